@@ -1,0 +1,230 @@
+"""The ``heliquad`` command line.
+
+Every subcommand reports bad input as one line on stderr (``heliquad SUB: error: ...``) and
+exits with code 2; no traceback reaches the user for an input problem.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+import numpy as np
+
+from . import __version__
+from .errors import InputError
+
+__all__ = ["main"]
+
+EXIT_INPUT = 2
+
+FSF_HELP = """\
+Estimate one frequency-response point per sine experiment with the frequency sampling
+filter (FSF) and least squares (SPEC.md step 2).
+
+RUN.csv: a header row, then columns t_s,u,y (seconds, input, output; any order, other
+columns ignored), uniformly sampled, one sine frequency per file.
+POINTS.csv (written): omega_rad_s,magnitude,phase_rad,sigma,coherence, one row per run,
+sorted by frequency; magnitude linear, phase in radians, sigma the standard deviation of
+the complex gain, coherence the magnitude-squared coherence at that frequency.
+
+example: heliquad fsf runs/*.csv --discard-periods 2 --out points.csv
+"""
+
+FIT_HELP = """\
+Fit transfer functions of the given orders to frequency-response points: Levy's method,
+Sanathanan-Koerner iterations, then an output-error refinement with stable poles
+(SPEC.md step 3). Prints each model's metrics and the recommended one.
+
+POINTS.csv: a header row, columns omega_rad_s,magnitude,phase_rad (rad/s, linear, rad;
+omega strictly increasing) and optionally sigma,coherence.
+MODELS.json (written): {"models": [{"order": [M, N], "num": [...], "den": [...],
+"delay_s": 0.0, "stable": true, "metrics": {"rms", "J", "aicc", ...}, "poles", "zeros",
+"dc_gain"}, ...], "recommended": INDEX, "reason": "..."}; coefficients in descending
+powers of s, den monic.
+
+example: heliquad fit points.csv --order 0/2 --order 0/3 --order 2/4 --json models.json --plot bode.png
+"""
+
+DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with a one-line error and exit code 2."""
+
+    def error(self, message):
+        sys.stderr.write(f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        sys.exit(EXIT_INPUT)
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="heliquad",
+                     description="Firmware-in-the-loop flight-controller emulator and "
+                                 "frequency-domain system identification for heterogeneous "
+                                 "multirotors.")
+    parser.add_argument("--version", action="version", version=f"heliquad {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    fmt = argparse.RawDescriptionHelpFormatter
+
+    p = sub.add_parser("fsf", help="frequency-response points from sine runs",
+                       description=FSF_HELP, formatter_class=fmt)
+    p.add_argument("runs", nargs="+", metavar="RUN.csv", help="one sine experiment per file")
+    p.add_argument("--freq-hz", type=float, action="append", metavar="F",
+                   help="excitation frequency: once for all runs or once per run "
+                        "(default: found from the input signal)")
+    p.add_argument("--harmonics", type=int, default=3, metavar="L",
+                   help="harmonics -L..L in the FSF model (default 3, as in the paper)")
+    p.add_argument("--discard-periods", type=int, default=1, metavar="K",
+                   help="settling periods dropped at the start of each run (default 1)")
+    p.add_argument("--no-offset", action="store_true",
+                   help="do not estimate a constant output offset")
+    p.add_argument("--out", required=True, metavar="POINTS.csv", help="points file to write")
+    p.set_defaults(func=_cmd_fsf)
+
+    p = sub.add_parser("fit", help="transfer functions from frequency-response points",
+                       description=FIT_HELP, formatter_class=fmt)
+    p.add_argument("points", metavar="POINTS.csv")
+    p.add_argument("--order", action="append", metavar="M/N",
+                   help="numerator/denominator degree; repeat for several "
+                        f"(default: {' '.join(DEFAULT_FIT_ORDERS)}, those the points support)")
+    p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model")
+    p.add_argument("--weights", choices=("auto", "sigma", "coherence", "none"), default="auto",
+                   help="point weights: 1/sigma, CIFER coherence weight, or equal relative "
+                        "weight (default auto: sigma, else coherence, else none)")
+    p.add_argument("--allow-unstable", action="store_true",
+                   help="do not constrain poles to the left half plane (unstable results "
+                        "are flagged)")
+    p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
+    p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models")
+    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB")
+    p.set_defaults(func=_cmd_fit)
+
+    from .demo import add_demo_parser
+
+    add_demo_parser(sub, fmt)
+    return parser
+
+
+def _cmd_fsf(args) -> int:
+    from .files import read_run_csv, write_points_csv
+    from .fsf import estimate_fsf
+
+    freqs = args.freq_hz or [None]
+    if len(freqs) not in (1, len(args.runs)):
+        raise InputError(f"--freq-hz given {len(freqs)} times for {len(args.runs)} runs; "
+                         "give it once for all runs or once per run")
+    if len(freqs) == 1:
+        freqs = freqs * len(args.runs)
+    points, origin = [], {}
+    for i, (path, freq) in enumerate(zip(args.runs, freqs), 1):
+        fs_hz, u, y = read_run_csv(path)
+        try:
+            point = estimate_fsf(u, y, fs_hz, freq_hz=freq, harmonics=args.harmonics,
+                                 discard_periods=args.discard_periods, offset=not args.no_offset)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        key = round(point.omega_rad_s, 9)
+        if key in origin:
+            raise InputError(f"{path} and {origin[key]} are both at {point.freq_hz:.6g} Hz; "
+                             "one point per frequency")
+        origin[key] = path
+        points.append(point)
+        print(f"[{i}/{len(args.runs)}] {path}: {_describe_point(point)}", flush=True)
+        if point.coherence < 0.6:
+            print(f"warning: {path}: low coherence {point.coherence:.2f}; the point is "
+                  "unreliable", file=sys.stderr)
+    write_points_csv(args.out, points)
+    print(f"wrote {len(points)} point(s) to {args.out}")
+    return 0
+
+
+def _describe_point(p) -> str:
+    return (f"{p.freq_hz:.4g} Hz  |G| {p.magnitude:.5g} ({20 * math.log10(p.magnitude):+.2f} dB)"
+            f"  phase {math.degrees(p.phase_rad):+.2f} deg  sigma {100 * p.sigma / p.magnitude:.2g} %"
+            f"  coherence {p.coherence:.4f}  [{p.method}, {p.n_periods} periods of "
+            f"{p.period_samples:.6g} samples]")
+
+
+def _cmd_fit(args) -> int:
+    from .files import read_points_csv, write_models_json, write_models_mat
+    from .fit import n_parameters, parse_order
+    from .identify import fit_orders
+
+    points = read_points_csv(args.points)
+    if args.order:
+        orders = [parse_order(o) for o in args.order]
+    else:
+        n = points["omega"].size
+        orders = [o for o in map(parse_order, DEFAULT_FIT_ORDERS)
+                  if 2 * n >= n_parameters(o, args.delay) + 1]
+        if not orders:
+            raise InputError(f"{args.points}: {n} point(s) are too few for any default order")
+    result = fit_orders(points, orders, weights=args.weights, delay=args.delay,
+                        stable=not args.allow_unstable)
+    _print_models(result)
+    write_models_json(args.json, result.models, result.recommended, result.reason,
+                      source=args.points, weights=result.weights)
+    print(f"wrote {args.json}")
+    if args.mat:
+        write_models_mat(args.mat, result.models, result.recommended)
+        print(f"wrote {args.mat}")
+    if args.plot:
+        from .plot import plot_bode
+
+        sigma = points["sigma"]
+        plot_bode(args.plot, points["omega"], points["F"], sigma=sigma, models=result.models,
+                  recommended=result.recommended, title=str(args.points))
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _print_models(result) -> None:
+    print(f"weights: {result.weights}")
+    print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "
+          f"{'stable':>6}  model")
+    for i, m in enumerate(result.models):
+        k = m.metrics
+        mark = "*" if i == result.recommended else " "
+        order = f"{m.order[0]}/{m.order[1]}{'+d' if m.delay_fitted else ''}"
+        print(f"{mark}{order:>7} {k['J']:9.3g} {100 * k['rms']:8.3g} {k['aicc']:10.4g} "
+              f"{k['max_mag_err_db']:7.3f} {k['max_phase_err_deg']:8.2f} "
+              f"{'yes' if m.stable else 'NO':>6}  {format_tf(m)}")
+    print(f"recommended: {result.reason}")
+
+
+def format_tf(model) -> str:
+    """``(num) / (den)`` in descending powers of s, with the delay if any."""
+    def poly(c):
+        n = len(c) - 1
+        terms = [f"{v:.5g}" + (f" s^{n - i}" if n - i > 1 else " s" if n - i == 1 else "")
+                 for i, v in enumerate(c)]
+        return " + ".join(terms).replace("+ -", "- ")
+    text = f"({poly(model.num)}) / ({poly(model.den)})"
+    if model.delay_fitted:
+        text += f" * exp(-{model.delay_s * 1e3:.3g} ms s)"
+    return text
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``heliquad`` console script."""
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    np.seterr(all="ignore")
+    try:
+        return args.func(args)
+    except InputError as exc:
+        sys.stderr.write(f"heliquad {args.command}: error: {exc}\n")
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        sys.stderr.write(f"heliquad {args.command}: interrupted\n")
+        return 130
+    except OSError as exc:
+        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}: "
+                         f"{exc.filename or ''}\n")
+        return EXIT_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

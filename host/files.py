@@ -1,0 +1,181 @@
+"""The file formats of the host tool (docs/file-formats.md is the reference).
+
+* RUN.csv: header row, columns ``t_s,u,y`` (in any order, extra columns ignored), uniformly
+  sampled, time strictly increasing.
+* POINTS.csv: header row, columns ``omega_rad_s,magnitude,phase_rad`` and optionally
+  ``sigma,coherence``; one row per frequency, omega strictly increasing; phase wrapped or not.
+* MODELS.json: ``{"models": [...], "recommended": INDEX, ...}``, coefficients in descending
+  powers of s, den monic.
+
+Readers raise :class:`InputError` with a one-line message naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import warnings
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
+           "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict"]
+
+RUN_COLUMNS = ("t_s", "u", "y")
+POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
+POINTS_OPTIONAL = ("sigma", "coherence")
+#: Largest spread of sample intervals, relative to the mean interval, still called uniform.
+UNIFORM_TOLERANCE = 0.01
+
+
+def _read_table(path, required, optional=()):
+    """Read a headed CSV of numbers; returns {column: array} for required + present optional."""
+    try:
+        with open(path, newline="") as fh:
+            header = next(csv.reader(fh), None)
+            if header is None:
+                raise InputError(f"{path}: empty file (expected a header row: "
+                                 f"{','.join(required)})")
+            names = [h.strip() for h in header]
+            missing = [c for c in required if c not in names]
+            if missing:
+                raise InputError(f"{path}: missing column(s) {','.join(missing)}; header has "
+                                 f"{','.join(names) or 'nothing'} (expected {','.join(required)})")
+            wanted = list(required) + [c for c in optional if c in names]
+            cols = [names.index(c) for c in wanted]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")      # "empty input file" from numpy
+                data = np.loadtxt(fh, delimiter=",", usecols=cols, ndmin=2, dtype=float)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, not a CSV file") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not a text CSV file") from None
+    except ValueError as exc:
+        if isinstance(exc, InputError):
+            raise
+        first = str(exc).splitlines()[0] if str(exc) else "malformed row"
+        raise InputError(f"{path}: {first} (data rows count from 1 after the header)") from None
+    if data.shape[0] == 0:
+        raise InputError(f"{path}: no data rows after the header")
+    table = {c: data[:, i] for i, c in enumerate(wanted)}
+    for c in required:
+        bad = np.flatnonzero(~np.isfinite(table[c]))
+        if bad.size:
+            raise InputError(f"{path}: column {c} has NaN or infinity at data row {bad[0] + 1}")
+    return table
+
+
+def read_run_csv(path):
+    """Read a sine experiment. Returns ``(fs_hz, u, y)``."""
+    table = _read_table(path, RUN_COLUMNS)
+    t = table["t_s"]
+    if t.size < 3:
+        raise InputError(f"{path}: only {t.size} samples; a run needs many periods of data")
+    dt = np.diff(t)
+    bad = np.flatnonzero(dt <= 0)
+    if bad.size:
+        raise InputError(f"{path}: time t_s does not increase at data row {bad[0] + 2}")
+    mean_dt = (t[-1] - t[0]) / (t.size - 1)
+    spread = float(np.max(np.abs(dt - mean_dt)) / mean_dt)
+    if spread > UNIFORM_TOLERANCE:
+        row = int(np.argmax(np.abs(dt - mean_dt))) + 2
+        raise InputError(f"{path}: not uniformly sampled (interval at data row {row} differs "
+                         f"from the mean {mean_dt:.6g} s by {100 * spread:.1f} %); resample first")
+    return 1.0 / mean_dt, table["u"], table["y"]
+
+
+def read_points_csv(path):
+    """Read frequency-response points.
+
+    Returns
+    -------
+    dict
+        ``omega`` (rad/s), ``F`` (complex), and ``sigma`` / ``coherence`` arrays or None.
+    """
+    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL)
+    omega = table["omega_rad_s"]
+    bad = np.flatnonzero(np.diff(omega) <= 0)
+    if bad.size:
+        raise InputError(f"{path}: omega_rad_s does not increase at data row {bad[0] + 2}")
+    if omega[0] <= 0:
+        raise InputError(f"{path}: omega_rad_s must be positive (row 1 has {omega[0]:g})")
+    mag = table["magnitude"]
+    if np.any(mag <= 0):
+        raise InputError(f"{path}: magnitude must be positive and linear (not dB); data row "
+                         f"{np.flatnonzero(mag <= 0)[0] + 1} is {mag[mag <= 0][0]:g}")
+    out = {"omega": omega, "F": mag * np.exp(1j * table["phase_rad"]),
+           "sigma": table.get("sigma"), "coherence": table.get("coherence")}
+    for name in POINTS_OPTIONAL:
+        col = out[name]
+        if col is not None and (np.any(~np.isfinite(col)) or np.any(col < 0)):
+            raise InputError(f"{path}: column {name} must be finite and non-negative")
+    if out["coherence"] is not None and np.any(out["coherence"] > 1):
+        raise InputError(f"{path}: coherence must lie in [0, 1]")
+    return out
+
+
+def write_points_csv(path, points):
+    """Write :class:`~heliquad.host.fsf.FrequencyPoint` objects, sorted by frequency."""
+    rows = sorted(points, key=lambda p: p.omega_rad_s)
+    with open(path, "w", newline="") as fh:
+        fh.write(",".join(POINTS_COLUMNS + POINTS_OPTIONAL) + "\n")
+        for p in rows:
+            fh.write(f"{p.omega_rad_s:.12g},{p.magnitude:.12g},{p.phase_rad:.12g},"
+                     f"{p.sigma:.6g},{p.coherence:.6g}\n")
+
+
+def _clean(x):
+    """JSON has no NaN or infinity: write them as null."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def model_to_dict(model) -> dict:
+    """A :class:`~heliquad.host.fit.TfModel` as the MODELS.json entry."""
+    return {
+        "order": list(model.order),
+        "num": [float(c) for c in model.num],
+        "den": [float(c) for c in model.den],
+        "delay_s": float(model.delay_s),
+        "stable": bool(model.stable),
+        "metrics": {k: _clean(v) if isinstance(v, float) else v
+                    for k, v in model.metrics.items()},
+        "poles": [[float(p.real), float(p.imag)] for p in model.poles],
+        "zeros": [[float(z.real), float(z.imag)] for z in model.zeros],
+        "dc_gain": _clean(model.dc_gain),
+    }
+
+
+def write_models_json(path, models, recommended, reason, source=None, weights=None):
+    """Write MODELS.json; the file is replaced atomically so a failure never truncates it."""
+    doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
+           "reason": reason}
+    if source is not None:
+        doc["points_file"] = str(source)
+    if weights is not None:
+        doc["weights"] = weights
+    tmp = f"{path}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(doc, fh, indent=2)
+        fh.write("\n")
+    os.replace(tmp, path)
+
+
+def write_models_mat(path, models, recommended):
+    """Write the models for MATLAB: ``models`` is a struct array (num, den, delay_s, order,
+    stable, J, rms, aicc); ``recommended`` is 1-based (0 when none)."""
+    import scipy.io
+
+    entries = np.empty(len(models), dtype=object)
+    for i, m in enumerate(models):
+        entries[i] = {"order": np.array(m.order, float), "num": np.asarray(m.num),
+                      "den": np.asarray(m.den), "delay_s": m.delay_s, "stable": m.stable,
+                      "J": m.metrics["J"], "rms": m.metrics["rms"], "aicc": m.metrics["aicc"]}
+    scipy.io.savemat(path, {"models": entries,
+                            "recommended": 0 if recommended is None else recommended + 1})

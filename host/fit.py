@@ -1,0 +1,349 @@
+"""Transfer-function fitting to frequency-response points (the missing ``invfreqs``).
+
+Given points ``F_k = F(j omega_k)`` and an order ``m/n`` this module fits
+
+    G(s) = (a_m s^m + ... + a_0) / (s^n + b_{n-1} s^{n-1} + ... + b_0) * exp(-s tau)
+
+in three stages (docs/method.md has the derivations):
+
+1. **Levy** (SPEC.md step 3, MATLAB invfreqs' default): minimise the weighted equation error
+   ``sum w_k^2 |D(j w_k) F_k - N(j w_k)|^2``, linear in the coefficients.
+2. **Sanathanan-Koerner**: repeat Levy with weights ``w_k / |D_prev(j w_k)|`` so the equation
+   error approaches the output error; this removes Levy's over-weighting of high frequencies.
+3. **Output-error refinement**: minimise ``sum w_k^2 |F_k - G(j w_k)|^2`` by a trust-region
+   Gauss-Newton method (scipy.optimize.least_squares) over the poles and the delay only: for
+   fixed poles and delay the numerator is linear and is solved exactly (variable projection).
+   The denominator is parametrised as a product of ``s^2 + e^p s + e^q`` factors (and one
+   ``s + e^r`` for odd ``n``), which is stable for every parameter value, so the result is
+   stable by construction. Several starts (Levy, SK with the given and with unit weights, and
+   for a delay a grid of delays) are refined; the best is kept.
+
+With ``stable=False`` the refinement works on the free denominator coefficients instead, and
+the model's ``stable`` flag reports what came out.
+
+Frequencies are scaled by ``omega_0`` (the geometric mean of the band) during the fit so the
+Vandermonde-like matrices stay well conditioned; coefficients are returned unscaled, in
+descending powers of ``s``, with a monic denominator (python-control and MATLAB order).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+import scipy.optimize
+
+from .errors import InputError
+
+__all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response"]
+
+#: Sanathanan-Koerner iterations at most, and the relative change that stops them early.
+SK_MAX_ITER = 30
+SK_TOL = 1e-12
+#: Delays tried as starts, as a fraction of the largest delay (pi / omega_max).
+DELAY_GRID = np.linspace(0.0, 1.0, 13)
+#: Roots on the imaginary axis (after reflection) are moved left by this fraction of
+#: omega_0 so that the log parametrisation exists.
+AXIS_MARGIN = 1e-6
+#: Log-parameters are clipped to +/- this so trial steps cannot overflow (e^80 ~ 5e34,
+#: far beyond any pole in scaled frequency).
+LOG_LIMIT = 80.0
+
+
+@dataclasses.dataclass
+class TfModel:
+    """A fitted transfer function and what is known about it.
+
+    Attributes
+    ----------
+    order : tuple of int
+        ``(m, n)``: numerator and denominator degrees.
+    num, den : ndarray
+        Coefficients in descending powers of ``s``; ``den[0] == 1``.
+    delay_s : float
+        Pure time delay ``tau`` in seconds (0 when not fitted).
+    stable : bool
+        Every pole has a negative real part.
+    delay_fitted : bool
+        The delay was a free parameter of the fit (it may have come out as 0).
+    metrics : dict
+        Filled by :func:`heliquad.host.metrics.evaluate_model`.
+    """
+
+    order: tuple
+    num: np.ndarray
+    den: np.ndarray
+    delay_s: float = 0.0
+    stable: bool = True
+    delay_fitted: bool = False
+    metrics: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def poles(self) -> np.ndarray:
+        return np.roots(self.den)
+
+    @property
+    def zeros(self) -> np.ndarray:
+        return np.roots(self.num) if len(self.num) > 1 else np.array([])
+
+    @property
+    def dc_gain(self) -> float:
+        """``G(0)``; infinite for a pole at the origin."""
+        if self.den[-1] == 0:
+            return float("inf")
+        return float(self.num[-1] / self.den[-1])
+
+    def response(self, omega_rad_s) -> np.ndarray:
+        """Complex frequency response at ``omega_rad_s``."""
+        return model_response(self.num, self.den, self.delay_s, omega_rad_s)
+
+
+def model_response(num, den, delay_s, omega_rad_s) -> np.ndarray:
+    """``N(j w) / D(j w) * exp(-j w tau)``."""
+    s = 1j * np.asarray(omega_rad_s, dtype=float)
+    return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay_s)
+
+
+_ORDER_RE = re.compile(r"^\s*(\d+)\s*/\s*(\d+)\s*$")
+
+
+def parse_order(text: str) -> tuple:
+    """Parse ``"M/N"`` (numerator/denominator degree) into ``(M, N)``."""
+    match = _ORDER_RE.match(str(text))
+    if not match:
+        raise InputError(f"order {text!r} is not of the form M/N (numerator/denominator "
+                         "degree, e.g. 0/2)")
+    m, n = int(match.group(1)), int(match.group(2))
+    if n < 1:
+        raise InputError(f"order {text}: the denominator degree must be at least 1")
+    if m > n:
+        raise InputError(f"order {text}: improper (numerator degree above denominator's); "
+                         "a physical rate response is proper")
+    if n > 12:
+        raise InputError(f"order {text}: denominator degree above 12 is not supported")
+    return m, n
+
+
+def n_parameters(order, delay: bool) -> int:
+    """Real parameters of a model: ``m + 1`` numerator, ``n`` denominator, optional delay."""
+    m, n = order
+    return m + 1 + n + int(delay)
+
+
+# --- Levy and Sanathanan-Koerner (linear, in scaled frequency) -----------------------------
+
+def _levy_solve(x, F, m, n, w):
+    """Weighted Levy step in scaled frequency ``x``: returns (num, den) descending, den monic."""
+    s = 1j * x
+    # Unknowns: a_0..a_m, b_0..b_{n-1};  sum b_i F s^i - sum a_i s^i = -F s^n.
+    cols = [-(s ** i) for i in range(m + 1)] + [F * s ** i for i in range(n)]
+    A = np.column_stack(cols) * w[:, None]
+    rhs = -F * s ** n * w
+    A_real = np.vstack([A.real, A.imag])
+    rhs_real = np.concatenate([rhs.real, rhs.imag])
+    scale = np.linalg.norm(A_real, axis=0)
+    scale[scale == 0] = 1.0
+    sol, *_ = np.linalg.lstsq(A_real / scale, rhs_real, rcond=None)
+    sol /= scale
+    num = sol[:m + 1][::-1]
+    den = np.concatenate([[1.0], sol[m + 1:][::-1]])
+    return num, den
+
+
+def fit_levy(omega_rad_s, F, order, weights=None):
+    """Plain Levy fit (one linear solve), as MATLAB invfreqs does without 'iter'.
+
+    Returns ``(num, den)`` in descending powers of ``s``, den monic.
+    """
+    x, w0 = _scaled(omega_rad_s)
+    w = np.ones_like(x) if weights is None else np.asarray(weights, float)
+    num, den = _levy_solve(x, np.asarray(F, complex), order[0], order[1], w)
+    return _unscale(num, den, w0)
+
+
+def _sk_solve(x, F, m, n, w, start=None):
+    num, den = start if start is not None else _levy_solve(x, F, m, n, w)
+    for _ in range(SK_MAX_ITER):
+        d = np.abs(np.polyval(den, 1j * x))
+        if not np.all(np.isfinite(d)) or np.any(d == 0):
+            break
+        new_num, new_den = _levy_solve(x, F, m, n, w / d)
+        change = np.linalg.norm(new_den - den) / np.linalg.norm(new_den)
+        num, den = new_num, new_den
+        if change < SK_TOL:
+            break
+    return num, den
+
+
+def _scaled(omega_rad_s):
+    omega = np.asarray(omega_rad_s, dtype=float)
+    w0 = float(np.sqrt(omega.min() * omega.max()))
+    return omega / w0, w0
+
+
+def _unscale(num, den, w0):
+    """From ``s' = s / w0`` back to ``s``; the monic denominator stays monic."""
+    n = len(den) - 1
+    den_s = np.asarray(den) * w0 ** (np.arange(n + 1))            # d'_i w0^(n-i), descending
+    num_s = np.asarray(num) * w0 ** (n - np.arange(len(num) - 1, -1, -1))
+    return num_s, den_s
+
+
+# --- stable denominator parametrisation -----------------------------------------------------
+
+def _reflect(den):
+    """Roots of ``den`` moved into the open left half plane (real parts negated)."""
+    roots = np.roots(den)
+    return -np.abs(roots.real) - AXIS_MARGIN + 1j * roots.imag
+
+
+def _roots_to_params(roots):
+    """Stable roots -> ``[p, q]`` per quadratic factor and ``[r]`` for a leftover real root."""
+    roots = np.asarray(roots)
+    cplx = roots[roots.imag > 1e-12 * np.maximum(1.0, np.abs(roots))]
+    real = np.sort(roots[np.abs(roots.imag) <= 1e-12 * np.maximum(1.0, np.abs(roots))].real)
+    params = []
+    for r in cplx:                            # upper half-plane member of each pair
+        params += [np.log(-2 * r.real), np.log(abs(r) ** 2)]
+    for i in range(0, len(real) - 1, 2):
+        a, b = -real[i], -real[i + 1]
+        params += [np.log(a + b), np.log(a * b)]
+    if len(real) % 2:
+        params.append(np.log(-real[-1]))
+    return np.array(params, dtype=float)
+
+
+def _params_to_den(params, n):
+    params = np.clip(params, -LOG_LIMIT, LOG_LIMIT)
+    den = np.array([1.0])
+    for i in range(n // 2):
+        den = np.polymul(den, [1.0, np.exp(params[2 * i]), np.exp(params[2 * i + 1])])
+    if n % 2:
+        den = np.polymul(den, [1.0, np.exp(params[n - 1])])
+    return den
+
+
+# --- output-error refinement (variable projection) -----------------------------------------
+
+class _OutputError:
+    """Residuals ``w (F - N/D e^{-j x tau'})`` with ``N`` solved linearly for given poles."""
+
+    def __init__(self, x, F, m, n, w, stable, delay):
+        self.x, self.F, self.m, self.n, self.w = x, F, m, n, w
+        self.stable, self.delay = stable, delay
+        self.s = 1j * x
+        self.vander = np.column_stack([self.s ** i for i in range(m, -1, -1)])
+
+    def den(self, params):
+        if self.stable:
+            return _params_to_den(params[:self.n], self.n)
+        return np.concatenate([[1.0], params[:self.n]])
+
+    def num(self, params):
+        basis = self._basis(params)
+        A = np.vstack([basis.real, basis.imag])
+        rhs = self.w * self.F
+        sol, *_ = np.linalg.lstsq(A, np.concatenate([rhs.real, rhs.imag]), rcond=None)
+        return sol
+
+    def _basis(self, params):
+        tau = params[self.n] if self.delay else 0.0
+        factor = self.w * np.exp(-self.s * tau) / np.polyval(self.den(params), self.s)
+        return self.vander * factor[:, None]
+
+    def residuals(self, params):
+        basis = self._basis(params)
+        A = np.vstack([basis.real, basis.imag])
+        rhs = self.w * self.F
+        b = np.concatenate([rhs.real, rhs.imag])
+        if not np.all(np.isfinite(A)):
+            return b * 1e6                     # a trial step off the map: a large, finite cost
+        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
+        return b - A @ sol
+
+    def initial(self, den, tau):
+        if self.stable:
+            p = _roots_to_params(_reflect(den))
+        else:
+            p = np.asarray(den[1:], dtype=float)
+        return np.concatenate([p, [tau]]) if self.delay else p
+
+
+def _refine(problem, x0, tau_max):
+    lower = np.full(x0.size, -np.inf)
+    upper = np.full(x0.size, np.inf)
+    if problem.delay:
+        lower[-1], upper[-1] = 0.0, tau_max
+        x0 = x0.copy()
+        x0[-1] = np.clip(x0[-1], 0.0, tau_max)
+    try:
+        res = scipy.optimize.least_squares(problem.residuals, x0, bounds=(lower, upper),
+                                           method="trf", x_scale="jac", xtol=1e-15,
+                                           ftol=1e-15, gtol=1e-15, max_nfev=400 * (x0.size + 1))
+    except (ValueError, np.linalg.LinAlgError):
+        return x0, float(np.sum(problem.residuals(x0) ** 2))
+    return res.x, float(np.sum(res.fun ** 2))
+
+
+def _starts(x, F, m, n, w, delay, tau_max):
+    """Initial (den, tau) pairs in scaled frequency."""
+    taus = DELAY_GRID * tau_max if delay else [0.0]
+    starts = []
+    for tau in taus:
+        Fd = F * np.exp(1j * x * tau)             # the data with the trial delay removed
+        levy = _levy_solve(x, Fd, m, n, w)
+        starts.append((levy[1], tau))
+        starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau))
+        starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau))
+    return starts
+
+
+def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
+           stable: bool = True) -> TfModel:
+    """Fit a transfer function of the given order to frequency-response points.
+
+    Parameters
+    ----------
+    omega_rad_s : array_like
+        Strictly increasing frequencies, rad/s.
+    F : array_like of complex
+        Measured response at those frequencies.
+    order : tuple of int
+        ``(m, n)`` numerator and denominator degree, ``m <= n``.
+    weights : array_like, optional
+        Per-point weight ``w_k`` on the complex error (``1/sigma_k``, say). Default
+        ``1/|F_k|``: each point counts by its relative error, as on a Bode plot.
+    delay : bool
+        Fit a pure time delay ``exp(-s tau)`` with the model, ``0 <= tau <= pi/omega_max``.
+    stable : bool
+        Constrain the poles to the left half plane (default).
+
+    Returns
+    -------
+    TfModel
+        Without metrics; see :func:`heliquad.host.metrics.evaluate_model`.
+    """
+    omega = np.asarray(omega_rad_s, dtype=float)
+    F = np.asarray(F, dtype=complex)
+    m, n = order
+    w = 1.0 / np.abs(F) if weights is None else np.asarray(weights, dtype=float)
+    x, w0 = _scaled(omega)
+    tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
+    problem = _OutputError(x, F, m, n, w, stable, delay)
+    best_cost, best_params = np.inf, None
+    for den0, tau0 in _starts(x, F, m, n, w, delay, tau_max):
+        if not np.all(np.isfinite(den0)):
+            continue
+        params, cost = _refine(problem, problem.initial(den0, tau0), tau_max)
+        if cost < best_cost:
+            best_cost, best_params = cost, params
+    if best_params is None:
+        raise InputError(f"order {m}/{n}: no fit could be started (degenerate points)")
+    den = problem.den(best_params)
+    num = problem.num(best_params)
+    tau = best_params[n] / w0 if delay else 0.0
+    num_s, den_s = _unscale(num, den, w0)
+    poles = np.roots(den_s)
+    return TfModel(order=(m, n), num=num_s, den=den_s, delay_s=float(tau),
+                   stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay))

@@ -1,0 +1,426 @@
+"""Frequency-response points from sine experiments: the frequency sampling filter (FSF).
+
+One experiment excites the system with a sine of one frequency; this module turns its input
+``u(k)`` and output ``y(k)`` into one frequency-response point (see docs/method.md and SPEC.md,
+step 2). The output is modelled by the FSF expansion
+
+    y(k) = sum_l G_l f_l(k) + c + v(k),
+    f_l(k) = (1/N) sum_{i=0}^{N-1} exp(j l w_d i) u(k - i),    w_d = 2 pi / N,
+
+for harmonics ``l = -L..L`` of the excitation period of ``N`` samples. ``f_l`` is the
+non-recursive (sliding-sum) form of ``(1/N)(1 - q^-N)/(1 - e^{j l w_d} q^-1) u(k)``; it is the
+same filter without the marginally stable pole, so round-off cannot accumulate. The constant
+``c`` (``offset=True``) absorbs a DC offset of the output that the input does not explain (gyro
+bias, trim), which would otherwise inflate the residual and so the uncertainty.
+
+Two solvers give the same estimate:
+
+* :class:`RecursiveFsf`, the paper's complex recursive least squares, sample by sample
+  (for online use);
+* :func:`estimate_fsf`, a batch solver of the same regularised least-squares problem. RLS
+  started from ``Theta(0) = 0, P(0) = p0 I`` minimises ``sum |y - Phi^H Theta|^2 +
+  |Theta|^2 / p0`` exactly, so the batch solver adds that ridge and agrees with RLS to
+  round-off. It exploits ``f_{-l} = conj(f_l)`` and ``G_{-l} = conj(G_l)`` to solve a real
+  problem of half the size.
+
+Harmonics the input does not excite (``f_l`` identically zero) are held at zero by the ridge
+and reported as NaN; DC is absorbed by the offset term and ``G(0)`` is not reported.
+
+A period that is not an integer number of samples cannot be expressed by the FSF. The batch
+solver then uses the exact non-integer treatment: a least-squares sine fit of both ``u`` and
+``y`` at the exact frequency (harmonics ``1..L`` and a constant), ``G_l = Y_l / U_l``, which
+equals the FSF estimate whenever the period is an integer. The point records which method
+produced it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+
+from .errors import InputError
+
+__all__ = [
+    "DEFAULT_HARMONICS",
+    "DEFAULT_DISCARD_PERIODS",
+    "DEFAULT_P0_RELATIVE",
+    "FrequencyPoint",
+    "RecursiveFsf",
+    "estimate_fsf",
+    "estimate_frequency",
+    "period_coherence",
+]
+
+#: Harmonics kept on each side of DC (SPEC.md step 2: l = 0, +/-1, +/-2, +/-3).
+DEFAULT_HARMONICS = 3
+#: Whole periods dropped at the start so the system's transient has decayed.
+DEFAULT_DISCARD_PERIODS = 1
+#: Initial RLS covariance relative to the input's power: ``P(0) = p0 I`` with
+#: ``p0 = DEFAULT_P0_RELATIVE / mean(u^2)``; the batch solver's ridge is ``1/p0``. The bias it
+#: causes on the fundamental is ``1 / (p0 n |U_1|^2) = 2e-6 / n`` for ``n`` samples, while
+#: RLS stays accurate to round-off (a larger ``p0`` costs RLS precision: its first updates
+#: subtract numbers of size ``p0``).
+DEFAULT_P0_RELATIVE = 1e6
+#: A period counts as an integer number of samples when snapping it to the nearest integer
+#: moves the last used sample by less than this many samples.
+SNAP_DRIFT_SAMPLES = 0.01
+#: A harmonic of the input counts as excited when its amplitude is at least this fraction of
+#: the fundamental's.
+EXCITED_FRACTION = 1e-3
+
+
+@dataclasses.dataclass(frozen=True)
+class FrequencyPoint:
+    """One frequency-response point from one sine experiment.
+
+    Attributes
+    ----------
+    omega_rad_s : float
+        Excitation frequency actually analysed, rad/s.
+    gain : complex
+        ``G(j omega)``, the fundamental's output/input ratio.
+    sigma : float
+        Standard deviation of the complex ``gain`` from the residuals, ``sqrt(E|dG|^2)``.
+    coherence : float
+        Magnitude-squared coherence between input and output at ``omega``, one segment per
+        whole period after the discarded ones (NaN with fewer than two periods).
+    period_samples : float
+        Samples per excitation period (an integer for the ``"fsf"`` method).
+    n_periods : int
+        Whole periods of regression rows (after the discarded periods and, for the FSF, the
+        period that fills the filter).
+    method : str
+        ``"fsf"`` (integer period) or ``"sinefit"`` (non-integer period).
+    harmonics : dict
+        ``{l: G_l}`` for ``l = 1..L``; NaN where the input does not excite ``l``.
+    offset : float
+        Estimated output offset ``c`` (0 when ``offset=False``).
+    """
+
+    omega_rad_s: float
+    gain: complex
+    sigma: float
+    coherence: float
+    period_samples: float
+    n_periods: int
+    method: str
+    harmonics: dict
+    offset: float = 0.0
+
+    @property
+    def magnitude(self) -> float:
+        """Linear magnitude ``|G|``."""
+        return float(abs(self.gain))
+
+    @property
+    def phase_rad(self) -> float:
+        """Phase of ``G`` in radians, wrapped to (-pi, pi]."""
+        return float(np.angle(self.gain))
+
+    @property
+    def freq_hz(self) -> float:
+        """Excitation frequency in Hz."""
+        return self.omega_rad_s / (2.0 * math.pi)
+
+
+class RecursiveFsf:
+    """The paper's FSF with complex recursive least squares, one sample at a time.
+
+    Parameters
+    ----------
+    period_samples : int
+        Excitation period ``N`` in samples.
+    harmonics : int
+        ``L``: harmonics ``-L..L`` are estimated.
+    offset : bool
+        Also estimate a constant output offset.
+    p0 : float, optional
+        Initial covariance ``P(0) = p0 I``; default ``DEFAULT_P0_RELATIVE / (A^2 / 2)`` for
+        an input sine of amplitude ``input_amplitude``. Give the batch solver the same ``p0``
+        and both return the same estimate.
+    input_amplitude : float
+        Expected amplitude of the input sine, used only for the default ``p0``.
+    discard_periods : int
+        Whole periods dropped for settling. The sliding sums need one more period of input
+        before they are complete, so RLS updates begin at sample
+        ``(discard_periods + 1) * N - 1``; earlier samples only fill the filters.
+
+    Notes
+    -----
+    The regressor of sample ``k`` is ``Phi(k) = conj([f_0, f_1, f_-1, ..., f_L, f_-L, 1])`` so
+    that the model reads ``y(k) = Phi(k)^H Theta`` as in SPEC.md. The sliding sums are kept in
+    a ring buffer and recomputed exactly once per period, so round-off stays bounded however
+    long the run.
+    """
+
+    def __init__(self, period_samples: int, harmonics: int = DEFAULT_HARMONICS,
+                 offset: bool = True, p0: float | None = None,
+                 discard_periods: int = DEFAULT_DISCARD_PERIODS, input_amplitude: float = 1.0):
+        if int(period_samples) != period_samples or period_samples < 2:
+            raise InputError(f"period must be an integer number of samples >= 2, got {period_samples}")
+        self.period = int(period_samples)
+        self.orders = _harmonic_orders(harmonics)
+        self.offset = offset
+        self.start_sample = fsf_first_row(self.period, discard_periods)
+        n_par = len(self.orders) + (1 if offset else 0)
+        self.theta = np.zeros(n_par, dtype=complex)
+        if p0 is None:
+            p0 = DEFAULT_P0_RELATIVE / (0.5 * input_amplitude ** 2)
+        self.P = np.eye(n_par, dtype=complex) * p0
+        # twiddle[l, i] = exp(-j l w_d i): exact per phase index i = k mod N.
+        idx = np.arange(self.period)
+        self._twiddle = np.exp(-2j * np.pi * np.outer(self.orders, idx) / self.period)
+        self._ring = np.zeros((len(self.orders), self.period), dtype=complex)
+        self._sums = np.zeros(len(self.orders), dtype=complex)
+        self.k = 0
+
+    def regressor(self, u_k: float) -> np.ndarray:
+        """Advance the filters by one input sample and return ``Phi(k)`` (conjugated)."""
+        i = self.k % self.period
+        prod = self._twiddle[:, i] * u_k
+        self._sums += prod - self._ring[:, i]
+        self._ring[:, i] = prod
+        if i == self.period - 1:
+            self._sums = self._ring.sum(axis=1)      # exact refresh once per period
+        f = np.conj(self._twiddle[:, i]) * self._sums / self.period
+        if self.offset:
+            f = np.append(f, 1.0)
+        return np.conj(f)
+
+    def update(self, u_k: float, y_k: float) -> None:
+        """Process one sample of input and output."""
+        phi = self.regressor(u_k)
+        if self.k >= self.start_sample:
+            P_phi = self.P @ phi
+            denom = 1.0 + np.real(np.vdot(phi, P_phi))
+            self.P -= np.outer(P_phi, P_phi.conj()) / denom
+            self.P = 0.5 * (self.P + self.P.conj().T)
+            err = y_k - np.vdot(phi, self.theta)
+            self.theta = self.theta + (self.P @ phi) * err
+        self.k += 1
+
+    def gain(self, harmonic: int = 1) -> complex:
+        """Current estimate of ``G(exp(j l w_d))`` for harmonic ``l``."""
+        return complex(self.theta[list(self.orders).index(harmonic)])
+
+
+def _harmonic_orders(harmonics: int) -> tuple:
+    """Parameter order of the paper: 0, 1, -1, 2, -2, ..., L, -L."""
+    if int(harmonics) != harmonics or not 1 <= harmonics <= 20:
+        raise InputError(f"harmonics must be an integer from 1 to 20, got {harmonics}")
+    orders = [0]
+    for l in range(1, int(harmonics) + 1):
+        orders += [l, -l]
+    return tuple(orders)
+
+
+def estimate_frequency(u, fs_hz: float) -> float:
+    """Frequency of the dominant sine in ``u``, in Hz.
+
+    A Hann-windowed, zero-padded FFT finds the peak; a bounded one-dimensional search then
+    maximises the power that a least-squares sine fit at that frequency explains (the
+    four-parameter sine fit), which is exact for a noise-free sine.
+    """
+    u = np.asarray(u, dtype=float) - np.mean(u)
+    n = u.size
+    if n < 8 or not np.any(u):
+        raise InputError("cannot find the excitation frequency: the input is constant or too short")
+    nfft = 1 << (4 * n - 1).bit_length()
+    spec = np.abs(np.fft.rfft(u * np.hanning(n), nfft))
+    spec[0] = 0.0
+    peak = int(np.argmax(spec))
+    bin_rad = 2 * np.pi / nfft
+    k = np.arange(n)
+
+    def neg_explained(w):
+        basis = np.column_stack([np.ones(n), np.cos(w * k), np.sin(w * k)])
+        coef, *_ = np.linalg.lstsq(basis, u, rcond=None)
+        return -float(np.dot(basis @ coef, u))
+
+    lo, hi = max(peak - 2, 0.5) * bin_rad, min(peak + 2, nfft / 2 - 0.5) * bin_rad
+    res = scipy.optimize.minimize_scalar(neg_explained, bounds=(lo, hi), method="bounded",
+                                         options={"xatol": 1e-13})
+    return float(res.x) * fs_hz / (2 * np.pi)
+
+
+def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> float:
+    """Magnitude-squared coherence of ``u`` and ``y`` at one frequency over given segments.
+
+    Each segment (one excitation period) gives a single-bin DFT pair ``U_p, Y_p`` with phase
+    referred to sample 0; ``gamma^2 = |sum U_p* Y_p|^2 / (sum |U_p|^2 sum |Y_p|^2)``. One
+    period per segment means no leakage for an integer period. NaN for fewer than two
+    segments, where coherence is 1 by construction and says nothing.
+    """
+    starts = np.asarray(starts, dtype=int)
+    if starts.size < 2:
+        return float("nan")
+    idx = starts[:, None] + np.arange(length)[None, :]
+    z = np.exp(-1j * omega_per_sample * idx)
+    U = np.sum(u[idx] * z, axis=1)
+    Y = np.sum(y[idx] * z, axis=1)
+    den = np.sum(np.abs(U) ** 2) * np.sum(np.abs(Y) ** 2)
+    if den == 0.0:
+        return float("nan")
+    return float(np.abs(np.sum(np.conj(U) * Y)) ** 2 / den)
+
+
+def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
+                 harmonics: int = DEFAULT_HARMONICS,
+                 discard_periods: int = DEFAULT_DISCARD_PERIODS,
+                 offset: bool = True, p0: float | None = None) -> FrequencyPoint:
+    """Estimate one frequency-response point from a sine experiment (batch solver).
+
+    Parameters
+    ----------
+    u, y : array_like
+        Input and output, uniformly sampled at ``fs_hz``.
+    fs_hz : float
+        Sampling rate.
+    freq_hz : float, optional
+        Excitation frequency; found from ``u`` with :func:`estimate_frequency` when omitted.
+    harmonics : int
+        ``L``: harmonics ``-L..L`` are in the model.
+    discard_periods : int
+        Whole periods dropped at the start (settling).
+    offset : bool
+        Estimate a constant output offset.
+    p0 : float, optional
+        Prior covariance as in :class:`RecursiveFsf` (the estimate equals RLS with the same
+        ``p0``); default ``DEFAULT_P0_RELATIVE / mean(u^2)``.
+
+    Returns
+    -------
+    FrequencyPoint
+    """
+    u, y = _check_signals(u, y)
+    if not fs_hz > 0:
+        raise InputError(f"sampling rate must be positive, got {fs_hz}")
+    if int(discard_periods) != discard_periods or discard_periods < 0:
+        raise InputError(f"discard periods must be a non-negative integer, got {discard_periods}")
+    if freq_hz is None:
+        freq_hz = estimate_frequency(u, fs_hz)
+    if not 0 < freq_hz < fs_hz / 2:
+        raise InputError(f"excitation frequency {freq_hz:g} Hz is outside (0, {fs_hz / 2:g}) Hz "
+                         "(Nyquist)")
+    period = fs_hz / freq_hz
+    whole = round(period)
+    used = u.size - discard_periods * period
+    if used < period:
+        raise InputError(f"record of {u.size} samples holds fewer than {discard_periods + 1} "
+                         f"periods of {period:.6g} samples; nothing is left to analyse")
+    if p0 is None:
+        p0 = DEFAULT_P0_RELATIVE / max(float(np.mean(u ** 2)), np.finfo(float).tiny)
+    if whole >= 2 and abs(period - whole) * used / period <= SNAP_DRIFT_SAMPLES:
+        return _solve_fsf(u, y, fs_hz, whole, harmonics, discard_periods, offset, p0)
+    return _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods)
+
+
+def _check_signals(u, y):
+    u = np.asarray(u, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
+        raise InputError("input and output must be one-dimensional and of equal length")
+    if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+        raise InputError("input or output contains NaN or infinity")
+    return u, y
+
+
+def fsf_first_row(period: int, discard_periods: int) -> int:
+    """First sample whose FSF regressor is complete after ``discard_periods`` settling periods."""
+    return (int(discard_periods) + 1) * int(period) - 1
+
+
+def fsf_regressors(u, period: int, orders) -> np.ndarray:
+    """FSF regressors ``f_l(k)`` for every sample (rows) and harmonic order (columns).
+
+    Sliding sums over the last ``period`` samples, starting from rest (samples before the
+    record count as zero), computed with a cumulative sum and a lag difference.
+    """
+    n = u.size
+    phase_idx = np.outer(np.arange(n) % period, orders) % period
+    twiddle = np.exp(-2j * np.pi * phase_idx / period)          # exp(-j l w_d k)
+    csum = np.cumsum(twiddle * u[:, None], axis=0)
+    sums = csum.copy()
+    sums[period:] -= csum[:-period]
+    return np.conj(twiddle) * sums / period
+
+
+def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
+    orders = _harmonic_orders(harmonics)
+    positive = [0] + list(range(1, int(harmonics) + 1))
+    start = fsf_first_row(period, discard_periods)
+    n_periods = (u.size - start) // period
+    if n_periods < 1:
+        raise InputError(f"record of {u.size} samples is too short: the FSF needs "
+                         f"{discard_periods + 2} periods of {period} samples (one fills the filter)")
+    stop = u.size     # every complete row, as RLS uses them; rows need not fill whole periods
+    f = fsf_regressors(u, period, positive)[start:stop]
+    # Real form: G_0 f_0 + sum_l 2 Re(G_l f_l) = G_0 f_0 + sum_l (a_l 2Re f_l + b_l (-2Im f_l)).
+    cols = [f[:, 0].real]
+    for j in range(1, len(positive)):
+        cols += [2.0 * f[:, j].real, -2.0 * f[:, j].imag]
+    ridge = [1.0] + [2.0] * (2 * len(positive) - 2)          # |G_l|^2 + |G_-l|^2 = 2(a^2+b^2)
+    if offset:
+        cols.append(np.ones(stop - start))
+        ridge.append(1.0)
+    X = np.column_stack(cols)
+    yy = y[start:stop]
+    gram = X.T @ X
+    A = gram + np.diag(ridge) / p0
+    coef = scipy.linalg.solve(A, X.T @ yy, assume_a="pos")
+    resid = yy - X @ coef
+    # Which harmonics does the input excite?  |U_l| from the regressor's per-period magnitude.
+    u_amp = np.sqrt(np.mean(np.abs(f) ** 2, axis=0))
+    excited = u_amp >= EXCITED_FRACTION * u_amp[1]
+    if not excited[1]:
+        raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
+    n_free = int(excited[0]) + 2 * int(np.sum(excited[1:])) + int(offset)
+    dof = max(yy.size - n_free, 1)
+    noise_var = float(resid @ resid) / dof
+    A_inv = scipy.linalg.inv(A)
+    cov = noise_var * A_inv @ gram @ A_inv
+    gains = {l: complex(coef[2 * l - 1], coef[2 * l]) if excited[l] else complex("nan+nanj")
+             for l in range(1, int(harmonics) + 1)}
+    sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0))
+    w = 2 * np.pi / period
+    first = discard_periods * period
+    coh = period_coherence(u, y, w, first + period * np.arange((u.size - first) // period), period)
+    return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
+                          period_samples=float(period), n_periods=int(n_periods), method="fsf",
+                          harmonics=gains, offset=float(coef[-1]) if offset else 0.0)
+
+
+def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
+    start = int(math.ceil(discard_periods * period))
+    n_periods = int((u.size - start) // period)
+    stop = start + int(round(n_periods * period))
+    w = 2 * np.pi / period
+    k = np.arange(start, stop)
+    cols = [np.ones(k.size)]
+    for l in range(1, int(harmonics) + 1):
+        cols += [np.cos(l * w * k), np.sin(l * w * k)]
+    X = np.column_stack(cols)
+    coef_u, *_ = np.linalg.lstsq(X, u[start:stop], rcond=None)
+    coef_y, *_ = np.linalg.lstsq(X, y[start:stop], rcond=None)
+    # a cos + b sin = Re((a - j b) e^{j w k}): complex amplitude of harmonic l is a - j b.
+    U = coef_u[1::2] - 1j * coef_u[2::2]
+    Y = coef_y[1::2] - 1j * coef_y[2::2]
+    excited = np.abs(U) >= EXCITED_FRACTION * abs(U[0])
+    if not excited[0]:
+        raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
+    gains = {l: complex(Y[l - 1] / U[l - 1]) if excited[l - 1] else complex("nan+nanj")
+             for l in range(1, int(harmonics) + 1)}
+    resid = y[start:stop] - X @ coef_y
+    noise_var = float(resid @ resid) / max(k.size - X.shape[1], 1)
+    cov = noise_var * scipy.linalg.inv(X.T @ X)
+    sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)) / abs(U[0])
+    seg_starts = np.round(start + period * np.arange(n_periods)).astype(int)
+    seg_len = int(math.floor(period))
+    coh = period_coherence(u, y, w, seg_starts, seg_len)
+    return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
+                          period_samples=float(period), n_periods=n_periods, method="sinefit",
+                          harmonics=gains, offset=float(coef_y[0]))

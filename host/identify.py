@@ -1,0 +1,75 @@
+"""From points to a set of fitted, evaluated models and a recommendation.
+
+The one place that turns a points table into models, shared by ``heliquad fit`` and the
+demo, so both weight, fit and judge the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .errors import InputError
+from .fit import TfModel, fit_tf, n_parameters
+from .metrics import cifer_weight, evaluate_model, recommend
+
+__all__ = ["WEIGHT_MODES", "FitResult", "point_weights", "fit_orders"]
+
+WEIGHT_MODES = ("auto", "sigma", "coherence", "none")
+#: Sigmas below this fraction of |F| are raised to it (noise-free simulations give sigma ~ 0,
+#: which would otherwise give one point all the weight).
+SIGMA_FLOOR = 1e-6
+
+
+@dataclasses.dataclass
+class FitResult:
+    """Models fitted to one points table and the recommendation among them."""
+
+    models: list
+    recommended: int | None
+    reason: str
+    weights: str
+
+
+def point_weights(points: dict, mode: str = "auto"):
+    """Per-point weights on the complex error, and the mode actually used.
+
+    ``sigma``: ``1 / sigma``. ``coherence``: ``sqrt(W_gamma) / |F|``, the CIFER coherence
+    weight on the relative error. ``none``: ``1 / |F|``, equal weight on every point's
+    relative error. ``auto`` picks sigma, else coherence, else none, by what the table has.
+    """
+    if mode not in WEIGHT_MODES:
+        raise InputError(f"unknown weights {mode!r}; use one of {', '.join(WEIGHT_MODES)}")
+    if mode == "auto":
+        mode = ("sigma" if points.get("sigma") is not None
+                else "coherence" if points.get("coherence") is not None else "none")
+    mag = np.abs(points["F"])
+    if mode in ("sigma", "coherence") and points.get(mode) is None:
+        raise InputError(f"--weights {mode}: the points file has no {mode} column")
+    if mode == "sigma":
+        return 1.0 / np.maximum(points["sigma"], SIGMA_FLOOR * mag), mode
+    if mode == "coherence":
+        return np.sqrt(cifer_weight(points["coherence"])) / mag, mode
+    return 1.0 / mag, mode
+
+
+def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
+               stable: bool = True) -> FitResult:
+    """Fit every order to the points, evaluate each model and recommend one."""
+    n_points = points["omega"].size
+    for order in orders:
+        k = n_parameters(order, delay)
+        if 2 * n_points < k + 1:
+            raise InputError(f"order {order[0]}/{order[1]}{' with delay' if delay else ''} has "
+                             f"{k} unknowns; it needs at least {(k + 2) // 2} points, "
+                             f"the file has {n_points}")
+    w, mode = point_weights(points, weights)
+    models = []
+    for order in orders:
+        model: TfModel = fit_tf(points["omega"], points["F"], order, weights=w, delay=delay,
+                                stable=stable)
+        evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
+        models.append(model)
+    index, reason = recommend(models)
+    return FitResult(models=models, recommended=index, reason=reason, weights=mode)

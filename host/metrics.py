@@ -1,0 +1,116 @@
+"""How well a fitted model matches its points, and which model to recommend.
+
+Every metric compares the model's response ``G_k`` with the points ``F_k``:
+
+* ``rms``: relative complex RMS error, ``sqrt(mean |F_k - G_k|^2 / |F_k|^2)`` (unitless).
+* ``J``: the CIFER-style cost (Tischler and Remple, *Aircraft and Rotorcraft System
+  Identification*, 2nd ed., 2012, ch. 11): ``J = 20/n sum W_gamma [(dB error)^2 +
+  0.01745 (deg error)^2]`` with ``W_gamma = [1.58 (1 - exp(-gamma^2))]^2`` from each point's
+  coherence ``gamma^2`` (1 where unknown). ``J <= 100`` is acceptable; ``J <= 50`` is a match
+  that can hardly be told from the data (CIFER's guideline).
+* ``aicc``: corrected Akaike information criterion of the weighted residuals, with ``2n`` real
+  observations and ``m + 1 + n (+1)`` parameters.
+* ``max_mag_err_db``, ``max_phase_err_deg``: worst point.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .fit import TfModel, n_parameters
+
+__all__ = ["evaluate_model", "recommend", "cifer_weight", "J_ACCEPTABLE", "J_EXCELLENT"]
+
+#: CIFER guideline: J at or below this is an acceptable model.
+J_ACCEPTABLE = 100.0
+#: CIFER guideline: J at or below this can hardly be told from the data.
+J_EXCELLENT = 50.0
+#: Phase weight in J: 0.01745 dB^2 per deg^2 (1 dB of magnitude ~ 7.57 deg of phase).
+J_PHASE_WEIGHT = 0.01745
+#: A higher order must lower AICc by at least this to count as clearly better
+#: (Burnham and Anderson: a difference above 10 is essentially no support for the worse).
+AICC_CLEAR = 10.0
+
+
+def cifer_weight(coherence) -> np.ndarray:
+    """CIFER coherence weight ``[1.58 (1 - exp(-gamma^2))]^2``; NaN coherence counts as 1."""
+    gamma2 = np.nan_to_num(np.asarray(coherence, dtype=float), nan=1.0)
+    return (1.58 * (1.0 - np.exp(-gamma2))) ** 2
+
+
+def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> dict:
+    """Fill and return ``model.metrics`` for the points it was fitted to.
+
+    ``weights`` are the per-point weights the fit used (for AICc).
+    """
+    omega = np.asarray(omega_rad_s, dtype=float)
+    F = np.asarray(F, dtype=complex)
+    G = model.response(omega)
+    ratio = G / F
+    mag_err_db = 20.0 * np.log10(np.abs(ratio))
+    phase_err_deg = np.degrees(np.angle(ratio))
+    w_gamma = cifer_weight(np.ones(omega.size) if coherence is None else coherence)
+    J = 20.0 / omega.size * float(np.sum(w_gamma * (mag_err_db ** 2
+                                                   + J_PHASE_WEIGHT * phase_err_deg ** 2)))
+    resid = np.asarray(weights, dtype=float) * (F - G)
+    rss = max(float(np.sum(np.abs(resid) ** 2)), np.finfo(float).tiny)
+    n_obs = 2 * omega.size
+    k = n_parameters(model.order, model.delay_fitted)
+    aicc = n_obs * math.log(rss / n_obs) + 2 * k
+    aicc = aicc + 2 * k * (k + 1) / (n_obs - k - 1) if n_obs - k - 1 > 0 else float("inf")
+    model.metrics.update({
+        "rms": float(np.sqrt(np.mean(np.abs(F - G) ** 2 / np.abs(F) ** 2))),
+        "J": J,
+        "aicc": float(aicc),
+        "max_mag_err_db": float(np.max(np.abs(mag_err_db))),
+        "max_phase_err_deg": float(np.max(np.abs(phase_err_deg))),
+        "n_parameters": k,
+    })
+    return model.metrics
+
+
+def recommend(models) -> tuple:
+    """Pick a model: the simplest stable one with acceptable J, unless a higher one is clearly
+    better.
+
+    "Clearly better" means: the simpler model is not already excellent (J > 50), and the
+    other, also stable and acceptable, lowers AICc by more than 10 and at least halves J.
+    Without an acceptable stable model, the stable one with the lowest J is chosen, and the
+    reason says so.
+
+    Returns
+    -------
+    (index, reason) : tuple of int and str
+    """
+    stable = [i for i, m in enumerate(models) if m.stable]
+    if not stable:
+        return None, "no stable model; none is recommended"
+    key = lambda i: (models[i].metrics["n_parameters"], models[i].order[1])  # noqa: E731
+    acceptable = sorted((i for i in stable if models[i].metrics["J"] <= J_ACCEPTABLE), key=key)
+    if not acceptable:
+        best = min(stable, key=lambda i: models[i].metrics["J"])
+        return best, (f"no stable model reaches J <= {J_ACCEPTABLE:g}; "
+                      f"{_name(models[best])} has the lowest J ({models[best].metrics['J']:.1f})")
+    pick = acceptable[0]
+    base = models[pick].metrics
+    reason = (f"{_name(models[pick])} is the lowest-order stable model with acceptable fit "
+              f"(J = {base['J']:.2f} <= {J_ACCEPTABLE:g})")
+    if base["J"] > J_EXCELLENT:
+        better = [i for i in acceptable[1:]
+                  if models[i].metrics["aicc"] < base["aicc"] - AICC_CLEAR
+                  and models[i].metrics["J"] <= 0.5 * base["J"]]
+        if better:
+            alt = min(better, key=lambda i: models[i].metrics["aicc"])
+            m = models[alt].metrics
+            reason = (f"{_name(models[alt])} is clearly better than {_name(models[pick])}: "
+                      f"J {m['J']:.1f} vs {base['J']:.1f}, AICc lower by "
+                      f"{base['aicc'] - m['aicc']:.1f}")
+            pick = alt
+    return pick, reason
+
+
+def _name(model) -> str:
+    m, n = model.order
+    return f"{m}/{n}" + (" with delay" if model.delay_fitted else "")
