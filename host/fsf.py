@@ -259,9 +259,11 @@ def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> floa
     if starts.size < 2:
         return float("nan")
     idx = starts[:, None] + np.arange(length)[None, :]
-    z = np.exp(-1j * omega_per_sample * idx)
-    U = np.sum(u[idx] * z, axis=1)
-    Y = np.sum(y[idx] * z, axis=1)
+    # exp(-j w (start_p + i)) = exp(-j w start_p) exp(-j w i): one kernel for every segment.
+    kernel = np.exp(-1j * omega_per_sample * np.arange(length))
+    shift = np.exp(-1j * omega_per_sample * starts)
+    U = shift * (u[idx] @ kernel)
+    Y = shift * (y[idx] @ kernel)
     den = np.sum(np.abs(U) ** 2) * np.sum(np.abs(Y) ** 2)
     if den == 0.0:
         return float("nan")
@@ -297,6 +299,7 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
     FrequencyPoint
     """
     u, y = _check_signals(u, y)
+    harmonics = len(_harmonic_orders(harmonics)) // 2       # validates
     if not fs_hz > 0:
         raise InputError(f"sampling rate must be positive, got {fs_hz}")
     if int(discard_periods) != discard_periods or discard_periods < 0:
@@ -334,48 +337,72 @@ def fsf_first_row(period: int, discard_periods: int) -> int:
     return (int(discard_periods) + 1) * int(period) - 1
 
 
-def fsf_regressors(u, period: int, orders) -> np.ndarray:
-    """FSF regressors ``f_l(k)`` for every sample (rows) and harmonic order (columns).
+def fsf_design_matrix(u, period: int, harmonics: int, first_row: int,
+                      offset: bool = False) -> np.ndarray:
+    """Real FSF regressors for rows ``first_row..end``, one regressor per row of the result
+    (shape ``(2L + 1 [+ 1], rows)``): ``[f_0, 2Re f_1, -2Im f_1, ..., (1)]``.
 
-    Sliding sums over the last ``period`` samples, starting from rest (samples before the
-    record count as zero), computed with a cumulative sum and a lag difference.
+    With ``exp(-j l w_d k) = c - j s`` (``c = cos(l w_d k)``, ``s = sin(l w_d k)``) the
+    sliding sum is ``C - j S`` with real sliding sums ``C = sum u c`` and ``S = sum u s`` over
+    the last ``period`` samples (from rest), and ``f_l = (c + j s)(C - j S) / N``, so
+    ``2 Re f_l = 2 (c C + s S) / N`` and ``-2 Im f_l = -2 (s C - c S) / N``: real arithmetic
+    only. The window of row ``first_row`` starts ``period - 1`` samples earlier.
     """
-    n = u.size
-    phase_idx = np.outer(np.arange(n) % period, orders) % period
-    twiddle = np.exp(-2j * np.pi * phase_idx / period)          # exp(-j l w_d k)
-    csum = np.cumsum(twiddle * u[:, None], axis=0)
-    sums = csum.copy()
-    sums[period:] -= csum[:-period]
-    return np.conj(twiddle) * sums / period
+    L = int(harmonics)
+    lo = max(first_row - period + 1, 0)
+    keep = first_row - lo
+    seg = u[lo:]
+    reps = -(-(seg.size + lo % period) // period)
+    Xt = np.empty((2 * L + 1 + int(offset), u.size - first_row))
+    Xt[0] = _sliding_sum(seg, period)[keep:] / period
+    # One harmonic at a time: arrays of one record length stay in cache.
+    for l in range(1, L + 1):
+        angle = 2 * np.pi * ((l * np.arange(period)) % period) / period
+        c = np.tile(np.cos(angle), reps)[lo % period:][:seg.size]    # c[k] = cos(l w_d k)
+        s = np.tile(np.sin(angle), reps)[lo % period:][:seg.size]
+        C = _sliding_sum(seg * c, period)[keep:]
+        S = _sliding_sum(seg * s, period)[keep:]
+        c, s = c[keep:], s[keep:]
+        np.multiply(c, C, out=Xt[2 * l - 1])
+        Xt[2 * l - 1] += s * S
+        Xt[2 * l - 1] *= 2.0 / period
+        np.multiply(c, S, out=Xt[2 * l])
+        Xt[2 * l] -= s * C
+        Xt[2 * l] *= 2.0 / period
+    if offset:
+        Xt[-1] = 1.0
+    return Xt
+
+
+def _sliding_sum(x, window: int) -> np.ndarray:
+    """``sum x[k - window + 1 .. k]`` for every ``k``, counting samples before ``x`` as zero."""
+    csum = np.cumsum(x)
+    csum[window:] -= csum[:-window].copy()
+    return csum
 
 
 def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
-    orders = _harmonic_orders(harmonics)
-    positive = [0] + list(range(1, int(harmonics) + 1))
     start = fsf_first_row(period, discard_periods)
     n_periods = (u.size - start) // period
     if n_periods < 1:
         raise InputError(f"record of {u.size} samples is too short: the FSF needs "
                          f"{discard_periods + 2} periods of {period} samples (one fills the filter)")
-    stop = u.size     # every complete row, as RLS uses them; rows need not fill whole periods
-    f = fsf_regressors(u, period, positive)[start:stop]
-    # Real form: G_0 f_0 + sum_l 2 Re(G_l f_l) = G_0 f_0 + sum_l (a_l 2Re f_l + b_l (-2Im f_l)).
-    cols = [f[:, 0].real]
-    for j in range(1, len(positive)):
-        cols += [2.0 * f[:, j].real, -2.0 * f[:, j].imag]
-    ridge = [1.0] + [2.0] * (2 * len(positive) - 2)          # |G_l|^2 + |G_-l|^2 = 2(a^2+b^2)
+    # Real form: G_0 f_0 + sum_l 2 Re(G_l f_l) = G_0 f_0 + sum_l (a_l 2Re f_l + b_l (-2Im f_l))
+    # with G_l = a_l + j b_l. Every complete row is used, as RLS uses them.
+    Xt = fsf_design_matrix(u, period, harmonics, start, offset)
+    ridge = np.full(Xt.shape[0], 2.0)          # |G_l|^2 + |G_-l|^2 = 2 (a^2 + b^2)
+    ridge[0] = 1.0                            # f_0 and the offset are real
     if offset:
-        cols.append(np.ones(stop - start))
-        ridge.append(1.0)
-    X = np.column_stack(cols)
-    yy = y[start:stop]
-    gram = X.T @ X
+        ridge[-1] = 1.0
+    yy = y[start:]
+    gram = Xt @ Xt.T
     A = gram + np.diag(ridge) / p0
-    coef = scipy.linalg.solve(A, X.T @ yy, assume_a="pos")
-    resid = yy - X @ coef
-    # Which harmonics does the input excite?  |U_l| from the regressor's per-period magnitude.
-    u_amp = np.sqrt(np.mean(np.abs(f) ** 2, axis=0))
-    excited = u_amp >= EXCITED_FRACTION * u_amp[1]
+    coef = scipy.linalg.solve(A, Xt @ yy, assume_a="pos")
+    resid = yy - coef @ Xt
+    # Excitation per harmonic from the Gram diagonal: sum |f_l|^2 = (|2Re f|^2 + |2Im f|^2)/4.
+    diag = np.diag(gram)
+    amp = np.sqrt(np.r_[diag[0], (diag[1:2 * harmonics:2] + diag[2:2 * harmonics + 1:2]) / 4])
+    excited = amp >= EXCITED_FRACTION * amp[1]
     if not excited[1]:
         raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
     n_free = int(excited[0]) + 2 * int(np.sum(excited[1:])) + int(offset)

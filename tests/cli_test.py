@@ -1,0 +1,162 @@
+"""The heliquad command line: formats, help, and bad input (one line, exit 2)."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.io
+
+from heliquad.host import paper
+from heliquad.sim.dwell import simulate_sine_dwell
+
+ROLL = paper.MODELS["roll"][(0, 2)]
+
+
+def heliquad(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Five settled sine runs through the roll model, as RUN.csv files."""
+    folder = tmp_path_factory.mktemp("runs")
+    paths = []
+    for i, f in enumerate(np.logspace(math.log10(0.5), math.log10(4.5), 5)):
+        d = simulate_sine_dwell(*ROLL, f, cycles=8, settle_cycles=math.ceil(6 * f))
+        path = folder / f"run{i}.csv"
+        d.to_csv(path)
+        paths.append(path)
+    return paths
+
+
+def test_fsf_then_fit_round_trip(runs, tmp_path):
+    points = tmp_path / "points.csv"
+    res = heliquad("fsf", *runs, "--out", points)
+    assert res.returncode == 0, res.stderr
+    assert "[5/5]" in res.stdout
+    header = points.read_text().splitlines()[0]
+    assert header == "omega_rad_s,magnitude,phase_rad,sigma,coherence"
+    table = np.loadtxt(points, delimiter=",", skiprows=1)
+    assert table.shape == (5, 5) and np.all(np.diff(table[:, 0]) > 0)
+    G = np.polyval(ROLL[0], 1j * table[:, 0]) / np.polyval(ROLL[1], 1j * table[:, 0])
+    np.testing.assert_allclose(table[:, 1] * np.exp(1j * table[:, 2]), G, rtol=1e-6)
+
+    models, mat, png = tmp_path / "models.json", tmp_path / "models.mat", tmp_path / "bode.png"
+    res = heliquad("fit", points, "--order", "0/2", "--order", "0/3", "--json", models,
+                   "--mat", mat, "--plot", png)
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(models.read_text())
+    assert doc["recommended"] == 0
+    first = doc["models"][0]
+    assert first["order"] == [0, 2] and first["den"][0] == 1.0 and first["stable"] is True
+    assert set(first["metrics"]) >= {"rms", "J", "aicc"}
+    np.testing.assert_allclose(first["num"], ROLL[0], rtol=1e-5)
+    np.testing.assert_allclose(first["den"], ROLL[1], rtol=1e-5)
+    assert first["delay_s"] == 0.0
+    loaded = scipy.io.loadmat(mat, squeeze_me=True)
+    assert int(loaded["recommended"]) == 1
+    assert png.stat().st_size > 10_000
+
+
+def test_fit_with_delay_writes_the_delay(runs, tmp_path):
+    points = tmp_path / "p.csv"
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 15)
+    F = np.polyval(ROLL[0], 1j * omega) / np.polyval(ROLL[1], 1j * omega) * np.exp(-0.02j * omega)
+    np.savetxt(points, np.column_stack([omega, np.abs(F), np.unwrap(np.angle(F))]),
+               delimiter=",", header="omega_rad_s,magnitude,phase_rad", comments="")
+    models = tmp_path / "m.json"
+    res = heliquad("fit", points, "--order", "0/2", "--delay", "--json", models)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(models.read_text())["models"][0]["delay_s"] == pytest.approx(0.02, rel=1e-4)
+
+
+def test_fsf_finds_the_frequency_or_takes_it(runs, tmp_path):
+    out = tmp_path / "one.csv"
+    assert heliquad("fsf", runs[0], "--out", out).returncode == 0
+    found = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert heliquad("fsf", runs[0], "--freq-hz", 0.5, "--out", out).returncode == 0
+    given = np.loadtxt(out, delimiter=",", skiprows=1)
+    np.testing.assert_allclose(found, given, rtol=1e-9)
+
+
+@pytest.mark.parametrize("sub", ["fsf", "fit"])
+def test_help_explains_the_formats(sub):
+    res = heliquad(sub, "--help")
+    assert res.returncode == 0
+    for needle in {"fsf": ["t_s,u,y", "omega_rad_s,magnitude,phase_rad"],
+                   "fit": ["omega_rad_s,magnitude,phase_rad", "MODELS.json", "descending"]}[sub]:
+        assert needle in res.stdout
+
+
+def write(path, text):
+    path.write_text(text)
+    return path
+
+
+GOOD_RUN = "t_s,u,y\n" + "".join(f"{k / 200},{math.sin(k / 10)},{0.5 * math.sin(k / 10)}\n"
+                                   for k in range(2000))
+GOOD_POINTS = "omega_rad_s,magnitude,phase_rad\n" + "".join(
+    f"{w},{1 / math.hypot(1, w)},{-math.atan(w)}\n" for w in np.logspace(-1, 1, 8))
+
+BAD_FSF = {
+    "empty file": ("", "empty file"),
+    "header only": ("t_s,u,y\n", "no data rows"),
+    "misnamed column": (GOOD_RUN.replace("t_s,u,y", "time,u,y", 1), "missing column"),
+    "missing column": ("t_s,u\n0,1\n0.005,2\n", "missing column"),
+    "NaN": ("t_s,u,y\n0,1,2\n0.005,nan,3\n0.01,1,1\n", "column u has NaN"),
+    "non-numeric": ("t_s,u,y\n0,1,2\n0.005,abc,3\n0.01,1,1\n", "could not convert|abc"),
+    "non-increasing time": ("t_s,u,y\n0,1,2\n0.005,1,3\n0.005,1,1\n0.01,1,1\n", "does not increase"),
+    "constant input": ("t_s,u,y\n" + "".join(f"{k / 200},1,1\n" for k in range(100)), "constant"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_FSF)
+def test_fsf_bad_input_is_one_line_exit_2(case, tmp_path):
+    text, match = BAD_FSF[case]
+    res = heliquad("fsf", write(tmp_path / "run.csv", text), "--out", tmp_path / "p.csv")
+    assert_one_line_error(res, match)
+    assert not (tmp_path / "p.csv").exists()
+
+
+BAD_FIT = {
+    "empty file": ("", [], "empty file"),
+    "misnamed column": (GOOD_POINTS.replace("omega_rad_s", "omega"), [], "missing column"),
+    "NaN": (GOOD_POINTS.replace("\n", "\nnan,1,0\n", 1), [], "NaN"),
+    "non-increasing omega": (GOOD_POINTS + "0.5,1,0\n", [], "does not increase"),
+    "too few points": ("omega_rad_s,magnitude,phase_rad\n1,1,0\n2,0.5,-1\n", ["--order", "2/4"],
+                       "needs at least"),
+    "unknown order syntax": (GOOD_POINTS, ["--order", "2-4"], "form M/N"),
+    "improper order": (GOOD_POINTS, ["--order", "3/1"], "improper"),
+    "dB magnitude": (GOOD_POINTS.replace(",0.", ",-3.", 1), [], "positive"),
+    "sigma weights without sigma": (GOOD_POINTS, ["--weights", "sigma"], "no sigma column"),
+    "unknown option": (GOOD_POINTS, ["--frobnicate"], "unrecognized"),
+}
+
+
+@pytest.mark.parametrize("case", BAD_FIT)
+def test_fit_bad_input_is_one_line_exit_2(case, tmp_path):
+    text, extra, match = BAD_FIT[case]
+    res = heliquad("fit", write(tmp_path / "p.csv", text), *extra, "--json", tmp_path / "m.json")
+    assert_one_line_error(res, match)
+    assert not (tmp_path / "m.json").exists()
+
+
+def test_missing_file_is_one_line_exit_2(tmp_path):
+    assert_one_line_error(heliquad("fit", tmp_path / "nope.csv", "--json", tmp_path / "m.json"),
+                          "no such file")
+    assert_one_line_error(heliquad("fsf", tmp_path / "nope.csv", "--out", tmp_path / "p.csv"),
+                          "no such file")
+
+
+def assert_one_line_error(res, match):
+    import re
+
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "Traceback" not in res.stderr
+    assert re.search(match, lines[0]), lines[0]

@@ -1,0 +1,192 @@
+"""Transfer-function fitting: exact recovery, noise, stability, delay, selection."""
+
+import math
+
+import numpy as np
+import pytest
+
+from heliquad.host import paper
+from heliquad.host.errors import InputError
+from heliquad.host.fit import fit_levy, fit_tf, model_response, parse_order
+from heliquad.host.identify import fit_orders
+from heliquad.host.metrics import evaluate_model, recommend
+
+N_POINTS = 15
+DECADES = 1.5
+
+#: Known models for synthetic recovery: name -> (num, den, delay_s, centre rad/s).
+SYNTHETIC = {
+    "first order": ([2.0], [1.0, 1.5], 0.0, 2.0),
+    "underdamped second order (roll-like)": ([28.19], [1, 5.13, 22.93], 0.0, 6.0),
+    "third order with zeros": (list(20.0 * np.poly([-1.0, -2.0])),
+                               list(np.poly([-6.0, -3 + 12j, -3 - 12j]).real), 0.0, 5.6),
+    "second order with 20 ms delay": ([28.19], [1, 5.13, 22.93], 0.020, 6.0),
+}
+
+
+def band(centre_rad_s):
+    half = DECADES / 2
+    return centre_rad_s * np.logspace(-half, half, N_POINTS)
+
+
+def order_of(num, den):
+    return len(num) - 1, len(den) - 1
+
+
+@pytest.mark.parametrize("name", SYNTHETIC)
+def test_noise_free_recovery_within_half_a_percent(name):
+    num, den, tau, centre = SYNTHETIC[name]
+    omega = band(centre)
+    F = model_response(num, den, tau, omega)
+    model = fit_tf(omega, F, order_of(num, den), delay=tau > 0)
+    np.testing.assert_allclose(model.num, num, rtol=5e-3)
+    np.testing.assert_allclose(model.den, den, rtol=5e-3)
+    assert model.delay_s == pytest.approx(tau, rel=5e-3, abs=1e-9)
+    assert model.stable
+
+
+@pytest.mark.parametrize("axis, order", [(a, o) for a in paper.MODELS for o in paper.MODELS[a]])
+def test_published_models_refit_at_their_own_order_within_one_percent(axis, order):
+    num, den = paper.MODELS[axis][order]
+    lo, hi = paper.BANDS_HZ[axis]
+    omega = 2 * np.pi * np.logspace(math.log10(lo), math.log10(hi), N_POINTS)
+    model = fit_tf(omega, model_response(num, den, 0.0, omega), order)
+    np.testing.assert_allclose(model.num, num, rtol=1e-2)
+    np.testing.assert_allclose(model.den, den, rtol=1e-2)
+
+
+def noisy(F, seed, level=0.05):
+    """5 % complex noise: F (1 + e), e complex Gaussian with E|e|^2 = level^2."""
+    rng = np.random.default_rng(seed)
+    e = (rng.normal(size=F.size) + 1j * rng.normal(size=F.size)) * level / math.sqrt(2)
+    return F * (1 + e)
+
+
+def band_error(response, num, den, tau, omega):
+    """Relative complex error of a response against the truth on a dense grid in the band."""
+    dense = np.logspace(np.log10(omega[0]), np.log10(omega[-1]), 400)
+    err = np.abs(response(dense) / model_response(num, den, tau, dense) - 1)
+    return float(np.sqrt(np.mean(err ** 2))), float(np.max(err))
+
+
+#: "Within the noise": the fitted response's RMS relative error across the band stays below
+#: the 5 % noise of a single point, and its worst error below twice that.
+NOISE = 0.05
+
+
+@pytest.mark.parametrize("name", SYNTHETIC)
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_fit_with_five_percent_noise_stays_within_the_noise(name, seed):
+    num, den, tau, centre = SYNTHETIC[name]
+    omega = band(centre)
+    F = noisy(model_response(num, den, tau, omega), seed)
+    model = fit_tf(omega, F, order_of(num, den), delay=tau > 0)
+    rms, worst = band_error(model.response, num, den, tau, omega)
+    assert rms < NOISE and worst < 2 * NOISE
+    assert model.stable
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_plain_levy_fails_the_same_criterion(seed):
+    # The criterion above discriminates: Levy's equation error weights each point by
+    # |D(j w)|^2, and with the zeros low in the band that drowns the low frequencies.
+    num, den, tau, centre = SYNTHETIC["third order with zeros"]
+    omega = band(centre)
+    F = noisy(model_response(num, den, tau, omega), seed)
+    lnum, lden = fit_levy(omega, F, order_of(num, den))
+    rms, worst = band_error(lambda w: model_response(lnum, lden, 0.0, w), num, den, tau, omega)
+    assert not (rms < NOISE and worst < 2 * NOISE)
+
+
+def test_unstable_data_gives_a_stable_model_by_default_and_a_flag_when_allowed():
+    num, den = [4.0], [1.0, -0.5, 4.0]          # poles at 0.25 +/- 1.98j
+    omega = np.logspace(-0.5, 1.0, N_POINTS)
+    F = model_response(num, den, 0.0, omega)
+    constrained = fit_tf(omega, F, (0, 2))
+    assert constrained.stable and np.all(constrained.poles.real < 0)
+    free = fit_tf(omega, F, (0, 2), stable=False)
+    assert not free.stable
+    np.testing.assert_allclose(free.den, den, atol=1e-6)
+
+
+def test_unstable_models_are_never_recommended():
+    num, den = [4.0], [1.0, -0.5, 4.0]
+    omega = np.logspace(-0.5, 1.0, N_POINTS)
+    points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
+    result = fit_orders(points, [(0, 2)], stable=False)
+    assert result.recommended is None and "no stable model" in result.reason
+
+
+def test_recommendation_prefers_the_lowest_acceptable_order():
+    num, den = paper.MODELS["roll"][(0, 2)]
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), N_POINTS)
+    points = {"omega": omega, "F": noisy(model_response(num, den, 0.0, omega), 4, 0.02)}
+    result = fit_orders(points, paper.DEFAULT_ORDERS["roll"])
+    assert result.models[result.recommended].order == (0, 2)
+    assert "lowest-order" in result.reason
+
+
+def test_recommendation_moves_up_when_a_higher_order_is_clearly_better():
+    num, den, _, centre = SYNTHETIC["third order with zeros"]
+    omega = band(centre)
+    points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
+    result = fit_orders(points, [(0, 1), (0, 2), (2, 3)])
+    assert result.models[result.recommended].order == (2, 3)
+    assert result.models[0].metrics["J"] > 100 or "clearly better" in result.reason
+
+
+def test_metrics_of_an_exact_model():
+    num, den = [28.19], [1, 5.13, 22.93]
+    omega = band(6.0)
+    F = model_response(num, den, 0.0, omega)
+    model = fit_tf(omega, F, (0, 2))
+    metrics = evaluate_model(model, omega, F, 1 / np.abs(F))
+    assert metrics["J"] < 1e-12 and metrics["rms"] < 1e-10
+    assert model.dc_gain == pytest.approx(28.19 / 22.93, rel=1e-8)
+    np.testing.assert_allclose(np.sort_complex(model.poles),
+                               np.sort_complex(np.roots(den)), rtol=1e-8)
+
+
+def test_cifer_cost_of_a_known_error():
+    # Every point 1 dB high and 10 deg late: J = 20 (1 + 0.01745 * 100) = 54.9 at coherence 1
+    # times W = (1.58 (1 - e^-1))^2 = 0.9976.
+    omega = band(2.0)
+    F = model_response([1.0], [1.0, 1.0], 0.0, omega)
+    model = fit_tf(omega, F, (0, 1))
+    shifted = F / (10 ** (1 / 20) * np.exp(-1j * np.radians(10)))
+    J = evaluate_model(model, omega, shifted, 1 / np.abs(F))["J"]
+    assert J == pytest.approx(20 * (1 + 0.01745 * 100) * (1.58 * (1 - math.exp(-1))) ** 2,
+                              rel=1e-6)
+
+
+@pytest.mark.parametrize("text, expected", [("0/2", (0, 2)), (" 2 / 4 ", (2, 4))])
+def test_parse_order(text, expected):
+    assert parse_order(text) == expected
+
+
+@pytest.mark.parametrize("text, match", [("2", "form M/N"), ("a/b", "form M/N"),
+                                         ("3/2", "improper"), ("0/0", "at least 1"),
+                                         ("-1/2", "form M/N")])
+def test_parse_order_rejects(text, match):
+    with pytest.raises(InputError, match=match):
+        parse_order(text)
+
+
+def test_too_few_points_for_the_order():
+    omega = np.array([1.0, 2.0, 3.0])
+    points = {"omega": omega, "F": model_response([1.0], [1, 1], 0.0, omega)}
+    with pytest.raises(InputError, match="needs at least"):
+        fit_orders(points, [(2, 4)])
+
+
+def test_recommend_without_acceptable_model_says_so():
+    omega = band(6.0)
+    num, den, _, _ = SYNTHETIC["third order with zeros"]
+    F = model_response(num, den, 0.0, band(5.6))
+    models = []
+    for order in [(0, 1)]:
+        m = fit_tf(omega, F, order)
+        evaluate_model(m, omega, F, 1 / np.abs(F))
+        models.append(m)
+    index, reason = recommend(models)
+    assert index == 0 and "no stable model reaches" in reason

@@ -1,0 +1,160 @@
+"""FSF estimator: accuracy, recursive/batch agreement, robustness, uncertainty."""
+
+import math
+
+import numpy as np
+import pytest
+
+from heliquad.host.baselines import estimate_dft, estimate_h1
+from heliquad.host.errors import InputError
+from heliquad.host.fsf import RecursiveFsf, estimate_frequency, estimate_fsf, period_coherence
+from heliquad.sim.dwell import simulate_sine_dwell
+
+ROLL = ([28.19], [1, 5.13, 22.93])          # SPEC.md's chosen roll model
+FS_HZ = 200.0
+#: Settling before the record: 16 of the roll model's slowest time constants (1/2.565 s),
+#: so the transient left (e^-16 ~ 1e-7) is below every tolerance here.
+SETTLE_S = 16 / 2.565
+ACCEPT_FREQS_HZ = [0.2, 0.5, 1.0, 2.0, 5.0]
+
+
+def truth(num, den, freq_hz):
+    s = 2j * math.pi * freq_hz
+    return np.polyval(num, s) / np.polyval(den, s)
+
+
+def dwell(freq_hz, cycles=10, snr_db=None, seed=0, model=ROLL, amplitude=1.0):
+    """Steady-state record of ``cycles`` periods; output noise at the given SNR."""
+    settle = math.ceil(SETTLE_S * freq_hz)
+    d = simulate_sine_dwell(*model, freq_hz, fs_hz=FS_HZ, cycles=cycles, settle_cycles=settle,
+                            amplitude=amplitude)
+    y = d.y
+    if snr_db is not None:
+        noise_std = np.sqrt(np.mean(y ** 2) / 10 ** (snr_db / 10))
+        y = y + np.random.default_rng(seed).normal(0.0, noise_std, y.size)
+    return d.u, y, d.freq_hz
+
+
+@pytest.mark.parametrize("freq_hz", ACCEPT_FREQS_HZ)
+def test_acceptance_20db_snr_ten_periods(freq_hz):
+    # Issue 2: 200 Hz, 10 periods, 20 dB SNR -> |G| within 1 %, phase within 1 degree.
+    # The estimator's own sigma at 5 Hz is ~0.7 % (complex), so 1 % is ~2 sigma per
+    # component; the fixed seed makes the test repeatable and the 3-sigma check below
+    # guards the estimator's honesty independent of the seed.
+    u, y, f = dwell(freq_hz, snr_db=20.0, seed=int(freq_hz * 100))
+    point = estimate_fsf(u, y, FS_HZ, discard_periods=0)
+    G = truth(*ROLL, f)
+    assert point.method == "fsf"
+    assert point.freq_hz == pytest.approx(f, rel=1e-12)
+    assert abs(point.magnitude / abs(G) - 1) < 0.01
+    assert abs(math.degrees(np.angle(point.gain / G))) < 1.0
+    assert abs(point.gain - G) < 3 * point.sigma
+
+
+@pytest.mark.parametrize("freq_hz", ACCEPT_FREQS_HZ)
+def test_recursive_and_batch_agree(freq_hz):
+    u, y, f = dwell(freq_hz, snr_db=20.0, seed=7)
+    y = y + 0.3                                   # an output offset too
+    period = round(FS_HZ / f)
+    p0 = 2e6
+    batch = estimate_fsf(u, y, FS_HZ, freq_hz=f, discard_periods=0, p0=p0)
+    rls = RecursiveFsf(period, discard_periods=0, p0=p0)
+    for a, b in zip(u, y):
+        rls.update(a, b)
+    for l in (1,):
+        assert abs(rls.gain(l) - batch.harmonics[l]) <= 1e-6 * abs(batch.harmonics[l])
+
+
+@pytest.mark.parametrize("freq_hz", [0.37, 1.2345, 3.3])
+def test_exact_for_noise_free_data_integer_and_non_integer_period(freq_hz):
+    # A non-integer period goes to the exact sine-fit treatment; never a biased FSF.
+    settle = math.ceil(SETTLE_S * freq_hz)
+    d = simulate_sine_dwell(*ROLL, freq_hz, fs_hz=FS_HZ, cycles=10, settle_cycles=settle,
+                            integer_period=False)
+    point = estimate_fsf(d.u, d.y, FS_HZ, discard_periods=0)
+    expected_method = "fsf" if float(FS_HZ / freq_hz).is_integer() else "sinefit"
+    assert point.method == expected_method
+    assert abs(point.gain / truth(*ROLL, freq_hz) - 1) < 1e-6
+
+
+def test_frequency_found_from_input_matches_the_excitation():
+    u, y, f = dwell(1.37, snr_db=20.0)
+    assert estimate_frequency(u, FS_HZ) == pytest.approx(f, rel=1e-7)
+
+
+def test_offsets_do_not_bias_the_estimate():
+    u, y, f = dwell(1.0)
+    clean = estimate_fsf(u, y, FS_HZ, discard_periods=0)
+    shifted = estimate_fsf(u + 2.0, y - 5.0, FS_HZ, discard_periods=0)
+    assert abs(shifted.gain / clean.gain - 1) < 1e-7
+    # Without an input DC the offset term alone carries the output's shift.
+    assert estimate_fsf(u, y - 5.0, FS_HZ, discard_periods=0).offset == pytest.approx(-5.0)
+
+
+def test_unexcited_harmonics_are_reported_as_nan_and_excited_ones_estimated():
+    u, y, f = dwell(1.0)
+    point = estimate_fsf(u, y, FS_HZ, discard_periods=0)
+    assert all(np.isnan(point.harmonics[l]) for l in (2, 3))
+    # Input with a second harmonic: both are estimated.
+    d1 = simulate_sine_dwell(*ROLL, 1.0, fs_hz=FS_HZ, cycles=10, settle_cycles=7)
+    d2 = simulate_sine_dwell(*ROLL, 2.0, fs_hz=FS_HZ, cycles=20, settle_cycles=14,
+                             amplitude=0.5)
+    point = estimate_fsf(d1.u + d2.u, d1.y + d2.y, FS_HZ, freq_hz=1.0, discard_periods=0)
+    assert abs(point.harmonics[2] / truth(*ROLL, 2.0) - 1) < 1e-6
+    assert np.isnan(point.harmonics[3])
+
+
+def test_sigma_matches_the_actual_scatter():
+    f = 2.0
+    G = truth(*ROLL, f)
+    errors, sigmas = [], []
+    for seed in range(60):
+        u, y, _ = dwell(f, snr_db=20.0, seed=seed)
+        p = estimate_fsf(u, y, FS_HZ, discard_periods=0)
+        errors.append(p.gain - G)
+        sigmas.append(p.sigma)
+    empirical = math.sqrt(np.mean(np.abs(errors) ** 2))
+    # 60 complex samples: the RMS estimate itself is good to about +/-13 % (1 sigma).
+    assert empirical == pytest.approx(np.mean(sigmas), rel=0.35)
+
+
+def test_coherence_is_one_without_noise_and_drops_with_noise():
+    u, y, _ = dwell(1.0)
+    assert estimate_fsf(u, y, FS_HZ, discard_periods=0).coherence == pytest.approx(1, abs=1e-9)
+    u, y, _ = dwell(1.0, snr_db=-10.0)
+    assert estimate_fsf(u, y, FS_HZ, discard_periods=0).coherence < 0.9
+    # One segment says nothing: coherence is 1 by construction, so it is NaN.
+    assert math.isnan(period_coherence(u, y, 2 * math.pi / 200, [0], 200))
+
+
+def test_discarding_settling_periods_removes_the_transient():
+    d = simulate_sine_dwell(*ROLL, 2.0, fs_hz=FS_HZ, cycles=30, settle_cycles=0)
+    G = truth(*ROLL, d.freq_hz)
+    raw = estimate_fsf(d.u, d.y, FS_HZ, discard_periods=0)
+    settled = estimate_fsf(d.u, d.y, FS_HZ, discard_periods=10)
+    assert abs(settled.gain / G - 1) < 1e-4
+    assert abs(raw.gain / G - 1) > abs(settled.gain / G - 1)
+
+
+@pytest.mark.parametrize("u, y, match", [
+    (np.ones(400), np.ones(400), "constant"),
+    (np.sin(np.arange(30) * 0.1), np.zeros(30), "too short|fewer than"),
+    (np.sin(np.arange(100) * 0.5), np.zeros(99), "equal length"),
+    (np.r_[np.sin(np.arange(99) * 0.5), np.nan], np.zeros(100), "NaN"),
+])
+def test_bad_signals_raise_input_error(u, y, match):
+    with pytest.raises(InputError, match=match):
+        estimate_fsf(u, y, FS_HZ)
+
+
+def test_frequency_above_nyquist_is_refused():
+    u, y, _ = dwell(1.0)
+    with pytest.raises(InputError, match="Nyquist"):
+        estimate_fsf(u, y, FS_HZ, freq_hz=150.0)
+
+
+@pytest.mark.parametrize("estimator", [estimate_dft, estimate_h1])
+def test_baselines_agree_with_fsf_on_clean_data(estimator):
+    u, y, f = dwell(1.0, cycles=40)
+    base = estimator(u, y, FS_HZ, f, discard_periods=0)
+    assert abs(base.gain / truth(*ROLL, f) - 1) < 1e-6
