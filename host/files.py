@@ -144,6 +144,7 @@ def model_to_dict(model) -> dict:
         "den": [float(c) for c in model.den],
         "delay_s": float(model.delay_s),
         "stable": bool(model.stable),
+        "degenerate": bool(model.degenerate),
         "metrics": {k: _clean(v) if isinstance(v, float) else v
                     for k, v in model.metrics.items()},
         "poles": [[float(p.real), float(p.imag)] for p in model.poles],

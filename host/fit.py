@@ -46,9 +46,14 @@ DELAY_GRID = np.linspace(0.0, 1.0, 13)
 #: Roots on the imaginary axis (after reflection) are moved left by this fraction of
 #: omega_0 so that the log parametrisation exists.
 AXIS_MARGIN = 1e-6
-#: Log-parameters are clipped to +/- this so trial steps cannot overflow (e^80 ~ 5e34,
-#: far beyond any pole in scaled frequency).
-LOG_LIMIT = 80.0
+#: The extra pole of a start built from the next-lower order sits this far above the band.
+FAST_POLE = 10.0
+#: Poles are kept within this factor of the band's centre frequency (above and below): the
+#: log-parameters of a factor ``s + e^r`` are bounded by ``ln(POLE_RANGE)`` and those of
+#: ``s^2 + e^p s + e^q`` by ``ln(2 POLE_RANGE)`` and ``2 ln(POLE_RANGE)``. A pole that runs
+#: to the bound means the data do not support the order; the model is flagged degenerate.
+POLE_RANGE = 1e4
+LOG_LIMIT = 2.0 * np.log(2.0 * POLE_RANGE)
 
 
 @dataclasses.dataclass
@@ -67,6 +72,9 @@ class TfModel:
         Every pole has a negative real part.
     delay_fitted : bool
         The delay was a free parameter of the fit (it may have come out as 0).
+    degenerate : bool
+        A pole ran to the edge of the allowed range (``POLE_RANGE`` times the band's centre
+        frequency, or as far below): the points do not support this order.
     metrics : dict
         Filled by :func:`heliquad.host.metrics.evaluate_model`.
     """
@@ -77,6 +85,7 @@ class TfModel:
     delay_s: float = 0.0
     stable: bool = True
     delay_fitted: bool = False
+    degenerate: bool = False
     metrics: dict = dataclasses.field(default_factory=dict)
 
     @property
@@ -262,17 +271,29 @@ class _OutputError:
         sol, *_ = np.linalg.lstsq(A, b, rcond=None)
         return b - A @ sol
 
+    def bounds(self):
+        """Lower and upper bounds of the pole parameters (none for free coefficients)."""
+        if not self.stable:
+            return np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        b = np.empty(self.n)
+        b[0:2 * (self.n // 2):2] = np.log(2.0 * POLE_RANGE)      # p: sum of decay rates
+        b[1:2 * (self.n // 2):2] = 2.0 * np.log(POLE_RANGE)      # q: product of magnitudes
+        if self.n % 2:
+            b[-1] = np.log(POLE_RANGE)                           # r: a real pole
+        return -b, b
+
     def initial(self, den, tau):
         if self.stable:
-            p = _roots_to_params(_reflect(den))
+            lo, hi = self.bounds()
+            p = np.clip(_roots_to_params(_reflect(den)), lo + 1e-9, hi - 1e-9)
         else:
             p = np.asarray(den[1:], dtype=float)
         return np.concatenate([p, [tau]]) if self.delay else p
 
 
 def _refine(problem, x0, tau_max):
-    lower = np.full(x0.size, -np.inf)
-    upper = np.full(x0.size, np.inf)
+    lower, upper = (np.append(b, 0.0) for b in problem.bounds())
+    lower, upper = lower[:x0.size], upper[:x0.size]
     if problem.delay:
         lower[-1], upper[-1] = 0.0, tau_max
         x0 = x0.copy()
@@ -296,6 +317,11 @@ def _starts(x, F, m, n, w, delay, tau_max):
         starts.append((levy[1], tau))
         starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau))
         starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau))
+        if n >= 2:
+            # The next-lower order's poles and one fast pole above the band: the start that
+            # reaches "this order is one more than the data need" without a local minimum.
+            lower = _sk_solve(x, Fd, min(m, n - 1), n - 1, w)[1]
+            starts.append((np.polymul(lower, [1.0, FAST_POLE * x.max()]), tau))
     return starts
 
 
@@ -345,5 +371,10 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     tau = best_params[n] / w0 if delay else 0.0
     num_s, den_s = _unscale(num, den, w0)
     poles = np.roots(den_s)
-    return TfModel(order=(m, n), num=num_s, den=den_s, delay_s=float(tau),
-                   stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay))
+    model = TfModel(order=(m, n), num=num_s, den=den_s, delay_s=float(tau),
+                    stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay))
+    if stable:
+        lo, hi = problem.bounds()
+        at_bound = np.isclose(best_params[:n], lo, atol=1e-3) | np.isclose(best_params[:n], hi, atol=1e-3)
+        model.degenerate = bool(np.any(at_bound))
+    return model

@@ -73,7 +73,8 @@ def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> d
 
 def recommend(models) -> tuple:
     """Pick a model: the simplest stable one with acceptable J, unless a higher one is clearly
-    better.
+    better. Degenerate models (a pole at the edge of the allowed range: the order is more
+    than the points support) are never picked.
 
     "Clearly better" means: the simpler model is not already excellent (J > 50), and the
     other, also stable and acceptable, lowers AICc by more than 10 and at least halves J.
@@ -84,9 +85,9 @@ def recommend(models) -> tuple:
     -------
     (index, reason) : tuple of int and str
     """
-    stable = [i for i, m in enumerate(models) if m.stable]
+    stable = [i for i, m in enumerate(models) if m.stable and not m.degenerate]
     if not stable:
-        return None, "no stable model; none is recommended"
+        return None, "no stable, non-degenerate model; none is recommended"
     key = lambda i: (models[i].metrics["n_parameters"], models[i].order[1])  # noqa: E731
     acceptable = sorted((i for i in stable if models[i].metrics["J"] <= J_ACCEPTABLE), key=key)
     if not acceptable:

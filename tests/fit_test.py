@@ -114,7 +114,7 @@ def test_unstable_models_are_never_recommended():
     omega = np.logspace(-0.5, 1.0, N_POINTS)
     points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
     result = fit_orders(points, [(0, 2)], stable=False)
-    assert result.recommended is None and "no stable model" in result.reason
+    assert result.recommended is None and "no stable" in result.reason
 
 
 def test_recommendation_prefers_the_lowest_acceptable_order():
@@ -180,13 +180,21 @@ def test_too_few_points_for_the_order():
 
 
 def test_recommend_without_acceptable_model_says_so():
+    # A first-order model cannot follow the roll model's resonance and -180 deg phase.
     omega = band(6.0)
-    num, den, _, _ = SYNTHETIC["third order with zeros"]
-    F = model_response(num, den, 0.0, band(5.6))
-    models = []
-    for order in [(0, 1)]:
-        m = fit_tf(omega, F, order)
-        evaluate_model(m, omega, F, 1 / np.abs(F))
-        models.append(m)
-    index, reason = recommend(models)
+    F = model_response([28.19], [1, 5.13, 22.93], 0.0, omega)
+    model = fit_tf(omega, F, (0, 1))
+    evaluate_model(model, omega, F, 1 / np.abs(F))
+    assert model.metrics["J"] > 100 and not model.degenerate
+    index, reason = recommend([model])
     assert index == 0 and "no stable model reaches" in reason
+
+
+def test_an_order_the_points_do_not_support_is_flagged_degenerate():
+    # A 0/3 fit to exact 0/2 data sends its extra pole off the band.
+    omega = band(6.0)
+    F = model_response([28.19], [1, 5.13, 22.93], 0.0, omega)
+    model = fit_tf(omega, F, (0, 3))
+    evaluate_model(model, omega, F, 1 / np.abs(F))
+    assert model.degenerate
+    assert recommend([model])[0] is None
