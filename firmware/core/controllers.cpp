@@ -1,0 +1,60 @@
+#include "controllers.hpp"
+
+namespace hq {
+
+CascadeGains CascadeGains::paper_defaults() {
+    CascadeGains g;
+    // Inner loop: Kc, tau_I, tau_D (SPEC.md, inner-loop table).
+    const float rate[kAxes][3] = {{2.422f, 0.439f, 0.051f},
+                                  {2.386f, 0.439f, 0.048f},
+                                  {7.393f, 0.397f, 0.043f}};
+    for (int a = 0; a < kAxes; ++a) {
+        g.rate[a].kc = rate[a][0];
+        g.rate[a].tau_i_s = rate[a][1];
+        g.rate[a].tau_d_s = rate[a][2];
+        g.rate[a].output_min = -1.0f;
+        g.rate[a].output_max = 1.0f;
+        g.rate[a].integral_limit = 0.5f;
+    }
+    // Outer loop: Kc, tau_D (SPEC.md, outer-loop table); PD, no integral.
+    const float angle[2][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
+    for (int a = 0; a < 2; ++a) {
+        g.angle[a].kc = angle[a][0];
+        g.angle[a].tau_i_s = 0.0f;
+        g.angle[a].tau_d_s = angle[a][1];
+        g.angle[a].output_min = -kMaxRateSetpoint;
+        g.angle[a].output_max = kMaxRateSetpoint;
+        g.angle[a].integral_limit = 0.0f;
+    }
+    return g;
+}
+
+AttitudeController::AttitudeController(const CascadeGains& gains)
+    : pid_{Pid(gains.angle[0]), Pid(gains.angle[1])} {}
+
+Vec3 AttitudeController::update(const Euler& setpoint, const Euler& measured, float dt_s) {
+    Vec3 rate_sp;
+    rate_sp.x = pid_[0].update(setpoint.roll, measured.roll, dt_s);
+    rate_sp.y = pid_[1].update(setpoint.pitch, measured.pitch, dt_s);
+    rate_sp.z = 0.0f;
+    return rate_sp;
+}
+
+void AttitudeController::reset() {
+    for (auto& p : pid_) p.reset();
+}
+
+RateController::RateController(const CascadeGains& gains)
+    : pid_{Pid(gains.rate[0]), Pid(gains.rate[1]), Pid(gains.rate[2])} {}
+
+Vec3 RateController::update(const Vec3& setpoint, const Vec3& measured, float dt_s) {
+    Vec3 torque;
+    for (int a = 0; a < kAxes; ++a) torque[a] = pid_[a].update(setpoint[a], measured[a], dt_s);
+    return torque;
+}
+
+void RateController::reset() {
+    for (auto& p : pid_) p.reset();
+}
+
+}  // namespace hq

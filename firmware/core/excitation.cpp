@@ -1,0 +1,59 @@
+#include "excitation.hpp"
+
+#include <cmath>
+
+namespace hq {
+
+namespace {
+constexpr float kTwoPi = 6.283185307179586f;
+// At least four samples per period: a sine needs more than two (Nyquist), and the FSF's
+// harmonics are meaningless much closer to it.
+constexpr float kMinSamplesPerPeriod = 4.0f;
+}  // namespace
+
+bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
+    active_ = false;
+    if (!(config.freq_hz > 0.0f) || !(loop_rate_hz > 0.0f) ||
+        config.freq_hz * kMinSamplesPerPeriod > loop_rate_hz || config.cycles == 0 ||
+        !std::isfinite(config.amplitude)) {
+        return false;
+    }
+    config_ = config;
+    period_ = static_cast<uint32_t>(std::lround(loop_rate_hz / config.freq_hz));
+    actual_freq_hz_ = loop_rate_hz / static_cast<float>(period_);
+    total_ = period_ * (static_cast<uint32_t>(config.cycles) + 2u * config.fade_cycles);
+    k_ = 0;
+    active_ = true;
+    return true;
+}
+
+void Excitation::stop() { active_ = false; }
+
+bool Excitation::measuring() const {
+    const uint32_t fade = period_ * config_.fade_cycles;
+    return active_ && k_ >= fade && k_ < total_ - fade;
+}
+
+float Excitation::next() {
+    if (!active_) return 0.0f;
+    if (k_ >= total_) {
+        active_ = false;
+        return 0.0f;
+    }
+    const uint32_t fade = period_ * config_.fade_cycles;
+    float envelope = 1.0f;
+    if (k_ < fade) {
+        envelope = 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(k_) /
+                                           static_cast<float>(fade)));
+    } else if (k_ >= total_ - fade) {
+        envelope = 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(total_ - k_) /
+                                           static_cast<float>(fade)));
+    }
+    const uint32_t phase = k_ % period_;          // exact: no accumulated phase error
+    const float value = config_.amplitude * envelope *
+                        std::sin(kTwoPi * static_cast<float>(phase) / static_cast<float>(period_));
+    ++k_;
+    return value;
+}
+
+}  // namespace hq

@@ -1,0 +1,82 @@
+#include "mixer.hpp"
+
+#include <cmath>
+
+namespace hq {
+
+namespace {
+float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
+float fabs_(float x) { return x < 0.0f ? -x : x; }
+constexpr float kDegToRad = 0.017453292519943295f;
+}  // namespace
+
+Mixer::Mixer(const MixerGeometry& geometry) : g_(geometry) {
+    cos_d_ = std::cos(g_.cant_deg * kDegToRad);
+    sin_d_ = std::sin(g_.cant_deg * kDegToRad);
+    sign_c0_ = g_.central_torque_per_thrust_m >= 0.0f ? 1.0f : -1.0f;
+    fz_max_ = g_.central_max_thrust_n + 4.0f * cos_d_ * g_.arm_max_thrust_n;
+    txy_max_ = g_.arm_length_m * cos_d_ * g_.arm_max_thrust_n;
+    tz_max_ = 2.0f * g_.arm_length_m * sin_d_ * g_.arm_max_thrust_n;
+}
+
+MixerOutput Mixer::mix(const MixerCommand& cmd) const {
+    MixerOutput out;
+    const float ta_max = g_.arm_max_thrust_n;
+    const float t0_max = g_.central_max_thrust_n;
+    const float c0 = g_.central_torque_per_thrust_m;
+    const float lat = sign_c0_ * 4.0f * g_.arm_length_m * sin_d_;   // yaw moment per N of T_a
+
+    // 1. Roll and pitch: differential arm thrust, each within its own authority.
+    const float roll = clamp(cmd.roll, -1.0f, 1.0f);
+    const float pitch = clamp(cmd.pitch, -1.0f, 1.0f);
+    const float dx = -roll * ta_max;
+    const float dy = pitch * ta_max;
+    out.saturated = (roll != cmd.roll) || (pitch != cmd.pitch);
+
+    // 2. Collective and yaw: solve [1, 4 cos d; c0, -lat] [T0; Ta] = [Fz; tau_z].
+    const float fz = clamp(cmd.collective, 0.0f, 1.0f) * fz_max_;
+    const float tz = clamp(cmd.yaw, -1.0f, 1.0f) * tz_max_;
+    const float det = -lat - 4.0f * cos_d_ * c0;
+    float t0 = (-lat * fz - 4.0f * cos_d_ * tz) / det;
+    float ta = (tz - c0 * fz) / det;
+    out.saturated = out.saturated || fz != cmd.collective * fz_max_ || tz != cmd.yaw * tz_max_;
+
+    // 3. Arms must hold the differential: T_a within [h, Ta_max - h].
+    const float h = 0.5f * (fabs_(dx) > fabs_(dy) ? fabs_(dx) : fabs_(dy));
+    const float ta_lo = h, ta_hi = ta_max - h;
+    if (ta < ta_lo || ta > ta_hi) {
+        ta = clamp(ta, ta_lo, ta_hi);
+        t0 = (tz + lat * ta) / c0;           // keep yaw with the central rotor ...
+        out.saturated = true;
+    }
+    if (t0 < 0.0f || t0 > t0_max) {          // ... unless it cannot: then yaw gives way too
+        t0 = clamp(t0, 0.0f, t0_max);
+        ta = clamp((c0 * t0 - tz) / lat, ta_lo, ta_hi);
+        out.saturated = true;
+    }
+
+    out.motor[0] = t0 / t0_max;
+    out.motor[1] = (ta + 0.5f * dy) / ta_max;
+    out.motor[2] = (ta + 0.5f * dx) / ta_max;
+    out.motor[3] = (ta - 0.5f * dy) / ta_max;
+    out.motor[4] = (ta - 0.5f * dx) / ta_max;
+    for (float& m : out.motor) m = clamp(m, 0.0f, 1.0f);   // round-off only
+    return out;
+}
+
+MixerCommand Mixer::achieved(const float motor[kMotors]) const {
+    const float ta_max = g_.arm_max_thrust_n;
+    const float t0 = motor[0] * g_.central_max_thrust_n;
+    float t[4];
+    for (int i = 0; i < 4; ++i) t[i] = motor[i + 1] * ta_max;
+    const float ta = 0.25f * (t[0] + t[1] + t[2] + t[3]);
+    const float lat = sign_c0_ * 4.0f * g_.arm_length_m * sin_d_;
+    MixerCommand c;
+    c.collective = (t0 + 4.0f * cos_d_ * ta) / fz_max_;
+    c.roll = -g_.arm_length_m * cos_d_ * (t[1] - t[3]) / txy_max_;
+    c.pitch = g_.arm_length_m * cos_d_ * (t[0] - t[2]) / txy_max_;
+    c.yaw = (g_.central_torque_per_thrust_m * t0 - lat * ta) / tz_max_;
+    return c;
+}
+
+}  // namespace hq

@@ -1,0 +1,78 @@
+// Mixer for the heterogeneous multirotor: one central rotor and four arm rotors canted
+// sideways (SPEC.md). Derivation and figures: docs/mixer.md.
+//
+// Geometry (body FRD, "+" configuration): arm rotor i sits at distance l on the arm at
+// azimuth psi_i = 0, 90, 180, 270 deg (1 front, 2 right, 3 back, 4 left). Each is canted by
+// delta about its own arm, so its thrust T_i has a vertical part T_i cos(delta) and a
+// tangential part T_i sin(delta) that gives a yaw moment l T_i sin(delta). The cant is the
+// same on all four, in the sense that opposes the central rotor's reaction torque
+// Q_0 = c0 T_0 (c0 signed: positive is a torque along +z, nose right). With
+// Dx = T_2 - T_4, Dy = T_1 - T_3, T_a = mean arm thrust:
+//
+//     Fz  = T_0 + 4 cos(delta) T_a                 (total vertical thrust, N)
+//     tau_x = -l cos(delta) Dx                      (roll moment, N m)
+//     tau_y =  l cos(delta) Dy                      (pitch moment, N m)
+//     tau_z = c0 T_0 - sign(c0) 4 l sin(delta) T_a  (yaw moment, N m)
+//
+// Roll and pitch come from differential arm thrust as on a quadrotor; yaw from the canted
+// arms' lateral thrust against the central torque; the collective falls mainly on the
+// central rotor (the 2 x 2 system for T_0, T_a). The arm rotors' own reaction torques cancel
+// in pairs and are not used.
+//
+// Commands are normalised: collective in [0, 1] is a fraction of the largest total vertical
+// thrust; roll, pitch and yaw in [-1, 1] are fractions of each axis's authority
+// (tau_x,max = tau_y,max = l cos(delta) T_a,max; tau_z,max = 2 l sin(delta) T_a,max).
+// Outputs are thrust fractions of each rotor's maximum, central first.
+//
+// Saturation keeps attitude authority first: roll and pitch are kept whole (each clipped to
+// its own authority), then yaw, and the collective gives way.
+#pragma once
+
+#include <cstdint>
+
+namespace hq {
+
+constexpr int kMotors = 5;   // 0 central, 1 front, 2 right, 3 back, 4 left
+
+struct MixerGeometry {
+    float arm_length_m = 0.3048f;         // SPEC.md table 2: 12 in moment arm
+    float cant_deg = 20.0f;               // SPEC.md table 2: arm rotors' tilt angle
+    float central_max_thrust_n = 25.0f;   // estimate: 15x5.5 in prop on a 400 KV motor, 4S
+    float arm_max_thrust_n = 9.0f;        // estimate: 5x4x3 prop on a 2205 2300 KV motor, 4S
+    float central_torque_per_thrust_m = 0.017f;  // estimate: Q/T = D C_Q / C_T ~ 0.381 * 0.045
+};
+
+struct MixerCommand {
+    float collective = 0.0f;   // 0..1
+    float roll = 0.0f;         // -1..1
+    float pitch = 0.0f;        // -1..1
+    float yaw = 0.0f;          // -1..1
+};
+
+struct MixerOutput {
+    float motor[kMotors] = {0, 0, 0, 0, 0};   // thrust fractions 0..1, central first
+    bool saturated = false;                     // some command was not met in full
+};
+
+class Mixer {
+public:
+    explicit Mixer(const MixerGeometry& geometry = MixerGeometry());
+    MixerOutput mix(const MixerCommand& command) const;
+
+    // The normalised command these thrust fractions actually produce (for tests and
+    // telemetry: what the vehicle got, as opposed to what was asked).
+    MixerCommand achieved(const float motor[kMotors]) const;
+
+    const MixerGeometry& geometry() const { return g_; }
+    // Physical scales of the normalised command (N and N m).
+    float max_vertical_thrust_n() const { return fz_max_; }
+    float max_roll_pitch_torque_nm() const { return txy_max_; }
+    float max_yaw_torque_nm() const { return tz_max_; }
+
+private:
+    MixerGeometry g_;
+    float cos_d_, sin_d_, sign_c0_;
+    float fz_max_, txy_max_, tz_max_;
+};
+
+}  // namespace hq

@@ -1,0 +1,58 @@
+// PID controller in the ideal (ISA) form of SPEC.md's gain tables:
+//
+//     u = Kc * ( e + (1 / tau_I) * integral(e) dt + tau_D * d/dt(-y_f) )
+//
+// discretised at the loop's dt with the Tustin (trapezoidal) rule, so the discrete
+// controller follows the continuous one to second order in (omega * dt).
+//
+// - Derivative on measurement (no derivative kick on setpoint steps), filtered by a
+//   first-order low-pass of time constant tau_f = tau_D / N (N = derivative_filter_n;
+//   Astrom and Hagglund recommend N between 8 and 20).
+// - Anti-windup by conditional integration: while the output is saturated, the integral
+//   is not allowed to grow further in the direction of the saturation.
+// - Integral limit and output limits.
+// - The P, I and D terms of the last update are readable for logging.
+// - tau_I <= 0 disables the integral (a PD controller, as in the paper's outer loop).
+#pragma once
+
+namespace hq {
+
+struct PidGains {
+    float kc = 0.0f;        // proportional gain Kc (output units per error unit)
+    float tau_i_s = 0.0f;   // integral time tau_I, s; <= 0 disables the integral
+    float tau_d_s = 0.0f;   // derivative time tau_D, s; 0 disables the derivative
+    float derivative_filter_n = 10.0f;  // N: tau_f = tau_D / N
+    float output_min = -1.0f;
+    float output_max = 1.0f;
+    float integral_limit = 1.0f;        // |I term| is kept at or below this
+};
+
+class Pid {
+public:
+    Pid() = default;
+    explicit Pid(const PidGains& gains) : gains_(gains) {}
+
+    // One controller step. dt_s > 0. Returns the limited output.
+    float update(float setpoint, float measurement, float dt_s);
+
+    // Forget the integral, the derivative filter and the previous sample.
+    void reset();
+
+    void set_gains(const PidGains& gains) { gains_ = gains; }
+    const PidGains& gains() const { return gains_; }
+
+    float p_term() const { return p_; }
+    float i_term() const { return i_; }
+    float d_term() const { return d_; }
+    float output() const { return out_; }
+    bool saturated() const { return saturated_; }
+
+private:
+    PidGains gains_{};
+    float p_ = 0.0f, i_ = 0.0f, d_ = 0.0f, out_ = 0.0f;
+    float prev_error_ = 0.0f, prev_measurement_ = 0.0f;
+    bool have_previous_ = false;
+    bool saturated_ = false;
+};
+
+}  // namespace hq

@@ -1,0 +1,30 @@
+// Small value types shared by the core. Frames and units (docs/units-and-frames.md):
+// body frame FRD (x forward, y right, z down); angles in rad, rates in rad/s; roll, pitch and
+// yaw are the ZYX (yaw-pitch-roll) Tait-Bryan angles of the body relative to NED.
+#pragma once
+
+#include <cstdint>
+
+namespace hq {
+
+enum class Axis : uint8_t { Roll = 0, Pitch = 1, Yaw = 2 };
+constexpr int kAxes = 3;
+
+struct Vec3 {
+    float x = 0.0f, y = 0.0f, z = 0.0f;
+    float& operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+    float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+};
+
+// Unit quaternion, Hamilton convention, scalar first.
+struct Quat {
+    float w = 1.0f, x = 0.0f, y = 0.0f, z = 0.0f;
+};
+
+// Roll, pitch, yaw in rad (ZYX order).
+struct Euler {
+    float roll = 0.0f, pitch = 0.0f, yaw = 0.0f;
+    float operator[](int i) const { return i == 0 ? roll : (i == 1 ? pitch : yaw); }
+};
+
+}  // namespace hq

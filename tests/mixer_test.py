@@ -1,0 +1,87 @@
+"""The firmware's mixer (firmware/core/mixer.cpp): 1 central + 4 canted arm rotors."""
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from heliquad import _firmware as fw
+
+MIXER = fw.Mixer()
+
+
+def wrench(motor, g=fw.MixerGeometry()):
+    """Physical Fz, tau_x, tau_y, tau_z (N, N m) of thrust fractions, from docs/mixer.md."""
+    d = math.radians(g.cant_deg)
+    t0 = motor[0] * g.central_max_thrust_n
+    t = [m * g.arm_max_thrust_n for m in motor[1:]]
+    l, c0 = g.arm_length_m, g.central_torque_per_thrust_m
+    fz = t0 + math.cos(d) * sum(t)
+    tx = -l * math.cos(d) * (t[1] - t[3])
+    ty = l * math.cos(d) * (t[0] - t[2])
+    tz = c0 * t0 - l * math.sin(d) * sum(t)
+    return np.array([fz, tx, ty, tz])
+
+
+def requested(cmd):
+    return np.array([cmd.collective * MIXER.max_vertical_thrust_n,
+                     cmd.roll * MIXER.max_roll_pitch_torque_nm,
+                     cmd.pitch * MIXER.max_roll_pitch_torque_nm,
+                     cmd.yaw * MIXER.max_yaw_torque_nm])
+
+
+# Feasible without saturation: yaw balance ties the mean arm thrust to the central rotor's
+# torque (about 0.6 N per arm at collective 0.3), and each arm must stay within 0..max, so
+# unsaturated roll and pitch are small fractions of the full-differential authority
+# (docs/mixer.md). Collective above ~0.49 would need more than the central rotor's maximum.
+@pytest.mark.parametrize("c, r, p, y", list(itertools.product([0.2, 0.35], [-0.03, 0.0, 0.04],
+                                                              [-0.04, 0.02], [-0.1, 0.0, 0.03])))
+def test_unsaturated_commands_are_reproduced(c, r, p, y):
+    cmd = fw.MixerCommand(c, r, p, y)
+    out = MIXER.mix(cmd)
+    assert not out.saturated
+    assert all(0.0 <= m <= 1.0 for m in out.motor)
+    np.testing.assert_allclose(wrench(out.motor), requested(cmd), rtol=1e-4, atol=1e-5)
+
+
+def test_hover_puts_the_collective_on_the_central_rotor():
+    out = MIXER.mix(fw.MixerCommand(0.3, 0, 0, 0))
+    g = fw.MixerGeometry()
+    central = out.motor[0] * g.central_max_thrust_n
+    arms = 4 * out.motor[1] * g.arm_max_thrust_n * math.cos(math.radians(g.cant_deg))
+    assert central > 5 * arms
+    # and the canted arms cancel the central rotor's torque exactly
+    assert wrench(out.motor)[3] == pytest.approx(0.0, abs=1e-6)
+    assert len(set(np.round(out.motor[1:], 7))) == 1
+
+
+def test_roll_right_speeds_up_the_left_rotor():
+    out = MIXER.mix(fw.MixerCommand(0.3, 0.05, 0, 0))
+    assert out.motor[4] > out.motor[2]          # left > right
+    out = MIXER.mix(fw.MixerCommand(0.3, 0, 0.05, 0))
+    assert out.motor[1] > out.motor[3]          # pitch up: front > back
+
+
+@pytest.mark.parametrize("collective", [0.0, 0.02, 0.98, 1.0])
+def test_saturation_keeps_roll_and_pitch_before_collective(collective):
+    cmd = fw.MixerCommand(collective, 0.8, -0.6, 0.0)
+    out = MIXER.mix(cmd)
+    got = MIXER.achieved(out.motor)
+    assert out.saturated
+    assert got.roll == pytest.approx(0.8, abs=1e-5)
+    assert got.pitch == pytest.approx(-0.6, abs=1e-5)
+    assert all(0.0 <= m <= 1.0 for m in out.motor)
+
+
+def test_roll_beyond_authority_is_clipped_and_flagged():
+    out = MIXER.mix(fw.MixerCommand(0.3, 1.7, 0.0, 0.0))
+    assert out.saturated
+    assert MIXER.achieved(out.motor).roll == pytest.approx(1.0, abs=1e-5)
+
+
+def test_yaw_is_kept_before_collective():
+    # Large yaw at low collective: the yaw moment is met, the collective is not.
+    cmd = fw.MixerCommand(0.05, 0.0, 0.0, -0.9)
+    got = MIXER.achieved(MIXER.mix(cmd).motor)
+    assert got.yaw == pytest.approx(-0.9, abs=1e-4)

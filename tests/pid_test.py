@@ -1,0 +1,130 @@
+"""The firmware's PID (firmware/core/pid.cpp), driven through the bindings.
+
+Modelled on PX4's PID test: zero case, limits, P convergence on a toy plant, integral ramp
+up and down, anti-windup; plus agreement with python-control's continuous PID.
+"""
+
+import math
+
+import control
+import numpy as np
+import pytest
+
+from heliquad import _firmware as fw
+
+DT = 0.005   # 200 Hz loop
+
+
+def gains(kc=1.0, tau_i=0.0, tau_d=0.0, lo=-1.0, hi=1.0, i_limit=1.0, n=10.0):
+    g = fw.PidGains()
+    g.kc, g.tau_i_s, g.tau_d_s = kc, tau_i, tau_d
+    g.output_min, g.output_max, g.integral_limit, g.derivative_filter_n = lo, hi, i_limit, n
+    return g
+
+
+def test_zero_error_gives_zero_output():
+    pid = fw.Pid(gains(2.422, 0.439, 0.051))
+    for _ in range(100):
+        assert pid.update(0.3, 0.3, DT) == 0.0
+    assert pid.p_term == pid.i_term == pid.d_term == 0.0
+
+
+def test_output_limits():
+    pid = fw.Pid(gains(kc=10.0, lo=-0.5, hi=0.8))
+    assert pid.update(1.0, 0.0, DT) == pytest.approx(0.8)
+    assert pid.saturated
+    assert pid.update(-1.0, 0.0, DT) == pytest.approx(-0.5)
+
+
+def test_p_controller_converges_on_a_first_order_plant():
+    # Plant x' = -x + u; P control with Kc = 4 settles at Kc/(1 + Kc) of the setpoint.
+    pid = fw.Pid(gains(kc=4.0, lo=-10, hi=10))
+    x = 0.0
+    for _ in range(2000):
+        u = pid.update(1.0, x, DT)
+        x += DT * (-x + u)
+    assert x == pytest.approx(4.0 / 5.0, rel=1e-3)
+
+
+def test_pi_controller_removes_the_steady_state_error():
+    pid = fw.Pid(gains(kc=4.0, tau_i=0.5, lo=-10, hi=10, i_limit=10))
+    x = 0.0
+    for _ in range(4000):
+        u = pid.update(1.0, x, DT)
+        x += DT * (-x + u)
+    assert x == pytest.approx(1.0, abs=1e-4)
+
+
+def test_integral_ramps_up_and_down_at_kc_over_tau_i():
+    pid = fw.Pid(gains(kc=2.0, tau_i=0.5, lo=-100, hi=100, i_limit=100))
+    for _ in range(200):                      # 1 s of error +0.1
+        pid.update(0.1, 0.0, DT)
+    # I = Kc/tau_I * integral(e) = 4 * 0.1 * 1 s (the first trapezoid uses e twice).
+    assert pid.i_term == pytest.approx(0.4, rel=1e-5)
+    for _ in range(200):                      # 1 s of error -0.1 brings it back ...
+        pid.update(-0.1, 0.0, DT)
+    # ... less one step: the trapezoid of the step where e flips averages +0.1 and -0.1 to 0.
+    assert pid.i_term == pytest.approx(4 * 0.1 * DT, rel=1e-4)
+
+
+def test_anti_windup_holds_the_integral_while_saturated():
+    pid = fw.Pid(gains(kc=1.0, tau_i=0.1, lo=-1.0, hi=1.0, i_limit=5.0))
+    for _ in range(2000):                     # 10 s against a saturated output
+        pid.update(2.0, 0.0, DT)
+    assert pid.saturated
+    assert pid.i_term < 0.1                   # no wind-up: P alone saturates
+    # When the error reverses, the output leaves saturation at once.
+    assert pid.update(-0.5, 0.0, DT) < 0.0
+
+
+def test_integral_limit():
+    pid = fw.Pid(gains(kc=1.0, tau_i=0.1, lo=-100, hi=100, i_limit=0.3))
+    for _ in range(2000):
+        pid.update(0.2, 0.0, DT)
+    assert pid.i_term == pytest.approx(0.3)
+
+
+def test_no_derivative_kick_on_a_setpoint_step():
+    pid = fw.Pid(gains(kc=1.0, tau_d=0.05, lo=-100, hi=100))
+    pid.update(0.0, 0.0, DT)
+    pid.update(1.0, 0.0, DT)                  # setpoint step, measurement unchanged
+    assert pid.d_term == 0.0
+
+
+def test_matches_python_control_continuous_pid():
+    # SPEC.md's roll rate gains. With setpoint 0 and measurement -e(t), the firmware PID is
+    # C(s) = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1)) applied to e. The reference is
+    # python-control's response on a 20x finer grid. Tustin's error is O((w dt)^2): at 2 Hz
+    # and 200 Hz it is ~1e-3 of the output, so 1 % of the output's amplitude is the bound,
+    # after the first 0.1 s: the derivative filter (tau_f = 5 ms, about one sample) starts
+    # differently from the continuous one and needs ~20 tau_f to forget it.
+    kc, ti, td, n = 2.422, 0.439, 0.051, 10.0
+    s = control.tf("s")
+    C = kc * (1 + 1 / (ti * s) + td * s / (td / n * s + 1))
+    f_hz, duration = 2.0, 3.0
+    fine = np.arange(0, duration, DT / 20)
+    ref = control.forced_response(C, fine, np.sin(2 * math.pi * f_hz * fine)).outputs[::20]
+    pid = fw.Pid(gains(kc, ti, td, lo=-1e6, hi=1e6, i_limit=1e6, n=n))
+    t = np.arange(ref.size) * DT
+    out = np.array([pid.update(0.0, -math.sin(2 * math.pi * f_hz * tk), DT) for tk in t])
+    settled = t >= 0.1
+    assert np.max(np.abs(out - ref)[settled]) < 0.01 * np.max(np.abs(ref))
+
+
+def test_cascade_defaults_are_the_papers_gains():
+    g = fw.CascadeGains.paper_defaults()
+    assert (g.rate(fw.Axis.ROLL).kc, g.rate(fw.Axis.ROLL).tau_i_s) == pytest.approx((2.422, 0.439))
+    assert g.rate(fw.Axis.YAW).tau_d_s == pytest.approx(0.043)
+    assert (g.angle(fw.Axis.PITCH).kc, g.angle(fw.Axis.PITCH).tau_d_s) == pytest.approx((1.501, 0.106))
+    assert g.angle(fw.Axis.ROLL).tau_i_s == 0.0
+
+
+def test_rate_loop_holds_a_rate_on_a_toy_plant():
+    # Body rate p' = 2 (torque command) - p per axis: the PID drives p to the setpoint.
+    ctl = fw.RateController(fw.CascadeGains.paper_defaults())
+    p = [0.0, 0.0, 0.0]
+    sp = fw.Vec3(0.5, -0.3, 0.2)
+    for _ in range(2000):
+        cmd = ctl.update(sp, fw.Vec3(*p), DT).to_list()
+        p = [pk + DT * (2 * ck - pk) for pk, ck in zip(p, cmd)]
+    assert p == pytest.approx([0.5, -0.3, 0.2], abs=1e-3)
