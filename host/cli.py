@@ -47,6 +47,20 @@ powers of s, den monic.
 example: heliquad fit points.csv --order 0/2 --order 0/3 --order 2/4 --json models.json --plot bode.png
 """
 
+SIL_HELP = """\
+Run one sine experiment with the firmware in the loop: the host build of the firmware is
+driven in lockstep over a pty by the simulated rig (a transfer-function plant from the
+axis's normalised torque command to its body rate, rad/s), armed and held at hover, and
+excited over the telemetry link exactly as a real board would be.
+
+Writes RUN.tlog (every telemetry message, stamped with simulated time; pymavlink reads it)
+and RUN.csv (t_s,u,y over the full-amplitude cycles, for heliquad fsf). u and y follow the
+injection point: mixer -> u torque command, y rate; rate -> u rate setpoint, y rate (rad/s);
+angle -> u angle setpoint, y angle (rad).
+
+example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --out run1
+"""
+
 DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
 
 
@@ -101,6 +115,32 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB")
     p.set_defaults(func=_cmd_fit)
 
+    p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
+                       description=SIL_HELP, formatter_class=fmt)
+    p.add_argument("--plant", choices=("tf",), default="tf",
+                   help="plant model: tf, a transfer function from the axis's torque command "
+                        "to its body rate (default)")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
+    p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19],
+                   help="numerator, descending powers of s (default: SPEC.md's roll model)")
+    p.add_argument("--den", type=float, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
+                   help="denominator, descending powers of s")
+    p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
+    p.add_argument("--freq-hz", type=float, required=True, metavar="F")
+    p.add_argument("--amplitude", type=float, required=True, metavar="A",
+                   help="deg for angle, deg/s for rate, normalised torque (-1..1) for mixer")
+    p.add_argument("--cycles", type=int, default=10, help="full-amplitude cycles (default 10)")
+    p.add_argument("--fade-cycles", type=int, default=2,
+                   help="cycles of fade in and of fade out, also the settling (default 2)")
+    p.add_argument("--collective", type=float, default=0.4,
+                   help="hover throttle as a fraction of stick travel (default 0.4)")
+    p.add_argument("--loop-hz", type=float, default=200.0, help="firmware loop rate (default 200)")
+    p.add_argument("--dmp-image", metavar="FILE",
+                   help="MotionApps 2.0 DMP image for the firmware (default: raw FIFO path)")
+    p.add_argument("--out", required=True, metavar="RUN",
+                   help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
+    p.set_defaults(func=_cmd_sil)
+
     from .demo import add_demo_parser
 
     add_demo_parser(sub, fmt)
@@ -137,6 +177,46 @@ def _cmd_fsf(args) -> int:
                   "unreliable", file=sys.stderr)
     write_points_csv(args.out, points)
     print(f"wrote {len(points)} point(s) to {args.out}")
+    return 0
+
+
+def _cmd_sil(args) -> int:
+    import os
+
+    from ..sim.lockstep import FirmwareError
+    from ..sim.sil import SilConfig, run_sil
+
+    if len(args.den) < 2 or args.den[0] == 0 or len(args.num) > len(args.den):
+        raise InputError("--den needs a leading non-zero coefficient and a degree at least "
+                         "that of --num")
+    if not 0 < args.freq_hz <= args.loop_hz / 4:
+        raise InputError(f"--freq-hz must be in (0, {args.loop_hz / 4:g}] (a quarter of the loop rate)")
+    if args.cycles < 1 or args.fade_cycles < 0:
+        raise InputError("--cycles must be at least 1 and --fade-cycles non-negative")
+    if args.inject == "angle" and args.axis == "yaw":
+        raise InputError("yaw is rate-only: use --inject rate or mixer")
+    if not 0 <= args.collective <= 1:
+        raise InputError("--collective must be in [0, 1]")
+    amplitude = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+    folder = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(folder):
+        raise InputError(f"--out: folder {folder} does not exist")
+    cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), inject=args.inject,
+                    freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
+                    fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
+                    collective=args.collective, dmp_image=args.dmp_image)
+    try:
+        r = run_sil(cfg, args.out)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    print(f"{r.frames} frames ({r.frames / args.loop_hz:.2f} s simulated) in {r.wall_s:.2f} s "
+          f"wall ({r.frames / args.loop_hz / r.wall_s:.0f}x real time); imu path {r.imu_mode}")
+    print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
+          f"{r.seq_gaps} telemetry gaps")
+    if r.saturated_samples:
+        print(f"warning: {r.saturated_samples} samples saturated the mixer; lower --amplitude",
+              file=sys.stderr)
+    print(f"wrote {r.tlog_path} and {r.csv_path}")
     return 0
 
 
@@ -219,6 +299,9 @@ def main(argv=None) -> int:
     except InputError as exc:
         sys.stderr.write(f"heliquad {args.command}: error: {exc}\n")
         return EXIT_INPUT
+    except BrokenPipeError:              # e.g. piped into `head`: not an error
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         sys.stderr.write(f"heliquad {args.command}: interrupted\n")
         return 130

@@ -52,6 +52,7 @@ __all__ = [
     "RecursiveFsf",
     "estimate_fsf",
     "estimate_frequency",
+    "integer_period_consistent",
     "period_coherence",
 ]
 
@@ -65,9 +66,9 @@ DEFAULT_DISCARD_PERIODS = 1
 #: RLS stays accurate to round-off (a larger ``p0`` costs RLS precision: its first updates
 #: subtract numbers of size ``p0``).
 DEFAULT_P0_RELATIVE = 1e6
-#: A period counts as an integer number of samples when snapping it to the nearest integer
-#: moves the last used sample by less than this many samples.
-SNAP_DRIFT_SAMPLES = 0.01
+#: A found frequency is moved to the nearest integer-period one when the input is consistent
+#: with it: F statistic (1 degree of freedom) below the chi-square 0.1 % point, 10.83.
+F_INTEGER_PERIOD = 10.83
 #: A harmonic of the input counts as excited when its amplitude is at least this fraction of
 #: the fundamental's.
 EXCITED_FRACTION = 1e-3
@@ -234,17 +235,42 @@ def estimate_frequency(u, fs_hz: float) -> float:
     spec[0] = 0.0
     peak = int(np.argmax(spec))
     bin_rad = 2 * np.pi / nfft
-    k = np.arange(n)
-
-    def neg_explained(w):
-        basis = np.column_stack([np.ones(n), np.cos(w * k), np.sin(w * k)])
-        coef, *_ = np.linalg.lstsq(basis, u, rcond=None)
-        return -float(np.dot(basis @ coef, u))
-
     lo, hi = max(peak - 2, 0.5) * bin_rad, min(peak + 2, nfft / 2 - 0.5) * bin_rad
-    res = scipy.optimize.minimize_scalar(neg_explained, bounds=(lo, hi), method="bounded",
-                                         options={"xatol": 1e-13})
+    res = scipy.optimize.minimize_scalar(lambda w: _sine_rss(u, w), bounds=(lo, hi),
+                                         method="bounded", options={"xatol": 1e-13})
     return float(res.x) * fs_hz / (2 * np.pi)
+
+
+def _sine_rss(u, w_per_sample: float) -> float:
+    """Residual sum of squares of the least-squares fit of a constant and a sine at ``w``."""
+    k = np.arange(u.size)
+    basis = np.column_stack([np.ones(u.size), np.cos(w_per_sample * k), np.sin(w_per_sample * k)])
+    coef, *_ = np.linalg.lstsq(basis, u, rcond=None)
+    resid = u - basis @ coef
+    return float(resid @ resid)
+
+
+def integer_period_consistent(u, fs_hz: float, freq_hz: float):
+    """The nearest integer period if the input is consistent with it, else None.
+
+    F-test (1 degree of freedom) of the sine fit at the integer-period frequency against the
+    fit at ``freq_hz`` (the best fit): consistent when ``F < F_INTEGER_PERIOD``. A clean sine
+    whose period is not an integer fails by many orders of magnitude; a record whose estimate
+    was pulled slightly off by noise or a settling transient passes.
+    """
+    whole = round(fs_hz / freq_hz)
+    if whole < 2:
+        return None
+    u = np.asarray(u, dtype=float)
+    rss_best = _sine_rss(u, 2 * np.pi * freq_hz / fs_hz)
+    rss_whole = _sine_rss(u, 2 * np.pi / whole)
+    scale = max(float(u @ u), np.finfo(float).tiny)
+    if rss_whole - rss_best <= 1e-20 * scale:          # equal to round-off: the same fit
+        return whole
+    if rss_best <= 1e-20 * scale:
+        return None
+    f_stat = (rss_whole - rss_best) / (rss_best / max(u.size - 4, 1))
+    return whole if f_stat < F_INTEGER_PERIOD else None
 
 
 def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> float:
@@ -304,20 +330,23 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
         raise InputError(f"sampling rate must be positive, got {fs_hz}")
     if int(discard_periods) != discard_periods or discard_periods < 0:
         raise InputError(f"discard periods must be a non-negative integer, got {discard_periods}")
-    if freq_hz is None:
+    given = freq_hz is not None
+    if not given:
         freq_hz = estimate_frequency(u, fs_hz)
     if not 0 < freq_hz < fs_hz / 2:
         raise InputError(f"excitation frequency {freq_hz:g} Hz is outside (0, {fs_hz / 2:g}) Hz "
                          "(Nyquist)")
     period = fs_hz / freq_hz
-    whole = round(period)
-    used = u.size - discard_periods * period
-    if used < period:
+    if u.size - discard_periods * period < period:
         raise InputError(f"record of {u.size} samples holds fewer than {discard_periods + 1} "
                          f"periods of {period:.6g} samples; nothing is left to analyse")
     if p0 is None:
         p0 = DEFAULT_P0_RELATIVE / max(float(np.mean(u ** 2)), np.finfo(float).tiny)
-    if whole >= 2 and abs(period - whole) * used / period <= SNAP_DRIFT_SAMPLES:
+    if given:      # taken as it is: an integer period only if it is one to round-off
+        whole = round(period) if abs(period - round(period)) <= 1e-9 * period else None
+    else:          # the firmware's periods are integers: use one if the input allows it
+        whole = integer_period_consistent(u, fs_hz, freq_hz)
+    if whole is not None and whole >= 2:
         return _solve_fsf(u, y, fs_hz, whole, harmonics, discard_periods, offset, p0)
     return _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods)
 

@@ -1,0 +1,76 @@
+// Host backends of the HAL, used by the host firmware executable (main.cpp).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "../../hal/clock.hpp"
+#include "../../hal/outputs.hpp"
+#include "../../hal/serial.hpp"
+
+namespace hq {
+
+// Lockstep clock: the simulator sets the time with every sensor frame; nothing here reads a
+// wall clock. Start-up delays return at once (the emulated devices are ready immediately).
+class HostClock final : public Clock {
+public:
+    uint64_t micros() const override { return now_us_; }
+    void delay_us(uint32_t) override {}
+    void set(uint64_t now_us) { now_us_ = now_us; }
+
+private:
+    uint64_t now_us_ = 0;
+};
+
+// One end of a pseudo-terminal, the stand-in for a UART or USB serial port. The firmware owns
+// the master side and publishes the slave device under a stable name (a symlink), which the
+// peer opens like any serial port. Writes go through a user-space buffer flushed without
+// blocking; a message that does not fit is refused whole (the caller counts it as dropped).
+class PtySerial final : public SerialPort {
+public:
+    static constexpr size_t kBufferSize = 1 << 16;
+
+    // Creates the pty and the symlink `link_path` -> slave device. Returns false with a
+    // message in error() on failure.
+    bool open(const std::string& link_path);
+    void close();
+    ~PtySerial() { close(); }
+
+    size_t read(uint8_t* data, size_t n) override;
+    size_t write(const uint8_t* data, size_t n) override;
+
+    // Push buffered bytes to the pty without blocking. Returns false if the pty failed.
+    bool flush();
+    // Block until some input arrives or timeout_ms passes; false on timeout.
+    bool wait_readable(int timeout_ms);
+    // Write all of data, waiting as needed (the sim link: lockstep, the peer is reading).
+    bool write_all(const uint8_t* data, size_t n, int timeout_ms);
+
+    int fd() const { return master_; }
+    const std::string& slave_path() const { return slave_path_; }
+    const std::string& error() const { return error_; }
+
+private:
+    int master_ = -1, slave_ = -1;
+    std::string link_path_, slave_path_, error_;
+    uint8_t buf_[kBufferSize];
+    size_t head_ = 0, count_ = 0;
+};
+
+// Motor outputs: the last thrust fractions set, sent back to the simulator.
+class HostMotors final : public MotorOutputs {
+public:
+    void set(const float thrust_fraction[5]) override {
+        for (int i = 0; i < 5; ++i) value_[i] = thrust_fraction[i];
+    }
+    void disarm() override {
+        for (float& v : value_) v = 0.0f;
+    }
+    const float* values() const { return value_; }
+
+private:
+    float value_[5] = {0, 0, 0, 0, 0};
+};
+
+}  // namespace hq

@@ -1,0 +1,181 @@
+// heliquad-fw-host: the firmware's host build, driven in lockstep by the simulator.
+//
+//   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
+//                    [--idle-timeout-s 10]
+//
+// Creates two pseudo-terminals and publishes their slave devices as PATH symlinks:
+//   sim link:  HQ_SENSOR_FRAME in (time, frame counter, MPU6050 FIFO bytes, RC), exactly one
+//              HQ_ACTUATOR_FRAME out per frame (same time and counter, five motor outputs);
+//   telemetry: what the Teensy sends over USB serial (telemetry out, commands in).
+// Prints "ready" on stdout when both exist. Each sensor frame sets the clock, the frame's FIFO
+// bytes go into the emulated MPU6050, and one FlightController step runs. A repeated frame
+// counter gets the previous reply again without a step; a gap is counted and reported. With
+// no frame for the idle timeout, or on SIGINT/SIGTERM, it exits cleanly (links removed).
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include "../../core/flight_controller.hpp"
+#include "host_hal.hpp"
+#include "mpu6050_emulator.hpp"
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;   // the one global: signal handlers need one
+void on_signal(int) { g_stop = 1; }
+
+struct Options {
+    std::string sim_link, telemetry, dmp_image;
+    float loop_hz = 200.0f;
+    int idle_timeout_s = 10;
+};
+
+[[noreturn]] void usage(const char* msg) {
+    std::fprintf(stderr,
+                 "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
+                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10]\n",
+                 msg);
+    std::exit(2);
+}
+
+Options parse(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        if (a == "--help" || a == "-h") usage("firmware-in-the-loop host build");
+        if (i + 1 >= argc) usage(("missing value for " + a).c_str());
+        const char* v = argv[++i];
+        if (a == "--sim-link") o.sim_link = v;
+        else if (a == "--telemetry") o.telemetry = v;
+        else if (a == "--dmp-image") o.dmp_image = v;
+        else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
+        else if (a == "--idle-timeout-s") o.idle_timeout_s = std::atoi(v);
+        else usage(("unknown option " + a).c_str());
+    }
+    if (o.sim_link.empty() || o.telemetry.empty()) usage("--sim-link and --telemetry are required");
+    if (!(o.loop_hz > 0.0f && o.loop_hz <= 2000.0f)) usage("--loop-hz must be in (0, 2000]");
+    if (o.idle_timeout_s <= 0) usage("--idle-timeout-s must be positive");
+    return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    const Options opt = parse(argc, argv);
+    std::signal(SIGINT, on_signal);
+    std::signal(SIGTERM, on_signal);
+    std::signal(SIGPIPE, SIG_IGN);
+
+    std::vector<uint8_t> image;
+    if (!opt.dmp_image.empty()) {
+        std::ifstream f(opt.dmp_image, std::ios::binary);
+        if (!f) usage(("cannot read DMP image " + opt.dmp_image).c_str());
+        image.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+        if (image.empty() || image.size() > 4096) usage("DMP image must be 1..4096 bytes");
+    }
+
+    static hq::PtySerial sim, telemetry;        // 64 KiB buffers each: not on the stack
+    if (!sim.open(opt.sim_link)) usage(sim.error().c_str());
+    if (!telemetry.open(opt.telemetry)) usage(telemetry.error().c_str());
+
+    hq::HostClock clock;
+    hq::HostMotors motors;
+    static hq::Mpu6050Emulator chip;
+    hq::FlightControllerConfig cfg;
+    cfg.loop_rate_hz = opt.loop_hz;
+    if (!image.empty()) {
+        cfg.imu.dmp_image = image.data();
+        cfg.imu.dmp_image_size = static_cast<uint16_t>(image.size());
+    }
+    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
+    const hq::InitResult init = fc.init();
+    std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),
+                sim.slave_path().c_str(), opt.telemetry.c_str(), telemetry.slave_path().c_str(),
+                init == hq::InitResult::OkDmp ? "dmp" : "raw");
+    std::fflush(stdout);
+
+    mavlink_status_t rx_status{}, tx_status{};
+    mavlink_message_t rx_msg{}, reply{};
+    bool have_last = false;
+    uint32_t last_frame = 0, lost = 0, repeated = 0;
+    int idle_ms = 0;
+    int exit_code = 0;
+    uint8_t buf[512], out[MAVLINK_MAX_PACKET_LEN];
+    uint16_t out_len = 0;
+
+    while (!g_stop) {
+        if (!sim.wait_readable(100)) {
+            idle_ms += 100;
+            telemetry.flush();
+            if (idle_ms >= opt.idle_timeout_s * 1000) {
+                std::fprintf(stderr, "heliquad-fw-host: no sensor frame for %d s; exiting\n",
+                             opt.idle_timeout_s);
+                exit_code = 3;
+                break;
+            }
+            continue;
+        }
+        idle_ms = 0;
+        const size_t n = sim.read(buf, sizeof(buf));
+        for (size_t i = 0; i < n && !g_stop; ++i) {
+            mavlink_message_t msg;
+            mavlink_status_t st;
+            if (mavlink_frame_char_buffer(&rx_msg, &rx_status, buf[i], &msg, &st) !=
+                    MAVLINK_FRAMING_OK ||
+                msg.msgid != MAVLINK_MSG_ID_HQ_SENSOR_FRAME) {
+                continue;
+            }
+            mavlink_hq_sensor_frame_t f;
+            mavlink_msg_hq_sensor_frame_decode(&msg, &f);
+            if (have_last && f.frame == last_frame) {          // repeated: same reply again
+                ++repeated;
+                sim.write_all(out, out_len, 1000);
+                continue;
+            }
+            if (have_last && f.frame != last_frame + 1) {
+                lost += f.frame - last_frame - 1;
+                std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost before %u\n",
+                             f.frame - last_frame - 1, f.frame);
+            }
+            have_last = true;
+            last_frame = f.frame;
+            clock.set(f.time_us);
+            const size_t len = f.fifo_len < sizeof(f.fifo) ? f.fifo_len : sizeof(f.fifo);
+            if (len > 0) chip.push_fifo(f.fifo, len, f.fifo_kind == HQ_SENSOR_DMP);
+            hq::RcInput rc;
+            bool any = false;
+            for (int c = 0; c < hq::kRcChannels; ++c) {
+                rc.channel_us[c] = f.rc_us[c];
+                any = any || f.rc_us[c] != 0;
+            }
+            rc.age_us = any ? 0u : 0xFFFFFFFFu;
+            fc.step(rc);
+            const uint8_t kind = fc.imu().mode() == hq::SensorMode::Dmp ? HQ_SENSOR_DMP
+                                 : fc.imu().mode() == hq::SensorMode::Raw ? HQ_SENSOR_RAW
+                                                                          : HQ_SENSOR_NONE;
+            mavlink_msg_hq_actuator_frame_pack_status(
+                cfg.system_id, cfg.component_id, &tx_status, &reply, f.time_us, f.frame,
+                motors.values(), fc.armed() ? 1 : 0, static_cast<uint8_t>(fc.mode()), kind);
+            out_len = mavlink_msg_to_send_buffer(out, &reply);
+            telemetry.flush();            // the step's telemetry goes out before its reply
+            if (!sim.write_all(out, out_len, 5000)) {
+                std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
+                g_stop = 1;
+                exit_code = 4;
+            }
+        }
+    }
+    telemetry.flush();
+    std::fprintf(stderr,
+                 "heliquad-fw-host: %u loops, %u frames lost, %u repeated, %u telemetry bytes "
+                 "dropped\n",
+                 fc.loops(), lost, repeated, fc.telemetry_dropped());
+    sim.close();
+    telemetry.close();
+    return exit_code;
+}

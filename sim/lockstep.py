@@ -1,0 +1,208 @@
+"""Lockstep driver of the host firmware (docs/link-contract.md).
+
+:class:`HostFirmware` starts ``heliquad-fw-host``, which creates the sim-link and telemetry
+ptys; :class:`SimLink` then exchanges frames on the sim link: one HQ_SENSOR_FRAME out, exactly
+one HQ_ACTUATOR_FRAME back with the same time and counter. A reply that does not come within
+the timeout, a wrong counter, or a firmware that died are errors with a clear message, never
+a hang.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import selectors
+import shutil
+import subprocess
+import sysconfig
+import tempfile
+import time
+
+import serial
+
+__all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "find_firmware"]
+
+#: How long the firmware may take to create its ptys and print "ready".
+START_TIMEOUT_S = 10.0
+#: How long one frame's reply may take before the link is declared dead.
+REPLY_TIMEOUT_S = 2.0
+FIFO_CAPACITY = 168            # HQ_SENSOR_FRAME.fifo
+SENSOR_NONE, SENSOR_DMP, SENSOR_RAW = 0, 1, 2
+
+
+class FirmwareError(RuntimeError):
+    """The firmware stopped answering, died, or broke the link contract."""
+
+
+def find_firmware() -> str:
+    """Path of the host firmware executable (installed next to the ``heliquad`` script)."""
+    env = os.environ.get("HELIQUAD_FW_HOST")
+    candidates = [env] if env else []
+    candidates.append(os.path.join(sysconfig.get_path("scripts"), "heliquad-fw-host"))
+    candidates.append(shutil.which("heliquad-fw-host") or "")
+    for path in candidates:
+        if path and os.path.isfile(path) and os.access(path, os.X_OK):
+            return path
+    raise FirmwareError("heliquad-fw-host not found; reinstall heliquad (pip install .) "
+                        "or set HELIQUAD_FW_HOST")
+
+
+class HostFirmware:
+    """The host firmware as a child process with its two ptys in a private directory."""
+
+    def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
+                 idle_timeout_s: int = 10, workdir: str | None = None):
+        self.loop_hz = loop_hz
+        self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="heliquad-sil-")
+        self.workdir = workdir or self._tmp.name
+        self.sim_link_path = os.path.join(self.workdir, "sim-link")
+        self.telemetry_path = os.path.join(self.workdir, "telemetry")
+        cmd = [find_firmware(), "--sim-link", self.sim_link_path, "--telemetry",
+               self.telemetry_path, "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s",
+               str(int(idle_timeout_s))]
+        if dmp_image:
+            cmd += ["--dmp-image", dmp_image]
+        self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
+        self._stderr = open(self.stderr_path, "w+")
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr)
+        self.imu_mode = self._wait_ready()
+
+    def _wait_ready(self) -> str:
+        """Read the firmware's start-up lines (raw reads: a buffered reader would hide data
+        from select) until "ready", the process exits, or the timeout passes."""
+        fd = self.proc.stdout.fileno()
+        sel = selectors.DefaultSelector()
+        sel.register(fd, selectors.EVENT_READ)
+        deadline = time.monotonic() + START_TIMEOUT_S
+        text = ""
+        while time.monotonic() < deadline:
+            if sel.select(timeout=0.1):
+                chunk = os.read(fd, 4096).decode(errors="replace")
+                if not chunk:
+                    break
+                text += chunk
+                lines = text.splitlines()
+                if "ready" in (line.strip() for line in lines):
+                    imu = [line.split(":", 1)[1].strip() for line in lines if line.startswith("imu:")]
+                    return imu[0] if imu else "?"
+            elif self.proc.poll() is not None:
+                break
+        message = self.stderr_tail()
+        self.stop()
+        raise FirmwareError(f"the host firmware did not start: {message}")
+
+    def stderr_tail(self, lines: int = 3) -> str:
+        """The last lines the firmware wrote on stderr, and its exit status."""
+        try:
+            with open(self.stderr_path) as fh:
+                tail = fh.read().strip().splitlines()[-lines:]
+        except OSError:
+            tail = []
+        code = self.proc.poll()
+        status = f"exit code {code}" if code is not None else "still running"
+        return f"{status}; " + (" | ".join(tail) if tail else "no message")
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def wait_exit(self, timeout_s: float) -> None:
+        """Give the process up to ``timeout_s`` to finish exiting (no error if it does not)."""
+        try:
+            self.proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            pass
+
+    def stop(self, timeout_s: float = 3.0) -> int | None:
+        """Ask the firmware to exit (SIGTERM), then kill it if it does not."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.proc.stdout:
+            self.proc.stdout.close()
+        self._stderr.close()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+        return self.proc.returncode
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+@dataclasses.dataclass
+class Actuators:
+    """One HQ_ACTUATOR_FRAME."""
+
+    time_us: int
+    frame: int
+    motor: list
+    armed: bool
+    mode: int
+    sensor_kind: int
+
+
+class SimLink:
+    """The simulator's end of the sim link: send a sensor frame, get exactly one reply."""
+
+    def __init__(self, firmware: HostFirmware, mav_module):
+        self.firmware = firmware
+        self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=REPLY_TIMEOUT_S)
+        self.mav = mav_module.MAVLink(None, srcSystem=1, srcComponent=200)
+        self.mav.robust_parsing = True
+        self._sel = selectors.DefaultSelector()
+        self._sel.register(self.serial.fileno(), selectors.EVENT_READ)
+        self.frame = 0
+
+    def close(self) -> None:
+        self.serial.close()
+
+    def step(self, time_us: int, fifo: bytes = b"", fifo_kind: int = SENSOR_NONE,
+             rc_us=(0,) * 8, frame: int | None = None) -> Actuators:
+        """Send one sensor frame and wait for its actuator frame."""
+        if len(fifo) > FIFO_CAPACITY:
+            raise ValueError(f"at most {FIFO_CAPACITY} FIFO bytes per frame")
+        frame = self.frame + 1 if frame is None else frame
+        payload = list(fifo) + [0] * (FIFO_CAPACITY - len(fifo))
+        msg = self.mav.hq_sensor_frame_encode(int(time_us), frame, fifo_kind, len(fifo),
+                                              list(rc_us), payload)
+        try:
+            self.serial.write(msg.pack(self.mav))
+        except (serial.SerialException, OSError) as exc:
+            self.firmware.wait_exit(0.5)
+            state = "died" if not self.firmware.alive() else "stopped reading"
+            raise FirmwareError(f"the firmware {state} at frame {frame} (sim link write failed: "
+                                f"{exc}; {self.firmware.stderr_tail()})") from None
+        reply = self._wait_reply(frame)
+        self.frame = frame
+        return reply
+
+    def _wait_reply(self, frame: int) -> Actuators:
+        deadline = time.monotonic() + REPLY_TIMEOUT_S
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not self.firmware.alive():
+                break
+            if not self._sel.select(timeout=min(remaining, 0.2)):
+                continue
+            try:
+                data = self.serial.read(self.serial.in_waiting or 1)
+            except (serial.SerialException, OSError):
+                break                      # the pty closed under us: the firmware is gone
+            for m in self.mav.parse_buffer(data) or []:
+                if m.get_type() != "HQ_ACTUATOR_FRAME":
+                    continue
+                if m.frame != frame:
+                    raise FirmwareError(f"reply to frame {frame} carries frame {m.frame}")
+                return Actuators(m.time_us, m.frame, list(m.motor), bool(m.armed), m.mode,
+                                 m.sensor_kind)
+        self.firmware.wait_exit(0.5)          # a dying process may need a moment to be reaped
+        why = "died" if not self.firmware.alive() else f"did not answer within {REPLY_TIMEOUT_S:g} s"
+        raise FirmwareError(f"the firmware {why} at frame {frame} "
+                            f"({self.firmware.stderr_tail()})")

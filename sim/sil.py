@@ -1,0 +1,190 @@
+"""One sine experiment with the firmware in the loop (``heliquad sil``).
+
+The simulator plays the rig and the pilot: it drives the host firmware in lockstep with the
+transfer-function plant and the MPU6050 FIFO packets, gives RC (throttle low, arm switch up,
+then hover throttle), and, as the host tool, starts the excitation over the telemetry link
+with the same code a real board gets. Every telemetry packet goes to ``RUN.tlog`` stamped with
+simulated time; the full-amplitude cycles go to ``RUN.csv`` (``t_s,u,y``) for ``heliquad fsf``.
+
+Input and output follow the injection point (HQ_INJECTION in the dialect):
+mixer -> u = the axis's total torque command, y = measured rate (the fit gives the plant);
+rate -> u = rate setpoint, y = measured rate (closed inner loop);
+angle -> u = angle setpoint, y = angle (closed cascade).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import select
+import time
+
+import numpy as np
+
+from .lockstep import SENSOR_DMP, SENSOR_RAW, FirmwareError, HostFirmware, SimLink
+from .mpu6050_packets import GRAVITY, dmp_packet, raw_packet
+from .tf_plant import TfPlant
+
+__all__ = ["SilConfig", "SilResult", "run_sil", "RC_CENTER_US"]
+
+RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
+#: Frames with everything low after start (the firmware initialises), then arm switch up.
+BOOT_FRAMES, ARM_FRAMES = 20, 20
+#: Frames recorded after the excitation ends.
+TAIL_FRAMES = 10
+#: How long to wait for a loop's telemetry (its HQ_SYSID_SAMPLE) after its reply.
+TELEMETRY_TIMEOUT_S = 2.0
+
+
+@dataclasses.dataclass
+class SilConfig:
+    """One experiment. ``amplitude`` is in firmware units (rad, rad/s or normalised)."""
+
+    axis: str = "roll"
+    num: tuple = (28.19,)
+    den: tuple = (1.0, 5.13, 22.93)
+    inject: str = "mixer"
+    freq_hz: float = 1.0
+    amplitude: float = 0.05
+    cycles: int = 10
+    fade_cycles: int = 2
+    loop_hz: float = 200.0
+    collective: float = 0.4        # hover throttle, fraction of full stick travel
+    settle_s: float = 1.0          # hover before the excitation starts
+    dmp_image: str | None = None
+
+
+@dataclasses.dataclass
+class SilResult:
+    tlog_path: str
+    csv_path: str
+    samples: int                   # full-amplitude samples written to the CSV
+    frames: int
+    seq_gaps: int                  # HQ_SYSID_SAMPLE sequence gaps (dropped telemetry)
+    actual_freq_hz: float
+    saturated_samples: int         # measured samples whose torque the mixer could not meet
+    imu_mode: str
+    wall_s: float
+    truth: complex                 # sampled-data truth at the actual frequency (mixer injection)
+
+
+def _columns(inject):
+    return {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
+            "angle": ("angle_sp", "angle")}[inject]
+
+
+def _rc(frame, collective):
+    rc = [RC_CENTER_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, 0, 0]
+    if frame > BOOT_FRAMES:
+        rc[4] = RC_HIGH_US                                     # arm switch
+    if frame > BOOT_FRAMES + ARM_FRAMES:
+        rc[2] = int(round(RC_LOW_US + collective * (RC_HIGH_US - RC_LOW_US)))
+    return rc
+
+
+def _fifo(plant, kind):
+    q, rates = plant.body_state()
+    w, x, y, z = q
+    # specific force at rest: R^T (0, 0, -g) in body FRD
+    down = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z])
+    accel = -GRAVITY * down
+    if kind == SENSOR_DMP:
+        return dmp_packet(q, rates, accel)
+    if kind == SENSOR_RAW:
+        return raw_packet(rates, accel)
+    return b""
+
+
+def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
+    """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``."""
+    from heliquad import _firmware
+    from heliquad.host.link import TelemetryLink
+    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.host.tlog import TlogWriter
+
+    mav = dialect()
+    dt_us = int(round(1e6 / cfg.loop_hz))
+    plant = TfPlant(cfg.axis, cfg.num, cfg.den, dt_us * 1e-6)
+    mixer = _firmware.Mixer()                     # the firmware's own mixer equations
+    axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
+    u_name, y_name = _columns(cfg.inject)
+    t0 = time.monotonic()
+    rows, saturated, gaps = [], 0, 0
+    last_seq, exc_seen, exc_done_frame, status = None, False, None, None
+    with HostFirmware(cfg.loop_hz, cfg.dmp_image) as fw, TlogWriter(out_base + ".tlog") as tlog:
+        link = SimLink(fw, mav)
+        tel = TelemetryLink(fw.telemetry_path, tlog=tlog)
+        start_frame = BOOT_FRAMES + ARM_FRAMES + int(round(cfg.settle_s * cfg.loop_hz))
+        kind, frame = 0, 0
+        max_frames = start_frame + int(cfg.loop_hz / cfg.freq_hz * (cfg.cycles + 2 * cfg.fade_cycles + 2)) + 400
+        next_report = 0.1
+        try:
+            while True:
+                frame += 1
+                time_us = frame * dt_us
+                if frame == start_frame:
+                    tel.start_excitation(cfg.axis, cfg.inject, cfg.freq_hz, cfg.amplitude,
+                                         cfg.cycles, cfg.fade_cycles)
+                if frame % int(cfg.loop_hz) == 0:
+                    tel.heartbeat()
+                reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, cfg.collective))
+                kind = reply.sensor_kind
+                for m in _telemetry_of_step(tel, time_us):
+                    t = m.get_type()
+                    if t == "HQ_EXCITATION_STATUS" and frame >= start_frame and status is None:
+                        status = m
+                        if not m.accepted:
+                            raise FirmwareError("the firmware refused the excitation (frequency "
+                                                "above a quarter of the loop rate, no cycles, "
+                                                "or angle injection on yaw)")
+                    elif t == "HQ_SYSID_SAMPLE":
+                        if last_seq is not None and m.seq != last_seq + 1:
+                            gaps += m.seq - last_seq - 1
+                        last_seq = m.seq
+                        if m.exc_state:
+                            exc_seen = True
+                        elif exc_seen and exc_done_frame is None:
+                            exc_done_frame = frame
+                        if m.exc_state == 2:
+                            rows.append((m.time_us * 1e-6, getattr(m, u_name), getattr(m, y_name)))
+                            got = mixer.achieved(reply.motor)
+                            if abs([got.roll, got.pitch, got.yaw][axis_index] - m.axis_cmd) > 1e-3:
+                                saturated += 1
+                    elif t == "STATUSTEXT" and m.severity <= 4:
+                        progress(f"firmware: {m.text}")
+                achieved = mixer.achieved(reply.motor)
+                plant.step([achieved.roll, achieved.pitch, achieved.yaw][axis_index])
+                if exc_done_frame is not None and frame >= exc_done_frame + TAIL_FRAMES:
+                    break
+                if frame >= max_frames:
+                    raise FirmwareError(f"the excitation did not finish within {frame} frames")
+                if frame / max_frames >= next_report:
+                    progress(f"  {100 * frame / max_frames:3.0f} %  t = {time_us * 1e-6:6.2f} s")
+                    next_report += 0.1
+        finally:
+            tel.close()
+            link.close()
+    csv_path = out_base + ".csv"
+    np.savetxt(csv_path, np.array(rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
+               comments="", fmt="%.9g")
+    freq = float(status.freq_hz) if status is not None else float("nan")
+    return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(rows),
+                     frames=frame, seq_gaps=gaps, actual_freq_hz=freq,
+                     saturated_samples=saturated, imu_mode=fw.imu_mode,
+                     wall_s=time.monotonic() - t0,
+                     truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))
+
+
+def _telemetry_of_step(tel, time_us):
+    """All telemetry of the step at ``time_us``: read until its HQ_SYSID_SAMPLE (the loop's
+    last message) has arrived."""
+    msgs = []
+    deadline = time.monotonic() + TELEMETRY_TIMEOUT_S
+    while time.monotonic() < deadline:
+        new = tel.poll(timestamp_us=time_us)
+        msgs += new
+        if any(m.get_type() == "HQ_SYSID_SAMPLE" and m.time_us == time_us for m in new):
+            return msgs
+        if not new:
+            select.select([tel.serial.fileno()], [], [], max(deadline - time.monotonic(), 0))
+    raise FirmwareError(f"no telemetry for the step at {time_us * 1e-6:.3f} s")

@@ -1,0 +1,76 @@
+"""Per-axis transfer-function plant: normalised torque command in, body rate out.
+
+``G(s) = num/den`` maps the axis's torque command (the mixer's normalised -1..1 input, as the
+motors actually produce it) to the body rate in rad/s about that axis. It is discretised
+with a zero-order hold at the loop period (python-control ``sample_system``), because the
+motors hold each command for one loop. The axis's angle is the integral of the rate.
+
+Known delay, for checking identification against it: the firmware computes the command from
+the sample at ``t_k`` and the plant holds it over ``[t_k, t_k+1)``, so the logged (u_k, y_k)
+pairs follow the ZOH discretisation ``H(z)`` exactly; to first order
+``H(e^{j w T}) = G(j w) e^{-j w T / 2} sinc(w T / 2)``. :meth:`TfPlant.truth` gives it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import control
+import numpy as np
+
+__all__ = ["TfPlant"]
+
+AXES = ("roll", "pitch", "yaw")
+
+
+class TfPlant:
+    """Single-axis plant with the vehicle otherwise held level (as on a one-axis rig).
+
+    Parameters
+    ----------
+    axis : str
+        ``roll``, ``pitch`` or ``yaw``.
+    num, den : sequence of float
+        ``G(s)``, descending powers of s, torque command -> rate (rad/s).
+    dt_s : float
+        Loop period.
+    """
+
+    def __init__(self, axis: str, num, den, dt_s: float):
+        if axis not in AXES:
+            raise ValueError(f"axis must be one of {', '.join(AXES)}")
+        self.axis = axis
+        self.index = AXES.index(axis)
+        self.dt_s = dt_s
+        self.G = control.tf(list(map(float, num)), list(map(float, den)))
+        sys_d = control.sample_system(control.ss(self.G), dt_s, method="zoh")
+        self.A, self.B = np.asarray(sys_d.A), np.asarray(sys_d.B).ravel()
+        self.C, self.D = np.asarray(sys_d.C).ravel(), float(np.asarray(sys_d.D).ravel()[0])
+        self.x = np.zeros(self.A.shape[0])
+        self.angle_rad = 0.0
+        self.rate_rad_s = 0.0
+
+    def step(self, u: float) -> float:
+        """Hold ``u`` for one period; returns the rate at the end of it."""
+        self.x = self.A @ self.x + self.B * u
+        rate = float(self.C @ self.x)          # strictly proper plants: no feed-through now
+        # angle: trapezoid of the rate over the period
+        self.angle_rad += 0.5 * (self.rate_rad_s + rate) * self.dt_s
+        self.rate_rad_s = rate
+        return rate
+
+    def body_state(self):
+        """(quaternion w x y z, body rates FRD) of the vehicle on its one-axis rig."""
+        half = 0.5 * self.angle_rad
+        q = [math.cos(half), 0.0, 0.0, 0.0]
+        q[1 + self.index] = math.sin(half)
+        rates = [0.0, 0.0, 0.0]
+        rates[self.index] = self.rate_rad_s
+        return np.array(q), np.array(rates)
+
+    def truth(self, omega_rad_s):
+        """The sampled-data response from logged command to logged rate (ZOH at dt)."""
+        z = np.exp(1j * np.asarray(omega_rad_s) * self.dt_s)
+        Hd = control.sample_system(self.G, self.dt_s, method="zoh")
+        num, den = np.asarray(Hd.num[0][0]), np.asarray(Hd.den[0][0])
+        return np.polyval(num, z) / np.polyval(den, z)

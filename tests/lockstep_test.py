@@ -1,0 +1,155 @@
+"""Firmware in the loop: the host build driven over ptys by the simulator (issue 3).
+
+Everything here runs the real heliquad-fw-host executable and talks to it over its two
+pseudo-terminals, as the tools do.
+"""
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from heliquad.host.errors import InputError
+from heliquad.host.fsf import estimate_fsf
+from heliquad.host.files import read_run_csv
+from heliquad.host.mavlink_dialect import dialect
+from heliquad.host.tlog import read_tlog
+from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
+from heliquad.sim.sil import SilConfig, run_sil
+from heliquad.sim.tf_plant import TfPlant
+
+ROLL = ((28.19,), (1.0, 5.13, 22.93))
+MAV = dialect()
+
+
+@pytest.fixture(scope="module")
+def mixer_run(tmp_path_factory):
+    out = str(tmp_path_factory.mktemp("sil") / "roll_mixer")
+    cfg = SilConfig(axis="roll", num=ROLL[0], den=ROLL[1], inject="mixer", freq_hz=1.0,
+                    amplitude=0.05, cycles=10)
+    return cfg, run_sil(cfg, out, progress=lambda *_: None)
+
+
+def test_sine_experiment_log_has_every_frame(mixer_run):
+    cfg, r = mixer_run
+    assert r.seq_gaps == 0 and r.saturated_samples == 0
+    assert r.actual_freq_hz == pytest.approx(1.0) and r.samples == 10 * 200
+    msgs = read_tlog(r.tlog_path, MAV)
+    samples = [m for _, m in msgs if m.get_type() == "HQ_SYSID_SAMPLE"]
+    assert len(samples) == r.frames
+    assert [m.seq for m in samples] == list(range(samples[0].seq, samples[0].seq + r.frames))
+    # every timestamp comes from the simulated clock: 5 ms steps
+    assert [m.time_us for m in samples] == [5000 * k for k in range(1, r.frames + 1)]
+
+
+def test_two_runs_with_the_same_inputs_give_identical_telemetry(mixer_run, tmp_path):
+    cfg, r = mixer_run
+    again = run_sil(cfg, str(tmp_path / "again"), progress=lambda *_: None)
+    assert open(again.tlog_path, "rb").read() == open(r.tlog_path, "rb").read()
+    assert open(again.csv_path).read() == open(r.csv_path).read()
+
+
+def test_fsf_recovers_the_roll_model_from_a_mixer_injection_run(mixer_run):
+    # Truth: the plant holds each command for one loop (zero-order hold), so the logged
+    # (command, rate) pairs follow the ZOH discretisation of G at 5 ms; to first order that
+    # is G(jw) e^{-jwT/2} sinc(wT/2), 0.9 deg of lag at 1 Hz.
+    cfg, r = mixer_run
+    fs, u, y = read_run_csv(r.csv_path)
+    point = estimate_fsf(u, y, fs)
+    assert point.method == "fsf" and point.period_samples == 200
+    truth = TfPlant("roll", *ROLL, 0.005).truth(point.omega_rad_s)
+    assert abs(point.magnitude / abs(truth) - 1) < 0.02
+    assert abs(math.degrees(np.angle(point.gain / truth))) < 2.0
+
+
+def test_rate_loop_holds_a_rate_setpoint():
+    # Rate mode (channel 6 high), roll stick at 1510 us: 0.02 of 200 deg/s = 0.0698 rad/s.
+    plant = TfPlant("roll", *ROLL, 0.005)
+    from heliquad import _firmware
+    from heliquad.sim.sil import _fifo
+
+    mixer = _firmware.Mixer()
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        kind = 0
+        for frame in range(1, 1201):
+            rc = [1500, 1500, 1000, 1500, 1000, 2000, 0, 0]
+            if frame > 20:
+                rc[4] = 2000                                  # arm
+            if frame > 40:
+                rc[2], rc[0] = 1400, 1510                     # hover throttle, roll stick
+            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            kind = reply.sensor_kind
+            plant.step(mixer.achieved(reply.motor).roll)
+        link.close()
+    assert reply.armed and reply.mode == 2
+    assert plant.rate_rad_s == pytest.approx(0.02 * math.radians(200), rel=0.02)
+
+
+def test_repeated_frame_gets_the_same_reply_without_a_step():
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        first = link.step(5000)
+        again = link.step(5000, frame=first.frame)            # the same counter once more
+        assert again == first
+        nxt = link.step(10000)
+        assert nxt.frame == first.frame + 1
+        link.close()
+
+
+def test_killing_the_firmware_mid_run_is_a_clear_error():
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        for k in range(1, 50):
+            link.step(5000 * k)
+        fw.proc.kill()
+        t0 = time.monotonic()
+        with pytest.raises(FirmwareError, match="died"):
+            link.step(5000 * 50)
+        assert time.monotonic() - t0 < 3.0
+        link.close()
+
+
+def test_a_firmware_that_stops_answering_is_a_clear_error():
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        link.step(5000)
+        os.kill(fw.proc.pid, signal.SIGSTOP)
+        try:
+            with pytest.raises(FirmwareError, match="did not answer"):
+                link.step(10000)
+        finally:
+            os.kill(fw.proc.pid, signal.SIGCONT)
+        link.close()
+
+
+def test_firmware_exits_by_itself_when_the_simulator_goes_away(tmp_path):
+    fw = HostFirmware(idle_timeout_s=1)
+    try:
+        fw.proc.wait(timeout=5)
+        assert fw.proc.returncode == 3
+        assert "no sensor frame" in fw.stderr_tail()
+    finally:
+        fw.stop()
+
+
+def heliquad(*args):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--freq-hz", "80", "--amplitude", "0.05"], "quarter of the loop rate"),
+    (["--freq-hz", "1", "--amplitude", "5", "--axis", "yaw", "--inject", "angle"], "rate-only"),
+    (["--freq-hz", "1", "--amplitude", "0.05", "--den", "0", "1"], "leading non-zero"),
+    (["--freq-hz", "1", "--amplitude", "0.05", "--collective", "2"], "collective"),
+])
+def test_sil_bad_input_is_one_line_exit_2(args, match, tmp_path):
+    res = heliquad("sil", *args, "--out", tmp_path / "run")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and match in res.stderr
