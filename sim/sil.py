@@ -64,7 +64,8 @@ class SilResult:
     actual_freq_hz: float
     saturated_samples: int         # measured samples whose torque the mixer could not meet
     imu_mode: str
-    wall_s: float
+    wall_s: float                  # the whole run, firmware start-up included
+    loop_s: float                  # the lockstep loop alone
     truth: complex                 # sampled-data truth at the actual frequency (mixer injection)
 
 
@@ -118,6 +119,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
         kind, frame = 0, 0
         max_frames = start_frame + int(cfg.loop_hz / cfg.freq_hz * (cfg.cycles + 2 * cfg.fade_cycles + 2)) + 400
         next_report = 0.1
+        loop_t0 = time.monotonic()
         try:
             while True:
                 frame += 1
@@ -162,6 +164,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                     progress(f"  {100 * frame / max_frames:3.0f} %  t = {time_us * 1e-6:6.2f} s")
                     next_report += 0.1
         finally:
+            loop_s = time.monotonic() - loop_t0
             tel.close()
             link.close()
     csv_path = out_base + ".csv"
@@ -171,7 +174,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(rows),
                      frames=frame, seq_gaps=gaps, actual_freq_hz=freq,
                      saturated_samples=saturated, imu_mode=fw.imu_mode,
-                     wall_s=time.monotonic() - t0,
+                     wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))
 
 
