@@ -27,7 +27,7 @@ import serial
 from heliquad.sim.sil import SilConfig, run_sil
 
 ECHO_C = r"""
-#define _DEFAULT_SOURCE
+#define _GNU_SOURCE
 #include <fcntl.h>
 #include <poll.h>
 #include <stdio.h>

@@ -20,6 +20,8 @@ import time
 
 import serial
 
+from heliquad.host.mavframe import Codec, Framer
+
 __all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "find_firmware"]
 
 #: How long the firmware may take to create its ptys and print "ready".
@@ -154,10 +156,13 @@ class SimLink:
     def __init__(self, firmware: HostFirmware, mav_module):
         self.firmware = firmware
         self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=REPLY_TIMEOUT_S)
-        self.mav = mav_module.MAVLink(None, srcSystem=1, srcComponent=200)
-        self.mav.robust_parsing = True
+        self.codec = Codec(mav_module, system_id=1, component_id=200)
+        self.framer = Framer(self.codec)
+        self.sensor_id = mav_module.MAVLINK_MSG_ID_HQ_SENSOR_FRAME
+        self.actuator_id = mav_module.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
         self._sel = selectors.DefaultSelector()
-        self._sel.register(self.serial.fileno(), selectors.EVENT_READ)
+        self.fd = self.serial.fileno()     # pyserial opened it non-blocking; raw I/O is faster
+        self._sel.register(self.fd, selectors.EVENT_READ)
         self.frame = 0
 
     def close(self) -> None:
@@ -169,12 +174,16 @@ class SimLink:
         if len(fifo) > FIFO_CAPACITY:
             raise ValueError(f"at most {FIFO_CAPACITY} FIFO bytes per frame")
         frame = self.frame + 1 if frame is None else frame
-        payload = list(fifo) + [0] * (FIFO_CAPACITY - len(fifo))
-        msg = self.mav.hq_sensor_frame_encode(int(time_us), frame, fifo_kind, len(fifo),
-                                              list(rc_us), payload)
+        packet = self.codec.encode(self.sensor_id, {
+            "time_us": int(time_us), "frame": frame, "fifo_kind": fifo_kind,
+            "fifo_len": len(fifo), "rc_us": rc_us,
+            "fifo": bytes(fifo) + bytes(FIFO_CAPACITY - len(fifo))})
         try:
-            self.serial.write(msg.pack(self.mav))
-        except (serial.SerialException, OSError) as exc:
+            view = memoryview(packet)
+            while view:                                   # the fd is non-blocking
+                written = os.write(self.fd, view)
+                view = view[written:]
+        except OSError as exc:
             self.firmware.wait_exit(0.5)
             state = "died" if not self.firmware.alive() else "stopped reading"
             raise FirmwareError(f"the firmware {state} at frame {frame} (sim link write failed: "
@@ -187,17 +196,22 @@ class SimLink:
         deadline = time.monotonic() + REPLY_TIMEOUT_S
         while True:
             remaining = deadline - time.monotonic()
-            if remaining <= 0 or not self.firmware.alive():
+            if remaining <= 0:
                 break
             if not self._sel.select(timeout=min(remaining, 0.2)):
+                if not self.firmware.alive():     # checked only when nothing came: cheap
+                    break
                 continue
             try:
-                data = self.serial.read(self.serial.in_waiting or 1)
-            except (serial.SerialException, OSError):
+                data = os.read(self.fd, 4096)
+            except BlockingIOError:
+                continue
+            except OSError:
                 break                      # the pty closed under us: the firmware is gone
-            for m in self.mav.parse_buffer(data) or []:
-                if m.get_type() != "HQ_ACTUATOR_FRAME":
+            for msgid, _, payload in self.framer.feed(data):
+                if msgid != self.actuator_id:
                     continue
+                m = self.codec.decode(msgid, payload)
                 if m.frame != frame:
                     raise FirmwareError(f"reply to frame {frame} carries frame {m.frame}")
                 return Actuators(m.time_us, m.frame, list(m.motor), bool(m.armed), m.mode,

@@ -32,6 +32,10 @@ RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
 BOOT_FRAMES, ARM_FRAMES = 20, 20
 #: Frames recorded after the excitation ends.
 TAIL_FRAMES = 10
+#: Messages the runner reads (all messages are logged to the .tlog regardless).
+STEP_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
+#: Telemetry is read every this many frames (the firmware buffers 64 KiB, ~500 loops).
+TELEMETRY_BATCH = 20
 #: How long to wait for a loop's telemetry (its HQ_SYSID_SAMPLE) after its reply.
 TELEMETRY_TIMEOUT_S = 2.0
 
@@ -87,13 +91,57 @@ def _fifo(plant, kind):
     q, rates = plant.body_state()
     w, x, y, z = q
     # specific force at rest: R^T (0, 0, -g) in body FRD
-    down = np.array([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z])
-    accel = -GRAVITY * down
+    accel = (-GRAVITY * 2 * (x * z - w * y), -GRAVITY * 2 * (y * z + w * x),
+             -GRAVITY * (w * w - x * x - y * y + z * z))
     if kind == SENSOR_DMP:
         return dmp_packet(q, rates, accel)
     if kind == SENSOR_RAW:
         return raw_packet(rates, accel)
     return b""
+
+
+class _TelemetryLog:
+    """Reads the telemetry link in batches and logs every packet with the simulated time of
+    its loop: each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped
+    with the time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Repeatable,
+    without a read per frame."""
+
+    def __init__(self, tel, tlog):
+        self.tel, self.tlog = tel, tlog
+        codec = tel.codec
+        self.codec = codec
+        self.ids = {name: tel.ids[name] for name in STEP_MESSAGES}
+        self.sysid_id = self.ids["HQ_SYSID_SAMPLE"]
+        self.pending = []
+        self.last_time_us = None
+
+    def read(self) -> list:
+        """Decoded messages of interest that arrived; every packet logged once its loop
+        is known."""
+        out = []
+        for msgid, packet, payload in self.tel.read_packets():
+            self.pending.append(packet)
+            if msgid in self.ids.values():
+                m = self.codec.decode(msgid, payload)
+                out.append(m)
+                if msgid == self.sysid_id:
+                    for p in self.pending:
+                        self.tlog.write(m.time_us, p)
+                    self.pending.clear()
+                    self.last_time_us = m.time_us
+        return out
+
+    def read_until(self, time_us: int) -> list:
+        """Read until the loop at ``time_us`` has all its telemetry."""
+        out = self.read()
+        deadline = time.monotonic() + TELEMETRY_TIMEOUT_S
+        while self.last_time_us is None or self.last_time_us < time_us:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise FirmwareError(f"no telemetry for the step at {time_us * 1e-6:.3f} s")
+            select.select([self.tel.serial.fileno()], [], [], remaining)
+            out += self.read()
+        return out
 
 
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
@@ -114,10 +162,12 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     last_seq, exc_seen, exc_done_frame, status = None, False, None, None
     with HostFirmware(cfg.loop_hz, cfg.dmp_image) as fw, TlogWriter(out_base + ".tlog") as tlog:
         link = SimLink(fw, mav)
-        tel = TelemetryLink(fw.telemetry_path, tlog=tlog)
+        tel = TelemetryLink(fw.telemetry_path)
+        telemetry = _TelemetryLog(tel, tlog)
         start_frame = BOOT_FRAMES + ARM_FRAMES + int(round(cfg.settle_s * cfg.loop_hz))
         kind, frame = 0, 0
-        max_frames = start_frame + int(cfg.loop_hz / cfg.freq_hz * (cfg.cycles + 2 * cfg.fade_cycles + 2)) + 400
+        max_frames = start_frame + int(cfg.loop_hz / cfg.freq_hz *
+                                       (cfg.cycles + 2 * cfg.fade_cycles + 2)) + 400
         next_report = 0.1
         loop_t0 = time.monotonic()
         try:
@@ -131,9 +181,13 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                     tel.heartbeat()
                 reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, cfg.collective))
                 kind = reply.sensor_kind
-                for m in _telemetry_of_step(tel, time_us):
+                achieved = mixer.achieved(reply.motor)
+                plant.step((achieved.roll, achieved.pitch, achieved.yaw)[axis_index])
+                if frame % TELEMETRY_BATCH and exc_done_frame is None:
+                    continue
+                for m in telemetry.read_until(time_us):
                     t = m.get_type()
-                    if t == "HQ_EXCITATION_STATUS" and frame >= start_frame and status is None:
+                    if t == "HQ_EXCITATION_STATUS" and status is None:
                         status = m
                         if not m.accepted:
                             raise FirmwareError("the firmware refused the excitation (frequency "
@@ -146,16 +200,14 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                         if m.exc_state:
                             exc_seen = True
                         elif exc_seen and exc_done_frame is None:
-                            exc_done_frame = frame
+                            exc_done_frame = m.time_us // dt_us
                         if m.exc_state == 2:
                             rows.append((m.time_us * 1e-6, getattr(m, u_name), getattr(m, y_name)))
-                            got = mixer.achieved(reply.motor)
-                            if abs([got.roll, got.pitch, got.yaw][axis_index] - m.axis_cmd) > 1e-3:
+                            got = mixer.achieved(m.motor)
+                            if abs((got.roll, got.pitch, got.yaw)[axis_index] - m.axis_cmd) > 1e-3:
                                 saturated += 1
                     elif t == "STATUSTEXT" and m.severity <= 4:
                         progress(f"firmware: {m.text}")
-                achieved = mixer.achieved(reply.motor)
-                plant.step([achieved.roll, achieved.pitch, achieved.yaw][axis_index])
                 if exc_done_frame is not None and frame >= exc_done_frame + TAIL_FRAMES:
                     break
                 if frame >= max_frames:
@@ -176,18 +228,3 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                      saturated_samples=saturated, imu_mode=fw.imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))
-
-
-def _telemetry_of_step(tel, time_us):
-    """All telemetry of the step at ``time_us``: read until its HQ_SYSID_SAMPLE (the loop's
-    last message) has arrived."""
-    msgs = []
-    deadline = time.monotonic() + TELEMETRY_TIMEOUT_S
-    while time.monotonic() < deadline:
-        new = tel.poll(timestamp_us=time_us)
-        msgs += new
-        if any(m.get_type() == "HQ_SYSID_SAMPLE" and m.time_us == time_us for m in new):
-            return msgs
-        if not new:
-            select.select([tel.serial.fileno()], [], [], max(deadline - time.monotonic(), 0))
-    raise FirmwareError(f"no telemetry for the step at {time_us * 1e-6:.3f} s")

@@ -44,16 +44,20 @@ class TfPlant:
         self.dt_s = dt_s
         self.G = control.tf(list(map(float, num)), list(map(float, den)))
         sys_d = control.sample_system(control.ss(self.G), dt_s, method="zoh")
-        self.A, self.B = np.asarray(sys_d.A), np.asarray(sys_d.B).ravel()
-        self.C, self.D = np.asarray(sys_d.C).ravel(), float(np.asarray(sys_d.D).ravel()[0])
-        self.x = np.zeros(self.A.shape[0])
+        # Plain floats: the state is a handful of numbers, and numpy's per-call overhead on
+        # 2 x 2 arrays costs more than the arithmetic (this runs every loop).
+        self.A = [list(map(float, row)) for row in np.asarray(sys_d.A)]
+        self.B = [float(b) for b in np.asarray(sys_d.B).ravel()]
+        self.C = [float(c) for c in np.asarray(sys_d.C).ravel()]
+        self.x = [0.0] * len(self.B)
         self.angle_rad = 0.0
         self.rate_rad_s = 0.0
 
     def step(self, u: float) -> float:
         """Hold ``u`` for one period; returns the rate at the end of it."""
-        self.x = self.A @ self.x + self.B * u
-        rate = float(self.C @ self.x)          # strictly proper plants: no feed-through now
+        x = self.x
+        self.x = [sum(a * xi for a, xi in zip(row, x)) + b * u for row, b in zip(self.A, self.B)]
+        rate = sum(c * xi for c, xi in zip(self.C, self.x))   # strictly proper: no feed-through
         # angle: trapezoid of the rate over the period
         self.angle_rad += 0.5 * (self.rate_rad_s + rate) * self.dt_s
         self.rate_rad_s = rate
@@ -66,7 +70,7 @@ class TfPlant:
         q[1 + self.index] = math.sin(half)
         rates = [0.0, 0.0, 0.0]
         rates[self.index] = self.rate_rad_s
-        return np.array(q), np.array(rates)
+        return q, rates
 
     def truth(self, omega_rad_s):
         """The sampled-data response from logged command to logged rate (ZOH at dt)."""
