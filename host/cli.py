@@ -61,6 +61,16 @@ angle -> u angle setpoint, y angle (rad).
 example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --out run1
 """
 
+BOARD_HELP = """\
+Run the simulated rig in real time as if it were a board on a serial port: the host
+firmware with a transfer-function plant, armed and hovering, stepping one loop per loop
+period of wall-clock time. Its telemetry port appears at --telemetry; connect any MAVLink
+tool to it as to /dev/ttyACM0 (115200 baud is accepted and ignored). Nothing reads the
+telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
+
+example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
+"""
+
 DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
 
 
@@ -141,6 +151,21 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
     p.set_defaults(func=_cmd_sil)
 
+    p = sub.add_parser("board", help="run the simulated rig as if it were a board on a serial port",
+                       description=BOARD_HELP, formatter_class=fmt)
+    p.add_argument("--plant", choices=("tf",), default="tf")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
+    p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19])
+    p.add_argument("--den", type=float, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
+    p.add_argument("--telemetry", default="heliquad-board", metavar="PATH",
+                   help="where the telemetry serial port appears (default ./heliquad-board)")
+    p.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds "
+                   "(default: run until Ctrl-C)")
+    p.add_argument("--collective", type=float, default=0.4)
+    p.add_argument("--loop-hz", type=float, default=200.0)
+    p.add_argument("--dmp-image", metavar="FILE")
+    p.set_defaults(func=_cmd_board)
+
     from .demo import add_demo_parser
 
     add_demo_parser(sub, fmt)
@@ -186,17 +211,13 @@ def _cmd_sil(args) -> int:
     from ..sim.lockstep import FirmwareError
     from ..sim.sil import SilConfig, run_sil
 
-    if len(args.den) < 2 or args.den[0] == 0 or len(args.num) > len(args.den):
-        raise InputError("--den needs a leading non-zero coefficient and a degree at least "
-                         "that of --num")
+    _check_plant(args)
     if not 0 < args.freq_hz <= args.loop_hz / 4:
         raise InputError(f"--freq-hz must be in (0, {args.loop_hz / 4:g}] (a quarter of the loop rate)")
     if args.cycles < 1 or args.fade_cycles < 0:
         raise InputError("--cycles must be at least 1 and --fade-cycles non-negative")
     if args.inject == "angle" and args.axis == "yaw":
         raise InputError("yaw is rate-only: use --inject rate or mixer")
-    if not 0 <= args.collective <= 1:
-        raise InputError("--collective must be in [0, 1]")
     amplitude = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
@@ -218,6 +239,37 @@ def _cmd_sil(args) -> int:
               file=sys.stderr)
     print(f"wrote {r.tlog_path} and {r.csv_path}")
     return 0
+
+
+def _cmd_board(args) -> int:
+    import os
+
+    from ..sim.board import run_board
+    from ..sim.lockstep import FirmwareError
+
+    _check_plant(args)
+    if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
+        raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
+                         "another path")
+    try:
+        r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
+                      collective=args.collective, duration_s=args.duration_s,
+                      dmp_image=args.dmp_image)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "
+          f"fell behind real time {r['resyncs']} time(s)")
+    return 0
+
+
+def _check_plant(args) -> None:
+    if len(args.den) < 2 or args.den[0] == 0 or len(args.num) > len(args.den):
+        raise InputError("--den needs a leading non-zero coefficient and a degree at least "
+                         "that of --num")
+    if not 0 <= args.collective <= 1:
+        raise InputError("--collective must be in [0, 1]")
+    if not 0 < args.loop_hz <= 2000:
+        raise InputError("--loop-hz must be in (0, 2000]")
 
 
 def _describe_point(p) -> str:

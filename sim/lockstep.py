@@ -53,12 +53,12 @@ class HostFirmware:
     """The host firmware as a child process with its two ptys in a private directory."""
 
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
-                 idle_timeout_s: int = 10, workdir: str | None = None):
+                 idle_timeout_s: int = 10, telemetry_path: str | None = None):
         self.loop_hz = loop_hz
-        self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="heliquad-sil-")
-        self.workdir = workdir or self._tmp.name
+        self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
+        self.workdir = self._tmp.name
         self.sim_link_path = os.path.join(self.workdir, "sim-link")
-        self.telemetry_path = os.path.join(self.workdir, "telemetry")
+        self.telemetry_path = telemetry_path or os.path.join(self.workdir, "telemetry")
         cmd = [find_firmware(), "--sim-link", self.sim_link_path, "--telemetry",
                self.telemetry_path, "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s",
                str(int(idle_timeout_s))]

@@ -1,0 +1,65 @@
+"""Free-running mode: the simulated rig behaves like a board on a serial port.
+
+``heliquad board`` starts the host firmware with a transfer-function plant and steps it in
+real time (one frame per loop period of wall-clock time), hovering with the arm switch up,
+and publishes the firmware's telemetry link as a pty. Any tool then connects to that path
+as it would to /dev/ttyACM0 (`heliquad log`, a sweep, QGroundControl over a serial link,
+or pymavlink). The simulator does not read the telemetry: if nobody does, the firmware's
+buffer fills and it drops and counts messages, as a UART would.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+from .lockstep import HostFirmware, SimLink
+from .sil import _fifo, _rc
+from .tf_plant import TfPlant
+
+__all__ = ["run_board"]
+
+#: If the simulator falls this far behind real time, it resynchronises instead of racing.
+MAX_LAG_S = 0.1
+
+
+def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
+              collective: float = 0.4, duration_s: float | None = None,
+              dmp_image: str | None = None, ready=print) -> dict:
+    """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
+    from heliquad import _firmware
+    from heliquad.host.mavlink_dialect import dialect
+
+    dt_s = 1.0 / loop_hz
+    plant = TfPlant(axis, num, den, dt_s)
+    mixer = _firmware.Mixer()
+    index = ("roll", "pitch", "yaw").index(axis)
+    frames, late = 0, 0
+    fw = HostFirmware(loop_hz, dmp_image, telemetry_path=os.path.abspath(telemetry_path))
+    try:
+        link = SimLink(fw, dialect())
+        ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")
+        kind = 0
+        t0 = time.monotonic()
+        try:
+            while duration_s is None or frames * dt_s < duration_s:
+                frames += 1
+                target = t0 + frames * dt_s
+                now = time.monotonic()
+                if now < target:
+                    time.sleep(target - now)
+                elif now - target > MAX_LAG_S:
+                    late += 1
+                    t0 = now - frames * dt_s            # resynchronise to real time
+                reply = link.step(int(round(frames * dt_s * 1e6)), _fifo(plant, kind), kind,
+                                  _rc(frames, collective))
+                kind = reply.sensor_kind
+                got = mixer.achieved(reply.motor)
+                plant.step((got.roll, got.pitch, got.yaw)[index])
+        except KeyboardInterrupt:
+            pass
+        finally:
+            link.close()
+    finally:
+        fw.stop()                                  # the firmware removes its links itself
+    return {"frames": frames, "resyncs": late}
