@@ -76,12 +76,7 @@ class TelemetryLink:
         ``only``: message type names to decode and return (default all); the others are
         still logged. Decoding costs a few microseconds a message, which matters at 200 Hz.
         """
-        waiting = self.serial.in_waiting
-        if not waiting:
-            return []
-        data = self.serial.read(waiting)
-        self.bytes_in += len(data)
-        packets = self.framer.feed(data)
+        packets = self.read_packets()
         if self.tlog is not None and packets:
             ts = int(time.time() * 1e6) if timestamp_us is None else timestamp_us
             for _, packet, _ in packets:

@@ -108,8 +108,7 @@ class _TelemetryLog:
 
     def __init__(self, tel, tlog):
         self.tel, self.tlog = tel, tlog
-        codec = tel.codec
-        self.codec = codec
+        self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in STEP_MESSAGES}
         self.sysid_id = self.ids["HQ_SYSID_SAMPLE"]
         self.pending = []

@@ -199,3 +199,53 @@ def test_dmp_path_end_to_end(tmp_path):
     point = estimate_fsf(u, y, fs)
     truth = TfPlant("pitch", (33.64,), (1.0, 5.374, 23.65), 0.005).truth(point.omega_rad_s)
     assert abs(point.gain / truth - 1) < 0.02
+
+
+def _hover(link, frames, start=1, throttle=1400, arm=2000):
+    reply = None
+    for frame in range(start, start + frames):
+        rc = [1500, 1500, 1000 if frame < 40 else throttle, 1500,
+              1000 if frame < 20 else arm, 1500, 0, 0]
+        reply = link.step(frame * 5000, rc_us=rc)
+    return reply
+
+
+def test_rc_loss_cuts_the_motors():
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        reply = _hover(link, 100)
+        assert reply.armed and max(reply.motor) > 0.0
+        lost = link.step(101 * 5000, rc_us=[0] * 8)            # no RC signal
+        assert not lost.armed and lost.motor == [0.0] * 5
+        link.close()
+
+
+def test_arming_is_refused_with_the_throttle_up():
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        for frame in range(1, 60):                             # switch up with throttle up
+            reply = link.step(frame * 5000, rc_us=[1500, 1500, 1500, 1500, 2000, 1500, 0, 0])
+        assert not reply.armed and reply.motor == [0.0] * 5
+        link.close()
+
+
+def test_a_full_telemetry_link_drops_and_counts_without_blocking_the_loop():
+    from heliquad.host.link import TelemetryLink
+
+    fw_status = MAV.MAVLINK_MSG_ID_HQ_FW_STATUS
+    with HostFirmware() as fw:
+        link = SimLink(fw, MAV)
+        tel = TelemetryLink(fw.telemetry_path)
+        _hover(link, 4000)                      # ~460 kB of telemetry nobody reads: lockstep goes on
+        latest = None
+        for frame in range(4001, 8001):         # now read while stepping, until a fresh status
+            _hover(link, 1, start=frame)
+            for msgid, _, payload in tel.read_packets():
+                if msgid == fw_status:
+                    latest = tel.codec.decode(msgid, payload)
+            if latest is not None and latest.loops > 4000:
+                break
+        assert latest is not None and latest.loops > 4000
+        assert latest.telemetry_dropped > 0
+        tel.close()
+        link.close()
