@@ -167,8 +167,10 @@ def _build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_board)
 
     from .demo import add_demo_parser
+    from .dmp_image import add_dmp_image_parser
 
     add_demo_parser(sub, fmt)
+    add_dmp_image_parser(sub, fmt)
     return parser
 
 

@@ -3,6 +3,9 @@
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
 //                    [--idle-timeout-s 10]
 //
+// DMP image: --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the
+// raw FIFO path).
+//
 // Creates two pseudo-terminals and publishes their slave devices as PATH symlinks:
 //   sim link:  HQ_SENSOR_FRAME in (time, frame counter, MPU6050 FIFO bytes, RC), exactly one
 //              HQ_ACTUATOR_FRAME out per frame (same time and counter, five motor outputs);
@@ -21,6 +24,7 @@
 #include <vector>
 
 #include "../../core/flight_controller.hpp"
+#include "../dmp_image.hpp"
 #include "host_hal.hpp"
 #include "mpu6050_emulator.hpp"
 
@@ -88,9 +92,12 @@ int main(int argc, char** argv) {
     static hq::Mpu6050Emulator chip;
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = opt.loop_hz;
-    if (!image.empty()) {
+    if (!image.empty()) {                      // --dmp-image wins over a built-in image
         cfg.imu.dmp_image = image.data();
         cfg.imu.dmp_image_size = static_cast<uint16_t>(image.size());
+    } else if (hq::kDmpImageSize > 0) {
+        cfg.imu.dmp_image = hq::kDmpImage;
+        cfg.imu.dmp_image_size = hq::kDmpImageSize;
     }
     hq::FlightController fc(cfg, chip, clock, telemetry, motors);
     const hq::InitResult init = fc.init();
