@@ -127,9 +127,13 @@ def _build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=SIL_HELP, formatter_class=fmt)
-    p.add_argument("--plant", choices=("tf",), default="tf",
-                   help="plant model: tf, a transfer function from the axis's torque command "
-                        "to its body rate (default)")
+    p.add_argument("--plant", choices=("tf", "vehicle"), default="tf",
+                   help="tf: a transfer function from the axis's torque command to its body "
+                        "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
+    p.add_argument("--rig", choices=("roll", "pitch", "yaw", "free"), default=None,
+                   help="vehicle plant: the test rig (default: the --axis one)")
+    p.add_argument("--params", metavar="FILE",
+                   help="vehicle plant: parameter file (default: the shipped vehicle.toml)")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
     p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: SPEC.md's roll model)")
@@ -224,10 +228,18 @@ def _cmd_sil(args) -> int:
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(f"--out: folder {folder} does not exist")
+    rig = args.rig or args.axis
+    if args.plant == "vehicle" and rig not in (args.axis, "free"):
+        raise InputError(f"on the {rig} rig only {rig} is free: use --axis {rig}")
+    if args.plant == "vehicle":
+        from ..sim.params import load_params
+
+        load_params(args.params)                       # a bad file fails here, in one line
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), inject=args.inject,
                     freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
-                    collective=args.collective, dmp_image=args.dmp_image)
+                    collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
+                    rig=rig, params=args.params)
     try:
         r = run_sil(cfg, args.out)
     except FirmwareError as exc:

@@ -33,7 +33,6 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     mixer = _firmware.Mixer()
-    index = ("roll", "pitch", "yaw").index(axis)
     frames, late = 0, 0
     fw = HostFirmware(loop_hz, dmp_image, telemetry_path=os.path.abspath(telemetry_path))
     try:
@@ -54,8 +53,7 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
                 reply = link.step(int(round(frames * dt_s * 1e6)), _fifo(plant, kind), kind,
                                   _rc(frames, collective))
                 kind = reply.sensor_kind
-                got = mixer.achieved(reply.motor)
-                plant.step((got.roll, got.pitch, got.yaw)[index])
+                plant.step_motors(reply.motor, mixer)
         except KeyboardInterrupt:
             pass
         finally:

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from .lockstep import SENSOR_DMP, SENSOR_RAW, FirmwareError, HostFirmware, SimLink
-from .mpu6050_packets import GRAVITY, dmp_packet, raw_packet
+from .mpu6050_packets import dmp_packet, raw_packet
 from .tf_plant import TfPlant
 
 __all__ = ["SilConfig", "SilResult", "run_sil", "RC_CENTER_US"]
@@ -56,6 +56,20 @@ class SilConfig:
     collective: float = 0.4        # hover throttle, fraction of full stick travel
     settle_s: float = 1.0          # hover before the excitation starts
     dmp_image: str | None = None
+    plant: str = "tf"              # "tf" (num/den) or "vehicle" (the 6-DoF model)
+    rig: str = "roll"              # vehicle plant: roll, pitch, yaw or free
+    params: str | None = None      # vehicle parameter file (default: the shipped one)
+
+
+def make_plant(cfg: SilConfig, dt_s: float):
+    """The plant of a run: the per-axis transfer function or the 6-DoF vehicle on its rig."""
+    if cfg.plant == "tf":
+        return TfPlant(cfg.axis, cfg.num, cfg.den, dt_s)
+    from .params import load_params
+    from .vehicle_plant import VehiclePlant
+
+    return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),
+                        trim_collective=cfg.collective)
 
 
 @dataclasses.dataclass
@@ -89,10 +103,7 @@ def _rc(frame, collective):
 
 def _fifo(plant, kind):
     q, rates = plant.body_state()
-    w, x, y, z = q
-    # specific force at rest: R^T (0, 0, -g) in body FRD
-    accel = (-GRAVITY * 2 * (x * z - w * y), -GRAVITY * 2 * (y * z + w * x),
-             -GRAVITY * (w * w - x * x - y * y + z * z))
+    accel = plant.specific_force()
     if kind == SENSOR_DMP:
         return dmp_packet(q, rates, accel)
     if kind == SENSOR_RAW:
@@ -152,7 +163,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
 
     mav = dialect()
     dt_us = int(round(1e6 / cfg.loop_hz))
-    plant = TfPlant(cfg.axis, cfg.num, cfg.den, dt_us * 1e-6)
+    plant = make_plant(cfg, dt_us * 1e-6)
     mixer = _firmware.Mixer()                     # the firmware's own mixer equations
     axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
     u_name, y_name = _columns(cfg.inject)
@@ -180,8 +191,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                     tel.heartbeat()
                 reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, cfg.collective))
                 kind = reply.sensor_kind
-                achieved = mixer.achieved(reply.motor)
-                plant.step((achieved.roll, achieved.pitch, achieved.yaw)[axis_index])
+                plant.step_motors(reply.motor, mixer)
                 if frame % TELEMETRY_BATCH and exc_done_frame is None:
                     continue
                 for m in telemetry.read_until(time_us):

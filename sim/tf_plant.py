@@ -53,6 +53,12 @@ class TfPlant:
         self.angle_rad = 0.0
         self.rate_rad_s = 0.0
 
+    def step_motors(self, motor, mixer) -> float:
+        """Drive the plant with the motors' thrust fractions: the axis's torque command is what
+        the firmware's mixer equations say these thrusts produce (``Mixer.achieved``)."""
+        got = mixer.achieved(motor)
+        return self.step((got.roll, got.pitch, got.yaw)[self.index])
+
     def step(self, u: float) -> float:
         """Hold ``u`` for one period; returns the rate at the end of it."""
         x = self.x
@@ -71,6 +77,12 @@ class TfPlant:
         rates = [0.0, 0.0, 0.0]
         rates[self.index] = self.rate_rad_s
         return q, rates
+
+    def specific_force(self):
+        """Accelerometer reading on the rig (held still): gravity only, in body FRD."""
+        (w, x, y, z), _ = self.body_state()
+        g = 9.80665
+        return (-g * 2 * (x * z - w * y), -g * 2 * (y * z + w * x), -g * (w * w - x * x - y * y + z * z))
 
     def truth(self, omega_rad_s):
         """The sampled-data response from logged command to logged rate (ZOH at dt)."""

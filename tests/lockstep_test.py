@@ -249,3 +249,23 @@ def test_a_full_telemetry_link_drops_and_counts_without_blocking_the_loop():
         assert latest.telemetry_dropped > 0
         tel.close()
         link.close()
+
+
+@pytest.mark.parametrize("axis, freq_hz, amplitude", [("roll", 1.2, 0.05), ("pitch", 2.0, 0.05),
+                                                       ("yaw", 0.5, 0.3)])
+def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, amplitude, tmp_path):
+    # The 6-DoF vehicle on its one-axis rig, the firmware flying it in angle mode, mixer
+    # injection: the FSF point matches the model linearised at the rig's trim (through the
+    # firmware's mixer), ZOH-sampled (issue 4: 0.5 dB and 3 deg). Yaw at 0.5 Hz needs the
+    # larger amplitude: the closed yaw loop holds the rate to a few gyro LSBs otherwise.
+    from heliquad.sim.vehicle_plant import VehiclePlant
+
+    cfg = SilConfig(axis=axis, inject="mixer", freq_hz=freq_hz, amplitude=amplitude, cycles=6,
+                    plant="vehicle", rig=axis)
+    r = run_sil(cfg, str(tmp_path / axis), progress=lambda *_: None)
+    assert r.saturated_samples == 0 and r.seq_gaps == 0
+    fs, u, y = read_run_csv(r.csv_path)
+    point = estimate_fsf(u, y, fs)
+    truth = VehiclePlant(axis, axis, 0.005).truth(point.omega_rad_s)
+    assert abs(20 * math.log10(point.magnitude / abs(truth))) < 0.5
+    assert abs(math.degrees(np.angle(point.gain / truth))) < 3.0

@@ -26,17 +26,17 @@ def wrench(motor, g=fw.MixerGeometry()):
 
 def requested(cmd):
     return np.array([cmd.collective * MIXER.max_vertical_thrust_n,
-                     cmd.roll * MIXER.max_roll_pitch_torque_nm,
-                     cmd.pitch * MIXER.max_roll_pitch_torque_nm,
-                     cmd.yaw * MIXER.max_yaw_torque_nm])
+                     cmd.roll * MIXER.roll_pitch_torque_unit_nm,
+                     cmd.pitch * MIXER.roll_pitch_torque_unit_nm,
+                     cmd.yaw * MIXER.yaw_torque_unit_nm])
 
 
 # Feasible without saturation: yaw balance ties the mean arm thrust to the central rotor's
-# torque (about 0.6 N per arm at collective 0.3), and each arm must stay within 0..max, so
-# unsaturated roll and pitch are small fractions of the full-differential authority
-# (docs/mixer.md). Collective above ~0.49 would need more than the central rotor's maximum.
-@pytest.mark.parametrize("c, r, p, y", list(itertools.product([0.2, 0.35], [-0.03, 0.0, 0.04],
-                                                              [-0.04, 0.02], [-0.1, 0.0, 0.03])))
+# torque (0.32 N per arm at hover, 0.42 N at collective 0.2), and each arm must stay within
+# 0..max; commands are in units of hover authority (docs/mixer.md). Collective above ~0.49
+# would need more than the central rotor's maximum.
+@pytest.mark.parametrize("c, r, p, y", list(itertools.product([0.2, 0.35], [-0.5, 0.0, 0.6],
+                                                              [-0.5, 0.3], [-0.3, 0.0, 0.2])))
 def test_unsaturated_commands_are_reproduced(c, r, p, y):
     cmd = fw.MixerCommand(c, r, p, y)
     out = MIXER.mix(cmd)
@@ -74,10 +74,21 @@ def test_saturation_keeps_roll_and_pitch_before_collective(collective):
     assert all(0.0 <= m <= 1.0 for m in out.motor)
 
 
-def test_roll_beyond_authority_is_clipped_and_flagged():
-    out = MIXER.mix(fw.MixerCommand(0.3, 1.7, 0.0, 0.0))
+def test_one_unit_of_roll_is_the_hover_arm_thrust_moved_across():
+    g = fw.MixerGeometry()
+    assert MIXER.hover_arm_thrust_n == pytest.approx(
+        g.central_torque_per_thrust_m * g.hover_thrust_n
+        / (4 * g.arm_length_m * math.sin(math.radians(g.cant_deg))
+           + 4 * math.cos(math.radians(g.cant_deg)) * g.central_torque_per_thrust_m), rel=1e-5)
+    assert MIXER.roll_pitch_torque_unit_nm == pytest.approx(
+        g.arm_length_m * math.cos(math.radians(g.cant_deg)) * 2 * MIXER.hover_arm_thrust_n, rel=1e-6)
+
+
+def test_roll_beyond_the_full_differential_is_clipped_and_flagged():
+    out = MIXER.mix(fw.MixerCommand(0.3, 20.0, 0.0, 0.0))
     assert out.saturated
-    assert MIXER.achieved(out.motor).roll == pytest.approx(1.0, abs=1e-5)
+    full = fw.MixerGeometry().arm_max_thrust_n / (2 * MIXER.hover_arm_thrust_n)
+    assert MIXER.achieved(out.motor).roll == pytest.approx(full, rel=1e-5)
 
 
 def test_yaw_is_kept_before_collective():

@@ -14,14 +14,7 @@ from heliquad.sim.vehicle import GRAVITY_M_S2, Vehicle
 PARAMS = load_params()
 
 
-def mixer_for(params):
-    g = fw.MixerGeometry()
-    g.arm_length_m = params.arm_rotors.arm_length_m
-    g.cant_deg = params.arm_rotors.cant_deg
-    g.central_max_thrust_n = params.central_rotor.max_thrust_n
-    g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
-    g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
-    return fw.Mixer(g)
+from heliquad.sim.vehicle_plant import mixer_for
 
 
 def settled(vehicle, u):
@@ -160,4 +153,4 @@ def test_roll_rig_acceleration_is_the_roll_moment_over_inertia():
     assert v.derivative(v.x, u)[10] == pytest.approx(expected, rel=1e-6)
     assert abs(drag_moment) < 0.02 * abs(thrust_moment)
     # and the mixer's normalised command maps to the thrust moment
-    assert thrust_moment == pytest.approx(0.03 * mixer.max_roll_pitch_torque_nm, rel=1e-4)
+    assert thrust_moment == pytest.approx(0.03 * mixer.roll_pitch_torque_unit_nm, rel=1e-4)

@@ -130,7 +130,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readwrite("cant_deg", &MixerGeometry::cant_deg)
         .def_readwrite("central_max_thrust_n", &MixerGeometry::central_max_thrust_n)
         .def_readwrite("arm_max_thrust_n", &MixerGeometry::arm_max_thrust_n)
-        .def_readwrite("central_torque_per_thrust_m", &MixerGeometry::central_torque_per_thrust_m);
+        .def_readwrite("central_torque_per_thrust_m", &MixerGeometry::central_torque_per_thrust_m)
+        .def_readwrite("hover_thrust_n", &MixerGeometry::hover_thrust_n);
     py::class_<MixerCommand>(m, "MixerCommand")
         .def(py::init([](float c, float r, float p, float y) { return MixerCommand{c, r, p, y}; }),
              py::arg("collective") = 0.0f, py::arg("roll") = 0.0f, py::arg("pitch") = 0.0f,
@@ -150,8 +151,9 @@ PYBIND11_MODULE(_firmware, m) {
             return mx.achieved(motor.data());
         })
         .def_property_readonly("max_vertical_thrust_n", &Mixer::max_vertical_thrust_n)
-        .def_property_readonly("max_roll_pitch_torque_nm", &Mixer::max_roll_pitch_torque_nm)
-        .def_property_readonly("max_yaw_torque_nm", &Mixer::max_yaw_torque_nm);
+        .def_property_readonly("roll_pitch_torque_unit_nm", &Mixer::roll_pitch_torque_unit_nm)
+        .def_property_readonly("yaw_torque_unit_nm", &Mixer::yaw_torque_unit_nm)
+        .def_property_readonly("hover_arm_thrust_n", &Mixer::hover_arm_thrust_n);
 
     py::class_<ExcitationConfig>(m, "ExcitationConfig")
         .def(py::init<>())

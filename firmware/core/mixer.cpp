@@ -14,9 +14,13 @@ Mixer::Mixer(const MixerGeometry& geometry) : g_(geometry) {
     cos_d_ = std::cos(g_.cant_deg * kDegToRad);
     sin_d_ = std::sin(g_.cant_deg * kDegToRad);
     sign_c0_ = g_.central_torque_per_thrust_m >= 0.0f ? 1.0f : -1.0f;
+    lat_ = sign_c0_ * 4.0f * g_.arm_length_m * sin_d_;        // yaw moment per N of T_a
+    det_ = -lat_ - 4.0f * cos_d_ * g_.central_torque_per_thrust_m;
     fz_max_ = g_.central_max_thrust_n + 4.0f * cos_d_ * g_.arm_max_thrust_n;
-    txy_max_ = g_.arm_length_m * cos_d_ * g_.arm_max_thrust_n;
-    tz_max_ = 2.0f * g_.arm_length_m * sin_d_ * g_.arm_max_thrust_n;
+    // Mean arm thrust at hover (Fz = weight, no yaw moment): second row of the 2 x 2 solve.
+    ta_hover_ = (-g_.central_torque_per_thrust_m * g_.hover_thrust_n) / det_;
+    txy_unit_ = g_.arm_length_m * cos_d_ * 2.0f * ta_hover_;
+    tz_unit_ = fabs_(lat_) * ta_hover_;
 }
 
 MixerOutput Mixer::mix(const MixerCommand& cmd) const {
@@ -24,22 +28,20 @@ MixerOutput Mixer::mix(const MixerCommand& cmd) const {
     const float ta_max = g_.arm_max_thrust_n;
     const float t0_max = g_.central_max_thrust_n;
     const float c0 = g_.central_torque_per_thrust_m;
-    const float lat = sign_c0_ * 4.0f * g_.arm_length_m * sin_d_;   // yaw moment per N of T_a
+    const float lat = lat_;
 
-    // 1. Roll and pitch: differential arm thrust, each within its own authority.
-    const float roll = clamp(cmd.roll, -1.0f, 1.0f);
-    const float pitch = clamp(cmd.pitch, -1.0f, 1.0f);
-    const float dx = -roll * ta_max;
-    const float dy = pitch * ta_max;
-    out.saturated = (roll != cmd.roll) || (pitch != cmd.pitch);
+    // 1. Roll and pitch: differential arm thrust, each at most the full arm thrust.
+    const float unit = 2.0f * ta_hover_;                     // Dx per unit of roll command
+    const float dx = clamp(-cmd.roll * unit, -ta_max, ta_max);
+    const float dy = clamp(cmd.pitch * unit, -ta_max, ta_max);
+    out.saturated = dx != -cmd.roll * unit || dy != cmd.pitch * unit;
 
     // 2. Collective and yaw: solve [1, 4 cos d; c0, -lat] [T0; Ta] = [Fz; tau_z].
     const float fz = clamp(cmd.collective, 0.0f, 1.0f) * fz_max_;
-    const float tz = clamp(cmd.yaw, -1.0f, 1.0f) * tz_max_;
-    const float det = -lat - 4.0f * cos_d_ * c0;
-    float t0 = (-lat * fz - 4.0f * cos_d_ * tz) / det;
-    float ta = (tz - c0 * fz) / det;
-    out.saturated = out.saturated || fz != cmd.collective * fz_max_ || tz != cmd.yaw * tz_max_;
+    const float tz = cmd.yaw * tz_unit_;
+    float t0 = (-lat * fz - 4.0f * cos_d_ * tz) / det_;
+    float ta = (tz - c0 * fz) / det_;
+    out.saturated = out.saturated || fz != cmd.collective * fz_max_;
 
     // 3. Arms must hold the differential: T_a within [h, Ta_max - h].
     const float h = 0.5f * (fabs_(dx) > fabs_(dy) ? fabs_(dx) : fabs_(dy));
@@ -70,12 +72,11 @@ MixerCommand Mixer::achieved(const float motor[kMotors]) const {
     float t[4];
     for (int i = 0; i < 4; ++i) t[i] = motor[i + 1] * ta_max;
     const float ta = 0.25f * (t[0] + t[1] + t[2] + t[3]);
-    const float lat = sign_c0_ * 4.0f * g_.arm_length_m * sin_d_;
     MixerCommand c;
     c.collective = (t0 + 4.0f * cos_d_ * ta) / fz_max_;
-    c.roll = -g_.arm_length_m * cos_d_ * (t[1] - t[3]) / txy_max_;
-    c.pitch = g_.arm_length_m * cos_d_ * (t[0] - t[2]) / txy_max_;
-    c.yaw = (g_.central_torque_per_thrust_m * t0 - lat * ta) / tz_max_;
+    c.roll = -g_.arm_length_m * cos_d_ * (t[1] - t[3]) / txy_unit_;
+    c.pitch = g_.arm_length_m * cos_d_ * (t[0] - t[2]) / txy_unit_;
+    c.yaw = (g_.central_torque_per_thrust_m * t0 - lat_ * ta) / tz_unit_;
     return c;
 }
 

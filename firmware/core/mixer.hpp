@@ -19,13 +19,19 @@
 // central rotor (the 2 x 2 system for T_0, T_a). The arm rotors' own reaction torques cancel
 // in pairs and are not used.
 //
-// Commands are normalised: collective in [0, 1] is a fraction of the largest total vertical
-// thrust; roll, pitch and yaw in [-1, 1] are fractions of each axis's authority
-// (tau_x,max = tau_y,max = l cos(delta) T_a,max; tau_z,max = 2 l sin(delta) T_a,max).
-// Outputs are thrust fractions of each rotor's maximum, central first.
+// Commands are normalised. Collective in [0, 1] is a fraction of the largest total vertical
+// thrust. Roll, pitch and yaw are in units of the vehicle's authority at hover: with T_a,h the
+// mean arm thrust at hover (weight = hover_thrust_n, no yaw), 1.0 of roll or pitch is the
+// moment of moving the whole hover arm thrust to one side, l cos(delta) 2 T_a,h; 1.0 of yaw is
+// the moment of changing the mean arm thrust by T_a,h, 4 l sin(delta) T_a,h. This is what the
+// vehicle can do around hover without the collective giving way, and it is what makes the
+// paper's auto-tuned gains (whose actuator units are not published) give rate-loop
+// crossovers of tens of rad/s on the modelled vehicle; docs/mixer.md has the numbers.
+// Larger commands are allowed up to the physical limits. Outputs are thrust fractions of
+// each rotor's maximum, central first.
 //
 // Saturation keeps attitude authority first: roll and pitch are kept whole (each clipped to
-// its own authority), then yaw, and the collective gives way.
+// the full differential arm thrust), then yaw, and the collective gives way.
 #pragma once
 
 #include <cstdint>
@@ -40,13 +46,14 @@ struct MixerGeometry {
     float central_max_thrust_n = 25.0f;   // estimate: 15x5.5 in prop on a 400 KV motor, 4S
     float arm_max_thrust_n = 9.0f;        // estimate: 5x4x3 prop on a 2205 2300 KV motor, 4S
     float central_torque_per_thrust_m = 0.017f;  // estimate: Q/T = D C_Q / C_T ~ 0.381 * 0.045
+    float hover_thrust_n = 9.1202f;       // weight: SPEC.md table 2, 0.930 kg x 9.80665 m/s^2
 };
 
 struct MixerCommand {
     float collective = 0.0f;   // 0..1
-    float roll = 0.0f;         // -1..1
-    float pitch = 0.0f;        // -1..1
-    float yaw = 0.0f;          // -1..1
+    float roll = 0.0f;         // units of hover authority (see above)
+    float pitch = 0.0f;
+    float yaw = 0.0f;
 };
 
 struct MixerOutput {
@@ -64,15 +71,16 @@ public:
     MixerCommand achieved(const float motor[kMotors]) const;
 
     const MixerGeometry& geometry() const { return g_; }
-    // Physical scales of the normalised command (N and N m).
+    // Physical scales of the normalised command (N and N m per unit).
     float max_vertical_thrust_n() const { return fz_max_; }
-    float max_roll_pitch_torque_nm() const { return txy_max_; }
-    float max_yaw_torque_nm() const { return tz_max_; }
+    float roll_pitch_torque_unit_nm() const { return txy_unit_; }
+    float yaw_torque_unit_nm() const { return tz_unit_; }
+    float hover_arm_thrust_n() const { return ta_hover_; }
 
 private:
     MixerGeometry g_;
-    float cos_d_, sin_d_, sign_c0_;
-    float fz_max_, txy_max_, tz_max_;
+    float cos_d_, sin_d_, sign_c0_, lat_, det_;
+    float fz_max_, ta_hover_, txy_unit_, tz_unit_;
 };
 
 }  // namespace hq

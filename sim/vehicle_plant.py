@@ -1,0 +1,118 @@
+"""The 6-DoF vehicle as a plant for the firmware in the loop, and its linearised truth.
+
+:class:`VehiclePlant` wraps :class:`heliquad.sim.vehicle.Vehicle` with the interface the
+lockstep runner uses (``step_motors``, ``body_state``, ``specific_force``). Its
+:meth:`VehiclePlant.truth` states what identification should find for mixer injection: the
+model linearised at the rig's trim (rotor speeds at the trim command, body at rest), from the
+axis's normalised torque command, through the firmware's own mixer equations, to the body
+rate; sampled with the zero-order hold of the loop period as the logged data are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from .params import VehicleParams, load_params
+from .vehicle import GRAVITY_M_S2, Vehicle, rotation_matrix
+
+__all__ = ["VehiclePlant", "mixer_for"]
+
+AXES = ("roll", "pitch", "yaw")
+#: Finite-difference steps for the linearisation (state and normalised command).
+EPS_STATE = 1e-6
+EPS_COMMAND = 1e-3
+
+
+def mixer_for(params: VehicleParams):
+    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+    from heliquad import _firmware as fw
+
+    g = fw.MixerGeometry()
+    g.arm_length_m = params.arm_rotors.arm_length_m
+    g.cant_deg = params.arm_rotors.cant_deg
+    g.central_max_thrust_n = params.central_rotor.max_thrust_n
+    g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
+    g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
+    g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
+    return fw.Mixer(g)
+
+
+class VehiclePlant:
+    """The vehicle on a rig (or free), stepped by the motors' thrust fractions."""
+
+    def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
+                 trim_collective: float = 0.4):
+        self.params = params or load_params()
+        self.axis, self.index = axis, AXES.index(axis)
+        self.rig, self.dt_s = rig, dt_s
+        self.vehicle = Vehicle(self.params, rig=rig)
+        self.trim_collective = trim_collective
+        self.last_u = np.zeros(5)
+
+    @property
+    def rate_rad_s(self) -> float:
+        return float(self.vehicle.x[10 + self.index])
+
+    def step_motors(self, motor, mixer=None) -> float:
+        self.last_u = np.asarray(motor, dtype=float)
+        self.vehicle.step(self.last_u, self.dt_s)
+        return self.rate_rad_s
+
+    def body_state(self):
+        x = self.vehicle.x
+        return list(x[6:10]), list(x[10:13])
+
+    def specific_force(self):
+        """What an accelerometer at the centre of mass reads, m/s^2 in body FRD."""
+        x = self.vehicle.x
+        rot = rotation_matrix(x[6:10])
+        accel_ned = np.zeros(3) if self.vehicle.free_axis is not None else \
+            self.vehicle.derivative(x, self.last_u)[3:6]
+        return rot.T @ (accel_ned - np.array([0.0, 0.0, GRAVITY_M_S2]))
+
+    # --- truth -------------------------------------------------------------------------------
+    def linearise(self):
+        """(A, b, c): the model at trim, from the axis's torque command to its body rate.
+
+        State: the free axis's rate and the five rotor speeds (on a rig the other states do
+        not move; in free flight this is the rotational part at hover with the other axes
+        held, which is what a one-axis experiment sees to first order).
+        """
+        mixer = mixer_for(self.params)
+        from heliquad import _firmware as fw
+
+        def motors(cmd):
+            c = [0.0, 0.0, 0.0]
+            c[self.index] = cmd
+            return np.array(mixer.mix(fw.MixerCommand(self.trim_collective, *c)).motor)
+
+        u0 = motors(0.0)
+        v = Vehicle(self.params, rig=self.rig if self.rig != "free" else AXES[self.index])
+        x0 = v.initial_state()
+        x0[13:18] = v.w_max * np.sqrt(u0)
+        idx = [10 + self.index] + list(range(13, 18))
+        f0 = v.derivative(x0, u0)[idx]
+        A = np.zeros((6, 6))
+        for j, k in enumerate(idx):
+            x1 = x0.copy()
+            x1[k] += EPS_STATE * max(1.0, abs(x0[k]))
+            A[:, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
+        du = (motors(EPS_COMMAND) - motors(-EPS_COMMAND)) / (2 * EPS_COMMAND)
+        b = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
+             - v.derivative(x0, u0 - EPS_COMMAND * du)[idx]) / (2 * EPS_COMMAND)
+        c = np.zeros(6)
+        c[0] = 1.0
+        return A, b, c
+
+    def truth(self, omega_rad_s):
+        """Logged torque command -> logged rate, ZOH-sampled at the loop period."""
+        A, b, c = self.linearise()
+        n = A.shape[0]
+        M = np.zeros((n + 1, n + 1))
+        M[:n, :n], M[:n, n] = A * self.dt_s, b * self.dt_s
+        E = scipy.linalg.expm(M)
+        Ad, bd = E[:n, :n], E[:n, n]
+        z = np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s)
+        out = np.array([c @ np.linalg.solve(zk * np.eye(n) - Ad, bd) for zk in z])
+        return out if np.ndim(omega_rad_s) else out[0]
