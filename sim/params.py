@@ -17,6 +17,7 @@ import tomllib
 from heliquad.host.errors import InputError
 
 __all__ = ["VehicleParams", "RotorParams", "ArmRotorParams", "RigParams", "BodyParams",
+           "TurbulenceParams",
            "load_params", "DEFAULT_PARAMS"]
 
 DEFAULT_PARAMS = "vehicle.toml"
@@ -68,11 +69,19 @@ class RigParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class TurbulenceParams:
+    altitude_m: float
+    span_m: float
+    rotational_damping_n_m_s_rad: float
+
+
+@dataclasses.dataclass(frozen=True)
 class VehicleParams:
     body: BodyParams
     central_rotor: RotorParams
     arm_rotors: ArmRotorParams
     rig: RigParams
+    turbulence: TurbulenceParams
     source: str = DEFAULT_PARAMS
 
 
@@ -88,6 +97,8 @@ _SCHEMA = (
                                     "torque_per_thrust_m": "pos", "rotor_inertia_kg_m2": "pos",
                                     "spin": "spin4", "time_constant_s": "pos"}),
     ("rig", RigParams, {"hinge_damping_n_m_s_rad": "nonneg", "hinge_friction_n_m": "nonneg"}),
+    ("turbulence", TurbulenceParams, {"altitude_m": "pos", "span_m": "pos",
+                                      "rotational_damping_n_m_s_rad": "nonneg"}),
 )
 
 

@@ -59,6 +59,8 @@ class SilConfig:
     plant: str = "tf"              # "tf" (num/den) or "vehicle" (the 6-DoF model)
     rig: str = "roll"              # vehicle plant: roll, pitch, yaw or free
     params: str | None = None      # vehicle parameter file (default: the shipped one)
+    turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
+    seed: int = 0                  # turbulence seed
 
 
 def make_plant(cfg: SilConfig, dt_s: float):
@@ -69,7 +71,7 @@ def make_plant(cfg: SilConfig, dt_s: float):
     from .vehicle_plant import VehiclePlant
 
     return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),
-                        trim_collective=cfg.collective)
+                        trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed)
 
 
 @dataclasses.dataclass

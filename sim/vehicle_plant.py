@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from .dryden import Dryden
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle, rotation_matrix
 
@@ -42,13 +43,17 @@ class VehiclePlant:
     """The vehicle on a rig (or free), stepped by the motors' thrust fractions."""
 
     def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
-                 trim_collective: float = 0.4):
+                 trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0):
         self.params = params or load_params()
         self.axis, self.index = axis, AXES.index(axis)
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
         self.trim_collective = trim_collective
         self.last_u = np.zeros(5)
+        self.dryden = None
+        if turbulence:
+            t = self.params.turbulence
+            self.dryden = Dryden(turbulence, t.altitude_m, t.span_m, dt_s, seed)
 
     @property
     def rate_rad_s(self) -> float:
@@ -56,8 +61,21 @@ class VehiclePlant:
 
     def step_motors(self, motor, mixer=None) -> float:
         self.last_u = np.asarray(motor, dtype=float)
-        self.vehicle.step(self.last_u, self.dt_s)
+        force, moment = self.disturbance()
+        self.vehicle.step(self.last_u, self.dt_s, force, moment)
         return self.rate_rad_s
+
+    def disturbance(self):
+        """Turbulence this period: (force NED in N, moment body in N m), or (None, None).
+
+        Gust velocity through the airframe's linear drag, gust rates through the rotational
+        damping (sim/dryden.py)."""
+        if self.dryden is None:
+            return None, None
+        gust = self.dryden.step()
+        force_body = self.params.body.drag_n_s_m * gust[:3]
+        moment = self.params.turbulence.rotational_damping_n_m_s_rad * gust[3:]
+        return rotation_matrix(self.vehicle.x[6:10]) @ force_body, moment
 
     def body_state(self):
         x = self.vehicle.x

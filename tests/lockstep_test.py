@@ -269,3 +269,79 @@ def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, 
     truth = VehiclePlant(axis, axis, 0.005).truth(point.omega_rad_s)
     assert abs(20 * math.log10(point.magnitude / abs(truth))) < 0.5
     assert abs(math.degrees(np.angle(point.gain / truth))) < 3.0
+
+
+def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
+    """The vehicle in free flight at hover throttle, armed, angle mode; roll angles (deg)."""
+    from heliquad.sim.sil import _fifo
+    from heliquad.sim.vehicle import GRAVITY_M_S2
+    from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
+
+    plant = VehiclePlant("roll", "free", 0.005)
+    mixer = mixer_for(plant.params)
+    hover = plant.params.body.mass_kg * GRAVITY_M_S2 / mixer.max_vertical_thrust_n
+    throttle = int(round(1000 + 1000 * hover))
+    roll, pitch = [], []
+    with HostFirmware(dmp_image=dmp_image) as fw:
+        link = SimLink(fw, MAV)
+        kind = 0
+        for frame in range(1, frames + 1):
+            rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
+                  1000 if frame < 15 else 2000, 1500, 0, 0]
+            if step_at is not None and frame > step_at:
+                rc[0] = roll_stick_us
+            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            kind = reply.sensor_kind
+            plant.step_motors(reply.motor)
+            w, x, y, z = plant.vehicle.x[6:10]
+            roll.append(math.degrees(math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))))
+            pitch.append(math.degrees(math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z))))))
+        link.close()
+    return np.array(roll), np.array(pitch)
+
+
+def test_free_flight_hover_is_level_and_a_10_degree_roll_step_settles(tmp_path):
+    # SPEC.md's gains, angle mode, DMP attitude. Stick 1667 us = 1/3 of 30 deg = 10 deg.
+    image = tmp_path / "dmp.bin"
+    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    roll, pitch = fly_free(str(image), 2200, step_at=1000, roll_stick_us=1500 + round(500 / 3))
+    hover = slice(200, 1000)                   # 1 s after arming until the step
+    assert np.max(np.abs(roll[hover])) < 0.2 and np.max(np.abs(pitch[hover])) < 0.2
+    after = roll[1000:]
+    assert after.max() < 11.0                  # no more than 1 deg of overshoot
+    assert np.all(np.abs(after[600:] - 10.0) < 0.5)   # settled within 3 s of the step
+    assert np.max(np.abs(pitch[1000:])) < 1.0
+
+
+def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path):
+    # Stated bound: |roll| and |pitch| below 1 deg over 19 s of hover in moderate Dryden
+    # turbulence (measured 0.30 and 0.15 deg with seeds 1-3). The model applies gusts as drag
+    # through the centre of mass and gust rates through rotational damping; rotor blowback
+    # (gust-velocity moments) is not modelled yet, which is why the bound is this tight.
+    from heliquad.sim.sil import _fifo
+    from heliquad.sim.vehicle import GRAVITY_M_S2
+    from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
+
+    image = tmp_path / "dmp.bin"
+    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    plant = VehiclePlant("roll", "free", 0.005, turbulence="moderate", seed=1)
+    mixer = mixer_for(plant.params)
+    throttle = int(round(1000 + 1000 * plant.params.body.mass_kg * GRAVITY_M_S2
+                         / mixer.max_vertical_thrust_n))
+    worst = 0.0
+    with HostFirmware(dmp_image=str(image)) as fw:
+        link = SimLink(fw, MAV)
+        kind = 0
+        for frame in range(1, 4001):
+            rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
+                  1000 if frame < 15 else 2000, 1500, 0, 0]
+            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            kind = reply.sensor_kind
+            plant.step_motors(reply.motor)
+            if frame > 200:
+                w, x, y, z = plant.vehicle.x[6:10]
+                roll = math.degrees(math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)))
+                pitch = math.degrees(math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z)))))
+                worst = max(worst, abs(roll), abs(pitch))
+        link.close()
+    assert 0.0 < worst < 1.0

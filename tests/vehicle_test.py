@@ -50,6 +50,7 @@ def test_default_file_loads_with_the_papers_figures():
     ("inertia_kg_m2 = [0.0118, 0.0118, 0.0226]", "inertia_kg_m2 = [0.0118, 0.0118]",
      "body.inertia_kg_m2 must be a list of 3"),
     ("[rig]", "[rigg]", "missing section \\[rig\\]"),
+    ("span_m = 0.74", "span_m = 0", "turbulence.span_m must be positive"),
     ("mass_kg = 0.930", "mass_kg = = 0.930", "not valid TOML"),
 ])
 def test_parameter_errors_name_the_key(tmp_path, old, new, match):

@@ -1,0 +1,37 @@
+"""Dryden turbulence (sim/dryden.py): intensities, scales, seeding."""
+
+import numpy as np
+import pytest
+
+from heliquad.sim.dryden import LEVELS_KT, Dryden
+
+DT = 0.005
+
+
+@pytest.mark.parametrize("level", list(LEVELS_KT))
+def test_gust_velocity_intensities_match_the_standard(level):
+    # 20 minutes of gusts: the v channel's correlation time (L/V = 3.5 s at moderate) leaves
+    # a sampling error of about 6 % (1 sigma) on its standard deviation; the bound is 15 %.
+    d = Dryden(level, altitude_m=3.0, span_m=0.74, dt_s=DT, seed=11)
+    x = np.array([d.step() for _ in range(int(1200 / DT))])
+    std = x[:, :3].std(axis=0)
+    np.testing.assert_allclose(std, [d.sigma_uv, d.sigma_uv, d.sigma_w], rtol=0.15)
+    assert np.all(np.abs(x.mean(axis=0)[:3]) < 0.15 * std)
+
+
+def test_intensity_scales_with_the_level_and_the_standards_low_altitude_form():
+    light, severe = (Dryden(level, 3.0, 0.74, DT) for level in ("light", "severe"))
+    assert severe.sigma_w == pytest.approx(3 * light.sigma_w)           # 45 kt vs 15 kt
+    assert light.sigma_w == pytest.approx(0.1 * 15 * 0.514444)           # sigma_w = 0.1 W20
+    # sigma_u / sigma_w = 1 / (0.177 + 0.000823 h)^0.4 at h = 10 ft (the floor)
+    assert light.sigma_uv / light.sigma_w == pytest.approx(1 / (0.177 + 0.00823) ** 0.4)
+
+
+def test_same_seed_same_turbulence():
+    a, b = Dryden("moderate", 3.0, 0.74, DT, seed=4), Dryden("moderate", 3.0, 0.74, DT, seed=4)
+    np.testing.assert_array_equal([a.step() for _ in range(100)], [b.step() for _ in range(100)])
+
+
+def test_unknown_level_is_refused():
+    with pytest.raises(ValueError, match="light, moderate"):
+        Dryden("gale", 3.0, 0.74, DT)
