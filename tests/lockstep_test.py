@@ -251,16 +251,29 @@ def test_a_full_telemetry_link_drops_and_counts_without_blocking_the_loop():
         link.close()
 
 
-@pytest.mark.parametrize("axis, freq_hz, amplitude", [("roll", 1.2, 0.05), ("pitch", 2.0, 0.05),
-                                                       ("yaw", 0.5, 0.3)])
+def _rig_points():
+    """Five log-spaced frequencies over each axis's Table 1 band (SPEC.md), with an amplitude
+    that keeps the response well above the gyro's quantisation: the closed yaw loop holds
+    the yaw rate to a few 0.001 rad/s LSBs below 0.4 Hz unless the excitation is large."""
+    from heliquad.host import paper
+
+    points = []
+    for axis in ("roll", "pitch", "yaw"):
+        lo, hi = paper.BANDS_HZ[axis]
+        for f in np.logspace(math.log10(lo), math.log10(hi), 5):
+            amplitude = 0.05 if axis != "yaw" else (1.0 if f < 0.4 else 0.3)
+            points.append((axis, round(float(f), 4), amplitude))
+    return points
+
+
+@pytest.mark.parametrize("axis, freq_hz, amplitude", _rig_points())
 def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, amplitude, tmp_path):
-    # The 6-DoF vehicle on its one-axis rig, the firmware flying it in angle mode, mixer
-    # injection: the FSF point matches the model linearised at the rig's trim (through the
-    # firmware's mixer), ZOH-sampled (issue 4: 0.5 dB and 3 deg). Yaw at 0.5 Hz needs the
-    # larger amplitude: the closed yaw loop holds the rate to a few gyro LSBs otherwise.
+    # Issue 4: the 6-DoF vehicle on its one-axis rig, the firmware flying it in angle mode,
+    # noise-free, mixer injection; the FSF point matches the model linearised at the rig's
+    # trim (through the firmware's mixer), ZOH-sampled, within 0.5 dB and 3 deg.
     from heliquad.sim.vehicle_plant import VehiclePlant
 
-    cfg = SilConfig(axis=axis, inject="mixer", freq_hz=freq_hz, amplitude=amplitude, cycles=6,
+    cfg = SilConfig(axis=axis, inject="mixer", freq_hz=freq_hz, amplitude=amplitude, cycles=5,
                     plant="vehicle", rig=axis)
     r = run_sil(cfg, str(tmp_path / axis), progress=lambda *_: None)
     assert r.saturated_samples == 0 and r.seq_gaps == 0
