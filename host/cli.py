@@ -136,7 +136,9 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="vehicle plant: parameter file (default: the shipped vehicle.toml)")
     p.add_argument("--turbulence", choices=("light", "moderate", "severe"),
                    help="vehicle plant: Dryden turbulence (MIL-F-8785C) at this level")
-    p.add_argument("--seed", type=int, default=0, help="turbulence seed (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="turbulence and sensor-noise seed (default 0)")
+    p.add_argument("--ideal-sensor", action="store_true",
+                   help="vehicle plant: no IMU noise, bias or DMP latency")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
     p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: SPEC.md's roll model)")
@@ -242,7 +244,8 @@ def _cmd_sil(args) -> int:
                     freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
-                    rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed)
+                    rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
+                    ideal_sensor=args.ideal_sensor)
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:

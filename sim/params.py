@@ -17,7 +17,7 @@ import tomllib
 from heliquad.host.errors import InputError
 
 __all__ = ["VehicleParams", "RotorParams", "ArmRotorParams", "RigParams", "BodyParams",
-           "TurbulenceParams",
+           "TurbulenceParams", "ImuParams",
            "load_params", "DEFAULT_PARAMS"]
 
 DEFAULT_PARAMS = "vehicle.toml"
@@ -76,17 +76,28 @@ class TurbulenceParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class ImuParams:
+    gyro_noise_deg_s_rt_hz: float
+    accel_noise_ug_rt_hz: float
+    noise_bandwidth_hz: float
+    gyro_bias_deg_s: tuple
+    dmp_latency_samples: float
+
+
+@dataclasses.dataclass(frozen=True)
 class VehicleParams:
     body: BodyParams
     central_rotor: RotorParams
     arm_rotors: ArmRotorParams
     rig: RigParams
     turbulence: TurbulenceParams
+    imu: ImuParams
     source: str = DEFAULT_PARAMS
 
 
 # (section, class, {key: kind}); kinds: "pos" > 0, "nonneg" >= 0, "spin" +/-1,
-# "vec3pos" three positive numbers, "spin4" four +/-1, "angle" in [0, 90) degrees.
+# "vec3pos" three positive numbers, "vec3" three numbers, "spin4" four +/-1,
+# "angle" in [0, 90) degrees, "count" a whole number >= 0.
 _SCHEMA = (
     ("body", BodyParams, {"mass_kg": "pos", "inertia_kg_m2": "vec3pos", "drag_n_s_m": "nonneg"}),
     ("central_rotor", RotorParams, {"max_thrust_n": "pos", "max_speed_rad_s": "pos",
@@ -99,6 +110,9 @@ _SCHEMA = (
     ("rig", RigParams, {"hinge_damping_n_m_s_rad": "nonneg", "hinge_friction_n_m": "nonneg"}),
     ("turbulence", TurbulenceParams, {"altitude_m": "pos", "span_m": "pos",
                                       "rotational_damping_n_m_s_rad": "nonneg"}),
+    ("imu", ImuParams, {"gyro_noise_deg_s_rt_hz": "nonneg", "accel_noise_ug_rt_hz": "nonneg",
+                        "noise_bandwidth_hz": "pos", "gyro_bias_deg_s": "vec3",
+                        "dmp_latency_samples": "count"}),
 )
 
 
@@ -122,14 +136,18 @@ def _check(path, key, kind, value):
         if value not in (1, -1) or isinstance(value, bool):
             raise InputError(f"{where} must be 1 or -1, got {value!r}")
         return int(value)
-    n = 3 if kind == "vec3pos" else 4
+    if kind == "count":
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            raise InputError(f"{where} must be a whole number >= 0, got {value!r}")
+        return int(value)
+    n = 3 if kind in ("vec3pos", "vec3") else 4
     if not isinstance(value, list) or len(value) != n or not all(_number(v) for v in value):
         raise InputError(f"{where} must be a list of {n} numbers, got {value!r}")
     if kind == "vec3pos" and min(value) <= 0:
         raise InputError(f"{where} must be positive, got {value}")
     if kind == "spin4" and any(v not in (1, -1) for v in value):
         raise InputError(f"{where} entries must be 1 or -1, got {value}")
-    return tuple(float(v) if kind == "vec3pos" else int(v) for v in value)
+    return tuple(float(v) if kind in ("vec3pos", "vec3") else int(v) for v in value)
 
 
 def load_params(path: str | None = None) -> VehicleParams:

@@ -60,7 +60,8 @@ class SilConfig:
     rig: str = "roll"              # vehicle plant: roll, pitch, yaw or free
     params: str | None = None      # vehicle parameter file (default: the shipped one)
     turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
-    seed: int = 0                  # turbulence seed
+    seed: int = 0                  # turbulence and sensor-noise seed
+    ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
 
 
 def make_plant(cfg: SilConfig, dt_s: float):
@@ -71,7 +72,8 @@ def make_plant(cfg: SilConfig, dt_s: float):
     from .vehicle_plant import VehiclePlant
 
     return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),
-                        trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed)
+                        trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed,
+                        ideal_sensor=cfg.ideal_sensor)
 
 
 @dataclasses.dataclass
@@ -104,8 +106,7 @@ def _rc(frame, collective):
 
 
 def _fifo(plant, kind):
-    q, rates = plant.body_state()
-    accel = plant.specific_force()
+    q, rates, accel = plant.sensor_sample()
     if kind == SENSOR_DMP:
         return dmp_packet(q, rates, accel)
     if kind == SENSOR_RAW:

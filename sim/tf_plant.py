@@ -78,6 +78,11 @@ class TfPlant:
         rates[self.index] = self.rate_rad_s
         return q, rates
 
+    def sensor_sample(self):
+        """(quaternion, body rates, specific force) as the IMU reports them: ideal here."""
+        q, rates = self.body_state()
+        return q, rates, self.specific_force()
+
     def specific_force(self):
         """Accelerometer reading on the rig (held still): gravity only, in body FRD."""
         (w, x, y, z), _ = self.body_state()

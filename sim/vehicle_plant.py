@@ -14,6 +14,7 @@ import numpy as np
 import scipy.linalg
 
 from .dryden import Dryden
+from .imu_model import ImuModel
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle, rotation_matrix
 
@@ -43,13 +44,15 @@ class VehiclePlant:
     """The vehicle on a rig (or free), stepped by the motors' thrust fractions."""
 
     def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
-                 trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0):
+                 trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0,
+                 ideal_sensor: bool = False):
         self.params = params or load_params()
         self.axis, self.index = axis, AXES.index(axis)
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
         self.trim_collective = trim_collective
         self.last_u = np.zeros(5)
+        self.imu = None if ideal_sensor else ImuModel(self.params.imu, seed)
         self.dryden = None
         if turbulence:
             t = self.params.turbulence
@@ -80,6 +83,18 @@ class VehiclePlant:
     def body_state(self):
         x = self.vehicle.x
         return list(x[6:10]), list(x[10:13])
+
+    def sensor_sample(self):
+        """(quaternion, gyro rad/s, accel m/s^2) as the MPU6050 reports them."""
+        q, rates = self.body_state()
+        accel = self.specific_force()
+        if self.imu is None:
+            return q, rates, accel
+        return self.imu.measure(q, rates, accel)
+
+    @property
+    def latency_samples(self) -> int:
+        return 0 if self.imu is None else self.params.imu.dmp_latency_samples
 
     def specific_force(self):
         """What an accelerometer at the centre of mass reads, m/s^2 in body FRD."""
@@ -124,7 +139,8 @@ class VehiclePlant:
         return A, b, c
 
     def truth(self, omega_rad_s):
-        """Logged torque command -> logged rate, ZOH-sampled at the loop period."""
+        """Logged torque command -> logged rate, ZOH-sampled at the loop period, with the
+        sensor's latency (the logged rate is the DMP's, ``latency_samples`` loops late)."""
         A, b, c = self.linearise()
         n = A.shape[0]
         M = np.zeros((n + 1, n + 1))
@@ -132,5 +148,6 @@ class VehiclePlant:
         E = scipy.linalg.expm(M)
         Ad, bd = E[:n, :n], E[:n, n]
         z = np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s)
-        out = np.array([c @ np.linalg.solve(zk * np.eye(n) - Ad, bd) for zk in z])
+        out = np.array([c @ np.linalg.solve(zk * np.eye(n) - Ad, bd) * zk ** -self.latency_samples
+                        for zk in z])
         return out if np.ndim(omega_rad_s) else out[0]

@@ -35,3 +35,19 @@ def test_same_seed_same_turbulence():
 def test_unknown_level_is_refused():
     with pytest.raises(ValueError, match="light, moderate"):
         Dryden("gale", 3.0, 0.74, DT)
+
+
+def test_imu_model_noise_bias_and_latency():
+    from heliquad.sim.imu_model import ImuModel
+    from heliquad.sim.params import load_params
+
+    p = load_params().imu
+    imu = ImuModel(p, seed=3)
+    samples = [imu.measure([1, 0, 0, 0], [0.1 * k, 0, 0], [0, 0, -9.80665]) for k in range(20000)]
+    gyro = np.array([s[1] for s in samples])
+    # latency: the sample returned at step k is the one measured at k - latency
+    assert gyro[5, 0] == pytest.approx(0.1 * (5 - p.dmp_latency_samples) + np.radians(p.gyro_bias_deg_s[0]),
+                                       abs=5 * imu.gyro_sigma_rad_s)
+    noise = gyro[:, 1] - np.radians(p.gyro_bias_deg_s[1])
+    assert noise.std() == pytest.approx(np.radians(p.gyro_noise_deg_s_rt_hz) * np.sqrt(p.noise_bandwidth_hz), rel=0.05)
+    assert noise.mean() == pytest.approx(0.0, abs=3 * imu.gyro_sigma_rad_s / np.sqrt(len(noise)))
