@@ -18,7 +18,7 @@ from .imu_model import ImuModel
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle, rotation_matrix
 
-__all__ = ["VehiclePlant", "mixer_for"]
+__all__ = ["VehiclePlant", "mixer_for", "pid_z"]
 
 AXES = ("roll", "pitch", "yaw")
 #: Finite-difference steps for the linearisation (state and normalised command).
@@ -106,11 +106,12 @@ class VehiclePlant:
 
     # --- truth -------------------------------------------------------------------------------
     def linearise(self):
-        """(A, b, c): the model at trim, from the axis's torque command to its body rate.
+        """(A, b, C): the model at trim, from the axis's torque command to [rate, angle].
 
-        State: the free axis's rate and the five rotor speeds (on a rig the other states do
-        not move; in free flight this is the rotational part at hover with the other axes
-        held, which is what a one-axis experiment sees to first order).
+        States: the free axis's angle and rate and the five rotor speeds (on a rig the other
+        states do not move; in free flight this is the rotational part at hover with the other
+        axes held, which is what a one-axis experiment sees to first order). Input: the axis's
+        normalised torque command, through the firmware's mixer equations.
         """
         mixer = mixer_for(self.params)
         from heliquad import _firmware as fw
@@ -126,28 +127,73 @@ class VehiclePlant:
         x0[13:18] = v.w_max * np.sqrt(u0)
         idx = [10 + self.index] + list(range(13, 18))
         f0 = v.derivative(x0, u0)[idx]
-        A = np.zeros((6, 6))
+        A = np.zeros((7, 7))                   # [rate, rotors x5, angle]
         for j, k in enumerate(idx):
             x1 = x0.copy()
             x1[k] += EPS_STATE * max(1.0, abs(x0[k]))
-            A[:, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
+            A[:6, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
+        A[6, 0] = 1.0                          # d(angle)/dt = rate, small angles at trim
         du = (motors(EPS_COMMAND) - motors(-EPS_COMMAND)) / (2 * EPS_COMMAND)
-        b = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
-             - v.derivative(x0, u0 - EPS_COMMAND * du)[idx]) / (2 * EPS_COMMAND)
-        c = np.zeros(6)
-        c[0] = 1.0
-        return A, b, c
+        b = np.zeros(7)
+        b[:6] = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
+                 - v.derivative(x0, u0 - EPS_COMMAND * du)[idx]) / (2 * EPS_COMMAND)
+        C = np.zeros((2, 7))
+        C[0, 0] = 1.0
+        C[1, 6] = 1.0
+        return A, b, C
 
-    def truth(self, omega_rad_s):
-        """Logged torque command -> logged rate, ZOH-sampled at the loop period, with the
-        sensor's latency (the logged rate is the DMP's, ``latency_samples`` loops late)."""
-        A, b, c = self.linearise()
+    def _sampled(self, z):
+        """Logged torque command -> logged [rate, angle] at the points ``z`` (ZOH, latency)."""
+        A, b, C = self.linearise()
         n = A.shape[0]
         M = np.zeros((n + 1, n + 1))
         M[:n, :n], M[:n, n] = A * self.dt_s, b * self.dt_s
         E = scipy.linalg.expm(M)
         Ad, bd = E[:n, :n], E[:n, n]
+        return np.array([C @ np.linalg.solve(zk * np.eye(n) - Ad, bd) * zk ** -self.latency_samples
+                         for zk in z]).T
+
+    def truth(self, omega_rad_s, inject: str = "mixer", gains=None):
+        """What identification should find for this injection point, at ``omega_rad_s``.
+
+        mixer: torque command -> rate, the plant. rate: rate setpoint -> rate, the inner loop
+        closed through the firmware's discrete PID. angle: angle setpoint -> angle, the whole
+        cascade (the logged angle is the attitude estimate: exact for the DMP path, where it
+        is the true attitude ``latency`` loops late; not for the raw path's filter).
+        All ZOH-sampled at the loop period, with the sensor's latency.
+        """
         z = np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s)
-        out = np.array([c @ np.linalg.solve(zk * np.eye(n) - Ad, bd) * zk ** -self.latency_samples
-                        for zk in z])
+        h_rate, h_angle = self._sampled(z)
+        if inject == "mixer":
+            out = h_rate
+        else:
+            from heliquad import _firmware as fw
+
+            g = gains or fw.CascadeGains.paper_defaults()
+            axis = (fw.Axis.ROLL, fw.Axis.PITCH, fw.Axis.YAW)[self.index]
+            c_pi, d_m = pid_z(g.rate(axis), self.dt_s, z)
+            inner_den = 1 + h_rate * (c_pi - d_m)
+            if inject == "rate":
+                out = h_rate * c_pi / inner_den
+            elif inject == "angle":
+                k_o, d_o = pid_z(g.angle(axis), self.dt_s, z)
+                out = h_angle * c_pi * k_o / (inner_den + c_pi * (k_o - d_o) * h_angle)
+            else:
+                raise ValueError("inject must be mixer, rate or angle")
         return out if np.ndim(omega_rad_s) else out[0]
+
+
+def pid_z(gains, dt_s, z):
+    """The firmware's Pid (firmware/core/pid.cpp) as two z-domain transfer functions:
+    ``C_PI`` on the error (P + Tustin integral) and ``D_m`` on the measurement (Tustin,
+    filtered derivative): output = C_PI (r - y) + D_m y."""
+    kc, ti, td, n = gains.kc, gains.tau_i_s, gains.tau_d_s, gains.derivative_filter_n
+    zi = 1.0 / z
+    c_pi = kc + (kc * dt_s / (2 * ti) * (1 + zi) / (1 - zi) if ti > 0 else 0.0)
+    d_m = 0.0
+    if td > 0:
+        tf = td / n
+        a = (2 * tf - dt_s) / (2 * tf + dt_s)
+        b = 2 * kc * td / (2 * tf + dt_s)
+        d_m = -b * (1 - zi) / (1 - a * zi)
+    return c_pi, d_m
