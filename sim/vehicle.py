@@ -49,6 +49,11 @@ def _quat_mul(a, b):
                      aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
 
 
+def _cross(a, b):
+    """3-vector cross product (np.cross's axis handling costs more than the arithmetic)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def rotation_matrix(q):
     """Body FRD -> NED rotation of the unit quaternion ``q`` (w, x, y, z)."""
     w, x, y, z = q
@@ -149,7 +154,7 @@ class Vehicle:
         moment = (thrust @ self.thrust_moment
                   - (self.c_torque * thrust) @ self.spin_axis
                   - (self.j_rotor * speed_dot) @ self.spin_axis
-                  - np.cross(w, self.inertia @ w + h_rotor))
+                  - _cross(w, self.inertia @ w + h_rotor))
         if moment_body is not None:
             moment = moment + moment_body
         dx = np.zeros(18)
