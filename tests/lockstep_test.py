@@ -402,3 +402,20 @@ def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, 
     truth = VehiclePlant(axis, axis, 0.005, ideal_sensor=True).truth(point.omega_rad_s, inject=inject)
     assert abs(20 * math.log10(point.magnitude / abs(truth))) < 0.5
     assert abs(math.degrees(np.angle(point.gain / truth))) < 3.0
+
+
+@pytest.mark.parametrize("old, new, match", [
+    ("mass_kg = 0.930", "mass_kg = -0.93", "body.mass_kg must be positive"),
+    ("mass_kg = 0.930", "mass_g = 930", "unknown key body.mass_g"),
+    ("cant_deg = 20.0", "", "missing key arm_rotors.cant_deg"),
+])
+def test_sil_with_a_bad_parameter_file_is_one_line_naming_the_key(old, new, match, tmp_path):
+    import importlib.resources
+
+    text = importlib.resources.files("heliquad.sim").joinpath("data", "vehicle.toml").read_text()
+    bad = tmp_path / "vehicle.toml"
+    bad.write_text(text.replace(old, new, 1))
+    res = heliquad("sil", "--plant", "vehicle", "--freq-hz", 1, "--amplitude", 0.05,
+                   "--params", bad, "--out", tmp_path / "run")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and match in res.stderr
