@@ -71,6 +71,17 @@ telemetry for you: with no reader, the firmware drops and counts messages as a U
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
 
+VALIDATE_HELP = """\
+Check an identified model in closed loop, as SPEC.md step 4: the paper's cascade (PID rate
+loop on the model; for roll and pitch a PD angle loop around it) with SPEC.md's gains or a
+gains file ({"rate": {"roll": [Kc, tau_I, tau_D]}, "angle": {"roll": [Kc, tau_D]}}).
+Reports gain and phase margins of each loop, the step response, 0.5 Hz sine tracking, and
+rejection of Dryden turbulence; writes validation.json and validation.png. Exit code 1 if
+the cascade is unstable.
+
+example: heliquad validate models.json --axis roll
+"""
+
 DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
 
 
@@ -175,6 +186,21 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dmp-image", metavar="FILE")
     p.set_defaults(func=_cmd_board)
 
+    p = sub.add_parser("validate", help="closed-loop validation of an identified model",
+                       description=VALIDATE_HELP, formatter_class=fmt)
+    p.add_argument("models", metavar="MODELS.json")
+    p.add_argument("--model", type=int, metavar="INDEX",
+                   help="which model (default: the recommended one)")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"),
+                   help="axis of the model (default: the file's \"axis\" entry)")
+    p.add_argument("--gains", metavar="FILE", help="gains file (default: SPEC.md's gains)")
+    p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
+                   default="moderate", help="Dryden level for disturbance rejection (default moderate)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", metavar="DIR", help="where validation.json and validation.png go "
+                   "(default: beside MODELS.json)")
+    p.set_defaults(func=_cmd_validate)
+
     from .demo import add_demo_parser
     from .dmp_image import add_dmp_image_parser
 
@@ -261,6 +287,74 @@ def _cmd_sil(args) -> int:
               file=sys.stderr)
     print(f"wrote {r.tlog_path} and {r.csv_path}")
     return 0
+
+
+def _cmd_validate(args) -> int:
+    import json
+    import os
+
+    from .validate import build_loops, load_gains, plot_validation, validate_model
+
+    try:
+        with open(args.models) as fh:
+            doc = json.load(fh)
+        models = doc["models"]
+    except OSError as exc:
+        raise InputError(f"{args.models}: {exc.strerror}") from None
+    except (ValueError, KeyError, TypeError):
+        raise InputError(f"{args.models}: not a MODELS.json (needs a \"models\" list)") from None
+    index = args.model if args.model is not None else doc.get("recommended")
+    if index is None or not 0 <= index < len(models):
+        raise InputError(f"{args.models}: no model {index!r} (the file has {len(models)}; "
+                         "give --model INDEX)")
+    axis = args.axis or doc.get("axis")
+    if axis not in ("roll", "pitch", "yaw"):
+        raise InputError(f"{args.models} does not say which axis: give --axis roll|pitch|yaw")
+    m = models[index]
+    try:
+        num, den, delay = m["num"], m["den"], float(m.get("delay_s", 0.0))
+    except (KeyError, TypeError):
+        raise InputError(f"{args.models}: model {index} has no num/den") from None
+    gains = load_gains(axis, args.gains)
+    turbulence = None if args.turbulence == "none" else args.turbulence
+    report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
+    out = args.out or os.path.dirname(os.path.abspath(args.models))
+    os.makedirs(out, exist_ok=True)
+    _print_validation(report)
+    with open(os.path.join(out, "validation.json"), "w") as fh:
+        json.dump(report, fh, indent=2)
+    if report["stable"]:
+        plot_validation(report, traces, build_loops(num, den, delay, axis, gains),
+                        os.path.join(out, "validation.png"))
+    print(f"wrote {os.path.join(out, 'validation.json')}"
+          + (f" and validation.png" if report["stable"] else ""))
+    return 0 if report["stable"] else 1
+
+
+def _print_validation(r) -> None:
+    coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
+    print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
+          + (f" * exp(-{r['delay_s'] * 1e3:.3g} ms s)" if r["delay_s"] else ""))
+    for name, lp in r["loops"].items():
+        gm = "inf" if lp["gain_margin_db"] is None else f"{lp['gain_margin_db']:.1f} dB"
+        pm = "none" if lp["phase_margin_deg"] is None else f"{lp['phase_margin_deg']:.1f} deg"
+        wc = "-" if lp["gain_crossover_rad_s"] is None else f"{lp['gain_crossover_rad_s']:.2f} rad/s"
+        print(f"  {name:5s} loop: gain margin {gm}, phase margin {pm} at {wc}; closed loop "
+              f"{'stable' if lp['closed_loop_stable'] else 'UNSTABLE'}")
+    if not r["stable"]:
+        print("  the cascade is unstable with these gains: no time responses")
+        return
+    st, sn = r["step"], r["sine"]
+    print(f"  step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
+          f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s")
+    print(f"  sine {sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} {st['unit']} "
+          f"({sn['tracking_rms_pct']:.1f} % of the reference RMS)")
+    if "turbulence" in r:
+        tb = r["turbulence"]
+        extra = f", angle RMS {tb['angle_rms_deg']:.2f} deg (max {tb['angle_max_deg']:.2f})" \
+            if "angle_rms_deg" in tb else ""
+        print(f"  {tb['level']} turbulence: gust rate RMS {tb['gust_rate_rms_deg_s']:.1f} deg/s -> "
+              f"rate RMS {tb['rate_rms_deg_s']:.2f} deg/s{extra}")
 
 
 def _cmd_board(args) -> int:

@@ -69,7 +69,7 @@ def run_demo(args) -> int:
         result = fit_orders(table, paper.DEFAULT_ORDERS[axis])
         write_points_csv(os.path.join(axis_dir, "points.csv"), points)
         write_models_json(os.path.join(axis_dir, "models.json"), result.models,
-                          result.recommended, result.reason)
+                          result.recommended, result.reason, axis=axis)
         truth = (f"truth {paper.CHOSEN_ORDER[axis]}", lambda w: model_response(num, den, 0, w))
         plot_bode(os.path.join(axis_dir, "bode.png"), table["omega"], table["F"],
                   sigma=table["sigma"], models=result.models, recommended=result.recommended,

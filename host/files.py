@@ -153,10 +153,12 @@ def model_to_dict(model) -> dict:
     }
 
 
-def write_models_json(path, models, recommended, reason, source=None, weights=None):
+def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None):
     """Write MODELS.json; the file is replaced atomically so a failure never truncates it."""
     doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
            "reason": reason}
+    if axis is not None:
+        doc["axis"] = axis
     if source is not None:
         doc["points_file"] = str(source)
     if weights is not None:
