@@ -71,6 +71,15 @@ telemetry for you: with no reader, the firmware drops and counts messages as a U
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
 
+LOG_HELP = """\
+Log every MAVLink message from a board's telemetry port to a .tlog (8-byte big-endian
+timestamp in us, then the packet; pymavlink reads it). The file is flushed as it goes, so
+Ctrl-C or a crash leaves a valid log. Lost samples are counted from the gaps in
+HQ_SYSID_SAMPLE.seq; a summary is printed at the end, and a status line every 5 s.
+
+example: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --out flight.tlog
+"""
+
 VALIDATE_HELP = """\
 Check an identified model in closed loop, as SPEC.md step 4: the paper's cascade (PID rate
 loop on the model; for roll and pitch a PD angle loop around it) with SPEC.md's gains or a
@@ -200,6 +209,23 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="DIR", help="where validation.json and validation.png go "
                    "(default: beside MODELS.json)")
     p.set_defaults(func=_cmd_validate)
+
+    p = sub.add_parser("log", help="log a board's (or a SIL's) telemetry to a .tlog",
+                       description=LOG_HELP, formatter_class=fmt)
+    p.add_argument("--port", required=True, metavar="DEVICE",
+                   help="serial device: /dev/ttyACM0 for a Teensy, or a heliquad board pty")
+    p.add_argument("--out", required=True, metavar="FILE.tlog")
+    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds "
+                   "(default: until Ctrl-C)")
+    p.set_defaults(func=_cmd_log)
+
+    p = sub.add_parser("tlog", help="summarise a .tlog: messages, time span, lost samples",
+                       description="Summarise a .tlog written by heliquad (or any MAVLink 2 "
+                                   "log of this dialect). A damaged or truncated file is read "
+                                   "up to the damage, with a warning.", formatter_class=fmt)
+    p.add_argument("path", metavar="FILE.tlog")
+    p.set_defaults(func=_cmd_tlog)
 
     from .demo import add_demo_parser
     from .dmp_image import add_dmp_image_parser
@@ -355,6 +381,32 @@ def _print_validation(r) -> None:
             if "angle_rms_deg" in tb else ""
         print(f"  {tb['level']} turbulence: gust rate RMS {tb['gust_rate_rms_deg_s']:.1f} deg/s -> "
               f"rate RMS {tb['rate_rms_deg_s']:.2f} deg/s{extra}")
+
+
+def _cmd_log(args) -> int:
+    from .logsession import run_log
+
+    if args.duration_s is not None and args.duration_s <= 0:
+        raise InputError("--duration-s must be positive")
+    print(f"logging {args.port} to {args.out} (Ctrl-C to stop)", flush=True)
+    r = run_log(args.port, args.out, args.baud, args.duration_s)
+    print(f"{r['seconds']:.1f} s: {r['messages']} messages, {r['samples']} samples"
+          + (f" (seq {r['first_seq']}..{r['last_seq']})" if r["samples"] else "")
+          + f", {r['lost']} lost; wrote {args.out}")
+    return 0
+
+
+def _cmd_tlog(args) -> int:
+    from .logsession import summarise_tlog
+
+    r = summarise_tlog(args.path)
+    if r["damage"]:
+        print(f"warning: {r['damage']}", file=sys.stderr)
+    print(f"{args.path}: {r['messages']} messages over {r['span_s']:.2f} s; {r['samples']} "
+          f"samples, {r['lost']} lost")
+    for name, count in r["types"].most_common():
+        print(f"  {count:8d}  {name}")
+    return 0
 
 
 def _cmd_board(args) -> int:

@@ -39,29 +39,35 @@ class TlogWriter:
         self.close()
 
 
-def read_tlog(path, mav_module):
-    """Messages of a .tlog as ``(timestamp_us, message)``, up to the first damage."""
-    data = open(path, "rb").read()
-    mav = mav_module.MAVLink(None)
-    mav.robust_parsing = True
+def read_tlog(path, mav_module, only=None):
+    """Messages of a .tlog as ``(timestamp_us, message)``, up to the first damage.
+
+    A truncated last record or a packet that fails its CRC ends the read with a warning
+    naming the byte offset; what came before is returned. ``only``: message type names to
+    decode (default all).
+    """
+    from .mavframe import HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN, STX_V2, Codec, Framer
+
+    with open(path, "rb") as fh:
+        data = fh.read()
+    codec = Codec(mav_module)
+    wanted = None if only is None else {cls.msgname for cls in codec.classes.values()} & set(only)
     out, pos = [], 0
-    while pos + 8 < len(data):
-        ts = struct.unpack(">Q", data[pos:pos + 8])[0]
-        start = pos + 8
-        if data[start] not in (0xFD, 0xFE):
-            warnings.warn(f"{path}: damaged at byte {pos}; read {len(out)} messages")
+    while pos < len(data):
+        if len(data) - pos < 8 + HEADER_LEN or data[pos + 8] != STX_V2:
             break
-        length = data[start + 1] + (12 if data[start] == 0xFD else 8)
-        if data[start] == 0xFD and data[start + 2] & 0x01:
-            length += 13                              # signed packet
-        packet = data[start:start + length]
-        try:
-            msgs = mav.parse_buffer(packet) if len(packet) == length else None
-        except Exception:                             # the generated parser raises its own
-            msgs = None
-        if not msgs:
-            warnings.warn(f"{path}: damaged at byte {pos}; read {len(out)} messages")
+        length = data[pos + 9]
+        total = HEADER_LEN + length + 2 + (SIGNATURE_LEN if data[pos + 10] & INCOMPAT_SIGNED else 0)
+        packet = data[pos + 8:pos + 8 + total]
+        framed = Framer(codec).feed(packet) if len(packet) == total else []
+        if len(framed) != 1:
             break
-        out += [(ts, m) for m in msgs]
-        pos = start + length
+        msgid, _, payload = framed[0]
+        cls = codec.classes[msgid]
+        if wanted is None or cls.msgname in wanted:
+            out.append((struct.unpack(">Q", data[pos:pos + 8])[0], codec.decode(msgid, payload)))
+        pos += 8 + total
+    if pos < len(data):
+        warnings.warn(f"{path}: damaged or truncated at byte {pos} of {len(data)}; "
+                      f"read the {len(out)} messages before it")
     return out

@@ -1,0 +1,91 @@
+"""Serial logging sessions (``heliquad log``) and log summaries (``heliquad tlog``).
+
+A session opens the telemetry link of a board (or of a SIL / ``heliquad board`` pty), writes
+every packet to a .tlog as it arrives (flushed as it goes, so Ctrl-C or a crash leaves a
+valid log), sends the host's HEARTBEAT once a second, and counts lost samples from the gaps
+in ``HQ_SYSID_SAMPLE.seq``.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+
+from .errors import InputError
+
+__all__ = ["run_log", "summarise_tlog"]
+
+POLL_S = 0.01
+STATUS_EVERY_S = 5.0
+
+
+def run_log(port: str, out: str, baud: int = 115200, duration_s: float | None = None,
+            progress=print) -> dict:
+    """Log until ``duration_s`` or Ctrl-C; returns the summary."""
+    from .link import TelemetryLink
+    from .tlog import TlogWriter
+
+    tlog = TlogWriter(out)
+    link = TelemetryLink(port, baud=baud, tlog=tlog)
+    stats = {"messages": 0, "samples": 0, "lost": 0, "first_seq": None, "last_seq": None}
+    t0 = time.monotonic()
+    next_status, next_heartbeat = t0 + STATUS_EVERY_S, t0
+    interrupted = False
+    try:
+        while duration_s is None or time.monotonic() - t0 < duration_s:
+            now = time.monotonic()
+            if now >= next_heartbeat:
+                link.heartbeat()
+                next_heartbeat = now + 1.0
+            before = tlog.messages
+            for m in link.poll(only=("HQ_SYSID_SAMPLE",)):
+                _count(stats, m.seq)
+            stats["messages"] += tlog.messages - before
+            tlog.flush()
+            if now >= next_status:
+                progress(f"  {now - t0:6.0f} s  {stats['samples']} samples, {stats['lost']} lost, "
+                         f"{stats['messages']} messages")
+                next_status = now + STATUS_EVERY_S
+            time.sleep(POLL_S)
+    except KeyboardInterrupt:
+        interrupted = True
+    except InputError:
+        progress("warning: the link went away; the log is kept up to here")
+    finally:
+        link.close()
+        tlog.close()
+    stats["seconds"] = time.monotonic() - t0
+    stats["interrupted"] = interrupted
+    return stats
+
+
+def _count(stats, seq):
+    if stats["last_seq"] is not None and seq > stats["last_seq"] + 1:
+        stats["lost"] += seq - stats["last_seq"] - 1
+    if stats["first_seq"] is None:
+        stats["first_seq"] = seq
+    stats["last_seq"] = seq
+    stats["samples"] += 1
+
+
+def summarise_tlog(path: str) -> dict:
+    """Message counts, time span and lost samples of a .tlog (read up to any damage)."""
+    import warnings
+
+    from .mavlink_dialect import dialect
+    from .tlog import read_tlog
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            msgs = read_tlog(path, dialect())
+        except OSError as exc:
+            raise InputError(f"{path}: {exc.strerror}") from None
+    stats = {"messages": len(msgs), "samples": 0, "lost": 0, "first_seq": None,
+             "last_seq": None, "types": collections.Counter(m.get_type() for _, m in msgs),
+             "damage": str(caught[0].message) if caught else None}
+    for _, m in msgs:
+        if m.get_type() == "HQ_SYSID_SAMPLE":
+            _count(stats, m.seq)
+    stats["span_s"] = (msgs[-1][0] - msgs[0][0]) * 1e-6 if msgs else 0.0
+    return stats
