@@ -71,6 +71,27 @@ telemetry for you: with no reader, the firmware drops and counts messages as a U
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
 
+SWEEP_HELP = """\
+Run the paper's sine sweep for one axis: SPEC.md Table 1's band, 15 log-spaced frequencies
+(or --freqs-hz), each faded in over 2 cycles (the settling), measured for --cycles cycles,
+faded out. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
+default); --port talks to a board, or to a `heliquad board` pty, in real time. Writes
+DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
+windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond 80 deg or a
+rate beyond 400 deg/s stops the excitation and the sweep (exit 1).
+Input and output for `heliquad identify`: mixer -> the axis's torque command and the rate
+(the plant; default, the paper's rate-in rate-out model); rate -> rate setpoint and rate;
+angle -> angle setpoint and angle.
+
+example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
+"""
+
+IDENTIFY_HELP = """\
+Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
+paper's table (points_table.csv), fitted models (models.json, SPEC.md's orders for the axis
+unless --order) and plots (bode.png; responses.png, input dashed, output solid).
+"""
+
 LOG_HELP = """\
 Log every MAVLink message from a board's telemetry port to a .tlog (8-byte big-endian
 timestamp in us, then the packet; pymavlink reads it). The file is flushed as it goes, so
@@ -226,6 +247,40 @@ def _build_parser() -> argparse.ArgumentParser:
                                    "up to the damage, with a warning.", formatter_class=fmt)
     p.add_argument("path", metavar="FILE.tlog")
     p.set_defaults(func=_cmd_tlog)
+
+    p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
+                       description=SWEEP_HELP, formatter_class=fmt)
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), required=True)
+    p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
+    where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
+    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
+                   help="--sil: the 6-DoF vehicle (default) or a transfer function")
+    p.add_argument("--num", type=float, nargs="+", metavar="B",
+                   help="--plant tf: numerator (default: SPEC.md's chosen model of the axis)")
+    p.add_argument("--den", type=float, nargs="+", metavar="A", help="--plant tf: denominator")
+    p.add_argument("--params", metavar="FILE", help="--plant vehicle: parameter file")
+    p.add_argument("--turbulence", choices=("light", "moderate", "severe"))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--ideal-sensor", action="store_true")
+    p.add_argument("--collective", type=float, default=0.4)
+    p.add_argument("--dmp-image", metavar="FILE")
+    p.add_argument("--freqs-hz", type=float, nargs="+", metavar="F",
+                   help="frequencies (default: 15 log-spaced over SPEC.md's band for the axis)")
+    p.add_argument("--amplitude", type=float, metavar="A", help="one amplitude for all "
+                   "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
+    p.add_argument("--cycles", type=int, default=8, help="measured cycles per frequency (default 8)")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.set_defaults(func=_cmd_sweep)
+
+    p = sub.add_parser("identify", help="points, models and plots from a sweep folder",
+                       description=IDENTIFY_HELP, formatter_class=fmt)
+    p.add_argument("dir", metavar="DIR")
+    p.add_argument("--order", action="append", metavar="M/N",
+                   help="orders to fit (default: SPEC.md's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
+    p.set_defaults(func=_cmd_identify)
 
     from .demo import add_demo_parser
     from .dmp_image import add_dmp_image_parser
@@ -383,6 +438,86 @@ def _print_validation(r) -> None:
               f"rate RMS {tb['rate_rms_deg_s']:.2f} deg/s{extra}")
 
 
+def _cmd_sweep(args) -> int:
+    import os
+
+    from . import paper
+    from .sweep import SWEEP_TLOG, PortSession, default_plan, run_sweep
+
+    if args.freqs_hz and any(f <= 0 for f in args.freqs_hz):
+        raise InputError("--freqs-hz must be positive")
+    if args.cycles < 1:
+        raise InputError("--cycles must be at least 1")
+    amp = None
+    if args.amplitude is not None:
+        amp = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+    plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
+    os.makedirs(args.out, exist_ok=True)
+    tlog = os.path.join(args.out, SWEEP_TLOG)
+    if args.sil:
+        from ..sim.lockstep import FirmwareError
+        from ..sim.sil import SilConfig, SilSession
+
+        num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
+        args.num, args.den = args.num or num, args.den or den
+        _check_plant(args)
+        if args.plant == "vehicle":
+            from ..sim.params import load_params
+
+            load_params(args.params)
+        cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
+                        inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
+                        plant=args.plant, rig=args.axis, params=args.params,
+                        turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor)
+        source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
+                  "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
+                  "ideal_sensor": args.ideal_sensor}
+        try:
+            session = SilSession(cfg, tlog)
+        except FirmwareError as exc:
+            raise InputError(str(exc)) from None
+    else:
+        source = {"kind": "port", "port": args.port, "baud": args.baud}
+        session = PortSession(args.port, tlog, args.baud)
+    print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
+          f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
+    try:
+        manifest = run_sweep(session, plan, args.out, source)
+    except Exception as exc:                      # the firmware died, the port went away
+        from ..sim.lockstep import FirmwareError
+
+        if isinstance(exc, (FirmwareError, InputError)):
+            raise InputError(f"{exc} (the log and manifest so far are kept in {args.out})") from None
+        raise
+    finally:
+        session.close()
+    done = sum(1 for f in manifest["frequencies"] if f["status"] == "ok")
+    print(f"{done} of {len(plan.freqs_hz)} frequencies measured; "
+          + ("complete" if manifest["complete"] else f"stopped: {manifest['aborted']}")
+          + f"; next: heliquad identify {args.out}")
+    return 0 if manifest["complete"] else 1
+
+
+def _cmd_identify(args) -> int:
+    import os
+
+    from .fit import parse_order
+    from .identify_session import identify_dir
+
+    orders = [parse_order(o) for o in args.order] if args.order else None
+    if not os.path.isdir(args.dir):
+        raise InputError(f"{args.dir}: not a folder")
+    r = identify_dir(args.dir, orders)
+    print(f"{r['axis']}: {len(r['points'])} points")
+    print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
+    for p in sorted(r["points"], key=lambda q: q.omega_rad_s):
+        print(f"{p.freq_hz:8.4g} {p.omega_rad_s:8.4g} {p.magnitude:9.4g} "
+              f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
+    _print_models(r["result"])
+    print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    return 0
+
+
 def _cmd_log(args) -> int:
     from .logsession import run_log
 
@@ -436,7 +571,7 @@ def _check_plant(args) -> None:
                          "that of --num")
     if not 0 <= args.collective <= 1:
         raise InputError("--collective must be in [0, 1]")
-    if not 0 < args.loop_hz <= 2000:
+    if not 0 < getattr(args, "loop_hz", 200.0) <= 2000:
         raise InputError("--loop-hz must be in (0, 2000]")
 
 

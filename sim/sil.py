@@ -157,86 +157,121 @@ class _TelemetryLog:
         return out
 
 
+class SilSession:
+    """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
+    and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
+    code as for a board) and :meth:`advance`. Every telemetry packet is logged to ``tlog``
+    with simulated time."""
+
+    def __init__(self, cfg: SilConfig, tlog_path: str):
+        from heliquad import _firmware
+        from heliquad.host.link import TelemetryLink
+        from heliquad.host.mavlink_dialect import dialect
+        from heliquad.host.tlog import TlogWriter
+
+        self.cfg = cfg
+        self.dt_us = int(round(1e6 / cfg.loop_hz))
+        self.plant = make_plant(cfg, self.dt_us * 1e-6)
+        self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
+        self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
+        self.tlog = TlogWriter(tlog_path)
+        self.link = SimLink(self.fw, dialect())
+        self.tel = TelemetryLink(self.fw.telemetry_path)
+        self.telemetry = _TelemetryLog(self.tel, self.tlog)
+        self.frame, self.kind, self.reply = 0, 0, None
+        self.t0 = time.monotonic()
+
+    @property
+    def time_us(self) -> int:
+        return self.frame * self.dt_us
+
+    def advance(self, frames: int = TELEMETRY_BATCH) -> list:
+        """Step ``frames`` lockstep frames; the messages of interest from their telemetry."""
+        for _ in range(frames):
+            self.frame += 1
+            if self.frame % int(self.cfg.loop_hz) == 0:
+                self.tel.heartbeat()
+            self.reply = self.link.step(self.time_us, _fifo(self.plant, self.kind), self.kind,
+                                        _rc(self.frame, self.cfg.collective))
+            self.kind = self.reply.sensor_kind
+            self.plant.step_motors(self.reply.motor, self.mixer)
+        return self.telemetry.read_until(self.time_us)
+
+    def hover(self) -> None:
+        """Boot, arm and hover for the settling time."""
+        self.advance(BOOT_FRAMES + ARM_FRAMES + int(round(self.cfg.settle_s * self.cfg.loop_hz)))
+
+    def close(self) -> None:
+        try:
+            self.tel.close()
+            self.link.close()
+        finally:
+            self.tlog.close()
+            self.fw.stop()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``."""
-    from heliquad import _firmware
-    from heliquad.host.link import TelemetryLink
-    from heliquad.host.mavlink_dialect import dialect
-    from heliquad.host.tlog import TlogWriter
-
-    mav = dialect()
-    dt_us = int(round(1e6 / cfg.loop_hz))
-    plant = make_plant(cfg, dt_us * 1e-6)
-    mixer = _firmware.Mixer()                     # the firmware's own mixer equations
     axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
     u_name, y_name = _columns(cfg.inject)
     t0 = time.monotonic()
     rows, saturated, gaps = [], 0, 0
     last_seq, exc_seen, exc_done_frame, status = None, False, None, None
-    with HostFirmware(cfg.loop_hz, cfg.dmp_image) as fw, TlogWriter(out_base + ".tlog") as tlog:
-        link = SimLink(fw, mav)
-        tel = TelemetryLink(fw.telemetry_path)
-        telemetry = _TelemetryLog(tel, tlog)
-        start_frame = BOOT_FRAMES + ARM_FRAMES + int(round(cfg.settle_s * cfg.loop_hz))
-        kind, frame = 0, 0
+    with SilSession(cfg, out_base + ".tlog") as session:
+        loop_t0 = time.monotonic()                 # the lockstep loop, hover included
+        session.hover()
+        start_frame = session.frame
         max_frames = start_frame + int(cfg.loop_hz / cfg.freq_hz *
                                        (cfg.cycles + 2 * cfg.fade_cycles + 2)) + 400
+        session.tel.start_excitation(cfg.axis, cfg.inject, cfg.freq_hz, cfg.amplitude,
+                                     cfg.cycles, cfg.fade_cycles)
         next_report = 0.1
-        loop_t0 = time.monotonic()
-        try:
-            while True:
-                frame += 1
-                time_us = frame * dt_us
-                if frame == start_frame:
-                    tel.start_excitation(cfg.axis, cfg.inject, cfg.freq_hz, cfg.amplitude,
-                                         cfg.cycles, cfg.fade_cycles)
-                if frame % int(cfg.loop_hz) == 0:
-                    tel.heartbeat()
-                reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, cfg.collective))
-                kind = reply.sensor_kind
-                plant.step_motors(reply.motor, mixer)
-                if frame % TELEMETRY_BATCH and exc_done_frame is None:
-                    continue
-                for m in telemetry.read_until(time_us):
-                    t = m.get_type()
-                    if t == "HQ_EXCITATION_STATUS" and status is None:
-                        status = m
-                        if not m.accepted:
-                            raise FirmwareError("the firmware refused the excitation (frequency "
-                                                "above a quarter of the loop rate, no cycles, "
-                                                "or angle injection on yaw)")
-                    elif t == "HQ_SYSID_SAMPLE":
-                        if last_seq is not None and m.seq != last_seq + 1:
-                            gaps += m.seq - last_seq - 1
-                        last_seq = m.seq
-                        if m.exc_state:
-                            exc_seen = True
-                        elif exc_seen and exc_done_frame is None:
-                            exc_done_frame = m.time_us // dt_us
-                        if m.exc_state == 2:
-                            rows.append((m.time_us * 1e-6, getattr(m, u_name), getattr(m, y_name)))
-                            got = mixer.achieved(m.motor)
-                            if abs((got.roll, got.pitch, got.yaw)[axis_index] - m.axis_cmd) > 1e-3:
-                                saturated += 1
-                    elif t == "STATUSTEXT" and m.severity <= 4:
-                        progress(f"firmware: {m.text}")
-                if exc_done_frame is not None and frame >= exc_done_frame + TAIL_FRAMES:
-                    break
-                if frame >= max_frames:
-                    raise FirmwareError(f"the excitation did not finish within {frame} frames")
-                if frame / max_frames >= next_report:
-                    progress(f"  {100 * frame / max_frames:3.0f} %  t = {time_us * 1e-6:6.2f} s")
-                    next_report += 0.1
-        finally:
-            loop_s = time.monotonic() - loop_t0
-            tel.close()
-            link.close()
+        while True:
+            for m in session.advance():
+                t = m.get_type()
+                if t == "HQ_EXCITATION_STATUS" and status is None:
+                    status = m
+                    if not m.accepted:
+                        raise FirmwareError("the firmware refused the excitation (frequency "
+                                            "above a quarter of the loop rate, no cycles, "
+                                            "or angle injection on yaw)")
+                elif t == "HQ_SYSID_SAMPLE":
+                    if last_seq is not None and m.seq != last_seq + 1:
+                        gaps += m.seq - last_seq - 1
+                    last_seq = m.seq
+                    if m.exc_state:
+                        exc_seen = True
+                    elif exc_seen and exc_done_frame is None:
+                        exc_done_frame = m.time_us // session.dt_us
+                    if m.exc_state == 2:
+                        rows.append((m.time_us * 1e-6, getattr(m, u_name), getattr(m, y_name)))
+                        got = session.mixer.achieved(m.motor)
+                        if abs((got.roll, got.pitch, got.yaw)[axis_index] - m.axis_cmd) > 1e-3:
+                            saturated += 1
+                elif t == "STATUSTEXT" and m.severity <= 4:
+                    progress(f"firmware: {m.text}")
+            frame = session.frame
+            if exc_done_frame is not None and frame >= exc_done_frame + TAIL_FRAMES:
+                break
+            if frame >= max_frames:
+                raise FirmwareError(f"the excitation did not finish within {frame} frames")
+            if (frame - start_frame) / (max_frames - start_frame) >= next_report:
+                progress(f"  {100 * frame / max_frames:3.0f} %  t = {session.time_us * 1e-6:6.2f} s")
+                next_report += 0.1
+        loop_s = time.monotonic() - loop_t0
+        plant, imu_mode = session.plant, session.fw.imu_mode
     csv_path = out_base + ".csv"
     np.savetxt(csv_path, np.array(rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
                comments="", fmt="%.9g")
     freq = float(status.freq_hz) if status is not None else float("nan")
     return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(rows),
                      frames=frame, seq_gaps=gaps, actual_freq_hz=freq,
-                     saturated_samples=saturated, imu_mode=fw.imu_mode,
+                     saturated_samples=saturated, imu_mode=imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))

@@ -1,0 +1,138 @@
+"""``heliquad identify DIR``: from a sweep's log to points, models and plots.
+
+Reads ``DIR/manifest.json`` and ``DIR/sweep.tlog``; for each frequency the manifest marks
+as measured, takes the full-amplitude samples (``exc_state == 2``) in its window, and runs
+the FSF with the exact frequency the firmware reported. Writes, inside DIR:
+``points.csv`` (the POINTS format), ``points_table.csv`` (the paper's tables 4-6: frequency,
+omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or those given),
+``bode.png`` and ``responses.png`` (input dashed, output solid, per frequency).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from . import paper
+from .errors import InputError
+
+__all__ = ["identify_dir", "INPUT_OUTPUT"]
+
+#: Which logged signal is the input and which the output, per injection point.
+INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
+                "angle": ("angle_sp", "angle")}
+
+
+def _load(dir_path):
+    from .mavlink_dialect import dialect
+    from .tlog import read_tlog
+    from .sweep import MANIFEST
+
+    try:
+        with open(os.path.join(dir_path, MANIFEST)) as fh:
+            manifest = json.load(fh)
+    except OSError:
+        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)") from None
+    except ValueError:
+        raise InputError(f"{dir_path}/{MANIFEST}: not valid JSON") from None
+    tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
+    if not os.path.exists(tlog):
+        raise InputError(f"{dir_path}: the log {os.path.basename(tlog)} is missing")
+    samples = [m for _, m in read_tlog(tlog, dialect(), only=("HQ_SYSID_SAMPLE",))]
+    return manifest, samples
+
+
+def _segments(manifest, samples):
+    u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
+    t = np.array([m.time_us for m in samples], dtype=np.int64)
+    state = np.array([m.exc_state for m in samples])
+    u = np.array([getattr(m, u_name) for m in samples])
+    y = np.array([getattr(m, y_name) for m in samples])
+    for entry in manifest["frequencies"]:
+        if entry.get("status") != "ok" or "start_us" not in entry:
+            continue
+        sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == 2)
+        yield entry, t[sel] * 1e-6, u[sel], y[sel]
+
+
+def identify_dir(dir_path: str, orders=None, progress=print) -> dict:
+    from .files import write_models_json, write_points_csv
+    from .fsf import estimate_fsf
+    from .identify import fit_orders
+    from .plot import plot_bode
+
+    manifest, samples = _load(dir_path)
+    axis = manifest["axis"]
+    points, segments = [], []
+    for entry, t, u, y in _segments(manifest, samples):
+        fs = entry["freq_hz"] * entry["period_samples"]
+        try:
+            p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
+        except InputError as exc:
+            progress(f"  {entry['freq_hz']:.4g} Hz skipped: {exc}")
+            continue
+        points.append(p)
+        segments.append((entry["freq_hz"], t, u, y))
+    if len(points) < 2:
+        raise InputError(f"{dir_path}: {len(points)} usable frequency(ies); a fit needs more")
+    write_points_csv(os.path.join(dir_path, "points.csv"), points)
+    _write_table(os.path.join(dir_path, "points_table.csv"), points)
+    table = {"omega": np.array([p.omega_rad_s for p in points]),
+             "F": np.array([p.gain for p in points]), "sigma": np.array([p.sigma for p in points]),
+             "coherence": np.array([p.coherence for p in points])}
+    order = np.argsort(table["omega"])
+    table = {k: v[order] for k, v in table.items()}
+    wanted = orders or paper.DEFAULT_ORDERS[axis]
+    orders = [o for o in wanted if 2 * len(points) >= o[0] + 1 + o[1] + 1]   # the points support
+    if not orders:
+        raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
+    result = fit_orders(table, orders)
+    write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
+                      result.reason, source="points.csv", weights=result.weights, axis=axis)
+    plot_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
+              models=result.models, recommended=result.recommended,
+              title=f"{axis}, {manifest['inject']} injection: points and models")
+    _plot_responses(os.path.join(dir_path, "responses.png"), segments, manifest)
+    return {"axis": axis, "points": points, "result": result, "manifest": manifest}
+
+
+def _write_table(path, points) -> None:
+    """The paper's tables 4-6: frequency, omega, magnitude, phase, real and imaginary parts."""
+    with open(path, "w") as fh:
+        fh.write("freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence\n")
+        for p in sorted(points, key=lambda q: q.omega_rad_s):
+            fh.write(f"{p.freq_hz:.6g},{p.omega_rad_s:.6g},{p.magnitude:.6g},"
+                     f"{math.degrees(p.phase_rad):.4f},{p.gain.real:.6g},{p.gain.imag:.6g},"
+                     f"{p.coherence:.5f}\n")
+
+
+def _plot_responses(path, segments, manifest) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(segments)
+    cols = 3
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(12, 2.4 * rows), squeeze=False,
+                             constrained_layout=True)
+    u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
+    unit = {"axis_cmd": "torque cmd", "rate_sp": "rad/s", "angle_sp": "rad"}[u_name]
+    for ax, (f, t, u, y) in zip(axes.ravel(), segments):
+        t = t - t[0]
+        ax.plot(t, u, "--", lw=1, label=f"input: {u_name} ({unit})")
+        ax.plot(t, y, lw=1, label=f"output: {y_name} ({'rad/s' if y_name == 'rate' else 'rad'})")
+        ax.set_title(f"{f:.3g} Hz", fontsize=9)
+        ax.set_xlabel("time (s)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"{manifest['axis']}: measured cycles per frequency (input dashed, output solid)")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
