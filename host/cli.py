@@ -280,7 +280,18 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("dir", metavar="DIR")
     p.add_argument("--order", action="append", metavar="M/N",
                    help="orders to fit (default: SPEC.md's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
+    p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
+                   "(the loop's hold and the sensor's latency are real delays)")
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("report", help="one self-contained HTML page of a session",
+                       description="Write DIR/report.html: every table, model, metric and plot "
+                                   "of a sweep folder (or of a folder of them, one per axis), "
+                                   "with the quality flags (low coherence, unstable fits, "
+                                   "aborted frequencies).", formatter_class=fmt)
+    p.add_argument("dir", metavar="DIR")
+    p.add_argument("--out", metavar="FILE.html")
+    p.set_defaults(func=_cmd_report)
 
     from .demo import add_demo_parser
     from .dmp_image import add_dmp_image_parser
@@ -507,7 +518,7 @@ def _cmd_identify(args) -> int:
     orders = [parse_order(o) for o in args.order] if args.order else None
     if not os.path.isdir(args.dir):
         raise InputError(f"{args.dir}: not a folder")
-    r = identify_dir(args.dir, orders)
+    r = identify_dir(args.dir, orders, delay=args.delay)
     print(f"{r['axis']}: {len(r['points'])} points")
     print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
     for p in sorted(r["points"], key=lambda q: q.omega_rad_s):
@@ -515,6 +526,13 @@ def _cmd_identify(args) -> int:
               f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
     _print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from .report import write_report
+
+    print(f"wrote {write_report(args.dir, args.out)}")
     return 0
 
 

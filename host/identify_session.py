@@ -58,7 +58,7 @@ def _segments(manifest, samples):
         yield entry, t[sel] * 1e-6, u[sel], y[sel]
 
 
-def identify_dir(dir_path: str, orders=None, progress=print) -> dict:
+def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False) -> dict:
     from .files import write_models_json, write_points_csv
     from .fsf import estimate_fsf
     from .identify import fit_orders
@@ -86,10 +86,10 @@ def identify_dir(dir_path: str, orders=None, progress=print) -> dict:
     order = np.argsort(table["omega"])
     table = {k: v[order] for k, v in table.items()}
     wanted = orders or paper.DEFAULT_ORDERS[axis]
-    orders = [o for o in wanted if 2 * len(points) >= o[0] + 1 + o[1] + 1]   # the points support
+    orders = [o for o in wanted if 2 * len(points) >= o[0] + 1 + o[1] + 1 + int(delay)]
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
-    result = fit_orders(table, orders)
+    result = fit_orders(table, orders, delay=delay)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis)
     plot_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],

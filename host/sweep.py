@@ -9,9 +9,9 @@ until the excitation ends, and move on. Everything is logged to ``DIR/sweep.tlog
 gains, firmware version, start time, aborts) is rewritten after every frequency, so Ctrl-C
 or a breach leaves a valid, identifiable session.
 
-Safety: a sample whose angle exceeds ``max_angle_deg`` (80 deg, SPEC.md) or whose rate
-exceeds ``max_rate_deg_s`` stops the excitation at once and ends the sweep; the manifest
-records the breach.
+Safety: a sample whose angle exceeds ``max_angle_deg`` (80 deg, SPEC.md; roll and pitch,
+whose rigs swing; the yaw rig's heading is free) or whose rate exceeds ``max_rate_deg_s``
+stops the excitation at once and ends the sweep; the manifest records the breach.
 """
 
 from __future__ import annotations
@@ -172,7 +172,10 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
                     entry.setdefault("start_us", int(m.time_us))
                     entry["end_us"] = int(m.time_us)
                     entry["samples"] += 1
-                if abs(math.degrees(m.angle)) > max_angle_deg or abs(math.degrees(m.rate)) > max_rate_deg_s:
+                # The angle limit is the roll and pitch rigs' swing; on the yaw rig the logged
+                # angle is the heading, which is free.
+                swing = abs(math.degrees(m.angle)) if plan.axis != "yaw" else 0.0
+                if swing > max_angle_deg or abs(math.degrees(m.rate)) > max_rate_deg_s:
                     session.tel.stop_excitation()
                     entry["status"] = (f"aborted: limit breached at {m.time_us * 1e-6:.2f} s "
                                        f"(angle {math.degrees(m.angle):.1f} deg, rate "
