@@ -128,6 +128,7 @@ def _plot_responses(path, segments, manifest) -> None:
         ax.plot(t, y, lw=1, label=f"output: {y_name} ({'rad/s' if y_name == 'rate' else 'rad'})")
         ax.set_title(f"{f:.3g} Hz", fontsize=9)
         ax.set_xlabel("time (s)", fontsize=8)
+        ax.set_ylabel(f"{unit} | {'rad/s' if y_name == 'rate' else 'rad'}", fontsize=7)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     for ax in axes.ravel()[n:]:

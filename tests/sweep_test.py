@@ -83,3 +83,21 @@ def test_identify_refuses_a_folder_that_is_not_a_sweep(tmp_path):
     res = heliquad("identify", tmp_path)
     assert res.returncode == 2 and "no manifest.json" in res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_ctrl_c_leaves_a_valid_log_and_manifest(tmp_path):
+    import signal
+
+    out = tmp_path / "interrupted"
+    proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
+                             "--sil", "--ideal-sensor", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(6)                                    # inside the first, slow yaw frequency
+    proc.send_signal(signal.SIGINT)
+    stdout, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    assert "interrupted" in stdout
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["aborted"] == "interrupted (Ctrl-C)" and not manifest["complete"]
+    res = heliquad("tlog", out / "sweep.tlog")
+    assert res.returncode == 0 and " 0 lost" in res.stdout and res.stderr == ""
