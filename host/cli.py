@@ -354,10 +354,6 @@ def _cmd_sil(args) -> int:
     rig = args.rig or args.axis
     if args.plant == "vehicle" and rig not in (args.axis, "free"):
         raise InputError(f"on the {rig} rig only {rig} is free: use --axis {rig}")
-    if args.plant == "vehicle":
-        from ..sim.params import load_params
-
-        load_params(args.params)                       # a bad file fails here, in one line
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), inject=args.inject,
                     freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
@@ -385,7 +381,7 @@ def _cmd_validate(args) -> int:
     import json
     import os
 
-    from .validate import build_loops, load_gains, plot_validation, validate_model
+    from .validate import load_gains, save_validation, validate_model
 
     try:
         with open(args.models) as fh:
@@ -411,15 +407,9 @@ def _cmd_validate(args) -> int:
     turbulence = None if args.turbulence == "none" else args.turbulence
     report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
     out = args.out or os.path.dirname(os.path.abspath(args.models))
-    os.makedirs(out, exist_ok=True)
     _print_validation(report)
-    with open(os.path.join(out, "validation.json"), "w") as fh:
-        json.dump(report, fh, indent=2)
-    if report["stable"]:
-        plot_validation(report, traces, build_loops(num, den, delay, axis, gains),
-                        os.path.join(out, "validation.png"))
-    print(f"wrote {os.path.join(out, 'validation.json')}"
-          + (f" and validation.png" if report["stable"] else ""))
+    written = save_validation(out, report, traces, num, den, delay, axis, gains)
+    print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
     return 0 if report["stable"] else 1
 
 
@@ -472,10 +462,6 @@ def _cmd_sweep(args) -> int:
         num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
         args.num, args.den = args.num or num, args.den or den
         _check_plant(args)
-        if args.plant == "vehicle":
-            from ..sim.params import load_params
-
-            load_params(args.params)
         cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
                         inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                         plant=args.plant, rig=args.axis, params=args.params,
@@ -591,6 +577,10 @@ def _check_plant(args) -> None:
         raise InputError("--collective must be in [0, 1]")
     if not 0 < getattr(args, "loop_hz", 200.0) <= 2000:
         raise InputError("--loop-hz must be in (0, 2000]")
+    if getattr(args, "plant", "tf") == "vehicle":
+        from ..sim.params import load_params
+
+        load_params(args.params)                       # a bad file fails here, in one line
 
 
 def _describe_point(p) -> str:

@@ -39,7 +39,7 @@ def run_demo(args) -> int:
     from .identify_session import identify_dir
     from .report import write_report
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
-    from .validate import load_gains, validate_model
+    from .validate import load_gains, save_validation, validate_model
 
     os.makedirs(args.out, exist_ok=True)
     t0, sim_s, summary = time.monotonic(), 0.0, []
@@ -64,27 +64,16 @@ def run_demo(args) -> int:
             continue
         model = result.models[result.recommended] if result.recommended is not None else None
         if model is not None:
-            report, traces = validate_model(model.num, model.den, model.delay_s, axis,
-                                            load_gains(axis), "moderate", args.seed)
-            _save_validation(folder, report, traces, model, axis)
+            gains = load_gains(axis)
+            report, traces = validate_model(model.num, model.den, model.delay_s, axis, gains,
+                                            "moderate", args.seed)
+            save_validation(folder, report, traces, model.num, model.den, model.delay_s, axis,
+                            gains)
         summary.append(_compare(axis, model, result.reason, truth_plant))
     report_path = write_report(args.out)
     wall = time.monotonic() - t0
     _print_summary(summary, report_path, wall, sim_s)
     return 0
-
-
-def _save_validation(folder, report, traces, model, axis):
-    import json
-
-    from .validate import build_loops, load_gains, plot_validation
-
-    with open(os.path.join(folder, "validation.json"), "w") as fh:
-        json.dump(report, fh, indent=2)
-    if report["stable"]:
-        plot_validation(report, traces, build_loops(model.num, model.den, model.delay_s, axis,
-                                                    load_gains(axis)),
-                        os.path.join(folder, "validation.png"))
 
 
 def _compare(axis, model, reason, plant):

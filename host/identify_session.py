@@ -18,12 +18,10 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
+from .link import INPUT_OUTPUT
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
-#: Which logged signal is the input and which the output, per injection point.
-INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
-                "angle": ("angle_sp", "angle")}
 
 
 def _load(dir_path):
@@ -61,6 +59,7 @@ def _segments(manifest, samples):
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False) -> dict:
     from .files import write_models_json, write_points_csv
     from .fsf import estimate_fsf
+    from .fit import n_parameters
     from .identify import fit_orders
     from .plot import plot_bode
 
@@ -86,7 +85,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     order = np.argsort(table["omega"])
     table = {k: v[order] for k, v in table.items()}
     wanted = orders or paper.DEFAULT_ORDERS[axis]
-    orders = [o for o in wanted if 2 * len(points) >= o[0] + 1 + o[1] + 1 + int(delay)]
+    orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(table, orders, delay=delay)

@@ -17,10 +17,15 @@ from .errors import InputError
 from .mavframe import Codec, Framer
 from .mavlink_dialect import dialect
 
-__all__ = ["TelemetryLink", "AXES", "INJECTIONS", "MODES"]
+__all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES"]
 
 AXES = {"roll": 0, "pitch": 1, "yaw": 2}
 INJECTIONS = {"angle": 0, "rate": 1, "mixer": 2}
+#: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point.
+INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
+                "angle": ("angle_sp", "angle")}
+#: The messages a session driver (SIL or board) reads while an excitation runs.
+SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
 MODES = {"angle": 1, "rate": 2}
 HOST_SYSTEM_ID, HOST_COMPONENT_ID = 255, 190       # a ground station's usual IDs
 TARGET_SYSTEM, TARGET_COMPONENT = 1, 1

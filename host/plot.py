@@ -19,14 +19,12 @@ def _figure(rows):
     return plt.subplots(rows, 1, sharex=True, figsize=(8, 7), constrained_layout=True)
 
 
-def plot_bode(path, omega, F, sigma=None, models=(), recommended=None, title="",
-              truth=None):
+def plot_bode(path, omega, F, sigma=None, models=(), recommended=None, title=""):
     """Bode plot: the points with their uncertainty and every model, magnitude and phase.
 
     Magnitude in dB, phase in degrees, frequency in Hz (log scale). ``sigma`` is the
     standard deviation of each complex point; it is drawn as the magnitude band
-    ``20 log10(1 +/- sigma/|F|)`` and the phase band ``asin(sigma/|F|)``. ``truth`` is an
-    optional ``(label, callable omega -> response)`` drawn dashed.
+    ``20 log10(1 +/- sigma/|F|)`` and the phase band ``asin(sigma/|F|)``.
     """
     fig, (ax_mag, ax_ph) = _figure(2)
     f_hz = omega / (2 * np.pi)
@@ -43,18 +41,14 @@ def plot_bode(path, omega, F, sigma=None, models=(), recommended=None, title="",
         ax_mag.plot(f_hz, mag_db, "o", color="k", label="measured", zorder=3)
         ax_ph.plot(f_hz, phase_deg, "o", color="k", zorder=3)
     dense = np.logspace(np.log10(omega.min() / 1.5), np.log10(omega.max() * 1.5), CURVE_POINTS)
-    curves = [(m, _model_label(m, i == recommended)) for i, m in enumerate(models)]
-    if truth is not None:
-        curves.append((truth[1], truth[0]))
-    for i, (source, label) in enumerate(curves):
-        resp = source(dense) if callable(source) else source.response(dense)
+    for i, model in enumerate(models):
+        label = _model_label(model, i == recommended)
+        resp = model.response(dense)
         ph = np.degrees(np.unwrap(np.angle(resp)))
         ph += 360 * np.round((phase_deg[0] - np.interp(omega[0], dense, ph)) / 360)
-        style = "--" if callable(source) else "-"
-        width = 2.5 if label.endswith("(recommended)") else 1.3
-        ax_mag.semilogx(dense / (2 * np.pi), 20 * np.log10(np.abs(resp)), style, lw=width,
-                        label=label)
-        ax_ph.semilogx(dense / (2 * np.pi), ph, style, lw=width)
+        width = 2.5 if i == recommended else 1.3
+        ax_mag.semilogx(dense / (2 * np.pi), 20 * np.log10(np.abs(resp)), lw=width, label=label)
+        ax_ph.semilogx(dense / (2 * np.pi), ph, lw=width)
     ax_mag.set_xscale("log")
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")

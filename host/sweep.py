@@ -26,6 +26,7 @@ import numpy as np
 
 from . import __version__, paper
 from .errors import InputError
+from .link import SESSION_MESSAGES
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
 
@@ -38,7 +39,6 @@ MAX_ANGLE_DEG = 80.0
 MAX_RATE_DEG_S = 400.0
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
-STEP_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
 
 
 def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
@@ -102,7 +102,7 @@ class PortSession:
         if now - self.last_hb >= 1.0:
             self.tel.heartbeat()
             self.last_hb = now
-        msgs = self.tel.poll(only=STEP_MESSAGES)
+        msgs = self.tel.poll(only=SESSION_MESSAGES)
         self.tlog.flush()
         return msgs
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 
 import control
 import numpy as np
@@ -25,7 +26,8 @@ import numpy as np
 from . import paper
 from .errors import InputError
 
-__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation"]
+__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation",
+           "save_validation"]
 
 DERIVATIVE_FILTER_N = 10.0
 PADE_ORDER = 3
@@ -162,6 +164,19 @@ def _turbulence(loops, axis, outer, t, level, seed):
         out["angle_max_deg"] = float(np.max(np.abs(angle)))
         trace["angle"] = angle
     return out, trace
+
+
+def save_validation(folder, report, traces, num, den, delay_s, axis, gains) -> list:
+    """Write ``validation.json`` (and ``validation.png`` when the cascade is stable) into
+    ``folder``; returns the file names written."""
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, "validation.json"), "w") as fh:
+        json.dump(report, fh, indent=2)
+    if not report["stable"]:
+        return ["validation.json"]
+    plot_validation(report, traces, build_loops(num, den, delay_s, axis, gains),
+                    os.path.join(folder, "validation.png"))
+    return ["validation.json", "validation.png"]
 
 
 def plot_validation(report, traces, loops, path) -> None:

@@ -14,7 +14,7 @@ import os
 import time
 
 from .lockstep import HostFirmware, SimLink
-from .sil import _fifo, _rc
+from .sil import rig_step
 from .tf_plant import TfPlant
 
 __all__ = ["run_board"]
@@ -50,10 +50,9 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
                 elif now - target > MAX_LAG_S:
                     late += 1
                     t0 = now - frames * dt_s            # resynchronise to real time
-                reply = link.step(int(round(frames * dt_s * 1e6)), _fifo(plant, kind), kind,
-                                  _rc(frames, collective))
+                reply = rig_step(link, plant, mixer, frames, int(round(frames * dt_s * 1e6)),
+                                 kind, collective)
                 kind = reply.sensor_kind
-                plant.step_motors(reply.motor, mixer)
         except KeyboardInterrupt:
             pass
         finally:

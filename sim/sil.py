@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from heliquad.host.link import INPUT_OUTPUT, SESSION_MESSAGES
+
 from .lockstep import SENSOR_DMP, SENSOR_RAW, FirmwareError, HostFirmware, SimLink
 from .mpu6050_packets import dmp_packet, raw_packet
 from .tf_plant import TfPlant
@@ -32,8 +34,6 @@ RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
 BOOT_FRAMES, ARM_FRAMES = 20, 20
 #: Frames recorded after the excitation ends.
 TAIL_FRAMES = 10
-#: Messages the runner reads (all messages are logged to the .tlog regardless).
-STEP_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
 #: Telemetry is read every this many frames (the firmware buffers 64 KiB, ~500 loops).
 TELEMETRY_BATCH = 20
 #: How long to wait for a loop's telemetry (its HQ_SYSID_SAMPLE) after its reply.
@@ -91,11 +91,6 @@ class SilResult:
     truth: complex                 # sampled-data truth at the actual frequency (mixer injection)
 
 
-def _columns(inject):
-    return {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
-            "angle": ("angle_sp", "angle")}[inject]
-
-
 def _rc(frame, collective):
     rc = [RC_CENTER_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, 0, 0]
     if frame > BOOT_FRAMES:
@@ -103,6 +98,14 @@ def _rc(frame, collective):
     if frame > BOOT_FRAMES + ARM_FRAMES:
         rc[2] = int(round(RC_LOW_US + collective * (RC_HIGH_US - RC_LOW_US)))
     return rc
+
+
+def rig_step(link, plant, mixer, frame, time_us, kind, collective):
+    """One lockstep frame of the simulated rig: the plant's sensor data and the pilot's RC
+    out, the firmware's reply in, the plant stepped with the reply's motors."""
+    reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, collective))
+    plant.step_motors(reply.motor, mixer)
+    return reply
 
 
 def _fifo(plant, kind):
@@ -123,7 +126,7 @@ class _TelemetryLog:
     def __init__(self, tel, tlog):
         self.tel, self.tlog = tel, tlog
         self.codec = tel.codec
-        self.ids = {name: tel.ids[name] for name in STEP_MESSAGES}
+        self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
         self.sysid_id = self.ids["HQ_SYSID_SAMPLE"]
         self.pending = []
         self.last_time_us = None
@@ -191,10 +194,9 @@ class SilSession:
             self.frame += 1
             if self.frame % int(self.cfg.loop_hz) == 0:
                 self.tel.heartbeat()
-            self.reply = self.link.step(self.time_us, _fifo(self.plant, self.kind), self.kind,
-                                        _rc(self.frame, self.cfg.collective))
+            self.reply = rig_step(self.link, self.plant, self.mixer, self.frame, self.time_us,
+                                  self.kind, self.cfg.collective)
             self.kind = self.reply.sensor_kind
-            self.plant.step_motors(self.reply.motor, self.mixer)
         return self.telemetry.read_until(self.time_us)
 
     def hover(self) -> None:
@@ -219,7 +221,7 @@ class SilSession:
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``."""
     axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
-    u_name, y_name = _columns(cfg.inject)
+    u_name, y_name = INPUT_OUTPUT[cfg.inject]
     t0 = time.monotonic()
     rows, saturated, gaps = [], 0, 0
     last_seq, exc_seen, exc_done_frame, status = None, False, None, None
