@@ -27,12 +27,10 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=print) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
-    from heliquad import _firmware
     from heliquad.host.mavlink_dialect import dialect
 
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
-    mixer = _firmware.Mixer()
     frames, late = 0, 0
     fw = HostFirmware(loop_hz, dmp_image, telemetry_path=os.path.abspath(telemetry_path))
     try:
@@ -50,8 +48,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
                 elif now - target > MAX_LAG_S:
                     late += 1
                     t0 = now - frames * dt_s            # resynchronise to real time
-                reply = rig_step(link, plant, mixer, frames, int(round(frames * dt_s * 1e6)),
-                                 kind, collective)
+                reply = rig_step(link, plant, frames, int(round(frames * dt_s * 1e6)), kind,
+                                 collective)
                 kind = reply.sensor_kind
         except KeyboardInterrupt:
             pass

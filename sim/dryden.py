@@ -40,10 +40,10 @@ Z0_FT = 0.15                 # surface roughness of the standard's wind profile
 MIN_CONVECTION_M_S = 1.0
 
 
-def _tf(num, den, dt):
-    """Discrete state space (ZOH) of a continuous filter num/den."""
-    a, b, c, d, _ = scipy.signal.cont2discrete(scipy.signal.tf2ss(num, den), dt, method="zoh")
-    return a, b.ravel(), c.ravel(), float(np.asarray(d).ravel()[0])
+def _discrete(num, den, dt):
+    """ZOH discretisation of a continuous filter num/den, as (b, a) for lfilter."""
+    b, a, _ = scipy.signal.cont2discrete((num, den), dt, method="zoh")
+    return np.atleast_2d(b)[0], np.asarray(a, dtype=float)
 
 
 class Dryden:
@@ -88,18 +88,21 @@ class Dryden:
         hq = (np.polymul([1 / v, 0.0], hw[0]), np.polymul([4 * b / (math.pi * v), 1.0], hw[1]))
         hr = (np.polymul([1 / v, 0.0], hv[0]), np.polymul([3 * b / (math.pi * v), 1.0], hv[1]))
         # q and r share their noise with w and v (they are derivatives of the same field).
-        self.filters = [_tf(n, d, dt_s) for n, d in (hu, hv, hw, hp, hq, hr)]
-        self.states = [np.zeros(f[0].shape[0]) for f in self.filters]
+        self.filters = [_discrete(n, d, dt_s) for n, d in (hu, hv, hw, hp, hq, hr)]
+        self.states = [np.zeros(max(len(a), len(b)) - 1) for b, a in self.filters]
         self.noise_gain = math.sqrt(math.pi / dt_s)
         self.rng = np.random.default_rng(seed)
 
     def step(self) -> np.ndarray:
         """The next sample: [u, v, w] gust velocity (m/s), [p, q, r] gust rates (rad/s)."""
-        n_u, n_v, n_w, n_p = self.rng.standard_normal(4) * self.noise_gain
-        out = np.empty(6)
+        return self.block(1)[0]
+
+    def block(self, samples: int) -> np.ndarray:
+        """The next ``samples`` samples (rows as :meth:`step`); the same stream however it
+        is cut into blocks."""
+        n_u, n_v, n_w, n_p = (self.rng.standard_normal((samples, 4)) * self.noise_gain).T
+        out = np.empty((samples, 6))
         for i, n in enumerate((n_u, n_v, n_w, n_p, n_w, n_v)):
-            a, b, c, d = self.filters[i]
-            x = self.states[i]
-            out[i] = c @ x + d * n
-            self.states[i] = a @ x + b * n
+            b, a = self.filters[i]
+            out[:, i], self.states[i] = scipy.signal.lfilter(b, a, n, zi=self.states[i])
         return out

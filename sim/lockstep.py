@@ -20,9 +20,7 @@ import time
 
 import serial
 
-from heliquad.host.mavframe import Codec, Framer
-
-__all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "find_firmware"]
+__all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "actuators", "find_firmware"]
 
 #: How long the firmware may take to create its ptys and print "ready".
 START_TIMEOUT_S = 10.0
@@ -151,18 +149,19 @@ class Actuators:
 
 
 class SimLink:
-    """The simulator's end of the sim link: send a sensor frame, get exactly one reply."""
+    """The simulator's end of the sim link: send a sensor frame, get exactly one reply.
 
-    def __init__(self, firmware: HostFirmware, mav_module):
+    pyserial opens the pty and makes it raw; the exchange itself (MAVLink framing, the
+    reply's counter check, the timeout) is C++ (``heliquad._simcore.SimLinkPort``,
+    sim/native/sim_link.cpp), shared with the batch engine of :class:`heliquad.sim.sil.SilSession`.
+    """
+
+    def __init__(self, firmware: HostFirmware, mav_module=None):
+        from heliquad import _simcore
+
         self.firmware = firmware
         self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=REPLY_TIMEOUT_S)
-        self.codec = Codec(mav_module, system_id=1, component_id=200)
-        self.framer = Framer(self.codec)
-        self.sensor_id = mav_module.MAVLINK_MSG_ID_HQ_SENSOR_FRAME
-        self.actuator_id = mav_module.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
-        self._sel = selectors.DefaultSelector()
-        self.fd = self.serial.fileno()     # pyserial opened it non-blocking; raw I/O is faster
-        self._sel.register(self.fd, selectors.EVENT_READ)
+        self.port = _simcore.SimLinkPort(self.serial.fileno(), int(REPLY_TIMEOUT_S * 1000))
         self.frame = 0
 
     def close(self) -> None:
@@ -174,49 +173,33 @@ class SimLink:
         if len(fifo) > FIFO_CAPACITY:
             raise ValueError(f"at most {FIFO_CAPACITY} FIFO bytes per frame")
         frame = self.frame + 1 if frame is None else frame
-        packet = self.codec.encode(self.sensor_id, {
-            "time_us": int(time_us), "frame": frame, "fifo_kind": fifo_kind,
-            "fifo_len": len(fifo), "rc_us": rc_us,
-            "fifo": bytes(fifo) + bytes(FIFO_CAPACITY - len(fifo))})
-        try:
-            view = memoryview(packet)
-            while view:                                   # the fd is non-blocking
-                written = os.write(self.fd, view)
-                view = view[written:]
-        except OSError as exc:
-            self.firmware.wait_exit(0.5)
-            state = "died" if not self.firmware.alive() else "stopped reading"
-            raise FirmwareError(f"the firmware {state} at frame {frame} (sim link write failed: "
-                                f"{exc}; {self.firmware.stderr_tail()})") from None
-        reply = self._wait_reply(frame)
+        status, reply, errno = self.port.exchange(int(time_us), frame, fifo_kind, bytes(fifo),
+                                                  list(rc_us))
+        self.check(status, frame, reply, errno)
         self.frame = frame
-        return reply
+        return actuators(reply)
 
-    def _wait_reply(self, frame: int) -> Actuators:
-        deadline = time.monotonic() + REPLY_TIMEOUT_S
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
-            if not self._sel.select(timeout=min(remaining, 0.2)):
-                if not self.firmware.alive():     # checked only when nothing came: cheap
-                    break
-                continue
-            try:
-                data = os.read(self.fd, 4096)
-            except BlockingIOError:
-                continue
-            except OSError:
-                break                      # the pty closed under us: the firmware is gone
-            for msgid, _, payload in self.framer.feed(data):
-                if msgid != self.actuator_id:
-                    continue
-                m = self.codec.decode(msgid, payload)
-                if m.frame != frame:
-                    raise FirmwareError(f"reply to frame {frame} carries frame {m.frame}")
-                return Actuators(m.time_us, m.frame, list(m.motor), bool(m.armed), m.mode,
-                                 m.sensor_kind)
+    def check(self, status, frame: int, reply=None, errno: int = 0) -> None:
+        """Raise the FirmwareError that a link status other than OK means."""
+        from heliquad._simcore import LinkStatus
+
+        if status == LinkStatus.OK:
+            return
+        if status == LinkStatus.WRONG_FRAME:
+            raise FirmwareError(f"reply to frame {frame} carries frame {reply.frame}")
+        if status == LinkStatus.CANCELLED:
+            raise FirmwareError(f"stopped before frame {frame}")
         self.firmware.wait_exit(0.5)          # a dying process may need a moment to be reaped
-        why = "died" if not self.firmware.alive() else f"did not answer within {REPLY_TIMEOUT_S:g} s"
-        raise FirmwareError(f"the firmware {why} at frame {frame} "
-                            f"({self.firmware.stderr_tail()})")
+        alive = self.firmware.alive()
+        if status == LinkStatus.WRITE_FAILED:
+            state = "stopped reading" if alive else "died"
+            raise FirmwareError(f"the firmware {state} at frame {frame} (sim link write failed: "
+                                f"{os.strerror(errno)}; {self.firmware.stderr_tail()})")
+        why = f"did not answer within {REPLY_TIMEOUT_S:g} s" if alive else "died"
+        raise FirmwareError(f"the firmware {why} at frame {frame} ({self.firmware.stderr_tail()})")
+
+
+def actuators(reply) -> Actuators:
+    """An :class:`Actuators` from the C++ link's reply."""
+    return Actuators(reply.time_us, reply.frame, list(reply.motor), bool(reply.armed),
+                     reply.mode, reply.sensor_kind)

@@ -23,8 +23,7 @@ import numpy as np
 
 from heliquad.host.link import INPUT_OUTPUT, SESSION_MESSAGES
 
-from .lockstep import SENSOR_DMP, SENSOR_RAW, FirmwareError, HostFirmware, SimLink
-from .mpu6050_packets import dmp_packet, raw_packet
+from .lockstep import FirmwareError, HostFirmware, SimLink, actuators
 from .tf_plant import TfPlant
 
 __all__ = ["SilConfig", "SilResult", "run_sil", "RC_CENTER_US"]
@@ -34,10 +33,13 @@ RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
 BOOT_FRAMES, ARM_FRAMES = 20, 20
 #: Frames recorded after the excitation ends.
 TAIL_FRAMES = 10
-#: Telemetry is read every this many frames (the firmware buffers 64 KiB, ~500 loops).
-TELEMETRY_BATCH = 20
+#: Frames per batch of the engine: a tool sees the telemetry (and a sweep checks its safety
+#: limits) this often, 250 ms of simulated time at 200 Hz. Larger batches run faster.
+TELEMETRY_BATCH = 50
 #: How long to wait for a loop's telemetry (its HQ_SYSID_SAMPLE) after its reply.
 TELEMETRY_TIMEOUT_S = 2.0
+#: While a batch runs, the telemetry link is read this often (the firmware buffers 64 KiB).
+ENGINE_POLL_S = 0.002
 
 
 @dataclasses.dataclass
@@ -100,21 +102,13 @@ def _rc(frame, collective):
     return rc
 
 
-def rig_step(link, plant, mixer, frame, time_us, kind, collective):
-    """One lockstep frame of the simulated rig: the plant's sensor data and the pilot's RC
-    out, the firmware's reply in, the plant stepped with the reply's motors."""
-    reply = link.step(time_us, _fifo(plant, kind), kind, _rc(frame, collective))
-    plant.step_motors(reply.motor, mixer)
+def rig_step(link, plant, frame, time_us, kind, collective):
+    """One lockstep frame of the simulated rig, driven from Python (the free-running board
+    and tests): the plant's FIFO bytes and the pilot's RC out, the firmware's reply in, the
+    plant stepped with the reply's motors. :class:`SilSession` runs batches of the same in C++."""
+    reply = link.step(time_us, plant.fifo(kind), kind, _rc(frame, collective))
+    plant.step_motors(reply.motor)
     return reply
-
-
-def _fifo(plant, kind):
-    q, rates, accel = plant.sensor_sample()
-    if kind == SENSOR_DMP:
-        return dmp_packet(q, rates, accel)
-    if kind == SENSOR_RAW:
-        return raw_packet(rates, accel)
-    return b""
 
 
 class _TelemetryLog:
@@ -164,10 +158,15 @@ class SilSession:
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
     code as for a board) and :meth:`advance`. Every telemetry packet is logged to ``tlog``
-    with simulated time."""
+    with simulated time.
+
+    The frames themselves run in C++ (``heliquad._simcore.RigEngine``, in its own thread):
+    the plant, the FIFO packets and the sim link, with the batch's RC inputs and random
+    inputs drawn here beforehand. Meanwhile this thread reads and logs the telemetry. Commands
+    and heartbeats go out between batches only, so a run is the same every time."""
 
     def __init__(self, cfg: SilConfig, tlog_path: str):
-        from heliquad import _firmware
+        from heliquad import _firmware, _simcore
         from heliquad.host.link import TelemetryLink
         from heliquad.host.mavlink_dialect import dialect
         from heliquad.host.tlog import TlogWriter
@@ -177,10 +176,16 @@ class SilSession:
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
         self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
-        self.tlog = TlogWriter(tlog_path)
-        self.link = SimLink(self.fw, dialect())
-        self.tel = TelemetryLink(self.fw.telemetry_path)
+        try:
+            self.tlog = TlogWriter(tlog_path)
+            self.link = SimLink(self.fw, dialect())
+            self.tel = TelemetryLink(self.fw.telemetry_path)
+        except BaseException:
+            self.fw.stop()
+            raise
         self.telemetry = _TelemetryLog(self.tel, self.tlog)
+        self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
+        self.heartbeat_frames = max(1, int(round(cfg.loop_hz)))   # the tool's 1 Hz heartbeat
         self.frame, self.kind, self.reply = 0, 0, None
         self.t0 = time.monotonic()
 
@@ -190,14 +195,37 @@ class SilSession:
 
     def advance(self, frames: int = TELEMETRY_BATCH) -> list:
         """Step ``frames`` lockstep frames; the messages of interest from their telemetry."""
-        for _ in range(frames):
-            self.frame += 1
-            if self.frame % int(self.cfg.loop_hz) == 0:
+        end, out = self.frame + frames, []
+        while self.frame < end:
+            first = self.frame + 1
+            if first % self.heartbeat_frames == 0:
                 self.tel.heartbeat()
-            self.reply = rig_step(self.link, self.plant, self.mixer, self.frame, self.time_us,
-                                  self.kind, self.cfg.collective)
+            next_heartbeat = (first // self.heartbeat_frames + 1) * self.heartbeat_frames
+            out += self._run(first, min(end, next_heartbeat - 1) - first + 1)
+        return out + self.telemetry.read_until(self.time_us)
+
+    def _run(self, first: int, n: int) -> list:
+        """Frames first .. first + n - 1 in the engine; telemetry read while they run."""
+        rc = np.array([_rc(f, self.cfg.collective) for f in range(first, first + n)],
+                      dtype=np.uint16)
+        noise, gust = self.plant.frame_inputs(n)
+        self.engine.start(first, n, self.dt_us, self.kind, rc, noise, gust)
+        out = []
+        try:
+            # Read at a fixed pace rather than on every arrival: one wake-up per few frames
+            # leaves the cores to the engine and the firmware.
+            while not self.engine.wait_finished(ENGINE_POLL_S):
+                out += self.telemetry.read()
+        finally:
+            if not self.engine.finished():           # Ctrl-C or an error here: stop it
+                self.engine.cancel()
+            result = self.engine.wait()
+        self.frame = first + result.frames_done - 1
+        if result.frames_done:
+            self.reply = actuators(result.last)
             self.kind = self.reply.sensor_kind
-        return self.telemetry.read_until(self.time_us)
+        self.link.check(result.status, result.failed_frame, result.last)
+        return out
 
     def hover(self) -> None:
         """Boot, arm and hover for the settling time."""

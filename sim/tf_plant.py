@@ -13,10 +13,10 @@ pairs follow the ZOH discretisation ``H(z)`` exactly; to first order
 
 from __future__ import annotations
 
-import math
-
 import control
 import numpy as np
+
+from heliquad import _simcore
 
 __all__ = ["TfPlant"]
 
@@ -44,50 +44,49 @@ class TfPlant:
         self.dt_s = dt_s
         self.G = control.tf(list(map(float, num)), list(map(float, den)))
         sys_d = control.sample_system(control.ss(self.G), dt_s, method="zoh")
-        # Plain floats: the state is a handful of numbers, and numpy's per-call overhead on
-        # 2 x 2 arrays costs more than the arithmetic (this runs every loop).
-        self.A = [list(map(float, row)) for row in np.asarray(sys_d.A)]
-        self.B = [float(b) for b in np.asarray(sys_d.B).ravel()]
-        self.C = [float(c) for c in np.asarray(sys_d.C).ravel()]
-        self.x = [0.0] * len(self.B)
-        self.angle_rad = 0.0
-        self.rate_rad_s = 0.0
+        # The per-frame arithmetic runs in C++ (sim/native/tf_axis.cpp), the same code the
+        # lockstep engine steps.
+        self.core = _simcore.TfAxis(np.asarray(sys_d.A, dtype=float).ravel().tolist(),
+                                    np.asarray(sys_d.B, dtype=float).ravel().tolist(),
+                                    np.asarray(sys_d.C, dtype=float).ravel().tolist(),
+                                    dt_s, self.index)
 
-    def step_motors(self, motor, mixer) -> float:
+    @property
+    def rate_rad_s(self) -> float:
+        return self.core.rate_rad_s
+
+    @property
+    def angle_rad(self) -> float:
+        return self.core.angle_rad
+
+    def step_motors(self, motor, mixer=None) -> float:
         """Drive the plant with the motors' thrust fractions: the axis's torque command is what
-        the firmware's mixer equations say these thrusts produce (``Mixer.achieved``)."""
-        got = mixer.achieved(motor)
-        return self.step((got.roll, got.pitch, got.yaw)[self.index])
+        the firmware's mixer equations (default geometry, as the firmware flies) say these
+        thrusts produce (``Mixer.achieved``)."""
+        self.core.step_motors(list(map(float, motor)))
+        return self.core.rate_rad_s
 
     def step(self, u: float) -> float:
-        """Hold ``u`` for one period; returns the rate at the end of it."""
-        x = self.x
-        self.x = [sum(a * xi for a, xi in zip(row, x)) + b * u for row, b in zip(self.A, self.B)]
-        rate = sum(c * xi for c, xi in zip(self.C, self.x))   # strictly proper: no feed-through
-        # angle: trapezoid of the rate over the period
-        self.angle_rad += 0.5 * (self.rate_rad_s + rate) * self.dt_s
-        self.rate_rad_s = rate
-        return rate
+        """Hold ``u`` for one period; returns the rate at the end of it (the angle is the
+        trapezoid integral of the rate)."""
+        return self.core.step_command(float(u))
 
     def body_state(self):
         """(quaternion w x y z, body rates FRD) of the vehicle on its one-axis rig."""
-        half = 0.5 * self.angle_rad
-        q = [math.cos(half), 0.0, 0.0, 0.0]
-        q[1 + self.index] = math.sin(half)
-        rates = [0.0, 0.0, 0.0]
-        rates[self.index] = self.rate_rad_s
-        return q, rates
+        return list(self.core.quaternion), list(self.core.rates)
 
     def sensor_sample(self):
-        """(quaternion, body rates, specific force) as the IMU reports them: ideal here."""
-        q, rates = self.body_state()
-        return q, rates, self.specific_force()
+        """(quaternion, body rates, specific force) as the IMU reports them: ideal here, the
+        rig held still (gravity only)."""
+        return self.core.sensor()
 
-    def specific_force(self):
-        """Accelerometer reading on the rig (held still): gravity only, in body FRD."""
-        (w, x, y, z), _ = self.body_state()
-        g = 9.80665
-        return (-g * 2 * (x * z - w * y), -g * 2 * (y * z + w * x), -g * (w * w - x * x - y * y + z * z))
+    def fifo(self, kind: int) -> bytes:
+        """This frame's FIFO bytes of the HQ_SENSOR_KIND ``kind``."""
+        return self.core.fifo(kind)
+
+    def frame_inputs(self, frames: int):
+        """Random inputs of the next ``frames`` frames: none for this plant."""
+        return None, None
 
     def truth(self, omega_rad_s):
         """The sampled-data response from logged command to logged rate (ZOH at dt)."""

@@ -19,9 +19,14 @@ Physics (docs/vehicle-model.md has the derivation):
 * Translation: ``m dv/dt = R F_body + m g e_z - c_d v + F_dist`` (free flight only).
 * Rigs (SPEC.md: the vehicle held on its thrust line with one axis free): position fixed,
   body rates other than the free axis held at zero by the rig, plus hinge damping and
-  (smoothed) Coulomb friction on the free axis.
+  Coulomb friction on the free axis, smoothed as F tanh(w / 0.01 rad/s) so the ODE stays
+  smooth.
 
 Integration: classical Runge-Kutta 4 with ``substeps`` steps per call.
+
+The equations themselves run in C++ (sim/native/vehicle_model.cpp, ``heliquad._simcore``):
+the lockstep engine steps them every frame, and this class calls the same code, so there is
+one implementation. This module owns the parameters and the geometry derived from them.
 """
 
 from __future__ import annotations
@@ -31,27 +36,14 @@ import math
 
 import numpy as np
 
+from heliquad import _simcore
+
 from .params import VehicleParams, load_params
 
 __all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2"]
 
 GRAVITY_M_S2 = 9.80665
 RIGS = ("roll", "pitch", "yaw", "free")
-#: Coulomb friction is smoothed as F tanh(w / FRICTION_SMOOTH_RAD_S) so the ODE stays smooth.
-FRICTION_SMOOTH_RAD_S = 0.01
-N_ROTORS = 5
-
-
-def _quat_mul(a, b):
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
-
-
-def _cross(a, b):
-    """3-vector cross product (np.cross's axis handling costs more than the arithmetic)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def rotation_matrix(q):
@@ -98,7 +90,7 @@ class Vehicle:
         self.inertia_inv = np.diag(1.0 / np.array(self.p.body.inertia_kg_m2))
         self._geometry()
         self.free_axis = {"roll": 0, "pitch": 1, "yaw": 2}.get(rig)
-        self.x = self.initial_state()
+        self.core = _simcore.VehicleModel(self._config())
 
     # --- geometry ---------------------------------------------------------------------
     def _geometry(self):
@@ -122,7 +114,30 @@ class Vehicle:
         # moment arm of each thrust: r x d (per newton of thrust)
         self.thrust_moment = np.cross(self.rotor_pos, self.thrust_dir)
 
+    def _config(self):
+        """The equations' inputs for the C++ model, in SI units and body axes."""
+        c = _simcore.VehicleConfig()
+        body, rig = self.p.body, self.p.rig
+        c.mass_kg, c.inertia_kg_m2, c.drag_n_s_m = body.mass_kg, list(body.inertia_kg_m2), body.drag_n_s_m
+        c.gravity_m_s2, c.substeps = self.g, self.substeps
+        c.hinge_damping_n_m_s_rad, c.hinge_friction_n_m = rig.hinge_damping_n_m_s_rad, rig.hinge_friction_n_m
+        c.free_axis = -1 if self.free_axis is None else self.free_axis
+        c.thrust_dir, c.thrust_moment = self.thrust_dir.tolist(), self.thrust_moment.tolist()
+        c.spin_axis = self.spin_axis.tolist()
+        c.k_thrust, c.c_torque, c.j_rotor = self.k_thrust.tolist(), self.c_torque.tolist(), self.j_rotor.tolist()
+        c.tau_s, c.w_max_rad_s = self.tau.tolist(), self.w_max.tolist()
+        return c
+
     # --- state ------------------------------------------------------------------------
+    @property
+    def x(self) -> np.ndarray:
+        """The state (18 values, see the module's docstring); a view: writing into it sets it."""
+        return self.core.x
+
+    @x.setter
+    def x(self, value) -> None:
+        self.core.x = np.asarray(value, dtype=float)
+
     @staticmethod
     def initial_state():
         x = np.zeros(18)
@@ -143,53 +158,14 @@ class Vehicle:
 
     # --- dynamics -----------------------------------------------------------------------
     def derivative(self, x, u, force_ned=None, moment_body=None):
-        """d/dt of the state for thrust fractions ``u`` and optional disturbances."""
-        q = x[6:10]
-        w = x[10:13]
-        speed = x[13:18]
-        w_cmd = self.w_max * np.sqrt(np.clip(u, 0.0, 1.0))
-        speed_dot = (w_cmd - speed) / self.tau
-        thrust = self.k_thrust * speed * speed
-        h_rotor = (self.j_rotor * speed) @ self.spin_axis
-        moment = (thrust @ self.thrust_moment
-                  - (self.c_torque * thrust) @ self.spin_axis
-                  - (self.j_rotor * speed_dot) @ self.spin_axis
-                  - _cross(w, self.inertia @ w + h_rotor))
-        if moment_body is not None:
-            moment = moment + moment_body
-        dx = np.zeros(18)
-        dx[13:18] = speed_dot
-        if self.free_axis is None:
-            rot = rotation_matrix(q)
-            force = rot @ (thrust @ self.thrust_dir) + np.array([0.0, 0.0, self.p.body.mass_kg * self.g])
-            force -= self.p.body.drag_n_s_m * x[3:6]
-            if force_ned is not None:
-                force = force + force_ned
-            dx[0:3] = x[3:6]
-            dx[3:6] = force / self.p.body.mass_kg
-            dx[10:13] = self.inertia_inv @ moment
-        else:
-            k = self.free_axis
-            rig = self.p.rig
-            hinge = -rig.hinge_damping_n_m_s_rad * w[k] - rig.hinge_friction_n_m * math.tanh(
-                w[k] / FRICTION_SMOOTH_RAD_S)
-            dx[10 + k] = (moment[k] + hinge) / self.inertia[k, k]
-        dx[6:10] = 0.5 * _quat_mul(q, np.array([0.0, w[0], w[1], w[2]]))
-        return dx
+        """d/dt of the state for thrust fractions ``u`` and optional disturbances (force NED
+        in N, moment body in N m)."""
+        return self.core.derivative(np.asarray(x, dtype=float), list(map(float, u)),
+                                    force_ned, moment_body)
 
     def step(self, u, dt_s: float, force_ned=None, moment_body=None) -> VehicleState:
         """Advance by ``dt_s`` with the thrust fractions ``u`` held (zero-order hold)."""
-        u = np.asarray(u, dtype=float)
-        h = dt_s / self.substeps
-        x = self.x
-        for _ in range(self.substeps):
-            k1 = self.derivative(x, u, force_ned, moment_body)
-            k2 = self.derivative(x + 0.5 * h * k1, u, force_ned, moment_body)
-            k3 = self.derivative(x + 0.5 * h * k2, u, force_ned, moment_body)
-            k4 = self.derivative(x + h * k3, u, force_ned, moment_body)
-            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-            x[6:10] /= np.linalg.norm(x[6:10])
-        self.x = x
+        self.core.step(list(map(float, u)), dt_s, force_ned, moment_body)
         return self.state()
 
     # --- diagnostics for tests -------------------------------------------------------------

@@ -1,7 +1,7 @@
 """The 6-DoF vehicle as a plant for the firmware in the loop, and its linearised truth.
 
 :class:`VehiclePlant` wraps :class:`heliquad.sim.vehicle.Vehicle` with the interface the
-lockstep runner uses (``step_motors``, ``body_state``, ``specific_force``). Its
+lockstep runner uses (``fifo``, ``step_motors``, ``frame_inputs``). Its
 :meth:`VehiclePlant.truth` states what identification should find for mixer injection: the
 model linearised at the rig's trim (rotor speeds at the trim command, body at rest), from the
 axis's normalised torque command, through the firmware's own mixer equations, to the body
@@ -13,10 +13,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from heliquad import _simcore
+
 from .dryden import Dryden
 from .imu_model import ImuModel
 from .params import VehicleParams, load_params
-from .vehicle import GRAVITY_M_S2, Vehicle, rotation_matrix
+from .vehicle import GRAVITY_M_S2, Vehicle
 
 __all__ = ["VehiclePlant", "mixer_for", "pid_z"]
 
@@ -51,46 +53,52 @@ class VehiclePlant:
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
         self.trim_collective = trim_collective
-        self.last_u = np.zeros(5)
         self.imu = None if ideal_sensor else ImuModel(self.params.imu, seed)
         self.dryden = None
         if turbulence:
             t = self.params.turbulence
             self.dryden = Dryden(turbulence, t.altitude_m, t.span_m, dt_s, seed)
+        # The per-frame work (gusts as forces and moments, the step, the IMU's bias and delay
+        # line, the specific force) runs in C++ (sim/native/vehicle_model.cpp); this class
+        # draws the random inputs and states the truth.
+        imu = self.imu.config() if self.imu else _simcore.ImuConfig()
+        self.core = _simcore.VehicleRig(self.vehicle.core, dt_s, imu,
+                                        self.params.turbulence.rotational_damping_n_m_s_rad)
 
     @property
     def rate_rad_s(self) -> float:
         return float(self.vehicle.x[10 + self.index])
 
+    @property
+    def last_u(self) -> np.ndarray:
+        """The motor commands held over the last step (thrust fractions)."""
+        return np.array(self.core.last_command)
+
+    def frame_inputs(self, frames: int):
+        """The random inputs of the next ``frames`` frames: (IMU noise, gusts), each
+        ``frames`` x 6 or None. Gust velocity acts through the airframe's linear drag, gust
+        rates through the rotational damping (sim/dryden.py)."""
+        noise = self.imu.noise(frames) if self.imu else None
+        gust = self.dryden.block(frames) if self.dryden else None
+        return noise, gust
+
     def step_motors(self, motor, mixer=None) -> float:
-        self.last_u = np.asarray(motor, dtype=float)
-        force, moment = self.disturbance()
-        self.vehicle.step(self.last_u, self.dt_s, force, moment)
+        """Hold the motors' thrust fractions for one period (this frame's gust applied)."""
+        gust = self.dryden.block(1) if self.dryden else None
+        self.core.step_motors(list(map(float, motor)), gust)
         return self.rate_rad_s
-
-    def disturbance(self):
-        """Turbulence this period: (force NED in N, moment body in N m), or (None, None).
-
-        Gust velocity through the airframe's linear drag, gust rates through the rotational
-        damping (sim/dryden.py)."""
-        if self.dryden is None:
-            return None, None
-        gust = self.dryden.step()
-        force_body = self.params.body.drag_n_s_m * gust[:3]
-        moment = self.params.turbulence.rotational_damping_n_m_s_rad * gust[3:]
-        return rotation_matrix(self.vehicle.x[6:10]) @ force_body, moment
 
     def body_state(self):
         x = self.vehicle.x
         return list(x[6:10]), list(x[10:13])
 
     def sensor_sample(self):
-        """(quaternion, gyro rad/s, accel m/s^2) as the MPU6050 reports them."""
-        q, rates = self.body_state()
-        accel = self.specific_force()
-        if self.imu is None:
-            return q, rates, accel
-        return self.imu.measure(q, rates, accel)
+        """(quaternion, gyro rad/s, accel m/s^2) as the MPU6050 reports them this frame."""
+        return self.core.sensor(self.imu.noise(1) if self.imu else None)
+
+    def fifo(self, kind: int) -> bytes:
+        """This frame's FIFO bytes of the HQ_SENSOR_KIND ``kind``."""
+        return self.core.fifo(kind, self.imu.noise(1) if self.imu else None)
 
     @property
     def latency_samples(self) -> int:
@@ -98,11 +106,7 @@ class VehiclePlant:
 
     def specific_force(self):
         """What an accelerometer at the centre of mass reads, m/s^2 in body FRD."""
-        x = self.vehicle.x
-        rot = rotation_matrix(x[6:10])
-        accel_ned = np.zeros(3) if self.vehicle.free_axis is not None else \
-            self.vehicle.derivative(x, self.last_u)[3:6]
-        return rot.T @ (accel_ned - np.array([0.0, 0.0, GRAVITY_M_S2]))
+        return np.array(self.core.specific_force())
 
     # --- truth -------------------------------------------------------------------------------
     def linearise(self):

@@ -37,17 +37,39 @@ def test_unknown_level_is_refused():
         Dryden("gale", 3.0, 0.74, DT)
 
 
+def test_dryden_blocks_give_the_same_stream_as_single_steps():
+    a, b = Dryden("severe", 3.0, 0.74, DT, seed=9), Dryden("severe", 3.0, 0.74, DT, seed=9)
+    singles = np.array([a.step() for _ in range(300)])
+    blocks = np.vstack([b.block(7), b.block(1), b.block(292)])
+    np.testing.assert_allclose(blocks, singles, rtol=1e-12, atol=1e-15)
+
+
 def test_imu_model_noise_bias_and_latency():
-    from heliquad.sim.imu_model import ImuModel
+    # The sensor as the firmware sees it on the roll rig: the C++ plant adds the residual
+    # bias and the drawn noise, and delays the sample by the DMP's latency.
     from heliquad.sim.params import load_params
+    from heliquad.sim.vehicle_plant import VehiclePlant
 
     p = load_params().imu
-    imu = ImuModel(p, seed=3)
-    samples = [imu.measure([1, 0, 0, 0], [0.1 * k, 0, 0], [0, 0, -9.80665]) for k in range(20000)]
-    gyro = np.array([s[1] for s in samples])
+    plant = VehiclePlant("roll", "roll", DT, seed=3)
+    gyro = []
+    for k in range(20000):
+        plant.vehicle.x[10] = 0.1 * k                      # the true roll rate this frame
+        gyro.append(plant.sensor_sample()[1])
+    gyro = np.array(gyro)
+    sigma = plant.imu.gyro_sigma_rad_s
     # latency: the sample returned at step k is the one measured at k - latency
     assert gyro[5, 0] == pytest.approx(0.1 * (5 - p.dmp_latency_samples) + np.radians(p.gyro_bias_deg_s[0]),
-                                       abs=5 * imu.gyro_sigma_rad_s)
+                                       abs=5 * sigma)
     noise = gyro[:, 1] - np.radians(p.gyro_bias_deg_s[1])
     assert noise.std() == pytest.approx(np.radians(p.gyro_noise_deg_s_rt_hz) * np.sqrt(p.noise_bandwidth_hz), rel=0.05)
-    assert noise.mean() == pytest.approx(0.0, abs=3 * imu.gyro_sigma_rad_s / np.sqrt(len(noise)))
+    assert noise.mean() == pytest.approx(0.0, abs=3 * sigma / np.sqrt(len(noise)))
+
+
+def test_imu_noise_is_the_same_stream_in_blocks_and_frames():
+    from heliquad.sim.params import load_params
+    from heliquad.sim.imu_model import ImuModel
+
+    a, b = ImuModel(load_params().imu, seed=5), ImuModel(load_params().imu, seed=5)
+    np.testing.assert_array_equal(np.vstack([a.noise(1) for _ in range(50)]),
+                                  np.vstack([b.noise(20), b.noise(30)]))

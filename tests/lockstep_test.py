@@ -14,7 +14,6 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.host.errors import InputError
 from heliquad.host.fsf import estimate_fsf
 from heliquad.host.files import read_run_csv
 from heliquad.host.mavlink_dialect import dialect
@@ -71,7 +70,6 @@ def test_rate_loop_holds_a_rate_setpoint():
     # Rate mode (channel 6 high), roll stick at 1510 us: 0.02 of 200 deg/s = 0.0698 rad/s.
     plant = TfPlant("roll", *ROLL, 0.005)
     from heliquad import _firmware
-    from heliquad.sim.sil import _fifo
 
     mixer = _firmware.Mixer()
     with HostFirmware() as fw:
@@ -83,7 +81,7 @@ def test_rate_loop_holds_a_rate_setpoint():
                 rc[4] = 2000                                  # arm
             if frame > 40:
                 rc[2], rc[0] = 1400, 1510                     # hover throttle, roll stick
-            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            reply = link.step(frame * 5000, plant.fifo(kind), kind, rc)
             kind = reply.sensor_kind
             plant.step(mixer.achieved(reply.motor).roll)
         link.close()
@@ -287,7 +285,6 @@ def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, 
 def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
     """The vehicle in free flight at hover throttle, armed, angle mode, ideal IMU (the
     control behaviour itself); roll and pitch angles (deg)."""
-    from heliquad.sim.sil import _fifo
     from heliquad.sim.vehicle import GRAVITY_M_S2
     from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
 
@@ -304,7 +301,7 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
                   1000 if frame < 15 else 2000, 1500, 0, 0]
             if step_at is not None and frame > step_at:
                 rc[0] = roll_stick_us
-            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            reply = link.step(frame * 5000, plant.fifo(kind), kind, rc)
             kind = reply.sensor_kind
             plant.step_motors(reply.motor)
             w, x, y, z = plant.vehicle.x[6:10]
@@ -332,7 +329,6 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
     # turbulence, with the realistic IMU (noise, residual bias, DMP latency). The model applies gusts as drag
     # through the centre of mass and gust rates through rotational damping; rotor blowback
     # (gust-velocity moments) is not modelled yet, which is why the bound is this tight.
-    from heliquad.sim.sil import _fifo
     from heliquad.sim.vehicle import GRAVITY_M_S2
     from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
 
@@ -349,7 +345,7 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
         for frame in range(1, 4001):
             rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
                   1000 if frame < 15 else 2000, 1500, 0, 0]
-            reply = link.step(frame * 5000, _fifo(plant, kind), kind, rc)
+            reply = link.step(frame * 5000, plant.fifo(kind), kind, rc)
             kind = reply.sensor_kind
             plant.step_motors(reply.motor)
             if frame > 200:

@@ -89,10 +89,17 @@ def test_ctrl_c_leaves_a_valid_log_and_manifest(tmp_path):
     import signal
 
     out = tmp_path / "interrupted"
+    # One very slow frequency (0.03 Hz x 54 cycles: 30 min simulated, tens of seconds here),
+    # interrupted once the log is being written.
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
-                             "--sil", "--ideal-sensor", "--out", str(out)],
+                             "--sil", "--ideal-sensor", "--freqs-hz", "0.03", "--cycles", "50",
+                             "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(6)                                    # inside the first, slow yaw frequency
+    tlog = out / "sweep.tlog"
+    deadline = time.monotonic() + 30
+    while not (tlog.exists() and tlog.stat().st_size > 0) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(1.0)                                  # well inside the frequency
     proc.send_signal(signal.SIGINT)
     stdout, _ = proc.communicate(timeout=60)
     assert proc.returncode == 1

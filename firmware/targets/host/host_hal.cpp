@@ -6,6 +6,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <time.h>
 #include <termios.h>
 #include <unistd.h>
 
@@ -53,7 +54,10 @@ void PtySerial::close() {
 }
 
 size_t PtySerial::read(uint8_t* data, size_t n) {
+    // A poll that just found no input saves the loop a system call per step.
+    if (!maybe_input_) return 0;
     const ssize_t r = ::read(master_, data, n);
+    if (r <= 0) maybe_input_ = false;
     return r > 0 ? static_cast<size_t>(r) : 0;
 }
 
@@ -76,10 +80,12 @@ bool PtySerial::flush() {
     return true;
 }
 
-bool PtySerial::wait_readable(int timeout_ms) {
-    pollfd p{master_, POLLIN, 0};
-    const int r = ::poll(&p, 1, timeout_ms);
-    return r > 0 && (p.revents & POLLIN);
+bool PtySerial::wait_readable_us(long timeout_us, PtySerial* also) {
+    pollfd p[2] = {{master_, POLLIN, 0}, {also ? also->master_ : -1, POLLIN, 0}};
+    const timespec t{timeout_us / 1000000, (timeout_us % 1000000) * 1000};
+    const int r = ::ppoll(p, also ? 2 : 1, &t, nullptr);
+    if (also) also->maybe_input_ = r > 0 && (p[1].revents & POLLIN);
+    return r > 0 && (p[0].revents & POLLIN);
 }
 
 bool PtySerial::write_all(const uint8_t* data, size_t n, int timeout_ms) {

@@ -42,8 +42,12 @@ public:
 
     // Push buffered bytes to the pty without blocking. Returns false if the pty failed.
     bool flush();
-    // Block until some input arrives or timeout_ms passes; false on timeout.
-    bool wait_readable(int timeout_ms);
+    size_t buffered() const { return count_; }
+    // Block until input arrives here or timeout_us passes; false on timeout. `also`, if
+    // given, is polled in the same call and told whether it has input (see read()).
+    bool wait_readable_us(long timeout_us, PtySerial* also = nullptr);
+    // False when the last poll found no input (read() then returns 0 without a system call).
+    bool input_pending() const { return maybe_input_; }
     // Write all of data, waiting as needed (the sim link: lockstep, the peer is reading).
     bool write_all(const uint8_t* data, size_t n, int timeout_ms);
 
@@ -54,6 +58,7 @@ public:
 private:
     int master_ = -1, slave_ = -1;
     std::string link_path_, slave_path_, error_;
+    bool maybe_input_ = true;     // false: the last poll found nothing, read() skips the call
     uint8_t buf_[kBufferSize];
     size_t head_ = 0, count_ = 0;
 };

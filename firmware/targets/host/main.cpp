@@ -14,6 +14,7 @@
 // bytes go into the emulated MPU6050, and one FlightController step runs. A repeated frame
 // counter gets the previous reply again without a step; a gap is counted and reported. With
 // no frame for the idle timeout, or on SIGINT/SIGTERM, it exits cleanly (links removed).
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
@@ -67,6 +68,13 @@ Options parse(int argc, char** argv) {
     return o;
 }
 
+// Telemetry is written to its pty in chunks of this size, after a `sync` frame, or when the
+// sim link has been quiet for kTelemetryQuietUs (a full-speed USB CDC device ships its
+// buffer every 1 ms frame).
+constexpr size_t kTelemetryChunk = 4096;
+constexpr long kTelemetryQuietUs = 1000;
+constexpr long kIdlePollUs = 100000;
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -110,16 +118,23 @@ int main(int argc, char** argv) {
     mavlink_message_t rx_msg{}, reply{};
     bool have_last = false;
     uint32_t last_frame = 0, lost = 0, repeated = 0;
-    int idle_ms = 0;
+    using Wall = std::chrono::steady_clock;   // the idle timeout only; never the core's clock
+    Wall::time_point last_input = Wall::now();
     int exit_code = 0;
     uint8_t buf[512], out[MAVLINK_MAX_PACKET_LEN];
     uint16_t out_len = 0;
 
     while (!g_stop) {
-        if (!sim.wait_readable(100)) {
-            idle_ms += 100;
+        // Telemetry ships as a USB CDC device ships it: in chunks, once a chunk is buffered,
+        // after a frame marked `sync` (the simulator pauses to read it), or when the sim link
+        // has been quiet for a moment. Fewer, larger writes keep the lockstep fast.
+        if (telemetry.buffered() >= kTelemetryChunk) telemetry.flush();
+        const long wait_us = telemetry.buffered() ? kTelemetryQuietUs : kIdlePollUs;
+        // Telemetry input (commands) is polled in the same call unless it is already known
+        // to be waiting for the next step.
+        if (!sim.wait_readable_us(wait_us, telemetry.input_pending() ? nullptr : &telemetry)) {
             telemetry.flush();
-            if (idle_ms >= opt.idle_timeout_s * 1000) {
+            if (Wall::now() - last_input >= std::chrono::seconds(opt.idle_timeout_s)) {
                 std::fprintf(stderr, "heliquad-fw-host: no sensor frame for %d s; exiting\n",
                              opt.idle_timeout_s);
                 exit_code = 3;
@@ -127,7 +142,7 @@ int main(int argc, char** argv) {
             }
             continue;
         }
-        idle_ms = 0;
+        last_input = Wall::now();
         const size_t n = sim.read(buf, sizeof(buf));
         for (size_t i = 0; i < n && !g_stop; ++i) {
             mavlink_message_t msg;
@@ -169,12 +184,12 @@ int main(int argc, char** argv) {
                 cfg.system_id, cfg.component_id, &tx_status, &reply, f.time_us, f.frame,
                 motors.values(), fc.armed() ? 1 : 0, static_cast<uint8_t>(fc.mode()), kind);
             out_len = mavlink_msg_to_send_buffer(out, &reply);
-            telemetry.flush();            // the step's telemetry goes out before its reply
             if (!sim.write_all(out, out_len, 5000)) {
                 std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
                 g_stop = 1;
                 exit_code = 4;
             }
+            if (f.sync) telemetry.flush();   // the simulator reads the telemetry now
         }
     }
     telemetry.flush();

@@ -1,0 +1,38 @@
+// The simulator's per-frame work in C++ (docs/architecture.md, "sim/native"): what a plant
+// offers the lockstep engine. Python (sim/*.py) builds and configures every plant, draws the
+// random numbers and states the truth; this code only steps it, frame after frame.
+//
+// Units and frames as in docs/units-and-frames.md: body FRD, NED, quaternion w x y z (body
+// to NED), rates rad/s, specific force m/s^2, motor commands thrust fractions 0..1.
+#pragma once
+
+#include <array>
+#include <cstdint>
+
+namespace hqsim {
+
+constexpr int kMotors = 5;          // central first, then arms front, right, back, left
+constexpr double kGravity = 9.80665;
+
+// What the MPU6050 reports for one sample (before quantisation), body FRD.
+struct SensorSample {
+    std::array<double, 4> q{1.0, 0.0, 0.0, 0.0};
+    std::array<double, 3> gyro_rad_s{0.0, 0.0, 0.0};
+    std::array<double, 3> accel_m_s2{0.0, 0.0, 0.0};
+};
+
+// A plant the engine can drive. Per frame, in this order: sensor(noise) gives the sample the
+// firmware reads at the start of the period, then step(motor, gust) holds the firmware's
+// reply for one period. `noise` (6 values: gyro rad/s, accel m/s^2, already scaled) and
+// `gust` (6 values: gust velocity m/s and gust rates rad/s, body axes) may be null.
+class RigPlant {
+public:
+    virtual ~RigPlant() = default;
+    virtual SensorSample sensor(const double* noise) = 0;
+    virtual void step(const float motor[kMotors], const double* gust) = 0;
+};
+
+// The accelerometer's reading for a body at rest at attitude q: gravity only, body FRD.
+SensorSample at_rest(const std::array<double, 4>& q, const std::array<double, 3>& rates);
+
+}  // namespace hqsim

@@ -1,0 +1,113 @@
+"""The simulator's C++ core (sim/native, ``heliquad._simcore``): FIFO packets the firmware's
+driver reads back, the batch engine against frame-by-frame stepping, and its failures."""
+
+import math
+import os
+import signal
+import struct
+
+import numpy as np
+import pytest
+
+from heliquad import _firmware as fw
+from heliquad import _simcore
+from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
+from heliquad.sim.sil import SilConfig, SilSession, _rc
+from heliquad.sim.vehicle_plant import VehiclePlant
+
+# A stand-in DMP image, so the firmware runs the DMP path (the driver treats it as opaque).
+FAKE_IMAGE = bytes((i * 7 + 3) & 0xFF for i in range(1929))
+
+
+def test_dmp_packet_reads_back_through_the_firmware_driver():
+    # 30 deg of roll, body rates and a specific force, all FRD: the encoder converts to the
+    # chip frame, the driver converts back; what survives is the chip's quantisation.
+    half = math.radians(30) / 2
+    q = (math.cos(half), math.sin(half), 0.0, 0.0)
+    gyro, accel = (0.3, -0.2, 0.1), (0.5, -4.9, -8.5)
+    s = fw.Mpu6050.parse_dmp_packet(_simcore.dmp_packet(q, gyro, accel))
+    assert s is not None and s.has_attitude
+    assert s.attitude.to_list() == pytest.approx(q, abs=1e-7)
+    assert s.gyro_rad_s.to_list() == pytest.approx(gyro, abs=math.radians(1 / 16.4))
+    assert s.accel_m_s2.to_list() == pytest.approx(accel, abs=9.80665 / 16384)
+
+
+def test_raw_packet_has_the_chips_layout_and_saturates():
+    # accel x y z then gyro x y z, int16 big-endian, chip frame (y and z flipped from FRD)
+    packet = _simcore.raw_packet((math.radians(100), 0.0, 0.0), (0.0, 0.0, -9.80665))
+    assert struct.unpack(">3h3h", packet) == (0, 0, 16384, 1640, 0, 0)
+    huge = _simcore.raw_packet((100.0, -100.0, 0.0), (0.0, 0.0, 0.0))
+    assert struct.unpack(">3h3h", huge)[3:5] == (32767, 32767)    # +/-2000 deg/s full scale
+
+
+def _vehicle_plant():
+    return VehiclePlant("roll", "free", 0.005, turbulence="moderate", seed=7)
+
+
+def test_a_batch_in_the_engine_equals_the_same_frames_stepped_one_by_one(tmp_path):
+    # Free flight with turbulence and the noisy IMU: the engine, fed the same random inputs
+    # in one block, reaches exactly the state that frame-by-frame stepping reaches.
+    image = tmp_path / "dmp.bin"
+    image.write_bytes(FAKE_IMAGE)
+    frames = 300
+    cfg = SilConfig(plant="vehicle", rig="free", collective=0.47)
+    rc = [_rc(f, cfg.collective) for f in range(1, frames + 1)]
+
+    one = _vehicle_plant()
+    with HostFirmware(dmp_image=str(image)) as fw_host:
+        link, kind = SimLink(fw_host), 0
+        for f in range(1, frames + 1):
+            reply = link.step(f * 5000, one.fifo(kind), kind, rc[f - 1])
+            one.step_motors(reply.motor)
+            kind = reply.sensor_kind
+        link.close()
+
+    batch = _vehicle_plant()
+    with HostFirmware(dmp_image=str(image)) as fw_host:
+        link = SimLink(fw_host)
+        engine = _simcore.RigEngine(link.port, batch.core)
+        noise, gust = batch.frame_inputs(frames)
+        engine.start(1, frames, 5000, 0, np.array(rc, dtype=np.uint16), noise, gust)
+        result = engine.wait()
+        link.close()
+    assert result.status == _simcore.LinkStatus.OK and result.frames_done == frames
+    assert result.last.armed
+    np.testing.assert_array_equal(batch.vehicle.x, one.vehicle.x)
+    assert np.max(np.abs(one.vehicle.x[10:13])) > 1e-3           # it did move
+
+
+def test_a_firmware_killed_during_a_batch_is_a_clear_error(tmp_path):
+    with SilSession(SilConfig(), str(tmp_path / "k.tlog")) as session:
+        session.advance(50)
+        os.kill(session.fw.proc.pid, signal.SIGKILL)
+        with pytest.raises(FirmwareError, match="died at frame 51"):
+            session.advance(50)
+        assert session.frame == 50
+
+
+def test_a_stopped_firmware_times_out_during_a_batch(tmp_path):
+    with SilSession(SilConfig(), str(tmp_path / "s.tlog")) as session:
+        session.advance(50)
+        os.kill(session.fw.proc.pid, signal.SIGSTOP)
+        try:
+            with pytest.raises(FirmwareError, match="did not answer within 2 s"):
+                session.advance(50)
+        finally:
+            os.kill(session.fw.proc.pid, signal.SIGCONT)
+
+
+def test_engine_checks_its_inputs(tmp_path):
+    with SilSession(SilConfig(), str(tmp_path / "c.tlog")) as session:
+        engine = session.engine
+        with pytest.raises(ValueError, match="rc must be n x 8"):
+            engine.start(1, 10, 5000, 0, np.zeros((9, 8), dtype=np.uint16), None, None)
+        with pytest.raises(ValueError, match="noise must have 10 x 6"):
+            engine.start(1, 10, 5000, 0, np.zeros((10, 8), dtype=np.uint16),
+                         np.zeros((10, 5)), None)
+
+
+def test_vehicle_model_refuses_impossible_parameters():
+    c = _simcore.VehicleConfig()
+    c.inertia_kg_m2 = [0.01, 0.01, 0.0]
+    with pytest.raises(ValueError, match="inertia"):
+        _simcore.VehicleModel(c)
