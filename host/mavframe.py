@@ -47,9 +47,11 @@ class Codec:
     def __init__(self, mav_module, system_id: int = 255, component_id: int = 190):
         self.classes = dict(mav_module.mavlink_map)
         self.extras = {msgid: cls.crc_extra for msgid, cls in self.classes.items()}
+        self.extra_bytes = {msgid: bytes((extra,)) for msgid, extra in self.extras.items()}
         self.system_id, self.component_id = system_id, component_id
         self.seq = 0
         self._plans = {}
+        self._decoders = {}
 
     def _plan(self, msgid: int):
         """(class, [(field name, 'char' | 'array' | 'scalar', length)]) in wire order."""
@@ -85,25 +87,40 @@ class Codec:
 
     def decode(self, msgid: int, payload) -> Message | None:
         """The message in ``payload`` (zero-extended to its full length), or None if unknown."""
-        if msgid not in self.classes:
-            return None
+        decoder = self._decoders.get(msgid)
+        if decoder is None:
+            if msgid not in self.classes:
+                return None
+            decoder = self._decoders[msgid] = self._decoder(msgid)
+        return decoder(payload)
+
+    def _decoder(self, msgid: int):
+        """A function decoding one message type (its layout worked out once)."""
         cls, plan = self._plan(msgid)
-        size = cls.unpacker.size
-        data = bytes(payload[:size]).ljust(size, b"\0")
-        values = cls.unpacker.unpack(data)
-        fields = {}
-        i = 0
-        for name, kind, n in plan:
-            if kind == "scalar":
-                fields[name] = values[i]
-                i += 1
-            elif kind == "array":
-                fields[name] = list(values[i:i + n])
-                i += n
-            else:
-                fields[name] = values[i].split(b"\0", 1)[0].decode(errors="replace")
-                i += 1
-        return Message(cls.msgname, fields)
+        unpack, size, name = cls.unpacker.unpack, cls.unpacker.size, cls.msgname
+        layout, i = [], 0                      # (field, first value, last value or None)
+        for field, kind, n in plan:
+            layout.append((field, kind, i, i + n if kind == "array" else None))
+            i += n if kind == "array" else 1
+        simple = all(kind == "scalar" for _, kind, _, _ in layout)
+        names = tuple(field for field, _, _, _ in layout)
+
+        def decode(payload):
+            data = bytes(payload)
+            values = unpack(data if len(data) == size else data[:size].ljust(size, b"\0"))
+            if simple:
+                return Message(name, dict(zip(names, values)))
+            fields = {}
+            for field, kind, first, last in layout:
+                if kind == "scalar":
+                    fields[field] = values[first]
+                elif kind == "array":
+                    fields[field] = list(values[first:last])
+                else:
+                    fields[field] = values[first].split(b"\0", 1)[0].decode(errors="replace")
+            return Message(name, fields)
+
+        return decode
 
 
 class Framer:
@@ -125,6 +142,8 @@ class Framer:
         out = []
         pos = 0
         n = len(buf)
+        extras = self.codec.extra_bytes
+        view = memoryview(buf)
         while True:
             start = buf.find(STX_V2, pos)
             if start < 0:
@@ -143,15 +162,16 @@ class Framer:
                 pos = start
                 break
             msgid = buf[start + 7] | (buf[start + 8] << 8) | (buf[start + 9] << 16)
-            extra = self.codec.extras.get(msgid)
+            extra = extras.get(msgid)
             end_payload = start + HEADER_LEN + length
-            if extra is None or _mcrf4xx(bytes(buf[start + 1:end_payload]) + bytes((extra,))) != (
+            if extra is None or _mcrf4xx(extra, initial=_mcrf4xx(view[start + 1:end_payload])) != (
                     buf[end_payload] | (buf[end_payload + 1] << 8)):
                 self.skipped += 1
                 pos = start + 1                                   # not a packet: resync
                 continue
-            packet = bytes(buf[start:start + total])
+            packet = bytes(view[start:start + total])
             out.append((msgid, packet, packet[HEADER_LEN:HEADER_LEN + length]))
             pos = start + total
+        view.release()                     # a bytearray with a live view cannot shrink
         del buf[:pos]
         return out

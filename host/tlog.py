@@ -12,6 +12,8 @@ import warnings
 
 __all__ = ["TlogWriter", "read_tlog"]
 
+_STAMP = struct.Struct(">Q")
+
 
 class TlogWriter:
     """Append MAVLink packets with timestamps to a .tlog file."""
@@ -22,7 +24,8 @@ class TlogWriter:
         self.messages = 0
 
     def write(self, timestamp_us: int, packet: bytes) -> None:
-        self._fh.write(struct.pack(">Q", int(timestamp_us)) + bytes(packet))
+        self._fh.write(_STAMP.pack(int(timestamp_us)))
+        self._fh.write(packet)
         self.messages += 1
 
     def flush(self) -> None:

@@ -112,34 +112,38 @@ def rig_step(link, plant, frame, time_us, kind, collective):
 
 
 class _TelemetryLog:
-    """Reads the telemetry link in batches and logs every packet with the simulated time of
-    its loop: each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped
-    with the time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Repeatable,
-    without a read per frame."""
+    """Reads the telemetry link and logs every packet with the simulated time of its loop:
+    each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped with the
+    time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Repeatable, without a
+    read per frame. Framing and logging are C++ (``_simcore.TelemetryTap``); the messages of
+    interest are decoded here with the host tool's codec."""
 
-    def __init__(self, tel, tlog):
-        self.tel, self.tlog = tel, tlog
+    def __init__(self, tel, tlog_path: str):
+        from heliquad import _simcore
+
+        self.tel = tel
         self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
-        self.sysid_id = self.ids["HQ_SYSID_SAMPLE"]
-        self.pending = []
-        self.last_time_us = None
+        self._file = open(tlog_path, "wb")
+        self.tap = _simcore.TelemetryTap(tel.serial.fileno(), self._file.fileno(),
+                                         list(self.ids.values()))
+
+    @property
+    def last_time_us(self):
+        t = self.tap.last_time_us
+        return None if t < 0 else t
 
     def read(self) -> list:
         """Decoded messages of interest that arrived; every packet logged once its loop
         is known."""
-        out = []
-        for msgid, packet, payload in self.tel.read_packets():
-            self.pending.append(packet)
-            if msgid in self.ids.values():
-                m = self.codec.decode(msgid, payload)
-                out.append(m)
-                if msgid == self.sysid_id:
-                    for p in self.pending:
-                        self.tlog.write(m.time_us, p)
-                    self.pending.clear()
-                    self.last_time_us = m.time_us
+        decode = self.codec.decode
+        out = [decode(msgid, payload) for msgid, payload in self.tap.read()]
+        if self.tap.write_failed:
+            raise OSError(f"cannot write {self._file.name}")
         return out
+
+    def close(self) -> None:
+        self._file.close()
 
     def read_until(self, time_us: int) -> list:
         """Read until the loop at ``time_us`` has all its telemetry."""
@@ -169,7 +173,6 @@ class SilSession:
         from heliquad import _firmware, _simcore
         from heliquad.host.link import TelemetryLink
         from heliquad.host.mavlink_dialect import dialect
-        from heliquad.host.tlog import TlogWriter
 
         self.cfg = cfg
         self.dt_us = int(round(1e6 / cfg.loop_hz))
@@ -177,13 +180,12 @@ class SilSession:
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
         self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
         try:
-            self.tlog = TlogWriter(tlog_path)
             self.link = SimLink(self.fw, dialect())
             self.tel = TelemetryLink(self.fw.telemetry_path)
+            self.telemetry = _TelemetryLog(self.tel, tlog_path)
         except BaseException:
             self.fw.stop()
             raise
-        self.telemetry = _TelemetryLog(self.tel, self.tlog)
         self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
         self.heartbeat_frames = max(1, int(round(cfg.loop_hz)))   # the tool's 1 Hz heartbeat
         self.frame, self.kind, self.reply = 0, 0, None
@@ -193,29 +195,41 @@ class SilSession:
     def time_us(self) -> int:
         return self.frame * self.dt_us
 
-    def advance(self, frames: int = TELEMETRY_BATCH) -> list:
-        """Step ``frames`` lockstep frames; the messages of interest from their telemetry."""
+    def advance(self, frames: int = TELEMETRY_BATCH, handle=None) -> list:
+        """Step ``frames`` lockstep frames; the messages of interest from their telemetry.
+
+        With ``handle``, each message is passed to it as it arrives, while the engine runs
+        the next frames (and the list returned is empty): work done there is off the
+        lockstep's critical path. It must not write to the telemetry link."""
         end, out = self.frame + frames, []
+
+        def collect(messages):
+            if handle is None:
+                out.extend(messages)
+                return
+            for m in messages:
+                handle(m)
+
         while self.frame < end:
             first = self.frame + 1
             if first % self.heartbeat_frames == 0:
                 self.tel.heartbeat()
             next_heartbeat = (first // self.heartbeat_frames + 1) * self.heartbeat_frames
-            out += self._run(first, min(end, next_heartbeat - 1) - first + 1)
-        return out + self.telemetry.read_until(self.time_us)
+            self._run(first, min(end, next_heartbeat - 1) - first + 1, collect)
+        collect(self.telemetry.read_until(self.time_us))
+        return out
 
-    def _run(self, first: int, n: int) -> list:
+    def _run(self, first: int, n: int, collect) -> None:
         """Frames first .. first + n - 1 in the engine; telemetry read while they run."""
         rc = np.array([_rc(f, self.cfg.collective) for f in range(first, first + n)],
                       dtype=np.uint16)
         noise, gust = self.plant.frame_inputs(n)
         self.engine.start(first, n, self.dt_us, self.kind, rc, noise, gust)
-        out = []
         try:
             # Read at a fixed pace rather than on every arrival: one wake-up per few frames
             # leaves the cores to the engine and the firmware.
             while not self.engine.wait_finished(ENGINE_POLL_S):
-                out += self.telemetry.read()
+                collect(self.telemetry.read())
         finally:
             if not self.engine.finished():           # Ctrl-C or an error here: stop it
                 self.engine.cancel()
@@ -225,7 +239,6 @@ class SilSession:
             self.reply = actuators(result.last)
             self.kind = self.reply.sensor_kind
         self.link.check(result.status, result.failed_frame, result.last)
-        return out
 
     def hover(self) -> None:
         """Boot, arm and hover for the settling time."""
@@ -236,7 +249,7 @@ class SilSession:
             self.tel.close()
             self.link.close()
         finally:
-            self.tlog.close()
+            self.telemetry.close()
             self.fw.stop()
 
     def __enter__(self):
@@ -246,14 +259,50 @@ class SilSession:
         self.close()
 
 
+class _Tally:
+    """What one experiment keeps of the telemetry, message by message (called while the
+    engine runs the next frames, see :meth:`SilSession.advance`)."""
+
+    def __init__(self, cfg: SilConfig, mixer, dt_us: int, progress):
+        self.axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
+        self.u_name, self.y_name = INPUT_OUTPUT[cfg.inject]
+        self.mixer, self.dt_us, self.progress = mixer, dt_us, progress
+        self.rows, self.saturated, self.gaps = [], 0, 0
+        self.last_seq, self.exc_seen, self.exc_done_frame, self.status = None, False, None, None
+
+    def __call__(self, m) -> None:
+        t = m.get_type()
+        if t == "HQ_SYSID_SAMPLE":
+            self._sample(m)
+        elif t == "HQ_EXCITATION_STATUS" and self.status is None:
+            self.status = m
+            if not m.accepted:
+                raise FirmwareError("the firmware refused the excitation (frequency above a "
+                                    "quarter of the loop rate, no cycles, or angle injection "
+                                    "on yaw)")
+        elif t == "STATUSTEXT" and m.severity <= 4:
+            self.progress(f"firmware: {m.text}")
+
+    def _sample(self, m) -> None:
+        if self.last_seq is not None and m.seq != self.last_seq + 1:
+            self.gaps += m.seq - self.last_seq - 1
+        self.last_seq = m.seq
+        if m.exc_state:
+            self.exc_seen = True
+        elif self.exc_seen and self.exc_done_frame is None:
+            self.exc_done_frame = m.time_us // self.dt_us
+        if m.exc_state == 2:
+            self.rows.append((m.time_us * 1e-6, getattr(m, self.u_name), getattr(m, self.y_name)))
+            got = self.mixer.achieved(m.motor)
+            if abs((got.roll, got.pitch, got.yaw)[self.axis_index] - m.axis_cmd) > 1e-3:
+                self.saturated += 1
+
+
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``."""
-    axis_index = ("roll", "pitch", "yaw").index(cfg.axis)
-    u_name, y_name = INPUT_OUTPUT[cfg.inject]
     t0 = time.monotonic()
-    rows, saturated, gaps = [], 0, 0
-    last_seq, exc_seen, exc_done_frame, status = None, False, None, None
     with SilSession(cfg, out_base + ".tlog") as session:
+        tally = _Tally(cfg, session.mixer, session.dt_us, progress)
         loop_t0 = time.monotonic()                 # the lockstep loop, hover included
         session.hover()
         start_frame = session.frame
@@ -263,31 +312,9 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                                      cfg.cycles, cfg.fade_cycles)
         next_report = 0.1
         while True:
-            for m in session.advance():
-                t = m.get_type()
-                if t == "HQ_EXCITATION_STATUS" and status is None:
-                    status = m
-                    if not m.accepted:
-                        raise FirmwareError("the firmware refused the excitation (frequency "
-                                            "above a quarter of the loop rate, no cycles, "
-                                            "or angle injection on yaw)")
-                elif t == "HQ_SYSID_SAMPLE":
-                    if last_seq is not None and m.seq != last_seq + 1:
-                        gaps += m.seq - last_seq - 1
-                    last_seq = m.seq
-                    if m.exc_state:
-                        exc_seen = True
-                    elif exc_seen and exc_done_frame is None:
-                        exc_done_frame = m.time_us // session.dt_us
-                    if m.exc_state == 2:
-                        rows.append((m.time_us * 1e-6, getattr(m, u_name), getattr(m, y_name)))
-                        got = session.mixer.achieved(m.motor)
-                        if abs((got.roll, got.pitch, got.yaw)[axis_index] - m.axis_cmd) > 1e-3:
-                            saturated += 1
-                elif t == "STATUSTEXT" and m.severity <= 4:
-                    progress(f"firmware: {m.text}")
+            session.advance(handle=tally)
             frame = session.frame
-            if exc_done_frame is not None and frame >= exc_done_frame + TAIL_FRAMES:
+            if tally.exc_done_frame is not None and frame >= tally.exc_done_frame + TAIL_FRAMES:
                 break
             if frame >= max_frames:
                 raise FirmwareError(f"the excitation did not finish within {frame} frames")
@@ -297,11 +324,12 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
         loop_s = time.monotonic() - loop_t0
         plant, imu_mode = session.plant, session.fw.imu_mode
     csv_path = out_base + ".csv"
-    np.savetxt(csv_path, np.array(rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
+    np.savetxt(csv_path, np.array(tally.rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
                comments="", fmt="%.9g")
+    status = tally.status
     freq = float(status.freq_hz) if status is not None else float("nan")
-    return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(rows),
-                     frames=frame, seq_gaps=gaps, actual_freq_hz=freq,
-                     saturated_samples=saturated, imu_mode=imu_mode,
+    return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(tally.rows),
+                     frames=frame, seq_gaps=tally.gaps, actual_freq_hz=freq,
+                     saturated_samples=tally.saturated, imu_mode=imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))

@@ -111,3 +111,46 @@ def test_vehicle_model_refuses_impossible_parameters():
     c.inertia_kg_m2 = [0.01, 0.01, 0.0]
     with pytest.raises(ValueError, match="inertia"):
         _simcore.VehicleModel(c)
+
+
+def _sysid(codec, mav, time_us, seq):
+    return codec.encode(mav.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE, {
+        "time_us": time_us, "seq": seq, "axis": 0, "injection": 2, "exc_state": 2,
+        "excitation": 0.1, "angle_sp": 0.0, "rate_sp": 0.0, "rate": 0.2, "angle": 0.0,
+        "axis_cmd": 0.1, "motor": [0.4] * 5})
+
+
+def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
+    # Two loops' telemetry (ATTITUDE, then the loop's HQ_SYSID_SAMPLE), line noise in
+    # between, and the start of a third loop: each packet is logged stamped with the time of
+    # the next HQ_SYSID_SAMPLE, the noise is skipped, the third loop waits for its sample.
+    from heliquad.host.mavframe import Codec
+    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.host.tlog import read_tlog
+
+    mav = dialect()
+    codec = Codec(mav, system_id=1, component_id=1)
+    att = [codec.encode(mav.MAVLINK_MSG_ID_ATTITUDE, {
+        "time_boot_ms": k, "roll": 0.1 * k, "pitch": 0.0, "yaw": 0.0, "rollspeed": 0.0,
+        "pitchspeed": 0.0, "yawspeed": 0.0}) for k in range(3)]
+    loops = [att[0], _sysid(codec, mav, 5000, 1), att[1], _sysid(codec, mav, 10000, 2)]
+    stream = b"\x00\xfd\x03junk" + b"".join(loops[:2]) + b"\xfd\x02\x00" + b"".join(loops[2:]) + att[2]
+    r, w = os.pipe()
+    os.set_blocking(r, False)
+    path = tmp_path / "tap.tlog"
+    with open(path, "wb") as fh:
+        tap = _simcore.TelemetryTap(r, fh.fileno(), [mav.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE])
+        os.write(w, stream[:37])                 # arrives in two pieces, split mid-packet
+        first = tap.read()
+        os.write(w, stream[37:])
+        got = first + tap.read()
+    os.close(r)
+    os.close(w)
+    assert [msgid for msgid, _ in got] == [mav.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE] * 2
+    assert [codec.decode(msgid, p).seq for msgid, p in got] == [1, 2]
+    assert tap.last_time_us == 10000 and tap.packets == 5
+    stamp = struct.Struct(">Q").pack
+    assert path.read_bytes() == b"".join(
+        stamp(t) + p for t, p in zip((5000, 5000, 10000, 10000), loops))
+    assert [m.get_type() for _, m in read_tlog(str(path), mav)] == [
+        "ATTITUDE", "HQ_SYSID_SAMPLE", "ATTITUDE", "HQ_SYSID_SAMPLE"]

@@ -13,6 +13,7 @@
 #include "fifo_packets.hpp"
 #include "rig_engine.hpp"
 #include "sim_link.hpp"
+#include "telemetry_tap.hpp"
 #include "tf_axis.hpp"
 #include "vehicle_model.hpp"
 
@@ -206,6 +207,27 @@ PYBIND11_MODULE(_simcore, m) {
         .def_readonly("frames_done", &BatchResult::frames_done)
         .def_readonly("failed_frame", &BatchResult::failed_frame)
         .def_readonly("last", &BatchResult::last);
+
+    py::class_<TelemetryTap>(m, "TelemetryTap")
+        .def(py::init<int, int, std::vector<uint32_t>>(), py::arg("tel_fd"), py::arg("tlog_fd"),
+             py::arg("wanted"))
+        .def("read", [](TelemetryTap& t) {
+            std::vector<TappedMessage> got;
+            {
+                py::gil_scoped_release release;
+                got = t.read();
+            }
+            py::list out;
+            for (const auto& m : got) {
+                out.append(py::make_tuple(m.msgid, py::bytes(reinterpret_cast<const char*>(
+                                                                 m.payload.data()),
+                                                             m.payload.size())));
+            }
+            return out;
+        }, "Read, frame and log what has arrived; [(msgid, payload)] of the wanted messages.")
+        .def_property_readonly("last_time_us", &TelemetryTap::last_time_us)
+        .def_property_readonly("packets", &TelemetryTap::packets)
+        .def_property_readonly("write_failed", &TelemetryTap::write_failed);
 
     py::class_<RigEngine>(m, "RigEngine")
         .def(py::init<SimLinkPort&, RigPlant&>(), py::arg("port"), py::arg("plant"),

@@ -71,7 +71,7 @@ Options parse(int argc, char** argv) {
 // Telemetry is written to its pty in chunks of this size, after a `sync` frame, or when the
 // sim link has been quiet for kTelemetryQuietUs (a full-speed USB CDC device ships its
 // buffer every 1 ms frame).
-constexpr size_t kTelemetryChunk = 4096;
+constexpr size_t kTelemetryChunk = 1024;
 constexpr long kTelemetryQuietUs = 1000;
 constexpr long kIdlePollUs = 100000;
 

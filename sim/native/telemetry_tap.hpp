@@ -1,0 +1,50 @@
+// The simulator's logger of the firmware's telemetry link (sim/sil.py, _TelemetryLog): reads
+// what has arrived, frames the MAVLink 2 packets (CRC checked with the dialect's CRC extras),
+// writes every packet to the .tlog stamped with simulated time, and hands the messages a
+// tool asked for back to Python, which decodes them with the host tool's codec.
+//
+// Stamping: each loop's telemetry ends with its HQ_SYSID_SAMPLE (docs/link-contract.md), so a
+// packet gets the time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Packets
+// after the last one wait for the next.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "heliquad/mavlink.h"
+
+namespace hqsim {
+
+struct TappedMessage {
+    uint32_t msgid = 0;
+    std::vector<uint8_t> payload;      // as received (MAVLink 2 trims trailing zeros)
+};
+
+class TelemetryTap {
+public:
+    // tel_fd: the telemetry pty (non-blocking); tlog_fd: the .tlog file, open for writing.
+    TelemetryTap(int tel_fd, int tlog_fd, std::vector<uint32_t> wanted);
+
+    // Everything that has arrived, logged; the wanted messages among it. Never blocks.
+    std::vector<TappedMessage> read();
+    int64_t last_time_us() const { return last_time_us_; }   // -1 before the first sample
+    uint64_t packets() const { return packets_; }
+    bool write_failed() const { return write_failed_; }
+
+private:
+    void accept(uint32_t msgid, const uint8_t* packet, size_t total,
+                std::vector<TappedMessage>* out);
+    void flush_log();
+
+    int tel_fd_, tlog_fd_;
+    std::vector<uint32_t> wanted_;
+    std::vector<uint8_t> rx_;          // bytes read, not yet framed
+    std::vector<uint8_t> pending_;     // packets whose loop is not known yet
+    std::vector<size_t> pending_lengths_;
+    std::vector<uint8_t> log_;         // stamped packets not yet written
+    int64_t last_time_us_ = -1;
+    uint64_t packets_ = 0;
+    bool write_failed_ = false;
+};
+
+}  // namespace hqsim
