@@ -424,7 +424,9 @@ def _print_validation(r) -> None:
         print(f"  {name:5s} loop: gain margin {gm}, phase margin {pm} at {wc}; closed loop "
               f"{'stable' if lp['closed_loop_stable'] else 'UNSTABLE'}")
     if not r["stable"]:
-        print("  the cascade is unstable with these gains: no time responses")
+        from .validate import instability_text
+
+        print(f"  {instability_text(r)}; no time responses")
         return
     st, sn = r["step"], r["sine"]
     print(f"  step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "

@@ -123,7 +123,12 @@ def _axis_section(folder):
                          + (f" {tb['level']} turbulence: rate RMS {tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
                             f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
         else:
-            flags.append(f"{axis}: the cascade is unstable with these gains")
+            from .validate import instability_text
+
+            text = instability_text(validation) if "instability" in validation else \
+                "the cascade is unstable with these gains"
+            parts.append(f"<p>{html.escape(text[0].upper() + text[1:])}.</p>")
+            flags.append(f"{axis}: {text}")
         parts.append(_img(os.path.join(folder, "validation.png"), f"{axis} validation"))
     return "".join(parts), flags
 

@@ -7,7 +7,8 @@ model ``G`` (rate in, rate out), and for roll and pitch an outer PD angle loop
 rate). Yaw is rate-only. N = 10, as the firmware's derivative filter. A model's delay enters
 as a 3rd-order Pade approximant.
 
-Reported: gain and phase margins and crossovers of each loop, closed-loop stability, the
+Reported: gain and phase margins and crossovers of each loop, closed-loop stability (and,
+when unstable, how far above the identified band the unstable poles lie), the
 step response (rise time 10-90 %, overshoot, 2 % settling), sine tracking (0.5 Hz), and
 disturbance rejection under Dryden turbulence: the gust rate of the axis (sim/dryden.py)
 entering at the model's input, with the closed loop's rate and angle RMS against the gust's.
@@ -27,7 +28,7 @@ from . import paper
 from .errors import InputError
 
 __all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation",
-           "save_validation"]
+           "save_validation", "instability_text"]
 
 DERIVATIVE_FILTER_N = 10.0
 PADE_ORDER = 3
@@ -36,6 +37,8 @@ SINE_FREQ_HZ = 0.5
 STEP_ANGLE_DEG = 10.0
 STEP_RATE_DEG_S = 30.0
 DURATION_S = 30.0
+#: An instability this many times above the identified band's top is flagged as outside it.
+OUT_OF_BAND_FACTOR = 3.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,11 +96,35 @@ def build_loops(num, den, delay_s, axis, gains: Gains):
 def _margins(L, T):
     gm, pm, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
     poles = control.poles(T)
+    unstable = poles[np.real(poles) >= 0]
     return {"gain_margin_db": None if not np.isfinite(gm) else float(20 * math.log10(gm)),
             "phase_margin_deg": None if not np.isfinite(pm) else float(pm),
             "gain_crossover_rad_s": None if not np.isfinite(wcp) else float(wcp),
             "phase_crossover_rad_s": None if not np.isfinite(wcg) else float(wcg),
-            "closed_loop_stable": bool(np.all(np.real(poles) < 0))}
+            "closed_loop_stable": bool(unstable.size == 0),
+            "unstable_pole_rad_s": float(np.max(np.abs(unstable))) if unstable.size else None}
+
+
+def _instability(report, axis):
+    """Where the cascade goes unstable, against the band the model was identified over
+    (SPEC.md Table 1): far above it, the model is extrapolated and says little."""
+    freq = max(lp["unstable_pole_rad_s"] for lp in report["loops"].values()
+               if lp["unstable_pole_rad_s"] is not None)
+    top = 2 * math.pi * paper.BANDS_HZ[axis][1]
+    return {"pole_rad_s": freq, "band_top_rad_s": top,
+            "outside_band": bool(freq > OUT_OF_BAND_FACTOR * top)}
+
+
+def instability_text(report) -> str:
+    """One line on where an unstable cascade goes unstable and what that means."""
+    inst = report["instability"]
+    where = (f"closed-loop poles at {inst['pole_rad_s']:.3g} rad/s, "
+             f"{inst['pole_rad_s'] / inst['band_top_rad_s']:.2g}x the identified band's top "
+             f"({inst['band_top_rad_s']:.3g} rad/s)")
+    if inst["outside_band"]:
+        return (f"the cascade is unstable with these gains: {where}, where the model has no data; "
+                "check with a model that rolls off there, or on the rig")
+    return f"the cascade is unstable with these gains: {where}, inside what was identified"
 
 
 def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0):
@@ -116,6 +143,7 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
     stable = all(l["closed_loop_stable"] for l in report["loops"].values())
     report["stable"] = stable
     if not stable:
+        report["instability"] = _instability(report, axis)
         return report, traces
     size = STEP_ANGLE_DEG if outer else STEP_RATE_DEG_S
     step = control.forced_response(T, t, np.full(t.size, size)).outputs
