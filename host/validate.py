@@ -177,7 +177,7 @@ def _turbulence(loops, axis, outer, t, level, seed):
 
     tp = load_params().turbulence
     d = Dryden(level, tp.altitude_m, tp.span_m, DT_S, seed)
-    gust = np.degrees(np.array([d.step()[3 + ("roll", "pitch", "yaw").index(axis)] for _ in t]))
+    gust = np.degrees(d.block(t.size)[:, 3 + ("roll", "pitch", "yaw").index(axis)])
     s = control.tf("s")
     G, C_r = loops["G"], loops["C_r"]
     outer_gain = (1 + loops["C_a"] / s) if outer else 1

@@ -27,14 +27,13 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=print) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
-    from heliquad.host.mavlink_dialect import dialect
 
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     frames, late = 0, 0
     fw = HostFirmware(loop_hz, dmp_image, telemetry_path=os.path.abspath(telemetry_path))
     try:
-        link = SimLink(fw, dialect())
+        link = SimLink(fw)
         ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")
         kind = 0
         t0 = time.monotonic()

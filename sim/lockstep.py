@@ -20,6 +20,9 @@ import time
 
 import serial
 
+from heliquad import _simcore
+from heliquad._simcore import LinkStatus
+
 __all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "actuators", "find_firmware"]
 
 #: How long the firmware may take to create its ptys and print "ready".
@@ -156,9 +159,7 @@ class SimLink:
     sim/native/sim_link.cpp), shared with the batch engine of :class:`heliquad.sim.sil.SilSession`.
     """
 
-    def __init__(self, firmware: HostFirmware, mav_module=None):
-        from heliquad import _simcore
-
+    def __init__(self, firmware: HostFirmware):
         self.firmware = firmware
         self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=REPLY_TIMEOUT_S)
         self.port = _simcore.SimLinkPort(self.serial.fileno(), int(REPLY_TIMEOUT_S * 1000))
@@ -181,8 +182,6 @@ class SimLink:
 
     def check(self, status, frame: int, reply=None, errno: int = 0) -> None:
         """Raise the FirmwareError that a link status other than OK means."""
-        from heliquad._simcore import LinkStatus
-
         if status == LinkStatus.OK:
             return
         if status == LinkStatus.WRONG_FRAME:

@@ -172,7 +172,6 @@ class SilSession:
     def __init__(self, cfg: SilConfig, tlog_path: str):
         from heliquad import _firmware, _simcore
         from heliquad.host.link import TelemetryLink
-        from heliquad.host.mavlink_dialect import dialect
 
         self.cfg = cfg
         self.dt_us = int(round(1e6 / cfg.loop_hz))
@@ -180,7 +179,7 @@ class SilSession:
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
         self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
         try:
-            self.link = SimLink(self.fw, dialect())
+            self.link = SimLink(self.fw)
             self.tel = TelemetryLink(self.fw.telemetry_path)
             self.telemetry = _TelemetryLog(self.tel, tlog_path)
         except BaseException:

@@ -59,7 +59,7 @@ class TfPlant:
     def angle_rad(self) -> float:
         return self.core.angle_rad
 
-    def step_motors(self, motor, mixer=None) -> float:
+    def step_motors(self, motor) -> float:
         """Drive the plant with the motors' thrust fractions: the axis's torque command is what
         the firmware's mixer equations (default geometry, as the firmware flies) say these
         thrusts produce (``Mixer.achieved``)."""

@@ -69,11 +69,6 @@ class VehiclePlant:
     def rate_rad_s(self) -> float:
         return float(self.vehicle.x[10 + self.index])
 
-    @property
-    def last_u(self) -> np.ndarray:
-        """The motor commands held over the last step (thrust fractions)."""
-        return np.array(self.core.last_command)
-
     def frame_inputs(self, frames: int):
         """The random inputs of the next ``frames`` frames: (IMU noise, gusts), each
         ``frames`` x 6 or None. Gust velocity acts through the airframe's linear drag, gust
@@ -82,7 +77,7 @@ class VehiclePlant:
         gust = self.dryden.block(frames) if self.dryden else None
         return noise, gust
 
-    def step_motors(self, motor, mixer=None) -> float:
+    def step_motors(self, motor) -> float:
         """Hold the motors' thrust fractions for one period (this frame's gust applied)."""
         gust = self.dryden.block(1) if self.dryden else None
         self.core.step_motors(list(map(float, motor)), gust)
@@ -94,11 +89,15 @@ class VehiclePlant:
 
     def sensor_sample(self):
         """(quaternion, gyro rad/s, accel m/s^2) as the MPU6050 reports them this frame."""
-        return self.core.sensor(self.imu.noise(1) if self.imu else None)
+        return self.core.sensor(self._noise())
 
     def fifo(self, kind: int) -> bytes:
         """This frame's FIFO bytes of the HQ_SENSOR_KIND ``kind``."""
-        return self.core.fifo(kind, self.imu.noise(1) if self.imu else None)
+        return self.core.fifo(kind, self._noise())
+
+    def _noise(self):
+        """One frame's IMU noise (None for the ideal sensor)."""
+        return self.imu.noise(1) if self.imu else None
 
     @property
     def latency_samples(self) -> int:

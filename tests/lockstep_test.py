@@ -73,7 +73,7 @@ def test_rate_loop_holds_a_rate_setpoint():
 
     mixer = _firmware.Mixer()
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         kind = 0
         for frame in range(1, 1201):
             rc = [1500, 1500, 1000, 1500, 1000, 2000, 0, 0]
@@ -91,7 +91,7 @@ def test_rate_loop_holds_a_rate_setpoint():
 
 def test_repeated_frame_gets_the_same_reply_without_a_step():
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         first = link.step(5000)
         again = link.step(5000, frame=first.frame)            # the same counter once more
         assert again == first
@@ -102,7 +102,7 @@ def test_repeated_frame_gets_the_same_reply_without_a_step():
 
 def test_killing_the_firmware_mid_run_is_a_clear_error():
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         for k in range(1, 50):
             link.step(5000 * k)
         fw.proc.kill()
@@ -115,7 +115,7 @@ def test_killing_the_firmware_mid_run_is_a_clear_error():
 
 def test_a_firmware_that_stops_answering_is_a_clear_error():
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         link.step(5000)
         os.kill(fw.proc.pid, signal.SIGSTOP)
         try:
@@ -210,7 +210,7 @@ def _hover(link, frames, start=1, throttle=1400, arm=2000):
 
 def test_rc_loss_cuts_the_motors():
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         reply = _hover(link, 100)
         assert reply.armed and max(reply.motor) > 0.0
         lost = link.step(101 * 5000, rc_us=[0] * 8)            # no RC signal
@@ -220,7 +220,7 @@ def test_rc_loss_cuts_the_motors():
 
 def test_arming_is_refused_with_the_throttle_up():
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         for frame in range(1, 60):                             # switch up with throttle up
             reply = link.step(frame * 5000, rc_us=[1500, 1500, 1500, 1500, 2000, 1500, 0, 0])
         assert not reply.armed and reply.motor == [0.0] * 5
@@ -232,7 +232,7 @@ def test_a_full_telemetry_link_drops_and_counts_without_blocking_the_loop():
 
     fw_status = MAV.MAVLINK_MSG_ID_HQ_FW_STATUS
     with HostFirmware() as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         tel = TelemetryLink(fw.telemetry_path)
         _hover(link, 4000)                      # ~460 kB of telemetry nobody reads: lockstep goes on
         latest = None
@@ -294,7 +294,7 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
     throttle = int(round(1000 + 1000 * hover))
     roll, pitch = [], []
     with HostFirmware(dmp_image=dmp_image) as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         kind = 0
         for frame in range(1, frames + 1):
             rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
@@ -340,7 +340,7 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
                          / mixer.max_vertical_thrust_n))
     worst = 0.0
     with HostFirmware(dmp_image=str(image)) as fw:
-        link = SimLink(fw, MAV)
+        link = SimLink(fw)
         kind = 0
         for frame in range(1, 4001):
             rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,

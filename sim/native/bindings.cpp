@@ -161,8 +161,7 @@ PYBIND11_MODULE(_simcore, m) {
         .def(py::init<VehicleModel&, double, const ImuConfig&, double>(), py::arg("model"),
              py::arg("dt_s"), py::arg("imu"), py::arg("rotational_damping_n_m_s_rad"),
              py::keep_alive<1, 2>())
-        .def("specific_force", &VehicleRig::specific_force)
-        .def_property_readonly("last_command", &VehicleRig::last_command);
+        .def("specific_force", &VehicleRig::specific_force);
 
     py::enum_<LinkStatus>(m, "LinkStatus")
         .value("OK", LinkStatus::Ok)
@@ -235,9 +234,6 @@ PYBIND11_MODULE(_simcore, m) {
         .def("start", [](RigEngine& e, uint32_t first, uint32_t n, uint32_t dt_us, uint8_t kind,
                          py::array_t<uint16_t, py::array::c_style | py::array::forcecast> rc,
                          py::object noise, py::object gust) {
-            if (static_cast<size_t>(rc.size()) != size_t{n} * 8) {
-                throw std::invalid_argument("rc must be n x 8");
-            }
             std::vector<uint16_t> r(rc.data(), rc.data() + rc.size());
             e.start(first, n, dt_us, kind, std::move(r), rows_of(noise, n, 6, "noise"),
                     rows_of(gust, n, 6, "gust"));

@@ -62,15 +62,4 @@ size_t encode_fifo(FifoKind kind, const SensorSample& s, uint8_t* out) {
     return 0;
 }
 
-SensorSample at_rest(const std::array<double, 4>& q, const std::array<double, 3>& rates) {
-    const double w = q[0], x = q[1], y = q[2], z = q[3];
-    SensorSample s;
-    s.q = q;
-    s.gyro_rad_s = rates;
-    // R^T (0, 0, -g): the third row of R times -g.
-    s.accel_m_s2 = {-kGravity * 2 * (x * z - w * y), -kGravity * 2 * (y * z + w * x),
-                    -kGravity * (w * w - x * x - y * y + z * z)};
-    return s;
-}
-
 }  // namespace hqsim

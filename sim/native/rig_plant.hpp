@@ -32,7 +32,16 @@ public:
     virtual void step(const float motor[kMotors], const double* gust) = 0;
 };
 
-// The accelerometer's reading for a body at rest at attitude q: gravity only, body FRD.
-SensorSample at_rest(const std::array<double, 4>& q, const std::array<double, 3>& rates);
+using Vec3 = std::array<double, 3>;
+using Rotation = std::array<double, 9>;   // row-major
+
+// Body FRD -> NED rotation of the unit quaternion (w x y z).
+Rotation rotation(const double q[4]);
+Vec3 rotate(const Rotation& r, const Vec3& v);        // R v: body -> NED
+Vec3 rotate_back(const Rotation& r, const Vec3& v);   // R^T v: NED -> body
+
+// The sample of a body at rest at attitude q turning at `rates`: the accelerometer reads
+// gravity only (body FRD).
+SensorSample at_rest(const std::array<double, 4>& q, const Vec3& rates);
 
 }  // namespace hqsim

@@ -1,13 +1,13 @@
 #include "sim_link.hpp"
 
 #include <fcntl.h>
-#include <poll.h>
 #include <termios.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <stdexcept>
 
 namespace hqsim {
 namespace {
@@ -26,34 +26,29 @@ int ms_since(std::chrono::steady_clock::time_point t0) {
 
 SimLinkPort::SimLinkPort(int fd, int timeout_ms) : fd_(fd), timeout_ms_(timeout_ms) {
     // Blocking reads that give up after kReadSliceDs tenths of a second (VMIN 0, VTIME): a
-    // reply costs one read() instead of poll() and read(), a tenth of the lockstep's calls.
+    // reply costs one read() instead of poll() and read().
     termios t{};
-    if (::tcgetattr(fd_, &t) == 0) {
-        t.c_cc[VMIN] = 0;
-        t.c_cc[VTIME] = kReadSliceDs;
-        ::tcsetattr(fd_, TCSANOW, &t);
-        const int flags = ::fcntl(fd_, F_GETFL);
-        if (flags >= 0) blocking_ = ::fcntl(fd_, F_SETFL, flags & ~O_NONBLOCK) == 0;
+    const int flags = ::fcntl(fd_, F_GETFL);
+    if (flags < 0 || ::tcgetattr(fd_, &t) != 0) {
+        throw std::invalid_argument("the sim link must be a terminal (the firmware's pty)");
+    }
+    t.c_cc[VMIN] = 0;
+    t.c_cc[VTIME] = kReadSliceDs;
+    if (::tcsetattr(fd_, TCSANOW, &t) != 0 || ::fcntl(fd_, F_SETFL, flags & ~O_NONBLOCK) != 0) {
+        throw std::invalid_argument("cannot set up the sim link's terminal");
     }
 }
 
 bool SimLinkPort::write_all(const uint8_t* data, size_t len) {
-    const auto t0 = std::chrono::steady_clock::now();
+    // Blocking, without a timeout of its own: a frame is written only once the previous one
+    // was answered (or its wait failed), so the pty never fills and the write cannot stall.
     while (len > 0) {
         const ssize_t n = ::write(fd_, data, len);
         if (n > 0) {
             data += n;
             len -= static_cast<size_t>(n);
-            continue;
-        }
-        if (n < 0 && errno != EAGAIN && errno != EINTR) {
-            errno_ = errno;
-            return false;
-        }
-        const int left = timeout_ms_ - ms_since(t0);          // the pty is full: wait for room
-        pollfd p{fd_, POLLOUT, 0};
-        if (left <= 0 || ::poll(&p, 1, left) <= 0 || (p.revents & (POLLHUP | POLLERR))) {
-            errno_ = left <= 0 ? ETIMEDOUT : EIO;
+        } else if (n < 0 && errno != EINTR) {
+            errno_ = errno;            // EIO: the firmware is gone
             return false;
         }
     }
@@ -82,15 +77,9 @@ LinkStatus SimLinkPort::wait_reply(uint32_t frame, Reply* reply) {
     for (;;) {
         const int left = timeout_ms_ - ms_since(t0);
         if (left <= 0) return LinkStatus::Timeout;
-        if (!blocking_) {                              // not a tty we could set up: poll
-            pollfd p{fd_, POLLIN, 0};
-            const int ready = ::poll(&p, 1, left);
-            if (ready < 0 && errno == EINTR) continue;
-            if (ready <= 0) return LinkStatus::Timeout;
-        }
         const ssize_t n = ::read(fd_, buf, sizeof buf);
-        if (n == 0 && blocking_) continue;             // a read slice passed without data
-        if (n < 0 && (errno == EAGAIN || errno == EINTR)) continue;
+        if (n == 0) continue;                          // a read slice passed without data
+        if (n < 0 && errno == EINTR) continue;
         if (n <= 0) return LinkStatus::Closed;         // EIO or EOF: the pty's master is gone
         for (ssize_t i = 0; i < n; ++i) {
             mavlink_message_t m;

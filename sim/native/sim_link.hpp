@@ -1,6 +1,7 @@
 // The simulator's end of the sim link (docs/link-contract.md): one HQ_SENSOR_FRAME out,
 // exactly one HQ_ACTUATOR_FRAME back with the same time and counter. The pty is opened (and
-// made raw) by Python with pyserial; this class owns only the byte exchange on its fd.
+// made raw) by Python with pyserial; this class owns the byte exchange on its fd, which it
+// switches to blocking reads with a VTIME slice.
 #pragma once
 
 #include <array>
@@ -16,7 +17,7 @@ constexpr size_t kFifoCapacity = 168;        // HQ_SENSOR_FRAME.fifo
 
 enum class LinkStatus : int {
     Ok = 0,
-    WriteFailed = 1,      // the firmware stopped reading or is gone (errno in `error`)
+    WriteFailed = 1,      // the write failed (errno in `error`): the firmware is gone
     Closed = 2,           // the pty hung up: the firmware is gone
     Timeout = 3,          // no reply within the timeout
     WrongFrame = 4,       // a reply with another frame counter (in `reply.frame`)
@@ -47,7 +48,6 @@ private:
 
     int fd_;
     int timeout_ms_;
-    bool blocking_ = false;
     int errno_ = 0;
     mavlink_status_t tx_status_{}, rx_status_{};
     mavlink_message_t rx_msg_{};

@@ -10,30 +10,13 @@ namespace {
 // Coulomb friction is smoothed as F tanh(w / kFrictionSmoothRadS) so the ODE stays smooth.
 constexpr double kFrictionSmoothRadS = 0.01;
 
-using V3 = std::array<double, 3>;
+using V3 = Vec3;
 
 V3 cross(const V3& a, const V3& b) {
     return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-V3 rotate(const std::array<double, 9>& r, const V3& v) {
-    return {r[0] * v[0] + r[1] * v[1] + r[2] * v[2], r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
-            r[6] * v[0] + r[7] * v[1] + r[8] * v[2]};
-}
-
-V3 rotate_back(const std::array<double, 9>& r, const V3& v) {    // R^T v
-    return {r[0] * v[0] + r[3] * v[1] + r[6] * v[2], r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
-            r[2] * v[0] + r[5] * v[1] + r[8] * v[2]};
-}
-
 }  // namespace
-
-std::array<double, 9> rotation(const double q[4]) {
-    const double w = q[0], x = q[1], y = q[2], z = q[3];
-    return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
-            2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
-}
 
 VehicleModel::VehicleModel(const VehicleConfig& cfg) : cfg_(cfg) {
     if (cfg.mass_kg <= 0 || cfg.substeps < 1 || cfg.free_axis < -1 || cfg.free_axis > 2) {

@@ -50,9 +50,6 @@ private:
     VehicleConfig cfg_;
 };
 
-// Body FRD -> NED rotation of the unit quaternion (w x y z), row-major.
-std::array<double, 9> rotation(const double q[4]);
-
 // The vehicle on its rig (or free) as a plant: motor lags, gusts as disturbances, and the
 // MPU6050 the firmware reads (residual gyro bias, noise given per frame, DMP latency).
 struct ImuConfig {
@@ -71,7 +68,6 @@ public:
 
     // What an accelerometer at the centre of mass reads now (body FRD, m/s^2).
     std::array<double, 3> specific_force() const;
-    const std::array<double, kMotors>& last_command() const { return last_u_; }
 
 private:
     VehicleModel& model_;
