@@ -191,7 +191,8 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="deg for angle, deg/s for rate, normalised torque (-1..1) for mixer")
     p.add_argument("--cycles", type=int, default=10, help="full-amplitude cycles (default 10)")
     p.add_argument("--fade-cycles", type=int, default=2,
-                   help="cycles of fade in and of fade out, also the settling (default 2)")
+                   help="cycles of fade in and of fade out, also the settling (default 2; the "
+                        "firmware needs at least 1)")
     p.add_argument("--collective", type=float, default=0.4,
                    help="hover throttle as a fraction of stick travel (default 0.4)")
     p.add_argument("--loop-hz", type=float, default=200.0, help="firmware loop rate (default 200)")
@@ -199,6 +200,7 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="MotionApps 2.0 DMP image for the firmware (default: raw FIFO path)")
     p.add_argument("--out", required=True, metavar="RUN",
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
+    _add_fault_argument(p)
     p.set_defaults(func=_cmd_sil)
 
     p = sub.add_parser("board", help="run the simulated rig as if it were a board on a serial port",
@@ -273,6 +275,7 @@ def _build_parser() -> argparse.ArgumentParser:
                    "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
     p.add_argument("--cycles", type=int, default=8, help="measured cycles per frequency (default 8)")
     p.add_argument("--out", required=True, metavar="DIR")
+    _add_fault_argument(p, "--sil: ")
     p.set_defaults(func=_cmd_sweep)
 
     p = sub.add_parser("identify", help="points, models and plots from a sweep folder",
@@ -299,6 +302,19 @@ def _build_parser() -> argparse.ArgumentParser:
     add_demo_parser(sub, fmt)
     add_dmp_image_parser(sub, fmt)
     return parser
+
+
+def _add_fault_argument(p, prefix="") -> None:
+    p.add_argument("--fault", action="append", default=[], metavar="KIND@T[:D]",
+                   help=prefix + "inject a fault at T seconds of simulated time (repeatable): "
+                        "silent, nack (for D seconds, or to the end), reset, overflow (the "
+                        "MPU6050), link (the host closes its telemetry link); e.g. silent@3:0.5")
+
+
+def _faults(args) -> tuple:
+    from ..sim.faults import parse_fault
+
+    return tuple(parse_fault(text) for text in args.fault)
 
 
 def _cmd_fsf(args) -> int:
@@ -343,8 +359,9 @@ def _cmd_sil(args) -> int:
     _check_plant(args)
     if not 0 < args.freq_hz <= args.loop_hz / 4:
         raise InputError(f"--freq-hz must be in (0, {args.loop_hz / 4:g}] (a quarter of the loop rate)")
-    if args.cycles < 1 or args.fade_cycles < 0:
-        raise InputError("--cycles must be at least 1 and --fade-cycles non-negative")
+    if args.cycles < 1 or args.fade_cycles < 1:
+        raise InputError("--cycles and --fade-cycles must be at least 1 (every excitation "
+                         "fades in)")
     if args.inject == "angle" and args.axis == "yaw":
         raise InputError("yaw is rate-only: use --inject rate or mixer")
     amplitude = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
@@ -359,7 +376,7 @@ def _cmd_sil(args) -> int:
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
-                    ideal_sensor=args.ideal_sensor)
+                    ideal_sensor=args.ideal_sensor, faults=_faults(args))
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:
@@ -374,6 +391,10 @@ def _cmd_sil(args) -> int:
         print(f"warning: {r.saturated_samples} samples saturated the mixer; lower --amplitude",
               file=sys.stderr)
     print(f"wrote {r.tlog_path} and {r.csv_path}")
+    if r.stopped:
+        print(f"heliquad sil: {r.stopped} (the log and the samples before it are kept)",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -467,7 +488,8 @@ def _cmd_sweep(args) -> int:
         cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
                         inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                         plant=args.plant, rig=args.axis, params=args.params,
-                        turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor)
+                        turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
+                        faults=_faults(args))
         source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
                   "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
                   "ideal_sensor": args.ideal_sensor}
@@ -475,7 +497,11 @@ def _cmd_sweep(args) -> int:
             session = SilSession(cfg, tlog)
         except FirmwareError as exc:
             raise InputError(str(exc)) from None
+        if args.fault:
+            source["faults"] = list(args.fault)
     else:
+        if args.fault:
+            raise InputError("--fault needs --sil (a board's faults are real)")
         source = {"kind": "port", "port": args.port, "baud": args.baud}
         session = PortSession(args.port, tlog, args.baud)
     print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
@@ -491,10 +517,14 @@ def _cmd_sweep(args) -> int:
     finally:
         session.close()
     done = sum(1 for f in manifest["frequencies"] if f["status"] == "ok")
-    print(f"{done} of {len(plan.freqs_hz)} frequencies measured; "
-          + ("complete" if manifest["complete"] else f"stopped: {manifest['aborted']}")
-          + f"; next: heliquad identify {args.out}")
-    return 0 if manifest["complete"] else 1
+    if manifest["complete"]:
+        print(f"{done} of {len(plan.freqs_hz)} frequencies measured; complete; "
+              f"next: heliquad identify {args.out}")
+        return 0
+    sys.stderr.write(f"heliquad sweep: {manifest['aborted']} ({done} of "
+                     f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
+                     f"in {args.out})\n")
+    return 1
 
 
 def _cmd_identify(args) -> int:

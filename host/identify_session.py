@@ -1,7 +1,7 @@
 """``heliquad identify DIR``: from a sweep's log to points, models and plots.
 
 Reads ``DIR/manifest.json`` and ``DIR/sweep.tlog``; for each frequency the manifest marks
-as measured, takes the full-amplitude samples (``exc_state == 2``) in its window, and runs
+as measured, takes the full-amplitude samples (HQ_EXCITATION_STATE_RUNNING) in its window, and runs
 the FSF with the exact frequency the firmware reported. Writes, inside DIR:
 ``points.csv`` (the POINTS format), ``points_table.csv`` (the paper's tables 4-6: frequency,
 omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or those given),
@@ -44,6 +44,9 @@ def _load(dir_path):
 
 
 def _segments(manifest, samples):
+    from .mavlink_dialect import dialect
+
+    running = dialect().HQ_EXCITATION_STATE_RUNNING
     u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
     t = np.array([m.time_us for m in samples], dtype=np.int64)
     state = np.array([m.exc_state for m in samples])
@@ -52,7 +55,7 @@ def _segments(manifest, samples):
     for entry in manifest["frequencies"]:
         if entry.get("status") != "ok" or "start_us" not in entry:
             continue
-        sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == 2)
+        sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
         yield entry, t[sel] * 1e-6, u[sel], y[sel]
 
 

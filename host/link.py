@@ -17,7 +17,8 @@ from .errors import InputError
 from .mavframe import Codec, Framer
 from .mavlink_dialect import dialect
 
-__all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES"]
+__all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES",
+           "reason_text"]
 
 AXES = {"roll": 0, "pitch": 1, "yaw": 2}
 INJECTIONS = {"angle": 0, "rate": 1, "mixer": 2}
@@ -26,10 +27,17 @@ INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
 #: The messages a session driver (SIL or board) reads while an excitation runs.
 SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
-MODES = {"angle": 1, "rate": 2}
+MODES = {"angle": dialect().HQ_MODE_ANGLE, "rate": dialect().HQ_MODE_RATE}
 HOST_SYSTEM_ID, HOST_COMPONENT_ID = 255, 190       # a ground station's usual IDs
 TARGET_SYSTEM, TARGET_COMPONENT = 1, 1
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+
+
+def reason_text(code: int) -> str:
+    """An HQ_REASON value in words: the dialect's description (the firmware's one
+    definition), which reads as the end of a sentence."""
+    entry = dialect().enums["HQ_REASON"].get(int(code))
+    return entry.description.rstrip(".") if entry else f"unknown reason {int(code)}"
 
 
 class TelemetryLink:

@@ -9,9 +9,13 @@ until the excitation ends, and move on. Everything is logged to ``DIR/sweep.tlog
 gains, firmware version, start time, aborts) is rewritten after every frequency, so Ctrl-C
 or a breach leaves a valid, identifiable session.
 
-Safety: a sample whose angle exceeds ``max_angle_deg`` (80 deg, SPEC.md; roll and pitch,
-whose rigs swing; the yaw rig's heading is free) or whose rate exceeds ``max_rate_deg_s``
-stops the excitation at once and ends the sweep; the manifest records the breach.
+Safety: the firmware enforces its own rules (docs/safety.md): it refuses an excitation out
+of bounds or while disarmed, and stops one when its axis passes the abort limits, when the
+host's heartbeat stops, or on disarm; HQ_EXCITATION_STATUS says why, and the sweep ends with
+that reason in the manifest (``aborted``), never as complete. As a second line, a sample whose
+angle exceeds ``max_angle_deg`` (roll and pitch, whose rigs swing; the yaw rig's heading is
+free) or whose rate exceeds ``max_rate_deg_s`` makes the host stop the excitation and end the
+sweep. Both limits default to the firmware's own (one definition, read from its bindings).
 """
 
 from __future__ import annotations
@@ -24,9 +28,12 @@ import time
 
 import numpy as np
 
+from heliquad import _firmware
+
 from . import __version__, paper
 from .errors import InputError
-from .link import SESSION_MESSAGES
+from .link import SESSION_MESSAGES, reason_text
+from .mavlink_dialect import dialect
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
 
@@ -35,10 +42,14 @@ SWEEP_TLOG = "sweep.tlog"
 N_FREQUENCIES = 15
 MEASURED_CYCLES = 8
 FADE_CYCLES = 2
-MAX_ANGLE_DEG = 80.0
-MAX_RATE_DEG_S = 400.0
+#: The firmware's abort limits (SafetyLimits), checked again on the host.
+MAX_ANGLE_DEG = math.degrees(_firmware.SafetyLimits().abort_angle_rad)
+MAX_RATE_DEG_S = math.degrees(_firmware.SafetyLimits().abort_rate_rad_s)
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
+#: A board session sends the host's HEARTBEAT this often: the firmware stops an excitation
+#: 1.5 s after the last one, so a few late ones must not end a sweep.
+HEARTBEAT_PERIOD_S = 0.25
 
 
 def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
@@ -87,7 +98,8 @@ class PortSession:
         self.tel = TelemetryLink(port, baud=baud, tlog=self.tlog)
         self.poll_s = poll_s
         self.t0 = time.monotonic()
-        self.last_hb = 0.0
+        self.tel.heartbeat()                  # the firmware wants one before an excitation
+        self.last_hb = self.t0
 
     @property
     def time_us(self) -> int:
@@ -99,7 +111,7 @@ class PortSession:
     def advance(self) -> list:
         time.sleep(self.poll_s)
         now = time.monotonic()
-        if now - self.last_hb >= 1.0:
+        if now - self.last_hb >= HEARTBEAT_PERIOD_S:
             self.tel.heartbeat()
             self.last_hb = now
         msgs = self.tel.poll(only=SESSION_MESSAGES)
@@ -154,6 +166,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
 
 
 def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s):
+    mav = dialect()
+    idle, running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
     entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "status": "ok"}
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles, plan.fade_cycles)
     started, seen_active = session.time_us, False
@@ -161,14 +175,18 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
         for m in session.advance():
             kind = m.get_type()
             if kind == "HQ_EXCITATION_STATUS" and "freq_hz" not in entry:
-                if not m.accepted:
-                    entry["status"] = "refused by the firmware"
+                if not m.accepted:           # the answer to this start: refused, and why
+                    entry["status"] = f"refused by the firmware: {reason_text(m.reason)}"
                     return entry
                 entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
+            elif kind == "HQ_EXCITATION_STATUS" and m.state == idle:
+                if m.reason != mav.HQ_REASON_FINISHED:
+                    entry["status"] = f"stopped by the firmware: {reason_text(m.reason)}"
+                    return entry
             elif kind == "HQ_SYSID_SAMPLE":
-                if m.exc_state:
+                if m.exc_state != idle:
                     seen_active = True
-                if m.exc_state == 2:
+                if m.exc_state == running:
                     entry.setdefault("start_us", int(m.time_us))
                     entry["end_us"] = int(m.time_us)
                     entry["samples"] += 1
@@ -181,10 +199,20 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
                                        f"(angle {math.degrees(m.angle):.1f} deg, rate "
                                        f"{math.degrees(m.rate):.1f} deg/s)")
                     return entry
-                if seen_active and m.exc_state == 0:
-                    return entry
+                if seen_active and m.exc_state == idle:
+                    return _check_complete(entry, plan)
             elif kind == "STATUSTEXT" and m.severity <= 4:
                 entry.setdefault("messages", []).append(m.text)
         if not seen_active and session.time_us - started > START_TIMEOUT_S * 1e6:
             entry["status"] = "the excitation did not start (no answer from the firmware)"
             return entry
+
+
+def _check_complete(entry, plan):
+    """An excitation that ended without a stop message must still have all its measured
+    samples (a lost status message must not pass a truncated record as complete)."""
+    expected = plan.cycles * entry.get("period_samples", 0)
+    if entry["samples"] != expected:
+        entry["status"] = (f"incomplete: {entry['samples']} of {expected} measured samples "
+                           "were logged")
+    return entry

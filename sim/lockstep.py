@@ -169,13 +169,14 @@ class SimLink:
         self.serial.close()
 
     def step(self, time_us: int, fifo: bytes = b"", fifo_kind: int = SENSOR_NONE,
-             rc_us=(0,) * 8, frame: int | None = None) -> Actuators:
-        """Send one sensor frame and wait for its actuator frame."""
+             rc_us=(0,) * 8, frame: int | None = None, imu_fault: int = 0) -> Actuators:
+        """Send one sensor frame and wait for its actuator frame. ``imu_fault``: the
+        dialect's HQ_IMU_FAULT for the emulated MPU6050 at this frame (sim/faults.py)."""
         if len(fifo) > FIFO_CAPACITY:
             raise ValueError(f"at most {FIFO_CAPACITY} FIFO bytes per frame")
         frame = self.frame + 1 if frame is None else frame
         status, reply, errno = self.port.exchange(int(time_us), frame, fifo_kind, bytes(fifo),
-                                                  list(rc_us))
+                                                  list(rc_us), imu_fault=int(imu_fault))
         self.check(status, frame, reply, errno)
         self.frame = frame
         return actuators(reply)

@@ -16,13 +16,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import select
 import time
 
 import numpy as np
 
-from heliquad.host.link import INPUT_OUTPUT, SESSION_MESSAGES
+from heliquad.host.link import INPUT_OUTPUT, SESSION_MESSAGES, reason_text
+from heliquad.host.mavlink_dialect import dialect
 
+from .faults import imu_fault_codes, link_close_frame
 from .lockstep import FirmwareError, HostFirmware, SimLink, actuators
 from .tf_plant import TfPlant
 
@@ -64,6 +67,7 @@ class SilConfig:
     turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
     seed: int = 0                  # turbulence and sensor-noise seed
     ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
+    faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
 
 
 def make_plant(cfg: SilConfig, dt_s: float):
@@ -91,6 +95,7 @@ class SilResult:
     wall_s: float                  # the whole run, firmware start-up included
     loop_s: float                  # the lockstep loop alone
     truth: complex                 # sampled-data truth at the actual frequency (mixer injection)
+    stopped: str | None = None     # why the firmware ended the excitation early, if it did
 
 
 def _rc(frame, collective):
@@ -102,11 +107,11 @@ def _rc(frame, collective):
     return rc
 
 
-def rig_step(link, plant, frame, time_us, kind, collective):
+def rig_step(link, plant, frame, time_us, kind, collective, imu_fault=0):
     """One lockstep frame of the simulated rig, driven from Python (the free-running board
     and tests): the plant's FIFO bytes and the pilot's RC out, the firmware's reply in, the
     plant stepped with the reply's motors. :class:`SilSession` runs batches of the same in C++."""
-    reply = link.step(time_us, plant.fifo(kind), kind, _rc(frame, collective))
+    reply = link.step(time_us, plant.fifo(kind), kind, _rc(frame, collective), imu_fault=imu_fault)
     plant.step_motors(reply.motor)
     return reply
 
@@ -116,17 +121,23 @@ class _TelemetryLog:
     each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped with the
     time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Repeatable, without a
     read per frame. Framing and logging are C++ (``_simcore.TelemetryTap``); the messages of
-    interest are decoded here with the host tool's codec."""
+    interest are decoded here with the host tool's codec.
+
+    The tap has its own descriptor on the link, as a wire tap would: when the host tool
+    closes its end (the ``link`` fault), what the firmware sends is still logged."""
 
     def __init__(self, tel, tlog_path: str):
         from heliquad import _simcore
 
-        self.tel = tel
         self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
-        self._file = open(tlog_path, "wb")
-        self.tap = _simcore.TelemetryTap(tel.serial.fileno(), self._file.fileno(),
-                                         list(self.ids.values()))
+        self.fd = os.open(tel.serial.port, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            self._file = open(tlog_path, "wb")
+        except OSError:
+            os.close(self.fd)
+            raise
+        self.tap = _simcore.TelemetryTap(self.fd, self._file.fileno(), list(self.ids.values()))
 
     @property
     def last_time_us(self):
@@ -144,6 +155,7 @@ class _TelemetryLog:
 
     def close(self) -> None:
         self._file.close()
+        os.close(self.fd)
 
     def read_until(self, time_us: int) -> list:
         """Read until the loop at ``time_us`` has all its telemetry."""
@@ -153,9 +165,26 @@ class _TelemetryLog:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise FirmwareError(f"no telemetry for the step at {time_us * 1e-6:.3f} s")
-            select.select([self.tel.serial.fileno()], [], [], remaining)
+            select.select([self.fd], [], [], remaining)
             out += self.read()
         return out
+
+
+class _ClosedLink:
+    """What is left of the host's telemetry link after the ``link`` fault: commands and
+    heartbeats go nowhere (counted in ``lost``); the codec still decodes what the tap reads."""
+
+    def __init__(self, closed):
+        self.codec, self.ids = closed.codec, closed.ids
+        self.lost = 0
+
+    def _drop(self, *args, **kwargs) -> None:
+        self.lost += 1
+
+    heartbeat = arm = set_mode = start_excitation = stop_excitation = _drop
+
+    def close(self) -> None:
+        pass
 
 
 class SilSession:
@@ -187,6 +216,7 @@ class SilSession:
             raise
         self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
         self.heartbeat_frames = max(1, int(round(cfg.loop_hz)))   # the tool's 1 Hz heartbeat
+        self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
         self.frame, self.kind, self.reply = 0, 0, None
         self.t0 = time.monotonic()
 
@@ -211,19 +241,34 @@ class SilSession:
 
         while self.frame < end:
             first = self.frame + 1
+            if first == self.link_close_frame:
+                self.close_host_link()
             if first % self.heartbeat_frames == 0:
                 self.tel.heartbeat()
-            next_heartbeat = (first // self.heartbeat_frames + 1) * self.heartbeat_frames
-            self._run(first, min(end, next_heartbeat - 1) - first + 1, collect)
+            # A batch ends before the next heartbeat and before the link fault's frame, so
+            # both happen at exact frames.
+            last = min(end, (first // self.heartbeat_frames + 1) * self.heartbeat_frames - 1)
+            if self.link_close_frame is not None and first < self.link_close_frame:
+                last = min(last, self.link_close_frame - 1)
+            self._run(first, last - first + 1, collect)
         collect(self.telemetry.read_until(self.time_us))
         return out
+
+    def close_host_link(self) -> None:
+        """The host tool closes its end of the telemetry link (the ``link`` fault): from now
+        on nothing it sends reaches the firmware. The tap keeps logging what arrives."""
+        if isinstance(self.tel, _ClosedLink):
+            return
+        self.tel.close()
+        self.tel = _ClosedLink(self.tel)
 
     def _run(self, first: int, n: int, collect) -> None:
         """Frames first .. first + n - 1 in the engine; telemetry read while they run."""
         rc = np.array([_rc(f, self.cfg.collective) for f in range(first, first + n)],
                       dtype=np.uint16)
         noise, gust = self.plant.frame_inputs(n)
-        self.engine.start(first, n, self.dt_us, self.kind, rc, noise, gust)
+        faults = imu_fault_codes(self.cfg.faults, first, n, self.dt_us)
+        self.engine.start(first, n, self.dt_us, self.kind, rc, noise, gust, faults)
         try:
             # Read at a fixed pace rather than on every arrival: one wake-up per few frames
             # leaves the cores to the engine and the firmware.
@@ -268,29 +313,37 @@ class _Tally:
         self.mixer, self.dt_us, self.progress = mixer, dt_us, progress
         self.rows, self.saturated, self.gaps = [], 0, 0
         self.last_seq, self.exc_seen, self.exc_done_frame, self.status = None, False, None, None
+        self.stopped = None
+        mav = dialect()
+        self.idle, self.running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
+        self.finished = mav.HQ_REASON_FINISHED
 
     def __call__(self, m) -> None:
         t = m.get_type()
         if t == "HQ_SYSID_SAMPLE":
             self._sample(m)
-        elif t == "HQ_EXCITATION_STATUS" and self.status is None:
-            self.status = m
-            if not m.accepted:
-                raise FirmwareError("the firmware refused the excitation (frequency above a "
-                                    "quarter of the loop rate, no cycles, or angle injection "
-                                    "on yaw)")
+        elif t == "HQ_EXCITATION_STATUS":
+            self._status(m)
         elif t == "STATUSTEXT" and m.severity <= 4:
             self.progress(f"firmware: {m.text}")
+
+    def _status(self, m) -> None:
+        if self.status is None:                   # the answer to the start command
+            self.status = m
+            if not m.accepted:
+                raise FirmwareError(f"the firmware refused the excitation: {reason_text(m.reason)}")
+        elif m.state == self.idle and m.reason != self.finished and self.stopped is None:
+            self.stopped = f"the firmware stopped the excitation: {reason_text(m.reason)}"
 
     def _sample(self, m) -> None:
         if self.last_seq is not None and m.seq != self.last_seq + 1:
             self.gaps += m.seq - self.last_seq - 1
         self.last_seq = m.seq
-        if m.exc_state:
+        if m.exc_state != self.idle:
             self.exc_seen = True
         elif self.exc_seen and self.exc_done_frame is None:
             self.exc_done_frame = m.time_us // self.dt_us
-        if m.exc_state == 2:
+        if m.exc_state == self.running:
             self.rows.append((m.time_us * 1e-6, getattr(m, self.u_name), getattr(m, self.y_name)))
             got = self.mixer.achieved(m.motor)
             if abs((got.roll, got.pitch, got.yaw)[self.axis_index] - m.axis_cmd) > 1e-3:
@@ -316,6 +369,10 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
             if tally.exc_done_frame is not None and frame >= tally.exc_done_frame + TAIL_FRAMES:
                 break
             if frame >= max_frames:
+                if tally.status is None:
+                    raise FirmwareError("the firmware never answered the excitation request"
+                                        + (" (the host link was closed)"
+                                           if session.link_close_frame is not None else ""))
                 raise FirmwareError(f"the excitation did not finish within {frame} frames")
             if (frame - start_frame) / (max_frames - start_frame) >= next_report:
                 progress(f"  {100 * frame / max_frames:3.0f} %  t = {session.time_us * 1e-6:6.2f} s")
@@ -331,4 +388,5 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                      frames=frame, seq_gaps=tally.gaps, actual_freq_hz=freq,
                      saturated_samples=tally.saturated, imu_mode=imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
-                     truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"))
+                     truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"),
+                     stopped=tally.stopped)

@@ -115,7 +115,8 @@ def test_vehicle_model_refuses_impossible_parameters():
 
 def _sysid(codec, mav, time_us, seq):
     return codec.encode(mav.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE, {
-        "time_us": time_us, "seq": seq, "axis": 0, "injection": 2, "exc_state": 2,
+        "time_us": time_us, "seq": seq, "axis": 0, "injection": 2,
+        "exc_state": mav.HQ_EXCITATION_STATE_RUNNING, "armed": 1, "mode": mav.HQ_MODE_ANGLE,
         "excitation": 0.1, "angle_sp": 0.0, "rate_sp": 0.0, "rate": 0.2, "angle": 0.0,
         "axis_cmd": 0.1, "motor": [0.4] * 5})
 

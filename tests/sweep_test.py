@@ -68,15 +68,58 @@ def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
     assert all(f["samples"] >= 3 * f["period_samples"] for f in manifest["frequencies"])
 
 
-def test_a_limit_breach_stops_the_sweep_and_keeps_the_log(tmp_path):
-    # A huge mixer amplitude on the vehicle's roll rig swings it past the 80 deg limit.
+def test_the_firmware_stops_a_sweep_at_its_angle_limit_and_the_log_is_kept(tmp_path):
+    # 190 deg/s of rate injection at 0.2 Hz swings the vehicle's roll rig past 80 deg: the
+    # firmware stops the excitation itself, the sweep ends with its reason, never "complete".
     out = tmp_path / "breach"
-    res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 0.5, 1.0, "--amplitude", 3,
-                   "--ideal-sensor", "--out", out)
-    assert res.returncode == 1
+    res = heliquad("sweep", "--axis", "roll", "--sil", "--inject", "rate", "--freqs-hz", 0.2, 1.0,
+                   "--amplitude", 190, "--ideal-sensor", "--out", out)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines() == [res.stderr.strip()]      # one line
+    assert "stopped by the firmware: the axis's angle passed the abort limit" in res.stderr
     manifest = json.loads((out / "manifest.json").read_text())
-    assert not manifest["complete"] and "limit breached" in manifest["aborted"]
+    assert not manifest["complete"] and manifest["aborted"].startswith("stopped by the firmware")
+    assert len(manifest["frequencies"]) == 1                 # the sweep went no further
     assert (out / "sweep.tlog").stat().st_size > 0
+
+
+def test_the_hosts_own_limit_stays_as_a_second_line(tmp_path):
+    # Below the firmware's limits, the host's check (here tightened to 20 deg) stops the
+    # excitation and the sweep, and says so.
+    from heliquad.host.sweep import default_plan, run_sweep
+    from heliquad.sim.sil import SilConfig, SilSession
+
+    plan = default_plan("roll", "rate", [0.2], math.radians(100))
+    with SilSession(SilConfig(axis="roll", plant="vehicle", rig="roll", ideal_sensor=True),
+                    str(tmp_path / "sweep.tlog")) as session:
+        manifest = run_sweep(session, plan, str(tmp_path), {"kind": "sil"}, progress=lambda *_: None,
+                             max_angle_deg=20.0)
+    assert not manifest["complete"] and manifest["aborted"].startswith("aborted: limit breached")
+
+
+def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
+    # A mixer amplitude of 3 is three times the axis's authority: refused, and the manifest
+    # says why.
+    out = tmp_path / "refused"
+    res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 1.0, "--amplitude", 3,
+                   "--ideal-sensor", "--out", out)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert "refused by the firmware: amplitude not finite, not positive, or above" in res.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert not manifest["complete"] and manifest["aborted"].startswith("refused by the firmware")
+
+
+def test_a_host_that_goes_quiet_ends_the_sweep_with_the_firmwares_reason(tmp_path):
+    # The host tool's link closes 3 s in (the `link` fault): no more heartbeats, so the
+    # firmware stops the excitation within 1.5 s and the sweep ends, not "complete".
+    out = tmp_path / "quiet"
+    res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 0.5, "--ideal-sensor",
+                   "--fault", "link@3", "--out", out)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert "stopped by the firmware: host lost" in res.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert not manifest["complete"] and "host lost" in manifest["aborted"]
+    assert manifest["source"]["faults"] == ["link@3"]
 
 
 def test_identify_refuses_a_folder_that_is_not_a_sweep(tmp_path):
@@ -89,11 +132,11 @@ def test_ctrl_c_leaves_a_valid_log_and_manifest(tmp_path):
     import signal
 
     out = tmp_path / "interrupted"
-    # One very slow frequency (0.03 Hz x 54 cycles: 30 min simulated, tens of seconds here),
-    # interrupted once the log is being written.
+    # Three of the slowest frequencies the firmware allows (0.05-0.07 Hz x 14 cycles: 12 min
+    # simulated, several seconds here), interrupted once the log is being written.
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
-                             "--sil", "--ideal-sensor", "--freqs-hz", "0.03", "--cycles", "50",
-                             "--out", str(out)],
+                             "--sil", "--ideal-sensor", "--freqs-hz", "0.05", "0.06", "0.07",
+                             "--cycles", "10", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     tlog = out / "sweep.tlog"
     deadline = time.monotonic() + 30

@@ -14,6 +14,8 @@
 #include "core/mixer.hpp"
 #include "core/mpu6050.hpp"
 #include "core/pid.hpp"
+#include "core/rc.hpp"
+#include "core/supervisor.hpp"
 #include "targets/host/mpu6050_emulator.hpp"
 
 namespace py = pybind11;
@@ -55,6 +57,152 @@ std::unique_ptr<DriverHolder> make_driver(const py::bytes& image, uint8_t dmp_ra
 
 template <typename T>
 std::array<float, 3> vec(const T& v) { return {v[0], v[1], v[2]}; }
+
+void bind_rc_and_cascade(py::module_& m) {
+    py::enum_<FlightMode>(m, "FlightMode").value("ANGLE", FlightMode::Angle)
+        .value("RATE", FlightMode::Rate);
+    py::class_<RcInput>(m, "RcInput")
+        .def(py::init([](const std::array<uint16_t, kRcChannels>& us, uint32_t age_us) {
+            RcInput in;
+            for (int c = 0; c < kRcChannels; ++c) in.channel_us[c] = us[c];
+            in.age_us = age_us;
+            return in;
+        }), py::arg("channel_us"), py::arg("age_us") = 0,
+             "Pulse widths of channels 1-8 in us (0 = no signal) and the time since the last "
+             "valid frame.")
+        .def_property_readonly("channel_us", [](const RcInput& in) {
+            std::array<uint16_t, kRcChannels> out{};
+            for (int c = 0; c < kRcChannels; ++c) out[c] = in.channel_us[c];
+            return out;
+        })
+        .def_readwrite("age_us", &RcInput::age_us);
+    py::class_<StickLimits>(m, "StickLimits")
+        .def(py::init<>())
+        .def_readwrite("angle_rad", &StickLimits::angle_rad)
+        .def_readwrite("rate_rad_s", &StickLimits::rate_rad_s)
+        .def_readwrite("yaw_rate_rad_s", &StickLimits::yaw_rate_rad_s);
+    py::class_<Sticks>(m, "Sticks")
+        .def_readonly("angle", &Sticks::angle).def_readonly("rate", &Sticks::rate)
+        .def_readonly("throttle", &Sticks::throttle);
+    m.def("sticks", &sticks, py::arg("rc"), py::arg("limits") = StickLimits());
+
+    py::class_<CascadeInput>(m, "CascadeInput")
+        .def(py::init<>())
+        .def_readwrite("mode", &CascadeInput::mode)
+        .def_readwrite("angle_stick", &CascadeInput::angle_stick)
+        .def_readwrite("rate_stick", &CascadeInput::rate_stick)
+        .def_readwrite("axis", &CascadeInput::axis)
+        .def_readwrite("injection", &CascadeInput::injection)
+        .def_readwrite("excitation", &CascadeInput::excitation)
+        .def_readwrite("attitude", &CascadeInput::attitude)
+        .def_readwrite("rate", &CascadeInput::rate)
+        .def_readwrite("dt_s", &CascadeInput::dt_s);
+    py::class_<CascadeOutput>(m, "CascadeOutput")
+        .def_readonly("angle_sp", &CascadeOutput::angle_sp)
+        .def_readonly("rate_sp", &CascadeOutput::rate_sp)
+        .def_readonly("torque", &CascadeOutput::torque);
+    py::class_<Cascade>(m, "Cascade")
+        .def(py::init<const CascadeGains&>(), py::arg("gains") = CascadeGains::paper_defaults())
+        .def("update", &Cascade::update)
+        .def("reset", &Cascade::reset);
+}
+
+void bind_supervisor(py::module_& m) {
+    bind_rc_and_cascade(m);
+    // Reasons cross as plain ints: their names are the dialect's HQ_REASON (the one
+    // definition; flight_controller.cpp asserts the values match).
+    m.def("reason_text", [](int r) { return reason_text(static_cast<Reason>(r)); },
+          py::arg("reason"));
+    py::enum_<ArmSource>(m, "ArmSource").value("NONE", ArmSource::None)
+        .value("RC_SWITCH", ArmSource::RcSwitch).value("COMMAND", ArmSource::Command);
+    py::enum_<Severity>(m, "Severity").value("CRITICAL", Severity::Critical)
+        .value("WARNING", Severity::Warning).value("NOTICE", Severity::Notice)
+        .value("INFO", Severity::Info);
+    py::class_<Event>(m, "Event")
+        .def_property_readonly("reason", [](const Event& e) { return static_cast<int>(e.reason); })
+        .def_readonly("severity", &Event::severity);
+    m.def("imu_timeout_for", &imu_timeout_for, py::arg("rate_hz"));
+
+    py::class_<SafetyLimits>(m, "SafetyLimits")
+        .def(py::init<>())
+        .def_readwrite("rc_timeout_us", &SafetyLimits::rc_timeout_us)
+        .def_readwrite("host_timeout_us", &SafetyLimits::host_timeout_us)
+        .def_readwrite("imu_timeout_us", &SafetyLimits::imu_timeout_us)
+        .def_readwrite("imu_retry_us", &SafetyLimits::imu_retry_us)
+        .def_readwrite("abort_angle_rad", &SafetyLimits::abort_angle_rad)
+        .def_readwrite("abort_rate_rad_s", &SafetyLimits::abort_rate_rad_s)
+        .def_property("max_amplitude", [](const SafetyLimits& l) {
+            return std::array<float, kInjections>{l.max_amplitude[0], l.max_amplitude[1],
+                                                  l.max_amplitude[2]};
+        }, [](SafetyLimits& l, const std::array<float, kInjections>& a) {
+            for (int i = 0; i < kInjections; ++i) l.max_amplitude[i] = a[i];
+        }, "Largest amplitude per injection point: angle (rad), rate (rad/s), mixer.")
+        .def_readwrite("min_freq_hz", &SafetyLimits::min_freq_hz)
+        .def_readwrite("max_freq_fraction", &SafetyLimits::max_freq_fraction)
+        .def_readwrite("max_duration_s", &SafetyLimits::max_duration_s)
+        .def_readwrite("min_fade_cycles", &SafetyLimits::min_fade_cycles);
+
+    py::class_<SupervisorInputs>(m, "SupervisorInputs")
+        .def(py::init([](uint64_t now_us, const RcInput& rc, bool imu_sample, const Euler& att,
+                         const Vec3& rate) { return SupervisorInputs{now_us, rc, imu_sample, att, rate}; }),
+             py::arg("now_us"), py::arg("rc"), py::arg("imu_sample") = true,
+             py::arg("attitude") = Euler(), py::arg("rate") = Vec3());
+
+    py::class_<SupervisorCounters>(m, "SupervisorCounters")
+        .def_readonly("rc_failsafes", &SupervisorCounters::rc_failsafes)
+        .def_readonly("host_failsafes", &SupervisorCounters::host_failsafes)
+        .def_readonly("imu_stale", &SupervisorCounters::imu_stale)
+        .def_readonly("imu_resets", &SupervisorCounters::imu_resets)
+        .def_readonly("imu_reinits", &SupervisorCounters::imu_reinits)
+        .def_readonly("non_finite", &SupervisorCounters::non_finite)
+        .def_readonly("arm_refused", &SupervisorCounters::arm_refused)
+        .def_readonly("exc_refused", &SupervisorCounters::exc_refused)
+        .def_readonly("exc_stopped", &SupervisorCounters::exc_stopped)
+        .def_readonly("events_dropped", &SupervisorCounters::events_dropped);
+
+    py::class_<Supervisor>(m, "Supervisor")
+        .def(py::init<const SafetyLimits&, float>(), py::arg("limits") = SafetyLimits(),
+             py::arg("loop_rate_hz") = 200.0f)
+        .def("host_heartbeat", &Supervisor::host_heartbeat, py::arg("now_us"))
+        .def("arm_command", [](Supervisor& s, const RcInput& rc, uint64_t now) {
+            return static_cast<int>(s.arm_command(rc, now));
+        }, py::arg("rc"), py::arg("now_us"), "HQ_REASON_NONE (0) when armed, else why not.")
+        .def("disarm_command", &Supervisor::disarm_command)
+        .def("set_mode", [](Supervisor& s, uint32_t mode) { return static_cast<int>(s.set_mode(mode)); },
+             py::arg("custom_mode"))
+        .def("start_excitation", [](Supervisor& s, const ExcitationConfig& c, uint64_t now) {
+            return static_cast<int>(s.start_excitation(c, now));
+        }, py::arg("config"), py::arg("now_us"))
+        .def("stop_excitation", &Supervisor::stop_excitation)
+        .def("update", &Supervisor::update, py::arg("inputs"))
+        .def("fault", [](Supervisor& s, int why) { s.fault(static_cast<Reason>(why)); }, py::arg("why"))
+        .def("imu_initialised", &Supervisor::imu_initialised, py::arg("now_us"), py::arg("timeout_us"))
+        .def("imu_recovery_due", &Supervisor::imu_recovery_due, py::arg("now_us"))
+        .def("imu_recovery_result", [](Supervisor& s, int found, bool ok, uint64_t now) {
+            s.imu_recovery_result(static_cast<Reason>(found), ok, now);
+        }, py::arg("found"), py::arg("reinitialised"), py::arg("now_us"))
+        .def_property_readonly("armed", &Supervisor::armed)
+        .def_property_readonly("arm_source", &Supervisor::arm_source)
+        .def_property_readonly("mode", &Supervisor::mode)
+        .def_property_readonly("excitation_state", &Supervisor::excitation_state)
+        .def_property_readonly("excitation", &Supervisor::excitation, py::return_value_policy::reference_internal)
+        .def("imu_fresh", &Supervisor::imu_fresh, py::arg("now_us"))
+        .def_property_readonly("imu_stale", &Supervisor::imu_stale)
+        .def_property_readonly("last_reason", [](const Supervisor& s) { return static_cast<int>(s.last_reason()); })
+        .def_property_readonly("counters", &Supervisor::counters)
+        .def_property_readonly("limits", &Supervisor::limits)
+        .def("events", [](Supervisor& s) {
+            std::vector<Event> out;
+            Event e;
+            while (s.next_event(e)) out.push_back(e);
+            return out;
+        }, "Every event not yet taken, oldest first.")
+        .def("take_excitation_end", [](Supervisor& s) -> py::object {
+            Reason why;
+            if (s.take_excitation_end(why)) return py::cast(static_cast<int>(why));
+            return py::none();
+        }, "Why an excitation ended since the last call, or None.");
+}
 
 }  // namespace
 
@@ -114,7 +262,11 @@ PYBIND11_MODULE(_firmware, m) {
     py::class_<CascadeGains>(m, "CascadeGains")
         .def_static("paper_defaults", &CascadeGains::paper_defaults)
         .def("rate", [](const CascadeGains& g, Axis a) { return g.rate[static_cast<int>(a)]; })
-        .def("angle", [](const CascadeGains& g, Axis a) { return g.angle[static_cast<int>(a)]; });
+        .def("angle", [](const CascadeGains& g, Axis a) {
+            const int i = static_cast<int>(a);
+            if (i >= kAngleAxes) throw py::value_error("yaw has no angle loop");
+            return g.angle[i];
+        });
     py::class_<AttitudeController>(m, "AttitudeController")
         .def(py::init<const CascadeGains&>())
         .def("update", &AttitudeController::update)
@@ -155,6 +307,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("yaw_torque_unit_nm", &Mixer::yaw_torque_unit_nm)
         .def_property_readonly("hover_arm_thrust_n", &Mixer::hover_arm_thrust_n);
 
+    py::enum_<ExcitationState>(m, "ExcitationState").value("IDLE", ExcitationState::Idle)
+        .value("FADING", ExcitationState::Fading).value("RUNNING", ExcitationState::Running);
     py::class_<ExcitationConfig>(m, "ExcitationConfig")
         .def(py::init<>())
         .def_readwrite("axis", &ExcitationConfig::axis)
@@ -172,7 +326,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("measuring", &Excitation::measuring)
         .def_property_readonly("period_samples", &Excitation::period_samples)
         .def_property_readonly("actual_freq_hz", &Excitation::actual_freq_hz)
-        .def_property_readonly("total_samples", &Excitation::total_samples);
+        .def_property_readonly("total_samples", &Excitation::total_samples)
+        .def_property_readonly("state", &Excitation::state);
 
     py::enum_<InitResult>(m, "InitResult")
         .value("OK_DMP", InitResult::OkDmp).value("OK_RAW", InitResult::OkRaw)
@@ -180,6 +335,8 @@ PYBIND11_MODULE(_firmware, m) {
         .value("NO_DEVICE", InitResult::NoDevice).value("BUS_ERROR", InitResult::BusError);
     py::enum_<SensorMode>(m, "SensorMode").value("NONE", SensorMode::None)
         .value("DMP", SensorMode::Dmp).value("RAW", SensorMode::Raw);
+    py::enum_<ImuHealth>(m, "ImuHealth").value("CONFIGURED", ImuHealth::Configured)
+        .value("UNCONFIGURED", ImuHealth::Unconfigured).value("NO_ANSWER", ImuHealth::NoAnswer);
     py::class_<ImuSample>(m, "ImuSample")
         .def(py::init<>())
         .def_readonly("attitude", &ImuSample::attitude)
@@ -213,6 +370,9 @@ PYBIND11_MODULE(_firmware, m) {
             return py::bytes(reinterpret_cast<const char*>(e.memory() + start), n);
         })
         .def("set_present", &Mpu6050Emulator::set_present)
+        .def("set_silent", &Mpu6050Emulator::set_silent)
+        .def("power_on_reset", &Mpu6050Emulator::power_on_reset)
+        .def("force_overflow", &Mpu6050Emulator::force_overflow)
         .def_property_readonly("fifo_count", &Mpu6050Emulator::fifo_count)
         .def_property_readonly("dmp_enabled", &Mpu6050Emulator::dmp_enabled)
         .def_property_readonly("raw_fifo_enabled", &Mpu6050Emulator::raw_fifo_enabled);
@@ -225,6 +385,8 @@ PYBIND11_MODULE(_firmware, m) {
             if (h.driver.poll(bus, s)) return py::cast(s);
             return py::none();
         })
+        .def("probe", [](DriverHolder& h, Mpu6050Emulator& bus) { return h.driver.probe(bus); })
+        .def_property_readonly("sample_rate_hz", [](const DriverHolder& h) { return h.driver.sample_rate_hz(); })
         .def_property_readonly("mode", [](const DriverHolder& h) { return h.driver.mode(); })
         .def_property_readonly("packet_size", [](const DriverHolder& h) { return h.driver.packet_size(); })
         .def_property_readonly("counters", [](const DriverHolder& h) { return h.driver.counters(); })
@@ -235,4 +397,6 @@ PYBIND11_MODULE(_firmware, m) {
             if (!Mpu6050::parse_dmp_packet(reinterpret_cast<const uint8_t*>(s.data()), out)) return py::none();
             return py::cast(out);
         });
+
+    bind_supervisor(m);
 }

@@ -17,8 +17,8 @@ CascadeGains CascadeGains::paper_defaults() {
         g.rate[a].integral_limit = 0.5f;
     }
     // Outer loop: Kc, tau_D (SPEC.md, outer-loop table); PD, no integral.
-    const float angle[2][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
-    for (int a = 0; a < 2; ++a) {
+    const float angle[kAngleAxes][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
+    for (int a = 0; a < kAngleAxes; ++a) {
         g.angle[a].kc = angle[a][0];
         g.angle[a].tau_i_s = 0.0f;
         g.angle[a].tau_d_s = angle[a][1];
@@ -55,6 +55,36 @@ Vec3 RateController::update(const Vec3& setpoint, const Vec3& measured, float dt
 
 void RateController::reset() {
     for (auto& p : pid_) p.reset();
+}
+
+namespace {
+float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
+}  // namespace
+
+CascadeOutput Cascade::update(const CascadeInput& in) {
+    CascadeOutput out;
+    const int a = static_cast<int>(in.axis);
+    out.angle_sp = Euler{in.angle_stick.roll, in.angle_stick.pitch, in.attitude.yaw};
+    if (in.injection == Injection::Angle && a < kAngleAxes) {
+        (a == 0 ? out.angle_sp.roll : out.angle_sp.pitch) += in.excitation;
+    }
+    out.angle_sp.roll = clampf(out.angle_sp.roll, -kMaxAngleSetpointRad, kMaxAngleSetpointRad);
+    out.angle_sp.pitch = clampf(out.angle_sp.pitch, -kMaxAngleSetpointRad, kMaxAngleSetpointRad);
+    out.rate_sp = in.rate_stick;
+    if (in.mode == FlightMode::Angle) {
+        const Vec3 outer = attitude_.update(out.angle_sp, in.attitude, in.dt_s);
+        out.rate_sp.x = outer.x;
+        out.rate_sp.y = outer.y;
+    }
+    if (in.injection == Injection::Rate && a < kAxes) out.rate_sp[a] += in.excitation;
+    out.torque = rate_.update(out.rate_sp, in.rate, in.dt_s);
+    if (in.injection == Injection::Mixer && a < kAxes) out.torque[a] += in.excitation;
+    return out;
+}
+
+void Cascade::reset() {
+    attitude_.reset();
+    rate_.reset();
 }
 
 }  // namespace hq

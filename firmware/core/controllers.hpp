@@ -4,19 +4,22 @@
 // Default gains are the paper's auto-tuned values (SPEC.md tables; Drones 2022, 6(10), 309).
 #pragma once
 
+#include "excitation.hpp"
 #include "pid.hpp"
 #include "types.hpp"
 
 namespace hq {
 
 struct CascadeGains {
-    PidGains rate[kAxes];      // inner loop, rad/s in, normalised torque out
-    PidGains angle[2];         // outer loop (roll, pitch), rad in, rad/s out
+    PidGains rate[kAxes];           // inner loop, rad/s in, normalised torque out
+    PidGains angle[kAngleAxes];     // outer loop (roll, pitch), rad in, rad/s out
     static CascadeGains paper_defaults();
 };
 
 // Largest rate setpoint the angle loop may ask for, rad/s (400 deg/s).
 constexpr float kMaxRateSetpoint = 6.9813f;
+// Angle setpoints (sticks plus an angle-injection excitation) are clamped here: 80 deg.
+constexpr float kMaxAngleSetpointRad = 1.3962634f;
 
 class AttitudeController {
 public:
@@ -24,10 +27,14 @@ public:
     // Angle setpoints and measured angles (rad) -> roll and pitch rate setpoints (rad/s).
     Vec3 update(const Euler& setpoint, const Euler& measured, float dt_s);
     void reset();
-    const Pid& loop(Axis axis) const { return pid_[static_cast<int>(axis)]; }
+    // The loop of roll or pitch; nullptr for yaw, which has no angle loop.
+    const Pid* loop(Axis axis) const {
+        const int a = static_cast<int>(axis);
+        return a < kAngleAxes ? &pid_[a] : nullptr;
+    }
 
 private:
-    Pid pid_[2];
+    Pid pid_[kAngleAxes];
 };
 
 class RateController {
@@ -36,10 +43,52 @@ public:
     // Rate setpoints and measured body rates (rad/s) -> normalised torque commands.
     Vec3 update(const Vec3& setpoint, const Vec3& measured, float dt_s);
     void reset();
-    const Pid& loop(Axis axis) const { return pid_[static_cast<int>(axis)]; }
+    const Pid* loop(Axis axis) const {
+        const int a = static_cast<int>(axis);
+        return a < kAxes ? &pid_[a] : nullptr;
+    }
 
 private:
     Pid pid_[kAxes];
+};
+
+// One pass of the whole cascade with an excitation added at its injection point, as the
+// flight loop runs it (PX4-style: a plain class, update() in, setpoints and torque out).
+// Angle mode: the sticks give roll and pitch angle setpoints (plus an angle-injection
+// excitation, clamped to kMaxAngleSetpointRad), the angle loop turns them into rate
+// setpoints, the sticks give the yaw rate. Rate mode: the sticks give all three rates and the
+// angle loop does not run. Then a rate-injection excitation is added to the axis's rate
+// setpoint, the rate loop gives torques, and a mixer-injection excitation is added to the
+// axis's torque.
+struct CascadeInput {
+    FlightMode mode = FlightMode::Angle;
+    Euler angle_stick{};            // rad (roll, pitch)
+    Vec3 rate_stick{};              // rad/s
+    Axis axis = Axis::Roll;         // the excitation's axis and injection point
+    Injection injection = Injection::Mixer;
+    float excitation = 0.0f;        // this loop's value, in the injection point's units
+    Euler attitude{};               // measured
+    Vec3 rate{};                    // measured
+    float dt_s = 0.005f;
+};
+
+struct CascadeOutput {
+    Euler angle_sp{};               // roll, pitch after injection and clamp (yaw: measured)
+    Vec3 rate_sp{};                 // after injection
+    Vec3 torque{};                  // normalised, after injection
+};
+
+class Cascade {
+public:
+    explicit Cascade(const CascadeGains& gains) : attitude_(gains), rate_(gains) {}
+    CascadeOutput update(const CascadeInput& in);
+    void reset();
+    const AttitudeController& attitude() const { return attitude_; }
+    const RateController& rate() const { return rate_; }
+
+private:
+    AttitudeController attitude_;
+    RateController rate_;
 };
 
 }  // namespace hq

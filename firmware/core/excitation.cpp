@@ -13,15 +13,22 @@ constexpr float kMinSamplesPerPeriod = 4.0f;
 
 bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     active_ = false;
-    if (!(config.freq_hz > 0.0f) || !(loop_rate_hz > 0.0f) ||
+    if (!(config.freq_hz > 0.0f) || !(loop_rate_hz > 0.0f) || !std::isfinite(loop_rate_hz) ||
         config.freq_hz * kMinSamplesPerPeriod > loop_rate_hz || config.cycles == 0 ||
         !std::isfinite(config.amplitude)) {
         return false;
     }
+    // In double: a tiny frequency must be refused, not wrapped into a short period.
+    const double samples = static_cast<double>(loop_rate_hz) / static_cast<double>(config.freq_hz);
+    if (!(samples <= static_cast<double>(kMaxPeriodSamples))) return false;
+    const uint32_t period = static_cast<uint32_t>(std::llround(samples));
+    const uint64_t total =
+        uint64_t{period} * (uint64_t{config.cycles} + 2u * uint64_t{config.fade_cycles});
+    if (total > kMaxTotalSamples) return false;
     config_ = config;
-    period_ = static_cast<uint32_t>(std::lround(loop_rate_hz / config.freq_hz));
+    period_ = period;
     actual_freq_hz_ = loop_rate_hz / static_cast<float>(period_);
-    total_ = period_ * (static_cast<uint32_t>(config.cycles) + 2u * config.fade_cycles);
+    total_ = static_cast<uint32_t>(total);
     k_ = 0;
     active_ = true;
     return true;
@@ -34,12 +41,13 @@ bool Excitation::measuring() const {
     return active_ && k_ >= fade && k_ < total_ - fade;
 }
 
+ExcitationState Excitation::state() const {
+    if (!active_) return ExcitationState::Idle;
+    return measuring() ? ExcitationState::Running : ExcitationState::Fading;
+}
+
 float Excitation::next() {
     if (!active_) return 0.0f;
-    if (k_ >= total_) {
-        active_ = false;
-        return 0.0f;
-    }
     const uint32_t fade = period_ * config_.fade_cycles;
     float envelope = 1.0f;
     if (k_ < fade) {
@@ -52,7 +60,7 @@ float Excitation::next() {
     const uint32_t phase = k_ % period_;          // exact: no accumulated phase error
     const float value = config_.amplitude * envelope *
                         std::sin(kTwoPi * static_cast<float>(phase) / static_cast<float>(period_));
-    ++k_;
+    if (++k_ >= total_) active_ = false;      // that was the last sample
     return value;
 }
 

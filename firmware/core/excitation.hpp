@@ -15,6 +15,10 @@
 namespace hq {
 
 enum class Injection : uint8_t { Angle = 0, Rate = 1, Mixer = 2 };
+constexpr int kInjections = 3;
+
+// Where an excitation is in its life (HQ_EXCITATION_STATE).
+enum class ExcitationState : uint8_t { Idle = 0, Fading = 1, Running = 2 };
 
 struct ExcitationConfig {
     Axis axis = Axis::Roll;
@@ -28,11 +32,14 @@ struct ExcitationConfig {
 class Excitation {
 public:
     // Arms the excitation; returns false (and stays idle) for an impossible request:
-    // frequency not in (0, loop_rate/4], no cycles, or a non-finite amplitude.
+    // frequency not in (0, loop_rate/4], a period longer than kMaxPeriodSamples, no cycles,
+    // a total length that does not fit the sample counter, or a non-finite amplitude.
+    // This is the signal generator's own guard; the safety bounds (amplitude, band,
+    // duration, fade-in) are the Supervisor's (supervisor.hpp).
     bool start(const ExcitationConfig& config, float loop_rate_hz);
     void stop();
 
-    // The value for this loop sample, then advance. 0 when idle or finished.
+    // The value for this loop sample, then advance; idle after the last one. 0 when idle.
     float next();
 
     bool active() const { return active_; }
@@ -41,8 +48,15 @@ public:
     float actual_freq_hz() const { return actual_freq_hz_; }
     uint32_t sample() const { return k_; }
     uint32_t total_samples() const { return total_; }
-    // True while in the full-amplitude cycles (between the fades).
+    // Of the sample the next call to next() returns: true in the full-amplitude cycles
+    // (between the fades); the state (idle, fading or running).
     bool measuring() const;
+    ExcitationState state() const;
+
+    // The phase is computed as (k mod N) / N in float, exact while N <= 2^24.
+    static constexpr uint32_t kMaxPeriodSamples = 1u << 24;
+    // Whole excitations stay well inside the 32-bit sample counter.
+    static constexpr uint64_t kMaxTotalSamples = 1ull << 31;
 
 private:
     ExcitationConfig config_{};

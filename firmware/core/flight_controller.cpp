@@ -6,32 +6,64 @@
 
 namespace hq {
 
+// The core's enums are the dialect's (firmware/mavlink/heliquad.xml), value for value.
+static_assert(static_cast<int>(FlightMode::Angle) == HQ_MODE_ANGLE &&
+              static_cast<int>(FlightMode::Rate) == HQ_MODE_RATE, "HQ_MODE");
+static_assert(static_cast<int>(ExcitationState::Idle) == HQ_EXCITATION_STATE_IDLE &&
+              static_cast<int>(ExcitationState::Fading) == HQ_EXCITATION_STATE_FADING &&
+              static_cast<int>(ExcitationState::Running) == HQ_EXCITATION_STATE_RUNNING,
+              "HQ_EXCITATION_STATE");
+static_assert(kReasonCount == HQ_REASON_ENUM_END, "HQ_REASON: one entry per reason");
+static_assert(static_cast<int>(Reason::None) == HQ_REASON_NONE, "HQ_REASON_NONE");
+static_assert(static_cast<int>(Reason::Finished) == HQ_REASON_FINISHED, "HQ_REASON_FINISHED");
+static_assert(static_cast<int>(Reason::StopCommand) == HQ_REASON_STOP_COMMAND, "HQ_REASON_STOP_COMMAND");
+static_assert(static_cast<int>(Reason::Disarmed) == HQ_REASON_DISARMED, "HQ_REASON_DISARMED");
+static_assert(static_cast<int>(Reason::NoHost) == HQ_REASON_NO_HOST, "HQ_REASON_NO_HOST");
+static_assert(static_cast<int>(Reason::Busy) == HQ_REASON_BUSY, "HQ_REASON_BUSY");
+static_assert(static_cast<int>(Reason::AxisInjection) == HQ_REASON_AXIS_INJECTION, "HQ_REASON_AXIS_INJECTION");
+static_assert(static_cast<int>(Reason::InjectionMode) == HQ_REASON_INJECTION_MODE, "HQ_REASON_INJECTION_MODE");
+static_assert(static_cast<int>(Reason::Amplitude) == HQ_REASON_AMPLITUDE, "HQ_REASON_AMPLITUDE");
+static_assert(static_cast<int>(Reason::Frequency) == HQ_REASON_FREQUENCY, "HQ_REASON_FREQUENCY");
+static_assert(static_cast<int>(Reason::Cycles) == HQ_REASON_CYCLES, "HQ_REASON_CYCLES");
+static_assert(static_cast<int>(Reason::Fade) == HQ_REASON_FADE, "HQ_REASON_FADE");
+static_assert(static_cast<int>(Reason::Duration) == HQ_REASON_DURATION, "HQ_REASON_DURATION");
+static_assert(static_cast<int>(Reason::AngleLimit) == HQ_REASON_ANGLE_LIMIT, "HQ_REASON_ANGLE_LIMIT");
+static_assert(static_cast<int>(Reason::RateLimit) == HQ_REASON_RATE_LIMIT, "HQ_REASON_RATE_LIMIT");
+static_assert(static_cast<int>(Reason::RcLost) == HQ_REASON_RC_LOST, "HQ_REASON_RC_LOST");
+static_assert(static_cast<int>(Reason::HostLost) == HQ_REASON_HOST_LOST, "HQ_REASON_HOST_LOST");
+static_assert(static_cast<int>(Reason::ImuStale) == HQ_REASON_IMU_STALE, "HQ_REASON_IMU_STALE");
+static_assert(static_cast<int>(Reason::NonFinite) == HQ_REASON_NON_FINITE, "HQ_REASON_NON_FINITE");
+static_assert(static_cast<int>(Reason::RcSwitch) == HQ_REASON_RC_SWITCH, "HQ_REASON_RC_SWITCH");
+static_assert(static_cast<int>(Reason::DisarmCommand) == HQ_REASON_DISARM_COMMAND, "HQ_REASON_DISARM_COMMAND");
+static_assert(static_cast<int>(Reason::NoRc) == HQ_REASON_NO_RC, "HQ_REASON_NO_RC");
+static_assert(static_cast<int>(Reason::ArmSwitchLow) == HQ_REASON_ARM_SWITCH_LOW, "HQ_REASON_ARM_SWITCH_LOW");
+static_assert(static_cast<int>(Reason::NoThrottle) == HQ_REASON_NO_THROTTLE, "HQ_REASON_NO_THROTTLE");
+static_assert(static_cast<int>(Reason::ThrottleHigh) == HQ_REASON_THROTTLE_HIGH, "HQ_REASON_THROTTLE_HIGH");
+static_assert(static_cast<int>(Reason::ImuNotReady) == HQ_REASON_IMU_NOT_READY, "HQ_REASON_IMU_NOT_READY");
+static_assert(static_cast<int>(Reason::ModeLocked) == HQ_REASON_MODE_LOCKED, "HQ_REASON_MODE_LOCKED");
+static_assert(static_cast<int>(Reason::ImuReset) == HQ_REASON_IMU_RESET, "HQ_REASON_IMU_RESET");
+static_assert(static_cast<int>(Reason::ImuNoAnswer) == HQ_REASON_IMU_NO_ANSWER, "HQ_REASON_IMU_NO_ANSWER");
+static_assert(static_cast<int>(Reason::ImuStalled) == HQ_REASON_IMU_STALLED, "HQ_REASON_IMU_STALLED");
+static_assert(static_cast<int>(Reason::ImuRecovered) == HQ_REASON_IMU_RECOVERED, "HQ_REASON_IMU_RECOVERED");
+static_assert(static_cast<int>(Reason::ImuInitFailed) == HQ_REASON_IMU_INIT_FAILED, "HQ_REASON_IMU_INIT_FAILED");
+static_assert(static_cast<int>(Reason::BadMode) == HQ_REASON_BAD_MODE, "HQ_REASON_BAD_MODE");
+static_assert(static_cast<int>(Axis::Yaw) == HQ_AXIS_YAW &&
+              static_cast<int>(Injection::Mixer) == HQ_INJECTION_MIXER, "HQ_AXIS/HQ_INJECTION");
+static_assert(static_cast<int>(Severity::Critical) == MAV_SEVERITY_CRITICAL &&
+              static_cast<int>(Severity::Warning) == MAV_SEVERITY_WARNING &&
+              static_cast<int>(Severity::Notice) == MAV_SEVERITY_NOTICE &&
+              static_cast<int>(Severity::Info) == MAV_SEVERITY_INFO, "MAV_SEVERITY");
+
 namespace {
 
-constexpr uint16_t kRcCenter = 1500, kRcMin = 1000, kRcHalfSpan = 500;
-constexpr uint16_t kRcArmHigh = 1700;        // channel 5 above this: arm requested
-constexpr uint16_t kRcThrottleLow = 1100;    // throttle below this counts as low for arming
-constexpr uint16_t kRcModeRate = 1700;       // channel 6 above this: rate mode
-constexpr int kChRoll = 0, kChPitch = 1, kChThrottle = 2, kChYaw = 3, kChArm = 4, kChMode = 5;
 constexpr uint64_t kSlowPeriodUs = 1000000;  // HEARTBEAT, HQ_FW_STATUS: 1 Hz
 // dt outside [kDtMin, kDtMax] x nominal is clamped (a late or early loop must not make the
 // derivative or integral jump).
 constexpr float kDtMin = 0.25f, kDtMax = 4.0f;
+// STATUSTEXT.text is 50 characters, NUL-terminated when shorter.
+constexpr size_t kStatusTextLen = 50;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
-
-// -1..1 from a stick channel; 0 when the channel has no signal.
-float stick(const RcInput& rc, int ch) {
-    const uint16_t us = rc.channel_us[ch];
-    if (us == 0) return 0.0f;
-    return clampf((static_cast<float>(us) - kRcCenter) / kRcHalfSpan, -1.0f, 1.0f);
-}
-
-float throttle(const RcInput& rc) {
-    const uint16_t us = rc.channel_us[kChThrottle];
-    if (us == 0) return 0.0f;
-    return clampf((static_cast<float>(us) - kRcMin) / (2.0f * kRcHalfSpan), 0.0f, 1.0f);
-}
 
 bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
@@ -40,8 +72,8 @@ bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) &&
 FlightController::FlightController(const FlightControllerConfig& config, I2cBus& i2c,
                                    Clock& clock, SerialPort& telemetry, MotorOutputs& motors)
     : config_(config), i2c_(i2c), clock_(clock), telemetry_(telemetry), motors_(motors),
-      imu_(config.imu), attitude_ctl_(config.gains), rate_ctl_(config.gains),
-      mixer_(config.geometry) {}
+      imu_(config.imu), cascade_(config.gains), mixer_(config.geometry),
+      supervisor_(config.safety, config.loop_rate_hz) {}
 
 InitResult FlightController::init() {
     motors_.disarm();
@@ -51,6 +83,7 @@ InitResult FlightController::init() {
     } else if (r == InitResult::NoDevice || r == InitResult::BusError) {
         send_statustext(MAV_SEVERITY_CRITICAL, "IMU: MPU6050 not found");
     }
+    supervisor_.imu_initialised(clock_.micros(), imu_timeout_for(imu_.sample_rate_hz()));
     return r;
 }
 
@@ -72,17 +105,24 @@ void FlightController::step(const RcInput& rc) {
     const uint64_t now = clock_.micros();
     const float dt = clamp_dt(now);
     state_.dt_s = dt;
-    read_imu(dt);
-    handle_commands(rc);
-    check_failsafes(rc);
-    run_control(rc, dt);
+    SupervisorInputs in;
+    in.now_us = now;
+    in.rc = rc;
+    in.imu_sample = read_imu(dt);
+    in.attitude = state_.attitude;
+    in.rate = state_.rate;
+    handle_commands(rc, now);
+    const float excitation = supervisor_.update(in);
+    recover_imu(now);
+    run_control(rc, excitation, dt);
+    send_events();
     send_telemetry();
     ++loops_;
 }
 
-void FlightController::read_imu(float dt_s) {
+bool FlightController::read_imu(float dt_s) {
     ImuSample s;
-    if (!imu_.poll(i2c_, s)) return;            // no new packet: keep the last estimate
+    if (!imu_.poll(i2c_, s)) return false;      // no new packet: keep the last estimate
     if (s.has_attitude) {
         state_.attitude = to_euler(s.attitude);
     } else {
@@ -90,9 +130,26 @@ void FlightController::read_imu(float dt_s) {
         state_.attitude = to_euler(filter_.quaternion());
     }
     state_.rate = s.gyro_rad_s;
+    return true;
 }
 
-void FlightController::handle_commands(const RcInput& rc) {
+void FlightController::recover_imu(uint64_t now_us) {
+    if (!supervisor_.imu_recovery_due(now_us)) return;
+    const ImuHealth health = imu_.probe(i2c_);
+    if (health == ImuHealth::NoAnswer) {
+        supervisor_.imu_recovery_result(Reason::ImuNoAnswer, false, now_us);
+        return;
+    }
+    // Disarmed: the motors are off, so the loop may stop for the start-up waits and the
+    // DMP upload (about 0.2 s on the board).
+    const InitResult r = imu_.init(i2c_, clock_);
+    const bool ok = r == InitResult::OkDmp || r == InitResult::OkRaw;
+    supervisor_.imu_recovery_result(
+        health == ImuHealth::Unconfigured ? Reason::ImuReset : Reason::ImuStalled, ok, now_us);
+    filter_.reset();
+}
+
+void FlightController::handle_commands(const RcInput& rc, uint64_t now_us) {
     uint8_t buf[64];
     size_t n;
     while ((n = telemetry_.read(buf, sizeof(buf))) > 0) {
@@ -101,183 +158,113 @@ void FlightController::handle_commands(const RcInput& rc) {
             mavlink_status_t status;
             if (mavlink_frame_char_buffer(&rx_msg_, &rx_status_, buf[i], &msg, &status) ==
                 MAVLINK_FRAMING_OK) {
-                handle_message(msg, rc);
+                handle_message(msg, rc, now_us);
             }
         }
     }
-    handle_rc_arming(rc);
 }
 
-void FlightController::handle_message(const mavlink_message_t& msg, const RcInput& rc) {
-    mavlink_message_t out;
+void FlightController::handle_message(const mavlink_message_t& msg, const RcInput& rc,
+                                      uint64_t now_us) {
     switch (msg.msgid) {
         case MAVLINK_MSG_ID_HEARTBEAT:
-            last_host_heartbeat_us_ = clock_.micros();
+            supervisor_.host_heartbeat(now_us);
             return;
-        case MAVLINK_MSG_ID_COMMAND_LONG: {
-            mavlink_command_long_t cmd;
-            mavlink_msg_command_long_decode(&msg, &cmd);
-            if (cmd.target_system != config_.system_id) return;
-            uint8_t result = MAV_RESULT_UNSUPPORTED;
-            if (cmd.command == MAV_CMD_COMPONENT_ARM_DISARM) {
-                last_host_heartbeat_us_ = clock_.micros();
-                if (cmd.param1 > 0.5f) {
-                    result = try_arm(rc, true) ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
-                } else {
-                    disarm("disarmed by command");
-                    result = MAV_RESULT_ACCEPTED;
-                }
-            }
-            mavlink_msg_command_ack_pack_status(config_.system_id, config_.component_id, &tx_status_,
-                                                &out, cmd.command, result, 0, 0, msg.sysid,
-                                                msg.compid);
-            send(out);
+        case MAVLINK_MSG_ID_COMMAND_LONG:
+            handle_command_long(msg, rc, now_us);
             return;
-        }
         case MAVLINK_MSG_ID_SET_MODE: {
             mavlink_set_mode_t sm;
             mavlink_msg_set_mode_decode(&msg, &sm);
-            if (sm.target_system != config_.system_id) return;
-            if (sm.custom_mode == static_cast<uint32_t>(Mode::Angle) ||
-                sm.custom_mode == static_cast<uint32_t>(Mode::Rate)) {
-                flight_mode_ = static_cast<Mode>(sm.custom_mode);
-                if (armed()) mode_ = flight_mode_;
-            }
+            if (sm.target_system == config_.system_id) supervisor_.set_mode(sm.custom_mode);
             return;
         }
-        case MAVLINK_MSG_ID_HQ_EXCITATION: {
-            mavlink_hq_excitation_t ex;
-            mavlink_msg_hq_excitation_decode(&msg, &ex);
-            if (ex.target_system != config_.system_id) return;
-            bool accepted = false;
-            if (ex.action == HQ_EXCITATION_STOP) {
-                excitation_.stop();
-                accepted = true;
-            } else if (ex.axis <= static_cast<uint8_t>(Axis::Yaw) &&
-                       ex.injection <= static_cast<uint8_t>(Injection::Mixer) &&
-                       !(ex.axis == static_cast<uint8_t>(Axis::Yaw) &&
-                         ex.injection == static_cast<uint8_t>(Injection::Angle))) {
-                ExcitationConfig cfg;
-                cfg.axis = static_cast<Axis>(ex.axis);
-                cfg.injection = static_cast<Injection>(ex.injection);
-                cfg.freq_hz = ex.freq_hz;
-                cfg.amplitude = ex.amplitude;
-                cfg.cycles = ex.cycles;
-                cfg.fade_cycles = ex.fade_cycles;
-                accepted = excitation_.start(cfg, config_.loop_rate_hz);
-                if (accepted) {
-                    exc_axis_ = cfg.axis;
-                    exc_injection_ = cfg.injection;
-                }
-            }
-            send_excitation_status(accepted);
+        case MAVLINK_MSG_ID_HQ_EXCITATION:
+            handle_excitation(msg, now_us);
             return;
-        }
         default:
             return;
     }
 }
 
-void FlightController::handle_rc_arming(const RcInput& rc) {
-    const bool high = rc.channel_us[kChArm] > kRcArmHigh;
-    if (high && !rc_arm_switch_was_high_ && !armed()) try_arm(rc, false);
-    if (!high && rc_arm_switch_was_high_ && armed() && !armed_by_command_) disarm("RC disarm");
-    rc_arm_switch_was_high_ = high;
-    if (rc.channel_us[kChMode] != 0) {
-        flight_mode_ = rc.channel_us[kChMode] > kRcModeRate ? Mode::Rate : Mode::Angle;
-        if (armed()) mode_ = flight_mode_;
+void FlightController::handle_command_long(const mavlink_message_t& msg, const RcInput& rc,
+                                           uint64_t now_us) {
+    mavlink_command_long_t cmd;
+    mavlink_msg_command_long_decode(&msg, &cmd);
+    if (cmd.target_system != config_.system_id) return;
+    uint8_t result = MAV_RESULT_UNSUPPORTED;
+    Reason why = Reason::None;
+    if (cmd.command == MAV_CMD_COMPONENT_ARM_DISARM) {
+        if (cmd.param1 > 0.5f) {
+            why = supervisor_.arm_command(rc, now_us);
+            result = why == Reason::None ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
+        } else {
+            supervisor_.host_heartbeat(now_us);
+            supervisor_.disarm_command();
+            result = MAV_RESULT_ACCEPTED;
+        }
     }
+    mavlink_message_t out;
+    mavlink_msg_command_ack_pack_status(config_.system_id, config_.component_id, &tx_status_,
+                                        &out, cmd.command, result, 0, static_cast<int32_t>(why),
+                                        msg.sysid, msg.compid);
+    send(out);
 }
 
-bool FlightController::try_arm(const RcInput& rc, bool by_command) {
-    if (armed()) return true;
-    if (rc.channel_us[kChThrottle] >= kRcThrottleLow && rc.channel_us[kChThrottle] != 0) {
-        send_statustext(MAV_SEVERITY_WARNING, "arming refused: throttle not low");
-        return false;
+void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t now_us) {
+    mavlink_hq_excitation_t ex;
+    mavlink_msg_hq_excitation_decode(&msg, &ex);
+    if (ex.target_system != config_.system_id) return;
+    Reason why = Reason::StopCommand;
+    if (ex.action == HQ_EXCITATION_STOP) {
+        supervisor_.stop_excitation();
+        last_exc_accepted_ = true;
+    } else {
+        ExcitationConfig cfg;
+        cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
+        cfg.injection = static_cast<Injection>(ex.injection);
+        cfg.freq_hz = ex.freq_hz;
+        cfg.amplitude = ex.amplitude;
+        cfg.cycles = ex.cycles;
+        cfg.fade_cycles = ex.fade_cycles;
+        why = supervisor_.start_excitation(cfg, now_us);
+        last_exc_accepted_ = why == Reason::None;
     }
-    if (imu_.mode() == SensorMode::None) {
-        send_statustext(MAV_SEVERITY_WARNING, "arming refused: no IMU");
-        return false;
-    }
-    attitude_ctl_.reset();
-    rate_ctl_.reset();
-    armed_by_command_ = by_command;
-    mode_ = flight_mode_;
-    return true;
+    send_excitation_status(why);
 }
 
-void FlightController::disarm(const char* reason) {
-    if (armed()) send_statustext(MAV_SEVERITY_NOTICE, reason);
-    mode_ = Mode::Disarmed;
-    armed_by_command_ = false;
-    excitation_.stop();
-    motors_.disarm();
-}
-
-void FlightController::check_failsafes(const RcInput& rc) {
-    if (!armed()) return;
-    if (rc.age_us > config_.rc_timeout_us) {
-        disarm("failsafe: RC lost, motors off");
-    } else if (armed_by_command_ &&
-               clock_.micros() - last_host_heartbeat_us_ > config_.link_timeout_us) {
-        disarm("failsafe: host link lost, motors off");
-    }
-}
-
-void FlightController::run_control(const RcInput& rc, float dt_s) {
-    const int a = static_cast<int>(exc_axis_);
-    const float exc = excitation_.next();
-    state_.excitation = exc;
-    const Mode flight = mode_ == Mode::Disarmed ? flight_mode_ : mode_;
-
-    Euler angle_sp{stick(rc, kChRoll) * config_.max_stick_angle_rad,
-                   stick(rc, kChPitch) * config_.max_stick_angle_rad, state_.attitude.yaw};
-    Vec3 rate_sp{stick(rc, kChRoll) * config_.max_stick_rate_rad_s,
-                 stick(rc, kChPitch) * config_.max_stick_rate_rad_s,
-                 stick(rc, kChYaw) * config_.max_yaw_rate_rad_s};
-    if (exc_injection_ == Injection::Angle && a < 2) {
-        (a == 0 ? angle_sp.roll : angle_sp.pitch) += exc;
-    }
-    angle_sp.roll = clampf(angle_sp.roll, -config_.max_angle_rad, config_.max_angle_rad);
-    angle_sp.pitch = clampf(angle_sp.pitch, -config_.max_angle_rad, config_.max_angle_rad);
-    if (flight == Mode::Angle || flight == Mode::Sysid) {
-        const Vec3 outer = attitude_ctl_.update(angle_sp, state_.attitude, dt_s);
-        rate_sp.x = outer.x;
-        rate_sp.y = outer.y;
-    }
-    if (exc_injection_ == Injection::Rate) rate_sp[a] += exc;
-    Vec3 torque = rate_ctl_.update(rate_sp, state_.rate, dt_s);
-    if (exc_injection_ == Injection::Mixer) torque[a] += exc;
-
-    state_.collective = throttle(rc);
-    const MixerOutput out =
-        mixer_.mix(MixerCommand{state_.collective, torque.x, torque.y, torque.z});
-    bool finite = finite3(torque) && finite3(rate_sp) && std::isfinite(angle_sp.roll) &&
-                  std::isfinite(angle_sp.pitch);
+void FlightController::run_control(const RcInput& rc, float excitation, float dt_s) {
+    const Sticks s = sticks(rc, config_.sticks);
+    const ExcitationConfig& exc = supervisor_.excitation_config();
+    CascadeInput in;
+    in.mode = supervisor_.mode();
+    in.angle_stick = s.angle;
+    in.rate_stick = s.rate;
+    in.axis = exc.axis;
+    in.injection = exc.injection;
+    in.excitation = excitation;
+    in.attitude = state_.attitude;
+    in.rate = state_.rate;
+    in.dt_s = dt_s;
+    const CascadeOutput c = cascade_.update(in);
+    state_.excitation = excitation;
+    state_.collective = s.throttle;
+    state_.angle_sp = c.angle_sp;
+    state_.rate_sp = c.rate_sp;
+    state_.torque = c.torque;
+    const MixerOutput out = mixer_.mix(MixerCommand{s.throttle, c.torque.x, c.torque.y, c.torque.z});
+    bool finite = finite3(c.torque) && finite3(c.rate_sp) && std::isfinite(c.angle_sp.roll) &&
+                  std::isfinite(c.angle_sp.pitch);
     for (float m : out.motor) finite = finite && std::isfinite(m);
-    state_.angle_sp = angle_sp;
-    state_.rate_sp = rate_sp;
-    state_.torque = torque;
-    if (!finite) {
-        ++nan_events_;
-        attitude_ctl_.reset();
-        rate_ctl_.reset();
-        for (float& m : state_.motor) m = 0.0f;
-        if (armed()) send_statustext(MAV_SEVERITY_CRITICAL, "non-finite value in control");
-        disarm("motors cut: non-finite value");
-        return;
-    }
-    if (armed()) {
-        if (excitation_.active()) mode_ = Mode::Sysid;
-        else if (mode_ == Mode::Sysid) mode_ = flight_mode_;
+    if (!finite) supervisor_.fault(Reason::NonFinite);
+    if (finite && supervisor_.armed()) {
         for (int i = 0; i < kMotors; ++i) state_.motor[i] = out.motor[i];
         motors_.set(state_.motor);
-    } else {
-        for (float& m : state_.motor) m = 0.0f;
-        motors_.disarm();
-        attitude_ctl_.reset();         // nothing integrates while the motors are off
-        rate_ctl_.reset();
+        return;
     }
+    for (float& m : state_.motor) m = 0.0f;
+    motors_.disarm();
+    cascade_.reset();                 // nothing integrates while the motors are off
 }
 
 void FlightController::send(const mavlink_message_t& msg) {
@@ -287,60 +274,81 @@ void FlightController::send(const mavlink_message_t& msg) {
 }
 
 void FlightController::send_statustext(uint8_t severity, const char* text) {
+    // The packer copies all 50 bytes: give it a zero-padded copy, never the literal itself.
+    char padded[kStatusTextLen] = {};
+    for (size_t i = 0; i < kStatusTextLen && text[i] != '\0'; ++i) padded[i] = text[i];
     mavlink_message_t msg;
     mavlink_msg_statustext_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                       severity, text, 0, 0);
+                                       severity, padded, 0, 0);
     send(msg);
 }
 
-void FlightController::send_excitation_status(bool accepted) {
+void FlightController::send_events() {
+    Event e;
+    while (supervisor_.next_event(e)) send_statustext(static_cast<uint8_t>(e.severity), reason_text(e.reason));
+    Reason why;
+    if (supervisor_.take_excitation_end(why)) send_excitation_status(why);
+}
+
+void FlightController::send_excitation_status(Reason reason) {
+    const Excitation& ex = supervisor_.excitation();
+    const ExcitationConfig& cfg = ex.config();
     mavlink_message_t msg;
     mavlink_msg_hq_excitation_status_pack_status(
         config_.system_id, config_.component_id, &tx_status_, &msg, clock_.micros(),
-        accepted ? 1 : 0, excitation_.active() ? 1 : 0, static_cast<uint8_t>(exc_axis_),
-        static_cast<uint8_t>(exc_injection_), excitation_.actual_freq_hz(),
-        excitation_.period_samples(), excitation_.total_samples());
+        last_exc_accepted_ ? 1 : 0, static_cast<uint8_t>(ex.state()), static_cast<uint8_t>(reason),
+        static_cast<uint8_t>(cfg.axis), static_cast<uint8_t>(cfg.injection), ex.actual_freq_hz(),
+        ex.period_samples(), ex.total_samples());
     send(msg);
+}
+
+uint8_t FlightController::sensor_kind() const {
+    return imu_.mode() == SensorMode::Dmp ? HQ_SENSOR_DMP
+           : imu_.mode() == SensorMode::Raw ? HQ_SENSOR_RAW : HQ_SENSOR_NONE;
 }
 
 void FlightController::send_telemetry() {
     // Order matters to the simulator: HQ_SYSID_SAMPLE is the last message of every loop, so
     // a reader that has it has the whole loop's telemetry.
     const uint64_t now = clock_.micros();
-    const int a = static_cast<int>(exc_axis_);
+    const Supervisor& sup = supervisor_;
+    const uint8_t armed = sup.armed() ? 1 : 0;
+    const auto mode = static_cast<uint8_t>(sup.mode());
+    const auto exc_state = static_cast<uint8_t>(sup.excitation_state());
     mavlink_message_t msg;
     if (loops_ == 0 || now - last_slow_us_ >= kSlowPeriodUs) {
         last_slow_us_ = now;
-        const uint8_t base = static_cast<uint8_t>(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED |
-                                                  (armed() ? MAV_MODE_FLAG_SAFETY_ARMED : 0));
+        const auto base = static_cast<uint8_t>(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED |
+                                               (armed ? MAV_MODE_FLAG_SAFETY_ARMED : 0));
+        const uint8_t system_status = armed ? MAV_STATE_ACTIVE
+                                      : sup.imu_stale() ? MAV_STATE_CRITICAL : MAV_STATE_STANDBY;
         mavlink_msg_heartbeat_pack_status(config_.system_id, config_.component_id, &tx_status_,
                                           &msg, MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_GENERIC, base,
-                                          static_cast<uint32_t>(mode_),
-                                          armed() ? MAV_STATE_ACTIVE : MAV_STATE_STANDBY);
+                                          mode, system_status);
         send(msg);
         const Mpu6050Counters& c = imu_.counters();
-        const uint8_t kind = imu_.mode() == SensorMode::Dmp ? HQ_SENSOR_DMP
-                             : imu_.mode() == SensorMode::Raw ? HQ_SENSOR_RAW : HQ_SENSOR_NONE;
-        mavlink_msg_hq_fw_status_pack_status(config_.system_id, config_.component_id, &tx_status_,
-                                             &msg, now, loops_, c.packets, c.dropped, c.overflows,
-                                             c.resyncs, c.bad_packets, c.bus_errors,
-                                             telemetry_dropped_, dt_clamped_, nan_events_, kind);
+        const SupervisorCounters& f = sup.counters();
+        mavlink_msg_hq_fw_status_pack_status(
+            config_.system_id, config_.component_id, &tx_status_, &msg, now, loops_, c.packets,
+            c.dropped, c.overflows, c.resyncs, c.bad_packets, c.bus_errors, telemetry_dropped_,
+            dt_clamped_, f.non_finite, sensor_kind(), armed, mode, exc_state,
+            static_cast<uint8_t>(sup.last_reason()), f.rc_failsafes, f.host_failsafes, f.imu_stale,
+            f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped);
         send(msg);
     }
-    const bool active = excitation_.active();
-    if (active != exc_was_active_) send_excitation_status(true);
-    exc_was_active_ = active;
     mavlink_msg_attitude_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
                                      static_cast<uint32_t>(now / 1000), state_.attitude.roll,
                                      state_.attitude.pitch, state_.attitude.yaw, state_.rate.x,
                                      state_.rate.y, state_.rate.z);
     send(msg);
-    const uint8_t exc_state = excitation_.measuring() ? 2 : (excitation_.active() ? 1 : 0);
-    const float angle_sp = a == 0 ? state_.angle_sp.roll : (a == 1 ? state_.angle_sp.pitch : 0.0f);
+    const ExcitationConfig& exc = sup.excitation_config();
+    const int a = static_cast<int>(exc.axis);
+    const float angle_sp = a < kAngleAxes ? (a == 0 ? state_.angle_sp.roll : state_.angle_sp.pitch)
+                                          : 0.0f;
     mavlink_msg_hq_sysid_sample_pack_status(
         config_.system_id, config_.component_id, &tx_status_, &msg, now, seq_++,
-        static_cast<uint8_t>(exc_axis_), static_cast<uint8_t>(exc_injection_), exc_state,
-        state_.excitation, angle_sp, state_.rate_sp[a], state_.rate[a], state_.attitude[a],
+        static_cast<uint8_t>(exc.axis), static_cast<uint8_t>(exc.injection), exc_state, armed,
+        mode, state_.excitation, angle_sp, state_.rate_sp[a], state_.rate[a], state_.attitude[a],
         state_.torque[a], state_.motor);
     send(msg);
 }

@@ -1,17 +1,14 @@
 // FlightController: the one place that does a loop iteration's I/O. It reads the IMU through
-// the HAL, computes and clamps dt, runs the cascade with any excitation injected, checks for
-// non-finite values, writes the motors, and sends telemetry; it parses commands arriving on
-// the telemetry link. Everything else in core/ is pure computation.
-//
-// Modes (HQ_MODE): disarmed, angle (sticks: roll/pitch angle, yaw rate), rate (sticks: body
-// rates), sysid (angle or rate mode with an excitation running). Arming only with the
-// throttle low, by the RC arm switch (channel 5 high) or MAV_CMD_COMPONENT_ARM_DISARM.
-// Failsafe: RC lost (no valid frame for rc_timeout_us) or, when armed by command, no HEARTBEAT
-// from the host for link_timeout_us -> motors off and disarmed, with a STATUSTEXT.
+// the HAL, computes and clamps dt, hands the commands that arrived on the telemetry link and
+// the loop's facts to the Supervisor (which owns the state and every safety rule, see
+// supervisor.hpp and docs/safety.md), runs the cascade with the excitation the Supervisor
+// gives, checks for non-finite values, writes the motors only when the Supervisor says they
+// may spin, re-initialises a stale IMU when the Supervisor asks, and sends telemetry.
 //
 // Telemetry every loop: ATTITUDE and HQ_SYSID_SAMPLE (always the loop's last message);
-// HEARTBEAT and HQ_FW_STATUS once a second; HQ_EXCITATION_STATUS on every change and in answer
-// to a command; STATUSTEXT on faults.
+// HEARTBEAT and HQ_FW_STATUS once a second; HQ_EXCITATION_STATUS in answer to every
+// HQ_EXCITATION and when an excitation ends; STATUSTEXT for every Supervisor event;
+// COMMAND_ACK for COMMAND_LONG.
 // A message that does not fit the link is dropped whole and counted, never blocking the loop.
 #pragma once
 
@@ -25,12 +22,12 @@
 #include "excitation.hpp"
 #include "mixer.hpp"
 #include "mpu6050.hpp"
+#include "rc.hpp"
+#include "supervisor.hpp"
 
 #include <heliquad/mavlink.h>
 
 namespace hq {
-
-enum class Mode : uint8_t { Disarmed = 0, Angle = 1, Rate = 2, Sysid = 3 };
 
 struct FlightControllerConfig {
     float loop_rate_hz = 200.0f;
@@ -39,12 +36,10 @@ struct FlightControllerConfig {
     Mpu6050Config imu{};
     uint8_t system_id = 1;
     uint8_t component_id = 1;            // MAV_COMP_ID_AUTOPILOT1
-    uint32_t rc_timeout_us = 500000;     // RC failsafe
-    uint32_t link_timeout_us = 1500000;  // host HEARTBEAT failsafe when armed by command
-    float max_stick_angle_rad = 0.5236f; // 30 deg at full stick
-    float max_stick_rate_rad_s = 3.4907f;// 200 deg/s at full stick (rate mode)
-    float max_yaw_rate_rad_s = 1.5708f;  // 90 deg/s at full yaw stick
-    float max_angle_rad = 1.3963f;       // 80 deg: setpoints (with excitation) are clamped here
+    // The rules' bounds. imu_timeout_us is replaced at init() by imu_timeout_for() of the
+    // IMU's configured rate.
+    SafetyLimits safety{};
+    StickLimits sticks{};
 };
 
 struct LoopState {               // what the last loop computed, for telemetry and tests
@@ -68,25 +63,27 @@ public:
     // One loop iteration at the clock's current time with the latest RC input.
     void step(const RcInput& rc);
 
-    Mode mode() const { return mode_; }
-    bool armed() const { return mode_ != Mode::Disarmed; }
+    const Supervisor& supervisor() const { return supervisor_; }
+    bool armed() const { return supervisor_.armed(); }
+    FlightMode mode() const { return supervisor_.mode(); }
     const LoopState& state() const { return state_; }
-    const Excitation& excitation() const { return excitation_; }
     const Mpu6050& imu() const { return imu_; }
+    // The FIFO data the MPU6050 is configured for (HQ_SENSOR_KIND).
+    uint8_t sensor_kind() const;
     uint32_t telemetry_dropped() const { return telemetry_dropped_; }
     uint32_t loops() const { return loops_; }
 
 private:
-    void read_imu(float dt_s);
-    void handle_commands(const RcInput& rc);
-    void handle_message(const mavlink_message_t& msg, const RcInput& rc);
-    void handle_rc_arming(const RcInput& rc);
-    bool try_arm(const RcInput& rc, bool by_command);
-    void disarm(const char* reason);
-    void check_failsafes(const RcInput& rc);
-    void run_control(const RcInput& rc, float dt_s);
+    bool read_imu(float dt_s);
+    void handle_commands(const RcInput& rc, uint64_t now_us);
+    void handle_message(const mavlink_message_t& msg, const RcInput& rc, uint64_t now_us);
+    void handle_command_long(const mavlink_message_t& msg, const RcInput& rc, uint64_t now_us);
+    void handle_excitation(const mavlink_message_t& msg, uint64_t now_us);
+    void recover_imu(uint64_t now_us);
+    void run_control(const RcInput& rc, float excitation, float dt_s);
+    void send_events();
     void send_telemetry();
-    void send_excitation_status(bool accepted);
+    void send_excitation_status(Reason reason);
     void send_statustext(uint8_t severity, const char* text);
     void send(const mavlink_message_t& msg);
     float clamp_dt(uint64_t now_us);
@@ -98,23 +95,16 @@ private:
     MotorOutputs& motors_;
     Mpu6050 imu_;
     ComplementaryFilter filter_;
-    AttitudeController attitude_ctl_;
-    RateController rate_ctl_;
+    Cascade cascade_;
     Mixer mixer_;
-    Excitation excitation_;
+    Supervisor supervisor_;
 
-    Mode mode_ = Mode::Disarmed;
-    Mode flight_mode_ = Mode::Angle;      // mode to use when armed (angle or rate)
-    bool armed_by_command_ = false;
-    bool rc_arm_switch_was_high_ = false;
     LoopState state_{};
-    Axis exc_axis_ = Axis::Roll;
-    Injection exc_injection_ = Injection::Mixer;
-    bool exc_was_active_ = false;
+    bool last_exc_accepted_ = false;
     bool have_time_ = false;
-    uint64_t last_us_ = 0, last_host_heartbeat_us_ = 0, last_slow_us_ = 0;
+    uint64_t last_us_ = 0, last_slow_us_ = 0;
     uint32_t loops_ = 0, seq_ = 0;
-    uint32_t telemetry_dropped_ = 0, dt_clamped_ = 0, nan_events_ = 0;
+    uint32_t telemetry_dropped_ = 0, dt_clamped_ = 0;
     mavlink_status_t tx_status_{};
     mavlink_status_t rx_status_{};
     mavlink_message_t rx_msg_{};

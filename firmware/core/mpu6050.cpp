@@ -18,6 +18,28 @@ constexpr float kDegToRad = 0.017453292519943295f;
 constexpr float kQuatNormTolerance = 0.05f;
 }  // namespace
 
+ImuHealth Mpu6050::probe(I2cBus& bus) {
+    uint8_t who = 0, power = 0, user = 0;
+    if (!read_reg(bus, WHO_AM_I, who) || who != WHO_AM_I_VALUE) return ImuHealth::NoAnswer;
+    if (mode_ == SensorMode::None) return ImuHealth::Unconfigured;
+    if (!read_reg(bus, PWR_MGMT_1, power) || !read_reg(bus, USER_CTRL, user)) {
+        return ImuHealth::NoAnswer;
+    }
+    const uint8_t running = static_cast<uint8_t>(
+        mode_ == SensorMode::Dmp ? USER_DMP_EN | USER_FIFO_EN : USER_FIFO_EN);
+    if (power != PWR_CLK_PLL_XGYRO || (user & running) != running) return ImuHealth::Unconfigured;
+    return ImuHealth::Configured;
+}
+
+float Mpu6050::sample_rate_hz() const {
+    // CONFIG DLPF_CFG 0 and 7 turn the filter off (register map rev 4.2, section 4.3).
+    const float gyro_hz = (config_.dlpf == 0 || config_.dlpf == 7) ? 8000.0f : 1000.0f;
+    const float raw_hz = gyro_hz / (1.0f + static_cast<float>(config_.sample_rate_div));
+    const bool dmp = mode_ == SensorMode::Dmp ||
+                     (mode_ == SensorMode::None && config_.dmp_image != nullptr);
+    return dmp ? raw_hz / (1.0f + static_cast<float>(config_.dmp_rate_div)) : raw_hz;
+}
+
 uint16_t Mpu6050::packet_size() const {
     return mode_ == SensorMode::Dmp ? kDmpPacketSize : kRawPacketSize;
 }

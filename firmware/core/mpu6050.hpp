@@ -63,6 +63,13 @@ struct Mpu6050Config {
 
 enum class SensorMode : uint8_t { None = 0, Dmp = 1, Raw = 2 };
 
+// What probe() finds.
+enum class ImuHealth : uint8_t {
+    Configured = 0,     // answers, and holds the configuration init() wrote
+    Unconfigured = 1,   // answers, but lost its configuration (reset, brown-out) or never had it
+    NoAnswer = 2,       // no acknowledge, or WHO_AM_I is not an MPU6050's
+};
+
 enum class InitResult : uint8_t {
     OkDmp = 0,
     OkRaw = 1,          // no image given: raw path by choice
@@ -96,6 +103,16 @@ public:
 
     // Reads what the FIFO holds. Returns true and fills `sample` when a new packet was read.
     bool poll(I2cBus& bus, ImuSample& sample);
+
+    // Reads WHO_AM_I, PWR_MGMT_1 and USER_CTRL: is the chip there, and does it still run as
+    // init() left it? After a reset or brown-out PWR_MGMT_1 reads SLEEP and USER_CTRL has
+    // neither FIFO_EN nor DMP_EN. Three register reads; for when samples stop coming.
+    ImuHealth probe(I2cBus& bus);
+
+    // Samples per second the configured path delivers: the gyro's output rate (1 kHz with the
+    // low-pass filter on, 8 kHz with it off) over (1 + SMPLRT_DIV), and on the DMP path over
+    // (1 + dmp_rate_div) again. Before init(), the rate of the path an image would choose.
+    float sample_rate_hz() const;
 
     SensorMode mode() const { return mode_; }
     uint16_t packet_size() const;

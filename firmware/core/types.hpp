@@ -9,6 +9,10 @@ namespace hq {
 
 enum class Axis : uint8_t { Roll = 0, Pitch = 1, Yaw = 2 };
 constexpr int kAxes = 3;
+constexpr int kAngleAxes = 2;          // roll and pitch: yaw has no angle loop
+
+// Flight mode (HQ_MODE): which loops run. Independent of being armed and of an excitation.
+enum class FlightMode : uint8_t { Angle = 1, Rate = 2 };
 
 struct Vec3 {
     float x = 0.0f, y = 0.0f, z = 0.0f;

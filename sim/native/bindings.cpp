@@ -184,7 +184,8 @@ PYBIND11_MODULE(_simcore, m) {
     py::class_<SimLinkPort>(m, "SimLinkPort")
         .def(py::init<int, int>(), py::arg("fd"), py::arg("timeout_ms"))
         .def("exchange", [](SimLinkPort& p, uint64_t time_us, uint32_t frame, uint8_t kind,
-                            const py::bytes& fifo, const std::array<uint16_t, 8>& rc, bool sync) {
+                            const py::bytes& fifo, const std::array<uint16_t, 8>& rc, bool sync,
+                            uint8_t imu_fault) {
             const std::string data = fifo;
             if (data.size() > kFifoCapacity) {
                 throw std::invalid_argument("at most 168 FIFO bytes per frame");
@@ -195,11 +196,12 @@ PYBIND11_MODULE(_simcore, m) {
                 py::gil_scoped_release release;
                 st = p.exchange(time_us, frame, kind,
                                 reinterpret_cast<const uint8_t*>(data.data()), data.size(),
-                                rc.data(), sync, &reply);
+                                rc.data(), sync, imu_fault, &reply);
             }
             return py::make_tuple(st, reply, p.error());
         }, py::arg("time_us"), py::arg("frame"), py::arg("kind"), py::arg("fifo"), py::arg("rc_us"),
-           py::arg("sync") = true, "One sensor frame out, its reply in: (status, reply, errno).");
+           py::arg("sync") = true, py::arg("imu_fault") = 0,
+           "One sensor frame out, its reply in: (status, reply, errno).");
 
     py::class_<BatchResult>(m, "BatchResult")
         .def_readonly("status", &BatchResult::status)
@@ -233,12 +235,19 @@ PYBIND11_MODULE(_simcore, m) {
              py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
         .def("start", [](RigEngine& e, uint32_t first, uint32_t n, uint32_t dt_us, uint8_t kind,
                          py::array_t<uint16_t, py::array::c_style | py::array::forcecast> rc,
-                         py::object noise, py::object gust) {
+                         py::object noise, py::object gust, py::object imu_faults) {
             std::vector<uint16_t> r(rc.data(), rc.data() + rc.size());
+            std::vector<uint8_t> faults;
+            if (!imu_faults.is_none()) {
+                auto f = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(imu_faults);
+                if (!f) throw std::invalid_argument("imu_faults must be n HQ_IMU_FAULT values");
+                faults.assign(f.data(), f.data() + f.size());
+            }
             e.start(first, n, dt_us, kind, std::move(r), rows_of(noise, n, 6, "noise"),
-                    rows_of(gust, n, 6, "gust"));
+                    rows_of(gust, n, 6, "gust"), std::move(faults));
         }, py::arg("first"), py::arg("n"), py::arg("dt_us"), py::arg("kind"), py::arg("rc"),
-           py::arg("noise") = py::none(), py::arg("gust") = py::none())
+           py::arg("noise") = py::none(), py::arg("gust") = py::none(),
+           py::arg("imu_faults") = py::none())
         .def("finished", &RigEngine::finished)
         .def("wait_finished", &RigEngine::wait_finished, py::arg("timeout_s"),
              py::call_guard<py::gil_scoped_release>(),

@@ -9,11 +9,16 @@ namespace {
 constexpr double kRadToDeg = 57.29577951308232;
 constexpr double kQ30 = 1073741824.0;
 
-// Rounds half to even, as the Python reference and the chip's converters do.
-int64_t round_even(double v) { return static_cast<int64_t>(std::nearbyint(v)); }
+// A converter's count: rounded half to even (as the Python reference and the chip's
+// converters do) and saturated to [lo, hi] before any conversion to an integer. A non-finite
+// simulator value (a diverged plant) reads as 0: the cast of NaN to an integer is undefined.
+int64_t saturated_count(double v, double lo, double hi) {
+    if (std::isnan(v)) return 0;
+    return static_cast<int64_t>(std::clamp(std::nearbyint(v), lo, hi));
+}
 
 int32_t count16(double value, double scale) {
-    return static_cast<int32_t>(std::clamp<int64_t>(round_even(value * scale), -32768, 32767));
+    return static_cast<int32_t>(saturated_count(value * scale, -32768.0, 32767.0));
 }
 
 void put_be32(uint8_t* p, int32_t v) {
@@ -42,8 +47,8 @@ size_t encode_fifo(FifoKind kind, const SensorSample& s, uint8_t* out) {
         // FRD attitude relative to NED -> the DMP's chip-frame quaternion (w, x, -y, -z).
         const double q[4] = {s.q[0], s.q[1], -s.q[2], -s.q[3]};
         for (int i = 0; i < 4; ++i) {
-            put_be32(out + 4 * i, static_cast<int32_t>(std::clamp<int64_t>(
-                                      round_even(q[i] * kQ30), INT32_MIN, INT32_MAX)));
+            put_be32(out + 4 * i, static_cast<int32_t>(saturated_count(q[i] * kQ30, INT32_MIN,
+                                                                       INT32_MAX)));
         }
         for (int i = 0; i < 3; ++i) {
             put_be32(out + 16 + 4 * i, count16(gyro[i] * kRadToDeg, kGyroLsbPerDegS) * 65536);

@@ -29,9 +29,11 @@ public:
     ~RigEngine();
 
     // Frames first .. first + n - 1 at time frame * dt_us. rc: n x 8 (us); noise and gust:
-    // n x 6 or empty. kind: the FIFO data the firmware asked for (its last reply).
+    // n x 6 or empty; imu_faults: n HQ_IMU_FAULT values or empty (no faults). kind: the FIFO
+    // data the firmware asked for (its last reply).
     void start(uint32_t first, uint32_t n, uint32_t dt_us, uint8_t kind,
-               std::vector<uint16_t> rc, std::vector<double> noise, std::vector<double> gust);
+               std::vector<uint16_t> rc, std::vector<double> noise, std::vector<double> gust,
+               std::vector<uint8_t> imu_faults);
     bool running() const { return running_.load(); }
     bool finished() const { return !running_.load() || done_.load(); }
     // Sleeps until the batch is finished or timeout_s passes; true if finished.
@@ -52,6 +54,7 @@ private:
     uint8_t kind_ = 0;
     std::vector<uint16_t> rc_;
     std::vector<double> noise_, gust_;
+    std::vector<uint8_t> imu_faults_;
     BatchResult result_;
 };
 

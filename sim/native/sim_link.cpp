@@ -57,14 +57,14 @@ bool SimLinkPort::write_all(const uint8_t* data, size_t len) {
 
 LinkStatus SimLinkPort::exchange(uint64_t time_us, uint32_t frame, uint8_t fifo_kind,
                                  const uint8_t* fifo, size_t fifo_len, const uint16_t rc_us[8],
-                                 bool sync, Reply* reply) {
+                                 bool sync, uint8_t imu_fault, Reply* reply) {
     uint8_t padded[kFifoCapacity] = {};
     if (fifo_len > kFifoCapacity) fifo_len = kFifoCapacity;
     if (fifo_len) std::memcpy(padded, fifo, fifo_len);
     mavlink_message_t msg;
     mavlink_msg_hq_sensor_frame_pack_status(kSystemId, kComponentId, &tx_status_, &msg, time_us,
                                             frame, fifo_kind, static_cast<uint8_t>(fifo_len),
-                                            sync ? 1 : 0, rc_us, padded);
+                                            sync ? 1 : 0, rc_us, padded, imu_fault);
     uint8_t out[MAVLINK_MAX_PACKET_LEN];
     const uint16_t len = mavlink_msg_to_send_buffer(out, &msg);
     if (!write_all(out, len)) return LinkStatus::WriteFailed;

@@ -36,8 +36,10 @@ public:
     SimLinkPort(int fd, int timeout_ms);
 
     // `sync`: the caller pauses after this frame to read the telemetry (HQ_SENSOR_FRAME.sync).
+    // `imu_fault`: HQ_IMU_FAULT of the emulated chip at this frame (fault injection).
     LinkStatus exchange(uint64_t time_us, uint32_t frame, uint8_t fifo_kind, const uint8_t* fifo,
-                        size_t fifo_len, const uint16_t rc_us[8], bool sync, Reply* reply);
+                        size_t fifo_len, const uint16_t rc_us[8], bool sync, uint8_t imu_fault,
+                        Reply* reply);
     int error() const { return errno_; }
 
 private:

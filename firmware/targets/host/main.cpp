@@ -28,6 +28,7 @@
 #include "../dmp_image.hpp"
 #include "host_hal.hpp"
 #include "mpu6050_emulator.hpp"
+#include "sim_link_handler.hpp"
 
 namespace {
 
@@ -74,6 +75,23 @@ Options parse(int argc, char** argv) {
 constexpr size_t kTelemetryChunk = 1024;
 constexpr long kTelemetryQuietUs = 1000;
 constexpr long kIdlePollUs = 100000;
+// A reply may wait this long for room on the sim link's pty (the simulator reads it at once).
+constexpr int kReplyTimeoutMs = 5000;
+
+// Replies go straight to the sim link's pty; a `sync` frame also ships the telemetry.
+class SimLinkPty final : public hq::SimLinkReplies {
+public:
+    SimLinkPty(hq::PtySerial& sim, hq::PtySerial& telemetry) : sim_(sim), telemetry_(telemetry) {}
+    bool reply(const uint8_t* packet, size_t n, bool sync) override {
+        if (!sim_.write_all(packet, n, kReplyTimeoutMs)) return false;
+        if (sync) telemetry_.flush();
+        return true;
+    }
+
+private:
+    hq::PtySerial& sim_;
+    hq::PtySerial& telemetry_;
+};
 
 }  // namespace
 
@@ -114,15 +132,12 @@ int main(int argc, char** argv) {
                 init == hq::InitResult::OkDmp ? "dmp" : "raw");
     std::fflush(stdout);
 
-    mavlink_status_t rx_status{}, tx_status{};
-    mavlink_message_t rx_msg{}, reply{};
-    bool have_last = false;
-    uint32_t last_frame = 0, lost = 0, repeated = 0;
+    SimLinkPty replies(sim, telemetry);
+    hq::SimLinkHandler handler(fc, clock, chip, motors, cfg.system_id, cfg.component_id);
     using Wall = std::chrono::steady_clock;   // the idle timeout only; never the core's clock
     Wall::time_point last_input = Wall::now();
     int exit_code = 0;
-    uint8_t buf[512], out[MAVLINK_MAX_PACKET_LEN];
-    uint16_t out_len = 0;
+    uint8_t buf[512];
 
     while (!g_stop) {
         // Telemetry ships as a USB CDC device ships it: in chunks, once a chunk is buffered,
@@ -144,59 +159,22 @@ int main(int argc, char** argv) {
         }
         last_input = Wall::now();
         const size_t n = sim.read(buf, sizeof(buf));
-        for (size_t i = 0; i < n && !g_stop; ++i) {
-            mavlink_message_t msg;
-            mavlink_status_t st;
-            if (mavlink_frame_char_buffer(&rx_msg, &rx_status, buf[i], &msg, &st) !=
-                    MAVLINK_FRAMING_OK ||
-                msg.msgid != MAVLINK_MSG_ID_HQ_SENSOR_FRAME) {
-                continue;
-            }
-            mavlink_hq_sensor_frame_t f;
-            mavlink_msg_hq_sensor_frame_decode(&msg, &f);
-            if (have_last && f.frame == last_frame) {          // repeated: same reply again
-                ++repeated;
-                sim.write_all(out, out_len, 1000);
-                continue;
-            }
-            if (have_last && f.frame != last_frame + 1) {
-                lost += f.frame - last_frame - 1;
-                std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost before %u\n",
-                             f.frame - last_frame - 1, f.frame);
-            }
-            have_last = true;
-            last_frame = f.frame;
-            clock.set(f.time_us);
-            const size_t len = f.fifo_len < sizeof(f.fifo) ? f.fifo_len : sizeof(f.fifo);
-            if (len > 0) chip.push_fifo(f.fifo, len, f.fifo_kind == HQ_SENSOR_DMP);
-            hq::RcInput rc;
-            bool any = false;
-            for (int c = 0; c < hq::kRcChannels; ++c) {
-                rc.channel_us[c] = f.rc_us[c];
-                any = any || f.rc_us[c] != 0;
-            }
-            rc.age_us = any ? 0u : 0xFFFFFFFFu;
-            fc.step(rc);
-            const uint8_t kind = fc.imu().mode() == hq::SensorMode::Dmp ? HQ_SENSOR_DMP
-                                 : fc.imu().mode() == hq::SensorMode::Raw ? HQ_SENSOR_RAW
-                                                                          : HQ_SENSOR_NONE;
-            mavlink_msg_hq_actuator_frame_pack_status(
-                cfg.system_id, cfg.component_id, &tx_status, &reply, f.time_us, f.frame,
-                motors.values(), fc.armed() ? 1 : 0, static_cast<uint8_t>(fc.mode()), kind);
-            out_len = mavlink_msg_to_send_buffer(out, &reply);
-            if (!sim.write_all(out, out_len, 5000)) {
-                std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
-                g_stop = 1;
-                exit_code = 4;
-            }
-            if (f.sync) telemetry.flush();   // the simulator reads the telemetry now
+        const uint32_t lost_before = handler.lost();
+        if (!handler.feed(buf, n, replies)) {
+            std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
+            exit_code = 4;
+            break;
+        }
+        if (handler.lost() != lost_before) {
+            std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost by frame %u\n",
+                         handler.lost() - lost_before, handler.last_frame());
         }
     }
     telemetry.flush();
     std::fprintf(stderr,
                  "heliquad-fw-host: %u loops, %u frames lost, %u repeated, %u telemetry bytes "
                  "dropped\n",
-                 fc.loops(), lost, repeated, fc.telemetry_dropped());
+                 fc.loops(), handler.lost(), handler.repeated(), fc.telemetry_dropped());
     sim.close();
     telemetry.close();
     return exit_code;

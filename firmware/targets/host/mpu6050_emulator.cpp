@@ -21,6 +21,28 @@ void Mpu6050Emulator::reset() {
     mem_address_ = 0;
 }
 
+void Mpu6050Emulator::power_on_reset() {
+    std::memset(memory_, 0, sizeof(memory_));
+    reset();
+}
+
+void Mpu6050Emulator::force_overflow() {
+    if (!(regs_[USER_CTRL] & USER_FIFO_EN)) return;
+    // One byte more than the FIFO holds, none of it at a packet boundary: the oldest byte is
+    // lost and FIFO_OFLOW is set, exactly as when the chip overruns.
+    for (uint16_t i = 0; i <= kFifoSize; ++i) append(static_cast<uint8_t>(0xA5 ^ i));
+}
+
+void Mpu6050Emulator::append(uint8_t byte) {
+    if (count_ == kFifoSize) {                // full: the oldest byte is lost
+        head_ = static_cast<uint16_t>((head_ + 1) % kFifoSize);
+        --count_;
+        regs_[INT_STATUS] |= INT_FIFO_OFLOW;
+    }
+    fifo_[(head_ + count_) % kFifoSize] = byte;
+    ++count_;
+}
+
 bool Mpu6050Emulator::dmp_enabled() const {
     return (regs_[USER_CTRL] & USER_DMP_EN) && (regs_[USER_CTRL] & USER_FIFO_EN);
 }
@@ -31,16 +53,8 @@ bool Mpu6050Emulator::raw_fifo_enabled() const {
 }
 
 size_t Mpu6050Emulator::push_fifo(const uint8_t* data, size_t n, bool dmp_packets) {
-    if (dmp_packets ? !dmp_enabled() : !raw_fifo_enabled()) return 0;
-    for (size_t i = 0; i < n; ++i) {
-        if (count_ == kFifoSize) {            // full: the oldest byte is lost
-            head_ = static_cast<uint16_t>((head_ + 1) % kFifoSize);
-            --count_;
-            regs_[INT_STATUS] |= INT_FIFO_OFLOW;
-        }
-        fifo_[(head_ + count_) % kFifoSize] = data[i];
-        ++count_;
-    }
+    if (silent_ || (dmp_packets ? !dmp_enabled() : !raw_fifo_enabled())) return 0;
+    for (size_t i = 0; i < n; ++i) append(data[i]);
     if (n > 0) regs_[INT_STATUS] |= dmp_packets ? INT_DMP : INT_DATA_RDY;
     return n;
 }

@@ -1,0 +1,51 @@
+// The pilot's radio: channel map, switch positions and stick scaling. Pure functions of one
+// RcInput (hal/outputs.hpp: pulse widths in us, 0 = no signal on that channel).
+//
+// Channels (FrSky V8FR-II PWM outputs, Mode 2 transmitter):
+//   1 roll stick, 2 pitch stick, 3 throttle, 4 yaw stick, 5 arm switch, 6 mode switch.
+// Sticks are centred at 1500 us with +/-500 us of travel; the throttle runs 1000..2000 us.
+#pragma once
+
+#include <cstdint>
+
+#include "../hal/outputs.hpp"
+#include "types.hpp"
+
+namespace hq {
+
+namespace rc {
+constexpr int kRoll = 0, kPitch = 1, kThrottle = 2, kYaw = 3, kArm = 4, kMode = 5;
+constexpr uint16_t kCenterUs = 1500, kMinUs = 1000, kHalfSpanUs = 500;
+// A two-position switch reads about 1000 or 2000 us; "high" needs a clear margin above the
+// centre so that a mid-travel or noisy pulse never counts as a deliberate arm or rate mode.
+constexpr uint16_t kSwitchHighUs = 1700;
+// Throttle at most 10 % of travel counts as low for arming (sticks rest at 1000 +/- a few us).
+constexpr uint16_t kThrottleLowUs = 1100;
+}  // namespace rc
+
+// Largest setpoints the sticks command at full deflection.
+struct StickLimits {
+    float angle_rad = 0.5236f;      // 30 deg of roll or pitch (angle mode)
+    float rate_rad_s = 3.4907f;     // 200 deg/s of roll or pitch rate (rate mode)
+    float yaw_rate_rad_s = 1.5708f; // 90 deg/s of yaw rate (both modes)
+};
+
+// The sticks as setpoints: angles for angle mode, rates for rate mode (yaw is always a rate).
+struct Sticks {
+    Euler angle{};                  // roll, pitch (yaw unused)
+    Vec3 rate{};                    // p, q, r
+    float throttle = 0.0f;          // collective, 0..1
+};
+
+// -1..1 from a stick channel; 0 when the channel has no signal.
+float stick(const RcInput& in, int channel);
+// 0..1 from the throttle channel; 0 when it has no signal.
+float throttle(const RcInput& in);
+Sticks sticks(const RcInput& in, const StickLimits& limits);
+
+inline bool has_signal(const RcInput& in, int channel) { return in.channel_us[channel] != 0; }
+inline bool switch_high(const RcInput& in, int channel) {
+    return in.channel_us[channel] > rc::kSwitchHighUs;
+}
+
+}  // namespace hq

@@ -1,0 +1,239 @@
+// The controller's state and its safety rules, with no I/O (docs/safety.md lists every rule
+// with its bound and the test that proves it).
+//
+// Three independent facts, each with one owner here:
+//   - armed (and what armed it: the RC switch or a command): whether the motors may spin;
+//   - the flight mode, angle or rate (types.hpp): which loops run;
+//   - the excitation, idle, fading or running (excitation.hpp).
+// The rules that change them:
+//   - Arming needs a live RC link, the arm switch (channel 5) high, a throttle signal that is
+//     low, and a fresh IMU sample; the switch arms on its low-to-high edge, a command arms
+//     with the switch already high. The switch not high always disarms, whatever armed.
+//   - Failsafes, each: motors off, disarmed, an event. RC lost (no valid frame within
+//     rc_timeout_us); host lost (armed by command and no host HEARTBEAT within
+//     host_timeout_us); IMU stale (no fresh sample within imu_timeout_us); a non-finite
+//     value in the loop (reported by the loop with fault()).
+//   - An excitation starts only when armed, with a live host, in bounds (amplitude per
+//     injection point, frequency band, duration, fade-in), and always with its fade-in. It
+//     stops at once on disarm, when the host goes quiet, or when its axis's angle or rate
+//     passes the abort limits (the same limits the host tool checks as a second line).
+//   - The flight mode does not change while an excitation runs: SET_MODE is refused, and an
+//     RC mode switch change takes effect when the excitation ends.
+//   - A stale IMU is probed and re-initialised while disarmed (imu_recovery_due()).
+//
+// The loop (FlightController) feeds it commands and one SupervisorInputs per loop, and does
+// what it decides; pytest drives it directly through the bindings.
+#pragma once
+
+#include <cstdint>
+
+#include "../hal/outputs.hpp"
+#include "excitation.hpp"
+#include "types.hpp"
+
+namespace hq {
+
+// Why something was refused, stopped, disarmed or reported (HQ_REASON; same values).
+enum class Reason : uint8_t {
+    None = 0,
+    Finished = 1,
+    StopCommand = 2,
+    Disarmed = 3,
+    NoHost = 4,
+    Busy = 5,
+    AxisInjection = 6,
+    InjectionMode = 7,
+    Amplitude = 8,
+    Frequency = 9,
+    Cycles = 10,
+    Fade = 11,
+    Duration = 12,
+    AngleLimit = 13,
+    RateLimit = 14,
+    RcLost = 15,
+    HostLost = 16,
+    ImuStale = 17,
+    NonFinite = 18,
+    RcSwitch = 19,
+    DisarmCommand = 20,
+    NoRc = 21,
+    ArmSwitchLow = 22,
+    NoThrottle = 23,
+    ThrottleHigh = 24,
+    ImuNotReady = 25,
+    ModeLocked = 26,
+    ImuReset = 27,
+    ImuNoAnswer = 28,
+    ImuStalled = 29,
+    ImuRecovered = 30,
+    ImuInitFailed = 31,
+    BadMode = 32,
+};
+constexpr uint8_t kReasonCount = 33;
+
+// The reason in words, for STATUSTEXT: at most 49 characters, never null.
+const char* reason_text(Reason reason);
+
+// MAV_SEVERITY values.
+enum class Severity : uint8_t { Critical = 2, Warning = 4, Notice = 5, Info = 6 };
+
+struct Event {
+    Reason reason = Reason::None;
+    Severity severity = Severity::Info;
+};
+
+enum class ArmSource : uint8_t { None = 0, RcSwitch = 1, Command = 2 };
+
+// Every bound a rule uses, with its reason. Defaults are the flight values.
+struct SafetyLimits {
+    // A receiver that lost its transmitter holds its last pulses or stops; half a second
+    // without a valid frame is about 25 lost frames of a 50 Hz PWM receiver.
+    uint32_t rc_timeout_us = 500000;
+    // The host sends HEARTBEAT at 1 Hz or faster; 1.5 s tolerates one late heartbeat.
+    uint32_t host_timeout_us = 1500000;
+    // No fresh IMU sample for this long: the rate loop is flying blind. Set from the IMU's
+    // rate with imu_timeout_for(); 25 ms is five samples at 200 Hz.
+    uint32_t imu_timeout_us = 25000;
+    // How often a stale IMU is probed and re-initialised while disarmed (the DMP upload
+    // blocks the loop for about 0.2 s on the board).
+    uint32_t imu_retry_us = 1000000;
+    // Abort limits of an excitation (80 deg, 400 deg/s): the rigs' safe swing and the
+    // gyro's comfortable range (it saturates at 2000 deg/s).
+    float abort_angle_rad = 1.3962634f;
+    float abort_rate_rad_s = 6.9813170f;
+    // Largest amplitude per injection point (Injection order: angle, rate, mixer):
+    // 45 deg of angle setpoint, with margin to the 80 deg abort limit for overshoot;
+    // 200 deg/s of rate setpoint, half the abort rate (a resonant response may double it);
+    // 1.0 of normalised torque, the axis's whole authority (beyond it the mixer clips).
+    float max_amplitude[kInjections] = {0.78539816f, 3.4906585f, 1.0f};
+    // Lowest frequency: a 20 s period, a third of the lowest band edge identified (yaw,
+    // 0.15 Hz). Highest: a quarter of the loop rate (at least four samples per period).
+    float min_freq_hz = 0.05f;
+    float max_freq_fraction = 0.25f;
+    // Longest excitation, fades included: 5 minutes, about a flight battery on the rig.
+    float max_duration_s = 300.0f;
+    // Every excitation fades in (and out) over at least this many cycles.
+    uint16_t min_fade_cycles = 1;
+};
+
+// The IMU timeout for a sensor delivering rate_hz samples: five samples, at most 50 ms.
+uint32_t imu_timeout_for(float rate_hz);
+
+// One loop's facts.
+struct SupervisorInputs {
+    uint64_t now_us = 0;
+    RcInput rc{};
+    bool imu_sample = false;   // a fresh IMU sample arrived in this loop
+    Euler attitude{};          // measured, rad
+    Vec3 rate{};               // measured, rad/s
+};
+
+struct SupervisorCounters {
+    uint32_t rc_failsafes = 0;
+    uint32_t host_failsafes = 0;
+    uint32_t imu_stale = 0;
+    uint32_t imu_resets = 0;
+    uint32_t imu_reinits = 0;
+    uint32_t non_finite = 0;
+    uint32_t arm_refused = 0;
+    uint32_t exc_refused = 0;
+    uint32_t exc_stopped = 0;   // by the firmware itself: limits, host lost, disarm
+    uint32_t events_dropped = 0;
+};
+
+class Supervisor {
+public:
+    Supervisor(const SafetyLimits& limits, float loop_rate_hz);
+
+    // --- commands (the telemetry link); each answer is Reason::None when accepted ----------
+    void host_heartbeat(uint64_t now_us);
+    Reason arm_command(const RcInput& rc, uint64_t now_us);
+    void disarm_command();
+    Reason set_mode(uint32_t custom_mode);
+    Reason start_excitation(const ExcitationConfig& config, uint64_t now_us);
+    // Stops a running excitation (StopCommand); false if none was running.
+    bool stop_excitation();
+
+    // --- once per loop, before the control laws -----------------------------------------------
+    // Applies the RC switches, the failsafes and the excitation's limits; returns the
+    // excitation's value for this loop (0 when idle).
+    float update(const SupervisorInputs& in);
+    // A fault the loop found itself (a non-finite value): motors off, disarmed.
+    void fault(Reason why);
+
+    // --- IMU recovery ---------------------------------------------------------------------
+    // The chip was initialised at now_us (the boot init): the first retry waits from here.
+    // timeout_us replaces limits().imu_timeout_us (imu_timeout_for() of the chip's rate).
+    void imu_initialised(uint64_t now_us, uint32_t timeout_us);
+    // True when the loop should probe the chip and re-initialise it: disarmed, no fresh
+    // sample, and imu_retry_us since the last attempt.
+    bool imu_recovery_due(uint64_t now_us) const;
+    // What the probe found (ImuReset, ImuStalled or ImuNoAnswer) and whether the
+    // re-initialisation that followed worked (false when none was tried).
+    void imu_recovery_result(Reason found, bool reinitialised, uint64_t now_us);
+
+    // --- state ----------------------------------------------------------------------------
+    bool armed() const { return armed_; }
+    ArmSource arm_source() const { return arm_source_; }
+    FlightMode mode() const { return mode_; }
+    // State of this loop's excitation sample (set by update()).
+    ExcitationState excitation_state() const { return exc_state_; }
+    const Excitation& excitation() const { return excitation_; }
+    const ExcitationConfig& excitation_config() const { return excitation_.config(); }
+    bool imu_fresh(uint64_t now_us) const;
+    bool imu_stale() const { return imu_stale_; }
+    uint64_t last_host_heartbeat_us() const { return last_host_us_; }
+    Reason last_reason() const { return last_reason_; }
+    const SupervisorCounters& counters() const { return counters_; }
+    const SafetyLimits& limits() const { return limits_; }
+
+    // --- what the loop reports -------------------------------------------------------------
+    // The oldest event not yet taken (STATUSTEXT); false when there is none.
+    bool next_event(Event& out);
+    // True once after an excitation ended by itself or was stopped by a rule (not by a stop
+    // command, which is answered directly), with why (HQ_EXCITATION_STATUS).
+    bool take_excitation_end(Reason& why);
+
+private:
+    Reason check_arm(const RcInput& rc, uint64_t now_us) const;
+    void arm(ArmSource source);
+    void disarm(Reason why);
+    void refuse_arm(Reason why);
+    void apply_rc(const RcInput& rc, uint64_t now_us);
+    void apply_mode_switch(const RcInput& rc);
+    void check_host(uint64_t now_us);
+    void check_imu(const SupervisorInputs& in);
+    float run_excitation(const SupervisorInputs& in);
+    Reason excitation_limit(const SupervisorInputs& in) const;
+    Reason check_excitation(const ExcitationConfig& config, uint64_t now_us) const;
+    void end_excitation(Reason why);
+    bool host_alive(uint64_t now_us) const;
+    void emit(Reason reason, Severity severity);
+
+    enum class SwitchPos : uint8_t { Unknown, Low, High };
+    static constexpr int kEventQueue = 8;
+
+    SafetyLimits limits_;
+    float loop_rate_hz_;
+    Excitation excitation_;
+    bool armed_ = false;
+    ArmSource arm_source_ = ArmSource::None;
+    FlightMode mode_ = FlightMode::Angle;
+    ExcitationState exc_state_ = ExcitationState::Idle;
+    SwitchPos arm_switch_ = SwitchPos::Unknown;
+    bool mode_switch_known_ = false, mode_switch_pending_ = false, mode_lock_reported_ = false;
+    FlightMode mode_switch_ = FlightMode::Angle;
+    bool host_seen_ = false;
+    uint64_t last_host_us_ = 0;
+    bool imu_seen_ = false, imu_stale_ = false;
+    uint64_t last_imu_us_ = 0, last_imu_attempt_us_ = 0;
+    Reason last_imu_finding_ = Reason::None;
+    Reason last_reason_ = Reason::None;
+    bool exc_end_pending_ = false;
+    Reason exc_end_reason_ = Reason::None;
+    SupervisorCounters counters_{};
+    Event events_[kEventQueue];
+    int event_head_ = 0, event_count_ = 0;
+};
+
+}  // namespace hq

@@ -1,0 +1,130 @@
+"""A test bench for the host firmware: the real ``heliquad-fw-host`` on a transfer-function
+plant, stepped one frame at a time from Python through the link contract, with the pilot's
+RC, IMU faults, and the host tool's telemetry link (not a test module: a helper the tests
+import).
+
+Commands on the telemetry link reach the firmware asynchronously (a pty), so a test that
+needs one to have acted steps until its answer is in the telemetry (:meth:`FirmwareRig.ping`,
+:meth:`FirmwareRig.until`): what is checked is firmware time, never wall time.
+"""
+
+from __future__ import annotations
+
+import select
+import time
+
+from heliquad.host.link import TelemetryLink
+from heliquad.host.mavlink_dialect import dialect
+from heliquad.sim.lockstep import HostFirmware, SimLink
+from heliquad.sim.tf_plant import TfPlant
+
+MAV = dialect()
+ROLL = ((28.19,), (1.0, 5.13, 22.93))
+DT_US = 5000
+#: RC at rest: sticks centred, throttle low, arm switch low, mode switch angle.
+RC_REST = (1500, 1500, 1000, 1500, 1000, 1000, 0, 0)
+ARM_HIGH, THROTTLE_HOVER = 2000, 1400
+#: How long a test may wait for telemetry that is due (a bound on a hang, never a check).
+WAIT_S = 5.0
+#: A COMMAND_LONG the firmware answers without acting (its COMMAND_ACK marks the loop).
+MAV_CMD_REQUEST_MESSAGE = 512
+
+
+class FirmwareRig:
+    """The host firmware flying a roll transfer-function plant, frame by frame."""
+
+    def __init__(self, fw: HostFirmware, plant=None):
+        self.fw = fw
+        self.link = SimLink(fw)
+        self.tel = TelemetryLink(fw.telemetry_path)
+        self.plant = plant or TfPlant("roll", *ROLL, DT_US * 1e-6)
+        self.rc = list(RC_REST)
+        self.frame, self.kind, self.reply = 0, 0, None
+        self.messages = []              # every decoded telemetry message, in order
+        self.time_of = []               # the loop time of each (its HQ_SYSID_SAMPLE's)
+        self._pending = []
+
+    def close(self) -> None:
+        self.tel.close()
+        self.link.close()
+
+    @property
+    def time_us(self) -> int:
+        return self.frame * DT_US
+
+    def step(self, n: int = 1, imu_fault: int = 0):
+        """Run n frames; the last reply. Telemetry is read as it comes."""
+        for _ in range(n):
+            self.frame += 1
+            self.reply = self.link.step(self.time_us, self.plant.fifo(self.kind), self.kind,
+                                        self.rc, imu_fault=imu_fault)
+            self.kind = self.reply.sensor_kind
+            self.plant.step_motors(self.reply.motor)
+            self._read(wait=False)
+        return self.reply
+
+    def _read(self, wait: bool) -> None:
+        fd = self.tel.serial.fileno()
+        if wait:
+            select.select([fd], [], [], 0.05)
+        for msgid, _, payload in self.tel.read_packets():
+            m = self.tel.codec.decode(msgid, payload)
+            self._pending.append(m)
+            if m.get_type() == "HQ_SYSID_SAMPLE":
+                self.messages.extend(self._pending)
+                self.time_of.extend([m.time_us] * len(self._pending))
+                self._pending = []
+
+    def settle_telemetry(self) -> None:
+        """Wait until every loop stepped so far has all its telemetry read."""
+        deadline = time.monotonic() + WAIT_S
+        while not self.time_of or self.time_of[-1] < self.time_us:
+            assert time.monotonic() < deadline, "telemetry stopped"
+            self._read(wait=True)
+
+    def of_type(self, name: str, since_us: int = 0):
+        """(loop time, message) of every message of one type from loop time since_us on."""
+        self.settle_telemetry()
+        return [(t, m) for t, m in zip(self.time_of, self.messages)
+                if m.get_type() == name and t >= since_us]
+
+    def until(self, predicate, max_frames: int = 400, imu_fault: int = 0):
+        """Step until predicate(message) holds for a message of a loop stepped here; that
+        (loop time, message). Fails after max_frames."""
+        self.settle_telemetry()
+        first = len(self.messages)
+        for _ in range(max_frames):
+            self.step(imu_fault=imu_fault)
+            self.settle_telemetry()
+            for t, m in zip(self.time_of[first:], self.messages[first:]):
+                if predicate(m):
+                    return t, m
+            first = len(self.messages)
+        raise AssertionError(f"not seen within {max_frames} frames")
+
+    def ping(self) -> int:
+        """Send the host's HEARTBEAT and step until the firmware has processed it; the loop
+        time at which it did (a COMMAND_ACK sent with it marks the loop)."""
+        self.tel.heartbeat()
+        self.tel.mav.command_long_send(1, 1, MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0)
+        t, _ = self.until(lambda m: m.get_type() == "COMMAND_ACK"
+                          and m.command == MAV_CMD_REQUEST_MESSAGE)
+        return t
+
+    def hover(self, frames: int = 60):
+        """Arm with the RC switch (low, then high, with the throttle low), then hover."""
+        self.rc[4] = 1000
+        self.step(10)
+        self.rc[4] = ARM_HIGH
+        self.step(10)
+        self.rc[2] = THROTTLE_HOVER
+        return self.step(frames)
+
+    def excitation_answer(self, **kwargs):
+        """Send HQ_EXCITATION START and step until its HQ_EXCITATION_STATUS answer."""
+        args = dict(axis="roll", injection="mixer", freq_hz=1.0, amplitude=0.05, cycles=20,
+                    fade_cycles=1)
+        args.update(kwargs)
+        self.tel.start_excitation(args["axis"], args["injection"], args["freq_hz"],
+                                  args["amplitude"], args["cycles"], args["fade_cycles"])
+        return self.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS")
