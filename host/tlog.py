@@ -63,7 +63,7 @@ def read_tlog(path, mav_module, only=None):
         total = HEADER_LEN + length + 2 + (SIGNATURE_LEN if data[pos + 10] & INCOMPAT_SIGNED else 0)
         packet = data[pos + 8:pos + 8 + total]
         framed = Framer(codec).feed(packet) if len(packet) == total else []
-        if len(framed) != 1:
+        if len(framed) != 1 or len(framed[0][1]) != total:   # not a packet found inside it
             break
         msgid, _, payload = framed[0]
         cls = codec.classes[msgid]

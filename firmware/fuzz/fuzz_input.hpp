@@ -1,0 +1,108 @@
+// Shared pieces of the firmware's libFuzzer targets: reading choices out of the fuzz input,
+// and framing MAVLink 2 packets from fuzz bytes with a correct checksum, so the fuzzer gets
+// past the CRC check to the decoders and handlers (random bytes almost never pass it).
+//
+// A packet built here can carry any message id of the dialect (or an unknown one), any
+// payload length 0..255 (shorter or longer than the message's), a deliberately wrong CRC, or
+// the signed flag; the parser and the generated decoders must cope with all of them.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#include <heliquad/mavlink.h>
+
+namespace hqfuzz {
+
+// The fuzz input as a stream of choices; reads past the end give zeros.
+class Reader {
+public:
+    Reader(const uint8_t* data, size_t size) : data_(data), size_(size) {}
+    bool done() const { return pos_ >= size_; }
+    uint8_t u8() { return pos_ < size_ ? data_[pos_++] : 0; }
+    uint16_t u16() { return static_cast<uint16_t>(u8() | (u8() << 8)); }
+    uint32_t u32() { return u16() | (static_cast<uint32_t>(u16()) << 16); }
+    uint64_t u64() { return u32() | (static_cast<uint64_t>(u32()) << 32); }
+    float f32() {
+        const uint32_t bits = u32();
+        float f;
+        std::memcpy(&f, &bits, sizeof f);
+        return f;
+    }
+    // Up to n bytes into out (the rest zero); how many came from the input.
+    size_t bytes(uint8_t* out, size_t n) {
+        size_t got = 0;
+        for (; got < n && pos_ < size_; ++got) out[got] = data_[pos_++];
+        for (size_t i = got; i < n; ++i) out[i] = 0;
+        return got;
+    }
+
+private:
+    const uint8_t* data_;
+    size_t size_;
+    size_t pos_ = 0;
+};
+
+// Every message of the dialect (common.xml and heliquad.xml), as the generated table has them.
+inline const mavlink_msg_entry_t* message_table(size_t* count) {
+    static const mavlink_msg_entry_t kEntries[] = MAVLINK_MESSAGE_CRCS;
+    *count = sizeof kEntries / sizeof kEntries[0];
+    return kEntries;
+}
+
+constexpr size_t kMaxPacket = MAVLINK_NUM_NON_PAYLOAD_BYTES + 255 + MAVLINK_SIGNATURE_BLOCK_LEN;
+
+// One MAVLink 2 packet into out (kMaxPacket bytes); its length. flags bit 0: corrupt the CRC;
+// bit 1: set the signed flag (and append a 13-byte signature of zeros).
+inline size_t frame_packet(uint8_t* out, uint32_t msgid, const uint8_t* payload, uint8_t len,
+                           uint8_t seq, uint8_t flags) {
+    const mavlink_msg_entry_t* entry = mavlink_get_msg_entry(msgid);
+    const bool sign = flags & 2;
+    out[0] = MAVLINK_STX;
+    out[1] = len;
+    out[2] = sign ? MAVLINK_IFLAG_SIGNED : 0;
+    out[3] = 0;
+    out[4] = seq;
+    out[5] = 255;                         // a ground station's ids
+    out[6] = 190;
+    out[7] = static_cast<uint8_t>(msgid);
+    out[8] = static_cast<uint8_t>(msgid >> 8);
+    out[9] = static_cast<uint8_t>(msgid >> 16);
+    if (len) std::memcpy(out + MAVLINK_CORE_HEADER_LEN + 1, payload, len);
+    uint16_t crc = crc_calculate(out + 1, static_cast<uint16_t>(MAVLINK_CORE_HEADER_LEN + len));
+    crc_accumulate(entry ? entry->crc_extra : seq, &crc);
+    if (flags & 1) crc = static_cast<uint16_t>(crc ^ 0x5A5A);
+    size_t n = MAVLINK_CORE_HEADER_LEN + 1 + len;
+    out[n++] = static_cast<uint8_t>(crc);
+    out[n++] = static_cast<uint8_t>(crc >> 8);
+    if (sign) {
+        std::memset(out + n, 0, MAVLINK_SIGNATURE_BLOCK_LEN);
+        n += MAVLINK_SIGNATURE_BLOCK_LEN;
+    }
+    return n;
+}
+
+// A packet of a message chosen by the input: any id of the table or an unknown one, a length
+// that is the message's own or any other, payload bytes from the input.
+inline size_t any_packet(Reader& in, uint8_t* out, uint8_t seq) {
+    size_t count = 0;
+    const mavlink_msg_entry_t* table = message_table(&count);
+    const uint16_t pick = in.u16();
+    const uint8_t how = in.u8();
+    uint32_t msgid;
+    uint8_t len;
+    if (pick % (count + 1) == count) {
+        msgid = in.u32() & 0xFFFFFF;      // most of these are unknown ids
+        len = in.u8();
+    } else {
+        const mavlink_msg_entry_t& e = table[pick % (count + 1)];
+        msgid = e.msgid;
+        len = (how & 4) ? in.u8() : e.max_msg_len;
+    }
+    uint8_t payload[255];
+    in.bytes(payload, len);
+    return frame_packet(out, msgid, payload, len, seq, how & 3 ? (how >> 3) & 3 : 0);
+}
+
+}  // namespace hqfuzz

@@ -1,0 +1,153 @@
+// libFuzzer target: the firmware's sim-link path (targets/host/sim_link_handler.*), what
+// heliquad-fw-host does with every byte the simulator sends. Input: HQ_SENSOR_FRAMEs with
+// fuzzed fields (time, frame counter, FIFO kind, fifo_len up to 255 against a 168-byte
+// field, FIFO bytes, RC, sync, IMU fault), any other message of the dialect or an unknown
+// one framed with a correct CRC and any length, and raw bytes. Besides the sanitizers it
+// checks the link contract: exactly one reply per sensor frame (a repeat included), each an
+// HQ_ACTUATOR_FRAME echoing that frame's time and counter, with motors off unless armed.
+//
+//   build: cmake -S firmware -B build/fuzz -DCMAKE_CXX_COMPILER=clang++ -DHQ_FUZZ=ON
+//   run:   build/fuzz/fuzz_sim_link CORPUS -max_total_time=60   (or tests/fuzz/run.py)
+#include <cmath>
+#include <cstdlib>
+
+#include "core/flight_controller.hpp"
+#include "fuzz_input.hpp"
+#include "targets/host/host_hal.hpp"
+#include "targets/host/mpu6050_emulator.hpp"
+#include "targets/host/sim_link_handler.hpp"
+
+namespace {
+
+using hqfuzz::Reader;
+
+class NoTelemetry final : public hq::SerialPort {
+public:
+    size_t read(uint8_t*, size_t) override { return 0; }
+    size_t write(const uint8_t*, size_t n) override { return n; }
+};
+
+// Takes the replies and checks each against the frame that asked for it.
+class Replies final : public hq::SimLinkReplies {
+public:
+    bool reply(const uint8_t* packet, size_t n, bool) override {
+        ++count;
+        mavlink_message_t msg;
+        mavlink_status_t st;
+        bool got = false;
+        for (size_t i = 0; i < n; ++i) {
+            if (mavlink_frame_char_buffer(&rx_msg_, &rx_, packet[i], &msg, &st) ==
+                MAVLINK_FRAMING_OK) {
+                got = true;
+            }
+        }
+        if (!got || msg.msgid != MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME) std::abort();
+        mavlink_hq_actuator_frame_t a;
+        mavlink_msg_hq_actuator_frame_decode(&msg, &a);
+        if (check && (a.frame != expect_frame || (time_known && a.time_us != expect_time))) {
+            std::abort();
+        }
+        for (float m : a.motor) {
+            if (!std::isfinite(m) || m < 0.0f || m > 1.0f || (!a.armed && m != 0.0f)) std::abort();
+        }
+        return accept;
+    }
+    uint32_t count = 0, expect_frame = 0;
+    uint64_t expect_time = 0;
+    bool accept = true, check = true, time_known = true;
+
+private:
+    mavlink_status_t rx_{};
+    mavlink_message_t rx_msg_{};
+};
+
+constexpr int kMaxFrames = 48;             // per input: keeps executions fast
+constexpr uint64_t kLoopUs = 5000;
+constexpr uint8_t kSmallDmpImage[16] = {9, 8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6};
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+    Reader in(data, size);
+    hq::HostClock clock;
+    hq::HostMotors motors;
+    hq::Mpu6050Emulator chip;
+    NoTelemetry telemetry;
+    hq::FlightControllerConfig cfg;
+    if (in.u8() & 1) {
+        cfg.imu.dmp_image = kSmallDmpImage;
+        cfg.imu.dmp_image_size = sizeof kSmallDmpImage;
+    }
+    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
+    fc.init();
+    hq::SimLinkHandler handler(fc, clock, chip, motors, cfg.system_id, cfg.component_id);
+    Replies replies;
+    mavlink_status_t tx{};
+    uint8_t packet[hqfuzz::kMaxPacket];
+    uint8_t seq = 0;
+    uint32_t frame = 0;
+    uint64_t time_us = 0;
+    int frames = 0;
+    bool clean = true;        // the parser is between packets: a frame must get its reply
+    while (!in.done() && frames < kMaxFrames) {
+        const uint8_t op = in.u8();
+        if (op % 4 == 0) {                        // any message, any length: ignored or not
+            const size_t n = hqfuzz::any_packet(in, packet, seq++);
+            const uint32_t before = replies.count;
+            replies.check = false;
+            replies.accept = true;
+            handler.feed(packet, n, replies);
+            replies.check = true;
+            // A mangled HQ_SENSOR_FRAME is still a frame, with whatever its fields decode to;
+            // follow its counter (its time is unknown here).
+            if (replies.count > before + 1) std::abort();
+            if (replies.count > before) {
+                frame = handler.last_frame();
+                replies.expect_frame = frame;
+                replies.time_known = false;
+            }
+            continue;
+        }
+        if (op % 4 == 1) {                        // line noise
+            uint8_t raw[64];
+            replies.check = false;
+            replies.accept = true;
+            handler.feed(raw, in.bytes(raw, in.u8() % sizeof raw), replies);
+            replies.check = true;
+            // The parser may now be inside a bogus frame that swallows the next packet.
+            clean = false;
+            continue;
+        }
+        // A sensor frame: mostly the next counter and time, sometimes a repeat or a jump.
+        const uint8_t how = in.u8();
+        if ((how & 7) != 0 || handler.frames() == 0) {
+            frame = (how & 7) == 1 ? in.u32() : frame + 1;
+            time_us = (how & 0x38) == 0x08 ? in.u64() : time_us + kLoopUs;
+        }
+        // The same counter as the last frame is a repeat, however it came about.
+        const bool repeat = handler.frames() > 0 && frame == handler.last_frame();
+        uint16_t rc[8];
+        for (auto& ch : rc) ch = in.u16() % 2200;
+        uint8_t fifo[168];
+        in.bytes(fifo, sizeof fifo);
+        mavlink_message_t msg;
+        mavlink_msg_hq_sensor_frame_pack_status(1, 200, &tx, &msg, time_us, frame, in.u8() % 4,
+                                                in.u8(), in.u8() & 1, rc, fifo, in.u8() % 6);
+        const size_t n = mavlink_msg_to_send_buffer(packet, &msg);
+        if (!repeat) {                            // a repeat gets the previous reply
+            replies.expect_frame = frame;
+            replies.expect_time = time_us;
+            replies.time_known = true;
+        }
+        replies.accept = (in.u8() & 0x1F) != 0;
+        const uint32_t before = replies.count;
+        replies.check = clean;
+        const bool kept = handler.feed(packet, n, replies);
+        replies.check = true;
+        if (clean && (replies.count != before + 1 || kept != replies.accept)) std::abort();
+        if (replies.count == before + 1) clean = true;
+        if (replies.count > before + 1) std::abort();
+        ++frames;
+    }
+    return 0;
+}

@@ -1,0 +1,165 @@
+// libFuzzer target: the firmware's telemetry command path. A FlightController on the emulated
+// MPU6050 gets fuzz-chosen bytes on its telemetry link (any message of the dialect, framed
+// with a correct CRC, with any length; raw bytes; well-formed commands with fuzzed fields:
+// HEARTBEAT, arm/disarm, SET_MODE, HQ_EXCITATION), fuzzed RC inputs, IMU data and IMU faults,
+// and runs loops between them. Besides the sanitizers, every loop checks the rules a pilot
+// relies on: motors off unless armed, never an excitation while disarmed, motor commands
+// finite and within 0..1.
+//
+//   build: cmake -S firmware -B build/fuzz -DCMAKE_CXX_COMPILER=clang++ -DHQ_FUZZ=ON
+//   run:   build/fuzz/fuzz_telemetry CORPUS -max_total_time=60   (or tests/fuzz/run.py)
+#include <cmath>
+#include <cstdlib>
+
+#include "core/flight_controller.hpp"
+#include "fuzz_input.hpp"
+#include "targets/host/host_hal.hpp"
+#include "targets/host/mpu6050_emulator.hpp"
+
+namespace {
+
+using hqfuzz::Reader;
+
+// The telemetry link: commands queued by the harness come out of read(); what the firmware
+// sends is counted and dropped, and the link is full whenever the input says so.
+class FuzzSerial final : public hq::SerialPort {
+public:
+    size_t read(uint8_t* data, size_t n) override {
+        size_t k = 0;
+        while (k < n && head_ < count_) data[k++] = buf_[head_++];
+        return k;
+    }
+    size_t write(const uint8_t*, size_t n) override { return full_ ? 0 : n; }
+    void push(const uint8_t* data, size_t n) {
+        if (head_ == count_) head_ = count_ = 0;
+        for (size_t i = 0; i < n && count_ < sizeof buf_; ++i) buf_[count_++] = data[i];
+    }
+    void set_full(bool full) { full_ = full; }
+
+private:
+    uint8_t buf_[4096];
+    size_t head_ = 0, count_ = 0;
+    bool full_ = false;
+};
+
+constexpr uint64_t kLoopUs = 5000;
+constexpr int kMaxLoops = 48;              // per input: keeps executions fast
+constexpr uint8_t kSmallDmpImage[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16,
+                                        17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30,
+                                        31, 32};
+
+void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
+    const float* m = motors.values();
+    for (int i = 0; i < hq::kMotors; ++i) {
+        if (!std::isfinite(m[i]) || m[i] < 0.0f || m[i] > 1.0f) std::abort();
+        if (!fc.armed() && m[i] != 0.0f) std::abort();
+    }
+    if (!fc.armed() && fc.supervisor().excitation().active()) std::abort();
+    if (!fc.armed() && fc.state().excitation != 0.0f) std::abort();
+}
+
+// A command with fuzzed fields but the right shape, so deep states (armed, exciting) are
+// reachable: the fuzzer only has to find field values, not checksums.
+size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
+    mavlink_message_t msg;
+    switch (in.u8() % 5) {
+        case 0:
+            mavlink_msg_heartbeat_pack_status(255, 190, &tx, &msg, MAV_TYPE_GCS,
+                                              MAV_AUTOPILOT_INVALID, 0, 0, 0);
+            break;
+        case 1:
+            mavlink_msg_command_long_pack_status(255, 190, &tx, &msg, in.u8() & 1 ? 1 : in.u8(),
+                                                 1, in.u8() & 1 ? MAV_CMD_COMPONENT_ARM_DISARM : in.u16(),
+                                                 0, in.f32(), in.f32(), 0, 0, 0, 0, 0);
+            break;
+        case 2:
+            mavlink_msg_set_mode_pack_status(255, 190, &tx, &msg, 1, 0, in.u8() & 3);
+            break;
+        default: {
+            const uint8_t axis = in.u8(), injection = in.u8(), action = in.u8();
+            const float freq = (axis & 0x80) ? in.f32() : 0.5f + (in.u8() % 40) * 0.25f;
+            const float amp = (injection & 0x80) ? in.f32() : (in.u8() % 100) * 0.01f;
+            mavlink_msg_hq_excitation_pack_status(255, 190, &tx, &msg, 1, 1, action & 1,
+                                                  axis % 4, injection % 4, freq, amp,
+                                                  in.u8() % 8, in.u8() % 3);
+            break;
+        }
+    }
+    return mavlink_msg_to_send_buffer(out, &msg);
+}
+
+void imu_fault(Reader& in, hq::Mpu6050Emulator& chip) {
+    const uint8_t kind = in.u8() % 5;
+    chip.set_present(kind != 2);
+    chip.set_silent(kind == 1);
+    if (kind == 3) chip.power_on_reset();
+    if (kind == 4) chip.force_overflow();
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+    Reader in(data, size);
+    hq::HostClock clock;
+    hq::HostMotors motors;
+    hq::Mpu6050Emulator chip;
+    FuzzSerial telemetry;
+    hq::FlightControllerConfig cfg;
+    if (in.u8() & 1) {
+        cfg.imu.dmp_image = kSmallDmpImage;
+        cfg.imu.dmp_image_size = sizeof kSmallDmpImage;
+    }
+    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
+    fc.init();
+    hq::RcInput rc;
+    const uint16_t rest[hq::kRcChannels] = {1500, 1500, 1000, 1500, 1000, 1000, 0, 0};
+    for (int c = 0; c < hq::kRcChannels; ++c) rc.channel_us[c] = rest[c];
+    rc.age_us = 0;
+    mavlink_status_t tx{};
+    uint8_t packet[hqfuzz::kMaxPacket];
+    uint8_t seq = 0;
+    int loops = 0;
+    while (!in.done() && loops < kMaxLoops) {
+        switch (in.u8() % 7) {
+            case 0:
+                telemetry.push(packet, hqfuzz::any_packet(in, packet, seq++));
+                break;
+            case 1: {
+                uint8_t raw[64];
+                telemetry.push(raw, in.bytes(raw, in.u8() % sizeof raw));
+                break;
+            }
+            case 2:
+                telemetry.push(packet, command_packet(in, packet, tx));
+                break;
+            case 3: {
+                const uint8_t ch = in.u8() % hq::kRcChannels;
+                rc.channel_us[ch] = static_cast<uint16_t>(in.u16() % 2200);
+                rc.age_us = (in.u8() & 7) == 0 ? in.u32() : 0;
+                break;
+            }
+            case 4:
+                imu_fault(in, chip);
+                break;
+            case 5:
+                telemetry.set_full(in.u8() & 1);
+                break;
+            default: {
+                const int n = 1 + in.u8() % 8;
+                for (int i = 0; i < n && loops < kMaxLoops; ++i, ++loops) {
+                    const uint8_t step = in.u8();
+                    clock.set(clock.micros() + (step == 0xFF ? in.u32() : kLoopUs));
+                    uint8_t sample[hq::mpu6050::kDmpPacketSize];
+                    in.bytes(sample, sizeof sample);
+                    chip.push_fifo(sample, chip.dmp_enabled() ? hq::mpu6050::kDmpPacketSize
+                                                              : hq::mpu6050::kRawPacketSize,
+                                   chip.dmp_enabled());
+                    fc.step(rc);
+                    check_rules(fc, motors);
+                }
+                break;
+            }
+        }
+    }
+    return 0;
+}

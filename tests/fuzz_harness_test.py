@@ -1,0 +1,140 @@
+"""The host fuzz harnesses (tests/fuzz) without atheris: their seed corpora and a few thousand
+deterministic pseudo-random inputs, so a broken harness or a parser regression fails the
+normal test suite; and regression tests for what fuzzing found."""
+
+import random
+import struct
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+from fastcrc import crc16
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "fuzz"))
+
+import framer_fuzz  # noqa: E402
+import fuzz_input  # noqa: E402
+import tlog_fuzz  # noqa: E402
+from heliquad.host import mavframe, tlog  # noqa: E402
+
+HARNESSES = {"tlog": tlog_fuzz, "framer": framer_fuzz}
+RANDOM_INPUTS = 1500                    # per harness and kind (raw, structured, mutated seed)
+MAX_RANDOM_LEN = 600
+MUTATIONS = 4
+
+
+def mutate(data: bytes, rng: random.Random) -> bytes:
+    """A few byte changes, insertions and deletions after the mode byte, as a fuzzer makes."""
+    out = bytearray(data)
+    for _ in range(rng.randint(1, MUTATIONS)):
+        pos = rng.randrange(1, len(out) + 1)
+        kind = rng.randrange(3)
+        if kind == 0 and pos < len(out):
+            out[pos] = rng.randrange(256)
+        elif kind == 1:
+            out[pos:pos] = rng.randbytes(rng.randint(1, 16))
+        else:
+            del out[pos:pos + rng.randint(1, 16)]
+    return bytes(out)
+
+
+def pseudo_random_inputs(harness, seed: int):
+    """Raw and structured random inputs and mutated seeds, RANDOM_INPUTS of each."""
+    rng = random.Random(seed)
+    seeds = list(harness.seed_inputs().values())
+    for _ in range(RANDOM_INPUTS):
+        yield bytes((0,)) + rng.randbytes(rng.randrange(MAX_RANDOM_LEN))
+        yield bytes((harness.STRUCTURED,)) + rng.randbytes(rng.randrange(MAX_RANDOM_LEN))
+        yield mutate(rng.choice(seeds), rng)
+
+
+def test_the_oracle_checksum_is_mavlinks():
+    assert fuzz_input.x25(b"123456789") == 0x6F91              # CRC-16/MCRF4XX check value
+    rng = random.Random(1)
+    for n in (0, 1, 9, 255, 300):
+        data = rng.randbytes(n)
+        assert fuzz_input.x25(data) == crc16.mcrf4xx(data)
+
+
+@pytest.mark.parametrize("name", HARNESSES)
+def test_seed_inputs_pass_and_are_valid_logs_and_streams(name):
+    harness = HARNESSES[name]
+    seeds = harness.seed_inputs()
+    read = {label: len(harness.check(data)) for label, data in seeds.items()}
+    n = len(harness.SEED_MESSAGES)
+    whole = {"raw-log": 2 * n, "raw-log-cut": 2 * n - 1} if name == "tlog" else {
+        "raw-all": n, "raw-all-in-quarters": n}
+    assert read["raw-heartbeat"] == 1 and {label: read[label] for label in whole} == whole
+
+
+@pytest.mark.parametrize("name", HARNESSES)
+def test_pseudo_random_inputs_pass(name):
+    harness = HARNESSES[name]
+    read = sum(len(harness.check(data)) for data in pseudo_random_inputs(harness, seed=7))
+    assert read > RANDOM_INPUTS                  # the mutated seeds and recipes do get through
+
+
+def test_structured_streams_reach_many_decoders_and_odd_lengths():
+    rng = random.Random(3)
+    ids, odd_lengths, signed = set(), set(), 0
+    for _ in range(400):
+        data = bytes((framer_fuzz.STRUCTURED,)) + rng.randbytes(rng.randrange(MAX_RANDOM_LEN))
+        for msgid, packet, payload in framer_fuzz.check(data):
+            ids.add(msgid)
+            size = framer_fuzz.BUILDER.sizes[msgid]
+            odd_lengths.add((len(payload) > size) - (len(payload) < size))
+            signed += packet[2] & fuzz_input.INCOMPAT_SIGNED
+    assert len(ids) > 50 and odd_lengths == {-1, 0, 1} and signed > 0
+
+
+def test_the_framer_harness_catches_a_framer_that_loses_a_packet(monkeypatch):
+    feed = mavframe.Framer.feed
+    monkeypatch.setattr(mavframe.Framer, "feed", lambda self, data: feed(self, data)[:-1])
+    with pytest.raises(AssertionError):
+        framer_fuzz.check(framer_fuzz.seed_inputs()["raw-all"])
+
+
+def test_the_tlog_harness_catches_a_reader_that_loses_a_message(monkeypatch):
+    read_tlog = tlog.read_tlog
+    monkeypatch.setattr(tlog, "read_tlog", lambda path, mav: read_tlog(path, mav)[:-1])
+    with pytest.raises(AssertionError):
+        tlog_fuzz.check(tlog_fuzz.seed_inputs()["raw-log"])
+
+
+def _record(stamp: int, name: str, **values) -> bytes:
+    codec = tlog_fuzz.CODEC
+    msgid = next(i for i, cls in codec.classes.items() if cls.msgname == name)
+    return struct.pack(">Q", stamp) + codec.encode(msgid, values)
+
+
+HEARTBEAT = dict(type=2, autopilot=3, base_mode=4, custom_mode=5, system_status=6,
+                 mavlink_version=3)
+
+
+def _length_spans_the_next_record() -> bytes:
+    first = bytearray(_record(1, "HEARTBEAT", **HEARTBEAT))
+    second = _record(2, "STATUSTEXT", severity=6, text="inside", id=0, chunk_seq=0)
+    first[9] += len(second)                                 # the length byte, after the stamp
+    return bytes(first) + second + _record(3, "HEARTBEAT", **HEARTBEAT)
+
+
+def _packet_inside_a_bad_packet() -> bytes:
+    inner = _record(0, "HEARTBEAT", **HEARTBEAT)[8:]
+    outer = bytearray(_record(1, "STATUSTEXT", severity=6, text="x" * 40, id=0, chunk_seq=0))
+    outer[8 + 10 + 1:8 + 10 + 1 + len(inner)] = inner      # over the text; the CRC now fails
+    return bytes(outer)
+
+
+@pytest.mark.parametrize("damaged", [_length_spans_the_next_record, _packet_inside_a_bad_packet])
+def test_a_damaged_record_with_a_packet_inside_ends_the_read(damaged, tmp_path):
+    # Found by fuzzing: read_tlog took the first valid packet the framer found anywhere in
+    # the damaged record's bytes as that record's message, and read on with no warning.
+    data = damaged()
+    path = tmp_path / "damaged.tlog"
+    path.write_bytes(data)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert tlog.read_tlog(str(path), tlog_fuzz.DIALECT) == []
+    assert len(caught) == 1 and "damaged or truncated at byte 0 " in str(caught[0].message)
+    tlog_fuzz.check(b"\0" + data)
