@@ -72,6 +72,9 @@ F_INTEGER_PERIOD = 10.83
 #: A harmonic of the input counts as excited when its amplitude is at least this fraction of
 #: the fundamental's.
 EXCITED_FRACTION = 1e-3
+#: The fundamental's regressor below this fraction of the input's norm: round-off, not an
+#: excitation (an input that is constant or zero), and the normal equations would be singular.
+NO_EXCITATION_RELATIVE = 1e-9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -425,15 +428,16 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
         ridge[-1] = 1.0
     yy = y[start:]
     gram = Xt @ Xt.T
+    # Excitation per harmonic from the Gram diagonal: sum |f_l|^2 = (|2Re f|^2 + |2Im f|^2)/4.
+    # Checked before solving: without excitation the system is singular.
+    diag = np.diag(gram)
+    amp = np.sqrt(np.r_[diag[0], (diag[1:2 * harmonics:2] + diag[2:2 * harmonics + 1:2]) / 4])
+    if not amp[1] > NO_EXCITATION_RELATIVE * float(np.sqrt(u[start:] @ u[start:])):
+        raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
+    excited = amp >= EXCITED_FRACTION * amp[1]
     A = gram + np.diag(ridge) / p0
     coef = scipy.linalg.solve(A, Xt @ yy, assume_a="pos")
     resid = yy - coef @ Xt
-    # Excitation per harmonic from the Gram diagonal: sum |f_l|^2 = (|2Re f|^2 + |2Im f|^2)/4.
-    diag = np.diag(gram)
-    amp = np.sqrt(np.r_[diag[0], (diag[1:2 * harmonics:2] + diag[2:2 * harmonics + 1:2]) / 4])
-    excited = amp >= EXCITED_FRACTION * amp[1]
-    if not excited[1]:
-        raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
     n_free = int(excited[0]) + 2 * int(np.sum(excited[1:])) + int(offset)
     dof = max(yy.size - n_free, 1)
     noise_var = float(resid @ resid) / dof

@@ -68,18 +68,23 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
 
     manifest, samples = _load(dir_path)
     axis = manifest["axis"]
-    points, segments = [], []
+    points, segments, skipped = [], [], []
     for entry, t, u, y in _segments(manifest, samples):
         fs = entry["freq_hz"] * entry["period_samples"]
         try:
             p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
         except InputError as exc:
             progress(f"  {entry['freq_hz']:.4g} Hz skipped: {exc}")
+            skipped.append(f"{entry['freq_hz']:.4g} Hz: {exc}")
             continue
         points.append(p)
         segments.append((entry["freq_hz"], t, u, y))
     if len(points) < 2:
-        raise InputError(f"{dir_path}: {len(points)} usable frequency(ies); a fit needs more")
+        why = f" (skipped {'; '.join(skipped[:2])}{'; ...' if len(skipped) > 2 else ''})" \
+            if skipped else ""
+        aborted = f"; the sweep ended early: {manifest['aborted']}" if manifest.get("aborted") else ""
+        raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
+                         f"a fit needs at least 2{why}{aborted}")
     write_points_csv(os.path.join(dir_path, "points.csv"), points)
     _write_table(os.path.join(dir_path, "points_table.csv"), points)
     table = {"omega": np.array([p.omega_rad_s for p in points]),

@@ -147,6 +147,15 @@ def test_bad_signals_raise_input_error(u, y, match):
         estimate_fsf(u, y, FS_HZ)
 
 
+@pytest.mark.parametrize("u", [np.zeros(2000), np.full(2000, 0.3)])
+def test_an_input_without_excitation_at_the_given_frequency_is_refused(u):
+    # A logged window whose excitation never ran (zero or a constant): one clear error, not
+    # a singular linear system.
+    y = np.random.default_rng(0).normal(size=u.size)
+    with pytest.raises(InputError, match="no component at 2 Hz"):
+        estimate_fsf(u, y, FS_HZ, freq_hz=2.0)
+
+
 def test_frequency_above_nyquist_is_refused():
     u, y, _ = dwell(1.0)
     with pytest.raises(InputError, match="Nyquist"):

@@ -122,6 +122,37 @@ def test_a_host_that_goes_quiet_ends_the_sweep_with_the_firmwares_reason(tmp_pat
     assert manifest["source"]["faults"] == ["link@3"]
 
 
+def test_identify_says_in_one_line_when_no_frequency_has_a_usable_excitation(tmp_path):
+    # A sweep whose logged input and output are flat (as when an excitation was logged as
+    # running but never reached the plant): every frequency is skipped with its reason.
+    import struct
+
+    from heliquad.host.mavframe import Codec
+    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.host.tlog import read_tlog
+
+    out = tmp_path / "flat"
+    res = heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2,
+                   "--cycles", 3, "--ideal-sensor", "--out", out)
+    assert res.returncode == 0, res.stderr
+    mav = dialect()
+    codec = Codec(mav)
+    tlog = out / "sweep.tlog"
+    messages = read_tlog(str(tlog), mav)
+    with open(tlog, "wb") as fh:
+        for ts, m in messages:
+            fields = dict(m.__dict__)
+            if m.get_type() == "HQ_SYSID_SAMPLE":
+                fields.update(axis_cmd=0.0, rate=0.0)
+            fh.write(struct.pack(">Q", ts))
+            fh.write(codec.encode(getattr(mav, "MAVLINK_MSG_ID_" + m.get_type()), fields))
+    res = heliquad("identify", out)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert "0 frequency(ies) with a usable excitation" in res.stderr
+    assert "the input has no component at 1 Hz" in res.stderr
+
+
 def test_identify_refuses_a_folder_that_is_not_a_sweep(tmp_path):
     res = heliquad("identify", tmp_path)
     assert res.returncode == 2 and "no manifest.json" in res.stderr
