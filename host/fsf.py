@@ -343,8 +343,11 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
     if u.size - discard_periods * period < period:
         raise InputError(f"record of {u.size} samples holds fewer than {discard_periods + 1} "
                          f"periods of {period:.6g} samples; nothing is left to analyse")
+    power = float(np.mean(u ** 2))
+    if not power > 0.0:
+        raise InputError(f"the input is zero: it has no component at {freq_hz:g} Hz")
     if p0 is None:
-        p0 = DEFAULT_P0_RELATIVE / max(float(np.mean(u ** 2)), np.finfo(float).tiny)
+        p0 = DEFAULT_P0_RELATIVE / power
     if given:      # taken as it is: an integer period only if it is one to round-off
         whole = round(period) if abs(period - round(period)) <= 1e-9 * period else None
     else:          # the firmware's periods are integers: use one if the input allows it

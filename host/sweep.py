@@ -42,9 +42,10 @@ SWEEP_TLOG = "sweep.tlog"
 N_FREQUENCIES = 15
 MEASURED_CYCLES = 8
 FADE_CYCLES = 2
-#: The firmware's abort limits (SafetyLimits), checked again on the host.
-MAX_ANGLE_DEG = math.degrees(_firmware.SafetyLimits().abort_angle_rad)
-MAX_RATE_DEG_S = math.degrees(_firmware.SafetyLimits().abort_rate_rad_s)
+#: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
+#: millidegree: the firmware holds them in single precision).
+MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
+MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
 #: A board session sends the host's HEARTBEAT this often: the firmware stops an excitation

@@ -155,6 +155,38 @@ def test_sil_bad_input_is_one_line_exit_2(args, match, tmp_path):
     assert len(res.stderr.strip().splitlines()) == 1 and match in res.stderr
 
 
+@pytest.mark.parametrize("fault, match", [
+    ("bogus@4", "unknown fault 'bogus'"),
+    ("silent", "expected KIND@T"),
+    ("silent@-1", "non-negative"),
+    ("reset@4:1", "takes no duration"),
+    ("nack@4:0", "duration must be positive"),
+    ("silent@x", "T and D are seconds"),
+])
+def test_sil_bad_fault_is_one_line_exit_2(fault, match, tmp_path):
+    res = heliquad("sil", "--freq-hz", 1, "--amplitude", 0.05, "--fault", fault,
+                   "--out", tmp_path / "run")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1 and match in res.stderr
+
+
+def test_sil_with_a_silent_imu_stops_with_the_firmwares_reason_and_keeps_the_log(tmp_path):
+    # The IMU goes silent 4 s in, during the excitation: the firmware's IMU failsafe cuts the
+    # motors, the run ends at once with that reason (exit 1), and the log and samples so far
+    # are written.
+    out = tmp_path / "silent"
+    res = heliquad("sil", "--freq-hz", 1, "--amplitude", 0.05, "--fault", "silent@4",
+                   "--out", out)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert "the firmware stopped the excitation: IMU stale" in res.stderr
+    assert "firmware: failsafe: IMU stale, motors off" in res.stdout
+    samples = [m for _, m in read_tlog(str(out) + ".tlog", MAV, only=("HQ_SYSID_SAMPLE",))]
+    cut = next(m for m in samples if m.armed == 0 and m.time_us > 1_000_000)
+    assert 4_000_000 < cut.time_us <= 4_000_000 + 25_000 + 5_000    # within the IMU timeout
+    fs, u, y = read_run_csv(str(out) + ".csv")
+    assert 0 < u.size < 10 * 200
+
+
 def test_free_running_board_streams_telemetry_in_real_time(tmp_path):
     # `heliquad board` paces the lockstep at real time; a tool connects to the telemetry
     # path like a serial port, sees 200 Hz samples without gaps, and, once the board is armed

@@ -362,7 +362,9 @@ def test_an_excitation_stops_at_once_on_disarm():
     b.step(10)
     b.sup.disarm_command()
     assert b.step() == [0.0] and b.sup.excitation_state == fw.ExcitationState.IDLE
-    assert b.sup.take_excitation_end() == reason("DISARMED")
+    # The end carries the disarm's reason (said once, by the disarm).
+    assert b.sup.take_excitation_end() == reason("DISARM_COMMAND")
+    assert b.reasons() == [reason("DISARM_COMMAND")]
 
 
 @pytest.mark.parametrize("axis, attitude, rate, why", [

@@ -136,7 +136,8 @@ void Supervisor::disarm(Reason why) {
     const bool failsafe = why == Reason::RcLost || why == Reason::HostLost ||
                           why == Reason::ImuStale || why == Reason::NonFinite;
     emit(why, failsafe ? Severity::Critical : Severity::Notice);
-    if (excitation_.active()) end_excitation(Reason::Disarmed);
+    // The excitation ends with the disarm's own reason, already announced.
+    if (excitation_.active()) end_excitation(why, false);
 }
 
 Reason Supervisor::arm_command(const RcInput& rc, uint64_t now_us) {
@@ -304,17 +305,12 @@ bool Supervisor::stop_excitation() {
     return true;
 }
 
-void Supervisor::end_excitation(Reason why) {
+void Supervisor::end_excitation(Reason why, bool announce) {
     excitation_.stop();
     exc_end_pending_ = true;
     exc_end_reason_ = why;
-    if (why == Reason::Finished) {
-        emit(why, Severity::Info);
-    } else {
-        ++counters_.exc_stopped;
-        // A disarm already said why; the stop of the excitation is implied by it.
-        if (why != Reason::Disarmed && why != Reason::NonFinite) emit(why, Severity::Warning);
-    }
+    if (why != Reason::Finished) ++counters_.exc_stopped;
+    if (announce) emit(why, why == Reason::Finished ? Severity::Info : Severity::Warning);
 }
 
 Reason Supervisor::excitation_limit(const SupervisorInputs& in) const {

@@ -206,7 +206,7 @@ private:
     float run_excitation(const SupervisorInputs& in);
     Reason excitation_limit(const SupervisorInputs& in) const;
     Reason check_excitation(const ExcitationConfig& config, uint64_t now_us) const;
-    void end_excitation(Reason why);
+    void end_excitation(Reason why, bool announce = true);
     bool host_alive(uint64_t now_us) const;
     void emit(Reason reason, Severity severity);
 

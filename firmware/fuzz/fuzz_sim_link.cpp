@@ -10,6 +10,7 @@
 //   run:   build/fuzz/fuzz_sim_link CORPUS -max_total_time=60   (or tests/fuzz/run.py)
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 
 #include "core/flight_controller.hpp"
 #include "fuzz_input.hpp"
@@ -27,7 +28,8 @@ public:
     size_t write(const uint8_t*, size_t n) override { return n; }
 };
 
-// Takes the replies and checks each against the frame that asked for it.
+// Takes the replies and checks each against the frame that asked for it: a new frame's reply
+// echoes its counter and time; a repeated frame gets the previous reply again, byte for byte.
 class Replies final : public hq::SimLinkReplies {
 public:
     bool reply(const uint8_t* packet, size_t n, bool) override {
@@ -44,21 +46,30 @@ public:
         if (!got || msg.msgid != MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME) std::abort();
         mavlink_hq_actuator_frame_t a;
         mavlink_msg_hq_actuator_frame_decode(&msg, &a);
-        if (check && (a.frame != expect_frame || (time_known && a.time_us != expect_time))) {
+        if (check == Check::Repeat && (n != last_len_ || std::memcmp(packet, last_, n) != 0)) {
+            std::abort();
+        }
+        if (check == Check::New && (a.frame != expect_frame || a.time_us != expect_time)) {
             std::abort();
         }
         for (float m : a.motor) {
             if (!std::isfinite(m) || m < 0.0f || m > 1.0f || (!a.armed && m != 0.0f)) std::abort();
         }
+        std::memcpy(last_, packet, n);
+        last_len_ = n;
         return accept;
     }
+    enum class Check { None, New, Repeat };
+    Check check = Check::None;
     uint32_t count = 0, expect_frame = 0;
     uint64_t expect_time = 0;
-    bool accept = true, check = true, time_known = true;
+    bool accept = true;
 
 private:
     mavlink_status_t rx_{};
     mavlink_message_t rx_msg_{};
+    uint8_t last_[MAVLINK_MAX_PACKET_LEN] = {};
+    size_t last_len_ = 0;
 };
 
 constexpr int kMaxFrames = 48;             // per input: keeps executions fast
@@ -94,26 +105,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (op % 4 == 0) {                        // any message, any length: ignored or not
             const size_t n = hqfuzz::any_packet(in, packet, seq++);
             const uint32_t before = replies.count;
-            replies.check = false;
+            replies.check = Replies::Check::None;
             replies.accept = true;
             handler.feed(packet, n, replies);
-            replies.check = true;
             // A mangled HQ_SENSOR_FRAME is still a frame, with whatever its fields decode to;
-            // follow its counter (its time is unknown here).
+            // follow its counter.
             if (replies.count > before + 1) std::abort();
-            if (replies.count > before) {
-                frame = handler.last_frame();
-                replies.expect_frame = frame;
-                replies.time_known = false;
-            }
+            if (replies.count > before) frame = handler.last_frame();
             continue;
         }
         if (op % 4 == 1) {                        // line noise
             uint8_t raw[64];
-            replies.check = false;
+            replies.check = Replies::Check::None;
             replies.accept = true;
             handler.feed(raw, in.bytes(raw, in.u8() % sizeof raw), replies);
-            replies.check = true;
             // The parser may now be inside a bogus frame that swallows the next packet.
             clean = false;
             continue;
@@ -134,16 +139,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         mavlink_msg_hq_sensor_frame_pack_status(1, 200, &tx, &msg, time_us, frame, in.u8() % 4,
                                                 in.u8(), in.u8() & 1, rc, fifo, in.u8() % 6);
         const size_t n = mavlink_msg_to_send_buffer(packet, &msg);
-        if (!repeat) {                            // a repeat gets the previous reply
-            replies.expect_frame = frame;
-            replies.expect_time = time_us;
-            replies.time_known = true;
-        }
+        replies.expect_frame = frame;
+        replies.expect_time = time_us;
         replies.accept = (in.u8() & 0x1F) != 0;
         const uint32_t before = replies.count;
-        replies.check = clean;
+        // Only a parser between packets is sure to see this frame (noise may hide it).
+        replies.check = !clean ? Replies::Check::None
+                        : repeat ? Replies::Check::Repeat : Replies::Check::New;
         const bool kept = handler.feed(packet, n, replies);
-        replies.check = true;
         if (clean && (replies.count != before + 1 || kept != replies.accept)) std::abort();
         if (replies.count == before + 1) clean = true;
         if (replies.count > before + 1) std::abort();
