@@ -18,7 +18,7 @@ from .mavframe import Codec, Framer
 from .mavlink_dialect import dialect
 
 __all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES",
-           "reason_text"]
+           "HEARTBEAT_PERIOD_S", "reason_text"]
 
 AXES = {"roll": 0, "pitch": 1, "yaw": 2}
 INJECTIONS = {"angle": 0, "rate": 1, "mixer": 2}
@@ -28,6 +28,10 @@ INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
 #: The messages a session driver (SIL or board) reads while an excitation runs.
 SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
 MODES = {"angle": dialect().HQ_MODE_ANGLE, "rate": dialect().HQ_MODE_RATE}
+#: How often a session sends the host's HEARTBEAT: the firmware stops an excitation 1.5 s
+#: after the last one (and disarms a vehicle armed by command), so a few late ones must not
+#: end a run.
+HEARTBEAT_PERIOD_S = 0.25
 HOST_SYSTEM_ID, HOST_COMPONENT_ID = 255, 190       # a ground station's usual IDs
 TARGET_SYSTEM, TARGET_COMPONENT = 1, 1
 MAV_CMD_COMPONENT_ARM_DISARM = 400

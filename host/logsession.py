@@ -22,7 +22,7 @@ STATUS_EVERY_S = 5.0
 def run_log(port: str, out: str, baud: int = 115200, duration_s: float | None = None,
             progress=print) -> dict:
     """Log until ``duration_s`` or Ctrl-C; returns the summary."""
-    from .link import TelemetryLink
+    from .link import HEARTBEAT_PERIOD_S, TelemetryLink
     from .tlog import TlogWriter
 
     tlog = TlogWriter(out)
@@ -36,7 +36,7 @@ def run_log(port: str, out: str, baud: int = 115200, duration_s: float | None = 
             now = time.monotonic()
             if now >= next_heartbeat:
                 link.heartbeat()
-                next_heartbeat = now + 1.0
+                next_heartbeat = now + HEARTBEAT_PERIOD_S
             before = tlog.messages
             for m in link.poll(only=("HQ_SYSID_SAMPLE",)):
                 _count(stats, m.seq)

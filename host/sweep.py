@@ -32,7 +32,7 @@ from heliquad import _firmware
 
 from . import __version__, paper
 from .errors import InputError
-from .link import SESSION_MESSAGES, reason_text
+from .link import HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
 from .mavlink_dialect import dialect
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
@@ -48,9 +48,6 @@ MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
 MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
-#: A board session sends the host's HEARTBEAT this often: the firmware stops an excitation
-#: 1.5 s after the last one, so a few late ones must not end a sweep.
-HEARTBEAT_PERIOD_S = 0.25
 
 
 def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
@@ -175,13 +172,15 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
     while True:
         for m in session.advance():
             kind = m.get_type()
-            if kind == "HQ_EXCITATION_STATUS" and "freq_hz" not in entry:
-                if not m.accepted:           # the answer to this start: refused, and why
+            if kind == "HQ_EXCITATION_STATUS":
+                # Read whatever arrives first: the answer to this start, or (if that was lost
+                # on a board's link) the status of its end, which carries the same fields.
+                if not m.accepted:           # only a start is ever refused
                     entry["status"] = f"refused by the firmware: {reason_text(m.reason)}"
                     return entry
-                entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
-            elif kind == "HQ_EXCITATION_STATUS" and m.state == idle:
-                if m.reason != mav.HQ_REASON_FINISHED:
+                if "freq_hz" not in entry:
+                    entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
+                if m.state == idle and m.reason not in (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED):
                     entry["status"] = f"stopped by the firmware: {reason_text(m.reason)}"
                     return entry
             elif kind == "HQ_SYSID_SAMPLE":

@@ -28,7 +28,7 @@ import numpy as np
 from heliquad.host.errors import InputError
 from heliquad.host.mavlink_dialect import dialect
 
-__all__ = ["Fault", "parse_fault", "imu_fault_codes", "link_close_frame", "KINDS"]
+__all__ = ["Fault", "parse_fault", "check_faults", "imu_fault_codes", "link_close_frame", "KINDS"]
 
 #: Fault kinds and whether they hold over a duration (True) or act once (False).
 KINDS = {"silent": True, "nack": True, "reset": False, "overflow": False, "link": False}
@@ -86,6 +86,15 @@ def parse_fault(text: str) -> Fault:
     except ValueError:
         raise InputError(f"--fault {text!r}: T and D are seconds, e.g. silent@2:0.5") from None
     return Fault(kind.strip().lower(), at_s, duration_s)
+
+
+def check_faults(faults, dt_us: int) -> None:
+    """Refuse a fault that would act on no frame (shorter than a loop, between two frames)."""
+    for f in faults:
+        if f.last_frame(dt_us) < f.first_frame(dt_us):
+            raise InputError(f"fault {f.kind}@{f.at_s:g}:{f.duration_s:g} falls between two "
+                             f"loops ({dt_us * 1e-3:g} ms apart) and would act on none; "
+                             "make it longer")
 
 
 def imu_fault_codes(faults, first: int, n: int, dt_us: int) -> np.ndarray | None:

@@ -22,10 +22,10 @@ import time
 
 import numpy as np
 
-from heliquad.host.link import INPUT_OUTPUT, SESSION_MESSAGES, reason_text
+from heliquad.host.link import HEARTBEAT_PERIOD_S, INPUT_OUTPUT, SESSION_MESSAGES, reason_text
 from heliquad.host.mavlink_dialect import dialect
 
-from .faults import imu_fault_codes, link_close_frame
+from .faults import check_faults, imu_fault_codes, link_close_frame
 from .lockstep import FirmwareError, HostFirmware, SimLink, actuators
 from .tf_plant import TfPlant
 
@@ -204,6 +204,7 @@ class SilSession:
 
         self.cfg = cfg
         self.dt_us = int(round(1e6 / cfg.loop_hz))
+        check_faults(cfg.faults, self.dt_us)
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
         self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
@@ -215,7 +216,8 @@ class SilSession:
             self.fw.stop()
             raise
         self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
-        self.heartbeat_frames = max(1, int(round(cfg.loop_hz)))   # the tool's 1 Hz heartbeat
+        # The tool's heartbeat, on exact frames so that runs repeat.
+        self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
         self.frame, self.kind, self.reply = 0, 0, None
         self.t0 = time.monotonic()

@@ -51,5 +51,13 @@ def test_bad_faults_are_input_errors(text, match):
         parse_fault(text)
 
 
+def test_a_fault_shorter_than_a_loop_between_two_frames_is_refused():
+    from heliquad.sim.faults import check_faults
+
+    with pytest.raises(InputError, match="falls between two loops"):
+        check_faults([parse_fault("silent@0.0012:0.0005")], DT_US)
+    check_faults([parse_fault("silent@0.0012:0.005")], DT_US)      # covers the frame at 5 ms
+
+
 def test_fault_is_a_value():
     assert parse_fault("SILENT@2:0.5") == Fault("silent", 2.0, 0.5)

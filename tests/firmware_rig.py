@@ -105,8 +105,11 @@ class FirmwareRig:
     def ping(self) -> int:
         """Send the host's HEARTBEAT and step until the firmware has processed it; the loop
         time at which it did (a COMMAND_ACK sent with it marks the loop)."""
-        self.tel.heartbeat()
-        self.tel.mav.command_long_send(1, 1, MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0)
+        # One write: both arrive together, so the ACK marks the heartbeat's own loop.
+        mav = self.tel.mav
+        self.tel.serial.write(
+            mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav)
+            + mav.command_long_encode(1, 1, MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
         t, _ = self.until(lambda m: m.get_type() == "COMMAND_ACK"
                           and m.command == MAV_CMD_REQUEST_MESSAGE)
         return t

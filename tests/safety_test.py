@@ -98,6 +98,26 @@ def test_the_rc_switch_disarms_a_vehicle_armed_by_command(rig):
     assert "disarmed by RC switch" in texts(rig)
 
 
+def test_our_own_heartbeat_echoed_back_does_not_count_as_the_hosts(rig):
+    # A router that echoes the vehicle's HEARTBEAT (system 1) must not keep an excitation
+    # alive: only the host's count.
+    rig.hover()
+    rig.ping()
+    _, status = rig.excitation_answer(cycles=60)
+    assert status.accepted
+    last_heartbeat = rig.ping()
+    echo = MAV.MAVLink(None, srcSystem=1, srcComponent=1)
+    for _ in range(400):
+        rig.tel.serial.write(echo.heartbeat_encode(2, 0, 0, 0, 0).pack(echo))
+        rig.step()
+        ends = [m for _, m in rig.of_type("HQ_EXCITATION_STATUS", last_heartbeat)
+                if m.state == MAV.HQ_EXCITATION_STATE_IDLE]
+        if ends:
+            break
+    assert ends and ends[0].reason == reason("HOST_LOST")
+    assert ends[0].time_us - last_heartbeat <= HOST_TIMEOUT_US + DT_US
+
+
 def test_arming_by_command_is_refused_without_a_live_rc_link(rig):
     rig.rc = [0] * 8
     rig.step(20)

@@ -88,12 +88,15 @@ def test_arming_by_command_works_when_every_check_passes():
 
 def test_arming_needs_a_fresh_imu_sample():
     b = Bench()
+    b.rc = rc(arm=True)                        # high from the start: only a command can arm
     b.step(4, imu=False)                       # the IMU never delivered
-    b.rc = rc(arm=True)
     assert b.sup.arm_command(b.rc, b.t) == reason("IMU_NOT_READY")
     b.step(1)
     b.step(6, imu=False)                       # 30 ms without a sample: stale
     assert b.sup.arm_command(b.rc, b.t) == reason("IMU_NOT_READY")
+    assert not b.sup.armed
+    b.step(1)                                  # fresh again
+    assert b.sup.arm_command(b.rc, b.t) == reason("NONE") and b.sup.armed
 
 
 def test_the_arm_switch_arms_only_on_an_edge_the_pilot_made():
@@ -130,6 +133,35 @@ def test_the_arm_switch_not_high_always_disarms_whatever_armed(arm_by, switch_us
     b.rc = fw.RcInput([1500, 1500, 1000, 1500, switch_us, 1000, 0, 0], 0)
     b.step()
     assert not b.sup.armed and reason("RC_SWITCH") in b.reasons()
+
+
+@pytest.mark.parametrize("dropout_us", [0, 1500])
+def test_a_dropout_of_the_arm_switch_pulse_disarms_and_does_not_rearm(dropout_us):
+    # A loose channel-5 lead: no pulse (or a mid-travel one) for a frame, then high again.
+    b = Bench()
+    b.arm_by_switch()
+    b.rc = fw.RcInput([1500, 1500, 1000, 1500, dropout_us, 1000, 0, 0], 0)
+    b.step()
+    assert not b.sup.armed
+    b.rc = rc(arm=True)
+    b.step(10)
+    assert not b.sup.armed                     # no low pulse in between: not an edge
+
+
+def test_a_switch_moved_high_while_the_rc_link_was_lost_does_not_arm():
+    b = Bench()
+    b.rc = rc(arm=False)
+    b.step(3)
+    b.rc = rc(arm=True, age_us=LIMITS.rc_timeout_us + 1)     # link lost, switch moved
+    b.step(3)
+    b.rc = rc(arm=True)                                       # link back
+    b.step(10)
+    assert not b.sup.armed
+    b.rc = rc(arm=False)                                      # a real edge arms
+    b.step()
+    b.rc = rc(arm=True)
+    b.step()
+    assert b.sup.armed
 
 
 def test_disarm_by_command():
@@ -379,6 +411,28 @@ def test_an_excitation_stops_at_the_abort_limits(axis, attitude, rate, why):
     b.step(5)
     assert b.step(attitude=attitude, rate=rate) == [0.0]
     assert b.sup.take_excitation_end() == reason(why) and reason(why) in b.reasons()
+
+
+@pytest.mark.parametrize("attitude, rate, why", [
+    (fw.Euler(math.nan, 0, 0), None, "ANGLE_LIMIT"),
+    (None, fw.Vec3(math.nan, 0, 0), "RATE_LIMIT"),
+    (None, fw.Vec3(math.inf, 0, 0), "RATE_LIMIT"),
+])
+def test_a_measurement_that_is_not_a_number_is_beyond_the_limits(attitude, rate, why):
+    b = armed_bench()
+    b.sup.start_excitation(config(), b.t)
+    b.step(3)
+    assert b.step(attitude=attitude, rate=rate) == [0.0]
+    assert b.sup.take_excitation_end() == reason(why)
+
+
+def test_imu_recovery_pacing_survives_a_clock_that_goes_backwards():
+    b = Bench()
+    b.step(int(2 * LIMITS.imu_retry_us / DT_US), imu=False)
+    assert b.sup.imu_recovery_due(b.t)
+    b.sup.imu_recovery_result(reason("IMU_STALLED"), True, b.t)
+    earlier = b.t - 100000
+    assert not b.sup.imu_recovery_due(earlier)        # not due on every loop
 
 
 def test_the_yaw_rigs_heading_has_no_angle_limit():

@@ -144,6 +144,7 @@ void FlightController::recover_imu(uint64_t now_us) {
     // DMP upload (about 0.2 s on the board).
     const InitResult r = imu_.init(i2c_, clock_);
     const bool ok = r == InitResult::OkDmp || r == InitResult::OkRaw;
+    supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));   // its path's rate
     supervisor_.imu_recovery_result(
         health == ImuHealth::Unconfigured ? Reason::ImuReset : Reason::ImuStalled, ok, now_us);
     filter_.reset();
@@ -168,7 +169,8 @@ void FlightController::handle_message(const mavlink_message_t& msg, const RcInpu
                                       uint64_t now_us) {
     switch (msg.msgid) {
         case MAVLINK_MSG_ID_HEARTBEAT:
-            supervisor_.host_heartbeat(now_us);
+            // The host's, not our own echoed back by a router.
+            if (msg.sysid != config_.system_id) supervisor_.host_heartbeat(now_us);
             return;
         case MAVLINK_MSG_ID_COMMAND_LONG:
             handle_command_long(msg, rc, now_us);
@@ -263,6 +265,7 @@ void FlightController::run_control(const RcInput& rc, float excitation, float dt
         return;
     }
     for (float& m : state_.motor) m = 0.0f;
+    state_.excitation = 0.0f;         // nothing reached the vehicle
     motors_.disarm();
     cascade_.reset();                 // nothing integrates while the motors are off
 }

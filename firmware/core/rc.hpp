@@ -17,8 +17,10 @@ namespace rc {
 constexpr int kRoll = 0, kPitch = 1, kThrottle = 2, kYaw = 3, kArm = 4, kMode = 5;
 constexpr uint16_t kCenterUs = 1500, kMinUs = 1000, kHalfSpanUs = 500;
 // A two-position switch reads about 1000 or 2000 us; "high" needs a clear margin above the
-// centre so that a mid-travel or noisy pulse never counts as a deliberate arm or rate mode.
+// centre so that a mid-travel or noisy pulse never counts as a deliberate arm or rate mode,
+// and "low" a valid pulse clearly below it (no signal is neither).
 constexpr uint16_t kSwitchHighUs = 1700;
+constexpr uint16_t kSwitchLowUs = 1300;
 // Throttle at most 10 % of travel counts as low for arming (sticks rest at 1000 +/- a few us).
 constexpr uint16_t kThrottleLowUs = 1100;
 }  // namespace rc
@@ -46,6 +48,9 @@ Sticks sticks(const RcInput& in, const StickLimits& limits);
 inline bool has_signal(const RcInput& in, int channel) { return in.channel_us[channel] != 0; }
 inline bool switch_high(const RcInput& in, int channel) {
     return in.channel_us[channel] > rc::kSwitchHighUs;
+}
+inline bool switch_low(const RcInput& in, int channel) {
+    return has_signal(in, channel) && in.channel_us[channel] < rc::kSwitchLowUs;
 }
 
 }  // namespace hq

@@ -204,8 +204,9 @@ void Supervisor::apply_mode_switch(const RcInput& rc) {
 
 void Supervisor::apply_rc(const RcInput& rc, uint64_t now_us) {
     if (rc.age_us > limits_.rc_timeout_us) {
-        // The switches' last positions are kept: the vehicle never re-arms by itself when
-        // the link comes back with the switch still high.
+        // The arm switch's position is forgotten: when the link comes back, only a new
+        // low-to-high move arms, never a switch that was moved (or left high) meanwhile.
+        arm_switch_ = SwitchPos::Unknown;
         if (armed_) {
             ++counters_.rc_failsafes;
             disarm(Reason::RcLost);
@@ -216,12 +217,14 @@ void Supervisor::apply_rc(const RcInput& rc, uint64_t now_us) {
     if (armed_ && !high) {
         disarm(Reason::RcSwitch);
     } else if (!armed_ && high && arm_switch_ == SwitchPos::Low) {
-        // Only a low-to-high edge the pilot made arms: a switch found high at boot does not.
+        // Only a low-to-high edge the pilot made arms: a switch found high at boot does not,
+        // nor one whose pulse dropped out (no signal, or mid-travel, is not "low").
         const Reason r = check_arm(rc, now_us);
         if (r == Reason::None) arm(ArmSource::RcSwitch);
         else refuse_arm(r);
     }
-    arm_switch_ = high ? SwitchPos::High : SwitchPos::Low;
+    arm_switch_ = high ? SwitchPos::High
+                : switch_low(rc, rc::kArm) ? SwitchPos::Low : SwitchPos::Unknown;
     apply_mode_switch(rc);
 }
 
@@ -317,11 +320,12 @@ Reason Supervisor::excitation_limit(const SupervisorInputs& in) const {
     const ExcitationConfig& c = excitation_.config();
     const int a = static_cast<int>(c.axis);
     if (!host_alive(in.now_us)) return Reason::HostLost;
-    // The yaw rig's heading is free: only roll and pitch have an angle limit.
-    if (a < kAngleAxes && std::fabs(in.attitude[a]) > limits_.abort_angle_rad) {
+    // The yaw rig's heading is free: only roll and pitch have an angle limit. A measurement
+    // that is not a number is beyond every limit (the comparisons are written so).
+    if (a < kAngleAxes && !(std::fabs(in.attitude[a]) <= limits_.abort_angle_rad)) {
         return Reason::AngleLimit;
     }
-    if (std::fabs(in.rate[a]) > limits_.abort_rate_rad_s) return Reason::RateLimit;
+    if (!(std::fabs(in.rate[a]) <= limits_.abort_rate_rad_s)) return Reason::RateLimit;
     return Reason::None;
 }
 
@@ -345,7 +349,10 @@ void Supervisor::imu_initialised(uint64_t now_us, uint32_t timeout_us) {
 }
 
 bool Supervisor::imu_recovery_due(uint64_t now_us) const {
-    return !armed_ && !imu_fresh(now_us) && now_us - last_imu_attempt_us_ >= limits_.imu_retry_us;
+    // A clock that went backwards (against the HAL's contract) delays the retry, never
+    // repeats it every loop.
+    return !armed_ && !imu_fresh(now_us) && now_us >= last_imu_attempt_us_ &&
+           now_us - last_imu_attempt_us_ >= limits_.imu_retry_us;
 }
 
 void Supervisor::imu_recovery_result(Reason found, bool reinitialised, uint64_t now_us) {

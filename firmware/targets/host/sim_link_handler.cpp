@@ -36,7 +36,7 @@ bool SimLinkHandler::on_frame(const mavlink_message_t& msg, SimLinkReplies& out)
         ++repeated_;
         return out.reply(out_, out_len_, f.sync != 0);
     }
-    if (have_last_ && f.frame != last_frame_ + 1) lost_ += f.frame - last_frame_ - 1;
+    if (have_last_ && f.frame > last_frame_ + 1) lost_ += f.frame - last_frame_ - 1;
     have_last_ = true;
     last_frame_ = f.frame;
     ++frames_;

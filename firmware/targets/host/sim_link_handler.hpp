@@ -1,11 +1,13 @@
 // The firmware's end of the sim link (docs/link-contract.md), without the pty: bytes in,
 // one FlightController step per new HQ_SENSOR_FRAME, exactly one HQ_ACTUATOR_FRAME out.
 //
-// Per frame: the clock is set to time_us; the frame's imu_fault acts on the emulated MPU6050
+// Per frame: the clock is set to time_us (never backwards: a frame from the past runs at the
+// latest time seen); the frame's imu_fault acts on the emulated MPU6050
 // (SILENT and NACK hold while frames carry them, RESET and OVERFLOW act once); its FIFO bytes
 // go into the chip (fifo_len is clamped to the field's 168 bytes); the RC channels become the
 // loop's RcInput (age 0 when any channel has a pulse, "never" when none has); one step runs.
-// A repeated frame counter gets the previous reply again without a step; a gap is counted.
+// A repeated frame counter gets the previous reply again without a step; a forward gap is
+// counted as lost frames.
 // Messages other than HQ_SENSOR_FRAME, and damaged bytes, are ignored.
 #pragma once
 
@@ -41,6 +43,8 @@ public:
     uint32_t lost() const { return lost_; }
     uint32_t repeated() const { return repeated_; }
     uint32_t last_frame() const { return last_frame_; }
+    // True when the parser is between packets (the next STX starts a new one).
+    bool between_packets() const { return rx_status_.parse_state <= MAVLINK_PARSE_STATE_IDLE; }
 
 private:
     bool on_frame(const mavlink_message_t& msg, SimLinkReplies& out);
