@@ -14,6 +14,7 @@ import numpy as np
 
 from . import __version__
 from .errors import InputError
+from .link import DEFAULT_BAUD
 
 __all__ = ["main"]
 
@@ -65,7 +66,7 @@ BOARD_HELP = """\
 Run the simulated rig in real time as if it were a board on a serial port: the host
 firmware with a transfer-function plant, armed and hovering, stepping one loop per loop
 period of wall-clock time. Its telemetry port appears at --telemetry; connect any MAVLink
-tool to it as to /dev/ttyACM0 (115200 baud is accepted and ignored). Nothing reads the
+tool to it as to a board's serial port (any baud rate is accepted and ignored). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
@@ -238,7 +239,8 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", required=True, metavar="DEVICE",
                    help="serial device: /dev/ttyACM0 for a Teensy, or a heliquad board pty")
     p.add_argument("--out", required=True, metavar="FILE.tlog")
-    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
     p.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds "
                    "(default: until Ctrl-C)")
     p.set_defaults(func=_cmd_log)
@@ -257,7 +259,8 @@ def _build_parser() -> argparse.ArgumentParser:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
-    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
     p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=float, nargs="+", metavar="B",
@@ -298,9 +301,11 @@ def _build_parser() -> argparse.ArgumentParser:
 
     from .demo import add_demo_parser
     from .dmp_image import add_dmp_image_parser
+    from .flash import add_flash_parser
 
     add_demo_parser(sub, fmt)
     add_dmp_image_parser(sub, fmt)
+    add_flash_parser(sub, fmt)
     return parser
 
 

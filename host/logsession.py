@@ -12,6 +12,7 @@ import collections
 import time
 
 from .errors import InputError
+from .link import DEFAULT_BAUD
 
 __all__ = ["run_log", "summarise_tlog"]
 
@@ -19,7 +20,7 @@ POLL_S = 0.01
 STATUS_EVERY_S = 5.0
 
 
-def run_log(port: str, out: str, baud: int = 115200, duration_s: float | None = None,
+def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | None = None,
             progress=print) -> dict:
     """Log until ``duration_s`` or Ctrl-C; returns the summary."""
     from .link import HEARTBEAT_PERIOD_S, TelemetryLink

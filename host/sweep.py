@@ -32,7 +32,7 @@ from heliquad import _firmware
 
 from . import __version__, paper
 from .errors import InputError
-from .link import HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
+from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
 from .mavlink_dialect import dialect
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
@@ -88,7 +88,7 @@ class PortSession:
     """A board (or a ``heliquad board`` pty) as a sweep driver: wall-clock time, the link
     logging every packet with the host's clock."""
 
-    def __init__(self, port: str, tlog_path: str, baud: int = 115200, poll_s: float = 0.05):
+    def __init__(self, port: str, tlog_path: str, baud: int = DEFAULT_BAUD, poll_s: float = 0.05):
         from .link import TelemetryLink
         from .tlog import TlogWriter
 

@@ -11,6 +11,7 @@
 #include "core/attitude.hpp"
 #include "core/controllers.hpp"
 #include "core/excitation.hpp"
+#include "core/loop_load.hpp"
 #include "core/mixer.hpp"
 #include "core/mpu6050.hpp"
 #include "core/pid.hpp"
@@ -235,6 +236,14 @@ PYBIND11_MODULE(_firmware, m) {
     m.def("from_euler", &from_euler);
     m.def("dmp_to_frd", &dmp_to_frd);
     m.def("chip_to_frd", &chip_to_frd);
+    py::class_<LoopLoad>(m, "LoopLoad")
+        .def(py::init<>())
+        .def_readonly_static("capacity", &LoopLoad::kCapacity)
+        .def("record", &LoopLoad::record, py::arg("cycles"), py::arg("overruns_total"))
+        .def("take", [](LoopLoad& l) {
+            const LoopLoad::Report r = l.take();
+            return py::make_tuple(r.median, r.max, r.overruns);
+        });
     py::class_<ComplementaryFilter>(m, "ComplementaryFilter")
         .def(py::init<float>(), py::arg("kp") = 1.0f)
         .def("update", &ComplementaryFilter::update)

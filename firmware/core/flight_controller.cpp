@@ -331,12 +331,14 @@ void FlightController::send_telemetry() {
         send(msg);
         const Mpu6050Counters& c = imu_.counters();
         const SupervisorCounters& f = sup.counters();
+        const LoopLoad::Report load = load_.take();
         mavlink_msg_hq_fw_status_pack_status(
             config_.system_id, config_.component_id, &tx_status_, &msg, now, loops_, c.packets,
             c.dropped, c.overflows, c.resyncs, c.bad_packets, c.bus_errors, telemetry_dropped_,
             dt_clamped_, f.non_finite, sensor_kind(), armed, mode, exc_state,
             static_cast<uint8_t>(sup.last_reason()), f.rc_failsafes, f.host_failsafes, f.imu_stale,
-            f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped);
+            f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped, load.median,
+            load.max, load.overruns);
         send(msg);
     }
     mavlink_msg_attitude_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,

@@ -16,10 +16,12 @@
 
 #include "../hal/clock.hpp"
 #include "../hal/i2c.hpp"
-#include "../hal/outputs.hpp"
+#include "../hal/motors.hpp"
+#include "../hal/rc_input.hpp"
 #include "../hal/serial.hpp"
 #include "controllers.hpp"
 #include "excitation.hpp"
+#include "loop_load.hpp"
 #include "mixer.hpp"
 #include "mpu6050.hpp"
 #include "rc.hpp"
@@ -62,6 +64,11 @@ public:
     InitResult init();
     // One loop iteration at the clock's current time with the latest RC input.
     void step(const RcInput& rc);
+    // The target's measurement of the loop just run: CPU cycles of its work and the loop
+    // ticks missed since boot (HQ_FW_STATUS loop_cycles_*, loop_overruns).
+    void record_loop(uint32_t cycles, uint32_t overruns_total) {
+        load_.record(cycles, overruns_total);
+    }
 
     const Supervisor& supervisor() const { return supervisor_; }
     bool armed() const { return supervisor_.armed(); }
@@ -100,6 +107,7 @@ private:
     Supervisor supervisor_;
 
     LoopState state_{};
+    LoopLoad load_{};
     bool last_exc_accepted_ = false;
     bool have_time_ = false;
     uint64_t last_us_ = 0, last_slow_us_ = 0;

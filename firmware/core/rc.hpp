@@ -1,5 +1,5 @@
 // The pilot's radio: channel map, switch positions and stick scaling. Pure functions of one
-// RcInput (hal/outputs.hpp: pulse widths in us, 0 = no signal on that channel).
+// RcInput (hal/rc_input.hpp: pulse widths in us, 0 = no signal on that channel).
 //
 // Channels (FrSky V8FR-II PWM outputs, Mode 2 transmitter):
 //   1 roll stick, 2 pitch stick, 3 throttle, 4 yaw stick, 5 arm switch, 6 mode switch.
@@ -8,7 +8,7 @@
 
 #include <cstdint>
 
-#include "../hal/outputs.hpp"
+#include "../hal/rc_input.hpp"
 #include "types.hpp"
 
 namespace hq {

@@ -27,7 +27,7 @@
 
 #include <cstdint>
 
-#include "../hal/outputs.hpp"
+#include "../hal/rc_input.hpp"
 #include "excitation.hpp"
 #include "types.hpp"
 

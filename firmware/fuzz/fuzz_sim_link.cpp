@@ -14,7 +14,8 @@
 
 #include "core/flight_controller.hpp"
 #include "fuzz_input.hpp"
-#include "targets/host/host_hal.hpp"
+#include "targets/host/clock.hpp"
+#include "targets/host/motors.hpp"
 #include "targets/host/mpu6050_emulator.hpp"
 #include "targets/host/sim_link_handler.hpp"
 

@@ -1,7 +1,7 @@
-// Byte stream (USB CDC serial on the Teensy, a pty on the host). Contract: never blocks.
-// read() returns the bytes available now (up to n); write() queues up to n bytes and returns
-// how many it took: a full link takes fewer, and the caller drops and counts the rest, as a
-// UART would.
+// Byte stream (UART0 on the Teensy, a pty on the host). Contract: never blocks. read()
+// returns the bytes available now (up to n). write() queues all n bytes, or none when they
+// do not fit (returns 0): the caller hands it one whole MAVLink packet at a time, so a full
+// link drops whole packets, never a packet's tail; the caller counts what was dropped.
 #pragma once
 
 #include <cstddef>

@@ -26,7 +26,10 @@
 
 #include "../../core/flight_controller.hpp"
 #include "../dmp_image.hpp"
-#include "host_hal.hpp"
+#include "clock.hpp"
+#include "i2c.hpp"
+#include "motors.hpp"
+#include "serial.hpp"
 #include "mpu6050_emulator.hpp"
 #include "sim_link_handler.hpp"
 
@@ -125,7 +128,9 @@ int main(int argc, char** argv) {
         cfg.imu.dmp_image = hq::kDmpImage;
         cfg.imu.dmp_image_size = hq::kDmpImageSize;
     }
-    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
+    hq::HostI2cBus bus;
+    bus.attach(hq::mpu6050::kAddress, chip);
+    hq::FlightController fc(cfg, bus, clock, telemetry, motors);
     const hq::InitResult init = fc.init();
     std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),
                 sim.slave_path().c_str(), opt.telemetry.c_str(), telemetry.slave_path().c_str(),

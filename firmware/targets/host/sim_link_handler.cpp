@@ -1,5 +1,7 @@
 #include "sim_link_handler.hpp"
 
+#include "rc_input.hpp"
+
 namespace hq {
 
 SimLinkHandler::SimLinkHandler(FlightController& fc, HostClock& clock, Mpu6050Emulator& chip,
@@ -44,14 +46,7 @@ bool SimLinkHandler::on_frame(const mavlink_message_t& msg, SimLinkReplies& out)
     apply_fault(f.imu_fault);
     const size_t len = f.fifo_len < sizeof(f.fifo) ? f.fifo_len : sizeof(f.fifo);
     if (len > 0) chip_.push_fifo(f.fifo, len, f.fifo_kind == HQ_SENSOR_DMP);
-    RcInput rc;
-    bool any = false;
-    for (int c = 0; c < kRcChannels; ++c) {
-        rc.channel_us[c] = f.rc_us[c];
-        any = any || f.rc_us[c] != 0;
-    }
-    rc.age_us = any ? 0u : 0xFFFFFFFFu;
-    fc_.step(rc);
+    fc_.step(rc_from_sim_frame(f.rc_us));
     mavlink_message_t reply;
     mavlink_msg_hq_actuator_frame_pack_status(system_id_, component_id_, &tx_status_, &reply,
                                               f.time_us, f.frame, motors_.values(),

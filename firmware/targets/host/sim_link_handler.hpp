@@ -15,7 +15,8 @@
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
-#include "host_hal.hpp"
+#include "clock.hpp"
+#include "motors.hpp"
 #include "mpu6050_emulator.hpp"
 
 namespace hq {

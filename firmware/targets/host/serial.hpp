@@ -1,30 +1,13 @@
-// Host backends of the HAL, used by the host firmware executable (main.cpp).
+// Host backend of the HAL serial port (hal/serial.hpp): a pseudo-terminal.
 #pragma once
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
-#include "../../hal/clock.hpp"
-#include "../../hal/outputs.hpp"
 #include "../../hal/serial.hpp"
 
 namespace hq {
-
-// Lockstep clock: the simulator sets the time with every sensor frame; nothing here reads a
-// wall clock. Start-up delays return at once (the emulated devices are ready immediately).
-// The HAL's contract is a monotonic clock: a time earlier than the current one is ignored.
-class HostClock final : public Clock {
-public:
-    uint64_t micros() const override { return now_us_; }
-    void delay_us(uint32_t) override {}
-    void set(uint64_t now_us) {
-        if (now_us > now_us_) now_us_ = now_us;
-    }
-
-private:
-    uint64_t now_us_ = 0;
-};
 
 // One end of a pseudo-terminal, the stand-in for a UART or USB serial port. The firmware owns
 // the master side and publishes the slave device under a stable name (a symlink), which the
@@ -64,21 +47,6 @@ private:
     bool maybe_input_ = true;     // false: the last poll found nothing, read() skips the call
     uint8_t buf_[kBufferSize];
     size_t head_ = 0, count_ = 0;
-};
-
-// Motor outputs: the last thrust fractions set, sent back to the simulator.
-class HostMotors final : public MotorOutputs {
-public:
-    void set(const float thrust_fraction[5]) override {
-        for (int i = 0; i < 5; ++i) value_[i] = thrust_fraction[i];
-    }
-    void disarm() override {
-        for (float& v : value_) v = 0.0f;
-    }
-    const float* values() const { return value_; }
-
-private:
-    float value_[5] = {0, 0, 0, 0, 0};
 };
 
 }  // namespace hq

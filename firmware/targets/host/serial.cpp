@@ -1,4 +1,4 @@
-#include "host_hal.hpp"
+#include "serial.hpp"
 
 #include <cerrno>
 #include <cstdlib>

@@ -1,0 +1,26 @@
+// Host backend of the HAL motor outputs (hal/motors.hpp).
+#pragma once
+
+#include "../../hal/motors.hpp"
+
+namespace hq {
+
+// Motor outputs: the last thrust fractions set, sent back to the simulator.
+class HostMotors final : public MotorOutputs {
+public:
+    void set(const float thrust_fraction[5]) override {
+        for (int i = 0; i < 5; ++i) {
+            const float f = thrust_fraction[i];
+            value_[i] = f > 0.0f ? (f < 1.0f ? f : 1.0f) : 0.0f;     // NaN -> 0
+        }
+    }
+    void disarm() override {
+        for (float& v : value_) v = 0.0f;
+    }
+    const float* values() const { return value_; }
+
+private:
+    float value_[5] = {0, 0, 0, 0, 0};
+};
+
+}  // namespace hq

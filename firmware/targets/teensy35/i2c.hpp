@@ -1,0 +1,46 @@
+// I2C0 master on pins 18 (SDA, PTB3) and 19 (SCL, PTB2): the MPU6050's bus.
+//
+// Polled, 375 kHz (F = 0x1D: bus 60 MHz / 160; the MPU6050 allows at most 400 kHz), glitch
+// filter 4 bus clocks. Every byte waits at most kByteTimeoutUs; a timeout, a lost
+// arbitration or a bus left busy ends the transfer with false and recovers the bus: the pins
+// become GPIO, SCL is clocked up to 9 times until the slave releases SDA, a STOP is made by
+// hand, and the pins go back to I2C. The pins are open drain: the board needs pull-ups on
+// both lines (GY-521 breakouts have them).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "../../hal/i2c.hpp"
+
+namespace hq::teensy {
+
+class I2c0Bus final : public I2cBus {
+public:
+    static constexpr uint32_t kByteTimeoutUs = 1000;
+    static constexpr uint8_t kFrequencyDivider = 0x1D;   // ICR 0x1D: SCL divider 160
+    static constexpr uint8_t kGlitchFilter = 4;
+
+    void begin();
+    bool write(uint8_t address, uint8_t reg, const uint8_t* data, size_t n) override;
+    bool read(uint8_t address, uint8_t reg, uint8_t* data, size_t n) override;
+
+    uint32_t timeouts() const { return timeouts_; }
+    uint32_t nacks() const { return nacks_; }
+    uint32_t recoveries() const { return recoveries_; }
+
+private:
+    enum class Result : uint8_t { Ok, Nack, Timeout, Lost };
+    bool start(uint8_t address_byte);
+    Result send(uint8_t byte);
+    bool wait_byte();
+    bool wait_idle();
+    void stop();
+    bool fail(Result r);
+    void recover();
+    void mux_i2c();
+
+    uint32_t timeouts_ = 0, nacks_ = 0, recoveries_ = 0;
+};
+
+}  // namespace hq::teensy

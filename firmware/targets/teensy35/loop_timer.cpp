@@ -1,0 +1,52 @@
+#include "loop_timer.hpp"
+
+#include "clock.hpp"
+#include "cpu.hpp"
+#include "mk64f12.hpp"
+
+namespace {
+volatile uint32_t g_ticks = 0;
+}
+
+extern "C" void SysTick_Handler() { g_ticks = g_ticks + 1; }
+
+namespace hq::teensy {
+
+using namespace hq::mk64;
+
+bool LoopTimer::start(uint32_t rate_hz) {
+    if (rate_hz == 0) return false;
+    const uint32_t period = core_hz() / rate_hz;
+    if (period < 2 || period > (1u << 24)) return false;
+    period_cycles_ = period;
+    SysTick::CSR::write(0);
+    SysTick::RVR::write(period - 1);
+    SysTick::CVR::write(0);
+    // Lowest priority of the three interrupts in use (RC capture 4, UART 8, SysTick 12).
+    SystemControl::SHPR3::write(static_cast<uint32_t>(
+        (SystemControl::SHPR3::read() & ~SystemControl::SHPR3::PRI_15_MASK) |
+        SystemControl::SHPR3::PRI_15(12u << 4)));
+    seen_ = g_ticks;
+    SysTick::CSR::write(SysTick::CSR::CLKSOURCE | SysTick::CSR::TICKINT | SysTick::CSR::ENABLE);
+    return true;
+}
+
+uint32_t LoopTimer::wait() {
+    // With interrupts masked, WFI still wakes on a pending interrupt; unmasking then lets the
+    // handler run. A tick between the check and the WFI therefore cannot be slept through.
+    irq_disable();
+    while (g_ticks == seen_) {
+        wfi();
+        irq_enable();
+        isb();
+        irq_disable();
+    }
+    const uint32_t now = g_ticks;
+    irq_enable();
+    const uint32_t missed = now - seen_ - 1;
+    overruns_ += missed;
+    seen_ = now;
+    return missed;
+}
+
+}  // namespace hq::teensy

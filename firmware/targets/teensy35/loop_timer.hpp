@@ -1,0 +1,25 @@
+// The 200 Hz loop tick: SysTick from the core clock, the loop sleeping in WFI between ticks.
+//
+// wait() returns when a tick has come since the last wait(); if more than one came (the
+// loop overran its period), the extra ticks are counted as overruns and skipped: the loop
+// never runs twice back to back to catch up.
+#pragma once
+
+#include <cstdint>
+
+namespace hq::teensy {
+
+class LoopTimer {
+public:
+    // rate_hz must divide the core clock into at most 2^24 cycles (SysTick's reload).
+    bool start(uint32_t rate_hz);
+    // Sleeps until the next tick; returns the ticks missed since the previous wait().
+    uint32_t wait();
+    uint32_t overruns() const { return overruns_; }
+    uint32_t period_cycles() const { return period_cycles_; }
+
+private:
+    uint32_t seen_ = 0, overruns_ = 0, period_cycles_ = 0;
+};
+
+}  // namespace hq::teensy

@@ -1,0 +1,77 @@
+// heliquad-fw-teensy35: the firmware on the Teensy 3.5.
+//
+// Start-up, in order: clocks (a failure ends in the fault path, blink code 1-5, the ESCs
+// never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
+// the telemetry UART; RC capture; the I2C bus; the FlightController and its IMU start-up
+// (MPU6050 reset, configuration and, with an image built in, the DMP upload); the 200 Hz
+// loop timer. Then, every tick: read the RC input, run one FlightController step, record
+// the cycles it took (HQ_FW_STATUS reports their median and maximum each second, and the
+// overruns), update the LED, sleep until the next tick.
+#include <cstdint>
+
+#include "../../core/flight_controller.hpp"
+#include "../dmp_image.hpp"
+#include "clock.hpp"
+#include "i2c.hpp"
+#include "led.hpp"
+#include "loop_timer.hpp"
+#include "motors.hpp"
+#include "rc_input.hpp"
+#include "serial.hpp"
+
+namespace {
+
+constexpr uint32_t kLoopHz = 200;
+constexpr uint32_t kTelemetryBaud = 921600;
+
+// ESC endpoints; the ESCs on the rig are calibrated to 1000-2000 us.
+constexpr hq::teensy::EscCalibration kEscCalibration{};
+
+hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResult init) {
+    using hq::teensy::LedPattern;
+    if (fc.armed()) return LedPattern::Armed;
+    if (init == hq::InitResult::NoDevice || init == hq::InitResult::BusError ||
+        fc.supervisor().imu_stale()) {
+        return LedPattern::ImuFault;
+    }
+    return LedPattern::Disarmed;
+}
+
+}  // namespace
+
+extern "C" [[noreturn]] void hq_teensy_main() {
+    using namespace hq::teensy;
+    const ClockFault clock_fault = start_clocks();
+    if (clock_fault != ClockFault::None) hq_fatal(static_cast<uint32_t>(clock_fault));
+    led_begin();
+    led_set(true);
+
+    static Ftm0Motors motors;
+    motors.begin(kEscCalibration);
+    static Uart0Serial telemetry;
+    if (!telemetry.begin(kTelemetryBaud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
+    static Ftm3RcInput rc;
+    rc.begin();
+    static I2c0Bus i2c;
+    i2c.begin();
+    static TeensyClock clock;
+
+    hq::FlightControllerConfig cfg;
+    cfg.loop_rate_hz = static_cast<float>(kLoopHz);
+    if (hq::kDmpImageSize > 0) {
+        cfg.imu.dmp_image = hq::kDmpImage;
+        cfg.imu.dmp_image_size = hq::kDmpImageSize;
+    }
+    static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
+    const hq::InitResult init = fc.init();
+
+    static LoopTimer timer;
+    if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
+    for (;;) {
+        timer.wait();
+        const uint32_t c0 = cycles32();
+        fc.step(rc.read(clock.micros()));
+        fc.record_loop(cycles32() - c0, timer.overruns());
+        led_update(clock.micros(), led_pattern(fc, init));
+    }
+}

@@ -1,0 +1,77 @@
+#include "motors.hpp"
+
+#include "mk64f12.hpp"
+
+namespace hq::teensy {
+
+using namespace hq::mk64;
+
+namespace {
+// The stop pulse of each channel in FTM counts, for the fault path (which has no object).
+uint32_t g_stop_counts[5] = {0, 0, 0, 0, 0};
+
+inline volatile uint32_t& channel_value(int i) {
+    // CnV registers are 8 bytes apart (C0V, C1V, ...).
+    return (&FTM0::C0V::ref())[2 * i];
+}
+inline volatile uint32_t& channel_control(int i) { return (&FTM0::C0SC::ref())[2 * i]; }
+
+bool plausible(uint16_t min_us, uint16_t max_us) {
+    return min_us >= 800 && max_us <= 2200 && max_us > min_us;
+}
+}  // namespace
+
+void Ftm0Motors::begin(const EscCalibration& cal) {
+    for (int i = 0; i < 5; ++i) {
+        const bool ok = plausible(cal.min_us[i], cal.max_us[i]);
+        cal_.min_us[i] = ok ? cal.min_us[i] : 1000;
+        cal_.max_us[i] = ok ? cal.max_us[i] : 2000;
+    }
+    SIM::SCGC6::set(SIM::SCGC6::FTM0);
+    SIM::SCGC5::set(SIM::SCGC5::PORTC | SIM::SCGC5::PORTD);
+    FTM0::SC::write(0);                            // stopped while configured
+    FTM0::CNT::write(0);
+    FTM0::CNTIN::write(0);
+    FTM0::MOD::write(kPeriodCounts - 1);
+    for (int i = 0; i < 5; ++i) {
+        channel_control(i) = FTM0::C0SC::MSB | FTM0::C0SC::ELSB;   // edge-aligned, high-true
+        write(i, cal_.min_us[i]);
+        g_stop_counts[i] = cal_.min_us[i] * kCountsPerUs;
+    }
+    FTM0::SC::write(FTM0::SC::CLKS(1) | FTM0::SC::PS(2));         // bus clock / 4
+    // Only now the pins: ALT4 = FTM0, high drive strength.
+    const uint32_t pcr = PORTC::PCR1::MUX(4) | PORTC::PCR1::DSE | PORTC::PCR1::SRE;
+    PORTC::PCR1::write(pcr);
+    PORTC::PCR2::write(pcr);
+    PORTC::PCR3::write(pcr);
+    PORTC::PCR4::write(pcr);
+    PORTD::PCR4::write(pcr);
+}
+
+void Ftm0Motors::write(int i, uint16_t us) {
+    pulse_us_[i] = us;
+    channel_value(i) = static_cast<uint32_t>(us) * kCountsPerUs;
+}
+
+void Ftm0Motors::set(const float thrust_fraction[5]) {
+    for (int i = 0; i < 5; ++i) {
+        float f = thrust_fraction[i];
+        if (!(f > 0.0f)) f = 0.0f;              // also NaN
+        if (f > 1.0f) f = 1.0f;
+        const float span = static_cast<float>(cal_.max_us[i] - cal_.min_us[i]);
+        write(i, static_cast<uint16_t>(cal_.min_us[i] + static_cast<uint16_t>(f * span + 0.5f)));
+    }
+}
+
+void Ftm0Motors::disarm() {
+    for (int i = 0; i < 5; ++i) write(i, cal_.min_us[i]);
+}
+
+void motors_emergency_stop() {
+    if (!(SIM::SCGC6::read() & SIM::SCGC6::FTM0)) return;     // never started: pins undriven
+    for (int i = 0; i < 5; ++i) {
+        if (g_stop_counts[i] != 0) channel_value(i) = g_stop_counts[i];
+    }
+}
+
+}  // namespace hq::teensy

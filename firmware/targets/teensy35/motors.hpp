@@ -1,0 +1,49 @@
+// Five ESC outputs on FTM0 channels 0-4, standard 400 Hz PWM.
+//
+//   motor    central    front      right      back       left
+//   channel  FTM0 CH0   CH1        CH2        CH3        CH4
+//   pin      22 (PTC1)  23 (PTC2)  9 (PTC3)   10 (PTC4)  6 (PTD4)
+//
+// FTM0 counts the bus clock / 4 = 15 MHz: 2.5 ms period = 37 500 counts, 15 counts per
+// microsecond. A thrust fraction f (0..1) becomes min_us + f (max_us - min_us) for each
+// ESC's own calibration; anything not finite becomes 0. begin() loads every channel with the
+// ESC's stop pulse (its min_us) before the pins are switched to FTM0, so from the first edge
+// an ESC sees nothing but "stop" until the vehicle arms. Channel values take effect at the
+// next period boundary (FTM0 buffers CnV in this mode), so a pulse is never cut short.
+#pragma once
+
+#include <cstdint>
+
+#include "../../hal/motors.hpp"
+
+namespace hq::teensy {
+
+struct EscCalibration {
+    // Pulse widths in microseconds: min is the stop pulse, max is full thrust.
+    uint16_t min_us[5] = {1000, 1000, 1000, 1000, 1000};
+    uint16_t max_us[5] = {2000, 2000, 2000, 2000, 2000};
+};
+
+class Ftm0Motors final : public MotorOutputs {
+public:
+    static constexpr uint32_t kPwmHz = 400;
+    static constexpr uint32_t kCountsPerUs = 15;                 // bus 60 MHz / 4
+    static constexpr uint32_t kPeriodCounts = 1000000 / kPwmHz * kCountsPerUs;
+
+    // Calibrations outside 800..2200 us, or with max <= min, are replaced by 1000/2000.
+    void begin(const EscCalibration& cal);
+    void set(const float thrust_fraction[5]) override;
+    void disarm() override;
+    // Pulse width now commanded on channel i, in microseconds.
+    uint16_t pulse_us(int i) const { return pulse_us_[i]; }
+
+private:
+    void write(int i, uint16_t us);
+    EscCalibration cal_{};
+    uint16_t pulse_us_[5] = {0, 0, 0, 0, 0};
+};
+
+// Drives every ESC channel to its stop pulse if FTM0 is running; for the fault path.
+void motors_emergency_stop();
+
+}  // namespace hq::teensy

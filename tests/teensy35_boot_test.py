@@ -1,0 +1,827 @@
+"""The emulated MK64FX512 (sim/mk64) and the Teensy 3.5 image booting on it.
+
+Two parts:
+
+* The harness itself, on tiny Cortex-M4 programs compiled here with arm-none-eabi-gcc:
+  register tables against the SVD and the firmware's generated header, exception entry and
+  return with basic and FP frames, nesting, tail-chaining and PRIMASK, the cycle counter
+  against the stated cycle model, a clock-gated access, an FPU instruction before CPACR,
+  the watchdog's reset window, and a small boot (clocks, I2C, UART, SysTick) with a good
+  and a dead crystal.
+* The real image (build/teensy35/heliquad-fw-teensy35.elf, from ``cmake --preset teensy35
+  && cmake --build --preset teensy35``; $HQ_TEENSY35_ELF overrides) from reset to its main
+  loop: watchdog first, FPU granted first, the clock tree and the MCG sequence, a dead
+  crystal, pin mux, I2C, UART, FTM0/FTM3, SysTick and the MPU6050 start-up against the
+  project's emulated chip. Without the image the tests skip; in CI (CI set) they fail.
+
+Every run is bounded by an instruction budget; nothing here depends on the machine's speed.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import shutil
+import struct
+import subprocess
+
+import pytest
+
+from heliquad.sim.mk64 import ChipReset, Fault, Mk64, Teensy35
+from heliquad.sim.mk64 import registers, svd
+from heliquad.sim.mk64.i2c import SCL_DIVIDER
+from heliquad.sim.mk64.machine import Stop
+from heliquad.sim.mk64.timing import EXCEPTION_ENTRY_CYCLES
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+IMAGE = pathlib.Path(os.environ.get("HQ_TEENSY35_ELF",
+                                    ROOT / "build" / "teensy35" / "heliquad-fw-teensy35.elf"))
+HEADER = ROOT / "firmware" / "targets" / "teensy35" / "mk64f12.hpp"
+ARM_FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard"]
+BOOT_BUDGET = 40_000_000        # instructions from reset to the first loop (the image needs ~9M)
+FATAL_BUDGET = 5_000_000        # a dead crystal must reach hq_fatal well within this
+
+
+# ---------------------------------------------------------------------------- helpers --------
+
+def require_compiler():
+    if shutil.which("arm-none-eabi-gcc"):
+        return
+    message = ("arm-none-eabi-gcc not found: apt-get install gcc-arm-none-eabi "
+               "libnewlib-arm-none-eabi")
+    if os.environ.get("CI"):
+        pytest.fail(message)
+    pytest.skip(message)
+
+
+LINKER_SCRIPT = """
+MEMORY { FLASH (rx) : ORIGIN = 0, LENGTH = 512K  RAM (rwx) : ORIGIN = 0x1FFF0000, LENGTH = 192K }
+_estack = ORIGIN(RAM) + LENGTH(RAM);
+SECTIONS {
+  .text : { KEEP(*(.vectors)) *(.text*) *(.rodata*) } > FLASH
+  _sidata = LOADADDR(.data);
+  .data : { _sdata = .; *(.data*) _edata = .; } > RAM AT > FLASH
+  .bss : { _sbss = .; *(.bss*) *(COMMON) _ebss = .; } > RAM
+}
+"""
+
+# The start of every C test program: the watchdog off within its window, the FPU on, .data
+# and .bss set up. Vector slots are filled by each program.
+C_PRELUDE = r"""
+#include <stdint.h>
+#define REG32(a) (*(volatile uint32_t *)(a))
+#define REG16(a) (*(volatile uint16_t *)(a))
+#define REG8(a) (*(volatile uint8_t *)(a))
+extern uint32_t _estack, _sidata, _sdata, _edata, _sbss, _ebss;
+int main(void);
+void reset(void) {
+    REG16(0x4005200E) = 0xC520; REG16(0x4005200E) = 0xD928;
+    __asm volatile("nop\n nop");
+    REG16(0x40052000) = 0x01D2;
+    REG32(0xE000ED88) |= 0xFu << 20;
+    __asm volatile("dsb\n isb");
+    for (uint32_t *s = &_sidata, *d = &_sdata; d < &_edata;) *d++ = *s++;
+    for (uint32_t *d = &_sbss; d < &_ebss;) *d++ = 0;
+    main();
+    for (;;) __asm volatile("bkpt #0");
+}
+"""
+
+ASM_WDOG_OFF = """
+    ldr r0, =0x40052000
+    movw r1, #0xC520
+    strh r1, [r0, #14]
+    movw r1, #0xD928
+    strh r1, [r0, #14]
+    nop
+    nop
+    movw r1, #0x01D2
+    strh r1, [r0]
+"""
+
+
+def build(tmp_path, name, source, *, asm=False, opt="-O2"):
+    require_compiler()
+    src = tmp_path / (name + (".S" if asm else ".c"))
+    src.write_text(source)
+    ld = tmp_path / "tiny.ld"
+    ld.write_text(LINKER_SCRIPT)
+    elf = tmp_path / (name + ".elf")
+    res = subprocess.run(["arm-none-eabi-gcc", *ARM_FLAGS, opt, "-nostdlib", "-ffreestanding",
+                          "-T", str(ld), str(src), "-o", str(elf)],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return elf
+
+
+def words(m, symbol, n):
+    return struct.unpack(f"<{n}I", m.read(m.image.symbol(symbol).address, 4 * n))
+
+
+# ------------------------------------------------------------ register tables ----------------
+
+def test_register_tables_match_the_svd():
+    try:
+        data = svd.find_svd()
+    except svd.SvdNotFound as e:
+        pytest.skip(str(e).splitlines()[0])
+    from heliquad.sim.mk64 import regmap
+    assert svd.parse(data) == regmap.PERIPHERALS, \
+        "sim/mk64/regmap.py is stale: python -m heliquad.sim.mk64.svd --write"
+    assert svd.interrupts(data) == regmap.INTERRUPTS
+
+
+def _header_registers(text):
+    """{(peripheral, register): (address, bits, reset)} from the firmware's generated header."""
+    out, periph = {}, None
+    for line in text.splitlines():
+        m = re.match(r"namespace (\w+) \{", line)
+        if m:
+            periph = m.group(1)
+            continue
+        m = re.match(r"struct (\w+) : Reg<uint(\d+)_t, (0x[0-9A-Fa-f]+)u>", line)
+        if m and periph:
+            current = (periph, m.group(1))
+            out[current] = [int(m.group(3), 16), int(m.group(2)), None]
+            continue
+        m = re.search(r"RESET_VALUE = (0x[0-9A-Fa-f]+)u", line)
+        if m and periph and out:
+            out[current][2] = int(m.group(1), 16)
+    return out
+
+
+def test_register_tables_match_the_firmware_header():
+    """The emulator's register tables and the firmware's generated header agree on every
+    register both describe: one SVD, two generators."""
+    if not HEADER.exists():
+        pytest.skip(f"{HEADER.relative_to(ROOT)} not generated yet")
+    theirs = _header_registers(HEADER.read_text())
+    compared = 0
+    for (periph, name), (address, bits, reset) in theirs.items():
+        try:
+            reg = registers.peripheral(periph)[name]
+        except KeyError:
+            continue
+        assert (reg.address, reg.bits) == (address, bits), f"{periph}_{name}"
+        if reset is not None:
+            assert reg.reset == reset, f"{periph}_{name} reset value"
+        compared += 1
+    assert compared > 200, f"only {compared} registers in common"
+
+
+# ------------------------------------------------------------ exceptions -----------------------
+
+FRAMES_ASM = """
+    .syntax unified
+    .thumb
+    .section .vectors,"a"
+    .word _estack
+    .word reset + 1
+    .fill 13, 4, 0
+    .word systick + 1
+    .text
+    .thumb_func
+reset:
+""" + ASM_WDOG_OFF + """
+    ldr r0, =0xE000ED88          @ CPACR: CP10, CP11 full access
+    ldr r1, [r0]
+    orr r1, r1, #0xF00000
+    str r1, [r0]
+    dsb
+    isb
+    ldr r0, =0xE000E010          @ SysTick: RVR 300, CVR 0, CSR = CLKSOURCE | TICKINT | ENABLE
+    movw r1, #300
+    str r1, [r0, #4]
+    movs r1, #0
+    str r1, [r0, #8]
+    movs r1, #7
+    str r1, [r0]
+    sub sp, sp, #4               @ phase 1: SP = 4 mod 8, no FP context -> basic frame, padded
+    ldr r0, =0x11111111
+    ldr r1, =0x22222222
+    ldr r2, =0x33333333
+    ldr r3, =0x44444444
+    ldr r12, =0x55555555
+    ldr r4, =count
+1:  ldr r5, [r4]
+    cmp r5, #1
+    blt 1b
+    ldr r6, =after_basic
+    stmia r6, {r0-r3, r12}
+    add sp, sp, #4               @ phase 2: SP = 0 mod 8, FP context active -> extended frame
+    ldr r6, =fp_values
+    vldmia r6, {s0-s15}
+    ldr r7, =0x03000000          @ FPSCR: DN and FZ, to see it restored
+    vmsr fpscr, r7
+1:  ldr r5, [r4]
+    cmp r5, #2
+    blt 1b
+    ldr r6, =after_fp
+    vstmia r6, {s0-s15}
+    vmrs r7, fpscr
+    str r7, [r6, #64]
+    bkpt #0
+    .thumb_func
+systick:
+    ldr r0, =count
+    ldr r1, [r0]
+    adds r1, r1, #1
+    str r1, [r0]
+    ldr r2, =seen                @ seen[count] = (LR = EXC_RETURN, SP, stacked xPSR)
+    add r2, r2, r1, lsl #4
+    str lr, [r2]
+    str sp, [r2, #4]
+    ldr r3, [sp, #28]
+    str r3, [r2, #8]
+    cmp r1, #2
+    bne 2f
+    ldr r3, =0xE000E010
+    movs r0, #0
+    str r0, [r3]                 @ SysTick off after the second one
+2:  movs r0, #0                  @ clobber what a handler may clobber
+    movs r1, #0
+    movs r2, #0
+    movs r3, #0
+    mov r12, r0
+    tst lr, #0x10
+    bne 3f
+    vmov.f32 s0, #1.0
+    vmov s1, s0
+    vmov s15, s0
+    vmsr fpscr, r0
+3:  bx lr
+    .ltorg
+    .section .rodata
+fp_values:
+    .word 0x3f800000, 0x40000000, 0x40400000, 0x40800000, 0x40a00000, 0x40c00000, 0x40e00000
+    .word 0x41000000, 0x41100000, 0x41200000, 0x41300000, 0x41400000, 0x41500000, 0x41600000
+    .word 0x41700000, 0x41800000
+    .bss
+    .align 3
+count: .space 4
+seen: .space 48
+after_basic: .space 20
+after_fp: .space 68
+"""
+
+
+def test_exception_entry_and_return_with_basic_and_fp_frames(tmp_path):
+    elf = build(tmp_path, "frames", FRAMES_ASM, asm=True)
+    chip = Mk64(elf)
+    m = chip.machine
+    stop = m.run(instructions=200_000)
+    assert stop.reason == "bkpt", stop
+    assert words(m, "count", 1) == (2,)
+    seen = words(m, "seen", 12)
+    top = 0x2002_0000
+    # 1st: thread on MSP, no FPU context: EXC_RETURN 0xFFFFFFF9, an 8-word frame below an SP
+    # of top - 4, aligned down to 8 with xPSR bit 9 set to say so.
+    assert seen[4] == 0xFFFF_FFF9
+    assert seen[5] == (top - 4 - 0x20) & ~7
+    assert seen[6] & (1 << 9) and seen[6] & (1 << 24)
+    # 2nd: the thread has used the FPU: EXC_RETURN 0xFFFFFFE9 and a 26-word frame.
+    assert seen[8] == 0xFFFF_FFE9
+    assert seen[9] == top - 0x68
+    assert not seen[10] & (1 << 9)
+    # Everything the handler clobbered came back.
+    assert words(m, "after_basic", 5) == (0x11111111, 0x22222222, 0x33333333, 0x44444444,
+                                          0x55555555)
+    fp = words(m, "after_fp", 17)
+    assert fp[:16] == words(m, "fp_values", 16)
+    assert fp[16] == 0x0300_0000
+    assert [e[1:] for e in m.exception_log] == [("enter", 15), ("return", 15)] * 2
+    assert m.active == [] and m.reg("sp") == top
+
+
+NESTING_C = C_PRELUDE + r"""
+void irq0(void); void irq1(void); void irq2(void);
+__attribute__((section(".vectors"), used)) void (*const vectors[16 + 86])(void) = {
+    (void (*)(void))&_estack, reset, [16] = irq0, [17] = irq1, [18] = irq2 };
+volatile uint32_t order[16]; volatile uint32_t n;
+void irq0(void) { order[n++] = 0x10; REG32(0xE000E200) = 1u << 1; __asm volatile("dsb\n isb");
+                  order[n++] = 0x11; }
+void irq1(void) { order[n++] = 0x20; }
+void irq2(void) { order[n++] = 0x30; }
+int main(void) {
+    REG8(0xE000E400) = 0x80; REG8(0xE000E401) = 0x40; REG8(0xE000E402) = 0x80;
+    REG32(0xE000E100) = 7;
+    __asm volatile("cpsid i");
+    REG32(0xE000E200) = 5;          /* IRQ 0 and 2 pending, masked */
+    order[n++] = 1;
+    __asm volatile("cpsie i");
+    order[n++] = 2;
+    return 0;
+}
+"""
+
+
+def test_preemption_tail_chaining_and_primask(tmp_path):
+    """IRQ0 and IRQ2 (priority 8) pend under PRIMASK; unmasking takes IRQ0 (lower number),
+    whose pend of IRQ1 (priority 4) preempts it; IRQ2 follows by tail-chaining."""
+    chip = Mk64(build(tmp_path, "nesting", NESTING_C))
+    m = chip.machine
+    assert m.run(instructions=100_000).reason == "bkpt"
+    n = words(m, "n", 1)[0]
+    assert words(m, "order", n) == (1, 0x10, 0x20, 0x11, 0x30, 2)
+    assert [e[1:] for e in m.exception_log] == [("enter", 16), ("enter", 17), ("return", 17),
+                                                ("return", 16), ("enter", 18), ("return", 18)]
+
+
+# ------------------------------------------------------------ time base -----------------------
+
+CYCCNT_ASM = """
+    .syntax unified
+    .thumb
+    .section .vectors,"a"
+    .word _estack
+    .word reset + 1
+    .text
+    .thumb_func
+reset:
+""" + ASM_WDOG_OFF + """
+    ldr r0, =0xE0001004          @ DWT_CYCCNT
+    ldr r2, =0xE0001000          @ DWT_CTRL
+    ldr r3, [r2]
+    orr r3, r3, #1
+    str r3, [r2]                 @ CYCCNTENA without TRCENA: must not count
+    ldr r1, [r0]
+    ldr r2, =0xE000EDFC          @ DEMCR.TRCENA
+    ldr r3, [r2]
+    orr r3, r3, #0x1000000
+    str r3, [r2]
+    ldr r4, [r0]                 @ c0
+    movw r5, #1000
+1:  subs r5, r5, #1
+    bne 1b
+    ldr r6, [r0]                 @ c1
+    ldr r7, =result
+    stmia r7, {r1, r4, r6}
+    bkpt #0
+    .ltorg
+    .bss
+result: .space 12
+"""
+
+
+def test_cyccnt_counts_the_stated_cycle_model(tmp_path):
+    """Between the two reads: LDR (2) + MOVW (1) + 1000 x (SUBS 1 + BNE 2) = 3003 cycles, as
+    timing.py states; the counter stays at 0 until DEMCR.TRCENA."""
+    chip = Mk64(build(tmp_path, "cyccnt", CYCCNT_ASM, asm=True))
+    m = chip.machine
+    assert m.run(instructions=100_000).reason == "bkpt"
+    before_trcena, c0, c1 = words(m, "result", 3)
+    assert before_trcena == 0
+    assert c1 - c0 == 2 + 1 + 1000 * (1 + 2)
+    assert m.cycles >= c1
+
+
+# ------------------------------------------------------------ what the chip refuses -----------
+
+GATED_C = C_PRELUDE + r"""
+__attribute__((section(".vectors"), used)) void (*const vectors[16])(void) = {
+    (void (*)(void))&_estack, reset };
+volatile uint8_t s;
+int main(void) {
+    REG32(0x40048038) |= 1u << 10;      /* PORTB clock on: fine */
+    REG32(0x4004A008) = 0x200;          /* PORTB_PCR2 */
+    s = REG8(0x40066003);               /* I2C0_S with SIM_SCGC4.I2C0 still 0 */
+    return 0;
+}
+"""
+
+
+def test_access_to_a_gated_peripheral_is_a_bus_fault(tmp_path):
+    chip = Mk64(build(tmp_path, "gated", GATED_C))
+    with pytest.raises(Fault) as info:
+        chip.run(instructions=100_000)
+    assert info.value.kind == "BusFault"
+    assert info.value.address == 0x40066003
+    assert "SIM_SCGC4.I2C0" in str(info.value)
+    assert chip.ports.mux("B", 2) == 2          # the gated-on PORTB write went through
+    fn = chip.image.function_at(info.value.pc)
+    assert fn is not None and fn.name == "main"
+
+
+NOCP_ASM = """
+    .syntax unified
+    .thumb
+    .section .vectors,"a"
+    .word _estack
+    .word reset + 1
+    .text
+    .thumb_func
+reset:
+""" + ASM_WDOG_OFF + """
+    b 1f
+1:  vmov s0, r0                  @ CPACR still 0
+    bkpt #0
+"""
+
+
+def test_fpu_instruction_before_cpacr_is_a_nocp_fault(tmp_path):
+    chip = Mk64(build(tmp_path, "nocp", NOCP_ASM, asm=True))
+    with pytest.raises(Fault) as info:
+        chip.run(instructions=10_000)
+    assert info.value.kind == "UsageFault" and "NOCP" in str(info.value)
+    assert chip.machine.fpu_violation is not None
+    assert chip.machine.fpu_granted_at is None
+
+
+def test_watchdog_resets_a_chip_that_does_not_unlock_it_in_time(tmp_path):
+    late = C_PRELUDE.replace("void reset(void) {", "void reset(void) {\n"
+                             "    for (volatile int i = 0; i < 100; ++i) {}")
+    source = late + r"""
+__attribute__((section(".vectors"), used)) void (*const vectors[16])(void) = {
+    (void (*)(void))&_estack, reset };
+int main(void) { return 0; }
+"""
+    chip = Mk64(build(tmp_path, "late_wdog", source))
+    with pytest.raises(ChipReset) as info:
+        chip.run(instructions=100_000)
+    assert info.value.source == "WDOG" and "WCT" in str(info.value)
+
+
+# ------------------------------------------------------------ a small boot ---------------------
+
+MINI_BOOT_C = C_PRELUDE + r"""
+void systick(void); void uart0(void);
+__attribute__((noreturn, noipa)) void hq_fatal(uint32_t code) {
+    (void)code; for (;;) __asm volatile("nop"); }
+static void unexpected(void) { hq_fatal(99); }
+__attribute__((section(".vectors"), used)) void (*const vectors[16 + 86])(void) = {
+    (void (*)(void))&_estack, reset, unexpected, unexpected, [15] = systick, [16 + 31] = uart0 };
+volatile uint32_t ticks, tx_left;
+volatile uint8_t who, nack, rx_echo;
+static const char msg[] = "0123456789abcdef";
+void systick(void) { ticks++; }
+void uart0(void) {
+    while ((REG8(0x4006A004) & 0x80) && tx_left) REG8(0x4006A007) = (uint8_t)msg[16 - tx_left--];
+    if (!tx_left) REG8(0x4006A003) &= (uint8_t)~0x80;          /* TIE off */
+}
+static int mcg_wait(uint8_t mask, uint8_t want) {
+    for (uint32_t i = 0; i < 200000; ++i) if ((REG8(0x40064006) & mask) == want) return 1;
+    return 0;
+}
+static int i2c_byte(void) {
+    for (uint32_t i = 0; i < 100000; ++i)
+        if (REG8(0x40066003) & 0x02) { REG8(0x40066003) = 0x02; return 1; }
+    return 0;
+}
+static uint8_t i2c_read(uint8_t addr, uint8_t reg, uint8_t *nacked) {
+    REG8(0x40066002) = 0xB0;                     /* IICEN MST TX: START */
+    REG8(0x40066004) = (uint8_t)(addr << 1); i2c_byte();
+    if (REG8(0x40066003) & 1) { *nacked = 1; REG8(0x40066002) = 0x80; return 0; }
+    REG8(0x40066004) = reg; i2c_byte();
+    REG8(0x40066002) = 0xB4;                     /* RSTA */
+    REG8(0x40066004) = (uint8_t)(addr << 1 | 1); i2c_byte();
+    REG8(0x40066002) = 0xA8;                     /* receive, NACK the only byte */
+    (void)*(volatile uint8_t *)0x40066004;       /* dummy read starts it */
+    i2c_byte();
+    REG8(0x40066002) = 0x80;                     /* STOP */
+    return REG8(0x40066004);
+}
+int main(void) {
+    REG8(0x40065000) = 0x8A;                     /* OSC0: ERCLKEN SC8P SC2P */
+    REG8(0x40064001) = 0x24;                     /* MCG_C2: RANGE 2, EREFS */
+    REG8(0x40064000) = 0xA0;                     /* MCG_C1: CLKS 2, FRDIV 4 */
+    if (!mcg_wait(0x02, 0x02)) hq_fatal(1);
+    if (!mcg_wait(0x10, 0x00)) hq_fatal(2);
+    if (!mcg_wait(0x0C, 0x08)) hq_fatal(3);
+    REG8(0x40064004) = 0x03;                     /* PRDIV0 3: 4 MHz */
+    REG8(0x40064005) = 0x46;                     /* PLLS, VDIV0 6: x30 */
+    if (!mcg_wait(0x20, 0x20) || !mcg_wait(0x40, 0x40)) hq_fatal(4);
+    REG32(0x40048044) = 0x01240000;              /* core /1, bus /2, FlexBus /3, flash /5 */
+    REG32(0x40048048) = (4 << 1) | 1;            /* USB 120 x 2 / 5 */
+    REG8(0x40064000) = 0x20;                     /* CLKS 0: PEE */
+    if (!mcg_wait(0x0C, 0x0C)) hq_fatal(5);
+    REG32(0x40048004) |= (1u << 18) | (1u << 16);
+    /* I2C0 on PTB2/PTB3 at 60 MHz / 144 */
+    REG32(0x40048034) |= (1u << 6) | (1u << 10); REG32(0x40048038) |= 1u << 10;
+    REG32(0x4004A008) = 0x264; REG32(0x4004A00C) = 0x264;
+    REG8(0x40066001) = 0x1C; REG8(0x40066002) = 0x80;
+    who = i2c_read(0x68, 0x75, (uint8_t *)&nack);
+    uint8_t n2 = 0; i2c_read(0x69, 0x75, &n2); nack = n2;
+    for (uint32_t i = 0; i < 10000 && (REG8(0x40066003) & 0x20); ++i) {}
+    /* UART0 at 921600 with the TX FIFO, interrupt-driven */
+    REG32(0x4004A040) = 0x300; REG32(0x4004A044) = 0x300;
+    REG8(0x4006A000) = 0; REG8(0x4006A001) = 8; REG8(0x4006A00A) = 4;
+    REG8(0x4006A010) = 0x88; REG8(0x4006A013) = 2;
+    REG8(0x4006A003) = 0x0C;
+    REG32(0xE000E100) = 1u << 31;
+    tx_left = 16;
+    REG8(0x4006A003) |= 0x80;
+    /* 200 Hz SysTick, WFI until three ticks */
+    REG32(0xE000E014) = 599999; REG32(0xE000E018) = 0; REG32(0xE000E010) = 7;
+    while (ticks < 3) __asm volatile("wfi");
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def mini_boot_elf(tmp_path_factory):
+    return build(tmp_path_factory.mktemp("mini"), "mini_boot", MINI_BOOT_C)
+
+
+def _fatal_stop(m):
+    return Stop("fatal", m.pc, {"code": m.reg("r0")})
+
+
+def test_small_boot_clocks_i2c_uart_and_systick(mini_boot_elf):
+    chip = Mk64(mini_boot_elf)
+    m = chip.machine
+    m.break_at("hq_fatal", _fatal_stop)
+    stop = m.run(instructions=3_000_000)
+    assert stop.reason == "bkpt", stop
+    tree = chip.tree()
+    assert (tree.mode, tree.core, tree.bus, tree.flexbus, tree.flash, tree.usb) == \
+        ("PEE", 120e6, 60e6, 40e6, 24e6, 48e6)
+    assert [mode for _, _, mode in chip.mcg.modes] == ["FEI", "FBE", "PBE", "PEE"]
+    assert chip.clock_violations == [] and chip.mcg.violations == []
+    # I2C with nothing on the bus: no acknowledge, and the program sees it
+    assert m.read(m.image.symbol("nack").address, 1)[0] == 1
+    assert [t.acked for t in chip.i2c0.transfers] == [False, False]
+    assert chip.i2c0.scl_hz() == pytest.approx(60e6 / 144)
+    # UART: the 16 bytes left at line rate, one 10-bit frame apart once the FIFO was primed
+    sent = chip.uart0.sent
+    assert bytes(b for _, b in sent) == b"0123456789abcdef"
+    frame = chip.uart0.frame_cycles()
+    assert frame == round(10 * 120e6 / chip.uart0.baud())
+    gaps = {b[0] - a[0] for a, b in zip(sent, sent[1:])}
+    assert gaps == {frame}
+    assert abs(chip.uart0.baud() / 921600 - 1) < 0.02
+    # SysTick: 5 ms apart, slept through in WFI
+    wraps = chip.scs.systick.wraps
+    assert [b - a for a, b in zip(wraps, wraps[1:])] == [600_000] * (len(wraps) - 1)
+    assert m.sleep_cycles > 1_000_000
+    assert m.exception_counts[15] == 3
+
+
+def test_small_boot_with_an_mpu6050_on_the_bus(mini_boot_elf):
+    Mpu6050Emulator = pytest.importorskip("heliquad._firmware").Mpu6050Emulator
+    from heliquad.sim.mk64.i2c import Mpu6050Slave
+    chip = Mk64(mini_boot_elf)
+    m = chip.machine
+    chip.i2c0.slaves.append(Mpu6050Slave(Mpu6050Emulator(), m))
+    assert m.run(instructions=3_000_000).reason == "bkpt"
+    assert m.read(m.image.symbol("who").address, 1)[0] == 0x68
+    t = chip.i2c0.transfers
+    assert [(x.address, x.read, x.acked) for x in t] == [(0x68, False, True), (0x68, True, True),
+                                                          (0x69, False, False)]
+    assert bytes(t[0].data) == b"\x75" and bytes(t[1].data) == b"\x68"
+
+
+def test_small_boot_with_a_dead_crystal_ends_in_the_fault_path(mini_boot_elf):
+    chip = Mk64(mini_boot_elf, crystal_ok=False)
+    m = chip.machine
+    m.break_at("hq_fatal", _fatal_stop)
+    stop = m.run(instructions=10_000_000)
+    assert stop.reason == "fatal" and stop.detail["code"] == 1
+    assert chip.mcg.modes[-1][2] == "FEI"
+    assert not chip.mcg.v["S"] & 0x02           # OSCINIT0 never set
+
+
+def test_i2c_scl_divider_table():
+    assert len(SCL_DIVIDER) == 64
+    assert 60e6 / SCL_DIVIDER[0x1C] == pytest.approx(416_667, rel=1e-5)
+    assert 60e6 / SCL_DIVIDER[0x1D] == 375_000
+
+
+# ============================================================ the real image ===================
+
+def require_image():
+    if IMAGE.exists():
+        return
+    message = (f"{IMAGE} is not built (cmake --preset teensy35 && cmake --build --preset "
+               "teensy35)")
+    if os.environ.get("CI"):
+        pytest.fail(message)
+    pytest.skip(message)
+
+
+@pytest.fixture(scope="module")
+def booted():
+    """The image from reset to the entry of its first FlightController::step."""
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    stop = board.run_to_loop(1, instructions=BOOT_BUDGET)
+    assert stop.reason == "loop", f"did not reach the main loop: {stop} (fatal code " \
+                                  f"{board.fatal_code})"
+    return board
+
+
+@pytest.fixture(scope="module")
+def running():
+    """The image through its first four loops (telemetry has started)."""
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    stop = board.run_to_loop(4, instructions=BOOT_BUDGET)
+    assert stop.reason == "loop", stop
+    return board
+
+
+def test_image_has_the_symbols_the_contract_names():
+    require_image()
+    board = Teensy35(IMAGE, with_mpu6050=False)
+    image = board.machine.image
+    for name in ("Reset_Handler", "NMI_Handler", "HardFault_Handler", "SysTick_Handler",
+                 "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "Default_Handler", "hq_fatal",
+                 "hq::FlightController::step"):
+        assert image.has(name), name
+    slots = {1: "Reset_Handler", 2: "NMI_Handler", 3: "HardFault_Handler",
+             15: "SysTick_Handler", 16 + registers.irq("UART0_RX_TX"): "UART0_RX_TX_IRQHandler",
+             16 + registers.irq("FTM3"): "FTM3_IRQHandler"}
+    for number, name in slots.items():
+        assert image.vector_symbol(number) == name, number
+    for irq in range(86):
+        if 16 + irq not in slots:
+            assert image.vector_symbol(16 + irq) == "Default_Handler", irq
+    assert image.objects_straddling_sram_boundary() == []
+
+
+def test_image_boots_to_the_main_loop(booted):
+    m = booted.machine
+    assert booted.loops == 1 and booted.fatal_code is None
+    assert m.instructions < BOOT_BUDGET
+    assert booted.chip.notes == []
+
+
+def test_watchdog_is_disabled_before_anything_else(booted):
+    chip, m = booted.chip, booted.machine
+    assert chip.wdog.disabled_at is not None, "the watchdog was never disabled"
+    disabled_at = chip.wdog.disabled_at[0]
+    before = [a for a in m.first_accesses if a.instruction <= disabled_at]
+    assert before and all(a.device == "WDOG" for a in before), before
+    assert [(a.address, a.value) for a in before] == [(0x4005200E, 0xC520), (0x4005200E, 0xD928),
+                                                      (0x40052000, 0x01D2)]
+    assert chip.wdog.ignored == []
+    assert not chip.wdog.enabled
+
+
+def test_fpu_is_granted_before_the_first_fpu_instruction(booted):
+    m = booted.machine
+    assert m.fpu_violation is None
+    assert m.fpu_granted_at is not None and m.fpu_synced_at is not None
+    assert m.fpu_granted_at < m.fpu_synced_at <= m.first_fpu[0]
+    mcg_first = booted.chip.mcg.log[0][0]
+    assert m.fpu_granted_at < mcg_first, "CP10/CP11 are granted before the clock set-up"
+
+
+def test_clock_tree_after_the_mcg_sequence(booted):
+    chip = booted.chip
+    tree = chip.tree()
+    assert tree.mode == "PEE"
+    assert tree.core == 120e6 and tree.bus == 60e6 and tree.flash <= 25e6
+    assert tree.usb == 48e6
+    assert [mode for _, _, mode in chip.mcg.modes] == ["FEI", "FBE", "PBE", "PEE"]
+    assert chip.clock_violations == [] and chip.mcg.violations == []
+
+
+def test_mcg_waits_come_in_the_documented_order(booted):
+    """Each step's status is seen by a read of MCG_S before the next step's write."""
+    chip = booted.chip
+    events = [(i, "W", reg, v) for i, _, kind, reg, v in chip.mcg.log if kind == "W"]
+    events += [(i, "R", reg, v) for i, _, kind, reg, v in chip.mcg.log if kind == "R"]
+    events += [(i, "W", "SIM_" + reg, v) for i, reg, v in chip.sim.writes
+               if reg in ("CLKDIV1", "CLKDIV2", "SOPT2")]
+    events += [(i, "W", "OSC_" + reg, v) for i, reg, v in chip.osc.writes]
+    events.sort(key=lambda e: e[0])
+
+    def first(pred, after):
+        for k, e in enumerate(events):
+            if e[0] >= after and pred(e):
+                return e[0]
+        raise AssertionError(f"not found after instruction {after}")
+
+    w = lambda reg, test=lambda v: True: (lambda e: e[1] == "W" and e[2] == reg and test(e[3]))
+    s = lambda test: (lambda e: e[1] == "R" and test(e[3]))
+    osc = first(w("OSC_CR", lambda v: v & 0x80), 0)
+    c2 = first(w("C2", lambda v: v & 0x04 and (v >> 4) & 3 == 2), osc)
+    fbe = first(w("C1", lambda v: v >> 6 == 2 and not v & 0x04 and (v >> 3) & 7 == 4), c2)
+    oscinit = first(s(lambda v: v & 0x02), fbe)
+    irefst = first(s(lambda v: not v & 0x10), oscinit)
+    clkst2 = first(s(lambda v: (v >> 2) & 3 == 2), irefst)
+    c5 = first(w("C5", lambda v: v & 0x1F == 3), clkst2)
+    c6 = first(w("C6", lambda v: v & 0x40 and v & 0x1F == 6), c5)
+    pllst = first(s(lambda v: v & 0x20), c6)
+    lock = first(s(lambda v: v & 0x40), pllst)
+    div = first(w("SIM_CLKDIV1", lambda v: v == 0x0124_0000), lock)
+    pee = first(w("C1", lambda v: v >> 6 == 0), div)
+    clkst3 = first(s(lambda v: (v >> 2) & 3 == 3), pee)
+    first(w("SIM_SOPT2", lambda v: v & (1 << 18) and (v >> 16) & 3 == 1), clkst3)
+
+
+def test_dead_crystal_ends_in_hq_fatal_with_the_crystal_code():
+    require_image()
+    board = Teensy35(IMAGE, crystal_ok=False, with_mpu6050=False)
+    stop = board.run(instructions=FATAL_BUDGET)
+    assert stop.reason == "fatal", stop
+    assert board.fatal_code == 1
+    assert board.machine.instructions < FATAL_BUDGET
+    for pin in (22, 23, 9, 10, 6):
+        assert board.pin(pin).signal is None, "an ESC pin was driven"
+
+
+EXPECTED_PINS = {
+    18: ("I2C0_SDA", True), 19: ("I2C0_SCL", True),
+    22: ("FTM0_CH0", False), 23: ("FTM0_CH1", False), 9: ("FTM0_CH2", False),
+    10: ("FTM0_CH3", False), 6: ("FTM0_CH4", False),
+    2: ("FTM3_CH0", False), 14: ("FTM3_CH1", False), 7: ("FTM3_CH2", False),
+    8: ("FTM3_CH3", False), 35: ("FTM3_CH4", False), 36: ("FTM3_CH5", False),
+    0: ("UART0_RX", False), 1: ("UART0_TX", False), 13: ("PTC5", False),
+}
+
+
+def test_pin_mux_of_every_used_pin(booted):
+    for pin, (sig, open_drain) in EXPECTED_PINS.items():
+        state = booted.pin(pin)
+        assert state.signal == sig, (pin, state)
+        if open_drain:
+            assert state.open_drain, pin
+    gpio_c = booted.chip.ports.gpio["C"]
+    assert gpio_c.v["PDDR"] & (1 << 5), "LED pin is an output"
+
+
+def test_i2c_rate_and_mpu6050_start_up(booted):
+    chip, mpu = booted.chip, booted.mpu
+    assert 375e3 <= chip.i2c0.scl_hz() <= 417e3
+    assert chip.i2c0.errors == []
+    assert all(t.acked for t in chip.i2c0.transfers)
+    log = [(kind, reg, data) for _, kind, reg, data in mpu.log]
+    assert log[:3] == [("W", 0x6B, b"\x80"), ("W", 0x6B, b"\x01"), ("R", 0x75, b"\x68")]
+    assert mpu.log[1][0] - mpu.log[0][0] >= 0.1, "100 ms after the device reset"
+    assert log[3:7] == [("W", 0x19, b"\x04"), ("W", 0x1A, b"\x03"), ("W", 0x1B, b"\x18"),
+                        ("W", 0x1C, b"\x00")]
+    if mpu.emu.dmp_enabled:
+        assert ("W", 0x6A, bytes([0xC0])) in log
+    else:
+        assert log[7:11] == [("W", 0x23, b"\x78"), ("W", 0x38, b"\x11"), ("W", 0x6A, b"\x04"),
+                             ("W", 0x6A, b"\x40")]
+        assert mpu.emu.raw_fifo_enabled
+
+
+def test_uart0_baud_and_line_rate(running):
+    uart = running.chip.uart0
+    assert abs(uart.baud() / 921600 - 1) < 0.02
+    assert uart.frame_bits() == 10
+    sent = uart.sent
+    assert sent, "no telemetry left the pin"
+    assert sent[0][1] == 0xFD, "MAVLink 2 frames"
+    gaps = [b[0] - a[0] for a, b in zip(sent, sent[1:])]
+    assert min(gaps) == uart.frame_cycles(), "bytes leave one frame apart, never faster"
+    assert running.machine.exception_counts[16 + registers.irq("UART0_RX_TX")] > 0
+
+
+def test_ftm0_esc_outputs_at_the_stop_pulse_from_their_first_edge(booted):
+    for pin, sig, period, pulse in booted.esc_outputs():
+        assert period == pytest.approx(2.5e-3, abs=1e-9), pin
+        assert pulse == pytest.approx(1.0e-3, abs=1e-9), pin
+    assert set(booted.esc_first_edges) == {22, 23, 9, 10, 6}
+    for pin, (t, period, pulse) in booted.esc_first_edges.items():
+        assert period == pytest.approx(2.5e-3, abs=1e-9) and pulse == pytest.approx(1e-3, abs=1e-9), \
+            f"pin {pin} was switched to FTM0 before its stop pulse was set"
+
+
+def test_ftm3_rc_capture_configuration(booted):
+    ftm3, m = booted.chip.ftm3, booted.machine
+    assert ftm3.clock_hz() == pytest.approx(60e6 / 32)
+    assert ftm3.v["MOD"] == 0xFFFF
+    for ch in range(6):
+        assert ftm3.channel_mode(ch) == "capture both", ch
+        assert ftm3.v[f"C{ch}SC"] & 0x40, f"CHIE on channel {ch}"
+    assert m.enabled & (1 << (16 + registers.irq("FTM3")))
+
+
+def test_systick_runs_the_loop_at_200_hz(booted):
+    systick = booted.chip.scs.systick
+    assert systick.rvr == 599_999 and systick.enabled and systick.csr & 2
+    assert systick.period_s() == pytest.approx(5e-3)
+    assert booted.machine.priority[15] == 12 << 4
+
+
+def test_main_loop_sleeps_between_ticks_and_keeps_200_hz(running):
+    board = running
+    starts = [c for _, c in board.loop_starts]
+    assert [b - a for a, b in zip(starts, starts[1:])] == [600_000] * 3
+    m = board.machine
+    assert m.sleep_cycles > 0
+    assert m.exception_counts[15] >= 3
+    for pin, sig, period, pulse in board.esc_outputs():
+        assert pulse == pytest.approx(1.0e-3, abs=1e-9), "disarmed: the ESCs stay at stop"
+
+
+def test_rc_pulses_reach_the_capture_interrupt():
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
+    board.rc_pulse(0, 1500e-6)
+    board.run(seconds=2e-3)
+    caps = [c for c in board.chip.ftm3.captures if c[1] == 0]
+    assert len(caps) == 2
+    width = (caps[1][2] - caps[0][2]) & 0xFFFF
+    assert width == pytest.approx(1500e-6 * 60e6 / 32, abs=1)
+    assert board.machine.exception_counts[16 + registers.irq("FTM3")] == 2

@@ -1,0 +1,249 @@
+"""The Teensy 3.5 image as built by the CMake preset: what the chip and the loader need of it.
+
+Read with pyelftools and intelhex, never by running it (tests/teensy35_boot_test.py runs it
+in the emulated MK64FX512). A wrong byte here bricks a board or leaves an interrupt on the
+default handler, so each fact the boot ROM, the bootloader or the NVIC relies on is pinned.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+
+import pytest
+from elftools.elf.elffile import ELFFile
+from intelhex import IntelHex
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from teensy_image import ROOT, image  # noqa: E402
+
+FLASH_SIZE = 0x8_0000
+SRAM_LOW, SRAM_TOP = 0x1FFF_0000, 0x2002_0000
+VECTOR_COUNT = 16 + 86
+# Exception and IRQ numbers of the MK64FX512 (vector = 16 + IRQ).
+SYSTICK, UART0_RX_TX, FTM3 = 15, 16 + 31, 16 + 71
+RESERVED = (7, 8, 9, 10, 13)
+
+
+@pytest.fixture(scope="module")
+def img():
+    return image()
+
+
+@pytest.fixture(scope="module")
+def elf(img):
+    with open(img.elf, "rb") as fh:
+        f = ELFFile(fh)
+        symbols = {s.name: s["st_value"] for s in f.get_section_by_name(".symtab").iter_symbols()
+                   if s.name}
+        sections = {s.name: (s["sh_addr"], s["sh_size"], s["sh_type"]) for s in f.iter_sections()}
+        attrs = {}
+        for sub in f.get_section_by_name(".ARM.attributes").iter_subsections():
+            for subsub in sub.iter_subsubsections():
+                for a in subsub.iter_attributes():
+                    attrs[a.tag] = a.value
+        vectors = f.get_section_by_name(".text").data()[:4 * VECTOR_COUNT]
+    words = [int.from_bytes(vectors[4 * i:4 * i + 4], "little") for i in range(VECTOR_COUNT)]
+    return {"symbols": symbols, "sections": sections, "attrs": attrs, "vectors": words}
+
+
+@pytest.fixture(scope="module")
+def hexfile(img):
+    ih = IntelHex()
+    ih.loadhex(str(img.hex))
+    return ih
+
+
+def test_flash_configuration_field_leaves_the_chip_unsecured(hexfile):
+    field = bytes(hexfile[a] for a in range(0x400, 0x410))
+    assert field[:12] == b"\xff" * 12, "backdoor key and FPROT erased: nothing write-protected"
+    fsec, fopt, feprot, fdprot = field[12:]
+    assert fsec & 0b11 == 0b10, f"FSEC 0x{fsec:02X}: SEC must be 0b10 (unsecure)"
+    assert fsec == 0xFE
+    assert fopt == 0xF9, "FOPT: normal boot (LPBOOT 1), EzPort off, NMI pin off"
+    assert (feprot, fdprot) == (0xFF, 0xFF)
+
+
+def test_everything_lies_in_the_512_kib_flash(hexfile):
+    addresses = hexfile.addresses()
+    assert min(addresses) == 0 and max(addresses) < FLASH_SIZE
+
+
+def test_hex_holds_exactly_the_elf_load_image(img, hexfile):
+    """The .hex is the ELF's loadable bytes (text, then .data's initial values), nothing else."""
+    with open(img.elf, "rb") as fh:
+        f = ELFFile(fh)
+        expected = {}
+        for seg in f.iter_segments():
+            if seg["p_type"] == "PT_LOAD" and seg["p_filesz"]:
+                for i, b in enumerate(seg.data()):
+                    expected[seg["p_paddr"] + i] = b
+    got = {a: hexfile[a] for a in hexfile.addresses()}
+    assert got == expected
+
+
+def test_initial_stack_pointer_is_the_top_of_sram_and_8_aligned(elf):
+    sp = elf["vectors"][0]
+    assert SRAM_LOW < sp <= SRAM_TOP and sp % 8 == 0
+    assert sp == elf["symbols"]["_estack"] == SRAM_TOP
+
+
+def test_reset_vector_is_a_thumb_address_of_reset_handler_in_text(elf):
+    reset = elf["vectors"][1]
+    text_addr, text_size, _ = elf["sections"][".text"]
+    assert reset & 1, "Thumb bit"
+    assert reset == elf["symbols"]["Reset_Handler"] | 1    # ELF symbols of Thumb code carry bit 0
+    assert text_addr <= (reset & ~1) < text_addr + text_size
+
+
+def test_vector_slots_point_at_the_intended_handlers(elf):
+    v, sym = elf["vectors"], elf["symbols"]
+    assert v[SYSTICK] == sym["SysTick_Handler"] | 1
+    assert v[UART0_RX_TX] == sym["UART0_RX_TX_IRQHandler"] | 1
+    assert v[FTM3] == sym["FTM3_IRQHandler"] | 1
+    assert v[3] == sym["HardFault_Handler"] | 1
+    for i in RESERVED:
+        assert v[i] == 0, f"reserved vector {i}"
+    used = {SYSTICK, UART0_RX_TX, FTM3}
+    default = sym["Default_Handler"] | 1
+    for i in range(16, VECTOR_COUNT):
+        if i not in used:
+            assert v[i] == default, f"IRQ {i - 16} not on Default_Handler"
+    # A handler with a C++ name would leave its slot on the default: check the names exist
+    # unmangled (they are the ones above) and that nothing else claims to be one.
+    assert not [n for n in sym if n.startswith("_Z") and "IRQHandler" in n]
+
+
+def test_vector_table_and_flash_configuration_sit_where_the_chip_reads_them(elf):
+    assert elf["symbols"]["hq_vectors"] == 0
+    assert elf["symbols"]["hq_flash_config"] == 0x400
+
+
+def test_elf_is_cortex_m4_with_single_precision_hard_float(elf):
+    a = elf["attrs"]
+    assert a["TAG_CPU_NAME"] == "7E-M"
+    assert a["TAG_CPU_ARCH"] == 13            # v7E-M
+    assert a["TAG_CPU_ARCH_PROFILE"] == ord("M")
+    assert a["TAG_FP_ARCH"] == 6              # VFPv4-D16
+    assert a["TAG_ABI_VFP_ARGS"] == 1         # arguments in VFP registers: hard float
+    assert a["TAG_ABI_HARDFP_USE"] == 1       # single precision only
+
+
+def _size_a(path) -> dict[str, int]:
+    out = subprocess.run(["arm-none-eabi-size", "-A", str(path)], capture_output=True,
+                         text=True, check=True).stdout
+    sizes = {}
+    for line in out.splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0].startswith(".") and parts[1].isdigit():
+            sizes[parts[0]] = int(parts[1])
+    return sizes
+
+
+def test_flash_and_static_ram_stay_within_budget(img):
+    """Flash <= 64 KiB and static RAM <= 16 KiB (of 512 / 192): room for USB and parameters."""
+    s = _size_a(img.elf)
+    flash = s[".text"] + s.get(".ARM.exidx", 0) + s.get(".data", 0)
+    ram = s.get(".data", 0) + s.get(".bss", 0)
+    print(f"flash {flash} B, static RAM {ram} B")
+    assert flash <= 64 * 1024, s
+    assert ram <= 16 * 1024, s
+
+
+def test_no_heap_and_no_exception_machinery_in_the_image(elf):
+    names = set(elf["symbols"])
+    for forbidden in ("malloc", "free", "_sbrk", "_Znwj", "_ZdlPv", "__cxa_allocate_exception",
+                      "__cxa_throw", "abort", "_write", "__cxa_atexit"):
+        assert forbidden not in names, forbidden
+
+
+def test_a_heap_call_fails_the_link(img, tmp_path):
+    """Linked exactly as the image is (the build's own link command), one `new` breaks it."""
+    cmd = img.link_command.read_text().strip()
+    probe = tmp_path / "probe.cpp"
+    probe.write_text("int* hq_probe() { return new int(1); }\n"
+                     "extern \"C\" int* hq_probe_keep = hq_probe();\n")
+    obj = tmp_path / "probe.o"
+    subprocess.run(["arm-none-eabi-g++", "-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16",
+                    "-mfloat-abi=hard", "-fno-exceptions", "-fno-rtti", "-c", str(probe),
+                    "-o", str(obj)], check=True)
+    out = tmp_path / "probe.elf"
+    cmd = re.sub(r"-o \S+", f"-o {out}", cmd)
+    cmd = cmd.replace("-Wl,--gc-sections", "")          # keep the probe
+    cmd += f" {obj} -Wl,-u,hq_probe_keep"
+    res = subprocess.run(cmd, shell=True, cwd=img.link_command.parents[2], capture_output=True,
+                         text=True)
+    assert res.returncode != 0, "a heap allocation linked"
+    assert "_sbrk" in res.stderr or "operator new" in res.stderr or "_Znwj" in res.stderr, res.stderr
+
+
+def test_core_library_has_no_writable_data(img):
+    """The core keeps no globals: every object's state lives in its owner."""
+    total = subprocess.run(["arm-none-eabi-size", "-t", str(img.core_lib)], capture_output=True,
+                           text=True, check=True).stdout.splitlines()[-1].split()
+    text, data, bss = map(int, total[:3])
+    assert text > 0 and data == 0 and bss == 0, total
+
+
+def test_teensy_loader_reads_the_hex_and_reports_its_usage(img, hexfile):
+    loader = shutil.which("teensy_loader_cli")
+    if loader is None:
+        message = "teensy_loader_cli not found: apt-get install teensy-loader-cli"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    # Without a board (and without -w) it reads the file, reports, and fails to open a device.
+    res = subprocess.run([loader, "--mcu=TEENSY35", "-v", str(img.hex)], capture_output=True,
+                         text=True, timeout=60, stdin=subprocess.DEVNULL)
+    out = res.stdout + res.stderr
+    m = re.search(r'Read "[^"]+": (\d+) bytes, ([\d.]+)% usage', out)
+    assert m, out
+    assert int(m.group(1)) == len(hexfile.addresses())
+    assert float(m.group(2)) == pytest.approx(100 * len(hexfile.addresses()) / FLASH_SIZE, abs=0.06)
+
+
+def test_no_peripheral_address_is_typed_by_hand():
+    """Peripheral addresses come from the generated mk64f12.hpp only."""
+    folder = ROOT / "firmware" / "targets" / "teensy35"
+    pattern = re.compile(r"0x(4[0-9A-Fa-f]{3}_?[0-9A-Fa-f]{4}|E000_?[0-9A-Fa-f]{4})\b")
+    offenders = []
+    for path in sorted(folder.glob("*.[ch]pp")):
+        if path.name == "mk64f12.hpp":
+            continue
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if pattern.search(line.split("//")[0]):
+                offenders.append(f"{path.name}:{n}: {line.strip()}")
+    assert not offenders, offenders
+
+
+def _svd_source() -> str | None:
+    """The SVD: HQ_MK64_SVD (a .svd, svd_data.zip or pyocd wheel), else an installed pyocd."""
+    env = os.environ.get("HQ_MK64_SVD")
+    if env:
+        return env
+    import importlib.util
+    return "" if importlib.util.find_spec("pyocd") else None
+
+
+def test_register_header_is_what_the_svd_generates():
+    source = _svd_source()
+    if source is None:
+        message = ("no MK64F12 SVD: set HQ_MK64_SVD to the pyocd wheel "
+                   "(pip download pyocd==0.46.0 --no-deps) or install pyocd")
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    gen = ROOT / "firmware" / "targets" / "teensy35" / "gen_registers.py"
+    args = [sys.executable, str(gen), "--check"] + (["--svd", source] if source else [])
+    res = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+
+
+def test_register_header_carries_the_svd_licence():
+    text = (ROOT / "firmware" / "targets" / "teensy35" / "mk64f12.hpp").read_text()
+    assert "GENERATED by firmware/targets/teensy35/gen_registers.py" in text
+    assert "Redistribution and use in source and binary forms" in text

@@ -1,0 +1,65 @@
+"""Builds the Teensy 3.5 image once per test session, with the CMake preset a user runs.
+
+`image()` runs `cmake --preset teensy35` and `cmake --build --preset teensy35` (incremental:
+cheap when nothing changed) and returns the paths. Without the ARM toolchain it skips with
+the install hint, except in CI (CI set), where the image is required and the test fails.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BUILD = ROOT / "build" / "teensy35"
+INSTALL_HINT = ("arm-none-eabi-g++ not found: apt-get install gcc-arm-none-eabi "
+                "libnewlib-arm-none-eabi libstdc++-arm-none-eabi-dev")
+
+
+@dataclass(frozen=True)
+class Image:
+    elf: pathlib.Path
+    hex: pathlib.Path
+    map: pathlib.Path
+    core_lib: pathlib.Path
+    link_command: pathlib.Path
+
+
+def require_toolchain() -> None:
+    if shutil.which("arm-none-eabi-g++") and shutil.which("cmake"):
+        return
+    if os.environ.get("CI"):
+        pytest.fail(INSTALL_HINT)
+    pytest.skip(INSTALL_HINT)
+
+
+@functools.lru_cache(maxsize=1)
+def _build() -> tuple[int, str]:
+    # The preset's build runs mavgen with the Python that CMake finds: point it at this one
+    # (it has pymavlink), whatever the PATH says.
+    configure = subprocess.run(
+        ["cmake", "--preset", "teensy35", f"-DPython3_EXECUTABLE={sys.executable}"],
+        cwd=ROOT, capture_output=True, text=True, timeout=600)
+    if configure.returncode != 0:
+        return configure.returncode, configure.stdout + configure.stderr
+    build = subprocess.run(["cmake", "--build", "--preset", "teensy35", "-j2"], cwd=ROOT,
+                           capture_output=True, text=True, timeout=1200)
+    return build.returncode, build.stdout + build.stderr
+
+
+def image() -> Image:
+    require_toolchain()
+    rc, log = _build()
+    assert rc == 0, log[-4000:]
+    return Image(elf=BUILD / "heliquad-fw-teensy35.elf", hex=BUILD / "heliquad-fw-teensy35.hex",
+                 map=BUILD / "heliquad-fw-teensy35.map",
+                 core_lib=BUILD / "firmware" / "libhq_core.a",
+                 link_command=BUILD / "firmware" / "targets" / "teensy35" / "CMakeFiles"
+                 / "heliquad-fw-teensy35.dir" / "link.txt")
