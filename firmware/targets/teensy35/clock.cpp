@@ -2,6 +2,7 @@
 
 #include "cpu.hpp"
 #include "mk64f12.hpp"
+#include "watchdog.hpp"
 
 namespace hq::teensy {
 
@@ -87,8 +88,14 @@ ClockFault start_clocks() {
 uint64_t TeensyClock::micros() const { return cycles64() / (g_core_hz / 1000000u); }
 
 void TeensyClock::delay_us(uint32_t us) {
+    // Start-up waits (the IMU's reset, 100 ms) outlast nothing but keep the watchdog fed.
     const uint64_t end = cycles64() + static_cast<uint64_t>(us) * (g_core_hz / 1000000u);
-    while (cycles64() < end) {
+    uint64_t next_refresh = 0;
+    for (uint64_t now = cycles64(); now < end; now = cycles64()) {
+        if (now >= next_refresh) {
+            Watchdog::refresh();
+            next_refresh = now + g_core_hz / 1000u;        // every millisecond
+        }
     }
 }
 

@@ -4,6 +4,7 @@
 #include "cpu.hpp"
 #include "mk64f12.hpp"
 #include "motors.hpp"
+#include "watchdog.hpp"
 
 namespace hq::teensy {
 
@@ -54,6 +55,9 @@ extern "C" [[noreturn]] void hq_fatal(uint32_t code) {
     const uint32_t per_ms = core_hz() / 1000u;
     uint32_t t_ms = 0, last = cycles32();
     for (;;) {
+        // The fault path is a deliberate, safe state (ESCs at their stop pulse): keep the
+        // watchdog from resetting out of it, so the blink code stays readable.
+        Watchdog::refresh();
         led_set(blink_code_on(code, t_ms));
         while (cycles32() - last < per_ms) {
         }

@@ -34,5 +34,6 @@ void led_update(uint64_t now_us, LedPattern pattern);
 }  // namespace hq::teensy
 
 // The fault path: ESCs to their stop pulse (if they were ever started), interrupts off, the
-// LED blinking `code` forever. Also the target of every CPU fault handler.
+// LED blinking `code` forever (the watchdog, if running, is kept fed: this state is safe
+// and its code should stay readable). Also the target of every CPU fault handler.
 extern "C" [[noreturn]] void hq_fatal(uint32_t code);

@@ -4,9 +4,10 @@
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
 // the telemetry UART; RC capture; the I2C bus; the FlightController and its IMU start-up
 // (MPU6050 reset, configuration and, with an image built in, the DMP upload); the 200 Hz
-// loop timer. Then, every tick: read the RC input, run one FlightController step, record
-// the cycles it took (HQ_FW_STATUS reports their median and maximum each second, and the
-// overruns), update the LED, sleep until the next tick.
+// loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the
+// RC input, run one FlightController step, record the cycles it took (HQ_FW_STATUS reports
+// their median and maximum each second, and the overruns), update the LED, sleep until the
+// next tick.
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
@@ -18,6 +19,7 @@
 #include "motors.hpp"
 #include "rc_input.hpp"
 #include "serial.hpp"
+#include "watchdog.hpp"
 
 namespace {
 
@@ -67,8 +69,10 @@ extern "C" [[noreturn]] void hq_teensy_main() {
 
     static LoopTimer timer;
     if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
+    Watchdog::start(Watchdog::kTimeoutMs);
     for (;;) {
         timer.wait();
+        Watchdog::refresh();
         const uint32_t c0 = cycles32();
         fc.step(rc.read(clock.micros()));
         fc.record_loop(cycles32() - c0, timer.overruns());
