@@ -43,7 +43,6 @@ struct Reg {
     static void clear(T bits) { ref() = static_cast<T>(ref() & static_cast<T>(~bits)); }
 };
 
-// SIM: System Integration Module
 namespace SIM {
 constexpr uint32_t BASE = 0x40047000u;
 struct SOPT1 : Reg<uint32_t, 0x40047000u> {
@@ -307,7 +306,6 @@ struct UIDL : Reg<uint32_t, 0x40048060u> {
 };
 }  // namespace SIM
 
-// WDOG: Generation 2008 Watchdog Timer
 namespace WDOG {
 constexpr uint32_t BASE = 0x40052000u;
 struct STCTRLH : Reg<uint16_t, 0x40052000u> {
@@ -393,7 +391,6 @@ struct PRESC : Reg<uint16_t, 0x40052016u> {
 };
 }  // namespace WDOG
 
-// MCG: Multipurpose Clock Generator module
 namespace MCG {
 constexpr uint32_t BASE = 0x40064000u;
 struct C1 : Reg<uint8_t, 0x40064000u> {
@@ -504,7 +501,6 @@ struct C8 : Reg<uint8_t, 0x4006400Du> {
 };
 }  // namespace MCG
 
-// OSC: Oscillator
 namespace OSC {
 constexpr uint32_t BASE = 0x40065000u;
 struct CR : Reg<uint8_t, 0x40065000u> {
@@ -518,7 +514,6 @@ struct CR : Reg<uint8_t, 0x40065000u> {
 };
 }  // namespace OSC
 
-// PORTB: Pin Control and Interrupts
 namespace PORTB {
 constexpr uint32_t BASE = 0x4004A000u;
 struct PCR0 : Reg<uint32_t, 0x4004A000u> {
@@ -1091,7 +1086,6 @@ struct ISFR : Reg<uint32_t, 0x4004A0A0u> {
 };
 }  // namespace PORTB
 
-// PORTC: Pin Control and Interrupts
 namespace PORTC {
 constexpr uint32_t BASE = 0x4004B000u;
 struct PCR0 : Reg<uint32_t, 0x4004B000u> {
@@ -1664,7 +1658,6 @@ struct ISFR : Reg<uint32_t, 0x4004B0A0u> {
 };
 }  // namespace PORTC
 
-// PORTD: Pin Control and Interrupts
 namespace PORTD {
 constexpr uint32_t BASE = 0x4004C000u;
 struct PCR0 : Reg<uint32_t, 0x4004C000u> {
@@ -2253,7 +2246,6 @@ struct DFWR : Reg<uint32_t, 0x4004C0C8u> {
 };
 }  // namespace PORTD
 
-// GPIOB: General Purpose Input/Output
 namespace GPIOB {
 constexpr uint32_t BASE = 0x400FF040u;
 struct PDOR : Reg<uint32_t, 0x400FF040u> {
@@ -2294,7 +2286,6 @@ struct PDDR : Reg<uint32_t, 0x400FF054u> {
 };
 }  // namespace GPIOB
 
-// GPIOC: General Purpose Input/Output
 namespace GPIOC {
 constexpr uint32_t BASE = 0x400FF080u;
 struct PDOR : Reg<uint32_t, 0x400FF080u> {
@@ -2335,7 +2326,6 @@ struct PDDR : Reg<uint32_t, 0x400FF094u> {
 };
 }  // namespace GPIOC
 
-// GPIOD: General Purpose Input/Output
 namespace GPIOD {
 constexpr uint32_t BASE = 0x400FF0C0u;
 struct PDOR : Reg<uint32_t, 0x400FF0C0u> {
@@ -2376,7 +2366,6 @@ struct PDDR : Reg<uint32_t, 0x400FF0D4u> {
 };
 }  // namespace GPIOD
 
-// I2C0: Inter-Integrated Circuit
 namespace I2C0 {
 constexpr uint32_t BASE = 0x40066000u;
 struct A1 : Reg<uint8_t, 0x40066000u> {
@@ -2480,7 +2469,6 @@ struct SLTL : Reg<uint8_t, 0x4006600Bu> {
 };
 }  // namespace I2C0
 
-// UART0: Serial Communication Interface
 namespace UART0 {
 constexpr uint32_t BASE = 0x4006A000u;
 struct BDH : Reg<uint8_t, 0x4006A000u> {
@@ -2730,7 +2718,6 @@ struct TL7816 : Reg<uint8_t, 0x4006A01Fu> {
 };
 }  // namespace UART0
 
-// FTM0: FlexTimer Module
 namespace FTM0 {
 constexpr uint32_t BASE = 0x40038000u;
 struct SC : Reg<uint32_t, 0x40038000u> {
@@ -3135,7 +3122,6 @@ struct PWMLOAD : Reg<uint32_t, 0x40038098u> {
 };
 }  // namespace FTM0
 
-// FTM3: FlexTimer Module
 namespace FTM3 {
 constexpr uint32_t BASE = 0x400B9000u;
 struct SC : Reg<uint32_t, 0x400B9000u> {
@@ -3540,7 +3526,6 @@ struct PWMLOAD : Reg<uint32_t, 0x400B9098u> {
 };
 }  // namespace FTM3
 
-// PIT: Periodic Interrupt Timer
 namespace PIT {
 constexpr uint32_t BASE = 0x40037000u;
 struct MCR : Reg<uint32_t, 0x40037000u> {
@@ -3638,7 +3623,6 @@ struct TFLG3 : Reg<uint32_t, 0x4003713Cu> {
 };
 }  // namespace PIT
 
-// SystemControl: System Control Block
 namespace SystemControl {
 constexpr uint32_t BASE = 0xE000E000u;
 struct ACTLR : Reg<uint32_t, 0xE000E008u> {
@@ -3849,7 +3833,6 @@ struct FPDSCR : Reg<uint32_t, 0xE000EF3Cu> {
 };
 }  // namespace SystemControl
 
-// SysTick: System timer
 namespace SysTick {
 constexpr uint32_t BASE = 0xE000E010u;
 struct CSR : Reg<uint32_t, 0xE000E010u> {
@@ -3881,7 +3864,6 @@ struct CALIB : Reg<uint32_t, 0xE000E01Cu> {
 };
 }  // namespace SysTick
 
-// NVIC: Nested Vectored Interrupt Controller
 namespace NVIC {
 constexpr uint32_t BASE = 0xE000E100u;
 struct NVICISER0 : Reg<uint32_t, 0xE000E100u> {
@@ -4648,7 +4630,6 @@ struct NVICSTIR : Reg<uint32_t, 0xE000EF00u> {
 };
 }  // namespace NVIC
 
-// FTFE_FlashConfig: Flash configuration field
 namespace FTFE_FlashConfig {
 constexpr uint32_t BASE = 0x00000400u;
 struct BACKKEY3 : Reg<uint8_t, 0x00000400u> {
@@ -4757,7 +4738,6 @@ struct FDPROT : Reg<uint8_t, 0x0000040Fu> {
 };
 }  // namespace FTFE_FlashConfig
 
-// RCM: Reset Control Module
 namespace RCM {
 constexpr uint32_t BASE = 0x4007F000u;
 struct SRS0 : Reg<uint8_t, 0x4007F000u> {
@@ -4798,7 +4778,6 @@ struct MR : Reg<uint8_t, 0x4007F007u> {
 };
 }  // namespace RCM
 
-// CoreDebug
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
 struct DHCSR : Reg<uint32_t, 0xE000EDF0u> {
@@ -4809,7 +4788,6 @@ struct DEMCR : Reg<uint32_t, 0xE000EDFCu> {
 };
 }  // namespace CoreDebug
 
-// DWT
 namespace DWT {
 constexpr uint32_t BASE = 0xE0001000u;
 struct CTRL : Reg<uint32_t, 0xE0001000u> {

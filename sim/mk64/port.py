@@ -1,0 +1,200 @@
+"""Pin control (PORTA-E) and general-purpose I/O (GPIOA-E).
+
+PORTx_PCRn holds each pin's multiplexer (MUX: 0 disabled/analog, 1 GPIO, 2-7 the
+peripheral functions of the data sheet's signal multiplexing table) and its electrical
+settings (pull, slew rate, open drain, drive strength); LK locks the low half until reset;
+ISF is write-1-to-clear. GPCLR/GPCHR write one value to several PCRs. Every change of a
+pin's PCR is logged with its time.
+
+GPIO: PDOR/PSOR/PCOR/PTOR/PDDR/PDIR. A pin's level is the GPIO output when MUX = 1 and its
+PDDR bit is set (an open-drain output only pulls low), otherwise what drives it from outside
+(:meth:`Ports.drive`), or its pull resistor, or 0. Level changes of output pins are logged
+(the status LED's blink pattern is readable from it).
+"""
+
+from __future__ import annotations
+
+from .peripheral import RegisterDevice
+
+PORT_NAMES = "ABCDE"
+MUX = (8, 3)
+
+
+class Port(RegisterDevice):
+    def __init__(self, machine, ports, letter, sim):
+        self.ports, self.letter = ports, letter
+        super().__init__(machine, f"PORT{letter}", gate=(sim, "SCGC5", f"PORT{letter}"),
+                         span=0xA4)
+
+    def _set_pcr(self, n, value, mask):
+        name = f"PCR{n}"
+        old = self.v[name]
+        if old & (1 << 15):                         # LK: bits 15:0 locked until reset
+            value = (value & ~0xFFFF) | (old & 0xFFFF)
+        isf = old & (1 << 24) & ~value              # ISF: write 1 to clear
+        new = (value & 0x000F_8777) | isf
+        self.v[name] = new
+        if new != old:
+            m = self.machine
+            self.ports.log.append((m.instructions_now(), m.now(), self.letter, n, new))
+            self.ports.pin_changed(self.letter, n)
+
+    def write(self, address, size, value):
+        offset = address - self.base
+        if offset < 0x80:
+            reg = self._reg_for(offset, size, True)
+            n = reg.offset // 4
+            shift = 8 * (offset - reg.offset)
+            mask = ((1 << (8 * size)) - 1) << shift
+            merged = (self.v[reg.name] & ~mask) | ((value << shift) & mask)
+            self._set_pcr(n, merged, mask)
+            return
+        super().write(address, size, value)
+
+    def _global(self, first, value):
+        data, enable = value & 0xFFFF, value >> 16
+        for i in range(16):
+            if enable & (1 << i):
+                n = first + i
+                self._set_pcr(n, (self.v[f"PCR{n}"] & ~0xFFFF) | data, 0xFFFF)
+
+    def w_GPCLR(self, value, mask):
+        self._global(0, value)
+
+    def w_GPCHR(self, value, mask):
+        self._global(16, value)
+
+    def r_GPCLR(self):
+        return 0
+
+    def r_GPCHR(self):
+        return 0
+
+    def r_ISFR(self):
+        return sum(1 << n for n in range(32) if self.v[f"PCR{n}"] & (1 << 24))
+
+    def w_ISFR(self, value, mask):
+        for n in range(32):
+            if value & (1 << n):
+                self.v[f"PCR{n}"] &= ~(1 << 24)
+
+    def mux(self, n) -> int:
+        return (self.v[f"PCR{n}"] >> 8) & 7
+
+
+class Gpio(RegisterDevice):
+    READ_ONLY = ("PDIR",)
+
+    def __init__(self, machine, ports, letter):
+        self.ports, self.letter = ports, letter
+        super().__init__(machine, f"GPIO{letter}", span=0x18)
+
+    def r_PDIR(self):
+        return sum(self.ports.level(self.letter, n) << n for n in range(32))
+
+    def r_PSOR(self):
+        return 0
+
+    def r_PCOR(self):
+        return 0
+
+    def r_PTOR(self):
+        return 0
+
+    def _output(self, pdor):
+        before = {n: self.ports.level(self.letter, n) for n in range(32)}
+        self.v["PDOR"] = pdor & 0xFFFF_FFFF
+        self.ports.outputs_changed(self.letter, before)
+
+    def w_PDOR(self, value, mask):
+        self._output(value)
+
+    def w_PSOR(self, value, mask):
+        self._output(self.v["PDOR"] | value)
+
+    def w_PCOR(self, value, mask):
+        self._output(self.v["PDOR"] & ~value)
+
+    def w_PTOR(self, value, mask):
+        self._output(self.v["PDOR"] ^ value)
+
+    def w_PDDR(self, value, mask):
+        before = {n: self.ports.level(self.letter, n) for n in range(32)}
+        self.v["PDDR"] = value
+        self.ports.outputs_changed(self.letter, before)
+
+
+class Ports:
+    """All five ports and their GPIO, with the pins' external world."""
+
+    def __init__(self, machine, sim):
+        self.machine = machine
+        self.port = {c: machine.attach(Port(machine, self, c, sim)) for c in PORT_NAMES}
+        self.gpio = {c: machine.attach(Gpio(machine, self, c)) for c in PORT_NAMES}
+        self.external = {}          # (letter, n) -> level driven from outside
+        self.pulls = {}             # (letter, n) -> level of an external pull resistor
+        self.listeners = []         # fn(letter, n) on a PCR change
+        self.edge_listeners = []    # fn(letter, n, level) on an input level change
+        self.log = []               # (instruction count, cycle, letter, n, PCR)
+        self.level_log = []         # (cycle, letter, n, level) of GPIO outputs
+        machine.reset_listeners.append(self.reset)
+
+    def reset(self):
+        self.log.clear()
+        self.level_log.clear()
+        self.external.clear()
+
+    def pcr(self, letter, n) -> int:
+        return self.port[letter].v[f"PCR{n}"]
+
+    def mux(self, letter, n) -> int:
+        return self.port[letter].mux(n)
+
+    def level(self, letter, n) -> int:
+        """The pin's level as PDIR reads it: 0 unless the pin has a digital function
+        (MUX != 0); a GPIO output drives it; else an outside driver, a pull, or 0."""
+        gpio = self.gpio[letter]
+        pcr = self.pcr(letter, n)
+        if (pcr >> 8) & 7 == 0:
+            return 0
+        if (pcr >> 8) & 7 == 1 and gpio.v["PDDR"] & (1 << n):
+            out = (gpio.v["PDOR"] >> n) & 1
+            if not (pcr & (1 << 5)) or out == 0:    # open drain only pulls low
+                return out
+        if (letter, n) in self.external:
+            return self.external[(letter, n)]
+        if (letter, n) in self.pulls:
+            return self.pulls[(letter, n)]
+        if pcr & 2:                                  # PE: internal pull, PS selects up
+            return pcr & 1
+        return 0
+
+    def pin_changed(self, letter, n):
+        for fn in self.listeners:
+            fn(letter, n)
+
+    def outputs_changed(self, letter, before):
+        m = self.machine
+        for n, old in before.items():
+            new = self.level(letter, n)
+            if new != old:
+                self.level_log.append((m.now(), letter, n, new))
+
+    def drive(self, letter, n, level):
+        """Drive a pin from outside (None: release it)."""
+        old = self.level(letter, n)
+        if level is None:
+            self.external.pop((letter, n), None)
+        else:
+            self.external[(letter, n)] = int(bool(level))
+        new = self.level(letter, n)
+        if new != old:
+            for fn in self.edge_listeners:
+                fn(letter, n, new)
+
+    def describe(self, letter, n) -> dict:
+        pcr = self.pcr(letter, n)
+        return {"mux": (pcr >> 8) & 7, "pull_enable": bool(pcr & 2), "pull_up": bool(pcr & 1),
+                "slew_slow": bool(pcr & 4), "filter": bool(pcr & 0x10),
+                "open_drain": bool(pcr & 0x20), "drive_high": bool(pcr & 0x40),
+                "locked": bool(pcr & 0x8000), "irqc": (pcr >> 16) & 0xF}
