@@ -235,9 +235,19 @@ PYBIND11_MODULE(_firmware, m) {
     m.def("from_euler", &from_euler);
     m.def("dmp_to_frd", &dmp_to_frd);
     m.def("chip_to_frd", &chip_to_frd);
+    py::class_<AttitudeFilterConfig>(m, "AttitudeFilterConfig")
+        .def(py::init<>())
+        .def_readwrite("kp_ground", &AttitudeFilterConfig::kp_ground)
+        .def_readwrite("kp_flight", &AttitudeFilterConfig::kp_flight)
+        .def_readwrite("accel_band_g", &AttitudeFilterConfig::accel_band_g)
+        .def_readwrite("rate_limit_rad_s", &AttitudeFilterConfig::rate_limit_rad_s)
+        .def_readwrite("tilt_limit_rad", &AttitudeFilterConfig::tilt_limit_rad);
     py::class_<ComplementaryFilter>(m, "ComplementaryFilter")
-        .def(py::init<float>(), py::arg("kp") = 1.0f)
-        .def("update", &ComplementaryFilter::update)
+        .def(py::init<const AttitudeFilterConfig&>(), py::arg("config") = AttitudeFilterConfig())
+        .def("update", &ComplementaryFilter::update, py::arg("gyro_rad_s"), py::arg("accel_m_s2"),
+             py::arg("dt_s"), py::arg("in_flight"))
+        .def_property_readonly("accel_weight", &ComplementaryFilter::accel_weight)
+        .def_property_readonly("config", &ComplementaryFilter::config)
         .def("reset", &ComplementaryFilter::reset, py::arg("q") = Quat())
         .def_property_readonly("quaternion", &ComplementaryFilter::quaternion);
 

@@ -72,7 +72,7 @@ bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) &&
 FlightController::FlightController(const FlightControllerConfig& config, I2cBus& i2c,
                                    Clock& clock, SerialPort& telemetry, MotorOutputs& motors)
     : config_(config), i2c_(i2c), clock_(clock), telemetry_(telemetry), motors_(motors),
-      imu_(config.imu), cascade_(config.gains), mixer_(config.geometry),
+      imu_(config.imu), filter_(config.attitude_filter), cascade_(config.gains), mixer_(config.geometry),
       supervisor_(config.safety, config.loop_rate_hz) {}
 
 InitResult FlightController::init() {
@@ -126,7 +126,8 @@ bool FlightController::read_imu(float dt_s) {
     if (s.has_attitude) {
         state_.attitude = to_euler(s.attitude);
     } else {
-        filter_.update(s.gyro_rad_s, s.accel_m_s2, dt_s);
+        // Armed is in flight as far as the filter knows: the low gain and the tilt weight.
+        filter_.update(s.gyro_rad_s, s.accel_m_s2, dt_s, supervisor_.armed());
         state_.attitude = to_euler(filter_.quaternion());
     }
     state_.rate = s.gyro_rad_s;
