@@ -22,6 +22,7 @@ from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
 from heliquad.sim.sil import SilConfig, run_sil
 from heliquad.sim.tf_plant import TfPlant
 
+from fake_dmp import write_fake_dmp
 from firmware_rig import FirmwareRig
 
 ROLL = ((28.19,), (1.0, 5.13, 22.93))
@@ -234,8 +235,7 @@ def test_dmp_path_end_to_end(tmp_path):
     # simulator then sends 42-byte DMP packets, and identification works the same. (The
     # image here is a made-up pattern: the emulated chip runs no DMP code, the simulator
     # computes the quaternion.)
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    image = write_fake_dmp(tmp_path / "dmp.bin")
     cfg = SilConfig(axis="pitch", num=(33.64,), den=(1.0, 5.374, 23.65), inject="mixer",
                     freq_hz=2.0, amplitude=0.05, cycles=8, dmp_image=str(image))
     r = run_sil(cfg, str(tmp_path / "dmp"), progress=lambda *_: None)
@@ -361,8 +361,7 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
 
 def test_free_flight_hover_is_level_and_a_10_degree_roll_step_settles(tmp_path):
     # SPEC.md's gains, angle mode, DMP attitude. Stick 1667 us = 1/3 of 30 deg = 10 deg.
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    image = write_fake_dmp(tmp_path / "dmp.bin")
     roll, pitch = fly_free(str(image), 2200, step_at=1000, roll_stick_us=1500 + round(500 / 3))
     hover = slice(200, 1000)                   # 1 s after arming until the step
     assert np.max(np.abs(roll[hover])) < 0.2 and np.max(np.abs(pitch[hover])) < 0.2
@@ -396,8 +395,7 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
     from heliquad.sim.vehicle import GRAVITY_M_S2
     from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
 
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    image = write_fake_dmp(tmp_path / "dmp.bin")
     plant = VehiclePlant("roll", "free", 0.005, turbulence="moderate", seed=1)
     mixer = mixer_for(plant.params)
     throttle = int(round(1000 + 1000 * plant.params.body.mass_kg * GRAVITY_M_S2
@@ -451,8 +449,7 @@ def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, 
     # logged angle is the attitude itself.
     from heliquad.sim.vehicle_plant import VehiclePlant
 
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
+    image = write_fake_dmp(tmp_path / "dmp.bin")
     cfg = SilConfig(axis=axis, inject=inject, freq_hz=freq_hz, amplitude=math.radians(amplitude_deg),
                     cycles=5, plant="vehicle", rig=axis, ideal_sensor=True, dmp_image=str(image))
     r = run_sil(cfg, str(tmp_path / "cl"), progress=lambda *_: None)

@@ -65,6 +65,19 @@ constexpr size_t kStatusTextLen = 50;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
+// Why the DMP set-up fell back to the raw path (STATUSTEXT, at most 50 characters).
+const char* dmp_failure_text(DmpStep step) {
+    switch (step) {
+        case DmpStep::Tables: return "IMU: DMP tables missing or bad; raw FIFO path";
+        case DmpStep::Image: return "IMU: DMP image did not verify; raw FIFO path";
+        case DmpStep::Config: return "IMU: DMP config did not verify; raw FIFO path";
+        case DmpStep::Registers: return "IMU: DMP set-up bus error; raw FIFO path";
+        case DmpStep::Updates: return "IMU: DMP updates did not verify; raw FIFO path";
+        case DmpStep::None: break;
+    }
+    return "IMU: DMP set-up failed; raw FIFO path";
+}
+
 bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 }  // namespace
@@ -79,7 +92,7 @@ InitResult FlightController::init() {
     motors_.disarm();
     const InitResult r = imu_.init(i2c_, clock_);
     if (r == InitResult::OkRawFallback) {
-        send_statustext(MAV_SEVERITY_WARNING, "IMU: DMP image did not verify; raw FIFO path");
+        send_statustext(MAV_SEVERITY_WARNING, dmp_failure_text(imu_.dmp_failure()));
     } else if (r == InitResult::NoDevice || r == InitResult::BusError) {
         send_statustext(MAV_SEVERITY_CRITICAL, "IMU: MPU6050 not found");
     }
@@ -142,7 +155,7 @@ void FlightController::recover_imu(uint64_t now_us) {
         return;
     }
     // Disarmed: the motors are off, so the loop may stop for the start-up waits and the
-    // DMP upload (about 0.2 s on the board).
+    // whole MotionApps DMP set-up, done again as at boot (about 0.3 s on the board).
     const InitResult r = imu_.init(i2c_, clock_);
     const bool ok = r == InitResult::OkDmp || r == InitResult::OkRaw;
     supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));   // its path's rate
