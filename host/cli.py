@@ -198,7 +198,8 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="hover throttle as a fraction of stick travel (default 0.4)")
     p.add_argument("--loop-hz", type=float, default=200.0, help="firmware loop rate (default 200)")
     p.add_argument("--dmp-image", metavar="FILE",
-                   help="MotionApps 2.0 DMP image for the firmware (default: raw FIFO path)")
+                   help="MotionApps 2.0 DMP firmware file for the firmware, made with "
+                        "heliquad dmp-image (default: raw FIFO path)")
     p.add_argument("--out", required=True, metavar="RUN",
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
     _add_fault_argument(p)

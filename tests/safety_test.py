@@ -8,6 +8,7 @@ import pytest
 
 from heliquad.sim.lockstep import HostFirmware
 
+from fake_dmp import write_fake_dmp
 from firmware_rig import DT_US, MAV, FirmwareRig
 
 IMU_TIMEOUT_US = 25000          # five samples of the 200 Hz sensor
@@ -28,10 +29,9 @@ def rig():
 
 @pytest.fixture
 def dmp_rig(tmp_path):
-    # The emulated chip runs no DMP code; any image exercises upload and verification.
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(bytes((i * 7 + 3) & 0xFF for i in range(1929)))
-    with HostFirmware(dmp_image=str(image)) as fw:
+    # The emulated chip runs no DMP code; made-up firmware of the right form exercises the
+    # MotionApps set-up and the emulator's check of it.
+    with HostFirmware(dmp_image=write_fake_dmp(tmp_path / "dmp.bin")) as fw:
         r = FirmwareRig(fw)
         yield r
         r.close()
@@ -182,6 +182,9 @@ def test_a_reset_chip_is_detected_and_the_dmp_path_comes_back_after_disarm(dmp_r
     assert reply.sensor_kind == MAV.HQ_SENSOR_DMP and not reply.armed
     _, status = rig.until(lambda m: m.get_type() == "HQ_FW_STATUS" and m.time_us > t_back)
     assert status.imu_resets == 1 and status.imu_reinits == 1 and status.sensor_kind == MAV.HQ_SENSOR_DMP
+    # The emulated chip takes DMP packets only after the whole MotionApps set-up since its
+    # reset (image, configuration table, registers, updates): that it flies again shows that
+    # recover_imu() did all of it.
     rig.rc[4] = 1000                                            # the pilot re-arms: it flies
     rig.step(5)
     rig.rc[2] = 1000

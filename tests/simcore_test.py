@@ -15,8 +15,8 @@ from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
 from heliquad.sim.sil import SilConfig, SilSession, _rc
 from heliquad.sim.vehicle_plant import VehiclePlant
 
-# A stand-in DMP image, so the firmware runs the DMP path (the driver treats it as opaque).
-FAKE_IMAGE = bytes((i * 7 + 3) & 0xFF for i in range(1929))
+from fake_dmp import write_fake_dmp
+
 
 
 def test_dmp_packet_reads_back_through_the_firmware_driver():
@@ -47,8 +47,7 @@ def _vehicle_plant():
 def test_a_batch_in_the_engine_equals_the_same_frames_stepped_one_by_one(tmp_path):
     # Free flight with turbulence and the noisy IMU: the engine, fed the same random inputs
     # in one block, reaches exactly the state that frame-by-frame stepping reaches.
-    image = tmp_path / "dmp.bin"
-    image.write_bytes(FAKE_IMAGE)
+    image = write_fake_dmp(tmp_path / "dmp.bin")
     frames = 300
     cfg = SilConfig(plant="vehicle", rig="free", collective=0.47)
     rc = [_rc(f, cfg.collective) for f in range(1, frames + 1)]

@@ -875,3 +875,49 @@ def test_image_telemetry_reports_its_loop_cycles_over_uart0():
     assert 10_000 < status.loop_cycles_median <= status.loop_cycles_max < 300_000, status
     assert status.loop_overruns == 0
     assert status.telemetry_dropped == 0, "the UART ring carries the telemetry"
+
+
+@pytest.fixture(scope="module")
+def dmp_image_elf(tmp_path_factory):
+    """The Teensy image built with a DMP firmware file compiled in (made-up tables of the
+    real shape: InvenSense's are never in the repository), in a build folder of its own."""
+    require_image()
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+    from fake_dmp import write_fake_dmp
+    from teensy_image import ROOT
+
+    work = tmp_path_factory.mktemp("t35dmp")
+    dmp = write_fake_dmp(work / "dmp.bin")
+    build = work / "build"
+    configure = subprocess.run(
+        ["cmake", "-S", str(ROOT), "-B", str(build),
+         f"--toolchain={ROOT / 'firmware' / 'cmake' / 'arm-none-eabi.cmake'}",
+         "-DCMAKE_BUILD_TYPE=Release", "-DCMAKE_CXX_FLAGS_RELEASE=-O2 -DNDEBUG",
+         f"-DHQ_DMP_IMAGE={dmp}", f"-DPython3_EXECUTABLE={sys.executable}"],
+        capture_output=True, text=True, timeout=600)
+    assert configure.returncode == 0, configure.stdout + configure.stderr
+    res = subprocess.run(["cmake", "--build", str(build), "-j2"], capture_output=True,
+                         text=True, timeout=1200)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    return build / "heliquad-fw-teensy35.elf", dmp
+
+
+def test_image_runs_the_motionapps_sequence_on_the_emulated_chip(dmp_image_elf):
+    """With a DMP firmware built in, the ARM image's start-up (image upload and read-back,
+    the configuration table, the register writes and the updates in MotionApps' order) is
+    what the register emulator requires before it produces DMP packets."""
+    pytest.importorskip("heliquad._firmware")
+    from heliquad.host.dmp_image import read_dmp_file, table_entries
+
+    elf, dmp = dmp_image_elf
+    firmware = read_dmp_file(str(dmp))
+    board = Teensy35(elf)
+    assert board.mpu.emu.set_dmp_reference(firmware.image, firmware.config, firmware.updates)
+    stop = board.run_to_loop(2, instructions=4 * BOOT_BUDGET)
+    assert stop.reason == "loop", (stop, board.fatal_code)
+    emu = board.mpu.emu
+    assert emu.dmp_status == "configured", emu.dmp_status
+    assert emu.dmp_configured and emu.dmp_enabled
+    entries = len(table_entries(firmware.config, specials=True))
+    updates = len(table_entries(firmware.updates, specials=False))
+    assert emu.dmp_progress == (len(firmware.image), entries, updates)

@@ -34,25 +34,41 @@ private:
     uint64_t now_ = 0;
 };
 
-// The driver borrows its DMP image; this keeps the bytes alive next to it.
+// The driver borrows its DMP firmware; this keeps the bytes alive next to it.
 struct DriverHolder {
-    std::vector<uint8_t> image;
+    std::vector<uint8_t> image, config, updates;
     Mpu6050 driver;
     InstantClock clock;
     explicit DriverHolder(const Mpu6050Config& cfg) : driver(cfg) {}
 };
 
-std::unique_ptr<DriverHolder> make_driver(const py::bytes& image, uint8_t dmp_rate_div) {
-    std::string data = image;
+std::vector<uint8_t> byte_vector(const py::bytes& b) {
+    const std::string data = b;
+    return std::vector<uint8_t>(data.begin(), data.end());
+}
+
+std::unique_ptr<DriverHolder> make_driver(const py::bytes& image, const py::bytes& config,
+                                          const py::bytes& updates, uint8_t dmp_rate_div) {
     Mpu6050Config cfg;
     cfg.dmp_rate_div = dmp_rate_div;
     auto holder = std::make_unique<DriverHolder>(cfg);
-    holder->image.assign(data.begin(), data.end());
+    holder->image = byte_vector(image);
+    holder->config = byte_vector(config);
+    holder->updates = byte_vector(updates);
+    // Empty bytes are "not given" (nullptr), as in the firmware's configuration.
     if (!holder->image.empty()) {
         cfg.dmp_image = holder->image.data();
         cfg.dmp_image_size = static_cast<uint16_t>(holder->image.size());
-        holder->driver = Mpu6050(cfg);
     }
+    if (!holder->config.empty()) {
+        cfg.dmp_config = holder->config.data();
+        cfg.dmp_config_size = static_cast<uint16_t>(holder->config.size());
+    }
+    if (!holder->updates.empty()) {
+        cfg.dmp_updates = holder->updates.data();
+        cfg.dmp_updates_size = static_cast<uint16_t>(holder->updates.size());
+    }
+    holder->driver = Mpu6050(cfg);
     return holder;
 }
 
@@ -244,9 +260,19 @@ PYBIND11_MODULE(_firmware, m) {
             const LoopLoad::Report r = l.take();
             return py::make_tuple(r.median, r.max, r.overruns);
         });
+    py::class_<AttitudeFilterConfig>(m, "AttitudeFilterConfig")
+        .def(py::init<>())
+        .def_readwrite("kp_ground", &AttitudeFilterConfig::kp_ground)
+        .def_readwrite("kp_flight", &AttitudeFilterConfig::kp_flight)
+        .def_readwrite("accel_band_g", &AttitudeFilterConfig::accel_band_g)
+        .def_readwrite("rate_limit_rad_s", &AttitudeFilterConfig::rate_limit_rad_s)
+        .def_readwrite("tilt_limit_rad", &AttitudeFilterConfig::tilt_limit_rad);
     py::class_<ComplementaryFilter>(m, "ComplementaryFilter")
-        .def(py::init<float>(), py::arg("kp") = 1.0f)
-        .def("update", &ComplementaryFilter::update)
+        .def(py::init<const AttitudeFilterConfig&>(), py::arg("config") = AttitudeFilterConfig())
+        .def("update", &ComplementaryFilter::update, py::arg("gyro_rad_s"), py::arg("accel_m_s2"),
+             py::arg("dt_s"), py::arg("in_flight"))
+        .def_property_readonly("accel_weight", &ComplementaryFilter::accel_weight)
+        .def_property_readonly("config", &ComplementaryFilter::config)
         .def("reset", &ComplementaryFilter::reset, py::arg("q") = Quat())
         .def_property_readonly("quaternion", &ComplementaryFilter::quaternion);
 
@@ -342,6 +368,9 @@ PYBIND11_MODULE(_firmware, m) {
         .value("OK_DMP", InitResult::OkDmp).value("OK_RAW", InitResult::OkRaw)
         .value("OK_RAW_FALLBACK", InitResult::OkRawFallback)
         .value("NO_DEVICE", InitResult::NoDevice).value("BUS_ERROR", InitResult::BusError);
+    py::enum_<DmpStep>(m, "DmpStep").value("NONE", DmpStep::None).value("TABLES", DmpStep::Tables)
+        .value("IMAGE", DmpStep::Image).value("CONFIG", DmpStep::Config)
+        .value("REGISTERS", DmpStep::Registers).value("UPDATES", DmpStep::Updates);
     py::enum_<SensorMode>(m, "SensorMode").value("NONE", SensorMode::None)
         .value("DMP", SensorMode::Dmp).value("RAW", SensorMode::Raw);
     py::enum_<ImuHealth>(m, "ImuHealth").value("CONFIGURED", ImuHealth::Configured)
@@ -378,6 +407,25 @@ PYBIND11_MODULE(_firmware, m) {
         .def("memory", [](const Mpu6050Emulator& e, size_t start, size_t n) {
             return py::bytes(reinterpret_cast<const char*>(e.memory() + start), n);
         })
+        .def("set_dmp_reference", [](Mpu6050Emulator& e, const py::bytes& image,
+                                     const py::bytes& config, const py::bytes& updates) {
+            const std::vector<uint8_t> i = byte_vector(image), c = byte_vector(config),
+                                       u = byte_vector(updates);
+            return e.set_dmp_reference(i.data(), static_cast<uint16_t>(i.size()), c.data(),
+                                       static_cast<uint16_t>(c.size()), u.data(),
+                                       static_cast<uint16_t>(u.size()));
+        }, py::arg("image"), py::arg("config"), py::arg("updates"),
+             "The DMP firmware the chip is to run (copied); False when it does not parse.")
+        .def_property_readonly("dmp_configured", &Mpu6050Emulator::dmp_configured)
+        .def_property_readonly("dmp_status", [](const Mpu6050Emulator& e) {
+            return std::string(e.dmp_status());
+        })
+        .def_property_readonly("dmp_progress", [](const Mpu6050Emulator& e) {
+            const Mpu6050Emulator::DmpProgress& p = e.dmp_progress();
+            return py::make_tuple(p.image_bytes, p.config_entries, p.updates);
+        }, "(image bytes, configuration entries, updates) applied in order since the last reset")
+        .def_property_readonly("dmp_config_entries", &Mpu6050Emulator::dmp_config_entries)
+        .def("set_stuck_memory_byte", &Mpu6050Emulator::set_stuck_memory_byte, py::arg("address"))
         .def("set_present", &Mpu6050Emulator::set_present)
         .def("set_silent", &Mpu6050Emulator::set_silent)
         .def("power_on_reset", &Mpu6050Emulator::power_on_reset)
@@ -387,7 +435,9 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("raw_fifo_enabled", &Mpu6050Emulator::raw_fifo_enabled);
 
     py::class_<DriverHolder>(m, "Mpu6050")
-        .def(py::init(&make_driver), py::arg("dmp_image") = py::bytes(), py::arg("dmp_rate_div") = 0)
+        .def(py::init(&make_driver), py::arg("dmp_image") = py::bytes(),
+             py::arg("dmp_config") = py::bytes(), py::arg("dmp_updates") = py::bytes(),
+             py::arg("dmp_rate_div") = 0)
         .def("init", [](DriverHolder& h, Mpu6050Emulator& bus) { return h.driver.init(bus, h.clock); })
         .def("poll", [](DriverHolder& h, Mpu6050Emulator& bus) -> py::object {
             ImuSample s;
@@ -397,6 +447,7 @@ PYBIND11_MODULE(_firmware, m) {
         .def("probe", [](DriverHolder& h, Mpu6050Emulator& bus) { return h.driver.probe(bus); })
         .def_property_readonly("sample_rate_hz", [](const DriverHolder& h) { return h.driver.sample_rate_hz(); })
         .def_property_readonly("mode", [](const DriverHolder& h) { return h.driver.mode(); })
+        .def_property_readonly("dmp_failure", [](const DriverHolder& h) { return h.driver.dmp_failure(); })
         .def_property_readonly("packet_size", [](const DriverHolder& h) { return h.driver.packet_size(); })
         .def_property_readonly("counters", [](const DriverHolder& h) { return h.driver.counters(); })
         .def_static("parse_dmp_packet", [](const py::bytes& data) -> py::object {

@@ -43,20 +43,42 @@ Quat dmp_to_frd(const Quat& q) { return normalise(Quat{q.w, q.x, -q.y, -q.z}); }
 
 Vec3 chip_to_frd(const Vec3& v) { return Vec3{v.x, -v.y, -v.z}; }
 
-void ComplementaryFilter::update(const Vec3& gyro, const Vec3& accel, float dt_s) {
+namespace {
+constexpr float kStandardGravity = 9.80665f;
+// 1 at x = 0, falling linearly to 0 at x = limit (and 0 beyond); a limit <= 0 disables it.
+float ramp_down(float x, float limit) {
+    if (!(limit > 0.0f)) return 1.0f;
+    const float w = 1.0f - x / limit;
+    return w > 0.0f ? w : 0.0f;
+}
+}  // namespace
+
+void ComplementaryFilter::update(const Vec3& gyro, const Vec3& accel, float dt_s, bool in_flight) {
     Vec3 w = gyro;
+    weight_ = 0.0f;
     const float an = std::sqrt(accel.x * accel.x + accel.y * accel.y + accel.z * accel.z);
     if (an > 1e-3f) {
-        // Measured "down" in body axes: at rest the specific force points up, so down = -a.
-        const Vec3 dm{-accel.x / an, -accel.y / an, -accel.z / an};
         // Estimated down: third row of the body->NED rotation, i.e. R^T [0 0 1].
         const Quat& q = q_;
         const Vec3 de{2.0f * (q.x * q.z - q.w * q.y), 2.0f * (q.y * q.z + q.w * q.x),
                       q.w * q.w - q.x * q.x - q.y * q.y + q.z * q.z};
-        // Rotate the estimate toward the measurement: e = dm x de.
-        w.x += kp_ * (dm.y * de.z - dm.z * de.y);
-        w.y += kp_ * (dm.z * de.x - dm.x * de.z);
-        w.z += kp_ * (dm.x * de.y - dm.y * de.x);
+        const float rate = std::sqrt(gyro.x * gyro.x + gyro.y * gyro.y + gyro.z * gyro.z);
+        float weight = ramp_down(std::fabs(an / kStandardGravity - 1.0f), config_.accel_band_g) *
+                       ramp_down(rate, config_.rate_limit_rad_s);
+        if (in_flight) {
+            const float cos_tilt = de.z > 1.0f ? 1.0f : (de.z < -1.0f ? -1.0f : de.z);
+            weight *= ramp_down(std::acos(cos_tilt), config_.tilt_limit_rad);
+        }
+        weight_ = weight;
+        const float k = (in_flight ? config_.kp_flight : config_.kp_ground) * weight;
+        if (k > 0.0f) {
+            // Measured "down" in body axes: at rest the specific force points up, so down = -a.
+            const Vec3 dm{-accel.x / an, -accel.y / an, -accel.z / an};
+            // Rotate the estimate toward the measurement: e = dm x de.
+            w.x += k * (dm.y * de.z - dm.z * de.y);
+            w.y += k * (dm.z * de.x - dm.x * de.z);
+            w.z += k * (dm.x * de.y - dm.y * de.x);
+        }
     }
     const Quat dq = multiply(q_, Quat{0.0f, w.x, w.y, w.z});
     q_ = normalise(Quat{q_.w + 0.5f * dt_s * dq.w, q_.x + 0.5f * dt_s * dq.x,

@@ -65,6 +65,19 @@ constexpr size_t kStatusTextLen = 50;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
+// Why the DMP set-up fell back to the raw path (STATUSTEXT, at most 50 characters).
+const char* dmp_failure_text(DmpStep step) {
+    switch (step) {
+        case DmpStep::Tables: return "IMU: DMP tables missing or bad; raw FIFO path";
+        case DmpStep::Image: return "IMU: DMP image did not verify; raw FIFO path";
+        case DmpStep::Config: return "IMU: DMP config did not verify; raw FIFO path";
+        case DmpStep::Registers: return "IMU: DMP set-up bus error; raw FIFO path";
+        case DmpStep::Updates: return "IMU: DMP updates did not verify; raw FIFO path";
+        case DmpStep::None: break;
+    }
+    return "IMU: DMP set-up failed; raw FIFO path";
+}
+
 bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
 }  // namespace
@@ -72,14 +85,14 @@ bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) &&
 FlightController::FlightController(const FlightControllerConfig& config, I2cBus& i2c,
                                    Clock& clock, SerialPort& telemetry, MotorOutputs& motors)
     : config_(config), i2c_(i2c), clock_(clock), telemetry_(telemetry), motors_(motors),
-      imu_(config.imu), cascade_(config.gains), mixer_(config.geometry),
+      imu_(config.imu), filter_(config.attitude_filter), cascade_(config.gains), mixer_(config.geometry),
       supervisor_(config.safety, config.loop_rate_hz) {}
 
 InitResult FlightController::init() {
     motors_.disarm();
     const InitResult r = imu_.init(i2c_, clock_);
     if (r == InitResult::OkRawFallback) {
-        send_statustext(MAV_SEVERITY_WARNING, "IMU: DMP image did not verify; raw FIFO path");
+        send_statustext(MAV_SEVERITY_WARNING, dmp_failure_text(imu_.dmp_failure()));
     } else if (r == InitResult::NoDevice || r == InitResult::BusError) {
         send_statustext(MAV_SEVERITY_CRITICAL, "IMU: MPU6050 not found");
     }
@@ -126,7 +139,8 @@ bool FlightController::read_imu(float dt_s) {
     if (s.has_attitude) {
         state_.attitude = to_euler(s.attitude);
     } else {
-        filter_.update(s.gyro_rad_s, s.accel_m_s2, dt_s);
+        // Armed is in flight as far as the filter knows: the low gain and the tilt weight.
+        filter_.update(s.gyro_rad_s, s.accel_m_s2, dt_s, supervisor_.armed());
         state_.attitude = to_euler(filter_.quaternion());
     }
     state_.rate = s.gyro_rad_s;
@@ -141,7 +155,7 @@ void FlightController::recover_imu(uint64_t now_us) {
         return;
     }
     // Disarmed: the motors are off, so the loop may stop for the start-up waits and the
-    // DMP upload (about 0.2 s on the board).
+    // whole MotionApps DMP set-up, done again as at boot (about 0.3 s on the board).
     const InitResult r = imu_.init(i2c_, clock_);
     const bool ok = r == InitResult::OkDmp || r == InitResult::OkRaw;
     supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));   // its path's rate

@@ -36,6 +36,7 @@ struct FlightControllerConfig {
     CascadeGains gains = CascadeGains::paper_defaults();
     MixerGeometry geometry{};
     Mpu6050Config imu{};
+    AttitudeFilterConfig attitude_filter{};   // the raw path's ComplementaryFilter
     uint8_t system_id = 1;
     uint8_t component_id = 1;            // MAV_COMP_ID_AUTOPILOT1
     // The rules' bounds. imu_timeout_us is replaced at init() by imu_timeout_for() of the

@@ -94,8 +94,8 @@ struct SafetyLimits {
     // No fresh IMU sample for this long: the rate loop is flying blind. Set from the IMU's
     // rate with imu_timeout_for(); 25 ms is five samples at 200 Hz.
     uint32_t imu_timeout_us = 25000;
-    // How often a stale IMU is probed and re-initialised while disarmed (the DMP upload
-    // blocks the loop for about 0.2 s on the board).
+    // How often a stale IMU is probed and re-initialised while disarmed (the DMP set-up
+    // blocks the loop for about 0.3 s on the board).
     uint32_t imu_retry_us = 1000000;
     // Abort limits of an excitation (80 deg, 400 deg/s): the rigs' safe swing and the
     // gyro's comfortable range (it saturates at 2000 deg/s).

@@ -13,7 +13,33 @@
 
 #include <heliquad/mavlink.h>
 
+#include "../core/mpu6050.hpp"
+#include "../targets/host/mpu6050_emulator.hpp"
+
 namespace hqfuzz {
+
+// A made-up DMP firmware of MotionApps 2.0's shape (the real one is InvenSense's and not in
+// the repository): a short image, a configuration table with the special entry and the FIFO
+// rate entry, and seven updates. Enough for the driver's DMP set-up and the emulator's check.
+constexpr uint8_t kSmallDmpImage[16] = {9, 8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6};
+constexpr uint8_t kSmallDmpConfig[] = {0, 0x40, 2, 0xA1, 0xA2,  0, 0, 0, 0x01,
+                                       1, 0x10, 3, 5, 6, 7,     2, 0x16, 2, 0x00, 0x09};
+constexpr uint8_t kSmallDmpUpdates[] = {1, 0x20, 1, 1,  1, 0x21, 1, 2,  1, 0x22, 1, 3,
+                                        1, 0x23, 1, 4,  1, 0x24, 1, 5,  1, 0x25, 1, 6,
+                                        1, 0x26, 1, 7};
+
+// Points the driver's configuration at the made-up DMP firmware and loads the emulated chip
+// with the same reference.
+inline void use_small_dmp(hq::Mpu6050Config& imu, hq::Mpu6050Emulator& chip) {
+    imu.dmp_image = kSmallDmpImage;
+    imu.dmp_image_size = sizeof kSmallDmpImage;
+    imu.dmp_config = kSmallDmpConfig;
+    imu.dmp_config_size = sizeof kSmallDmpConfig;
+    imu.dmp_updates = kSmallDmpUpdates;
+    imu.dmp_updates_size = sizeof kSmallDmpUpdates;
+    chip.set_dmp_reference(imu.dmp_image, imu.dmp_image_size, imu.dmp_config,
+                           imu.dmp_config_size, imu.dmp_updates, imu.dmp_updates_size);
+}
 
 // The fuzz input as a stream of choices; reads past the end give zeros.
 class Reader {

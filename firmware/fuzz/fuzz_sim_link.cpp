@@ -75,7 +75,6 @@ private:
 
 constexpr int kMaxFrames = 48;             // per input: keeps executions fast
 constexpr uint64_t kLoopUs = 5000;
-constexpr uint8_t kSmallDmpImage[16] = {9, 8, 7, 6, 5, 4, 3, 2, 1, 0, 1, 2, 3, 4, 5, 6};
 
 }  // namespace
 
@@ -87,8 +86,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     NoTelemetry telemetry;
     hq::FlightControllerConfig cfg;
     if (in.u8() & 1) {
-        cfg.imu.dmp_image = kSmallDmpImage;
-        cfg.imu.dmp_image_size = sizeof kSmallDmpImage;
+        hqfuzz::use_small_dmp(cfg.imu, chip);
     }
     hq::FlightController fc(cfg, chip, clock, telemetry, motors);
     fc.init();

@@ -45,9 +45,6 @@ private:
 
 constexpr uint64_t kLoopUs = 5000;
 constexpr int kMaxLoops = 48;              // per input: keeps executions fast
-constexpr uint8_t kSmallDmpImage[32] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16,
-                                        17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30,
-                                        31, 32};
 
 void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
     const float* m = motors.values();
@@ -107,8 +104,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     FuzzSerial telemetry;
     hq::FlightControllerConfig cfg;
     if (in.u8() & 1) {
-        cfg.imu.dmp_image = kSmallDmpImage;
-        cfg.imu.dmp_image_size = sizeof kSmallDmpImage;
+        hqfuzz::use_small_dmp(cfg.imu, chip);
     }
     hq::FlightController fc(cfg, chip, clock, telemetry, motors);
     fc.init();

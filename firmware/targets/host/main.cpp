@@ -3,8 +3,9 @@
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
 //                    [--idle-timeout-s 10]
 //
-// DMP image: --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the
-// raw FIFO path).
+// DMP firmware (the MotionApps image and its tables, a file made with `heliquad dmp-image`):
+// --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the raw FIFO
+// path). A bad file, or a bare image of the old format, is refused with one line (exit 2).
 //
 // Creates two pseudo-terminals and publishes their slave devices as PATH symlinks:
 //   sim link:  HQ_SENSOR_FRAME in (time, frame counter, MPU6050 FIFO bytes, RC), exactly one
@@ -104,12 +105,11 @@ int main(int argc, char** argv) {
     std::signal(SIGTERM, on_signal);
     std::signal(SIGPIPE, SIG_IGN);
 
-    std::vector<uint8_t> image;
+    std::vector<uint8_t> dmp_file;             // the DMP firmware file (heliquad dmp-image)
     if (!opt.dmp_image.empty()) {
         std::ifstream f(opt.dmp_image, std::ios::binary);
         if (!f) usage(("cannot read DMP image " + opt.dmp_image).c_str());
-        image.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-        if (image.empty() || image.size() > 4096) usage("DMP image must be 1..4096 bytes");
+        dmp_file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
     }
 
     static hq::PtySerial sim, telemetry;        // 64 KiB buffers each: not on the stack
@@ -121,13 +121,16 @@ int main(int argc, char** argv) {
     static hq::Mpu6050Emulator chip;
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = opt.loop_hz;
-    if (!image.empty()) {                      // --dmp-image wins over a built-in image
-        cfg.imu.dmp_image = image.data();
-        cfg.imu.dmp_image_size = static_cast<uint16_t>(image.size());
-    } else if (hq::kDmpImageSize > 0) {
-        cfg.imu.dmp_image = hq::kDmpImage;
-        cfg.imu.dmp_image_size = hq::kDmpImageSize;
+    if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image
+        if (const char* bad = hq::use_dmp_file(dmp_file.data(), dmp_file.size(), cfg.imu)) {
+            usage((opt.dmp_image + ": " + bad).c_str());
+        }
+    } else {
+        hq::use_built_in_dmp(cfg.imu);
     }
+    // The emulated chip runs the DMP firmware the driver was given (docs/mpu6050.md).
+    chip.set_dmp_reference(cfg.imu.dmp_image, cfg.imu.dmp_image_size, cfg.imu.dmp_config,
+                           cfg.imu.dmp_config_size, cfg.imu.dmp_updates, cfg.imu.dmp_updates_size);
     hq::HostI2cBus bus;
     bus.attach(hq::mpu6050::kAddress, chip);
     hq::FlightController fc(cfg, bus, clock, telemetry, motors);

@@ -60,10 +60,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
 
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
-    if (hq::kDmpImageSize > 0) {
-        cfg.imu.dmp_image = hq::kDmpImage;
-        cfg.imu.dmp_image_size = hq::kDmpImageSize;
-    }
+    hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
     const hq::InitResult init = fc.init();
 
