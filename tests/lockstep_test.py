@@ -217,7 +217,7 @@ def test_free_running_board_streams_telemetry_in_real_time(tmp_path):
         link.close()
     finally:
         proc.send_signal(signal.SIGINT)             # Ctrl-C: the board stops cleanly
-        proc.wait(timeout=10)
+        proc.wait(timeout=120)                      # a bound on a hang: a loaded machine is slow
     assert len(samples) >= 400, "the board did not stream"
     seqs = [m.seq for _, m in samples]
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))

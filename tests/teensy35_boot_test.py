@@ -921,3 +921,25 @@ def test_image_runs_the_motionapps_sequence_on_the_emulated_chip(dmp_image_elf):
     entries = len(table_entries(firmware.config, specials=True))
     updates = len(table_entries(firmware.updates, specials=False))
     assert emu.dmp_progress == (len(firmware.image), entries, updates)
+
+
+def test_watchdog_resets_the_chip_when_the_loop_stops_running():
+    """The loop feeds the watchdog every tick. If the loop stops (here: its tick stops, as a
+    hang would stop it), the chip resets about 250 ms after the last refresh, so the ESC
+    pins fall back to inputs instead of holding the last command."""
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    assert board.run_to_loop(3, instructions=BOOT_BUDGET).reason == "loop"
+    board.run(seconds=0.1)                      # 20 more loops: no reset while it runs
+    m, wdog = board.machine, board.chip.wdog
+    refreshes = [entry for entry in wdog.log if entry[2] == "REFRESH"]
+    assert refreshes, "the loop refreshes the watchdog"
+    # The tick stops, as if the CPU wrote SYST_CSR = 0: the loop sleeps in WFI for good.
+    m._mmio_write(registers.peripheral("SysTick").address("CSR"), 4, 0)
+    with pytest.raises(ChipReset) as info:
+        board.run(seconds=1.0)
+    assert info.value.source == "WDOG"
+    last_refresh_cycle = [entry for entry in wdog.log if entry[2] == "REFRESH"][-1][1]
+    waited = m.seconds(m.now() - last_refresh_cycle)
+    assert 0.245 <= waited <= 0.26, waited
