@@ -196,8 +196,11 @@ def test_free_running_board_streams_telemetry_in_real_time(tmp_path):
     from heliquad.host.link import TelemetryLink
 
     port = tmp_path / "rig"
+    # SIGINT back to its default in the child: a shell that ran the tests in the background
+    # hands SIGINT down ignored, and then Python would never see the Ctrl-C sent below.
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                             str(port), "--duration-s", "30"], stdout=subprocess.PIPE, text=True)
+                             str(port), "--duration-s", "30"], stdout=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert "board running" in proc.stdout.readline()
         link = TelemetryLink(str(port))

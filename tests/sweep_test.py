@@ -168,7 +168,10 @@ def test_ctrl_c_leaves_a_valid_log_and_manifest(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
                              "--sil", "--ideal-sensor", "--freqs-hz", "0.05", "0.06", "0.07",
                              "--cycles", "10", "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            # SIGINT back to its default: a shell that ran the tests in the
+                            # background hands it down ignored, and the Ctrl-C would be lost.
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     tlog = out / "sweep.tlog"
     deadline = time.monotonic() + 30
     while not (tlog.exists() and tlog.stat().st_size > 0) and time.monotonic() < deadline:

@@ -3,30 +3,23 @@
 Everything on the MK64F12's peripheral bus, and the parts of the Cortex-M4 system control
 space the SVD describes (SCB, SysTick, NVIC, FPU control), comes from ``regmap.py``, which is
 generated from NXP's SVD (``svd.py``; checked against the SVD by the tests). The two core
-blocks the SVD leaves out are below, from the ARMv7-M Architecture Reference Manual
-(C1.8 DWT, C1.6 debug registers): :data:`CORE_EXTRA`.
+blocks the SVD leaves out (DWT, CoreDebug) are described in ``armv7m_debug.svd``, written from
+the ARMv7-M Architecture Reference Manual, which the firmware's register generator reads too:
+:data:`CORE_EXTRA`.
 """
 
 from __future__ import annotations
 
+import pathlib
 from dataclasses import dataclass
 from functools import lru_cache
 
-from . import regmap
+from . import regmap, svd
 
-# ARMv7-M ARM, C1.8.7 (DWT_CTRL, DWT_CYCCNT) and C1.6.5 (DEMCR). DWT_CTRL's reset value
-# holds NUMCOMP = 4, the number of comparators the Cortex-M4 implements.
-CORE_EXTRA = {
-    "DWT": (0xE0001000, {
-        "CTRL": (0x0000, 32, 0x40000000, {"CYCCNTENA": (0, 1), "NOCYCCNT": (25, 1),
-                                          "NUMCOMP": (28, 4)}),
-        "CYCCNT": (0x0004, 32, 0x0, {"CYCCNT": (0, 32)}),
-    }),
-    "CoreDebug": (0xE000EDF0, {
-        "DHCSR": (0x0000, 32, 0x0, {"C_DEBUGEN": (0, 1)}),
-        "DEMCR": (0x000C, 32, 0x0, {"VC_CORERESET": (0, 1), "TRCENA": (24, 1)}),
-    }),
-}
+# The two core blocks the SVD leaves out, from armv7m_debug.svd (written from the ARMv7-M
+# ARM: C1.8.7 DWT_CTRL, C1.8.8 DWT_CYCCNT, C1.6.5 DEMCR), read by the same SVD reader.
+CORE_EXTRA_SVD = pathlib.Path(__file__).with_name("armv7m_debug.svd")
+CORE_EXTRA = svd.parse(CORE_EXTRA_SVD.read_bytes(), ("DWT", "CoreDebug"))
 
 
 @dataclass(frozen=True)

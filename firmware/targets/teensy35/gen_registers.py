@@ -4,7 +4,7 @@
 No peripheral address in the Teensy 3.5 backends is typed by hand: every register the target
 uses is emitted here from NXP's CMSIS-SVD description of the MK64F12 family (the MK64FX512 on
 the Teensy 3.5 is one of them), plus the few ARMv7-M debug registers the SVD leaves out
-(armv7m_debug.svd beside this script, written from the ARMv7-M Architecture Reference Manual).
+(sim/mk64/armv7m_debug.svd, written from the ARMv7-M Architecture Reference Manual).
 
 Where the SVD comes from: the PyPI wheel of pyocd ships it as
 pyocd/debug/svd/svd_data.zip -> MK64F12.svd (BSD-3-Clause; its licence text is copied into
@@ -23,7 +23,7 @@ The SVD is read by sim/mk64/svd.py, the same reader the emulated MK64FX512 uses 
 register tables, so the firmware and its emulator cannot disagree on an address.
 
 What is emitted, per register: a struct deriving from Reg<T, address> (read/write/set/clear
-of the volatile register), with its RESET_VALUE (SVD peripherals), one constant per single-bit field (its mask) and, per
+of the volatile register), with its RESET_VALUE, one constant per single-bit field (its mask) and, per
 multi-bit field, NAME_SHIFT, NAME_MASK and NAME(value) placing a value in the field.
 Register arrays (C%sSC, PCR%s, ...) are expanded (C0SC..C7SC). IRQ numbers go into
 namespace irq.
@@ -41,7 +41,7 @@ import xml.etree.ElementTree as ET
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
 DEFAULT_OUT = HERE / "mk64f12.hpp"
-SUPPLEMENT = HERE / "armv7m_debug.svd"
+SUPPLEMENT = ROOT / "sim" / "mk64" / "armv7m_debug.svd"
 
 # The peripherals the Teensy 3.5 backends use (and the flash configuration field's layout).
 PERIPHERALS = (
@@ -118,8 +118,7 @@ def generate(svd: bytes, supplement: bytes | None = None) -> str:
                 raise SvdError(f"{pname}.{rname}: register size {size}")
             rid = _ident(rname)
             body = []
-            if pname not in SUPPLEMENT_PERIPHERALS:     # (the supplement gives no resets)
-                body.append(f"    static constexpr {ctype} RESET_VALUE = 0x{reset:X}u;")
+            body.append(f"    static constexpr {ctype} RESET_VALUE = 0x{reset:X}u;")
             for fname, (off, width) in fields.items():
                 fid = _ident(fname)
                 if fid == rid:

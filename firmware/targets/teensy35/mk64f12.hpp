@@ -4781,9 +4781,12 @@ struct MR : Reg<uint8_t, 0x4007F007u> {
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
 struct DHCSR : Reg<uint32_t, 0xE000EDF0u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
     static constexpr uint32_t C_DEBUGEN = 0x1u;
 };
 struct DEMCR : Reg<uint32_t, 0xE000EDFCu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t VC_CORERESET = 0x1u;
     static constexpr uint32_t TRCENA = 0x1000000u;
 };
 }  // namespace CoreDebug
@@ -4791,10 +4794,19 @@ struct DEMCR : Reg<uint32_t, 0xE000EDFCu> {
 namespace DWT {
 constexpr uint32_t BASE = 0xE0001000u;
 struct CTRL : Reg<uint32_t, 0xE0001000u> {
+    static constexpr uint32_t RESET_VALUE = 0x40000000u;
     static constexpr uint32_t CYCCNTENA = 0x1u;
     static constexpr uint32_t NOCYCCNT = 0x2000000u;
+    static constexpr uint32_t NUMCOMP_SHIFT = 28;
+    static constexpr uint32_t NUMCOMP_MASK = 0xF0000000u;
+    static constexpr uint32_t NUMCOMP(uint32_t v) { return static_cast<uint32_t>((v << 28) & 0xF0000000u); }
 };
-struct CYCCNT : Reg<uint32_t, 0xE0001004u> {};
+struct CYCCNT : Reg<uint32_t, 0xE0001004u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CYCCNT__SHIFT = 0;
+    static constexpr uint32_t CYCCNT__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CYCCNT_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
 }  // namespace DWT
 
 // Interrupt numbers (vector = 16 + IRQ).
