@@ -1,6 +1,8 @@
 // Host backend of the HAL motor outputs (hal/motors.hpp).
 #pragma once
 
+#include <cmath>
+
 #include "../../hal/motors.hpp"
 
 namespace hq {
@@ -11,7 +13,7 @@ public:
     void set(const float thrust_fraction[5]) override {
         for (int i = 0; i < 5; ++i) {
             const float f = thrust_fraction[i];
-            value_[i] = f > 0.0f ? (f < 1.0f ? f : 1.0f) : 0.0f;     // NaN -> 0
+            value_[i] = std::isfinite(f) && f > 0.0f ? (f < 1.0f ? f : 1.0f) : 0.0f;  // NaN, inf: 0
         }
     }
     void disarm() override {

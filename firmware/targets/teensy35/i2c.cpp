@@ -42,10 +42,15 @@ void I2c0Bus::begin() {
     mux_i2c();
 }
 
+// Both waits test the flag once more after the time is up: an interrupt that held the CPU
+// past the timeout must not turn a finished byte into a bus recovery mid-transfer.
 bool I2c0Bus::wait_byte() {
     const uint32_t t0 = cycles32();
     while (!(I2C0::S::read() & I2C0::S::IICIF)) {
-        if (expired(t0, kByteTimeoutUs)) return false;
+        if (expired(t0, kByteTimeoutUs)) {
+            if (!(I2C0::S::read() & I2C0::S::IICIF)) return false;
+            break;
+        }
     }
     I2C0::S::write(I2C0::S::IICIF);          // write-one-to-clear
     return true;
@@ -54,7 +59,7 @@ bool I2c0Bus::wait_byte() {
 bool I2c0Bus::wait_idle() {
     const uint32_t t0 = cycles32();
     while (I2C0::S::read() & I2C0::S::BUSY) {
-        if (expired(t0, kByteTimeoutUs)) return false;
+        if (expired(t0, kByteTimeoutUs)) return !(I2C0::S::read() & I2C0::S::BUSY);
     }
     return true;
 }
@@ -91,7 +96,8 @@ bool I2c0Bus::fail(Result r) {
         stop();
         return false;
     }
-    ++timeouts_;
+    if (r == Result::Lost) ++arbitration_lost_;
+    else ++timeouts_;
     I2C0::C1::write(I2C0::C1::IICEN);
     recover();
     return false;
@@ -121,6 +127,7 @@ void I2c0Bus::recover() {
     clock.delay_us(5);
     GPIOB::PDDR::clear(kSclBit | kSdaBit);
     I2C0::C1::write(I2C0::C1::IICEN);
+    I2C0::S::write(I2C0::S::IICIF | I2C0::S::ARBL);   // no stale flag for the next transfer
     mux_i2c();
 }
 

@@ -28,6 +28,7 @@ public:
     uint32_t timeouts() const { return timeouts_; }
     uint32_t nacks() const { return nacks_; }
     uint32_t recoveries() const { return recoveries_; }
+    uint32_t arbitration_lost() const { return arbitration_lost_; }
 
 private:
     enum class Result : uint8_t { Ok, Nack, Timeout, Lost };
@@ -40,7 +41,7 @@ private:
     void recover();
     void mux_i2c();
 
-    uint32_t timeouts_ = 0, nacks_ = 0, recoveries_ = 0;
+    uint32_t timeouts_ = 0, nacks_ = 0, recoveries_ = 0, arbitration_lost_ = 0;
 };
 
 }  // namespace hq::teensy

@@ -71,7 +71,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         timer.wait();
         Watchdog::refresh();
         const uint32_t c0 = cycles32();
-        fc.step(rc.read(clock.micros()));
+        fc.step(rc.read());
         fc.record_loop(cycles32() - c0, timer.overruns());
         led_update(clock.micros(), led_pattern(fc, init));
     }

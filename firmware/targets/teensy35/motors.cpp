@@ -1,5 +1,7 @@
 #include "motors.hpp"
 
+#include <cmath>
+
 #include "mk64f12.hpp"
 
 namespace hq::teensy {
@@ -56,7 +58,7 @@ void Ftm0Motors::write(int i, uint16_t us) {
 void Ftm0Motors::set(const float thrust_fraction[5]) {
     for (int i = 0; i < 5; ++i) {
         float f = thrust_fraction[i];
-        if (!(f > 0.0f)) f = 0.0f;              // also NaN
+        if (!std::isfinite(f) || !(f > 0.0f)) f = 0.0f;     // NaN and infinities: stop
         if (f > 1.0f) f = 1.0f;
         const float span = static_cast<float>(cal_.max_us[i] - cal_.min_us[i]);
         write(i, static_cast<uint16_t>(cal_.min_us[i] + static_cast<uint16_t>(f * span + 0.5f)));
@@ -69,8 +71,13 @@ void Ftm0Motors::disarm() {
 
 void motors_emergency_stop() {
     if (!(SIM::SCGC6::read() & SIM::SCGC6::FTM0)) return;     // never started: pins undriven
+    // The stop pulses come from RAM, which a fault may have corrupted: never more than a
+    // plausible stop pulse (1100 us), never nothing.
+    constexpr uint32_t kMaxStop = 1100 * Ftm0Motors::kCountsPerUs;
+    constexpr uint32_t kDefaultStop = 1000 * Ftm0Motors::kCountsPerUs;
     for (int i = 0; i < 5; ++i) {
-        if (g_stop_counts[i] != 0) channel_value(i) = g_stop_counts[i];
+        const uint32_t c = g_stop_counts[i];
+        channel_value(i) = (c != 0 && c <= kMaxStop) ? c : kDefaultStop;
     }
 }
 

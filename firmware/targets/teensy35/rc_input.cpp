@@ -48,38 +48,43 @@ void Ftm3RcInput::begin() {
         channel_control(i) = FTM3::C0SC::ELSA | FTM3::C0SC::ELSB | FTM3::C0SC::CHIE;
     }
     FTM3::SC::write(FTM3::SC::CLKS(1) | FTM3::SC::PS(5));          // bus / 32
-    // ALT4 = FTM3 on PTD0-3, ALT3 = FTM3 on PTC8-9; inputs with the digital filter off.
-    const uint32_t d = PORTD::PCR0::MUX(4);
+    // ALT4 = FTM3 on PTD0-3, ALT3 = FTM3 on PTC8-9; inputs with a pull-down, so a missing or
+    // broken receiver lead reads a steady low (no pulses: no signal) instead of floating
+    // into noise on the highest-priority interrupt.
+    const uint32_t d = PORTD::PCR0::MUX(4) | PORTD::PCR0::PE;     // PS = 0: pull-down
     PORTD::PCR0::write(d);
     PORTD::PCR1::write(d);
     PORTD::PCR2::write(d);
     PORTD::PCR3::write(d);
-    PORTC::PCR8::write(PORTC::PCR8::MUX(3));
-    PORTC::PCR9::write(PORTC::PCR9::MUX(3));
+    PORTC::PCR8::write(PORTC::PCR8::MUX(3) | PORTC::PCR8::PE);
+    PORTC::PCR9::write(PORTC::PCR9::MUX(3) | PORTC::PCR9::PE);
     nvic_enable(irq::FTM3, 4);
 }
 
-RcInput Ftm3RcInput::read(uint64_t now_us) const {
+RcInput Ftm3RcInput::read() const {
     Captures c;
+    uint64_t now_cycles;
     {
         IrqGuard guard;
         c = g_cap;
+        now_cycles = cycles64();    // taken with the snapshot: no capture can be newer than now
     }
     RcInput in;
     const uint64_t per_us = core_hz() / 1000000u;
+    const uint64_t now_us = now_cycles / per_us;
     uint64_t oldest_stick_us = 0;
     bool sticks_live = true;
     for (int i = 0; i < kN; ++i) {
         const uint64_t t_us = c.when_cycles[i] / per_us;
-        const bool fresh = c.valid[i] && now_us >= t_us && now_us - t_us <= kChannelTimeoutUs;
+        const bool fresh = c.valid[i] && (t_us >= now_us || now_us - t_us <= kChannelTimeoutUs);
         in.channel_us[i] = fresh ? c.pulse_us[i] : 0;
         if (i < 4) {
             if (!c.valid[i]) sticks_live = false;
             else if (i == 0 || t_us < oldest_stick_us) oldest_stick_us = t_us;
         }
     }
-    if (sticks_live && now_us >= oldest_stick_us) {
-        const uint64_t age = now_us - oldest_stick_us;
+    if (sticks_live) {
+        const uint64_t age = now_us > oldest_stick_us ? now_us - oldest_stick_us : 0;
         in.age_us = age > 0xFFFFFFFEu ? 0xFFFFFFFEu : static_cast<uint32_t>(age);
     }
     return in;

@@ -25,8 +25,9 @@ public:
     static constexpr uint16_t kMinPulseUs = 800, kMaxPulseUs = 2200;
 
     void begin();
-    // The channels as of now (now_us from the same clock as TeensyClock::micros()).
-    RcInput read(uint64_t now_us) const;
+    // The channels as of now. The time is taken together with the captures, so a pulse that
+    // ends during the call can never look newer than "now" (and read as no signal).
+    RcInput read() const;
     uint32_t rejected() const;
 };
 

@@ -1,5 +1,7 @@
 #include "serial.hpp"
 
+#include <atomic>
+
 #include "clock.hpp"
 #include "cpu.hpp"
 #include "mk64f12.hpp"
@@ -13,7 +15,9 @@ namespace {
 constexpr uint8_t kHwFifo = 8;          // UART0's TX and RX FIFOs hold 8 bytes
 
 // Single producer, single consumer: main writes tx_head and reads rx_tail, the interrupt
-// the other two. Indices run freely; masks pick the slot.
+// the other two. Indices run freely; masks pick the slot. The buffers themselves are not
+// volatile, so signal fences order them against the index that publishes them (release
+// before a producer's index store, acquire after a consumer's index load).
 struct Rings {
     uint8_t tx[Uart0Serial::kTxRing];
     uint8_t rx[Uart0Serial::kRxRing];
@@ -68,6 +72,7 @@ size_t Uart0Serial::write(const uint8_t* data, size_t n) {
     const uint32_t used = head - g_uart.tx_tail;
     if (n > kTxRing - used) return 0;                   // refused whole
     for (size_t i = 0; i < n; ++i) g_uart.tx[(head + i) & (kTxRing - 1)] = data[i];
+    std::atomic_signal_fence(std::memory_order_release);
     g_uart.tx_head = head + static_cast<uint32_t>(n);
     IrqGuard guard;
     UART0::C2::set(UART0::C2::TIE);
@@ -77,8 +82,10 @@ size_t Uart0Serial::write(const uint8_t* data, size_t n) {
 size_t Uart0Serial::read(uint8_t* data, size_t n) {
     uint32_t tail = g_uart.rx_tail;
     const uint32_t head = g_uart.rx_head;
+    std::atomic_signal_fence(std::memory_order_acquire);
     size_t got = 0;
     while (got < n && tail != head) data[got++] = g_uart.rx[tail++ & (kRxRing - 1)];
+    std::atomic_signal_fence(std::memory_order_release);
     g_uart.rx_tail = tail;
     return got;
 }
@@ -86,29 +93,60 @@ size_t Uart0Serial::read(uint8_t* data, size_t n) {
 uint32_t Uart0Serial::rx_overruns() const { return g_uart.rx_overruns; }
 size_t Uart0Serial::tx_pending() const { return g_uart.tx_head - g_uart.tx_tail; }
 
+
+namespace {
+// Reads a register for its side effect only (a flag clear); `(void)reg;` on a volatile
+// reference is not a read in C++.
+inline uint8_t touch(volatile uint8_t& reg) {
+    const uint8_t v = reg;
+    return v;
+}
+
+void push_rx(uint8_t b) {
+    const uint32_t head = g_uart.rx_head;
+    if (head - g_uart.rx_tail < Uart0Serial::kRxRing) {
+        g_uart.rx[head & (Uart0Serial::kRxRing - 1)] = b;
+        std::atomic_signal_fence(std::memory_order_release);
+        g_uart.rx_head = head + 1;
+    } else {
+        g_uart.rx_overruns = g_uart.rx_overruns + 1;
+    }
+}
+}  // namespace
+
 }  // namespace hq::teensy
 
+// UART0 status interrupt. RDRF and TDRE are latched flags: RDRF clears only when S1 is read
+// with it set and then D is read, TDRE only when S1 is read and then D is written, each with
+// the FIFO count moving past its watermark. So S1 is read right before the D access that
+// should clear the flag (the last read of a drain, every write of a top-up): reading S1 once
+// at entry and draining bytes that arrived later would leave RDRF set over an empty FIFO and
+// the interrupt firing back to back, starving the loop.
 extern "C" void UART0_RX_TX_IRQHandler() {
     using namespace hq::teensy;
     using namespace hq::mk64;
-    const uint8_t s1 = UART0::S1::read();      // reading S1 first arms the flag clears below
-    // Receive: drain the FIFO into the ring; a full ring drops the byte and counts it.
-    while (UART0::RCFIFO::read() > 0) {
-        const uint8_t b = UART0::D::read();
-        const uint32_t head = g_uart.rx_head;
-        if (head - g_uart.rx_tail < Uart0Serial::kRxRing) {
-            g_uart.rx[head & (Uart0Serial::kRxRing - 1)] = b;
-            g_uart.rx_head = head + 1;
-        } else {
-            g_uart.rx_overruns = g_uart.rx_overruns + 1;
-        }
+    // Receive: every byte the FIFO holds now, S1 read before the last one.
+    const uint8_t avail = UART0::RCFIFO::read();
+    if (avail > 0) {
+        for (uint8_t i = 1; i < avail; ++i) push_rx(UART0::D::read());
+        const uint8_t s1 = UART0::S1::read();
+        push_rx(UART0::D::read());
+        if (s1 & UART0::S1::OR) g_uart.rx_overruns = g_uart.rx_overruns + 1;
+    } else if (UART0::S1::read() & (UART0::S1::RDRF | UART0::S1::OR)) {
+        // A flag left set over an empty FIFO: a dummy read (it underflows the FIFO), then
+        // flush and clear the underflow, so the interrupt cannot fire again for nothing.
+        touch(UART0::D::ref());
+        UART0::CFIFO::write(UART0::CFIFO::RXFLUSH);
+        UART0::SFIFO::write(UART0::SFIFO::RXUF);
     }
-    if (s1 & UART0::S1::OR) g_uart.rx_overruns = g_uart.rx_overruns + 1;
-    // Transmit: top the FIFO up from the ring; with the ring empty, stop the interrupt.
+    // Transmit: top the FIFO up from the ring, S1 read before each write; with the ring
+    // empty, stop the interrupt.
     if (UART0::C2::read() & UART0::C2::TIE) {
         uint32_t tail = g_uart.tx_tail;
         const uint32_t head = g_uart.tx_head;
+        std::atomic_signal_fence(std::memory_order_acquire);
         while (tail != head && UART0::TCFIFO::read() < kHwFifo) {
+            touch(UART0::S1::ref());
             UART0::D::write(g_uart.tx[tail++ & (Uart0Serial::kTxRing - 1)]);
         }
         g_uart.tx_tail = tail;

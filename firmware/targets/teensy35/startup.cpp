@@ -1,9 +1,9 @@
 // Reset, the vector table and the flash configuration field of the Teensy 3.5 image.
 //
 // Reset_Handler, in order: the watchdog off (its unlock must come within a few cycles of
-// reset), the cycle counter on (the clock's timeouts count cycles), CP10/CP11 granted so the
-// FPU may be used (before any floating-point instruction: nothing before this point touches
-// a float), .data copied from flash, .bss zeroed, constructors run, then hq_teensy_main() (main.cpp), which never returns.
+// reset), CP10/CP11 granted so the FPU may be used (before any floating-point instruction:
+// nothing before this point touches a float), the cycle counter on (the clock's timeouts
+// count cycles), .data copied from flash, .bss zeroed, constructors run, then hq_teensy_main() (main.cpp), which never returns.
 //
 // The vector table is a constant built at compile time, placed at address 0 by the linker
 // script; every slot holds an extern "C" handler (a C++ name would leave the slot bound to

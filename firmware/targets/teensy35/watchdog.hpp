@@ -15,10 +15,11 @@ namespace hq::teensy {
 
 class Watchdog {
 public:
-    // 250 ms: ten times the IMU-stale bound, longer than the IMU re-initialisation's longest
-    // stretch between refreshes (the DMP upload, about 0.15 s), short enough that a hang
-    // cannot hold the last motor command for long.
-    static constexpr uint32_t kTimeoutMs = 250;
+    // 500 ms: longer than the IMU re-initialisation's longest stretch between refreshes (the
+    // DMP upload, read-back and configuration, about 0.2-0.3 s of I2C at 375 kHz, with margin
+    // for the low-power oscillator's tolerance), and still short: a hang holds the last motor
+    // command for at most half a second (ArduPilot's watchdog allows about two).
+    static constexpr uint32_t kTimeoutMs = 500;
 
     static void start(uint32_t timeout_ms);
     static void refresh();
