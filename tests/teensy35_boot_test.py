@@ -973,3 +973,31 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
         assert ack.result == mav_mod.MAV_RESULT_DENIED
         assert ack.result_param2 == mav_mod.HQ_REASON_NO_RC
     assert board.chip.uart0.overruns == 0
+
+
+def test_uart_rdrf_is_latched_as_on_the_chip():
+    """S1[RDRF] clears only on an S1 read that saw it followed by a D read that leaves the
+    FIFO below its watermark: draining two bytes after one S1 read (what the firmware's
+    first UART handler did) leaves it set over an empty FIFO, so the interrupt would fire
+    for ever; the firmware's handler reads S1 before the last byte."""
+    uart = Mk64().uart0
+    uart.v["C2"] |= 0x04                     # RE
+    uart.v["PFIFO"] = 0x88                   # both FIFOs on
+    uart.v["RWFIFO"] = 1
+
+    def arrive(*data):
+        for b in data:
+            uart._rx_queue.append(b)
+            uart._arrived()
+
+    arrive(1, 2)
+    uart.r_S1()
+    assert (uart.r_D(), uart.r_D()) == (1, 2)
+    assert uart.rdrf() and not uart.rx, "one S1 read, two D reads: RDRF stays set"
+    uart.r_S1()
+    uart.r_D()                               # the dummy read clears it, and underflows
+    assert not uart.rdrf() and uart.r_SFIFO() & 0x01
+    arrive(3, 4)
+    first = uart.r_D()
+    uart.r_S1()
+    assert (first, uart.r_D()) == (3, 4) and not uart.rdrf()

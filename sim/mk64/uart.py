@@ -11,8 +11,11 @@ Receiver/Transmitter" chapter.
   TWFIFO[TXWATER] bytes, S1[TC] when the FIFO and the shifter are empty. A write to a full
   FIFO is lost and sets SFIFO[TXOF].
 * Received bytes (:meth:`Uart.receive`) arrive one frame apart into the receive FIFO;
-  S1[RDRF] is set while it holds at least RWFIFO[RXWATER] bytes; a byte arriving to a full
-  FIFO is lost and sets S1[OR]. S1[IDLE] sets one idle frame after the last byte. OR, IDLE,
+  S1[RDRF] is latched: it sets when the FIFO reaches RWFIFO[RXWATER] bytes, and clears only
+  when S1 is read with RDRF set and then D is read, leaving fewer than RXWATER bytes. A D
+  read without that S1 read leaves it set, even over an empty FIFO (the interrupt then fires
+  again and again, as on the chip). Reading D from an empty FIFO sets SFIFO[RXUF]. A byte
+  arriving to a full FIFO is lost and sets S1[OR]. S1[IDLE] sets one idle frame after the last byte. OR, IDLE,
   NF, FE and PF clear by reading S1 and then D.
 * The RX/TX interrupt request is (TIE and TDRE) or (TCIE and TC) or (RIE and RDRF) or
   (ILIE and IDLE); the error request is OR with C3[ORIE].
@@ -47,7 +50,8 @@ _CFIFO_ENABLES = _MAP["CFIFO"].bit("RXUFE") | _MAP["CFIFO"].bit("TXOFE") | \
     _MAP["CFIFO"].bit("RXOFE")
 _TXEMPT, _RXEMPT = _MAP["SFIFO"].bit("TXEMPT"), _MAP["SFIFO"].bit("RXEMPT")
 _TXOF = _MAP["SFIFO"].bit("TXOF")
-_SFIFO_W1C = _MAP["SFIFO"].bit("RXUF") | _TXOF | _MAP["SFIFO"].bit("RXOF")
+_RXUF = _MAP["SFIFO"].bit("RXUF")
+_SFIFO_W1C = _RXUF | _TXOF | _MAP["SFIFO"].bit("RXOF")
 
 
 class Uart(RegisterDevice):
@@ -75,6 +79,7 @@ class Uart(RegisterDevice):
         self._idle_event = None
         self._bdh_buffer = self.v["BDH"]
         self._s1_seen = 0
+        self._rdrf = False              # S1[RDRF], latched (see the module's notes)
         self.flags = 0                  # OR, IDLE (and errors) latched in S1
         self.overruns = 0
         self.tx_overflows = 0
@@ -118,9 +123,15 @@ class Uart(RegisterDevice):
     def tc(self) -> bool:
         return not self.tx and self.shifting is None
 
+    def _rx_water(self) -> int:
+        return max(1, self.v["RWFIFO"]) if self.v["PFIFO"] & _RXFE else 1
+
+    def _latch_rdrf(self):
+        if len(self.rx) >= self._rx_water():
+            self._rdrf = True
+
     def rdrf(self) -> bool:
-        water = max(1, self.v["RWFIFO"]) if self.v["PFIFO"] & _RXFE else 1
-        return len(self.rx) >= water
+        return self._rdrf
 
     def s1(self) -> int:
         return (_TDRE if self.tdre() else 0) | (_TC if self.tc() else 0) | \
@@ -176,6 +187,7 @@ class Uart(RegisterDevice):
                 self.overruns += 1
             else:
                 self.rx.append(byte)
+                self._latch_rdrf()
         if self._idle_event:
             self._idle_event.cancel()
         self._idle_event = self.machine.at(self.machine.cycles + self.frame_cycles(), self._idle)
@@ -198,13 +210,19 @@ class Uart(RegisterDevice):
 
     def r_S1(self):
         value = self.s1()
-        self._s1_seen = value & _S1_CLEARED_BY_D
+        self._s1_seen = value & (_S1_CLEARED_BY_D | _RDRF)
         return value
 
     def r_D(self):
-        value = self.rx.popleft() if self.rx else 0
+        if self.rx:
+            value = self.rx.popleft()
+        else:
+            value = 0
+            self.v["SFIFO"] |= _RXUF
         if self._s1_seen:
-            self.flags &= ~self._s1_seen
+            if self._s1_seen & _RDRF and len(self.rx) < self._rx_water():
+                self._rdrf = False
+            self.flags &= ~(self._s1_seen & ~_RDRF)
             self._s1_seen = 0
         self._update_irq()
         return value
@@ -265,6 +283,7 @@ class Uart(RegisterDevice):
 
     def w_RWFIFO(self, value, mask):
         self.v["RWFIFO"] = value & 0xFF
+        self._latch_rdrf()
         self._update_irq()
 
     def r_TCFIFO(self):
