@@ -101,6 +101,19 @@ ASM_WDOG_OFF = """
     strh r1, [r0]
 """
 
+# A vector table with the stack and the reset vector only, and a reset that first turns the
+# watchdog off: the start of the tiny programs that need no interrupts.
+ASM_RESET_ONLY = """
+    .syntax unified
+    .thumb
+    .section .vectors,"a"
+    .word _estack
+    .word reset + 1
+    .text
+    .thumb_func
+reset:
+""" + ASM_WDOG_OFF
+
 
 def build(tmp_path, name, source, *, asm=False, opt="-O2"):
     require_compiler()
@@ -333,16 +346,7 @@ def test_preemption_tail_chaining_and_primask(tmp_path):
 
 # ------------------------------------------------------------ time base -----------------------
 
-CYCCNT_ASM = """
-    .syntax unified
-    .thumb
-    .section .vectors,"a"
-    .word _estack
-    .word reset + 1
-    .text
-    .thumb_func
-reset:
-""" + ASM_WDOG_OFF + """
+CYCCNT_ASM = ASM_RESET_ONLY + """
     ldr r0, =0xE0001004          @ DWT_CYCCNT
     ldr r2, =0xE0001000          @ DWT_CTRL
     ldr r3, [r2]
@@ -406,16 +410,7 @@ def test_access_to_a_gated_peripheral_is_a_bus_fault(tmp_path):
     assert fn is not None and fn.name == "main"
 
 
-NOCP_ASM = """
-    .syntax unified
-    .thumb
-    .section .vectors,"a"
-    .word _estack
-    .word reset + 1
-    .text
-    .thumb_func
-reset:
-""" + ASM_WDOG_OFF + """
+NOCP_ASM = ASM_RESET_ONLY + """
     b 1f
 1:  vmov s0, r0                  @ CPACR still 0
     bkpt #0
@@ -884,21 +879,13 @@ def dmp_image_elf(tmp_path_factory):
     require_image()
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from fake_dmp import write_fake_dmp
-    from teensy_image import ROOT
+    from teensy_image import build_preset
 
     work = tmp_path_factory.mktemp("t35dmp")
     dmp = write_fake_dmp(work / "dmp.bin")
     build = work / "build"
-    configure = subprocess.run(
-        ["cmake", "-S", str(ROOT), "-B", str(build),
-         f"--toolchain={ROOT / 'firmware' / 'cmake' / 'arm-none-eabi.cmake'}",
-         "-DCMAKE_BUILD_TYPE=Release", "-DCMAKE_CXX_FLAGS_RELEASE=-O2 -DNDEBUG",
-         f"-DHQ_DMP_IMAGE={dmp}", f"-DPython3_EXECUTABLE={sys.executable}"],
-        capture_output=True, text=True, timeout=600)
-    assert configure.returncode == 0, configure.stdout + configure.stderr
-    res = subprocess.run(["cmake", "--build", str(build), "-j2"], capture_output=True,
-                         text=True, timeout=1200)
-    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    rc, log = build_preset(build, defines=(f"HQ_DMP_IMAGE={dmp}",))
+    assert rc == 0, log[-4000:]
     return build / "heliquad-fw-teensy35.elf", dmp
 
 

@@ -1,7 +1,7 @@
 """The Teensy 3.5 image as built by the CMake preset: what the chip and the loader need of it.
 
-Read with pyelftools and intelhex, never by running it (tests/teensy35_boot_test.py runs it
-in the emulated MK64FX512). A wrong byte here bricks a board or leaves an interrupt on the
+Read with the emulator's ELF loader (heliquad.sim.mk64.image, pyelftools underneath) and
+intelhex, never by running it (tests/teensy35_boot_test.py runs it in the emulated MK64FX512). A wrong byte here bricks a board or leaves an interrupt on the
 default handler, so each fact the boot ROM, the bootloader or the NVIC relies on is pinned.
 """
 
@@ -17,6 +17,9 @@ import sys
 import pytest
 from elftools.elf.elffile import ELFFile
 from intelhex import IntelHex
+
+from heliquad.sim.mk64 import svd
+from heliquad.sim.mk64.image import Image
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from teensy_image import ROOT, image  # noqa: E402
@@ -35,20 +38,23 @@ def img():
 
 
 @pytest.fixture(scope="module")
-def elf(img):
+def loaded(img):
+    return Image(img.elf)
+
+
+@pytest.fixture(scope="module")
+def elf(img, loaded):
+    # Build attributes: the one thing the loader does not read.
     with open(img.elf, "rb") as fh:
-        f = ELFFile(fh)
-        symbols = {s.name: s["st_value"] for s in f.get_section_by_name(".symtab").iter_symbols()
-                   if s.name}
-        sections = {s.name: (s["sh_addr"], s["sh_size"], s["sh_type"]) for s in f.iter_sections()}
         attrs = {}
-        for sub in f.get_section_by_name(".ARM.attributes").iter_subsections():
+        for sub in ELFFile(fh).get_section_by_name(".ARM.attributes").iter_subsections():
             for subsub in sub.iter_subsubsections():
                 for a in subsub.iter_attributes():
                     attrs[a.tag] = a.value
-        vectors = f.get_section_by_name(".text").data()[:4 * VECTOR_COUNT]
-    words = [int.from_bytes(vectors[4 * i:4 * i + 4], "little") for i in range(VECTOR_COUNT)]
-    return {"symbols": symbols, "sections": sections, "attrs": attrs, "vectors": words}
+    # Symbols at their addresses (functions without the Thumb bit); vector words as stored.
+    return {"symbols": {name: sym.address for name, sym in loaded.symbols.items()},
+            "sections": loaded.sections, "attrs": attrs,
+            "vectors": [loaded.word(4 * i) for i in range(VECTOR_COUNT)]}
 
 
 @pytest.fixture(scope="module")
@@ -73,17 +79,9 @@ def test_everything_lies_in_the_512_kib_flash(hexfile):
     assert min(addresses) == 0 and max(addresses) < FLASH_SIZE
 
 
-def test_hex_holds_exactly_the_elf_load_image(img, hexfile):
+def test_hex_holds_exactly_the_elf_load_image(img, loaded):
     """The .hex is the ELF's loadable bytes (text, then .data's initial values), nothing else."""
-    with open(img.elf, "rb") as fh:
-        f = ELFFile(fh)
-        expected = {}
-        for seg in f.iter_segments():
-            if seg["p_type"] == "PT_LOAD" and seg["p_filesz"]:
-                for i, b in enumerate(seg.data()):
-                    expected[seg["p_paddr"] + i] = b
-    got = {a: hexfile[a] for a in hexfile.addresses()}
-    assert got == expected
+    assert loaded.compare_hex(img.hex) == []
 
 
 def test_initial_stack_pointer_is_the_top_of_sram_and_8_aligned(elf):
@@ -94,7 +92,7 @@ def test_initial_stack_pointer_is_the_top_of_sram_and_8_aligned(elf):
 
 def test_reset_vector_is_a_thumb_address_of_reset_handler_in_text(elf):
     reset = elf["vectors"][1]
-    text_addr, text_size, _ = elf["sections"][".text"]
+    text_addr, text_size, _, _ = elf["sections"][".text"]
     assert reset & 1, "Thumb bit"
     assert reset == elf["symbols"]["Reset_Handler"] | 1    # ELF symbols of Thumb code carry bit 0
     assert text_addr <= (reset & ~1) < text_addr + text_size
@@ -220,26 +218,16 @@ def test_no_peripheral_address_is_typed_by_hand():
     assert not offenders, offenders
 
 
-def _svd_source() -> str | None:
-    """The SVD: HQ_MK64_SVD (a .svd, svd_data.zip or pyocd wheel), else an installed pyocd."""
-    env = os.environ.get("HQ_MK64_SVD")
-    if env:
-        return env
-    import importlib.util
-    return "" if importlib.util.find_spec("pyocd") else None
-
-
 def test_register_header_is_what_the_svd_generates():
-    source = _svd_source()
-    if source is None:
-        message = ("no MK64F12 SVD: set HQ_MK64_SVD to the pyocd wheel "
-                   "(pip download pyocd==0.46.0 --no-deps) or install pyocd")
+    try:
+        svd.find_svd()              # where the generator looks: $HQ_MK64_SVD, then pyocd
+    except svd.SvdNotFound as exc:
         if os.environ.get("CI"):
-            pytest.fail(message)
-        pytest.skip(message)
+            pytest.fail(str(exc))
+        pytest.skip(str(exc))
     gen = ROOT / "firmware" / "targets" / "teensy35" / "gen_registers.py"
-    args = [sys.executable, str(gen), "--check"] + (["--svd", source] if source else [])
-    res = subprocess.run(args, capture_output=True, text=True, timeout=300)
+    res = subprocess.run([sys.executable, str(gen), "--check"], capture_output=True, text=True,
+                         timeout=300)
     assert res.returncode == 0, res.stderr
 
 

@@ -40,18 +40,24 @@ def require_toolchain() -> None:
     pytest.skip(INSTALL_HINT)
 
 
-@functools.lru_cache(maxsize=1)
-def _build() -> tuple[int, str]:
-    # The preset's build runs mavgen with the Python that CMake finds: point it at this one
-    # (it has pymavlink), whatever the PATH says.
+def build_preset(binary_dir: pathlib.Path = BUILD, defines: tuple = ()) -> tuple[int, str]:
+    """Configure and build the teensy35 preset into binary_dir (its own folder by default),
+    with extra -D definitions; (exit code, output). The preset's build runs mavgen with the
+    Python that CMake finds: point it at this one (it has pymavlink), whatever the PATH says."""
     configure = subprocess.run(
-        ["cmake", "--preset", "teensy35", f"-DPython3_EXECUTABLE={sys.executable}"],
+        ["cmake", "--preset", "teensy35", "-B", str(binary_dir),
+         f"-DPython3_EXECUTABLE={sys.executable}", *(f"-D{d}" for d in defines)],
         cwd=ROOT, capture_output=True, text=True, timeout=600)
     if configure.returncode != 0:
         return configure.returncode, configure.stdout + configure.stderr
-    build = subprocess.run(["cmake", "--build", "--preset", "teensy35", "-j2"], cwd=ROOT,
+    build = subprocess.run(["cmake", "--build", str(binary_dir), "-j2"], cwd=ROOT,
                            capture_output=True, text=True, timeout=1200)
     return build.returncode, build.stdout + build.stderr
+
+
+@functools.lru_cache(maxsize=1)
+def _build() -> tuple[int, str]:
+    return build_preset()
 
 
 def image() -> Image:

@@ -1,7 +1,7 @@
 // Host backend of the HAL I2C bus (hal/i2c.hpp): the emulated devices attached at their
 // addresses. A transfer to an address no device holds is a NACK, as on a real bus; the
 // device decides everything else (the MPU6050 register emulator NACKs too while a test has
-// it absent). Transfers and NACKs are counted.
+// it absent).
 #pragma once
 
 #include <cstddef>
@@ -23,14 +23,12 @@ public:
     }
     bool write(uint8_t address, uint8_t reg, const uint8_t* data, size_t n) override {
         I2cBus* d = find(address);
-        return count(d != nullptr && d->write(address, reg, data, n));
+        return d != nullptr && d->write(address, reg, data, n);
     }
     bool read(uint8_t address, uint8_t reg, uint8_t* data, size_t n) override {
         I2cBus* d = find(address);
-        return count(d != nullptr && d->read(address, reg, data, n));
+        return d != nullptr && d->read(address, reg, data, n);
     }
-    uint32_t transfers() const { return transfers_; }
-    uint32_t nacks() const { return nacks_; }
 
 private:
     struct Slot {
@@ -43,14 +41,8 @@ private:
         }
         return nullptr;
     }
-    bool count(bool ok) {
-        ++transfers_;
-        if (!ok) ++nacks_;
-        return ok;
-    }
     Slot devices_[kMaxDevices] = {};
     int count_ = 0;
-    uint32_t transfers_ = 0, nacks_ = 0;
 };
 
 }  // namespace hq

@@ -36,8 +36,21 @@ private:
     uint32_t saved_;
 };
 
+// Element i of a register array whose first element is Reg0 and whose elements lie
+// stride_elements apart (NVIC ISER0..3: 1; FTM CnSC/CnV: 2, since they interleave).
+template <typename Reg0>
+inline volatile typename Reg0::type& reg_at(int i, int stride_elements = 1) {
+    return (&Reg0::ref())[i * stride_elements];
+}
+
+// Reads a register for its side effect only (a flag clear, the I2C dummy read): a plain
+// `(void)reg;` on a volatile reference is not a read in C++.
+inline uint8_t read_for_effect(volatile uint8_t& reg) {
+    const uint8_t v = reg;
+    return v;
+}
+
 // Priority 0 (highest) .. 15; the MK64 implements the top four bits of each priority byte.
 void nvic_enable(int irq, uint8_t priority);
-void nvic_disable(int irq);
 
 }  // namespace hq::teensy

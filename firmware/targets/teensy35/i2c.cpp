@@ -1,6 +1,7 @@
 #include "i2c.hpp"
 
 #include "clock.hpp"
+#include "cpu.hpp"
 #include "mk64f12.hpp"
 
 namespace hq::teensy {
@@ -13,13 +14,6 @@ constexpr uint32_t kSdaBit = 1u << kSda, kSclBit = 1u << kScl;
 
 bool expired(uint32_t start, uint32_t timeout_us) {
     return cycles32() - start > timeout_us * (core_hz() / 1000000u);
-}
-
-// Reads a register for its side effect (I2C0_D starts the next byte). A plain `(void)reg;`
-// on a volatile reference is not a read in C++.
-inline uint8_t touch(volatile uint8_t& reg) {
-    const uint8_t v = reg;
-    return v;
 }
 }  // namespace
 
@@ -151,7 +145,7 @@ bool I2c0Bus::read(uint8_t address, uint8_t reg, uint8_t* data, size_t n) {
     // Receive: TX off; with one byte to read, NACK it at once.
     I2C0::C1::write(static_cast<uint8_t>(I2C0::C1::IICEN | I2C0::C1::MST |
                                          (n == 1 ? I2C0::C1::TXAK : 0)));
-    touch(I2C0::D::ref());                   // dummy read: clocks in the first byte
+    read_for_effect(I2C0::D::ref());                   // dummy read: clocks in the first byte
     for (size_t i = 0; i < n; ++i) {
         if (!wait_byte()) return fail(Result::Timeout);
         if (i + 1 == n) {

@@ -18,7 +18,6 @@ bool LoopTimer::start(uint32_t rate_hz) {
     if (rate_hz == 0) return false;
     const uint32_t period = core_hz() / rate_hz;
     if (period < 2 || period > (1u << 24)) return false;
-    period_cycles_ = period;
     SysTick::CSR::write(0);
     SysTick::RVR::write(period - 1);
     SysTick::CVR::write(0);

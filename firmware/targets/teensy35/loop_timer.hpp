@@ -16,10 +16,9 @@ public:
     // Sleeps until the next tick; returns the ticks missed since the previous wait().
     uint32_t wait();
     uint32_t overruns() const { return overruns_; }
-    uint32_t period_cycles() const { return period_cycles_; }
 
 private:
-    uint32_t seen_ = 0, overruns_ = 0, period_cycles_ = 0;
+    uint32_t seen_ = 0, overruns_ = 0;
 };
 
 }  // namespace hq::teensy

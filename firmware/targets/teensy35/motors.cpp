@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "cpu.hpp"
 #include "mk64f12.hpp"
 
 namespace hq::teensy {
@@ -12,11 +13,9 @@ namespace {
 // The stop pulse of each channel in FTM counts, for the fault path (which has no object).
 uint32_t g_stop_counts[5] = {0, 0, 0, 0, 0};
 
-inline volatile uint32_t& channel_value(int i) {
-    // CnV registers are 8 bytes apart (C0V, C1V, ...).
-    return (&FTM0::C0V::ref())[2 * i];
-}
-inline volatile uint32_t& channel_control(int i) { return (&FTM0::C0SC::ref())[2 * i]; }
+// CnSC and CnV interleave (C0SC, C0V, C1SC, ...): two registers between channels.
+inline volatile uint32_t& channel_value(int i) { return reg_at<FTM0::C0V>(i, 2); }
+inline volatile uint32_t& channel_control(int i) { return reg_at<FTM0::C0SC>(i, 2); }
 
 bool plausible(uint16_t min_us, uint16_t max_us) {
     return min_us >= 800 && max_us <= 2200 && max_us > min_us;
@@ -51,7 +50,6 @@ void Ftm0Motors::begin(const EscCalibration& cal) {
 }
 
 void Ftm0Motors::write(int i, uint16_t us) {
-    pulse_us_[i] = us;
     channel_value(i) = static_cast<uint32_t>(us) * kCountsPerUs;
 }
 

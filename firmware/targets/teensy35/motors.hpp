@@ -34,13 +34,10 @@ public:
     void begin(const EscCalibration& cal);
     void set(const float thrust_fraction[5]) override;
     void disarm() override;
-    // Pulse width now commanded on channel i, in microseconds.
-    uint16_t pulse_us(int i) const { return pulse_us_[i]; }
 
 private:
     void write(int i, uint16_t us);
     EscCalibration cal_{};
-    uint16_t pulse_us_[5] = {0, 0, 0, 0, 0};
 };
 
 // Drives every ESC channel to its stop pulse if FTM0 is running; for the fault path.

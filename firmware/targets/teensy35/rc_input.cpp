@@ -29,8 +29,9 @@ bool pin_high(int ch) {
     return (GPIOC::PDIR::read() >> (ch + 4)) & 1u;            // PTC8-9
 }
 
-inline volatile uint32_t& channel_control(int i) { return (&FTM3::C0SC::ref())[2 * i]; }
-inline volatile uint32_t& channel_value(int i) { return (&FTM3::C0V::ref())[2 * i]; }
+// CnSC and CnV interleave (C0SC, C0V, C1SC, ...): two registers between channels.
+inline volatile uint32_t& channel_control(int i) { return reg_at<FTM3::C0SC>(i, 2); }
+inline volatile uint32_t& channel_value(int i) { return reg_at<FTM3::C0V>(i, 2); }
 
 // Counts of 1.875 MHz to microseconds: x 8 / 15.
 constexpr uint32_t counts_to_us(uint32_t counts) { return counts * 8u / 15u; }

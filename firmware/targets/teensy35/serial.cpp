@@ -91,17 +91,9 @@ size_t Uart0Serial::read(uint8_t* data, size_t n) {
 }
 
 uint32_t Uart0Serial::rx_overruns() const { return g_uart.rx_overruns; }
-size_t Uart0Serial::tx_pending() const { return g_uart.tx_head - g_uart.tx_tail; }
 
 
 namespace {
-// Reads a register for its side effect only (a flag clear); `(void)reg;` on a volatile
-// reference is not a read in C++.
-inline uint8_t touch(volatile uint8_t& reg) {
-    const uint8_t v = reg;
-    return v;
-}
-
 void push_rx(uint8_t b) {
     const uint32_t head = g_uart.rx_head;
     if (head - g_uart.rx_tail < Uart0Serial::kRxRing) {
@@ -135,7 +127,7 @@ extern "C" void UART0_RX_TX_IRQHandler() {
     } else if (UART0::S1::read() & (UART0::S1::RDRF | UART0::S1::OR)) {
         // A flag left set over an empty FIFO: a dummy read (it underflows the FIFO), then
         // flush and clear the underflow, so the interrupt cannot fire again for nothing.
-        touch(UART0::D::ref());
+        read_for_effect(UART0::D::ref());
         UART0::CFIFO::write(UART0::CFIFO::RXFLUSH);
         UART0::SFIFO::write(UART0::SFIFO::RXUF);
     }
@@ -146,7 +138,7 @@ extern "C" void UART0_RX_TX_IRQHandler() {
         const uint32_t head = g_uart.tx_head;
         std::atomic_signal_fence(std::memory_order_acquire);
         while (tail != head && UART0::TCFIFO::read() < kHwFifo) {
-            touch(UART0::S1::ref());
+            read_for_effect(UART0::S1::ref());
             UART0::D::write(g_uart.tx[tail++ & (Uart0Serial::kTxRing - 1)]);
         }
         g_uart.tx_tail = tail;

@@ -27,7 +27,6 @@ public:
     size_t write(const uint8_t* data, size_t n) override;
 
     uint32_t rx_overruns() const;
-    size_t tx_pending() const;
 };
 
 // SBR and BRFA for a baud rate from clock_hz; false if the error would exceed 2 %.

@@ -33,6 +33,4 @@ void Watchdog::refresh() {
     WDOG::REFRESH::write(0xB480);
 }
 
-bool Watchdog::running() { return g_running; }
-
 }  // namespace hq::teensy

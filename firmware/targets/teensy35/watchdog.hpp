@@ -23,7 +23,6 @@ public:
 
     static void start(uint32_t timeout_ms);
     static void refresh();
-    static bool running();
 };
 
 }  // namespace hq::teensy
