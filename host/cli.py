@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from . import __version__
+from .cli_args import add_firmware_argument
 from .errors import InputError
 from .link import DEFAULT_BAUD
 
@@ -202,6 +203,7 @@ def _build_parser() -> argparse.ArgumentParser:
                         "heliquad dmp-image (default: raw FIFO path)")
     p.add_argument("--out", required=True, metavar="RUN",
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
+    add_firmware_argument(p)
     _add_fault_argument(p)
     p.set_defaults(func=_cmd_sil)
 
@@ -218,6 +220,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--collective", type=float, default=0.4)
     p.add_argument("--loop-hz", type=float, default=200.0)
     p.add_argument("--dmp-image", metavar="FILE")
+    add_firmware_argument(p)
     p.set_defaults(func=_cmd_board)
 
     p = sub.add_parser("validate", help="closed-loop validation of an identified model",
@@ -279,6 +282,7 @@ def _build_parser() -> argparse.ArgumentParser:
                    "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
     p.add_argument("--cycles", type=int, default=8, help="measured cycles per frequency (default 8)")
     p.add_argument("--out", required=True, metavar="DIR")
+    add_firmware_argument(p)
     _add_fault_argument(p, "--sil: ")
     p.set_defaults(func=_cmd_sweep)
 
@@ -382,7 +386,7 @@ def _cmd_sil(args) -> int:
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
-                    ideal_sensor=args.ideal_sensor, faults=_faults(args))
+                    ideal_sensor=args.ideal_sensor, faults=_faults(args), firmware=args.firmware)
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:
@@ -390,7 +394,8 @@ def _cmd_sil(args) -> int:
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
     print(f"{r.frames} frames ({r.frames / args.loop_hz:.2f} s simulated) in {r.wall_s:.2f} s "
-          f"wall ({r.frames / args.loop_hz / r.wall_s:.0f}x real time); imu path {r.imu_mode}")
+          f"wall ({r.frames / args.loop_hz / r.wall_s:.2g}x real time); firmware "
+          f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
     if r.saturated_samples:
@@ -495,7 +500,7 @@ def _cmd_sweep(args) -> int:
                         inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                         plant=args.plant, rig=args.axis, params=args.params,
                         turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                        faults=_faults(args))
+                        faults=_faults(args), firmware=args.firmware)
         source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
                   "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
                   "ideal_sensor": args.ideal_sensor}
@@ -503,11 +508,14 @@ def _cmd_sweep(args) -> int:
             session = SilSession(cfg, tlog)
         except FirmwareError as exc:
             raise InputError(str(exc)) from None
+        source["firmware"] = session.fw.record()
         if args.fault:
             source["faults"] = list(args.fault)
     else:
         if args.fault:
             raise InputError("--fault needs --sil (a board's faults are real)")
+        if args.firmware != "host":
+            raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
         source = {"kind": "port", "port": args.port, "baud": args.baud}
         session = PortSession(args.port, tlog, args.baud)
     print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
@@ -599,7 +607,7 @@ def _cmd_board(args) -> int:
     try:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
-                      dmp_image=args.dmp_image)
+                      dmp_image=args.dmp_image, firmware=args.firmware)
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
     print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "

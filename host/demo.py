@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from . import paper
+from .cli_args import add_firmware_argument
 from .errors import InputError
 
 __all__ = ["add_demo_parser", "run_demo"]
@@ -31,6 +32,7 @@ def add_demo_parser(sub, fmt) -> None:
     p.add_argument("--axes", nargs="+", choices=tuple(paper.BANDS_HZ), default=list(paper.BANDS_HZ))
     p.add_argument("--ideal-sensor", action="store_true", help="no IMU noise, bias or latency")
     p.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default 1)")
+    add_firmware_argument(p)
     p.set_defaults(func=run_demo)
 
 
@@ -46,13 +48,14 @@ def run_demo(args) -> int:
     for axis in args.axes:
         folder = os.path.join(args.out, axis)
         os.makedirs(folder, exist_ok=True)
-        print(f"== {axis}: sweep on the {axis} rig, firmware in the loop", flush=True)
+        print(f"== {axis}: sweep on the {axis} rig, {args.firmware} firmware in the loop",
+              flush=True)
         cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
-                        ideal_sensor=args.ideal_sensor, seed=args.seed)
+                        ideal_sensor=args.ideal_sensor, seed=args.seed, firmware=args.firmware)
         with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
             run_sweep(session, default_plan(axis), folder,
                       {"kind": "sil", "plant": "vehicle", "ideal_sensor": args.ideal_sensor,
-                       "seed": args.seed})
+                       "seed": args.seed, "firmware": session.fw.record()})
             sim_s += session.time_us * 1e-6
             truth_plant = session.plant
         print(f"== {axis}: identify", flush=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import time
 
-from .lockstep import HostFirmware, SimLink
+from .lockstep import SimLink, start_firmware
 from .sil import rig_step
 from .tf_plant import TfPlant
 
@@ -25,13 +25,14 @@ MAX_LAG_S = 0.1
 
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
-              dmp_image: str | None = None, ready=print) -> dict:
+              dmp_image: str | None = None, ready=print, firmware: str = "host") -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
 
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     frames, late = 0, 0
-    fw = HostFirmware(loop_hz, dmp_image, telemetry_path=os.path.abspath(telemetry_path))
+    fw = start_firmware(firmware, loop_hz=loop_hz, dmp_image=dmp_image,
+                        telemetry_path=os.path.abspath(telemetry_path))
     try:
         link = SimLink(fw)
         ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")

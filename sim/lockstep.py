@@ -1,7 +1,8 @@
 """Lockstep driver of the host firmware (docs/link-contract.md).
 
 :class:`HostFirmware` starts ``heliquad-fw-host``, which creates the sim-link and telemetry
-ptys; :class:`SimLink` then exchanges frames on the sim link: one HQ_SENSOR_FRAME out, exactly
+ptys (:class:`PilFirmware` starts the Teensy image in the emulated chip instead, the same
+link contract: ``heliquad.sim.pil``; :func:`start_firmware` picks one by name); :class:`SimLink` then exchanges frames on the sim link: one HQ_SENSOR_FRAME out, exactly
 one HQ_ACTUATOR_FRAME back with the same time and counter. A reply that does not come within
 the timeout, a wrong counter, or a firmware that died are errors with a clear message, never
 a hang.
@@ -14,6 +15,7 @@ import os
 import selectors
 import shutil
 import subprocess
+import sys
 import sysconfig
 import tempfile
 import time
@@ -23,7 +25,8 @@ import serial
 from heliquad import _simcore
 from heliquad._simcore import LinkStatus
 
-__all__ = ["FirmwareError", "HostFirmware", "SimLink", "Actuators", "actuators", "find_firmware"]
+__all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
+           "find_firmware", "start_firmware", "FIRMWARES"]
 
 #: How long the firmware may take to create its ptys and print "ready".
 START_TIMEOUT_S = 10.0
@@ -31,6 +34,11 @@ START_TIMEOUT_S = 10.0
 REPLY_TIMEOUT_S = 2.0
 FIFO_CAPACITY = 168            # HQ_SENSOR_FRAME.fifo
 SENSOR_NONE, SENSOR_DMP, SENSOR_RAW = 0, 1, 2
+
+
+#: The firmwares that can fly the simulated rig: the host build, and the Teensy 3.5 image in
+#: the emulated MK64FX512 (processor in the loop).
+FIRMWARES = ("host", "teensy35")
 
 
 class FirmwareError(RuntimeError):
@@ -53,22 +61,38 @@ def find_firmware() -> str:
 class HostFirmware:
     """The host firmware as a child process with its two ptys in a private directory."""
 
+    name = "host"
+    #: How long the firmware may take to create its ptys and print "ready".
+    start_timeout_s = START_TIMEOUT_S
+    #: How long one frame's reply may take before the link is declared dead.
+    reply_timeout_s = REPLY_TIMEOUT_S
+
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None):
         self.loop_hz = loop_hz
+        cmd = self.command()
         self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
         self.workdir = self._tmp.name
         self.sim_link_path = os.path.join(self.workdir, "sim-link")
         self.telemetry_path = telemetry_path or os.path.join(self.workdir, "telemetry")
-        cmd = [find_firmware(), "--sim-link", self.sim_link_path, "--telemetry",
-               self.telemetry_path, "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s",
-               str(int(idle_timeout_s))]
+        cmd += ["--sim-link", self.sim_link_path, "--telemetry", self.telemetry_path,
+                "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s", str(int(idle_timeout_s))]
         if dmp_image:
             cmd += ["--dmp-image", dmp_image]
         self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
         self._stderr = open(self.stderr_path, "w+")
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr)
+        self.ready_lines = []
         self.imu_mode = self._wait_ready()
+
+    def command(self) -> list:
+        """The firmware's command line, before the link options."""
+        self.executable = find_firmware()
+        return [self.executable]
+
+    def record(self) -> dict:
+        """What flew, for a manifest."""
+        return {"name": self.name, "executable": self.executable}
 
     def _wait_ready(self) -> str:
         """Read the firmware's start-up lines (raw reads: a buffered reader would hide data
@@ -76,7 +100,7 @@ class HostFirmware:
         fd = self.proc.stdout.fileno()
         sel = selectors.DefaultSelector()
         sel.register(fd, selectors.EVENT_READ)
-        deadline = time.monotonic() + START_TIMEOUT_S
+        deadline = time.monotonic() + self.start_timeout_s
         text = ""
         while time.monotonic() < deadline:
             if sel.select(timeout=0.1):
@@ -86,13 +110,14 @@ class HostFirmware:
                 text += chunk
                 lines = text.splitlines()
                 if "ready" in (line.strip() for line in lines):
+                    self.ready_lines = lines
                     imu = [line.split(":", 1)[1].strip() for line in lines if line.startswith("imu:")]
                     return imu[0] if imu else "?"
             elif self.proc.poll() is not None:
                 break
         message = self.stderr_tail()
         self.stop()
-        raise FirmwareError(f"the host firmware did not start: {message}")
+        raise FirmwareError(f"the {self.name} firmware did not start: {message}")
 
     def stderr_tail(self, lines: int = 3) -> str:
         """The last lines the firmware wrote on stderr, and its exit status."""
@@ -139,6 +164,44 @@ class HostFirmware:
         self.stop()
 
 
+class PilFirmware(HostFirmware):
+    """The Teensy 3.5 image in the emulated MK64FX512 (``python -m heliquad.sim.pil``):
+    the same ptys and frames as the host build, the image as flashed to the board inside.
+    ``image``: the .elf (default: the installed one). The emulated chip runs slower than the
+    host build, and one loop may hold the bus for an IMU re-initialisation, so its start-up
+    and reply timeouts are longer; each loop is also bounded in emulated time inside."""
+
+    name = "teensy35"
+    start_timeout_s = 120.0
+    reply_timeout_s = 60.0
+
+    def __init__(self, *args, image: str | None = None, **kwargs):
+        self.image = image
+        super().__init__(*args, **kwargs)
+
+    def command(self) -> list:
+        from .firmware_image import teensy35_image
+
+        self.image = os.path.abspath(self.image or str(teensy35_image("elf")))
+        return [sys.executable, "-m", "heliquad.sim.pil", "--image", self.image]
+
+    def record(self) -> dict:
+        import hashlib
+
+        with open(self.image, "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()
+        return {"name": self.name, "image": self.image, "image_sha256": digest}
+
+
+def start_firmware(firmware: str = "host", **kwargs) -> HostFirmware:
+    """Start the named firmware (one of FIRMWARES) with HostFirmware's arguments."""
+    if firmware == "host":
+        return HostFirmware(**kwargs)
+    if firmware == "teensy35":
+        return PilFirmware(**kwargs)
+    raise FirmwareError(f"unknown firmware {firmware!r}: one of {', '.join(FIRMWARES)}")
+
+
 @dataclasses.dataclass
 class Actuators:
     """One HQ_ACTUATOR_FRAME."""
@@ -161,8 +224,9 @@ class SimLink:
 
     def __init__(self, firmware: HostFirmware):
         self.firmware = firmware
-        self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=REPLY_TIMEOUT_S)
-        self.port = _simcore.SimLinkPort(self.serial.fileno(), int(REPLY_TIMEOUT_S * 1000))
+        self.timeout_s = firmware.reply_timeout_s
+        self.serial = serial.Serial(firmware.sim_link_path, timeout=0, write_timeout=self.timeout_s)
+        self.port = _simcore.SimLinkPort(self.serial.fileno(), int(self.timeout_s * 1000))
         self.frame = 0
 
     def close(self) -> None:
@@ -195,7 +259,7 @@ class SimLink:
             state = "stopped reading" if alive else "died"
             raise FirmwareError(f"the firmware {state} at frame {frame} (sim link write failed: "
                                 f"{os.strerror(errno)}; {self.firmware.stderr_tail()})")
-        why = f"did not answer within {REPLY_TIMEOUT_S:g} s" if alive else "died"
+        why = f"did not answer within {self.timeout_s:g} s" if alive else "died"
         raise FirmwareError(f"the firmware {why} at frame {frame} ({self.firmware.stderr_tail()})")
 
 

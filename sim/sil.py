@@ -26,7 +26,7 @@ from heliquad.host.link import HEARTBEAT_PERIOD_S, INPUT_OUTPUT, SESSION_MESSAGE
 from heliquad.host.mavlink_dialect import dialect
 
 from .faults import check_faults, imu_fault_codes, link_close_frame
-from .lockstep import FirmwareError, HostFirmware, SimLink, actuators
+from .lockstep import FirmwareError, SimLink, actuators, start_firmware
 from .tf_plant import TfPlant
 
 __all__ = ["SilConfig", "SilResult", "run_sil", "RC_CENTER_US"]
@@ -68,6 +68,7 @@ class SilConfig:
     seed: int = 0                  # turbulence and sensor-noise seed
     ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
+    firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
 
 
 def make_plant(cfg: SilConfig, dt_s: float):
@@ -207,7 +208,7 @@ class SilSession:
         check_faults(cfg.faults, self.dt_us)
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
-        self.fw = HostFirmware(cfg.loop_hz, cfg.dmp_image)
+        self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image)
         try:
             self.link = SimLink(self.fw)
             self.tel = TelemetryLink(self.fw.telemetry_path)

@@ -7,7 +7,7 @@
 // loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the
 // RC input, run one FlightController step, record the cycles it took (HQ_FW_STATUS reports
 // their median and maximum each second, and the overruns), update the LED, sleep until the
-// next tick.
+// next tick. After each step the loop's state goes to hq_loop_report (below).
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
@@ -41,6 +41,21 @@ hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResul
 
 }  // namespace
 
+// The last loop's state, at a fixed symbol in RAM, for a debug probe to watch without
+// stopping the loop; the emulated board (heliquad's processor-in-the-loop target) reads it to
+// answer each lockstep frame as the host build does. Written once a loop, after the step.
+struct LoopReport {
+    uint32_t loops;         // FlightController steps since boot
+    uint32_t step_cycles;   // core cycles of the last step
+    uint8_t armed;          // 1 when armed
+    uint8_t mode;           // HQ_MODE
+    uint8_t sensor_kind;    // HQ_SENSOR_KIND the MPU6050 is configured for
+    uint8_t exc_state;      // HQ_EXCITATION_STATE
+};
+extern "C" {
+volatile LoopReport hq_loop_report;
+}
+
 extern "C" [[noreturn]] void hq_teensy_main() {
     using namespace hq::teensy;
     const ClockFault clock_fault = start_clocks();
@@ -72,7 +87,14 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         Watchdog::refresh();
         const uint32_t c0 = cycles32();
         fc.step(rc.read());
-        fc.record_loop(cycles32() - c0, timer.overruns());
+        const uint32_t step_cycles = cycles32() - c0;
+        fc.record_loop(step_cycles, timer.overruns());
+        hq_loop_report.loops = fc.loops();
+        hq_loop_report.step_cycles = step_cycles;
+        hq_loop_report.armed = fc.armed() ? 1 : 0;
+        hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
+        hq_loop_report.sensor_kind = fc.sensor_kind();
+        hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
         led_update(clock.micros(), led_pattern(fc, init));
     }
 }

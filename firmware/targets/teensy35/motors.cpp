@@ -53,13 +53,17 @@ void Ftm0Motors::write(int i, uint16_t us) {
     channel_value(i) = static_cast<uint32_t>(us) * kCountsPerUs;
 }
 
+// The pulse is set to the FTM0 count, not the microsecond: 15 steps per microsecond, so a
+// 1000 us span has 15 000 thrust steps instead of 1 000 (a rounding to whole microseconds
+// would add a 1e-3 staircase to every small excitation).
 void Ftm0Motors::set(const float thrust_fraction[5]) {
     for (int i = 0; i < 5; ++i) {
         float f = thrust_fraction[i];
         if (!std::isfinite(f) || !(f > 0.0f)) f = 0.0f;     // NaN and infinities: stop
         if (f > 1.0f) f = 1.0f;
-        const float span = static_cast<float>(cal_.max_us[i] - cal_.min_us[i]);
-        write(i, static_cast<uint16_t>(cal_.min_us[i] + static_cast<uint16_t>(f * span + 0.5f)));
+        const uint32_t min_counts = cal_.min_us[i] * kCountsPerUs;
+        const float span = static_cast<float>((cal_.max_us[i] - cal_.min_us[i]) * kCountsPerUs);
+        channel_value(i) = min_counts + static_cast<uint32_t>(f * span + 0.5f);
     }
 }
 

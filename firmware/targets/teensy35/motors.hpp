@@ -6,7 +6,7 @@
 //
 // FTM0 counts the bus clock / 4 = 15 MHz: 2.5 ms period = 37 500 counts, 15 counts per
 // microsecond. A thrust fraction f (0..1) becomes min_us + f (max_us - min_us) for each
-// ESC's own calibration; anything not finite becomes 0. begin() loads every channel with the
+// ESC's own calibration, rounded to the count (1/15 us); anything not finite becomes 0. begin() loads every channel with the
 // ESC's stop pulse (its min_us) before the pins are switched to FTM0, so from the first edge
 // an ESC sees nothing but "stop" until the vehicle arms. Channel values take effect at the
 // next period boundary (FTM0 buffers CnV in this mode), so a pulse is never cut short.

@@ -1,0 +1,425 @@
+"""heliquad-fw-pil: the Teensy 3.5 image, run in the emulated MK64FX512, as a drop-in for
+the host build ``heliquad-fw-host`` (processor in the loop).
+
+    python -m heliquad.sim.pil --sim-link PATH --telemetry PATH [--image ELF]
+                               [--loop-hz 200] [--idle-timeout-s 10]
+
+It honours the host build's link contract (docs/link-contract.md): it creates the same two
+ptys and publishes their slave devices as the PATH symlinks, prints ``ready`` once the image
+has booted, answers each HQ_SENSOR_FRAME with exactly one HQ_ACTUATOR_FRAME (same time and
+counter; a repeated counter gets the same reply again, a gap is counted), and exits cleanly
+on SIGINT/SIGTERM or when no frame comes for the idle timeout. What differs is inside: the
+image that is flashed to the board runs instruction by instruction, and every input and
+output goes through the chip's pins and peripherals, as on the rig:
+
+* the frame's MPU6050 FIFO bytes go into the MPU6050 on I2C0, and its fault (NACK, silent,
+  reset, overflow) into that chip, which the image reads over the bus byte by byte;
+* the frame's RC channels become servo pulses on the six RC pins, captured by FTM3;
+* one frame is one pass of the image's main loop: the board runs until the loop has done
+  its step and is about to sleep for the next tick (``hq::teensy::LoopTimer::wait``);
+* the five thrust fractions are read back from FTM0's pulse widths (the value loaded for the
+  next PWM period), with the image's ESC calibration;
+* the telemetry link carries UART0's TX pin at its line rate (921 600 baud) and feeds the
+  host's bytes into UART0's RX pin; a frame marked ``sync`` also lets the board run until
+  what it has queued is on the wire, so the simulator can read that loop's telemetry;
+* armed, mode and sensor kind come from ``hq_loop_report``, the state the image keeps in RAM
+  for a debug probe.
+
+Time is the emulated chip's: core cycles from retired instructions (sim/mk64/timing.py
+states the cycle model) and device events, never the host's clock, so two runs of the same
+frames give the same bytes. A watchdog reset reboots the emulated board as it would the
+real one (counted, and said on stderr); a fault of the image (bus fault, undefined
+instruction, ``hq_fatal``) ends the run with one line on stderr and exit code 5.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import os
+import select
+import signal
+import struct
+import sys
+import time
+import tty
+
+from heliquad.host.mavlink_dialect import dialect
+
+from .mk64.machine import ChipReset, EmulationError
+from .mk64.uart import _TIE
+
+#: The image's loop rate (firmware/targets/teensy35/main.cpp, kLoopHz).
+IMAGE_LOOP_HZ = 200.0
+#: Where a loop ends: the step is done and the image is about to sleep for the next tick.
+WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
+REPORT_SYMBOL = "hq_loop_report"
+#: hq_loop_report: loops, step cycles (uint32); armed, mode, sensor kind, excitation state.
+REPORT = struct.Struct("<IIBBBB")
+#: The image's ESC calibration (firmware/targets/teensy35/motors.hpp: EscCalibration's
+#: defaults) and FTM0's counts per microsecond: a pulse of min_us is stop, max_us full thrust.
+ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
+#: FTM3 (RC capture) counts bus / 32: one count per 64 core cycles at 120 MHz.
+RC_CHANNELS = 6
+#: Emulated-time bounds: reset to the first loop; one loop (a loop that takes longer has hung,
+#: and the 500 ms watchdog has already reset the chip); draining the UART on a sync frame.
+BOOT_LIMIT_S = 5.0
+LOOP_LIMIT_S = 2.0
+DRAIN_LIMIT_S = 0.004
+#: HQ_IMU_FAULT values (the dialect's enum) as the emulated MPU6050 takes them.
+EXIT_USAGE, EXIT_IDLE, EXIT_LINK, EXIT_IMAGE = 2, 3, 4, 5
+
+
+class ImageFault(RuntimeError):
+    """The image stopped in a way a board would not recover from by itself."""
+
+
+class PilBoard:
+    """The Teensy 3.5 on the simulated rig, one lockstep frame at a time."""
+
+    def __init__(self, elf: str):
+        from .mk64 import Teensy35
+
+        self.board = Teensy35(elf)
+        self.machine = self.board.machine
+        image = self.machine.image
+        for needed in (WAIT_SYMBOL, REPORT_SYMBOL):
+            if not image.has(needed):
+                raise ImageFault(f"{elf} has no {needed}: not a heliquad Teensy 3.5 image "
+                                 "(or one older than the processor-in-the-loop target)")
+        self.report_address = image.symbol(REPORT_SYMBOL).address
+        self.waits = 0
+        self._wait_target = None
+        self.machine.break_at(WAIT_SYMBOL, self._on_wait)
+        self.resets = 0
+        self.telemetry_out = bytearray()
+
+    def _on_wait(self, machine):
+        self.waits += 1
+        if self._wait_target is not None and self.waits >= self._wait_target:
+            return "loop-done"
+        return None
+
+    def _run_to_wait(self, limit_s: float, what: str):
+        """Run until the main loop next reaches its sleep; a watchdog reset reboots."""
+        self._wait_target = self.waits + 1
+        try:
+            while True:
+                try:
+                    stop = self.machine.run(seconds=limit_s)
+                except ChipReset as e:
+                    self.resets += 1
+                    print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
+                          file=sys.stderr, flush=True)
+                    self.board.reset()
+                    self.waits = 0
+                    self._wait_target = 1
+                    continue
+                except EmulationError as e:
+                    raise ImageFault(f"{what}: {e}") from None
+                if stop.reason == "loop-done":
+                    return
+                if stop.reason == "fatal":
+                    raise ImageFault(f"{what}: the image stopped in hq_fatal "
+                                     f"(code {stop.detail.get('code')})")
+                raise ImageFault(f"{what}: the main loop did not come round within "
+                                 f"{limit_s:g} s of emulated time ({stop})")
+        finally:
+            self._wait_target = None
+
+    def boot(self) -> None:
+        """Reset to the main loop's first sleep, before the first tick."""
+        self._run_to_wait(BOOT_LIMIT_S, "start-up")
+        self._collect_telemetry()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def apply_imu_fault(self, fault: int) -> None:
+        mav = dialect()
+        mpu = self.board.mpu
+        mpu.set_present(fault != mav.HQ_IMU_FAULT_NACK)
+        mpu.emu.set_silent(fault == mav.HQ_IMU_FAULT_SILENT)
+        if fault == mav.HQ_IMU_FAULT_RESET:
+            mpu.emu.power_on_reset()
+        if fault == mav.HQ_IMU_FAULT_OVERFLOW:
+            mpu.emu.force_overflow()
+
+    def rc_pulses(self, rc_us) -> None:
+        """One servo pulse per channel with a signal (0: none), starting on the next FTM3
+        count: the rising edge on a count boundary and the falling edge ceil(us x 1.875)
+        counts later, so the capture reads back exactly the frame's microseconds (the image
+        truncates counts x 8 / 15). A receiver's pulse is continuous; the frame's value is
+        an integer, and this is the pulse whose capture is that integer."""
+        m, ftm3, ports = self.machine, self.board.chip.ftm3, self.board.chip.ports
+        if ftm3.anchor is None:
+            return                                  # capture not running: no one listens
+        start, _ = ftm3.anchor
+        per_count = round(1 / ftm3._ticks_per_cycle())
+        now = m.now()
+        rise = start + -(-(now - start) // per_count) * per_count
+        from .mk64.teensy35 import PINS, RC_PINS
+
+        for ch in range(RC_CHANNELS):
+            us = int(rc_us[ch])
+            if us <= 0:
+                continue
+            counts = -(-us * 15 // 8)
+            letter, bit = PINS[RC_PINS[ch]]
+            m.at(rise, lambda lb=(letter, bit): ports.drive(*lb, 1), scaled=False)
+            m.at(rise + counts * per_count, lambda lb=(letter, bit): ports.drive(*lb, 0),
+                 scaled=False)
+
+    def feed_telemetry(self, data: bytes) -> None:
+        if data:
+            self.board.chip.uart0.receive(data)
+
+    # -- one frame ---------------------------------------------------------------------------
+    def frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int, sync: bool):
+        """Inputs in, one loop, outputs out: (motors, armed, mode, sensor kind)."""
+        self.apply_imu_fault(imu_fault)
+        if fifo:
+            self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
+        self.rc_pulses(rc_us)
+        self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
+        if sync:
+            self._drain_uart()
+        self._collect_telemetry()
+        loops, _, armed, mode, kind, _ = REPORT.unpack(
+            self.machine.read(self.report_address, REPORT.size))
+        return self.thrust(), bool(armed), mode, kind
+
+    def _drain_uart(self) -> None:
+        """Let the board run (it sleeps, the TX interrupt feeds the UART) until nothing it
+        queued is left to send, or DRAIN_LIMIT_S: then the loop's telemetry is on the wire.
+        The main loop must not come round meanwhile: the next frame's inputs are not in."""
+        uart = self.board.chip.uart0
+        m = self.machine
+        deadline = m.now() + int(DRAIN_LIMIT_S * m.core_hz)
+        self._wait_target = self.waits + 1
+        try:
+            while m.now() < deadline and not (uart.tc() and not uart.v["C2"] & _TIE):
+                step = min(int(uart.frame_cycles()) * 4, deadline - m.now())
+                stop = m.run(instructions=None, seconds=max(step, 1) / m.core_hz)
+                if stop.reason == "loop-done":
+                    raise ImageFault("the main loop came round while its telemetry drained")
+        finally:
+            self._wait_target = None
+
+    def thrust(self) -> list:
+        """The five thrust fractions the ESCs get from the next PWM period on."""
+        ftm0 = self.board.chip.ftm0
+        out = []
+        for ch in range(5):
+            counts = _commanded_value(ftm0, ch)
+            lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
+            out.append(min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None
+                       else 0.0)
+        return out
+
+    def _collect_telemetry(self) -> None:
+        chip = self.board.chip
+        uart = chip.uart0
+        self.telemetry_out += bytes(b for _, b in uart.sent)
+        uart.sent.clear()
+        # A lockstep run is long: the models' inspection logs must not grow with it.
+        self.board.mpu.log.clear()
+        chip.i2c0.transfers.clear()
+        chip.ftm3.captures.clear()
+        chip.ports.level_log.clear()
+
+
+def _commanded_value(ftm, ch: int):
+    """The channel's CnV for the next PWM period (a write waits for the period's end)."""
+    if ftm.channel_mode(ch) != "edge-aligned PWM":
+        return None
+    return ftm.pending.get(f"C{ch}V", ftm.v[f"C{ch}V"]) & 0xFFFF
+
+
+class Pty:
+    """A pseudo-terminal whose slave device is published as ``link_path`` (a symlink), raw,
+    with our own slave descriptor kept open so the master never sees EOF between users."""
+
+    def __init__(self, link_path: str):
+        self.master, slave = os.openpty()
+        self.slave = slave
+        tty.setraw(slave)
+        os.set_blocking(self.master, False)
+        self.slave_path = os.ttyname(slave)
+        self.link_path = link_path
+        try:
+            os.unlink(link_path)
+        except FileNotFoundError:
+            pass
+        os.symlink(self.slave_path, link_path)
+
+    def close(self) -> None:
+        try:
+            os.unlink(self.link_path)
+        except OSError:
+            pass
+        for fd in (self.slave, self.master):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def read(self) -> bytes:
+        try:
+            return os.read(self.master, 65536)
+        except BlockingIOError:
+            return b""
+        except OSError as e:
+            if e.errno == errno.EIO:
+                return b""
+            raise
+
+    def write_some(self, data: bytes) -> int:
+        """Write what fits without blocking; the rest is lost as on a wire nobody reads."""
+        try:
+            return os.write(self.master, data)
+        except BlockingIOError:
+            return 0
+
+    def write_all(self, data: bytes, timeout_s: float) -> bool:
+        view, deadline = memoryview(data), time.monotonic() + timeout_s
+        while view:
+            try:
+                n = os.write(self.master, view)
+                view = view[n:]
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    return False
+                select.select([], [self.master], [], 0.05)
+        return True
+
+
+def _usage(message: str) -> None:
+    print(f"heliquad-fw-pil: {message}", file=sys.stderr)
+    sys.exit(EXIT_USAGE)
+
+
+def parse(argv):
+    p = argparse.ArgumentParser(
+        prog="heliquad-fw-pil",
+        description="The Teensy 3.5 image in the emulated MK64FX512, driven in lockstep like "
+                    "heliquad-fw-host (the same sim-link and telemetry ptys).")
+    p.add_argument("--sim-link", required=True, help="path for the sim link's pty symlink")
+    p.add_argument("--telemetry", required=True, help="path for the telemetry pty symlink")
+    p.add_argument("--image", help="the .elf (default: the image the install built)")
+    p.add_argument("--loop-hz", type=float, default=IMAGE_LOOP_HZ,
+                   help="must be the image's loop rate, 200")
+    p.add_argument("--idle-timeout-s", type=int, default=10,
+                   help="exit when no sensor frame arrives for this long (wall time)")
+    p.add_argument("--dmp-image", help="refused: the Teensy image carries its DMP firmware "
+                                       "from its build")
+    args = p.parse_args(argv)
+    if args.loop_hz != IMAGE_LOOP_HZ:
+        _usage(f"--loop-hz {args.loop_hz:g}: the Teensy image runs its loop at "
+               f"{IMAGE_LOOP_HZ:g} Hz")
+    if args.idle_timeout_s <= 0:
+        _usage("--idle-timeout-s must be positive")
+    if args.dmp_image:
+        _usage("--dmp-image: the Teensy image carries its DMP firmware from its build "
+               "(-DHQ_DMP_IMAGE=FILE); the emulated board runs what the image has")
+    return args
+
+
+class _Stop:
+    requested = False
+
+
+def main(argv=None) -> int:
+    args = parse(sys.argv[1:] if argv is None else argv)
+
+    def on_signal(signum, frame):
+        _Stop.requested = True
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+
+    from .firmware_image import ImageNotFound, teensy35_image
+    try:
+        elf = args.image or str(teensy35_image("elf"))
+    except ImageNotFound as e:
+        _usage(str(e))
+    try:
+        board = PilBoard(elf)
+        board.boot()
+    except (ImageFault, OSError) as e:
+        _usage(str(e))
+    mav = dialect()
+    try:
+        sim, tel = Pty(args.sim_link), Pty(args.telemetry)
+    except OSError as e:
+        _usage(f"cannot create the links: {e}")
+    report = REPORT.unpack(board.machine.read(board.report_address, REPORT.size))
+    print(f"sim link: {args.sim_link} -> {sim.slave_path}\ntelemetry: {args.telemetry} -> "
+          f"{tel.slave_path}\nimu: {'dmp' if report[4] == mav.HQ_SENSOR_DMP else 'raw'}\n"
+          f"image: {elf}\nready", flush=True)
+
+    parser = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    parser.robust_parsing = True
+    last_frame, reply, lost, repeated, frames, dropped = None, b"", 0, 0, 0, 0
+    exit_code = 0
+    last_input = time.monotonic()
+    try:
+        while not _Stop.requested:
+            if board.telemetry_out:
+                n = tel.write_some(bytes(board.telemetry_out))
+                del board.telemetry_out[:n]
+            ready, _, _ = select.select([sim.master], [], [], 0.1)
+            if not ready:
+                if len(board.telemetry_out) > (1 << 20):     # nobody reads the link
+                    dropped += len(board.telemetry_out)
+                    board.telemetry_out.clear()
+                if time.monotonic() - last_input >= args.idle_timeout_s:
+                    print(f"heliquad-fw-pil: no sensor frame for {args.idle_timeout_s} s; "
+                          "exiting", file=sys.stderr)
+                    exit_code = EXIT_IDLE
+                    break
+                continue
+            last_input = time.monotonic()
+            for msg in parser.parse_buffer(sim.read()) or ():
+                if msg.get_type() != "HQ_SENSOR_FRAME":
+                    continue
+                if last_frame is not None and msg.frame == last_frame:
+                    repeated += 1
+                else:
+                    if last_frame is not None and msg.frame > last_frame + 1:
+                        lost += msg.frame - last_frame - 1
+                        print(f"heliquad-fw-pil: {msg.frame - last_frame - 1} sensor frame(s) "
+                              f"lost by frame {msg.frame}", file=sys.stderr)
+                    last_frame = msg.frame
+                    frames += 1
+                    board.feed_telemetry(tel.read())
+                    fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
+                    motors, armed, mode, kind = board.frame(
+                        fifo, msg.fifo_kind == mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault,
+                        bool(msg.sync))
+                    reply = mav.MAVLink_hq_actuator_frame_message(
+                        msg.time_us, msg.frame, motors, int(armed), mode, kind).pack(parser)
+                if msg.sync and board.telemetry_out:
+                    n = tel.write_some(bytes(board.telemetry_out))
+                    del board.telemetry_out[:n]
+                if not sim.write_all(reply, 5.0):
+                    print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
+                    exit_code = EXIT_LINK
+                    break
+            if exit_code:
+                break
+    except ImageFault as e:
+        print(f"heliquad-fw-pil: the image faulted at frame {last_frame}: {e}",
+              file=sys.stderr)
+        exit_code = EXIT_IMAGE
+    finally:
+        if board.telemetry_out:
+            tel.write_some(bytes(board.telemetry_out))
+        loops = REPORT.unpack(board.machine.read(board.report_address, REPORT.size))[0]
+        print(f"heliquad-fw-pil: {loops} loops, {lost} frames lost, {repeated} repeated, "
+              f"{dropped} telemetry bytes dropped, {board.resets} watchdog resets, "
+              f"{board.machine.seconds():.3f} s emulated", file=sys.stderr)
+        sim.close()
+        tel.close()
+    return exit_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
