@@ -68,8 +68,11 @@ class HostFirmware:
     reply_timeout_s = REPLY_TIMEOUT_S
 
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
-                 idle_timeout_s: int = 10, telemetry_path: str | None = None):
+                 idle_timeout_s: int = 10, telemetry_path: str | None = None,
+                 reply_timeout_s: float | None = None):
         self.loop_hz = loop_hz
+        if reply_timeout_s is not None:
+            self.reply_timeout_s = reply_timeout_s
         cmd = self.command()
         self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
         self.workdir = self._tmp.name

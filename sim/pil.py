@@ -66,7 +66,7 @@ RC_CHANNELS = 6
 BOOT_LIMIT_S = 5.0
 LOOP_LIMIT_S = 2.0
 DRAIN_LIMIT_S = 0.004
-#: HQ_IMU_FAULT values (the dialect's enum) as the emulated MPU6050 takes them.
+SYSTICK_EXCEPTION = 15
 EXIT_USAGE, EXIT_IDLE, EXIT_LINK, EXIT_IMAGE = 2, 3, 4, 5
 
 
@@ -189,20 +189,21 @@ class PilBoard:
 
     def _drain_uart(self) -> None:
         """Let the board run (it sleeps, the TX interrupt feeds the UART) until nothing it
-        queued is left to send, or DRAIN_LIMIT_S: then the loop's telemetry is on the wire.
-        The main loop must not come round meanwhile: the next frame's inputs are not in."""
+        queued is left to send: then the loop's telemetry is on the wire. Never into the
+        next loop, whose inputs are not in yet: at most until 20 us before the next SysTick
+        (none at all when that tick is already pending: the loop overran), and at most
+        DRAIN_LIMIT_S. What is still queued then leaves during the next frame, as the bytes
+        of a loop that sent more than its period carries leave a board late."""
         uart = self.board.chip.uart0
         m = self.machine
-        deadline = m.now() + int(DRAIN_LIMIT_S * m.core_hz)
-        self._wait_target = self.waits + 1
-        try:
-            while m.now() < deadline and not (uart.tc() and not uart.v["C2"] & _TIE):
-                step = min(int(uart.frame_cycles()) * 4, deadline - m.now())
-                stop = m.run(instructions=None, seconds=max(step, 1) / m.core_hz)
-                if stop.reason == "loop-done":
-                    raise ImageFault("the main loop came round while its telemetry drained")
-        finally:
-            self._wait_target = None
+        systick = self.board.chip.scs.systick
+        if m.pending & (1 << SYSTICK_EXCEPTION) or systick.zero_at is None:
+            return
+        deadline = min(m.now() + int(DRAIN_LIMIT_S * m.core_hz),
+                       systick.zero_at - int(20e-6 * m.core_hz))
+        while m.now() < deadline and not (uart.tc() and not uart.v["C2"] & _TIE):
+            step = min(uart.frame_cycles() * 4, deadline - m.now())
+            m.run(seconds=step / m.core_hz)
 
     def thrust(self) -> list:
         """The five thrust fractions the ESCs get from the next PWM period on."""

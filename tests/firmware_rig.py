@@ -1,5 +1,5 @@
-"""A test bench for the host firmware: the real ``heliquad-fw-host`` on a transfer-function
-plant, stepped one frame at a time from Python through the link contract, with the pilot's
+"""A test bench for the firmware: the real ``heliquad-fw-host`` (or the Teensy image in the
+emulated chip, tests/firmwares.py) on a transfer-function plant, stepped one frame at a time from Python through the link contract, with the pilot's
 RC, IMU faults, and the host tool's telemetry link (not a test module: a helper the tests
 import).
 
@@ -31,7 +31,7 @@ MAV_CMD_REQUEST_MESSAGE = 512
 
 
 class FirmwareRig:
-    """The host firmware flying a roll transfer-function plant, frame by frame."""
+    """A firmware flying a roll transfer-function plant, frame by frame."""
 
     def __init__(self, fw: HostFirmware, plant=None):
         self.fw = fw
@@ -41,6 +41,7 @@ class FirmwareRig:
         self.rc = list(RC_REST)
         self.frame, self.kind, self.reply = 0, 0, None
         self.messages = []              # every decoded telemetry message, in order
+        self.samples = 0                # HQ_SYSID_SAMPLEs read: one per loop
         self.time_of = []               # the loop time of each (its HQ_SYSID_SAMPLE's)
         self._pending = []
 
@@ -63,24 +64,45 @@ class FirmwareRig:
             self._read(wait=False)
         return self.reply
 
-    def _read(self, wait: bool) -> None:
+    def _read(self, wait: bool) -> int:
+        """Decode what the link has (waiting up to 50 ms for it with ``wait``); how many
+        bytes came."""
         fd = self.tel.serial.fileno()
         if wait:
             select.select([fd], [], [], 0.05)
-        for msgid, _, payload in self.tel.read_packets():
+        before = self.tel.bytes_in
+        packets = self.tel.read_packets()
+        for msgid, _, payload in packets:
             m = self.tel.codec.decode(msgid, payload)
             self._pending.append(m)
             if m.get_type() == "HQ_SYSID_SAMPLE":
+                self.samples += 1
                 self.messages.extend(self._pending)
                 self.time_of.extend([m.time_us] * len(self._pending))
                 self._pending = []
+        return self.tel.bytes_in - before
 
     def settle_telemetry(self) -> None:
         """Wait until every loop stepped so far has all its telemetry read."""
+        # Every loop ends its telemetry with one HQ_SYSID_SAMPLE: settled when there is one
+        # per frame stepped. (Counting, not comparing times: the host build's clock is the
+        # simulator's, the Teensy image's starts at its own reset.) The emulated board puts
+        # what left its UART on the link before it replies, so everything that will come is
+        # already there; only a loop that sent more than its period carries is still partly
+        # in the board's queue, and that arrives with later frames.
+        if self.fw.name != "host":
+            while self._read(wait=False):
+                pass
+            return
         deadline = time.monotonic() + WAIT_S
-        while not self.time_of or self.time_of[-1] < self.time_us:
+        while self.samples < self.frame:
             assert time.monotonic() < deadline, "telemetry stopped"
             self._read(wait=True)
+
+    def last_loop_us(self) -> int:
+        """The firmware's time of the last loop stepped (its HQ_SYSID_SAMPLE's time_us)."""
+        self.settle_telemetry()
+        return self.time_of[-1]
 
     def of_type(self, name: str, since_us: int = 0):
         """(loop time, message) of every message of one type from loop time since_us on."""

@@ -1,7 +1,11 @@
-"""Firmware in the loop: the host build driven over ptys by the simulator (issue 3).
+"""Firmware in the loop: the firmware driven over ptys by the simulator.
 
-Everything here runs the real heliquad-fw-host executable and talks to it over its two
-pseudo-terminals, as the tools do.
+Everything here runs a real firmware and talks to it over its two pseudo-terminals, as the
+tools do: the host build (heliquad-fw-host) and, where a test is parametrised with
+FIRMWARES, also the Teensy 3.5 image in the emulated chip (heliquad.sim.pil; the ``pil``
+mark). The two differ where the board does: the image's clock starts at its reset (its
+loop times are offset by the boot and jitter by tens of microseconds), and its telemetry
+leaves at the UART's line rate.
 """
 
 import math
@@ -24,16 +28,17 @@ from heliquad.sim.tf_plant import TfPlant
 
 from fake_dmp import write_fake_dmp
 from firmware_rig import FirmwareRig
+from firmwares import FIRMWARES, image_for, start
 
 ROLL = ((28.19,), (1.0, 5.13, 22.93))
 MAV = dialect()
 
 
-@pytest.fixture(scope="module")
-def mixer_run(tmp_path_factory):
+@pytest.fixture(scope="module", params=FIRMWARES)
+def mixer_run(request, tmp_path_factory):
     out = str(tmp_path_factory.mktemp("sil") / "roll_mixer")
     cfg = SilConfig(axis="roll", num=ROLL[0], den=ROLL[1], inject="mixer", freq_hz=1.0,
-                    amplitude=0.05, cycles=10)
+                    amplitude=0.05, cycles=10, **image_for(request.param))
     return cfg, run_sil(cfg, out, progress=lambda *_: None)
 
 
@@ -45,8 +50,16 @@ def test_sine_experiment_log_has_every_frame(mixer_run):
     samples = [m for _, m in msgs if m.get_type() == "HQ_SYSID_SAMPLE"]
     assert len(samples) == r.frames
     assert [m.seq for m in samples] == list(range(samples[0].seq, samples[0].seq + r.frames))
-    # every timestamp comes from the simulated clock: 5 ms steps
-    assert [m.time_us for m in samples] == [5000 * k for k in range(1, r.frames + 1)]
+    times = np.array([m.time_us for m in samples])
+    if cfg.firmware == "host":
+        # every timestamp comes from the simulated clock: 5 ms steps
+        assert list(times) == [5000 * k for k in range(1, r.frames + 1)]
+    else:
+        # the image's own clock, from its reset: one loop per SysTick period of 5 ms, each
+        # loop's time taken after its I2C reads, whose length varies (up to 14 bytes at
+        # 375 kHz, 0.34 ms), so the steps jitter by less than half a millisecond
+        steps = np.diff(times)
+        assert np.all(np.abs(steps - 5000) < 500) and abs(steps.mean() - 5000) < 1
 
 
 def test_two_runs_with_the_same_inputs_give_identical_telemetry(mixer_run, tmp_path):
@@ -69,13 +82,14 @@ def test_fsf_recovers_the_roll_model_from_a_mixer_injection_run(mixer_run):
     assert abs(math.degrees(np.angle(point.gain / truth))) < 2.0
 
 
-def test_rate_loop_holds_a_rate_setpoint():
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_rate_loop_holds_a_rate_setpoint(firmware):
     # Rate mode (channel 6 high), roll stick at 1510 us: 0.02 of 200 deg/s = 0.0698 rad/s.
     plant = TfPlant("roll", *ROLL, 0.005)
     from heliquad import _firmware
 
     mixer = _firmware.Mixer()
-    with HostFirmware() as fw:
+    with start(firmware) as fw:
         link = SimLink(fw)
         kind = 0
         for frame in range(1, 1201):
@@ -92,8 +106,9 @@ def test_rate_loop_holds_a_rate_setpoint():
     assert plant.rate_rad_s == pytest.approx(0.02 * math.radians(200), rel=0.02)
 
 
-def test_repeated_frame_gets_the_same_reply_without_a_step():
-    with HostFirmware() as fw:
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_repeated_frame_gets_the_same_reply_without_a_step(firmware):
+    with start(firmware) as fw:
         link = SimLink(fw)
         first = link.step(5000)
         again = link.step(5000, frame=first.frame)            # the same counter once more
@@ -103,8 +118,9 @@ def test_repeated_frame_gets_the_same_reply_without_a_step():
         link.close()
 
 
-def test_killing_the_firmware_mid_run_is_a_clear_error():
-    with HostFirmware() as fw:
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_killing_the_firmware_mid_run_is_a_clear_error(firmware):
+    with start(firmware) as fw:
         link = SimLink(fw)
         for k in range(1, 50):
             link.step(5000 * k)
@@ -116,8 +132,9 @@ def test_killing_the_firmware_mid_run_is_a_clear_error():
         link.close()
 
 
-def test_a_firmware_that_stops_answering_is_a_clear_error():
-    with HostFirmware() as fw:
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_a_firmware_that_stops_answering_is_a_clear_error(firmware):
+    with start(firmware, reply_timeout_s=3.0) as fw:
         link = SimLink(fw)
         link.step(5000)
         os.kill(fw.proc.pid, signal.SIGSTOP)
@@ -129,8 +146,9 @@ def test_a_firmware_that_stops_answering_is_a_clear_error():
         link.close()
 
 
-def test_firmware_exits_by_itself_when_the_simulator_goes_away(tmp_path):
-    fw = HostFirmware(idle_timeout_s=1)
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_firmware_exits_by_itself_when_the_simulator_goes_away(firmware, tmp_path):
+    fw = start(firmware, idle_timeout_s=1)
     try:
         fw.proc.wait(timeout=5)
         assert fw.proc.returncode == 3
@@ -249,19 +267,28 @@ def test_dmp_path_end_to_end(tmp_path):
     assert abs(point.gain / truth - 1) < 0.02
 
 
-def test_rc_loss_cuts_the_motors():
-    with HostFirmware() as fw:
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_rc_loss_cuts_the_motors(firmware):
+    with start(firmware) as fw:
         rig = FirmwareRig(fw)
         reply = rig.hover(100)
         assert reply.armed and max(reply.motor) > 0.0
         rig.rc = [0] * 8                                        # no RC signal
         lost = rig.step()
+        if firmware != "host":
+            # The board hears no pulses: each channel reads "no signal" 100 ms after its
+            # last one, and the link counts as lost 0.5 s after the sticks' last (safety.md).
+            frames = 1
+            while lost.armed and frames < 200:
+                lost, frames = rig.step(), frames + 1
+            assert frames * 5000 <= 500_000 + 5000
         assert not lost.armed and lost.motor == [0.0] * 5
         rig.close()
 
 
-def test_arming_is_refused_with_the_throttle_up():
-    with HostFirmware() as fw:
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_arming_is_refused_with_the_throttle_up(firmware):
+    with start(firmware) as fw:
         rig = FirmwareRig(fw)
         rig.rc[2] = 1500                                        # throttle up, then the switch
         rig.step(20)

@@ -1,0 +1,33 @@
+"""The two firmwares a lockstep test can fly (not a test module: a helper the tests import).
+
+``host``: the host build, heliquad-fw-host. ``teensy35``: the Teensy 3.5 image as flashed,
+in the emulated MK64FX512 (heliquad.sim.pil), the image built with the CMake preset by
+tests/teensy_image.py (skipped without the ARM toolchain, except in CI, where it must be
+there). Tests parametrised with :data:`FIRMWARES` run against both; the processor-in-the-
+loop cases carry the ``pil`` mark, so ``pytest -m pil`` runs only them and ``-m "not pil"``
+leaves them out.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from heliquad.sim.lockstep import HostFirmware, PilFirmware
+
+import teensy_image
+
+FIRMWARES = ["host", pytest.param("teensy35", marks=pytest.mark.pil)]
+
+
+def start(name: str, **kwargs) -> HostFirmware:
+    """Start the named firmware with HostFirmware's arguments."""
+    if name == "teensy35":
+        return PilFirmware(image=str(teensy_image.image().elf), **kwargs)
+    return HostFirmware(**kwargs)
+
+
+def image_for(name: str) -> dict:
+    """SilConfig/SilSession arguments that fly ``name`` (the image path for the PIL)."""
+    if name == "teensy35":
+        return {"firmware": name, "firmware_image": str(teensy_image.image().elf)}
+    return {"firmware": name}
