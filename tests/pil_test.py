@@ -1,0 +1,116 @@
+"""Processor in the loop against the host build: the same experiment on both firmwares.
+
+The Teensy image and the host build compile the same core without fused multiply-adds, so
+their single-precision arithmetic is the same bit for bit where no libm function is called
+(checked here on the mixer, whose inputs the telemetry carries). What the board adds moves
+the rest a little: its loop measures its own dt (the host build gets exactly 5 ms), and its
+ESC pulses have one FTM0 count of resolution (1/15 000 of the range). The closed loop then
+sometimes lands the plant's rate on the other side of one gyro count (0.061 deg/s); through
+the rate loop's derivative gain and the mixer's roll coefficient that moves a motor by 7e-4
+of full thrust. Tolerances follow from those figures, stated at each check.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from heliquad import _firmware
+from heliquad.host.files import read_run_csv
+from heliquad.host.fsf import estimate_fsf
+from heliquad.host.mavlink_dialect import dialect
+from heliquad.host.tlog import read_tlog
+from heliquad.sim.pil import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
+from heliquad.sim.sil import RC_CENTER_US, SilConfig, run_sil
+
+from firmware_rig import FirmwareRig
+from firmwares import image_for, start
+
+pytestmark = pytest.mark.pil
+MAV = dialect()
+ROLL = ((28.19,), (1.0, 5.13, 22.93))
+#: Motor telemetry, host build against image, per loop: a gyro count's effect (see above),
+#: with half as much again for the dt jitter acting through the same gains.
+MOTOR_TOLERANCE = 1e-3
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pil")
+    result = {}
+    for fw in ("host", "teensy35"):
+        cfg = SilConfig(axis="roll", num=ROLL[0], den=ROLL[1], inject="mixer", freq_hz=1.0,
+                        amplitude=0.05, cycles=4, fade_cycles=1, **image_for(fw))
+        r = run_sil(cfg, str(out / fw), progress=lambda *_: None)
+        samples = [m for _, m in read_tlog(r.tlog_path, MAV, only=("HQ_SYSID_SAMPLE",))]
+        result[fw] = (cfg, r, samples)
+    return result
+
+
+def test_both_fly_the_same_loops_in_the_same_states(runs):
+    (_, host, hs), (_, pil, ps) = runs["host"], runs["teensy35"]
+    assert host.frames == pil.frames and len(hs) == len(ps) == host.frames
+    assert host.seq_gaps == pil.seq_gaps == 0 and host.samples == pil.samples == 4 * 200
+    for field in ("armed", "mode", "exc_state", "axis", "injection"):
+        assert [getattr(m, field) for m in hs] == [getattr(m, field) for m in ps], field
+
+
+def test_the_images_mixer_is_the_host_builds_bit_for_bit(runs):
+    # While the excitation runs the sticks are still (throttle 1400 us) and only roll moves
+    # (pitch and yaw see exact zeros: their commands are exactly 0), so each loop's motors
+    # are mix(throttle, axis_cmd, 0, 0): computed here by the host build's mixer from the
+    # image's own telemetry, they must be the image's motors to the last bit.
+    cfg, _, ps = runs["teensy35"]
+    rc = [RC_CENTER_US] * 8
+    rc[2] = int(round(1000 + cfg.collective * 1000))
+    throttle = _firmware.sticks(_firmware.RcInput(rc)).throttle
+    mixer = _firmware.Mixer()
+    running = [m for m in ps if m.exc_state != MAV.HQ_EXCITATION_STATE_IDLE]
+    assert len(running) > 4 * 200
+    for m in running:
+        want = np.array(mixer.mix(_firmware.MixerCommand(throttle, m.axis_cmd, 0.0, 0.0)).motor,
+                        dtype=np.float32)
+        assert np.array_equal(want, np.array(m.motor, dtype=np.float32)), (m.seq, m.axis_cmd)
+
+
+def test_motors_and_measurements_agree_within_what_the_board_adds(runs):
+    (_, _, hs), (_, _, ps) = runs["host"], runs["teensy35"]
+    mh = np.array([m.motor for m in hs], dtype=np.float64)
+    mp = np.array([m.motor for m in ps], dtype=np.float64)
+    assert np.abs(mh - mp).max() < MOTOR_TOLERANCE
+    # The measured rate is the gyro's count times its scale on both: equal, or one count apart.
+    gyro_count = math.radians(2000 / 32768)
+    rh = np.array([m.rate for m in hs])
+    rp = np.array([m.rate for m in ps])
+    steps = np.abs(rh - rp) / gyro_count
+    assert np.all((steps < 1e-6) | (np.abs(steps - 1) < 1e-3) | (np.abs(steps - 2) < 1e-3))
+    assert np.mean(steps < 1e-6) > 0.8
+
+
+def test_fsf_points_agree_within_a_tenth_of_a_db_and_half_a_degree(runs):
+    points = {}
+    for fw in ("host", "teensy35"):
+        fs, u, y = read_run_csv(runs[fw][1].csv_path)
+        points[fw] = estimate_fsf(u, y, fs)
+    host, pil = points["host"], points["teensy35"]
+    assert abs(20 * math.log10(pil.magnitude / host.magnitude)) < 0.1
+    assert abs(math.degrees(np.angle(pil.gain / host.gain))) < 0.5
+
+
+def test_the_esc_pulses_carry_the_commanded_thrust_to_one_ftm_count():
+    # The reply's motors are read back from FTM0's pulse widths; the telemetry's are the
+    # floats the image computed. They differ by the rounding to a count, no more.
+    with start("teensy35") as fw:
+        rig = FirmwareRig(fw)
+        rig.hover(40)
+        replies = [(rig.frame + 1, rig.step()) for _ in range(20)]
+        rig.step(5)                                 # their telemetry is surely out
+        samples = [m for _, m in rig.of_type("HQ_SYSID_SAMPLE")]
+        rig.close()
+    span = (ESC_MAX_US - ESC_MIN_US) * FTM0_COUNTS_PER_US
+    for frame, reply in replies:
+        sample = samples[frame - 1]                 # one loop per frame, from the first
+        assert reply.armed and sample.armed and max(reply.motor) > 0.05
+        for f, pulse in zip(sample.motor, reply.motor):
+            counts = int(np.float32(f) * np.float32(span) + np.float32(0.5))
+            assert round(pulse * span) == counts
