@@ -401,6 +401,8 @@ def _cmd_sil(args) -> int:
     if r.saturated_samples:
         print(f"warning: {r.saturated_samples} samples saturated the mixer; lower --amplitude",
               file=sys.stderr)
+    if args.firmware != "host" and r.firmware_summary:
+        print(f"the board: {r.firmware_summary.removeprefix('heliquad-fw-pil: ')}")
     print(f"wrote {r.tlog_path} and {r.csv_path}")
     if r.stopped:
         print(f"heliquad sil: {r.stopped} (the log and the samples before it are kept)",

@@ -86,6 +86,7 @@ class HostFirmware:
         self._stderr = open(self.stderr_path, "w+")
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr)
         self.ready_lines = []
+        self.summary = ""
         self.imu_mode = self._wait_ready()
 
     def command(self) -> list:
@@ -154,6 +155,9 @@ class HostFirmware:
                 self.proc.wait()
         if self.proc.stdout:
             self.proc.stdout.close()
+        if not self._stderr.closed:
+            # The firmware's last line: its counters (and, emulated, its loop figures).
+            self.summary = self.stderr_tail(1).split("; ", 1)[-1]
         self._stderr.close()
         if self._tmp is not None:
             self._tmp.cleanup()

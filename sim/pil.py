@@ -54,8 +54,12 @@ IMAGE_LOOP_HZ = 200.0
 #: Where a loop ends: the step is done and the image is about to sleep for the next tick.
 WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
 REPORT_SYMBOL = "hq_loop_report"
-#: hq_loop_report: loops, step cycles (uint32); armed, mode, sensor kind, excitation state.
-REPORT = struct.Struct("<IIBBBB")
+#: hq_loop_report: loops, step cycles, overruns (uint32); armed, mode, sensor kind,
+#: excitation state (uint8).
+REPORT = struct.Struct("<IIIBBBB")
+#: The stack is painted with this word before reset; the deepest word overwritten since is
+#: the stack's high-water mark.
+STACK_PAINT = 0xDEADBEEF
 #: The image's ESC calibration (firmware/targets/teensy35/motors.hpp: EscCalibration's
 #: defaults) and FTM0's counts per microsecond: a pulse of min_us is stop, max_us full thrust.
 ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
@@ -92,6 +96,7 @@ class PilBoard:
         self._wait_target = None
         self.machine.break_at(WAIT_SYMBOL, self._on_wait)
         self.resets = 0
+        self.step_cycles = []
         self.telemetry_out = bytearray()
 
     def _on_wait(self, machine):
@@ -128,7 +133,10 @@ class PilBoard:
             self._wait_target = None
 
     def boot(self) -> None:
-        """Reset to the main loop's first sleep, before the first tick."""
+        """Reset to the main loop's first sleep, before the first tick (the stack painted
+        first, for its high-water mark)."""
+        image = self.machine.image
+        self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
         self._collect_telemetry()
 
@@ -183,9 +191,26 @@ class PilBoard:
         if sync:
             self._drain_uart()
         self._collect_telemetry()
-        loops, _, armed, mode, kind, _ = REPORT.unpack(
-            self.machine.read(self.report_address, REPORT.size))
+        loops, cycles, _, armed, mode, kind, _ = self.report()
+        self.step_cycles.append(cycles)
         return self.thrust(), bool(armed), mode, kind
+
+    def report(self) -> tuple:
+        """hq_loop_report as the image last wrote it."""
+        return REPORT.unpack(self.machine.read(self.report_address, REPORT.size))
+
+    def figures(self) -> dict:
+        """What the board would report of its loop: cycles per step (median and maximum over
+        the frames run), overruns since boot, the stack's high-water mark, and the
+        emulated time."""
+        m, image = self.machine, self.machine.image
+        loops, _, overruns, *_ = self.report()
+        cycles = sorted(self.step_cycles) or [0]
+        low = m.painted_high_water(image.ram_end(), image.initial_sp, STACK_PAINT)
+        return {"loops": loops, "step_cycles_median": cycles[len(cycles) // 2],
+                "step_cycles_max": cycles[-1], "overruns": overruns,
+                "stack_bytes": image.initial_sp - low, "emulated_s": m.seconds(),
+                "watchdog_resets": self.resets}
 
     def _drain_uart(self) -> None:
         """Let the board run (it sleeps, the TX interrupt feeds the UART) until nothing it
@@ -351,9 +376,9 @@ def main(argv=None) -> int:
         sim, tel = Pty(args.sim_link), Pty(args.telemetry)
     except OSError as e:
         _usage(f"cannot create the links: {e}")
-    report = REPORT.unpack(board.machine.read(board.report_address, REPORT.size))
+    report = board.report()
     print(f"sim link: {args.sim_link} -> {sim.slave_path}\ntelemetry: {args.telemetry} -> "
-          f"{tel.slave_path}\nimu: {'dmp' if report[4] == mav.HQ_SENSOR_DMP else 'raw'}\n"
+          f"{tel.slave_path}\nimu: {'dmp' if report[5] == mav.HQ_SENSOR_DMP else 'raw'}\n"
           f"image: {elf}\nready", flush=True)
 
     parser = mav.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -413,10 +438,13 @@ def main(argv=None) -> int:
     finally:
         if board.telemetry_out:
             tel.write_some(bytes(board.telemetry_out))
-        loops = REPORT.unpack(board.machine.read(board.report_address, REPORT.size))[0]
-        print(f"heliquad-fw-pil: {loops} loops, {lost} frames lost, {repeated} repeated, "
-              f"{dropped} telemetry bytes dropped, {board.resets} watchdog resets, "
-              f"{board.machine.seconds():.3f} s emulated", file=sys.stderr)
+        f = board.figures()
+        print(f"heliquad-fw-pil: {f['loops']} loops, {lost} frames lost, {repeated} repeated, "
+              f"{dropped} telemetry bytes dropped, {f['watchdog_resets']} watchdog resets, "
+              f"{f['emulated_s']:.3f} s emulated; step cycles median {f['step_cycles_median']} "
+              f"max {f['step_cycles_max']} of {int(board.machine.core_hz / IMAGE_LOOP_HZ)}, "
+              f"{f['overruns']} overruns, stack high-water {f['stack_bytes']} bytes",
+              file=sys.stderr)
         sim.close()
         tel.close()
     return exit_code

@@ -69,6 +69,7 @@ class SilConfig:
     ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
     firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
+    firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
 
 
 def make_plant(cfg: SilConfig, dt_s: float):
@@ -97,6 +98,7 @@ class SilResult:
     loop_s: float                  # the lockstep loop alone
     truth: complex                 # sampled-data truth at the actual frequency (mixer injection)
     stopped: str | None = None     # why the firmware ended the excitation early, if it did
+    firmware_summary: str = ""     # the firmware's own last word: counters, loop figures
 
 
 def _rc(frame, collective):
@@ -208,7 +210,9 @@ class SilSession:
         check_faults(cfg.faults, self.dt_us)
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
         self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
-        self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image)
+        image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
+        self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image,
+                                 **image)
         try:
             self.link = SimLink(self.fw)
             self.tel = TelemetryLink(self.fw.telemetry_path)
@@ -382,6 +386,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                 next_report += 0.1
         loop_s = time.monotonic() - loop_t0
         plant, imu_mode = session.plant, session.fw.imu_mode
+    summary = session.fw.summary
     csv_path = out_base + ".csv"
     np.savetxt(csv_path, np.array(tally.rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
                comments="", fmt="%.9g")
@@ -392,4 +397,4 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                      saturated_samples=tally.saturated, imu_mode=imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=complex(plant.truth(2 * math.pi * freq)) if math.isfinite(freq) else complex("nan"),
-                     stopped=tally.stopped)
+                     stopped=tally.stopped, firmware_summary=summary)

@@ -47,6 +47,7 @@ hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResul
 struct LoopReport {
     uint32_t loops;         // FlightController steps since boot
     uint32_t step_cycles;   // core cycles of the last step
+    uint32_t overruns;      // loop ticks missed since boot
     uint8_t armed;          // 1 when armed
     uint8_t mode;           // HQ_MODE
     uint8_t sensor_kind;    // HQ_SENSOR_KIND the MPU6050 is configured for
@@ -91,6 +92,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         fc.record_loop(step_cycles, timer.overruns());
         hq_loop_report.loops = fc.loops();
         hq_loop_report.step_cycles = step_cycles;
+        hq_loop_report.overruns = timer.overruns();
         hq_loop_report.armed = fc.armed() ? 1 : 0;
         hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
         hq_loop_report.sensor_kind = fc.sensor_kind();
