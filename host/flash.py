@@ -21,11 +21,8 @@ from dataclasses import dataclass
 
 from .errors import InputError
 
-__all__ = ["DEFAULT_HEX", "ImageInfo", "check_image", "add_flash_parser"]
+__all__ = ["ImageInfo", "check_image", "default_hex", "add_flash_parser"]
 
-#: Where ``cmake --preset teensy35 && cmake --build --preset teensy35`` writes the image,
-#: relative to the repository (the directory the preset was run from).
-DEFAULT_HEX = os.path.join("build", "teensy35", "heliquad-fw-teensy35.hex")
 FLASH_SIZE = 512 * 1024                      # MK64FX512
 SRAM_LOW, SRAM_HIGH = 0x1FFF0000, 0x20020000  # SRAM_L + SRAM_U, 192 KiB
 FLASH_CONFIG = 0x400                         # 16 bytes: key, FPROT, FSEC, FOPT, FEPROT, FDPROT
@@ -88,15 +85,28 @@ def check_image(path: str) -> ImageInfo:
                      reset_vector=reset, fsec=fsec, fopt=fopt)
 
 
+def default_hex() -> str:
+    """The image to flash when none is given: the finder's .hex (heliquad.sim.firmware_image:
+    $HQ_TEENSY35_ELF's .hex, the installed image, the teensy35 preset's build)."""
+    from ..sim.firmware_image import ImageNotFound, teensy35_image
+
+    try:
+        return str(teensy35_image("hex"))
+    except ImageNotFound as exc:
+        raise InputError(f"{exc}, or give HEX") from None
+
+
 def add_flash_parser(sub, fmt) -> None:
     p = sub.add_parser("flash", help="flash the firmware image to a Teensy 3.5",
-                       description=__doc__ + f"""
-Build the image first, from the repository:
+                       description=__doc__ + """
+Without HEX, the image is the one the install built when the ARM toolchain was there
+(heliquad/firmware/teensy35/ in the package), or the teensy35 preset's build
+(build/teensy35/heliquad-fw-teensy35.hex), made from the repository with
   cmake --preset teensy35 && cmake --build --preset teensy35
-which writes {DEFAULT_HEX} (the default HEX here).
+$HQ_TEENSY35_ELF, when set, names the image instead (its .hex beside it).
 """, formatter_class=fmt)
-    p.add_argument("hex", nargs="?", default=DEFAULT_HEX, metavar="HEX",
-                   help=f"the image (default: {DEFAULT_HEX})")
+    p.add_argument("hex", nargs="?", default=None, metavar="HEX",
+                   help="the image (default: the installed or built heliquad-fw-teensy35.hex)")
     p.add_argument("--check-only", action="store_true",
                    help="check the image and print what would be flashed; do not flash")
     p.add_argument("--loader", default="teensy_loader_cli", metavar="PROGRAM",
@@ -105,10 +115,7 @@ which writes {DEFAULT_HEX} (the default HEX here).
 
 
 def _cmd(args) -> int:
-    if args.hex == DEFAULT_HEX and not os.path.exists(DEFAULT_HEX):
-        raise InputError(f"no image at {DEFAULT_HEX}: build it from the repository with "
-                         "cmake --preset teensy35 && cmake --build --preset teensy35, or give HEX")
-    info = check_image(args.hex)
+    info = check_image(args.hex if args.hex is not None else default_hex())
     print(f"{info.path}: {info.size} bytes, {100 * info.usage:.1f}% of the Teensy 3.5's flash; "
           f"stack 0x{info.initial_sp:08X}, reset 0x{info.reset_vector:08X}, "
           f"FSEC 0x{info.fsec:02X} (unsecure), FOPT 0x{info.fopt:02X}")

@@ -110,7 +110,24 @@ def test_a_missing_loader_says_how_to_get_it(tmp_path, capsys):
     assert rc == 2 and "apt-get install teensy-loader-cli" in err
 
 
-def test_no_default_image_says_how_to_build_it(tmp_path, capsys, monkeypatch):
+def test_no_default_image_says_how_to_get_it(tmp_path, capsys, monkeypatch):
+    # Wherever the finder would look, nothing: HQ_TEENSY35_ELF is authoritative when set.
+    loader, record = fake_loader(tmp_path)
     monkeypatch.chdir(tmp_path)
-    rc, _, err = run(capsys)
-    assert rc == 2 and "cmake --preset teensy35" in err
+    monkeypatch.setenv("HQ_TEENSY35_ELF", str(tmp_path / "missing.elf"))
+    rc, _, err = run(capsys, "--loader", loader)
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert "missing.hex" in err and "cmake --preset teensy35" in err
+    assert "apt-get install gcc-arm-none-eabi" in err and "or give HEX" in err
+    assert not record.exists(), "the loader must not run"
+
+
+def test_the_default_image_is_the_finders(tmp_path, capsys, monkeypatch):
+    """No HEX: the .hex the finder names (here beside $HQ_TEENSY35_ELF), checked and flashed."""
+    loader, record = fake_loader(tmp_path)
+    hexfile = make_image(tmp_path / "fw.hex")
+    monkeypatch.setenv("HQ_TEENSY35_ELF", str(tmp_path / "fw.elf"))
+    rc, out, err = run(capsys, "--loader", loader)
+    assert rc == 0, err
+    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-v", str(hexfile)]
+    assert out.startswith(f"{hexfile}: ")
