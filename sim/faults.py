@@ -1,15 +1,17 @@
 """Fault injection in the SIL: what goes wrong, and when (``heliquad sil --fault KIND@T``).
 
-The emulated MPU6050 (in the firmware's host build) takes a fault per sim-link frame,
+The emulated MPU6050 (and, on the emulated Teensy, its bus) takes a fault per sim-link frame,
 ``HQ_SENSOR_FRAME.imu_fault`` (the dialect's HQ_IMU_FAULT):
 
 * ``silent``: the chip answers on the bus but produces no FIFO data;
 * ``nack``: the chip does not acknowledge its address, every transfer fails;
 * ``reset``: the chip resets to its power-on defaults (a brown-out): registers, FIFO and
   DMP memory are lost; once, at T;
-* ``overflow``: the FIFO overflows (filled past 1024 bytes, misaligned); once, at T.
+* ``overflow``: the FIFO overflows (filled past 1024 bytes, misaligned); once, at T;
+* ``stuck-bus``: a device holds the I2C clock low, no transfer completes (on the emulated
+  Teensy; the host build, whose bus has no timing, fails every transfer as for ``nack``).
 
-``silent`` and ``nack`` hold from T for the given duration (``KIND@T:D``, seconds), or to the
+``silent``, ``nack`` and ``stuck-bus`` hold from T for the given duration (``KIND@T:D``, seconds), or to the
 end of the run. And one fault of the host, not the chip:
 
 * ``link``: the host tool closes its telemetry link at T (as when it crashes): no more
@@ -31,7 +33,8 @@ from heliquad.host.mavlink_dialect import dialect
 __all__ = ["Fault", "parse_fault", "check_faults", "imu_fault_codes", "link_close_frame", "KINDS"]
 
 #: Fault kinds and whether they hold over a duration (True) or act once (False).
-KINDS = {"silent": True, "nack": True, "reset": False, "overflow": False, "link": False}
+KINDS = {"silent": True, "nack": True, "stuck-bus": True, "reset": False, "overflow": False,
+         "link": False}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,7 +61,7 @@ class Fault:
         """The HQ_IMU_FAULT value, or None for the host's own fault (``link``)."""
         if self.kind == "link":
             return None
-        return getattr(dialect(), f"HQ_IMU_FAULT_{self.kind.upper()}")
+        return getattr(dialect(), "HQ_IMU_FAULT_" + self.kind.upper().replace("-", "_"))
 
     def first_frame(self, dt_us: int) -> int:
         """The first frame (frame k runs at k * dt_us) at or after the fault's time."""

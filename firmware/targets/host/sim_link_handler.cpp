@@ -25,7 +25,8 @@ bool SimLinkHandler::feed(const uint8_t* data, size_t n, SimLinkReplies& out) {
 }
 
 void SimLinkHandler::apply_fault(uint8_t fault) {
-    chip_.set_present(fault != HQ_IMU_FAULT_NACK);
+    // The host bus has no timing: a stuck bus fails every transfer, as a missing chip does.
+    chip_.set_present(fault != HQ_IMU_FAULT_NACK && fault != HQ_IMU_FAULT_STUCK_BUS);
     chip_.set_silent(fault == HQ_IMU_FAULT_SILENT);
     if (fault == HQ_IMU_FAULT_RESET) chip_.power_on_reset();
     if (fault == HQ_IMU_FAULT_OVERFLOW) chip_.force_overflow();
