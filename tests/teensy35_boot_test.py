@@ -34,6 +34,7 @@ from heliquad.sim.mk64 import ChipReset, Fault, Mk64, Teensy35
 from heliquad.sim.mk64 import registers, svd
 from heliquad.sim.mk64.i2c import SCL_DIVIDER
 from heliquad.sim.mk64.machine import Stop
+from heliquad.sim.mk64.teensy35 import I2C_PINS, PINS
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 IMAGE = pathlib.Path(os.environ.get("HQ_TEENSY35_ELF",
@@ -643,12 +644,14 @@ def test_image_has_the_symbols_the_contract_names():
     board = Teensy35(IMAGE, with_mpu6050=False)
     image = board.machine.image
     for name in ("Reset_Handler", "NMI_Handler", "HardFault_Handler", "SysTick_Handler",
-                 "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "Default_Handler", "hq_fatal",
+                 "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "I2C0_IRQHandler",
+                 "Default_Handler", "hq_fatal",
                  "hq::FlightController::step"):
         assert image.has(name), name
     slots = {1: "Reset_Handler", 2: "NMI_Handler", 3: "HardFault_Handler",
              15: "SysTick_Handler", 16 + registers.irq("UART0_RX_TX"): "UART0_RX_TX_IRQHandler",
-             16 + registers.irq("FTM3"): "FTM3_IRQHandler"}
+             16 + registers.irq("FTM3"): "FTM3_IRQHandler",
+             16 + registers.irq("I2C0"): "I2C0_IRQHandler"}
     for number, name in slots.items():
         assert image.vector_symbol(number) == name, number
     for irq in range(86):
@@ -825,6 +828,34 @@ def test_main_loop_sleeps_between_ticks_and_keeps_200_hz(running):
     assert m.exception_counts[15] >= 3
     for pin, sig, period, pulse in board.esc_outputs():
         assert pulse == pytest.approx(1.0e-3, abs=1e-9), "disarmed: the ESCs stay at stop"
+
+
+def test_a_stuck_i2c_bus_times_out_recovers_and_the_loop_goes_on():
+    # The byte waits sleep until the I2C0 interrupt; with SCL held low no byte ends, and
+    # only SysTick wakes the wait: the timeout shows at the first tick after 1 ms (the
+    # step's first byte starts right after the tick, so at the next one, 5 ms on), the
+    # transfer ends in the bus recovery (the pins as GPIO, then back to I2C) and the loop
+    # carries on. Released, the bus works again.
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    assert board.run_to_loop(4, instructions=BOOT_BUDGET).reason == "loop"
+    m, ports, i2c = board.machine, board.chip.ports, board.chip.i2c0
+    scl = PINS[I2C_PINS["SCL"]]
+    held_at, loops = m.now(), board.loops
+    i2c.hold_scl(True)
+    board.run(seconds=0.03)
+    to_gpio = [c for _, c, letter, n, pcr in ports.log
+               if (letter, n) == scl and c > held_at and (pcr >> 8) & 7 == 1]
+    assert to_gpio, "no bus recovery"
+    assert 120_000 < to_gpio[0] - held_at <= 600_000, "noticed at the next tick"
+    assert ports.mux(*scl) == 2, "the pins are back on I2C0"
+    assert board.loops >= loops + 4, "the loop goes on"
+    i2c.hold_scl(False)
+    released, loops = m.now(), board.loops
+    board.run(seconds=0.02)
+    assert board.loops >= loops + 3
+    assert any(t.acked and t.start_cycle > released for t in i2c.transfers)
 
 
 def test_rc_pulses_reach_the_capture_interrupt():

@@ -18,6 +18,11 @@ The module follows the reference manual's "Inter-Integrated Circuit" chapter:
 
 The bus reaches the slaves only through the pins muxed to I2C0 (SCL/SDA); a byte sent
 with no slave answering (wrong address, pins not muxed) is not acknowledged.
+
+A slave can hold SCL low (:meth:`I2c.hold_scl`, a stuck bus for tests): no byte and no STOP
+completes while it does, so S[TCF]/S[IICIF] never set and S[BUSY], once set by a START,
+stays set; bytes in flight are lost. Releasing it frees the bus (BUSY clears unless the
+master holds it).
 """
 
 from __future__ import annotations
@@ -97,6 +102,7 @@ class I2c(RegisterDevice):
         self._current = None
         self._reading = False
         self._line = False
+        self.scl_held = False
 
     # -- timing -----------------------------------------------------------------------------
     def scl_hz(self) -> float:
@@ -108,6 +114,17 @@ class I2c(RegisterDevice):
     def _bit_cycles(self) -> int:
         hz = self.scl_hz()
         return max(1, int(round(self.machine.core_hz / hz))) if hz else 1 << 40
+
+    def hold_scl(self, held: bool):
+        """A slave holds SCL low (True) or lets it go: see the module's notes."""
+        self.scl_held = held
+        if held:
+            for ev in (self._event, self._free_event):
+                if ev is not None:
+                    ev.cancel()
+            self._event = self._free_event = None
+        elif not self.v["C1"] & _C1_MST:
+            self.v["S"] &= ~_S_BUSY
 
     # -- interrupt ---------------------------------------------------------------------------
     def _update_irq(self):
@@ -174,6 +191,8 @@ class I2c(RegisterDevice):
         self._slave = None
         done = max(self._busy_until, now) + self._bit_cycles()
         self._busy_until = done
+        if self.scl_held:
+            return
 
         def bus_free():
             self._free_event = None
@@ -214,6 +233,8 @@ class I2c(RegisterDevice):
         done = start + BITS_PER_BYTE * self._bit_cycles()
         self._busy_until = done
         self.v["S"] &= ~_S_TCF
+        if self.scl_held:
+            return
         self._event = m.at(done, lambda: self._finish_byte(receive, byte, ack, start))
 
     def _finish_byte(self, receive, byte, ack, start):
