@@ -998,24 +998,33 @@ def test_uart_rdrf_is_latched_as_on_the_chip():
     FIFO below its watermark: draining two bytes after one S1 read (what the firmware's
     first UART handler did) leaves it set over an empty FIFO, so the interrupt would fire
     for ever; the firmware's handler reads S1 before the last byte."""
-    uart = Mk64().uart0
-    uart.v["C2"] |= 0x04                     # RE
-    uart.v["PFIFO"] = 0x88                   # both FIFOs on
-    uart.v["RWFIFO"] = 1
+    chip = Mk64()
+    m, uart, wdog = chip.machine, chip.uart0, chip.wdog
+    for name, value in (("UNLOCK", 0xC520), ("UNLOCK", 0xD928), ("STCTRLH", 0x01D2)):
+        wdog.write(wdog.base + wdog.map[name].offset, 2, value)      # the watchdog off
 
-    def arrive(*data):
-        for b in data:
-            uart._rx_queue.append(b)
-            uart._arrived()
+    def wr(name, value):
+        uart.write(uart.base + uart.map[name].offset, 1, value)
+
+    rd = uart.read_register
+    wr("PFIFO", 0x88)                        # both FIFOs on
+    wr("RWFIFO", 1)
+    wr("C2", rd("C2") | 0x04)                # RE
+
+    def arrive(*data):                       # on the RX pin, time passing with no program
+        uart.receive(bytes(data))
+        m.advance(len(data) * uart.frame_cycles())
 
     arrive(1, 2)
-    uart.r_S1()
-    assert (uart.r_D(), uart.r_D()) == (1, 2)
+    assert uart.rx == [1, 2] and uart.rdrf()
+    rd("S1")
+    assert (rd("D"), rd("D")) == (1, 2)
     assert uart.rdrf() and not uart.rx, "one S1 read, two D reads: RDRF stays set"
-    uart.r_S1()
-    uart.r_D()                               # the dummy read clears it, and underflows
-    assert not uart.rdrf() and uart.r_SFIFO() & 0x01
+    rd("S1")
+    rd("D")                                  # the dummy read clears it, and underflows
+    assert not uart.rdrf() and rd("SFIFO") & 0x01
     arrive(3, 4)
-    first = uart.r_D()
-    uart.r_S1()
-    assert (first, uart.r_D()) == (3, 4) and not uart.rdrf()
+    first = rd("D")
+    rd("S1")
+    assert (first, rd("D")) == (3, 4) and not uart.rdrf()
+    assert chip.notes == []
