@@ -736,7 +736,7 @@ class _Native:
         self._keep += callbacks.values()
         address = self.address
         functions = {name: address(getattr(lib, name)) for name in
-                     ("uc_emu_start", "uc_emu_stop", "uc_reg_read", "uc_reg_write",
+                     ("uc_emu_start", "uc_emu_stop", "uc_reg_read", "uc_reg_write", "uc_reg_write2",
                       "uc_mem_read", "uc_mem_write", "uc_hook_add", "uc_mmio_map")}
         functions["handle"] = handle.value
         regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in

@@ -73,6 +73,7 @@ void bind_mk64(py::module_& m) {
                  u.emu_stop = function<decltype(u.emu_stop)>(uc, "uc_emu_stop");
                  u.reg_read = function<decltype(u.reg_read)>(uc, "uc_reg_read");
                  u.reg_write = function<decltype(u.reg_write)>(uc, "uc_reg_write");
+                 u.reg_write2 = function<decltype(u.reg_write2)>(uc, "uc_reg_write2");
                  u.mem_read = function<decltype(u.mem_read)>(uc, "uc_mem_read");
                  u.mem_write = function<decltype(u.mem_write)>(uc, "uc_mem_write");
                  u.hook_add = function<decltype(u.hook_add)>(uc, "uc_hook_add");
@@ -153,6 +154,9 @@ void bind_mk64(py::module_& m) {
         .def_readwrite("sleeping", &Core::sleeping_)
         .def_readwrite("fpu_watch", &Core::fpu_watch_)
         .def_readwrite("log_all", &Core::log_all)
+        .def_readwrite("inline_boundaries", &Core::inline_boundaries,
+                       "attend to block boundaries inside emu_start (False: stop at each, as "
+                       "a reference for tests)")
         .def("counts", [](const Core& c) {
             const Core::Counts& k = c.counts;
             py::dict d;
@@ -160,7 +164,7 @@ void bind_mk64(py::module_& m) {
             d["native_accesses"] = k.native_accesses; d["python_accesses"] = k.python_accesses;
             d["native_events"] = k.native_events; d["python_events"] = k.python_events;
             d["exceptions"] = k.exceptions; d["emu_starts"] = k.emu_starts;
-            d["fpu_checks"] = k.fpu_checks;
+            d["fpu_checks"] = k.fpu_checks; d["inline_boundaries"] = k.inline_boundaries;
             return d;
         })
         // NVIC

@@ -72,7 +72,6 @@ void Core::reset(double core_hz) {
     deadline_ = 0;
     instr_limit_ = 0;
     stop_ = py_error_ = budget_hit_ = watch_mask_ = false;
-    exc_return_ = 0;
     svc_ = bkpt_ = intr_fault_ = false;
     sleeping_ = false;
     time_up_ = false;
@@ -112,10 +111,27 @@ uint32_t Core::reg(int id) const {
 
 void Core::set_reg(int id, uint32_t value) {
     uint64_t v = value;
-    uc_.reg_write(uc_.handle, id, &v);
+    size_t size = sizeof v;
+    uc_.reg_write2(uc_.handle, id, &v, &size);
 }
 
 uint32_t Core::pc() const { return reg(r_.pc); }
+
+// A PC written while unicorn runs makes it continue there. How it must be written depends on
+// where (unicorn 2.1): in a block hook, the exit check that follows the hook would restore the
+// PC from the block unless uc_reg_write's skip_sync_pc_on_exit tells it not to (the check
+// consumes the flag); anywhere else (the interrupt hook, between runs) that flag would stay set
+// and turn off the PC sync at peripheral accesses until the next uc_emu_start, so
+// uc_reg_write2, which leaves it alone, is used there. Bit 0 keeps unicorn in Thumb state.
+void Core::set_pc(uint32_t value) {
+    uint64_t v = value | 1u;
+    if (in_block_hook_) {
+        uc_.reg_write(uc_.handle, r_.pc, &v);
+    } else {
+        size_t size = sizeof v;
+        uc_.reg_write2(uc_.handle, r_.pc, &v, &size);
+    }
+}
 
 bool Core::read32(uint32_t address, uint32_t& out) const {
     uint8_t b[4];
@@ -275,12 +291,12 @@ void Core::log_exception(bool enter, int number) {
     exception_log_.push_back({cycles_, enter, number});
 }
 
-bool Core::take_exception(int number) {
+bool Core::take_exception(int number, uint32_t return_pc) {
     ++counts.exceptions;
     const uint32_t control = reg(r_.control);
     if ((control & kControlSpsel) && active_.empty()) {
         fault("UsageFault", "thread mode on the process stack (CONTROL.SPSEL) is not modelled",
-              pc());
+              return_pc);
         return false;
     }
     const bool fp = (control & kControlFpca) && (fpccr_ & (1u << 31));
@@ -298,7 +314,7 @@ bool Core::take_exception(int number) {
     uint32_t words[26];
     const int base_regs[6] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
     for (int i = 0; i < 6; ++i) words[i] = reg(base_regs[i]);
-    words[6] = pc();
+    words[6] = return_pc;
     words[7] = xpsr;
     int n = 8;
     if (fp) {
@@ -312,7 +328,7 @@ bool Core::take_exception(int number) {
     if (uc_.mem_write(uc_.handle, new_sp, words, 4u * n) != 0) {
         fault("BusFault", "stacking a " + exception_name(number) + " frame at " + hex8(new_sp) +
                               " failed (stack overflow?)",
-              pc(), true, new_sp);
+              return_pc, true, new_sp);
         return false;
     }
     const bool thread = active_.empty();
@@ -331,14 +347,14 @@ bool Core::take_exception(int number) {
     set_reg(r_.lr, exc_return);
     set_reg(r_.control, control & ~kControlFpca);
     set_reg(r_.xpsr, (1u << 24) | static_cast<uint32_t>(number));
-    set_reg(r_.pc, handler & ~1u);
+    set_pc(handler);
     cycles_ += kEntryCycles;
     log_exception(true, number);
     ++exception_counts_[number];
     if (!(handler & 1)) {
         fault("UsageFault", "vector " + std::to_string(number) + " (" + exception_name(number) +
                                 ") = " + hex8(handler) + " has no Thumb bit (INVSTATE)",
-              pc());
+              return_pc);
         return false;
     }
     return true;
@@ -389,7 +405,7 @@ bool Core::return_from_exception(uint32_t exc_return) {
     const uint32_t control = reg(r_.control);
     set_reg(r_.control, fp ? (control | kControlFpca) : (control & ~kControlFpca));
     set_reg(r_.xpsr, xpsr & ~kXpsrAlign);
-    set_reg(r_.pc, words[6] & ~1u);
+    set_pc(words[6]);
     cycles_ += kReturnCycles;
     log_exception(false, number);
     if (active_.empty() && handler_since_valid_) {
@@ -437,9 +453,43 @@ int Core::service() {
     const int number = pending_exception();
     if (number >= 0 && preempts(number)) {
         sleeping_ = false;
-        if (!take_exception(number)) return kFault;
+        if (!take_exception(number, pc())) return kFault;
     }
     return 0;
+}
+
+// At a block boundary inside emu_start that needs attention (an event due, an interrupt to
+// take, a mask lifted, an exception return): what run() would do before its next emu_start,
+// done here when nothing in it needs Python, so the run goes on without leaving unicorn (a PC
+// written from a hook makes unicorn continue there). False: stop, and let run() see to it
+// (a Python event due, a stop, the budget or the time limit, a fault).
+bool Core::continue_inline() {
+    inline_taken_ = false;
+    if (!inline_boundaries) return false;
+    ++counts.inline_boundaries;
+    for (;;) {
+        const HeapEntry* h = head();
+        if (!h || h->due > cycles_) break;
+        if (h->kind == Ev::Python) return false;
+        const HeapEntry e = *h;
+        pop();
+        live_.erase(e.seq);
+        dispatch(e);
+    }
+    const int number = pending_exception();
+    if (number >= 0 && preempts(number)) {
+        sleeping_ = false;
+        if (!take_exception(number, pending_pc_)) {
+            inline_fault_ = true;
+            return false;
+        }
+        inline_taken_ = true;
+    }
+    if (stop_ || instructions_ >= instr_limit_ || time_up_) return false;
+    update_deadline();
+    budget_hit_ = false;
+    watch_mask_ = masked_pending();
+    return true;
 }
 
 // WFI: wake on an exception that would preempt were PRIMASK clear; else time passes to the
@@ -471,6 +521,10 @@ int Core::execute() {
     const int err = uc_.emu_start(uc_.handle, start | 1u, 0xFFFFFFFFu, 0, 0);
     commit();
     if (py_error_) return kPyError;
+    if (inline_fault_) {
+        inline_fault_ = false;
+        return kFault;
+    }
     if (intr_fault_) {
         intr_fault_ = false;
         return kIntrFault;
@@ -483,16 +537,12 @@ int Core::execute() {
         budget_hit_ = false;
         return kBudget;
     }
-    if (exc_return_) {
-        const uint32_t v = exc_return_;
-        exc_return_ = 0;
-        if (!return_from_exception(v)) return kFault;
-    } else if (svc_) {
+    if (svc_) {
         svc_ = false;
         pend(11);
     } else if (bkpt_) {
         bkpt_ = false;
-        set_reg(r_.pc, bkpt_pc_ + 2);
+        set_pc(bkpt_pc_ + 2);
         return kBkpt;
     } else if (stop_) {
         return kStop;
@@ -513,25 +563,33 @@ void Core::commit() {
     cur_ = nullptr;
 }
 
-// Unicorn is about to run the block at `address`: the previous one retired. Stops before it
-// (it does not run) when an event is due, the budget would be exceeded, or an interrupt waits
-// on a mask the previous block may have lifted.
+// Unicorn is about to run the block at `address`: the previous one retired. The boundary needs
+// attention when an event is due or an interrupt waits on a mask the previous block may have
+// lifted; it is attended to here (continue_inline) when nothing there needs Python, and the
+// block then runs, or the handler of an exception taken there runs instead. Otherwise, and when
+// the budget would be exceeded, the run stops before the block (it does not run). The PC unicorn
+// holds inside a block hook may be stale (chained blocks do not store it), so the block's
+// address is the return address of an exception taken here.
 void Core::on_block(uint64_t address, uint32_t size) {
     ++counts.blocks;
+    const uint32_t a = static_cast<uint32_t>(address);
     if (cur_) {
         instructions_ += cur_->n;
         cycles_ += cur_->cycles;
-        if ((cur_->flags & Block::kMaskOp) && watch_mask_) {
-            cur_ = nullptr;
-            stop_now();
-            return;
+        const bool unmasked = (cur_->flags & Block::kMaskOp) && watch_mask_;
+        cur_ = nullptr;
+        if (unmasked) {
+            pending_pc_ = a;
+            if (!continue_inline()) {
+                stop_now();
+                return;
+            }
+            if (inline_taken_) return;
         }
     }
-    const uint32_t a = static_cast<uint32_t>(address);
     auto it = blocks_.find(a);
     if (it == blocks_.end() || it->second.size != size) {
         ++counts.decodes;
-        cur_ = nullptr;
         if (py_.decode(address, size) != 0) {       // Python has flagged the error and stopped
             return;
         }
@@ -543,16 +601,24 @@ void Core::on_block(uint64_t address, uint32_t size) {
         }
     }
     const Block* b = &it->second;
-    if (cycles_ >= deadline_ || instructions_ + b->n > instr_limit_) {
-        cur_ = nullptr;
-        budget_hit_ = instructions_ + b->n > instr_limit_;
+    if (instructions_ + b->n > instr_limit_) {
+        budget_hit_ = true;
         stop_now();
         return;
+    }
+    if (cycles_ >= deadline_) {
+        pending_pc_ = a;
+        if (!continue_inline()) {
+            stop_now();
+            return;
+        }
+        if (inline_taken_) {
+            return;
+        }
     }
     if (fpu_watch_ && (b->flags & (Block::kVfp | Block::kIsb))) {
         ++counts.fpu_checks;
         if (py_.fpu_check(address) == 0) {        // the chip would take a NOCP UsageFault
-            cur_ = nullptr;
             stop_now();
             return;
         }
@@ -563,7 +629,16 @@ void Core::on_block(uint64_t address, uint32_t size) {
 void Core::on_intr(uint32_t intno) {
     const uint32_t p = pc();
     if (intno == kExcReturnTrap) {
-        exc_return_ = p | 1u;
+        // The handler's return: unstack here and go on (as run() would after a stop).
+        commit();
+        if (!return_from_exception(p | 1u)) {
+            inline_fault_ = true;
+            stop_now();
+            return;
+        }
+        pending_pc_ = pc();
+        if (!continue_inline()) stop_now();
+        return;
     } else if (intno == kIntrSvc) {
         svc_ = true;
     } else if (intno == kIntrBkpt) {
@@ -638,7 +713,10 @@ void Core::mmio_write(uint32_t address, unsigned size, uint64_t value) {
 }
 
 void Core::on_block_cb(void*, uint64_t address, uint32_t size, void* user) {
-    static_cast<Core*>(user)->on_block(address, size);
+    Core* c = static_cast<Core*>(user);
+    c->in_block_hook_ = true;
+    c->on_block(address, size);
+    c->in_block_hook_ = false;
 }
 
 void Core::on_intr_cb(void*, uint32_t intno, void* user) {

@@ -43,6 +43,7 @@ struct Uc {
     int (*emu_stop)(void*) = nullptr;
     int (*reg_read)(void*, int, void*) = nullptr;
     int (*reg_write)(void*, int, const void*) = nullptr;
+    int (*reg_write2)(void*, int, const void*, size_t*) = nullptr;
     int (*mem_read)(void*, uint64_t, void*, uint64_t) = nullptr;
     int (*mem_write)(void*, uint64_t, const void*, uint64_t) = nullptr;
     int (*hook_add)(void*, size_t*, int, void*, void*, uint64_t, uint64_t, ...) = nullptr;
@@ -326,6 +327,7 @@ public:
     bool read32(uint32_t address, uint32_t& out) const;
     uint32_t reg(int id) const;
     void set_reg(int id, uint32_t value);
+    void set_pc(uint32_t value);
 
     // -- the devices ----------------------------------------------------------------------
     bool dev_read(int dev, uint32_t address, unsigned size, uint64_t& out);
@@ -340,6 +342,7 @@ public:
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     bool clocked[kDevices] = {true, true, false, false};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
+    bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
 
     uint64_t cycles_ = 0, instructions_ = 0, sleep_cycles_ = 0;
     uint64_t handler_instructions_ = 0, handler_cycles_ = 0;
@@ -364,7 +367,7 @@ public:
     struct Counts {
         uint64_t blocks = 0, decodes = 0, native_accesses = 0, python_accesses = 0,
                  native_events = 0, python_events = 0, exceptions = 0, emu_starts = 0,
-                 fpu_checks = 0;
+                 fpu_checks = 0, inline_boundaries = 0;
     } counts;
 
     static u128 bit(int n) { return static_cast<u128>(1) << n; }
@@ -403,7 +406,8 @@ private:
     void commit();
     void dispatch(const HeapEntry& e);
     bool masked_pending() const;
-    bool take_exception(int number);
+    bool take_exception(int number, uint32_t return_pc);
+    bool continue_inline();
     bool return_from_exception(uint32_t exc_return);
     void log_exception(bool enter, int number);
     void fault(const char* kind, std::string message, uint32_t pc, bool has_address = false,
@@ -424,8 +428,10 @@ private:
     uint64_t epoch_cycles_ = 0;
     double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0;
     bool watch_mask_ = false, budget_hit_ = false, stop_ = false, py_error_ = false;
-    uint32_t exc_return_ = 0;
-    bool svc_ = false, bkpt_ = false, intr_fault_ = false;
+    bool svc_ = false, bkpt_ = false, intr_fault_ = false, inline_fault_ = false;
+    bool inline_taken_ = false;     // continue_inline() took an exception (the PC moved)
+    bool in_block_hook_ = false;
+    uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
 
 public:
     struct Space { Core* core; uint32_t base; };
