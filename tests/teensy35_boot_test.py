@@ -858,6 +858,58 @@ def test_a_stuck_i2c_bus_times_out_recovers_and_the_loop_goes_on():
     assert any(t.acked and t.start_cycle > released for t in i2c.transfers)
 
 
+def _flight(board, loops):
+    """Run ``loops`` main loops as a lockstep driver does (one raw IMU sample a loop), and
+    what a run must reproduce exactly: counts, times, the UART line with its stamps, the
+    interrupts, the I2C traffic."""
+    from heliquad.sim.mpu6050_packets import raw_packet
+    sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
+    m = board.machine
+    assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
+    for _ in range(loops):
+        board.mpu.emu.push_fifo(sample, False)
+        assert board.run_to_loop(board.loops + 1, instructions=1_000_000).reason == "loop"
+    transfers = [(t.address, t.read, t.acked, t.start_cycle, bytes(t.data), t.end_cycle)
+                 for t in board.chip.i2c0.transfers]
+    return (m.instructions, m.cycles, m.sleep_cycles, list(board.chip.uart0.sent),
+            list(m.exception_log), sorted(m.exception_counts.items()), transfers,
+            board.loop_starts)
+
+
+def test_image_runs_are_deterministic_and_the_native_paths_agree_with_the_reference():
+    # Two runs give the same counts, times and UART stamps; so does a run that stops at
+    # every boundary needing attention (instead of attending to it inside unicorn) and
+    # takes every peripheral access through Python (the logged path): the fast paths
+    # change nothing the image can see.
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    first = _flight(Teensy35(IMAGE), 12)
+    assert _flight(Teensy35(IMAGE), 12) == first
+    reference = Teensy35(IMAGE)
+    reference.machine.core.inline_boundaries = False
+    reference.machine.trace_enabled = True
+    assert _flight(reference, 12) == first
+    assert len(first[3]) > 12 * 100, "telemetry streamed at line rate meanwhile"
+    counts = reference.machine.counts()
+    assert counts["inline_boundaries"] == 0 and counts["native_accesses"] == 0
+
+
+def test_take_telemetry_hands_over_each_byte_once():
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    whole = Teensy35(IMAGE)
+    whole.run_to_loop(6, instructions=BOOT_BUDGET)
+    taken = Teensy35(IMAGE)
+    parts = []
+    for n in range(1, 7):
+        taken.run_to_loop(n, instructions=BOOT_BUDGET)
+        parts.append(taken.take_telemetry())
+    assert b"".join(parts) == whole.telemetry() and len(whole.telemetry()) > 100
+    assert taken.telemetry() == b"" and taken.chip.uart0.sent == []
+    taken.run_to_loop(7, instructions=BOOT_BUDGET)
+    assert taken.telemetry() == taken.take_telemetry() != b""
+
+
 def test_rc_pulses_reach_the_capture_interrupt():
     require_image()
     pytest.importorskip("heliquad._firmware")
@@ -977,7 +1029,7 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     host = mav_mod.MAVLink(None, srcSystem=255, srcComponent=190)
     arm = host.command_long_encode(1, 1, mav_mod.MAV_CMD_COMPONENT_ARM_DISARM, 0,
                                    1, 0, 0, 0, 0, 0, 0)
-    board.chip.uart0.receive(arm.pack(host) * 3)       # three back to back: the ring drains
+    board.receive(arm.pack(host) * 3)       # three back to back: the ring drains
     board.run(seconds=0.05)
     parser = mav_mod.MAVLink(None)
     acks = []

@@ -44,7 +44,6 @@ SCL_DIVIDER = (
     160, 192, 224, 256, 288, 320, 384, 480, 320, 384, 448, 512, 576, 640, 768, 960,
     640, 768, 896, 1024, 1152, 1280, 1536, 1920, 1280, 1536, 1792, 2048, 2304, 2560, 3072, 3840,
 )
-BITS_PER_BYTE = 9
 
 
 @dataclass
@@ -142,10 +141,6 @@ class I2c(NativeRegisters):
 
     def scl_hz(self) -> float:
         return self.machine.core.i2c_scl_hz()
-
-    def _bit_cycles(self) -> int:
-        hz = self.scl_hz()
-        return max(1, int(round(self.machine.core_hz / hz))) if hz else 1 << 40
 
     def hold_scl(self, held: bool):
         """A slave holds SCL low (True) or lets it go: see the module's notes."""

@@ -397,23 +397,33 @@ bool covered(const Layout8& L, uint32_t address, unsigned size) {
     }
     return true;
 }
-}  // namespace
 
-bool Uart::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
-    if (!covered(L, address, size)) return false;
+template <typename Device>
+bool read_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    if (!covered(d.L, address, size)) return false;
     out = 0;
     for (unsigned i = 0; i < size; ++i) {
-        out |= uint64_t{read_reg(c, address - L.base + i)} << (8 * i);
+        out |= uint64_t{d.read_reg(c, address - d.L.base + i)} << (8 * i);
     }
     return true;
 }
 
-bool Uart::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
-    if (!covered(L, address, size)) return false;
+template <typename Device>
+bool write_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t value) {
+    if (!covered(d.L, address, size)) return false;
     for (unsigned i = 0; i < size; ++i) {
-        write_reg(c, address - L.base + i, static_cast<uint8_t>(value >> (8 * i)));
+        d.write_reg(c, address - d.L.base + i, static_cast<uint8_t>(value >> (8 * i)));
     }
     return true;
+}
+}  // namespace
+
+bool Uart::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    return read_bytes(*this, c, address, size, out);
+}
+
+bool Uart::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    return write_bytes(*this, c, address, size, value);
 }
 
 // -- the MPU6050 on the bus -------------------------------------------------------------------
@@ -669,20 +679,11 @@ void I2c::write_reg(Core& c, uint32_t o, uint8_t value) {
 }
 
 bool I2c::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
-    if (!covered(L, address, size)) return false;
-    out = 0;
-    for (unsigned i = 0; i < size; ++i) {
-        out |= uint64_t{read_reg(c, address - L.base + i)} << (8 * i);
-    }
-    return true;
+    return read_bytes(*this, c, address, size, out);
 }
 
 bool I2c::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
-    if (!covered(L, address, size)) return false;
-    for (unsigned i = 0; i < size; ++i) {
-        write_reg(c, address - L.base + i, static_cast<uint8_t>(value >> (8 * i)));
-    }
-    return true;
+    return write_bytes(*this, c, address, size, value);
 }
 
 }  // namespace hqsim::mk64
