@@ -34,6 +34,7 @@ from heliquad.sim.mk64 import ChipReset, Fault, Mk64, Teensy35
 from heliquad.sim.mk64 import registers, svd
 from heliquad.sim.mk64.i2c import SCL_DIVIDER
 from heliquad.sim.mk64.machine import Stop
+from heliquad.sim.mk64.teensy35 import I2C_PINS, PINS
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 IMAGE = pathlib.Path(os.environ.get("HQ_TEENSY35_ELF",
@@ -643,12 +644,14 @@ def test_image_has_the_symbols_the_contract_names():
     board = Teensy35(IMAGE, with_mpu6050=False)
     image = board.machine.image
     for name in ("Reset_Handler", "NMI_Handler", "HardFault_Handler", "SysTick_Handler",
-                 "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "Default_Handler", "hq_fatal",
+                 "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "I2C0_IRQHandler",
+                 "Default_Handler", "hq_fatal",
                  "hq::FlightController::step"):
         assert image.has(name), name
     slots = {1: "Reset_Handler", 2: "NMI_Handler", 3: "HardFault_Handler",
              15: "SysTick_Handler", 16 + registers.irq("UART0_RX_TX"): "UART0_RX_TX_IRQHandler",
-             16 + registers.irq("FTM3"): "FTM3_IRQHandler"}
+             16 + registers.irq("FTM3"): "FTM3_IRQHandler",
+             16 + registers.irq("I2C0"): "I2C0_IRQHandler"}
     for number, name in slots.items():
         assert image.vector_symbol(number) == name, number
     for irq in range(86):
@@ -827,6 +830,86 @@ def test_main_loop_sleeps_between_ticks_and_keeps_200_hz(running):
         assert pulse == pytest.approx(1.0e-3, abs=1e-9), "disarmed: the ESCs stay at stop"
 
 
+def test_a_stuck_i2c_bus_times_out_recovers_and_the_loop_goes_on():
+    # The byte waits sleep until the I2C0 interrupt; with SCL held low no byte ends, and
+    # only SysTick wakes the wait: the timeout shows at the first tick after 1 ms (the
+    # step's first byte starts right after the tick, so at the next one, 5 ms on), the
+    # transfer ends in the bus recovery (the pins as GPIO, then back to I2C) and the loop
+    # carries on. Released, the bus works again.
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE)
+    assert board.run_to_loop(4, instructions=BOOT_BUDGET).reason == "loop"
+    m, ports, i2c = board.machine, board.chip.ports, board.chip.i2c0
+    scl = PINS[I2C_PINS["SCL"]]
+    held_at, loops = m.now(), board.loops
+    i2c.hold_scl(True)
+    board.run(seconds=0.03)
+    to_gpio = [c for _, c, letter, n, pcr in ports.log
+               if (letter, n) == scl and c > held_at and (pcr >> 8) & 7 == 1]
+    assert to_gpio, "no bus recovery"
+    assert 120_000 < to_gpio[0] - held_at <= 600_000, "noticed at the next tick"
+    assert ports.mux(*scl) == 2, "the pins are back on I2C0"
+    assert board.loops >= loops + 4, "the loop goes on"
+    i2c.hold_scl(False)
+    released, loops = m.now(), board.loops
+    board.run(seconds=0.02)
+    assert board.loops >= loops + 3
+    assert any(t.acked and t.start_cycle > released for t in i2c.transfers)
+
+
+def _flight(board, loops):
+    """Run ``loops`` main loops as a lockstep driver does (one raw IMU sample a loop), and
+    what a run must reproduce exactly: counts, times, the UART line with its stamps, the
+    interrupts, the I2C traffic."""
+    from heliquad.sim.mpu6050_packets import raw_packet
+    sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
+    m = board.machine
+    assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
+    for _ in range(loops):
+        board.mpu.emu.push_fifo(sample, False)
+        assert board.run_to_loop(board.loops + 1, instructions=1_000_000).reason == "loop"
+    transfers = [(t.address, t.read, t.acked, t.start_cycle, bytes(t.data), t.end_cycle)
+                 for t in board.chip.i2c0.transfers]
+    return (m.instructions, m.cycles, m.sleep_cycles, list(board.chip.uart0.sent),
+            list(m.exception_log), sorted(m.exception_counts.items()), transfers,
+            board.loop_starts)
+
+
+def test_image_runs_are_deterministic_and_the_native_paths_agree_with_the_reference():
+    # Two runs give the same counts, times and UART stamps; so does a run that stops at
+    # every boundary needing attention (instead of attending to it inside unicorn) and
+    # takes every peripheral access through Python (the logged path): the fast paths
+    # change nothing the image can see.
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    first = _flight(Teensy35(IMAGE), 12)
+    assert _flight(Teensy35(IMAGE), 12) == first
+    reference = Teensy35(IMAGE)
+    reference.machine.core.inline_boundaries = False
+    reference.machine.trace_enabled = True
+    assert _flight(reference, 12) == first
+    assert len(first[3]) > 12 * 100, "telemetry streamed at line rate meanwhile"
+    counts = reference.machine.counts()
+    assert counts["inline_boundaries"] == 0 and counts["native_accesses"] == 0
+
+
+def test_take_telemetry_hands_over_each_byte_once():
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    whole = Teensy35(IMAGE)
+    whole.run_to_loop(6, instructions=BOOT_BUDGET)
+    taken = Teensy35(IMAGE)
+    parts = []
+    for n in range(1, 7):
+        taken.run_to_loop(n, instructions=BOOT_BUDGET)
+        parts.append(taken.take_telemetry())
+    assert b"".join(parts) == whole.telemetry() and len(whole.telemetry()) > 100
+    assert taken.telemetry() == b"" and taken.chip.uart0.sent == []
+    taken.run_to_loop(7, instructions=BOOT_BUDGET)
+    assert taken.telemetry() == taken.take_telemetry() != b""
+
+
 def test_rc_pulses_reach_the_capture_interrupt():
     require_image()
     pytest.importorskip("heliquad._firmware")
@@ -946,7 +1029,7 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     host = mav_mod.MAVLink(None, srcSystem=255, srcComponent=190)
     arm = host.command_long_encode(1, 1, mav_mod.MAV_CMD_COMPONENT_ARM_DISARM, 0,
                                    1, 0, 0, 0, 0, 0, 0)
-    board.chip.uart0.receive(arm.pack(host) * 3)       # three back to back: the ring drains
+    board.receive(arm.pack(host) * 3)       # three back to back: the ring drains
     board.run(seconds=0.05)
     parser = mav_mod.MAVLink(None)
     acks = []
@@ -967,24 +1050,33 @@ def test_uart_rdrf_is_latched_as_on_the_chip():
     FIFO below its watermark: draining two bytes after one S1 read (what the firmware's
     first UART handler did) leaves it set over an empty FIFO, so the interrupt would fire
     for ever; the firmware's handler reads S1 before the last byte."""
-    uart = Mk64().uart0
-    uart.v["C2"] |= 0x04                     # RE
-    uart.v["PFIFO"] = 0x88                   # both FIFOs on
-    uart.v["RWFIFO"] = 1
+    chip = Mk64()
+    m, uart, wdog = chip.machine, chip.uart0, chip.wdog
+    for name, value in (("UNLOCK", 0xC520), ("UNLOCK", 0xD928), ("STCTRLH", 0x01D2)):
+        wdog.write(wdog.base + wdog.map[name].offset, 2, value)      # the watchdog off
 
-    def arrive(*data):
-        for b in data:
-            uart._rx_queue.append(b)
-            uart._arrived()
+    def wr(name, value):
+        uart.write(uart.base + uart.map[name].offset, 1, value)
+
+    rd = uart.read_register
+    wr("PFIFO", 0x88)                        # both FIFOs on
+    wr("RWFIFO", 1)
+    wr("C2", rd("C2") | 0x04)                # RE
+
+    def arrive(*data):                       # on the RX pin, time passing with no program
+        uart.receive(bytes(data))
+        m.advance(len(data) * uart.frame_cycles())
 
     arrive(1, 2)
-    uart.r_S1()
-    assert (uart.r_D(), uart.r_D()) == (1, 2)
+    assert uart.rx == [1, 2] and uart.rdrf()
+    rd("S1")
+    assert (rd("D"), rd("D")) == (1, 2)
     assert uart.rdrf() and not uart.rx, "one S1 read, two D reads: RDRF stays set"
-    uart.r_S1()
-    uart.r_D()                               # the dummy read clears it, and underflows
-    assert not uart.rdrf() and uart.r_SFIFO() & 0x01
+    rd("S1")
+    rd("D")                                  # the dummy read clears it, and underflows
+    assert not uart.rdrf() and rd("SFIFO") & 0x01
     arrive(3, 4)
-    first = uart.r_D()
-    uart.r_S1()
-    assert (first, uart.r_D()) == (3, 4) and not uart.rdrf()
+    first = rd("D")
+    rd("S1")
+    assert (first, rd("D")) == (3, 4) and not uart.rdrf()
+    assert chip.notes == []

@@ -28,7 +28,7 @@ FLASH_SIZE = 0x8_0000
 SRAM_LOW, SRAM_TOP = 0x1FFF_0000, 0x2002_0000
 VECTOR_COUNT = 16 + 86
 # Exception and IRQ numbers of the MK64FX512 (vector = 16 + IRQ).
-SYSTICK, UART0_RX_TX, FTM3 = 15, 16 + 31, 16 + 71
+SYSTICK, I2C0, UART0_RX_TX, FTM3 = 15, 16 + 24, 16 + 31, 16 + 71
 RESERVED = (7, 8, 9, 10, 13)
 
 
@@ -103,10 +103,11 @@ def test_vector_slots_point_at_the_intended_handlers(elf):
     assert v[SYSTICK] == sym["SysTick_Handler"] | 1
     assert v[UART0_RX_TX] == sym["UART0_RX_TX_IRQHandler"] | 1
     assert v[FTM3] == sym["FTM3_IRQHandler"] | 1
+    assert v[I2C0] == sym["I2C0_IRQHandler"] | 1
     assert v[3] == sym["HardFault_Handler"] | 1
     for i in RESERVED:
         assert v[i] == 0, f"reserved vector {i}"
-    used = {SYSTICK, UART0_RX_TX, FTM3}
+    used = {SYSTICK, I2C0, UART0_RX_TX, FTM3}
     default = sym["Default_Handler"] | 1
     for i in range(16, VECTOR_COUNT):
         if i not in used:

@@ -7,7 +7,7 @@ from .clocks import IRC48M_HZ, ClockTree, Mcg, Osc, Sim, check_tree
 from .ftm import Ftm
 from .i2c import I2c
 from .image import Image
-from .machine import Machine
+from .machine import I2C0_DEVICE, UART0_DEVICE, Machine
 from .port import Ports
 from .scs import Dwt, SystemControlSpace
 from .uart import Uart
@@ -26,7 +26,7 @@ class Mk64:
         self.crystal_hz = crystal_hz
         self.crystal_ok = crystal_ok
         self.ready = False
-        self.notes = []                 # (instruction count, text): documented misuse
+        self._notes = []                # (instruction count, text): documented misuse
         self.clock_history = []         # (instruction count, cycle, ClockTree)
         self.clock_violations = []      # (instruction count, cycle, text)
         m = self.machine = Machine()
@@ -57,7 +57,8 @@ class Mk64:
         self._tree = None
 
     def _on_reset(self):
-        self.notes = []
+        self._notes = []
+        self.gates_changed()
         self.clock_history = []
         self.clock_violations = []
         self._tree = None
@@ -102,10 +103,26 @@ class Mk64:
         self.clock_history.append(at + (tree,))
         for text in check_tree(tree, self.sim):
             self.clock_violations.append(at + (f"{text} (after {cause})",))
-        m.set_core_hz(tree.core)
+        m.set_clocks(tree.core, tree.bus)
+
+    def gates_changed(self):
+        """A SIM clock gate may have changed: the native models take accesses only while
+        clocked (a gated access goes to Python, which faults)."""
+        if not self.ready:
+            return
+        core = self.machine.core
+        for dev, number in ((self.uart0, UART0_DEVICE), (self.i2c0, I2C0_DEVICE)):
+            core.set_clocked(number, dev.clocked())
+
+    @property
+    def notes(self) -> list:
+        """(instruction count, text): documented misuse the models saw."""
+        if self.ready:
+            self._notes.extend(self.uart0.take_notes())
+        return self._notes
 
     def note(self, text: str):
-        self.notes.append((self.machine.instructions_now(), text))
+        self._notes.append((self.machine.instructions_now(), text))
 
     # -- running -----------------------------------------------------------------------------
     def run(self, instructions=None, seconds=None):

@@ -90,6 +90,10 @@ class Sim(RegisterDevice):
     def gated(self, reg: str, fld: str) -> bool:
         return not self.v[reg] & self.map[reg].bit(fld)
 
+    def write(self, address, size, value):
+        super().write(address, size, value)
+        self.chip.gates_changed()
+
 
 class Osc(RegisterDevice):
     """OSC0_CR: external reference enable and load capacitors (16 MHz crystal on the board)."""

@@ -52,6 +52,7 @@ class Ftm(RegisterDevice):
         self._tof_clear = 0
         self._line = False
         self._tof_event = None
+        self._rate_key, self._rate = None, 0.0
 
     # -- the counter -----------------------------------------------------------------------
     def clock_hz(self) -> float:
@@ -65,8 +66,14 @@ class Ftm(RegisterDevice):
         return src / (1 << ps)
 
     def _ticks_per_cycle(self):
-        hz = self.clock_hz()
-        return hz / self.machine.core_hz if hz else 0.0
+        # Read at every counter and buffered-write computation: kept until SC's clock
+        # select or prescaler or the clock tree changes.
+        key = (self.v["SC"] & _CLKS_PS, self.chip._tree)
+        if key != self._rate_key:
+            hz = self.clock_hz()
+            self._rate = hz / self.machine.core_hz if hz else 0.0
+            self._rate_key = key
+        return self._rate
 
     def _limits(self):
         cntin, mod = self.v["CNTIN"] & 0xFFFF, self.v["MOD"] & 0xFFFF

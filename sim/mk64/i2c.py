@@ -18,14 +18,24 @@ The module follows the reference manual's "Inter-Integrated Circuit" chapter:
 
 The bus reaches the slaves only through the pins muxed to I2C0 (SCL/SDA); a byte sent
 with no slave answering (wrong address, pins not muxed) is not acknowledged.
+
+A slave can hold SCL low (:meth:`I2c.hold_scl`, a stuck bus for tests): no byte and no STOP
+completes while it does, so S[TCF]/S[IICIF] never set and S[BUSY], once set by a START,
+stays set; bytes in flight are lost. Releasing it frees the bus (BUSY clears unless the
+master holds it).
+
+The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp), and so is
+the MPU6050 slave's byte protocol on the project's register model: a flight loop moves a
+couple of dozen bytes and the driver touches S, D and C1 for each. These classes are views.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .peripheral import RegisterDevice
-from .registers import irq, peripheral
+from .machine import I2C0_DEVICE
+from .peripheral import NativeRegisters
+from .registers import irq
 
 # Reference manual, "I2C divider and hold values": SCL divider by ICR.
 SCL_DIVIDER = (
@@ -34,34 +44,6 @@ SCL_DIVIDER = (
     160, 192, 224, 256, 288, 320, 384, 480, 320, 384, 448, 512, 576, 640, 768, 960,
     640, 768, 896, 1024, 1152, 1280, 1536, 1920, 1280, 1536, 1792, 2048, 2304, 2560, 3072, 3840,
 )
-BITS_PER_BYTE = 9
-_MAP = peripheral("I2C0")
-_C1_IICEN, _C1_IICIE, _C1_MST, _C1_TX, _C1_TXAK, _C1_RSTA = (
-    _MAP["C1"].bit(f) for f in ("IICEN", "IICIE", "MST", "TX", "TXAK", "RSTA"))
-_S_TCF, _S_BUSY, _S_ARBL, _S_IICIF, _S_RXAK = (
-    _MAP["S"].bit(f) for f in ("TCF", "BUSY", "ARBL", "IICIF", "RXAK"))
-_FLT_STOPF, _FLT_SSIE, _FLT_STARTF, _FLT_SHEN = (
-    _MAP["FLT"].bit(f) for f in ("STOPF", "SSIE", "STARTF", "SHEN"))
-_FLT_FLT = _MAP["FLT"].field("FLT").mask
-
-
-class I2cSlave:
-    """A device on the bus, at the byte level."""
-    address = 0
-
-    def start(self, read: bool) -> None:
-        """Addressed after a START or repeated START."""
-
-    def write_byte(self, byte: int) -> bool:
-        """A byte from the master; returns the acknowledge."""
-        return True
-
-    def read_byte(self) -> int:
-        """The next byte for the master."""
-        return 0xFF
-
-    def stop(self) -> None:
-        """STOP, or a repeated START ending the current transfer."""
 
 
 @dataclass
@@ -76,188 +58,100 @@ class Transfer:
     start_s: float = 0.0
 
 
-class I2c(RegisterDevice):
+def _transfer(record) -> Transfer:
+    address, read, acked, start, data, end, start_s = record
+    return Transfer(address, read, acked, start, bytearray(data), end, start_s)
+
+
+class I2cSlave:
+    """A device on the bus, at the byte level: its behaviour is native (``Mk64Core``); the
+    Python object is its handle (``native`` is its number in the core)."""
+    address = 0
+    native: int
+
+
+class _Slaves(list):
+    """The bus's slaves; appending one connects the native model to the bus."""
+
+    def __init__(self, i2c):
+        super().__init__()
+        self._i2c = i2c
+
+    def append(self, slave):
+        if not isinstance(slave, I2cSlave):
+            raise TypeError("I2C slaves are native models (Mpu6050Slave)")
+        self._i2c.machine.core.mpu_attach(slave.native)
+        super().append(slave)
+
+
+class I2c(NativeRegisters):
     def __init__(self, machine, chip, instance=0):
+        if instance != 0:
+            raise ValueError("only I2C0 is modelled")
         self.chip = chip
-        self.slaves = []
-        self.pins_connected = lambda: True
         self.irq = irq(f"I2C{instance}")
-        super().__init__(machine, f"I2C{instance}", gate=(chip.sim, "SCGC4", f"I2C{instance}"),
-                         span=0xC)
+        core = machine.core
+        super().__init__(machine, f"I2C{instance}", I2C0_DEVICE, core.i2c_reg,
+                         gate=(chip.sim, "SCGC4", f"I2C{instance}"), span=0xC)
+        core.i2c_setup(dict(self.layout(), irq=self.irq, scl_divider=list(SCL_DIVIDER)))
+        self.slaves = _Slaves(self)
+        self._pins_connected = lambda: True
+        # The bus reaches the slaves through the pins: re-evaluated whenever a pin's
+        # function changes, so the native model knows at every byte.
+        chip.ports.listeners.append(lambda letter, n: self._refresh_pins())
+        self._transfers, self._open, self._errors = [], None, []
 
     def reset(self):
-        super().reset()
-        self.transfers = []             # Transfer records, in order
-        self.errors = []                # (instruction count, text)
-        self._slave = None              # the addressed slave, None when none acknowledged
-        self._expect_address = False
-        self._busy_until = 0            # cycle the bus is free for the next byte
-        self._event = None
-        self._free_event = None
-        self._current = None
-        self._reading = False
-        self._line = False
+        self._transfers, self._open, self._errors = [], None, []
+        self._refresh_pins()
 
-    # -- timing -----------------------------------------------------------------------------
+    @property
+    def pins_connected(self):
+        """A callable: are SCL and SDA muxed to this I2C (the board's wiring)?"""
+        return self._pins_connected
+
+    @pins_connected.setter
+    def pins_connected(self, fn):
+        self._pins_connected = fn
+        self._refresh_pins()
+
+    def _refresh_pins(self):
+        if self.chip.ready:
+            self.machine.core.i2c_pins_connected = bool(self._pins_connected())
+
+    @property
+    def transfers(self) -> list:
+        """Transfer records in order since reset (clearing the list forgets them); the last
+        one may still be in progress."""
+        lst, core = self._transfers, self.machine.core
+        if self._open is not None and lst and lst[-1] is self._open:
+            lst.pop()
+        lst.extend(_transfer(t) for t in core.i2c_take_transfers())
+        current = core.i2c_open_transfer()
+        self._open = _transfer(current) if current is not None else None
+        if self._open is not None:
+            lst.append(self._open)
+        return lst
+
+    @property
+    def errors(self) -> list:
+        """(instruction count, text) of the misuse the model saw."""
+        self._errors.extend(self.machine.core.i2c_take_errors())
+        return self._errors
+
     def scl_hz(self) -> float:
-        mult = self.field("F", "MULT")
-        if mult == 3:
-            return 0.0
-        return self.chip.bus_hz() / ((1 << mult) * SCL_DIVIDER[self.field("F", "ICR")])
+        return self.machine.core.i2c_scl_hz()
 
-    def _bit_cycles(self) -> int:
-        hz = self.scl_hz()
-        return max(1, int(round(self.machine.core_hz / hz))) if hz else 1 << 40
+    def hold_scl(self, held: bool):
+        """A slave holds SCL low (True) or lets it go: see the module's notes."""
+        self.machine.core.i2c_hold_scl(bool(held))
 
-    # -- interrupt ---------------------------------------------------------------------------
-    def _update_irq(self):
-        level = bool(self.v["C1"] & _C1_IICIE and self.v["S"] & _S_IICIF)
-        if level != self._line:
-            self._line = level
-            self.machine.set_irq(self.irq, level)
+    @property
+    def scl_held(self) -> bool:
+        return self.machine.core.i2c_scl_held
 
-    def _flag(self, bits):
-        self.v["S"] |= bits
-        self._update_irq()
-
-    # -- registers ---------------------------------------------------------------------------
-    def r_C1(self):
-        return self.v["C1"] & ~_C1_RSTA
-
-    def w_S(self, value, mask):
-        old = self.v["S"]
-        self.v["S"] = old & ~(value & (_S_ARBL | _S_IICIF))
-        self._update_irq()
-
-    def w_FLT(self, value, mask):
-        old = self.v["FLT"]
-        keep = old & (_FLT_STOPF | _FLT_STARTF) & ~value
-        self.v["FLT"] = (value & (_FLT_SHEN | _FLT_SSIE | _FLT_FLT)) | keep
-
-    def w_C1(self, value, mask):
-        old = self.v["C1"]
-        self.v["C1"] = value & ~_C1_RSTA
-        now = self.machine.now()
-        if not value & _C1_IICEN:
-            if old & _C1_MST:
-                self._stop(now)
-            self._update_irq()
-            return
-        if value & _C1_MST and not old & _C1_MST:
-            self._start(now, repeated=False)
-        elif old & _C1_MST and not value & _C1_MST:
-            self._stop(now)
-        elif value & _C1_RSTA and value & _C1_MST:
-            if self.field("F", "MULT") != 0:
-                self.errors.append((self.machine.instructions_now(),
-                                    "repeated START with F[MULT] != 0 is not generated (e6070)"))
-            else:
-                self._start(now, repeated=True)
-        self._update_irq()
-
-    def _start(self, now, repeated):
-        if self._free_event is not None:        # a START before the last STOP finished
-            self._free_event.cancel()
-            self._free_event = None
-        self._end_transfer(now)
-        self.v["S"] |= _S_BUSY
-        self._busy_until = max(self._busy_until, now) + self._bit_cycles()
-        self._expect_address = True
-        self._slave = None
-        self.v["FLT"] |= _FLT_STARTF
-        if self.v["FLT"] & _FLT_SSIE:
-            self._flag(_S_IICIF)
-
-    def _stop(self, now):
-        self._end_transfer(now)
-        self._expect_address = False
-        self._slave = None
-        done = max(self._busy_until, now) + self._bit_cycles()
-        self._busy_until = done
-
-        def bus_free():
-            self._free_event = None
-            self.v["S"] &= ~_S_BUSY
-            self.v["FLT"] |= _FLT_STOPF
-            if self.v["FLT"] & _FLT_SSIE:
-                self._flag(_S_IICIF)
-        self._free_event = self.machine.at(done, bus_free)
-
-    def _end_transfer(self, now):
-        if self._current is not None:
-            self._current.end_cycle = now
-            self._current = None
-        for s in self.slaves:
-            s.stop()
-
-    def r_D(self):
-        data = self.v["D"]
-        c1 = self.v["C1"]
-        if c1 & _C1_MST and not c1 & _C1_TX and c1 & _C1_IICEN:
-            self._begin_byte(receive=True, byte=None, ack=not c1 & _C1_TXAK)
-        return data
-
-    def w_D(self, value, mask):
-        value &= 0xFF
-        self.v["D"] = value
-        c1 = self.v["C1"]
-        if c1 & _C1_MST and c1 & _C1_TX and c1 & _C1_IICEN:
-            self._begin_byte(receive=False, byte=value, ack=None)
-
-    def _begin_byte(self, receive, byte, ack):
-        m = self.machine
-        now = m.now()
-        if self._event is not None:
-            self.errors.append((m.instructions_now(), "D accessed while a byte was in transfer"))
-            self._event.cancel()
-        start = max(now, self._busy_until)
-        done = start + BITS_PER_BYTE * self._bit_cycles()
-        self._busy_until = done
-        self.v["S"] &= ~_S_TCF
-        self._event = m.at(done, lambda: self._finish_byte(receive, byte, ack, start))
-
-    def _finish_byte(self, receive, byte, ack, start):
-        self._event = None
-        if receive:
-            slave = self._slave
-            value = slave.read_byte() if slave is not None and self._reading else 0xFF
-            self.v["D"] = value
-            if self._current is not None:
-                self._current.data.append(value)
-            self.v["S"] &= ~_S_RXAK
-        elif self._expect_address:
-            self._expect_address = False
-            address, read = byte >> 1, bool(byte & 1)
-            slave = None
-            if self.pins_connected():
-                slave = next((s for s in self.slaves
-                              if s.address == address and getattr(s, "present", True)), None)
-            if slave is not None:
-                slave.start(read)
-            self._slave = slave
-            self._reading = read
-            self._current = Transfer(address, read, slave is not None, start,
-                                     start_s=self.machine.seconds(start))
-            self.transfers.append(self._current)
-            self._set_rxak(slave is not None)
-        else:
-            acked = False
-            if self._slave is not None and not self._reading:
-                acked = self._slave.write_byte(byte)
-                if self._current is not None:
-                    self._current.data.append(byte)
-            self._set_rxak(acked)
-        self._flag(_S_TCF | _S_IICIF)
-
-    def _set_rxak(self, acked):
-        if acked:
-            self.v["S"] &= ~_S_RXAK
-        else:
-            self.v["S"] |= _S_RXAK
-
-
-# MPU-6000/6050 register map: the two data ports whose address does not auto-increment.
-MPU6050_MEM_R_W, MPU6050_FIFO_R_W = 0x6F, 0x74
+    def byte_in_flight(self) -> bool:
+        return self.machine.core.i2c_byte_in_flight()
 
 
 class Mpu6050Slave(I2cSlave):
@@ -267,59 +161,26 @@ class Mpu6050Slave(I2cSlave):
     auto-increments except on FIFO_R_W and MEM_R_W. A write's data bytes reach the model
     together at the STOP (or repeated START) that ends the transfer; a read takes one byte
     from the model per byte clocked out, so FIFO and INT_STATUS side effects happen per byte.
-    Every completed register write and read is logged with its time."""
+    Every completed register write and read is logged with its time (``log``: (seconds,
+    'W'|'R', register, bytes), until cleared)."""
 
     def __init__(self, emulator, machine, address=0x68):
         self.emu = emulator
         self.machine = machine
         self.address = address
-        self.present = True     # False: the chip does not answer (no acknowledge)
-        self.log = []           # (seconds, 'W'|'R', register, bytes)
-        self._pointer = None
-        self._pointer_set = False
-        self._pending = bytearray()
-        self._read_reg = None
-        self._read_bytes = bytearray()
+        self.native = machine.core.mpu_new(emulator, address)
+        self._log = []
+
+    @property
+    def present(self) -> bool:
+        """False: the chip does not answer (no acknowledge)."""
+        return self.machine.core.mpu_present(self.native)
 
     def set_present(self, present: bool):
-        self.present = present
+        self.machine.core.mpu_set_present(self.native, bool(present))
         self.emu.set_present(present)
 
-    def start(self, read):
-        self._flush()
-        if read:
-            self._read_reg = self._pointer
-            self._read_bytes = bytearray()
-        else:
-            self._pointer_set = False
-
-    def write_byte(self, byte):
-        if not self._pointer_set:
-            self._pointer = byte
-            self._pointer_set = True
-        else:
-            self._pending.append(byte)
-        return True
-
-    def read_byte(self):
-        reg = self._pointer if self._pointer is not None else 0
-        value = self.emu.read(reg, 1)[0]
-        self._read_bytes.append(value)
-        if reg not in (MPU6050_FIFO_R_W, MPU6050_MEM_R_W):
-            self._pointer = (reg + 1) & 0x7F
-        return value
-
-    def _flush(self):
-        now = self.machine.seconds()
-        if self._pending:
-            self.emu.write(self._pointer, bytes(self._pending))
-            self.log.append((now, "W", self._pointer, bytes(self._pending)))
-            if self._pointer not in (MPU6050_FIFO_R_W, MPU6050_MEM_R_W):
-                self._pointer = (self._pointer + len(self._pending)) & 0x7F
-            self._pending = bytearray()
-        elif self._read_bytes:
-            self.log.append((now, "R", self._read_reg, bytes(self._read_bytes)))
-            self._read_bytes = bytearray()
-
-    def stop(self):
-        self._flush()
+    @property
+    def log(self) -> list:
+        self._log.extend(self.machine.core.mpu_take_log(self.native))
+        return self._log

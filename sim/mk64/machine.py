@@ -1,5 +1,6 @@
-"""The Cortex-M4 core of the emulated chip: unicorn for the instructions, this module for
-everything unicorn leaves out on an M-profile core.
+"""The Cortex-M4 core of the emulated chip: unicorn for the instructions, this module and its
+native half (``heliquad._simcore.Mk64Core``, sim/native/mk64_core.cpp) for everything
+unicorn leaves out on an M-profile core.
 
 * Memory map: flash (read/execute), SRAM, and the peripheral spaces as MMIO dispatched to
   device models by address (:meth:`Machine.attach`). An access to a peripheral whose clock is
@@ -18,37 +19,45 @@ everything unicorn leaves out on an M-profile core.
 * Checks the chip would enforce or a test wants: FPU instructions before CPACR grants
   CP10/CP11 (a NOCP UsageFault on the chip), the first peripheral accesses, and an
   instruction budget on every run.
+
+What runs at every block, every busy peripheral access and every interrupt is native: the
+block accounting and the event deadline, the event queue (Python's events included, so
+every event runs in one order), the NVIC's state, exception entry and return, WFI, and the
+models of DWT, SysTick, UART0 and I2C0 (their Python classes are views). The native core
+calls back into Python (through ctypes function pointers, which take the GIL) for a block not
+decoded yet, the FPU-enable check until the first FPU instruction and an access to a device
+modelled in Python; it returns from a run for a Python event, a breakpoint or a fault. This
+module keeps the rest: decoding (timing.py), the memory map, the Python devices, breakpoints,
+faults and their messages, and the logs of the first accesses.
 """
 
 from __future__ import annotations
 
 import collections
 import ctypes
-import heapq
-import itertools
 import struct
 from dataclasses import dataclass, field
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_BLOCK, UC_HOOK_CODE, UC_HOOK_INTR,
-                     UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE, UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS,
-                     UC_MODE_THUMB, UC_PROT_ALL, UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
+from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE, UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE,
+                     UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
+                     UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
 from unicorn import arm_const as A
 
 from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE, Image, exception_name
-from .timing import EXCEPTION_ENTRY_CYCLES, EXCEPTION_RETURN_CYCLES, BlockDecoder
+from .timing import BlockDecoder
 
 PERIPHERAL_BASE, PERIPHERAL_SIZE = 0x4000_0000, 0x0010_0000    # AIPS0/1 bridges and GPIO
 PPB_BASE, PPB_SIZE = 0xE000_0000, 0x0010_0000                  # private peripheral bus
 
 N_EXCEPTIONS = 16 + 86
-THREAD_PRIORITY = 1 << 16           # lower than any configurable priority
-EXC_RETURN_TRAP = 8                 # unicorn/QEMU EXCP_EXCEPTION_EXIT
-_INTR_UNDEF, _INTR_SVC, _INTR_BKPT = 1, 2, 7
-_FRAME_REGS = (A.UC_ARM_REG_R0, A.UC_ARM_REG_R1, A.UC_ARM_REG_R2, A.UC_ARM_REG_R3,
-               A.UC_ARM_REG_R12, A.UC_ARM_REG_LR)
-_S_REGS = tuple(getattr(A, f"UC_ARM_REG_S{i}") for i in range(16))
-_CONTROL_SPSEL, _CONTROL_FPCA = 1 << 1, 1 << 2
-_XPSR_ALIGN = 1 << 9
+_INTR_UNDEF = 1
+# Why Mk64Core.run() returned (sim/native/mk64_core.hpp, enum Run).
+(_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
+ _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT) = range(1, 11)
+# Native device numbers (Core::Device).
+DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE = range(4)
+# Block flags in the native table (Block::kMaskOp ...).
+_MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
 
 
 class EmulationError(RuntimeError):
@@ -97,16 +106,24 @@ class Access:
 
 
 class Event:
-    __slots__ = ("due", "seq", "fn", "scaled", "cancelled")
+    """A Python callback at a core cycle (:meth:`Machine.at`), queued natively with every
+    other event. ``due`` follows a core clock change when the event is in seconds."""
+    __slots__ = ("_core", "seq", "fn", "scaled", "cancelled", "_due")
 
-    def __init__(self, due, seq, fn, scaled):
-        self.due, self.seq, self.fn, self.scaled, self.cancelled = due, seq, fn, scaled, False
+    def __init__(self, core, seq, due, fn, scaled):
+        self._core, self.seq, self.fn, self.scaled, self._due = core, seq, fn, scaled, due
+        self.cancelled = False
 
-    def __lt__(self, other):
-        return (self.due, self.seq) < (other.due, other.seq)
+    @property
+    def due(self) -> int:
+        due = self._core.event_due(self.seq)
+        if due is not None:
+            self._due = due
+        return self._due
 
     def cancel(self):
         self.cancelled = True
+        self._core.cancel(self.seq)
 
 
 class Device:
@@ -146,43 +163,73 @@ class Machine:
         uc.mem_map(FLASH_BASE, FLASH_SIZE, UC_PROT_READ | UC_PROT_EXEC)
         uc.mem_map(SRAM_BASE, SRAM_SIZE, UC_PROT_ALL)
         self.uc = uc
-        self._raw = _RawHooks(uc, self._defer)
+        self._native = _Native(uc, self)
+        self.core = self._native.core
+        self.core.install(PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_SIZE)
         for base, size in ((PERIPHERAL_BASE, PERIPHERAL_SIZE), (PPB_BASE, PPB_SIZE)):
-            self._raw.mmio_map(base, size, self._mmio_read, self._mmio_write)
             # A memory hook on the peripheral spaces keeps the PC exact at every access
             # there (unicorn syncs it for memory hooks); the hook itself has nothing to do.
-            self._raw.pc_sync_hook(base, base + size - 1)
-        self._raw.block_hook(self._on_block)
-        uc.hook_add(UC_HOOK_INTR, self._on_interrupt)
+            self._native.pc_sync_hook(base, base + size - 1)
         uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped)
-        self._pc = _pc_reader(uc)
         self._decoder = BlockDecoder()
-        self._blocks = {}
+        self._blocks = {}                               # start -> timing.Block (decoded once)
         self._pages = collections.defaultdict(list)     # 4 KiB page -> [(lo, hi, device)]
         self.devices = []
         self._breakpoints = {}                         # address -> [callback]
         self._bp_hooks = {}
-        self._seq = itertools.count()
+        self._py_events = {}                           # native event number -> Event
         self._reset_core_hz = core_hz
         self.reset_listeners = []           # called after the devices reset
         self.pre_reset_listeners = []       # called before
         self.clock_listeners = []
-
-        # NVIC state (exception numbers 1..101)
-        self.enabled = 0            # bit n: exception n enabled (IRQs; system ones always)
-        self.pending = 0
-        self.irq_lines = 0          # level of each peripheral's interrupt request, by exception number
-        self.priority = [0] * N_EXCEPTIONS
-        self.prigroup = 0
-        self.vtor = 0
-        self.active = []            # stack of active exception numbers, innermost last
-        self._frames = []           # per active exception: (sp, fp frame, exc_return)
-        self.cpacr = 0
-        self.fpccr = 0xC000_0000
-        self.ccr = 0x200            # STKALIGN: the Cortex-M4 (r0p1) resets it to 1
-        self.exception_log = collections.deque(maxlen=4096)   # (cycle, 'enter'|'return', number)
-        self.exception_counts = collections.Counter()
+        self.priority = _Priorities(self.core)
+        self.exception_log = _ExceptionLog(self.core)
         self.reset()
+
+    # ------------------------------------------------------------------ native state ----
+    # The NVIC's state and the time base live in the native core; these are its views.
+    cycles = property(lambda self: self.core.cycles, lambda self, v: setattr(self.core, "cycles", v),
+                      doc="core cycles before the current block")
+    instructions = property(lambda self: self.core.instructions,
+                            doc="instructions retired before the current block")
+    sleep_cycles = property(lambda self: self.core.sleep_cycles)
+    handler_instructions = property(lambda self: self.core.handler_instructions,
+                                    doc="instructions retired in handler mode (all handlers)")
+    handler_cycles = property(lambda self: self.core.handler_cycles,
+                              doc="core cycles in handlers, entry and return included")
+    core_hz = property(lambda self: self.core.core_hz)
+    enabled = property(lambda self: self.core.enabled,
+                       lambda self, v: setattr(self.core, "enabled", v),
+                       doc="bit n: exception n enabled (IRQs; system ones always)")
+    pending = property(lambda self: self.core.pending,
+                       lambda self, v: setattr(self.core, "pending", v))
+    irq_lines = property(lambda self: self.core.irq_lines,
+                         doc="level of each peripheral's interrupt request, by exception number")
+    prigroup = property(lambda self: self.core.prigroup,
+                        lambda self, v: setattr(self.core, "prigroup", v))
+    vtor = property(lambda self: self.core.vtor, lambda self, v: setattr(self.core, "vtor", v))
+    ccr = property(lambda self: self.core.ccr, lambda self, v: setattr(self.core, "ccr", v))
+    fpccr = property(lambda self: self.core.fpccr, lambda self, v: setattr(self.core, "fpccr", v))
+    active = property(lambda self: self.core.active,
+                      doc="active exception numbers, innermost last")
+
+    @property
+    def exception_counts(self) -> collections.Counter:
+        return collections.Counter({n: c for n, c in enumerate(self.core.exception_counts()) if c})
+
+    @property
+    def trace_enabled(self) -> bool:
+        return self._trace_enabled
+
+    @trace_enabled.setter
+    def trace_enabled(self, on: bool):
+        self._trace_enabled = bool(on)
+        self._update_log_all()
+
+    def _update_log_all(self):
+        """Peripheral accesses go through Python while something logs them all."""
+        self.core.log_all = len(self.first_accesses) < self.FIRST_ACCESSES or \
+            self._trace_enabled or bool(self.access_listeners)
 
     # ------------------------------------------------------------------ memory map ----
     def attach(self, device: Device) -> Device:
@@ -236,12 +283,14 @@ class Machine:
             self._defer(e)
 
     def _log_access(self, address, size, value, write, dev):
-        if len(self.first_accesses) < self.FIRST_ACCESSES or self.trace_enabled:
+        if len(self.first_accesses) < self.FIRST_ACCESSES or self._trace_enabled:
             a = Access(self.instructions_now(), self.now(), self.pc, address, size, value, write,
                        dev.name)
             if len(self.first_accesses) < self.FIRST_ACCESSES:
                 self.first_accesses.append(a)
-            if self.trace_enabled:
+                if len(self.first_accesses) == self.FIRST_ACCESSES:
+                    self._update_log_all()
+            if self._trace_enabled:
                 self.trace.append(a)
         for listener in self.access_listeners:
             listener(address, size, value, write, dev)
@@ -256,6 +305,7 @@ class Machine:
         inside a hook). The access's instruction does not retire."""
         if self._error is None:
             self._error = error
+        self.core.request_error()
         try:
             self.uc.emu_stop()
         except UcError:
@@ -284,13 +334,18 @@ class Machine:
             self._bp_resume = None
             return
         stop = None
-        for cb in self._breakpoints.get(address, ()):
-            result = True if cb is None else cb(self)
-            if result and stop is None:
-                stop = result
+        try:
+            for cb in self._breakpoints.get(address, ()):
+                result = True if cb is None else cb(self)
+                if result and stop is None:
+                    stop = result
+        except BaseException as e:           # noqa: BLE001 - re-raised by run()
+            self._defer(e)
+            return
         if stop:
             self._stop = stop if isinstance(stop, Stop) else \
                 Stop(stop if isinstance(stop, str) else "breakpoint", address)
+            self.core.request_stop()
             uc.emu_stop()
 
     # ------------------------------------------------------------------ reset ---------
@@ -300,38 +355,19 @@ class Machine:
         for address, data in image.segments:
             self.uc.mem_write(address, data)
         self._blocks.clear()
+        self.core.clear_blocks()
         self.reset()
 
     def reset(self):
         """Power-on reset: core registers, NVIC, time, every attached device."""
         uc = self.uc
-        self.cycles = 0                 # core cycles before the current block
-        self.instructions = 0           # instructions retired before the current block
-        self.sleep_cycles = 0
-        self._epoch_cycles, self._epoch_seconds = 0, 0.0
-        self.core_hz = self._reset_core_hz
-        self._events = []
-        self._cur = None
-        self._deadline = 0
-        self._instr_limit = 0
+        self.core.reset(self._reset_core_hz)    # time, events, NVIC, the native devices
+        self._py_events.clear()
         self._stop = None
         self._error = None
         self._unmapped = None
-        self._exc_return = None
-        self._svc = False
         self._bp_resume = None
-        self._sleeping = False
-        self._watch_mask = False
-        self._budget_hit = False
-        self._last = None
-        self.trace_enabled = False
-        self.enabled = self.pending = self.irq_lines = 0
-        self.priority = [0] * N_EXCEPTIONS
-        self.priority[1], self.priority[2], self.priority[3] = -3, -2, -1
-        self.prigroup = 0
-        self.vtor = 0
-        self.active, self._frames = [], []
-        self.cpacr, self.fpccr, self.ccr = 0, 0xC000_0000, 0x200
+        self.cpacr = 0
         self.fpu_granted_at = None      # instruction count of the CPACR write granting CP10/CP11
         self.fpu_synced_at = None       # instruction count of the first ISB after that
         self.first_fpu = None           # (instruction count, pc) of the first FPU instruction
@@ -340,11 +376,8 @@ class Machine:
         self.first_accesses = []
         self.trace = collections.deque(maxlen=self.TRACE_LENGTH)   # with trace_enabled
         self.access_listeners = []
-        self.exception_log.clear()
-        self.exception_counts.clear()
-        self.handler_instructions = 0   # instructions retired in handler mode (all handlers)
-        self.handler_cycles = 0         # core cycles spent in handlers, entry and return included
-        self._handler_since = None
+        self._trace_enabled = False
+        self._update_log_all()
         for reg in (A.UC_ARM_REG_R0, A.UC_ARM_REG_R1, A.UC_ARM_REG_R2, A.UC_ARM_REG_R3,
                     A.UC_ARM_REG_R4, A.UC_ARM_REG_R5, A.UC_ARM_REG_R6, A.UC_ARM_REG_R7,
                     A.UC_ARM_REG_R8, A.UC_ARM_REG_R9, A.UC_ARM_REG_R10, A.UC_ARM_REG_R11,
@@ -370,60 +403,43 @@ class Machine:
     # ------------------------------------------------------------------ time ----------
     @property
     def pc(self) -> int:
-        return self._pc()
+        return self.core.pc()
 
     def now(self) -> int:
         """Core cycles since reset, exact at the instruction executing now."""
-        cur = self._cur
-        if cur is None:
-            return self.cycles
-        return self.cycles + cur.cycles_before(self._pc())
+        return self.core.now()
 
     def instructions_now(self) -> int:
-        cur = self._cur
-        if cur is None:
-            return self.instructions
-        return self.instructions + cur.executed_before(self._pc())
+        return self.core.instructions_now()
 
     def seconds(self, cycles: int | None = None) -> float:
         """Simulated time since reset at ``cycles`` (now by default)."""
-        c = self.now() if cycles is None else cycles
-        return self._epoch_seconds + (c - self._epoch_cycles) / self.core_hz
+        return self.core.seconds(self.core.now() if cycles is None else cycles)
 
     def cycles_after(self, seconds: float, start: int | None = None) -> int:
         """The core cycle count ``seconds`` after ``start`` (now) at the current clock."""
         start = self.now() if start is None else start
         return start + max(1, int(-(-seconds * self.core_hz // 1)))
 
+    def set_clocks(self, core_hz: float, bus_hz: float):
+        """The core (and bus) clock changed now: time stays continuous, and events scheduled
+        in seconds keep their time (their cycle counts are rescaled)."""
+        changed = core_hz != self.core.core_hz
+        self.core.set_clocks(core_hz, bus_hz)
+        if changed:
+            for listener in self.clock_listeners:
+                listener()
+
     def set_core_hz(self, hz: float):
-        """The core clock changed now: time stays continuous, and events scheduled in
-        seconds keep their time (their cycle counts are rescaled)."""
-        if hz == self.core_hz:
-            return
-        now = self.now()
-        self._epoch_seconds = self.seconds(now)
-        self._epoch_cycles = now
-        ratio = hz / self.core_hz
-        self.core_hz = hz
-        rescaled = []
-        for ev in self._events:
-            if ev.scaled and not ev.cancelled and ev.due > now:
-                ev.due = now + max(1, int(round((ev.due - now) * ratio)))
-            rescaled.append(ev)
-        heapq.heapify(rescaled)
-        self._events = rescaled
-        self._update_deadline()
-        for listener in self.clock_listeners:
-            listener()
+        self.set_clocks(hz, self.core.bus_hz)
 
     def at(self, cycle: int, fn, *, scaled: bool = True) -> Event:
         """Run ``fn()`` at the first block boundary at or after core cycle ``cycle``.
         ``scaled``: the event is a time in seconds (moves with a core clock change);
         False for events counted in core cycles (SysTick)."""
-        ev = Event(max(cycle, self.now()), next(self._seq), fn, scaled)
-        heapq.heappush(self._events, ev)
-        if ev.due < self._deadline:
-            self._deadline = ev.due
+        seq = self.core.at(cycle, scaled)
+        ev = Event(self.core, seq, max(cycle, self.now()), fn, scaled)
+        self._py_events[seq] = ev
         return ev
 
     def after(self, seconds: float, fn) -> Event:
@@ -431,57 +447,37 @@ class Machine:
 
     def attention(self):
         """Stop at the next block boundary to re-evaluate interrupts."""
-        self._deadline = 0
+        self.core.attention()
 
-    def _update_deadline(self):
-        while self._events and self._events[0].cancelled:
-            heapq.heappop(self._events)
-        self._deadline = self._events[0].due if self._events else 1 << 62
-
-    def _run_due_events(self):
-        while self._events:
-            ev = self._events[0]
-            if ev.cancelled:
-                heapq.heappop(self._events)
-                continue
-            if ev.due > self.cycles:
-                break
-            heapq.heappop(self._events)
-            ev.fn()
-
-    # ------------------------------------------------------------------ the block hook --
-    def _on_block(self, address, size):
-        """Unicorn is about to run the block at ``address``: the previous one retired.
-        Stops before it (it does not run) when an event is due, the budget would be
-        exceeded, or an interrupt waits on a mask the previous block may have lifted."""
-        cur = self._cur
-        if cur is not None:
-            self.instructions += cur.n
-            self.cycles += cur.cycles
-            if cur.mask_op and self._watch_mask:
-                self._cur = None
-                self.uc.emu_stop()
+    def advance(self, cycles: int):
+        """Let ``cycles`` core cycles pass without running any code (tests of the device
+        models on a chip with no program): the events due meanwhile run in order."""
+        target = self.core.cycles + cycles
+        while True:
+            seq = self.core.advance(target)
+            if not seq:
                 return
-        block = self._blocks.get(address)
-        if block is None or block.size != size:
-            block = self._decoder.decode(bytes(self.uc.mem_read(address, size)), address)
-            self._blocks[address] = block
-        if self.cycles >= self._deadline or self.instructions + block.n > self._instr_limit:
-            self._cur = None
-            self._budget_hit = self.instructions + block.n > self._instr_limit
-            self.uc.emu_stop()
-            return
-        if self._fpu_watch and not self._fpu_block(block):
-            self._cur = None            # the chip would take a NOCP UsageFault here
-            self.uc.emu_stop()
-            return
-        self._cur = block
+            ev = self._py_events.pop(seq, None)
+            if ev is not None:
+                ev.fn()
 
-    def _fpu_block(self, block) -> bool:
+    # ------------------------------------------------------------------ decoding -------
+    def _decode(self, address: int, size: int):
+        """A block unicorn is about to run for the first time: decode it once (capstone)
+        and give the native table its costs."""
+        block = self._decoder.decode(bytes(self.uc.mem_read(address, size)), address)
+        self._blocks[address] = block
+        flags = (_MASK_OP if block.mask_op else 0) | (_ISB if block.isb else 0) | \
+            (_VFP if block.vfp_at >= 0 else 0) | (_WFI if block.wfi else 0)
+        self.core.add_block(address, size, block.n, block.cycles, flags, block.addrs, block.cum)
+
+    def _fpu_block(self, address: int) -> bool:
         """Until the first FPU instruction: note the ISB that synchronises a CPACR grant,
         and judge the first FPU instruction when it comes."""
+        block = self._blocks[address]
         if block.vfp_at >= 0:
             self._fpu_watch = False
+            self.core.fpu_watch = False
             return self._check_fpu(block)
         if block.isb and self.fpu_granted_at is not None and self.fpu_synced_at is None:
             self.fpu_synced_at = self.instructions + block.n
@@ -498,6 +494,7 @@ class Machine:
                                 f"(instruction {at[0]}) before CPACR granted CP10 and CP11 "
                                 f"(CPACR = 0x{self.cpacr:08X}; a grant in the same block has "
                                 "no ISB before it either)", at[1])
+            self.core.request_error()
             return False
         if self.fpu_synced_at is None:
             self.fpu_violation = at
@@ -508,182 +505,32 @@ class Machine:
         self.cpacr = cpacr
         if (cpacr >> 20) & 0xF == 0xF and self.fpu_granted_at is None:
             self.fpu_granted_at = self.instructions_now()
-            if self._cur is not None and self._cur.isb:
+            cur = self.core.cur_start()
+            if cur >= 0 and self._blocks[cur].isb:
                 # ISB ends a block, so it follows this write in the same block
-                self.fpu_synced_at = self.instructions + self._cur.n
-
-    # ------------------------------------------------------------------ interrupts from unicorn
-    def _on_interrupt(self, uc, intno, _):
-        pc = uc.reg_read(A.UC_ARM_REG_PC)
-        if intno == EXC_RETURN_TRAP:
-            self._exc_return = pc | 1
-        elif intno == _INTR_SVC:
-            self._svc = True
-        elif intno == _INTR_BKPT:
-            imm = uc.mem_read(pc, 2)[0]
-            self._stop = Stop("bkpt", pc, {"imm": imm})
-        elif intno == _INTR_UNDEF:
-            self._error = Fault("UsageFault", f"undefined instruction at {self.describe(pc)}", pc)
-        else:
-            self._error = Fault("UsageFault", f"exception {intno} from the core at "
-                                f"{self.describe(pc)}", pc)
-        uc.emu_stop()
+                self.fpu_synced_at = self.instructions + self._blocks[cur].n
 
     # ------------------------------------------------------------------ NVIC ----------
     def set_irq(self, irq: int, level: bool):
         """A peripheral's interrupt request line (level), by IRQ number."""
-        bit = 1 << (irq + 16)
-        if level:
-            if not self.irq_lines & bit:
-                self.irq_lines |= bit
-                if (irq + 16) not in self.active:
-                    self.pending |= bit
-                    self.attention()
-        else:
-            self.irq_lines &= ~bit
+        self.core.set_irq(irq, bool(level))
 
     def pend(self, number: int):
         """Set an exception pending by exception number (SysTick 15, PendSV 14, IRQ n 16+n)."""
-        self.pending |= 1 << number
-        self.attention()
+        self.core.pend(number)
 
     def unpend(self, number: int):
-        self.pending &= ~(1 << number)
-
-    def _group(self, priority: int) -> int:
-        if priority < 0:
-            return priority
-        return priority >> (self.prigroup + 1)
+        self.core.unpend(number)
 
     def execution_priority(self, ignore_primask: bool = False) -> int:
-        prio = THREAD_PRIORITY
-        for n in self.active:
-            prio = min(prio, self._group(self.priority[n]))
-        uc = self.uc
-        if not ignore_primask:
-            if uc.reg_read(A.UC_ARM_REG_FAULTMASK) & 1:
-                prio = min(prio, -1)
-            if uc.reg_read(A.UC_ARM_REG_PRIMASK) & 1:
-                prio = min(prio, 0)
-        basepri = uc.reg_read(A.UC_ARM_REG_BASEPRI) & 0xF0
-        if basepri:
-            prio = min(prio, self._group(basepri))
-        return prio
-
-    def _enabled_mask(self) -> int:
-        return self.enabled | 0xFFFF            # system exceptions need no NVIC enable
+        return self.core.execution_priority(ignore_primask)
 
     def pending_exception(self):
         """The pending, enabled exception the NVIC would present, or None."""
-        ready = self.pending & self._enabled_mask()
-        if not ready:
-            return None
-        best, best_key = None, None
-        n = 0
-        while ready:
-            if ready & 1:
-                key = (self.priority[n], n)
-                if best_key is None or key < best_key:
-                    best, best_key = n, key
-            ready >>= 1
-            n += 1
-        return best
+        return self.core.pending_exception()
 
     def _preempts(self, number: int, ignore_primask=False) -> bool:
-        return self._group(self.priority[number]) < self.execution_priority(ignore_primask)
-
-    def take_exception(self, number: int):
-        """Exception entry: stack a frame on the main stack, set LR to EXC_RETURN and jump
-        to the handler the vector table names."""
-        uc = self.uc
-        control = uc.reg_read(A.UC_ARM_REG_CONTROL)
-        if control & _CONTROL_SPSEL and not self.active:
-            raise Fault("UsageFault", "thread mode on the process stack (CONTROL.SPSEL) is not "
-                        "modelled", self.pc)
-        fp = bool(control & _CONTROL_FPCA) and bool(self.fpccr & (1 << 31))
-        sp = uc.reg_read(A.UC_ARM_REG_SP)
-        frame_size = 0x68 if fp else 0x20
-        xpsr = uc.reg_read(A.UC_ARM_REG_XPSR)
-        new_sp = sp - frame_size
-        if (self.ccr & 0x200) or fp:
-            if new_sp & 4:
-                new_sp -= 4
-                xpsr |= _XPSR_ALIGN
-            else:
-                xpsr &= ~_XPSR_ALIGN
-        words = [uc.reg_read(r) for r in _FRAME_REGS] + [uc.reg_read(A.UC_ARM_REG_PC), xpsr]
-        if fp:
-            # Lazy stacking reserves this space and fills it when the handler first uses the
-            # FPU; the harness fills it at once, which the program cannot tell apart.
-            words += [uc.reg_read(r) for r in _S_REGS]
-            words += [uc.reg_read(A.UC_ARM_REG_FPSCR), 0]
-        try:
-            uc.mem_write(new_sp, struct.pack(f"<{len(words)}I", *words))
-        except UcError:
-            raise Fault("BusFault", f"stacking a {exception_name(number)} frame at "
-                        f"0x{new_sp:08X} failed (stack overflow?)", self.pc, new_sp) from None
-        thread = not self.active
-        if thread:
-            self._handler_since = (self.instructions, self.cycles)
-        exc_return = (0xFFFF_FFF9 if thread else 0xFFFF_FFF1) & ~(0 if not fp else 0x10)
-        self.active.append(number)
-        self._frames.append((new_sp, fp, exc_return))
-        self.pending &= ~(1 << number)
-        handler = self._read32(self.vtor + 4 * number)
-        uc.reg_write(A.UC_ARM_REG_SP, new_sp)
-        uc.reg_write(A.UC_ARM_REG_LR, exc_return)
-        uc.reg_write(A.UC_ARM_REG_CONTROL, control & ~_CONTROL_FPCA)
-        uc.reg_write(A.UC_ARM_REG_XPSR, (1 << 24) | number)
-        uc.reg_write(A.UC_ARM_REG_PC, handler & ~1)
-        self.cycles += EXCEPTION_ENTRY_CYCLES
-        self.exception_log.append((self.cycles, "enter", number))
-        self.exception_counts[number] += 1
-        if not handler & 1:
-            raise Fault("UsageFault", f"vector {number} ({exception_name(number)}) = "
-                        f"0x{handler:08X} has no Thumb bit (INVSTATE)", self.pc)
-
-    def return_from_exception(self, exc_return: int):
-        uc = self.uc
-        if not self.active:
-            raise Fault("UsageFault", f"EXC_RETURN 0x{exc_return:08X} in thread mode (INVPC)",
-                        exc_return)
-        number = self.active[-1]
-        sp_expected, fp, stacked_return = self._frames[-1]
-        if exc_return not in (0xFFFF_FFF1, 0xFFFF_FFF9, 0xFFFF_FFE1, 0xFFFF_FFE9):
-            raise Fault("UsageFault", f"EXC_RETURN 0x{exc_return:08X} from "
-                        f"{exception_name(number)}: only main-stack returns are modelled",
-                        exc_return)
-        to_thread = bool(exc_return & 0x8)
-        if to_thread != (len(self.active) == 1):
-            raise Fault("UsageFault", f"EXC_RETURN 0x{exc_return:08X} from "
-                        f"{exception_name(number)} names the wrong mode (INVPC)", exc_return)
-        fp = not exc_return & 0x10
-        sp = uc.reg_read(A.UC_ARM_REG_SP)
-        n = 26 if fp else 8
-        words = struct.unpack(f"<{n}I", bytes(uc.mem_read(sp, 4 * n)))
-        for reg, value in zip(_FRAME_REGS, words[:6]):
-            uc.reg_write(reg, value)
-        xpsr = words[7]
-        if fp:
-            for reg, value in zip(_S_REGS, words[8:24]):
-                uc.reg_write(reg, value)
-            uc.reg_write(A.UC_ARM_REG_FPSCR, words[24])
-        new_sp = sp + 4 * n + (4 if xpsr & _XPSR_ALIGN else 0)
-        self.active.pop()
-        self._frames.pop()
-        uc.reg_write(A.UC_ARM_REG_SP, new_sp)
-        control = uc.reg_read(A.UC_ARM_REG_CONTROL)
-        uc.reg_write(A.UC_ARM_REG_CONTROL, (control | _CONTROL_FPCA) if fp else (control & ~_CONTROL_FPCA))
-        uc.reg_write(A.UC_ARM_REG_XPSR, xpsr & ~_XPSR_ALIGN)
-        uc.reg_write(A.UC_ARM_REG_PC, words[6] & ~1)
-        self.cycles += EXCEPTION_RETURN_CYCLES
-        self.exception_log.append((self.cycles, "return", number))
-        if not self.active and self._handler_since is not None:
-            self.handler_instructions += self.instructions - self._handler_since[0]
-            self.handler_cycles += self.cycles - self._handler_since[1]
-            self._handler_since = None
-        if self.irq_lines & (1 << number):          # a level still asserted pends again
-            self.pending |= 1 << number
+        return self.core.preempts(number, ignore_primask)
 
     # ------------------------------------------------------------------ run ------------
     def run(self, instructions: int | None = None, seconds: float | None = None) -> Stop:
@@ -692,112 +539,61 @@ class Machine:
         passed. Faults and resets raise. One of the two limits is required."""
         if instructions is None and seconds is None:
             raise ValueError("give an instruction budget or a simulated time")
-        uc = self.uc
-        instr_limit = self.instructions + instructions if instructions is not None else 1 << 62
-        time_up = []
+        core = self.core
+        instr_limit = core.instructions + instructions if instructions is not None else 1 << 62
         # The time limit is an event in seconds: it keeps its time if the clock changes.
-        limit = self.at(self.cycles_after(seconds, self.cycles), lambda: time_up.append(1)) \
+        limit = core.time_limit(self.cycles_after(seconds, core.cycles)) \
             if seconds is not None else None
+        core.time_up = False
         self._stop = None
+        core.clear_stop()
+        self._update_log_all()
         try:
             while True:
-                self._service()
-                if self._stop is not None:
-                    return self._stop
-                if self.instructions >= instr_limit:
-                    return Stop("budget", self.pc, {"instructions": self.instructions})
-                if time_up:
-                    return Stop("time", self.pc, {"seconds": self.seconds()})
-                if self._sleeping:
-                    if not self._sleep():
-                        return Stop("sleep-forever", self.pc, {
-                            "detail": "WFI with no enabled interrupt and no event to come"})
+                code = core.run(instr_limit)
+                if code == _RUN_PY_EVENT:
+                    ev = self._py_events.pop(core.py_event, None)
+                    if ev is not None:
+                        ev.fn()
                     continue
-                stop = self._execute(instr_limit)
-                if stop is not None:
-                    return stop
+                if code == _RUN_STOP:
+                    self._bp_resume = self._stop.pc
+                    return self._stop
+                if code == _RUN_BKPT:
+                    pc = core.bkpt_pc
+                    return Stop("bkpt", pc, {"imm": self.uc.mem_read(pc, 2)[0]})
+                if code == _RUN_BUDGET:
+                    return Stop("budget", self.pc, {"instructions": self.instructions})
+                if code == _RUN_TIME:
+                    return Stop("time", self.pc, {"seconds": self.seconds()})
+                if code == _RUN_SLEEP_FOREVER:
+                    return Stop("sleep-forever", self.pc, {
+                        "detail": "WFI with no enabled interrupt and no event to come"})
+                raise self._run_error(code)
         finally:
             if limit is not None:
-                limit.cancel()
+                core.cancel(limit)
+            core.time_up = False
 
-    def _execute(self, instr_limit: int):
-        """One emu_start: until a block boundary the harness must attend to."""
-        uc = self.uc
-        self._update_deadline()
-        self._instr_limit = instr_limit
-        self._budget_hit = False
-        self._watch_mask = self._masked_pending()
-        pc = self._pc()
-        self._cur = None
-        try:
-            uc.emu_start(pc | 1, 0xFFFF_FFFF)
-        except UcError as e:
-            self._commit()
-            if self._error is None:
-                self._error = self._uc_error(e)
-        else:
-            self._commit()
-        if self._error is not None:
-            error, self._error = self._error, None
-            raise error
-        if self._budget_hit:
-            self._budget_hit = False
-            return Stop("budget", self.pc, {"instructions": self.instructions})
-        if self._exc_return is not None:
-            exc_return, self._exc_return = self._exc_return, None
-            self.return_from_exception(exc_return)
-        elif self._svc:
-            self._svc = False
-            self.pend(11)
-        elif self._stop is not None:
-            self._bp_resume = self._stop.pc if self._stop.reason != "bkpt" else None
-            if self._stop.reason == "bkpt":
-                uc.reg_write(A.UC_ARM_REG_PC, self._stop.pc + 2)
-            return self._stop
-        elif self._last is not None and self._last.wfi and \
-                self._pc() == self._last.start + self._last.size:
-            self._sleeping = True
-        return None
-
-    def _commit(self):
-        """After unicorn returns: count what retired of the block it was in."""
-        cur = self._cur
-        self._last = cur
-        if cur is not None:
-            pc = self._pc()
-            done = cur.executed_before(pc)
-            self.instructions += done
-            self.cycles += cur.cycles_before(pc) if done < cur.n else cur.cycles
-            self._cur = None
-
-    def _service(self):
-        """At a boundary: due events, then the exception the NVIC presents, if it preempts."""
-        self._run_due_events()
-        number = self.pending_exception()
-        if number is not None and self._preempts(number):
-            self._sleeping = False
-            self.take_exception(number)
-
-    def _masked_pending(self) -> bool:
-        number = self.pending_exception()
-        return number is not None and not self._preempts(number) and \
-            self._preempts(number, ignore_primask=True)
-
-    def _sleep(self) -> bool:
-        """WFI: wake on an exception that would preempt were PRIMASK clear; otherwise let
-        time pass to the next event. False when nothing will ever wake the core."""
-        number = self.pending_exception()
-        if number is not None and self._preempts(number, ignore_primask=True):
-            self._sleeping = False
-            return True
-        self._update_deadline()
-        if not self._events:
-            return False
-        target = self._events[0].due
-        if target > self.cycles:
-            self.sleep_cycles += target - self.cycles
-            self.cycles = target
-        return True
+    def _run_error(self, code: int) -> EmulationError:
+        """The error a run stopped with (native codes, deferred Python errors)."""
+        core = self.core
+        error, self._error = self._error, None
+        core.clear_error()
+        if code == _RUN_PY_ERROR and error is not None:
+            return error
+        if code == _RUN_UC_ERROR:
+            return error or self._uc_error(UcError(core.uc_error))
+        if code == _RUN_FAULT:
+            kind, message, pc, address = core.fault()
+            return Fault(kind, message, pc, address)
+        if code == _RUN_INTR_FAULT:
+            pc = core.intr_pc
+            if core.intr_number == _INTR_UNDEF:
+                return Fault("UsageFault", f"undefined instruction at {self.describe(pc)}", pc)
+            return Fault("UsageFault", f"exception {core.intr_number} from the core at "
+                         f"{self.describe(pc)}", pc)
+        return error or EmulationError(f"run stopped with code {code}")
 
     def _uc_error(self, e: UcError) -> EmulationError:
         pc = self.pc
@@ -813,6 +609,12 @@ class Machine:
         if "INSN_INVALID" in text:
             return Fault("UsageFault", f"undefined instruction at {self.describe(pc)}", pc)
         return Fault("Fault", f"{text} at {self.describe(pc)}", pc)
+
+    def counts(self) -> dict:
+        """What the native core has done since the machine was made: blocks entered, blocks
+        decoded, peripheral accesses handled natively and in Python, events run natively and
+        in Python, exceptions taken, emu_start calls, FPU-watch callbacks (for benchmarks)."""
+        return self.core.counts()
 
     # ------------------------------------------------------------------ helpers -------
     def _read32(self, address: int) -> int:
@@ -849,96 +651,113 @@ class Machine:
         return hi
 
 
-class _RawHooks:
-    """Hooks registered with the unicorn library directly, for the callbacks that run at
-    every block and every peripheral access: the Python binding's generic wrappers cost
-    about as much again as the callbacks themselves. Falls back to the binding when its
-    internals are not there. Every callback is guarded: an exception stops the emulation
-    and run() raises it."""
+class _Priorities:
+    """The NVIC's priority of each exception (by number), a view onto the native core."""
 
-    def __init__(self, uc, on_error):
-        self.uc, self.on_error = uc, on_error
-        self._keep = []
+    def __init__(self, core):
+        self._core = core
+
+    def __getitem__(self, n: int) -> int:
+        return self._core.priority(n)
+
+    def __setitem__(self, n: int, value: int):
+        self._core.set_priority(n, value)
+
+    def __len__(self):
+        return N_EXCEPTIONS
+
+    def __iter__(self):
+        return iter(self._core.priorities())
+
+
+class _ExceptionLog:
+    """(cycle, 'enter'|'return', number) of the last 4096 exception entries and returns."""
+
+    def __init__(self, core):
+        self._core = core
+
+    def __iter__(self):
+        return iter(self._core.exception_log())
+
+    def __len__(self):
+        return len(self._core.exception_log())
+
+    def __getitem__(self, i):
+        return self._core.exception_log()[i]
+
+
+class _Native:
+    """The native core and what it needs from the unicorn binding: the engine handle and the
+    library's entry points (taken from the library the binding loaded; nothing is linked),
+    and the ctypes callbacks it calls back into Python with."""
+
+    def __init__(self, uc, machine):
         try:
             from unicorn.unicorn_py3 import unicorn as binding
-            self.lib, self.handle = binding.uclib, uc._uch
-            self.code_t, self.read_t = binding.HOOK_CODE_CFUNC, binding.MMIO_READ_CFUNC
-            self.write_t, self.hook_h = binding.MMIO_WRITE_CFUNC, binding.uc_hook_h
-        except (ImportError, AttributeError):
-            self.lib = None
+            lib, handle = binding.uclib, uc._uch
+            code_t = binding.HOOK_CODE_CFUNC
+        except (ImportError, AttributeError) as e:
+            raise EmulationError(
+                "the emulator needs the unicorn Python binding's internals (unicorn_py3.unicorn."
+                f"uclib, Uc._uch; unicorn>=2.1.4,<3 is pinned): {e}") from None
+        try:
+            from heliquad._simcore import Mk64Core
+        except ImportError as e:
+            raise EmulationError(f"the emulator's native core (heliquad._simcore.Mk64Core) is "
+                                 f"not built: {e}") from None
+        self.uc, self.lib, self.handle, self._code_t = uc, lib, handle, code_t
+        self._keep = []
+        m = machine
 
-    def _add(self, htype, fptr, begin, end):
-        h = self.hook_h()
-        status = self.lib.uc_hook_add(self.handle, ctypes.byref(h), htype, fptr, None,
-                                      ctypes.c_uint64(begin), ctypes.c_uint64(end))
-        if status != 0:
-            raise UcError(status)
-        self._keep.append(fptr)
+        def guarded(fn, failed):
+            def call(*args):
+                try:
+                    return fn(*args)
+                except BaseException as e:       # noqa: BLE001 - re-raised by run()
+                    m._defer(e)
+                    return failed
+            return call
 
-    def block_hook(self, fn):
-        if self.lib is None:
-            self.uc.hook_add(UC_HOOK_BLOCK, lambda uc, a, s, _: fn(a, s))
-            return
-        on_error = self.on_error
+        decode_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint64, ctypes.c_uint32)
+        fpu_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint64)
+        read_t = ctypes.CFUNCTYPE(ctypes.c_uint64, ctypes.c_uint64, ctypes.c_uint32)
+        write_t = ctypes.CFUNCTYPE(None, ctypes.c_uint64, ctypes.c_uint32, ctypes.c_uint64)
 
-        def cb(handle, address, size, user):
-            try:
-                fn(address, size)
-            except BaseException as e:       # noqa: BLE001 - re-raised by run()
-                on_error(e)
-        self._add(UC_HOOK_BLOCK, self.code_t(cb), 1, 0)
+        def decode(address, size):
+            m._decode(address, size)
+            return 0
 
-    def mmio_map(self, base, size, read, write):
-        if self.lib is None:
-            self.uc.mmio_map(base, size, lambda uc, off, n, _: read(base + off, n), None,
-                             lambda uc, off, n, v, _: write(base + off, n, v), None)
-            return
-        on_error = self.on_error
+        callbacks = {
+            "decode": decode_t(guarded(decode, 1)),
+            "fpu_check": fpu_t(guarded(lambda a: 1 if m._fpu_block(a) else 0, 0)),
+            "read": read_t(guarded(m._mmio_read, 0)),
+            "write": write_t(guarded(m._mmio_write, None)),
+        }
+        self._keep += callbacks.values()
+        address = self.address
+        functions = {name: address(getattr(lib, name)) for name in
+                     ("uc_emu_start", "uc_emu_stop", "uc_reg_read", "uc_reg_write", "uc_reg_write2",
+                      "uc_mem_read", "uc_mem_write", "uc_hook_add", "uc_mmio_map")}
+        functions["handle"] = handle.value
+        regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in
+                ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "CONTROL", "FPSCR",
+                 "PRIMASK", "BASEPRI", "FAULTMASK")}
+        regs.update({f"S{i}": getattr(A, f"UC_ARM_REG_S{i}") for i in range(16)})
+        self.core = Mk64Core(functions, regs, {k: address(v) for k, v in callbacks.items()},
+                             [exception_name(n) for n in range(N_EXCEPTIONS)])
 
-        def rd(handle, offset, n, user):
-            try:
-                return read(base + offset, n)
-            except BaseException as e:       # noqa: BLE001
-                on_error(e)
-                return 0
-
-        def wr(handle, offset, n, value, user):
-            try:
-                write(base + offset, n, value)
-            except BaseException as e:       # noqa: BLE001
-                on_error(e)
-        rp, wp = self.read_t(rd), self.write_t(wr)
-        self._keep += [rp, wp]
-        status = self.lib.uc_mmio_map(self.handle, base, size, rp, None, wp, None)
-        if status != 0:
-            raise UcError(status)
+    @staticmethod
+    def address(fn) -> int:
+        return ctypes.cast(fn, ctypes.c_void_p).value
 
     def pc_sync_hook(self, begin, end):
         """A memory hook whose presence makes unicorn keep the PC exact at accesses in
         [begin, end]. Its callback does nothing; a side-effect-free function of the unicorn
         library (uc_arch_supported, which only reads its first argument) serves as one."""
-        if self.lib is None:
-            self.uc.hook_add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, lambda *a: None, None,
-                             begin, end)
-            return
+        h = ctypes.c_size_t()
         noop = ctypes.cast(self.lib.uc_arch_supported, ctypes.c_void_p)
-        self._add(UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, noop, begin, end)
-
-
-def _pc_reader(uc):
-    """A fast read of the PC: the peripheral models ask for it at every access. Goes to the
-    unicorn library directly when the binding exposes it, else through reg_read."""
-    try:
-        from unicorn.unicorn_py3.unicorn import uclib
-        handle = uc._uch
-    except (ImportError, AttributeError):
-        return lambda: uc.reg_read(A.UC_ARM_REG_PC)
-    buf = ctypes.c_uint64(0)
-    ref = ctypes.byref(buf)
-    read = uclib.uc_reg_read
-    pc = A.UC_ARM_REG_PC
-
-    def read_pc():
-        read(handle, pc, ref)
-        return buf.value & 0xFFFF_FFFF
-    return read_pc
+        status = self.lib.uc_hook_add(self.handle, ctypes.byref(h),
+                                      UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, noop, None,
+                                      ctypes.c_uint64(begin), ctypes.c_uint64(end))
+        if status != 0:
+            raise UcError(status)

@@ -7,6 +7,10 @@ have side effects, as reading D does on a UART) and ``w_<NAME>(self, value, mask
 is the register after the write, the old contents where ``mask`` has no bits; store what
 the register should hold in ``self.v[name]``). Registers without handlers store what is
 written. An access to an offset no register occupies is a bus fault.
+
+A model that lives in native code (``heliquad._simcore.Mk64Core``: UART0, I2C0) subclasses
+:class:`NativeRegisters` instead: the same map, gate and field helpers, its registers read
+from the native model (``v`` is a read-only view), its accesses passed to it.
 """
 
 from __future__ import annotations
@@ -15,12 +19,10 @@ from .machine import Device, Fault
 from .registers import peripheral
 
 
-class RegisterDevice(Device):
-    #: registers whose writes the chip ignores (read-only)
-    READ_ONLY: tuple = ()
+class _RegisterMap(Device):
+    """A peripheral's SVD register map, its clock gate and the field helpers."""
 
-    def __init__(self, machine, svd_name: str, *, gate=None, span: int | None = None,
-                 name: str | None = None):
+    def _map(self, machine, svd_name: str, gate, span: int | None, name: str | None):
         self.machine = machine
         self.map = peripheral(svd_name)
         self.name = name or svd_name
@@ -32,6 +34,45 @@ class RegisterDevice(Device):
         for reg in self.map.registers.values():
             for i in range(reg.bits // 8):
                 self._at.setdefault(reg.offset + i, reg)
+
+    # -- the clock gate --------------------------------------------------------------------
+    def clocked(self) -> bool:
+        if self.gate is None:
+            return True
+        return bool(self.gate[0].v[self.gate[1]] & self._gate_mask)
+
+    def gate_name(self) -> str:
+        return f"SIM_{self.gate[1]}.{self.gate[2]}" if self.gate else "no gate"
+
+    def reg(self, name):
+        return self.map[name]
+
+    def field(self, reg: str, fld: str) -> int:
+        return self.map[reg].field(fld).get(self.v[reg])
+
+    def bit(self, reg: str, fld: str) -> int:
+        return self.map[reg].bit(fld)
+
+    def peek(self, name: str) -> int:
+        """A register's stored value, without a read's side effects."""
+        return self.v[name]
+
+    def _reg_for(self, offset, size, write):
+        reg = self._at.get(offset)
+        if reg is None:
+            raise Fault("BusFault", f"{'write to' if write else 'read of'} "
+                        f"0x{self.base + offset:08X}: no {self.name} register there",
+                        self.machine.pc, self.base + offset)
+        return reg
+
+
+class RegisterDevice(_RegisterMap):
+    #: registers whose writes the chip ignores (read-only)
+    READ_ONLY: tuple = ()
+
+    def __init__(self, machine, svd_name: str, *, gate=None, span: int | None = None,
+                 name: str | None = None):
+        self._map(machine, svd_name, gate, span, name)
         self._readers = {}
         self._writers = {}
         for reg in self.map.registers.values():
@@ -44,15 +85,6 @@ class RegisterDevice(Device):
         self.v = {}
         self.reset()
 
-    # -- the clock gate --------------------------------------------------------------------
-    def clocked(self) -> bool:
-        if self.gate is None:
-            return True
-        return bool(self.gate[0].v[self.gate[1]] & self._gate_mask)
-
-    def gate_name(self) -> str:
-        return f"SIM_{self.gate[1]}.{self.gate[2]}" if self.gate else "no gate"
-
     # -- state -----------------------------------------------------------------------------
     WRITE_LOG = 4096                # writes kept per device (the first ones: boot order)
 
@@ -60,33 +92,12 @@ class RegisterDevice(Device):
         self.v = {reg.name: reg.reset for reg in self.map.registers.values()}
         self.writes = []            # (instruction count, register, value) of the first writes
 
-    def reg(self, name):
-        return self.map[name]
-
-    def field(self, reg: str, fld: str) -> int:
-        return self.map[reg].field(fld).get(self.v[reg])
-
-    def bit(self, reg: str, fld: str) -> int:
-        return self.map[reg].bit(fld)
-
     def read_register(self, name: str) -> int:
         """A register's value as the program would read it (handlers run: side effects)."""
         r = self._readers.get(name)
         return r() if r else self.v[name]
 
-    def peek(self, name: str) -> int:
-        """A register's stored value, without a read's side effects."""
-        return self.v[name]
-
     # -- bus side --------------------------------------------------------------------------
-    def _reg_for(self, offset, size, write):
-        reg = self._at.get(offset)
-        if reg is None:
-            raise Fault("BusFault", f"{'write to' if write else 'read of'} "
-                        f"0x{self.base + offset:08X}: no {self.name} register there",
-                        self.machine.pc, self.base + offset)
-        return reg
-
     def read(self, address: int, size: int) -> int:
         offset = address - self.base
         value, done = 0, 0
@@ -121,3 +132,70 @@ class RegisterDevice(Device):
                 else:
                     self.v[reg.name] = merged
             done += take
+
+
+class _NativeValues:
+    """``v`` of a native model: its registers by name, as stored (no read side effects)."""
+
+    def __init__(self, device):
+        self._device = device
+
+    def __getitem__(self, name: str) -> int:
+        dev = self._device
+        return dev._stored(dev.map[name].offset)
+
+    def __contains__(self, name):
+        return name in self._device.map.registers
+
+    def keys(self):
+        return self._device.map.registers.keys()
+
+
+class NativeRegisters(_RegisterMap):
+    """A peripheral of 8-bit registers whose model is native: ``device`` is its number in
+    the native core, ``stored(offset)`` reads a register as stored. Accesses reach it here
+    only while the machine logs every access (or when it is gated or the offset holds no
+    register); otherwise the native core takes them directly."""
+
+    def __init__(self, machine, svd_name: str, device: int, stored, *, gate=None,
+                 span: int | None = None, name: str | None = None):
+        self._map(machine, svd_name, gate, span, name)
+        self.device = device
+        self._stored = stored
+        self.v = _NativeValues(self)
+        machine.core.add_route(device, self.base, self.base + self.size)
+
+    def layout(self) -> dict:
+        """The register map for the native model: offsets, reset values, and every
+        register's offset ("REG") and field's mask ("REG.FIELD"), from the SVD."""
+        reg_at, reset, k = [-1] * self.size, [0] * self.size, {}
+        for reg in self.map.registers.values():
+            if reg.bits != 8:
+                raise ValueError(f"{self.name}_{reg.name}: native models take 8-bit registers")
+            if reg.offset < self.size:
+                reg_at[reg.offset] = reg.offset
+                reset[reg.offset] = reg.reset & 0xFF
+            k[reg.name] = reg.offset
+            for fld in reg.fields:
+                k[f"{reg.name}.{fld}"] = reg.field(fld).mask
+        return {"base": self.base, "span": self.size, "reg_at": reg_at, "reset": reset, "k": k}
+
+    def read_register(self, name: str) -> int:
+        """A register's value as the program would read it (side effects included)."""
+        return self.read(self.base + self.map[name].offset, 1)
+
+    def _first_hole(self, address, size):
+        for i in range(size):
+            if address - self.base + i not in self._at:
+                return address - self.base + i
+        return address - self.base
+
+    def read(self, address: int, size: int) -> int:
+        value = self.machine.core.dev_read(self.device, address, size)
+        if value is None:
+            self._reg_for(self._first_hole(address, size), size, False)
+        return value
+
+    def write(self, address: int, size: int, value: int):
+        if not self.machine.core.dev_write(self.device, address, size, value):
+            self._reg_for(self._first_hole(address, size), size, True)

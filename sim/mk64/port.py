@@ -101,9 +101,16 @@ class Gpio(RegisterDevice):
     def r_PTOR(self):
         return 0
 
+    def _levels(self, changed):
+        """The levels of the pins whose output or direction bits are in ``changed``: the
+        only ones a GPIO write can move."""
+        level, letter = self.ports.level, self.letter
+        return {n: level(letter, n) for n in range(32) if changed >> n & 1}
+
     def _output(self, pdor):
-        before = {n: self.ports.level(self.letter, n) for n in range(32)}
-        self.v["PDOR"] = pdor & 0xFFFF_FFFF
+        pdor &= 0xFFFF_FFFF
+        before = self._levels(self.v["PDOR"] ^ pdor)
+        self.v["PDOR"] = pdor
         self.ports.outputs_changed(self.letter, before)
 
     def w_PDOR(self, value, mask):
@@ -119,7 +126,7 @@ class Gpio(RegisterDevice):
         self._output(self.v["PDOR"] ^ value)
 
     def w_PDDR(self, value, mask):
-        before = {n: self.ports.level(self.letter, n) for n in range(32)}
+        before = self._levels(self.v["PDDR"] ^ value)
         self.v["PDDR"] = value
         self.ports.outputs_changed(self.letter, before)
 

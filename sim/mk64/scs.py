@@ -9,7 +9,7 @@ returns exceptions; these registers are its programmer's view.
 
 from __future__ import annotations
 
-from .machine import ChipReset, Device, Fault
+from .machine import DWT_DEVICE, SYSTICK_DEVICE, ChipReset, Device, Fault
 from .registers import peripheral
 
 _NVIC = peripheral("NVIC")
@@ -36,91 +36,46 @@ class SysTick:
     """SYST_CSR/RVR/CVR/CALIB: a 24-bit down-counter on the core clock (CALIB.NOREF is set:
     the MK64F12 has no external SysTick reference, so CLKSOURCE reads 1). It counts every
     core cycle, sleeping included; reaching 0 sets COUNTFLAG and, with TICKINT, pends the
-    SysTick exception; the next cycle reloads RVR (a period of RVR + 1 cycles)."""
+    SysTick exception; the next cycle reloads RVR (a period of RVR + 1 cycles). Reading CSR
+    clears COUNTFLAG; any CVR write clears the counter and COUNTFLAG.
+
+    The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp); this
+    is its view."""
 
     def __init__(self, machine):
         self.m = machine
-        self.reset()
+        self.base = _SYST.base
+        machine.core.systick_setup(self.base, _SYST["CALIB"].reset, _SYST["CSR"].reset)
+        machine.core.add_route(SYSTICK_DEVICE, self.base, self.base + 0x10)
 
     def reset(self):
-        self.csr = _SYST["CSR"].reset
-        self.rvr = 0
-        self.zero_at = None         # next core cycle at which the counter reads 0 (running)
-        self.stopped_value = 0
-        self._event = None
-        self.wraps = []             # core cycles of recent counter wraps (for tests)
+        pass                                    # the core resets it with the machine
+
+    def _state(self):
+        return self.m.core.systick_state()      # (csr, rvr, zero_at, stopped value, wraps)
+
+    csr = property(lambda self: self._state()[0])
+    rvr = property(lambda self: self._state()[1])
+    zero_at = property(lambda self: self._state()[2],
+                       doc="next core cycle at which the counter reads 0 (None: stopped)")
+    stopped_value = property(lambda self: self._state()[3])
+    wraps = property(lambda self: self._state()[4], doc="core cycles of the last 64 wraps")
 
     @property
     def enabled(self):
         return bool(self.csr & 1)
 
     def value(self, now):
-        if self.zero_at is None:
-            return self.stopped_value
-        if now <= self.zero_at:
-            return self.zero_at - now
-        return (self.zero_at - now) % (self.rvr + 1)
+        return self.m.core.systick_value(now)
 
     def period_s(self):
         return (self.rvr + 1) / self.m.core_hz
 
-    def _schedule(self):
-        if self._event:
-            self._event.cancel()
-        self._event = self.m.at(self.zero_at, self._on_zero, scaled=False) if self.zero_at is not None else None
+    def read(self, address, size):
+        return self.m.core.dev_read(SYSTICK_DEVICE, address, size)
 
-    def _on_zero(self):
-        self._event = None
-        self.csr |= 1 << 16                     # COUNTFLAG
-        self.wraps.append(self.zero_at)
-        if len(self.wraps) > 64:
-            del self.wraps[:-64]
-        if self.csr & 2:
-            self.m.pend(15)
-        if self.rvr == 0:                       # reload of 0: the counter stops
-            self.stopped_value = 0
-            self.zero_at = None
-            return
-        self.zero_at += self.rvr + 1
-        self._schedule()
-
-    def read(self, offset, now):
-        if offset == 0x0:
-            value = self.csr | (1 << 2)
-            self.csr &= ~(1 << 16)              # COUNTFLAG clears on read
-            return value
-        if offset == 0x4:
-            return self.rvr
-        if offset == 0x8:
-            return self.value(now)
-        return _SYST["CALIB"].reset
-
-    def write(self, offset, value, now):
-        if offset == 0x0:
-            was = self.enabled
-            self.csr = (self.csr & (1 << 16)) | (value & 0x3) | (1 << 2)
-            if self.enabled and not was:
-                current = self.stopped_value
-                self.zero_at = now + current if current else now + 1 + self.rvr
-                if current == 0 and self.rvr == 0:
-                    self.zero_at = None
-                self._schedule()
-            elif was and not self.enabled:
-                self.stopped_value = self.value(now)
-                self.zero_at = None
-                self._schedule()
-        elif offset == 0x4:
-            self.rvr = value & 0xFF_FFFF
-            if self.enabled and self.zero_at is None and self.rvr:
-                self.zero_at = now + 1 + self.rvr
-                self._schedule()
-        elif offset == 0x8:                     # any write clears the counter and COUNTFLAG
-            self.csr &= ~(1 << 16)
-            if self.enabled:
-                self.zero_at = now + 1 + self.rvr if self.rvr else None
-                self._schedule()
-            else:
-                self.stopped_value = 0
+    def write(self, address, size, value):
+        self.m.core.dev_write(SYSTICK_DEVICE, address, size, value)
 
 
 class SystemControlSpace(Device):
@@ -148,24 +103,26 @@ class SystemControlSpace(Device):
 
     # Word-wide registers; byte and halfword accesses are read-modify-write of the word.
     def read(self, address, size):
+        if self.systick.base <= address < self.systick.base + 0x10:
+            return self.systick.read(address, size)
         word = self._read_word(address & ~3)
         shift = 8 * (address & 3)
         return (word >> shift) & ((1 << (8 * size)) - 1)
 
     def write(self, address, size, value):
+        if self.systick.base <= address < self.systick.base + 0x10:
+            self.systick.write(address, size, value)
+            return
         shift = 8 * (address & 3)
         mask = ((1 << (8 * size)) - 1) << shift
         self._write_word(address & ~3, (value << shift) & mask, mask)
 
     def _read_word(self, a):
         m = self.m
-        now = m.now()
         if a == ICTR:
             return N_IRQ_WORDS - 2          # INTLINESNUM: (n + 1) * 32 lines, 86 IRQs -> 2
         if a == _SCB.address("ACTLR"):
             return self.actlr
-        if _SYST.base <= a < _SYST.base + 0x10:
-            return self.systick.read(a - _SYST.base, now)
         for base, kind in ((ISER, "en"), (ICER, "en"), (ISPR, "pend"), (ICPR, "pend"), (IABR, "act")):
             if base <= a < base + 4 * N_IRQ_WORDS:
                 n = (a - base) // 4
@@ -241,9 +198,6 @@ class SystemControlSpace(Device):
         now = m.now()
         if a == _SCB.address("ACTLR"):
             self.actlr = (self.actlr & ~mask) | value
-        elif _SYST.base <= a < _SYST.base + 0x10:
-            old = self.systick.read(a - _SYST.base, now) if a != _SYST.base else self.systick.csr
-            self.systick.write(a - _SYST.base, (old & ~mask) | value, now)
         elif ISER <= a < ISER + 4 * N_IRQ_WORDS:
             m.enabled |= value << (16 + 32 * ((a - ISER) // 4))
             m.attention()
@@ -303,7 +257,7 @@ class SystemControlSpace(Device):
             pass                            # debug halting: no debugger
         elif a == _DBG.address("DEMCR"):
             self.demcr = ((self.demcr & ~mask) | value) & 0x010F_07F1
-            m.dwt.sync(now)
+            m.dwt.trace_changed(self.trace_enabled, now)
         elif a == _SCB.address("FPCCR"):
             m.fpccr = ((m.fpccr & ~mask) | value) & 0xC000_0000 | (m.fpccr & 0x1FB)
         elif a == _SCB.address("FPCAR"):
@@ -325,61 +279,49 @@ class SystemControlSpace(Device):
 
 class Dwt(Device):
     """DWT_CTRL and DWT_CYCCNT: the cycle counter counts core cycles while DEMCR.TRCENA and
-    CTRL.CYCCNTENA are both set (sleep included, like SysTick); it wraps at 2^32."""
+    CTRL.CYCCNTENA are both set (sleep included, like SysTick); it wraps at 2^32. Other DWT
+    registers are not modelled (a bus fault).
+
+    The model is native (the I2C and loop timing read CYCCNT all the time); this is its view."""
 
     name = "DWT"
     base = _DWT.base
     size = 0x1000
+    _CTRL = _DWT.address("CTRL")
+    _CYCCNT = _DWT.address("CYCCNT")
 
     def __init__(self, machine, scs: SystemControlSpace):
         self.m, self.scs = machine, scs
-        self.reset()
+        machine.core.dwt_setup(self._CTRL, self._CYCCNT, _DWT["CTRL"].reset)
+        machine.core.add_route(DWT_DEVICE, min(self._CTRL, self._CYCCNT),
+                               max(self._CTRL, self._CYCCNT) + 4)
 
     def reset(self):
-        self.ctrl = _DWT["CTRL"].reset
-        self.base_value = 0
-        self.since = None           # core cycle at which base_value held (None: stopped)
+        pass                                    # the core resets it with the machine
+
+    ctrl = property(lambda self: self.m.core.dwt_state()[0])
+    base_value = property(lambda self: self.m.core.dwt_state()[1])
+    since = property(lambda self: self.m.core.dwt_state()[2],
+                     doc="core cycle at which base_value held (None: stopped)")
 
     def running(self):
         return bool(self.ctrl & 1) and self.scs.trace_enabled
 
     def cyccnt(self, now=None):
-        now = self.m.now() if now is None else now
-        if self.since is None:
-            return self.base_value
-        return (self.base_value + now - self.since) & 0xFFFF_FFFF
+        return self.m.core.dwt_cyccnt(self.m.now() if now is None else now)
 
-    def sync(self, now):
-        """CTRL or DEMCR changed: freeze or resume the counter."""
-        value = self.cyccnt(now)
-        self.base_value = value
-        self.since = now if self.running() else None
-
-    _CTRL = _DWT.address("CTRL")
-    _CYCCNT = _DWT.address("CYCCNT")
+    def trace_changed(self, trcena: bool, now):
+        """DEMCR.TRCENA written: freeze or resume the counter."""
+        self.m.core.dwt_trace(trcena, now)
 
     def read(self, address, size):
-        a = address & ~3
-        if a == self._CYCCNT:
-            word = self.cyccnt()
-        elif a == self._CTRL:
-            word = self.ctrl
-        else:
-            raise Fault("BusFault", f"read of 0x{address:08X}: DWT register not modelled", self.m.pc, address)
-        return (word >> (8 * (address & 3))) & ((1 << (8 * size)) - 1)
+        value = self.m.core.dev_read(DWT_DEVICE, address, size)
+        if value is None:
+            raise Fault("BusFault", f"read of 0x{address:08X}: DWT register not modelled",
+                        self.m.pc, address)
+        return value
 
     def write(self, address, size, value):
-        a = address & ~3
-        now = self.m.now()
-        shift = 8 * (address & 3)
-        mask = ((1 << (8 * size)) - 1) << shift
-        value = (value << shift) & mask
-        if a == _DWT.address("CTRL"):
-            new = (self.ctrl & ~mask) | value
-            self.ctrl = _DWT["CTRL"].reset | (new & 1)      # only CYCCNTENA is modelled
-            self.sync(now)
-        elif a == _DWT.address("CYCCNT"):
-            self.base_value = (self.cyccnt(now) & ~mask) | value
-            self.since = now if self.running() else None
-        else:
-            raise Fault("BusFault", f"write to 0x{address:08X}: DWT register not modelled", self.m.pc, address)
+        if not self.m.core.dev_write(DWT_DEVICE, address, size, value):
+            raise Fault("BusFault", f"write to 0x{address:08X}: DWT register not modelled",
+                        self.m.pc, address)

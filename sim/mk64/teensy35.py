@@ -178,5 +178,15 @@ class Teensy35:
         m.after(width_s, lambda: ports.drive(letter, bit, 0))
 
     def telemetry(self) -> bytes:
-        """What has left UART0's TX pin so far."""
+        """What has left UART0's TX pin since reset (or since the last take_telemetry())."""
         return self.chip.uart0.sent_bytes()
+
+    def take_telemetry(self) -> bytes:
+        """The bytes that left UART0's TX pin since the last call (or reset), forgotten by the
+        emulator: a long run keeps none of them."""
+        return self.chip.uart0.take_sent()
+
+    def receive(self, data: bytes):
+        """Bytes for the board's UART0 RX pin (the telemetry link's uplink), arriving back to
+        back at the configured baud rate from now on."""
+        self.chip.uart0.receive(data)

@@ -20,6 +20,8 @@
 namespace py = pybind11;
 using namespace hqsim;
 
+void bind_mk64(py::module_& m);     // mk64_bindings.cpp
+
 namespace {
 
 using DArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -71,6 +73,7 @@ State to_state(const DArray& a) {
 }  // namespace
 
 PYBIND11_MODULE(_simcore, m) {
+    bind_mk64(m);
     m.doc() = "heliquad simulator core: plants, MPU6050 FIFO packets, sim link, lockstep engine";
 
     m.def("dmp_packet", [](std::array<double, 4> q, std::array<double, 3> gyro,

@@ -2,6 +2,7 @@
 
 #include "clock.hpp"
 #include "cpu.hpp"
+#include "loop_timer.hpp"
 #include "mk64f12.hpp"
 
 namespace hq::teensy {
@@ -16,6 +17,13 @@ bool expired(uint32_t start, uint32_t timeout_us) {
     return cycles32() - start > timeout_us * (core_hz() / 1000000u);
 }
 }  // namespace
+
+// The byte-done wake-up. wait_byte() sleeps with IICIE set; the level (IICIF and IICIE)
+// wakes it and this handler masks IICIE so the level drops and the handler does not run
+// again before the waiter has seen IICIF. The flag itself is left for the waiter to clear.
+extern "C" void I2C0_IRQHandler() {
+    I2C0::C1::clear(I2C0::C1::IICIE);
+}
 
 void I2c0Bus::mux_i2c() {
     // ALT2 = I2C0; open drain, slow slew, high drive.
@@ -34,22 +42,40 @@ void I2c0Bus::begin() {
     I2C0::S::write(I2C0::S::IICIF | I2C0::S::ARBL);
     I2C0::C1::write(I2C0::C1::IICEN);
     mux_i2c();
+    nvic_enable(irq::I2C0, kIrqPriority);
 }
 
 // Both waits test the flag once more after the time is up: an interrupt that held the CPU
 // past the timeout must not turn a finished byte into a bus recovery mid-transfer.
 bool I2c0Bus::wait_byte() {
     const uint32_t t0 = cycles32();
+    // Sleep only once the loop tick runs: SysTick is then the wake-up that comes even when
+    // the bus never answers. Before it (the IMU start-up) the wait polls.
+    const bool sleep = LoopTimer::ticking();
     while (!(I2C0::S::read() & I2C0::S::IICIF)) {
         if (expired(t0, kByteTimeoutUs)) {
             if (!(I2C0::S::read() & I2C0::S::IICIF)) return false;
             break;
+        }
+        if (sleep) {
+            // As in LoopTimer::wait(): masked, WFI still wakes on the pending I2C0 (or any
+            // other) interrupt, so a byte that ends between the check and the WFI cannot be
+            // slept through. Unmasking lets the handler run; the loop then checks again.
+            irq_disable();
+            if (!(I2C0::S::read() & I2C0::S::IICIF)) {
+                I2C0::C1::set(I2C0::C1::IICIE);
+                wfi();
+            }
+            irq_enable();
+            isb();
         }
     }
     I2C0::S::write(I2C0::S::IICIF);          // write-one-to-clear
     return true;
 }
 
+// A STOP takes one SCL period (2.7 us): this wait polls. Sleeping on it would need the
+// stop-detect interrupt (FLT[SSIE]), which shares IICIF with the byte flag.
 bool I2c0Bus::wait_idle() {
     const uint32_t t0 = cycles32();
     while (I2C0::S::read() & I2C0::S::BUSY) {

@@ -6,6 +6,7 @@
 
 namespace {
 volatile uint32_t g_ticks = 0;
+bool g_ticking = false;
 }
 
 extern "C" void SysTick_Handler() { g_ticks = g_ticks + 1; }
@@ -21,14 +22,17 @@ bool LoopTimer::start(uint32_t rate_hz) {
     SysTick::CSR::write(0);
     SysTick::RVR::write(period - 1);
     SysTick::CVR::write(0);
-    // Lowest priority of the three interrupts in use (RC capture 4, UART 8, SysTick 12).
+    // Lowest priority of the interrupts in use (RC capture 4, UART 8, I2C0 10, SysTick 12).
     SystemControl::SHPR3::write(static_cast<uint32_t>(
         (SystemControl::SHPR3::read() & ~SystemControl::SHPR3::PRI_15_MASK) |
         SystemControl::SHPR3::PRI_15(12u << 4)));
     seen_ = g_ticks;
     SysTick::CSR::write(SysTick::CSR::CLKSOURCE | SysTick::CSR::TICKINT | SysTick::CSR::ENABLE);
+    g_ticking = true;
     return true;
 }
+
+bool LoopTimer::ticking() { return g_ticking; }
 
 uint32_t LoopTimer::wait() {
     // With interrupts masked, WFI still wakes on a pending interrupt; unmasking then lets the

@@ -16,6 +16,9 @@ public:
     // Sleeps until the next tick; returns the ticks missed since the previous wait().
     uint32_t wait();
     uint32_t overruns() const { return overruns_; }
+    // True once start() has set the tick going: from then on an interrupt comes at least every
+    // period, so a WFI anywhere is bounded by it (the I2C waits rely on that).
+    static bool ticking();
 
 private:
     uint32_t seen_ = 0, overruns_ = 0;

@@ -37,6 +37,7 @@ void Default_Handler();
 void SysTick_Handler();
 void UART0_RX_TX_IRQHandler();
 void FTM3_IRQHandler();
+void I2C0_IRQHandler();
 }
 
 namespace {
@@ -69,6 +70,7 @@ constexpr VectorTable make_vectors() {
     for (Handler& h : v.irqs) h = Default_Handler;
     v.irqs[hq::mk64::irq::UART0_RX_TX] = UART0_RX_TX_IRQHandler;
     v.irqs[hq::mk64::irq::FTM3] = FTM3_IRQHandler;
+    v.irqs[hq::mk64::irq::I2C0] = I2C0_IRQHandler;
     return v;
 }
 

@@ -1,0 +1,340 @@
+// heliquad._simcore.Mk64Core: the emulated MK64FX512's native hot path (mk64_core.hpp) as
+// sim/mk64's Machine and its device views use it. Thin: every rule lives in mk64_core.cpp and
+// mk64_devices.cpp; this file converts arguments.
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mk64_core.hpp"
+#include "targets/host/mpu6050_emulator.hpp"
+
+namespace py = pybind11;
+using namespace hqsim::mk64;
+
+namespace {
+
+template <typename F>
+F function(const py::dict& d, const char* name) {
+    if (!d.contains(name)) throw std::invalid_argument(std::string("no address for ") + name);
+    const uintptr_t a = d[name].cast<uintptr_t>();
+    if (!a) throw std::invalid_argument(std::string("null address for ") + name);
+    return reinterpret_cast<F>(a);
+}
+
+py::int_ to_int(u128 v) {
+    py::int_ hi(static_cast<uint64_t>(v >> 64)), lo(static_cast<uint64_t>(v));
+    return py::reinterpret_steal<py::int_>(
+        PyNumber_Or(PyNumber_Lshift(hi.ptr(), py::int_(64).ptr()), lo.ptr()));
+}
+
+u128 from_int(const py::int_& v) {
+    const py::int_ mask(~uint64_t{0});
+    const py::object lo = v & mask;
+    const py::object hi = (v >> py::int_(64)) & mask;
+    return (static_cast<u128>(hi.cast<uint64_t>()) << 64) | lo.cast<uint64_t>();
+}
+
+Layout8 layout(const py::dict& d) {
+    Layout8 L;
+    L.base = d["base"].cast<uint32_t>();
+    L.span = d["span"].cast<uint32_t>();
+    L.reg_at = d["reg_at"].cast<std::vector<int>>();
+    L.reset = d["reset"].cast<std::vector<uint8_t>>();
+    L.k = d["k"].cast<std::unordered_map<std::string, uint32_t>>();
+    if (L.reg_at.size() != L.span || L.reset.size() != L.span) {
+        throw std::invalid_argument("register layout: reg_at and reset need one entry a byte");
+    }
+    return L;
+}
+
+py::object optional_cycle(int64_t c) { return c < 0 ? py::object(py::none()) : py::int_(c); }
+
+py::tuple transfer_tuple(const I2c::Transfer& t) {
+    return py::make_tuple(t.address, t.read, t.acked, t.start_cycle,
+                          py::bytes(reinterpret_cast<const char*>(t.data.data()), t.data.size()),
+                          optional_cycle(t.end_cycle), t.start_s);
+}
+
+}  // namespace
+
+void bind_mk64(py::module_& m) {
+    py::class_<Core>(m, "Mk64Core",
+                     "The emulated MK64FX512's hot path (sim/mk64): block accounting, events, "
+                     "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0 models.")
+        .def(py::init([](const py::dict& uc, const py::dict& regs, const py::dict& callbacks,
+                         std::vector<std::string> names) {
+                 Uc u;
+                 u.handle = reinterpret_cast<void*>(uc["handle"].cast<uintptr_t>());
+                 u.emu_start = function<decltype(u.emu_start)>(uc, "uc_emu_start");
+                 u.emu_stop = function<decltype(u.emu_stop)>(uc, "uc_emu_stop");
+                 u.reg_read = function<decltype(u.reg_read)>(uc, "uc_reg_read");
+                 u.reg_write = function<decltype(u.reg_write)>(uc, "uc_reg_write");
+                 u.reg_write2 = function<decltype(u.reg_write2)>(uc, "uc_reg_write2");
+                 u.mem_read = function<decltype(u.mem_read)>(uc, "uc_mem_read");
+                 u.mem_write = function<decltype(u.mem_write)>(uc, "uc_mem_write");
+                 u.hook_add = function<decltype(u.hook_add)>(uc, "uc_hook_add");
+                 u.mmio_map = function<decltype(u.mmio_map)>(uc, "uc_mmio_map");
+                 Regs r{};
+                 r.r0 = regs["R0"].cast<int>(); r.r1 = regs["R1"].cast<int>();
+                 r.r2 = regs["R2"].cast<int>(); r.r3 = regs["R3"].cast<int>();
+                 r.r12 = regs["R12"].cast<int>(); r.lr = regs["LR"].cast<int>();
+                 r.pc = regs["PC"].cast<int>(); r.sp = regs["SP"].cast<int>();
+                 r.xpsr = regs["XPSR"].cast<int>(); r.control = regs["CONTROL"].cast<int>();
+                 r.fpscr = regs["FPSCR"].cast<int>(); r.primask = regs["PRIMASK"].cast<int>();
+                 r.basepri = regs["BASEPRI"].cast<int>();
+                 r.faultmask = regs["FAULTMASK"].cast<int>();
+                 for (int i = 0; i < 16; ++i) r.s[i] = regs[("S" + std::to_string(i)).c_str()].cast<int>();
+                 PyCallbacks p;
+                 p.decode = function<decltype(p.decode)>(callbacks, "decode");
+                 p.fpu_check = function<decltype(p.fpu_check)>(callbacks, "fpu_check");
+                 p.read = function<decltype(p.read)>(callbacks, "read");
+                 p.write = function<decltype(p.write)>(callbacks, "write");
+                 return new Core(u, r, p, std::move(names));
+             }),
+             py::arg("uc"), py::arg("regs"), py::arg("callbacks"), py::arg("exception_names"))
+        .def("install", &Core::install)
+        .def("reset", &Core::reset, py::arg("core_hz"))
+        // blocks
+        .def("add_block", [](Core& c, uint32_t start, uint32_t size, uint32_t n, uint64_t cycles,
+                             uint32_t flags, std::vector<uint32_t> addrs, std::vector<uint32_t> cum) {
+            Block b;
+            b.start = start; b.size = size; b.n = n; b.cycles = cycles; b.flags = flags;
+            b.addrs = std::move(addrs); b.cum = std::move(cum);
+            c.add_block(std::move(b));
+        })
+        .def("clear_blocks", &Core::clear_blocks)
+        .def("cur_start", [](const Core& c) -> int64_t { return c.cur() ? c.cur()->start : -1; })
+        // time
+        .def_readwrite("cycles", &Core::cycles_)
+        .def_readwrite("instructions", &Core::instructions_)
+        .def_readwrite("sleep_cycles", &Core::sleep_cycles_)
+        .def_readonly("handler_instructions", &Core::handler_instructions_)
+        .def_readonly("handler_cycles", &Core::handler_cycles_)
+        .def_property_readonly("core_hz", &Core::core_hz)
+        .def_property_readonly("bus_hz", &Core::bus_hz)
+        .def("pc", &Core::pc)
+        .def("now", &Core::now)
+        .def("instructions_now", &Core::instructions_now)
+        .def("seconds", &Core::seconds)
+        .def("set_clocks", &Core::set_clocks)
+        // events
+        .def("at", [](Core& c, uint64_t cycle, bool scaled) { return c.at(cycle, Ev::Python, scaled); })
+        .def("time_limit", [](Core& c, uint64_t cycle) { return c.at(cycle, Ev::TimeLimit, true); })
+        .def_readwrite("time_up", &Core::time_up_)
+        .def("cancel", &Core::cancel)
+        .def("live", &Core::live)
+        .def("event_due", [](const Core& c, uint64_t seq) -> py::object {
+            uint64_t due = 0;
+            return c.event_due(seq, due) ? py::object(py::int_(due)) : py::object(py::none());
+        })
+        .def("next_event_due", &Core::next_event_due)
+        .def("advance", &Core::advance)
+        .def("attention", &Core::attention)
+        // running
+        .def("run", &Core::run, py::arg("instr_limit"), py::call_guard<py::gil_scoped_release>())
+        .def_readonly("py_event", &Core::py_event_)
+        .def("request_stop", &Core::request_stop)
+        .def("clear_stop", &Core::clear_stop)
+        .def("request_error", &Core::request_error)
+        .def("clear_error", &Core::clear_error)
+        .def("stop_now", &Core::stop_now)
+        .def_readonly("uc_error", &Core::uc_error_)
+        .def("fault", [](const Core& c) {
+            const FaultInfo& f = c.fault_;
+            return py::make_tuple(f.kind, f.message, f.pc,
+                                  f.has_address ? py::object(py::int_(f.address)) : py::object(py::none()));
+        })
+        .def_readonly("intr_number", &Core::intr_number_)
+        .def_readonly("intr_pc", &Core::intr_pc_)
+        .def_readonly("bkpt_pc", &Core::bkpt_pc_)
+        .def_readwrite("sleeping", &Core::sleeping_)
+        .def_readwrite("fpu_watch", &Core::fpu_watch_)
+        .def_readwrite("log_all", &Core::log_all)
+        .def_readwrite("inline_boundaries", &Core::inline_boundaries,
+                       "attend to block boundaries inside emu_start (False: stop at each, as "
+                       "a reference for tests)")
+        .def("counts", [](const Core& c) {
+            const Core::Counts& k = c.counts;
+            py::dict d;
+            d["blocks"] = k.blocks; d["decodes"] = k.decodes;
+            d["native_accesses"] = k.native_accesses; d["python_accesses"] = k.python_accesses;
+            d["native_events"] = k.native_events; d["python_events"] = k.python_events;
+            d["exceptions"] = k.exceptions; d["emu_starts"] = k.emu_starts;
+            d["fpu_checks"] = k.fpu_checks; d["inline_boundaries"] = k.inline_boundaries;
+            return d;
+        })
+        // NVIC
+        .def_property("enabled", [](const Core& c) { return to_int(c.enabled_); },
+                      [](Core& c, const py::int_& v) { c.enabled_ = from_int(v); })
+        .def_property("pending", [](const Core& c) { return to_int(c.pending_); },
+                      [](Core& c, const py::int_& v) { c.pending_ = from_int(v); })
+        .def_property("irq_lines", [](const Core& c) { return to_int(c.irq_lines_); },
+                      [](Core& c, const py::int_& v) { c.irq_lines_ = from_int(v); })
+        .def("priority", [](const Core& c, int n) { return c.priority_.at(n); })
+        .def("set_priority", [](Core& c, int n, int p) { c.priority_.at(n) = p; })
+        .def("priorities", [](const Core& c) { return c.priority_; })
+        .def_readwrite("prigroup", &Core::prigroup_)
+        .def_readwrite("vtor", &Core::vtor_)
+        .def_readwrite("ccr", &Core::ccr_)
+        .def_readwrite("fpccr", &Core::fpccr_)
+        .def_property_readonly("active", [](const Core& c) { return c.active_; })
+        .def("set_irq", &Core::set_irq)
+        .def("pend", &Core::pend)
+        .def("unpend", &Core::unpend)
+        .def("pending_exception", [](const Core& c) -> py::object {
+            const int n = c.pending_exception();
+            return n < 0 ? py::object(py::none()) : py::object(py::int_(n));
+        })
+        .def("preempts", &Core::preempts, py::arg("number"), py::arg("ignore_primask") = false)
+        .def("execution_priority", &Core::execution_priority, py::arg("ignore_primask") = false)
+        .def("exception_log", [](const Core& c) {
+            py::list out;
+            for (const auto& e : c.exception_log_) {
+                out.append(py::make_tuple(e.cycle, e.enter ? "enter" : "return", e.number));
+            }
+            return out;
+        })
+        .def("exception_counts", [](const Core& c) { return c.exception_counts_; })
+        // devices
+        .def("add_route", &Core::add_route)
+        .def("set_clocked", [](Core& c, int dev, bool on) { c.clocked[dev] = on; })
+        .def("dev_read", [](Core& c, int dev, uint32_t address, unsigned size) -> py::object {
+            uint64_t v = 0;
+            return c.dev_read(dev, address, size, v) ? py::object(py::int_(v)) : py::object(py::none());
+        })
+        .def("dev_write", &Core::dev_write)
+        // DWT
+        .def("dwt_setup", [](Core& c, uint32_t ctrl, uint32_t cyccnt, uint32_t ctrl_reset) {
+            c.dwt.ctrl_address = ctrl; c.dwt.cyccnt_address = cyccnt; c.dwt.ctrl_reset = ctrl_reset;
+            c.dwt.reset();
+        })
+        .def("dwt_state", [](const Core& c) {
+            return py::make_tuple(c.dwt.ctrl, c.dwt.base_value, optional_cycle(c.dwt.since),
+                                  c.dwt.trcena);
+        })
+        .def("dwt_cyccnt", [](const Core& c, uint64_t now) { return c.dwt.cyccnt(now); })
+        .def("dwt_trace", [](Core& c, bool trcena, uint64_t now) {
+            c.dwt.trcena = trcena;
+            c.dwt.sync(now);
+        })
+        // SysTick
+        .def("systick_setup", [](Core& c, uint32_t base, uint32_t calib, uint32_t csr_reset) {
+            c.systick.base = base; c.systick.calib = calib; c.systick.csr_reset = csr_reset;
+            c.systick.reset();
+        })
+        .def("systick_state", [](const Core& c) {
+            const SysTick& s = c.systick;
+            return py::make_tuple(s.csr, s.rvr, optional_cycle(s.zero_at), s.stopped_value,
+                                  std::vector<uint64_t>(s.wraps.begin(), s.wraps.end()));
+        })
+        .def("systick_value", [](const Core& c, uint64_t now) { return c.systick.value(now); })
+        // UART0
+        .def("uart_setup", [](Core& c, const py::dict& d) {
+            Uart& u = c.uart0;
+            u.L = layout(d);
+            u.irq_rxtx = d["irq_rxtx"].cast<int>();
+            u.irq_err = d["irq_err"].cast<int>();
+            u.depth = d["depth"].cast<int>();
+            u.setup();
+            u.reset(c);
+        })
+        .def("uart_reg", [](const Core& c, uint32_t offset) { return c.uart0.v.at(offset); })
+        .def("uart_state", [](const Core& c) {
+            const Uart& u = c.uart0;
+            py::dict d;
+            d["tx"] = std::vector<uint8_t>(u.tx.begin(), u.tx.end());
+            d["rx"] = std::vector<uint8_t>(u.rx.begin(), u.rx.end());
+            d["rx_queue"] = u.rx_queue.size();
+            d["shifting"] = u.shifting < 0 ? py::object(py::none())
+                            : u.shifting == Uart::kPreamble ? py::object(py::str("preamble"))
+                                                            : py::object(py::int_(u.shifting));
+            d["overruns"] = u.overruns; d["tx_overflows"] = u.tx_overflows;
+            d["rdrf"] = u.rdrf; d["flags"] = u.flags; d["s1"] = u.s1();
+            d["tdre"] = u.tdre(); d["tc"] = u.tc();
+            return d;
+        })
+        .def("uart_take_sent", [](Core& c) {
+            std::vector<std::pair<uint64_t, uint8_t>> out;
+            out.swap(c.uart0.sent);
+            return out;
+        })
+        .def("uart_take_sent_bytes", [](Core& c) {
+            std::string out;
+            out.reserve(c.uart0.sent.size());
+            for (const auto& s : c.uart0.sent) out.push_back(static_cast<char>(s.second));
+            c.uart0.sent.clear();
+            return py::bytes(out);
+        })
+        .def("uart_receive", [](Core& c, const py::bytes& data) {
+            const std::string s = data;
+            c.uart0.receive(c, reinterpret_cast<const uint8_t*>(s.data()), s.size());
+        })
+        .def("uart_take_notes", [](Core& c) {
+            auto out = std::move(c.uart0.notes);
+            c.uart0.notes.clear();
+            return out;
+        })
+        .def("uart_frame_cycles", [](const Core& c) { return c.uart0.frame_cycles(c); })
+        .def("uart_baud", [](const Core& c) { return c.uart0.baud(c); })
+        .def("uart_frame_bits", [](const Core& c) { return c.uart0.frame_bits(); })
+        // I2C0
+        .def("i2c_setup", [](Core& c, const py::dict& d) {
+            I2c& i = c.i2c0;
+            i.L = layout(d);
+            i.irq = d["irq"].cast<int>();
+            i.scl_divider = d["scl_divider"].cast<std::vector<uint32_t>>();
+            i.setup();
+            i.reset();
+        })
+        .def("i2c_reg", [](const Core& c, uint32_t offset) { return c.i2c0.v.at(offset); })
+        .def("i2c_take_transfers", [](Core& c) {
+            I2c& i = c.i2c0;
+            const size_t done = i.transfers.size() - (i.open ? 1 : 0);
+            py::list out;
+            for (size_t k = 0; k < done; ++k) out.append(transfer_tuple(i.transfers[k]));
+            i.transfers.erase(i.transfers.begin(), i.transfers.begin() + static_cast<long>(done));
+            return out;
+        })
+        .def("i2c_open_transfer", [](const Core& c) -> py::object {
+            const I2c& i = c.i2c0;
+            return i.open ? py::object(transfer_tuple(i.transfers.back())) : py::object(py::none());
+        })
+        .def("i2c_take_errors", [](Core& c) {
+            auto out = std::move(c.i2c0.errors);
+            c.i2c0.errors.clear();
+            return out;
+        })
+        .def("i2c_hold_scl", [](Core& c, bool held) { c.i2c0.hold_scl(c, held); })
+        .def_property_readonly("i2c_scl_held", [](const Core& c) { return c.i2c0.scl_held; })
+        .def_property("i2c_pins_connected", [](const Core& c) { return c.i2c0.pins_connected; },
+                      [](Core& c, bool v) { c.i2c0.pins_connected = v; })
+        .def("i2c_scl_hz", [](const Core& c) { return c.i2c0.scl_hz(c); })
+        .def("i2c_byte_in_flight", [](const Core& c) { return c.i2c0.event != 0; })
+        // the MPU6050 slaves: the register model is the Python object's (heliquad._firmware)
+        .def("mpu_new", [](Core& c, py::object emu, int address) {
+            auto s = std::make_unique<MpuSlave>();
+            s->emu = emu.cast<hq::Mpu6050Emulator*>();
+            s->address = static_cast<uint8_t>(address);
+            c.owned_slaves.push_back(std::move(s));
+            return c.owned_slaves.size() - 1;
+        }, py::arg("emu"), py::arg("address"), py::keep_alive<1, 2>())
+        .def("mpu_attach", [](Core& c, size_t k) { c.i2c0.slaves.push_back(c.owned_slaves.at(k).get()); })
+        .def("mpu_set_present", [](Core& c, size_t k, bool p) { c.owned_slaves.at(k)->present = p; })
+        .def("mpu_present", [](const Core& c, size_t k) { return c.owned_slaves.at(k)->present; })
+        .def("mpu_take_log", [](Core& c, size_t k) {
+            MpuSlave* s = c.owned_slaves.at(k).get();
+            py::list out;
+            for (const auto& e : s->log) {
+                out.append(py::make_tuple(e.seconds, std::string(1, e.kind),
+                                          e.reg < 0 ? py::object(py::none()) : py::object(py::int_(e.reg)),
+                                          py::bytes(reinterpret_cast<const char*>(e.data.data()),
+                                                    e.data.size())));
+            }
+            s->log.clear();
+            return out;
+        });
+}

@@ -1,0 +1,736 @@
+// The emulated core's hot path: block accounting, events, the NVIC, exception entry and
+// return, WFI, and the MMIO dispatch (mk64_core.hpp says what and why). Every rule here is the
+// one sim/mk64/machine.py documented when it did this in Python; the order of the checks at a
+// block boundary is kept, so instruction and cycle counts are the same.
+#include "mk64_core.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+
+namespace hqsim::mk64 {
+
+namespace {
+constexpr int UC_HOOK_INTR = 1 << 0;
+constexpr int UC_HOOK_BLOCK = 1 << 3;
+constexpr uint32_t kExcReturnTrap = 8;     // QEMU's EXCP_EXCEPTION_EXIT
+constexpr uint32_t kIntrUndef = 1, kIntrSvc = 2, kIntrBkpt = 7;
+constexpr uint32_t kControlSpsel = 1u << 1, kControlFpca = 1u << 2;
+constexpr uint32_t kXpsrAlign = 1u << 9;
+constexpr int kThreadPriority = 1 << 16;
+constexpr int kExceptions = 16 + 86;
+constexpr uint64_t kEntryCycles = 12, kReturnCycles = 12;   // timing.py's figures
+constexpr size_t kExceptionLog = 4096;
+constexpr uint64_t kFar = uint64_t{1} << 62;
+
+std::string hex8(uint32_t v) {
+    char buf[16];
+    std::snprintf(buf, sizeof buf, "0x%08X", v);
+    return buf;
+}
+}  // namespace
+
+Core::Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
+           std::vector<std::string> exception_names)
+    : uc_(uc), r_(regs), py_(py), names_(std::move(exception_names)) {
+    priority_.assign(kExceptions, 0);
+    exception_counts_.assign(kExceptions, 0);
+    spaces_[0].core = spaces_[1].core = this;
+}
+
+const std::string& Core::exception_name(int n) const {
+    static const std::string unknown = "exception";
+    return n >= 0 && static_cast<size_t>(n) < names_.size() ? names_[n] : unknown;
+}
+
+void Core::install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base,
+                   uint32_t ppb_size) {
+    size_t h = 0;
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_BLOCK, reinterpret_cast<void*>(&Core::on_block_cb),
+                 this, uint64_t{1}, uint64_t{0});
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_INTR, reinterpret_cast<void*>(&Core::on_intr_cb), this,
+                 uint64_t{1}, uint64_t{0});
+    spaces_[0].base = periph_base;
+    spaces_[1].base = ppb_base;
+    uc_.mmio_map(uc_.handle, periph_base, periph_size,
+                 reinterpret_cast<void*>(&Core::mmio_read_cb), &spaces_[0],
+                 reinterpret_cast<void*>(&Core::mmio_write_cb), &spaces_[0]);
+    uc_.mmio_map(uc_.handle, ppb_base, ppb_size, reinterpret_cast<void*>(&Core::mmio_read_cb),
+                 &spaces_[1], reinterpret_cast<void*>(&Core::mmio_write_cb), &spaces_[1]);
+}
+
+void Core::reset(double core_hz) {
+    cycles_ = instructions_ = sleep_cycles_ = 0;
+    epoch_cycles_ = 0;
+    epoch_seconds_ = 0.0;
+    core_hz_ = core_hz;
+    heap_.clear();
+    live_.clear();
+    cur_ = last_ = nullptr;
+    deadline_ = 0;
+    instr_limit_ = 0;
+    stop_ = py_error_ = budget_hit_ = watch_mask_ = false;
+    svc_ = bkpt_ = intr_fault_ = false;
+    sleeping_ = false;
+    time_up_ = false;
+    fpu_watch_ = true;
+    enabled_ = pending_ = irq_lines_ = 0;
+    priority_.assign(kExceptions, 0);
+    priority_[1] = -3;
+    priority_[2] = -2;
+    priority_[3] = -1;
+    prigroup_ = 0;
+    vtor_ = 0;
+    active_.clear();
+    frames_.clear();
+    ccr_ = 0x200;
+    fpccr_ = 0xC0000000u;
+    exception_log_.clear();
+    exception_counts_.assign(kExceptions, 0);
+    handler_instructions_ = handler_cycles_ = 0;
+    handler_since_valid_ = false;
+    dwt.reset();
+    systick.reset();
+    if (i2c0.ready) i2c0.reset();
+    if (uart0.ready) uart0.reset(*this);
+}
+
+void Core::add_block(Block b) {
+    const uint32_t start = b.start;
+    blocks_[start] = std::move(b);
+}
+
+// -- registers and memory --------------------------------------------------------------------
+uint32_t Core::reg(int id) const {
+    uint64_t v = 0;
+    uc_.reg_read(uc_.handle, id, &v);
+    return static_cast<uint32_t>(v);
+}
+
+void Core::set_reg(int id, uint32_t value) {
+    uint64_t v = value;
+    size_t size = sizeof v;
+    uc_.reg_write2(uc_.handle, id, &v, &size);
+}
+
+uint32_t Core::pc() const { return reg(r_.pc); }
+
+// A PC written while unicorn runs makes it continue there. How it must be written depends on
+// where (unicorn 2.1): in a block hook, the exit check that follows the hook would restore the
+// PC from the block unless uc_reg_write's skip_sync_pc_on_exit tells it not to (the check
+// consumes the flag); anywhere else (the interrupt hook, between runs) that flag would stay set
+// and turn off the PC sync at peripheral accesses until the next uc_emu_start, so
+// uc_reg_write2, which leaves it alone, is used there. Bit 0 keeps unicorn in Thumb state.
+void Core::set_pc(uint32_t value) {
+    uint64_t v = value | 1u;
+    if (in_block_hook_) {
+        uc_.reg_write(uc_.handle, r_.pc, &v);
+    } else {
+        size_t size = sizeof v;
+        uc_.reg_write2(uc_.handle, r_.pc, &v, &size);
+    }
+}
+
+bool Core::read32(uint32_t address, uint32_t& out) const {
+    uint8_t b[4];
+    if (uc_.mem_read(uc_.handle, address, b, 4) != 0) return false;
+    out = uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 | uint32_t{b[3]} << 24;
+    return true;
+}
+
+// -- time and events -------------------------------------------------------------------------
+void Core::set_clocks(double core_hz, double bus_hz) {
+    bus_hz_ = bus_hz;
+    if (core_hz == core_hz_) return;
+    const uint64_t t = now();
+    epoch_seconds_ = seconds(t);
+    epoch_cycles_ = t;
+    const double ratio = core_hz / core_hz_;
+    core_hz_ = core_hz;
+    // Events in seconds keep their time: their cycle counts move with the clock.
+    for (HeapEntry& e : heap_) {
+        if (e.scaled && live_.count(e.seq) && e.due > t) {
+            const double moved = std::nearbyint(static_cast<double>(e.due - t) * ratio);
+            e.due = t + std::max<uint64_t>(1, static_cast<uint64_t>(moved));
+        }
+    }
+    std::make_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
+    update_deadline();
+}
+
+uint64_t Core::at(uint64_t cycle, Ev kind, bool scaled) {
+    const HeapEntry e{std::max(cycle, now()), ++seq_, kind, scaled};
+    heap_.push_back(e);
+    std::push_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
+    live_.insert(e.seq);
+    if (e.due < deadline_) deadline_ = e.due;
+    return e.seq;
+}
+
+bool Core::event_due(uint64_t seq, uint64_t& due) const {
+    for (const HeapEntry& e : heap_) {
+        if (e.seq == seq) {
+            due = e.due;
+            return true;
+        }
+    }
+    return false;
+}
+
+const Core::HeapEntry* Core::head() {
+    while (!heap_.empty() && !live_.count(heap_.front().seq)) pop();
+    return heap_.empty() ? nullptr : &heap_.front();
+}
+
+void Core::pop() {
+    std::pop_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
+    heap_.pop_back();
+}
+
+uint64_t Core::next_event_due() const {
+    uint64_t best = kFar;
+    for (const HeapEntry& e : heap_) {
+        if (live_.count(e.seq)) best = std::min(best, e.due);
+    }
+    return best;
+}
+
+uint64_t Core::advance(uint64_t target) {
+    for (;;) {
+        const HeapEntry* h = head();
+        if (!h || h->due > target) {
+            cycles_ = std::max(cycles_, target);
+            return 0;
+        }
+        const HeapEntry e = *h;
+        pop();
+        live_.erase(e.seq);
+        cycles_ = std::max(cycles_, e.due);
+        if (e.kind == Ev::Python) return e.seq;
+        dispatch(e);
+    }
+}
+
+void Core::update_deadline() {
+    const HeapEntry* h = head();
+    deadline_ = h ? h->due : kFar;
+}
+
+void Core::dispatch(const HeapEntry& e) {
+    ++counts.native_events;
+    switch (e.kind) {
+        case Ev::TimeLimit: time_up_ = true; break;
+        case Ev::SysTick: systick.on_zero(*this); break;
+        case Ev::UartTx: uart0.shifted(*this); break;
+        case Ev::UartRx: uart0.arrived(*this); break;
+        case Ev::UartIdle: uart0.idle(*this); break;
+        case Ev::I2cByte: i2c0.finish_byte(*this); break;
+        case Ev::I2cFree: i2c0.bus_free(*this); break;
+        case Ev::Python: break;
+    }
+}
+
+// -- NVIC -----------------------------------------------------------------------------------
+void Core::set_irq(int irq, bool level) {
+    const int n = irq + 16;
+    const u128 b = bit(n);
+    if (level) {
+        if (!(irq_lines_ & b)) {
+            irq_lines_ |= b;
+            if (std::find(active_.begin(), active_.end(), n) == active_.end()) {
+                pending_ |= b;
+                attention();
+            }
+        }
+    } else {
+        irq_lines_ &= ~b;
+    }
+}
+
+int Core::pending_exception() const {
+    u128 ready = pending_ & (enabled_ | u128{0xFFFF});
+    if (!ready) return -1;
+    int best = -1;
+    for (int n = 0; ready; ++n, ready >>= 1) {
+        if ((ready & 1) && (best < 0 || priority_[n] < priority_[best])) best = n;
+    }
+    return best;
+}
+
+int Core::execution_priority(bool ignore_primask) const {
+    int prio = kThreadPriority;
+    for (int n : active_) prio = std::min(prio, group(priority_[n]));
+    if (!ignore_primask) {
+        if (reg(r_.faultmask) & 1) prio = std::min(prio, -1);
+        if (reg(r_.primask) & 1) prio = std::min(prio, 0);
+    }
+    const int basepri = static_cast<int>(reg(r_.basepri) & 0xF0);
+    if (basepri) prio = std::min(prio, group(basepri));
+    return prio;
+}
+
+bool Core::masked_pending() const {
+    const int n = pending_exception();
+    return n >= 0 && !preempts(n) && preempts(n, true);
+}
+
+// -- exceptions -----------------------------------------------------------------------------
+void Core::fault(const char* kind, std::string message, uint32_t pc, bool has_address,
+                 uint32_t address) {
+    fault_.kind = kind;
+    fault_.message = std::move(message);
+    fault_.pc = pc;
+    fault_.has_address = has_address;
+    fault_.address = address;
+}
+
+void Core::log_exception(bool enter, int number) {
+    if (exception_log_.size() == kExceptionLog) exception_log_.pop_front();
+    exception_log_.push_back({cycles_, enter, number});
+}
+
+bool Core::take_exception(int number, uint32_t return_pc) {
+    ++counts.exceptions;
+    const uint32_t control = reg(r_.control);
+    if ((control & kControlSpsel) && active_.empty()) {
+        fault("UsageFault", "thread mode on the process stack (CONTROL.SPSEL) is not modelled",
+              return_pc);
+        return false;
+    }
+    const bool fp = (control & kControlFpca) && (fpccr_ & (1u << 31));
+    const uint32_t sp = reg(r_.sp);
+    uint32_t xpsr = reg(r_.xpsr);
+    uint32_t new_sp = sp - (fp ? 0x68 : 0x20);
+    if ((ccr_ & 0x200) || fp) {
+        if (new_sp & 4) {
+            new_sp -= 4;
+            xpsr |= kXpsrAlign;
+        } else {
+            xpsr &= ~kXpsrAlign;
+        }
+    }
+    uint32_t words[26];
+    const int base_regs[6] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
+    for (int i = 0; i < 6; ++i) words[i] = reg(base_regs[i]);
+    words[6] = return_pc;
+    words[7] = xpsr;
+    int n = 8;
+    if (fp) {
+        // Lazy stacking reserves this space and fills it when the handler first uses the FPU;
+        // it is filled at once here, which the program cannot tell apart.
+        for (int i = 0; i < 16; ++i) words[8 + i] = reg(r_.s[i]);
+        words[24] = reg(r_.fpscr);
+        words[25] = 0;
+        n = 26;
+    }
+    if (uc_.mem_write(uc_.handle, new_sp, words, 4u * n) != 0) {
+        fault("BusFault", "stacking a " + exception_name(number) + " frame at " + hex8(new_sp) +
+                              " failed (stack overflow?)",
+              return_pc, true, new_sp);
+        return false;
+    }
+    const bool thread = active_.empty();
+    if (thread) {
+        handler_since_valid_ = true;
+        handler_since_i_ = instructions_;
+        handler_since_c_ = cycles_;
+    }
+    const uint32_t exc_return = (thread ? 0xFFFFFFF9u : 0xFFFFFFF1u) & ~(fp ? 0x10u : 0u);
+    active_.push_back(number);
+    frames_.push_back({new_sp, fp, exc_return});
+    pending_ &= ~bit(number);
+    uint32_t handler = 0;
+    read32(vtor_ + 4u * static_cast<uint32_t>(number), handler);
+    set_reg(r_.sp, new_sp);
+    set_reg(r_.lr, exc_return);
+    set_reg(r_.control, control & ~kControlFpca);
+    set_reg(r_.xpsr, (1u << 24) | static_cast<uint32_t>(number));
+    set_pc(handler);
+    cycles_ += kEntryCycles;
+    log_exception(true, number);
+    ++exception_counts_[number];
+    if (!(handler & 1)) {
+        fault("UsageFault", "vector " + std::to_string(number) + " (" + exception_name(number) +
+                                ") = " + hex8(handler) + " has no Thumb bit (INVSTATE)",
+              return_pc);
+        return false;
+    }
+    return true;
+}
+
+bool Core::return_from_exception(uint32_t exc_return) {
+    if (active_.empty()) {
+        fault("UsageFault", "EXC_RETURN " + hex8(exc_return) + " in thread mode (INVPC)",
+              exc_return);
+        return false;
+    }
+    const int number = active_.back();
+    if (exc_return != 0xFFFFFFF1u && exc_return != 0xFFFFFFF9u && exc_return != 0xFFFFFFE1u &&
+        exc_return != 0xFFFFFFE9u) {
+        fault("UsageFault", "EXC_RETURN " + hex8(exc_return) + " from " + exception_name(number) +
+                                ": only main-stack returns are modelled",
+              exc_return);
+        return false;
+    }
+    const bool to_thread = exc_return & 0x8;
+    if (to_thread != (active_.size() == 1)) {
+        fault("UsageFault", "EXC_RETURN " + hex8(exc_return) + " from " + exception_name(number) +
+                                " names the wrong mode (INVPC)",
+              exc_return);
+        return false;
+    }
+    const bool fp = !(exc_return & 0x10);
+    const uint32_t sp = reg(r_.sp);
+    const int n = fp ? 26 : 8;
+    uint32_t words[26];
+    if (uc_.mem_read(uc_.handle, sp, words, 4u * n) != 0) {
+        fault("BusFault", "unstacking a " + exception_name(number) + " frame at " + hex8(sp) +
+                              " failed",
+              exc_return, true, sp);
+        return false;
+    }
+    const int base_regs[6] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
+    for (int i = 0; i < 6; ++i) set_reg(base_regs[i], words[i]);
+    const uint32_t xpsr = words[7];
+    if (fp) {
+        for (int i = 0; i < 16; ++i) set_reg(r_.s[i], words[8 + i]);
+        set_reg(r_.fpscr, words[24]);
+    }
+    const uint32_t new_sp = sp + 4u * n + ((xpsr & kXpsrAlign) ? 4u : 0u);
+    active_.pop_back();
+    frames_.pop_back();
+    set_reg(r_.sp, new_sp);
+    const uint32_t control = reg(r_.control);
+    set_reg(r_.control, fp ? (control | kControlFpca) : (control & ~kControlFpca));
+    set_reg(r_.xpsr, xpsr & ~kXpsrAlign);
+    set_pc(words[6]);
+    cycles_ += kReturnCycles;
+    log_exception(false, number);
+    if (active_.empty() && handler_since_valid_) {
+        handler_instructions_ += instructions_ - handler_since_i_;
+        handler_cycles_ += cycles_ - handler_since_c_;
+        handler_since_valid_ = false;
+    }
+    if (irq_lines_ & bit(number)) pending_ |= bit(number);   // a level still asserted pends again
+    return true;
+}
+
+// -- the run loop ---------------------------------------------------------------------------
+int Core::run(uint64_t instr_limit) {
+    instr_limit_ = instr_limit;
+    for (;;) {
+        const int s = service();
+        if (s) return s;
+        if (stop_) return kStop;
+        if (instructions_ >= instr_limit) return kBudget;
+        if (time_up_) return kTime;
+        if (sleeping_) {
+            if (!sleep()) return kSleepForever;
+            continue;
+        }
+        const int e = execute();
+        if (e) return e;
+    }
+}
+
+// At a boundary: due events in order, then the exception the NVIC presents, if it preempts.
+int Core::service() {
+    for (;;) {
+        const HeapEntry* h = head();
+        if (!h || h->due > cycles_) break;
+        const HeapEntry e = *h;
+        pop();
+        live_.erase(e.seq);
+        if (e.kind == Ev::Python) {
+            ++counts.python_events;
+            py_event_ = e.seq;
+            return kPyEvent;
+        }
+        dispatch(e);
+    }
+    const int number = pending_exception();
+    if (number >= 0 && preempts(number)) {
+        sleeping_ = false;
+        if (!take_exception(number, pc())) return kFault;
+    }
+    return 0;
+}
+
+// At a block boundary inside emu_start that needs attention (an event due, an interrupt to
+// take, a mask lifted, an exception return): what run() would do before its next emu_start,
+// done here when nothing in it needs Python, so the run goes on without leaving unicorn (a PC
+// written from a hook makes unicorn continue there). False: stop, and let run() see to it
+// (a Python event due, a stop, the budget or the time limit, a fault).
+bool Core::continue_inline() {
+    inline_taken_ = false;
+    if (!inline_boundaries) return false;
+    ++counts.inline_boundaries;
+    for (;;) {
+        const HeapEntry* h = head();
+        if (!h || h->due > cycles_) break;
+        if (h->kind == Ev::Python) return false;
+        const HeapEntry e = *h;
+        pop();
+        live_.erase(e.seq);
+        dispatch(e);
+    }
+    const int number = pending_exception();
+    if (number >= 0 && preempts(number)) {
+        sleeping_ = false;
+        if (!take_exception(number, pending_pc_)) {
+            inline_fault_ = true;
+            return false;
+        }
+        inline_taken_ = true;
+    }
+    if (stop_ || instructions_ >= instr_limit_ || time_up_) return false;
+    update_deadline();
+    budget_hit_ = false;
+    watch_mask_ = masked_pending();
+    return true;
+}
+
+// WFI: wake on an exception that would preempt were PRIMASK clear; else time passes to the
+// next event. False when nothing will ever wake the core.
+bool Core::sleep() {
+    const int number = pending_exception();
+    if (number >= 0 && preempts(number, true)) {
+        sleeping_ = false;
+        return true;
+    }
+    update_deadline();
+    const HeapEntry* h = head();
+    if (!h) return false;
+    if (h->due > cycles_) {
+        sleep_cycles_ += h->due - cycles_;
+        cycles_ = h->due;
+    }
+    return true;
+}
+
+// One emu_start: until a block boundary that needs attention.
+int Core::execute() {
+    update_deadline();
+    budget_hit_ = false;
+    watch_mask_ = masked_pending();
+    const uint32_t start = pc();
+    cur_ = nullptr;
+    ++counts.emu_starts;
+    const int err = uc_.emu_start(uc_.handle, start | 1u, 0xFFFFFFFFu, 0, 0);
+    commit();
+    if (py_error_) return kPyError;
+    if (inline_fault_) {
+        inline_fault_ = false;
+        return kFault;
+    }
+    if (intr_fault_) {
+        intr_fault_ = false;
+        return kIntrFault;
+    }
+    if (err != 0) {
+        uc_error_ = err;
+        return kUcError;
+    }
+    if (budget_hit_) {
+        budget_hit_ = false;
+        return kBudget;
+    }
+    if (svc_) {
+        svc_ = false;
+        pend(11);
+    } else if (bkpt_) {
+        bkpt_ = false;
+        set_pc(bkpt_pc_ + 2);
+        return kBkpt;
+    } else if (stop_) {
+        return kStop;
+    } else if (last_ && (last_->flags & Block::kWfi) && pc() == last_->start + last_->size) {
+        sleeping_ = true;
+    }
+    return 0;
+}
+
+// After unicorn returns: count what retired of the block it was in.
+void Core::commit() {
+    last_ = cur_;
+    if (!cur_) return;
+    const uint32_t p = pc();
+    const uint32_t done = cur_->index_of(p);
+    instructions_ += done;
+    cycles_ += done < cur_->n ? cur_->cycles_before(p) : cur_->cycles;
+    cur_ = nullptr;
+}
+
+// Unicorn is about to run the block at `address`: the previous one retired. The boundary needs
+// attention when an event is due or an interrupt waits on a mask the previous block may have
+// lifted; it is attended to here (continue_inline) when nothing there needs Python, and the
+// block then runs, or the handler of an exception taken there runs instead. Otherwise, and when
+// the budget would be exceeded, the run stops before the block (it does not run). The PC unicorn
+// holds inside a block hook may be stale (chained blocks do not store it), so the block's
+// address is the return address of an exception taken here.
+void Core::on_block(uint64_t address, uint32_t size) {
+    ++counts.blocks;
+    const uint32_t a = static_cast<uint32_t>(address);
+    if (cur_) {
+        instructions_ += cur_->n;
+        cycles_ += cur_->cycles;
+        const bool unmasked = (cur_->flags & Block::kMaskOp) && watch_mask_;
+        cur_ = nullptr;
+        if (unmasked) {
+            pending_pc_ = a;
+            if (!continue_inline()) {
+                stop_now();
+                return;
+            }
+            if (inline_taken_) return;
+        }
+    }
+    auto it = blocks_.find(a);
+    if (it == blocks_.end() || it->second.size != size) {
+        ++counts.decodes;
+        if (py_.decode(address, size) != 0) {       // Python has flagged the error and stopped
+            return;
+        }
+        it = blocks_.find(a);
+        if (it == blocks_.end()) {
+            py_error_ = true;
+            stop_now();
+            return;
+        }
+    }
+    const Block* b = &it->second;
+    if (instructions_ + b->n > instr_limit_) {
+        budget_hit_ = true;
+        stop_now();
+        return;
+    }
+    if (cycles_ >= deadline_) {
+        pending_pc_ = a;
+        if (!continue_inline()) {
+            stop_now();
+            return;
+        }
+        if (inline_taken_) {
+            return;
+        }
+    }
+    if (fpu_watch_ && (b->flags & (Block::kVfp | Block::kIsb))) {
+        ++counts.fpu_checks;
+        if (py_.fpu_check(address) == 0) {        // the chip would take a NOCP UsageFault
+            stop_now();
+            return;
+        }
+    }
+    cur_ = b;
+}
+
+void Core::on_intr(uint32_t intno) {
+    const uint32_t p = pc();
+    if (intno == kExcReturnTrap) {
+        // The handler's return: unstack here and go on (as run() would after a stop).
+        commit();
+        if (!return_from_exception(p | 1u)) {
+            inline_fault_ = true;
+            stop_now();
+            return;
+        }
+        pending_pc_ = pc();
+        if (!continue_inline()) stop_now();
+        return;
+    } else if (intno == kIntrSvc) {
+        svc_ = true;
+    } else if (intno == kIntrBkpt) {
+        bkpt_ = true;
+        bkpt_pc_ = p;
+    } else {
+        intr_fault_ = true;
+        intr_number_ = intno;
+        intr_pc_ = p;
+    }
+    (void)kIntrUndef;
+    stop_now();
+}
+
+// -- MMIO -----------------------------------------------------------------------------------
+int Core::route(uint32_t address, unsigned size) const {
+    for (const Route& r : routes_) {
+        if (r.lo <= address && address + size <= r.hi) return clocked[r.dev] ? r.dev : kNone;
+    }
+    return kNone;
+}
+
+bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
+    switch (dev) {
+        case kDwt: return dwt.read(*this, address, size, out);
+        case kSysTick: return systick.read(*this, address, size, out);
+        case kUart0: return uart0.read(*this, address, size, out);
+        case kI2c0: return i2c0.read(*this, address, size, out);
+        default: return false;
+    }
+}
+
+bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
+    switch (dev) {
+        case kDwt: return dwt.write(*this, address, size, value);
+        case kSysTick: return systick.write(*this, address, size, value);
+        case kUart0: return uart0.write(*this, address, size, value);
+        case kI2c0: return i2c0.write(*this, address, size, value);
+        default: return false;
+    }
+}
+
+// A native device takes the access when it is clocked and has the register; anything else
+// (another device, a gated one, an offset no register occupies, or logging on) goes to
+// Python, which logs it, models it or raises the bus fault.
+uint64_t Core::mmio_read(uint32_t address, unsigned size) {
+    if (!log_all) {
+        const int dev = route(address, size);
+        uint64_t v = 0;
+        if (dev != kNone && dev_read(dev, address, size, v)) {
+            ++counts.native_accesses;
+            return v;
+        }
+    }
+    ++counts.python_accesses;
+    return py_.read(address, size);
+}
+
+void Core::mmio_write(uint32_t address, unsigned size, uint64_t value) {
+    if (!log_all) {
+        const int dev = route(address, size);
+        if (dev != kNone) {
+            const uint64_t masked = size >= 8 ? value : value & ((uint64_t{1} << (8 * size)) - 1);
+            if (dev_write(dev, address, size, masked)) {
+                ++counts.native_accesses;
+                return;
+            }
+        }
+    }
+    ++counts.python_accesses;
+    py_.write(address, size, value);
+}
+
+void Core::on_block_cb(void*, uint64_t address, uint32_t size, void* user) {
+    Core* c = static_cast<Core*>(user);
+    c->in_block_hook_ = true;
+    c->on_block(address, size);
+    c->in_block_hook_ = false;
+}
+
+void Core::on_intr_cb(void*, uint32_t intno, void* user) {
+    static_cast<Core*>(user)->on_intr(intno);
+}
+
+uint64_t Core::mmio_read_cb(void*, uint64_t offset, unsigned size, void* user) {
+    auto* s = static_cast<Space*>(user);
+    return s->core->mmio_read(s->base + static_cast<uint32_t>(offset), size);
+}
+
+void Core::mmio_write_cb(void*, uint64_t offset, unsigned size, uint64_t value, void* user) {
+    auto* s = static_cast<Space*>(user);
+    s->core->mmio_write(s->base + static_cast<uint32_t>(offset), size, value);
+}
+
+}  // namespace hqsim::mk64

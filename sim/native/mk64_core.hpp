@@ -1,0 +1,441 @@
+// The emulated MK64FX512's hot path (sim/mk64, docs/teensy35-emulator.md): what runs at every
+// translated block, every access to the busy peripherals and every interrupt, in C++ so that a
+// flight loop costs no Python call per block or register access.
+//
+// * The unicorn library is not linked: its entry points are taken at run time from the library
+//   the Python binding loaded (Uc below), and the hooks are installed as C functions.
+// * Time base: cycles and instructions per translated block from a table the Python decoder
+//   fills (sim/mk64/timing.py states the cycle model; nothing here changes it), exact to the
+//   instruction at every peripheral access (the PC is synced there).
+// * One event queue for every device, Python's included (a Python event stops the run and
+//   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
+// * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
+//   loop uses all the time: DWT_CYCCNT, SysTick, UART0 and I2C0 with the MPU6050 on it. Their
+//   Python classes are views onto these (one model each).
+// * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
+//   instruction, an access to a device modelled in Python, a Python event, a breakpoint, a
+//   fault) either calls a C function pointer the Python side made with ctypes (which takes the
+//   GIL) or stops the run with a code saying why.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <unordered_set>
+#include <utility>
+#include <vector>
+
+namespace hq {
+class Mpu6050Emulator;
+}
+
+namespace hqsim::mk64 {
+
+using u128 = unsigned __int128;
+
+// The unicorn entry points used here, as the library exports them (unicorn.h, 2.1).
+struct Uc {
+    void* handle = nullptr;
+    int (*emu_start)(void*, uint64_t, uint64_t, uint64_t, size_t) = nullptr;
+    int (*emu_stop)(void*) = nullptr;
+    int (*reg_read)(void*, int, void*) = nullptr;
+    int (*reg_write)(void*, int, const void*) = nullptr;
+    int (*reg_write2)(void*, int, const void*, size_t*) = nullptr;
+    int (*mem_read)(void*, uint64_t, void*, uint64_t) = nullptr;
+    int (*mem_write)(void*, uint64_t, const void*, uint64_t) = nullptr;
+    int (*hook_add)(void*, size_t*, int, void*, void*, uint64_t, uint64_t, ...) = nullptr;
+    int (*mmio_map)(void*, uint64_t, uint64_t, void*, void*, void*, void*) = nullptr;
+};
+
+// unicorn's register numbers for the registers the core reads and writes (from arm_const).
+struct Regs {
+    int r0, r1, r2, r3, r12, lr, pc, sp, xpsr, control, fpscr, primask, basepri, faultmask;
+    int s[16];
+};
+
+// Callbacks into Python (ctypes function pointers; they take the GIL themselves).
+struct PyCallbacks {
+    int (*decode)(uint64_t address, uint32_t size) = nullptr;        // 0: decoded
+    int (*fpu_check)(uint64_t address) = nullptr;                    // 0: stop (a NOCP fault)
+    uint64_t (*read)(uint64_t address, uint32_t size) = nullptr;
+    void (*write)(uint64_t address, uint32_t size, uint64_t value) = nullptr;
+};
+
+// One translated block's costs, from the Python decoder.
+struct Block {
+    enum : uint32_t { kMaskOp = 1, kIsb = 2, kVfp = 4, kWfi = 8 };
+    uint32_t start = 0, size = 0, n = 0, flags = 0;
+    uint64_t cycles = 0;
+    std::vector<uint32_t> addrs;     // decoded instructions' addresses
+    std::vector<uint32_t> cum;       // cycles before each instruction (undecoded included)
+    uint32_t index_of(uint32_t pc) const {
+        pc &= ~1u;
+        for (uint32_t i = 0; i < addrs.size(); ++i) {
+            if (addrs[i] == pc) return i;
+        }
+        return n;
+    }
+    uint64_t cycles_before(uint32_t pc) const {
+        const uint32_t i = index_of(pc);
+        return i < addrs.size() ? cum[i] : cycles;
+    }
+};
+
+enum class Ev : uint8_t { Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree };
+
+// Why run() returned.
+enum Run : int {
+    kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
+    kIntrFault
+};
+
+// A fault found natively (exception entry/return); Python raises it.
+struct FaultInfo {
+    std::string kind, message;
+    uint32_t pc = 0, address = 0;
+    bool has_address = false;
+};
+
+class Core;
+
+// DWT_CTRL/CYCCNT: counts core cycles while DEMCR.TRCENA and CTRL.CYCCNTENA are set.
+struct Dwt {
+    uint32_t ctrl_address = 0, cyccnt_address = 0, ctrl_reset = 0;
+    uint32_t ctrl = 0, base_value = 0;
+    int64_t since = -1;            // core cycle at which base_value held; -1: stopped
+    bool trcena = false;
+    void reset() { ctrl = ctrl_reset; base_value = 0; since = -1; trcena = false; }
+    bool running() const { return (ctrl & 1) && trcena; }
+    uint32_t cyccnt(uint64_t now) const {
+        return since < 0 ? base_value
+                         : static_cast<uint32_t>(base_value + (now - static_cast<uint64_t>(since)));
+    }
+    void sync(uint64_t now) {
+        base_value = cyccnt(now);
+        since = running() ? static_cast<int64_t>(now) : -1;
+    }
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
+// SYST_CSR/RVR/CVR/CALIB on the core clock (see sim/mk64/scs.py's SysTick view).
+struct SysTick {
+    uint32_t base = 0, calib = 0, csr_reset = 0;
+    uint32_t csr = 0, rvr = 0, stopped_value = 0;
+    int64_t zero_at = -1;          // next cycle the counter reads 0 (running); -1 stopped
+    uint64_t event = 0;
+    std::deque<uint64_t> wraps;
+    void reset() {
+        csr = csr_reset; rvr = 0; stopped_value = 0; zero_at = -1; event = 0; wraps.clear();
+    }
+    bool enabled() const { return csr & 1; }
+    uint32_t value(uint64_t now) const;
+    void schedule(Core& c);
+    void on_zero(Core& c);
+    uint32_t read_reg(uint32_t offset, uint64_t now);
+    void write_reg(Core& c, uint32_t offset, uint32_t value, uint64_t now);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
+// Register layout and bits of an 8-bit-register peripheral, from the SVD tables (Python).
+struct Layout8 {
+    uint32_t base = 0, span = 0;
+    std::vector<int> reg_at;               // byte offset -> register offset, or -1
+    std::vector<uint8_t> reset;            // reset value by offset
+    std::unordered_map<std::string, uint32_t> k;   // "REG" offset, "REG.FIELD" mask
+    uint32_t operator[](const std::string& name) const;
+};
+
+// UART0 at line rate (sim/mk64/uart.py's notes describe the model).
+struct Uart {
+    Layout8 L;
+    bool ready = false;                    // set up (its layout given)
+    int irq_rxtx = 0, irq_err = 0, depth = 8;
+    // offsets and bits, resolved from L once
+    uint32_t oBDH, oBDL, oC1, oC2, oS1, oC3, oD, oC4, oPFIFO, oCFIFO, oSFIFO, oTWFIFO,
+        oTCFIFO, oRWFIFO, oRCFIFO, oED;
+    uint32_t TIE, TCIE, RIE, ILIE, TE, RE, TDRE, TC, RDRF, IDLE, OR, S1_CLEARED_BY_D, SBR_HIGH,
+        SBNS, M, BRFA, ORIE, TXFE, RXFE, TXFLUSH, RXFLUSH, CFIFO_ENABLES, TXEMPT, RXEMPT, TXOF,
+        RXUF, SFIFO_W1C, FIFO_CODE;
+    std::vector<uint8_t> v;
+    std::deque<uint8_t> tx, rx, rx_queue;
+    std::vector<std::pair<uint64_t, uint8_t>> sent;   // (cycle, byte), until taken
+    int shifting = -1;                                // byte, kPreamble, or -1 (idle)
+    static constexpr int kPreamble = 0x100;
+    uint64_t tx_event = 0, rx_event = 0, idle_event = 0;
+    uint8_t bdh_buffer = 0, s1_seen = 0;
+    bool rdrf = false, line_rxtx = false, line_err = false;
+    uint8_t flags = 0;
+    uint64_t overruns = 0, tx_overflows = 0;
+    std::vector<std::pair<uint64_t, std::string>> notes;
+
+    void setup();
+    void reset(Core& c);
+    double baud(const Core& c) const;
+    int frame_bits() const;
+    uint64_t frame_cycles(const Core& c) const;
+    size_t tx_depth() const { return (v[oPFIFO] & TXFE) ? depth : 1; }
+    size_t rx_depth() const { return (v[oPFIFO] & RXFE) ? depth : 1; }
+    size_t rx_water() const;
+    bool tdre() const;
+    bool tc() const { return tx.empty() && shifting < 0; }
+    uint8_t s1() const;
+    void latch_rdrf() { if (rx.size() >= rx_water()) rdrf = true; }
+    void update_irq(Core& c);
+    void kick(Core& c);
+    void shifted(Core& c);
+    void receive(Core& c, const uint8_t* data, size_t n);
+    void arrived(Core& c);
+    void idle(Core& c);
+    uint8_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint8_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
+// The MPU6050 at the I2C byte level, on the project's register model (Mpu6050Emulator).
+struct MpuSlave {
+    hq::Mpu6050Emulator* emu = nullptr;
+    uint8_t address = 0x68;
+    bool present = true;
+    int pointer = -1;
+    bool pointer_set = false;
+    std::vector<uint8_t> pending, read_bytes;
+    int read_reg = -1;
+    struct Entry { double seconds; char kind; int reg; std::vector<uint8_t> data; };
+    std::vector<Entry> log;          // until taken
+    void start(Core& c, bool read);
+    bool write_byte(uint8_t byte);
+    uint8_t read_byte();
+    void flush(Core& c);
+    void stop(Core& c) { flush(c); }
+};
+
+// I2C0 as a byte-level master (sim/mk64/i2c.py's notes describe the model).
+struct I2c {
+    Layout8 L;
+    bool ready = false;
+    int irq = 0;
+    std::vector<uint32_t> scl_divider;
+    uint32_t oC1, oS, oD, oF, oFLT;
+    uint32_t IICEN, IICIE, MST, TX, TXAK, RSTA, TCF, BUSY, ARBL, IICIF, RXAK, STOPF, SSIE, STARTF,
+        SHEN, FLT_FLT, MULT, MULT_SHIFT, ICR;
+    std::vector<uint8_t> v;
+    std::vector<MpuSlave*> slaves;
+    bool pins_connected = true, scl_held = false;
+    struct Transfer {
+        int address; bool read, acked; uint64_t start_cycle; std::vector<uint8_t> data;
+        int64_t end_cycle; double start_s;
+    };
+    std::vector<Transfer> transfers;         // until taken; the last may be open
+    bool open = false;                       // transfers.back() is the current transfer
+    std::vector<std::pair<uint64_t, std::string>> errors;
+    MpuSlave* slave = nullptr;
+    bool expect_address = false, reading = false, line = false;
+    uint64_t busy_until = 0, event = 0, free_event = 0;
+    // the byte in flight
+    bool byte_receive = false, byte_ack = false;
+    int byte_value = 0;
+    uint64_t byte_start = 0;
+
+    void setup();
+    void reset();
+    double scl_hz(const Core& c) const;
+    uint64_t bit_cycles(const Core& c) const;
+    void update_irq(Core& c);
+    void flag(Core& c, uint8_t bits) { v[oS] |= bits; update_irq(c); }
+    void hold_scl(Core& c, bool held);
+    void start(Core& c, uint64_t now, bool repeated);
+    void stop(Core& c, uint64_t now);
+    void bus_free(Core& c);
+    void end_transfer(Core& c, uint64_t now);
+    void begin_byte(Core& c, bool receive, int byte, bool ack);
+    void finish_byte(Core& c);
+    void set_rxak(bool acked) { if (acked) v[oS] &= ~RXAK; else v[oS] |= RXAK; }
+    uint8_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint8_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
+class Core {
+public:
+    enum Device : int { kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kDevices };
+
+    Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
+         std::vector<std::string> exception_names);
+    Core(const Core&) = delete;
+    Core& operator=(const Core&) = delete;
+
+    // Installs the block and interrupt hooks and maps the peripheral spaces (MMIO).
+    void install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base, uint32_t ppb_size);
+    void reset(double core_hz);
+
+    // -- blocks ---------------------------------------------------------------------------
+    void add_block(Block b);
+    void clear_blocks() { blocks_.clear(); cur_ = last_ = nullptr; }
+    const Block* cur() const { return cur_; }
+    const Block* last() const { return last_; }
+
+    // -- time -----------------------------------------------------------------------------
+    uint32_t pc() const;
+    uint64_t now() const { return cur_ ? cycles_ + cur_->cycles_before(pc()) : cycles_; }
+    uint64_t instructions_now() const {
+        return cur_ ? instructions_ + cur_->index_of(pc()) : instructions_;
+    }
+    double seconds(uint64_t cycles) const {
+        return epoch_seconds_ + static_cast<double>(static_cast<int64_t>(cycles - epoch_cycles_)) / core_hz_;
+    }
+    void set_clocks(double core_hz, double bus_hz);
+    double core_hz() const { return core_hz_; }
+    double bus_hz() const { return bus_hz_; }
+
+    // -- events ---------------------------------------------------------------------------
+    uint64_t at(uint64_t cycle, Ev kind, bool scaled = true);
+    void cancel(uint64_t seq) { live_.erase(seq); }
+    bool live(uint64_t seq) const { return live_.count(seq) != 0; }
+    bool event_due(uint64_t seq, uint64_t& due) const;
+    void attention() { deadline_ = 0; }
+    uint64_t next_event_due() const;
+    // Time passes to `target` with no code running: native events due by then run in order;
+    // a Python event due returns its number (0 when the target is reached).
+    uint64_t advance(uint64_t target);
+
+    // -- NVIC -----------------------------------------------------------------------------
+    void set_irq(int irq, bool level);
+    void pend(int number) { pending_ |= bit(number); attention(); }
+    void unpend(int number) { pending_ &= ~bit(number); }
+    int pending_exception() const;
+    int execution_priority(bool ignore_primask) const;
+    bool preempts(int number, bool ignore_primask = false) const {
+        return group(priority_[number]) < execution_priority(ignore_primask);
+    }
+
+    // -- running --------------------------------------------------------------------------
+    int run(uint64_t instr_limit);
+    void request_stop() { stop_ = true; }
+    void clear_stop() { stop_ = false; }
+    void request_error() { py_error_ = true; }
+    void clear_error() { py_error_ = false; }
+    void stop_now() { uc_.emu_stop(uc_.handle); }
+
+    // -- memory ---------------------------------------------------------------------------
+    bool read32(uint32_t address, uint32_t& out) const;
+    uint32_t reg(int id) const;
+    void set_reg(int id, uint32_t value);
+    void set_pc(uint32_t value);
+
+    // -- the devices ----------------------------------------------------------------------
+    bool dev_read(int dev, uint32_t address, unsigned size, uint64_t& out);
+    bool dev_write(int dev, uint32_t address, unsigned size, uint64_t value);
+    void add_route(int dev, uint32_t lo, uint32_t hi) { routes_.push_back({lo, hi, dev}); }
+
+    // State Python reads and sets (the views).
+    Dwt dwt;
+    SysTick systick;
+    Uart uart0;
+    I2c i2c0;
+    std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
+    bool clocked[kDevices] = {true, true, false, false};
+    bool log_all = true;         // every peripheral access through Python (boot logs, traces)
+    bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
+
+    uint64_t cycles_ = 0, instructions_ = 0, sleep_cycles_ = 0;
+    uint64_t handler_instructions_ = 0, handler_cycles_ = 0;
+    bool handler_since_valid_ = false;
+    uint64_t handler_since_i_ = 0, handler_since_c_ = 0;
+    u128 enabled_ = 0, pending_ = 0, irq_lines_ = 0;
+    std::vector<int> priority_;
+    int prigroup_ = 0;
+    uint32_t vtor_ = 0, ccr_ = 0x200, fpccr_ = 0xC0000000u;
+    std::vector<int> active_;
+    struct Frame { uint32_t sp; bool fp; uint32_t exc_return; };
+    std::vector<Frame> frames_;
+    struct LogEntry { uint64_t cycle; bool enter; int number; };
+    std::deque<LogEntry> exception_log_;
+    std::vector<uint64_t> exception_counts_;
+    bool sleeping_ = false, fpu_watch_ = true, time_up_ = false;
+    uint64_t py_event_ = 0;
+    int uc_error_ = 0;
+    uint32_t intr_number_ = 0, intr_pc_ = 0, bkpt_pc_ = 0;
+    FaultInfo fault_;
+    // per-run counters for the benchmark (what the wall time is spent on)
+    struct Counts {
+        uint64_t blocks = 0, decodes = 0, native_accesses = 0, python_accesses = 0,
+                 native_events = 0, python_events = 0, exceptions = 0, emu_starts = 0,
+                 fpu_checks = 0, inline_boundaries = 0;
+    } counts;
+
+    static u128 bit(int n) { return static_cast<u128>(1) << n; }
+
+    // unicorn callbacks (C functions; user data is the Core)
+    static void on_block_cb(void* uc, uint64_t address, uint32_t size, void* user);
+    static void on_intr_cb(void* uc, uint32_t intno, void* user);
+    static uint64_t mmio_read_cb(void* uc, uint64_t offset, unsigned size, void* user);
+    static void mmio_write_cb(void* uc, uint64_t offset, unsigned size, uint64_t value, void* user);
+
+    const std::string& exception_name(int n) const;
+
+private:
+    struct HeapEntry {
+        uint64_t due, seq;
+        Ev kind;
+        bool scaled;
+        bool operator>(const HeapEntry& o) const {
+            return due != o.due ? due > o.due : seq > o.seq;
+        }
+    };
+    struct Route { uint32_t lo, hi; int dev; };
+
+    int group(int prio) const { return prio < 0 ? prio : prio >> (prigroup_ + 1); }
+    void on_block(uint64_t address, uint32_t size);
+    void on_intr(uint32_t intno);
+    uint64_t mmio_read(uint32_t address, unsigned size);
+    void mmio_write(uint32_t address, unsigned size, uint64_t value);
+    int route(uint32_t address, unsigned size) const;
+    const HeapEntry* head();
+    void pop();
+    void update_deadline();
+    int service();
+    bool sleep();
+    int execute();
+    void commit();
+    void dispatch(const HeapEntry& e);
+    bool masked_pending() const;
+    bool take_exception(int number, uint32_t return_pc);
+    bool continue_inline();
+    bool return_from_exception(uint32_t exc_return);
+    void log_exception(bool enter, int number);
+    void fault(const char* kind, std::string message, uint32_t pc, bool has_address = false,
+               uint32_t address = 0);
+
+    Uc uc_;
+    Regs r_;
+    PyCallbacks py_;
+    std::vector<std::string> names_;
+    std::unordered_map<uint32_t, Block> blocks_;
+    const Block* cur_ = nullptr;
+    const Block* last_ = nullptr;
+    std::vector<Route> routes_;
+    std::vector<HeapEntry> heap_;
+    std::unordered_set<uint64_t> live_;
+    uint64_t seq_ = 0;
+    uint64_t deadline_ = 0, instr_limit_ = 0;
+    uint64_t epoch_cycles_ = 0;
+    double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0;
+    bool watch_mask_ = false, budget_hit_ = false, stop_ = false, py_error_ = false;
+    bool svc_ = false, bkpt_ = false, intr_fault_ = false, inline_fault_ = false;
+    bool inline_taken_ = false;     // continue_inline() took an exception (the PC moved)
+    bool in_block_hook_ = false;
+    uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
+
+public:
+    struct Space { Core* core; uint32_t base; };
+    Space spaces_[2] = {{nullptr, 0}, {nullptr, 0}};   // the MMIO callbacks' user data
+};
+
+}  // namespace hqsim::mk64

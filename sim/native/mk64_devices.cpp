@@ -1,0 +1,689 @@
+// The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0 and
+// I2C0 with the MPU6050. Their behaviour is documented where their Python views live
+// (sim/mk64/scs.py, uart.py, i2c.py); register offsets and bits come from the SVD tables
+// through Python (Layout8), never typed here.
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/mpu6050.hpp"
+#include "mk64_core.hpp"
+#include "targets/host/mpu6050_emulator.hpp"
+
+namespace hqsim::mk64 {
+
+namespace {
+constexpr uint64_t kNever = uint64_t{1} << 40;     // a rate of 0: the event never comes
+constexpr int kBitsPerByte = 9;
+
+// Word-wide registers accessed with any width: the bytes of the word at address & ~3.
+uint32_t merge_word(uint32_t old, uint32_t address, unsigned size, uint64_t value, uint32_t& mask) {
+    const uint32_t shift = 8 * (address & 3);
+    const uint64_t width = size >= 4 ? 0xFFFFFFFFull : ((uint64_t{1} << (8 * size)) - 1);
+    mask = static_cast<uint32_t>(width << shift);
+    return (old & ~mask) | (static_cast<uint32_t>(value << shift) & mask);
+}
+
+uint64_t extract(uint32_t word, uint32_t address, unsigned size) {
+    const uint64_t width = size >= 4 ? 0xFFFFFFFFull : ((uint64_t{1} << (8 * size)) - 1);
+    return (word >> (8 * (address & 3))) & width;
+}
+
+int shift_of(uint32_t mask) {
+    int s = 0;
+    while (mask && !(mask & 1)) {
+        mask >>= 1;
+        ++s;
+    }
+    return s;
+}
+}  // namespace
+
+uint32_t Layout8::operator[](const std::string& name) const {
+    auto it = k.find(name);
+    if (it == k.end()) throw std::invalid_argument("register layout has no " + name);
+    return it->second;
+}
+
+// -- DWT --------------------------------------------------------------------------------------
+bool Dwt::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    const uint32_t a = address & ~3u;
+    if (a == cyccnt_address) {
+        out = extract(cyccnt(c.now()), address, size);
+    } else if (a == ctrl_address) {
+        out = extract(ctrl, address, size);
+    } else {
+        return false;
+    }
+    return true;
+}
+
+bool Dwt::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    const uint32_t a = address & ~3u;
+    const uint64_t now = c.now();
+    uint32_t mask = 0;
+    if (a == ctrl_address) {
+        const uint32_t v = merge_word(ctrl, address, size, value, mask);
+        ctrl = ctrl_reset | (v & 1u);           // only CYCCNTENA is modelled
+        sync(now);
+    } else if (a == cyccnt_address) {
+        base_value = merge_word(cyccnt(now), address, size, value, mask);
+        since = running() ? static_cast<int64_t>(now) : -1;
+    } else {
+        return false;
+    }
+    return true;
+}
+
+// -- SysTick ----------------------------------------------------------------------------------
+uint32_t SysTick::value(uint64_t now) const {
+    if (zero_at < 0) return stopped_value;
+    const uint64_t z = static_cast<uint64_t>(zero_at);
+    if (now <= z) return static_cast<uint32_t>(z - now);
+    const uint64_t period = uint64_t{rvr} + 1;
+    const uint64_t r = (now - z) % period;
+    return static_cast<uint32_t>(r ? period - r : 0);
+}
+
+void SysTick::schedule(Core& c) {
+    if (event) c.cancel(event);
+    event = zero_at >= 0 ? c.at(static_cast<uint64_t>(zero_at), Ev::SysTick, false) : 0;
+}
+
+void SysTick::on_zero(Core& c) {
+    event = 0;
+    csr |= 1u << 16;                        // COUNTFLAG
+    wraps.push_back(static_cast<uint64_t>(zero_at));
+    if (wraps.size() > 64) wraps.pop_front();
+    if (csr & 2) c.pend(15);
+    if (rvr == 0) {                         // a reload of 0 stops the counter
+        stopped_value = 0;
+        zero_at = -1;
+        return;
+    }
+    zero_at += static_cast<int64_t>(rvr) + 1;
+    schedule(c);
+}
+
+uint32_t SysTick::read_reg(uint32_t offset, uint64_t now) {
+    if (offset == 0x0) {
+        const uint32_t v = csr | (1u << 2);
+        csr &= ~(1u << 16);                 // COUNTFLAG clears on read
+        return v;
+    }
+    if (offset == 0x4) return rvr;
+    if (offset == 0x8) return value(now);
+    return calib;
+}
+
+void SysTick::write_reg(Core& c, uint32_t offset, uint32_t v, uint64_t now) {
+    const int64_t t = static_cast<int64_t>(now);
+    if (offset == 0x0) {
+        const bool was = enabled();
+        csr = (csr & (1u << 16)) | (v & 0x3u) | (1u << 2);
+        if (enabled() && !was) {
+            const uint32_t current = stopped_value;
+            zero_at = current ? t + current : t + 1 + rvr;
+            if (current == 0 && rvr == 0) zero_at = -1;
+            schedule(c);
+        } else if (was && !enabled()) {
+            stopped_value = value(now);
+            zero_at = -1;
+            schedule(c);
+        }
+    } else if (offset == 0x4) {
+        rvr = v & 0xFFFFFFu;
+        if (enabled() && zero_at < 0 && rvr) {
+            zero_at = t + 1 + rvr;
+            schedule(c);
+        }
+    } else if (offset == 0x8) {             // any write clears the counter and COUNTFLAG
+        csr &= ~(1u << 16);
+        if (enabled()) {
+            zero_at = rvr ? t + 1 + rvr : -1;
+            schedule(c);
+        } else {
+            stopped_value = 0;
+        }
+    }
+}
+
+bool SysTick::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    const uint32_t a = address & ~3u;
+    if (a < base || a >= base + 0x10) return false;
+    out = extract(read_reg(a - base, c.now()), address, size);
+    return true;
+}
+
+bool SysTick::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    const uint32_t a = address & ~3u;
+    if (a < base || a >= base + 0x10) return false;
+    const uint64_t now = c.now();
+    // Byte and halfword writes merge into the word; CSR's merge must not read (and clear)
+    // COUNTFLAG.
+    const uint32_t old = a == base ? csr : read_reg(a - base, now);
+    uint32_t mask = 0;
+    write_reg(c, a - base, merge_word(old, address, size, value, mask), now);
+    return true;
+}
+
+// -- UART0 ------------------------------------------------------------------------------------
+void Uart::setup() {
+    oBDH = L["BDH"]; oBDL = L["BDL"]; oC1 = L["C1"]; oC2 = L["C2"]; oS1 = L["S1"];
+    oC3 = L["C3"]; oD = L["D"]; oC4 = L["C4"]; oPFIFO = L["PFIFO"]; oCFIFO = L["CFIFO"];
+    oSFIFO = L["SFIFO"]; oTWFIFO = L["TWFIFO"]; oTCFIFO = L["TCFIFO"]; oRWFIFO = L["RWFIFO"];
+    oRCFIFO = L["RCFIFO"]; oED = L["ED"];
+    TIE = L["C2.TIE"]; TCIE = L["C2.TCIE"]; RIE = L["C2.RIE"]; ILIE = L["C2.ILIE"];
+    TE = L["C2.TE"]; RE = L["C2.RE"];
+    TDRE = L["S1.TDRE"]; TC = L["S1.TC"]; RDRF = L["S1.RDRF"]; IDLE = L["S1.IDLE"];
+    OR = L["S1.OR"];
+    S1_CLEARED_BY_D = IDLE | OR | L["S1.NF"] | L["S1.FE"] | L["S1.PF"];
+    SBR_HIGH = L["BDH.SBR"]; SBNS = L["BDH.SBNS"]; M = L["C1.M"]; BRFA = L["C4.BRFA"];
+    ORIE = L["C3.ORIE"]; TXFE = L["PFIFO.TXFE"]; RXFE = L["PFIFO.RXFE"];
+    TXFLUSH = L["CFIFO.TXFLUSH"]; RXFLUSH = L["CFIFO.RXFLUSH"];
+    CFIFO_ENABLES = L["CFIFO.RXUFE"] | L["CFIFO.TXOFE"] | L["CFIFO.RXOFE"];
+    TXEMPT = L["SFIFO.TXEMPT"]; RXEMPT = L["SFIFO.RXEMPT"]; TXOF = L["SFIFO.TXOF"];
+    RXUF = L["SFIFO.RXUF"];
+    SFIFO_W1C = RXUF | TXOF | L["SFIFO.RXOF"];
+    FIFO_CODE = L["FIFO_CODE"];
+    ready = true;
+}
+
+void Uart::reset(Core&) {
+    v = L.reset;
+    tx.clear();
+    rx.clear();
+    rx_queue.clear();
+    sent.clear();
+    notes.clear();
+    shifting = -1;
+    tx_event = rx_event = idle_event = 0;
+    bdh_buffer = v[oBDH];
+    s1_seen = 0;
+    rdrf = false;
+    flags = 0;
+    overruns = tx_overflows = 0;
+    line_rxtx = line_err = false;
+}
+
+double Uart::baud(const Core& c) const {
+    const uint32_t sbr = ((v[oBDH] & SBR_HIGH) << 8) | v[oBDL];
+    const uint32_t brfa = v[oC4] & BRFA;
+    if (sbr == 0) return 0.0;
+    return c.core_hz() / (16 * (sbr + brfa / 32.0));    // UART0 runs from the core clock
+}
+
+int Uart::frame_bits() const {
+    const int data = (v[oC1] & M) ? 9 : 8;
+    const int stop = (v[oBDH] & SBNS) ? 2 : 1;
+    return 1 + data + stop;
+}
+
+uint64_t Uart::frame_cycles(const Core& c) const {
+    const double b = baud(c);
+    if (b == 0.0) return kNever;
+    const double cycles = std::nearbyint(frame_bits() * c.core_hz() / b);   // half to even
+    return std::max<uint64_t>(1, static_cast<uint64_t>(cycles));
+}
+
+size_t Uart::rx_water() const {
+    return (v[oPFIFO] & RXFE) ? std::max<size_t>(1, v[oRWFIFO]) : 1;
+}
+
+bool Uart::tdre() const {
+    const size_t water = (v[oPFIFO] & TXFE) ? v[oTWFIFO] : 0;
+    return tx.size() <= water;
+}
+
+uint8_t Uart::s1() const {
+    return static_cast<uint8_t>((tdre() ? TDRE : 0) | (tc() ? TC : 0) | (rdrf ? RDRF : 0) | flags);
+}
+
+void Uart::update_irq(Core& c) {
+    const uint8_t c2 = v[oC2], s = s1();
+    const bool rxtx = ((c2 & TIE) && (s & TDRE)) || ((c2 & TCIE) && (s & TC)) ||
+                      ((c2 & RIE) && (s & RDRF)) || ((c2 & ILIE) && (s & IDLE));
+    const bool err = (v[oC3] & ORIE) && (s & OR);
+    if (rxtx != line_rxtx || err != line_err) {
+        line_rxtx = rxtx;
+        line_err = err;
+        c.set_irq(irq_rxtx, rxtx);
+        c.set_irq(irq_err, err);
+    }
+}
+
+void Uart::kick(Core& c) {
+    if (shifting >= 0 || !(v[oC2] & TE) || tx.empty()) return;
+    shifting = tx.front();
+    tx.pop_front();
+    tx_event = c.at(c.now() + frame_cycles(c), Ev::UartTx);
+}
+
+void Uart::shifted(Core& c) {
+    const int byte = shifting;
+    shifting = -1;
+    tx_event = 0;
+    if (byte != kPreamble) sent.emplace_back(c.cycles_, static_cast<uint8_t>(byte));
+    kick(c);
+    update_irq(c);
+}
+
+void Uart::receive(Core& c, const uint8_t* data, size_t n) {
+    rx_queue.insert(rx_queue.end(), data, data + n);
+    if (!rx_event && !rx_queue.empty()) rx_event = c.at(c.now() + frame_cycles(c), Ev::UartRx);
+}
+
+void Uart::arrived(Core& c) {
+    rx_event = 0;
+    const uint8_t byte = rx_queue.front();
+    rx_queue.pop_front();
+    if (v[oC2] & RE) {
+        if (rx.size() >= rx_depth()) {
+            flags |= OR;
+            ++overruns;
+        } else {
+            rx.push_back(byte);
+            latch_rdrf();
+        }
+    }
+    if (idle_event) c.cancel(idle_event);
+    idle_event = c.at(c.cycles_ + frame_cycles(c), Ev::UartIdle);
+    if (!rx_queue.empty()) rx_event = c.at(c.cycles_ + frame_cycles(c), Ev::UartRx);
+    update_irq(c);
+}
+
+void Uart::idle(Core& c) {
+    idle_event = 0;
+    flags |= IDLE;
+    update_irq(c);
+}
+
+uint8_t Uart::read_reg(Core& c, uint32_t o) {
+    if (o == oS1) {
+        const uint8_t s = s1();
+        s1_seen = static_cast<uint8_t>(s & (S1_CLEARED_BY_D | RDRF));
+        return s;
+    }
+    if (o == oD) {
+        uint8_t value = 0;
+        if (!rx.empty()) {
+            value = rx.front();
+            rx.pop_front();
+        } else {
+            v[oSFIFO] |= RXUF;
+        }
+        if (s1_seen) {
+            if ((s1_seen & RDRF) && rx.size() < rx_water()) rdrf = false;
+            flags &= static_cast<uint8_t>(~(s1_seen & ~RDRF));
+            s1_seen = 0;
+        }
+        update_irq(c);
+        return value;
+    }
+    if (o == oPFIFO) {
+        return static_cast<uint8_t>((v[oPFIFO] & (TXFE | RXFE)) | (FIFO_CODE << 4) | FIFO_CODE);
+    }
+    if (o == oSFIFO) {
+        return static_cast<uint8_t>((v[oSFIFO] & SFIFO_W1C) | (tx.empty() ? TXEMPT : 0) |
+                                    (rx.empty() ? RXEMPT : 0));
+    }
+    if (o == oTCFIFO) return static_cast<uint8_t>(tx.size());
+    if (o == oRCFIFO) return static_cast<uint8_t>(rx.size());
+    return v[o];
+}
+
+void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
+    if (o == oS1 || o == oED || o == oTCFIFO || o == oRCFIFO) return;    // read-only
+    if (o == oBDH) {
+        bdh_buffer = value;                      // buffered until BDL
+    } else if (o == oBDL) {
+        v[oBDH] = bdh_buffer;
+        v[oBDL] = value;
+    } else if (o == oD) {
+        if (tx.size() >= tx_depth()) {
+            v[oSFIFO] |= TXOF;
+            ++tx_overflows;
+        } else {
+            tx.push_back(value);
+        }
+        kick(c);
+        update_irq(c);
+    } else if (o == oC2) {
+        const uint8_t old = v[oC2];
+        v[oC2] = value;
+        if ((value & TE) && !(old & TE) && shifting < 0) {     // a preamble (idle frame) first
+            shifting = kPreamble;
+            tx_event = c.at(c.now() + frame_cycles(c), Ev::UartTx);
+        }
+        kick(c);
+        update_irq(c);
+    } else if (o == oC3) {
+        v[oC3] = value;
+        update_irq(c);
+    } else if (o == oPFIFO) {
+        if (v[oC2] & (TE | RE)) {
+            notes.emplace_back(c.instructions_now(),
+                               "UART0_PFIFO written with TE or RE set (the manual allows changing "
+                               "the FIFO enables only with both clear)");
+        }
+        v[oPFIFO] = static_cast<uint8_t>(value & (TXFE | RXFE));
+        update_irq(c);
+    } else if (o == oCFIFO) {
+        if (value & TXFLUSH) tx.clear();
+        if (value & RXFLUSH) rx.clear();
+        v[oCFIFO] = static_cast<uint8_t>(value & CFIFO_ENABLES);
+        update_irq(c);
+    } else if (o == oSFIFO) {
+        v[oSFIFO] &= static_cast<uint8_t>(~(value & SFIFO_W1C));
+    } else if (o == oTWFIFO) {
+        v[oTWFIFO] = value;
+        update_irq(c);
+    } else if (o == oRWFIFO) {
+        v[oRWFIFO] = value;
+        latch_rdrf();
+        update_irq(c);
+    } else {
+        v[o] = value;
+    }
+}
+
+namespace {
+// 8-bit registers: an access of any width is one access per byte, low address first; an
+// offset no register occupies makes the whole access the caller's (a bus fault in Python).
+bool covered(const Layout8& L, uint32_t address, unsigned size) {
+    if (address < L.base || address + size > L.base + L.span) return false;
+    for (unsigned i = 0; i < size; ++i) {
+        if (L.reg_at[address - L.base + i] < 0) return false;
+    }
+    return true;
+}
+
+template <typename Device>
+bool read_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    if (!covered(d.L, address, size)) return false;
+    out = 0;
+    for (unsigned i = 0; i < size; ++i) {
+        out |= uint64_t{d.read_reg(c, address - d.L.base + i)} << (8 * i);
+    }
+    return true;
+}
+
+template <typename Device>
+bool write_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t value) {
+    if (!covered(d.L, address, size)) return false;
+    for (unsigned i = 0; i < size; ++i) {
+        d.write_reg(c, address - d.L.base + i, static_cast<uint8_t>(value >> (8 * i)));
+    }
+    return true;
+}
+}  // namespace
+
+bool Uart::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    return read_bytes(*this, c, address, size, out);
+}
+
+bool Uart::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    return write_bytes(*this, c, address, size, value);
+}
+
+// -- the MPU6050 on the bus -------------------------------------------------------------------
+void MpuSlave::start(Core& c, bool read) {
+    flush(c);
+    if (read) {
+        read_reg = pointer;
+        read_bytes.clear();
+    } else {
+        pointer_set = false;
+    }
+}
+
+bool MpuSlave::write_byte(uint8_t byte) {
+    if (!pointer_set) {
+        pointer = byte;
+        pointer_set = true;
+    } else {
+        pending.push_back(byte);
+    }
+    return true;
+}
+
+namespace {
+bool auto_increments(int reg) {
+    return reg != hq::mpu6050::FIFO_R_W && reg != hq::mpu6050::MEM_R_W;
+}
+}  // namespace
+
+uint8_t MpuSlave::read_byte() {
+    const int reg = pointer >= 0 ? pointer : 0;
+    uint8_t value = 0;
+    emu->read(hq::mpu6050::kAddress, static_cast<uint8_t>(reg), &value, 1);
+    read_bytes.push_back(value);
+    if (auto_increments(reg)) pointer = (reg + 1) & 0x7F;
+    return value;
+}
+
+void MpuSlave::flush(Core& c) {
+    const double now = c.seconds(c.now());
+    if (!pending.empty()) {
+        emu->write(hq::mpu6050::kAddress, static_cast<uint8_t>(pointer), pending.data(),
+                   pending.size());
+        log.push_back({now, 'W', pointer, pending});
+        if (auto_increments(pointer)) {
+            pointer = (pointer + static_cast<int>(pending.size())) & 0x7F;
+        }
+        pending.clear();
+    } else if (!read_bytes.empty()) {
+        log.push_back({now, 'R', read_reg, read_bytes});
+        read_bytes.clear();
+    }
+}
+
+// -- I2C0 -------------------------------------------------------------------------------------
+void I2c::setup() {
+    oC1 = L["C1"]; oS = L["S"]; oD = L["D"]; oF = L["F"]; oFLT = L["FLT"];
+    IICEN = L["C1.IICEN"]; IICIE = L["C1.IICIE"]; MST = L["C1.MST"]; TX = L["C1.TX"];
+    TXAK = L["C1.TXAK"]; RSTA = L["C1.RSTA"];
+    TCF = L["S.TCF"]; BUSY = L["S.BUSY"]; ARBL = L["S.ARBL"]; IICIF = L["S.IICIF"];
+    RXAK = L["S.RXAK"];
+    STOPF = L["FLT.STOPF"]; SSIE = L["FLT.SSIE"]; STARTF = L["FLT.STARTF"]; SHEN = L["FLT.SHEN"];
+    FLT_FLT = L["FLT.FLT"];
+    MULT = L["F.MULT"]; MULT_SHIFT = static_cast<uint32_t>(shift_of(MULT)); ICR = L["F.ICR"];
+    ready = true;
+}
+
+void I2c::reset() {
+    v = L.reset;
+    transfers.clear();
+    open = false;
+    errors.clear();
+    slave = nullptr;
+    expect_address = reading = line = false;
+    busy_until = event = free_event = 0;
+    scl_held = false;
+}
+
+double I2c::scl_hz(const Core& c) const {
+    const uint32_t mult = (v[oF] & MULT) >> MULT_SHIFT;
+    if (mult == 3) return 0.0;
+    return c.bus_hz() / ((1u << mult) * scl_divider[v[oF] & ICR]);
+}
+
+uint64_t I2c::bit_cycles(const Core& c) const {
+    const double hz = scl_hz(c);
+    if (hz == 0.0) return kNever;
+    return std::max<uint64_t>(1, static_cast<uint64_t>(std::nearbyint(c.core_hz() / hz)));
+}
+
+void I2c::update_irq(Core& c) {
+    const bool level = (v[oC1] & IICIE) && (v[oS] & IICIF);
+    if (level != line) {
+        line = level;
+        c.set_irq(irq, level);
+    }
+}
+
+void I2c::hold_scl(Core& c, bool held) {
+    scl_held = held;
+    if (held) {
+        if (event) c.cancel(event);
+        if (free_event) c.cancel(free_event);
+        event = free_event = 0;
+    } else if (!(v[oC1] & MST)) {
+        v[oS] &= static_cast<uint8_t>(~BUSY);
+    }
+}
+
+void I2c::start(Core& c, uint64_t now, bool) {
+    if (free_event) {                    // a START before the last STOP finished
+        c.cancel(free_event);
+        free_event = 0;
+    }
+    end_transfer(c, now);
+    v[oS] |= BUSY;
+    busy_until = std::max(busy_until, now) + bit_cycles(c);
+    expect_address = true;
+    slave = nullptr;
+    v[oFLT] |= STARTF;
+    if (v[oFLT] & SSIE) flag(c, static_cast<uint8_t>(IICIF));
+}
+
+void I2c::stop(Core& c, uint64_t now) {
+    end_transfer(c, now);
+    expect_address = false;
+    slave = nullptr;
+    const uint64_t done = std::max(busy_until, now) + bit_cycles(c);
+    busy_until = done;
+    if (scl_held) return;
+    free_event = c.at(done, Ev::I2cFree);
+}
+
+void I2c::bus_free(Core& c) {
+    free_event = 0;
+    v[oS] &= static_cast<uint8_t>(~BUSY);
+    v[oFLT] |= STOPF;
+    if (v[oFLT] & SSIE) flag(c, static_cast<uint8_t>(IICIF));
+}
+
+void I2c::end_transfer(Core& c, uint64_t now) {
+    if (open) {
+        transfers.back().end_cycle = static_cast<int64_t>(now);
+        open = false;
+    }
+    for (MpuSlave* s : slaves) s->stop(c);
+}
+
+void I2c::begin_byte(Core& c, bool receive, int byte, bool ack) {
+    const uint64_t now = c.now();
+    if (event) {
+        errors.emplace_back(c.instructions_now(), "D accessed while a byte was in transfer");
+        c.cancel(event);
+        event = 0;
+    }
+    const uint64_t start = std::max(now, busy_until);
+    const uint64_t done = start + kBitsPerByte * bit_cycles(c);
+    busy_until = done;
+    v[oS] &= static_cast<uint8_t>(~TCF);
+    if (scl_held) return;
+    byte_receive = receive;
+    byte_value = byte;
+    byte_ack = ack;
+    byte_start = start;
+    event = c.at(done, Ev::I2cByte);
+}
+
+void I2c::finish_byte(Core& c) {
+    event = 0;
+    if (byte_receive) {
+        const uint8_t value = (slave && reading) ? slave->read_byte() : 0xFF;
+        v[oD] = value;
+        if (open) transfers.back().data.push_back(value);
+        v[oS] &= static_cast<uint8_t>(~RXAK);
+    } else if (expect_address) {
+        expect_address = false;
+        const int address = byte_value >> 1;
+        const bool read = byte_value & 1;
+        MpuSlave* found = nullptr;
+        if (pins_connected) {
+            for (MpuSlave* s : slaves) {
+                if (s->address == address && s->present) {
+                    found = s;
+                    break;
+                }
+            }
+        }
+        if (found) found->start(c, read);
+        slave = found;
+        reading = read;
+        transfers.push_back({address, read, found != nullptr, byte_start, {}, -1,
+                             c.seconds(byte_start)});
+        open = true;
+        set_rxak(found != nullptr);
+    } else {
+        bool acked = false;
+        if (slave && !reading) {
+            acked = slave->write_byte(static_cast<uint8_t>(byte_value));
+            if (open) transfers.back().data.push_back(static_cast<uint8_t>(byte_value));
+        }
+        set_rxak(acked);
+    }
+    flag(c, static_cast<uint8_t>(TCF | IICIF));
+}
+
+uint8_t I2c::read_reg(Core& c, uint32_t o) {
+    if (o == oC1) return static_cast<uint8_t>(v[oC1] & ~RSTA);
+    if (o == oD) {
+        const uint8_t data = v[oD];
+        const uint8_t c1 = v[oC1];
+        if ((c1 & MST) && !(c1 & TX) && (c1 & IICEN)) begin_byte(c, true, -1, !(c1 & TXAK));
+        return data;
+    }
+    return v[o];
+}
+
+void I2c::write_reg(Core& c, uint32_t o, uint8_t value) {
+    if (o == oS) {
+        v[oS] = static_cast<uint8_t>(v[oS] & ~(value & (ARBL | IICIF)));
+        update_irq(c);
+    } else if (o == oFLT) {
+        const uint8_t keep = static_cast<uint8_t>(v[oFLT] & (STOPF | STARTF) & ~value);
+        v[oFLT] = static_cast<uint8_t>((value & (SHEN | SSIE | FLT_FLT)) | keep);
+    } else if (o == oC1) {
+        const uint8_t old = v[oC1];
+        v[oC1] = static_cast<uint8_t>(value & ~RSTA);
+        const uint64_t now = c.now();
+        if (!(value & IICEN)) {
+            if (old & MST) stop(c, now);
+            update_irq(c);
+            return;
+        }
+        if ((value & MST) && !(old & MST)) {
+            start(c, now, false);
+        } else if ((old & MST) && !(value & MST)) {
+            stop(c, now);
+        } else if ((value & RSTA) && (value & MST)) {
+            if (v[oF] & MULT) {
+                errors.emplace_back(c.instructions_now(),
+                                    "repeated START with F[MULT] != 0 is not generated (e6070)");
+            } else {
+                start(c, now, true);
+            }
+        }
+        update_irq(c);
+    } else if (o == oD) {
+        v[oD] = value;
+        const uint8_t c1 = v[oC1];
+        if ((c1 & MST) && (c1 & TX) && (c1 & IICEN)) begin_byte(c, false, value, false);
+    } else {
+        v[o] = value;
+    }
+}
+
+bool I2c::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    return read_bytes(*this, c, address, size, out);
+}
+
+bool I2c::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    return write_bytes(*this, c, address, size, value);
+}
+
+}  // namespace hqsim::mk64
