@@ -13,8 +13,10 @@ image that is flashed to the board runs instruction by instruction, and every in
 output goes through the chip's pins and peripherals, as on the rig:
 
 * the frame's MPU6050 FIFO bytes go into the MPU6050 on I2C0, and its fault (NACK, silent,
-  reset, overflow) into that chip, which the image reads over the bus byte by byte;
-* the frame's RC channels become servo pulses on the six RC pins, captured by FTM3;
+  reset, overflow) into that chip, or (stuck bus) into the bus itself, whose clock a device
+  then holds low; the image reads the chip over the bus byte by byte;
+* the frame's RC channels become servo pulses on the six RC pins (as a 50 Hz receiver
+  sends them, and at once on a change), captured by FTM3;
 * one frame is one pass of the image's main loop: the board runs until the loop has done
   its step and is about to sleep for the next tick (``hq::teensy::LoopTimer::wait``);
 * the five thrust fractions are read back from FTM0's pulse widths (the value loaded for the
@@ -47,7 +49,6 @@ import tty
 from heliquad.host.mavlink_dialect import dialect
 
 from .mk64.machine import ChipReset, EmulationError
-from .mk64.uart import _TIE
 
 #: The image's loop rate (firmware/targets/teensy35/main.cpp, kLoopHz).
 IMAGE_LOOP_HZ = 200.0
@@ -65,6 +66,8 @@ STACK_PAINT = 0xDEADBEEF
 ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
 #: FTM3 (RC capture) counts bus / 32: one count per 64 core cycles at 120 MHz.
 RC_CHANNELS = 6
+#: A receiver's frame: 20 ms, four loops.
+RC_FRAME_LOOPS = 4
 #: Emulated-time bounds: reset to the first loop; one loop (a loop that takes longer has hung,
 #: and the 500 ms watchdog has already reset the chip); draining the UART on a sync frame.
 BOOT_LIMIT_S = 5.0
@@ -96,6 +99,7 @@ class PilBoard:
         self._wait_target = None
         self.machine.break_at(WAIT_SYMBOL, self._on_wait)
         self.resets = 0
+        self._rc_last, self._rc_age = None, 0
         self.step_cycles = []
         self.telemetry_out = bytearray()
 
@@ -117,6 +121,7 @@ class PilBoard:
                     print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
                           file=sys.stderr, flush=True)
                     self.board.reset()
+                    self._rc_last = None            # the image lost its captures
                     self.waits = 0
                     self._wait_target = 1
                     continue
@@ -138,12 +143,16 @@ class PilBoard:
         image = self.machine.image
         self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
+        self.machine.core.keep_records = False
+        self.board.mpu.log.clear()
+        self.board.chip.i2c0.transfers.clear()
         self._collect_telemetry()
 
     # -- inputs ----------------------------------------------------------------------------
     def apply_imu_fault(self, fault: int) -> None:
         mav = dialect()
         mpu = self.board.mpu
+        self.board.chip.i2c0.hold_scl(fault == mav.HQ_IMU_FAULT_STUCK_BUS)
         mpu.set_present(fault != mav.HQ_IMU_FAULT_NACK)
         mpu.emu.set_silent(fault == mav.HQ_IMU_FAULT_SILENT)
         if fault == mav.HQ_IMU_FAULT_RESET:
@@ -152,11 +161,19 @@ class PilBoard:
             mpu.emu.force_overflow()
 
     def rc_pulses(self, rc_us) -> None:
-        """One servo pulse per channel with a signal (0: none), starting on the next FTM3
-        count: the rising edge on a count boundary and the falling edge ceil(us x 1.875)
-        counts later, so the capture reads back exactly the frame's microseconds (the image
-        truncates counts x 8 / 15). A receiver's pulse is continuous; the frame's value is
-        an integer, and this is the pulse whose capture is that integer."""
+        """Servo pulses as a 50 Hz receiver sends them (every RC_FRAME_LOOPS frames), and at
+        once when a channel's value changes, so a stick change reaches the image's next loop
+        as it reaches the host build's. One pulse per channel with a signal (0: none),
+        starting on the next FTM3 count: the rising edge on a count boundary and the falling
+        edge ceil(us x 1.875) counts later, so the capture reads back exactly the frame's
+        microseconds (the image truncates counts x 8 / 15). A receiver's pulse is
+        continuous; the frame's value is an integer, and this is the pulse whose capture is
+        that integer."""
+        rc = tuple(int(v) for v in rc_us[:RC_CHANNELS])
+        self._rc_age += 1
+        if rc == self._rc_last and self._rc_age < RC_FRAME_LOOPS:
+            return
+        self._rc_last, self._rc_age = rc, 0
         m, ftm3, ports = self.machine, self.board.chip.ftm3, self.board.chip.ports
         if ftm3.anchor is None:
             return                                  # capture not running: no one listens
@@ -167,7 +184,7 @@ class PilBoard:
         from .mk64.teensy35 import PINS, RC_PINS
 
         for ch in range(RC_CHANNELS):
-            us = int(rc_us[ch])
+            us = rc[ch]
             if us <= 0:
                 continue
             counts = -(-us * 15 // 8)
@@ -178,7 +195,7 @@ class PilBoard:
 
     def feed_telemetry(self, data: bytes) -> None:
         if data:
-            self.board.chip.uart0.receive(data)
+            self.board.receive(data)
 
     # -- one frame ---------------------------------------------------------------------------
     def frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int, sync: bool):
@@ -226,7 +243,7 @@ class PilBoard:
             return
         deadline = min(m.now() + int(DRAIN_LIMIT_S * m.core_hz),
                        systick.zero_at - int(20e-6 * m.core_hz))
-        while m.now() < deadline and not (uart.tc() and not uart.v["C2"] & _TIE):
+        while m.now() < deadline and not uart.tx_idle():
             step = min(uart.frame_cycles() * 4, deadline - m.now())
             m.run(seconds=step / m.core_hz)
 
@@ -243,12 +260,9 @@ class PilBoard:
 
     def _collect_telemetry(self) -> None:
         chip = self.board.chip
-        uart = chip.uart0
-        self.telemetry_out += bytes(b for _, b in uart.sent)
-        uart.sent.clear()
-        # A lockstep run is long: the models' inspection logs must not grow with it.
-        self.board.mpu.log.clear()
-        chip.i2c0.transfers.clear()
+        self.telemetry_out += self.board.take_telemetry()
+        # A lockstep run is long: the models' inspection logs must not grow with it (the
+        # I2C and MPU6050 records are off after the boot, see boot()).
         chip.ftm3.captures.clear()
         chip.ports.level_log.clear()
 
@@ -381,8 +395,11 @@ def main(argv=None) -> int:
           f"{tel.slave_path}\nimu: {'dmp' if report[5] == mav.HQ_SENSOR_DMP else 'raw'}\n"
           f"image: {elf}\nready", flush=True)
 
-    parser = mav.MAVLink(None, srcSystem=1, srcComponent=1)
-    parser.robust_parsing = True
+    from heliquad.host.mavframe import Codec, Framer
+
+    codec = Codec(mav, system_id=1, component_id=1)      # the vehicle's ids, as the board's
+    framer = Framer(codec)
+    frame_id, reply_id = mav.MAVLINK_MSG_ID_HQ_SENSOR_FRAME, mav.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
     last_frame, reply, lost, repeated, frames, dropped = None, b"", 0, 0, 0, 0
     exit_code = 0
     last_input = time.monotonic()
@@ -403,9 +420,10 @@ def main(argv=None) -> int:
                     break
                 continue
             last_input = time.monotonic()
-            for msg in parser.parse_buffer(sim.read()) or ():
-                if msg.get_type() != "HQ_SENSOR_FRAME":
+            for msgid, _, payload in framer.feed(sim.read()):
+                if msgid != frame_id:
                     continue
+                msg = codec.decode(msgid, payload)
                 if last_frame is not None and msg.frame == last_frame:
                     repeated += 1
                 else:
@@ -420,8 +438,9 @@ def main(argv=None) -> int:
                     motors, armed, mode, kind = board.frame(
                         fifo, msg.fifo_kind == mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault,
                         bool(msg.sync))
-                    reply = mav.MAVLink_hq_actuator_frame_message(
-                        msg.time_us, msg.frame, motors, int(armed), mode, kind).pack(parser)
+                    reply = codec.encode(reply_id, {
+                        "time_us": msg.time_us, "frame": msg.frame, "motor": motors,
+                        "armed": int(armed), "mode": mode, "sensor_kind": kind})
                 if msg.sync and board.telemetry_out:
                     n = tel.write_some(bytes(board.telemetry_out))
                     del board.telemetry_out[:n]

@@ -206,7 +206,8 @@ def test_sil_with_a_silent_imu_stops_with_the_firmwares_reason_and_keeps_the_log
     assert 0 < u.size < 10 * 200
 
 
-def test_free_running_board_streams_telemetry_in_real_time(tmp_path):
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_free_running_board_streams_telemetry_in_real_time(firmware, tmp_path):
     # `heliquad board` paces the lockstep at real time; a tool connects to the telemetry
     # path like a serial port, sees 200 Hz samples without gaps, and, once the board is armed
     # and has the tool's heartbeat, can start an excitation. Pacing: the simulated clock never
@@ -216,8 +217,12 @@ def test_free_running_board_streams_telemetry_in_real_time(tmp_path):
     port = tmp_path / "rig"
     # SIGINT back to its default in the child: a shell that ran the tests in the background
     # hands SIGINT down ignored, and then Python would never see the Ctrl-C sent below.
+    env = dict(os.environ)
+    if firmware != "host":                      # the image the tests built
+        env["HQ_TEENSY35_ELF"] = image_for(firmware)["firmware_image"]
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                             str(port), "--duration-s", "30"], stdout=subprocess.PIPE, text=True,
+                             str(port), "--duration-s", "30", "--firmware", firmware],
+                            stdout=subprocess.PIPE, text=True, env=env,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert "board running" in proc.stdout.readline()

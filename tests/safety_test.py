@@ -159,6 +159,31 @@ def test_a_nacking_imu_cuts_the_motors_and_says_it_does_not_answer(rig):
     rig.until(lambda m: m.get_type() == "STATUSTEXT" and m.text == "IMU recovered")
 
 
+def test_a_stuck_bus_cuts_the_motors_is_counted_and_the_loop_goes_on(rig):
+    # A device holds the I2C clock low. On the emulated Teensy no byte ends: each transfer
+    # times out at the next SysTick (the byte waits sleep until then) and ends in a bus
+    # recovery; the host build fails each transfer at once, as for a NACK. Either way the
+    # IMU goes stale, the failsafe cuts the motors, the failures are counted, and the loop
+    # keeps running; when the bus is released the chip is read again.
+    stuck = MAV.HQ_IMU_FAULT_STUCK_BUS
+    rig.hover(200)
+    _, before = rig.until(lambda m: m.get_type() == "HQ_FW_STATUS", max_frames=250)
+    first = rig.frame + 1
+    reply = rig.step(imu_fault=stuck)
+    while reply.armed and rig.frame - first < 50:
+        assert max(reply.motor) > 0.0
+        reply = rig.step(imu_fault=stuck)
+    assert not reply.armed and reply.motor == [0.0] * 5
+    # stale after 25 ms of samples, noticed within one more loop (the timeout's tick)
+    assert (rig.frame - first) * DT_US <= IMU_TIMEOUT_US + 2 * DT_US
+    _, during = rig.until(lambda m: m.get_type() == "HQ_FW_STATUS" and m.loops > before.loops,
+                          imu_fault=stuck, max_frames=250)
+    assert during.imu_bus_errors > before.imu_bus_errors and during.imu_stale == 1
+    assert during.loops >= before.loops + 150                   # a second later: still looping
+    rig.until(lambda m: m.get_type() == "STATUSTEXT" and m.text == "IMU recovered",
+              max_frames=400)
+
+
 def test_a_fifo_overflow_is_resynchronised_without_a_failsafe(rig):
     rig.hover()
     reply = rig.step(imu_fault=MAV.HQ_IMU_FAULT_OVERFLOW)

@@ -26,6 +26,10 @@ class Port(RegisterDevice):
         super().__init__(machine, f"PORT{letter}", gate=(sim, "SCGC5", f"PORT{letter}"),
                          span=0xA4)
 
+    def reset(self):
+        super().reset()
+        self._digital = None
+
     def _set_pcr(self, n, value, mask):
         name = f"PCR{n}"
         old = self.v[name]
@@ -34,6 +38,8 @@ class Port(RegisterDevice):
         isf = old & (1 << 24) & ~value              # ISF: write 1 to clear
         new = (value & 0x000F_8777) | isf
         self.v[name] = new
+        if (new ^ old) & (7 << 8):
+            self._digital = None
         if new != old:
             m = self.machine
             self.ports.log.append((m.instructions_now(), m.now(), self.letter, n, new))
@@ -81,6 +87,13 @@ class Port(RegisterDevice):
     def mux(self, n) -> int:
         return (self.v[f"PCR{n}"] >> 8) & 7
 
+    def digital_pins(self) -> tuple:
+        """The pins with a digital function (MUX != 0): the only ones PDIR can read as 1.
+        Cached until a PCR's MUX changes (PDIR is read in interrupt handlers)."""
+        if self._digital is None:
+            self._digital = tuple(n for n in range(32) if self.mux(n))
+        return self._digital
+
 
 class Gpio(RegisterDevice):
     READ_ONLY = ("PDIR",)
@@ -90,7 +103,8 @@ class Gpio(RegisterDevice):
         super().__init__(machine, f"GPIO{letter}", span=0x18)
 
     def r_PDIR(self):
-        return sum(self.ports.level(self.letter, n) << n for n in range(32))
+        ports, letter = self.ports, self.letter
+        return sum(ports.level(letter, n) << n for n in ports.port[letter].digital_pins())
 
     def r_PSOR(self):
         return 0

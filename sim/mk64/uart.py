@@ -116,6 +116,11 @@ class Uart(NativeRegisters):
     def rdrf(self) -> bool:
         return self._state()["rdrf"]
 
+    def tx_idle(self) -> bool:
+        """Nothing left to send: the FIFO and the shifter are empty and the transmit
+        interrupt is not enabled (a driver enables it while its own queue holds bytes)."""
+        return self.tc() and not self.v["C2"] & self.map["C2"].bit("TIE")
+
     def s1(self) -> int:
         return self._state()["s1"]
 

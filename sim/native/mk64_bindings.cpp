@@ -154,6 +154,7 @@ void bind_mk64(py::module_& m) {
         .def_readwrite("sleeping", &Core::sleeping_)
         .def_readwrite("fpu_watch", &Core::fpu_watch_)
         .def_readwrite("log_all", &Core::log_all)
+        .def_readwrite("keep_records", &Core::keep_records)
         .def_readwrite("inline_boundaries", &Core::inline_boundaries,
                        "attend to block boundaries inside emu_start (False: stop at each, as "
                        "a reference for tests)")

@@ -342,6 +342,9 @@ public:
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     bool clocked[kDevices] = {true, true, false, false};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
+    // Keep the I2C transfer records and the MPU6050's register log until taken (for tests and
+    // inspection); a long lockstep run turns them off instead of taking and dropping them.
+    bool keep_records = true;
     bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
 
     uint64_t cycles_ = 0, instructions_ = 0, sleep_cycles_ = 0;

@@ -467,13 +467,13 @@ void MpuSlave::flush(Core& c) {
     if (!pending.empty()) {
         emu->write(hq::mpu6050::kAddress, static_cast<uint8_t>(pointer), pending.data(),
                    pending.size());
-        log.push_back({now, 'W', pointer, pending});
+        if (c.keep_records) log.push_back({now, 'W', pointer, pending});
         if (auto_increments(pointer)) {
             pointer = (pointer + static_cast<int>(pending.size())) & 0x7F;
         }
         pending.clear();
     } else if (!read_bytes.empty()) {
-        log.push_back({now, 'R', read_reg, read_bytes});
+        if (c.keep_records) log.push_back({now, 'R', read_reg, read_bytes});
         read_bytes.clear();
     }
 }
@@ -614,9 +614,11 @@ void I2c::finish_byte(Core& c) {
         if (found) found->start(c, read);
         slave = found;
         reading = read;
-        transfers.push_back({address, read, found != nullptr, byte_start, {}, -1,
-                             c.seconds(byte_start)});
-        open = true;
+        if (c.keep_records) {
+            transfers.push_back({address, read, found != nullptr, byte_start, {}, -1,
+                                 c.seconds(byte_start)});
+            open = true;
+        }
         set_rxak(found != nullptr);
     } else {
         bool acked = false;
