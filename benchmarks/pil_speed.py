@@ -4,12 +4,11 @@ Runs the same sine experiment (`heliquad sil`: the roll transfer function, mixer
 1 Hz, 0.05) on the host build and on the Teensy 3.5 image in the emulated MK64FX512, and
 prints for each the frames per second of the lockstep loop (wall time of the loop alone,
 start-up excluded) as a multiple of real time at 200 Hz; then the PIL's rate as a ratio to
-the host build's measured in the same run (the baseline), and where the PIL's time goes: the
-emulated board driven in this process for the same number of loops under cProfile, its time
-split into unicorn's own execution, the harness's callbacks (block accounting, peripheral
-accesses, exceptions, events) and the rest.
+the host build's measured in the same run (the baseline), and where the PIL's time goes:
+the emulated board driven alone for as many loops as the drop-in drives it (its share of a
+frame; the rest is the lockstep around it), with the board's own counts per loop.
 
-    python benchmarks/pil_speed.py [--cycles 10] [--elf PATH] [--profile-loops 400]
+    python benchmarks/pil_speed.py [--cycles 10] [--elf PATH] [--board-loops 1000]
 
 Figures are wall-clock ratios on a shared machine: they move with the load. Never a test.
 """
@@ -17,9 +16,7 @@ Figures are wall-clock ratios on a shared machine: they move with the load. Neve
 from __future__ import annotations
 
 import argparse
-import cProfile
 import pathlib
-import pstats
 import sys
 import tempfile
 import time
@@ -39,8 +36,11 @@ def run(firmware: str, cycles: int, elf: str | None, out: str):
     return r, time.perf_counter() - t0
 
 
-def profile(elf: str, loops: int):
-    """The emulated board alone, driven loop by loop as the drop-in drives it."""
+def board_alone(elf: str, loops: int):
+    """The emulated board driven loop by loop as the drop-in drives it (inputs in, one loop,
+    outputs out), without the ptys, the codec or the simulator: wall time, and the board's
+    own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
+    accesses and events)."""
     from heliquad.sim.mpu6050_packets import raw_packet
     from heliquad.sim.pil import PilBoard
 
@@ -48,40 +48,23 @@ def profile(elf: str, loops: int):
     board.boot()
     sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
     rc = [1500, 1500, 1000, 1500, 2000, 1000, 0, 0]
-    prof = cProfile.Profile()
+    m = board.machine
+    before = m.counts()
     t0 = time.perf_counter()
-    prof.enable()
     for k in range(loops):
         board.frame(sample, False, rc, 0, sync=(k % 50 == 49))
         board.telemetry_out.clear()
-    prof.disable()
     wall = time.perf_counter() - t0
-    return wall, pstats.Stats(prof)
-
-
-def split(stats: pstats.Stats):
-    """Own time (tottime) grouped: unicorn's emu_start, the harness (sim/mk64 and the
-    drop-in), everything else."""
-    groups = {"unicorn emu_start (emulation, native hooks)": 0.0,
-              "harness: sim/mk64 models and hooks": 0.0, "drop-in (sim/pil.py)": 0.0,
-              "other": 0.0}
-    for (path, _, name), (_, _, tottime, _, _) in stats.stats.items():
-        if name == "emu_start" or "unicorn" in path:
-            groups["unicorn emu_start (emulation, native hooks)"] += tottime
-        elif "/mk64/" in path:
-            groups["harness: sim/mk64 models and hooks"] += tottime
-        elif path.endswith("pil.py"):
-            groups["drop-in (sim/pil.py)"] += tottime
-        else:
-            groups["other"] += tottime
-    return groups
+    after = m.counts()
+    return wall, {k: (after[k] - before[k]) / loops for k in after}
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cycles", type=int, default=10, help="full-amplitude cycles (default 10)")
     p.add_argument("--elf", help="the Teensy image (default: the installed or in-tree one)")
-    p.add_argument("--profile-loops", type=int, default=400)
+    p.add_argument("--board-loops", type=int, default=1000,
+                   help="loops of the board driven alone (default 1000)")
     args = p.parse_args()
     from heliquad.sim.firmware_image import teensy35_image
 
@@ -97,16 +80,21 @@ def main() -> int:
                   f"{r.loop_s:.2f} s wall = {rate:.0f} frames/s = {rate / LOOP_HZ:.2f}x real "
                   f"time; start-up and shutdown {total - r.loop_s:.2f} s")
     print(f"PIL / host lockstep rate: {rates['teensy35'] / rates['host']:.4f}")
-    wall, stats = profile(elf, args.profile_loops)
-    print(f"\nthe emulated board alone, {args.profile_loops} loops under cProfile: {wall:.2f} s "
-          f"wall ({args.profile_loops / LOOP_HZ / wall:.2f}x real time with the profiler's "
-          "overhead)")
-    groups = split(stats)
-    total = sum(groups.values()) or 1.0
-    for name, t in groups.items():
-        print(f"  {name:45s} {t:6.2f} s  {100 * t / total:5.1f} %")
-    print("\ntop functions by own time:")
-    stats.sort_stats("tottime").print_stats(12)
+    n = args.board_loops
+    wall, per = board_alone(elf, n)
+    board_rate = n / wall
+    pil_frame_us = 1e6 / rates["teensy35"]
+    print(f"\nthe emulated board alone, {n} loops driven as the drop-in drives them: "
+          f"{board_rate:.0f} loops/s = {board_rate / LOOP_HZ:.2f}x real time, "
+          f"{1e6 / board_rate:.0f} us a loop")
+    print(f"  so of the PIL's {pil_frame_us:.0f} us a frame, the board takes "
+          f"{1e6 / board_rate:.0f} us and the lockstep around it (ptys, codec, the simulator's "
+          f"plant and telemetry tap) {pil_frame_us - 1e6 / board_rate:.0f} us")
+    print(f"  per loop: {per['blocks']:.0f} blocks entered, {per['emu_starts']:.1f} emu_start "
+          f"calls, {per['native_accesses']:.0f} native and {per['python_accesses']:.1f} Python "
+          f"peripheral accesses, {per['native_events']:.1f} native and "
+          f"{per['python_events']:.2f} Python events, {per['exceptions']:.1f} exceptions")
+    print("  (benchmarks/teensy35_pil_speed.py --profile breaks the board's own time down)")
     return 0
 
 
