@@ -119,6 +119,7 @@ class HostFirmware:
                     return imu[0] if imu else "?"
             elif self.proc.poll() is not None:
                 break
+        self.wait_exit(1.0)                 # it closed its output: let its exit status arrive
         message = self.stderr_tail()
         self.stop()
         raise FirmwareError(f"the {self.name} firmware did not start: {message}")
