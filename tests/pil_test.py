@@ -114,3 +114,32 @@ def test_the_esc_pulses_carry_the_commanded_thrust_to_one_ftm_count():
         for f, pulse in zip(sample.motor, reply.motor):
             counts = int(np.float32(f) * np.float32(span) + np.float32(0.5))
             assert round(pulse * span) == counts
+
+
+def test_a_loop_longer_than_its_period_shows_as_overruns(tmp_path_factory):
+    # A test build of the image (HQ_TEST_LOOP_DELAY_US) adds 6 ms of busy time to every
+    # loop of its 5 ms period: the loop timer must count the ticks it missed, HQ_FW_STATUS
+    # must report them, and the loop's cycles must show the stretch. The image as built
+    # reports none, and a fraction of its budget.
+    import teensy_image
+
+    slow_dir = teensy_image.BUILD.parent / "teensy35-slow-loop"
+    rc, log = teensy_image.build_preset(slow_dir, defines=("HQ_TEST_LOOP_DELAY_US=6000",))
+    assert rc == 0, log[-3000:]
+    budget = 600_000                                  # cycles of a 5 ms loop at 120 MHz
+    for image, slow in ((str(teensy_image.image().elf), False),
+                        (str(slow_dir / "heliquad-fw-teensy35.elf"), True)):
+        from heliquad.sim.lockstep import PilFirmware
+
+        with PilFirmware(image=image) as fw:
+            rig = FirmwareRig(fw)
+            rig.hover(20)
+            _, status = rig.until(lambda m: m.get_type() == "HQ_FW_STATUS" and m.loops > 100,
+                                  max_frames=400)
+            rig.close()
+        if slow:
+            assert status.loop_overruns > 10
+            assert status.loop_cycles_max > budget
+        else:
+            assert status.loop_overruns == 0
+            assert 0 < status.loop_cycles_max < budget / 4

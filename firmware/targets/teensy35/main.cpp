@@ -88,6 +88,9 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         Watchdog::refresh();
         const uint32_t c0 = cycles32();
         fc.step(rc.read());
+#ifdef HQ_TEST_LOOP_DELAY_US
+        clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
+#endif
         const uint32_t step_cycles = cycles32() - c0;
         fc.record_loop(step_cycles, timer.overruns());
         hq_loop_report.loops = fc.loops();
