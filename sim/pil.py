@@ -64,7 +64,7 @@ STACK_PAINT = 0xDEADBEEF
 #: The image's ESC calibration (firmware/targets/teensy35/motors.hpp: EscCalibration's
 #: defaults) and FTM0's counts per microsecond: a pulse of min_us is stop, max_us full thrust.
 ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
-#: FTM3 (RC capture) counts bus / 32: one count per 64 core cycles at 120 MHz.
+#: The RC inputs the board captures (FTM3 channels 0-5).
 RC_CHANNELS = 6
 #: A receiver's frame: 20 ms, four loops.
 RC_FRAME_LOOPS = 4
