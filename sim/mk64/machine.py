@@ -430,9 +430,6 @@ class Machine:
             for listener in self.clock_listeners:
                 listener()
 
-    def set_core_hz(self, hz: float):
-        self.set_clocks(hz, self.core.bus_hz)
-
     def at(self, cycle: int, fn, *, scaled: bool = True) -> Event:
         """Run ``fn()`` at the first block boundary at or after core cycle ``cycle``.
         ``scaled``: the event is a time in seconds (moves with a core clock change);
@@ -529,9 +526,6 @@ class Machine:
         """The pending, enabled exception the NVIC would present, or None."""
         return self.core.pending_exception()
 
-    def _preempts(self, number: int, ignore_primask=False) -> bool:
-        return self.core.preempts(number, ignore_primask)
-
     # ------------------------------------------------------------------ run ------------
     def run(self, instructions: int | None = None, seconds: float | None = None) -> Stop:
         """Run until a breakpoint or BKPT stops it, ``instructions`` more instructions have
@@ -619,9 +613,6 @@ class Machine:
     # ------------------------------------------------------------------ helpers -------
     def _read32(self, address: int) -> int:
         return struct.unpack("<I", bytes(self.uc.mem_read(address, 4)))[0]
-
-    def read32(self, address: int) -> int:
-        return self._read32(address)
 
     def read(self, address: int, n: int) -> bytes:
         return bytes(self.uc.mem_read(address, n))

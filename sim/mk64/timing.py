@@ -100,19 +100,18 @@ def instruction_cycles(insn) -> int:
 
 class Block:
     """One translated block of straight-line Thumb code, decoded once."""
-    __slots__ = ("start", "size", "n", "cycles", "cum", "index", "addrs", "vfp_at", "isb",
+    __slots__ = ("start", "size", "n", "cycles", "cum", "addrs", "vfp_at", "isb",
                  "wfi", "mask_op", "svc", "mnemonics")
 
     def __init__(self, start, size, insns, undecoded_halfwords=0):
         self.start = start
         self.size = size
-        cum, index = [], {}
+        cum = []
         total = 0
         self.vfp_at = -1            # index of the first FPU instruction, -1 if none
         self.isb = self.wfi = self.mask_op = self.svc = False
         names = []
         for i, insn in enumerate(insns):
-            index[insn.address] = i
             cum.append(total)
             total += instruction_cycles(insn)
             name = _name(insn)
@@ -131,20 +130,9 @@ class Block:
         self.wfi = bool(names) and names[-1] == "wfi"
         self.n = len(insns) + undecoded_halfwords
         self.cycles = total
-        self.cum = cum
-        self.index = index
+        self.cum = cum                 # cycles before each instruction (the native core's table)
         self.addrs = [insn.address for insn in insns]
         self.mnemonics = names
-
-    def cycles_before(self, pc: int) -> int:
-        """Cycles of the block's instructions before the one at ``pc``."""
-        i = self.index.get(pc & ~1)
-        return self.cum[i] if i is not None else self.cycles
-
-    def executed_before(self, pc: int) -> int:
-        """How many of the block's instructions precede ``pc`` (all of them if outside)."""
-        i = self.index.get(pc & ~1)
-        return i if i is not None else self.n
 
 
 class BlockDecoder:
