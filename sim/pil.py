@@ -163,35 +163,17 @@ class PilBoard:
     def rc_pulses(self, rc_us) -> None:
         """Servo pulses as a 50 Hz receiver sends them (every RC_FRAME_LOOPS frames), and at
         once when a channel's value changes, so a stick change reaches the image's next loop
-        as it reaches the host build's. One pulse per channel with a signal (0: none),
-        starting on the next FTM3 count: the rising edge on a count boundary and the falling
-        edge ceil(us x 1.875) counts later, so the capture reads back exactly the frame's
-        microseconds (the image truncates counts x 8 / 15). A receiver's pulse is
-        continuous; the frame's value is an integer, and this is the pulse whose capture is
-        that integer."""
+        as it reaches the host build's. One pulse per channel with a signal (0: none). A
+        receiver's pulse is continuous, the frame's value an integer: each pulse is the one
+        the image's capture reads as exactly that integer (Teensy35.rc_capture_pulse)."""
         rc = tuple(int(v) for v in rc_us[:RC_CHANNELS])
         self._rc_age += 1
         if rc == self._rc_last and self._rc_age < RC_FRAME_LOOPS:
             return
         self._rc_last, self._rc_age = rc, 0
-        m, ftm3, ports = self.machine, self.board.chip.ftm3, self.board.chip.ports
-        if ftm3.anchor is None:
-            return                                  # capture not running: no one listens
-        start, _ = ftm3.anchor
-        per_count = round(1 / ftm3._ticks_per_cycle())
-        now = m.now()
-        rise = start + -(-(now - start) // per_count) * per_count
-        from .mk64.teensy35 import PINS, RC_PINS
-
-        for ch in range(RC_CHANNELS):
-            us = rc[ch]
-            if us <= 0:
-                continue
-            counts = -(-us * 15 // 8)
-            letter, bit = PINS[RC_PINS[ch]]
-            m.at(rise, lambda lb=(letter, bit): ports.drive(*lb, 1), scaled=False)
-            m.at(rise + counts * per_count, lambda lb=(letter, bit): ports.drive(*lb, 0),
-                 scaled=False)
+        for ch, us in enumerate(rc):
+            if us > 0:
+                self.board.rc_capture_pulse(ch, us)
 
     def feed_telemetry(self, data: bytes) -> None:
         if data:
@@ -250,10 +232,10 @@ class PilBoard:
     def thrust(self) -> list:
         """The five thrust fractions the ESCs get from the next PWM period on."""
         ftm0 = self.board.chip.ftm0
+        lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
         out = []
         for ch in range(5):
-            counts = _commanded_value(ftm0, ch)
-            lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
+            counts = ftm0.commanded_value(ch)
             out.append(min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None
                        else 0.0)
         return out
@@ -266,12 +248,6 @@ class PilBoard:
         chip.ftm3.captures.clear()
         chip.ports.level_log.clear()
 
-
-def _commanded_value(ftm, ch: int):
-    """The channel's CnV for the next PWM period (a write waits for the period's end)."""
-    if ftm.channel_mode(ch) != "edge-aligned PWM":
-        return None
-    return ftm.pending.get(f"C{ch}V", ftm.v[f"C{ch}V"]) & 0xFFFF
 
 
 class Pty:

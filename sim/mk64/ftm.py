@@ -109,6 +109,21 @@ class Ftm(RegisterDevice):
         to_wrap = period - pos
         return start + int(-(-(ticks + to_wrap) // per_cycle))
 
+    def cycles_per_tick(self) -> float:
+        """Core cycles per count of the counter at the current clocks (0 when stopped)."""
+        rate = self._ticks_per_cycle()
+        return 1 / rate if rate else 0.0
+
+    def next_tick(self, cycle: int) -> int | None:
+        """The first core cycle at or after ``cycle`` at which the running counter steps
+        (None while it is stopped)."""
+        if self.anchor is None:
+            return None
+        start, _ = self.anchor
+        per_cycle = self._ticks_per_cycle()
+        ticks = -(-(cycle - start) * per_cycle // 1)
+        return start + int(-(-ticks // per_cycle))
+
     def _load_pending(self, now):
         """Apply buffered MOD/CnV writes whose wrap has come."""
         if not self.pending:
@@ -289,6 +304,14 @@ class Ftm(RegisterDevice):
         else:
             ticks = max(0, cnv - cntin)
         return ticks / hz
+
+    def commanded_value(self, ch) -> int | None:
+        """An edge-aligned PWM channel's CnV for the next period: a write while the counter
+        runs waits for the period's end, so this is what the pin carries from then on."""
+        if self.channel_mode(ch) != "edge-aligned PWM":
+            return None
+        self._load_pending(self.machine.now())
+        return self.pending.get(f"C{ch}V", self.v[f"C{ch}V"]) & 0xFFFF
 
     def high_true(self, ch) -> bool:
         return (self.v[f"C{ch}SC"] >> 2) & 3 == 2

@@ -177,6 +177,21 @@ class Teensy35:
         ports.drive(letter, bit, 1)
         m.after(width_s, lambda: ports.drive(letter, bit, 0))
 
+    def rc_capture_pulse(self, channel: int, us: int):
+        """A servo pulse on RC input ``channel`` (0..5) that FTM3 captures as ``us`` whole
+        microseconds: it rises on the next count of the running counter and lasts
+        ceil(us x counts per microsecond) counts, so a capture that truncates counts to
+        microseconds reads exactly ``us``. Nothing happens while FTM3 does not count."""
+        ftm, ports, m = self.chip.ftm3, self.chip.ports, self.machine
+        rise = ftm.next_tick(m.now())
+        if rise is None:
+            return
+        counts = -(-us * round(ftm.clock_hz()) // 1_000_000)
+        fall = ftm.next_tick(rise + int(counts * ftm.cycles_per_tick()))
+        letter, bit = PINS[RC_PINS[channel]]
+        m.at(rise, lambda: ports.drive(letter, bit, 1), scaled=False)
+        m.at(fall, lambda: ports.drive(letter, bit, 0), scaled=False)
+
     def telemetry(self) -> bytes:
         """What has left UART0's TX pin since reset (or since the last take_telemetry())."""
         return self.chip.uart0.sent_bytes()
