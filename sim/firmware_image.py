@@ -32,8 +32,10 @@ PACKAGE_DIR = ("firmware", "teensy35")
 PRESET_DIR = ("build", "teensy35")
 KINDS = ("elf", "hex")
 
-HOW_TO_GET_IT = ("install the ARM toolchain (apt-get install gcc-arm-none-eabi "
-                 "libnewlib-arm-none-eabi libstdc++-arm-none-eabi-dev) and reinstall heliquad "
+#: The Debian packages of the ARM toolchain the image needs.
+ARM_TOOLCHAIN_PACKAGES = "gcc-arm-none-eabi libnewlib-arm-none-eabi libstdc++-arm-none-eabi-dev"
+HOW_TO_GET_IT = (f"install the ARM toolchain (apt-get install {ARM_TOOLCHAIN_PACKAGES}) "
+                 "and reinstall heliquad "
                  "(pip install .), or build it from the repository with "
                  "cmake --preset teensy35 && cmake --build --preset teensy35")
 

@@ -85,7 +85,6 @@ class HostFirmware:
         self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
         self._stderr = open(self.stderr_path, "w+")
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr)
-        self.ready_lines = []
         self.summary = ""
         self.imu_mode = self._wait_ready()
 
@@ -114,7 +113,6 @@ class HostFirmware:
                 text += chunk
                 lines = text.splitlines()
                 if "ready" in (line.strip() for line in lines):
-                    self.ready_lines = lines
                     imu = [line.split(":", 1)[1].strip() for line in lines if line.startswith("imu:")]
                     return imu[0] if imu else "?"
             elif self.proc.poll() is not None:
@@ -124,13 +122,17 @@ class HostFirmware:
         self.stop()
         raise FirmwareError(f"the {self.name} firmware did not start: {message}")
 
-    def stderr_tail(self, lines: int = 3) -> str:
-        """The last lines the firmware wrote on stderr, and its exit status."""
+    def _stderr_lines(self, lines: int) -> list:
+        """The last lines the firmware wrote on stderr."""
         try:
             with open(self.stderr_path) as fh:
-                tail = fh.read().strip().splitlines()[-lines:]
+                return fh.read().strip().splitlines()[-lines:]
         except OSError:
-            tail = []
+            return []
+
+    def stderr_tail(self, lines: int = 3) -> str:
+        """The last lines the firmware wrote on stderr, and its exit status."""
+        tail = self._stderr_lines(lines)
         code = self.proc.poll()
         status = f"exit code {code}" if code is not None else "still running"
         return f"{status}; " + (" | ".join(tail) if tail else "no message")
@@ -158,7 +160,7 @@ class HostFirmware:
             self.proc.stdout.close()
         if not self._stderr.closed:
             # The firmware's last line: its counters (and, emulated, its loop figures).
-            self.summary = self.stderr_tail(1).split("; ", 1)[-1]
+            self.summary = "".join(self._stderr_lines(1))
         self._stderr.close()
         if self._tmp is not None:
             self._tmp.cleanup()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from heliquad.sim.lockstep import HostFirmware, PilFirmware
+from heliquad.sim.lockstep import HostFirmware, start_firmware
 
 import teensy_image
 
@@ -20,10 +20,11 @@ FIRMWARES = ["host", pytest.param("teensy35", marks=pytest.mark.pil)]
 
 
 def start(name: str, **kwargs) -> HostFirmware:
-    """Start the named firmware with HostFirmware's arguments."""
+    """Start the named firmware with HostFirmware's arguments (the Teensy image: the one the
+    tests built)."""
     if name == "teensy35":
-        return PilFirmware(image=str(teensy_image.image().elf), **kwargs)
-    return HostFirmware(**kwargs)
+        kwargs["image"] = str(teensy_image.image().elf)
+    return start_firmware(name, **kwargs)
 
 
 def image_for(name: str) -> dict:

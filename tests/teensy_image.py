@@ -17,10 +17,11 @@ from dataclasses import dataclass
 
 import pytest
 
+from heliquad.sim.firmware_image import ARM_TOOLCHAIN_PACKAGES
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BUILD = ROOT / "build" / "teensy35"
-INSTALL_HINT = ("arm-none-eabi-g++ not found: apt-get install gcc-arm-none-eabi "
-                "libnewlib-arm-none-eabi libstdc++-arm-none-eabi-dev")
+INSTALL_HINT = f"arm-none-eabi-g++ not found: apt-get install {ARM_TOOLCHAIN_PACKAGES}"
 
 
 @dataclass(frozen=True)
