@@ -69,6 +69,16 @@ endif()
 
 include(ExternalProject)
 set(hq_teensy_bin "${CMAKE_BINARY_DIR}/teensy35")
+# A build folder reused for another checkout (pip's -Cbuild-dir, a moved clone) holds an inner
+# cache made for the other source tree, which CMake refuses to reconfigure: start it afresh.
+if(EXISTS "${hq_teensy_bin}/CMakeCache.txt")
+  file(STRINGS "${hq_teensy_bin}/CMakeCache.txt" hq_teensy_home REGEX "^CMAKE_HOME_DIRECTORY:")
+  string(REGEX REPLACE "^[^=]*=" "" hq_teensy_home "${hq_teensy_home}")
+  if(NOT hq_teensy_home STREQUAL CMAKE_SOURCE_DIR)
+    message(STATUS "heliquad: ${hq_teensy_bin} was configured for ${hq_teensy_home}: removed")
+    file(REMOVE_RECURSE "${hq_teensy_bin}" "${CMAKE_BINARY_DIR}/hq_teensy35_image-prefix")
+  endif()
+endif()
 set(hq_teensy_generator -G "${CMAKE_GENERATOR}")
 if(CMAKE_MAKE_PROGRAM)
   list(APPEND hq_teensy_generator "-DCMAKE_MAKE_PROGRAM=${CMAKE_MAKE_PROGRAM}")
