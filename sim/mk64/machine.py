@@ -38,9 +38,10 @@ import ctypes
 import struct
 from dataclasses import dataclass, field
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE, UC_HOOK_MEM_READ, UC_HOOK_MEM_WRITE,
+from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE,
                      UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
-                     UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
+                     UC_PROT_EXEC, UC_PROT_NONE, UC_PROT_READ, UC_TLB_VIRTUAL, Uc,
+                     UcError)
 from unicorn import arm_const as A
 
 from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE, Image, exception_name
@@ -166,11 +167,23 @@ class Machine:
         self._native = _Native(uc, self)
         self.core = self._native.core
         self.core.install(PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_SIZE)
+        # The core fills unicorn's TLB itself (mk64_core.hpp, install_tlb): the default
+        # memory map's permissions, and RAM stores on unicorn's fast path.
+        uc.ctl_set_tlb_mode(UC_TLB_VIRTUAL)
+        self.core.install_tlb(SRAM_BASE, SRAM_SIZE)
         for base, size in ((PERIPHERAL_BASE, PERIPHERAL_SIZE), (PPB_BASE, PPB_SIZE)):
-            # A memory hook on the peripheral spaces keeps the PC exact at every access
-            # there (unicorn syncs it for memory hooks); the hook itself has nothing to do.
-            self._native.pc_sync_hook(base, base + size - 1)
-        uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped)
+            # No access rights: every access there calls the core's protection hook, with the
+            # PC brought up to date first, and then goes to the MMIO callbacks (install()).
+            uc.mem_protect(base, size, UC_PROT_NONE)
+        # The unmapped-access hook covers only the holes of the map: unicorn never lets a
+        # page that any memory hook covers take the fast store path, so a hook over all of
+        # the address space would send every RAM store through its slow path.
+        mapped = sorted((lo, hi) for lo, hi, _ in uc.mem_regions())
+        edge = 0
+        for lo, hi in mapped + [(1 << 32, 1 << 32)]:
+            if lo > edge:
+                uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped, begin=edge, end=lo - 1)
+            edge = max(edge, hi + 1)
         self._decoder = BlockDecoder()
         self._blocks = {}                               # start -> timing.Block (decoded once)
         self._pages = collections.defaultdict(list)     # 4 KiB page -> [(lo, hi, device)]
@@ -598,6 +611,10 @@ class Machine:
                          f"{size}-byte {kind} of unmapped 0x{address:08X} at {self.describe(pc)}",
                          pc, address)
         text = str(e)
+        if self.core.xn_fetched:
+            address = self.core.xn_fetch
+            return Fault("MemManage", f"instruction fetch from 0x{address:08X}, an execute-never "
+                         f"region of the memory map, at {self.describe(pc)}", pc, address)
         if "WRITE_PROT" in text:
             return Fault("BusFault", f"write to flash at {self.describe(pc)}", pc)
         if "INSN_INVALID" in text:
@@ -740,15 +757,3 @@ class _Native:
     @staticmethod
     def address(fn) -> int:
         return ctypes.cast(fn, ctypes.c_void_p).value
-
-    def pc_sync_hook(self, begin, end):
-        """A memory hook whose presence makes unicorn keep the PC exact at accesses in
-        [begin, end]. Its callback does nothing; a side-effect-free function of the unicorn
-        library (uc_arch_supported, which only reads its first argument) serves as one."""
-        h = ctypes.c_size_t()
-        noop = ctypes.cast(self.lib.uc_arch_supported, ctypes.c_void_p)
-        status = self.lib.uc_hook_add(self.handle, ctypes.byref(h),
-                                      UC_HOOK_MEM_READ | UC_HOOK_MEM_WRITE, noop, None,
-                                      ctypes.c_uint64(begin), ctypes.c_uint64(end))
-        if status != 0:
-            raise UcError(status)

@@ -97,6 +97,9 @@ void bind_mk64(py::module_& m) {
              }),
              py::arg("uc"), py::arg("regs"), py::arg("callbacks"), py::arg("exception_names"))
         .def("install", &Core::install)
+        .def("install_tlb", &Core::install_tlb)
+        .def_readonly("xn_fetched", &Core::xn_fetched_)
+        .def_readonly("xn_fetch", &Core::xn_fetch_)
         .def("reset", &Core::reset, py::arg("core_hz"))
         // blocks
         .def("add_block", [](Core& c, uint32_t start, uint32_t size, uint32_t n, uint64_t cycles,

@@ -15,6 +15,10 @@ namespace hqsim::mk64 {
 namespace {
 constexpr int UC_HOOK_INTR = 1 << 0;
 constexpr int UC_HOOK_BLOCK = 1 << 3;
+constexpr int UC_HOOK_MEM_READ_PROT = 1 << 7, UC_HOOK_MEM_WRITE_PROT = 1 << 8;
+constexpr int UC_HOOK_TLB_FILL = 1 << 17;
+constexpr int UC_MEM_FETCH = 18;
+constexpr int UC_PROT_READ = 1, UC_PROT_WRITE = 2, UC_PROT_EXEC = 4;
 constexpr uint32_t kExcReturnTrap = 8;     // QEMU's EXCP_EXCEPTION_EXIT
 constexpr uint32_t kIntrUndef = 1, kIntrSvc = 2, kIntrBkpt = 7;
 constexpr uint32_t kControlSpsel = 1u << 1, kControlFpca = 1u << 2;
@@ -59,6 +63,18 @@ void Core::install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base
                  reinterpret_cast<void*>(&Core::mmio_write_cb), &spaces_[0]);
     uc_.mmio_map(uc_.handle, ppb_base, ppb_size, reinterpret_cast<void*>(&Core::mmio_read_cb),
                  &spaces_[1], reinterpret_cast<void*>(&Core::mmio_write_cb), &spaces_[1]);
+    // The PC must be exact at every peripheral access (the time of an access is the cycle of
+    // its instruction). Unicorn brings the PC up to date before it calls a memory hook, but
+    // any UC_HOOK_MEM_READ/WRITE hook sends every load and store of the program through its
+    // slow path; a protection hook does not. So the peripheral spaces are mapped without
+    // access rights (machine.py protects them) and this hook grants each access: unicorn
+    // syncs the PC, calls it, and then performs the access through the MMIO callbacks.
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_MEM_READ_PROT | UC_HOOK_MEM_WRITE_PROT,
+                 reinterpret_cast<void*>(&Core::grant_cb), this, uint64_t{periph_base},
+                 uint64_t{periph_base} + periph_size - 1);
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_MEM_READ_PROT | UC_HOOK_MEM_WRITE_PROT,
+                 reinterpret_cast<void*>(&Core::grant_cb), this, uint64_t{ppb_base},
+                 uint64_t{ppb_base} + ppb_size - 1);
 }
 
 void Core::reset(double core_hz) {
@@ -99,7 +115,36 @@ void Core::reset(double core_hz) {
 
 void Core::add_block(Block b) {
     const uint32_t start = b.start;
+    recent_[(start >> 1) & (kRecent - 1)] = nullptr;   // looked up afresh next time
     blocks_[start] = std::move(b);
+}
+
+void Core::install_tlb(uint32_t sram_base, uint32_t sram_size) {
+    sram_base_ = sram_base;
+    sram_size_ = sram_size;
+    size_t h = 0;
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_TLB_FILL, reinterpret_cast<void*>(&Core::tlb_fill_cb),
+                 this, uint64_t{1}, uint64_t{0});
+}
+
+bool Core::grant_cb(void*, int, uint64_t, int, int64_t, void*) { return true; }
+
+bool Core::tlb_fill_cb(void*, uint64_t vaddr, int type, TlbEntry* e, void* user) {
+    Core* c = static_cast<Core*>(user);
+    const uint32_t a = static_cast<uint32_t>(vaddr);
+    e->paddr = vaddr;
+    const bool fetch = type == UC_MEM_FETCH;
+    // The top page is where a return to an EXC_RETURN value goes; unicorn recognises it when
+    // it translates the fetch, so that fetch must be allowed (nothing is mapped there).
+    const bool xn = (a >= 0x40000000u && a < 0x60000000u) || (a >= 0xA0000000u && a < 0xFFFFF000u);
+    if (fetch && xn) {
+        c->xn_fetch_ = a;
+        c->xn_fetched_ = true;
+        return false;                       // unicorn stops the run (UC_ERR_EXCEPTION)
+    }
+    const bool sram = a - c->sram_base_ < c->sram_size_;
+    e->perms = UC_PROT_READ | UC_PROT_WRITE | ((sram && !fetch) || xn ? 0 : UC_PROT_EXEC);
+    return true;
 }
 
 // -- registers and memory --------------------------------------------------------------------
@@ -517,6 +562,7 @@ int Core::execute() {
     watch_mask_ = masked_pending();
     const uint32_t start = pc();
     cur_ = nullptr;
+    xn_fetched_ = false;
     ++counts.emu_starts;
     const int err = uc_.emu_start(uc_.handle, start | 1u, 0xFFFFFFFFu, 0, 0);
     commit();
@@ -587,20 +633,20 @@ void Core::on_block(uint64_t address, uint32_t size) {
             if (inline_taken_) return;
         }
     }
-    auto it = blocks_.find(a);
-    if (it == blocks_.end() || it->second.size != size) {
+    const Block* b = find_block(a, size);
+    if (!b) {
         ++counts.decodes;
         if (py_.decode(address, size) != 0) {       // Python has flagged the error and stopped
             return;
         }
-        it = blocks_.find(a);
+        auto it = blocks_.find(a);
         if (it == blocks_.end()) {
             py_error_ = true;
             stop_now();
             return;
         }
+        b = &it->second;
     }
-    const Block* b = &it->second;
     if (instructions_ + b->n > instr_limit_) {
         budget_hit_ = true;
         stop_now();

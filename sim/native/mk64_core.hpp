@@ -273,11 +273,23 @@ public:
 
     // Installs the block and interrupt hooks and maps the peripheral spaces (MMIO).
     void install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base, uint32_t ppb_size);
+    // Fills unicorn's TLB (its virtual TLB mode, set before this) with the permissions of
+    // the Cortex-M4's default memory map: everything identity-mapped; the peripheral and
+    // system regions (0x40000000-0x5FFFFFFF, 0xA0000000-) execute-never; and SRAM
+    // [sram_base, +sram_size) entered for data without the execute right until code is
+    // fetched from one of its pages. The chip may run code from SRAM; what this buys is that
+    // unicorn then lets stores to RAM take its fast path (it checks every store to a page it
+    // may have translated code from for self-modifying code).
+    void install_tlb(uint32_t sram_base, uint32_t sram_size);
     void reset(double core_hz);
 
     // -- blocks ---------------------------------------------------------------------------
     void add_block(Block b);
-    void clear_blocks() { blocks_.clear(); cur_ = last_ = nullptr; }
+    void clear_blocks() {
+        blocks_.clear();
+        recent_.assign(kRecent, nullptr);
+        cur_ = last_ = nullptr;
+    }
     const Block* cur() const { return cur_; }
     const Block* last() const { return last_; }
 
@@ -378,6 +390,12 @@ public:
     // unicorn callbacks (C functions; user data is the Core)
     static void on_block_cb(void* uc, uint64_t address, uint32_t size, void* user);
     static void on_intr_cb(void* uc, uint32_t intno, void* user);
+    static bool grant_cb(void* uc, int type, uint64_t address, int size, int64_t value,
+                         void* user);
+    struct TlbEntry { uint64_t paddr; int perms; };
+    static bool tlb_fill_cb(void* uc, uint64_t vaddr, int type, TlbEntry* e, void* user);
+    uint32_t xn_fetch_ = 0;         // the address of a fetch the memory map forbids
+    bool xn_fetched_ = false;
     static uint64_t mmio_read_cb(void* uc, uint64_t offset, unsigned size, void* user);
     static void mmio_write_cb(void* uc, uint64_t offset, unsigned size, uint64_t value, void* user);
 
@@ -418,9 +436,23 @@ private:
 
     Uc uc_;
     Regs r_;
+    uint32_t sram_base_ = 0, sram_size_ = 0;
     PyCallbacks py_;
     std::vector<std::string> names_;
     std::unordered_map<uint32_t, Block> blocks_;
+    // The blocks by start address, direct-mapped (a block entered at every boundary is found
+    // here without hashing); a miss falls back to blocks_. Node pointers stay valid as
+    // blocks_ grows.
+    static constexpr size_t kRecent = size_t{1} << 16;
+    std::vector<const Block*> recent_ = std::vector<const Block*>(kRecent, nullptr);
+    const Block* find_block(uint32_t start, uint32_t size) {
+        const Block*& slot = recent_[(start >> 1) & (kRecent - 1)];
+        if (slot && slot->start == start && slot->size == size) return slot;
+        auto it = blocks_.find(start);
+        if (it == blocks_.end() || it->second.size != size) return nullptr;
+        slot = &it->second;
+        return slot;
+    }
     const Block* cur_ = nullptr;
     const Block* last_ = nullptr;
     std::vector<Route> routes_;

@@ -13,6 +13,7 @@ using namespace hq::mk64;
 namespace {
 
 constexpr uint8_t kHwFifo = 8;          // UART0's TX and RX FIFOs hold 8 bytes
+constexpr uint8_t kTxWater = 2;         // TDRE (and the interrupt) while at most this many wait
 
 // Single producer, single consumer: main writes tx_head and reads rx_tail, the interrupt
 // the other two. Indices run freely; masks pick the slot. The buffers themselves are not
@@ -57,7 +58,7 @@ bool Uart0Serial::begin(uint32_t baud) {
     UART0::C1::write(0);                                // 8N1
     UART0::PFIFO::write(UART0::PFIFO::TXFE | UART0::PFIFO::RXFE);
     UART0::CFIFO::write(UART0::CFIFO::TXFLUSH | UART0::CFIFO::RXFLUSH);
-    UART0::TWFIFO::write(UART0::TWFIFO::TXWATER(2));    // refill when two bytes remain
+    UART0::TWFIFO::write(UART0::TWFIFO::TXWATER(kTxWater));   // refill when two bytes remain
     UART0::RWFIFO::write(UART0::RWFIFO::RXWATER(1));
     // ALT3 = UART0; RX with a pull-up (an unplugged cable reads idle, not noise).
     PORTB::PCR16::write(PORTB::PCR16::MUX(3) | PORTB::PCR16::PE | PORTB::PCR16::PS);
@@ -111,9 +112,9 @@ void push_rx(uint8_t b) {
 // UART0 status interrupt. RDRF and TDRE are latched flags: RDRF clears only when S1 is read
 // with it set and then D is read, TDRE only when S1 is read and then D is written, each with
 // the FIFO count moving past its watermark. So S1 is read right before the D access that
-// should clear the flag (the last read of a drain, every write of a top-up): reading S1 once
-// at entry and draining bytes that arrived later would leave RDRF set over an empty FIFO and
-// the interrupt firing back to back, starving the loop.
+// should clear the flag (the last read of a drain, the top-up write that passes the
+// watermark): reading S1 once at entry and draining bytes that arrived later would leave RDRF
+// set over an empty FIFO and the interrupt firing back to back, starving the loop.
 extern "C" void UART0_RX_TX_IRQHandler() {
     using namespace hq::teensy;
     using namespace hq::mk64;
@@ -131,14 +132,17 @@ extern "C" void UART0_RX_TX_IRQHandler() {
         UART0::CFIFO::write(UART0::CFIFO::RXFLUSH);
         UART0::SFIFO::write(UART0::SFIFO::RXUF);
     }
-    // Transmit: top the FIFO up from the ring, S1 read before each write; with the ring
-    // empty, stop the interrupt.
+    // Transmit: top the FIFO up from the ring; with the ring empty, stop the interrupt. The
+    // FIFO's count is read once: it only falls while the handler writes (the shifter takes
+    // bytes), so the room it leaves is never overfilled. S1 is read right before the write
+    // that takes the count past the watermark, the one that clears TDRE (every peripheral
+    // access costs bus cycles: two per byte were most of the handler's time).
     if (UART0::C2::read() & UART0::C2::TIE) {
         uint32_t tail = g_uart.tx_tail;
         const uint32_t head = g_uart.tx_head;
         std::atomic_signal_fence(std::memory_order_acquire);
-        while (tail != head && UART0::TCFIFO::read() < kHwFifo) {
-            read_for_effect(UART0::S1::ref());
+        for (uint8_t queued = UART0::TCFIFO::read(); tail != head && queued < kHwFifo; ++queued) {
+            if (queued == kTxWater) read_for_effect(UART0::S1::ref());
             UART0::D::write(g_uart.tx[tail++ & (Uart0Serial::kTxRing - 1)]);
         }
         g_uart.tx_tail = tail;
