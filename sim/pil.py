@@ -87,7 +87,7 @@ class PilBoard:
     def __init__(self, elf: str):
         from .mk64 import Teensy35
 
-        self.board = Teensy35(elf)
+        self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
         self.machine = self.board.machine
         image = self.machine.image
         for needed in (WAIT_SYMBOL, REPORT_SYMBOL):
@@ -100,6 +100,7 @@ class PilBoard:
         self.machine.break_at(WAIT_SYMBOL, self._on_wait)
         self.resets = 0
         self._rc_last, self._rc_age = None, 0
+        self._fault = None
         self.step_cycles = []
         self.telemetry_out = bytearray()
 
@@ -122,6 +123,7 @@ class PilBoard:
                           file=sys.stderr, flush=True)
                     self.board.reset()
                     self._rc_last = None            # the image lost its captures
+                    self._fault = None
                     self.waits = 0
                     self._wait_target = 1
                     continue
@@ -150,7 +152,14 @@ class PilBoard:
 
     # -- inputs ----------------------------------------------------------------------------
     def apply_imu_fault(self, fault: int) -> None:
+        """The frame's IMU fault. The held ones (none, NACK, silent, stuck bus) are set
+        again only when the fault changes; reset and overflow act at every frame that
+        carries them."""
         mav = dialect()
+        if fault == self._fault and fault not in (mav.HQ_IMU_FAULT_RESET,
+                                                  mav.HQ_IMU_FAULT_OVERFLOW):
+            return
+        self._fault = fault
         mpu = self.board.mpu
         self.board.chip.i2c0.hold_scl(fault == mav.HQ_IMU_FAULT_STUCK_BUS)
         mpu.set_present(fault != mav.HQ_IMU_FAULT_NACK)
@@ -171,9 +180,7 @@ class PilBoard:
         if rc == self._rc_last and self._rc_age < RC_FRAME_LOOPS:
             return
         self._rc_last, self._rc_age = rc, 0
-        for ch, us in enumerate(rc):
-            if us > 0:
-                self.board.rc_capture_pulse(ch, us)
+        self.board.rc_capture_pulses({ch: us for ch, us in enumerate(rc) if us > 0})
 
     def feed_telemetry(self, data: bytes) -> None:
         if data:

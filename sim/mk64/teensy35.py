@@ -61,9 +61,13 @@ class PinState:
 class Teensy35:
     """A Teensy 3.5 running ``image`` (an Image or an ELF path). ``crystal_ok`` False: a
     dead crystal. ``mpu6050``: the ``heliquad._firmware.Mpu6050Emulator`` on I2C0 (a new
-    one if None); ``with_mpu6050=False`` leaves the bus empty (every address NACKs)."""
+    one if None); ``with_mpu6050=False`` leaves the bus empty (every address NACKs).
+    ``track_loops=False`` does not stop at each FlightController::step entry to count the
+    loops (``loops``, ``loop_starts``, :meth:`run_to_loop`): a long lockstep run that finds
+    its loop boundary itself saves that call into Python at every loop."""
 
-    def __init__(self, image, *, crystal_ok: bool = True, mpu6050=None, with_mpu6050=True):
+    def __init__(self, image, *, crystal_ok: bool = True, mpu6050=None, with_mpu6050=True,
+                 track_loops: bool = True):
         self.chip = Mk64(image, crystal_hz=CRYSTAL_HZ, crystal_ok=crystal_ok)
         self.machine = self.chip.machine
         self.mpu = None
@@ -83,7 +87,7 @@ class Teensy35:
         image = self.machine.image
         if image.has(FATAL_SYMBOL):
             self.machine.break_at(FATAL_SYMBOL, self._on_fatal)
-        if image.has(STEP_SYMBOL):
+        if track_loops and image.has(STEP_SYMBOL):
             self.machine.break_at(STEP_SYMBOL, self._on_step)
 
     def _clear(self):
@@ -182,15 +186,31 @@ class Teensy35:
         microseconds: it rises on the next count of the running counter and lasts
         ceil(us x counts per microsecond) counts, so a capture that truncates counts to
         microseconds reads exactly ``us``. Nothing happens while FTM3 does not count."""
+        self.rc_capture_pulses({channel: us})
+
+    def rc_capture_pulses(self, widths: dict):
+        """Pulses as :meth:`rc_capture_pulse` makes them, on several channels at once
+        ({channel: us}), as a receiver's frame sends them: all rise on the same count, and
+        the pins whose pulses end on the same count fall together (one event per edge time,
+        not per pin)."""
         ftm, ports, m = self.chip.ftm3, self.chip.ports, self.machine
         rise = ftm.next_tick(m.now())
-        if rise is None:
+        if rise is None or not widths:
             return
-        counts = -(-us * round(ftm.clock_hz()) // 1_000_000)
-        fall = ftm.next_tick(rise + int(counts * ftm.cycles_per_tick()))
-        letter, bit = PINS[RC_PINS[channel]]
-        m.at(rise, lambda: ports.drive(letter, bit, 1), scaled=False)
-        m.at(fall, lambda: ports.drive(letter, bit, 0), scaled=False)
+        hz, per_tick = round(ftm.clock_hz()), ftm.cycles_per_tick()
+        pins = {ch: PINS[RC_PINS[ch]] for ch in widths}
+        falls = {}
+        for ch, us in widths.items():
+            counts = -(-us * hz // 1_000_000)
+            falls.setdefault(ftm.next_tick(rise + int(counts * per_tick)), []).append(pins[ch])
+
+        def drive(group, level):
+            for letter, bit in group:
+                ports.drive(letter, bit, level)
+
+        m.at(rise, lambda: drive(pins.values(), 1), scaled=False)
+        for fall, group in falls.items():
+            m.at(fall, lambda group=group: drive(group, 0), scaled=False)
 
     def telemetry(self) -> bytes:
         """What has left UART0's TX pin since reset (or since the last take_telemetry())."""
