@@ -115,7 +115,7 @@ void Core::reset(double core_hz) {
 
 void Core::add_block(Block b) {
     const uint32_t start = b.start;
-    recent_[(start >> 1) & (kRecent - 1)] = nullptr;   // looked up afresh next time
+    recent_[(start >> 1) & (kRecent - 1)] = Recent{};   // looked up afresh next time
     blocks_[start] = std::move(b);
 }
 

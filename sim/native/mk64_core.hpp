@@ -287,7 +287,7 @@ public:
     void add_block(Block b);
     void clear_blocks() {
         blocks_.clear();
-        recent_.assign(kRecent, nullptr);
+        recent_.assign(kRecent, Recent{});
         cur_ = last_ = nullptr;
     }
     const Block* cur() const { return cur_; }
@@ -440,18 +440,19 @@ private:
     PyCallbacks py_;
     std::vector<std::string> names_;
     std::unordered_map<uint32_t, Block> blocks_;
-    // The blocks by start address, direct-mapped (a block entered at every boundary is found
-    // here without hashing); a miss falls back to blocks_. Node pointers stay valid as
-    // blocks_ grows.
-    static constexpr size_t kRecent = size_t{1} << 16;
-    std::vector<const Block*> recent_ = std::vector<const Block*>(kRecent, nullptr);
+    // The blocks by start address, direct-mapped with the key beside the pointer (a block is
+    // found at every boundary without hashing or touching the Block); a miss falls back to
+    // blocks_. Node pointers stay valid as blocks_ grows.
+    struct Recent { uint32_t start = 0, size = 0; const Block* block = nullptr; };
+    static constexpr size_t kRecent = size_t{1} << 12;
+    std::vector<Recent> recent_ = std::vector<Recent>(kRecent);
     const Block* find_block(uint32_t start, uint32_t size) {
-        const Block*& slot = recent_[(start >> 1) & (kRecent - 1)];
-        if (slot && slot->start == start && slot->size == size) return slot;
+        Recent& slot = recent_[(start >> 1) & (kRecent - 1)];
+        if (slot.block && slot.start == start && slot.size == size) return slot.block;
         auto it = blocks_.find(start);
         if (it == blocks_.end() || it->second.size != size) return nullptr;
-        slot = &it->second;
-        return slot;
+        slot = {start, size, &it->second};
+        return slot.block;
     }
     const Block* cur_ = nullptr;
     const Block* last_ = nullptr;
