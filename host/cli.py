@@ -478,8 +478,7 @@ def _print_validation(r) -> None:
 def _cmd_sweep(args) -> int:
     import os
 
-    from . import paper
-    from .sweep import SWEEP_TLOG, PortSession, default_plan, run_sweep
+    from .sweep import SWEEP_TLOG, default_plan, run_sweep
 
     if args.freqs_hz and any(f <= 0 for f in args.freqs_hz):
         raise InputError("--freqs-hz must be positive")
@@ -489,37 +488,24 @@ def _cmd_sweep(args) -> int:
     if args.amplitude is not None:
         amp = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
     plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
+    if not args.sil and args.fault:
+        raise InputError("--fault needs --sil (a board's faults are real)")
+    if not args.sil and args.firmware != "host":
+        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    if os.path.isdir(args.out) and os.listdir(args.out):
+        raise InputError(f"{args.out} is not empty: a sweep goes into a new (or empty) folder, "
+                         "so no record of an earlier session is overwritten or mixed with it; "
+                         "give another --out")
+    if os.path.lexists(args.out) and not os.path.isdir(args.out):
+        raise InputError(f"{args.out} exists and is not a folder: give another --out")
+    created = not os.path.isdir(args.out)
     os.makedirs(args.out, exist_ok=True)
-    tlog = os.path.join(args.out, SWEEP_TLOG)
-    if args.sil:
-        from ..sim.lockstep import FirmwareError
-        from ..sim.sil import SilConfig, SilSession
-
-        num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
-        args.num, args.den = args.num or num, args.den or den
-        _check_plant(args)
-        cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
-                        inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
-                        plant=args.plant, rig=args.axis, params=args.params,
-                        turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                        faults=_faults(args), firmware=args.firmware)
-        source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
-                  "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
-                  "ideal_sensor": args.ideal_sensor}
-        try:
-            session = SilSession(cfg, tlog)
-        except FirmwareError as exc:
-            raise InputError(str(exc)) from None
-        source["firmware"] = session.fw.record()
-        if args.fault:
-            source["faults"] = list(args.fault)
-    else:
-        if args.fault:
-            raise InputError("--fault needs --sil (a board's faults are real)")
-        if args.firmware != "host":
-            raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
-        source = {"kind": "port", "port": args.port, "baud": args.baud}
-        session = PortSession(args.port, tlog, args.baud)
+    try:
+        session, source = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
+    except BaseException:
+        if created and not os.listdir(args.out):     # nothing recorded: leave nothing behind
+            os.rmdir(args.out)
+        raise
     print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
           f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
     try:
@@ -541,6 +527,39 @@ def _cmd_sweep(args) -> int:
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
     return 1
+
+
+def _sweep_session(args, tlog):
+    """The session a sweep drives (the firmware in the loop, or a board's port) and the
+    manifest's record of its source."""
+    from . import paper
+    from .sweep import PortSession
+
+    if not args.sil:
+        return PortSession(args.port, tlog, args.baud), \
+            {"kind": "port", "port": args.port, "baud": args.baud}
+    from ..sim.lockstep import FirmwareError
+    from ..sim.sil import SilConfig, SilSession
+
+    num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
+    args.num, args.den = args.num or num, args.den or den
+    _check_plant(args)
+    cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
+                    inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
+                    plant=args.plant, rig=args.axis, params=args.params,
+                    turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
+                    faults=_faults(args), firmware=args.firmware)
+    source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
+              "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
+              "ideal_sensor": args.ideal_sensor}
+    try:
+        session = SilSession(cfg, tlog)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    source["firmware"] = session.fw.record()
+    if args.fault:
+        source["faults"] = list(args.fault)
+    return session, source
 
 
 def _cmd_identify(args) -> int:

@@ -12,10 +12,12 @@ Readers raise :class:`InputError` with a one-line message naming the file and th
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
 import os
+import tempfile
 import warnings
 
 import numpy as np
@@ -23,13 +25,56 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
-           "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict"]
+           "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
+           "atomic_write", "write_json", "save_figure"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
 POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
 POINTS_OPTIONAL = ("sigma", "coherence")
 #: Largest spread of sample intervals, relative to the mean interval, still called uniform.
 UNIFORM_TOLERANCE = 0.01
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "w"):
+    """A file object for ``path`` that replaces it only once everything is written: the
+    data goes to a temporary file beside it, is flushed to the disk, and is renamed over
+    ``path`` at the end. A failure (a full disk, an exception while writing) leaves the old
+    file as it was and no temporary file behind; an OSError becomes an InputError."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
+                                   dir=folder)
+    except OSError as exc:
+        raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        with os.fdopen(fd, mode, **({} if "b" in mode else {"newline": ""})) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+        raise
+
+
+def write_json(path, doc) -> None:
+    """``doc`` as indented JSON, atomically (:func:`atomic_write`)."""
+    with atomic_write(path) as fh:
+        json.dump(doc, fh, indent=2)
+        fh.write("\n")
+
+
+def save_figure(fig, path, **kwargs) -> None:
+    """A matplotlib figure to ``path`` (format from its extension), atomically."""
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format=fmt, **kwargs)
 
 
 def _read_table(path, required, optional=()):
@@ -123,7 +168,7 @@ def read_points_csv(path):
 def write_points_csv(path, points):
     """Write :class:`~heliquad.host.fsf.FrequencyPoint` objects, sorted by frequency."""
     rows = sorted(points, key=lambda p: p.omega_rad_s)
-    with open(path, "w", newline="") as fh:
+    with atomic_write(path) as fh:
         fh.write(",".join(POINTS_COLUMNS + POINTS_OPTIONAL) + "\n")
         for p in rows:
             fh.write(f"{p.omega_rad_s:.12g},{p.magnitude:.12g},{p.phase_rad:.12g},"
@@ -163,11 +208,7 @@ def write_models_json(path, models, recommended, reason, source=None, weights=No
         doc["points_file"] = str(source)
     if weights is not None:
         doc["weights"] = weights
-    tmp = f"{path}.tmp"
-    with open(tmp, "w") as fh:
-        json.dump(doc, fh, indent=2)
-        fh.write("\n")
-    os.replace(tmp, path)
+    write_json(path, doc)
 
 
 def write_models_mat(path, models, recommended):
@@ -180,5 +221,6 @@ def write_models_mat(path, models, recommended):
         entries[i] = {"order": np.array(m.order, float), "num": np.asarray(m.num),
                       "den": np.asarray(m.den), "delay_s": m.delay_s, "stable": m.stable,
                       "J": m.metrics["J"], "rms": m.metrics["rms"], "aicc": m.metrics["aicc"]}
-    scipy.io.savemat(path, {"models": entries,
-                            "recommended": 0 if recommended is None else recommended + 1})
+    with atomic_write(path, "wb") as fh:
+        scipy.io.savemat(fh, {"models": entries,
+                              "recommended": 0 if recommended is None else recommended + 1})

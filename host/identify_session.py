@@ -18,6 +18,7 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
+from .files import atomic_write, save_figure
 from .link import INPUT_OUTPUT
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
@@ -108,7 +109,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
 
 def _write_table(path, points) -> None:
     """The paper's tables 4-6: frequency, omega, magnitude, phase, real and imaginary parts."""
-    with open(path, "w") as fh:
+    with atomic_write(path) as fh:
         fh.write("freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence\n")
         for p in sorted(points, key=lambda q: q.omega_rad_s):
             fh.write(f"{p.freq_hz:.6g},{p.omega_rad_s:.6g},{p.magnitude:.6g},"
@@ -142,5 +143,5 @@ def _plot_responses(path, segments, manifest) -> None:
         ax.axis("off")
     axes[0, 0].legend(fontsize=7)
     fig.suptitle(f"{manifest['axis']}: measured cycles per frequency (input dashed, output solid)")
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)

@@ -26,8 +26,12 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
     from .link import HEARTBEAT_PERIOD_S, TelemetryLink
     from .tlog import TlogWriter
 
-    tlog = TlogWriter(out)
-    link = TelemetryLink(port, baud=baud, tlog=tlog)
+    link = TelemetryLink(port, baud=baud)          # the port first: a bad one creates nothing
+    try:
+        tlog = link.tlog = TlogWriter(out)
+    except BaseException:
+        link.close()
+        raise
     stats = {"messages": 0, "samples": 0, "lost": 0, "first_seq": None, "last_seq": None}
     t0 = time.monotonic()
     next_status, next_heartbeat = t0 + STATUS_EVERY_S, t0

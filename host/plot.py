@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .files import save_figure
+
 __all__ = ["plot_bode"]
 
 #: Dense grid points per plotted model curve.
@@ -58,7 +60,7 @@ def plot_bode(path, omega, F, sigma=None, models=(), recommended=None, title="")
     ax_mag.legend(fontsize=8)
     if title:
         ax_mag.set_title(title)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     import matplotlib.pyplot as plt
 
     plt.close(fig)

@@ -18,6 +18,7 @@ import math
 import os
 
 from .errors import InputError
+from .files import atomic_write
 
 __all__ = ["write_report", "LOW_COHERENCE"]
 
@@ -155,6 +156,6 @@ def write_report(dir_path: str, out: str | None = None) -> str:
             f"<p>{html.escape(os.path.abspath(dir_path))}, written {stamp}.</p><h2>Quality flags</h2>{flag_html}"
             + "".join(sections) + "</body></html>")
     out = out or os.path.join(dir_path, "report.html")
-    with open(out, "w") as fh:
+    with atomic_write(out) as fh:
         fh.write(page)
     return out

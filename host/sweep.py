@@ -21,7 +21,6 @@ sweep. Both limits default to the firmware's own (one definition, read from its 
 from __future__ import annotations
 
 import datetime
-import json
 import math
 import os
 import time
@@ -32,6 +31,7 @@ from heliquad import _firmware
 
 from . import __version__, paper
 from .errors import InputError
+from .files import write_json
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
 from .mavlink_dialect import dialect
 
@@ -92,8 +92,12 @@ class PortSession:
         from .link import TelemetryLink
         from .tlog import TlogWriter
 
-        self.tlog = TlogWriter(tlog_path)
-        self.tel = TelemetryLink(port, baud=baud, tlog=self.tlog)
+        self.tel = TelemetryLink(port, baud=baud)   # the port first: a bad one creates nothing
+        try:
+            self.tlog = self.tel.tlog = TlogWriter(tlog_path)
+        except BaseException:
+            self.tel.close()
+            raise
         self.poll_s = poll_s
         self.t0 = time.monotonic()
         self.tel.heartbeat()                  # the firmware wants one before an excitation
@@ -122,10 +126,7 @@ class PortSession:
 
 
 def _write_manifest(out_dir, manifest) -> None:
-    path = os.path.join(out_dir, MANIFEST)
-    with open(path + ".tmp", "w") as fh:
-        json.dump(manifest, fh, indent=2)
-    os.replace(path + ".tmp", path)
+    write_json(os.path.join(out_dir, MANIFEST), manifest)
 
 
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,

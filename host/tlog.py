@@ -2,7 +2,9 @@
 the raw MAVLink packet, the format QGroundControl and pymavlink's tools read.
 
 The writer flushes as it goes, so a crash or Ctrl-C leaves a valid log up to the last whole
-message. The reader stops at damage (a truncated or corrupted tail) with a warning.
+message, and it never writes over a file that exists (:func:`create_log`): a log is a record
+of a flight or a rig session that cannot be made again. The reader stops at damage (a
+truncated or corrupted tail) with a warning.
 """
 
 from __future__ import annotations
@@ -10,9 +12,23 @@ from __future__ import annotations
 import struct
 import warnings
 
-__all__ = ["TlogWriter", "read_tlog"]
+__all__ = ["TlogWriter", "create_log", "read_tlog"]
 
 _STAMP = struct.Struct(">Q")
+
+
+def create_log(path, what: str = "log"):
+    """A new file for a log, opened for binary writing; one that exists is never truncated
+    (InputError naming it and how to go on)."""
+    from .errors import InputError
+
+    try:
+        return open(path, "xb")
+    except FileExistsError:
+        raise InputError(f"{path} exists: heliquad never writes over a {what}; give another "
+                         "name (or move the old one away)") from None
+    except OSError as exc:
+        raise InputError(f"cannot create {path}: {exc.strerror or exc}") from None
 
 
 class TlogWriter:
@@ -20,7 +36,7 @@ class TlogWriter:
 
     def __init__(self, path):
         self.path = path
-        self._fh = open(path, "wb")
+        self._fh = create_log(path)
         self.messages = 0
 
     def write(self, timestamp_us: int, packet: bytes) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
+from .files import save_figure, write_json
 
 __all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation",
            "save_validation", "instability_text"]
@@ -198,8 +199,7 @@ def save_validation(folder, report, traces, num, den, delay_s, axis, gains) -> l
     """Write ``validation.json`` (and ``validation.png`` when the cascade is stable) into
     ``folder``; returns the file names written."""
     os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, "validation.json"), "w") as fh:
-        json.dump(report, fh, indent=2)
+    write_json(os.path.join(folder, "validation.json"), report)
     if not report["stable"]:
         return ["validation.json"]
     plot_validation(report, traces, build_loops(num, den, delay_s, axis, gains),
@@ -256,5 +256,5 @@ def plot_validation(report, traces, loops, path) -> None:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.suptitle(f"{report['axis']}: closed-loop validation of the identified model")
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)

@@ -134,10 +134,12 @@ class _TelemetryLog:
 
         self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
+        from heliquad.host.tlog import create_log
+
         self.fd = os.open(tel.serial.port, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
         try:
-            self._file = open(tlog_path, "wb")
-        except OSError:
+            self._file = create_log(tlog_path)
+        except BaseException:
             os.close(self.fd)
             raise
         self.tap = _simcore.TelemetryTap(self.fd, self._file.fileno(), list(self.ids.values()))
@@ -358,7 +360,15 @@ class _Tally:
 
 
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
-    """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``."""
+    """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``, never over files
+    that exist (InputError before anything starts)."""
+    from heliquad.host.errors import InputError
+
+    csv_path = out_base + ".csv"
+    for path in (out_base + ".tlog", csv_path):
+        if os.path.lexists(path):
+            raise InputError(f"{path} exists: heliquad never writes over a run's records; give "
+                             "another --out (or move the old files away)")
     t0 = time.monotonic()
     with SilSession(cfg, out_base + ".tlog") as session:
         tally = _Tally(cfg, session.mixer, session.dt_us, progress)
@@ -387,9 +397,9 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
         loop_s = time.monotonic() - loop_t0
         plant, imu_mode = session.plant, session.fw.imu_mode
     summary = session.fw.summary
-    csv_path = out_base + ".csv"
-    np.savetxt(csv_path, np.array(tally.rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
-               comments="", fmt="%.9g")
+    with open(csv_path, "x") as fh:
+        np.savetxt(fh, np.array(tally.rows).reshape(-1, 3), delimiter=",", header="t_s,u,y",
+                   comments="", fmt="%.9g")
     status = tally.status
     freq = float(status.freq_hz) if status is not None else float("nan")
     return SilResult(tlog_path=out_base + ".tlog", csv_path=csv_path, samples=len(tally.rows),

@@ -1,0 +1,124 @@
+"""Nothing already recorded is lost: the commands that record (log, sweep, sil) never write
+over a log or into an earlier session's folder, and a bad port creates nothing."""
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+
+def heliquad(*args):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=120)
+
+
+def one_line_error(res, *words):
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+@pytest.fixture
+def old_log(tmp_path):
+    path = tmp_path / "flight.tlog"
+    path.write_bytes(b"recorded flight data \x00\x01\x02" * 100)
+    return path
+
+
+@pytest.fixture
+def pty_port():
+    """A port that opens (the slave of a pty nobody writes to)."""
+    master, slave = os.openpty()
+    yield os.ttyname(slave)
+    os.close(slave)
+    os.close(master)
+
+
+def test_log_with_a_bad_port_leaves_an_existing_log_untouched(old_log, tmp_path):
+    before = old_log.read_bytes()
+    res = heliquad("log", "--port", tmp_path / "no-such-port", "--out", old_log)
+    one_line_error(res, "no-such-port")
+    assert old_log.read_bytes() == before
+
+
+def test_log_with_a_bad_port_creates_no_file(tmp_path):
+    out = tmp_path / "new.tlog"
+    one_line_error(heliquad("log", "--port", tmp_path / "no-such-port", "--out", out))
+    assert not out.exists()
+
+
+def test_log_refuses_to_write_over_an_existing_log(old_log, pty_port):
+    before = old_log.read_bytes()
+    res = heliquad("log", "--port", pty_port, "--out", old_log, "--duration-s", "0.2")
+    one_line_error(res, str(old_log), "exists", "another name")
+    assert old_log.read_bytes() == before
+
+
+def test_sweep_refuses_a_folder_that_holds_an_earlier_session(tmp_path):
+    folder = tmp_path / "old_sweep"
+    folder.mkdir()
+    (folder / "sweep.tlog").write_bytes(b"an earlier session")
+    (folder / "models.json").write_text("{}")
+    for source in (["--port", tmp_path / "nope"], ["--sil"]):
+        res = heliquad("sweep", "--axis", "roll", *source, "--out", folder)
+        one_line_error(res, "not empty", "--out")
+    assert (folder / "sweep.tlog").read_bytes() == b"an earlier session"
+    assert sorted(p.name for p in folder.iterdir()) == ["models.json", "sweep.tlog"]
+
+
+def test_sweep_with_a_bad_port_leaves_no_folder(tmp_path):
+    out = tmp_path / "new_sweep"
+    one_line_error(heliquad("sweep", "--axis", "roll", "--port", tmp_path / "nope", "--out", out),
+                   "nope")
+    assert not out.exists()
+
+
+def test_sweep_into_an_existing_empty_folder_keeps_the_folder(tmp_path):
+    out = tmp_path / "empty"
+    out.mkdir()
+    one_line_error(heliquad("sweep", "--axis", "roll", "--port", tmp_path / "nope", "--out", out))
+    assert out.is_dir() and not any(out.iterdir())
+
+
+@pytest.mark.parametrize("existing", ["run.tlog", "run.csv"])
+def test_sil_refuses_to_write_over_a_run(tmp_path, existing):
+    (tmp_path / existing).write_text("an earlier run")
+    res = heliquad("sil", "--axis", "roll", "--freq-hz", "1", "--amplitude", "0.05",
+                   "--out", tmp_path / "run")
+    one_line_error(res, existing, "exists")
+    assert (tmp_path / existing).read_text() == "an earlier run"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [existing]
+
+
+def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    from heliquad.host.files import atomic_write, write_json
+
+    path = tmp_path / "models.json"
+    write_json(path, {"models": [1, 2, 3]})
+    before = path.read_text()
+    with pytest.raises(RuntimeError):
+        with atomic_write(path) as fh:
+            fh.write('{"models": [')
+            raise RuntimeError("the disk filled up here")
+    assert path.read_text() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["models.json"]
+
+
+def test_an_unwritable_folder_is_one_line(tmp_path):
+    from heliquad.host.errors import InputError
+    from heliquad.host.files import write_json
+
+    with pytest.raises(InputError, match="cannot write .*no-such-folder"):
+        write_json(tmp_path / "no-such-folder" / "x.json", {})
+
+
+def test_fit_into_a_missing_folder_is_one_line_and_writes_nothing(tmp_path):
+    points = tmp_path / "points.csv"
+    points.write_text("omega_rad_s,magnitude,phase_rad\n1,1,-0.5\n2,0.8,-1\n4,0.5,-1.5\n"
+                      "8,0.2,-2\n16,0.05,-2.5\n")
+    res = heliquad("fit", points, "--order", "0/2", "--json", tmp_path / "nope" / "m.json")
+    one_line_error(res, "nope")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["points.csv"]
