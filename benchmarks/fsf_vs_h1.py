@@ -1,6 +1,6 @@
 """Benchmark: batch FSF estimate versus Welch H1 (scipy.signal.csd) on the same data.
 
-Ten minutes of 200 Hz data (120 000 samples) of a 1 Hz sine through SPEC.md's roll model
+Ten minutes of 200 Hz data (120 000 samples) of a 1 Hz sine through the paper's roll model
 with 20 dB output noise. Both estimators produce a gain and a coherence at the excitation
 frequency; each is timed as the best of several repeats in the same run, and the ratio
 FSF / H1 is printed (target <= 1.0). The recursive (sample-by-sample) form's throughput is

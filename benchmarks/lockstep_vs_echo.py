@@ -8,7 +8,7 @@ This is the transport's round-trip cost with nothing else in it, for a Python si
 Floor, for reference: the same echo with a C client (write, poll, read), the round trip the
 C++ engine (sim/native) could reach if the firmware took no time and sent no telemetry.
 
-Lockstep: ``heliquad sil`` with the transfer-function plant (SPEC.md's roll model) at a
+Lockstep: ``heliquad sil`` with the transfer-function plant (the paper's roll model) at a
 200 Hz loop, mixer injection: plant step, sensor packet, frame out, firmware step, reply and
 that step's telemetry in, logged. Frames per second over the lockstep loop (hover included).
 

@@ -23,7 +23,7 @@ EXIT_INPUT = 2
 
 FSF_HELP = """\
 Estimate one frequency-response point per sine experiment with the frequency sampling
-filter (FSF) and least squares (SPEC.md step 2).
+filter (FSF) and least squares (the paper's step 2, docs/paper.md).
 
 RUN.csv: a header row, then columns t_s,u,y (seconds, input, output; any order, other
 columns ignored), uniformly sampled, one sine frequency per file.
@@ -37,7 +37,7 @@ example: heliquad fsf runs/*.csv --discard-periods 2 --out points.csv
 FIT_HELP = """\
 Fit transfer functions of the given orders to frequency-response points: Levy's method,
 Sanathanan-Koerner iterations, then an output-error refinement with stable poles
-(SPEC.md step 3). Prints each model's metrics and the recommended one.
+(docs/paper.md, step 3). Prints each model's metrics and the recommended one.
 
 POINTS.csv: a header row, columns omega_rad_s,magnitude,phase_rad (rad/s, linear, rad;
 omega strictly increasing) and optionally sigma,coherence.
@@ -74,7 +74,7 @@ example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
 
 SWEEP_HELP = """\
-Run the paper's sine sweep for one axis: SPEC.md Table 1's band, 15 log-spaced frequencies
+Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
 (or --freqs-hz), each faded in over 2 cycles (the settling), measured for --cycles cycles,
 faded out. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
 default); --port talks to a board, or to a `heliquad board` pty, in real time. Writes
@@ -90,7 +90,7 @@ example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify 
 
 IDENTIFY_HELP = """\
 Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
-paper's table (points_table.csv), fitted models (models.json, SPEC.md's orders for the axis
+paper's table (points_table.csv), fitted models (models.json, the paper's orders for the axis
 unless --order) and plots (bode.png; responses.png, input dashed, output solid).
 """
 
@@ -104,8 +104,8 @@ example: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --o
 """
 
 VALIDATE_HELP = """\
-Check an identified model in closed loop, as SPEC.md step 4: the paper's cascade (PID rate
-loop on the model; for roll and pitch a PD angle loop around it) with SPEC.md's gains or a
+Check an identified model in closed loop, as the paper does: its cascade (PID rate
+loop on the model; for roll and pitch a PD angle loop around it) with the paper's gains or a
 gains file ({"rate": {"roll": [Kc, tau_I, tau_D]}, "angle": {"roll": [Kc, tau_D]}}).
 Reports gain and phase margins of each loop, the step response, 0.5 Hz sine tracking, and
 rejection of Dryden turbulence; writes validation.json and validation.png. Exit code 1 if
@@ -184,7 +184,7 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="vehicle plant: no IMU noise, bias or DMP latency")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
     p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19],
-                   help="numerator, descending powers of s (default: SPEC.md's roll model)")
+                   help="numerator, descending powers of s (default: the paper's roll model)")
     p.add_argument("--den", type=float, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
                    help="denominator, descending powers of s")
     p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
@@ -230,7 +230,7 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="which model (default: the recommended one)")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"),
                    help="axis of the model (default: the file's \"axis\" entry)")
-    p.add_argument("--gains", metavar="FILE", help="gains file (default: SPEC.md's gains)")
+    p.add_argument("--gains", metavar="FILE", help="gains file (default: the paper's gains)")
     p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
                    default="moderate", help="Dryden level for disturbance rejection (default moderate)")
     p.add_argument("--seed", type=int, default=0)
@@ -268,7 +268,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=float, nargs="+", metavar="B",
-                   help="--plant tf: numerator (default: SPEC.md's chosen model of the axis)")
+                   help="--plant tf: numerator (default: the paper's chosen model of the axis)")
     p.add_argument("--den", type=float, nargs="+", metavar="A", help="--plant tf: denominator")
     p.add_argument("--params", metavar="FILE", help="--plant vehicle: parameter file")
     p.add_argument("--turbulence", choices=("light", "moderate", "severe"))
@@ -277,7 +277,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--collective", type=float, default=0.4)
     p.add_argument("--dmp-image", metavar="FILE")
     p.add_argument("--freqs-hz", type=float, nargs="+", metavar="F",
-                   help="frequencies (default: 15 log-spaced over SPEC.md's band for the axis)")
+                   help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
     p.add_argument("--amplitude", type=float, metavar="A", help="one amplitude for all "
                    "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
     p.add_argument("--cycles", type=int, default=8, help="measured cycles per frequency (default 8)")
@@ -290,7 +290,7 @@ def _build_parser() -> argparse.ArgumentParser:
                        description=IDENTIFY_HELP, formatter_class=fmt)
     p.add_argument("dir", metavar="DIR")
     p.add_argument("--order", action="append", metavar="M/N",
-                   help="orders to fit (default: SPEC.md's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
+                   help="orders to fit (default: the paper's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
     p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
                    "(the loop's hold and the sensor's latency are real delays)")
     p.set_defaults(func=_cmd_identify)

@@ -1,12 +1,12 @@
 """``heliquad demo``: the whole identification campaign on the simulated vehicle.
 
 For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's test rig
-(SPEC.md's vehicle, its IMU with noise, bias and latency); a sweep over the axis's Table 1
-band (15 frequencies, mixer injection: the plant); identification with SPEC.md's orders
-and a fitted delay (the loop's hold and the DMP's latency are real delays); closed-loop
-validation with SPEC.md's gains; and one HTML report for all three axes. It prints each
-axis's recommended model against the simulator's own truth, with the worst error across
-the band.
+(the paper's vehicle, docs/paper.md, and its IMU with noise, bias and latency); a sweep
+over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
+with the paper's orders and a fitted delay (the loop's hold and the DMP's latency are real
+delays); closed-loop validation with the paper's gains; and one HTML report for all three
+axes. It prints each axis's recommended model against the simulator's own truth, with the
+worst error across the band.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Given points ``F_k = F(j omega_k)`` and an order ``m/n`` this module fits
 
 in three stages (docs/method.md has the derivations):
 
-1. **Levy** (SPEC.md step 3, MATLAB invfreqs' default): minimise the weighted equation error
+1. **Levy** (docs/paper.md step 3, MATLAB invfreqs' default): minimise the weighted equation error
    ``sum w_k^2 |D(j w_k) F_k - N(j w_k)|^2``, linear in the coefficients.
 2. **Sanathanan-Koerner**: repeat Levy with weights ``w_k / |D_prev(j w_k)|`` so the equation
    error approaches the output error; this removes Levy's over-weighting of high frequencies.

@@ -1,8 +1,8 @@
 """Frequency-response points from sine experiments: the frequency sampling filter (FSF).
 
 One experiment excites the system with a sine of one frequency; this module turns its input
-``u(k)`` and output ``y(k)`` into one frequency-response point (see docs/method.md and SPEC.md,
-step 2). The output is modelled by the FSF expansion
+``u(k)`` and output ``y(k)`` into one frequency-response point (see docs/method.md, and
+docs/paper.md, step 2). The output is modelled by the FSF expansion
 
     y(k) = sum_l G_l f_l(k) + c + v(k),
     f_l(k) = (1/N) sum_{i=0}^{N-1} exp(j l w_d i) u(k - i),    w_d = 2 pi / N,
@@ -56,7 +56,7 @@ __all__ = [
     "period_coherence",
 ]
 
-#: Harmonics kept on each side of DC (SPEC.md step 2: l = 0, +/-1, +/-2, +/-3).
+#: Harmonics kept on each side of DC (the paper's step 2, docs/paper.md: l = 0, +/-1, +/-2, +/-3).
 DEFAULT_HARMONICS = 3
 #: Whole periods dropped at the start so the system's transient has decayed.
 DEFAULT_DISCARD_PERIODS = 1
@@ -156,7 +156,7 @@ class RecursiveFsf:
     Notes
     -----
     The regressor of sample ``k`` is ``Phi(k) = conj([f_0, f_1, f_-1, ..., f_L, f_-L, 1])`` so
-    that the model reads ``y(k) = Phi(k)^H Theta`` as in SPEC.md. The sliding sums are kept in
+    that the model reads ``y(k) = Phi(k)^H Theta`` as in the paper. The sliding sums are kept in
     a ring buffer and recomputed exactly once per period, so round-off stays bounded however
     long the run.
     """

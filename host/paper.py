@@ -1,4 +1,4 @@
-"""Published facts of the vehicle this project started from (SPEC.md).
+"""Published facts of the vehicle this project started from (docs/paper.md restates them).
 
 Source: A. A. Hoshu, L. Wang, S. Ansari, A. Sattar, M. H. A. Bilal, "System Identification of
 Heterogeneous Multirotor Unmanned Aerial Vehicle", Drones 2022, 6(10), 309,

@@ -75,7 +75,7 @@ class SweepPlan:
 
 
 def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=MEASURED_CYCLES):
-    """SPEC.md Table 1: 15 log-spaced frequencies over the axis's band."""
+    """The paper's Table 1 (docs/paper.md): 15 log-spaced frequencies over the axis's band."""
     if freqs_hz is None:
         lo, hi = paper.BANDS_HZ[axis]
         freqs_hz = np.logspace(math.log10(lo), math.log10(hi), N_FREQUENCIES)

@@ -1,4 +1,4 @@
-"""Closed-loop validation of an identified model (SPEC.md step 4, ``heliquad validate``).
+"""Closed-loop validation of an identified model (``heliquad validate``; docs/paper.md, step 4).
 
 The cascade of the paper, in continuous time as the paper's validation does: an inner PID
 rate loop ``C_r = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))`` around the identified
@@ -51,7 +51,7 @@ class Gains:
 
 
 def load_gains(axis: str, path: str | None = None) -> Gains:
-    """SPEC.md's gains, or a gains file: ``{"rate": {"roll": [Kc, tau_I, tau_D], ...},
+    """The paper's gains, or a gains file: ``{"rate": {"roll": [Kc, tau_I, tau_D], ...},
     "angle": {"roll": [Kc, tau_D], ...}}``."""
     if path is None:
         return Gains(paper.RATE_GAINS[axis], paper.ANGLE_GAINS.get(axis))
@@ -108,7 +108,7 @@ def _margins(L, T):
 
 def _instability(report, axis):
     """Where the cascade goes unstable, against the band the model was identified over
-    (SPEC.md Table 1): far above it, the model is extrapolated and says little."""
+    (the paper's Table 1): far above it, the model is extrapolated and says little."""
     freq = max(lp["unstable_pole_rad_s"] for lp in report["loops"].values()
                if lp["unstable_pole_rad_s"] is not None)
     top = 2 * math.pi * paper.BANDS_HZ[axis][1]

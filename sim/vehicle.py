@@ -17,7 +17,7 @@ Physics (docs/vehicle-model.md has the derivation):
   ``I dw/dt = M_thrust - sum Q_r a_r - sum J_r dW_r/dt a_r - w x H + M_dist``: reaction
   torques, spin-up reaction and gyroscopic precession of the big central rotor all follow.
 * Translation: ``m dv/dt = R F_body + m g e_z - c_d v + F_dist`` (free flight only).
-* Rigs (SPEC.md: the vehicle held on its thrust line with one axis free): position fixed,
+* Rigs (docs/paper.md: the vehicle held on its thrust line with one axis free): position fixed,
   body rates other than the free axis held at zero by the rig, plus hinge damping and
   Coulomb friction on the free axis, smoothed as F tanh(w / 0.01 rad/s) so the ODE stays
   smooth.

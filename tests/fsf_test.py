@@ -10,7 +10,7 @@ from heliquad.host.errors import InputError
 from heliquad.host.fsf import RecursiveFsf, estimate_frequency, estimate_fsf, period_coherence
 from heliquad.sim.dwell import simulate_sine_dwell
 
-ROLL = ([28.19], [1, 5.13, 22.93])          # SPEC.md's chosen roll model
+ROLL = ([28.19], [1, 5.13, 22.93])          # the paper's chosen roll model (docs/paper.md)
 FS_HZ = 200.0
 #: Settling before the record: 16 of the roll model's slowest time constants (1/2.565 s),
 #: so the transient left (e^-16 ~ 1e-7) is below every tolerance here.

@@ -332,7 +332,7 @@ def test_a_full_telemetry_link_drops_and_counts_without_blocking_the_loop():
 
 
 def _rig_points():
-    """Five log-spaced frequencies over each axis's Table 1 band (SPEC.md), with an amplitude
+    """Five log-spaced frequencies over each axis's Table 1 band (docs/paper.md), with an amplitude
     that keeps the response well above the gyro's quantisation: the closed yaw loop holds
     the yaw rate to a few 0.001 rad/s LSBs below 0.4 Hz unless the excitation is large."""
     from heliquad.host import paper
@@ -395,7 +395,7 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
 
 
 def test_free_flight_hover_is_level_and_a_10_degree_roll_step_settles(tmp_path):
-    # SPEC.md's gains, angle mode, DMP attitude. Stick 1667 us = 1/3 of 30 deg = 10 deg.
+    # The paper's gains, angle mode, DMP attitude. Stick 1667 us = 1/3 of 30 deg = 10 deg.
     image = write_fake_dmp(tmp_path / "dmp.bin")
     roll, pitch = fly_free(str(image), 2200, step_at=1000, roll_stick_us=1500 + round(500 / 3))
     hover = slice(200, 1000)                   # 1 s after arming until the step

@@ -92,7 +92,7 @@ def test_no_derivative_kick_on_a_setpoint_step():
 
 
 def test_matches_python_control_continuous_pid():
-    # SPEC.md's roll rate gains. With setpoint 0 and measurement -e(t), the firmware PID is
+    # The paper's roll rate gains. With setpoint 0 and measurement -e(t), the firmware PID is
     # C(s) = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1)) applied to e. The reference is
     # python-control's response on a 20x finer grid. Tustin's error is O((w dt)^2): at 2 Hz
     # and 200 Hz it is ~1e-3 of the output, so 1 % of the output's amplitude is the bound,

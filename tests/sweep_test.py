@@ -20,7 +20,7 @@ def heliquad(*args):
 
 @pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])
 def test_sil_sweep_and_identify_recover_the_papers_models(axis, tmp_path):
-    # The transfer-function plant set to SPEC.md's chosen model of the axis: the sweep over the
+    # The transfer-function plant set to the paper's chosen model of the axis: the sweep over the
     # Table 1 band and identify recover it within 1 dB and 3 deg and recommend the same order.
     out = tmp_path / axis
     res = heliquad("sweep", "--axis", axis, "--sil", "--plant", "tf", "--out", out)

@@ -78,7 +78,7 @@ def test_an_unstable_cascade_is_reported_with_exit_1(tmp_path):
 
 
 def test_an_instability_far_above_the_band_is_told_apart_from_one_inside_it():
-    # The demo's identified yaw model (0/1 with a 21 ms delay) under SPEC.md's yaw gains: the
+    # The demo's identified yaw model (0/1 with a 21 ms delay) under the paper's yaw gains: the
     # filtered derivative keeps the loop gain above 1 up to ~435 rad/s, and the closed loop is
     # unstable near 123 rad/s, 12x the yaw band's top (1.6 Hz): the model has no data there.
     far, _ = validate_model([6.0652], [1, 0.11048], 0.0213, "yaw", load_gains("yaw"), None)
@@ -86,7 +86,7 @@ def test_an_instability_far_above_the_band_is_told_apart_from_one_inside_it():
     inst = far["instability"]
     assert inst["outside_band"] and inst["pole_rad_s"] == pytest.approx(123, rel=0.02)
     assert inst["band_top_rad_s"] == pytest.approx(2 * math.pi * 1.6)
-    # SPEC.md's roll model with a 0.6 s delay goes unstable near its crossover, in the band.
+    # The paper's roll model with a 0.6 s delay goes unstable near its crossover, in the band.
     near, _ = validate_model([28.19], [1, 5.13, 22.93], 0.6, "roll", load_gains("roll"), None)
     assert not near["stable"] and not near["instability"]["outside_band"]
     assert near["instability"]["pole_rad_s"] < 3 * 2 * math.pi * 4.5

@@ -4,7 +4,7 @@ namespace hq {
 
 CascadeGains CascadeGains::paper_defaults() {
     CascadeGains g;
-    // Inner loop: Kc, tau_I, tau_D (SPEC.md, inner-loop table).
+    // Inner loop: Kc, tau_I, tau_D (the paper's rate-loop gains, docs/paper.md).
     const float rate[kAxes][3] = {{2.422f, 0.439f, 0.051f},
                                   {2.386f, 0.439f, 0.048f},
                                   {7.393f, 0.397f, 0.043f}};
@@ -16,7 +16,7 @@ CascadeGains CascadeGains::paper_defaults() {
         g.rate[a].output_max = 1.0f;
         g.rate[a].integral_limit = 0.5f;
     }
-    // Outer loop: Kc, tau_D (SPEC.md, outer-loop table); PD, no integral.
+    // Outer loop: Kc, tau_D (the paper's angle-loop gains, docs/paper.md); PD, no integral.
     const float angle[kAngleAxes][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
     for (int a = 0; a < kAngleAxes; ++a) {
         g.angle[a].kc = angle[a][0];

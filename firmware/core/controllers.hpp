@@ -1,7 +1,8 @@
-// The cascade of SPEC.md step 4: an outer PD loop on roll and pitch angle gives rate
-// setpoints; an inner PID loop on the body rates p, q, r gives normalised torque commands
-// (fraction of each axis's authority, -1..1, see mixer.hpp). Yaw is rate-only.
-// Default gains are the paper's auto-tuned values (SPEC.md tables; Drones 2022, 6(10), 309).
+// The cascade of the paper's step 4 (docs/paper.md): an outer PD loop on roll and pitch
+// angle gives rate setpoints; an inner PID loop on the body rates p, q, r gives normalised
+// torque commands (fraction of each axis's authority, -1..1, see mixer.hpp). Yaw is
+// rate-only. Default gains are the paper's auto-tuned values (Hoshu et al., Drones 2022,
+// 6(10), 309; docs/paper.md).
 #pragma once
 
 #include "excitation.hpp"

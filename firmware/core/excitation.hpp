@@ -1,4 +1,4 @@
-// Sine excitation for frequency-response experiments (SPEC.md step 1).
+// Sine excitation for frequency-response experiments (the paper's step 1, docs/paper.md).
 //
 // The period is an integer number N of loop samples, so every period ends exactly where it
 // started and the host's FSF sees a perfectly periodic input; the frequency actually used,

@@ -1,5 +1,5 @@
 // Mixer for the heterogeneous multirotor: one central rotor and four arm rotors canted
-// sideways (SPEC.md). Derivation and figures: docs/mixer.md.
+// sideways (the paper's vehicle, docs/paper.md). Derivation and figures: docs/mixer.md.
 //
 // Geometry (body FRD, "+" configuration): arm rotor i sits at distance l on the arm at
 // azimuth psi_i = 0, 90, 180, 270 deg (1 front, 2 right, 3 back, 4 left). Each is canted by
@@ -41,12 +41,12 @@ namespace hq {
 constexpr int kMotors = 5;   // 0 central, 1 front, 2 right, 3 back, 4 left
 
 struct MixerGeometry {
-    float arm_length_m = 0.3048f;         // SPEC.md table 2: 12 in moment arm
-    float cant_deg = 20.0f;               // SPEC.md table 2: arm rotors' tilt angle
+    float arm_length_m = 0.3048f;         // the paper's table 2: 12 in moment arm
+    float cant_deg = 20.0f;               // the paper's table 2: arm rotors' tilt angle
     float central_max_thrust_n = 25.0f;   // estimate: 15x5.5 in prop on a 400 KV motor, 4S
     float arm_max_thrust_n = 9.0f;        // estimate: 5x4x3 prop on a 2205 2300 KV motor, 4S
     float central_torque_per_thrust_m = 0.017f;  // estimate: Q/T = D C_Q / C_T ~ 0.381 * 0.045
-    float hover_thrust_n = 9.1202f;       // weight: SPEC.md table 2, 0.930 kg x 9.80665 m/s^2
+    float hover_thrust_n = 9.1202f;       // weight: the paper's table 2, 0.930 kg x 9.80665 m/s^2
 };
 
 struct MixerCommand {

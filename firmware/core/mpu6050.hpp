@@ -19,7 +19,7 @@
 // count it resets the FIFO and counts a resync; otherwise it drains to the newest packet.
 // Every fault has a counter.
 //
-// Register map: InvenSense MPU-6000/6050 Register Map rev 4.2; addresses in SPEC.md.
+// Register map: InvenSense MPU-6000/6050 Register Map rev 4.2, which the addresses below follow.
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,4 @@
-// PID controller in the ideal (ISA) form of SPEC.md's gain tables:
+// PID controller in the ideal (ISA) form of the paper's gain tables (docs/paper.md):
 //
 //     u = Kc * ( e + (1 / tau_I) * integral(e) dt + tau_D * d/dt(-y_f) )
 //
