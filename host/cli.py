@@ -579,6 +579,12 @@ def _cmd_identify(args) -> int:
               f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
     _print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    if r["skipped"] or r["damage"]:
+        n = len(r["points"]) + len(r["skipped"])
+        sys.stderr.write(f"heliquad identify: warning: {len(r['skipped'])} of {n} measured "
+                         "frequencies not used"
+                         + (f"; the log is damaged: {r['damage'].summary()}" if r["damage"] else "")
+                         + " (heliquad report flags it)\n")
     return 0
 
 

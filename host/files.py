@@ -198,10 +198,13 @@ def model_to_dict(model) -> dict:
     }
 
 
-def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None):
-    """Write MODELS.json; the file is replaced atomically so a failure never truncates it."""
+def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None,
+                      extra=None):
+    """Write MODELS.json; the file is replaced atomically so a failure never truncates it.
+    ``extra``: more top-level entries (identify adds the log's condition and the frequencies
+    it could not use)."""
     doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
-           "reason": reason}
+           "reason": reason, **(extra or {})}
     if axis is not None:
         doc["axis"] = axis
     if source is not None:

@@ -27,8 +27,8 @@ __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 def _load(dir_path):
     from .mavlink_dialect import dialect
-    from .tlog import read_tlog
     from .sweep import MANIFEST
+    from .tlog import TlogDamage, read_tlog
 
     try:
         with open(os.path.join(dir_path, MANIFEST)) as fh:
@@ -40,8 +40,31 @@ def _load(dir_path):
     tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
     if not os.path.exists(tlog):
         raise InputError(f"{dir_path}: the log {os.path.basename(tlog)} is missing")
-    samples = [m for _, m in read_tlog(tlog, dialect(), only=("HQ_SYSID_SAMPLE",))]
-    return manifest, samples
+    damage = TlogDamage()
+    try:
+        samples = [m for _, m in read_tlog(tlog, dialect(), only=("HQ_SYSID_SAMPLE",),
+                                           damage=damage)]
+    except OSError as exc:
+        raise InputError(f"{tlog}: {exc.strerror or exc}") from None
+    _check_log_matches(dir_path, manifest, samples)
+    return manifest, samples, damage
+
+
+def _check_log_matches(dir_path, manifest, samples) -> None:
+    """The log's excitations are the manifest's: same axis and injection (a folder whose
+    log comes from another session is refused, not fitted)."""
+    from .link import AXES, INJECTIONS
+    from .mavlink_dialect import dialect
+
+    idle = dialect().HQ_EXCITATION_STATE_IDLE
+    want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))
+    for m in samples:
+        if m.exc_state != idle and (m.axis, m.injection) != want:
+            names = {v: k for k, v in AXES.items()}, {v: k for k, v in INJECTIONS.items()}
+            raise InputError(f"{dir_path}: the log excites {names[0].get(m.axis, m.axis)} with "
+                             f"{names[1].get(m.injection, m.injection)} injection, the manifest "
+                             f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
+                             "log and the manifest are not of one session")
 
 
 def _segments(manifest, samples):
@@ -67,11 +90,18 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     from .identify import fit_orders
     from .plot import plot_bode
 
-    manifest, samples = _load(dir_path)
+    manifest, samples, damage = _load(dir_path)
+    if damage:
+        progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
+                 "every well-formed record was read")
     axis = manifest["axis"]
     points, segments, skipped = [], [], []
     for entry, t, u, y in _segments(manifest, samples):
         fs = entry["freq_hz"] * entry["period_samples"]
+        if not len(t):
+            progress(f"  {entry['freq_hz']:.4g} Hz skipped: the log holds none of its samples")
+            skipped.append(f"{entry['freq_hz']:.4g} Hz: the log holds none of its samples")
+            continue
         try:
             p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
         except InputError as exc:
@@ -99,12 +129,14 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(table, orders, delay=delay)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
-                      result.reason, source="points.csv", weights=result.weights, axis=axis)
+                      result.reason, source="points.csv", weights=result.weights, axis=axis,
+                      extra={"log": damage.record(), "skipped_frequencies": skipped})
     plot_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
               models=result.models, recommended=result.recommended,
               title=f"{axis}, {manifest['inject']} injection: points and models")
     _plot_responses(os.path.join(dir_path, "responses.png"), segments, manifest)
-    return {"axis": axis, "points": points, "result": result, "manifest": manifest}
+    return {"axis": axis, "points": points, "result": result, "manifest": manifest,
+            "damage": damage, "skipped": skipped}
 
 
 def _write_table(path, points) -> None:

@@ -74,21 +74,18 @@ def _count(stats, seq):
 
 
 def summarise_tlog(path: str) -> dict:
-    """Message counts, time span and lost samples of a .tlog (read up to any damage)."""
-    import warnings
-
+    """Message counts, time span and lost samples of a .tlog, and what damage was skipped."""
     from .mavlink_dialect import dialect
-    from .tlog import read_tlog
+    from .tlog import TlogDamage, read_tlog
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            msgs = read_tlog(path, dialect())
-        except OSError as exc:
-            raise InputError(f"{path}: {exc.strerror}") from None
+    damage = TlogDamage()
+    try:
+        msgs = read_tlog(path, dialect(), damage=damage)
+    except OSError as exc:
+        raise InputError(f"{path}: {exc.strerror or exc}") from None
     stats = {"messages": len(msgs), "samples": 0, "lost": 0, "first_seq": None,
              "last_seq": None, "types": collections.Counter(m.get_type() for _, m in msgs),
-             "damage": str(caught[0].message) if caught else None}
+             "damage": f"{path} is damaged: {damage.summary()}" if damage else None}
     for _, m in msgs:
         if m.get_type() == "HQ_SYSID_SAMPLE":
             _count(stats, m.seq)

@@ -123,6 +123,29 @@ class Codec:
         return decode
 
 
+def packet_at(buf, start: int, extras: dict):
+    """The whole MAVLink 2 packet whose STX is at ``buf[start]``: ``(msgid, total length,
+    payload length)`` when it is all there, of a known message, and its CRC verifies;
+    ``None`` when it is not a packet; ``0`` when its header or body is cut off by the end
+    of ``buf`` (more bytes may complete it)."""
+    n = len(buf)
+    if n - start < HEADER_LEN:
+        return 0
+    length = buf[start + 1]
+    total = HEADER_LEN + length + CRC_LEN
+    if buf[start + 2] & INCOMPAT_SIGNED:
+        total += SIGNATURE_LEN
+    if n - start < total:
+        return 0
+    msgid = buf[start + 7] | (buf[start + 8] << 8) | (buf[start + 9] << 16)
+    extra = extras.get(msgid)
+    end_payload = start + HEADER_LEN + length
+    if extra is None or _mcrf4xx(extra, initial=_mcrf4xx(buf[start + 1:end_payload])) != (
+            buf[end_payload] | (buf[end_payload + 1] << 8)):
+        return None
+    return msgid, total, length
+
+
 class Framer:
     """Splits a byte stream into whole, CRC-checked MAVLink 2 packets.
 
@@ -151,24 +174,15 @@ class Framer:
                 pos = n
                 break
             self.skipped += start - pos
-            if n - start < HEADER_LEN:
+            found = packet_at(view, start, extras)
+            if found == 0:                                        # cut off: wait for more
                 pos = start
                 break
-            length = buf[start + 1]
-            total = HEADER_LEN + length + CRC_LEN
-            if buf[start + 2] & INCOMPAT_SIGNED:
-                total += SIGNATURE_LEN
-            if n - start < total:
-                pos = start
-                break
-            msgid = buf[start + 7] | (buf[start + 8] << 8) | (buf[start + 9] << 16)
-            extra = extras.get(msgid)
-            end_payload = start + HEADER_LEN + length
-            if extra is None or _mcrf4xx(extra, initial=_mcrf4xx(view[start + 1:end_payload])) != (
-                    buf[end_payload] | (buf[end_payload + 1] << 8)):
+            if found is None:
                 self.skipped += 1
                 pos = start + 1                                   # not a packet: resync
                 continue
+            msgid, total, length = found
             packet = bytes(view[start:start + total])
             out.append((msgid, packet, packet[HEADER_LEN:HEADER_LEN + length]))
             pos = start + total

@@ -89,6 +89,13 @@ def _axis_section(folder):
             if float(row[-1]) < LOW_COHERENCE:
                 flags.append(f"{axis}: low coherence {float(row[-1]):.2f} at {float(row[0]):.3g} Hz")
     if models:
+        log = models.get("log") or {}
+        if log.get("skipped_bytes") or log.get("stamps_out_of_order"):
+            flags.append(f"{axis}: the log is damaged: {log.get('skipped_bytes', 0)} bytes "
+                         f"skipped in {log.get('damaged_regions', 0)} places, "
+                         f"{log.get('stamps_out_of_order', 0)} timestamps out of order")
+        for text in models.get("skipped_frequencies") or []:
+            flags.append(f"{axis}: {text} (not used)")
         rec = models.get("recommended")
         rows = []
         for i, m in enumerate(models["models"]):

@@ -3,16 +3,24 @@ the raw MAVLink packet, the format QGroundControl and pymavlink's tools read.
 
 The writer flushes as it goes, so a crash or Ctrl-C leaves a valid log up to the last whole
 message, and it never writes over a file that exists (:func:`create_log`): a log is a record
-of a flight or a rig session that cannot be made again. The reader stops at damage (a
-truncated or corrupted tail) with a warning.
+of a flight or a rig session that cannot be made again.
+
+The reader takes every well-formed record (a timestamp, then a whole packet of a known
+message whose CRC verifies) and resynchronises past damage: where a record does not verify,
+it skips byte by byte to the next offset where one does. What it skipped (where and how
+much) and the records whose timestamp goes back in time are counted in a
+:class:`TlogDamage`; a flipped bit in a packet costs that one message, not the rest of the log.
+A timestamp is not covered by the packet's CRC: a damaged one is seen only when it breaks the
+order of time.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import warnings
 
-__all__ = ["TlogWriter", "create_log", "read_tlog"]
+__all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog"]
 
 _STAMP = struct.Struct(">Q")
 
@@ -58,35 +66,88 @@ class TlogWriter:
         self.close()
 
 
-def read_tlog(path, mav_module, only=None):
-    """Messages of a .tlog as ``(timestamp_us, message)``, up to the first damage.
+@dataclasses.dataclass
+class TlogDamage:
+    """What a read found wrong with a .tlog."""
+    size: int = 0                       # bytes in the file
+    regions: list = dataclasses.field(default_factory=list)   # (offset, bytes) skipped
+    out_of_order: list = dataclasses.field(default_factory=list)  # offsets of such records
+    messages: int = 0                   # well-formed records read
 
-    A truncated last record or a packet that fails its CRC ends the read with a warning
-    naming the byte offset; what came before is returned. ``only``: message type names to
-    decode (default all).
+    @property
+    def skipped(self) -> int:
+        return sum(n for _, n in self.regions)
+
+    def __bool__(self) -> bool:
+        return bool(self.regions or self.out_of_order)
+
+    def summary(self) -> str:
+        """One line: what was skipped and where, or "" when nothing was wrong."""
+        parts = []
+        if self.regions:
+            first = self.regions[0][0]
+            parts.append(f"{self.skipped} of {self.size} bytes skipped in {len(self.regions)} "
+                         f"damaged place{'s' if len(self.regions) > 1 else ''} (the first at byte "
+                         f"{first})")
+        if self.out_of_order:
+            parts.append(f"{len(self.out_of_order)} timestamp{'s' if len(self.out_of_order) > 1 else ''}"
+                         f" going back in time (the first at byte {self.out_of_order[0]})")
+        return "; ".join(parts)
+
+    def record(self) -> dict:
+        """For a JSON file: the counts and the first places."""
+        return {"bytes": self.size, "messages": self.messages, "skipped_bytes": self.skipped,
+                "damaged_regions": len(self.regions), "first_regions": self.regions[:10],
+                "stamps_out_of_order": len(self.out_of_order)}
+
+
+def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
+    """Messages of a .tlog as ``(timestamp_us, message)``, every well-formed record in order.
+
+    ``only``: message type names to decode (default all; the others are still checked).
+    ``damage``: a :class:`TlogDamage` to fill; without one, damage is reported as a warning
+    naming the file and what was skipped.
     """
-    from .mavframe import HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN, STX_V2, Codec, Framer
+    from .mavframe import STX_V2, Codec, packet_at
 
     with open(path, "rb") as fh:
         data = fh.read()
     codec = Codec(mav_module)
-    wanted = None if only is None else {cls.msgname for cls in codec.classes.values()} & set(only)
-    out, pos = [], 0
-    while pos < len(data):
-        if len(data) - pos < 8 + HEADER_LEN or data[pos + 8] != STX_V2:
-            break
-        length = data[pos + 9]
-        total = HEADER_LEN + length + 2 + (SIGNATURE_LEN if data[pos + 10] & INCOMPAT_SIGNED else 0)
-        packet = data[pos + 8:pos + 8 + total]
-        framed = Framer(codec).feed(packet) if len(packet) == total else []
-        if len(framed) != 1 or len(framed[0][1]) != total:   # not a packet found inside it
-            break
-        msgid, _, payload = framed[0]
-        cls = codec.classes[msgid]
-        if wanted is None or cls.msgname in wanted:
-            out.append((struct.unpack(">Q", data[pos:pos + 8])[0], codec.decode(msgid, payload)))
+    extras = codec.extra_bytes
+    wanted = None if only is None else {msgid for msgid, cls in codec.classes.items()
+                                        if cls.msgname in set(only)}
+    report = TlogDamage(size=len(data)) if damage is None else damage
+    report.size = len(data)
+    out, pos, n, last_stamp = [], 0, len(data), None
+
+    def record_at(p):
+        found = packet_at(data, p + 8, extras) if p + 8 < n and data[p + 8] == STX_V2 else None
+        return found or None
+
+    while pos < n:
+        found = record_at(pos)
+        if found is None:                       # damage: on to the next well-formed record
+            start, p = pos, pos + 1
+            while True:
+                p = data.find(STX_V2, p + 8) - 8 if p + 8 < n else -1
+                if p < start + 1 or (found := record_at(p)) is not None:
+                    break
+                p += 1
+            pos = n if p < start + 1 else p
+            report.regions.append((start, pos - start))
+            if found is None:
+                break
+        msgid, total, length = found
+        stamp = _STAMP.unpack_from(data, pos)[0]
+        if last_stamp is not None and stamp < last_stamp:
+            report.out_of_order.append(pos)
+        last_stamp = stamp
+        report.messages += 1
+        if wanted is None or msgid in wanted:
+            payload = data[pos + 18:pos + 18 + length]
+            out.append((stamp, codec.decode(msgid, payload)))
         pos += 8 + total
-    if pos < len(data):
-        warnings.warn(f"{path}: damaged or truncated at byte {pos} of {len(data)}; "
-                      f"read the {len(out)} messages before it")
+    if damage is None and report:
+        warnings.warn(f"{path}: damaged: {report.summary()}; read the {report.messages} "
+                      "well-formed messages")
     return out

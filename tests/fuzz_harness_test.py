@@ -97,7 +97,7 @@ def test_the_framer_harness_catches_a_framer_that_loses_a_packet(monkeypatch):
 
 def test_the_tlog_harness_catches_a_reader_that_loses_a_message(monkeypatch):
     read_tlog = tlog.read_tlog
-    monkeypatch.setattr(tlog, "read_tlog", lambda path, mav: read_tlog(path, mav)[:-1])
+    monkeypatch.setattr(tlog, "read_tlog", lambda path, mav, **kw: read_tlog(path, mav, **kw)[:-1])
     with pytest.raises(AssertionError):
         tlog_fuzz.check(tlog_fuzz.seed_inputs()["raw-log"])
 
@@ -127,14 +127,29 @@ def _packet_inside_a_bad_packet() -> bytes:
 
 
 @pytest.mark.parametrize("damaged", [_length_spans_the_next_record, _packet_inside_a_bad_packet])
-def test_a_damaged_record_with_a_packet_inside_ends_the_read(damaged, tmp_path):
+def test_a_damaged_record_with_a_packet_inside_is_reported(damaged, tmp_path):
     # Found by fuzzing: read_tlog took the first valid packet the framer found anywhere in
-    # the damaged record's bytes as that record's message, and read on with no warning.
+    # the damaged record's bytes as that record's message, and read on with no warning. The
+    # damaged record is skipped and reported; what verifies after it is read.
     data = damaged()
     path = tmp_path / "damaged.tlog"
     path.write_bytes(data)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        assert tlog.read_tlog(str(path), tlog_fuzz.DIALECT) == []
-    assert len(caught) == 1 and "damaged or truncated at byte 0 " in str(caught[0].message)
+        messages = tlog.read_tlog(str(path), tlog_fuzz.DIALECT)
+    assert len(caught) == 1 and "(the first at byte 0)" in str(caught[0].message)
+    assert all(stamp != 1 for stamp, _ in messages)          # nothing of the damaged record
     tlog_fuzz.check(b"\0" + data)
+
+
+def test_a_log_damaged_in_the_middle_is_read_on_after_it(tmp_path):
+    records = [_record(k, "HEARTBEAT", **HEARTBEAT) for k in range(1, 6)]
+    middle = bytearray(records[2])
+    middle[8 + 12] ^= 0x01                                    # a payload byte: the CRC fails
+    path = tmp_path / "middle.tlog"
+    path.write_bytes(b"".join(records[:2]) + bytes(middle) + b"".join(records[3:]))
+    damage = tlog.TlogDamage()
+    messages = tlog.read_tlog(str(path), tlog_fuzz.DIALECT, damage=damage)
+    assert [stamp for stamp, _ in messages] == [1, 2, 4, 5]
+    assert damage.regions == [(2 * len(records[0]), len(records[0]))]
+    assert damage.messages == 4 and not damage.out_of_order

@@ -122,3 +122,66 @@ def test_fit_into_a_missing_folder_is_one_line_and_writes_nothing(tmp_path):
     res = heliquad("fit", points, "--order", "0/2", "--json", tmp_path / "nope" / "m.json")
     one_line_error(res, "nope")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["points.csv"]
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """A SIL sweep of the roll rig (the transfer-function plant, host build)."""
+    out = tmp_path_factory.mktemp("sweep") / "roll"
+    res = heliquad("sweep", "--sil", "--axis", "roll", "--out", out)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def _copy(sweep, dest):
+    import shutil
+
+    shutil.copytree(sweep, dest)
+    return dest
+
+
+def test_identify_reads_past_a_damaged_byte_and_the_report_flags_it(sweep, tmp_path):
+    import json
+
+    folder = _copy(sweep, tmp_path / "damaged")
+    log = folder / "sweep.tlog"
+    data = bytearray(log.read_bytes())
+    data[1000] ^= 0x10                     # the flip that used to lose every frequency
+    log.write_bytes(bytes(data))
+    res = heliquad("identify", folder)
+    assert res.returncode == 0, res.stderr
+    assert "15 points" in res.stdout                      # every frequency still measured
+    assert "is damaged" in res.stdout and "the first at byte" in res.stdout
+    doc = json.loads((folder / "models.json").read_text())
+    assert doc["log"]["skipped_bytes"] > 0 and doc["log"]["damaged_regions"] == 1
+    assert heliquad("report", folder).returncode == 0
+    page = (folder / "report.html").read_text()
+    assert "the log is damaged" in page and "No quality flags" not in page
+
+
+def test_identify_refuses_a_log_of_another_session(sweep, tmp_path):
+    import json
+
+    folder = _copy(sweep, tmp_path / "mixed")
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["axis"] = "pitch"
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    one_line_error(heliquad("identify", folder), "not of one session", "roll", "pitch")
+    assert not (folder / "models.json").exists()
+
+
+def test_identify_says_which_frequencies_the_log_lost(sweep, tmp_path):
+    import json
+
+    folder = _copy(sweep, tmp_path / "short")
+    log = folder / "sweep.tlog"
+    data = log.read_bytes()
+    log.write_bytes(data[:len(data) * 2 // 3])            # the last frequencies are gone
+    res = heliquad("identify", folder)
+    assert res.returncode == 0, res.stderr
+    assert "the log holds none of its samples" in res.stdout
+    assert "frequencies not used" in res.stderr and len(res.stderr.strip().splitlines()) == 1
+    doc = json.loads((folder / "models.json").read_text())
+    assert doc["skipped_frequencies"]
+    assert heliquad("report", folder).returncode == 0
+    assert "(not used)" in (folder / "report.html").read_text()

@@ -9,11 +9,15 @@ of an 8-byte timestamp and a packet with a valid CRC, then damages, cuts and rep
 Contract checked per input (the file is written to one temporary file per process):
 - ``read_tlog`` never raises; it returns (int timestamp, message) pairs, each message of a
   type of the dialect;
-- they are exactly the leading run of well-formed records (a whole packet of a known message
-  whose CRC verifies, right after its timestamp), decoded from those records' payloads;
-- a damage warning naming the byte offset comes if and only if bytes are left after that
-  run, and no other warning;
-- reading the file cut right after the last record returned gives the same list, silently.
+- they are exactly the well-formed records (a whole packet of a known message whose CRC
+  verifies, right after its timestamp) found by reading from byte 0 and, where no record
+  verifies, stepping one byte at a time to the next offset where one does, decoded from
+  those records' payloads;
+- the damage it reports is exactly the bytes stepped over (offset and length of each run)
+  and the records whose timestamp is earlier than the one before; a warning comes if and
+  only if there is such damage, and no other warning;
+- reading the file with the damaged runs cut out gives the same list, silently unless a
+  timestamp goes back in time.
 """
 
 from __future__ import annotations
@@ -62,30 +66,48 @@ def _scratch_file() -> tuple:
 
 
 def well_formed_records(data: bytes) -> tuple:
-    """([(timestamp, msgid, payload)], end): the leading run of well-formed records and the
-    offset just after it."""
-    records, pos = [], 0
-    while len(data) - pos >= STAMP_LEN + HEADER_LEN and data[pos + STAMP_LEN] == STX_V2:
+    """([(timestamp, msgid, payload)], [(offset, length) stepped over], [offsets of records
+    whose timestamp is earlier than the one before]) by the resynchronising rule, slowly."""
+    def record_end(pos):
         start = pos + STAMP_LEN
+        if len(data) - start < HEADER_LEN or data[start] != STX_V2:
+            return None
         end = packet_end(data, start)
-        if end > len(data) or not verifies(data, start, BUILDER.extras):
-            break
+        return end if end <= len(data) and verifies(data, start, BUILDER.extras) else None
+
+    records, skipped, back, pos, last = [], [], [], 0, None
+    while pos < len(data):
+        end = record_end(pos)
+        if end is None:
+            first = pos
+            while pos < len(data) and record_end(pos) is None:
+                pos += 1
+            skipped.append((first, pos - first))
+            continue
+        start = pos + STAMP_LEN
+        stamp = _STAMP.unpack_from(data, pos)[0]
+        if last is not None and stamp < last:
+            back.append(pos)
+        last = stamp
         msgid = int.from_bytes(data[start + 7:start + HEADER_LEN], "little")
-        payload = data[start + HEADER_LEN:start + HEADER_LEN + data[start + 1]]
-        records.append((_STAMP.unpack_from(data, pos)[0], msgid, payload))
+        records.append((stamp, msgid, data[start + HEADER_LEN:start + HEADER_LEN + data[start + 1]]))
         pos = end
-    return records, pos
+    return records, skipped, back
 
 
 def read(data: bytes) -> tuple:
-    """(read_tlog's list, the warnings it gave) for a file holding ``data``."""
+    """(read_tlog's list, the warnings it gave, the damage it reported when asked) for a
+    file holding ``data``."""
     fd, path = _scratch_file()
     os.ftruncate(fd, 0)
     os.pwrite(fd, data, 0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         messages = tlog.read_tlog(path, DIALECT)
-    return messages, [str(w.message) for w in caught]
+    damage = tlog.TlogDamage()
+    again = tlog.read_tlog(path, DIALECT, damage=damage)
+    assert _same_messages(again, messages)
+    return messages, [str(w.message) for w in caught], damage
 
 
 def _same_messages(got: list, want: list) -> bool:
@@ -105,20 +127,27 @@ def tlog_bytes(data: bytes) -> bytes:
 def check(data: bytes) -> list:
     """Run the contract on one input; read_tlog's list."""
     content = tlog_bytes(data)
-    messages, caught = read(content)
+    messages, caught, damage = read(content)
     assert isinstance(messages, list)
     for item in messages:
         assert isinstance(item, tuple) and len(item) == 2 and type(item[0]) is int
         assert item[1].get_type() in MESSAGE_TYPES
 
-    records, end = well_formed_records(content)
+    records, skipped, back = well_formed_records(content)
     want = [(stamp, CODEC.decode(msgid, payload)) for stamp, msgid, payload in records]
     assert _same_messages(messages, want), f"{len(messages)} read, {len(want)} well-formed"
-    if end < len(content):
-        assert len(caught) == 1 and f"damaged or truncated at byte {end} " in caught[0], caught
-        prefix, caught = read(content[:end])
-        assert _same_messages(prefix, messages)
-    assert not caught, caught
+    assert damage.regions == skipped and damage.out_of_order == back
+    assert damage.messages == len(records) and damage.size == len(content)
+    if skipped or back:
+        assert len(caught) == 1 and damage.summary() in caught[0], caught
+        cut, pos = bytearray(), 0
+        for first, length in skipped:
+            cut += content[pos:first]
+            pos = first + length
+        cut += content[pos:]
+        clean, caught, again = read(bytes(cut))
+        assert _same_messages(clean, messages) and not again.regions
+    assert not caught or damage.out_of_order, caught
     return messages
 
 
