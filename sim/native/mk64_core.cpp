@@ -44,6 +44,18 @@ Core::Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
     spaces_[0].core = spaces_[1].core = this;
 }
 
+double py_floordiv(double a, double b) {
+    double mod = std::fmod(a, b);
+    double div = (a - mod) / b;
+    if (mod != 0.0) {
+        if ((b < 0) != (mod < 0)) div -= 1.0;
+    }
+    if (div == 0.0) return std::copysign(0.0, a / b);
+    double floordiv = std::floor(div);
+    if (div - floordiv > 0.5) floordiv += 1.0;
+    return floordiv;
+}
+
 const std::string& Core::exception_name(int n) const {
     static const std::string unknown = "exception";
     return n >= 0 && static_cast<size_t>(n) < names_.size() ? names_[n] : unknown;
@@ -111,6 +123,8 @@ void Core::reset(double core_hz) {
     systick.reset();
     if (i2c0.ready) i2c0.reset();
     if (uart0.ready) uart0.reset(*this);
+    if (ftm0.ready) ftm0.reset();
+    if (ftm3.ready) ftm3.reset();
 }
 
 void Core::add_block(Block b) {
@@ -273,6 +287,8 @@ void Core::dispatch(const HeapEntry& e) {
         case Ev::UartIdle: uart0.idle(*this); break;
         case Ev::I2cByte: i2c0.finish_byte(*this); break;
         case Ev::I2cFree: i2c0.bus_free(*this); break;
+        case Ev::Ftm0Tof: ftm0.on_tof(*this); break;
+        case Ev::Ftm3Tof: ftm3.on_tof(*this); break;
         case Ev::Python: break;
     }
 }
@@ -713,6 +729,8 @@ bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
         case kSysTick: return systick.read(*this, address, size, out);
         case kUart0: return uart0.read(*this, address, size, out);
         case kI2c0: return i2c0.read(*this, address, size, out);
+        case kFtm0: return ftm0.read(*this, address, size, out);
+        case kFtm3: return ftm3.read(*this, address, size, out);
         default: return false;
     }
 }
@@ -723,6 +741,8 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kSysTick: return systick.write(*this, address, size, value);
         case kUart0: return uart0.write(*this, address, size, value);
         case kI2c0: return i2c0.write(*this, address, size, value);
+        case kFtm0: return ftm0.write(*this, address, size, value);
+        case kFtm3: return ftm3.write(*this, address, size, value);
         default: return false;
     }
 }

@@ -10,8 +10,8 @@
 // * One event queue for every device, Python's included (a Python event stops the run and
 //   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
 // * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
-//   loop uses all the time: DWT_CYCCNT, SysTick, UART0 and I2C0 with the MPU6050 on it. Their
-//   Python classes are views onto these (one model each).
+//   loop uses all the time: DWT_CYCCNT, SysTick, UART0, I2C0 with the MPU6050 on it, FTM0 and
+//   FTM3. Their Python classes are views onto these (one model each).
 // * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
 //   instruction, an access to a device modelled in Python, a Python event, a breakpoint, a
 //   fault) either calls a C function pointer the Python side made with ctypes (which takes the
@@ -84,7 +84,9 @@ struct Block {
     }
 };
 
-enum class Ev : uint8_t { Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree };
+enum class Ev : uint8_t {
+    Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof
+};
 
 // Why run() returned.
 enum Run : int {
@@ -100,6 +102,10 @@ struct FaultInfo {
 };
 
 class Core;
+
+// Python's float floor division (a // b), step for step as CPython does it: the models' timing
+// rules were written with it, and a cycle computed differently would move an event.
+double py_floordiv(double a, double b);
 
 // DWT_CTRL/CYCCNT: counts core cycles while DEMCR.TRCENA and CTRL.CYCCNTENA are set.
 struct Dwt {
@@ -141,18 +147,19 @@ struct SysTick {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// Register layout and bits of an 8-bit-register peripheral, from the SVD tables (Python).
-struct Layout8 {
+// Register layout and bits of a peripheral, from the SVD tables (Python).
+struct Layout {
     uint32_t base = 0, span = 0;
     std::vector<int> reg_at;               // byte offset -> register offset, or -1
-    std::vector<uint8_t> reset;            // reset value by offset
+    std::vector<uint8_t> width;            // register offset -> its width in bytes
+    std::vector<uint32_t> reset;           // register offset -> reset value
     std::unordered_map<std::string, uint32_t> k;   // "REG" offset, "REG.FIELD" mask
     uint32_t operator[](const std::string& name) const;
 };
 
 // UART0 at line rate (sim/mk64/uart.py's notes describe the model).
 struct Uart {
-    Layout8 L;
+    Layout L;
     bool ready = false;                    // set up (its layout given)
     int irq_rxtx = 0, irq_err = 0, depth = 8;
     // offsets and bits, resolved from L once
@@ -217,7 +224,7 @@ struct MpuSlave {
 
 // I2C0 as a byte-level master (sim/mk64/i2c.py's notes describe the model).
 struct I2c {
-    Layout8 L;
+    Layout L;
     bool ready = false;
     int irq = 0;
     std::vector<uint32_t> scl_divider;
@@ -262,9 +269,69 @@ struct I2c {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
+// A FlexTimer (FTM0, FTM3) in up-counting edge-aligned PWM and input capture (sim/mk64/ftm.py's
+// notes describe the model). The counter is not stepped: it is computed from time, from the
+// cycle and count it last started at (the anchor).
+struct Ftm {
+    Layout L;
+    bool ready = false;
+    int irq = 0;
+    Ev tof_kind = Ev::Ftm0Tof;
+    static constexpr int kChannels = 8;
+    enum Mode : int {
+        kDisabled, kEdgePwm, kOutputCompare, kCaptureRising, kCaptureFalling, kCaptureBoth,
+        kCenterPwm
+    };
+    uint32_t oSC, oCNT, oMOD, oCNTIN, oSTATUS, oMODE, oCOMBINE, oCnSC[kChannels], oCnV[kChannels];
+    uint32_t TOF, TOIE, CPWMS, CLKS, PS, CHF, CHIE, MSB, MSA, ELSB, ELSA, CNSC_WRITABLE, FTMEN,
+        CHnF[kChannels];
+    uint32_t channels_end;                 // CnSC/CnV span [oCnSC[0], channels_end)
+    std::vector<uint32_t> v;               // by register offset
+    bool anchored = false;                 // the counter runs
+    uint64_t anchor_cycle = 0;
+    int64_t anchor_count = 0;
+    // MOD and CnV writes waiting for the counter's wrap, in the order first written (the
+    // order they load in matters: a MOD load moves the anchor the later ones wrap from).
+    struct Pending { uint32_t reg, value; uint64_t written_at; };
+    std::vector<Pending> pending;
+    struct Capture { uint64_t cycle; int channel; uint32_t value; };
+    std::vector<Capture> captures;         // until taken (Core::keep_records)
+    std::vector<std::string> unmodelled;   // until taken
+    uint64_t tof_clear = 0, tof_event = 0;
+    bool line = false;
+
+    void setup();
+    void reset();
+    double clock_hz(const Core& c) const;
+    double ticks_per_cycle(const Core& c) const;
+    uint32_t cntin() const { return v[oCNTIN] & 0xFFFF; }
+    uint32_t mod() const { return v[oMOD] & 0xFFFF; }
+    int64_t period_ticks() const;
+    uint32_t count(Core& c, uint64_t now);
+    bool next_wrap_after(const Core& c, uint64_t cycle, uint64_t& wrap) const;
+    bool next_tick(const Core& c, uint64_t cycle, uint64_t& tick) const;
+    void load_pending(const Core& c, uint64_t now);
+    void buffered(Core& c, uint32_t reg, uint32_t value);
+    void restart(Core& c, uint64_t now);
+    void schedule_tof(Core& c);
+    void on_tof(Core& c);
+    void update_irq(Core& c);
+    int mode(int ch) const;
+    bool period_s(Core& c, double& out);
+    bool pulse_s(Core& c, int ch, double& out);
+    bool commanded_value(Core& c, int ch, uint32_t& out);
+    void edge(Core& c, int ch, bool rising);
+    uint32_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint32_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
 class Core {
 public:
-    enum Device : int { kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kDevices };
+    enum Device : int {
+        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kDevices
+    };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
          std::vector<std::string> exception_names);
@@ -303,8 +370,10 @@ public:
         return epoch_seconds_ + static_cast<double>(static_cast<int64_t>(cycles - epoch_cycles_)) / core_hz_;
     }
     void set_clocks(double core_hz, double bus_hz);
+    void set_fixed_hz(double hz) { fixed_hz_ = hz; }
     double core_hz() const { return core_hz_; }
     double bus_hz() const { return bus_hz_; }
+    double fixed_hz() const { return fixed_hz_; }     // MCGFFCLK
 
     // -- events ---------------------------------------------------------------------------
     uint64_t at(uint64_t cycle, Ev kind, bool scaled = true);
@@ -351,11 +420,14 @@ public:
     SysTick systick;
     Uart uart0;
     I2c i2c0;
+    Ftm ftm0, ftm3;
+    Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
-    bool clocked[kDevices] = {true, true, false, false};
+    bool clocked[kDevices] = {true, true, false, false, false, false};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
-    // Keep the I2C transfer records and the MPU6050's register log until taken (for tests and
-    // inspection); a long lockstep run turns them off instead of taking and dropping them.
+    // Keep the I2C transfer records, the MPU6050's register log and the FTM captures until
+    // taken (for tests and inspection); a long lockstep run turns them off instead of taking
+    // and dropping them.
     bool keep_records = true;
     bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
 
@@ -461,7 +533,7 @@ private:
     uint64_t seq_ = 0;
     uint64_t deadline_ = 0, instr_limit_ = 0;
     uint64_t epoch_cycles_ = 0;
-    double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0;
+    double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0, fixed_hz_ = 0.0;
     bool watch_mask_ = false, budget_hit_ = false, stop_ = false, py_error_ = false;
     bool svc_ = false, bkpt_ = false, intr_fault_ = false, inline_fault_ = false;
     bool inline_taken_ = false;     // continue_inline() took an exception (the PC moved)
