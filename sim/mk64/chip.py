@@ -112,7 +112,7 @@ class Mk64:
         if not self.ready:
             return
         core = self.machine.core
-        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3):
+        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog):
             core.set_clocked(dev.device, dev.clocked())
 
     @property

@@ -8,14 +8,14 @@ is the register after the write, the old contents where ``mask`` has no bits; st
 the register should hold in ``self.v[name]``). Registers without handlers store what is
 written. An access to an offset no register occupies is a bus fault.
 
-A model that lives in native code (``heliquad._simcore.Mk64Core``: UART0, I2C0, FTM0, FTM3)
-subclasses :class:`NativeRegisters` instead: the same map, gate and field helpers, its
+A model that lives in native code (``heliquad._simcore.Mk64Core``: UART0, I2C0, FTM0, FTM3,
+WDOG) subclasses :class:`NativeRegisters` instead: the same map, gate and field helpers, its
 registers read from the native model (``v`` is a read-only view), its accesses passed to it.
 """
 
 from __future__ import annotations
 
-from .machine import Device, Fault
+from .machine import ChipReset, Device, Fault
 from .registers import peripheral
 
 
@@ -155,7 +155,8 @@ class NativeRegisters(_RegisterMap):
     """A peripheral whose model is native: ``device`` is its number in the native core,
     ``stored(offset)`` reads a register as stored. Accesses reach it here only while the
     machine logs every access (or when it is gated or the offset holds no register);
-    otherwise the native core takes them directly."""
+    otherwise the native core takes them directly. A write that resets the chip (the
+    watchdog's rules) raises :class:`ChipReset` here."""
 
     def __init__(self, machine, svd_name: str, device: int, stored, *, gate=None,
                  span: int | None = None, name: str | None = None):
@@ -204,5 +205,8 @@ class NativeRegisters(_RegisterMap):
         return value
 
     def write(self, address: int, size: int, value: int):
-        if not self.machine.core.dev_write(self.device, address, size, value):
+        core = self.machine.core
+        if not core.dev_write(self.device, address, size, value):
             self._reg_for(self._first_hole(address, size), size, True)
+        if core.reset_pending:
+            raise ChipReset(*core.take_reset())

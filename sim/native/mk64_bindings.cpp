@@ -87,7 +87,7 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 void bind_mk64(py::module_& m) {
     py::class_<Core>(m, "Mk64Core",
                      "The emulated MK64FX512's hot path (sim/mk64): block accounting, events, "
-                     "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0/FTM0/FTM3 models.")
+                     "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0/FTM0/FTM3/WDOG models.")
         .def(py::init([](const py::dict& uc, const py::dict& regs, const py::dict& callbacks,
                          std::vector<std::string> names) {
                  Uc u;
@@ -171,6 +171,12 @@ void bind_mk64(py::module_& m) {
         .def("clear_error", &Core::clear_error)
         .def("stop_now", &Core::stop_now)
         .def_readonly("uc_error", &Core::uc_error_)
+        .def_property_readonly("reset_pending", &Core::reset_pending)
+        .def("take_reset", [](Core& c) -> py::object {
+            if (!c.reset_pending()) return py::none();
+            auto r = c.take_reset();
+            return py::make_tuple(r.first, r.second);
+        }, "(source, message) of the reset a native model caused, forgotten; None if none")
         .def("fault", [](const Core& c) {
             const FaultInfo& f = c.fault_;
             return py::make_tuple(f.kind, f.message, f.pc,
@@ -409,6 +415,50 @@ void bind_mk64(py::module_& m) {
             d["written_at"] = written_at;
             d["line"] = f.line;
             return d;
+        })
+        // WDOG
+        .def("wdog_setup", [](Core& c, const py::dict& d) {
+            Wdog& w = c.wdog;
+            w.L = layout(d);
+            w.wct = d["wct"].cast<uint32_t>();
+            w.gap = d["gap"].cast<uint32_t>();
+            const auto unlock = d["unlock"].cast<std::pair<uint32_t, uint32_t>>();
+            const auto refresh = d["refresh"].cast<std::pair<uint32_t, uint32_t>>();
+            w.unlock[0] = unlock.first; w.unlock[1] = unlock.second;
+            w.refresh[0] = refresh.first; w.refresh[1] = refresh.second;
+            w.lpo_hz = d["lpo_hz"].cast<double>();
+            w.setup();
+            w.reset();
+        })
+        .def("wdog_reg", [](const Core& c, uint32_t offset) { return c.wdog.v.at(offset); })
+        .def("wdog_power_on", [](Core& c, double core_hz, double bus_hz) {
+            c.wdog.power_on(c, core_hz, bus_hz);
+        }, py::arg("core_hz"), py::arg("bus_hz"))
+        .def("wdog_timeout_s", [](const Core& c) { return c.wdog.timeout_s(c.bus_hz()); })
+        .def("wdog_state", [](const Core& c) {
+            const Wdog& w = c.wdog;
+            py::dict d;
+            d["first_unlock"] = optional_cycle(w.first_unlock);
+            d["unlocked_at"] = optional_cycle(w.unlocked_at);
+            d["first_refresh"] = optional_cycle(w.first_refresh);
+            d["written"] = w.written;
+            d["disabled_at"] = w.disabled ? py::object(py::make_tuple(w.disabled_instruction,
+                                                                      w.disabled_cycle))
+                                          : py::object(py::none());
+            py::list ignored;
+            for (const auto& i : w.ignored) {
+                ignored.append(py::make_tuple(i.instruction, i.reg, i.value, i.why));
+            }
+            d["ignored"] = ignored;
+            return d;
+        })
+        .def("wdog_take_log", [](Core& c) {
+            py::list out;
+            for (const auto& e : c.wdog.log) {
+                out.append(py::make_tuple(e.instruction, e.cycle, e.reg, e.value));
+            }
+            c.wdog.log.clear();
+            return out;
         })
         // the MPU6050 slaves: the register model is the Python object's (heliquad._firmware)
         .def("mpu_new", [](Core& c, py::object emu, int address) {

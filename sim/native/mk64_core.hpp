@@ -11,7 +11,9 @@
 //   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
 // * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
 //   loop uses all the time: DWT_CYCCNT, SysTick, UART0, I2C0 with the MPU6050 on it, FTM0 and
-//   FTM3. Their Python classes are views onto these (one model each).
+//   FTM3, and the watchdog. Their Python classes are views onto these (one model each).
+// * A reset the chip would perform (the watchdog's) stops the run with its cause (kReset);
+//   Python raises it as ChipReset.
 // * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
 //   instruction, an access to a device modelled in Python, a Python event, a breakpoint, a
 //   fault) either calls a C function pointer the Python side made with ctypes (which takes the
@@ -85,13 +87,14 @@ struct Block {
 };
 
 enum class Ev : uint8_t {
-    Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof
+    Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof,
+    WdogTimeout, WdogWindow
 };
 
 // Why run() returned.
 enum Run : int {
     kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
-    kIntrFault
+    kIntrFault, kReset
 };
 
 // A fault found natively (exception entry/return); Python raises it.
@@ -327,10 +330,52 @@ struct Ftm {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
+// The watchdog (sim/mk64/wdog.py's notes describe the model). Its timings are in bus clocks
+// and are worked out with the clocks of the moment; its constants (the unlock and refresh
+// words, the WCT, the LPO's rate) come from Python with the layout.
+struct Wdog {
+    Layout L;
+    bool ready = false;
+    uint32_t wct = 0, gap = 0, unlock[2] = {0, 0}, refresh[2] = {0, 0};
+    double lpo_hz = 0.0;
+    uint32_t oSTCTRLH, oSTCTRLL, oTOVALH, oTOVALL, oWINH, oWINL, oREFRESH, oUNLOCK, oTMROUTH,
+        oTMROUTL, oRSTCNT, oPRESC;
+    uint32_t WDOGEN, CLKSRC, ALLOWUPDATE, INTFLG, PRESCVAL;
+    std::vector<uint32_t> v;               // by register offset
+    int64_t first_unlock = -1, unlocked_at = -1, first_refresh = -1;   // cycles; -1 none
+    std::vector<uint32_t> written;         // write-once registers written since the unlock
+    bool disabled = false;
+    uint64_t disabled_instruction = 0, disabled_cycle = 0;
+    struct Ignored { uint64_t instruction; uint32_t reg, value; std::string why; };
+    std::vector<Ignored> ignored;
+    struct Write { uint64_t instruction, cycle; uint32_t reg; uint64_t value; };
+    std::vector<Write> log;                // until taken (Core::keep_records)
+    uint64_t timeout_event = 0, window_event = 0, started = 0;
+    bool window_after_unlock = false;
+
+    void setup();
+    void reset();
+    bool enabled() const { return v[oSTCTRLH] & WDOGEN; }
+    double clock_hz(double bus_hz) const { return (v[oSTCTRLH] & CLKSRC) ? bus_hz : lpo_hz; }
+    uint32_t prescale() const;
+    double timeout_s(double bus_hz) const;
+    void power_on(Core& c, double core_hz, double bus_hz);
+    void arm_timeout(Core& c, double bus_hz);
+    void expired(Core& c);
+    void window(Core& c);
+    uint32_t count(const Core& c) const;
+    void write_once(Core& c, uint32_t offset, uint32_t value);
+    void ignore(Core& c, uint32_t offset, uint32_t value, std::string why);
+    uint32_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint32_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
 class Core {
 public:
     enum Device : int {
-        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kDevices
+        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kDevices
     };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
@@ -374,6 +419,8 @@ public:
     double core_hz() const { return core_hz_; }
     double bus_hz() const { return bus_hz_; }
     double fixed_hz() const { return fixed_hz_; }     // MCGFFCLK
+    // The cycle `seconds` after `start` at the current core clock (Machine.cycles_after).
+    uint64_t cycles_after(double seconds, uint64_t start) const;
 
     // -- events ---------------------------------------------------------------------------
     uint64_t at(uint64_t cycle, Ev kind, bool scaled = true);
@@ -398,6 +445,14 @@ public:
 
     // -- running --------------------------------------------------------------------------
     int run(uint64_t instr_limit);
+    // The chip resets (a native model's cause): the run stops at once, returning kReset;
+    // the first cause is kept until taken.
+    void chip_reset(const char* source, std::string message);
+    bool reset_pending() const { return reset_pending_; }
+    std::pair<std::string, std::string> take_reset() {
+        reset_pending_ = false;
+        return {std::move(reset_source_), std::move(reset_message_)};
+    }
     void request_stop() { stop_ = true; }
     void clear_stop() { stop_ = false; }
     void request_error() { py_error_ = true; }
@@ -421,13 +476,14 @@ public:
     Uart uart0;
     I2c i2c0;
     Ftm ftm0, ftm3;
+    Wdog wdog;
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
-    bool clocked[kDevices] = {true, true, false, false, false, false};
+    bool clocked[kDevices] = {true, true, false, false, false, false, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
-    // Keep the I2C transfer records, the MPU6050's register log and the FTM captures until
-    // taken (for tests and inspection); a long lockstep run turns them off instead of taking
-    // and dropping them.
+    // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
+    // watchdog's write log until taken (for tests and inspection); a long lockstep run turns
+    // them off instead of taking and dropping them.
     bool keep_records = true;
     bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
 
@@ -538,6 +594,9 @@ private:
     bool svc_ = false, bkpt_ = false, intr_fault_ = false, inline_fault_ = false;
     bool inline_taken_ = false;     // continue_inline() took an exception (the PC moved)
     bool in_block_hook_ = false;
+    bool in_emu_ = false;           // inside emu_start
+    bool reset_pending_ = false;
+    std::string reset_source_, reset_message_;
     uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
 
 public:

@@ -1,9 +1,11 @@
 // The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0,
-// I2C0 with the MPU6050 and FTM0/FTM3. Their behaviour is documented where their Python views
-// live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py); register offsets and bits come from the SVD
-// tables through Python (Layout), never typed here.
+// I2C0 with the MPU6050, FTM0/FTM3 and the watchdog. Their behaviour is documented where their
+// Python views live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py, wdog.py); register offsets and
+// bits come from the SVD tables through Python (Layout), never typed here.
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
 #include <stdexcept>
 #include <type_traits>
 
@@ -393,7 +395,7 @@ namespace {
 // sim/mk64/peripheral.py's RegisterDevice does: a register read whole and the bytes taken from
 // it, a part written merged into the register's stored value (so 8-bit registers see one
 // access per byte). An offset no register occupies makes the whole access the caller's (a bus
-// fault in Python).
+// fault in Python). A write that resets the chip ends the access there.
 bool covered(const Layout& L, uint32_t address, unsigned size) {
     if (address < L.base || address + size > L.base + L.span) return false;
     for (unsigned i = 0; i < size; ++i) {
@@ -424,7 +426,7 @@ template <typename Device>
 bool write_regs(Device& d, Core& c, uint32_t address, unsigned size, uint64_t value) {
     if (!covered(d.L, address, size)) return false;
     using Value = std::remove_reference_t<decltype(d.v[0])>;
-    for (unsigned done = 0; done < size;) {
+    for (unsigned done = 0; done < size && !c.reset_pending();) {
         const uint32_t at = address - d.L.base + done;
         const uint32_t reg = static_cast<uint32_t>(d.L.reg_at[at]);
         const unsigned shift = at - reg;
@@ -726,6 +728,16 @@ double elapsed(uint64_t now, uint64_t since) {
 uint64_t plus(uint64_t cycle, int64_t n) {
     return static_cast<uint64_t>(static_cast<int64_t>(cycle) + n);
 }
+
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+    char buf[256];
+    va_list args;
+    va_start(args, fmt);
+    std::vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    return buf;
+}
 }  // namespace
 
 void Ftm::setup() {
@@ -1022,6 +1034,182 @@ bool Ftm::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
 }
 
 bool Ftm::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    return write_regs(*this, c, address, size, value);
+}
+
+// -- WDOG -------------------------------------------------------------------------------------
+void Wdog::setup() {
+    oSTCTRLH = L["STCTRLH"]; oSTCTRLL = L["STCTRLL"]; oTOVALH = L["TOVALH"]; oTOVALL = L["TOVALL"];
+    oWINH = L["WINH"]; oWINL = L["WINL"]; oREFRESH = L["REFRESH"]; oUNLOCK = L["UNLOCK"];
+    oTMROUTH = L["TMROUTH"]; oTMROUTL = L["TMROUTL"]; oRSTCNT = L["RSTCNT"]; oPRESC = L["PRESC"];
+    WDOGEN = L["STCTRLH.WDOGEN"]; CLKSRC = L["STCTRLH.CLKSRC"];
+    ALLOWUPDATE = L["STCTRLH.ALLOWUPDATE"]; INTFLG = L["STCTRLL.INTFLG"];
+    PRESCVAL = L["PRESC.PRESCVAL"];
+    ready = true;
+}
+
+void Wdog::reset() {
+    v = L.reset;
+    first_unlock = unlocked_at = first_refresh = -1;
+    written.clear();
+    disabled = false;
+    disabled_instruction = disabled_cycle = 0;
+    ignored.clear();
+    log.clear();
+    timeout_event = window_event = started = 0;
+    window_after_unlock = false;
+}
+
+namespace {
+uint64_t bus_cycles_to_core(uint32_t n, uint64_t start, double ratio) {
+    return start + static_cast<uint64_t>(std::nearbyint(n * ratio));     // half to even
+}
+
+double bus_elapsed(int64_t since, uint64_t now, double ratio) {
+    return static_cast<double>(static_cast<int64_t>(now) - since) / ratio;
+}
+
+double bus_ratio(const Core& c) { return c.core_hz() / c.bus_hz(); }
+}  // namespace
+
+uint32_t Wdog::prescale() const { return (v[oPRESC] & PRESCVAL) >> shift_of(PRESCVAL); }
+
+double Wdog::timeout_s(double bus_hz) const {
+    const uint64_t toval = (uint64_t{v[oTOVALH]} << 16) | v[oTOVALL];
+    return static_cast<double>(toval * (prescale() + 1)) / clock_hz(bus_hz);
+}
+
+// At reset the core's clocks are not yet the chip's (its tree is set up after the devices
+// reset), so Python gives the ones of the tree the chip resets to.
+void Wdog::power_on(Core& c, double core_hz, double bus_hz) {
+    window_after_unlock = false;
+    window_event = c.at(bus_cycles_to_core(wct, 0, core_hz / bus_hz), Ev::WdogWindow);
+    arm_timeout(c, bus_hz);
+}
+
+void Wdog::arm_timeout(Core& c, double bus_hz) {
+    if (timeout_event) {
+        c.cancel(timeout_event);
+        timeout_event = 0;
+    }
+    if (!enabled()) return;
+    started = c.now();
+    timeout_event = c.at(c.cycles_after(timeout_s(bus_hz), started), Ev::WdogTimeout);
+}
+
+void Wdog::expired(Core& c) {
+    timeout_event = 0;
+    c.chip_reset("WDOG", format("watchdog timeout (%.3f s) while enabled", timeout_s(c.bus_hz())));
+}
+
+void Wdog::window(Core& c) {
+    window_event = 0;
+    if (!window_after_unlock) {
+        if (first_unlock < 0 && unlocked_at < 0) {
+            c.chip_reset("WDOG", format("no unlock sequence within the WCT (%u bus clocks) after "
+                                        "reset", wct));
+        }
+    } else if (written.empty()) {
+        c.chip_reset("WDOG", "no configuration register written within the WCT after the unlock");
+    }
+}
+
+uint32_t Wdog::count(const Core& c) const {
+    if (!enabled()) return 0;
+    const double seconds = elapsed(c.now(), started) / c.core_hz();
+    return static_cast<uint32_t>(py_int(seconds * clock_hz(c.bus_hz()) / (prescale() + 1)));
+}
+
+void Wdog::ignore(Core& c, uint32_t offset, uint32_t value, std::string why) {
+    ignored.push_back({c.instructions_now(), offset, value, std::move(why)});
+}
+
+void Wdog::write_once(Core& c, uint32_t o, uint32_t value) {
+    const uint64_t now = c.now();
+    if (unlocked_at < 0) {
+        ignore(c, o, value, "not unlocked");
+    } else if (bus_elapsed(unlocked_at, now, bus_ratio(c)) > wct) {
+        ignore(c, o, value, "WCT after the unlock has passed");
+    } else if (std::find(written.begin(), written.end(), o) != written.end()) {
+        ignore(c, o, value, "already written once since the unlock");
+    } else {
+        written.push_back(o);
+        const bool was_enabled = enabled();
+        v[o] = value;
+        if (o == oSTCTRLH && was_enabled && !enabled() && !disabled) {
+            disabled = true;
+            disabled_instruction = c.instructions_now();
+            disabled_cycle = now;
+        }
+        arm_timeout(c, c.bus_hz());
+    }
+}
+
+uint32_t Wdog::read_reg(Core& c, uint32_t o) {
+    if (o == oTMROUTH) return (count(c) >> 16) & 0xFFFF;
+    if (o == oTMROUTL) return count(c) & 0xFFFF;
+    return v[o];
+}
+
+void Wdog::write_reg(Core& c, uint32_t o, uint32_t value) {
+    const uint64_t now = c.now();
+    if (o == oUNLOCK) {
+        if (!(v[oSTCTRLH] & ALLOWUPDATE)) {
+            ignore(c, o, value, "ALLOWUPDATE is clear");
+        } else if (value == unlock[0]) {
+            first_unlock = static_cast<int64_t>(now);
+        } else if (value == unlock[1] && first_unlock >= 0) {
+            const double apart = bus_elapsed(first_unlock, now, bus_ratio(c));
+            if (apart > gap) {
+                c.chip_reset("WDOG", format("unlock words %.0f bus clocks apart (at most %u)",
+                                            apart, gap));
+                return;
+            }
+            first_unlock = -1;
+            unlocked_at = static_cast<int64_t>(now);
+            written.clear();
+            if (window_event) c.cancel(window_event);
+            window_after_unlock = true;
+            window_event = c.at(bus_cycles_to_core(wct, now, bus_ratio(c)), Ev::WdogWindow);
+        } else {
+            c.chip_reset("WDOG", format("invalid unlock sequence: 0x%04X written to WDOG_UNLOCK",
+                                        value));
+        }
+    } else if (o == oREFRESH) {
+        if (value == refresh[0]) {
+            first_refresh = static_cast<int64_t>(now);
+        } else if (value == refresh[1] && first_refresh >= 0 &&
+                   bus_elapsed(first_refresh, now, bus_ratio(c)) <= gap) {
+            first_refresh = -1;
+            arm_timeout(c, c.bus_hz());
+        } else {
+            c.chip_reset("WDOG", format("invalid refresh sequence (0x%04X)", value));
+        }
+    } else if (o == oSTCTRLL) {
+        if (value & INTFLG) v[oSTCTRLL] &= ~INTFLG;             // write 1 to clear
+    } else if (o == oRSTCNT) {
+        v[oRSTCNT] &= ~value;                                   // write 1 to clear
+    } else if (o == oSTCTRLH || o == oTOVALH || o == oTOVALL || o == oWINH || o == oWINL ||
+               o == oPRESC) {
+        write_once(c, o, value);
+    } else if (o != oTMROUTH && o != oTMROUTL) {
+        v[o] = value;
+    }
+}
+
+bool Wdog::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    return read_regs(*this, c, address, size, out);
+}
+
+bool Wdog::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    if (!covered(L, address, size)) return false;
+    const uint32_t reg = static_cast<uint32_t>(L.reg_at[address - L.base]);
+    if (c.keep_records) log.push_back({c.instructions_now(), c.now(), reg, value});
+    if (reg == oUNLOCK && size != 2) {
+        c.chip_reset("WDOG", format("%u-bit write to WDOG_UNLOCK: the sequence is two 16-bit "
+                                    "writes", 8 * size));
+        return true;
+    }
     return write_regs(*this, c, address, size, value);
 }
 
