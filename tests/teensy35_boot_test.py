@@ -7,7 +7,8 @@ Two parts:
   return with basic and FP frames, nesting, tail-chaining and PRIMASK, the cycle counter
   against the stated cycle model, a clock-gated access, an FPU instruction before CPACR,
   the watchdog's reset window, and a small boot (clocks, I2C, UART, SysTick) with a good
-  and a dead crystal.
+  and a dead crystal; the FTM and watchdog models driven directly, and a watchdog reset by a
+  program's store.
 * The real image (build/teensy35/heliquad-fw-teensy35.elf, from ``cmake --preset teensy35
   && cmake --build --preset teensy35``; $HQ_TEENSY35_ELF overrides) from reset to its main
   loop: watchdog first, FPU granted first, the clock tree and the MCG sequence, a dead
@@ -861,7 +862,7 @@ def test_a_stuck_i2c_bus_times_out_recovers_and_the_loop_goes_on():
 def _flight(board, loops):
     """Run ``loops`` main loops as a lockstep driver does (one raw IMU sample a loop), and
     what a run must reproduce exactly: counts, times, the UART line with its stamps, the
-    interrupts, the I2C traffic."""
+    interrupts, the I2C traffic, the ESC commands, the watchdog's writes."""
     from heliquad.sim.mpu6050_packets import raw_packet
     sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
     m = board.machine
@@ -871,9 +872,11 @@ def _flight(board, loops):
         assert board.run_to_loop(board.loops + 1, instructions=1_000_000).reason == "loop"
     transfers = [(t.address, t.read, t.acked, t.start_cycle, bytes(t.data), t.end_cycle)
                  for t in board.chip.i2c0.transfers]
-    return (m.instructions, m.cycles, m.sleep_cycles, list(board.chip.uart0.sent),
+    chip = board.chip
+    return (m.instructions, m.cycles, m.sleep_cycles, list(chip.uart0.sent),
             list(m.exception_log), sorted(m.exception_counts.items()), transfers,
-            board.loop_starts)
+            board.loop_starts, [chip.ftm0.commanded_value(ch) for ch in range(5)],
+            list(chip.wdog.log))
 
 
 def test_image_runs_are_deterministic_and_the_native_paths_agree_with_the_reference():
@@ -1080,3 +1083,126 @@ def test_uart_rdrf_is_latched_as_on_the_chip():
     rd("S1")
     assert (first, rd("D")) == (3, 4) and not uart.rdrf()
     assert chip.notes == []
+
+
+# ------------------------------------------------- FTM and WDOG models, no program ------------
+
+def _write(dev, name, value, size=None):
+    reg = dev.map[name]
+    dev.write(dev.base + reg.offset, size or reg.bits // 8, value)
+
+
+def _wdog_off(chip):
+    for name, value in (("UNLOCK", 0xC520), ("UNLOCK", 0xD928), ("STCTRLH", 0x01D2)):
+        _write(chip.wdog, name, value)
+
+
+def test_ftm_pwm_writes_wait_for_the_wrap_and_captures_copy_the_count():
+    """The FTM model (native; ``Ftm`` is its view) at the reset clocks (bus = core clock, so
+    one count a cycle): MOD and CnV load at once while stopped and at the next wrap while
+    counting; an edge on a capture channel copies CNT into CnV and raises the interrupt
+    until CHF is written 0; accesses of any width reach the 32-bit registers."""
+    chip = Mk64()
+    m, ftm0, ftm3 = chip.machine, chip.ftm0, chip.ftm3
+    _wdog_off(chip)
+    sc, cnsc = ftm0.map["SC"], ftm0.map["C0SC"]
+    bus_clock = 1 << sc.field("CLKS").mask.bit_length() - 2          # CLKS = 1
+    _write(ftm0, "MOD", 99)
+    _write(ftm0, "C0SC", cnsc.bit("MSB") | cnsc.bit("ELSB"))
+    _write(ftm0, "C0V", 25)
+    assert ftm0.channel_mode(0) == "edge-aligned PWM" and ftm0.high_true(0)
+    assert ftm0.period_s() is None and ftm0.commanded_value(0) == 25    # no clock yet
+    _write(ftm0, "SC", bus_clock)
+    hz = chip.bus_hz()
+    assert ftm0.clock_hz() == hz and ftm0.cycles_per_tick() == 1.0
+    assert ftm0.period_s() == 100 / hz and ftm0.pulse_s(0) == 25 / hz
+    m.advance(10)
+    _write(ftm0, "C0V", 50)
+    assert ftm0.commanded_value(0) == 50 and ftm0.pulse_s(0) == 25 / hz, "waits for the wrap"
+    assert ftm0.read_register("CNT") == 10
+    m.advance(90)
+    assert ftm0.read_register("CNT") == 0 and ftm0.pulse_s(0) == 50 / hz and not ftm0.pending
+    assert ftm0.read_register("SC") & sc.bit("TOF"), "TOF computed when read (no TOIE)"
+    c0v = ftm0.base + ftm0.map["C0V"].offset
+    assert ftm0.read(c0v, 1) == 50 and ftm0.read(c0v, 2) == 50
+    assert ftm0.next_tick(m.now()) == m.now()
+
+    _write(ftm3, "MOD", 0xFFFF)
+    _write(ftm3, "C0SC", cnsc.bit("ELSA") | cnsc.bit("ELSB") | cnsc.bit("CHIE"))
+    _write(ftm3, "SC", bus_clock)
+    assert ftm3.channel_mode(0) == "capture both"
+    irq = 1 << (16 + ftm3.irq)
+    m.advance(37)
+    ftm3.edge(0, True)
+    assert ftm3.captures == [(m.now(), 0, 37)] and ftm3.v["C0V"] == 37
+    assert ftm3.read_register("STATUS") == 1 and m.irq_lines & irq
+    ftm3.captures.clear()
+    assert ftm3.captures == [], "taken once"
+    _write(ftm3, "C0SC", ftm3.v["C0SC"] & ~cnsc.bit("CHF"))
+    assert not m.irq_lines & irq and ftm3.read_register("STATUS") == 0
+    assert ftm0.unmodelled == [] and ftm3.unmodelled == []
+    _write(ftm3, "COMBINE", 1)
+    assert ftm3.unmodelled == ["combined / dual-edge channel modes"]
+
+
+def test_watchdog_resets_with_its_cause():
+    """The watchdog model (native; ``Wdog`` is its view): each way it resets the chip
+    raises ChipReset("WDOG", why), whether the cause is a write or time passing."""
+    chip = Mk64()
+    with pytest.raises(ChipReset) as info:
+        chip.machine.advance(1000)
+    assert info.value.source == "WDOG"
+    assert str(info.value) == ("reset by WDOG: no unlock sequence within the WCT (256 bus "
+                               "clocks) after reset")
+
+    chip = Mk64()
+    wdog = chip.wdog
+    with pytest.raises(ChipReset, match="8-bit write to WDOG_UNLOCK: the sequence is two "
+                                        "16-bit writes"):
+        _write(wdog, "UNLOCK", 0x20, size=1)
+    assert [e[2:] for e in wdog.log] == [("UNLOCK", 0x20)]
+
+    chip = Mk64()
+    wdog = chip.wdog
+    _write(wdog, "UNLOCK", 0xC520)
+    _write(wdog, "UNLOCK", 0xD928)
+    _write(wdog, "TOVALL", 1000)         # 1000 bus clocks, the watchdog left on
+    _write(wdog, "TOVALH", 0)
+    _write(wdog, "PRESC", 0)
+    _write(wdog, "PRESC", 0x100)         # ignored: once only
+    assert wdog.enabled and wdog.written == {"TOVALL", "TOVALH", "PRESC"}
+    assert wdog.ignored == [(0, "PRESC", 0x100, "already written once since the unlock")]
+    assert wdog.timeout_s() == 1000 / chip.bus_hz()
+    _write(wdog, "REFRESH", 0xA602)
+    _write(wdog, "REFRESH", 0xB480)
+    with pytest.raises(ChipReset, match=r"invalid refresh sequence \(0x1234\)"):
+        _write(wdog, "REFRESH", 0x1234)
+    chip.machine.advance(999)
+    with pytest.raises(ChipReset, match=r"watchdog timeout \(0.000 s\) while enabled"):
+        chip.machine.advance(1)
+
+
+WDOG_WRONG_REFRESH_C = C_PRELUDE + r"""
+__attribute__((section(".vectors"), used)) void (*const vectors[16])(void) = {
+    (void (*)(void))&_estack, reset };
+volatile uint32_t sum;
+int main(void) {
+    for (int i = 0; i < 100; ++i) sum += REG16(0x40052004);     /* TOVALH: past the logged ones */
+    REG16(0x4005200C) = 0x1234;
+    for (;;) {}
+}
+"""
+
+
+def test_a_wrong_refresh_from_the_program_stops_the_run_at_its_store(tmp_path):
+    chip = Mk64(build(tmp_path, "wrong_refresh", WDOG_WRONG_REFRESH_C))
+    m = chip.machine
+    with pytest.raises(ChipReset, match=r"invalid refresh sequence \(0x1234\)") as info:
+        chip.run(instructions=100_000)
+    assert info.value.source == "WDOG"
+    assert m.counts()["native_accesses"] >= 100 - m.FIRST_ACCESSES, "the native path took it"
+    import capstone
+    cs = capstone.Cs(capstone.CS_ARCH_ARM, capstone.CS_MODE_THUMB | capstone.CS_MODE_MCLASS)
+    insn = next(cs.disasm(m.read(m.pc, 4), m.pc))
+    assert m.image.function_at(m.pc).name == "main" and insn.mnemonic.startswith("strh"), \
+        f"stopped at the store, which does not retire ({insn.mnemonic} {insn.op_str})"

@@ -7,7 +7,7 @@ from .clocks import IRC48M_HZ, ClockTree, Mcg, Osc, Sim, check_tree
 from .ftm import Ftm
 from .i2c import I2c
 from .image import Image
-from .machine import I2C0_DEVICE, UART0_DEVICE, Machine
+from .machine import Machine
 from .port import Ports
 from .scs import Dwt, SystemControlSpace
 from .uart import Uart
@@ -103,6 +103,7 @@ class Mk64:
         self.clock_history.append(at + (tree,))
         for text in check_tree(tree, self.sim):
             self.clock_violations.append(at + (f"{text} (after {cause})",))
+        m.core.fixed_hz = self.fixed_hz()           # MCGFFCLK, for the FTMs
         m.set_clocks(tree.core, tree.bus)
 
     def gates_changed(self):
@@ -111,8 +112,8 @@ class Mk64:
         if not self.ready:
             return
         core = self.machine.core
-        for dev, number in ((self.uart0, UART0_DEVICE), (self.i2c0, I2C0_DEVICE)):
-            core.set_clocked(number, dev.clocked())
+        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog):
+            core.set_clocked(dev.device, dev.clocked())
 
     @property
     def notes(self) -> list:

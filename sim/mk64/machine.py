@@ -23,10 +23,11 @@ unicorn leaves out on an M-profile core.
 What runs at every block, every busy peripheral access and every interrupt is native: the
 block accounting and the event deadline, the event queue (Python's events included, so
 every event runs in one order), the NVIC's state, exception entry and return, WFI, and the
-models of DWT, SysTick, UART0 and I2C0 (their Python classes are views). The native core
-calls back into Python (through ctypes function pointers, which take the GIL) for a block not
-decoded yet, the FPU-enable check until the first FPU instruction and an access to a device
-modelled in Python; it returns from a run for a Python event, a breakpoint or a fault. This
+models of DWT, SysTick, UART0, I2C0, FTM0, FTM3 and the watchdog (their Python classes are
+views). The native core calls back into Python (through ctypes function pointers, which take
+the GIL) for a block not decoded yet, the FPU-enable check until the first FPU instruction and
+an access to a device modelled in Python; it returns from a run for a Python event, a
+breakpoint, a fault or a reset a native model caused (raised as :class:`ChipReset`). This
 module keeps the rest: decoding (timing.py), the memory map, the Python devices, breakpoints,
 faults and their messages, and the logs of the first accesses.
 """
@@ -54,9 +55,10 @@ N_EXCEPTIONS = 16 + 86
 _INTR_UNDEF = 1
 # Why Mk64Core.run() returned (sim/native/mk64_core.hpp, enum Run).
 (_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
- _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT) = range(1, 11)
+ _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
 # Native device numbers (Core::Device).
-DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE = range(4)
+DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE = \
+    range(7)
 # Block flags in the native table (Block::kMaskOp ...).
 _MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
 
@@ -465,6 +467,8 @@ class Machine:
         target = self.core.cycles + cycles
         while True:
             seq = self.core.advance(target)
+            if self.core.reset_pending:
+                raise ChipReset(*self.core.take_reset())
             if not seq:
                 return
             ev = self._py_events.pop(seq, None)
@@ -594,6 +598,8 @@ class Machine:
         if code == _RUN_FAULT:
             kind, message, pc, address = core.fault()
             return Fault(kind, message, pc, address)
+        if code == _RUN_RESET:
+            return ChipReset(*core.take_reset())
         if code == _RUN_INTR_FAULT:
             pc = core.intr_pc
             if core.intr_number == _INTR_UNDEF:

@@ -8,14 +8,14 @@ is the register after the write, the old contents where ``mask`` has no bits; st
 the register should hold in ``self.v[name]``). Registers without handlers store what is
 written. An access to an offset no register occupies is a bus fault.
 
-A model that lives in native code (``heliquad._simcore.Mk64Core``: UART0, I2C0) subclasses
-:class:`NativeRegisters` instead: the same map, gate and field helpers, its registers read
-from the native model (``v`` is a read-only view), its accesses passed to it.
+A model that lives in native code (``heliquad._simcore.Mk64Core``: UART0, I2C0, FTM0, FTM3,
+WDOG) subclasses :class:`NativeRegisters` instead: the same map, gate and field helpers, its
+registers read from the native model (``v`` is a read-only view), its accesses passed to it.
 """
 
 from __future__ import annotations
 
-from .machine import Device, Fault
+from .machine import ChipReset, Device, Fault
 from .registers import peripheral
 
 
@@ -152,10 +152,11 @@ class _NativeValues:
 
 
 class NativeRegisters(_RegisterMap):
-    """A peripheral of 8-bit registers whose model is native: ``device`` is its number in
-    the native core, ``stored(offset)`` reads a register as stored. Accesses reach it here
-    only while the machine logs every access (or when it is gated or the offset holds no
-    register); otherwise the native core takes them directly."""
+    """A peripheral whose model is native: ``device`` is its number in the native core,
+    ``stored(offset)`` reads a register as stored. Accesses reach it here only while the
+    machine logs every access (or when it is gated or the offset holds no register);
+    otherwise the native core takes them directly. A write that resets the chip (the
+    watchdog's rules) raises :class:`ChipReset` here."""
 
     def __init__(self, machine, svd_name: str, device: int, stored, *, gate=None,
                  span: int | None = None, name: str | None = None):
@@ -166,23 +167,30 @@ class NativeRegisters(_RegisterMap):
         machine.core.add_route(device, self.base, self.base + self.size)
 
     def layout(self) -> dict:
-        """The register map for the native model: offsets, reset values, and every
-        register's offset ("REG") and field's mask ("REG.FIELD"), from the SVD."""
-        reg_at, reset, k = [-1] * self.size, [0] * self.size, {}
+        """The register map for the native model, from the SVD: the register each byte
+        belongs to (``reg_at``, by byte offset), each register's width in bytes and reset
+        value (by its offset), and every register's offset ("REG") and field's mask
+        ("REG.FIELD")."""
+        reg_at, width, reset, k = [-1] * self.size, [0] * self.size, [0] * self.size, {}
         for reg in self.map.registers.values():
-            if reg.bits != 8:
-                raise ValueError(f"{self.name}_{reg.name}: native models take 8-bit registers")
-            if reg.offset < self.size:
-                reg_at[reg.offset] = reg.offset
-                reset[reg.offset] = reg.reset & 0xFF
+            if reg.bits not in (8, 16, 32):
+                raise ValueError(f"{self.name}_{reg.name}: native models take 8-, 16- and "
+                                 "32-bit registers")
+            if reg.offset + reg.bits // 8 <= self.size:
+                for i in range(reg.bits // 8):
+                    reg_at[reg.offset + i] = reg.offset
+                width[reg.offset] = reg.bits // 8
+                reset[reg.offset] = reg.reset & ((1 << reg.bits) - 1)
             k[reg.name] = reg.offset
             for fld in reg.fields:
                 k[f"{reg.name}.{fld}"] = reg.field(fld).mask
-        return {"base": self.base, "span": self.size, "reg_at": reg_at, "reset": reset, "k": k}
+        return {"base": self.base, "span": self.size, "reg_at": reg_at, "width": width,
+                "reset": reset, "k": k}
 
     def read_register(self, name: str) -> int:
         """A register's value as the program would read it (side effects included)."""
-        return self.read(self.base + self.map[name].offset, 1)
+        reg = self.map[name]
+        return self.read(self.base + reg.offset, reg.bits // 8)
 
     def _first_hole(self, address, size):
         for i in range(size):
@@ -197,5 +205,8 @@ class NativeRegisters(_RegisterMap):
         return value
 
     def write(self, address: int, size: int, value: int):
-        if not self.machine.core.dev_write(self.device, address, size, value):
+        core = self.machine.core
+        if not core.dev_write(self.device, address, size, value):
             self._reg_for(self._first_hole(address, size), size, True)
+        if core.reset_pending:
+            raise ChipReset(*core.take_reset())

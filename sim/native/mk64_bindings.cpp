@@ -38,17 +38,40 @@ u128 from_int(const py::int_& v) {
     return (static_cast<u128>(hi.cast<uint64_t>()) << 64) | lo.cast<uint64_t>();
 }
 
-Layout8 layout(const py::dict& d) {
-    Layout8 L;
+Layout layout(const py::dict& d) {
+    Layout L;
     L.base = d["base"].cast<uint32_t>();
     L.span = d["span"].cast<uint32_t>();
     L.reg_at = d["reg_at"].cast<std::vector<int>>();
-    L.reset = d["reset"].cast<std::vector<uint8_t>>();
+    L.width = d["width"].cast<std::vector<uint8_t>>();
+    L.reset = d["reset"].cast<std::vector<uint32_t>>();
     L.k = d["k"].cast<std::unordered_map<std::string, uint32_t>>();
-    if (L.reg_at.size() != L.span || L.reset.size() != L.span) {
-        throw std::invalid_argument("register layout: reg_at and reset need one entry a byte");
+    if (L.reg_at.size() != L.span || L.width.size() != L.span || L.reset.size() != L.span) {
+        throw std::invalid_argument("register layout: reg_at, width and reset need one entry a "
+                                    "byte");
+    }
+    for (uint32_t at = 0; at < L.span; ++at) {
+        const int reg = L.reg_at[at];
+        if (reg >= 0 && (static_cast<uint32_t>(reg) > at || at - reg >= L.width[reg])) {
+            throw std::invalid_argument("register layout: a byte outside its register");
+        }
     }
     return L;
+}
+
+Ftm& ftm_of(Core& c, int dev) {
+    Ftm* f = c.ftm(dev);
+    if (!f) throw std::invalid_argument("no FTM is native device " + std::to_string(dev));
+    return *f;
+}
+
+int channel(int ch) {
+    if (ch < 0 || ch >= Ftm::kChannels) throw py::index_error("no FTM channel " + std::to_string(ch));
+    return ch;
+}
+
+py::object optional_double(bool known, double value) {
+    return known ? py::object(py::float_(value)) : py::object(py::none());
 }
 
 py::object optional_cycle(int64_t c) { return c < 0 ? py::object(py::none()) : py::int_(c); }
@@ -64,7 +87,7 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 void bind_mk64(py::module_& m) {
     py::class_<Core>(m, "Mk64Core",
                      "The emulated MK64FX512's hot path (sim/mk64): block accounting, events, "
-                     "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0 models.")
+                     "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0/FTM0/FTM3/WDOG models.")
         .def(py::init([](const py::dict& uc, const py::dict& regs, const py::dict& callbacks,
                          std::vector<std::string> names) {
                  Uc u;
@@ -124,6 +147,8 @@ void bind_mk64(py::module_& m) {
         .def("instructions_now", &Core::instructions_now)
         .def("seconds", &Core::seconds)
         .def("set_clocks", &Core::set_clocks)
+        .def_property("fixed_hz", &Core::fixed_hz, &Core::set_fixed_hz,
+                      "MCGFFCLK, the FTMs' fixed-frequency clock (the chip sets it)")
         // events
         .def("at", [](Core& c, uint64_t cycle, bool scaled) { return c.at(cycle, Ev::Python, scaled); })
         .def("time_limit", [](Core& c, uint64_t cycle) { return c.at(cycle, Ev::TimeLimit, true); })
@@ -146,6 +171,12 @@ void bind_mk64(py::module_& m) {
         .def("clear_error", &Core::clear_error)
         .def("stop_now", &Core::stop_now)
         .def_readonly("uc_error", &Core::uc_error_)
+        .def_property_readonly("reset_pending", &Core::reset_pending)
+        .def("take_reset", [](Core& c) -> py::object {
+            if (!c.reset_pending()) return py::none();
+            auto r = c.take_reset();
+            return py::make_tuple(r.first, r.second);
+        }, "(source, message) of the reset a native model caused, forgotten; None if none")
         .def("fault", [](const Core& c) {
             const FaultInfo& f = c.fault_;
             return py::make_tuple(f.kind, f.message, f.pc,
@@ -318,6 +349,117 @@ void bind_mk64(py::module_& m) {
                       [](Core& c, bool v) { c.i2c0.pins_connected = v; })
         .def("i2c_scl_hz", [](const Core& c) { return c.i2c0.scl_hz(c); })
         .def("i2c_byte_in_flight", [](const Core& c) { return c.i2c0.event != 0; })
+        // FTM0, FTM3 (by native device number)
+        .def("ftm_setup", [](Core& c, int dev, const py::dict& d) {
+            Ftm& f = ftm_of(c, dev);
+            f.L = layout(d);
+            f.irq = d["irq"].cast<int>();
+            f.tof_kind = dev == Core::kFtm0 ? Ev::Ftm0Tof : Ev::Ftm3Tof;
+            f.setup();
+            f.reset();
+        })
+        .def("ftm_reg", [](Core& c, int dev, uint32_t offset) { return ftm_of(c, dev).v.at(offset); })
+        .def("ftm_count", [](Core& c, int dev) { return ftm_of(c, dev).count(c, c.now()); })
+        .def("ftm_clock_hz", [](Core& c, int dev) { return ftm_of(c, dev).clock_hz(c); })
+        .def("ftm_cycles_per_tick", [](Core& c, int dev) {
+            const double rate = ftm_of(c, dev).ticks_per_cycle(c);
+            return rate != 0.0 ? 1 / rate : 0.0;
+        })
+        .def("ftm_next_tick", [](Core& c, int dev, uint64_t cycle) -> py::object {
+            uint64_t tick = 0;
+            return ftm_of(c, dev).next_tick(c, cycle, tick) ? py::object(py::int_(tick))
+                                                             : py::object(py::none());
+        })
+        .def("ftm_mode", [](Core& c, int dev, int ch) { return ftm_of(c, dev).mode(channel(ch)); })
+        .def("ftm_period_s", [](Core& c, int dev) {
+            double s = 0.0;
+            const bool known = ftm_of(c, dev).period_s(c, s);
+            return optional_double(known, s);
+        })
+        .def("ftm_pulse_s", [](Core& c, int dev, int ch) {
+            double s = 0.0;
+            const bool known = ftm_of(c, dev).pulse_s(c, channel(ch), s);
+            return optional_double(known, s);
+        })
+        .def("ftm_commanded_value", [](Core& c, int dev, int ch) -> py::object {
+            uint32_t value = 0;
+            return ftm_of(c, dev).commanded_value(c, channel(ch), value) ? py::object(py::int_(value))
+                                                                   : py::object(py::none());
+        })
+        .def("ftm_edge", [](Core& c, int dev, int ch, bool rising) {
+            ftm_of(c, dev).edge(c, channel(ch), rising);
+        })
+        .def("ftm_take_captures", [](Core& c, int dev) {
+            Ftm& f = ftm_of(c, dev);
+            py::list out;
+            for (const auto& k : f.captures) out.append(py::make_tuple(k.cycle, k.channel, k.value));
+            f.captures.clear();
+            return out;
+        })
+        .def("ftm_take_unmodelled", [](Core& c, int dev) {
+            auto out = std::move(ftm_of(c, dev).unmodelled);
+            ftm_of(c, dev).unmodelled.clear();
+            return out;
+        })
+        .def("ftm_state", [](Core& c, int dev) {
+            const Ftm& f = ftm_of(c, dev);
+            py::dict d;
+            d["anchor"] = f.anchored ? py::object(py::make_tuple(f.anchor_cycle, f.anchor_count))
+                                     : py::object(py::none());
+            py::dict pending, written_at;
+            for (const auto& p : f.pending) {
+                pending[py::int_(p.reg)] = p.value;
+                written_at[py::int_(p.reg)] = p.written_at;
+            }
+            d["pending"] = pending;
+            d["written_at"] = written_at;
+            d["line"] = f.line;
+            return d;
+        })
+        // WDOG
+        .def("wdog_setup", [](Core& c, const py::dict& d) {
+            Wdog& w = c.wdog;
+            w.L = layout(d);
+            w.wct = d["wct"].cast<uint32_t>();
+            w.gap = d["gap"].cast<uint32_t>();
+            const auto unlock = d["unlock"].cast<std::pair<uint32_t, uint32_t>>();
+            const auto refresh = d["refresh"].cast<std::pair<uint32_t, uint32_t>>();
+            w.unlock[0] = unlock.first; w.unlock[1] = unlock.second;
+            w.refresh[0] = refresh.first; w.refresh[1] = refresh.second;
+            w.lpo_hz = d["lpo_hz"].cast<double>();
+            w.setup();
+            w.reset();
+        })
+        .def("wdog_reg", [](const Core& c, uint32_t offset) { return c.wdog.v.at(offset); })
+        .def("wdog_power_on", [](Core& c, double core_hz, double bus_hz) {
+            c.wdog.power_on(c, core_hz, bus_hz);
+        }, py::arg("core_hz"), py::arg("bus_hz"))
+        .def("wdog_timeout_s", [](const Core& c) { return c.wdog.timeout_s(c.bus_hz()); })
+        .def("wdog_state", [](const Core& c) {
+            const Wdog& w = c.wdog;
+            py::dict d;
+            d["first_unlock"] = optional_cycle(w.first_unlock);
+            d["unlocked_at"] = optional_cycle(w.unlocked_at);
+            d["first_refresh"] = optional_cycle(w.first_refresh);
+            d["written"] = w.written;
+            d["disabled_at"] = w.disabled ? py::object(py::make_tuple(w.disabled_instruction,
+                                                                      w.disabled_cycle))
+                                          : py::object(py::none());
+            py::list ignored;
+            for (const auto& i : w.ignored) {
+                ignored.append(py::make_tuple(i.instruction, i.reg, i.value, i.why));
+            }
+            d["ignored"] = ignored;
+            return d;
+        })
+        .def("wdog_take_log", [](Core& c) {
+            py::list out;
+            for (const auto& e : c.wdog.log) {
+                out.append(py::make_tuple(e.instruction, e.cycle, e.reg, e.value));
+            }
+            c.wdog.log.clear();
+            return out;
+        })
         // the MPU6050 slaves: the register model is the Python object's (heliquad._firmware)
         .def("mpu_new", [](Core& c, py::object emu, int address) {
             auto s = std::make_unique<MpuSlave>();

@@ -44,6 +44,18 @@ Core::Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
     spaces_[0].core = spaces_[1].core = this;
 }
 
+double py_floordiv(double a, double b) {
+    double mod = std::fmod(a, b);
+    double div = (a - mod) / b;
+    if (mod != 0.0) {
+        if ((b < 0) != (mod < 0)) div -= 1.0;
+    }
+    if (div == 0.0) return std::copysign(0.0, a / b);
+    double floordiv = std::floor(div);
+    if (div - floordiv > 0.5) floordiv += 1.0;
+    return floordiv;
+}
+
 const std::string& Core::exception_name(int n) const {
     static const std::string unknown = "exception";
     return n >= 0 && static_cast<size_t>(n) < names_.size() ? names_[n] : unknown;
@@ -88,6 +100,9 @@ void Core::reset(double core_hz) {
     deadline_ = 0;
     instr_limit_ = 0;
     stop_ = py_error_ = budget_hit_ = watch_mask_ = false;
+    reset_pending_ = false;
+    reset_source_.clear();
+    reset_message_.clear();
     svc_ = bkpt_ = intr_fault_ = false;
     sleeping_ = false;
     time_up_ = false;
@@ -111,6 +126,9 @@ void Core::reset(double core_hz) {
     systick.reset();
     if (i2c0.ready) i2c0.reset();
     if (uart0.ready) uart0.reset(*this);
+    if (ftm0.ready) ftm0.reset();
+    if (ftm3.ready) ftm3.reset();
+    if (wdog.ready) wdog.reset();
 }
 
 void Core::add_block(Block b) {
@@ -205,6 +223,11 @@ void Core::set_clocks(double core_hz, double bus_hz) {
     update_deadline();
 }
 
+uint64_t Core::cycles_after(double seconds, uint64_t start) const {
+    const double cycles = -py_floordiv(-seconds * core_hz_, 1.0);
+    return start + static_cast<uint64_t>(std::max<int64_t>(1, static_cast<int64_t>(cycles)));
+}
+
 uint64_t Core::at(uint64_t cycle, Ev kind, bool scaled) {
     const HeapEntry e{std::max(cycle, now()), ++seq_, kind, scaled};
     heap_.push_back(e);
@@ -255,6 +278,7 @@ uint64_t Core::advance(uint64_t target) {
         cycles_ = std::max(cycles_, e.due);
         if (e.kind == Ev::Python) return e.seq;
         dispatch(e);
+        if (reset_pending_) return 0;
     }
 }
 
@@ -273,6 +297,10 @@ void Core::dispatch(const HeapEntry& e) {
         case Ev::UartIdle: uart0.idle(*this); break;
         case Ev::I2cByte: i2c0.finish_byte(*this); break;
         case Ev::I2cFree: i2c0.bus_free(*this); break;
+        case Ev::Ftm0Tof: ftm0.on_tof(*this); break;
+        case Ev::Ftm3Tof: ftm3.on_tof(*this); break;
+        case Ev::WdogTimeout: wdog.expired(*this); break;
+        case Ev::WdogWindow: wdog.window(*this); break;
         case Ev::Python: break;
     }
 }
@@ -463,9 +491,19 @@ bool Core::return_from_exception(uint32_t exc_return) {
 }
 
 // -- the run loop ---------------------------------------------------------------------------
+void Core::chip_reset(const char* source, std::string message) {
+    if (!reset_pending_) {
+        reset_pending_ = true;
+        reset_source_ = source;
+        reset_message_ = std::move(message);
+    }
+    if (in_emu_) stop_now();
+}
+
 int Core::run(uint64_t instr_limit) {
     instr_limit_ = instr_limit;
     for (;;) {
+        if (reset_pending_) return kReset;
         const int s = service();
         if (s) return s;
         if (stop_) return kStop;
@@ -494,6 +532,7 @@ int Core::service() {
             return kPyEvent;
         }
         dispatch(e);
+        if (reset_pending_) return kReset;
     }
     const int number = pending_exception();
     if (number >= 0 && preempts(number)) {
@@ -520,6 +559,7 @@ bool Core::continue_inline() {
         pop();
         live_.erase(e.seq);
         dispatch(e);
+        if (reset_pending_) return false;
     }
     const int number = pending_exception();
     if (number >= 0 && preempts(number)) {
@@ -564,9 +604,12 @@ int Core::execute() {
     cur_ = nullptr;
     xn_fetched_ = false;
     ++counts.emu_starts;
+    in_emu_ = true;
     const int err = uc_.emu_start(uc_.handle, start | 1u, 0xFFFFFFFFu, 0, 0);
+    in_emu_ = false;
     commit();
     if (py_error_) return kPyError;
+    if (reset_pending_) return kReset;
     if (inline_fault_) {
         inline_fault_ = false;
         return kFault;
@@ -713,6 +756,9 @@ bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
         case kSysTick: return systick.read(*this, address, size, out);
         case kUart0: return uart0.read(*this, address, size, out);
         case kI2c0: return i2c0.read(*this, address, size, out);
+        case kFtm0: return ftm0.read(*this, address, size, out);
+        case kFtm3: return ftm3.read(*this, address, size, out);
+        case kWdog: return wdog.read(*this, address, size, out);
         default: return false;
     }
 }
@@ -723,6 +769,9 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kSysTick: return systick.write(*this, address, size, value);
         case kUart0: return uart0.write(*this, address, size, value);
         case kI2c0: return i2c0.write(*this, address, size, value);
+        case kFtm0: return ftm0.write(*this, address, size, value);
+        case kFtm3: return ftm3.write(*this, address, size, value);
+        case kWdog: return wdog.write(*this, address, size, value);
         default: return false;
     }
 }

@@ -10,8 +10,10 @@
 // * One event queue for every device, Python's included (a Python event stops the run and
 //   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
 // * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
-//   loop uses all the time: DWT_CYCCNT, SysTick, UART0 and I2C0 with the MPU6050 on it. Their
-//   Python classes are views onto these (one model each).
+//   loop uses all the time: DWT_CYCCNT, SysTick, UART0, I2C0 with the MPU6050 on it, FTM0 and
+//   FTM3, and the watchdog. Their Python classes are views onto these (one model each).
+// * A reset the chip would perform (the watchdog's) stops the run with its cause (kReset);
+//   Python raises it as ChipReset.
 // * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
 //   instruction, an access to a device modelled in Python, a Python event, a breakpoint, a
 //   fault) either calls a C function pointer the Python side made with ctypes (which takes the
@@ -84,12 +86,15 @@ struct Block {
     }
 };
 
-enum class Ev : uint8_t { Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree };
+enum class Ev : uint8_t {
+    Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof,
+    WdogTimeout, WdogWindow
+};
 
 // Why run() returned.
 enum Run : int {
     kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
-    kIntrFault
+    kIntrFault, kReset
 };
 
 // A fault found natively (exception entry/return); Python raises it.
@@ -100,6 +105,10 @@ struct FaultInfo {
 };
 
 class Core;
+
+// Python's float floor division (a // b), step for step as CPython does it: the models' timing
+// rules were written with it, and a cycle computed differently would move an event.
+double py_floordiv(double a, double b);
 
 // DWT_CTRL/CYCCNT: counts core cycles while DEMCR.TRCENA and CTRL.CYCCNTENA are set.
 struct Dwt {
@@ -141,18 +150,19 @@ struct SysTick {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// Register layout and bits of an 8-bit-register peripheral, from the SVD tables (Python).
-struct Layout8 {
+// Register layout and bits of a peripheral, from the SVD tables (Python).
+struct Layout {
     uint32_t base = 0, span = 0;
     std::vector<int> reg_at;               // byte offset -> register offset, or -1
-    std::vector<uint8_t> reset;            // reset value by offset
+    std::vector<uint8_t> width;            // register offset -> its width in bytes
+    std::vector<uint32_t> reset;           // register offset -> reset value
     std::unordered_map<std::string, uint32_t> k;   // "REG" offset, "REG.FIELD" mask
     uint32_t operator[](const std::string& name) const;
 };
 
 // UART0 at line rate (sim/mk64/uart.py's notes describe the model).
 struct Uart {
-    Layout8 L;
+    Layout L;
     bool ready = false;                    // set up (its layout given)
     int irq_rxtx = 0, irq_err = 0, depth = 8;
     // offsets and bits, resolved from L once
@@ -217,7 +227,7 @@ struct MpuSlave {
 
 // I2C0 as a byte-level master (sim/mk64/i2c.py's notes describe the model).
 struct I2c {
-    Layout8 L;
+    Layout L;
     bool ready = false;
     int irq = 0;
     std::vector<uint32_t> scl_divider;
@@ -262,9 +272,111 @@ struct I2c {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
+// A FlexTimer (FTM0, FTM3) in up-counting edge-aligned PWM and input capture (sim/mk64/ftm.py's
+// notes describe the model). The counter is not stepped: it is computed from time, from the
+// cycle and count it last started at (the anchor).
+struct Ftm {
+    Layout L;
+    bool ready = false;
+    int irq = 0;
+    Ev tof_kind = Ev::Ftm0Tof;
+    static constexpr int kChannels = 8;
+    enum Mode : int {
+        kDisabled, kEdgePwm, kOutputCompare, kCaptureRising, kCaptureFalling, kCaptureBoth,
+        kCenterPwm
+    };
+    uint32_t oSC, oCNT, oMOD, oCNTIN, oSTATUS, oMODE, oCOMBINE, oCnSC[kChannels], oCnV[kChannels];
+    uint32_t TOF, TOIE, CPWMS, CLKS, PS, CHF, CHIE, MSB, MSA, ELSB, ELSA, CNSC_WRITABLE, FTMEN,
+        CHnF[kChannels];
+    uint32_t channels_end;                 // CnSC/CnV span [oCnSC[0], channels_end)
+    std::vector<uint32_t> v;               // by register offset
+    bool anchored = false;                 // the counter runs
+    uint64_t anchor_cycle = 0;
+    int64_t anchor_count = 0;
+    // MOD and CnV writes waiting for the counter's wrap, in the order first written (the
+    // order they load in matters: a MOD load moves the anchor the later ones wrap from).
+    struct Pending { uint32_t reg, value; uint64_t written_at; };
+    std::vector<Pending> pending;
+    struct Capture { uint64_t cycle; int channel; uint32_t value; };
+    std::vector<Capture> captures;         // until taken (Core::keep_records)
+    std::vector<std::string> unmodelled;   // until taken
+    uint64_t tof_clear = 0, tof_event = 0;
+    bool line = false;
+
+    void setup();
+    void reset();
+    double clock_hz(const Core& c) const;
+    double ticks_per_cycle(const Core& c) const;
+    uint32_t cntin() const { return v[oCNTIN] & 0xFFFF; }
+    uint32_t mod() const { return v[oMOD] & 0xFFFF; }
+    int64_t period_ticks() const;
+    uint32_t count(Core& c, uint64_t now);
+    bool next_wrap_after(const Core& c, uint64_t cycle, uint64_t& wrap) const;
+    bool next_tick(const Core& c, uint64_t cycle, uint64_t& tick) const;
+    void load_pending(const Core& c, uint64_t now);
+    void buffered(Core& c, uint32_t reg, uint32_t value);
+    void restart(Core& c, uint64_t now);
+    void schedule_tof(Core& c);
+    void on_tof(Core& c);
+    void update_irq(Core& c);
+    int mode(int ch) const;
+    bool period_s(Core& c, double& out);
+    bool pulse_s(Core& c, int ch, double& out);
+    bool commanded_value(Core& c, int ch, uint32_t& out);
+    void edge(Core& c, int ch, bool rising);
+    uint32_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint32_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
+// The watchdog (sim/mk64/wdog.py's notes describe the model). Its timings are in bus clocks
+// and are worked out with the clocks of the moment; its constants (the unlock and refresh
+// words, the WCT, the LPO's rate) come from Python with the layout.
+struct Wdog {
+    Layout L;
+    bool ready = false;
+    uint32_t wct = 0, gap = 0, unlock[2] = {0, 0}, refresh[2] = {0, 0};
+    double lpo_hz = 0.0;
+    uint32_t oSTCTRLH, oSTCTRLL, oTOVALH, oTOVALL, oWINH, oWINL, oREFRESH, oUNLOCK, oTMROUTH,
+        oTMROUTL, oRSTCNT, oPRESC;
+    uint32_t WDOGEN, CLKSRC, ALLOWUPDATE, INTFLG, PRESCVAL;
+    std::vector<uint32_t> v;               // by register offset
+    int64_t first_unlock = -1, unlocked_at = -1, first_refresh = -1;   // cycles; -1 none
+    std::vector<uint32_t> written;         // write-once registers written since the unlock
+    bool disabled = false;
+    uint64_t disabled_instruction = 0, disabled_cycle = 0;
+    struct Ignored { uint64_t instruction; uint32_t reg, value; std::string why; };
+    std::vector<Ignored> ignored;
+    struct Write { uint64_t instruction, cycle; uint32_t reg; uint64_t value; };
+    std::vector<Write> log;                // until taken (Core::keep_records)
+    uint64_t timeout_event = 0, window_event = 0, started = 0;
+    bool window_after_unlock = false;
+
+    void setup();
+    void reset();
+    bool enabled() const { return v[oSTCTRLH] & WDOGEN; }
+    double clock_hz(double bus_hz) const { return (v[oSTCTRLH] & CLKSRC) ? bus_hz : lpo_hz; }
+    uint32_t prescale() const;
+    double timeout_s(double bus_hz) const;
+    void power_on(Core& c, double core_hz, double bus_hz);
+    void arm_timeout(Core& c, double bus_hz);
+    void expired(Core& c);
+    void window(Core& c);
+    uint32_t count(const Core& c) const;
+    void write_once(Core& c, uint32_t offset, uint32_t value);
+    void ignore(Core& c, uint32_t offset, uint32_t value, std::string why);
+    uint32_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint32_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
 class Core {
 public:
-    enum Device : int { kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kDevices };
+    enum Device : int {
+        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kDevices
+    };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
          std::vector<std::string> exception_names);
@@ -303,8 +415,12 @@ public:
         return epoch_seconds_ + static_cast<double>(static_cast<int64_t>(cycles - epoch_cycles_)) / core_hz_;
     }
     void set_clocks(double core_hz, double bus_hz);
+    void set_fixed_hz(double hz) { fixed_hz_ = hz; }
     double core_hz() const { return core_hz_; }
     double bus_hz() const { return bus_hz_; }
+    double fixed_hz() const { return fixed_hz_; }     // MCGFFCLK
+    // The cycle `seconds` after `start` at the current core clock (Machine.cycles_after).
+    uint64_t cycles_after(double seconds, uint64_t start) const;
 
     // -- events ---------------------------------------------------------------------------
     uint64_t at(uint64_t cycle, Ev kind, bool scaled = true);
@@ -329,6 +445,14 @@ public:
 
     // -- running --------------------------------------------------------------------------
     int run(uint64_t instr_limit);
+    // The chip resets (a native model's cause): the run stops at once, returning kReset;
+    // the first cause is kept until taken.
+    void chip_reset(const char* source, std::string message);
+    bool reset_pending() const { return reset_pending_; }
+    std::pair<std::string, std::string> take_reset() {
+        reset_pending_ = false;
+        return {std::move(reset_source_), std::move(reset_message_)};
+    }
     void request_stop() { stop_ = true; }
     void clear_stop() { stop_ = false; }
     void request_error() { py_error_ = true; }
@@ -351,11 +475,15 @@ public:
     SysTick systick;
     Uart uart0;
     I2c i2c0;
+    Ftm ftm0, ftm3;
+    Wdog wdog;
+    Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
-    bool clocked[kDevices] = {true, true, false, false};
+    bool clocked[kDevices] = {true, true, false, false, false, false, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
-    // Keep the I2C transfer records and the MPU6050's register log until taken (for tests and
-    // inspection); a long lockstep run turns them off instead of taking and dropping them.
+    // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
+    // watchdog's write log until taken (for tests and inspection); a long lockstep run turns
+    // them off instead of taking and dropping them.
     bool keep_records = true;
     bool inline_boundaries = true;   // attend to boundaries inside emu_start (off: always stop)
 
@@ -462,11 +590,14 @@ private:
     uint64_t seq_ = 0;
     uint64_t deadline_ = 0, instr_limit_ = 0;
     uint64_t epoch_cycles_ = 0;
-    double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0;
+    double epoch_seconds_ = 0.0, core_hz_ = 20971520.0, bus_hz_ = 20971520.0, fixed_hz_ = 0.0;
     bool watch_mask_ = false, budget_hit_ = false, stop_ = false, py_error_ = false;
     bool svc_ = false, bkpt_ = false, intr_fault_ = false, inline_fault_ = false;
     bool inline_taken_ = false;     // continue_inline() took an exception (the PC moved)
     bool in_block_hook_ = false;
+    bool in_emu_ = false;           // inside emu_start
+    bool reset_pending_ = false;
+    std::string reset_source_, reset_message_;
     uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
 
 public:

@@ -1,10 +1,13 @@
-// The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0 and
-// I2C0 with the MPU6050. Their behaviour is documented where their Python views live
-// (sim/mk64/scs.py, uart.py, i2c.py); register offsets and bits come from the SVD tables
-// through Python (Layout8), never typed here.
+// The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0,
+// I2C0 with the MPU6050, FTM0/FTM3 and the watchdog. Their behaviour is documented where their
+// Python views live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py, wdog.py); register offsets and
+// bits come from the SVD tables through Python (Layout), never typed here.
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
 #include <stdexcept>
+#include <type_traits>
 
 #include "core/mpu6050.hpp"
 #include "mk64_core.hpp"
@@ -39,7 +42,7 @@ int shift_of(uint32_t mask) {
 }
 }  // namespace
 
-uint32_t Layout8::operator[](const std::string& name) const {
+uint32_t Layout::operator[](const std::string& name) const {
     auto it = k.find(name);
     if (it == k.end()) throw std::invalid_argument("register layout has no " + name);
     return it->second;
@@ -190,7 +193,7 @@ void Uart::setup() {
 }
 
 void Uart::reset(Core&) {
-    v = L.reset;
+    v.assign(L.reset.begin(), L.reset.end());
     tx.clear();
     rx.clear();
     rx_queue.clear();
@@ -388,9 +391,12 @@ void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
 }
 
 namespace {
-// 8-bit registers: an access of any width is one access per byte, low address first; an
-// offset no register occupies makes the whole access the caller's (a bus fault in Python).
-bool covered(const Layout8& L, uint32_t address, unsigned size) {
+// An access of any width is split onto the registers it covers, low address first, as
+// sim/mk64/peripheral.py's RegisterDevice does: a register read whole and the bytes taken from
+// it, a part written merged into the register's stored value (so 8-bit registers see one
+// access per byte). An offset no register occupies makes the whole access the caller's (a bus
+// fault in Python). A write that resets the chip ends the access there.
+bool covered(const Layout& L, uint32_t address, unsigned size) {
     if (address < L.base || address + size > L.base + L.span) return false;
     for (unsigned i = 0; i < size; ++i) {
         if (L.reg_at[address - L.base + i] < 0) return false;
@@ -398,32 +404,49 @@ bool covered(const Layout8& L, uint32_t address, unsigned size) {
     return true;
 }
 
+uint64_t ones(unsigned bytes) { return bytes >= 8 ? ~uint64_t{0} : (uint64_t{1} << (8 * bytes)) - 1; }
+
 template <typename Device>
-bool read_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t& out) {
+bool read_regs(Device& d, Core& c, uint32_t address, unsigned size, uint64_t& out) {
     if (!covered(d.L, address, size)) return false;
     out = 0;
-    for (unsigned i = 0; i < size; ++i) {
-        out |= uint64_t{d.read_reg(c, address - d.L.base + i)} << (8 * i);
+    for (unsigned done = 0; done < size;) {
+        const uint32_t at = address - d.L.base + done;
+        const uint32_t reg = static_cast<uint32_t>(d.L.reg_at[at]);
+        const unsigned shift = at - reg;
+        const unsigned take = std::min<unsigned>(d.L.width[reg] - shift, size - done);
+        const uint64_t full = d.read_reg(c, reg);
+        out |= ((full >> (8 * shift)) & ones(take)) << (8 * done);
+        done += take;
     }
     return true;
 }
 
 template <typename Device>
-bool write_bytes(Device& d, Core& c, uint32_t address, unsigned size, uint64_t value) {
+bool write_regs(Device& d, Core& c, uint32_t address, unsigned size, uint64_t value) {
     if (!covered(d.L, address, size)) return false;
-    for (unsigned i = 0; i < size; ++i) {
-        d.write_reg(c, address - d.L.base + i, static_cast<uint8_t>(value >> (8 * i)));
+    using Value = std::remove_reference_t<decltype(d.v[0])>;
+    for (unsigned done = 0; done < size && !c.reset_pending();) {
+        const uint32_t at = address - d.L.base + done;
+        const uint32_t reg = static_cast<uint32_t>(d.L.reg_at[at]);
+        const unsigned shift = at - reg;
+        const unsigned take = std::min<unsigned>(d.L.width[reg] - shift, size - done);
+        const uint64_t part = (value >> (8 * done)) & ones(take);
+        const uint64_t mask = ones(take) << (8 * shift);
+        const uint64_t merged = (uint64_t{d.v[reg]} & ~mask) | (part << (8 * shift));
+        d.write_reg(c, reg, static_cast<Value>(merged));
+        done += take;
     }
     return true;
 }
 }  // namespace
 
 bool Uart::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
-    return read_bytes(*this, c, address, size, out);
+    return read_regs(*this, c, address, size, out);
 }
 
 bool Uart::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
-    return write_bytes(*this, c, address, size, value);
+    return write_regs(*this, c, address, size, value);
 }
 
 // -- the MPU6050 on the bus -------------------------------------------------------------------
@@ -492,7 +515,7 @@ void I2c::setup() {
 }
 
 void I2c::reset() {
-    v = L.reset;
+    v.assign(L.reset.begin(), L.reset.end());
     transfers.clear();
     open = false;
     errors.clear();
@@ -681,11 +704,513 @@ void I2c::write_reg(Core& c, uint32_t o, uint8_t value) {
 }
 
 bool I2c::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
-    return read_bytes(*this, c, address, size, out);
+    return read_regs(*this, c, address, size, out);
 }
 
 bool I2c::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
-    return write_bytes(*this, c, address, size, value);
+    return write_regs(*this, c, address, size, value);
+}
+
+// -- FTM0, FTM3 -------------------------------------------------------------------------------
+namespace {
+int64_t floor_mod(int64_t a, int64_t n) {
+    const int64_t r = a % n;
+    return r < 0 ? r + n : r;
+}
+
+// Python's int(x) of a float (truncation), for the cycle arithmetic the spec states in Python.
+int64_t py_int(double x) { return static_cast<int64_t>(x); }
+
+double elapsed(uint64_t now, uint64_t since) {
+    return static_cast<double>(static_cast<int64_t>(now - since));
+}
+
+uint64_t plus(uint64_t cycle, int64_t n) {
+    return static_cast<uint64_t>(static_cast<int64_t>(cycle) + n);
+}
+
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+    char buf[256];
+    va_list args;
+    va_start(args, fmt);
+    std::vsnprintf(buf, sizeof buf, fmt, args);
+    va_end(args);
+    return buf;
+}
+}  // namespace
+
+void Ftm::setup() {
+    oSC = L["SC"]; oCNT = L["CNT"]; oMOD = L["MOD"]; oCNTIN = L["CNTIN"]; oSTATUS = L["STATUS"];
+    oMODE = L["MODE"]; oCOMBINE = L["COMBINE"];
+    for (int ch = 0; ch < kChannels; ++ch) {
+        const std::string n = std::to_string(ch);
+        oCnSC[ch] = L["C" + n + "SC"];
+        oCnV[ch] = L["C" + n + "V"];
+        CHnF[ch] = L["STATUS.CH" + n + "F"];
+    }
+    TOF = L["SC.TOF"]; TOIE = L["SC.TOIE"]; CPWMS = L["SC.CPWMS"]; CLKS = L["SC.CLKS"];
+    PS = L["SC.PS"];
+    CHF = L["C0SC.CHF"]; CHIE = L["C0SC.CHIE"]; MSB = L["C0SC.MSB"]; MSA = L["C0SC.MSA"];
+    ELSB = L["C0SC.ELSB"]; ELSA = L["C0SC.ELSA"];
+    CNSC_WRITABLE = CHIE | MSB | MSA | ELSB | ELSA | L["C0SC.DMA"];
+    FTMEN = L["MODE.FTMEN"];
+    channels_end = oCnV[kChannels - 1] + L.width.at(oCnV[kChannels - 1]);
+    ready = true;
+}
+
+void Ftm::reset() {
+    v = L.reset;
+    anchored = false;
+    anchor_cycle = 0;
+    anchor_count = 0;
+    pending.clear();
+    captures.clear();
+    unmodelled.clear();
+    tof_clear = tof_event = 0;
+    line = false;
+}
+
+double Ftm::clock_hz(const Core& c) const {
+    const uint32_t clks = (v[oSC] & CLKS) >> shift_of(CLKS);
+    const uint32_t ps = (v[oSC] & PS) >> shift_of(PS);
+    double source = 0.0;
+    if (clks == 1) {
+        source = c.bus_hz();
+    } else if (clks == 2) {
+        source = c.fixed_hz();
+    } else {
+        return 0.0;
+    }
+    return source / (1u << ps);
+}
+
+double Ftm::ticks_per_cycle(const Core& c) const {
+    const double hz = clock_hz(c);
+    return hz != 0.0 ? hz / c.core_hz() : 0.0;
+}
+
+int64_t Ftm::period_ticks() const {
+    return mod() >= cntin() ? int64_t{mod()} - cntin() + 1 : 0x10000;
+}
+
+uint32_t Ftm::count(Core& c, uint64_t now) {
+    load_pending(c, now);
+    if (!anchored) return v[oCNT] & 0xFFFF;
+    const int64_t ticks = py_int(elapsed(now, anchor_cycle) * ticks_per_cycle(c));
+    return static_cast<uint32_t>(cntin() + floor_mod(anchor_count - cntin() + ticks, period_ticks()));
+}
+
+// The first cycle after `cycle` at which the counter wraps from MOD to CNTIN.
+bool Ftm::next_wrap_after(const Core& c, uint64_t cycle, uint64_t& wrap) const {
+    const double per_cycle = ticks_per_cycle(c);
+    if (!anchored || per_cycle == 0.0) return false;
+    const int64_t ticks = py_int(elapsed(cycle, anchor_cycle) * per_cycle);
+    const int64_t period = period_ticks();
+    const int64_t to_wrap = period - floor_mod(anchor_count - cntin() + ticks, period);
+    wrap = plus(anchor_cycle,
+                py_int(-py_floordiv(static_cast<double>(-(ticks + to_wrap)), per_cycle)));
+    return true;
+}
+
+// The first cycle at or after `cycle` at which the running counter steps.
+bool Ftm::next_tick(const Core& c, uint64_t cycle, uint64_t& tick) const {
+    const double per_cycle = ticks_per_cycle(c);
+    if (!anchored || per_cycle == 0.0) return false;
+    const double ticks = -py_floordiv(-elapsed(cycle, anchor_cycle) * per_cycle, 1.0);
+    tick = plus(anchor_cycle, py_int(-py_floordiv(-ticks, per_cycle)));
+    return true;
+}
+
+void Ftm::load_pending(const Core& c, uint64_t now) {
+    for (size_t i = 0; i < pending.size();) {
+        const Pending p = pending[i];
+        uint64_t wrap = 0;
+        const bool runs = next_wrap_after(c, p.written_at, wrap);
+        if (runs && wrap > now) {
+            ++i;
+            continue;
+        }
+        pending.erase(pending.begin() + static_cast<long>(i));
+        if (p.reg == oMOD && runs) {
+            // the new modulus counts from CNTIN at the wrap
+            anchor_cycle = wrap;
+            anchor_count = cntin();
+        }
+        v[p.reg] = p.value;
+    }
+}
+
+void Ftm::buffered(Core& c, uint32_t reg, uint32_t value) {
+    const uint64_t now = c.now();
+    load_pending(c, now);
+    auto it = std::find_if(pending.begin(), pending.end(),
+                           [reg](const Pending& p) { return p.reg == reg; });
+    if (!anchored) {
+        v[reg] = value;
+        if (it != pending.end()) pending.erase(it);
+    } else if (it != pending.end()) {
+        it->value = value;
+        it->written_at = now;
+    } else {
+        pending.push_back({reg, value, now});
+    }
+}
+
+void Ftm::restart(Core& c, uint64_t now) {
+    load_pending(c, now);
+    const uint32_t clks = (v[oSC] & CLKS) >> shift_of(CLKS);
+    if (clks == 1 || clks == 2) {
+        // the count so far runs on from now (at the new rate, from the old anchor)
+        const int64_t count0 = anchored ? count(c, now) : (v[oCNT] & 0xFFFF);
+        anchored = true;
+        anchor_cycle = now;
+        anchor_count = count0;
+    } else {
+        if (anchored) v[oCNT] = count(c, now);
+        anchored = false;
+    }
+    schedule_tof(c);
+}
+
+void Ftm::schedule_tof(Core& c) {
+    if (tof_event) {
+        c.cancel(tof_event);
+        tof_event = 0;
+    }
+    uint64_t wrap = 0;
+    if ((v[oSC] & TOIE) && next_wrap_after(c, c.now(), wrap)) tof_event = c.at(wrap, tof_kind);
+}
+
+void Ftm::on_tof(Core& c) {
+    tof_event = 0;
+    v[oSC] |= TOF;
+    update_irq(c);
+    schedule_tof(c);
+}
+
+void Ftm::update_irq(Core& c) {
+    bool level = (v[oSC] & TOF) && (v[oSC] & TOIE);
+    for (int ch = 0; ch < kChannels; ++ch) {
+        const uint32_t sc = v[oCnSC[ch]];
+        if ((sc & CHF) && (sc & CHIE)) level = true;
+    }
+    if (level != line) {
+        line = level;
+        c.set_irq(irq, level);
+    }
+}
+
+int Ftm::mode(int ch) const {
+    const uint32_t sc = v[oCnSC[ch]];
+    if (v[oSC] & CPWMS) return kCenterPwm;
+    const int ms = ((sc & MSB) ? 2 : 0) | ((sc & MSA) ? 1 : 0);
+    const int els = ((sc & ELSB) ? 2 : 0) | ((sc & ELSA) ? 1 : 0);
+    if (ms & 2) return els ? kEdgePwm : kDisabled;
+    if (ms == 1) return els ? kOutputCompare : kDisabled;
+    static constexpr int kCapture[4] = {kDisabled, kCaptureRising, kCaptureFalling, kCaptureBoth};
+    return kCapture[els];
+}
+
+bool Ftm::period_s(Core& c, double& out) {
+    const double hz = clock_hz(c);
+    if (hz == 0.0) return false;
+    load_pending(c, c.now());
+    out = static_cast<double>(period_ticks()) / hz;
+    return true;
+}
+
+bool Ftm::pulse_s(Core& c, int ch, double& out) {
+    if (mode(ch) != kEdgePwm) return false;
+    const double hz = clock_hz(c);
+    if (hz == 0.0) return false;
+    load_pending(c, c.now());
+    const int64_t cnv = v[oCnV[ch]] & 0xFFFF;
+    const int64_t ticks = cnv > mod() ? period_ticks() : std::max<int64_t>(0, cnv - cntin());
+    out = static_cast<double>(ticks) / hz;
+    return true;
+}
+
+bool Ftm::commanded_value(Core& c, int ch, uint32_t& out) {
+    if (mode(ch) != kEdgePwm) return false;
+    load_pending(c, c.now());
+    out = v[oCnV[ch]];
+    for (const Pending& p : pending) {
+        if (p.reg == oCnV[ch]) out = p.value;
+    }
+    out &= 0xFFFF;
+    return true;
+}
+
+void Ftm::edge(Core& c, int ch, bool rising) {
+    const int m = mode(ch);
+    if ((m != kCaptureRising && m != kCaptureFalling && m != kCaptureBoth) || !anchored) return;
+    if ((m == kCaptureRising && !rising) || (m == kCaptureFalling && rising)) return;
+    const uint64_t now = c.now();
+    const uint32_t value = count(c, now);
+    v[oCnV[ch]] = value;
+    v[oCnSC[ch]] |= CHF;
+    if (c.keep_records) captures.push_back({now, ch, value});
+    update_irq(c);
+}
+
+uint32_t Ftm::read_reg(Core& c, uint32_t o) {
+    if (o == oCNT) return count(c, c.now());
+    if (o == oSC) {
+        if (anchored && !(v[oSC] & TOIE)) {
+            // TOF without TOIE is computed when read, not scheduled
+            uint64_t wrap = 0;
+            if (next_wrap_after(c, std::max(tof_clear, anchor_cycle), wrap) && wrap <= c.now()) {
+                v[oSC] |= TOF;
+            }
+        }
+        return v[oSC];
+    }
+    if (o == oSTATUS) {
+        uint32_t status = 0;
+        for (int ch = 0; ch < kChannels; ++ch) {
+            if (v[oCnSC[ch]] & CHF) status |= CHnF[ch];
+        }
+        return status;
+    }
+    return v[o];
+}
+
+void Ftm::write_reg(Core& c, uint32_t o, uint32_t value) {
+    for (int ch = 0; ch < kChannels; ++ch) {
+        if (o == oCnSC[ch]) {
+            const uint32_t chf = (value & CHF) ? (v[o] & CHF) : 0;   // CHF: cleared by writing 0
+            v[o] = (value & CNSC_WRITABLE) | chf;
+            update_irq(c);
+            return;
+        }
+        if (o == oCnV[ch]) {
+            buffered(c, o, value & 0xFFFF);
+            return;
+        }
+    }
+    const uint64_t now = c.now();
+    if (o == oCNT) {
+        v[oCNT] = cntin();
+        if (anchored) {
+            anchor_cycle = now;
+            anchor_count = cntin();
+        }
+        schedule_tof(c);
+    } else if (o == oSC) {
+        const uint32_t old = v[oSC];
+        const uint32_t tof = (value & TOF) ? (old & TOF) : 0;     // TOF: cleared by writing 0
+        if (!tof) tof_clear = now;
+        v[oSC] = (value & ~TOF) | tof;
+        if ((old ^ value) & (CLKS | PS | TOIE)) restart(c, now);
+        if (value & CPWMS) unmodelled.emplace_back("center-aligned PWM (CPWMS)");
+        update_irq(c);
+    } else if (o == oMOD) {
+        buffered(c, oMOD, value & 0xFFFF);
+        schedule_tof(c);
+    } else if (o == oCNTIN) {
+        v[oCNTIN] = value & 0xFFFF;
+    } else if (o == oMODE) {
+        v[oMODE] = value;
+        if (value & FTMEN) unmodelled.emplace_back("MODE[FTMEN] = 1 (enhanced synchronisation)");
+    } else if (o == oSTATUS) {
+        for (int ch = 0; ch < kChannels; ++ch) {
+            if (!(value & CHnF[ch])) v[oCnSC[ch]] &= ~CHF;
+        }
+        update_irq(c);
+    } else if (o == oCOMBINE) {
+        v[oCOMBINE] = value;
+        if (value) unmodelled.emplace_back("combined / dual-edge channel modes");
+    } else {
+        v[o] = value;
+    }
+}
+
+bool Ftm::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    if (!covered(L, address, size)) return false;
+    const uint32_t offset = address - L.base;
+    if (offset >= oCnSC[0] && offset < channels_end) load_pending(c, c.now());
+    return read_regs(*this, c, address, size, out);
+}
+
+bool Ftm::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    return write_regs(*this, c, address, size, value);
+}
+
+// -- WDOG -------------------------------------------------------------------------------------
+void Wdog::setup() {
+    oSTCTRLH = L["STCTRLH"]; oSTCTRLL = L["STCTRLL"]; oTOVALH = L["TOVALH"]; oTOVALL = L["TOVALL"];
+    oWINH = L["WINH"]; oWINL = L["WINL"]; oREFRESH = L["REFRESH"]; oUNLOCK = L["UNLOCK"];
+    oTMROUTH = L["TMROUTH"]; oTMROUTL = L["TMROUTL"]; oRSTCNT = L["RSTCNT"]; oPRESC = L["PRESC"];
+    WDOGEN = L["STCTRLH.WDOGEN"]; CLKSRC = L["STCTRLH.CLKSRC"];
+    ALLOWUPDATE = L["STCTRLH.ALLOWUPDATE"]; INTFLG = L["STCTRLL.INTFLG"];
+    PRESCVAL = L["PRESC.PRESCVAL"];
+    ready = true;
+}
+
+void Wdog::reset() {
+    v = L.reset;
+    first_unlock = unlocked_at = first_refresh = -1;
+    written.clear();
+    disabled = false;
+    disabled_instruction = disabled_cycle = 0;
+    ignored.clear();
+    log.clear();
+    timeout_event = window_event = started = 0;
+    window_after_unlock = false;
+}
+
+namespace {
+uint64_t bus_cycles_to_core(uint32_t n, uint64_t start, double ratio) {
+    return start + static_cast<uint64_t>(std::nearbyint(n * ratio));     // half to even
+}
+
+double bus_elapsed(int64_t since, uint64_t now, double ratio) {
+    return static_cast<double>(static_cast<int64_t>(now) - since) / ratio;
+}
+
+double bus_ratio(const Core& c) { return c.core_hz() / c.bus_hz(); }
+}  // namespace
+
+uint32_t Wdog::prescale() const { return (v[oPRESC] & PRESCVAL) >> shift_of(PRESCVAL); }
+
+double Wdog::timeout_s(double bus_hz) const {
+    const uint64_t toval = (uint64_t{v[oTOVALH]} << 16) | v[oTOVALL];
+    return static_cast<double>(toval * (prescale() + 1)) / clock_hz(bus_hz);
+}
+
+// At reset the core's clocks are not yet the chip's (its tree is set up after the devices
+// reset), so Python gives the ones of the tree the chip resets to.
+void Wdog::power_on(Core& c, double core_hz, double bus_hz) {
+    window_after_unlock = false;
+    window_event = c.at(bus_cycles_to_core(wct, 0, core_hz / bus_hz), Ev::WdogWindow);
+    arm_timeout(c, bus_hz);
+}
+
+void Wdog::arm_timeout(Core& c, double bus_hz) {
+    if (timeout_event) {
+        c.cancel(timeout_event);
+        timeout_event = 0;
+    }
+    if (!enabled()) return;
+    started = c.now();
+    timeout_event = c.at(c.cycles_after(timeout_s(bus_hz), started), Ev::WdogTimeout);
+}
+
+void Wdog::expired(Core& c) {
+    timeout_event = 0;
+    c.chip_reset("WDOG", format("watchdog timeout (%.3f s) while enabled", timeout_s(c.bus_hz())));
+}
+
+void Wdog::window(Core& c) {
+    window_event = 0;
+    if (!window_after_unlock) {
+        if (first_unlock < 0 && unlocked_at < 0) {
+            c.chip_reset("WDOG", format("no unlock sequence within the WCT (%u bus clocks) after "
+                                        "reset", wct));
+        }
+    } else if (written.empty()) {
+        c.chip_reset("WDOG", "no configuration register written within the WCT after the unlock");
+    }
+}
+
+uint32_t Wdog::count(const Core& c) const {
+    if (!enabled()) return 0;
+    const double seconds = elapsed(c.now(), started) / c.core_hz();
+    return static_cast<uint32_t>(py_int(seconds * clock_hz(c.bus_hz()) / (prescale() + 1)));
+}
+
+void Wdog::ignore(Core& c, uint32_t offset, uint32_t value, std::string why) {
+    ignored.push_back({c.instructions_now(), offset, value, std::move(why)});
+}
+
+void Wdog::write_once(Core& c, uint32_t o, uint32_t value) {
+    const uint64_t now = c.now();
+    if (unlocked_at < 0) {
+        ignore(c, o, value, "not unlocked");
+    } else if (bus_elapsed(unlocked_at, now, bus_ratio(c)) > wct) {
+        ignore(c, o, value, "WCT after the unlock has passed");
+    } else if (std::find(written.begin(), written.end(), o) != written.end()) {
+        ignore(c, o, value, "already written once since the unlock");
+    } else {
+        written.push_back(o);
+        const bool was_enabled = enabled();
+        v[o] = value;
+        if (o == oSTCTRLH && was_enabled && !enabled() && !disabled) {
+            disabled = true;
+            disabled_instruction = c.instructions_now();
+            disabled_cycle = now;
+        }
+        arm_timeout(c, c.bus_hz());
+    }
+}
+
+uint32_t Wdog::read_reg(Core& c, uint32_t o) {
+    if (o == oTMROUTH) return (count(c) >> 16) & 0xFFFF;
+    if (o == oTMROUTL) return count(c) & 0xFFFF;
+    return v[o];
+}
+
+void Wdog::write_reg(Core& c, uint32_t o, uint32_t value) {
+    const uint64_t now = c.now();
+    if (o == oUNLOCK) {
+        if (!(v[oSTCTRLH] & ALLOWUPDATE)) {
+            ignore(c, o, value, "ALLOWUPDATE is clear");
+        } else if (value == unlock[0]) {
+            first_unlock = static_cast<int64_t>(now);
+        } else if (value == unlock[1] && first_unlock >= 0) {
+            const double apart = bus_elapsed(first_unlock, now, bus_ratio(c));
+            if (apart > gap) {
+                c.chip_reset("WDOG", format("unlock words %.0f bus clocks apart (at most %u)",
+                                            apart, gap));
+                return;
+            }
+            first_unlock = -1;
+            unlocked_at = static_cast<int64_t>(now);
+            written.clear();
+            if (window_event) c.cancel(window_event);
+            window_after_unlock = true;
+            window_event = c.at(bus_cycles_to_core(wct, now, bus_ratio(c)), Ev::WdogWindow);
+        } else {
+            c.chip_reset("WDOG", format("invalid unlock sequence: 0x%04X written to WDOG_UNLOCK",
+                                        value));
+        }
+    } else if (o == oREFRESH) {
+        if (value == refresh[0]) {
+            first_refresh = static_cast<int64_t>(now);
+        } else if (value == refresh[1] && first_refresh >= 0 &&
+                   bus_elapsed(first_refresh, now, bus_ratio(c)) <= gap) {
+            first_refresh = -1;
+            arm_timeout(c, c.bus_hz());
+        } else {
+            c.chip_reset("WDOG", format("invalid refresh sequence (0x%04X)", value));
+        }
+    } else if (o == oSTCTRLL) {
+        if (value & INTFLG) v[oSTCTRLL] &= ~INTFLG;             // write 1 to clear
+    } else if (o == oRSTCNT) {
+        v[oRSTCNT] &= ~value;                                   // write 1 to clear
+    } else if (o == oSTCTRLH || o == oTOVALH || o == oTOVALL || o == oWINH || o == oWINL ||
+               o == oPRESC) {
+        write_once(c, o, value);
+    } else if (o != oTMROUTH && o != oTMROUTL) {
+        v[o] = value;
+    }
+}
+
+bool Wdog::read(Core& c, uint32_t address, unsigned size, uint64_t& out) {
+    return read_regs(*this, c, address, size, out);
+}
+
+bool Wdog::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
+    if (!covered(L, address, size)) return false;
+    const uint32_t reg = static_cast<uint32_t>(L.reg_at[address - L.base]);
+    if (c.keep_records) log.push_back({c.instructions_now(), c.now(), reg, value});
+    if (reg == oUNLOCK && size != 2) {
+        c.chip_reset("WDOG", format("%u-bit write to WDOG_UNLOCK: the sequence is two 16-bit "
+                                    "writes", 8 * size));
+        return true;
+    }
+    return write_regs(*this, c, address, size, value);
 }
 
 }  // namespace hqsim::mk64
