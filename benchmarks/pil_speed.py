@@ -8,7 +8,7 @@ the host build's measured in the same run (the baseline), and where the PIL's ti
 the emulated board driven alone for as many loops as the drop-in drives it (its share of a
 frame; the rest is the lockstep around it), with the board's own counts per loop.
 
-    python benchmarks/pil_speed.py [--cycles 10] [--elf PATH] [--board-loops 1000]
+    python benchmarks/pil_speed.py [--cycles 30] [--elf PATH] [--board-loops 1000]
 
 Figures are wall-clock ratios on a shared machine: they move with the load. Never a test.
 """
@@ -61,7 +61,10 @@ def board_alone(elf: str, loops: int):
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--cycles", type=int, default=10, help="full-amplitude cycles (default 10)")
+    p.add_argument("--cycles", type=int, default=30,
+                   help="full-amplitude cycles (default 30: a 33 s experiment; a shorter one "
+                        "weighs the one-time costs of its first seconds, arming and the first "
+                        "translation of each code path, more)")
     p.add_argument("--elf", help="the Teensy image (default: the installed or in-tree one)")
     p.add_argument("--board-loops", type=int, default=1000,
                    help="loops of the board driven alone (default 1000)")

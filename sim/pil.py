@@ -74,6 +74,10 @@ BOOT_LIMIT_S = 5.0
 LOOP_LIMIT_S = 2.0
 DRAIN_LIMIT_S = 0.004
 SYSTICK_EXCEPTION = 15
+#: Telemetry is written out in chunks as a USB CDC device ships it (the link contract): after
+#: a sync frame's reply, once this many bytes wait, or when the sim link is quiet this long.
+TELEMETRY_CHUNK = 1024
+QUIET_S = 0.001
 EXIT_USAGE, EXIT_IDLE, EXIT_LINK, EXIT_IMAGE = 2, 3, 4, 5
 
 
@@ -386,16 +390,29 @@ def main(argv=None) -> int:
     last_frame, reply, lost, repeated, frames, dropped = None, b"", 0, 0, 0, 0
     exit_code = 0
     last_input = time.monotonic()
+    uplink = b""
+
+    def flush_telemetry():
+        if board.telemetry_out:
+            n = tel.write_some(bytes(board.telemetry_out))
+            del board.telemetry_out[:n]
+
     try:
         while not _Stop.requested:
-            if board.telemetry_out:
-                n = tel.write_some(bytes(board.telemetry_out))
-                del board.telemetry_out[:n]
-            ready, _, _ = select.select([sim.master], [], [], 0.1)
-            if not ready:
-                if len(board.telemetry_out) > (1 << 20):     # nobody reads the link
-                    dropped += len(board.telemetry_out)
-                    board.telemetry_out.clear()
+            # Telemetry leaves as the link contract says: after a sync frame's reply, and
+            # otherwise once TELEMETRY_CHUNK bytes wait or the sim link is quiet QUIET_S.
+            if len(board.telemetry_out) >= TELEMETRY_CHUNK:
+                flush_telemetry()
+            ready, _, _ = select.select([sim.master, tel.master], [], [],
+                                        QUIET_S if board.telemetry_out else 0.1)
+            if tel.master in ready:
+                uplink += tel.read()                # fed to the board before its next loop
+            if sim.master not in ready:
+                if not ready:
+                    flush_telemetry()
+                    if len(board.telemetry_out) > (1 << 20):     # nobody reads the link
+                        dropped += len(board.telemetry_out)
+                        board.telemetry_out.clear()
                 if time.monotonic() - last_input >= args.idle_timeout_s:
                     print(f"heliquad-fw-pil: no sensor frame for {args.idle_timeout_s} s; "
                           "exiting", file=sys.stderr)
@@ -416,7 +433,8 @@ def main(argv=None) -> int:
                               f"lost by frame {msg.frame}", file=sys.stderr)
                     last_frame = msg.frame
                     frames += 1
-                    board.feed_telemetry(tel.read())
+                    board.feed_telemetry(uplink)
+                    uplink = b""
                     fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
                     motors, armed, mode, kind = board.frame(
                         fifo, msg.fifo_kind == mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault,
@@ -424,9 +442,8 @@ def main(argv=None) -> int:
                     reply = codec.encode(reply_id, {
                         "time_us": msg.time_us, "frame": msg.frame, "motor": motors,
                         "armed": int(armed), "mode": mode, "sensor_kind": kind})
-                if msg.sync and board.telemetry_out:
-                    n = tel.write_some(bytes(board.telemetry_out))
-                    del board.telemetry_out[:n]
+                if msg.sync:
+                    flush_telemetry()
                 if not sim.write_all(reply, 5.0):
                     print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
                     exit_code = EXIT_LINK

@@ -10,10 +10,16 @@ GPIO: PDOR/PSOR/PCOR/PTOR/PDDR/PDIR. A pin's level is the GPIO output when MUX =
 PDDR bit is set (an open-drain output only pulls low), otherwise what drives it from outside
 (:meth:`Ports.drive`), or its pull resistor, or 0. Level changes of output pins are logged
 (the status LED's blink pattern is readable from it).
+
+The model is here; the native core serves reads of PDIR from the word this model gives it
+(:meth:`Ports.publish`) whenever a pin's level may have changed (a PCR, a GPIO output or
+direction, an outside driver, a pull), so an interrupt handler reading a pin costs no call
+into Python.
 """
 
 from __future__ import annotations
 
+from .machine import GPIO_IN_DEVICE
 from .peripheral import RegisterDevice
 
 PORT_NAMES = "ABCDE"
@@ -43,6 +49,7 @@ class Port(RegisterDevice):
         if new != old:
             m = self.machine
             self.ports.log.append((m.instructions_now(), m.now(), self.letter, n, new))
+            self.ports.publish(self.letter)
             self.ports.pin_changed(self.letter, n)
 
     def write(self, address, size, value):
@@ -101,6 +108,8 @@ class Gpio(RegisterDevice):
     def __init__(self, machine, ports, letter):
         self.ports, self.letter = ports, letter
         super().__init__(machine, f"GPIO{letter}", span=0x18)
+        self.pdir_address = self.base + self.map["PDIR"].offset
+        machine.core.add_route(GPIO_IN_DEVICE, self.pdir_address, self.pdir_address + 4)
 
     def r_PDIR(self):
         ports, letter = self.ports, self.letter
@@ -126,6 +135,7 @@ class Gpio(RegisterDevice):
         before = self._levels(self.v["PDOR"] ^ pdor)
         self.v["PDOR"] = pdor
         self.ports.outputs_changed(self.letter, before)
+        self.ports.publish(self.letter, before)
 
     def w_PDOR(self, value, mask):
         self._output(value)
@@ -143,6 +153,7 @@ class Gpio(RegisterDevice):
         before = self._levels(self.v["PDDR"] ^ value)
         self.v["PDDR"] = value
         self.ports.outputs_changed(self.letter, before)
+        self.ports.publish(self.letter, before)
 
 
 class Ports:
@@ -158,12 +169,41 @@ class Ports:
         self.edge_listeners = []    # fn(letter, n, level) on an input level change
         self.log = []               # (instruction count, cycle, letter, n, PCR)
         self.level_log = []         # (cycle, letter, n, level) of GPIO outputs
+        self._published = {}        # letter -> the PDIR word the native core holds
         machine.reset_listeners.append(self.reset)
 
     def reset(self):
         self.log.clear()
         self.level_log.clear()
         self.external.clear()
+        self._published.clear()
+        for letter in PORT_NAMES:
+            self.publish(letter)
+
+    def publish(self, letter, pins=None):
+        """Give the native core the port's input word (PDIR as a read would return it):
+        recomputed whole, or only for ``pins`` (an iterable of pin numbers) when only their
+        levels can have changed."""
+        gpio = self.gpio[letter]
+        if pins is None or letter not in self._published:
+            word = gpio.r_PDIR()
+        else:
+            word = self._published[letter]
+            digital = self.port[letter].digital_pins()
+            for n in pins:
+                bit = 1 << n
+                word = (word | bit) if n in digital and self.level(letter, n) else (word & ~bit)
+        if self._published.get(letter) != word:
+            self._published[letter] = word
+            self.machine.core.set_gpio_input(gpio.pdir_address, word)
+
+    def set_pull(self, letter, n, level):
+        """An external pull resistor on a pin (None: none)."""
+        if level is None:
+            self.pulls.pop((letter, n), None)
+        else:
+            self.pulls[(letter, n)] = int(bool(level))
+        self.publish(letter)
 
     def pcr(self, letter, n) -> int:
         return self.port[letter].v[f"PCR{n}"]
@@ -210,6 +250,7 @@ class Ports:
             self.external[(letter, n)] = int(bool(level))
         new = self.level(letter, n)
         if new != old:
+            self.publish(letter, (n,))
             for fn in self.edge_listeners:
                 fn(letter, n, new)
 

@@ -79,7 +79,7 @@ class Teensy35:
             self.chip.i2c0.slaves.append(self.mpu)
         self.chip.i2c0.pins_connected = self._i2c_pins_connected
         for pin in I2C_PINS.values():               # the breakout board's pull-ups
-            self.chip.ports.pulls[PINS[pin]] = 1
+            self.chip.ports.set_pull(*PINS[pin], 1)
         self.chip.ports.edge_listeners.append(self._pin_edge)
         self.chip.ports.listeners.append(self._pin_muxed)
         self._clear()

@@ -237,6 +237,9 @@ void bind_mk64(py::module_& m) {
         // devices
         .def("add_route", &Core::add_route)
         .def("set_clocked", [](Core& c, int dev, bool on) { c.clocked[dev] = on; })
+        .def("set_gpio_input", [](Core& c, uint32_t address, uint32_t value) {
+            c.gpio_in.set(address, value);
+        })
         .def("dev_read", [](Core& c, int dev, uint32_t address, unsigned size) -> py::object {
             uint64_t v = 0;
             return c.dev_read(dev, address, size, v) ? py::object(py::int_(v)) : py::object(py::none());

@@ -759,6 +759,7 @@ bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
         case kFtm0: return ftm0.read(*this, address, size, out);
         case kFtm3: return ftm3.read(*this, address, size, out);
         case kWdog: return wdog.read(*this, address, size, out);
+        case kGpioIn: return gpio_in.read(address, size, out);
         default: return false;
     }
 }

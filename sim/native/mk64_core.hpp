@@ -372,10 +372,22 @@ struct Wdog {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
+// The GPIO ports' input registers (PDIR), read natively from the value the Python pin model
+// (sim/mk64/port.py) keeps here: it owns the pins and pushes a port's input word whenever a
+// pin's level may have changed; every other GPIO and PORT access goes to it. An interrupt
+// handler that reads a pin's level (the RC capture handler does at every edge) then costs no
+// call into Python.
+struct GpioInputs {
+    struct Port { uint32_t address; uint32_t value; };
+    std::vector<Port> ports;             // PDIR's address and value per port
+    bool read(uint32_t address, unsigned size, uint64_t& out) const;
+    void set(uint32_t address, uint32_t value);
+};
+
 class Core {
 public:
     enum Device : int {
-        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kDevices
+        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kDevices
     };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
@@ -479,7 +491,8 @@ public:
     Wdog wdog;
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
-    bool clocked[kDevices] = {true, true, false, false, false, false, true};
+    GpioInputs gpio_in;
+    bool clocked[kDevices] = {true, true, false, false, false, false, true, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
     // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
     // watchdog's write log until taken (for tests and inspection); a long lockstep run turns

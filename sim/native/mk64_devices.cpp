@@ -78,6 +78,27 @@ bool Dwt::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
     return true;
 }
 
+// -- GPIO inputs -------------------------------------------------------------------------------
+bool GpioInputs::read(uint32_t address, unsigned size, uint64_t& out) const {
+    for (const Port& p : ports) {
+        if ((address & ~3u) == p.address) {
+            out = extract(p.value, address, size);
+            return true;
+        }
+    }
+    return false;
+}
+
+void GpioInputs::set(uint32_t address, uint32_t value) {
+    for (Port& p : ports) {
+        if (p.address == address) {
+            p.value = value;
+            return;
+        }
+    }
+    ports.push_back({address, value});
+}
+
 // -- SysTick ----------------------------------------------------------------------------------
 uint32_t SysTick::value(uint64_t now) const {
     if (zero_at < 0) return stopped_value;
