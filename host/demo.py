@@ -43,6 +43,12 @@ def run_demo(args) -> int:
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
     from .validate import load_gains, save_validation, validate_model
 
+    if os.path.isdir(args.out) and os.listdir(args.out):
+        raise InputError(f"{args.out} is not empty (an earlier demo?): the demo writes its "
+                         "sweeps into a new folder and never over earlier records; give another "
+                         "--out or remove that folder")
+    if os.path.lexists(args.out) and not os.path.isdir(args.out):
+        raise InputError(f"{args.out} exists and is not a folder: give another --out")
     os.makedirs(args.out, exist_ok=True)
     t0, sim_s, summary = time.monotonic(), 0.0, []
     for axis in args.axes:

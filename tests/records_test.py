@@ -185,3 +185,11 @@ def test_identify_says_which_frequencies_the_log_lost(sweep, tmp_path):
     assert doc["skipped_frequencies"]
     assert heliquad("report", folder).returncode == 0
     assert "(not used)" in (folder / "report.html").read_text()
+
+
+def test_the_demo_refuses_a_folder_with_an_earlier_demo(tmp_path):
+    out = tmp_path / "heliquad-demo"
+    (out / "roll").mkdir(parents=True)
+    (out / "roll" / "sweep.tlog").write_bytes(b"an earlier demo")
+    one_line_error(heliquad("demo", "--axes", "roll", "--out", out), "not empty", "--out")
+    assert (out / "roll" / "sweep.tlog").read_bytes() == b"an earlier demo"
