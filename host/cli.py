@@ -13,7 +13,7 @@ import sys
 import numpy as np
 
 from . import __version__
-from .cli_args import add_firmware_argument
+from .cli_args import MAX_CYCLES, MAX_SEED, add_firmware_argument, finite, int_in, number_in
 from .errors import InputError
 from .link import DEFAULT_BAUD
 
@@ -138,7 +138,7 @@ def _build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("fsf", help="frequency-response points from sine runs",
                        description=FSF_HELP, formatter_class=fmt)
     p.add_argument("runs", nargs="+", metavar="RUN.csv", help="one sine experiment per file")
-    p.add_argument("--freq-hz", type=float, action="append", metavar="F",
+    p.add_argument("--freq-hz", type=number_in(0, 1e6, lo_open=True), action="append", metavar="F",
                    help="excitation frequency: once for all runs or once per run "
                         "(default: found from the input signal)")
     p.add_argument("--harmonics", type=int, default=3, metavar="L",
@@ -179,25 +179,25 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="vehicle plant: parameter file (default: the shipped vehicle.toml)")
     p.add_argument("--turbulence", choices=("light", "moderate", "severe"),
                    help="vehicle plant: Dryden turbulence (MIL-F-8785C) at this level")
-    p.add_argument("--seed", type=int, default=0, help="turbulence and sensor-noise seed (default 0)")
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="turbulence and sensor-noise seed (default 0)")
     p.add_argument("--ideal-sensor", action="store_true",
                    help="vehicle plant: no IMU noise, bias or DMP latency")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
-    p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19],
+    p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: the paper's roll model)")
-    p.add_argument("--den", type=float, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
+    p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
                    help="denominator, descending powers of s")
     p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
-    p.add_argument("--freq-hz", type=float, required=True, metavar="F")
-    p.add_argument("--amplitude", type=float, required=True, metavar="A",
+    p.add_argument("--freq-hz", type=number_in(0, 1e6, lo_open=True), required=True, metavar="F")
+    p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), required=True, metavar="A",
                    help="deg for angle, deg/s for rate, normalised torque (-1..1) for mixer")
-    p.add_argument("--cycles", type=int, default=10, help="full-amplitude cycles (default 10)")
-    p.add_argument("--fade-cycles", type=int, default=2,
+    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), default=10, help="full-amplitude cycles (default 10)")
+    p.add_argument("--fade-cycles", type=int_in(1, MAX_CYCLES), default=2,
                    help="cycles of fade in and of fade out, also the settling (default 2; the "
                         "firmware needs at least 1)")
-    p.add_argument("--collective", type=float, default=0.4,
+    p.add_argument("--collective", type=number_in(0, 1), default=0.4,
                    help="hover throttle as a fraction of stick travel (default 0.4)")
-    p.add_argument("--loop-hz", type=float, default=200.0, help="firmware loop rate (default 200)")
+    p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0, help="firmware loop rate (default 200)")
     p.add_argument("--dmp-image", metavar="FILE",
                    help="MotionApps 2.0 DMP firmware file for the firmware, made with "
                         "heliquad dmp-image (default: raw FIFO path)")
@@ -211,14 +211,14 @@ def _build_parser() -> argparse.ArgumentParser:
                        description=BOARD_HELP, formatter_class=fmt)
     p.add_argument("--plant", choices=("tf",), default="tf")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
-    p.add_argument("--num", type=float, nargs="+", metavar="B", default=[28.19])
-    p.add_argument("--den", type=float, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
+    p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19])
+    p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
     p.add_argument("--telemetry", default="heliquad-board", metavar="PATH",
                    help="where the telemetry serial port appears (default ./heliquad-board)")
-    p.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds "
+    p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
                    "(default: run until Ctrl-C)")
-    p.add_argument("--collective", type=float, default=0.4)
-    p.add_argument("--loop-hz", type=float, default=200.0)
+    p.add_argument("--collective", type=number_in(0, 1), default=0.4)
+    p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
     p.add_argument("--dmp-image", metavar="FILE")
     add_firmware_argument(p)
     p.set_defaults(func=_cmd_board)
@@ -226,14 +226,14 @@ def _build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("validate", help="closed-loop validation of an identified model",
                        description=VALIDATE_HELP, formatter_class=fmt)
     p.add_argument("models", metavar="MODELS.json")
-    p.add_argument("--model", type=int, metavar="INDEX",
+    p.add_argument("--model", type=int_in(0, 10_000), metavar="INDEX",
                    help="which model (default: the recommended one)")
     p.add_argument("--axis", choices=("roll", "pitch", "yaw"),
                    help="axis of the model (default: the file's \"axis\" entry)")
     p.add_argument("--gains", metavar="FILE", help="gains file (default: the paper's gains)")
     p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
                    default="moderate", help="Dryden level for disturbance rejection (default moderate)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
     p.add_argument("--out", metavar="DIR", help="where validation.json and validation.png go "
                    "(default: beside MODELS.json)")
     p.set_defaults(func=_cmd_validate)
@@ -243,9 +243,9 @@ def _build_parser() -> argparse.ArgumentParser:
     p.add_argument("--port", required=True, metavar="DEVICE",
                    help="serial device: /dev/ttyACM0 for a Teensy, or a heliquad board pty")
     p.add_argument("--out", required=True, metavar="FILE.tlog")
-    p.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
-    p.add_argument("--duration-s", type=float, metavar="S", help="stop after S seconds "
+    p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
                    "(default: until Ctrl-C)")
     p.set_defaults(func=_cmd_log)
 
@@ -263,24 +263,24 @@ def _build_parser() -> argparse.ArgumentParser:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
-    p.add_argument("--baud", type=int, default=DEFAULT_BAUD,
+    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
     p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
-    p.add_argument("--num", type=float, nargs="+", metavar="B",
+    p.add_argument("--num", type=finite, nargs="+", metavar="B",
                    help="--plant tf: numerator (default: the paper's chosen model of the axis)")
-    p.add_argument("--den", type=float, nargs="+", metavar="A", help="--plant tf: denominator")
+    p.add_argument("--den", type=finite, nargs="+", metavar="A", help="--plant tf: denominator")
     p.add_argument("--params", metavar="FILE", help="--plant vehicle: parameter file")
     p.add_argument("--turbulence", choices=("light", "moderate", "severe"))
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
     p.add_argument("--ideal-sensor", action="store_true")
-    p.add_argument("--collective", type=float, default=0.4)
+    p.add_argument("--collective", type=number_in(0, 1), default=0.4)
     p.add_argument("--dmp-image", metavar="FILE")
-    p.add_argument("--freqs-hz", type=float, nargs="+", metavar="F",
+    p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
                    help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
-    p.add_argument("--amplitude", type=float, metavar="A", help="one amplitude for all "
+    p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
                    "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
-    p.add_argument("--cycles", type=int, default=8, help="measured cycles per frequency (default 8)")
+    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), default=8, help="measured cycles per frequency (default 8)")
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
     _add_fault_argument(p, "--sil: ")
@@ -360,6 +360,39 @@ def _cmd_fsf(args) -> int:
     return 0
 
 
+def _check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):
+    """Refuse, before anything starts, an excitation the firmware would refuse: the limits
+    are the firmware's own defaults (heliquad._firmware.SafetyLimits, the same C++ the
+    firmware compiles)."""
+    from heliquad import _firmware
+
+    from .link import INJECTIONS
+
+    import numpy as np
+
+    f32 = lambda x: float(np.float32(x))       # noqa: E731 - the firmware compares in float
+    lim = _firmware.SafetyLimits()
+    hi = f32(lim.max_freq_fraction * f32(loop_hz))
+    for f in freqs_hz:
+        if not lim.min_freq_hz <= f32(f) <= hi:
+            raise InputError(f"{f:g} Hz is outside the firmware's excitation band "
+                             f"[{lim.min_freq_hz:g}, {hi:g}] Hz at a {loop_hz:g} Hz loop")
+        duration = (cycles + 2 * fade_cycles) / f
+        if duration > lim.max_duration_s:
+            raise InputError(f"{cycles} cycles with {fade_cycles} of fade each way at {f:g} Hz "
+                             f"last {duration:.0f} s; the firmware allows "
+                             f"{lim.max_duration_s:g} s: fewer --cycles")
+    if fade_cycles < lim.min_fade_cycles:
+        raise InputError(f"--fade-cycles must be at least {lim.min_fade_cycles}")
+    if amplitude is not None:
+        top = lim.max_amplitude[INJECTIONS[inject]]
+        if f32(amplitude) > top:
+            unit = {"angle": f"{math.degrees(top):g} deg", "rate": f"{math.degrees(top):g} deg/s",
+                    "mixer": f"{top:g}"}[inject]
+            raise InputError(f"--amplitude is above the firmware's bound for {inject} "
+                             f"injection ({unit})")
+
+
 def _cmd_sil(args) -> int:
     import os
 
@@ -367,14 +400,11 @@ def _cmd_sil(args) -> int:
     from ..sim.sil import SilConfig, run_sil
 
     _check_plant(args)
-    if not 0 < args.freq_hz <= args.loop_hz / 4:
-        raise InputError(f"--freq-hz must be in (0, {args.loop_hz / 4:g}] (a quarter of the loop rate)")
-    if args.cycles < 1 or args.fade_cycles < 1:
-        raise InputError("--cycles and --fade-cycles must be at least 1 (every excitation "
-                         "fades in)")
     if args.inject == "angle" and args.axis == "yaw":
         raise InputError("yaw is rate-only: use --inject rate or mixer")
     amplitude = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+    _check_excitation([args.freq_hz], args.cycles, args.fade_cycles, args.loop_hz, amplitude,
+                      args.inject)
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(f"--out: folder {folder} does not exist")
@@ -480,14 +510,16 @@ def _cmd_sweep(args) -> int:
 
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
 
-    if args.freqs_hz and any(f <= 0 for f in args.freqs_hz):
-        raise InputError("--freqs-hz must be positive")
-    if args.cycles < 1:
-        raise InputError("--cycles must be at least 1")
     amp = None
     if args.amplitude is not None:
         amp = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
     plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
+    if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
+        from ..sim.sil import SilConfig
+
+        for f, a in zip(plan.freqs_hz, plan.amplitudes):
+            _check_excitation([f], plan.cycles, plan.fade_cycles, SilConfig.loop_hz, a,
+                              args.inject)
     if not args.sil and args.fault:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
@@ -612,6 +644,8 @@ def _cmd_tlog(args) -> int:
     from .logsession import summarise_tlog
 
     r = summarise_tlog(args.path)
+    if not r["messages"] and r["damage"]:
+        raise InputError(f"{args.path}: no MAVLink record in it (not a .tlog?)")
     if r["damage"]:
         print(f"warning: {r['damage']}", file=sys.stderr)
     print(f"{args.path}: {r['messages']} messages over {r['span_s']:.2f} s; {r['samples']} "

@@ -31,11 +31,20 @@ img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}h2{border-bottom:2px sol
 
 
 def _read_json(path):
+    """A folder's JSON file: None when it is not there; a damaged one is an InputError
+    (a report must not quietly leave out what it cannot read)."""
     try:
         with open(path) as fh:
-            return json.load(fh)
-    except (OSError, ValueError):
+            doc = json.load(fh)
+    except FileNotFoundError:
         return None
+    except OSError as exc:
+        raise InputError(f"{path}: {exc.strerror or exc}") from None
+    except (ValueError, UnicodeDecodeError):
+        raise InputError(f"{path}: not valid JSON (damaged?)") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: not a heliquad {os.path.basename(path)} (expected an object)")
+    return doc
 
 
 def _img(path, alt):

@@ -160,7 +160,9 @@ def load_params(path: str | None = None) -> VehicleParams:
             with open(path, encoding="utf-8") as fh:
                 text = fh.read()
         except OSError as exc:
-            raise InputError(f"{path}: {exc.strerror}") from None
+            raise InputError(f"{path}: {exc.strerror or exc}") from None
+        except UnicodeDecodeError:
+            raise InputError(f"{path}: not a text (TOML) file") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

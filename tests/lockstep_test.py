@@ -163,7 +163,7 @@ def heliquad(*args):
 
 
 @pytest.mark.parametrize("args, match", [
-    (["--freq-hz", "80", "--amplitude", "0.05"], "quarter of the loop rate"),
+    (["--freq-hz", "80", "--amplitude", "0.05"], "excitation band [0.05, 50] Hz"),
     (["--freq-hz", "1", "--amplitude", "5", "--axis", "yaw", "--inject", "angle"], "rate-only"),
     (["--freq-hz", "1", "--amplitude", "0.05", "--den", "0", "1"], "leading non-zero"),
     (["--freq-hz", "1", "--amplitude", "0.05", "--collective", "2"], "collective"),

@@ -98,15 +98,27 @@ def test_the_hosts_own_limit_stays_as_a_second_line(tmp_path):
 
 
 def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
-    # A mixer amplitude of 3 is three times the axis's authority: refused, and the manifest
+    # A mixer amplitude of 3 is three times the axis's authority. The command line refuses it
+    # before anything starts (the firmware's own limits); a session that sends it anyway (a
+    # board flashed with tighter limits would) is refused by the firmware, and the manifest
     # says why.
-    out = tmp_path / "refused"
+    from heliquad.host.sweep import SweepPlan, run_sweep
+    from heliquad.sim.sil import SilConfig, SilSession
+
     res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 1.0, "--amplitude", 3,
-                   "--ideal-sensor", "--out", out)
-    assert res.returncode == 1 and "Traceback" not in res.stderr
-    assert "refused by the firmware: amplitude not finite, not positive, or above" in res.stderr
-    manifest = json.loads((out / "manifest.json").read_text())
-    assert not manifest["complete"] and manifest["aborted"].startswith("refused by the firmware")
+                   "--out", tmp_path / "cli")
+    assert res.returncode == 2 and "above the firmware's bound for mixer" in res.stderr
+    assert not (tmp_path / "cli").exists()
+    out = tmp_path / "refused"
+    out.mkdir()
+    with SilSession(SilConfig(axis="roll", plant="vehicle", rig="roll", ideal_sensor=True),
+                    str(out / "sweep.tlog")) as session:
+        manifest = run_sweep(session, SweepPlan("roll", "mixer", [1.0], [3.0]), str(out),
+                             {"kind": "sil"}, progress=lambda *_: None)
+    assert not manifest["complete"]
+    assert manifest["aborted"].startswith("refused by the firmware: amplitude not finite, not "
+                                          "positive, or above")
+    assert json.loads((out / "manifest.json").read_text())["aborted"] == manifest["aborted"]
 
 
 def test_a_host_that_goes_quiet_ends_the_sweep_with_the_firmwares_reason(tmp_path):
