@@ -761,9 +761,17 @@ def format_tf(model) -> str:
 
 def main(argv=None) -> int:
     """Entry point of the ``heliquad`` console script."""
+    import signal
+
+    from .errors import Terminated
+
     parser = _build_parser()
     args = parser.parse_args(argv)
     np.seterr(all="ignore")
+
+    def on_sigterm(signum, frame):
+        raise Terminated()
+    signal.signal(signal.SIGTERM, on_sigterm)
     try:
         return args.func(args)
     except InputError as exc:
@@ -772,9 +780,10 @@ def main(argv=None) -> int:
     except BrokenPipeError:              # e.g. piped into `head`: not an error
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
-        sys.stderr.write(f"heliquad {args.command}: interrupted\n")
-        return 130
+    except KeyboardInterrupt as exc:
+        terminated = isinstance(exc, Terminated)
+        sys.stderr.write(f"heliquad {args.command}: {'terminated' if terminated else 'interrupted'}\n")
+        return 143 if terminated else 130
     except OSError as exc:
         sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}: "
                          f"{exc.filename or ''}\n")

@@ -30,7 +30,7 @@ import numpy as np
 from heliquad import _firmware
 
 from . import __version__, paper
-from .errors import InputError
+from .errors import InputError, Terminated
 from .files import write_json
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
 from .mavlink_dialect import dialect
@@ -140,10 +140,12 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 "tlog": SWEEP_TLOG, "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
                 "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
                 "frequencies": [], "complete": False, "aborted": None}
-    _write_manifest(out_dir, manifest)
-    session.hover()
+    current = None
     try:
+        _write_manifest(out_dir, manifest)
+        session.hover()
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
+            current = f
             entry = _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
             manifest["frequencies"].append(entry)
             _write_manifest(out_dir, manifest)
@@ -155,10 +157,12 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 break
         else:
             manifest["complete"] = True
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         session.tel.stop_excitation()
-        manifest["aborted"] = "interrupted (Ctrl-C)"
-        progress("interrupted: the excitation is stopped; the log and manifest are kept")
+        how = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted (Ctrl-C)"
+        manifest["aborted"] = how
+        manifest["in_progress_hz"] = current          # None: during the hover, before any
+        progress(f"{how}: the excitation is stopped; the log and manifest are kept")
     finally:
         _write_manifest(out_dir, manifest)
     return manifest

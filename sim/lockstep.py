@@ -84,7 +84,11 @@ class HostFirmware:
             cmd += ["--dmp-image", dmp_image]
         self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
         self._stderr = open(self.stderr_path, "w+")
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr)
+        # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and the
+        # tool ends the run in order (stops the excitation, keeps the records, then stops
+        # the firmware) instead of losing the firmware under it.
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr,
+                                     start_new_session=True)
         self.summary = ""
         self.imu_mode = self._wait_ready()
 

@@ -171,29 +171,43 @@ def test_identify_refuses_a_folder_that_is_not_a_sweep(tmp_path):
     assert len(res.stderr.strip().splitlines()) == 1
 
 
-def test_ctrl_c_leaves_a_valid_log_and_manifest(tmp_path):
+@pytest.mark.parametrize("signame, aborted", [("SIGINT", "interrupted (Ctrl-C)"),
+                                              ("SIGTERM", "terminated (SIGTERM)")])
+def test_a_terminal_ctrl_c_or_sigterm_leaves_a_valid_log_and_manifest_and_nothing_behind(
+        signame, aborted, tmp_path):
+    """Ctrl-C as a terminal sends it: SIGINT to the whole foreground process group (and
+    SIGTERM, as a service manager sends it). The firmware runs in its own session, so only
+    the tool gets it; the tool stops the excitation, writes the manifest with ``aborted`` set
+    and stops the firmware. Sent once the manifest exists, whenever that is: the outcome does
+    not depend on timing."""
+    import os
     import signal
 
-    out = tmp_path / "interrupted"
+    out, tmp = tmp_path / "interrupted", tmp_path / "tmp"
+    tmp.mkdir()
     # Three of the slowest frequencies the firmware allows (0.05-0.07 Hz x 14 cycles: 12 min
-    # simulated, several seconds here), interrupted once the log is being written.
+    # simulated, several seconds here).
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
                              "--sil", "--ideal-sensor", "--freqs-hz", "0.05", "0.06", "0.07",
                              "--cycles", "10", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, TMPDIR=str(tmp)),
+                            start_new_session=True,         # its own group, as in a terminal
                             # SIGINT back to its default: a shell that ran the tests in the
                             # background hands it down ignored, and the Ctrl-C would be lost.
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    tlog = out / "sweep.tlog"
-    deadline = time.monotonic() + 30
-    while not (tlog.exists() and tlog.stat().st_size > 0) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(1.0)                                  # well inside the frequency
-    proc.send_signal(signal.SIGINT)
-    stdout, _ = proc.communicate(timeout=60)
-    assert proc.returncode == 1
-    assert "interrupted" in stdout
-    manifest = json.loads((out / "manifest.json").read_text())
-    assert manifest["aborted"] == "interrupted (Ctrl-C)" and not manifest["complete"]
+    manifest_path = out / "manifest.json"
+    deadline = time.monotonic() + 60
+    while not manifest_path.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert manifest_path.exists(), proc.communicate(timeout=60)
+    os.killpg(proc.pid, getattr(signal, signame))
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 1, stderr
+    assert aborted in stdout and "Traceback" not in stderr
+    manifest = json.loads(manifest_path.read_text())
+    assert manifest["aborted"] == aborted and not manifest["complete"]
+    assert manifest["in_progress_hz"] in (None, 0.05, 0.06, 0.07)
+    assert list(tmp.iterdir()) == []             # the firmware's folder went with it
     res = heliquad("tlog", out / "sweep.tlog")
     assert res.returncode == 0 and " 0 lost" in res.stdout and res.stderr == ""
