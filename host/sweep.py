@@ -48,6 +48,10 @@ MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
 MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
+#: A running excitation whose samples stop for this long (the session's time: wall clock on a
+#: board) has lost its board: the link is gone or the board hung. The telemetry carries a
+#: sample every loop (200 Hz), so 2 s is 400 missing in a row.
+SAMPLE_TIMEOUT_S = 2.0
 
 
 def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
@@ -174,6 +178,7 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
     entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "status": "ok"}
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles, plan.fade_cycles)
     started, seen_active = session.time_us, False
+    last_sample = started
     while True:
         for m in session.advance():
             kind = m.get_type()
@@ -189,6 +194,7 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
                     entry["status"] = f"stopped by the firmware: {reason_text(m.reason)}"
                     return entry
             elif kind == "HQ_SYSID_SAMPLE":
+                last_sample = session.time_us
                 if m.exc_state != idle:
                     seen_active = True
                 if m.exc_state == running:
@@ -210,6 +216,11 @@ def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
                 entry.setdefault("messages", []).append(m.text)
         if not seen_active and session.time_us - started > START_TIMEOUT_S * 1e6:
             entry["status"] = "the excitation did not start (no answer from the firmware)"
+            return entry
+        if seen_active and session.time_us - last_sample > SAMPLE_TIMEOUT_S * 1e6:
+            session.tel.stop_excitation()          # in case the board is there but deaf
+            entry["status"] = (f"no samples for {SAMPLE_TIMEOUT_S:g} s: the board stopped "
+                               "sending (link lost or board hung)")
             return entry
 
 

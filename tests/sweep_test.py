@@ -68,6 +68,38 @@ def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
     assert all(f["samples"] >= 3 * f["period_samples"] for f in manifest["frequencies"])
 
 
+def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_path):
+    # The simulated board stopped (SIGSTOP) once the sweep's log holds samples: no sample
+    # comes any more, and the sweep ends with the timeout's status instead of waiting forever.
+    import os
+    import signal
+
+    port, out = tmp_path / "rig", tmp_path / "sweep"
+    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
+                              str(port), "--duration-s", "60"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert "board running" in board.stdout.readline()
+        sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis",
+                                  "roll", "--port", str(port), "--freqs-hz", "0.5", "--cycles", "10",
+                                  "--out", str(out)],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        tlog, deadline = out / "sweep.tlog", time.monotonic() + 60
+        while not (tlog.exists() and tlog.stat().st_size > 20_000) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(board.pid, signal.SIGSTOP)
+        stdout, stderr = sweep.communicate(timeout=60)
+    finally:
+        os.kill(board.pid, signal.SIGCONT)
+        board.terminate()
+        board.wait(timeout=20)
+    assert sweep.returncode == 1, stdout + stderr
+    assert "no samples for 2 s: the board stopped sending" in stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["aborted"].startswith("no samples for 2 s") and not manifest["complete"]
+    res = heliquad("tlog", tlog)                      # what came before the freeze is kept
+    assert res.returncode == 0 and "HQ_SYSID_SAMPLE" in res.stdout
+
+
 def test_the_firmware_stops_a_sweep_at_its_angle_limit_and_the_log_is_kept(tmp_path):
     # 190 deg/s of rate injection at 0.2 Hz swings the vehicle's roll rig past 80 deg: the
     # firmware stops the excitation itself, the sweep ends with its reason, never "complete".
