@@ -1,5 +1,6 @@
 """Sweeps and identification end to end (issue 5): heliquad sweep + heliquad identify."""
 
+import contextlib
 import json
 import math
 import subprocess
@@ -50,17 +51,25 @@ def test_sil_sweep_and_identify_recover_the_papers_models(axis, tmp_path):
         assert (out / name).stat().st_size > 0
 
 
-def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
-    port, out = tmp_path / "rig", tmp_path / "sweep"
+@contextlib.contextmanager
+def running_board(port, duration_s):
+    """``heliquad board`` publishing its telemetry at ``port`` (the Popen), stopped at the end."""
     board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port), "--duration-s", "20"], stdout=subprocess.PIPE, text=True)
+                              str(port), "--duration-s", str(duration_s)],
+                             stdout=subprocess.PIPE, text=True)
     try:
         assert "board running" in board.stdout.readline()
-        res = heliquad("sweep", "--axis", "roll", "--port", port, "--freqs-hz", 3, 4.5,
-                       "--cycles", 3, "--out", out)
+        yield board
     finally:
         board.terminate()
         board.wait(timeout=20)
+
+
+def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
+    port, out = tmp_path / "rig", tmp_path / "sweep"
+    with running_board(port, 20):
+        res = heliquad("sweep", "--axis", "roll", "--port", port, "--freqs-hz", 3, 4.5,
+                       "--cycles", 3, "--out", out)
     assert res.returncode == 0, res.stdout + res.stderr
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["source"]["kind"] == "port" and manifest["complete"]
@@ -75,10 +84,7 @@ def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_
     import signal
 
     port, out = tmp_path / "rig", tmp_path / "sweep"
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port), "--duration-s", "60"], stdout=subprocess.PIPE, text=True)
-    try:
-        assert "board running" in board.stdout.readline()
+    with running_board(port, 60) as board:
         sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis",
                                   "roll", "--port", str(port), "--freqs-hz", "0.5", "--cycles", "10",
                                   "--out", str(out)],
@@ -87,11 +93,10 @@ def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_
         while not (tlog.exists() and tlog.stat().st_size > 20_000) and time.monotonic() < deadline:
             time.sleep(0.05)
         os.kill(board.pid, signal.SIGSTOP)
-        stdout, stderr = sweep.communicate(timeout=60)
-    finally:
-        os.kill(board.pid, signal.SIGCONT)
-        board.terminate()
-        board.wait(timeout=20)
+        try:
+            stdout, stderr = sweep.communicate(timeout=60)
+        finally:
+            os.kill(board.pid, signal.SIGCONT)
     assert sweep.returncode == 1, stdout + stderr
     assert "no samples for 2 s: the board stopped sending" in stderr
     manifest = json.loads((out / "manifest.json").read_text())
