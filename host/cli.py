@@ -508,6 +508,7 @@ def _print_validation(r) -> None:
 def _cmd_sweep(args) -> int:
     import os
 
+    from .files import new_output_folder
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
 
     amp = None
@@ -524,14 +525,7 @@ def _cmd_sweep(args) -> int:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
         raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
-    if os.path.isdir(args.out) and os.listdir(args.out):
-        raise InputError(f"{args.out} is not empty: a sweep goes into a new (or empty) folder, "
-                         "so no record of an earlier session is overwritten or mixed with it; "
-                         "give another --out")
-    if os.path.lexists(args.out) and not os.path.isdir(args.out):
-        raise InputError(f"{args.out} exists and is not a folder: give another --out")
-    created = not os.path.isdir(args.out)
-    os.makedirs(args.out, exist_ok=True)
+    created = new_output_folder(args.out, "a sweep")
     try:
         session, source = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
     except BaseException:

@@ -38,18 +38,13 @@ def add_demo_parser(sub, fmt) -> None:
 
 def run_demo(args) -> int:
     from ..sim.sil import SilConfig, SilSession
+    from .files import new_output_folder
     from .identify_session import identify_dir
     from .report import write_report
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
     from .validate import load_gains, save_validation, validate_model
 
-    if os.path.isdir(args.out) and os.listdir(args.out):
-        raise InputError(f"{args.out} is not empty (an earlier demo?): the demo writes its "
-                         "sweeps into a new folder and never over earlier records; give another "
-                         "--out or remove that folder")
-    if os.path.lexists(args.out) and not os.path.isdir(args.out):
-        raise InputError(f"{args.out} exists and is not a folder: give another --out")
-    os.makedirs(args.out, exist_ok=True)
+    new_output_folder(args.out, "the demo")
     t0, sim_s, summary = time.monotonic(), 0.0, []
     for axis in args.axes:
         folder = os.path.join(args.out, axis)

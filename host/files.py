@@ -26,7 +26,7 @@ from .errors import InputError
 
 __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
            "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
-           "atomic_write", "write_json", "save_figure"]
+           "atomic_write", "write_json", "save_figure", "new_output_folder"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
 POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
@@ -75,6 +75,21 @@ def save_figure(fig, path, **kwargs) -> None:
     fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format=fmt, **kwargs)
+
+
+def new_output_folder(path, what: str) -> bool:
+    """Make ``path`` the folder ``what`` records into: it may be new or empty, never one that
+    holds earlier records (an InputError says so before anything starts). True when this
+    call created it (so that a run that records nothing can remove it again)."""
+    path = os.fspath(path)
+    if os.path.isdir(path) and os.listdir(path):
+        raise InputError(f"{path} is not empty: {what} goes into a new (or empty) folder, so no "
+                         "earlier record is overwritten or mixed with it; give another --out")
+    if os.path.lexists(path) and not os.path.isdir(path):
+        raise InputError(f"{path} exists and is not a folder: give another --out")
+    created = not os.path.isdir(path)
+    os.makedirs(path, exist_ok=True)
+    return created
 
 
 def _read_table(path, required, optional=()):

@@ -25,7 +25,7 @@ __all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog"]
 _STAMP = struct.Struct(">Q")
 
 
-def create_log(path, what: str = "log"):
+def create_log(path):
     """A new file for a log, opened for binary writing; one that exists is never truncated
     (InputError naming it and how to go on)."""
     from .errors import InputError
@@ -33,7 +33,7 @@ def create_log(path, what: str = "log"):
     try:
         return open(path, "xb")
     except FileExistsError:
-        raise InputError(f"{path} exists: heliquad never writes over a {what}; give another "
+        raise InputError(f"{path} exists: heliquad never writes over a log; give another "
                          "name (or move the old one away)") from None
     except OSError as exc:
         raise InputError(f"cannot create {path}: {exc.strerror or exc}") from None
@@ -108,20 +108,24 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
     ``damage``: a :class:`TlogDamage` to fill; without one, damage is reported as a warning
     naming the file and what was skipped.
     """
-    from .mavframe import STX_V2, Codec, packet_at
+    from .mavframe import HEADER_LEN, STX_V2, Codec, packet_at
 
     with open(path, "rb") as fh:
         data = fh.read()
     codec = Codec(mav_module)
     extras = codec.extra_bytes
-    wanted = None if only is None else {msgid for msgid, cls in codec.classes.items()
-                                        if cls.msgname in set(only)}
-    report = TlogDamage(size=len(data)) if damage is None else damage
+    names = None if only is None else set(only)
+    wanted = None if names is None else {msgid for msgid, cls in codec.classes.items()
+                                         if cls.msgname in names}
+    report = TlogDamage() if damage is None else damage
     report.size = len(data)
     out, pos, n, last_stamp = [], 0, len(data), None
+    stamp_len = _STAMP.size
 
     def record_at(p):
-        found = packet_at(data, p + 8, extras) if p + 8 < n and data[p + 8] == STX_V2 else None
+        """(msgid, packet length, payload length) of a well-formed record at p, or None."""
+        start = p + stamp_len
+        found = packet_at(data, start, extras) if start < n and data[start] == STX_V2 else None
         return found or None
 
     while pos < n:
@@ -129,7 +133,7 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
         if found is None:                       # damage: on to the next well-formed record
             start, p = pos, pos + 1
             while True:
-                p = data.find(STX_V2, p + 8) - 8 if p + 8 < n else -1
+                p = data.find(STX_V2, p + stamp_len) - stamp_len if p + stamp_len < n else -1
                 if p < start + 1 or (found := record_at(p)) is not None:
                     break
                 p += 1
@@ -144,9 +148,9 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
         last_stamp = stamp
         report.messages += 1
         if wanted is None or msgid in wanted:
-            payload = data[pos + 18:pos + 18 + length]
-            out.append((stamp, codec.decode(msgid, payload)))
-        pos += 8 + total
+            body = pos + stamp_len + HEADER_LEN
+            out.append((stamp, codec.decode(msgid, data[body:body + length])))
+        pos += stamp_len + total
     if damage is None and report:
         warnings.warn(f"{path}: damaged: {report.summary()}; read the {report.messages} "
                       "well-formed messages")

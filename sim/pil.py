@@ -152,6 +152,7 @@ class PilBoard:
         self.machine.core.keep_records = False
         self.board.mpu.log.clear()
         self.board.chip.i2c0.transfers.clear()
+        self.board.chip.ftm3.captures.clear()
         self._collect_telemetry()
 
     # -- inputs ----------------------------------------------------------------------------
@@ -255,8 +256,8 @@ class PilBoard:
         chip = self.board.chip
         self.telemetry_out += self.board.take_telemetry()
         # A lockstep run is long: the models' inspection logs must not grow with it (the
-        # I2C and MPU6050 records are off after the boot, see boot()).
-        chip.ftm3.captures.clear()
+        # native models keep none after the boot, see boot(); the pin model's level log is
+        # Python's).
         chip.ports.level_log.clear()
 
 
