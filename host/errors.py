@@ -1,13 +1,12 @@
-"""Errors the host tool reports to users as one line, without a traceback."""
+"""Errors the host tool reports to users as one line, without a traceback.
+
+``InputError`` is defined with the simulator (the layer below: its parameter files and fault
+specifications are user input too) and is the same class here.
+"""
+
+from ..sim.errors import InputError
 
 __all__ = ["InputError", "Terminated"]
-
-
-class InputError(ValueError):
-    """Bad user input: a malformed file, an impossible option, too little data.
-
-    The command-line interface prints ``str(error)`` on one line and exits with code 2.
-    """
 
 
 class Terminated(KeyboardInterrupt):

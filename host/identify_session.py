@@ -26,7 +26,7 @@ __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 
 def _load(dir_path):
-    from .mavlink_dialect import dialect
+    from ..sim.dialect import dialect
     from .sweep import MANIFEST
     from .tlog import TlogDamage, read_tlog
 
@@ -54,7 +54,7 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
     """The log's excitations are the manifest's: same axis and injection (a folder whose
     log comes from another session is refused, not fitted)."""
     from .link import AXES, INJECTIONS
-    from .mavlink_dialect import dialect
+    from ..sim.dialect import dialect
 
     idle = dialect().HQ_EXCITATION_STATE_IDLE
     want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))
@@ -68,7 +68,7 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 
 
 def _segments(manifest, samples):
-    from .mavlink_dialect import dialect
+    from ..sim.dialect import dialect
 
     running = dialect().HQ_EXCITATION_STATE_RUNNING
     u_name, y_name = INPUT_OUTPUT[manifest["inject"]]

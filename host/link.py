@@ -14,8 +14,8 @@ import time
 import serial
 
 from .errors import InputError
-from .mavframe import Codec, Framer
-from .mavlink_dialect import dialect
+from ..sim.mavframe import Codec, Framer
+from ..sim.dialect import dialect
 
 __all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES",
            "HEARTBEAT_PERIOD_S", "reason_text"]

@@ -75,7 +75,7 @@ def _count(stats, seq):
 
 def summarise_tlog(path: str) -> dict:
     """Message counts, time span and lost samples of a .tlog, and what damage was skipped."""
-    from .mavlink_dialect import dialect
+    from ..sim.dialect import dialect
     from .tlog import TlogDamage, read_tlog
 
     damage = TlogDamage()

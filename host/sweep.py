@@ -33,7 +33,7 @@ from . import __version__, paper
 from .errors import InputError, Terminated
 from .files import write_json
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
-from .mavlink_dialect import dialect
+from ..sim.dialect import dialect
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
 

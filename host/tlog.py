@@ -108,7 +108,7 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
     ``damage``: a :class:`TlogDamage` to fill; without one, damage is reported as a warning
     naming the file and what was skipped.
     """
-    from .mavframe import HEADER_LEN, STX_V2, Codec, packet_at
+    from ..sim.mavframe import HEADER_LEN, STX_V2, Codec, packet_at
 
     with open(path, "rb") as fh:
         data = fh.read()

@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from heliquad.host.errors import InputError
-from heliquad.host.mavlink_dialect import dialect
+from .errors import InputError
+from .dialect import dialect
 
 __all__ = ["Fault", "parse_fault", "check_faults", "imu_fault_codes", "link_close_frame", "KINDS"]
 

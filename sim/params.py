@@ -3,7 +3,7 @@
 Every key carries its unit in its name; the loader checks that every expected key is there,
 that there are no others (a key in another unit, ``mass_g`` say, is refused with the
 expected name), and that values have the right shape and sign. Errors name the file and the
-key on one line (:class:`heliquad.host.errors.InputError`).
+key on one line (:class:`heliquad.sim.errors.InputError`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import importlib.resources
 import math
 import tomllib
 
-from heliquad.host.errors import InputError
+from .errors import InputError
 
 __all__ = ["VehicleParams", "RotorParams", "ArmRotorParams", "RigParams", "BodyParams",
            "TurbulenceParams", "ImuParams",

@@ -46,7 +46,7 @@ import sys
 import time
 import tty
 
-from heliquad.host.mavlink_dialect import dialect
+from .dialect import dialect
 
 from .mk64.machine import ChipReset, EmulationError
 
@@ -383,7 +383,7 @@ def main(argv=None) -> int:
           f"{tel.slave_path}\nimu: {'dmp' if report[5] == mav.HQ_SENSOR_DMP else 'raw'}\n"
           f"image: {elf}\nready", flush=True)
 
-    from heliquad.host.mavframe import Codec, Framer
+    from .mavframe import Codec, Framer
 
     codec = Codec(mav, system_id=1, component_id=1)      # the vehicle's ids, as the board's
     framer = Framer(codec)

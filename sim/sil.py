@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from heliquad.host.link import HEARTBEAT_PERIOD_S, INPUT_OUTPUT, SESSION_MESSAGES, reason_text
-from heliquad.host.mavlink_dialect import dialect
+from .dialect import dialect
 
 from .faults import check_faults, imu_fault_codes, link_close_frame
 from .lockstep import FirmwareError, SimLink, actuators, start_firmware
@@ -362,7 +362,7 @@ class _Tally:
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``, never over files
     that exist (InputError before anything starts)."""
-    from heliquad.host.errors import InputError
+    from .errors import InputError
 
     csv_path = out_base + ".csv"
     for path in (out_base + ".tlog", csv_path):

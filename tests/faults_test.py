@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from heliquad.host.errors import InputError
-from heliquad.host.mavlink_dialect import dialect
+from heliquad.sim.dialect import dialect
 from heliquad.sim.faults import Fault, imu_fault_codes, link_close_frame, parse_fault
 
 MAV = dialect()

@@ -14,7 +14,7 @@ import select
 import time
 
 from heliquad.host.link import TelemetryLink
-from heliquad.host.mavlink_dialect import dialect
+from heliquad.sim.dialect import dialect
 from heliquad.sim.lockstep import HostFirmware, SimLink
 from heliquad.sim.tf_plant import TfPlant
 

@@ -20,7 +20,7 @@ import pytest
 
 from heliquad.host.fsf import estimate_fsf
 from heliquad.host.files import read_run_csv
-from heliquad.host.mavlink_dialect import dialect
+from heliquad.sim.dialect import dialect
 from heliquad.host.tlog import read_tlog
 from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
 from heliquad.sim.sil import SilConfig, run_sil

@@ -73,8 +73,8 @@ def test_single_bit_flips_are_read_past_and_reported(session, tmp_path):
     timestamp; identification reads the samples' own CRC-checked times)."""
     import random
 
-    from heliquad.host.mavframe import Codec, packet_at
-    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.sim.mavframe import Codec, packet_at
+    from heliquad.sim.dialect import dialect
 
     _, out = session
     data = out.read_bytes()

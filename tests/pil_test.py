@@ -18,7 +18,7 @@ import pytest
 from heliquad import _firmware
 from heliquad.host.files import read_run_csv
 from heliquad.host.fsf import estimate_fsf
-from heliquad.host.mavlink_dialect import dialect
+from heliquad.sim.dialect import dialect
 from heliquad.host.tlog import read_tlog
 from heliquad.sim.pil import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
 from heliquad.sim.sil import RC_CENTER_US, SilConfig, run_sil

@@ -124,8 +124,8 @@ def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
     # Two loops' telemetry (ATTITUDE, then the loop's HQ_SYSID_SAMPLE), line noise in
     # between, and the start of a third loop: each packet is logged stamped with the time of
     # the next HQ_SYSID_SAMPLE, the noise is skipped, the third loop waits for its sample.
-    from heliquad.host.mavframe import Codec
-    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.sim.mavframe import Codec
+    from heliquad.sim.dialect import dialect
     from heliquad.host.tlog import read_tlog
 
     mav = dialect()

@@ -176,8 +176,8 @@ def test_identify_says_in_one_line_when_no_frequency_has_a_usable_excitation(tmp
     # running but never reached the plant): every frequency is skipped with its reason.
     import struct
 
-    from heliquad.host.mavframe import Codec
-    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.sim.mavframe import Codec
+    from heliquad.sim.dialect import dialect
     from heliquad.host.tlog import read_tlog
 
     out = tmp_path / "flat"

@@ -933,7 +933,7 @@ def test_image_telemetry_reports_its_loop_cycles_over_uart0():
     measured with the board's own cycle counter."""
     require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.sim.dialect import dialect
 
     board = Teensy35(IMAGE)
     assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
@@ -1024,7 +1024,7 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     refused over TX with the reason (no RC link), as on the host build."""
     require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.host.mavlink_dialect import dialect
+    from heliquad.sim.dialect import dialect
 
     mav_mod = dialect()
     board = Teensy35(IMAGE)

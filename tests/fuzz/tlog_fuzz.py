@@ -32,9 +32,10 @@ import warnings
 
 from fuzz_input import (HEADER_LEN, STAMP_LEN, STX_V2, ByteReader, StreamBuilder, packet_end,
                         same_fields, sample_values, verifies)
-from heliquad.host import mavframe, tlog
-from heliquad.host.mavframe import Codec
-from heliquad.host.mavlink_dialect import dialect
+from heliquad.host import tlog
+from heliquad.sim import mavframe
+from heliquad.sim.mavframe import Codec
+from heliquad.sim.dialect import dialect
 
 STRUCTURED = 0x01               # mode byte: build the file from the input
 DIALECT = dialect()
