@@ -21,10 +21,10 @@ from . import paper
 from .cli_args import add_firmware_argument
 from .errors import InputError
 
-__all__ = ["add_demo_parser", "run_demo"]
+__all__ = ["add_parser", "run_demo"]
 
 
-def add_demo_parser(sub, fmt) -> None:
+def add_parser(sub, fmt) -> None:
     p = sub.add_parser("demo", help="the whole campaign on the simulated vehicle, all three axes",
                        description=__doc__, formatter_class=fmt)
     p.add_argument("--out", default="heliquad-demo", metavar="DIR",
@@ -82,7 +82,7 @@ def run_demo(args) -> int:
 
 def _compare(axis, model, reason, plant):
     """Worst error of the recommended model against the simulator's sampled-data truth."""
-    from .cli import format_tf
+    from .fit import format_tf
 
     if model is None:
         return (axis, None, reason, float("nan"), float("nan"))

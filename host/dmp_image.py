@@ -27,7 +27,7 @@ from .errors import InputError
 
 __all__ = ["DMP_IMAGE_SIZE", "DMP_CONFIG_SIZE", "DMP_UPDATES_SIZE", "DmpFirmware",
            "read_dmp_firmware", "pack_dmp_file", "unpack_dmp_file", "read_dmp_file",
-           "table_entries", "add_dmp_image_parser"]
+           "table_entries", "add_parser"]
 
 #: MotionApps 2.0: MPU6050_DMP_CODE_SIZE, MPU6050_DMP_CONFIG_SIZE, MPU6050_DMP_UPDATES_SIZE.
 DMP_IMAGE_SIZE = 1929
@@ -192,7 +192,7 @@ def read_dmp_firmware(source: str | None = None) -> DmpFirmware:
                               _list(tree, "dmpUpdates", DMP_UPDATES_SIZE)))
 
 
-def add_dmp_image_parser(sub, fmt) -> None:
+def add_parser(sub, fmt) -> None:
     p = sub.add_parser("dmp-image", help="extract the MPU6050 DMP firmware for the firmware build",
                        description=__doc__ + """
 Build the firmware with it:  pip install . -Ccmake.define.HQ_DMP_IMAGE=$PWD/dmp.bin

@@ -36,7 +36,7 @@ import scipy.optimize
 
 from .errors import InputError
 
-__all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response"]
+__all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response", "format_tf"]
 
 #: Sanathanan-Koerner iterations at most, and the relative change that stops them early.
 SK_MAX_ITER = 30
@@ -378,3 +378,16 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
         at_bound = np.isclose(best_params[:n], lo, atol=1e-3) | np.isclose(best_params[:n], hi, atol=1e-3)
         model.degenerate = bool(np.any(at_bound))
     return model
+
+
+def format_tf(model) -> str:
+    """``(num) / (den)`` in descending powers of s, with the delay if any."""
+    def poly(c):
+        n = len(c) - 1
+        terms = [f"{v:.5g}" + (f" s^{n - i}" if n - i > 1 else " s" if n - i == 1 else "")
+                 for i, v in enumerate(c)]
+        return " + ".join(terms).replace("+ -", "- ")
+    text = f"({poly(model.num)}) / ({poly(model.den)})"
+    if model.delay_fitted:
+        text += f" * exp(-{model.delay_s * 1e3:.3g} ms s)"
+    return text

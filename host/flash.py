@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from .errors import InputError
 
-__all__ = ["ImageInfo", "check_image", "default_hex", "add_flash_parser"]
+__all__ = ["ImageInfo", "check_image", "default_hex", "add_parser"]
 
 FLASH_SIZE = 512 * 1024                      # MK64FX512
 SRAM_LOW, SRAM_HIGH = 0x1FFF0000, 0x20020000  # SRAM_L + SRAM_U, 192 KiB
@@ -96,7 +96,7 @@ def default_hex() -> str:
         raise InputError(f"{exc}, or give HEX") from None
 
 
-def add_flash_parser(sub, fmt) -> None:
+def add_parser(sub, fmt) -> None:
     p = sub.add_parser("flash", help="flash the firmware image to a Teensy 3.5",
                        description=__doc__ + """
 Without HEX, the image is the one the install built when the ARM toolchain was there

@@ -1,0 +1,59 @@
+"""The simulated rig as a board on a serial port (``heliquad board``)."""
+
+from __future__ import annotations
+
+
+from ..cli_args import add_firmware_argument, check_plant, finite, number_in
+from ..errors import InputError
+
+__all__ = ["add_parser", "run"]
+
+HELP = """\
+Run the simulated rig in real time as if it were a board on a serial port: the host
+firmware with a transfer-function plant, armed and hovering, stepping one loop per loop
+period of wall-clock time. Its telemetry port appears at --telemetry; connect any MAVLink
+tool to it as to a board's serial port (any baud rate is accepted and ignored). Nothing reads the
+telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
+
+example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
+"""
+
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("board", help="run the simulated rig as if it were a board on a serial port",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("--plant", choices=("tf",), default="tf")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
+    p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19])
+    p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
+    p.add_argument("--telemetry", default="heliquad-board", metavar="PATH",
+                   help="where the telemetry serial port appears (default ./heliquad-board)")
+    p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
+                   "(default: run until Ctrl-C)")
+    p.add_argument("--collective", type=number_in(0, 1), default=0.4)
+    p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
+    p.add_argument("--dmp-image", metavar="FILE")
+    add_firmware_argument(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import os
+
+    from ...sim.board import run_board
+    from ...sim.lockstep import FirmwareError
+
+    check_plant(args)
+    if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
+        raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
+                         "another path")
+    try:
+        r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
+                      collective=args.collective, duration_s=args.duration_s,
+                      dmp_image=args.dmp_image, firmware=args.firmware)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "
+          f"fell behind real time {r['resyncs']} time(s)")
+    return 0

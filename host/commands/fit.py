@@ -1,0 +1,98 @@
+"""Transfer functions from frequency-response points (``heliquad fit``)."""
+
+from __future__ import annotations
+
+
+from ..errors import InputError
+from ..fit import format_tf
+
+__all__ = ["add_parser", "run", "print_models"]
+
+DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
+
+HELP = """\
+Fit transfer functions of the given orders to frequency-response points: Levy's method,
+Sanathanan-Koerner iterations, then an output-error refinement with stable poles
+(docs/paper.md, step 3). Prints each model's metrics and the recommended one.
+
+POINTS.csv: a header row, columns omega_rad_s,magnitude,phase_rad (rad/s, linear, rad;
+omega strictly increasing) and optionally sigma,coherence.
+MODELS.json (written): {"models": [{"order": [M, N], "num": [...], "den": [...],
+"delay_s": 0.0, "stable": true, "metrics": {"rms", "J", "aicc", ...}, "poles", "zeros",
+"dc_gain"}, ...], "recommended": INDEX, "reason": "..."}; coefficients in descending
+powers of s, den monic.
+
+example: heliquad fit points.csv --order 0/2 --order 0/3 --order 2/4 --json models.json --plot bode.png
+"""
+
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("fit", help="transfer functions from frequency-response points",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("points", metavar="POINTS.csv")
+    p.add_argument("--order", action="append", metavar="M/N",
+                   help="numerator/denominator degree; repeat for several "
+                        f"(default: {' '.join(DEFAULT_FIT_ORDERS)}, those the points support)")
+    p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model")
+    p.add_argument("--weights", choices=("auto", "sigma", "coherence", "none"), default="auto",
+                   help="point weights: 1/sigma, CIFER coherence weight, or equal relative "
+                        "weight (default auto: sigma, else coherence, else none)")
+    p.add_argument("--allow-unstable", action="store_true",
+                   help="do not constrain poles to the left half plane (unstable results "
+                        "are flagged)")
+    p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
+    p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models")
+    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB")
+    p.set_defaults(func=run)
+
+
+
+
+def run(args) -> int:
+    from ..files import read_points_csv, write_models_json, write_models_mat
+    from ..fit import n_parameters, parse_order
+    from ..identify import fit_orders
+
+    points = read_points_csv(args.points)
+    if args.order:
+        orders = [parse_order(o) for o in args.order]
+    else:
+        n = points["omega"].size
+        orders = [o for o in map(parse_order, DEFAULT_FIT_ORDERS)
+                  if 2 * n >= n_parameters(o, args.delay) + 1]
+        if not orders:
+            raise InputError(f"{args.points}: {n} point(s) are too few for any default order")
+    result = fit_orders(points, orders, weights=args.weights, delay=args.delay,
+                        stable=not args.allow_unstable)
+    print_models(result)
+    write_models_json(args.json, result.models, result.recommended, result.reason,
+                      source=args.points, weights=result.weights)
+    print(f"wrote {args.json}")
+    if args.mat:
+        write_models_mat(args.mat, result.models, result.recommended)
+        print(f"wrote {args.mat}")
+    if args.plot:
+        from ..plot import plot_bode
+
+        sigma = points["sigma"]
+        plot_bode(args.plot, points["omega"], points["F"], sigma=sigma, models=result.models,
+                  recommended=result.recommended, title=str(args.points))
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def print_models(result) -> None:
+    print(f"weights: {result.weights}")
+    print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "
+          f"{'stable':>6}  model")
+    for i, m in enumerate(result.models):
+        k = m.metrics
+        mark = "*" if i == result.recommended else " "
+        order = f"{m.order[0]}/{m.order[1]}{'+d' if m.delay_fitted else ''}"
+        print(f"{mark}{order:>7} {k['J']:9.3g} {100 * k['rms']:8.3g} {k['aicc']:10.4g} "
+              f"{k['max_mag_err_db']:7.3f} {k['max_phase_err_deg']:8.2f} "
+              f"{'yes' if m.stable else 'NO':>6}  {format_tf(m)}"
+              + ("  [degenerate: a pole reached the edge of the allowed range; the points "
+                 "do not support this order]" if m.degenerate else ""))
+    print(f"recommended: {result.reason}")

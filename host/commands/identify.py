@@ -1,0 +1,55 @@
+"""Points, models and plots from a sweep folder (``heliquad identify``)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from ..errors import InputError
+from .fit import print_models
+
+__all__ = ["add_parser", "run"]
+
+HELP = """\
+Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
+paper's table (points_table.csv), fitted models (models.json, the paper's orders for the axis
+unless --order) and plots (bode.png; responses.png, input dashed, output solid).
+"""
+
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("identify", help="points, models and plots from a sweep folder",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("dir", metavar="DIR")
+    p.add_argument("--order", action="append", metavar="M/N",
+                   help="orders to fit (default: the paper's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
+    p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
+                   "(the loop's hold and the sensor's latency are real delays)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import os
+
+    from ..fit import parse_order
+    from ..identify_session import identify_dir
+
+    orders = [parse_order(o) for o in args.order] if args.order else None
+    if not os.path.isdir(args.dir):
+        raise InputError(f"{args.dir}: not a folder")
+    r = identify_dir(args.dir, orders, delay=args.delay)
+    print(f"{r['axis']}: {len(r['points'])} points")
+    print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
+    for p in sorted(r["points"], key=lambda q: q.omega_rad_s):
+        print(f"{p.freq_hz:8.4g} {p.omega_rad_s:8.4g} {p.magnitude:9.4g} "
+              f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
+    print_models(r["result"])
+    print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    if r["skipped"] or r["damage"]:
+        n = len(r["points"]) + len(r["skipped"])
+        sys.stderr.write(f"heliquad identify: warning: {len(r['skipped'])} of {n} measured "
+                         "frequencies not used"
+                         + (f"; the log is damaged: {r['damage'].summary()}" if r["damage"] else "")
+                         + " (heliquad report flags it)\n")
+    return 0

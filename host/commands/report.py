@@ -1,0 +1,25 @@
+"""One self-contained HTML page of a session (``heliquad report``)."""
+
+from __future__ import annotations
+
+
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("report", help="one self-contained HTML page of a session",
+                       description="Write DIR/report.html: every table, model, metric and plot "
+                                   "of a sweep folder (or of a folder of them, one per axis), "
+                                   "with the quality flags (low coherence, unstable fits, "
+                                   "aborted frequencies).", formatter_class=fmt)
+    p.add_argument("dir", metavar="DIR")
+    p.add_argument("--out", metavar="FILE.html")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..report import write_report
+
+    print(f"wrote {write_report(args.dir, args.out)}")
+    return 0

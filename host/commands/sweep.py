@@ -1,0 +1,144 @@
+"""An axis's sine sweep on the simulated rig or a board (``heliquad sweep``)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+                        check_excitation, check_plant, faults, finite, int_in, number_in)
+from ..errors import InputError
+from ..link import DEFAULT_BAUD
+
+__all__ = ["add_parser", "run"]
+
+HELP = """\
+Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
+(or --freqs-hz), each faded in over 2 cycles (the settling), measured for --cycles cycles,
+faded out. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
+default); --port talks to a board, or to a `heliquad board` pty, in real time. Writes
+DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
+windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond 80 deg or a
+rate beyond 400 deg/s stops the excitation and the sweep (exit 1).
+Input and output for `heliquad identify`: mixer -> the axis's torque command and the rate
+(the plant; default, the paper's rate-in rate-out model); rate -> rate setpoint and rate;
+angle -> angle setpoint and angle.
+
+example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
+"""
+
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), required=True)
+    p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
+    where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
+    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
+    p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
+                   help="--sil: the 6-DoF vehicle (default) or a transfer function")
+    p.add_argument("--num", type=finite, nargs="+", metavar="B",
+                   help="--plant tf: numerator (default: the paper's chosen model of the axis)")
+    p.add_argument("--den", type=finite, nargs="+", metavar="A", help="--plant tf: denominator")
+    p.add_argument("--params", metavar="FILE", help="--plant vehicle: parameter file")
+    p.add_argument("--turbulence", choices=("light", "moderate", "severe"))
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
+    p.add_argument("--ideal-sensor", action="store_true")
+    p.add_argument("--collective", type=number_in(0, 1), default=0.4)
+    p.add_argument("--dmp-image", metavar="FILE")
+    p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
+                   help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
+    p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
+                   "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
+    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), default=8, help="measured cycles per frequency (default 8)")
+    p.add_argument("--out", required=True, metavar="DIR")
+    add_firmware_argument(p)
+    add_fault_argument(p, "--sil: ")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import os
+
+    from ..files import new_output_folder
+    from ..sweep import SWEEP_TLOG, default_plan, run_sweep
+
+    amp = None
+    if args.amplitude is not None:
+        amp = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+    plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
+    if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
+        from ...sim.sil import SilConfig
+
+        for f, a in zip(plan.freqs_hz, plan.amplitudes):
+            check_excitation([f], plan.cycles, plan.fade_cycles, SilConfig.loop_hz, a,
+                              args.inject)
+    if not args.sil and args.fault:
+        raise InputError("--fault needs --sil (a board's faults are real)")
+    if not args.sil and args.firmware != "host":
+        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    created = new_output_folder(args.out, "a sweep")
+    try:
+        session, source = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
+    except BaseException:
+        if created and not os.listdir(args.out):     # nothing recorded: leave nothing behind
+            os.rmdir(args.out)
+        raise
+    print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
+          f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
+    try:
+        manifest = run_sweep(session, plan, args.out, source)
+    except Exception as exc:                      # the firmware died, the port went away
+        from ...sim.lockstep import FirmwareError
+
+        if isinstance(exc, (FirmwareError, InputError)):
+            raise InputError(f"{exc} (the log and manifest so far are kept in {args.out})") from None
+        raise
+    finally:
+        session.close()
+    done = sum(1 for f in manifest["frequencies"] if f["status"] == "ok")
+    if manifest["complete"]:
+        print(f"{done} of {len(plan.freqs_hz)} frequencies measured; complete; "
+              f"next: heliquad identify {args.out}")
+        return 0
+    sys.stderr.write(f"heliquad sweep: {manifest['aborted']} ({done} of "
+                     f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
+                     f"in {args.out})\n")
+    return 1
+
+
+def _sweep_session(args, tlog):
+    """The session a sweep drives (the firmware in the loop, or a board's port) and the
+    manifest's record of its source."""
+    from .. import paper
+    from ..sweep import PortSession
+
+    if not args.sil:
+        return PortSession(args.port, tlog, args.baud), \
+            {"kind": "port", "port": args.port, "baud": args.baud}
+    from ...sim.lockstep import FirmwareError
+    from ...sim.sil import SilConfig, SilSession
+
+    num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
+    args.num, args.den = args.num or num, args.den or den
+    check_plant(args)
+    cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
+                    inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
+                    plant=args.plant, rig=args.axis, params=args.params,
+                    turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
+                    faults=faults(args), firmware=args.firmware)
+    source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
+              "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
+              "ideal_sensor": args.ideal_sensor}
+    try:
+        session = SilSession(cfg, tlog)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    source["firmware"] = session.fw.record()
+    if args.fault:
+        source["faults"] = list(args.fault)
+    return session, source

@@ -1,0 +1,102 @@
+"""Closed-loop validation of an identified model (``heliquad validate``)."""
+
+from __future__ import annotations
+
+
+from ..cli_args import MAX_SEED, int_in
+from ..errors import InputError
+
+__all__ = ["add_parser", "run"]
+
+HELP = """\
+Check an identified model in closed loop, as the paper does: its cascade (PID rate
+loop on the model; for roll and pitch a PD angle loop around it) with the paper's gains or a
+gains file ({"rate": {"roll": [Kc, tau_I, tau_D]}, "angle": {"roll": [Kc, tau_D]}}).
+Reports gain and phase margins of each loop, the step response, 0.5 Hz sine tracking, and
+rejection of Dryden turbulence; writes validation.json and validation.png. Exit code 1 if
+the cascade is unstable.
+
+example: heliquad validate models.json --axis roll
+"""
+
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("validate", help="closed-loop validation of an identified model",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("models", metavar="MODELS.json")
+    p.add_argument("--model", type=int_in(0, 10_000), metavar="INDEX",
+                   help="which model (default: the recommended one)")
+    p.add_argument("--axis", choices=("roll", "pitch", "yaw"),
+                   help="axis of the model (default: the file's \"axis\" entry)")
+    p.add_argument("--gains", metavar="FILE", help="gains file (default: the paper's gains)")
+    p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
+                   default="moderate", help="Dryden level for disturbance rejection (default moderate)")
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
+    p.add_argument("--out", metavar="DIR", help="where validation.json and validation.png go "
+                   "(default: beside MODELS.json)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import json
+    import os
+
+    from ..validate import load_gains, save_validation, validate_model
+
+    try:
+        with open(args.models) as fh:
+            doc = json.load(fh)
+        models = doc["models"]
+    except OSError as exc:
+        raise InputError(f"{args.models}: {exc.strerror}") from None
+    except (ValueError, KeyError, TypeError):
+        raise InputError(f"{args.models}: not a MODELS.json (needs a \"models\" list)") from None
+    index = args.model if args.model is not None else doc.get("recommended")
+    if index is None or not 0 <= index < len(models):
+        raise InputError(f"{args.models}: no model {index!r} (the file has {len(models)}; "
+                         "give --model INDEX)")
+    axis = args.axis or doc.get("axis")
+    if axis not in ("roll", "pitch", "yaw"):
+        raise InputError(f"{args.models} does not say which axis: give --axis roll|pitch|yaw")
+    m = models[index]
+    try:
+        num, den, delay = m["num"], m["den"], float(m.get("delay_s", 0.0))
+    except (KeyError, TypeError):
+        raise InputError(f"{args.models}: model {index} has no num/den") from None
+    gains = load_gains(axis, args.gains)
+    turbulence = None if args.turbulence == "none" else args.turbulence
+    report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
+    out = args.out or os.path.dirname(os.path.abspath(args.models))
+    _print_validation(report)
+    written = save_validation(out, report, traces, num, den, delay, axis, gains)
+    print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
+    return 0 if report["stable"] else 1
+
+
+def _print_validation(r) -> None:
+    coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
+    print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
+          + (f" * exp(-{r['delay_s'] * 1e3:.3g} ms s)" if r["delay_s"] else ""))
+    for name, lp in r["loops"].items():
+        gm = "inf" if lp["gain_margin_db"] is None else f"{lp['gain_margin_db']:.1f} dB"
+        pm = "none" if lp["phase_margin_deg"] is None else f"{lp['phase_margin_deg']:.1f} deg"
+        wc = "-" if lp["gain_crossover_rad_s"] is None else f"{lp['gain_crossover_rad_s']:.2f} rad/s"
+        print(f"  {name:5s} loop: gain margin {gm}, phase margin {pm} at {wc}; closed loop "
+              f"{'stable' if lp['closed_loop_stable'] else 'UNSTABLE'}")
+    if not r["stable"]:
+        from ..validate import instability_text
+
+        print(f"  {instability_text(r)}; no time responses")
+        return
+    st, sn = r["step"], r["sine"]
+    print(f"  step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
+          f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s")
+    print(f"  sine {sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} {st['unit']} "
+          f"({sn['tracking_rms_pct']:.1f} % of the reference RMS)")
+    if "turbulence" in r:
+        tb = r["turbulence"]
+        extra = f", angle RMS {tb['angle_rms_deg']:.2f} deg (max {tb['angle_max_deg']:.2f})" \
+            if "angle_rms_deg" in tb else ""
+        print(f"  {tb['level']} turbulence: gust rate RMS {tb['gust_rate_rms_deg_s']:.1f} deg/s -> "
+              f"rate RMS {tb['rate_rms_deg_s']:.2f} deg/s{extra}")
