@@ -28,7 +28,8 @@ import time
 
 import serial
 
-from heliquad.sim.sil import SilConfig, run_sil
+from heliquad.host.experiment import run_sil
+from heliquad.sim.sil import SilConfig
 
 ECHO_C = r"""
 #define _GNU_SOURCE

@@ -26,7 +26,8 @@ LOOP_HZ = 200.0
 
 
 def run(firmware: str, cycles: int, elf: str | None, out: str):
-    from heliquad.sim.sil import SilConfig, run_sil
+    from heliquad.host.experiment import run_sil
+    from heliquad.sim.sil import SilConfig
 
     cfg = SilConfig(axis="roll", inject="mixer", freq_hz=1.0, amplitude=0.05, cycles=cycles,
                     fade_cycles=1, firmware=firmware,

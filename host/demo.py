@@ -37,7 +37,8 @@ def add_parser(sub, fmt) -> None:
 
 
 def run_demo(args) -> int:
-    from ..sim.sil import SilConfig, SilSession
+    from ..sim.sil import SilConfig
+    from .session import SilSession
     from .files import new_output_folder
     from .identify_session import identify_dir
     from .report import write_report

@@ -25,7 +25,7 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
-           "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
+           "write_run_csv", "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
            "atomic_write", "write_json", "save_figure", "new_output_folder"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
@@ -148,6 +148,13 @@ def read_run_csv(path):
         raise InputError(f"{path}: not uniformly sampled (interval at data row {row} differs "
                          f"from the mean {mean_dt:.6g} s by {100 * spread:.1f} %); resample first")
     return 1.0 / mean_dt, table["u"], table["y"]
+
+
+def write_run_csv(path, rows) -> None:
+    """RUN.csv: a ``t_s,u,y`` header, then one row per sample (``rows``: (t_s, u, y))."""
+    with atomic_write(path) as fh:
+        np.savetxt(fh, np.asarray(rows, dtype=float).reshape(-1, 3), delimiter=",",
+                   header="t_s,u,y", comments="", fmt="%.9g")
 
 
 def read_points_csv(path):

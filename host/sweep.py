@@ -1,10 +1,11 @@
 """Frequency sweeps (``heliquad sweep``): the paper's sine dwells for one axis, logged.
 
-The same protocol runs on the simulated rig (lockstep, :class:`heliquad.sim.sil.SilSession`)
-and on a port (a Teensy, or a ``heliquad board`` pty; :class:`PortSession`): for each
-frequency, start the excitation over the telemetry link, wait for the firmware's
-HQ_EXCITATION_STATUS (which gives the exact frequency used), watch every HQ_SYSID_SAMPLE
-until the excitation ends, and move on. Everything is logged to ``DIR/sweep.tlog``;
+The same protocol runs on any session (:mod:`heliquad.host.session`: the simulated rig in
+lockstep, or a Teensy or ``heliquad board`` pty on a port): for each frequency,
+:func:`measure` starts the excitation over the telemetry link, waits for the firmware's
+HQ_EXCITATION_STATUS (which gives the exact frequency used), watches every HQ_SYSID_SAMPLE
+until the excitation ends (:class:`ExcitationWatch`), and the sweep moves on. ``heliquad sil``
+is the same routine for one frequency. Everything is logged to ``DIR/sweep.tlog``;
 ``DIR/manifest.json`` (axis, injection, frequencies requested and used, sample windows,
 gains, firmware version, start time, aborts) is rewritten after every frequency, so Ctrl-C
 or a breach leaves a valid, identifiable session.
@@ -23,19 +24,19 @@ from __future__ import annotations
 import datetime
 import math
 import os
-import time
 
 import numpy as np
 
 from heliquad import _firmware
 
+from ..sim.dialect import dialect
 from . import __version__, paper
 from .errors import InputError, Terminated
 from .files import write_json
-from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, reason_text
-from ..sim.dialect import dialect
+from .link import INPUT_OUTPUT, reason_text
 
-__all__ = ["SweepPlan", "default_plan", "run_sweep", "PortSession", "MANIFEST", "SWEEP_TLOG"]
+__all__ = ["SweepPlan", "default_plan", "run_sweep", "measure", "ExcitationWatch", "Limits",
+           "MANIFEST", "SWEEP_TLOG"]
 
 MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
@@ -46,6 +47,9 @@ FADE_CYCLES = 2
 #: millidegree: the firmware holds them in single precision).
 MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
 MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
+#: A sample whose achieved axis command differs from the commanded one by more than this
+#: (normalised units) saturated the mixer.
+SATURATION_TOL = 1e-3
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
 #: A running excitation whose samples stop for this long (the session's time: wall clock on a
@@ -88,47 +92,6 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=MEA
     return SweepPlan(axis, inject, freqs_hz, amps, cycles)
 
 
-class PortSession:
-    """A board (or a ``heliquad board`` pty) as a sweep driver: wall-clock time, the link
-    logging every packet with the host's clock."""
-
-    def __init__(self, port: str, tlog_path: str, baud: int = DEFAULT_BAUD, poll_s: float = 0.05):
-        from .link import TelemetryLink
-        from .tlog import TlogWriter
-
-        self.tel = TelemetryLink(port, baud=baud)   # the port first: a bad one creates nothing
-        try:
-            self.tlog = self.tel.tlog = TlogWriter(tlog_path)
-        except BaseException:
-            self.tel.close()
-            raise
-        self.poll_s = poll_s
-        self.t0 = time.monotonic()
-        self.tel.heartbeat()                  # the firmware wants one before an excitation
-        self.last_hb = self.t0
-
-    @property
-    def time_us(self) -> int:
-        return int((time.monotonic() - self.t0) * 1e6)
-
-    def hover(self) -> None:
-        """On a board the pilot arms and hovers; nothing to do."""
-
-    def advance(self) -> list:
-        time.sleep(self.poll_s)
-        now = time.monotonic()
-        if now - self.last_hb >= HEARTBEAT_PERIOD_S:
-            self.tel.heartbeat()
-            self.last_hb = now
-        msgs = self.tel.poll(only=SESSION_MESSAGES)
-        self.tlog.flush()
-        return msgs
-
-    def close(self) -> None:
-        self.tel.close()
-        self.tlog.close()
-
-
 def _write_manifest(out_dir, manifest) -> None:
     write_json(os.path.join(out_dir, MANIFEST), manifest)
 
@@ -136,7 +99,7 @@ def _write_manifest(out_dir, manifest) -> None:
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
     """Run the plan on ``session``; returns the manifest (also written to ``out_dir``)."""
-    axis_i = ("roll", "pitch", "yaw").index(plan.axis)
+    limits = Limits(max_angle_deg, max_rate_deg_s)
     gains = {"rate": paper.RATE_GAINS[plan.axis], "angle": paper.ANGLE_GAINS.get(plan.axis)}
     manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
                 "firmware": f"heliquad {__version__}", "gains": gains,
@@ -150,12 +113,13 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         session.hover()
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
             current = f
-            entry = _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s)
+            entry = measure(session, plan, f, amp, limits, progress).entry
             manifest["frequencies"].append(entry)
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
+            saturated = f" ({entry['saturated']} saturated the mixer)" if entry["saturated"] else ""
             progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {entry.get('freq_hz', f):.4g} Hz  "
-                     f"{entry['samples']} samples  {entry['status']}")
+                     f"{entry['samples']} samples{saturated}  {entry['status']}")
             if entry["status"] != "ok":
                 manifest["aborted"] = entry["status"]
                 break
@@ -172,63 +136,131 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     return manifest
 
 
-def _one_frequency(session, plan, f, amp, axis_i, max_angle_deg, max_rate_deg_s):
-    mav = dialect()
-    idle, running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
-    entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "status": "ok"}
+class Limits:
+    """The host's second line of safety: a sample beyond either ends the excitation."""
+
+    def __init__(self, max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S):
+        self.max_angle_deg, self.max_rate_deg_s = max_angle_deg, max_rate_deg_s
+
+    def breach(self, axis: str, m) -> str | None:
+        """Why sample ``m`` breaches the limits, or None. The angle limit is the roll and
+        pitch rigs' swing; on the yaw rig the logged angle is the heading, which is free."""
+        swing = abs(math.degrees(m.angle)) if axis != "yaw" else 0.0
+        if swing > self.max_angle_deg or abs(math.degrees(m.rate)) > self.max_rate_deg_s:
+            return (f"aborted: limit breached at {m.time_us * 1e-6:.2f} s (angle "
+                    f"{math.degrees(m.angle):.1f} deg, rate {math.degrees(m.rate):.1f} deg/s)")
+        return None
+
+
+class ExcitationWatch:
+    """Watches one excitation, message by message (a session's ``handle``): its answer, its
+    samples, its end. ``entry`` is what the manifest records of it; ``done`` is set once it
+    ended (the messages after that are ignored), ``stop`` when the host must stop it. With
+    ``keep_rows``, the full-amplitude samples' (t_s, u, y) are kept in ``rows``.
+
+    Counted per excitation: the samples, the mixer's saturation (the axis's achieved torque
+    command, from the logged motors through the firmware's own mixer equations, differing
+    from the commanded one), and gaps in the samples' sequence numbers (lost telemetry)."""
+
+    def __init__(self, plan, f, amp, limits: Limits, now_us: int, progress=print,
+                 keep_rows: bool = False):
+        mav = dialect()
+        self.idle, self.running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
+        self.normal_end = (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED)
+        self.plan, self.limits, self.progress = plan, limits, progress
+        self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "saturated": 0,
+                      "seq_gaps": 0, "status": "ok"}
+        self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
+        self.axis_i = ("roll", "pitch", "yaw").index(plan.axis)
+        self.mixer = _firmware.Mixer()
+        self.rows = [] if keep_rows else None
+        self.started_us, self.last_sample_us = now_us, now_us
+        self.seen_active, self.last_seq, self.fresh = False, None, False
+        self.done, self.stop = False, False
+
+    def __call__(self, m) -> None:
+        if self.done:
+            return
+        kind = m.get_type()
+        if kind == "HQ_EXCITATION_STATUS":
+            self._status(m)
+        elif kind == "HQ_SYSID_SAMPLE":
+            self._sample(m)
+        elif kind == "STATUSTEXT" and m.severity <= 4:
+            self.entry.setdefault("messages", []).append(m.text)
+            self.progress(f"firmware: {m.text}")
+
+    def _end(self, status: str | None = None, stop: bool = False) -> None:
+        if status:
+            self.entry["status"] = status
+        self.done, self.stop = True, stop
+
+    def _status(self, m) -> None:
+        # Whatever arrives first: the answer to this start, or (if that was lost on a
+        # board's link) the status of its end, which carries the same fields.
+        if not m.accepted:                       # only a start is ever refused
+            return self._end(f"refused by the firmware: {reason_text(m.reason)}")
+        if "freq_hz" not in self.entry:
+            self.entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
+        if m.state == self.idle and m.reason not in self.normal_end:
+            self._end(f"stopped by the firmware: {reason_text(m.reason)}")
+
+    def _sample(self, m) -> None:
+        e = self.entry
+        if self.last_seq is not None and m.seq > self.last_seq + 1:
+            e["seq_gaps"] += m.seq - self.last_seq - 1
+        self.last_seq, self.fresh = m.seq, True
+        if m.exc_state != self.idle:
+            self.seen_active = True
+        if m.exc_state == self.running:
+            e.setdefault("start_us", int(m.time_us))
+            e["end_us"] = int(m.time_us)
+            e["samples"] += 1
+            got = self.mixer.achieved(m.motor)
+            if abs((got.roll, got.pitch, got.yaw)[self.axis_i] - m.axis_cmd) > SATURATION_TOL:
+                e["saturated"] += 1
+            if self.rows is not None:
+                self.rows.append((m.time_us * 1e-6, getattr(m, self.u_name),
+                                  getattr(m, self.y_name)))
+        breach = self.limits.breach(self.plan.axis, m)
+        if breach:
+            return self._end(breach, stop=True)
+        if self.seen_active and m.exc_state == self.idle:
+            self._end(_incomplete(e, self.plan))
+
+    def check_time(self, now_us: int) -> None:
+        """The timeouts, on the session's clock: no start, or samples that stopped."""
+        if self.fresh:
+            self.last_sample_us, self.fresh = now_us, False
+        if self.done:
+            return
+        if not self.seen_active and now_us - self.started_us > START_TIMEOUT_S * 1e6:
+            self._end("the excitation did not start (no answer from the firmware)")
+        elif self.seen_active and now_us - self.last_sample_us > SAMPLE_TIMEOUT_S * 1e6:
+            # stop too, in case the board is there but deaf
+            self._end(f"no samples for {SAMPLE_TIMEOUT_S:g} s: the board stopped sending "
+                      "(link lost or board hung)", stop=True)
+
+
+def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
+            keep_rows: bool = False) -> ExcitationWatch:
+    """One excitation on ``session``: start it, watch it to its end, stop it if the host
+    must. The one routine every experiment (a sweep's frequency, ``heliquad sil``) runs."""
+    watch = ExcitationWatch(plan, f, amp, limits or Limits(), session.time_us, progress,
+                            keep_rows)
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles, plan.fade_cycles)
-    started, seen_active = session.time_us, False
-    last_sample = started
-    while True:
-        for m in session.advance():
-            kind = m.get_type()
-            if kind == "HQ_EXCITATION_STATUS":
-                # Read whatever arrives first: the answer to this start, or (if that was lost
-                # on a board's link) the status of its end, which carries the same fields.
-                if not m.accepted:           # only a start is ever refused
-                    entry["status"] = f"refused by the firmware: {reason_text(m.reason)}"
-                    return entry
-                if "freq_hz" not in entry:
-                    entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
-                if m.state == idle and m.reason not in (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED):
-                    entry["status"] = f"stopped by the firmware: {reason_text(m.reason)}"
-                    return entry
-            elif kind == "HQ_SYSID_SAMPLE":
-                last_sample = session.time_us
-                if m.exc_state != idle:
-                    seen_active = True
-                if m.exc_state == running:
-                    entry.setdefault("start_us", int(m.time_us))
-                    entry["end_us"] = int(m.time_us)
-                    entry["samples"] += 1
-                # The angle limit is the roll and pitch rigs' swing; on the yaw rig the logged
-                # angle is the heading, which is free.
-                swing = abs(math.degrees(m.angle)) if plan.axis != "yaw" else 0.0
-                if swing > max_angle_deg or abs(math.degrees(m.rate)) > max_rate_deg_s:
-                    session.tel.stop_excitation()
-                    entry["status"] = (f"aborted: limit breached at {m.time_us * 1e-6:.2f} s "
-                                       f"(angle {math.degrees(m.angle):.1f} deg, rate "
-                                       f"{math.degrees(m.rate):.1f} deg/s)")
-                    return entry
-                if seen_active and m.exc_state == idle:
-                    return _check_complete(entry, plan)
-            elif kind == "STATUSTEXT" and m.severity <= 4:
-                entry.setdefault("messages", []).append(m.text)
-        if not seen_active and session.time_us - started > START_TIMEOUT_S * 1e6:
-            entry["status"] = "the excitation did not start (no answer from the firmware)"
-            return entry
-        if seen_active and session.time_us - last_sample > SAMPLE_TIMEOUT_S * 1e6:
-            session.tel.stop_excitation()          # in case the board is there but deaf
-            entry["status"] = (f"no samples for {SAMPLE_TIMEOUT_S:g} s: the board stopped "
-                               "sending (link lost or board hung)")
-            return entry
+    while not watch.done:
+        session.advance(watch)
+        watch.check_time(session.time_us)
+    if watch.stop:
+        session.tel.stop_excitation()
+    return watch
 
 
-def _check_complete(entry, plan):
+def _incomplete(entry, plan) -> str | None:
     """An excitation that ended without a stop message must still have all its measured
     samples (a lost status message must not pass a truncated record as complete)."""
     expected = plan.cycles * entry.get("period_samples", 0)
     if entry["samples"] != expected:
-        entry["status"] = (f"incomplete: {entry['samples']} of {expected} measured samples "
-                           "were logged")
-    return entry
+        return f"incomplete: {entry['samples']} of {expected} measured samples were logged"
+    return None

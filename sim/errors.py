@@ -1,6 +1,6 @@
-"""The error every layer reports to users as one line, without a traceback."""
+"""Errors every layer reports to users as one line, without a traceback."""
 
-__all__ = ["InputError"]
+__all__ = ["InputError", "FirmwareError"]
 
 
 class InputError(ValueError):
@@ -8,3 +8,7 @@ class InputError(ValueError):
 
     The command-line interface prints ``str(error)`` on one line and exits with code 2.
     """
+
+
+class FirmwareError(RuntimeError):
+    """The firmware stopped answering, died, or broke the link contract."""

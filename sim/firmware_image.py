@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 import pathlib
 
-from .lockstep import FirmwareError
+from .errors import FirmwareError
 
 __all__ = ["ENV_VAR", "IMAGE_NAME", "PACKAGE_DIR", "ImageNotFound", "teensy35_image"]
 

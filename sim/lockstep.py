@@ -25,6 +25,8 @@ import serial
 from heliquad import _simcore
 from heliquad._simcore import LinkStatus
 
+from .errors import FirmwareError
+
 __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
            "find_firmware", "start_firmware", "FIRMWARES"]
 
@@ -39,10 +41,6 @@ SENSOR_NONE, SENSOR_DMP, SENSOR_RAW = 0, 1, 2
 #: The firmwares that can fly the simulated rig: the host build, and the Teensy 3.5 image in
 #: the emulated MK64FX512 (processor in the loop).
 FIRMWARES = ("host", "teensy35")
-
-
-class FirmwareError(RuntimeError):
-    """The firmware stopped answering, died, or broke the link contract."""
 
 
 def find_firmware() -> str:

@@ -355,14 +355,109 @@ class _Stop:
     requested = False
 
 
-def main(argv=None) -> int:
-    args = parse(sys.argv[1:] if argv is None else argv)
+class _DropIn:
+    """The board behind the two ptys: sensor frames in, replies and telemetry out, as
+    heliquad-fw-host does (docs/link-contract.md)."""
 
-    def on_signal(signum, frame):
-        _Stop.requested = True
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    def __init__(self, board, sim, tel, idle_timeout_s: float):
+        from .mavframe import Codec, Framer
 
+        self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
+        self.mav = mav = dialect()
+        self.codec = Codec(mav, system_id=1, component_id=1)   # the vehicle's ids, as the board's
+        self.framer = Framer(self.codec)
+        self.frame_id = mav.MAVLINK_MSG_ID_HQ_SENSOR_FRAME
+        self.reply_id = mav.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
+        self.last_frame, self.reply = None, b""
+        self.lost = self.repeated = self.frames = self.dropped = 0
+        self.last_input = time.monotonic()
+        self.uplink = b""
+
+    def flush_telemetry(self) -> None:
+        out = self.board.telemetry_out
+        if out:
+            del out[:self.tel.write_some(bytes(out))]
+
+    def serve(self) -> int:
+        """Answer sensor frames until asked to stop, idle, or the link fails: the exit code."""
+        board, sim, tel = self.board, self.sim, self.tel
+        while not _Stop.requested:
+            # Telemetry leaves as the link contract says: after a sync frame's reply, and
+            # otherwise once TELEMETRY_CHUNK bytes wait or the sim link is quiet QUIET_S.
+            if len(board.telemetry_out) >= TELEMETRY_CHUNK:
+                self.flush_telemetry()
+            ready, _, _ = select.select([sim.master, tel.master], [], [],
+                                        QUIET_S if board.telemetry_out else 0.1)
+            if tel.master in ready:
+                self.uplink += tel.read()           # fed to the board before its next loop
+            if sim.master in ready:
+                self.last_input = time.monotonic()
+                code = self._feed(sim.read())
+                if code:
+                    return code
+            elif self._idle(ready):
+                return EXIT_IDLE
+        return 0
+
+    def _idle(self, ready) -> bool:
+        """Nothing on the sim link: flush, drop what nobody reads, and say when to give up."""
+        if not ready:
+            self.flush_telemetry()
+            if len(self.board.telemetry_out) > (1 << 20):     # nobody reads the link
+                self.dropped += len(self.board.telemetry_out)
+                self.board.telemetry_out.clear()
+        if time.monotonic() - self.last_input >= self.idle_timeout_s:
+            print(f"heliquad-fw-pil: no sensor frame for {self.idle_timeout_s} s; exiting",
+                  file=sys.stderr)
+            return True
+        return False
+
+    def _feed(self, data: bytes) -> int:
+        for msgid, _, payload in self.framer.feed(data):
+            if msgid != self.frame_id:
+                continue
+            msg = self.codec.decode(msgid, payload)
+            if self.last_frame is not None and msg.frame == self.last_frame:
+                self.repeated += 1                 # the simulator resent it: same reply
+            else:
+                self._step(msg)
+            if msg.sync:
+                self.flush_telemetry()
+            if not self.sim.write_all(self.reply, 5.0):
+                print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
+                return EXIT_LINK
+        return 0
+
+    def _step(self, msg) -> None:
+        """One new sensor frame: the board's loop, and the reply to send."""
+        if self.last_frame is not None and msg.frame > self.last_frame + 1:
+            gap = msg.frame - self.last_frame - 1
+            self.lost += gap
+            print(f"heliquad-fw-pil: {gap} sensor frame(s) lost by frame {msg.frame}",
+                  file=sys.stderr)
+        self.last_frame = msg.frame
+        self.frames += 1
+        self.board.feed_telemetry(self.uplink)
+        self.uplink = b""
+        fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
+        motors, armed, mode, kind = self.board.frame(
+            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault, bool(msg.sync))
+        self.reply = self.codec.encode(self.reply_id, {
+            "time_us": msg.time_us, "frame": msg.frame, "motor": motors, "armed": int(armed),
+            "mode": mode, "sensor_kind": kind})
+
+    def summary(self) -> str:
+        f = self.board.figures()
+        return (f"heliquad-fw-pil: {f['loops']} loops, {self.lost} frames lost, {self.repeated} "
+                f"repeated, {self.dropped} telemetry bytes dropped, {f['watchdog_resets']} "
+                f"watchdog resets, {f['emulated_s']:.3f} s emulated; step cycles median "
+                f"{f['step_cycles_median']} max {f['step_cycles_max']} of "
+                f"{int(self.board.machine.core_hz / IMAGE_LOOP_HZ)}, {f['overruns']} overruns, "
+                f"stack high-water {f['stack_bytes']} bytes")
+
+
+def _open(args):
+    """The booted board and its two ptys, or a one-line usage error."""
     from .firmware_image import ImageNotFound, teensy35_image
     try:
         elf = args.image or str(teensy35_image("elf"))
@@ -373,98 +468,37 @@ def main(argv=None) -> int:
         board.boot()
     except (ImageFault, OSError) as e:
         _usage(str(e))
-    mav = dialect()
     try:
         sim, tel = Pty(args.sim_link), Pty(args.telemetry)
     except OSError as e:
         _usage(f"cannot create the links: {e}")
     report = board.report()
     print(f"sim link: {args.sim_link} -> {sim.slave_path}\ntelemetry: {args.telemetry} -> "
-          f"{tel.slave_path}\nimu: {'dmp' if report[5] == mav.HQ_SENSOR_DMP else 'raw'}\n"
+          f"{tel.slave_path}\nimu: {'dmp' if report[5] == dialect().HQ_SENSOR_DMP else 'raw'}\n"
           f"image: {elf}\nready", flush=True)
+    return board, sim, tel
 
-    from .mavframe import Codec, Framer
 
-    codec = Codec(mav, system_id=1, component_id=1)      # the vehicle's ids, as the board's
-    framer = Framer(codec)
-    frame_id, reply_id = mav.MAVLINK_MSG_ID_HQ_SENSOR_FRAME, mav.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
-    last_frame, reply, lost, repeated, frames, dropped = None, b"", 0, 0, 0, 0
+def main(argv=None) -> int:
+    args = parse(sys.argv[1:] if argv is None else argv)
+
+    def on_signal(signum, frame):
+        _Stop.requested = True
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    board, sim, tel = _open(args)
+    drop_in = _DropIn(board, sim, tel, args.idle_timeout_s)
     exit_code = 0
-    last_input = time.monotonic()
-    uplink = b""
-
-    def flush_telemetry():
-        if board.telemetry_out:
-            n = tel.write_some(bytes(board.telemetry_out))
-            del board.telemetry_out[:n]
-
     try:
-        while not _Stop.requested:
-            # Telemetry leaves as the link contract says: after a sync frame's reply, and
-            # otherwise once TELEMETRY_CHUNK bytes wait or the sim link is quiet QUIET_S.
-            if len(board.telemetry_out) >= TELEMETRY_CHUNK:
-                flush_telemetry()
-            ready, _, _ = select.select([sim.master, tel.master], [], [],
-                                        QUIET_S if board.telemetry_out else 0.1)
-            if tel.master in ready:
-                uplink += tel.read()                # fed to the board before its next loop
-            if sim.master not in ready:
-                if not ready:
-                    flush_telemetry()
-                    if len(board.telemetry_out) > (1 << 20):     # nobody reads the link
-                        dropped += len(board.telemetry_out)
-                        board.telemetry_out.clear()
-                if time.monotonic() - last_input >= args.idle_timeout_s:
-                    print(f"heliquad-fw-pil: no sensor frame for {args.idle_timeout_s} s; "
-                          "exiting", file=sys.stderr)
-                    exit_code = EXIT_IDLE
-                    break
-                continue
-            last_input = time.monotonic()
-            for msgid, _, payload in framer.feed(sim.read()):
-                if msgid != frame_id:
-                    continue
-                msg = codec.decode(msgid, payload)
-                if last_frame is not None and msg.frame == last_frame:
-                    repeated += 1
-                else:
-                    if last_frame is not None and msg.frame > last_frame + 1:
-                        lost += msg.frame - last_frame - 1
-                        print(f"heliquad-fw-pil: {msg.frame - last_frame - 1} sensor frame(s) "
-                              f"lost by frame {msg.frame}", file=sys.stderr)
-                    last_frame = msg.frame
-                    frames += 1
-                    board.feed_telemetry(uplink)
-                    uplink = b""
-                    fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
-                    motors, armed, mode, kind = board.frame(
-                        fifo, msg.fifo_kind == mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault,
-                        bool(msg.sync))
-                    reply = codec.encode(reply_id, {
-                        "time_us": msg.time_us, "frame": msg.frame, "motor": motors,
-                        "armed": int(armed), "mode": mode, "sensor_kind": kind})
-                if msg.sync:
-                    flush_telemetry()
-                if not sim.write_all(reply, 5.0):
-                    print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
-                    exit_code = EXIT_LINK
-                    break
-            if exit_code:
-                break
+        exit_code = drop_in.serve()
     except ImageFault as e:
-        print(f"heliquad-fw-pil: the image faulted at frame {last_frame}: {e}",
+        print(f"heliquad-fw-pil: the image faulted at frame {drop_in.last_frame}: {e}",
               file=sys.stderr)
         exit_code = EXIT_IMAGE
     finally:
         if board.telemetry_out:
             tel.write_some(bytes(board.telemetry_out))
-        f = board.figures()
-        print(f"heliquad-fw-pil: {f['loops']} loops, {lost} frames lost, {repeated} repeated, "
-              f"{dropped} telemetry bytes dropped, {f['watchdog_resets']} watchdog resets, "
-              f"{f['emulated_s']:.3f} s emulated; step cycles median {f['step_cycles_median']} "
-              f"max {f['step_cycles_max']} of {int(board.machine.core_hz / IMAGE_LOOP_HZ)}, "
-              f"{f['overruns']} overruns, stack high-water {f['stack_bytes']} bytes",
-              file=sys.stderr)
+        print(drop_in.summary(), file=sys.stderr)
         sim.close()
         tel.close()
     return exit_code

@@ -88,8 +88,11 @@ class TfPlant:
         """Random inputs of the next ``frames`` frames: none for this plant."""
         return None, None
 
-    def truth(self, omega_rad_s):
-        """The sampled-data response from logged command to logged rate (ZOH at dt)."""
+    def truth(self, omega_rad_s, inject: str = "mixer"):
+        """The sampled-data response from logged command to logged rate (ZOH at dt): what
+        mixer injection identifies (this plant has no model of the closed loops)."""
+        if inject != "mixer":
+            raise ValueError("a transfer-function plant's truth is for mixer injection only")
         z = np.exp(1j * np.asarray(omega_rad_s) * self.dt_s)
         Hd = control.sample_system(self.G, self.dt_s, method="zoh")
         num, den = np.asarray(Hd.num[0][0]), np.asarray(Hd.den[0][0])

@@ -23,7 +23,8 @@ from heliquad.host.files import read_run_csv
 from heliquad.sim.dialect import dialect
 from heliquad.host.tlog import read_tlog
 from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
-from heliquad.sim.sil import SilConfig, run_sil
+from heliquad.host.experiment import run_sil
+from heliquad.sim.sil import SilConfig
 from heliquad.sim.tf_plant import TfPlant
 
 from fake_dmp import write_fake_dmp
@@ -197,7 +198,7 @@ def test_sil_with_a_silent_imu_stops_with_the_firmwares_reason_and_keeps_the_log
     res = heliquad("sil", "--freq-hz", 1, "--amplitude", 0.05, "--fault", "silent@4",
                    "--out", out)
     assert res.returncode == 1 and "Traceback" not in res.stderr
-    assert "the firmware stopped the excitation: IMU stale" in res.stderr
+    assert "stopped by the firmware: IMU stale" in res.stderr
     assert "firmware: failsafe: IMU stale, motors off" in res.stdout
     samples = [m for _, m in read_tlog(str(out) + ".tlog", MAV, only=("HQ_SYSID_SAMPLE",))]
     cut = next(m for m in samples if m.armed == 0 and m.time_us > 1_000_000)

@@ -34,7 +34,11 @@ def test_a_session_from_a_board_loses_no_samples(session):
     assert "0 lost" in res.stdout
     s = summarise_tlog(str(out))
     assert s["lost"] == 0 and s["damage"] is None
-    assert 0.9 * 200 * 4 < s["samples"] < 1.1 * 200 * 4          # 200 Hz for 4 s
+    # Every sample between the first and the last is there. The count depends on the clock
+    # (what the board buffered before the log opened, how far a loaded machine runs the board
+    # behind real time): only a floor far below 4 s at 200 Hz.
+    assert s["samples"] == s["last_seq"] - s["first_seq"] + 1
+    assert s["samples"] > 50
     assert s["types"]["ATTITUDE"] >= s["samples"] - 1 and s["types"]["HEARTBEAT"] >= 3
 
 

@@ -21,7 +21,8 @@ from heliquad.host.fsf import estimate_fsf
 from heliquad.sim.dialect import dialect
 from heliquad.host.tlog import read_tlog
 from heliquad.sim.pil import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
-from heliquad.sim.sil import RC_CENTER_US, SilConfig, run_sil
+from heliquad.host.experiment import run_sil
+from heliquad.sim.sil import RC_CENTER_US, SilConfig
 
 from firmware_rig import FirmwareRig
 from firmwares import image_for, start

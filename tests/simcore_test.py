@@ -12,7 +12,8 @@ import pytest
 from heliquad import _firmware as fw
 from heliquad import _simcore
 from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
-from heliquad.sim.sil import SilConfig, SilSession, _rc
+from heliquad.host.session import SilSession
+from heliquad.sim.sil import SilConfig, _rc
 from heliquad.sim.vehicle_plant import VehiclePlant
 
 from fake_dmp import write_fake_dmp
@@ -77,20 +78,20 @@ def test_a_batch_in_the_engine_equals_the_same_frames_stepped_one_by_one(tmp_pat
 
 def test_a_firmware_killed_during_a_batch_is_a_clear_error(tmp_path):
     with SilSession(SilConfig(), str(tmp_path / "k.tlog")) as session:
-        session.advance(50)
+        session.advance(frames=50)
         os.kill(session.fw.proc.pid, signal.SIGKILL)
         with pytest.raises(FirmwareError, match="died at frame 51"):
-            session.advance(50)
+            session.advance(frames=50)
         assert session.frame == 50
 
 
 def test_a_stopped_firmware_times_out_during_a_batch(tmp_path):
     with SilSession(SilConfig(), str(tmp_path / "s.tlog")) as session:
-        session.advance(50)
+        session.advance(frames=50)
         os.kill(session.fw.proc.pid, signal.SIGSTOP)
         try:
             with pytest.raises(FirmwareError, match="did not answer within 2 s"):
-                session.advance(50)
+                session.advance(frames=50)
         finally:
             os.kill(session.fw.proc.pid, signal.SIGCONT)
 

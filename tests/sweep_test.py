@@ -124,7 +124,8 @@ def test_the_hosts_own_limit_stays_as_a_second_line(tmp_path):
     # Below the firmware's limits, the host's check (here tightened to 20 deg) stops the
     # excitation and the sweep, and says so.
     from heliquad.host.sweep import default_plan, run_sweep
-    from heliquad.sim.sil import SilConfig, SilSession
+    from heliquad.host.session import SilSession
+    from heliquad.sim.sil import SilConfig
 
     plan = default_plan("roll", "rate", [0.2], math.radians(100))
     with SilSession(SilConfig(axis="roll", plant="vehicle", rig="roll", ideal_sensor=True),
@@ -140,7 +141,8 @@ def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
     # board flashed with tighter limits would) is refused by the firmware, and the manifest
     # says why.
     from heliquad.host.sweep import SweepPlan, run_sweep
-    from heliquad.sim.sil import SilConfig, SilSession
+    from heliquad.host.session import SilSession
+    from heliquad.sim.sil import SilConfig
 
     res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 1.0, "--amplitude", 3,
                    "--out", tmp_path / "cli")

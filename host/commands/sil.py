@@ -72,7 +72,8 @@ def run(args) -> int:
     import os
 
     from ...sim.lockstep import FirmwareError
-    from ...sim.sil import SilConfig, run_sil
+    from ...sim.sil import SilConfig
+    from ..experiment import run_sil
 
     check_plant(args)
     if args.inject == "angle" and args.axis == "yaw":

@@ -115,13 +115,14 @@ def _sweep_session(args, tlog):
     """The session a sweep drives (the firmware in the loop, or a board's port) and the
     manifest's record of its source."""
     from .. import paper
-    from ..sweep import PortSession
+    from ..session import PortSession
 
     if not args.sil:
         return PortSession(args.port, tlog, args.baud), \
             {"kind": "port", "port": args.port, "baud": args.baud}
     from ...sim.lockstep import FirmwareError
-    from ...sim.sil import SilConfig, SilSession
+    from ...sim.sil import SilConfig
+    from ..session import SilSession
 
     num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
     args.num, args.den = args.num or num, args.den or den
