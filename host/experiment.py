@@ -41,6 +41,8 @@ class SilResult:
     wall_s: float                  # the whole run, firmware start-up included
     loop_s: float                  # the lockstep loop alone, hover included
     truth: complex                 # sampled-data truth at the actual frequency (nan if unknown)
+    collective_limited: int = 0    # measured samples whose collective gave way
+    sensor_clipped: int = 0        # measured samples whose gyro or accelerometer read full scale
     stopped: str | None = None     # why the excitation ended early, if it did
     firmware_summary: str = ""     # the firmware's own last word: counters, loop figures
 
@@ -71,6 +73,8 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     return SilResult(tlog_path=tlog_path, csv_path=csv_path, samples=e["samples"],
                      frames=frames, seq_gaps=e["seq_gaps"], actual_freq_hz=freq,
                      saturated_samples=e["saturated"], imu_mode=imu_mode,
+                     collective_limited=e["collective_limited"],
+                     sensor_clipped=e["sensor_clipped"],
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=_truth(plant, freq, cfg.inject),
                      stopped=None if e["status"] == "ok" else e["status"],

@@ -110,6 +110,9 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
             continue
         points.append(p)
         segments.append((entry["freq_hz"], t, u, y))
+    saturated = _saturated(manifest)
+    for text in saturated:
+        progress(f"  warning: {text}: the record is not the linear response")
     if len(points) < 2:
         why = f" (skipped {'; '.join(skipped[:2])}{'; ...' if len(skipped) > 2 else ''})" \
             if skipped else ""
@@ -130,13 +133,22 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     result = fit_orders(table, orders, delay=delay)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
-                      extra={"log": damage.record(), "skipped_frequencies": skipped})
+                      extra={"log": damage.record(), "skipped_frequencies": skipped,
+                             "saturated_frequencies": saturated})
     plot_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
               models=result.models, recommended=result.recommended,
               title=f"{axis}, {manifest['inject']} injection: points and models")
     _plot_responses(os.path.join(dir_path, "responses.png"), segments, manifest)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
-            "damage": damage, "skipped": skipped}
+            "damage": damage, "skipped": skipped, "saturated": saturated}
+
+
+def _saturated(manifest) -> list:
+    """The measured frequencies during which something saturated, in words."""
+    from .sweep import saturation_text
+
+    return [f"{e['freq_hz']:.4g} Hz{saturation_text(e)}" for e in manifest["frequencies"]
+            if e.get("status") == "ok" and "freq_hz" in e and saturation_text(e)]
 
 
 def _write_table(path, points) -> None:

@@ -19,6 +19,7 @@ import os
 
 from .errors import InputError
 from .files import atomic_write
+from .sweep import saturation_text
 
 __all__ = ["write_report", "LOW_COHERENCE"]
 
@@ -87,6 +88,8 @@ def _axis_section(folder):
         for f in manifest.get("frequencies", []):
             if f.get("status") != "ok":
                 flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz {f.get('status')}")
+            elif saturation_text(f):
+                flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz:{saturation_text(f)}")
         if manifest.get("aborted"):
             flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
     table_path = os.path.join(folder, "points_table.csv")

@@ -36,7 +36,7 @@ from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "measure", "ExcitationWatch", "Limits",
-           "MANIFEST", "SWEEP_TLOG"]
+           "MANIFEST", "SWEEP_TLOG", "saturation_text"]
 
 MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
@@ -47,9 +47,6 @@ FADE_CYCLES = 2
 #: millidegree: the firmware holds them in single precision).
 MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
 MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
-#: A sample whose achieved axis command differs from the commanded one by more than this
-#: (normalised units) saturated the mixer.
-SATURATION_TOL = 1e-3
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
 #: A running excitation whose samples stop for this long (the session's time: wall clock on a
@@ -117,9 +114,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             manifest["frequencies"].append(entry)
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
-            saturated = f" ({entry['saturated']} saturated the mixer)" if entry["saturated"] else ""
             progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {entry.get('freq_hz', f):.4g} Hz  "
-                     f"{entry['samples']} samples{saturated}  {entry['status']}")
+                     f"{entry['samples']} samples{saturation_text(entry)}  {entry['status']}")
             if entry["status"] != "ok":
                 manifest["aborted"] = entry["status"]
                 break
@@ -134,6 +130,14 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     finally:
         _write_manifest(out_dir, manifest)
     return manifest
+
+
+def saturation_text(entry) -> str:
+    """`` (N saturated the mixer, ...)`` for what saturated in a frequency's window, or ""."""
+    words = {"saturated": "saturated the mixer", "collective_limited": "lost collective",
+             "sensor_clipped": "clipped the IMU"}
+    said = [f"{entry[k]} {w}" for k, w in words.items() if entry.get(k)]
+    return f" ({', '.join(said)})" if said else ""
 
 
 class Limits:
@@ -158,21 +162,24 @@ class ExcitationWatch:
     ended (the messages after that are ignored), ``stop`` when the host must stop it. With
     ``keep_rows``, the full-amplitude samples' (t_s, u, y) are kept in ``rows``.
 
-    Counted per excitation: the samples, the mixer's saturation (the axis's achieved torque
-    command, from the logged motors through the firmware's own mixer equations, differing
-    from the commanded one), and gaps in the samples' sequence numbers (lost telemetry)."""
+    Counted per full-amplitude window, from what the firmware reports in each sample
+    (HQ_SYSID_SAMPLE.saturation): samples whose torque command the mixer could not meet
+    (``saturated``), whose collective gave way (``collective_limited``), whose gyro or
+    accelerometer read full scale (``sensor_clipped``); and gaps in the samples' sequence
+    numbers (``seq_gaps``, lost telemetry)."""
 
     def __init__(self, plan, f, amp, limits: Limits, now_us: int, progress=print,
                  keep_rows: bool = False):
         mav = dialect()
         self.idle, self.running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
         self.normal_end = (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED)
+        self.flags = {"saturated": mav.HQ_SATURATION_TORQUE,
+                      "collective_limited": mav.HQ_SATURATION_COLLECTIVE,
+                      "sensor_clipped": mav.HQ_SATURATION_GYRO | mav.HQ_SATURATION_ACCEL}
         self.plan, self.limits, self.progress = plan, limits, progress
-        self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "saturated": 0,
-                      "seq_gaps": 0, "status": "ok"}
+        self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,
+                      **dict.fromkeys(self.flags, 0), "status": "ok"}
         self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
-        self.axis_i = ("roll", "pitch", "yaw").index(plan.axis)
-        self.mixer = _firmware.Mixer()
         self.rows = [] if keep_rows else None
         self.started_us, self.last_sample_us = now_us, now_us
         self.seen_active, self.last_seq, self.fresh = False, None, False
@@ -216,9 +223,9 @@ class ExcitationWatch:
             e.setdefault("start_us", int(m.time_us))
             e["end_us"] = int(m.time_us)
             e["samples"] += 1
-            got = self.mixer.achieved(m.motor)
-            if abs((got.roll, got.pitch, got.yaw)[self.axis_i] - m.axis_cmd) > SATURATION_TOL:
-                e["saturated"] += 1
+            for key, bits in self.flags.items():
+                if m.saturation & bits:
+                    e[key] += 1
             if self.rows is not None:
                 self.rows.append((m.time_us * 1e-6, getattr(m, self.u_name),
                                   getattr(m, self.y_name)))

@@ -68,7 +68,9 @@ def test_saturation_keeps_roll_and_pitch_before_collective(collective):
     cmd = fw.MixerCommand(collective, 0.8, -0.6, 0.0)
     out = MIXER.mix(cmd)
     got = MIXER.achieved(out.motor)
-    assert out.saturated
+    assert out.saturated and out.collective_limited
+    # roll and pitch are kept; a torque is flagged only when yaw had to give way as well
+    assert out.torque_limited == (abs(got.yaw) > 1e-4)
     assert got.roll == pytest.approx(0.8, abs=1e-5)
     assert got.pitch == pytest.approx(-0.6, abs=1e-5)
     assert all(0.0 <= m <= 1.0 for m in out.motor)
@@ -86,7 +88,7 @@ def test_one_unit_of_roll_is_the_hover_arm_thrust_moved_across():
 
 def test_roll_beyond_the_full_differential_is_clipped_and_flagged():
     out = MIXER.mix(fw.MixerCommand(0.3, 20.0, 0.0, 0.0))
-    assert out.saturated
+    assert out.saturated and out.torque_limited
     full = fw.MixerGeometry().arm_max_thrust_n / (2 * MIXER.hover_arm_thrust_n)
     assert MIXER.achieved(out.motor).roll == pytest.approx(full, rel=1e-5)
 
@@ -94,5 +96,7 @@ def test_roll_beyond_the_full_differential_is_clipped_and_flagged():
 def test_yaw_is_kept_before_collective():
     # Large yaw at low collective: the yaw moment is met, the collective is not.
     cmd = fw.MixerCommand(0.05, 0.0, 0.0, -0.9)
-    got = MIXER.achieved(MIXER.mix(cmd).motor)
+    out = MIXER.mix(cmd)
+    got = MIXER.achieved(out.motor)
+    assert out.collective_limited and not out.torque_limited
     assert got.yaw == pytest.approx(-0.9, abs=1e-4)

@@ -254,3 +254,29 @@ def test_partial_packet_count_forces_a_resync():
     chip, drv, _ = init()
     chip.push_fifo(dmp_packet((1, 0, 0, 0))[:30], True)
     assert drv.poll(chip) is None and drv.counters.resyncs == 1 and chip.fifo_count == 0
+
+
+@pytest.mark.parametrize("gyro_dps, accel_g, gyro_clipped, accel_clipped", [
+    ((1, 2, 3), (0, 0, 1), False, False),
+    ((2000, 0, 0), (0, 0, 1), True, False),       # +2000 deg/s: the gyro's last count
+    ((0, -2000, 0), (0, 0, 1), True, False),      # -2000 deg/s is -32800 LSB: clamped to -32768
+    ((0, 0, 0), (0, 0, 2), False, True),          # +2 g: the accelerometer's last count
+    ((1990, 0, 0), (1.99, 0, 0), False, False),   # just inside both ranges
+])
+def test_a_sample_at_full_scale_says_it_is_clipped(gyro_dps, accel_g, gyro_clipped, accel_clipped):
+    # A clipped rate is not the vehicle's rate: the driver flags the sample (the firmware
+    # reports it in HQ_SYSID_SAMPLE.saturation), on the raw path and the DMP path alike.
+    def clamp(v):
+        return max(-32768, min(32767, v))
+    raw = struct.pack(">3h3h", *[clamp(int(round(a * ACCEL_LSB))) for a in accel_g],
+                      *[clamp(int(round(g * GYRO_LSB))) for g in gyro_dps])
+    chip, drv, _ = init(None)
+    chip.push_fifo(raw, False)
+    s = drv.poll(chip)
+    assert (s.gyro_clipped, s.accel_clipped) == (gyro_clipped, accel_clipped)
+    packet = bytearray(dmp_packet((1, 0, 0, 0)))
+    for i in range(3):
+        packet[16 + 4 * i:18 + 4 * i] = raw[6 + 2 * i:8 + 2 * i]
+        packet[28 + 4 * i:30 + 4 * i] = raw[2 * i:2 + 2 * i]
+    s = fw.Mpu6050.parse_dmp_packet(bytes(packet))
+    assert (s.gyro_clipped, s.accel_clipped) == (gyro_clipped, accel_clipped)

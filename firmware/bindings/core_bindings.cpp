@@ -330,7 +330,9 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("motor", [](const MixerOutput& o) {
             return std::array<float, kMotors>{o.motor[0], o.motor[1], o.motor[2], o.motor[3], o.motor[4]};
         })
-        .def_readonly("saturated", &MixerOutput::saturated);
+        .def_readonly("saturated", &MixerOutput::saturated)
+        .def_readonly("torque_limited", &MixerOutput::torque_limited)
+        .def_readonly("collective_limited", &MixerOutput::collective_limited);
     py::class_<Mixer>(m, "Mixer")
         .def(py::init<const MixerGeometry&>(), py::arg("geometry") = MixerGeometry())
         .def("mix", &Mixer::mix)
@@ -380,7 +382,9 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readonly("attitude", &ImuSample::attitude)
         .def_readonly("gyro_rad_s", &ImuSample::gyro_rad_s)
         .def_readonly("accel_m_s2", &ImuSample::accel_m_s2)
-        .def_readonly("has_attitude", &ImuSample::has_attitude);
+        .def_readonly("has_attitude", &ImuSample::has_attitude)
+        .def_readonly("gyro_clipped", &ImuSample::gyro_clipped)
+        .def_readonly("accel_clipped", &ImuSample::accel_clipped);
     py::class_<Mpu6050Counters>(m, "Mpu6050Counters")
         .def_readonly("packets", &Mpu6050Counters::packets)
         .def_readonly("dropped", &Mpu6050Counters::dropped)

@@ -144,6 +144,8 @@ bool FlightController::read_imu(float dt_s) {
         state_.attitude = to_euler(filter_.quaternion());
     }
     state_.rate = s.gyro_rad_s;
+    state_.sensor_clipped = static_cast<uint8_t>((s.gyro_clipped ? HQ_SATURATION_GYRO : 0) |
+                                                 (s.accel_clipped ? HQ_SATURATION_ACCEL : 0));
     return true;
 }
 
@@ -269,6 +271,9 @@ void FlightController::run_control(const RcInput& rc, float excitation, float dt
     state_.rate_sp = c.rate_sp;
     state_.torque = c.torque;
     const MixerOutput out = mixer_.mix(MixerCommand{s.throttle, c.torque.x, c.torque.y, c.torque.z});
+    state_.saturation = static_cast<uint8_t>(
+        state_.sensor_clipped | (out.torque_limited ? HQ_SATURATION_TORQUE : 0) |
+        (out.collective_limited ? HQ_SATURATION_COLLECTIVE : 0));
     bool finite = finite3(c.torque) && finite3(c.rate_sp) && std::isfinite(c.angle_sp.roll) &&
                   std::isfinite(c.angle_sp.pitch);
     for (float m : out.motor) finite = finite && std::isfinite(m);
@@ -368,7 +373,7 @@ void FlightController::send_telemetry() {
         config_.system_id, config_.component_id, &tx_status_, &msg, now, seq_++,
         static_cast<uint8_t>(exc.axis), static_cast<uint8_t>(exc.injection), exc_state, armed,
         mode, state_.excitation, angle_sp, state_.rate_sp[a], state_.rate[a], state_.attitude[a],
-        state_.torque[a], state_.motor);
+        state_.torque[a], state_.motor, state_.saturation);
     send(msg);
 }
 

@@ -55,6 +55,8 @@ struct LoopState {               // what the last loop computed, for telemetry a
     float excitation = 0.0f;
     float motor[kMotors] = {0, 0, 0, 0, 0};
     float dt_s = 0.0f;
+    uint8_t sensor_clipped = 0;  // HQ_SATURATION_GYRO / _ACCEL bits of the last IMU sample
+    uint8_t saturation = 0;      // HQ_SATURATION bits of this loop (mixer and sensor)
 };
 
 class FlightController {

@@ -34,14 +34,14 @@ MixerOutput Mixer::mix(const MixerCommand& cmd) const {
     const float unit = 2.0f * ta_hover_;                     // Dx per unit of roll command
     const float dx = clamp(-cmd.roll * unit, -ta_max, ta_max);
     const float dy = clamp(cmd.pitch * unit, -ta_max, ta_max);
-    out.saturated = dx != -cmd.roll * unit || dy != cmd.pitch * unit;
+    out.torque_limited = dx != -cmd.roll * unit || dy != cmd.pitch * unit;
 
     // 2. Collective and yaw: solve [1, 4 cos d; c0, -lat] [T0; Ta] = [Fz; tau_z].
     const float fz = clamp(cmd.collective, 0.0f, 1.0f) * fz_max_;
     const float tz = cmd.yaw * tz_unit_;
     float t0 = (-lat * fz - 4.0f * cos_d_ * tz) / det_;
     float ta = (tz - c0 * fz) / det_;
-    out.saturated = out.saturated || fz != cmd.collective * fz_max_;
+    out.collective_limited = fz != cmd.collective * fz_max_;
 
     // 3. Arms must hold the differential: T_a within [h, Ta_max - h].
     const float h = 0.5f * (fabs_(dx) > fabs_(dy) ? fabs_(dx) : fabs_(dy));
@@ -49,13 +49,16 @@ MixerOutput Mixer::mix(const MixerCommand& cmd) const {
     if (ta < ta_lo || ta > ta_hi) {
         ta = clamp(ta, ta_lo, ta_hi);
         t0 = (tz + lat * ta) / c0;           // keep yaw with the central rotor ...
-        out.saturated = true;
+        out.collective_limited = true;       // ... the vertical thrust gives way
     }
     if (t0 < 0.0f || t0 > t0_max) {          // ... unless it cannot: then yaw gives way too
         t0 = clamp(t0, 0.0f, t0_max);
-        ta = clamp((c0 * t0 - tz) / lat, ta_lo, ta_hi);
-        out.saturated = true;
+        const float ta_yaw = (c0 * t0 - tz) / lat;
+        ta = clamp(ta_yaw, ta_lo, ta_hi);
+        out.collective_limited = true;
+        out.torque_limited = out.torque_limited || ta != ta_yaw;
     }
+    out.saturated = out.torque_limited || out.collective_limited;
 
     out.motor[0] = t0 / t0_max;
     out.motor[1] = (ta + 0.5f * dy) / ta_max;

@@ -58,7 +58,9 @@ struct MixerCommand {
 
 struct MixerOutput {
     float motor[kMotors] = {0, 0, 0, 0, 0};   // thrust fractions 0..1, central first
-    bool saturated = false;                     // some command was not met in full
+    bool saturated = false;                     // some command was not met in full:
+    bool torque_limited = false;                //   a roll, pitch or yaw torque command
+    bool collective_limited = false;            //   the collective (it gave way, or was out of 0..1)
 };
 
 class Mixer {

@@ -8,6 +8,15 @@ using namespace mpu6050;
 
 namespace {
 int16_t be16(const uint8_t* p) { return static_cast<int16_t>((p[0] << 8) | p[1]); }
+
+// Three big-endian int16 at `p`, `stride` bytes apart: does any read full scale?
+bool any_full_scale(const uint8_t* p, int stride) {
+    for (int i = 0; i < 3; ++i) {
+        const int16_t v = be16(p + i * stride);
+        if (v == INT16_MAX || v == INT16_MIN) return true;
+    }
+    return false;
+}
 int32_t be32(const uint8_t* p) {
     return static_cast<int32_t>((static_cast<uint32_t>(p[0]) << 24) |
                                 (static_cast<uint32_t>(p[1]) << 16) |
@@ -390,6 +399,8 @@ bool Mpu6050::parse_dmp_packet(const uint8_t* p, ImuSample& out) {
     const float g = kDegToRad / kGyroLsbPerDegS, a = kGravity / kAccelLsbPerG;
     out.gyro_rad_s = chip_to_frd(Vec3{be16(p + 16) * g, be16(p + 20) * g, be16(p + 24) * g});
     out.accel_m_s2 = chip_to_frd(Vec3{be16(p + 28) * a, be16(p + 32) * a, be16(p + 36) * a});
+    out.gyro_clipped = any_full_scale(p + 16, 4);
+    out.accel_clipped = any_full_scale(p + 28, 4);
     return true;
 }
 
@@ -398,6 +409,8 @@ void Mpu6050::parse_raw_packet(const uint8_t* p, ImuSample& out) {
     out.accel_m_s2 = chip_to_frd(Vec3{be16(p) * a, be16(p + 2) * a, be16(p + 4) * a});
     out.gyro_rad_s = chip_to_frd(Vec3{be16(p + 6) * g, be16(p + 8) * g, be16(p + 10) * g});
     out.has_attitude = false;
+    out.accel_clipped = any_full_scale(p, 2);
+    out.gyro_clipped = any_full_scale(p + 6, 2);
 }
 
 }  // namespace hq

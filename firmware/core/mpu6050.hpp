@@ -143,6 +143,8 @@ struct ImuSample {
     Vec3 gyro_rad_s{};
     Vec3 accel_m_s2{};
     bool has_attitude = false;
+    bool gyro_clipped = false;    // a gyro axis read full scale (-32768 or 32767 LSB)
+    bool accel_clipped = false;   // an accelerometer axis read full scale
 };
 
 struct Mpu6050Counters {

@@ -52,4 +52,8 @@ def run(args) -> int:
                          "frequencies not used"
                          + (f"; the log is damaged: {r['damage'].summary()}" if r["damage"] else "")
                          + " (heliquad report flags it)\n")
+    if r["saturated"]:
+        sys.stderr.write(f"heliquad identify: warning: something saturated at "
+                         f"{len(r['saturated'])} frequency(ies): {'; '.join(r['saturated'])} "
+                         "(heliquad report flags it)\n")
     return 0

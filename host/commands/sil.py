@@ -8,6 +8,7 @@ import sys
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, int_in, number_in)
 from ..errors import InputError
+from ..sweep import saturation_text
 
 __all__ = ["add_parser", "run"]
 
@@ -104,9 +105,12 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
-    if r.saturated_samples:
-        print(f"warning: {r.saturated_samples} samples saturated the mixer; lower --amplitude",
-              file=sys.stderr)
+    said = saturation_text({"saturated": r.saturated_samples,
+                            "collective_limited": r.collective_limited,
+                            "sensor_clipped": r.sensor_clipped})
+    if said:
+        print(f"warning: measured samples: {said.strip()[1:-1]}; the record is not the "
+              "linear response: lower --amplitude", file=sys.stderr)
     if args.firmware != "host" and r.firmware_summary:
         print(f"the board: {r.firmware_summary.removeprefix('heliquad-fw-pil: ')}")
     print(f"wrote {r.tlog_path} and {r.csv_path}")
