@@ -93,10 +93,16 @@ def test_roll_beyond_the_full_differential_is_clipped_and_flagged():
     assert MIXER.achieved(out.motor).roll == pytest.approx(full, rel=1e-5)
 
 
-def test_yaw_is_kept_before_collective():
-    # Large yaw at low collective: the yaw moment is met, the collective is not.
-    cmd = fw.MixerCommand(0.05, 0.0, 0.0, -0.9)
-    out = MIXER.mix(cmd)
+@pytest.mark.parametrize("collective, yaw, gives_way", [
+    (0.05, -0.9, False),     # within the authority: both met, nothing flagged
+    (0.05, 2.0, True),       # large yaw at low collective: the central rotor must push more
+    (0.3, 3.0, True),
+])
+def test_yaw_is_kept_before_collective(collective, yaw, gives_way):
+    # The yaw moment is always met here; the collective gives way when both cannot be, and
+    # the mixer flags exactly that.
+    out = MIXER.mix(fw.MixerCommand(collective, 0.0, 0.0, yaw))
     got = MIXER.achieved(out.motor)
-    assert out.collective_limited and not out.torque_limited
-    assert got.yaw == pytest.approx(-0.9, abs=1e-4)
+    assert got.yaw == pytest.approx(yaw, abs=1e-4)
+    assert not out.torque_limited
+    assert out.collective_limited == gives_way == (abs(got.collective - collective) > 1e-4)
