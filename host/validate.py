@@ -26,10 +26,10 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
-from .files import save_figure, write_json
+from .files import write_json
 
-__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation",
-           "save_validation", "instability_text"]
+__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "save_validation",
+           "instability_text"]
 
 DERIVATIVE_FILTER_N = 10.0
 PADE_ORDER = 3
@@ -202,59 +202,8 @@ def save_validation(folder, report, traces, num, den, delay_s, axis, gains) -> l
     write_json(os.path.join(folder, "validation.json"), report)
     if not report["stable"]:
         return ["validation.json"]
-    plot_validation(report, traces, build_loops(num, den, delay_s, axis, gains),
-                    os.path.join(folder, "validation.png"))
+    from .plot import write_validation
+
+    write_validation(os.path.join(folder, "validation.png"), report, traces,
+                     build_loops(num, den, delay_s, axis, gains))
     return ["validation.json", "validation.png"]
-
-
-def plot_validation(report, traces, loops, path) -> None:
-    """The paper's figures 12-16 in one page: step, sine tracking, turbulence, loop Bode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), constrained_layout=True)
-    t = traces["t"]
-    unit = report.get("step", {}).get("unit", "deg")
-    for ax, key, title in ((axes[0, 0], "step", "step response"),
-                           (axes[0, 1], "sine", f"sine tracking, {SINE_FREQ_HZ:g} Hz")):
-        if key in traces:
-            ref, out = traces[key]
-            ax.plot(t, ref, "--", color="k", label="reference")
-            ax.plot(t, out, label="response")
-            ax.set_xlim(0, 10)
-        ax.set_title(title)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel(f"{report['axis']} ({unit})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    ax = axes[1, 0]
-    if "turbulence" in traces:
-        tr = traces["turbulence"]
-        ax.plot(t, tr["gust"], color="0.7", label="gust rate (deg/s)")
-        ax.plot(t, tr["rate"], label="rate, closed loop (deg/s)")
-        if "angle" in tr:
-            ax.plot(t, tr["angle"], label="angle, closed loop (deg)")
-        ax.set_title(f"Dryden turbulence, {report['turbulence']['level']}")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("deg/s, deg")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax = axes[1, 1]
-    w = np.logspace(-1, 3, 400)
-    for name, L in (("rate loop L_r", loops["L_r"]), ("angle loop L_a", loops["L_a"])):
-        if L is None:
-            continue
-        resp = L(1j * w)
-        ax.semilogx(w, 20 * np.log10(np.abs(resp)), label=f"{name}: PM "
-                    f"{report['loops']['rate' if 'rate' in name else 'angle']['phase_margin_deg'] or float('nan'):.0f} deg")
-    ax.axhline(0, color="k", lw=0.8)
-    ax.set_title("loop gains")
-    ax.set_xlabel("frequency (rad/s)")
-    ax.set_ylabel("magnitude (dB)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.suptitle(f"{report['axis']}: closed-loop validation of the identified model")
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)

@@ -73,11 +73,10 @@ def run(args) -> int:
         write_models_mat(args.mat, result.models, result.recommended)
         print(f"wrote {args.mat}")
     if args.plot:
-        from ..plot import plot_bode
+        from ..plot import write_bode
 
-        sigma = points["sigma"]
-        plot_bode(args.plot, points["omega"], points["F"], sigma=sigma, models=result.models,
-                  recommended=result.recommended, title=str(args.points))
+        write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
+                   models=result.models, recommended=result.recommended, title=str(args.points))
         print(f"wrote {args.plot}")
     return 0
 
