@@ -156,51 +156,55 @@ def write_responses(path, segments, input_name, output_name, title=""):
 
 # -- closed-loop validation ----------------------------------------------------------------
 
-def plot_validation(axes, report, traces, loops):
+def plot_validation(axes, report, traces):
     """The paper's figures 12-16 onto four Axes (``axes`` of any shape, in row order): step
     response, sine tracking, Dryden turbulence, and the loop gains' magnitude; returns
     their figure. ``report`` and ``traces`` as :func:`~heliquad.host.validate.validate_model`
-    returns them; ``loops`` as :func:`~heliquad.host.validate.build_loops`."""
+    returns them (SI units); drawn in degrees, deg/s and dB."""
     ax_step, ax_sine, ax_turb, ax_loops = np.asarray(axes, dtype=object).ravel()[:4]
     t = traces["t"]
-    unit = report.get("step", {}).get("unit", "deg")
-    sine_hz = report.get("sine", {}).get("freq_hz")
-    for ax, key, title in ((ax_step, "step", "step response"),
-                           (ax_sine, "sine", "sine tracking" + (f", {sine_hz:g} Hz" if sine_hz else ""))):
+    unit = "deg" if report.get("step", {}).get("quantity", "angle") == "angle" else "deg/s"
+    sine = report.get("sine")
+    sine_title = "sine tracking" + (f", {sine['omega_rad_s'] / (2 * np.pi):g} Hz" if sine else "")
+    for ax, key, title in ((ax_step, "step", "step response"), (ax_sine, "sine", sine_title)):
         if key in traces:
             ref, out = traces[key]
-            ax.plot(t, ref, "--", color="k", label="reference")
-            ax.plot(t, out, label="response")
+            ax.plot(t, np.degrees(ref), "--", color="k", label="reference")
+            ax.plot(t, np.degrees(out), label="response")
             ax.set_xlim(0, 10)
         ax.set_title(title)
         ax.set_xlabel("time (s)")
         ax.set_ylabel(f"{report['axis']} ({unit})")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    if "turbulence" in traces:
-        tr = traces["turbulence"]
-        ax_turb.plot(t, tr["gust"], color="0.7", label="gust rate (deg/s)")
-        ax_turb.plot(t, tr["rate"], label="rate, closed loop (deg/s)")
-        if "angle" in tr:
-            ax_turb.plot(t, tr["angle"], label="angle, closed loop (deg)")
-        ax_turb.set_title(f"Dryden turbulence, {report['turbulence']['level']}")
-    ax_turb.set_xlabel("time (s)")
-    ax_turb.set_ylabel("deg/s, deg")
-    ax_turb.grid(alpha=0.3)
-    ax_turb.legend(fontsize=8)
-    _loop_gains(ax_loops, report, loops)
+    _turbulence(ax_turb, report, traces)
+    _loop_gains(ax_loops, report, traces["loop_gains"])
     return ax_step.figure
 
 
-def _loop_gains(ax, report, loops):
-    w = np.logspace(-1, 3, 400)
-    for name, key, L in (("rate loop L_r", "rate", loops["L_r"]),
-                         ("angle loop L_a", "angle", loops["L_a"])):
-        if L is None:
+def _turbulence(ax, report, traces):
+    t = traces["t"]
+    if "turbulence" in traces:
+        tr = traces["turbulence"]
+        ax.plot(t, np.degrees(tr["gust"]), color="0.7", label="gust rate (deg/s)")
+        ax.plot(t, np.degrees(tr["rate"]), label="rate, closed loop (deg/s)")
+        if "angle" in tr:
+            ax.plot(t, np.degrees(tr["angle"]), label="angle, closed loop (deg)")
+        ax.set_title(f"Dryden turbulence, {report['turbulence']['level']}")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("deg/s, deg")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+
+
+def _loop_gains(ax, report, gains):
+    w = gains["omega_rad_s"]
+    for name, key in (("rate loop L_r", "rate"), ("angle loop L_a", "angle")):
+        if key not in gains:
             continue
-        pm = report["loops"][key]["phase_margin_deg"]
-        ax.semilogx(w, 20 * np.log10(np.abs(L(1j * w))),
-                    label=f"{name}: PM {float('nan') if pm is None else pm:.0f} deg")
+        pm = report["loops"][key]["phase_margin_rad"]
+        ax.semilogx(w, 20 * np.log10(np.abs(gains[key])),
+                    label=f"{name}: PM {float('nan') if pm is None else np.degrees(pm):.0f} deg")
     ax.axhline(0, color="k", lw=0.8)
     ax.set_title("loop gains")
     ax.set_xlabel("frequency (rad/s)")
@@ -209,9 +213,9 @@ def _loop_gains(ax, report, loops):
     ax.legend(fontsize=8)
 
 
-def write_validation(path, report, traces, loops):
+def write_validation(path, report, traces):
     """:func:`plot_validation` in a figure of its own, titled, written to ``path``."""
     fig, axes = new_figure(2, 2, figsize=(11, 7.5))
-    plot_validation(axes, report, traces, loops)
+    plot_validation(axes, report, traces)
     fig.suptitle(f"{report['axis']}: closed-loop validation of the identified model")
     save_figure(fig, path, dpi=100)
