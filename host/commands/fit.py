@@ -43,7 +43,8 @@ def add_parser(sub, fmt) -> None:
                         "are flagged)")
     p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
     p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models")
-    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB")
+    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB (a "
+                   "struct array, docs/file-formats.md)")
     p.set_defaults(func=run)
 
 
