@@ -191,10 +191,12 @@ def _turbulence(ax, report, traces):
         if "angle" in tr:
             ax.plot(t, np.degrees(tr["angle"]), label="angle, closed loop (deg)")
         ax.set_title(f"Dryden turbulence, {report['turbulence']['level']}")
+        ax.legend(fontsize=8)
+    else:
+        ax.set_title("no turbulence")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("deg/s, deg")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
 
 
 def _loop_gains(ax, report, gains):
@@ -203,7 +205,9 @@ def _loop_gains(ax, report, gains):
         if key not in gains:
             continue
         pm = report["loops"][key]["phase_margin_rad"]
-        ax.semilogx(w, 20 * np.log10(np.abs(gains[key])),
+        with np.errstate(divide="ignore"):      # a zero on the axis: -inf dB, not drawn
+            gain_db = 20 * np.log10(np.abs(gains[key]))
+        ax.semilogx(w, gain_db,
                     label=f"{name}: PM {float('nan') if pm is None else np.degrees(pm):.0f} deg")
     ax.axhline(0, color="k", lw=0.8)
     ax.set_title("loop gains")

@@ -106,7 +106,10 @@ def build_loops(num, den, delay_s, axis, gains: Gains):
 def _margins(L, T):
     """Margins and crossovers of the loop gain ``L``, and whether its closed loop ``T`` is
     stable; None where a margin or crossover does not exist."""
-    gm, pm_deg, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
+    # For some loops (a zero at the origin) python-control meets NaN responses, which its
+    # comparisons drop; numpy need not warn about them
+    with np.errstate(invalid="ignore"):
+        gm, pm_deg, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
     poles = control.poles(T)
     unstable = poles[np.real(poles) >= 0]
     finite = lambda x: float(x) if np.isfinite(x) else None      # noqa: E731
@@ -190,7 +193,8 @@ def _step(T, t, outer):
     outer loop, else 30 deg/s of rate (in rad, rad/s)."""
     size = STEP_ANGLE_RAD if outer else STEP_RATE_RAD_S
     ref = np.full(t.size, size)
-    info = control.step_info(T)
+    with np.errstate(divide="ignore", invalid="ignore"):    # final value 0: NaN times
+        info = control.step_info(T)
     return ({"quantity": "angle" if outer else "rate", "size": size,
              "rise_time_s": float(info["RiseTime"]), "overshoot_pct": float(info["Overshoot"]),
              "settling_time_s": float(info["SettlingTime"])},

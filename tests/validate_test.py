@@ -141,6 +141,17 @@ def test_cli_writes_report_and_plot(tmp_path):
     assert (tmp_path / "validation.png").stat().st_size > 20_000
 
 
+@pytest.mark.parametrize("num, den, extra", [
+    ([1, 0], [1, 2, 1], []),                        # a zero at the origin: NaN margins inside
+    ([3], [1, 0], ["--turbulence", "none"]),        # an integrator, no turbulence panel
+    ([1.191], [1, 1.178], ["--axis", "yaw", "--turbulence", "none"]),
+    ([0], [1, 1], []),                              # a zero model: no rise or settling time
+])
+def test_awkward_models_print_no_warning(tmp_path, num, den, extra):
+    res = cli(models_file(tmp_path, num, den), *extra)
+    assert res.returncode in (0, 1) and res.stderr == "", res.stderr
+
+
 def test_an_unstable_cascade_is_reported_with_exit_1(tmp_path):
     gains = tmp_path / "gains.json"
     gains.write_text(json.dumps({"rate": {"roll": [400.0, 0.01, 0.2]}, "angle": {"roll": [50.0, 0.0]}}))
