@@ -1,6 +1,7 @@
 """The code's shape: no Python function in the tool, the simulator, the benchmarks or the
-firmware's scripts is longer than MAX_FUNCTION_LINES. A longer one is split into named
-pieces, each saying what it does.
+firmware's scripts is longer than MAX_FUNCTION_LINES (a longer one is split into named
+pieces, each saying what it does), and the library changes no process-wide setting that
+belongs to its caller (numpy's error handling, matplotlib's backend).
 
 Reads the sources with ``ast``; imports nothing from heliquad.
 """
@@ -73,3 +74,32 @@ def test_every_exemption_is_still_needed():
             for path in _sources()
             for where, _ in long_functions(path.read_text(), path.relative_to(ROOT).as_posix())}
     assert not set(EXEMPT) - long, "exempted functions that now fit: drop them from EXEMPT"
+
+
+#: Calls that change what the whole process does, ``module: attribute``; the library leaves
+#: them to the program that uses it (``np.errstate`` is the local form of ``np.seterr``).
+PROCESS_WIDE = {"np": "seterr", "numpy": "seterr", "matplotlib": "use"}
+LIBRARY_FOLDERS = ("host", "sim")
+
+
+def process_wide_calls(source: str, path: str = "<source>"):
+    found = []
+    for node in ast.walk(ast.parse(source, filename=path)):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and isinstance(node.func.value, ast.Name)
+                and PROCESS_WIDE.get(node.func.value.id) == node.func.attr):
+            found.append(f"{path}:{node.lineno} {node.func.value.id}.{node.func.attr}")
+    return found
+
+
+def test_the_finder_sees_process_wide_calls():
+    source = "import numpy as np\nnp.seterr(all='ignore')\nwith np.errstate(all='ignore'):\n" \
+             "    pass\nimport matplotlib\nmatplotlib.use('Agg')\n"
+    assert process_wide_calls(source, "m.py") == ["m.py:2 np.seterr", "m.py:6 matplotlib.use"]
+
+
+def test_the_library_sets_nothing_process_wide():
+    offenders = [hit for folder in LIBRARY_FOLDERS for path in sorted((ROOT / folder).rglob("*.py"))
+                 for hit in process_wide_calls(path.read_text(), path.relative_to(ROOT).as_posix())]
+    assert not offenders, ("process-wide settings in the library (use np.errstate locally; "
+                           "make figures with matplotlib.figure.Figure):\n" + "\n".join(offenders))
