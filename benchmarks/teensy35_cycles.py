@@ -58,101 +58,125 @@ def optimisation(elf: pathlib.Path) -> str:
     return f"{build_type} ({flags.strip() or 'no flags'})"
 
 
-def measure(elf: pathlib.Path, loops: int):
-    board = Teensy35(elf)
-    m = board.machine
-    image = m.image
-    stack_lo, stack_hi = image.ram_end(), image.initial_sp
-    m.paint(stack_lo, stack_hi, PAINT)
-
+def imu_sample():
+    """One raw FIFO packet of a level vehicle at rest, rotating a little (None when the
+    packet encoders are not built)."""
     try:
         from heliquad.sim.mpu6050_packets import raw_packet
-        sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
     except ImportError:
-        sample = None
+        return None
+    return raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
 
-    entries, exits = [], []         # (instructions, handler instructions, cycles, sleep, irqs)
 
-    def snapshot():
+class I2cTransferTime:
+    """Instructions inside the I2C backend's transfers (interrupt handlers excluded), summed,
+    and that sum at each step's entry and exit."""
+
+    def __init__(self, machine):
+        self.total = 0
+        self.at_step_entry, self.at_step_exit = [], []
+        self._call = None
+        self._returns = set()
+        for name in I2C_TRANSFERS:
+            if machine.image.has(name):
+                machine.break_at(name, self._transfer_entry)
+
+    def _transfer_entry(self, machine):
+        lr = machine.reg("lr") & ~1
+        self._call = (machine.instructions_now(), machine.handler_instructions)
+        if lr not in self._returns:
+            self._returns.add(lr)
+            machine.break_at(lr, self._transfer_exit)
+        return None
+
+    def _transfer_exit(self, machine):
+        if self._call is not None:
+            i0, h0 = self._call
+            self._call = None
+            self.total += (machine.instructions_now() - i0) - (machine.handler_instructions - h0)
+        return None
+
+    def step_entry(self, machine):
+        self.at_step_entry.append(self.total)
+
+    def step_exit(self, machine):
+        self.at_step_exit.append(self.total)
+
+
+class StepProbe:
+    """Breakpoints on ``hq::FlightController::step``: the machine's counters at each entry
+    and exit (instructions, handler instructions, cycles, sleep cycles, exceptions taken), an
+    IMU sample pushed at each entry, and a stop after ``loops`` + 1 entries."""
+
+    def __init__(self, board, loops: int, sample, i2c: I2cTransferTime):
+        self.board, self.loops, self.sample, self.i2c = board, loops, sample, i2c
+        self.entries, self.exits = [], []
+        board.machine.break_at("hq::FlightController::step", i2c.step_entry)
+        board.machine.break_at("hq::FlightController::step", self._entry)
+
+    def _snapshot(self):
+        m = self.board.machine
         return (m.instructions_now(), m.handler_instructions, m.now(), m.sleep_cycles,
                 sum(n for exc, n in m.exception_counts.items()))
 
-    def on_exit(machine):
-        exits.append(snapshot())
-        return None
-
-    def on_entry(machine):
-        if not entries:
+    def _entry(self, machine):
+        if not self.entries:
             ret = machine.reg("lr") & ~1                        # the step's return address
-            machine.break_at(ret, on_exit_i2c)
-            machine.break_at(ret, on_exit)
-        entries.append(snapshot())
-        if sample is not None and board.mpu is not None:
-            board.mpu.emu.push_fifo(sample, False)
-        if len(entries) > loops:
+            machine.break_at(ret, self.i2c.step_exit)
+            machine.break_at(ret, self._exit)
+        self.entries.append(self._snapshot())
+        if self.sample is not None and self.board.mpu is not None:
+            self.board.mpu.emu.push_fifo(self.sample, False)
+        if len(self.entries) > self.loops:
             return Stop("done", machine.pc)
         return None
 
-    # Instructions inside the I2C transfers (handlers excluded), summed per step.
-    in_i2c = [0]
-    call = {}
-    returns = set()
-
-    def transfer_entry(machine):
-        lr = machine.reg("lr") & ~1
-        call["at"] = (machine.instructions_now(), machine.handler_instructions)
-        if lr not in returns:
-            returns.add(lr)
-            machine.break_at(lr, transfer_exit)
+    def _exit(self, machine):
+        self.exits.append(self._snapshot())
         return None
 
-    def transfer_exit(machine):
-        if "at" in call:
-            i0, h0 = call.pop("at")
-            in_i2c[0] += (machine.instructions_now() - i0) - (machine.handler_instructions - h0)
-        return None
 
-    for name in I2C_TRANSFERS:
-        if image.has(name):
-            m.break_at(name, transfer_entry)
-    i2c_at_entry, i2c_at_exit = [], []
+def i2c_bytes_per_loop(i2c, entries):
+    """Bytes on the I2C bus (address bytes included) between consecutive step entries."""
+    starts = [e[2] for e in entries]
+    per_loop = [0] * (len(starts) - 1)
+    for t in i2c.transfers:
+        for k in range(len(starts) - 1):
+            if starts[k] <= t.start_cycle < starts[k + 1]:
+                per_loop[k] += 1 + len(t.data)
+    return per_loop
 
-    def on_entry_i2c(machine):
-        i2c_at_entry.append(in_i2c[0])
 
-    def on_exit_i2c(machine):
-        i2c_at_exit.append(in_i2c[0])
-
-    m.break_at("hq::FlightController::step", on_entry_i2c)
-    m.break_at("hq::FlightController::step", on_entry)
+def measure(elf: pathlib.Path, loops: int):
+    """Run the image through ``loops`` + 1 steps; the figures of every loop after the first."""
+    board = Teensy35(elf)
+    m = board.machine
+    stack_lo, stack_hi = m.image.ram_end(), m.image.initial_sp
+    m.paint(stack_lo, stack_hi, PAINT)
+    sample = imu_sample()
+    i2c_time = I2cTransferTime(m)
+    probe = StepProbe(board, loops, sample, i2c_time)
     t0 = time.perf_counter()
     stop = m.run(instructions=BOOT_BUDGET + PER_LOOP_BUDGET * (loops + 1))
     wall = time.perf_counter() - t0
     if stop.reason != "done":
         raise SystemExit(f"the image did not run {loops} loops: {stop} "
                          f"(fatal code {board.fatal_code})")
+    entries, exits = probe.entries, probe.exits
     steps = [(x[0] - e[0]) - (x[1] - e[1]) for e, x in zip(entries, exits)]
-    step_i2c = [b - a for a, b in zip(i2c_at_entry, i2c_at_exit)]
-    per_loop = [b[0] - a[0] for a, b in zip(entries, entries[1:])]
-    busy = [(b[2] - a[2]) - (b[3] - a[3]) for a, b in zip(entries, entries[1:])]
-    irqs = [b[4] - a[4] for a, b in zip(entries, entries[1:])]
-    high = m.painted_high_water(stack_lo, stack_hi, PAINT)
-    # I2C traffic per loop: bytes on the bus (address bytes included) between step entries
-    i2c = board.chip.i2c0
-    starts = [e[2] for e in entries]
-    per_loop_bytes = [0] * (len(starts) - 1)
-    for t in i2c.transfers:
-        for k in range(len(starts) - 1):
-            if starts[k] <= t.start_cycle < starts[k + 1]:
-                per_loop_bytes[k] += 1 + len(t.data)
+    step_i2c = [b - a for a, b in zip(i2c_time.at_step_entry, i2c_time.at_step_exit)]
+    loop_pairs = list(zip(entries, entries[1:]))
     return {
-        "board": board, "wall": wall, "steps": steps[1:], "per_loop": per_loop[1:],
-        "busy": busy[1:], "irqs": irqs[1:], "stack": stack_hi - high,
+        "board": board, "wall": wall, "steps": steps[1:],
+        "per_loop": [b[0] - a[0] for a, b in loop_pairs][1:],
+        "busy": [(b[2] - a[2]) - (b[3] - a[3]) for a, b in loop_pairs][1:],
+        "irqs": [b[4] - a[4] for a, b in loop_pairs][1:],
+        "stack": stack_hi - m.painted_high_water(stack_lo, stack_hi, PAINT),
         "stack_region": stack_hi - stack_lo, "instructions": m.instructions,
         "simulated": m.seconds(), "fed": sample is not None,
         "imu": board.mpu.emu.raw_fifo_enabled or board.mpu.emu.dmp_enabled,
-        "i2c_bytes": per_loop_bytes[1:], "scl_hz": i2c.scl_hz(),
-        "step_i2c": step_i2c[1:len(steps)],
+        "i2c_bytes": i2c_bytes_per_loop(board.chip.i2c0, entries)[1:],
+        "scl_hz": board.chip.i2c0.scl_hz(), "step_i2c": step_i2c[1:len(steps)],
     }
 
 

@@ -72,8 +72,7 @@ def run_demo(args) -> int:
             gains = load_gains(axis)
             report, traces = validate_model(model.num, model.den, model.delay_s, axis, gains,
                                             "moderate", args.seed)
-            save_validation(folder, report, traces, model.num, model.den, model.delay_s, axis,
-                            gains)
+            save_validation(folder, report, traces)
         summary.append(_compare(axis, model, result.reason, truth_plant))
     report_path = write_report(args.out)
     wall = time.monotonic() - t0

@@ -236,16 +236,27 @@ def write_models_json(path, models, recommended, reason, source=None, weights=No
     write_json(path, doc)
 
 
+#: MODELS.mat's struct fields; each model's metrics (MODELS.json's) come before dc_gain.
+MAT_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate", "dc_gain")
+
+
 def write_models_mat(path, models, recommended):
-    """Write the models for MATLAB: ``models`` is a struct array (num, den, delay_s, order,
-    stable, J, rms, aicc); ``recommended`` is 1-based (0 when none)."""
+    """Write MODELS.mat (docs/file-formats.md), atomically: ``models``, a 1-by-N MATLAB
+    struct array with the fields of :data:`MAT_FIELDS` around every metric of the models
+    (doubles, logical flags, coefficient row vectors), and ``recommended``, a 1-based index
+    (0 when none)."""
     import scipy.io
 
-    entries = np.empty(len(models), dtype=object)
+    metrics = list(dict.fromkeys(k for m in models for k in m.metrics))
+    fields = [*MAT_FIELDS[:-1], *metrics, MAT_FIELDS[-1]]
+    array = np.empty((1, len(models)), dtype=[(f, object) for f in fields])
     for i, m in enumerate(models):
-        entries[i] = {"order": np.array(m.order, float), "num": np.asarray(m.num),
-                      "den": np.asarray(m.den), "delay_s": m.delay_s, "stable": m.stable,
-                      "J": m.metrics["J"], "rms": m.metrics["rms"], "aicc": m.metrics["aicc"]}
+        entry = {"order": np.array([m.order], float), "num": np.array([m.num], float),
+                 "den": np.array([m.den], float), "delay_s": float(m.delay_s),
+                 "stable": bool(m.stable), "degenerate": bool(m.degenerate),
+                 "dc_gain": float(m.dc_gain),
+                 **{k: float(m.metrics.get(k, math.nan)) for k in metrics}}
+        array[0, i] = tuple(entry[f] for f in fields)
     with atomic_write(path, "wb") as fh:
-        scipy.io.savemat(fh, {"models": entries,
-                              "recommended": 0 if recommended is None else recommended + 1})
+        scipy.io.savemat(fh, {"models": array,
+                              "recommended": float(0 if recommended is None else recommended + 1)})

@@ -258,8 +258,11 @@ class _OutputError:
 
     def _basis(self, params):
         tau = params[self.n] if self.delay else 0.0
-        factor = self.w * np.exp(-self.s * tau) / np.polyval(self.den(params), self.s)
-        return self.vander * factor[:, None]
+        # A trial step may put a pole on a point's frequency: the basis is then not finite,
+        # which residuals() answers with a large cost; numpy need not warn about it.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            factor = self.w * np.exp(-self.s * tau) / np.polyval(self.den(params), self.s)
+            return self.vander * factor[:, None]
 
     def residuals(self, params):
         basis = self._basis(params)

@@ -50,7 +50,11 @@ def point_weights(points: dict, mode: str = "auto"):
     if mode == "sigma":
         return 1.0 / np.maximum(points["sigma"], SIGMA_FLOOR * mag), mode
     if mode == "coherence":
-        return np.sqrt(cifer_weight(points["coherence"])) / mag, mode
+        w = np.sqrt(cifer_weight(points["coherence"])) / mag
+        if not np.any(w > 0):
+            raise InputError("coherence weights: every point has coherence 0, so none would "
+                             "count; use --weights none (or sigma)")
+        return w, mode
     return 1.0 / mag, mode
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
-from .files import atomic_write, save_figure
+from .files import atomic_write
 from .link import INPUT_OUTPUT
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
@@ -88,7 +88,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     from .fsf import estimate_fsf
     from .fit import n_parameters
     from .identify import fit_orders
-    from .plot import plot_bode
+    from .plot import write_bode, write_responses
 
     manifest, samples, damage = _load(dir_path)
     if damage:
@@ -135,10 +135,12 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
                       extra={"log": damage.record(), "skipped_frequencies": skipped,
                              "saturated_frequencies": saturated})
-    plot_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
-              models=result.models, recommended=result.recommended,
-              title=f"{axis}, {manifest['inject']} injection: points and models")
-    _plot_responses(os.path.join(dir_path, "responses.png"), segments, manifest)
+    write_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
+               models=result.models, recommended=result.recommended,
+               title=f"{axis}, {manifest['inject']} injection: points and models")
+    write_responses(os.path.join(dir_path, "responses.png"), segments,
+                    *INPUT_OUTPUT[manifest["inject"]],
+                    title=f"{axis}: measured cycles per frequency (input dashed, output solid)")
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated}
 
@@ -159,33 +161,3 @@ def _write_table(path, points) -> None:
             fh.write(f"{p.freq_hz:.6g},{p.omega_rad_s:.6g},{p.magnitude:.6g},"
                      f"{math.degrees(p.phase_rad):.4f},{p.gain.real:.6g},{p.gain.imag:.6g},"
                      f"{p.coherence:.5f}\n")
-
-
-def _plot_responses(path, segments, manifest) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = len(segments)
-    cols = 3
-    rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(12, 2.4 * rows), squeeze=False,
-                             constrained_layout=True)
-    u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
-    unit = {"axis_cmd": "torque cmd", "rate_sp": "rad/s", "angle_sp": "rad"}[u_name]
-    for ax, (f, t, u, y) in zip(axes.ravel(), segments):
-        t = t - t[0]
-        ax.plot(t, u, "--", lw=1, label=f"input: {u_name} ({unit})")
-        ax.plot(t, y, lw=1, label=f"output: {y_name} ({'rad/s' if y_name == 'rate' else 'rad'})")
-        ax.set_title(f"{f:.3g} Hz", fontsize=9)
-        ax.set_xlabel("time (s)", fontsize=8)
-        ax.set_ylabel(f"{unit} | {'rad/s' if y_name == 'rate' else 'rad'}", fontsize=7)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    for ax in axes.ravel()[n:]:
-        ax.axis("off")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{manifest['axis']}: measured cycles per frequency (input dashed, output solid)")
-    save_figure(fig, path, dpi=90)
-    plt.close(fig)

@@ -49,11 +49,13 @@ def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> d
     F = np.asarray(F, dtype=complex)
     G = model.response(omega)
     ratio = G / F
-    mag_err_db = 20.0 * np.log10(np.abs(ratio))
+    with np.errstate(divide="ignore"):          # G = 0 at a point: an infinite error in dB
+        mag_err_db = 20.0 * np.log10(np.abs(ratio))
     phase_err_deg = np.degrees(np.angle(ratio))
     w_gamma = cifer_weight(np.ones(omega.size) if coherence is None else coherence)
-    J = 20.0 / omega.size * float(np.sum(w_gamma * (mag_err_db ** 2
-                                                   + J_PHASE_WEIGHT * phase_err_deg ** 2)))
+    counted = w_gamma > 0                       # a point of weight 0 adds nothing, even inf
+    J = 20.0 / omega.size * float(np.sum(w_gamma[counted] * (
+        mag_err_db[counted] ** 2 + J_PHASE_WEIGHT * phase_err_deg[counted] ** 2)))
     resid = np.asarray(weights, dtype=float) * (F - G)
     rss = max(float(np.sum(np.abs(resid) ** 2)), np.finfo(float).tiny)
     n_obs = 2 * omega.size

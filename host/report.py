@@ -70,87 +70,111 @@ def _fmt(x, spec=".4g"):
 
 
 def _axis_section(folder):
+    """One axis's part of the page and its quality flags: the sweep, the points, the models,
+    the plots and the validation, each as far as the folder holds it."""
     manifest = _read_json(os.path.join(folder, "manifest.json")) or {}
     models = _read_json(os.path.join(folder, "models.json"))
     validation = _read_json(os.path.join(folder, "validation.json"))
     axis = manifest.get("axis") or (models or {}).get("axis") or os.path.basename(folder)
     flags, parts = [], [f"<h2>{html.escape(str(axis))}</h2>"]
     if manifest:
-        src = manifest.get("source", {})
-        parts.append(f"<p>Injection: <b>{html.escape(str(manifest.get('inject')))}</b>; source: "
-                     f"{html.escape(json.dumps(src))}; firmware {html.escape(str(manifest.get('firmware')))}; "
-                     f"started {html.escape(str(manifest.get('started')))}; gains "
-                     f"{html.escape(json.dumps(manifest.get('gains')))}.</p>")
-        rows = [(_fmt(f.get("requested_hz")), _fmt(f.get("freq_hz")), f.get("period_samples", "-"),
-                 f.get("samples", 0), f.get("status")) for f in manifest.get("frequencies", [])]
-        parts.append("<h3>Frequencies</h3>" + _table(
-            ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,)))
-        for f in manifest.get("frequencies", []):
-            if f.get("status") != "ok":
-                flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz {f.get('status')}")
-            elif saturation_text(f):
-                flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz:{saturation_text(f)}")
-        if manifest.get("aborted"):
-            flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
-    table_path = os.path.join(folder, "points_table.csv")
-    if os.path.exists(table_path):
-        with open(table_path) as fh:
-            lines = [line.strip().split(",") for line in fh if line.strip()]
-        parts.append("<h3>Frequency response (the paper's tables 4-6)</h3>" + _table(lines[0], lines[1:]))
-        for row in lines[1:]:
-            if float(row[-1]) < LOW_COHERENCE:
-                flags.append(f"{axis}: low coherence {float(row[-1]):.2f} at {float(row[0]):.3g} Hz")
+        parts.append(_sweep_html(manifest, axis, flags))
+    parts.append(_points_html(os.path.join(folder, "points_table.csv"), axis, flags))
     if models:
-        log = models.get("log") or {}
-        if log.get("skipped_bytes") or log.get("stamps_out_of_order"):
-            flags.append(f"{axis}: the log is damaged: {log.get('skipped_bytes', 0)} bytes "
-                         f"skipped in {log.get('damaged_regions', 0)} places, "
-                         f"{log.get('stamps_out_of_order', 0)} timestamps out of order")
-        for text in models.get("skipped_frequencies") or []:
-            flags.append(f"{axis}: {text} (not used)")
-        rec = models.get("recommended")
-        rows = []
-        for i, m in enumerate(models["models"]):
-            k = m.get("metrics", {})
-            tf = f"[{', '.join(f'{c:.5g}' for c in m['num'])}] / [{', '.join(f'{c:.5g}' for c in m['den'])}]"
-            rows.append(("*" if i == rec else "", f"{m['order'][0]}/{m['order'][1]}", _fmt(k.get("J"), ".3g"),
-                         _fmt(100 * k["rms"], ".3g") if k.get("rms") is not None else "-",
-                         _fmt(k.get("aicc"), ".4g"), _fmt(k.get("max_mag_err_db"), ".3f"),
-                         _fmt(k.get("max_phase_err_deg"), ".2f"),
-                         "yes" if m.get("stable") else "NO", "yes" if m.get("degenerate") else "", tf))
-            if not m.get("stable"):
-                flags.append(f"{axis}: model {m['order'][0]}/{m['order'][1]} is unstable")
-        parts.append("<h3>Models</h3>" + _table(
-            ["", "order", "J", "rms %", "AICc", "max dB", "max deg", "stable", "degenerate", "G(s)"],
-            rows, left=(9,)))
-        parts.append(f"<p>Recommended: {html.escape(str(models.get('reason')))}</p>")
-        if rec is None:
-            flags.append(f"{axis}: no model recommended")
+        parts.append(_models_html(models, axis, flags))
     parts.append(_img(os.path.join(folder, "bode.png"), f"{axis} Bode plot"))
     parts.append(_img(os.path.join(folder, "responses.png"), f"{axis} time responses"))
     if validation:
-        rows = [(name, _fmt(lp.get("gain_margin_db"), ".3g"), _fmt(lp.get("phase_margin_deg"), ".3g"),
-                 _fmt(lp.get("gain_crossover_rad_s"), ".3g"), "stable" if lp.get("closed_loop_stable") else "UNSTABLE")
-                for name, lp in validation["loops"].items()]
-        parts.append("<h3>Closed-loop validation</h3>" + _table(
-            ["loop", "gain margin (dB)", "phase margin (deg)", "crossover (rad/s)", "closed loop"], rows))
-        if validation.get("stable"):
-            st, sn = validation["step"], validation["sine"]
-            tb = validation.get("turbulence", {})
-            parts.append(f"<p>Step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
-                         f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s. Sine "
-                         f"{sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} ({sn['tracking_rms_pct']:.0f} %)."
-                         + (f" {tb['level']} turbulence: rate RMS {tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
-                            f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
-        else:
-            from .validate import instability_text
-
-            text = instability_text(validation) if "instability" in validation else \
-                "the cascade is unstable with these gains"
-            parts.append(f"<p>{html.escape(text[0].upper() + text[1:])}.</p>")
-            flags.append(f"{axis}: {text}")
+        parts.append(_validation_html(validation, axis, flags))
         parts.append(_img(os.path.join(folder, "validation.png"), f"{axis} validation"))
     return "".join(parts), flags
+
+
+def _sweep_html(manifest, axis, flags):
+    """The session's source and the frequencies tried; flags those not measured and an
+    early end."""
+    src = manifest.get("source", {})
+    text = (f"<p>Injection: <b>{html.escape(str(manifest.get('inject')))}</b>; source: "
+            f"{html.escape(json.dumps(src))}; firmware {html.escape(str(manifest.get('firmware')))}; "
+            f"started {html.escape(str(manifest.get('started')))}; gains "
+            f"{html.escape(json.dumps(manifest.get('gains')))}.</p>")
+    rows = [(_fmt(f.get("requested_hz")), _fmt(f.get("freq_hz")), f.get("period_samples", "-"),
+             f.get("samples", 0), f.get("status")) for f in manifest.get("frequencies", [])]
+    text += "<h3>Frequencies</h3>" + _table(
+        ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,))
+    for f in manifest.get("frequencies", []):
+        if f.get("status") != "ok":
+            flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz {f.get('status')}")
+        elif saturation_text(f):
+            flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz:{saturation_text(f)}")
+    if manifest.get("aborted"):
+        flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
+    return text
+
+
+def _points_html(table_path, axis, flags):
+    """The paper-style points table (empty without one); flags low coherence."""
+    if not os.path.exists(table_path):
+        return ""
+    with open(table_path) as fh:
+        lines = [line.strip().split(",") for line in fh if line.strip()]
+    for row in lines[1:]:
+        if float(row[-1]) < LOW_COHERENCE:
+            flags.append(f"{axis}: low coherence {float(row[-1]):.2f} at {float(row[0]):.3g} Hz")
+    return "<h3>Frequency response (the paper's tables 4-6)</h3>" + _table(lines[0], lines[1:])
+
+
+def _models_html(models, axis, flags):
+    """The models with their metrics and the recommendation; flags a damaged log, unused
+    frequencies, unstable models and no recommendation."""
+    log = models.get("log") or {}
+    if log.get("skipped_bytes") or log.get("stamps_out_of_order"):
+        flags.append(f"{axis}: the log is damaged: {log.get('skipped_bytes', 0)} bytes "
+                     f"skipped in {log.get('damaged_regions', 0)} places, "
+                     f"{log.get('stamps_out_of_order', 0)} timestamps out of order")
+    for text in models.get("skipped_frequencies") or []:
+        flags.append(f"{axis}: {text} (not used)")
+    rec = models.get("recommended")
+    rows = []
+    for i, m in enumerate(models["models"]):
+        k = m.get("metrics", {})
+        tf = f"[{', '.join(f'{c:.5g}' for c in m['num'])}] / [{', '.join(f'{c:.5g}' for c in m['den'])}]"
+        rows.append(("*" if i == rec else "", f"{m['order'][0]}/{m['order'][1]}", _fmt(k.get("J"), ".3g"),
+                     _fmt(100 * k["rms"], ".3g") if k.get("rms") is not None else "-",
+                     _fmt(k.get("aicc"), ".4g"), _fmt(k.get("max_mag_err_db"), ".3f"),
+                     _fmt(k.get("max_phase_err_deg"), ".2f"),
+                     "yes" if m.get("stable") else "NO", "yes" if m.get("degenerate") else "", tf))
+        if not m.get("stable"):
+            flags.append(f"{axis}: model {m['order'][0]}/{m['order'][1]} is unstable")
+    if rec is None:
+        flags.append(f"{axis}: no model recommended")
+    return ("<h3>Models</h3>" + _table(
+        ["", "order", "J", "rms %", "AICc", "max dB", "max deg", "stable", "degenerate", "G(s)"],
+        rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.get('reason')))}</p>")
+
+
+def _validation_html(validation, axis, flags):
+    """The loops' margins, then the time responses, or where the cascade goes unstable
+    (flagged)."""
+    rows = [(name, _fmt(lp.get("gain_margin_db"), ".3g"), _fmt(lp.get("phase_margin_deg"), ".3g"),
+             _fmt(lp.get("gain_crossover_rad_s"), ".3g"), "stable" if lp.get("closed_loop_stable") else "UNSTABLE")
+            for name, lp in validation["loops"].items()]
+    text = "<h3>Closed-loop validation</h3>" + _table(
+        ["loop", "gain margin (dB)", "phase margin (deg)", "crossover (rad/s)", "closed loop"], rows)
+    if validation.get("stable"):
+        st, sn = validation["step"], validation["sine"]
+        tb = validation.get("turbulence", {})
+        return text + (f"<p>Step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
+                       f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s. Sine "
+                       f"{sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} ({sn['tracking_rms_pct']:.0f} %)."
+                       + (f" {tb['level']} turbulence: rate RMS {tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
+                          f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
+    from .validate import instability_text
+
+    why = instability_text(validation) if "instability" in validation else \
+        "the cascade is unstable with these gains"
+    flags.append(f"{axis}: {why}")
+    return text + f"<p>{html.escape(why[0].upper() + why[1:])}.</p>"
 
 
 def write_report(dir_path: str, out: str | None = None) -> str:

@@ -12,6 +12,11 @@ when unstable, how far above the identified band the unstable poles lie), the
 step response (rise time 10-90 %, overshoot, 2 % settling), sine tracking (0.5 Hz), and
 disturbance rejection under Dryden turbulence: the gust rate of the axis (sim/dryden.py)
 entering at the model's input, with the closed loop's rate and angle RMS against the gust's.
+
+Everything here is computed in SI units: angles in rad, rates and frequencies in rad/s,
+times in s, gain margins as ratios. Degrees, deg/s, dB and Hz are for people: they appear
+only in validation.json (:func:`validation_record`, docs/file-formats.md), in what
+``heliquad validate`` prints (from that record) and in the plot.
 """
 
 from __future__ import annotations
@@ -26,18 +31,22 @@ import numpy as np
 
 from . import paper
 from .errors import InputError
-from .files import save_figure, write_json
+from .files import write_json
 
-__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "plot_validation",
+__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "validation_record",
            "save_validation", "instability_text"]
 
 DERIVATIVE_FILTER_N = 10.0
 PADE_ORDER = 3
 DT_S = 0.005
-SINE_FREQ_HZ = 0.5
-STEP_ANGLE_DEG = 10.0
-STEP_RATE_DEG_S = 30.0
+SINE_OMEGA_RAD_S = math.pi                      # 0.5 Hz
+STEP_ANGLE_RAD = math.radians(10.0)
+STEP_RATE_RAD_S = math.radians(30.0)
 DURATION_S = 30.0
+#: The sine's tracking error is measured over its last this many periods.
+SINE_MEASURED_PERIODS = 5
+#: Where the loop gains' frequency responses are evaluated (for the plot).
+LOOP_GAIN_OMEGA_RAD_S = np.logspace(-1, 3, 400)
 #: An instability this many times above the identified band's top is flagged as outside it.
 OUT_OF_BAND_FACTOR = 3.0
 
@@ -95,13 +104,19 @@ def build_loops(num, den, delay_s, axis, gains: Gains):
 
 
 def _margins(L, T):
-    gm, pm, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
+    """Margins and crossovers of the loop gain ``L``, and whether its closed loop ``T`` is
+    stable; None where a margin or crossover does not exist."""
+    # For some loops (a zero at the origin) python-control meets NaN responses, which its
+    # comparisons drop; numpy need not warn about them
+    with np.errstate(invalid="ignore"):
+        gm, pm_deg, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
     poles = control.poles(T)
     unstable = poles[np.real(poles) >= 0]
-    return {"gain_margin_db": None if not np.isfinite(gm) else float(20 * math.log10(gm)),
-            "phase_margin_deg": None if not np.isfinite(pm) else float(pm),
-            "gain_crossover_rad_s": None if not np.isfinite(wcp) else float(wcp),
-            "phase_crossover_rad_s": None if not np.isfinite(wcg) else float(wcg),
+    finite = lambda x: float(x) if np.isfinite(x) else None      # noqa: E731
+    return {"gain_margin": finite(gm) if gm > 0 else None,
+            "phase_margin_rad": None if not np.isfinite(pm_deg) else math.radians(pm_deg),
+            "gain_crossover_rad_s": finite(wcp),
+            "phase_crossover_rad_s": finite(wcg),
             "closed_loop_stable": bool(unstable.size == 0),
             "unstable_pole_rad_s": float(np.max(np.abs(unstable))) if unstable.size else None}
 
@@ -129,45 +144,77 @@ def instability_text(report) -> str:
 
 
 def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0):
-    """Margins, step, sine tracking and turbulence rejection. Returns (report, traces)."""
+    """Margins, step, sine tracking and turbulence rejection, in SI units.
+
+    Returns ``(report, traces)``. ``report``: ``axis``, the model (``num``, ``den``,
+    ``delay_s``), ``gains``; ``loops``: per loop (``rate``, and ``angle`` for roll and
+    pitch) ``gain_margin`` (a ratio), ``phase_margin_rad``, ``gain_crossover_rad_s``,
+    ``phase_crossover_rad_s``, ``closed_loop_stable``, ``unstable_pole_rad_s``;
+    ``stable``; when unstable ``instability`` (:func:`instability_text`), else ``step``
+    (``quantity`` angle or rate, ``size`` in rad or rad/s, ``rise_time_s``,
+    ``overshoot_pct``, ``settling_time_s``), ``sine`` (``omega_rad_s``, ``amplitude``,
+    ``tracking_rms`` in the step's unit, ``tracking_rms_pct``) and, with ``turbulence``,
+    ``turbulence`` (``level``, ``seed``, ``gust_rate_rms_rad_s``, ``rate_rms_rad_s``,
+    ``angle_rms_rad``, ``angle_max_rad``). ``traces``: ``t`` (s), ``loop_gains``
+    (``omega_rad_s`` and each loop's complex gain), and when stable ``step`` and ``sine``
+    (reference, response) and ``turbulence`` (``gust``, ``rate``, ``angle``) in rad and
+    rad/s. :func:`validation_record` turns the report into validation.json.
+    """
     loops = build_loops(num, den, delay_s, axis, gains)
+    outer = loops["T_a"] is not None
     report = {"axis": axis, "num": list(map(float, num)), "den": list(map(float, den)),
               "delay_s": float(delay_s), "gains": {"rate": list(gains.rate),
                                                    "angle": None if gains.angle is None else list(gains.angle)},
               "loops": {"rate": _margins(loops["L_r"], loops["T_r"])}}
-    outer = loops["T_a"] is not None
+    w = LOOP_GAIN_OMEGA_RAD_S
+    traces = {"t": np.arange(0.0, DURATION_S, DT_S),
+              "loop_gains": {"omega_rad_s": w, "rate": loops["L_r"](1j * w)}}
     if outer:
         report["loops"]["angle"] = _margins(loops["L_a"], loops["T_a"])
-    T = loops["T_a"] if outer else loops["T_r"]
-    t = np.arange(0.0, DURATION_S, DT_S)
-    traces = {"t": t}
-    stable = all(l["closed_loop_stable"] for l in report["loops"].values())
-    report["stable"] = stable
-    if not stable:
+        traces["loop_gains"]["angle"] = loops["L_a"](1j * w)
+    report["stable"] = all(lp["closed_loop_stable"] for lp in report["loops"].values())
+    if not report["stable"]:
         report["instability"] = _instability(report, axis)
         return report, traces
-    size = STEP_ANGLE_DEG if outer else STEP_RATE_DEG_S
-    step = control.forced_response(T, t, np.full(t.size, size)).outputs
-    info = control.step_info(T)
-    traces["step"] = (np.full(t.size, size), step)
-    report["step"] = {"size": size, "unit": "deg" if outer else "deg/s",
-                      "rise_time_s": float(info["RiseTime"]),
-                      "overshoot_pct": float(info["Overshoot"]),
-                      "settling_time_s": float(info["SettlingTime"])}
-    ref = size * np.sin(2 * math.pi * SINE_FREQ_HZ * t)
-    sine = control.forced_response(T, t, ref).outputs
-    last = t >= t[-1] - 5 / SINE_FREQ_HZ
-    traces["sine"] = (ref, sine)
-    report["sine"] = {"freq_hz": SINE_FREQ_HZ, "amplitude": size,
-                      "tracking_rms": float(np.sqrt(np.mean((sine - ref)[last] ** 2))),
-                      "tracking_rms_pct": float(100 * np.sqrt(np.mean((sine - ref)[last] ** 2)) / (size / math.sqrt(2)))}
+    T, t = (loops["T_a"] if outer else loops["T_r"]), traces["t"]
+    report["step"], traces["step"] = _step(T, t, outer)
+    report["sine"], traces["sine"] = _sine(T, t, report["step"]["size"])
     if turbulence:
         report["turbulence"], traces["turbulence"] = _turbulence(loops, axis, outer, t, turbulence, seed)
     return report, traces
 
 
+def _rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def _step(T, t, outer):
+    """The closed loop's response to a step of the reference: 10 deg of angle with the
+    outer loop, else 30 deg/s of rate (in rad, rad/s)."""
+    size = STEP_ANGLE_RAD if outer else STEP_RATE_RAD_S
+    ref = np.full(t.size, size)
+    with np.errstate(divide="ignore", invalid="ignore"):    # final value 0: NaN times
+        info = control.step_info(T)
+    return ({"quantity": "angle" if outer else "rate", "size": size,
+             "rise_time_s": float(info["RiseTime"]), "overshoot_pct": float(info["Overshoot"]),
+             "settling_time_s": float(info["SettlingTime"])},
+            (ref, control.forced_response(T, t, ref).outputs))
+
+
+def _sine(T, t, amplitude):
+    """Tracking of a sine reference of ``amplitude`` at SINE_OMEGA_RAD_S, measured over its
+    last periods (the start-up transient gone)."""
+    ref = amplitude * np.sin(SINE_OMEGA_RAD_S * t)
+    out = control.forced_response(T, t, ref).outputs
+    last = t >= t[-1] - SINE_MEASURED_PERIODS * 2 * math.pi / SINE_OMEGA_RAD_S
+    rms = _rms((out - ref)[last])
+    return ({"omega_rad_s": SINE_OMEGA_RAD_S, "amplitude": amplitude, "tracking_rms": rms,
+             "tracking_rms_pct": 100 * rms / (amplitude / math.sqrt(2))},
+            (ref, out))
+
+
 def _turbulence(loops, axis, outer, t, level, seed):
-    """The axis's Dryden gust rate entering at the model's input, references zero.
+    """The axis's Dryden gust rate (rad/s) entering at the model's input, references zero.
 
     The identified models map a rate (command) to a rate, so the gust rate enters where the
     command does: the plant filters it, as the rotors' aerodynamics filter a gust. Added to
@@ -178,83 +225,68 @@ def _turbulence(loops, axis, outer, t, level, seed):
 
     tp = load_params().turbulence
     d = Dryden(level, tp.altitude_m, tp.span_m, DT_S, seed)
-    gust = np.degrees(d.block(t.size)[:, 3 + ("roll", "pitch", "yaw").index(axis)])
+    gust = d.block(t.size)[:, 3 + ("roll", "pitch", "yaw").index(axis)]
     s = control.tf("s")
     G, C_r = loops["G"], loops["C_r"]
     outer_gain = (1 + loops["C_a"] / s) if outer else 1
     to_rate = control.feedback(G, C_r * outer_gain)          # rate / d, d at the plant input
     rate = control.forced_response(to_rate, t, gust).outputs
-    out = {"level": level, "seed": seed, "gust_rate_rms_deg_s": float(np.std(gust)),
-           "rate_rms_deg_s": float(np.sqrt(np.mean(rate ** 2)))}
+    out = {"level": level, "seed": seed, "gust_rate_rms_rad_s": float(np.std(gust)),
+           "rate_rms_rad_s": _rms(rate)}
     trace = {"gust": gust, "rate": rate}
     if outer:
         angle = control.forced_response(to_rate / s, t, gust).outputs
-        out["angle_rms_deg"] = float(np.sqrt(np.mean(angle ** 2)))
-        out["angle_max_deg"] = float(np.max(np.abs(angle)))
+        out["angle_rms_rad"] = _rms(angle)
+        out["angle_max_rad"] = float(np.max(np.abs(angle)))
         trace["angle"] = angle
     return out, trace
 
 
-def save_validation(folder, report, traces, num, den, delay_s, axis, gains) -> list:
-    """Write ``validation.json`` (and ``validation.png`` when the cascade is stable) into
-    ``folder``; returns the file names written."""
+def validation_record(report) -> dict:
+    """validation.json's content (docs/file-formats.md): the report of :func:`validate_model`
+    in the units people read: gain margins in dB, phase margins, angles and rates in deg
+    and deg/s, the sine's frequency in Hz; crossovers and poles stay in rad/s."""
+    doc = {key: report[key] for key in ("axis", "num", "den", "delay_s", "gains")}
+    doc["loops"] = {name: _loop_record(lp) for name, lp in report["loops"].items()}
+    doc["stable"] = report["stable"]
+    if "instability" in report:
+        doc["instability"] = dict(report["instability"])
+    if "step" in report:
+        st, sn = report["step"], report["sine"]
+        doc["step"] = {"size": math.degrees(st["size"]),
+                       "unit": "deg" if st["quantity"] == "angle" else "deg/s",
+                       **{k: st[k] for k in ("rise_time_s", "overshoot_pct", "settling_time_s")}}
+        doc["sine"] = {"freq_hz": sn["omega_rad_s"] / (2 * math.pi),
+                       "amplitude": math.degrees(sn["amplitude"]),
+                       "tracking_rms": math.degrees(sn["tracking_rms"]),
+                       "tracking_rms_pct": sn["tracking_rms_pct"]}
+    if "turbulence" in report:
+        tb = report["turbulence"]
+        doc["turbulence"] = {"level": tb["level"], "seed": tb["seed"],
+                             "gust_rate_rms_deg_s": math.degrees(tb["gust_rate_rms_rad_s"]),
+                             "rate_rms_deg_s": math.degrees(tb["rate_rms_rad_s"])}
+        if "angle_rms_rad" in tb:
+            doc["turbulence"]["angle_rms_deg"] = math.degrees(tb["angle_rms_rad"])
+            doc["turbulence"]["angle_max_deg"] = math.degrees(tb["angle_max_rad"])
+    return doc
+
+
+def _loop_record(lp) -> dict:
+    gm, pm = lp["gain_margin"], lp["phase_margin_rad"]
+    return {"gain_margin_db": None if gm is None else 20 * math.log10(gm),
+            "phase_margin_deg": None if pm is None else math.degrees(pm),
+            **{k: lp[k] for k in ("gain_crossover_rad_s", "phase_crossover_rad_s",
+                                  "closed_loop_stable", "unstable_pole_rad_s")}}
+
+
+def save_validation(folder, report, traces) -> list:
+    """Write ``validation.json`` (:func:`validation_record`) and, when the cascade is
+    stable, ``validation.png`` into ``folder``; returns the file names written."""
     os.makedirs(folder, exist_ok=True)
-    write_json(os.path.join(folder, "validation.json"), report)
+    write_json(os.path.join(folder, "validation.json"), validation_record(report))
     if not report["stable"]:
         return ["validation.json"]
-    plot_validation(report, traces, build_loops(num, den, delay_s, axis, gains),
-                    os.path.join(folder, "validation.png"))
+    from .plot import write_validation
+
+    write_validation(os.path.join(folder, "validation.png"), report, traces)
     return ["validation.json", "validation.png"]
-
-
-def plot_validation(report, traces, loops, path) -> None:
-    """The paper's figures 12-16 in one page: step, sine tracking, turbulence, loop Bode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), constrained_layout=True)
-    t = traces["t"]
-    unit = report.get("step", {}).get("unit", "deg")
-    for ax, key, title in ((axes[0, 0], "step", "step response"),
-                           (axes[0, 1], "sine", f"sine tracking, {SINE_FREQ_HZ:g} Hz")):
-        if key in traces:
-            ref, out = traces[key]
-            ax.plot(t, ref, "--", color="k", label="reference")
-            ax.plot(t, out, label="response")
-            ax.set_xlim(0, 10)
-        ax.set_title(title)
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel(f"{report['axis']} ({unit})")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    ax = axes[1, 0]
-    if "turbulence" in traces:
-        tr = traces["turbulence"]
-        ax.plot(t, tr["gust"], color="0.7", label="gust rate (deg/s)")
-        ax.plot(t, tr["rate"], label="rate, closed loop (deg/s)")
-        if "angle" in tr:
-            ax.plot(t, tr["angle"], label="angle, closed loop (deg)")
-        ax.set_title(f"Dryden turbulence, {report['turbulence']['level']}")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("deg/s, deg")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax = axes[1, 1]
-    w = np.logspace(-1, 3, 400)
-    for name, L in (("rate loop L_r", loops["L_r"]), ("angle loop L_a", loops["L_a"])):
-        if L is None:
-            continue
-        resp = L(1j * w)
-        ax.semilogx(w, 20 * np.log10(np.abs(resp)), label=f"{name}: PM "
-                    f"{report['loops']['rate' if 'rate' in name else 'angle']['phase_margin_deg'] or float('nan'):.0f} deg")
-    ax.axhline(0, color="k", lw=0.8)
-    ax.set_title("loop gains")
-    ax.set_xlabel("frequency (rad/s)")
-    ax.set_ylabel("magnitude (dB)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.suptitle(f"{report['axis']}: closed-loop validation of the identified model")
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)

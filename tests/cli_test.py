@@ -133,6 +133,9 @@ BAD_FIT = {
     "improper order": (GOOD_POINTS, ["--order", "3/1"], "improper"),
     "dB magnitude": (GOOD_POINTS.replace(",0.", ",-3.", 1), [], "positive"),
     "sigma weights without sigma": (GOOD_POINTS, ["--weights", "sigma"], "no sigma column"),
+    "coherence all 0": (GOOD_POINTS.replace("phase_rad", "phase_rad,coherence")
+                        .replace("\n", ",0\n").replace("phase_rad,coherence,0", "phase_rad,coherence"),
+                        [], "every point has coherence 0"),
     "unknown option": (GOOD_POINTS, ["--frobnicate"], "unrecognized"),
 }
 
@@ -143,6 +146,20 @@ def test_fit_bad_input_is_one_line_exit_2(case, tmp_path):
     res = heliquad("fit", write(tmp_path / "p.csv", text), *extra, "--json", tmp_path / "m.json")
     assert_one_line_error(res, match)
     assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("F, extra", [
+    (lambda w: 3 / (1j * w), ["--allow-unstable"]),           # an integrator: trial poles on a point
+    (lambda w: 1 / (1j * w - 2), ["--allow-unstable"]),
+    (lambda w: np.full(w.shape, 1e-12 + 0j), []),
+])
+def test_fit_of_awkward_points_prints_no_warning(F, extra, tmp_path):
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 10)
+    np.savetxt(tmp_path / "p.csv", np.column_stack([omega, np.abs(F(omega)), np.angle(F(omega))]),
+               delimiter=",", header="omega_rad_s,magnitude,phase_rad", comments="")
+    res = heliquad("fit", tmp_path / "p.csv", *extra, "--json", tmp_path / "m.json",
+                   "--plot", tmp_path / "b.png")
+    assert res.returncode == 0 and res.stderr == "", res.stderr
 
 
 def test_missing_file_is_one_line_exit_2(tmp_path):

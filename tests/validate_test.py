@@ -10,7 +10,8 @@ import pytest
 import scipy.optimize
 
 from heliquad.host import paper
-from heliquad.host.validate import load_gains, validate_model
+from heliquad.host.plot import new_figure, plot_validation
+from heliquad.host.validate import load_gains, validate_model, validation_record
 
 
 @pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])
@@ -19,9 +20,9 @@ def test_papers_models_and_gains_give_stable_loops_with_margins(axis):
     report, _ = validate_model(num, den, 0.0, axis, load_gains(axis), turbulence="moderate", seed=1)
     assert report["stable"]
     for loop in report["loops"].values():
-        assert loop["closed_loop_stable"] and loop["phase_margin_deg"] > 30
+        assert loop["closed_loop_stable"] and loop["phase_margin_rad"] > math.radians(30)
     assert set(report["loops"]) == ({"rate"} if axis == "yaw" else {"rate", "angle"})
-    assert report["turbulence"]["rate_rms_deg_s"] < report["turbulence"]["gust_rate_rms_deg_s"]
+    assert report["turbulence"]["rate_rms_rad_s"] < report["turbulence"]["gust_rate_rms_rad_s"]
 
 
 def test_rate_loop_phase_margin_matches_a_hand_computation():
@@ -33,9 +34,9 @@ def test_rate_loop_phase_margin_matches_a_hand_computation():
         return kc * (1 + 1 / (ti * s) + td * s / (td / 10 * s + 1)) * 28.19 / (s * s + 5.13 * s + 22.93)
 
     wc = scipy.optimize.brentq(lambda w: abs(L(w)) - 1, 1.0, 100.0)
-    pm = 180 + math.degrees(np.angle(L(wc)))
+    pm = math.pi + np.angle(L(wc))
     report, _ = validate_model([28.19], [1, 5.13, 22.93], 0.0, "roll", load_gains("roll"), None)
-    assert report["loops"]["rate"]["phase_margin_deg"] == pytest.approx(pm, abs=0.05)
+    assert report["loops"]["rate"]["phase_margin_rad"] == pytest.approx(pm, abs=1e-3)
     assert report["loops"]["rate"]["gain_crossover_rad_s"] == pytest.approx(wc, rel=1e-3)
 
 
@@ -43,8 +44,77 @@ def test_delay_costs_phase_margin():
     base, _ = validate_model([28.19], [1, 5.13, 22.93], 0.0, "roll", load_gains("roll"), None)
     late, _ = validate_model([28.19], [1, 5.13, 22.93], 0.05, "roll", load_gains("roll"), None)
     wc = base["loops"]["rate"]["gain_crossover_rad_s"]
-    lost = base["loops"]["rate"]["phase_margin_deg"] - late["loops"]["rate"]["phase_margin_deg"]
-    assert lost == pytest.approx(math.degrees(wc * 0.05), rel=0.05)   # w_c tau, crossover unmoved
+    lost = base["loops"]["rate"]["phase_margin_rad"] - late["loops"]["rate"]["phase_margin_rad"]
+    assert lost == pytest.approx(wc * 0.05, rel=0.05)   # w_c tau, crossover unmoved
+
+
+def _keys(doc):
+    if isinstance(doc, dict):
+        for key, value in doc.items():
+            yield key
+            yield from _keys(value)
+
+
+@pytest.fixture(scope="module")
+def roll_validation():
+    num, den = paper.MODELS["roll"][paper.CHOSEN_ORDER["roll"]]
+    return validate_model(num, den, 0.0, "roll", load_gains("roll"), "moderate", seed=2)
+
+
+def test_the_report_and_traces_are_in_si_units(roll_validation):
+    report, traces = roll_validation
+    assert not [k for k in _keys(report) if "deg" in k or k.endswith(("_db", "_hz"))]
+    step = report["step"]
+    assert step["quantity"] == "angle" and step["size"] == pytest.approx(math.radians(10))
+    ref, out = traces["step"]
+    assert ref[0] == step["size"] and out[-1] == pytest.approx(step["size"], rel=1e-3)
+    assert report["sine"]["omega_rad_s"] == pytest.approx(math.pi)
+    assert np.max(traces["sine"][0]) == pytest.approx(math.radians(10), rel=1e-4)
+    # the gust rate (rad/s) is the Dryden model's own output: its RMS is of order 1 rad/s
+    tb = report["turbulence"]
+    assert np.std(traces["turbulence"]["gust"]) == pytest.approx(tb["gust_rate_rms_rad_s"])
+    assert 0.1 < tb["gust_rate_rms_rad_s"] < 5 and tb["angle_rms_rad"] < tb["angle_max_rad"] < 1
+    loop = report["loops"]["angle"]
+    assert loop["gain_margin"] > 1 and 0 < loop["phase_margin_rad"] < math.pi
+
+
+def test_the_record_is_the_report_in_degrees_db_and_hz(roll_validation):
+    report, _ = roll_validation
+    doc = validation_record(report)
+    assert set(doc) == {"axis", "num", "den", "delay_s", "gains", "loops", "stable", "step",
+                        "sine", "turbulence"}
+    for name, loop in report["loops"].items():
+        rec = doc["loops"][name]
+        assert set(rec) == {"gain_margin_db", "phase_margin_deg", "gain_crossover_rad_s",
+                            "phase_crossover_rad_s", "closed_loop_stable", "unstable_pole_rad_s"}
+        assert rec["phase_margin_deg"] == pytest.approx(math.degrees(loop["phase_margin_rad"]))
+        assert rec["gain_crossover_rad_s"] == loop["gain_crossover_rad_s"]
+    rate_gm = report["loops"]["rate"]["gain_margin"]
+    assert doc["loops"]["rate"]["gain_margin_db"] == (None if rate_gm is None else
+                                                     pytest.approx(20 * math.log10(rate_gm)))
+    assert doc["loops"]["angle"]["gain_margin_db"] == pytest.approx(
+        20 * math.log10(report["loops"]["angle"]["gain_margin"]))
+    assert doc["step"]["size"] == pytest.approx(10) and doc["step"]["unit"] == "deg"
+    assert doc["step"]["rise_time_s"] == report["step"]["rise_time_s"]
+    assert doc["sine"]["freq_hz"] == pytest.approx(0.5)
+    assert doc["sine"]["amplitude"] == pytest.approx(10)
+    assert doc["sine"]["tracking_rms"] == pytest.approx(math.degrees(report["sine"]["tracking_rms"]))
+    tb, rec = report["turbulence"], doc["turbulence"]
+    assert rec["gust_rate_rms_deg_s"] == pytest.approx(math.degrees(tb["gust_rate_rms_rad_s"]))
+    assert rec["angle_max_deg"] == pytest.approx(math.degrees(tb["angle_max_rad"]))
+    json.dumps(doc)                                   # plain JSON: no numpy types left
+
+
+def test_the_validation_plot_draws_in_degrees_onto_the_given_axes(roll_validation):
+    report, traces = roll_validation
+    fig, axes = new_figure(2, 2)
+    assert plot_validation(axes, report, traces) is fig
+    step_ax, loops_ax = axes[0, 0], axes[1, 1]
+    assert max(step_ax.lines[0].get_ydata()) == pytest.approx(10)
+    assert step_ax.get_ylabel() == "roll (deg)" and axes[0, 1].get_title() == "sine tracking, 0.5 Hz"
+    pm = math.degrees(report["loops"]["rate"]["phase_margin_rad"])
+    assert loops_ax.lines[0].get_label() == f"rate loop L_r: PM {pm:.0f} deg"
+    assert len(loops_ax.lines) == 3                   # both loops and the 0 dB line
 
 
 def cli(*args):
@@ -66,7 +136,20 @@ def test_cli_writes_report_and_plot(tmp_path):
     assert "phase margin" in res.stdout
     doc = json.loads((tmp_path / "validation.json").read_text())
     assert doc["stable"] and doc["turbulence"]["seed"] == 3
+    pm = doc["loops"]["rate"]["phase_margin_deg"]
+    assert 30 < pm < 90 and f"phase margin {pm:.1f} deg" in res.stdout
     assert (tmp_path / "validation.png").stat().st_size > 20_000
+
+
+@pytest.mark.parametrize("num, den, extra", [
+    ([1, 0], [1, 2, 1], []),                        # a zero at the origin: NaN margins inside
+    ([3], [1, 0], ["--turbulence", "none"]),        # an integrator, no turbulence panel
+    ([1.191], [1, 1.178], ["--axis", "yaw", "--turbulence", "none"]),
+    ([0], [1, 1], []),                              # a zero model: no rise or settling time
+])
+def test_awkward_models_print_no_warning(tmp_path, num, den, extra):
+    res = cli(models_file(tmp_path, num, den), *extra)
+    assert res.returncode in (0, 1) and res.stderr == "", res.stderr
 
 
 def test_an_unstable_cascade_is_reported_with_exit_1(tmp_path):

@@ -43,7 +43,8 @@ def add_parser(sub, fmt) -> None:
                         "are flagged)")
     p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
     p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models")
-    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB")
+    p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB (a "
+                   "struct array, docs/file-formats.md)")
     p.set_defaults(func=run)
 
 
@@ -73,11 +74,10 @@ def run(args) -> int:
         write_models_mat(args.mat, result.models, result.recommended)
         print(f"wrote {args.mat}")
     if args.plot:
-        from ..plot import plot_bode
+        from ..plot import write_bode
 
-        sigma = points["sigma"]
-        plot_bode(args.plot, points["omega"], points["F"], sigma=sigma, models=result.models,
-                  recommended=result.recommended, title=str(args.points))
+        write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
+                   models=result.models, recommended=result.recommended, title=str(args.points))
         print(f"wrote {args.plot}")
     return 0
 

@@ -26,6 +26,9 @@ def add_parser(sub, fmt) -> None:
                    help="orders to fit (default: the paper's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
     p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
                    "(the loop's hold and the sensor's latency are real delays)")
+    p.add_argument("--mat", metavar="MODELS.mat",
+                   help="also write the models for MATLAB to this file (a struct array, "
+                        "docs/file-formats.md)")
     p.set_defaults(func=run)
 
 
@@ -46,6 +49,11 @@ def run(args) -> int:
               f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    if args.mat:
+        from ..files import write_models_mat
+
+        write_models_mat(args.mat, r["result"].models, r["result"].recommended)
+        print(f"wrote {args.mat}")
     if r["skipped"] or r["damage"]:
         n = len(r["points"]) + len(r["skipped"])
         sys.stderr.write(f"heliquad identify: warning: {len(r['skipped'])} of {n} measured "

@@ -42,7 +42,7 @@ def run(args) -> int:
     import json
     import os
 
-    from ..validate import load_gains, save_validation, validate_model
+    from ..validate import load_gains, save_validation, validate_model, validation_record
 
     try:
         with open(args.models) as fh:
@@ -68,13 +68,14 @@ def run(args) -> int:
     turbulence = None if args.turbulence == "none" else args.turbulence
     report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
     out = args.out or os.path.dirname(os.path.abspath(args.models))
-    _print_validation(report)
-    written = save_validation(out, report, traces, num, den, delay, axis, gains)
+    _print_validation(validation_record(report))
+    written = save_validation(out, report, traces)
     print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
     return 0 if report["stable"] else 1
 
 
 def _print_validation(r) -> None:
+    """The validation as validation.json records it (degrees, deg/s and dB)."""
     coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
     print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
           + (f" * exp(-{r['delay_s'] * 1e3:.3g} ms s)" if r["delay_s"] else ""))

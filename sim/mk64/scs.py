@@ -194,11 +194,17 @@ class SystemControlSpace(Device):
         return value
 
     def _write_word(self, a, value, mask):
+        """Write the bits of ``mask`` (``value`` already shifted into place) of the word at
+        ``a``; an address with no register modelled is a bus fault."""
+        if not (self._write_nvic(a, value, mask) or self._write_scb(a, value, mask)
+                or self._write_fault_debug_fpu(a, value, mask)):
+            raise Fault("BusFault", f"write to 0x{a:08X}: no system control register modelled "
+                        "there", self.m.pc, a)
+
+    def _write_nvic(self, a, value, mask) -> bool:
+        """The NVIC's set/clear words, its priorities and STIR (False: not one of them)."""
         m = self.m
-        now = m.now()
-        if a == _SCB.address("ACTLR"):
-            self.actlr = (self.actlr & ~mask) | value
-        elif ISER <= a < ISER + 4 * N_IRQ_WORDS:
+        if ISER <= a < ISER + 4 * N_IRQ_WORDS:
             m.enabled |= value << (16 + 32 * ((a - ISER) // 4))
             m.attention()
         elif ICER <= a < ICER + 4 * N_IRQ_WORDS:
@@ -216,17 +222,20 @@ class SystemControlSpace(Device):
                 if (mask >> (8 * i)) & 0xFF and n + i < N_IPR:
                     m.priority[16 + n + i] = (value >> (8 * i)) & PRIORITY_MASK
             m.attention()
+        elif a == STIR:
+            m.pend(16 + (value & 0x1FF))
+        else:
+            return False
+        return True
+
+    def _write_scb(self, a, value, mask) -> bool:
+        """ACTLR and the SCB's control words: ICSR, VTOR, AIRCR, SCR, CCR, SHPR1-3, SHCSR, and
+        the read-only ICTR and CPUID (False: not one of them)."""
+        m = self.m
+        if a == _SCB.address("ACTLR"):
+            self.actlr = (self.actlr & ~mask) | value
         elif a == _SCB.address("ICSR"):
-            if value & (1 << 26):
-                m.pend(15)
-            if value & (1 << 25):
-                m.unpend(15)
-            if value & (1 << 28):
-                m.pend(14)
-            if value & (1 << 27):
-                m.unpend(14)
-            if value & (1 << 31):
-                m.pend(2)
+            self._write_icsr(value)
         elif a == _SCB.address("VTOR"):
             m.vtor = ((m.vtor & ~mask) | value) & 0xFFFF_FF80
         elif a == _SCB.address("AIRCR"):
@@ -246,7 +255,31 @@ class SystemControlSpace(Device):
             m.attention()
         elif a == _SCB.address("SHCSR"):
             self.shcsr = (self.shcsr & ~mask) | value
-        elif a in (_SCB.address(n) for n in ("CFSR", "HFSR", "DFSR")):
+        elif a in (ICTR, _SCB.address("CPUID")):
+            pass
+        else:
+            return False
+        return True
+
+    def _write_icsr(self, value):
+        """ICSR's set and clear bits: PendSV (28, 27), SysTick (26, 25), NMI (31)."""
+        m = self.m
+        if value & (1 << 26):
+            m.pend(15)
+        if value & (1 << 25):
+            m.unpend(15)
+        if value & (1 << 28):
+            m.pend(14)
+        if value & (1 << 27):
+            m.unpend(14)
+        if value & (1 << 31):
+            m.pend(2)
+
+    def _write_fault_debug_fpu(self, a, value, mask) -> bool:
+        """The fault status and address registers, CPACR, the debug block's DHCSR and DEMCR,
+        the FPU's control words and the read-only MVFR0/1 (False: not one of them)."""
+        m = self.m
+        if a in (_SCB.address(n) for n in ("CFSR", "HFSR", "DFSR")):
             name = next(n for n in ("CFSR", "HFSR", "DFSR") if _SCB.address(n) == a)
             self.fault_status[name] = self.fault_status.get(name, 0) & ~value   # write 1 to clear
         elif a in (_SCB.address("MMFAR"), _SCB.address("BFAR"), _SCB.address("AFSR")):
@@ -257,20 +290,18 @@ class SystemControlSpace(Device):
             pass                            # debug halting: no debugger
         elif a == _DBG.address("DEMCR"):
             self.demcr = ((self.demcr & ~mask) | value) & 0x010F_07F1
-            m.dwt.trace_changed(self.trace_enabled, now)
+            m.dwt.trace_changed(self.trace_enabled, m.now())
         elif a == _SCB.address("FPCCR"):
             m.fpccr = ((m.fpccr & ~mask) | value) & 0xC000_0000 | (m.fpccr & 0x1FB)
         elif a == _SCB.address("FPCAR"):
             self.fpcar = ((self.fpcar & ~mask) | value) & ~7
         elif a == _SCB.address("FPDSCR"):
             self.fpdscr = ((self.fpdscr & ~mask) | value) & 0x07C0_0000
-        elif a == STIR:
-            m.pend(16 + (value & 0x1FF))
-        elif a in (ICTR, _SCB.address("CPUID"), MVFR0, MVFR1):
+        elif a in (MVFR0, MVFR1):
             pass
         else:
-            raise Fault("BusFault", f"write to 0x{a:08X}: no system control register modelled "
-                        "there", m.pc, a)
+            return False
+        return True
 
     @property
     def trace_enabled(self):

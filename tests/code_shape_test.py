@@ -1,0 +1,105 @@
+"""The code's shape: no Python function in the tool, the simulator, the benchmarks or the
+firmware's scripts is longer than MAX_FUNCTION_LINES (a longer one is split into named
+pieces, each saying what it does), and the library changes no process-wide setting that
+belongs to its caller (numpy's error handling, matplotlib's backend).
+
+Reads the sources with ``ast``; imports nothing from heliquad.
+"""
+
+from __future__ import annotations
+
+import ast
+import pathlib
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+#: The folders walked (every .py file below each).
+FOLDERS = ("host", "sim", "benchmarks", "firmware")
+#: A function's length: from its ``def`` line to its last line, docstring and blank lines
+#: included (decorators not).
+MAX_FUNCTION_LINES = 60
+#: "path:function" -> why it may be longer. Empty: every function fits.
+EXEMPT: dict[str, str] = {}
+
+
+def long_functions(source: str, path: str = "<source>", limit: int = MAX_FUNCTION_LINES):
+    """``(path:line function, lines)`` of every function (nested and methods included)
+    longer than ``limit`` lines."""
+    found = []
+    for node in ast.walk(ast.parse(source, filename=path)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            lines = node.end_lineno - node.lineno + 1
+            if lines > limit:
+                found.append((f"{path}:{node.lineno} {node.name}", lines))
+    return found
+
+
+def _sources():
+    for folder in FOLDERS:
+        yield from sorted((ROOT / folder).rglob("*.py"))
+
+
+def test_the_walk_reaches_every_folder():
+    seen = {path.relative_to(ROOT).parts[0] for path in _sources()}
+    assert seen == set(FOLDERS)
+
+
+def test_the_measure_counts_from_def_to_the_last_line():
+    def body(indent, n):
+        return [f"{indent}x{i} = {i}" for i in range(n)]
+
+    source = "\n".join(["@decorator", "def fits():", *body("    ", 59), "",
+                        "class Holder:", "    def too_long(self):", *body("        ", 58),
+                        "        def inner():", "            pass", ""])
+    # fits: 60 lines, the limit itself (the decorator does not count); too_long: 61, its
+    # nested function included
+    assert long_functions(source, "m.py") == [("m.py:64 too_long", 61)]
+    assert long_functions(source, "m.py", limit=59) == [("m.py:2 fits", 60),
+                                                         ("m.py:64 too_long", 61)]
+
+
+def test_no_function_is_longer_than_the_limit():
+    offenders = []
+    for path in _sources():
+        rel = path.relative_to(ROOT).as_posix()
+        for where, lines in long_functions(path.read_text(), rel):
+            name = f"{rel}:{where.split()[-1]}"
+            if name not in EXEMPT:
+                offenders.append(f"{where}: {lines} lines")
+    assert not offenders, (f"functions over {MAX_FUNCTION_LINES} lines; split them into named "
+                           "pieces:\n" + "\n".join(offenders))
+
+
+def test_every_exemption_is_still_needed():
+    long = {f"{path.relative_to(ROOT).as_posix()}:{where.split()[-1]}"
+            for path in _sources()
+            for where, _ in long_functions(path.read_text(), path.relative_to(ROOT).as_posix())}
+    assert not set(EXEMPT) - long, "exempted functions that now fit: drop them from EXEMPT"
+
+
+#: Calls that change what the whole process does, ``module: attribute``; the library leaves
+#: them to the program that uses it (``np.errstate`` is the local form of ``np.seterr``).
+PROCESS_WIDE = {"np": "seterr", "numpy": "seterr", "matplotlib": "use"}
+LIBRARY_FOLDERS = ("host", "sim")
+
+
+def process_wide_calls(source: str, path: str = "<source>"):
+    found = []
+    for node in ast.walk(ast.parse(source, filename=path)):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and isinstance(node.func.value, ast.Name)
+                and PROCESS_WIDE.get(node.func.value.id) == node.func.attr):
+            found.append(f"{path}:{node.lineno} {node.func.value.id}.{node.func.attr}")
+    return found
+
+
+def test_the_finder_sees_process_wide_calls():
+    source = "import numpy as np\nnp.seterr(all='ignore')\nwith np.errstate(all='ignore'):\n" \
+             "    pass\nimport matplotlib\nmatplotlib.use('Agg')\n"
+    assert process_wide_calls(source, "m.py") == ["m.py:2 np.seterr", "m.py:6 matplotlib.use"]
+
+
+def test_the_library_sets_nothing_process_wide():
+    offenders = [hit for folder in LIBRARY_FOLDERS for path in sorted((ROOT / folder).rglob("*.py"))
+                 for hit in process_wide_calls(path.read_text(), path.relative_to(ROOT).as_posix())]
+    assert not offenders, ("process-wide settings in the library (use np.errstate locally; "
+                           "make figures with matplotlib.figure.Figure):\n" + "\n".join(offenders))
