@@ -21,15 +21,16 @@ from .imu_model import ImuModel
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle
 
-__all__ = ["VehiclePlant", "mixer_for", "pid_z"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
 EPS_COMMAND = 1e-3
 
 
-def mixer_for(params: VehicleParams):
-    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+def mixer_geometry(params: VehicleParams):
+    """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
+    the shipped parameter file's: tests/vehicle_test.py)."""
     from heliquad import _firmware as fw
 
     g = fw.MixerGeometry()
@@ -39,7 +40,14 @@ def mixer_for(params: VehicleParams):
     g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
     g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
     g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
-    return fw.Mixer(g)
+    return g
+
+
+def mixer_for(params: VehicleParams):
+    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+    from heliquad import _firmware as fw
+
+    return fw.Mixer(mixer_geometry(params))
 
 
 class VehiclePlant:
