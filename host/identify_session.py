@@ -53,8 +53,7 @@ def _load(dir_path):
 def _check_log_matches(dir_path, manifest, samples) -> None:
     """The log's excitations are the manifest's: same axis and injection (a folder whose
     log comes from another session is refused, not fitted)."""
-    from .link import AXES, INJECTIONS
-    from ..sim.dialect import dialect
+    from ..sim.dialect import AXES, INJECTIONS, dialect
 
     idle = dialect().HQ_EXCITATION_STATE_IDLE
     want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))

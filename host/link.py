@@ -14,27 +14,35 @@ import time
 import serial
 
 from .errors import InputError
+from ..sim import dialect as names
 from ..sim.mavframe import Codec, Framer
 from ..sim.dialect import dialect
 
-__all__ = ["TelemetryLink", "AXES", "INJECTIONS", "INPUT_OUTPUT", "MODES", "SESSION_MESSAGES",
-           "HEARTBEAT_PERIOD_S", "reason_text"]
+# AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
+__all__ = ["TelemetryLink", "INPUT_OUTPUT", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
+           "reason_text"]
 
-AXES = {"roll": 0, "pitch": 1, "yaw": 2}
-INJECTIONS = {"angle": 0, "rate": 1, "mixer": 2}
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point.
 INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
 #: The messages a session driver (SIL or board) reads while an excitation runs.
 SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
-MODES = {"angle": dialect().HQ_MODE_ANGLE, "rate": dialect().HQ_MODE_RATE}
 #: How often a session sends the host's HEARTBEAT: the firmware stops an excitation 1.5 s
 #: after the last one (and disarms a vehicle armed by command), so a few late ones must not
 #: end a run.
 HEARTBEAT_PERIOD_S = 0.25
-HOST_SYSTEM_ID, HOST_COMPONENT_ID = 255, 190       # a ground station's usual IDs
-TARGET_SYSTEM, TARGET_COMPONENT = 1, 1
-MAV_CMD_COMPONENT_ARM_DISARM = 400
+#: The host's system id, a ground station's usual one (its component: MAV_COMP_ID_MISSIONPLANNER),
+#: and the vehicle's (its component: MAV_COMP_ID_AUTOPILOT1).
+HOST_SYSTEM_ID, TARGET_SYSTEM = 255, 1
+
+
+def __getattr__(name: str):
+    """``AXES``, ``INJECTIONS`` and ``MODES``: the dialect's names for HQ_AXIS, HQ_INJECTION
+    and HQ_MODE (``{"roll": 0, ...}``, sim/dialect.py), made on first use, so importing this
+    module (as the command line does) needs no generated code yet."""
+    if name in names.NAMED_ENUMS:
+        return getattr(names, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def reason_text(code: int) -> str:
@@ -69,8 +77,10 @@ class TelemetryLink:
             self.serial = serial.Serial(port, baudrate=baud, timeout=0, write_timeout=1.0)
         except (serial.SerialException, OSError) as exc:
             raise InputError(f"cannot open {port}: {exc}") from None
-        self.mav = self.mav_module.MAVLink(self.serial, srcSystem=HOST_SYSTEM_ID,
-                                           srcComponent=HOST_COMPONENT_ID)
+        self.mav = self.mav_module.MAVLink(
+            self.serial, srcSystem=HOST_SYSTEM_ID,
+            srcComponent=self.mav_module.MAV_COMP_ID_MISSIONPLANNER)
+        self.target = self.mav_module.MAV_COMP_ID_AUTOPILOT1
         self.mav.robust_parsing = True
         self.codec = Codec(self.mav_module)
         self.framer = Framer(self.codec)
@@ -109,20 +119,27 @@ class TelemetryLink:
                 if wanted is None or msgid in wanted]
 
     def heartbeat(self) -> None:
-        self.mav.heartbeat_send(6, 8, 0, 0, 0)          # MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID
+        m = self.mav_module
+        self.mav.heartbeat_send(m.MAV_TYPE_GCS, m.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def arm(self, arm: bool = True) -> None:
-        self.mav.command_long_send(TARGET_SYSTEM, TARGET_COMPONENT, MAV_CMD_COMPONENT_ARM_DISARM,
+        self.mav.command_long_send(TARGET_SYSTEM, self.target,
+                                   self.mav_module.MAV_CMD_COMPONENT_ARM_DISARM,
                                    0, 1.0 if arm else 0.0, 0, 0, 0, 0, 0, 0)
 
     def set_mode(self, mode: str) -> None:
-        self.mav.set_mode_send(TARGET_SYSTEM, 1, MODES[mode])
+        self.mav.set_mode_send(TARGET_SYSTEM, self.mav_module.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                               names.MODES[mode])
 
     def start_excitation(self, axis: str, injection: str, freq_hz: float, amplitude: float,
                          cycles: int, fade_cycles: int) -> None:
-        self.mav.hq_excitation_send(TARGET_SYSTEM, TARGET_COMPONENT, 1, AXES[axis],
-                                    INJECTIONS[injection], float(freq_hz), float(amplitude),
+        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target,
+                                    self.mav_module.HQ_EXCITATION_START, names.AXES[axis],
+                                    names.INJECTIONS[injection], float(freq_hz), float(amplitude),
                                     int(cycles), int(fade_cycles))
 
     def stop_excitation(self) -> None:
-        self.mav.hq_excitation_send(TARGET_SYSTEM, TARGET_COMPONENT, 0, 0, 0, 0.0, 0.0, 0, 0)
+        """Stop any excitation (axis and injection are not read with STOP)."""
+        m = self.mav_module
+        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_STOP,
+                                    m.HQ_AXIS_ROLL, m.HQ_INJECTION_ANGLE, 0.0, 0.0, 0, 0)

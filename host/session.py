@@ -21,6 +21,7 @@ from typing import Callable, Protocol
 
 from heliquad import _firmware, _simcore
 
+from ..sim.dialect import dialect
 from ..sim.faults import check_faults, imu_fault_codes, link_close_frame
 from ..sim.lockstep import FirmwareError, SimLink, actuators, start_firmware
 from ..sim.sil import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
@@ -158,7 +159,7 @@ class SilSession:
         # The tool's heartbeat, on exact frames so that runs repeat.
         self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
-        self.frame, self.kind, self.reply = 0, 0, None
+        self.frame, self.kind, self.reply = 0, dialect().HQ_SENSOR_NONE, None
         self.t0 = time.monotonic()
 
     @property

@@ -7,8 +7,8 @@ HQ_EXCITATION_STATUS (which gives the exact frequency used), watches every HQ_SY
 until the excitation ends (:class:`ExcitationWatch`), and the sweep moves on. ``heliquad sil``
 is the same routine for one frequency. Everything is logged to ``DIR/sweep.tlog``;
 ``DIR/manifest.json`` (axis, injection, frequencies requested and used, sample windows,
-gains, firmware version, start time, aborts) is rewritten after every frequency, so Ctrl-C
-or a breach leaves a valid, identifiable session.
+the gains the firmware flies, firmware version, start time, aborts) is rewritten after every
+frequency, so Ctrl-C or a breach leaves a valid, identifiable session.
 
 Safety: the firmware enforces its own rules (docs/safety.md): it refuses an excitation out
 of bounds or while disarmed, and stops one when its axis passes the abort limits, when the
@@ -21,6 +21,7 @@ sweep. Both limits default to the firmware's own (one definition, read from its 
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import math
 import os
@@ -34,6 +35,7 @@ from . import __version__, paper
 from .errors import InputError, Terminated
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
+from .gains import firmware_gains
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "measure", "ExcitationWatch", "Limits",
            "MANIFEST", "SWEEP_TLOG", "saturation_text"]
@@ -97,7 +99,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
     """Run the plan on ``session``; returns the manifest (also written to ``out_dir``)."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
-    gains = {"rate": paper.RATE_GAINS[plan.axis], "angle": paper.ANGLE_GAINS.get(plan.axis)}
+    gains = dataclasses.asdict(firmware_gains(plan.axis))      # what the firmware flies
     manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
                 "firmware": f"heliquad {__version__}", "gains": gains,
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -176,6 +178,7 @@ class ExcitationWatch:
         self.flags = {"saturated": mav.HQ_SATURATION_TORQUE,
                       "collective_limited": mav.HQ_SATURATION_COLLECTIVE,
                       "sensor_clipped": mav.HQ_SATURATION_GYRO | mav.HQ_SATURATION_ACCEL}
+        self.warning = mav.MAV_SEVERITY_WARNING
         self.plan, self.limits, self.progress = plan, limits, progress
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
@@ -193,7 +196,7 @@ class ExcitationWatch:
             self._status(m)
         elif kind == "HQ_SYSID_SAMPLE":
             self._sample(m)
-        elif kind == "STATUSTEXT" and m.severity <= 4:
+        elif kind == "STATUSTEXT" and m.severity <= self.warning:
             self.entry.setdefault("messages", []).append(m.text)
             self.progress(f"firmware: {m.text}")
 

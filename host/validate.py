@@ -4,8 +4,9 @@ The cascade of the paper, in continuous time as the paper's validation does: an 
 rate loop ``C_r = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))`` around the identified
 model ``G`` (rate in, rate out), and for roll and pitch an outer PD angle loop
 ``C_a = Kc (1 + tau_D s / (tau_D/N s + 1))`` around ``T_r / s`` (angle is the integral of the
-rate). Yaw is rate-only. N = 10, as the firmware's derivative filter. A model's delay enters
-as a 3rd-order Pade approximant.
+rate). Yaw is rate-only. N is the firmware's derivative filter. The gains default to those
+the firmware flies (read from its bindings: the paper's). A model's delay enters as a
+3rd-order Pade approximant.
 
 Reported: gain and phase margins and crossovers of each loop, closed-loop stability (and,
 when unstable, how far above the identified band the unstable poles lie), the
@@ -21,8 +22,6 @@ only in validation.json (:func:`validation_record`, docs/file-formats.md), in wh
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import math
 import os
 
@@ -30,13 +29,14 @@ import control
 import numpy as np
 
 from . import paper
-from .errors import InputError
+from ..sim import dialect as names
 from .files import write_json
+from .gains import DERIVATIVE_FILTER_N, Gains, load_gains
 
-__all__ = ["Gains", "load_gains", "build_loops", "validate_model", "validation_record",
+# Gains and load_gains are host/gains.py's, here for the validation's callers.
+__all__ = ["Gains", "load_gains", "pid_tf", "build_loops", "validate_model", "validation_record",
            "save_validation", "instability_text"]
 
-DERIVATIVE_FILTER_N = 10.0
 PADE_ORDER = 3
 DT_S = 0.005
 SINE_OMEGA_RAD_S = math.pi                      # 0.5 Hz
@@ -51,35 +51,11 @@ LOOP_GAIN_OMEGA_RAD_S = np.logspace(-1, 3, 400)
 OUT_OF_BAND_FACTOR = 3.0
 
 
-@dataclasses.dataclass(frozen=True)
-class Gains:
-    """Cascade gains of one axis: rate (Kc, tau_I, tau_D) and, for roll/pitch, angle (Kc, tau_D)."""
-
-    rate: tuple
-    angle: tuple | None
-
-
-def load_gains(axis: str, path: str | None = None) -> Gains:
-    """The paper's gains, or a gains file: ``{"rate": {"roll": [Kc, tau_I, tau_D], ...},
-    "angle": {"roll": [Kc, tau_D], ...}}``."""
-    if path is None:
-        return Gains(paper.RATE_GAINS[axis], paper.ANGLE_GAINS.get(axis))
-    try:
-        with open(path) as fh:
-            doc = json.load(fh)
-        rate = tuple(float(v) for v in doc["rate"][axis])
-        angle = tuple(float(v) for v in doc["angle"][axis]) if axis != "yaw" else None
-    except OSError as exc:
-        raise InputError(f"{path}: {exc.strerror}") from None
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"{path}: gains file needs rate.{axis} = [Kc, tau_I, tau_D]"
-                         f"{'' if axis == 'yaw' else f' and angle.{axis} = [Kc, tau_D]'} ({exc})") from None
-    if len(rate) != 3 or (angle is not None and len(angle) != 2) or min(rate) <= 0:
-        raise InputError(f"{path}: rate.{axis} needs 3 positive values, angle.{axis} 2")
-    return Gains(rate, angle)
-
-
-def _pid(kc, tau_i, tau_d):
+def pid_tf(kc, tau_i, tau_d):
+    """The firmware's PID (firmware/core/pid.hpp) in continuous time, on the error as the
+    paper writes it: ``Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))``; no integral for
+    tau_I <= 0, no derivative for tau_D <= 0. (The firmware differentiates the measurement
+    only, which spares a setpoint step the derivative kick and leaves the loop the same.)"""
     s = control.tf("s")
     c = kc * (1 + (1 / (tau_i * s) if tau_i > 0 else 0))
     if tau_d > 0:
@@ -92,12 +68,12 @@ def build_loops(num, den, delay_s, axis, gains: Gains):
     G = control.tf(list(num), list(den))
     if delay_s > 0:
         G = G * control.tf(*control.pade(delay_s, PADE_ORDER))
-    C_r = _pid(*gains.rate)
+    C_r = pid_tf(*gains.rate)
     L_r = C_r * G
     T_r = control.feedback(L_r, 1)
     if axis == "yaw" or gains.angle is None:
         return {"G": G, "C_r": C_r, "L_r": L_r, "T_r": T_r, "L_a": None, "T_a": None, "C_a": None}
-    C_a = _pid(gains.angle[0], 0.0, gains.angle[1])
+    C_a = pid_tf(gains.angle[0], 0.0, gains.angle[1])
     L_a = C_a * T_r * control.tf([1], [1, 0])
     T_a = control.feedback(L_a, 1)
     return {"G": G, "C_r": C_r, "L_r": L_r, "T_r": T_r, "L_a": L_a, "T_a": T_a, "C_a": C_a}
@@ -225,7 +201,7 @@ def _turbulence(loops, axis, outer, t, level, seed):
 
     tp = load_params().turbulence
     d = Dryden(level, tp.altitude_m, tp.span_m, DT_S, seed)
-    gust = d.block(t.size)[:, 3 + ("roll", "pitch", "yaw").index(axis)]
+    gust = d.block(t.size)[:, 3 + names.AXES[axis]]             # gust rates p, q, r, rad/s
     s = control.tf("s")
     G, C_r = loops["G"], loops["C_r"]
     outer_gain = (1 + loops["C_a"] / s) if outer else 1

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import time
 
+from .dialect import dialect
 from .lockstep import SimLink, start_firmware
 from .sil import rig_step
 from .tf_plant import TfPlant
@@ -36,7 +37,7 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
     try:
         link = SimLink(fw)
         ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")
-        kind = 0
+        kind = dialect().HQ_SENSOR_NONE            # until the firmware says what it set up
         t0 = time.monotonic()
         try:
             while duration_s is None or frames * dt_s < duration_s:

@@ -25,6 +25,7 @@ import serial
 from heliquad import _simcore
 from heliquad._simcore import LinkStatus
 
+from .dialect import dialect
 from .errors import FirmwareError
 
 __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
@@ -34,8 +35,6 @@ __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators
 START_TIMEOUT_S = 10.0
 #: How long one frame's reply may take before the link is declared dead.
 REPLY_TIMEOUT_S = 2.0
-FIFO_CAPACITY = 168            # HQ_SENSOR_FRAME.fifo
-SENSOR_NONE, SENSOR_DMP, SENSOR_RAW = 0, 1, 2
 
 
 #: The firmwares that can fly the simulated rig: the host build, and the Teensy 3.5 image in
@@ -244,15 +243,20 @@ class SimLink:
     def close(self) -> None:
         self.serial.close()
 
-    def step(self, time_us: int, fifo: bytes = b"", fifo_kind: int = SENSOR_NONE,
-             rc_us=(0,) * 8, frame: int | None = None, imu_fault: int = 0) -> Actuators:
-        """Send one sensor frame and wait for its actuator frame. ``imu_fault``: the
-        dialect's HQ_IMU_FAULT for the emulated MPU6050 at this frame (sim/faults.py)."""
-        if len(fifo) > FIFO_CAPACITY:
-            raise ValueError(f"at most {FIFO_CAPACITY} FIFO bytes per frame")
+    def step(self, time_us: int, fifo: bytes = b"", fifo_kind: int | None = None,
+             rc_us=None, frame: int | None = None, imu_fault: int | None = None) -> Actuators:
+        """Send one sensor frame and wait for its actuator frame. ``fifo_kind``: the dialect's
+        HQ_SENSOR_KIND of ``fifo`` (default HQ_SENSOR_NONE); ``rc_us``: the RC channels, us
+        (default: no signal on any); ``imu_fault``: the dialect's HQ_IMU_FAULT for the emulated
+        MPU6050 at this frame (sim/faults.py; default HQ_IMU_FAULT_NONE). A ValueError for more
+        FIFO bytes than the frame carries."""
+        mav = dialect()
+        fifo_kind = mav.HQ_SENSOR_NONE if fifo_kind is None else fifo_kind
+        imu_fault = mav.HQ_IMU_FAULT_NONE if imu_fault is None else imu_fault
+        rc_us = [0] * _simcore.RC_CHANNELS if rc_us is None else list(rc_us)
         frame = self.frame + 1 if frame is None else frame
         status, reply, errno = self.port.exchange(int(time_us), frame, fifo_kind, bytes(fifo),
-                                                  list(rc_us), imu_fault=int(imu_fault))
+                                                  rc_us, imu_fault=int(imu_fault))
         self.check(status, frame, reply, errno)
         self.frame = frame
         return actuators(reply)

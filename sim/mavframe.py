@@ -42,9 +42,13 @@ class Message:
 
 
 class Codec:
-    """Encoder and decoder for one generated dialect module."""
+    """Encoder and decoder for one generated dialect module. Packets it encodes come from
+    ``system_id`` and ``component_id`` (default: a ground station's, MAV_COMP_ID_MISSIONPLANNER
+    of system 255)."""
 
-    def __init__(self, mav_module, system_id: int = 255, component_id: int = 190):
+    def __init__(self, mav_module, system_id: int = 255, component_id: int | None = None):
+        if component_id is None:
+            component_id = mav_module.MAV_COMP_ID_MISSIONPLANNER
         self.classes = dict(mav_module.mavlink_map)
         self.extras = {msgid: cls.crc_extra for msgid, cls in self.classes.items()}
         self.extra_bytes = {msgid: bytes((extra,)) for msgid, extra in self.extras.items()}

@@ -10,12 +10,11 @@ these are its Python entry points.
 
 from __future__ import annotations
 
-from heliquad._simcore import dmp_packet, raw_packet
+# The scales (gyro LSB per deg/s at +/-2000 deg/s, accel LSB per g at +/-2 g, the DMP
+# quaternion's 2^30) and the packet sizes are the firmware driver's constants
+# (firmware/core/mpu6050.hpp), through heliquad._simcore: one definition.
+from heliquad._simcore import (ACCEL_LSB_PER_G, DMP_PACKET_SIZE, GYRO_LSB_PER_DEG_S,
+                               QUAT_SCALE, RAW_PACKET_SIZE, dmp_packet, raw_packet)
 
-__all__ = ["GYRO_LSB_PER_DEG_S", "ACCEL_LSB_PER_G", "DMP_PACKET_SIZE", "RAW_PACKET_SIZE",
-           "dmp_packet", "raw_packet"]
-
-GYRO_LSB_PER_DEG_S = 16.4     # +/-2000 deg/s full scale
-ACCEL_LSB_PER_G = 16384.0     # +/-2 g full scale
-DMP_PACKET_SIZE = 42
-RAW_PACKET_SIZE = 12
+__all__ = ["GYRO_LSB_PER_DEG_S", "ACCEL_LSB_PER_G", "QUAT_SCALE", "DMP_PACKET_SIZE",
+           "RAW_PACKET_SIZE", "dmp_packet", "raw_packet"]

@@ -364,7 +364,8 @@ class _DropIn:
 
         self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
         self.mav = mav = dialect()
-        self.codec = Codec(mav, system_id=1, component_id=1)   # the vehicle's ids, as the board's
+        # The vehicle's ids, as the board's.
+        self.codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
         self.framer = Framer(self.codec)
         self.frame_id = mav.MAVLINK_MSG_ID_HQ_SENSOR_FRAME
         self.reply_id = mav.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME

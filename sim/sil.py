@@ -103,11 +103,11 @@ def rc_block(first: int, n: int, collective: float) -> np.ndarray:
     return np.array([_rc(f, collective) for f in range(first, first + n)], dtype=np.uint16)
 
 
-def rig_step(link, plant, frame, time_us, kind, collective, imu_fault=0):
+def rig_step(link, plant, frame, time_us, kind, collective, imu_fault=None):
     """One lockstep frame of the simulated rig, driven from Python (the free-running board
     and tests): the plant's FIFO bytes and the pilot's RC out, the firmware's reply in, the
     plant stepped with the reply's motors. :class:`heliquad.host.session.SilSession` runs batches
-    of the same in C++."""
+    of the same in C++. ``imu_fault``: HQ_IMU_FAULT (default none)."""
     reply = link.step(time_us, plant.fifo(kind), kind, _rc(frame, collective), imu_fault=imu_fault)
     plant.step_motors(reply.motor)
     return reply

@@ -18,9 +18,9 @@ import numpy as np
 
 from heliquad import _simcore
 
-__all__ = ["TfPlant"]
+from .dialect import AXES
 
-AXES = ("roll", "pitch", "yaw")
+__all__ = ["TfPlant"]
 
 
 class TfPlant:
@@ -40,7 +40,7 @@ class TfPlant:
         if axis not in AXES:
             raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.axis = axis
-        self.index = AXES.index(axis)
+        self.index = AXES[axis]
         self.dt_s = dt_s
         self.G = control.tf(list(map(float, num)), list(map(float, den)))
         sys_d = control.sample_system(control.ss(self.G), dt_s, method="zoh")

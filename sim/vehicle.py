@@ -38,12 +38,14 @@ import numpy as np
 
 from heliquad import _simcore
 
+from .dialect import AXES
 from .params import VehicleParams, load_params
 
 __all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2"]
 
 GRAVITY_M_S2 = 9.80665
-RIGS = ("roll", "pitch", "yaw", "free")
+#: One rig per axis (the dialect's HQ_AXIS names), or free flight.
+RIGS = (*AXES, "free")
 
 
 def rotation_matrix(q):
@@ -89,7 +91,7 @@ class Vehicle:
         self.inertia = np.diag(self.p.body.inertia_kg_m2)
         self.inertia_inv = np.diag(1.0 / np.array(self.p.body.inertia_kg_m2))
         self._geometry()
-        self.free_axis = {"roll": 0, "pitch": 1, "yaw": 2}.get(rig)
+        self.free_axis = AXES.get(rig)           # the free axis's body index; None when free
         self.core = _simcore.VehicleModel(self._config())
 
     # --- geometry ---------------------------------------------------------------------

@@ -15,21 +15,22 @@ import scipy.linalg
 
 from heliquad import _simcore
 
+from .dialect import AXES
 from .dryden import Dryden
 from .imu_model import ImuModel
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle
 
-__all__ = ["VehiclePlant", "mixer_for", "pid_z"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z"]
 
-AXES = ("roll", "pitch", "yaw")
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
 EPS_COMMAND = 1e-3
 
 
-def mixer_for(params: VehicleParams):
-    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+def mixer_geometry(params: VehicleParams):
+    """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
+    the shipped parameter file's: tests/vehicle_test.py)."""
     from heliquad import _firmware as fw
 
     g = fw.MixerGeometry()
@@ -39,7 +40,14 @@ def mixer_for(params: VehicleParams):
     g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
     g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
     g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
-    return fw.Mixer(g)
+    return g
+
+
+def mixer_for(params: VehicleParams):
+    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+    from heliquad import _firmware as fw
+
+    return fw.Mixer(mixer_geometry(params))
 
 
 class VehiclePlant:
@@ -48,8 +56,10 @@ class VehiclePlant:
     def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
                  trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0,
                  ideal_sensor: bool = False):
+        if axis not in AXES:
+            raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.params = params or load_params()
-        self.axis, self.index = axis, AXES.index(axis)
+        self.axis, self.index = axis, AXES[axis]
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
         self.trim_collective = trim_collective
@@ -125,7 +135,7 @@ class VehiclePlant:
             return np.array(mixer.mix(fw.MixerCommand(self.trim_collective, *c)).motor)
 
         u0 = motors(0.0)
-        v = Vehicle(self.params, rig=self.rig if self.rig != "free" else AXES[self.index])
+        v = Vehicle(self.params, rig=self.rig if self.rig != "free" else self.axis)
         x0 = v.initial_state()
         x0[13:18] = v.w_max * np.sqrt(u0)
         idx = [10 + self.index] + list(range(13, 18))
@@ -173,7 +183,7 @@ class VehiclePlant:
             from heliquad import _firmware as fw
 
             g = gains or fw.CascadeGains.paper_defaults()
-            axis = (fw.Axis.ROLL, fw.Axis.PITCH, fw.Axis.YAW)[self.index]
+            axis = fw.Axis(self.index)
             c_pi, d_m = pid_z(g.rate(axis), self.dt_s, z)
             inner_den = 1 + h_rate * (c_pi - d_m)
             if inject == "rate":

@@ -26,8 +26,6 @@ RC_REST = (1500, 1500, 1000, 1500, 1000, 1000, 0, 0)
 ARM_HIGH, THROTTLE_HOVER = 2000, 1400
 #: How long a test may wait for telemetry that is due (a bound on a hang, never a check).
 WAIT_S = 5.0
-#: A COMMAND_LONG the firmware answers without acting (its COMMAND_ACK marks the loop).
-MAV_CMD_REQUEST_MESSAGE = 512
 
 
 class FirmwareRig:
@@ -39,7 +37,7 @@ class FirmwareRig:
         self.tel = TelemetryLink(fw.telemetry_path)
         self.plant = plant or TfPlant("roll", *ROLL, DT_US * 1e-6)
         self.rc = list(RC_REST)
-        self.frame, self.kind, self.reply = 0, 0, None
+        self.frame, self.kind, self.reply = 0, MAV.HQ_SENSOR_NONE, None
         self.messages = []              # every decoded telemetry message, in order
         self.samples = 0                # HQ_SYSID_SAMPLEs read: one per loop
         self.time_of = []               # the loop time of each (its HQ_SYSID_SAMPLE's)
@@ -53,7 +51,7 @@ class FirmwareRig:
     def time_us(self) -> int:
         return self.frame * DT_US
 
-    def step(self, n: int = 1, imu_fault: int = 0):
+    def step(self, n: int = 1, imu_fault: int = MAV.HQ_IMU_FAULT_NONE):
         """Run n frames; the last reply. Telemetry is read as it comes."""
         for _ in range(n):
             self.frame += 1
@@ -110,7 +108,7 @@ class FirmwareRig:
         return [(t, m) for t, m in zip(self.time_of, self.messages)
                 if m.get_type() == name and t >= since_us]
 
-    def until(self, predicate, max_frames: int = 400, imu_fault: int = 0):
+    def until(self, predicate, max_frames: int = 400, imu_fault: int = MAV.HQ_IMU_FAULT_NONE):
         """Step until predicate(message) holds for a message of a loop stepped here; that
         (loop time, message). Fails after max_frames."""
         self.settle_telemetry()
@@ -127,13 +125,14 @@ class FirmwareRig:
     def ping(self) -> int:
         """Send the host's HEARTBEAT and step until the firmware has processed it; the loop
         time at which it did (a COMMAND_ACK sent with it marks the loop)."""
-        # One write: both arrive together, so the ACK marks the heartbeat's own loop.
+        # One write: both arrive together, so the ACK marks the heartbeat's own loop (the
+        # firmware answers MAV_CMD_REQUEST_MESSAGE without acting).
         mav = self.tel.mav
         self.tel.serial.write(
-            mav.heartbeat_encode(6, 8, 0, 0, 0).pack(mav)
-            + mav.command_long_encode(1, 1, MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+            mav.heartbeat_encode(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
+            + mav.command_long_encode(1, 1, MAV.MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
         t, _ = self.until(lambda m: m.get_type() == "COMMAND_ACK"
-                          and m.command == MAV_CMD_REQUEST_MESSAGE)
+                          and m.command == MAV.MAV_CMD_REQUEST_MESSAGE)
         return t
 
     def hover(self, frames: int = 60):

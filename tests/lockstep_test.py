@@ -92,7 +92,7 @@ def test_rate_loop_holds_a_rate_setpoint(firmware):
     mixer = _firmware.Mixer()
     with start(firmware) as fw:
         link = SimLink(fw)
-        kind = 0
+        kind = MAV.HQ_SENSOR_NONE
         for frame in range(1, 1201):
             rc = [1500, 1500, 1000, 1500, 1000, 2000, 0, 0]
             if frame > 20:
@@ -103,7 +103,7 @@ def test_rate_loop_holds_a_rate_setpoint(firmware):
             kind = reply.sensor_kind
             plant.step(mixer.achieved(reply.motor).roll)
         link.close()
-    assert reply.armed and reply.mode == 2
+    assert reply.armed and reply.mode == MAV.HQ_MODE_RATE
     assert plant.rate_rad_s == pytest.approx(0.02 * math.radians(200), rel=0.02)
 
 
@@ -379,7 +379,7 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
     with HostFirmware(dmp_image=dmp_image) as fw:
         assert fw.imu_mode == ("dmp" if dmp_image else "raw")
         link = SimLink(fw)
-        kind = 0
+        kind = MAV.HQ_SENSOR_NONE
         for frame in range(1, frames + 1):
             rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
                   1000 if frame < 15 else 2000, 1500, 0, 0]
@@ -439,7 +439,7 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
     worst = 0.0
     with HostFirmware(dmp_image=str(image)) as fw:
         link = SimLink(fw)
-        kind = 0
+        kind = MAV.HQ_SENSOR_NONE
         for frame in range(1, 4001):
             rc = [1500, 1500, 1000 if frame < 30 else throttle, 1500,
                   1000 if frame < 15 else 2000, 1500, 0, 0]

@@ -1,7 +1,8 @@
 """The firmware's PID (firmware/core/pid.cpp), driven through the bindings.
 
 Modelled on PX4's PID test: zero case, limits, P convergence on a toy plant, integral ramp
-up and down, anti-windup; plus agreement with python-control's continuous PID.
+up and down, anti-windup; plus agreement with the host's two models of it: the continuous one
+of the closed-loop validation and the z-domain one of the simulator's truth.
 """
 
 import math
@@ -11,6 +12,8 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
+from heliquad.host.validate import pid_tf
+from heliquad.sim.vehicle_plant import pid_z
 
 DT = 0.005   # 200 Hz loop
 
@@ -91,24 +94,58 @@ def test_no_derivative_kick_on_a_setpoint_step():
     assert pid.d_term == 0.0
 
 
-def test_matches_python_control_continuous_pid():
-    # The paper's roll rate gains. With setpoint 0 and measurement -e(t), the firmware PID is
-    # C(s) = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1)) applied to e. The reference is
+def flown_rate_gains(axis=fw.Axis.ROLL):
+    """The firmware's own rate-loop gains of an axis, with limits too wide to act."""
+    g = fw.CascadeGains.paper_defaults().rate(axis)
+    g.output_min, g.output_max, g.integral_limit = -1e6, 1e6, 1e6
+    return g
+
+
+def test_matches_the_hosts_continuous_pid():
+    # The firmware's roll rate loop. With setpoint 0 and measurement -e(t), the firmware PID is
+    # the host's continuous model (host/validate.py, pid_tf: Kc (1 + 1/(tau_I s) +
+    # tau_D s / (tau_D/N s + 1)), N its derivative filter) applied to e. The reference is
     # python-control's response on a 20x finer grid. Tustin's error is O((w dt)^2): at 2 Hz
     # and 200 Hz it is ~1e-3 of the output, so 1 % of the output's amplitude is the bound,
     # after the first 0.1 s: the derivative filter (tau_f = 5 ms, about one sample) starts
     # differently from the continuous one and needs ~20 tau_f to forget it.
-    kc, ti, td, n = 2.422, 0.439, 0.051, 10.0
-    s = control.tf("s")
-    C = kc * (1 + 1 / (ti * s) + td * s / (td / n * s + 1))
+    g = flown_rate_gains()
+    C = pid_tf(g.kc, g.tau_i_s, g.tau_d_s)
     f_hz, duration = 2.0, 3.0
     fine = np.arange(0, duration, DT / 20)
     ref = control.forced_response(C, fine, np.sin(2 * math.pi * f_hz * fine)).outputs[::20]
-    pid = fw.Pid(gains(kc, ti, td, lo=-1e6, hi=1e6, i_limit=1e6, n=n))
+    pid = fw.Pid(g)
     t = np.arange(ref.size) * DT
     out = np.array([pid.update(0.0, -math.sin(2 * math.pi * f_hz * tk), DT) for tk in t])
     settled = t >= 0.1
     assert np.max(np.abs(out - ref)[settled]) < 0.01 * np.max(np.abs(ref))
+
+
+def steady_gain(pid, on_setpoint, f_hz, periods=40):
+    """The complex gain of the firmware Pid from a sine on the setpoint (or the measurement)
+    to its output, fitted over the last half of ``periods`` whole periods (with an offset:
+    the integral holds one)."""
+    n = int(round(1 / (f_hz * DT)))
+    k = np.arange(periods * n)
+    x = np.sin(2 * math.pi * k / n)
+    out = np.array([pid.update(v, 0.0, DT) if on_setpoint else pid.update(0.0, v, DT) for v in x])
+    last = k >= periods * n // 2
+    basis = np.column_stack([np.sin(2 * math.pi * k / n), np.cos(2 * math.pi * k / n),
+                             np.ones(k.size)])[last]
+    a, b, _ = np.linalg.lstsq(basis, out[last], rcond=None)[0]
+    return complex(a, b), 2 * math.pi / (n * DT)
+
+
+@pytest.mark.parametrize("f_hz", [0.5, 4.0, 20.0])
+def test_the_simulators_z_domain_pid_is_the_firmwares(f_hz):
+    # sim/vehicle_plant.py states the firmware's Pid in z for the closed loops' truth: output
+    # = C_PI (r - y) + D_m y. The firmware's own steady state must be exactly that.
+    g = flown_rate_gains()
+    on_error, w = steady_gain(fw.Pid(g), True, f_hz)
+    on_measurement, _ = steady_gain(fw.Pid(g), False, f_hz)
+    c_pi, d_m = pid_z(g, DT, np.exp(1j * w * DT))
+    assert on_error == pytest.approx(c_pi, rel=1e-5)
+    assert on_measurement == pytest.approx(d_m - c_pi, rel=1e-5)
 
 
 def test_cascade_defaults_are_the_papers_gains():

@@ -130,7 +130,7 @@ def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
     from heliquad.host.tlog import read_tlog
 
     mav = dialect()
-    codec = Codec(mav, system_id=1, component_id=1)
+    codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
     att = [codec.encode(mav.MAVLINK_MSG_ID_ATTITUDE, {
         "time_boot_ms": k, "roll": 0.1 * k, "pitch": 0.0, "yaw": 0.0, "rollspeed": 0.0,
         "pitchspeed": 0.0, "yawspeed": 0.0}) for k in range(3)]

@@ -157,7 +157,11 @@ def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
     assert not manifest["complete"]
     assert manifest["aborted"].startswith("refused by the firmware: amplitude not finite, not "
                                           "positive, or above")
-    assert json.loads((out / "manifest.json").read_text())["aborted"] == manifest["aborted"]
+    written = json.loads((out / "manifest.json").read_text())
+    assert written["aborted"] == manifest["aborted"]
+    # The gains recorded are those the firmware flies: the paper's, digit for digit.
+    assert written["gains"] == {"rate": list(paper.RATE_GAINS["roll"]),
+                                "angle": list(paper.ANGLE_GAINS["roll"])}
 
 
 def test_a_host_that_goes_quiet_ends_the_sweep_with_the_firmwares_reason(tmp_path):

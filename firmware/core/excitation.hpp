@@ -14,11 +14,20 @@
 
 namespace hq {
 
-enum class Injection : uint8_t { Angle = 0, Rate = 1, Mixer = 2 };
-constexpr int kInjections = 3;
+// Where an excitation is added (HQ_INJECTION).
+enum class Injection : uint8_t {
+    Angle = HQ_INJECTION_ANGLE,
+    Rate = HQ_INJECTION_RATE,
+    Mixer = HQ_INJECTION_MIXER,
+};
+constexpr int kInjections = HQ_INJECTION_ENUM_END;
 
 // Where an excitation is in its life (HQ_EXCITATION_STATE).
-enum class ExcitationState : uint8_t { Idle = 0, Fading = 1, Running = 2 };
+enum class ExcitationState : uint8_t {
+    Idle = HQ_EXCITATION_STATE_IDLE,
+    Fading = HQ_EXCITATION_STATE_FADING,
+    Running = HQ_EXCITATION_STATE_RUNNING,
+};
 
 struct ExcitationConfig {
     Axis axis = Axis::Roll;

@@ -6,53 +6,10 @@
 
 namespace hq {
 
-// The core's enums are the dialect's (firmware/mavlink/heliquad.xml), value for value.
-static_assert(static_cast<int>(FlightMode::Angle) == HQ_MODE_ANGLE &&
-              static_cast<int>(FlightMode::Rate) == HQ_MODE_RATE, "HQ_MODE");
-static_assert(static_cast<int>(ExcitationState::Idle) == HQ_EXCITATION_STATE_IDLE &&
-              static_cast<int>(ExcitationState::Fading) == HQ_EXCITATION_STATE_FADING &&
-              static_cast<int>(ExcitationState::Running) == HQ_EXCITATION_STATE_RUNNING,
-              "HQ_EXCITATION_STATE");
-static_assert(kReasonCount == HQ_REASON_ENUM_END, "HQ_REASON: one entry per reason");
-static_assert(static_cast<int>(Reason::None) == HQ_REASON_NONE, "HQ_REASON_NONE");
-static_assert(static_cast<int>(Reason::Finished) == HQ_REASON_FINISHED, "HQ_REASON_FINISHED");
-static_assert(static_cast<int>(Reason::StopCommand) == HQ_REASON_STOP_COMMAND, "HQ_REASON_STOP_COMMAND");
-static_assert(static_cast<int>(Reason::Disarmed) == HQ_REASON_DISARMED, "HQ_REASON_DISARMED");
-static_assert(static_cast<int>(Reason::NoHost) == HQ_REASON_NO_HOST, "HQ_REASON_NO_HOST");
-static_assert(static_cast<int>(Reason::Busy) == HQ_REASON_BUSY, "HQ_REASON_BUSY");
-static_assert(static_cast<int>(Reason::AxisInjection) == HQ_REASON_AXIS_INJECTION, "HQ_REASON_AXIS_INJECTION");
-static_assert(static_cast<int>(Reason::InjectionMode) == HQ_REASON_INJECTION_MODE, "HQ_REASON_INJECTION_MODE");
-static_assert(static_cast<int>(Reason::Amplitude) == HQ_REASON_AMPLITUDE, "HQ_REASON_AMPLITUDE");
-static_assert(static_cast<int>(Reason::Frequency) == HQ_REASON_FREQUENCY, "HQ_REASON_FREQUENCY");
-static_assert(static_cast<int>(Reason::Cycles) == HQ_REASON_CYCLES, "HQ_REASON_CYCLES");
-static_assert(static_cast<int>(Reason::Fade) == HQ_REASON_FADE, "HQ_REASON_FADE");
-static_assert(static_cast<int>(Reason::Duration) == HQ_REASON_DURATION, "HQ_REASON_DURATION");
-static_assert(static_cast<int>(Reason::AngleLimit) == HQ_REASON_ANGLE_LIMIT, "HQ_REASON_ANGLE_LIMIT");
-static_assert(static_cast<int>(Reason::RateLimit) == HQ_REASON_RATE_LIMIT, "HQ_REASON_RATE_LIMIT");
-static_assert(static_cast<int>(Reason::RcLost) == HQ_REASON_RC_LOST, "HQ_REASON_RC_LOST");
-static_assert(static_cast<int>(Reason::HostLost) == HQ_REASON_HOST_LOST, "HQ_REASON_HOST_LOST");
-static_assert(static_cast<int>(Reason::ImuStale) == HQ_REASON_IMU_STALE, "HQ_REASON_IMU_STALE");
-static_assert(static_cast<int>(Reason::NonFinite) == HQ_REASON_NON_FINITE, "HQ_REASON_NON_FINITE");
-static_assert(static_cast<int>(Reason::RcSwitch) == HQ_REASON_RC_SWITCH, "HQ_REASON_RC_SWITCH");
-static_assert(static_cast<int>(Reason::DisarmCommand) == HQ_REASON_DISARM_COMMAND, "HQ_REASON_DISARM_COMMAND");
-static_assert(static_cast<int>(Reason::NoRc) == HQ_REASON_NO_RC, "HQ_REASON_NO_RC");
-static_assert(static_cast<int>(Reason::ArmSwitchLow) == HQ_REASON_ARM_SWITCH_LOW, "HQ_REASON_ARM_SWITCH_LOW");
-static_assert(static_cast<int>(Reason::NoThrottle) == HQ_REASON_NO_THROTTLE, "HQ_REASON_NO_THROTTLE");
-static_assert(static_cast<int>(Reason::ThrottleHigh) == HQ_REASON_THROTTLE_HIGH, "HQ_REASON_THROTTLE_HIGH");
-static_assert(static_cast<int>(Reason::ImuNotReady) == HQ_REASON_IMU_NOT_READY, "HQ_REASON_IMU_NOT_READY");
-static_assert(static_cast<int>(Reason::ModeLocked) == HQ_REASON_MODE_LOCKED, "HQ_REASON_MODE_LOCKED");
-static_assert(static_cast<int>(Reason::ImuReset) == HQ_REASON_IMU_RESET, "HQ_REASON_IMU_RESET");
-static_assert(static_cast<int>(Reason::ImuNoAnswer) == HQ_REASON_IMU_NO_ANSWER, "HQ_REASON_IMU_NO_ANSWER");
-static_assert(static_cast<int>(Reason::ImuStalled) == HQ_REASON_IMU_STALLED, "HQ_REASON_IMU_STALLED");
-static_assert(static_cast<int>(Reason::ImuRecovered) == HQ_REASON_IMU_RECOVERED, "HQ_REASON_IMU_RECOVERED");
-static_assert(static_cast<int>(Reason::ImuInitFailed) == HQ_REASON_IMU_INIT_FAILED, "HQ_REASON_IMU_INIT_FAILED");
-static_assert(static_cast<int>(Reason::BadMode) == HQ_REASON_BAD_MODE, "HQ_REASON_BAD_MODE");
-static_assert(static_cast<int>(Axis::Yaw) == HQ_AXIS_YAW &&
-              static_cast<int>(Injection::Mixer) == HQ_INJECTION_MIXER, "HQ_AXIS/HQ_INJECTION");
-static_assert(static_cast<int>(Severity::Critical) == MAV_SEVERITY_CRITICAL &&
-              static_cast<int>(Severity::Warning) == MAV_SEVERITY_WARNING &&
-              static_cast<int>(Severity::Notice) == MAV_SEVERITY_NOTICE &&
-              static_cast<int>(Severity::Info) == MAV_SEVERITY_INFO, "MAV_SEVERITY");
+// The core's enums take their values from the dialect (types.hpp, excitation.hpp,
+// supervisor.hpp); the arrays the messages carry must match the core's.
+static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
+              kMotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
 
 namespace {
 
@@ -60,8 +17,8 @@ constexpr uint64_t kSlowPeriodUs = 1000000;  // HEARTBEAT, HQ_FW_STATUS: 1 Hz
 // dt outside [kDtMin, kDtMax] x nominal is clamped (a late or early loop must not make the
 // derivative or integral jump).
 constexpr float kDtMin = 0.25f, kDtMax = 4.0f;
-// STATUSTEXT.text is 50 characters, NUL-terminated when shorter.
-constexpr size_t kStatusTextLen = 50;
+// STATUSTEXT.text, NUL-terminated when shorter.
+constexpr size_t kStatusTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
@@ -296,7 +253,7 @@ void FlightController::send(const mavlink_message_t& msg) {
 }
 
 void FlightController::send_statustext(uint8_t severity, const char* text) {
-    // The packer copies all 50 bytes: give it a zero-padded copy, never the literal itself.
+    // The packer copies the whole field: give it a zero-padded copy, never the literal itself.
     char padded[kStatusTextLen] = {};
     for (size_t i = 0; i < kStatusTextLen && text[i] != '\0'; ++i) padded[i] = text[i];
     mavlink_message_t msg;
@@ -325,8 +282,7 @@ void FlightController::send_excitation_status(Reason reason) {
 }
 
 uint8_t FlightController::sensor_kind() const {
-    return imu_.mode() == SensorMode::Dmp ? HQ_SENSOR_DMP
-           : imu_.mode() == SensorMode::Raw ? HQ_SENSOR_RAW : HQ_SENSOR_NONE;
+    return static_cast<uint8_t>(imu_.mode());       // SensorMode is HQ_SENSOR_KIND
 }
 
 void FlightController::send_telemetry() {

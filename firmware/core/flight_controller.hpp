@@ -38,7 +38,7 @@ struct FlightControllerConfig {
     Mpu6050Config imu{};
     AttitudeFilterConfig attitude_filter{};   // the raw path's ComplementaryFilter
     uint8_t system_id = 1;
-    uint8_t component_id = 1;            // MAV_COMP_ID_AUTOPILOT1
+    uint8_t component_id = MAV_COMP_ID_AUTOPILOT1;
     // The rules' bounds. imu_timeout_us is replaced at init() by imu_timeout_for() of the
     // IMU's configured rate.
     SafetyLimits safety{};

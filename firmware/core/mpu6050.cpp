@@ -23,6 +23,10 @@ int32_t be32(const uint8_t* p) {
                                 (static_cast<uint32_t>(p[2]) << 8) | p[3]);
 }
 constexpr float kDegToRad = 0.017453292519943295f;
+// The chip's scales in the driver's single precision.
+constexpr float kGyroLsb = static_cast<float>(kGyroLsbPerDegS);
+constexpr float kAccelLsb = static_cast<float>(kAccelLsbPerG);
+constexpr float kQ30 = static_cast<float>(kQuatScale);
 // A DMP quaternion whose norm is this far from 1 is misaligned data, not an attitude.
 constexpr float kQuatNormTolerance = 0.05f;
 // Start-up waits (MotionApps' own): after the I2C master reset, and per poll of the FIFO count
@@ -389,14 +393,13 @@ bool Mpu6050::poll(I2cBus& bus, ImuSample& sample) {
 
 bool Mpu6050::parse_dmp_packet(const uint8_t* p, ImuSample& out) {
     // Q30: the int32 over 2^30. float keeps 24 bits, which is 1e-7 of a unit quaternion.
-    Quat q{static_cast<float>(be32(p)) / kQuatScale, static_cast<float>(be32(p + 4)) / kQuatScale,
-           static_cast<float>(be32(p + 8)) / kQuatScale,
-           static_cast<float>(be32(p + 12)) / kQuatScale};
+    Quat q{static_cast<float>(be32(p)) / kQ30, static_cast<float>(be32(p + 4)) / kQ30,
+           static_cast<float>(be32(p + 8)) / kQ30, static_cast<float>(be32(p + 12)) / kQ30};
     const float norm = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
     if (!(std::fabs(norm - 1.0f) < kQuatNormTolerance)) return false;
     out.attitude = dmp_to_frd(q);
     out.has_attitude = true;
-    const float g = kDegToRad / kGyroLsbPerDegS, a = kGravity / kAccelLsbPerG;
+    const float g = kDegToRad / kGyroLsb, a = kGravity / kAccelLsb;
     out.gyro_rad_s = chip_to_frd(Vec3{be16(p + 16) * g, be16(p + 20) * g, be16(p + 24) * g});
     out.accel_m_s2 = chip_to_frd(Vec3{be16(p + 28) * a, be16(p + 32) * a, be16(p + 36) * a});
     out.gyro_clipped = any_full_scale(p + 16, 4);
@@ -405,7 +408,7 @@ bool Mpu6050::parse_dmp_packet(const uint8_t* p, ImuSample& out) {
 }
 
 void Mpu6050::parse_raw_packet(const uint8_t* p, ImuSample& out) {
-    const float g = kDegToRad / kGyroLsbPerDegS, a = kGravity / kAccelLsbPerG;
+    const float g = kDegToRad / kGyroLsb, a = kGravity / kAccelLsb;
     out.accel_m_s2 = chip_to_frd(Vec3{be16(p) * a, be16(p + 2) * a, be16(p + 4) * a});
     out.gyro_rad_s = chip_to_frd(Vec3{be16(p + 6) * g, be16(p + 8) * g, be16(p + 10) * g});
     out.has_attitude = false;

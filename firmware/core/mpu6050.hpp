@@ -71,9 +71,11 @@ constexpr uint8_t kDmpUpdateCount = 7;
 constexpr uint8_t kMotThr = 2, kMotDur = 80, kZrmotThr = 156, kZrmotDur = 0;
 constexpr uint8_t kSlaveAddressDummy = 0x7F;
 constexpr uint16_t kDmpSettleBytes = 3;   // MotionApps waits for more than 2 FIFO bytes
-// Scales: gyro at +/-2000 deg/s is 16.4 LSB per deg/s; accel at +/-2 g is 16384 LSB per g.
-// The DMP packet's gyro and accel high halves use the same scales (docs/mpu6050.md).
-constexpr float kGyroLsbPerDegS = 16.4f, kAccelLsbPerG = 16384.0f, kQuatScale = 1073741824.0f;
+// Scales, the chip's exact figures: gyro at +/-2000 deg/s is 16.4 LSB per deg/s; accel at
+// +/-2 g is 16384 LSB per g; the DMP quaternion is Q30 (2^30 per unit). The DMP packet's gyro
+// and accel high halves use the same scales (docs/mpu6050.md). The one definition: the
+// simulator's packet encoder (sim/native/fifo_packets.*) and its Python names use these.
+constexpr double kGyroLsbPerDegS = 16.4, kAccelLsbPerG = 16384.0, kQuatScale = 1073741824.0;
 constexpr float kGravity = 9.80665f;
 
 // One entry of a MotionApps DMP table (dmpConfig, dmpUpdates): bank, offset, length, then
@@ -110,7 +112,12 @@ struct Mpu6050Config {
     uint16_t dmp_updates_size = 0;
 };
 
-enum class SensorMode : uint8_t { None = 0, Dmp = 1, Raw = 2 };
+// The FIFO data the chip is set up for: the dialect's HQ_SENSOR_KIND.
+enum class SensorMode : uint8_t {
+    None = HQ_SENSOR_NONE,
+    Dmp = HQ_SENSOR_DMP,
+    Raw = HQ_SENSOR_RAW,
+};
 
 // What probe() finds.
 enum class ImuHealth : uint8_t {

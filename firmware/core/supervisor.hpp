@@ -33,49 +33,55 @@
 
 namespace hq {
 
-// Why something was refused, stopped, disarmed or reported (HQ_REASON; same values).
+// Why something was refused, stopped, disarmed or reported: HQ_REASON, whose descriptions
+// say each in words (the dialect is the one definition of the values).
 enum class Reason : uint8_t {
-    None = 0,
-    Finished = 1,
-    StopCommand = 2,
-    Disarmed = 3,
-    NoHost = 4,
-    Busy = 5,
-    AxisInjection = 6,
-    InjectionMode = 7,
-    Amplitude = 8,
-    Frequency = 9,
-    Cycles = 10,
-    Fade = 11,
-    Duration = 12,
-    AngleLimit = 13,
-    RateLimit = 14,
-    RcLost = 15,
-    HostLost = 16,
-    ImuStale = 17,
-    NonFinite = 18,
-    RcSwitch = 19,
-    DisarmCommand = 20,
-    NoRc = 21,
-    ArmSwitchLow = 22,
-    NoThrottle = 23,
-    ThrottleHigh = 24,
-    ImuNotReady = 25,
-    ModeLocked = 26,
-    ImuReset = 27,
-    ImuNoAnswer = 28,
-    ImuStalled = 29,
-    ImuRecovered = 30,
-    ImuInitFailed = 31,
-    BadMode = 32,
+    None = HQ_REASON_NONE,
+    Finished = HQ_REASON_FINISHED,
+    StopCommand = HQ_REASON_STOP_COMMAND,
+    Disarmed = HQ_REASON_DISARMED,
+    NoHost = HQ_REASON_NO_HOST,
+    Busy = HQ_REASON_BUSY,
+    AxisInjection = HQ_REASON_AXIS_INJECTION,
+    InjectionMode = HQ_REASON_INJECTION_MODE,
+    Amplitude = HQ_REASON_AMPLITUDE,
+    Frequency = HQ_REASON_FREQUENCY,
+    Cycles = HQ_REASON_CYCLES,
+    Fade = HQ_REASON_FADE,
+    Duration = HQ_REASON_DURATION,
+    AngleLimit = HQ_REASON_ANGLE_LIMIT,
+    RateLimit = HQ_REASON_RATE_LIMIT,
+    RcLost = HQ_REASON_RC_LOST,
+    HostLost = HQ_REASON_HOST_LOST,
+    ImuStale = HQ_REASON_IMU_STALE,
+    NonFinite = HQ_REASON_NON_FINITE,
+    RcSwitch = HQ_REASON_RC_SWITCH,
+    DisarmCommand = HQ_REASON_DISARM_COMMAND,
+    NoRc = HQ_REASON_NO_RC,
+    ArmSwitchLow = HQ_REASON_ARM_SWITCH_LOW,
+    NoThrottle = HQ_REASON_NO_THROTTLE,
+    ThrottleHigh = HQ_REASON_THROTTLE_HIGH,
+    ImuNotReady = HQ_REASON_IMU_NOT_READY,
+    ModeLocked = HQ_REASON_MODE_LOCKED,
+    ImuReset = HQ_REASON_IMU_RESET,
+    ImuNoAnswer = HQ_REASON_IMU_NO_ANSWER,
+    ImuStalled = HQ_REASON_IMU_STALLED,
+    ImuRecovered = HQ_REASON_IMU_RECOVERED,
+    ImuInitFailed = HQ_REASON_IMU_INIT_FAILED,
+    BadMode = HQ_REASON_BAD_MODE,
 };
-constexpr uint8_t kReasonCount = 33;
+constexpr uint8_t kReasonCount = HQ_REASON_ENUM_END;
 
 // The reason in words, for STATUSTEXT: at most 49 characters, never null.
 const char* reason_text(Reason reason);
 
-// MAV_SEVERITY values.
-enum class Severity : uint8_t { Critical = 2, Warning = 4, Notice = 5, Info = 6 };
+// The MAV_SEVERITY values the firmware uses.
+enum class Severity : uint8_t {
+    Critical = MAV_SEVERITY_CRITICAL,
+    Warning = MAV_SEVERITY_WARNING,
+    Notice = MAV_SEVERITY_NOTICE,
+    Info = MAV_SEVERITY_INFO,
+};
 
 struct Event {
     Reason reason = Reason::None;

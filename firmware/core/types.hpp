@@ -1,18 +1,24 @@
 // Small value types shared by the core. Frames and units (docs/units-and-frames.md):
 // body frame FRD (x forward, y right, z down); angles in rad, rates in rad/s; roll, pitch and
 // yaw are the ZYX (yaw-pitch-roll) Tait-Bryan angles of the body relative to NED.
+//
+// The enums that cross a link take their values from the generated dialect
+// (firmware/mavlink/heliquad.xml): one definition, no copies.
 #pragma once
+
+#include <heliquad/mavlink.h>
 
 #include <cstdint>
 
 namespace hq {
 
-enum class Axis : uint8_t { Roll = 0, Pitch = 1, Yaw = 2 };
-constexpr int kAxes = 3;
+// HQ_AXIS; the value is also the body axis index (x, y, z) of Vec3 and Euler.
+enum class Axis : uint8_t { Roll = HQ_AXIS_ROLL, Pitch = HQ_AXIS_PITCH, Yaw = HQ_AXIS_YAW };
+constexpr int kAxes = HQ_AXIS_ENUM_END;
 constexpr int kAngleAxes = 2;          // roll and pitch: yaw has no angle loop
 
 // Flight mode (HQ_MODE): which loops run. Independent of being armed and of an excitation.
-enum class FlightMode : uint8_t { Angle = 1, Rate = 2 };
+enum class FlightMode : uint8_t { Angle = HQ_MODE_ANGLE, Rate = HQ_MODE_RATE };
 
 struct Vec3 {
     float x = 0.0f, y = 0.0f, z = 0.0f;

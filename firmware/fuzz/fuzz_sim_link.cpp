@@ -1,6 +1,6 @@
 // libFuzzer target: the firmware's sim-link path (targets/host/sim_link_handler.*), what
 // heliquad-fw-host does with every byte the simulator sends. Input: HQ_SENSOR_FRAMEs with
-// fuzzed fields (time, frame counter, FIFO kind, fifo_len up to 255 against a 168-byte
+// fuzzed fields (time, frame counter, FIFO kind, fifo_len up to 255 against the 168-byte
 // field, FIFO bytes, RC, sync, IMU fault), any other message of the dialect or an unknown
 // one framed with a correct CRC and any length, and raw bytes. Besides the sanitizers it
 // checks the link contract: exactly one reply per sensor frame (a repeat included), each an
@@ -129,13 +129,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         }
         // The same counter as the last frame is a repeat, however it came about.
         const bool repeat = handler.frames() > 0 && frame == handler.last_frame();
-        uint16_t rc[8];
+        uint16_t rc[MAVLINK_MSG_HQ_SENSOR_FRAME_FIELD_RC_US_LEN];
         for (auto& ch : rc) ch = in.u16() % 2200;
-        uint8_t fifo[168];
+        uint8_t fifo[MAVLINK_MSG_HQ_SENSOR_FRAME_FIELD_FIFO_LEN];
         in.bytes(fifo, sizeof fifo);
+        // FIFO kind: every HQ_SENSOR_KIND and one unknown; IMU fault: every HQ_IMU_FAULT.
+        const auto kind = static_cast<uint8_t>(in.u8() % (HQ_SENSOR_KIND_ENUM_END + 1));
+        const uint8_t fifo_len = in.u8(), sync = in.u8() & 1;
+        const auto fault = static_cast<uint8_t>(in.u8() % HQ_IMU_FAULT_ENUM_END);
         mavlink_message_t msg;
-        mavlink_msg_hq_sensor_frame_pack_status(1, 200, &tx, &msg, time_us, frame, in.u8() % 4,
-                                                in.u8(), in.u8() & 1, rc, fifo, in.u8() % 6);
+        mavlink_msg_hq_sensor_frame_pack_status(1, MAV_COMP_ID_IMU, &tx, &msg, time_us, frame, kind, fifo_len,
+                                                sync, rc, fifo, fault);
         const size_t n = mavlink_msg_to_send_buffer(packet, &msg);
         replies.expect_frame = frame;
         replies.expect_time = time_us;

@@ -56,42 +56,53 @@ void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
     if (!fc.armed() && fc.state().excitation != 0.0f) std::abort();
 }
 
+// The host's ids: a ground station's.
+constexpr uint8_t kGcs = MAV_COMP_ID_MISSIONPLANNER;
+
 // A command with fuzzed fields but the right shape, so deep states (armed, exciting) are
 // reachable: the fuzzer only has to find field values, not checksums.
 size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
     mavlink_message_t msg;
     switch (in.u8() % 5) {
         case 0:
-            mavlink_msg_heartbeat_pack_status(255, 190, &tx, &msg, MAV_TYPE_GCS,
+            mavlink_msg_heartbeat_pack_status(255, kGcs, &tx, &msg, MAV_TYPE_GCS,
                                               MAV_AUTOPILOT_INVALID, 0, 0, 0);
             break;
         case 1:
-            mavlink_msg_command_long_pack_status(255, 190, &tx, &msg, in.u8() & 1 ? 1 : in.u8(),
-                                                 1, in.u8() & 1 ? MAV_CMD_COMPONENT_ARM_DISARM : in.u16(),
+            mavlink_msg_command_long_pack_status(255, kGcs, &tx, &msg, in.u8() & 1 ? 1 : in.u8(),
+                                                 MAV_COMP_ID_AUTOPILOT1,
+                                                 in.u8() & 1 ? MAV_CMD_COMPONENT_ARM_DISARM : in.u16(),
                                                  0, in.f32(), in.f32(), 0, 0, 0, 0, 0);
             break;
         case 2:
-            mavlink_msg_set_mode_pack_status(255, 190, &tx, &msg, 1, 0, in.u8() & 3);
+            // Every HQ_MODE, and 0 and one above, which are refused.
+            mavlink_msg_set_mode_pack_status(255, kGcs, &tx, &msg, 1,
+                                             MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                             in.u8() % (HQ_MODE_ENUM_END + 1));
             break;
         default: {
             const uint8_t axis = in.u8(), injection = in.u8(), action = in.u8();
             const float freq = (axis & 0x80) ? in.f32() : 0.5f + (in.u8() % 40) * 0.25f;
             const float amp = (injection & 0x80) ? in.f32() : (in.u8() % 100) * 0.01f;
-            mavlink_msg_hq_excitation_pack_status(255, 190, &tx, &msg, 1, 1, action & 1,
-                                                  axis % 4, injection % 4, freq, amp,
-                                                  in.u8() % 8, in.u8() % 3);
+            // Every axis and injection point, and one unknown of each.
+            mavlink_msg_hq_excitation_pack_status(
+                255, kGcs, &tx, &msg, 1, MAV_COMP_ID_AUTOPILOT1,
+                action % HQ_EXCITATION_ACTION_ENUM_END, axis % (HQ_AXIS_ENUM_END + 1),
+                injection % (HQ_INJECTION_ENUM_END + 1), freq, amp, in.u8() % 8, in.u8() % 3);
             break;
         }
     }
     return mavlink_msg_to_send_buffer(out, &msg);
 }
 
+// One HQ_IMU_FAULT, as the host build's sim link applies it (no bus timing: a stuck bus fails
+// every transfer, as a missing chip does).
 void imu_fault(Reader& in, hq::Mpu6050Emulator& chip) {
-    const uint8_t kind = in.u8() % 5;
-    chip.set_present(kind != 2);
-    chip.set_silent(kind == 1);
-    if (kind == 3) chip.power_on_reset();
-    if (kind == 4) chip.force_overflow();
+    const uint8_t fault = in.u8() % HQ_IMU_FAULT_ENUM_END;
+    chip.set_present(fault != HQ_IMU_FAULT_NACK && fault != HQ_IMU_FAULT_STUCK_BUS);
+    chip.set_silent(fault == HQ_IMU_FAULT_SILENT);
+    if (fault == HQ_IMU_FAULT_RESET) chip.power_on_reset();
+    if (fault == HQ_IMU_FAULT_OVERFLOW) chip.force_overflow();
 }
 
 }  // namespace

@@ -75,6 +75,15 @@ State to_state(const DArray& a) {
 PYBIND11_MODULE(_simcore, m) {
     bind_mk64(m);
     m.doc() = "heliquad simulator core: plants, MPU6050 FIFO packets, sim link, lockstep engine";
+    // The chip's scales and packet sizes (the firmware driver's) and the sensor frame's FIFO
+    // capacity and RC channels (the dialect's), for Python.
+    m.attr("GYRO_LSB_PER_DEG_S") = kGyroLsbPerDegS;
+    m.attr("ACCEL_LSB_PER_G") = kAccelLsbPerG;
+    m.attr("QUAT_SCALE") = kQuatScale;
+    m.attr("DMP_PACKET_SIZE") = kDmpPacketSize;
+    m.attr("RAW_PACKET_SIZE") = kRawPacketSize;
+    m.attr("FIFO_CAPACITY") = kFifoCapacity;
+    m.attr("RC_CHANNELS") = kRcChannels;
 
     m.def("dmp_packet", [](std::array<double, 4> q, std::array<double, 3> gyro,
                            std::array<double, 3> accel) {
@@ -187,11 +196,12 @@ PYBIND11_MODULE(_simcore, m) {
     py::class_<SimLinkPort>(m, "SimLinkPort")
         .def(py::init<int, int>(), py::arg("fd"), py::arg("timeout_ms"))
         .def("exchange", [](SimLinkPort& p, uint64_t time_us, uint32_t frame, uint8_t kind,
-                            const py::bytes& fifo, const std::array<uint16_t, 8>& rc, bool sync,
-                            uint8_t imu_fault) {
+                            const py::bytes& fifo, const std::array<uint16_t, kRcChannels>& rc,
+                            bool sync, uint8_t imu_fault) {
             const std::string data = fifo;
             if (data.size() > kFifoCapacity) {
-                throw std::invalid_argument("at most 168 FIFO bytes per frame");
+                throw std::invalid_argument("at most " + std::to_string(kFifoCapacity) +
+                                            " FIFO bytes per frame");
             }
             Reply reply;
             LinkStatus st;
@@ -203,7 +213,7 @@ PYBIND11_MODULE(_simcore, m) {
             }
             return py::make_tuple(st, reply, p.error());
         }, py::arg("time_us"), py::arg("frame"), py::arg("kind"), py::arg("fifo"), py::arg("rc_us"),
-           py::arg("sync") = true, py::arg("imu_fault") = 0,
+           py::arg("sync") = true, py::arg("imu_fault") = uint8_t{HQ_IMU_FAULT_NONE},
            "One sensor frame out, its reply in: (status, reply, errno).");
 
     py::class_<BatchResult>(m, "BatchResult")

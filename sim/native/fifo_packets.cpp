@@ -7,7 +7,6 @@ namespace hqsim {
 namespace {
 
 constexpr double kRadToDeg = 57.29577951308232;
-constexpr double kQ30 = 1073741824.0;
 
 // A converter's count: rounded half to even (as the Python reference and the chip's
 // converters do) and saturated to [lo, hi] before any conversion to an integer. A non-finite
@@ -47,7 +46,7 @@ size_t encode_fifo(FifoKind kind, const SensorSample& s, uint8_t* out) {
         // FRD attitude relative to NED -> the DMP's chip-frame quaternion (w, x, -y, -z).
         const double q[4] = {s.q[0], s.q[1], -s.q[2], -s.q[3]};
         for (int i = 0; i < 4; ++i) {
-            put_be32(out + 4 * i, static_cast<int32_t>(saturated_count(q[i] * kQ30, INT32_MIN,
+            put_be32(out + 4 * i, static_cast<int32_t>(saturated_count(q[i] * kQuatScale, INT32_MIN,
                                                                        INT32_MAX)));
         }
         for (int i = 0; i < 3; ++i) {

@@ -8,17 +8,21 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "core/mpu6050.hpp"
+#include "heliquad/mavlink.h"
 #include "rig_plant.hpp"
 
 namespace hqsim {
 
-constexpr double kGyroLsbPerDegS = 16.4;      // +/-2000 deg/s full scale
-constexpr double kAccelLsbPerG = 16384.0;     // +/-2 g full scale
-constexpr size_t kDmpPacketSize = 42;
-constexpr size_t kRawPacketSize = 12;
+// The chip's scales and packet sizes: the firmware driver's (one definition).
+using hq::mpu6050::kAccelLsbPerG;
+using hq::mpu6050::kDmpPacketSize;
+using hq::mpu6050::kGyroLsbPerDegS;
+using hq::mpu6050::kQuatScale;
+using hq::mpu6050::kRawPacketSize;
 
-// Kinds of FIFO data (HQ_SENSOR_KIND in firmware/mavlink/heliquad.xml).
-enum class FifoKind : uint8_t { None = 0, Dmp = 1, Raw = 2 };
+// Kinds of FIFO data: the dialect's HQ_SENSOR_KIND.
+enum class FifoKind : uint8_t { None = HQ_SENSOR_NONE, Dmp = HQ_SENSOR_DMP, Raw = HQ_SENSOR_RAW };
 
 // Writes the packet of `kind` for `s` into `out` (room for kDmpPacketSize); returns its size.
 size_t encode_fifo(FifoKind kind, const SensorSample& s, uint8_t* out);

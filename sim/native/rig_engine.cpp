@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <stdexcept>
+#include <string>
 
 #include "fifo_packets.hpp"
 
@@ -16,11 +17,11 @@ void RigEngine::start(uint32_t first, uint32_t n, uint32_t dt_us, uint8_t kind,
                       std::vector<uint16_t> rc, std::vector<double> noise,
                       std::vector<double> gust, std::vector<uint8_t> imu_faults) {
     if (running_.load()) throw std::logic_error("a batch is already running");
-    if (rc.size() != size_t{n} * 8 || (!noise.empty() && noise.size() != size_t{n} * 6) ||
+    if (rc.size() != size_t{n} * kRcChannels || (!noise.empty() && noise.size() != size_t{n} * 6) ||
         (!gust.empty() && gust.size() != size_t{n} * 6) ||
         (!imu_faults.empty() && imu_faults.size() != n)) {
-        throw std::invalid_argument(
-            "rc must be n x 8, noise and gust n x 6 or empty, imu_faults n or empty");
+        throw std::invalid_argument("rc must be n x " + std::to_string(kRcChannels) +
+                                    ", noise and gust n x 6 or empty, imu_faults n or empty");
     }
     first_ = first;
     n_ = n;
@@ -51,8 +52,9 @@ void RigEngine::run() {
         Reply reply;
         const bool last = i + 1 == n_;            // the caller reads telemetry after it
         const LinkStatus st = port_.exchange(uint64_t{frame} * dt_us_, frame, kind_, fifo, len,
-                                             &rc_[8 * i], last,
-                                             imu_faults_.empty() ? uint8_t{0} : imu_faults_[i],
+                                             &rc_[kRcChannels * i], last,
+                                             imu_faults_.empty() ? uint8_t{HQ_IMU_FAULT_NONE}
+                                                                 : imu_faults_[i],
                                              &reply);
         if (st != LinkStatus::Ok) {
             result_.status = st;

@@ -28,7 +28,7 @@ public:
     RigEngine(SimLinkPort& port, RigPlant& plant) : port_(port), plant_(plant) {}
     ~RigEngine();
 
-    // Frames first .. first + n - 1 at time frame * dt_us. rc: n x 8 (us); noise and gust:
+    // Frames first .. first + n - 1 at time frame * dt_us. rc: n x kRcChannels (us); noise and gust:
     // n x 6 or empty; imu_faults: n HQ_IMU_FAULT values or empty (no faults). kind: the FIFO
     // data the firmware asked for (its last reply).
     void start(uint32_t first, uint32_t n, uint32_t dt_us, uint8_t kind,

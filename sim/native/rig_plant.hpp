@@ -9,9 +9,11 @@
 #include <array>
 #include <cstdint>
 
+#include "core/mixer.hpp"
+
 namespace hqsim {
 
-constexpr int kMotors = 5;          // central first, then arms front, right, back, left
+using hq::kMotors;                  // the firmware mixer's: central, then front, right, back, left
 constexpr double kGravity = 9.80665;
 
 // What the MPU6050 reports for one sample (before quantisation), body FRD.

@@ -14,7 +14,7 @@ namespace {
 
 // The simulator's MAVLink identity on the sim link.
 constexpr uint8_t kSystemId = 1;
-constexpr uint8_t kComponentId = 200;
+constexpr uint8_t kComponentId = MAV_COMP_ID_IMU;
 
 int ms_since(std::chrono::steady_clock::time_point t0) {
     return static_cast<int>(std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -56,8 +56,9 @@ bool SimLinkPort::write_all(const uint8_t* data, size_t len) {
 }
 
 LinkStatus SimLinkPort::exchange(uint64_t time_us, uint32_t frame, uint8_t fifo_kind,
-                                 const uint8_t* fifo, size_t fifo_len, const uint16_t rc_us[8],
-                                 bool sync, uint8_t imu_fault, Reply* reply) {
+                                 const uint8_t* fifo, size_t fifo_len,
+                                 const uint16_t rc_us[kRcChannels], bool sync, uint8_t imu_fault,
+                                 Reply* reply) {
     uint8_t padded[kFifoCapacity] = {};
     if (fifo_len > kFifoCapacity) fifo_len = kFifoCapacity;
     if (fifo_len) std::memcpy(padded, fifo, fifo_len);
@@ -93,6 +94,7 @@ LinkStatus SimLinkPort::wait_reply(uint32_t frame, Reply* reply) {
             mavlink_msg_hq_actuator_frame_decode(&m, &a);
             reply->time_us = a.time_us;
             reply->frame = a.frame;
+            static_assert(sizeof a.motor == sizeof reply->motor, "HQ_ACTUATOR_FRAME.motor: kMotors");
             std::memcpy(reply->motor.data(), a.motor, sizeof a.motor);
             reply->armed = a.armed;
             reply->mode = a.mode;

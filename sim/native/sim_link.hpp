@@ -13,7 +13,9 @@
 
 namespace hqsim {
 
-constexpr size_t kFifoCapacity = 168;        // HQ_SENSOR_FRAME.fifo
+// The sensor frame's FIFO bytes and RC channels (the dialect's array lengths).
+constexpr size_t kFifoCapacity = MAVLINK_MSG_HQ_SENSOR_FRAME_FIELD_FIFO_LEN;
+constexpr size_t kRcChannels = MAVLINK_MSG_HQ_SENSOR_FRAME_FIELD_RC_US_LEN;
 
 enum class LinkStatus : int {
     Ok = 0,
@@ -38,7 +40,8 @@ public:
     // `sync`: the caller pauses after this frame to read the telemetry (HQ_SENSOR_FRAME.sync).
     // `imu_fault`: HQ_IMU_FAULT of the emulated chip at this frame (fault injection).
     LinkStatus exchange(uint64_t time_us, uint32_t frame, uint8_t fifo_kind, const uint8_t* fifo,
-                        size_t fifo_len, const uint16_t rc_us[8], bool sync, uint8_t imu_fault,
+                        size_t fifo_len, const uint16_t rc_us[kRcChannels], bool sync,
+                        uint8_t imu_fault,
                         Reply* reply);
     int error() const { return errno_; }
 
