@@ -48,8 +48,11 @@ def _on_sigterm(signum, frame):
 
 def main(argv=None) -> int:
     """Entry point of the ``heliquad`` console script."""
-    parser = _build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = _build_parser().parse_args(argv)
+    except InputError as exc:            # the parser's choices come from the generated dialect
+        sys.stderr.write(f"heliquad: error: {exc}\n")
+        return EXIT_INPUT
     signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return args.func(args)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 
+from ...sim import dialect as names
 from ..cli_args import add_firmware_argument, check_plant, finite, number_in
 from ..errors import InputError
 
@@ -24,7 +25,7 @@ def add_parser(sub, fmt) -> None:
     p = sub.add_parser("board", help="run the simulated rig as if it were a board on a serial port",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--plant", choices=("tf",), default="tf")
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
+    p.add_argument("--axis", choices=tuple(names.AXES), default="roll")
     p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19])
     p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
     p.add_argument("--telemetry", default="heliquad-board", metavar="PATH",

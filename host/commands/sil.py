@@ -5,10 +5,10 @@ from __future__ import annotations
 import math
 import sys
 
+from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, int_in, number_in)
 from ..errors import InputError
-from ..sweep import saturation_text
 
 __all__ = ["add_parser", "run"]
 
@@ -29,12 +29,14 @@ example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --
 
 
 def add_parser(sub, fmt) -> None:
+    from ...sim.vehicle import RIGS
+
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--plant", choices=("tf", "vehicle"), default="tf",
                    help="tf: a transfer function from the axis's torque command to its body "
                         "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
-    p.add_argument("--rig", choices=("roll", "pitch", "yaw", "free"), default=None,
+    p.add_argument("--rig", choices=RIGS, default=None,
                    help="vehicle plant: the test rig (default: the --axis one)")
     p.add_argument("--params", metavar="FILE",
                    help="vehicle plant: parameter file (default: the shipped vehicle.toml)")
@@ -43,12 +45,12 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="turbulence and sensor-noise seed (default 0)")
     p.add_argument("--ideal-sensor", action="store_true",
                    help="vehicle plant: no IMU noise, bias or DMP latency")
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), default="roll")
+    p.add_argument("--axis", choices=tuple(names.AXES), default="roll")
     p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: the paper's roll model)")
     p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
                    help="denominator, descending powers of s")
-    p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
+    p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
     p.add_argument("--freq-hz", type=number_in(0, 1e6, lo_open=True), required=True, metavar="F")
     p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), required=True, metavar="A",
                    help="deg for angle, deg/s for rate, normalised torque (-1..1) for mixer")
@@ -79,7 +81,7 @@ def run(args) -> int:
     check_plant(args)
     if args.inject == "angle" and args.axis == "yaw":
         raise InputError("yaw is rate-only: use --inject rate or mixer")
-    amplitude = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+    amplitude = math.radians(args.amplitude) if args.inject != "mixer" else args.amplitude
     check_excitation([args.freq_hz], args.cycles, args.fade_cycles, args.loop_hz, amplitude,
                       args.inject)
     folder = os.path.dirname(os.path.abspath(args.out))
@@ -105,6 +107,8 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
+    from ..sweep import saturation_text
+
     said = saturation_text({"saturated": r.saturated_samples,
                             "collective_limited": r.collective_limited,
                             "sensor_clipped": r.sensor_clipped})

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import sys
 
+from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, int_in, number_in)
 from ..errors import InputError
@@ -32,8 +33,8 @@ example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify 
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"), required=True)
-    p.add_argument("--inject", choices=("mixer", "rate", "angle"), default="mixer")
+    p.add_argument("--axis", choices=tuple(names.AXES), required=True)
+    p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
@@ -69,7 +70,7 @@ def run(args) -> int:
 
     amp = None
     if args.amplitude is not None:
-        amp = math.radians(args.amplitude) if args.inject in ("angle", "rate") else args.amplitude
+        amp = math.radians(args.amplitude) if args.inject != "mixer" else args.amplitude
     plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         from ...sim.sil import SilConfig

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 
+from ...sim import dialect as names
 from ..cli_args import MAX_SEED, int_in
 from ..errors import InputError
 
@@ -27,7 +28,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("models", metavar="MODELS.json")
     p.add_argument("--model", type=int_in(0, 10_000), metavar="INDEX",
                    help="which model (default: the recommended one)")
-    p.add_argument("--axis", choices=("roll", "pitch", "yaw"),
+    p.add_argument("--axis", choices=tuple(names.AXES),
                    help="axis of the model (default: the file's \"axis\" entry)")
     p.add_argument("--gains", metavar="FILE", help="gains file (default: the paper's gains)")
     p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
@@ -57,7 +58,7 @@ def run(args) -> int:
         raise InputError(f"{args.models}: no model {index!r} (the file has {len(models)}; "
                          "give --model INDEX)")
     axis = args.axis or doc.get("axis")
-    if axis not in ("roll", "pitch", "yaw"):
+    if axis not in names.AXES:
         raise InputError(f"{args.models} does not say which axis: give --axis roll|pitch|yaw")
     m = models[index]
     try:
