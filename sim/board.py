@@ -26,9 +26,12 @@ MAX_LAG_S = 0.1
 
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
-              dmp_image: str | None = None, ready=print, firmware: str = "host") -> dict:
-    """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
+              dmp_image: str | None = None, ready=None, firmware: str = "host") -> dict:
+    """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters. ``ready`` is told
+    when the telemetry port is there (default: a line on stdout, flushed at once, for
+    whatever waits for it)."""
 
+    ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     frames, late = 0, 0
