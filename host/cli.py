@@ -76,8 +76,8 @@ def main(argv=None) -> int:
         if no_room(exc):
             sys.stderr.write(f"heliquad {args.command}: {DiskFull.from_os_error(exc.filename or 'an output file', exc)}\n")
             return EXIT_STOPPED
-        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}: "
-                         f"{exc.filename or ''}\n")
+        where = f": {exc.filename}" if exc.filename else ""
+        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}{where}\n")
         return EXIT_INPUT
 
 

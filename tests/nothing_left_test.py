@@ -198,3 +198,23 @@ def test_a_firmware_stop_interrupted_still_stops_it_and_removes_its_links(tmp_pa
         fw.stop()
     assert fw.proc.returncode == -signal.SIGKILL
     assert not os.path.lexists(telemetry) and not os.path.exists(fw.workdir)
+
+
+def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
+    # The board's firmware killed under a sweep over its port: the sweep ends with one
+    # line, its manifest says why and at which frequency, its log is kept.
+    rig, out = tmp_path / "rig", tmp_path / "sweep"
+    board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
+    assert "board running" in board.readline()
+    sweep = Tool("sweep", "--axis", "roll", "--port", rig, "--freqs-hz", 0.5, "--cycles", 10,
+                 "--out", out, tmpdir=tmpdir_)
+    wait_for(lambda: size(out / "sweep.tlog") > UNDER_WAY, "a log under way", sweep.proc)
+    os.kill(board.firmware_pid(), signal.SIGKILL)
+    code, _, err = sweep.finish()
+    assert code == 2 and f"kept in {out}" in one_line(err)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["aborted"] and manifest["in_progress_hz"] == 0.5 and not manifest["complete"]
+    assert_log_readable(out / "sweep.tlog")
+    assert board.finish()[0] == 2
+    assert not os.path.lexists(rig)
+    assert_nothing_left(tmpdir_)

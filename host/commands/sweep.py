@@ -99,7 +99,8 @@ def run(args) -> int:
         kept = f"the log and manifest so far are kept in {args.out}"
         if isinstance(exc, DiskFull):
             raise exc.also(kept)
-        if isinstance(exc, (FirmwareError, InputError)):
+        # OSError: a write to the port (pyserial's SerialException) or to the log failed
+        if isinstance(exc, (FirmwareError, InputError, OSError)):
             raise InputError(f"{exc} ({kept})") from None
         raise
     finally:
