@@ -16,7 +16,7 @@ import pytest
 
 from heliquad.host.errors import DiskFull
 from heliquad.host.logsession import summarise_tlog
-from tool_runs import Tool, adopting_orphans, one_line, orphans
+from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir
 
 import teensy_image
 
@@ -26,9 +26,7 @@ LIMIT = 100_000
 
 @pytest.fixture
 def tmpdir_(tmp_path):
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    with adopting_orphans():
+    with private_tmpdir(tmp_path) as tmp:
         yield tmp
 
 
@@ -45,11 +43,6 @@ def assert_whole_log(path):
 def assert_disk_full(code, err, path):
     line = one_line(err)
     assert code == 1 and f"disk full: {path} (File too large)" in line, err
-
-
-def assert_nothing_left(tmp):
-    assert orphans() == []
-    assert list(tmp.iterdir()) == []
 
 
 @pytest.fixture

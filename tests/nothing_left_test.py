@@ -15,7 +15,7 @@ import signal
 import pytest
 
 from heliquad.host.logsession import summarise_tlog
-from tool_runs import Tool, adopting_orphans, one_line, orphans, size, wait_for
+from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir, size, wait_for
 
 import teensy_image
 
@@ -27,18 +27,8 @@ UNDER_WAY, SWEEP_UNDER_WAY = 20_000, 100_000
 
 @pytest.fixture
 def tmpdir_(tmp_path):
-    """A private TMPDIR, checked empty at the end, and an orphan check around the test."""
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    with adopting_orphans():
+    with private_tmpdir(tmp_path) as tmp:
         yield tmp
-
-
-def assert_nothing_left(tmp, *running):
-    for tool in running:
-        tool.finish()
-    assert orphans({t.pid for t in running}) == []
-    assert list(tmp.iterdir()) == []
 
 
 def end_run(tool, ending, log, under_way=UNDER_WAY):

@@ -96,6 +96,22 @@ def orphans(known=()) -> list[str]:
     return left
 
 
+@contextlib.contextmanager
+def private_tmpdir(base):
+    """A TMPDIR for the tools a test runs (``base``/tmp), with orphans adopted meanwhile
+    (:func:`adopting_orphans`); :func:`assert_nothing_left` checks both at the end."""
+    tmp = base / "tmp"
+    tmp.mkdir()
+    with adopting_orphans():
+        yield tmp
+
+
+def assert_nothing_left(tmp) -> None:
+    """No process left running by the tools the test ran, nothing in their TMPDIR."""
+    assert orphans() == []
+    assert list(tmp.iterdir()) == []
+
+
 def wait_for(condition, what: str, proc=None, timeout_s: float = HANG_GUARD_S) -> None:
     """Until ``condition()`` holds; fails if ``proc`` ends first or the hang guard passes."""
     deadline = time.monotonic() + timeout_s
