@@ -2,8 +2,9 @@
 
 Every subcommand (one module each, :mod:`heliquad.host.commands`) reports bad input as one
 line on stderr (``heliquad SUB: error: ...``) and exits with code 2; no traceback reaches
-the user for an input problem. Ctrl-C exits 130, SIGTERM 143, each after the command has
-stopped what it runs and kept what it recorded.
+the user for an input problem. A full disk (``heliquad SUB: disk full: FILE ...``) exits 1,
+Ctrl-C 130, SIGTERM 143, each after the command has stopped what it runs and kept what it
+recorded.
 """
 
 from __future__ import annotations
@@ -13,11 +14,13 @@ import signal
 import sys
 
 from . import __version__
-from .errors import InputError, Terminated
+from .errors import DiskFull, InputError, Terminated, no_room
 
 __all__ = ["main"]
 
 EXIT_INPUT = 2
+#: A run that stopped early and kept its records (a full disk; a sweep's abort).
+EXIT_STOPPED = 1
 
 
 class _Parser(argparse.ArgumentParser):
@@ -66,9 +69,15 @@ def main(argv=None) -> int:
         terminated = isinstance(exc, Terminated)
         sys.stderr.write(f"heliquad {args.command}: {'terminated' if terminated else 'interrupted'}\n")
         return 143 if terminated else 130
+    except DiskFull as exc:
+        sys.stderr.write(f"heliquad {args.command}: {exc}\n")
+        return EXIT_STOPPED
     except OSError as exc:
-        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}: "
-                         f"{exc.filename or ''}\n")
+        if no_room(exc):
+            sys.stderr.write(f"heliquad {args.command}: {DiskFull.from_os_error(exc.filename or 'an output file', exc)}\n")
+            return EXIT_STOPPED
+        where = f": {exc.filename}" if exc.filename else ""
+        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}{where}\n")
         return EXIT_INPUT
 
 

@@ -1,12 +1,13 @@
 """Errors the host tool reports to users as one line, without a traceback.
 
-``InputError`` is defined with the simulator (the layer below: its parameter files and fault
-specifications are user input too) and is the same class here.
+``InputError`` and ``DiskFull`` are defined with the simulator (the layer below: its
+parameter files and fault specifications are user input too, and its telemetry tap writes
+the SIL's log) and are the same classes here.
 """
 
-from ..sim.errors import InputError
+from ..sim.errors import NO_ROOM, DiskFull, InputError, no_room
 
-__all__ = ["InputError", "Terminated"]
+__all__ = ["InputError", "DiskFull", "NO_ROOM", "no_room", "Terminated"]
 
 
 class Terminated(KeyboardInterrupt):

@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from .errors import InputError
+from .errors import DiskFull, InputError, no_room
 
 __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
            "write_run_csv", "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
@@ -40,14 +40,15 @@ def atomic_write(path, mode: str = "w"):
     """A file object for ``path`` that replaces it only once everything is written: the
     data goes to a temporary file beside it, is flushed to the disk, and is renamed over
     ``path`` at the end. A failure (a full disk, an exception while writing) leaves the old
-    file as it was and no temporary file behind; an OSError becomes an InputError."""
+    file as it was and no temporary file behind; a write that finds no room raises
+    :class:`DiskFull` naming ``path``, any other OSError an InputError."""
     path = os.fspath(path)
     folder = os.path.dirname(os.path.abspath(path))
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
                                    dir=folder)
     except OSError as exc:
-        raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+        raise _write_error(path, exc) from None
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"newline": ""})) as fh:
             yield fh
@@ -59,8 +60,16 @@ def atomic_write(path, mode: str = "w"):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         if isinstance(exc, OSError):
-            raise InputError(f"cannot write {path}: {exc.strerror or exc}") from None
+            raise _write_error(path, exc) from None
         raise
+
+
+def _write_error(path, exc: OSError) -> Exception:
+    """What a failed write of ``path`` is reported as: no room is :class:`DiskFull`, anything
+    else an InputError naming the file."""
+    if no_room(exc):
+        return DiskFull.from_os_error(path, exc)
+    return InputError(f"cannot write {path}: {exc.strerror or exc}")
 
 
 def write_json(path, doc) -> None:

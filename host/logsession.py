@@ -1,9 +1,9 @@
 """Serial logging sessions (``heliquad log``) and log summaries (``heliquad tlog``).
 
 A session opens the telemetry link of a board (or of a SIL / ``heliquad board`` pty), writes
-every packet to a .tlog as it arrives (flushed as it goes, so Ctrl-C or a crash leaves a
-valid log), sends the host's HEARTBEAT once a second, and counts lost samples from the gaps
-in ``HQ_SYSID_SAMPLE.seq``.
+every packet to a .tlog as it arrives (flushed as it goes, so Ctrl-C, a crash or a full disk
+leaves a valid log up to its last whole record), sends the host's HEARTBEAT every 0.25 s, and
+counts lost samples from the gaps in ``HQ_SYSID_SAMPLE.seq``.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import collections
 import time
 
-from .errors import InputError
+from .errors import DiskFull, InputError
 from .link import DEFAULT_BAUD
 
 __all__ = ["run_log", "summarise_tlog"]
@@ -22,7 +22,9 @@ STATUS_EVERY_S = 5.0
 
 def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | None = None,
             progress=print) -> dict:
-    """Log until ``duration_s`` or Ctrl-C; returns the summary."""
+    """Log until ``duration_s``, Ctrl-C (or SIGTERM), the link going away or a full disk;
+    returns the summary of what the log holds. ``stopped``: why the session ended early
+    (an :class:`InputError` for the link, :class:`DiskFull` for the log), else None."""
     from .link import HEARTBEAT_PERIOD_S, TelemetryLink
     from .tlog import TlogWriter
 
@@ -35,18 +37,18 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
     stats = {"messages": 0, "samples": 0, "lost": 0, "first_seq": None, "last_seq": None}
     t0 = time.monotonic()
     next_status, next_heartbeat = t0 + STATUS_EVERY_S, t0
-    interrupted = False
+    interrupted, stopped = False, None
     try:
         while duration_s is None or time.monotonic() - t0 < duration_s:
             now = time.monotonic()
             if now >= next_heartbeat:
-                link.heartbeat()
+                _heartbeat(link)
                 next_heartbeat = now + HEARTBEAT_PERIOD_S
-            before = tlog.messages
-            for m in link.poll(only=("HQ_SYSID_SAMPLE",)):
+            samples = link.poll(only=("HQ_SYSID_SAMPLE",))
+            tlog.flush()                         # counted once they are in the file
+            for m in samples:
                 _count(stats, m.seq)
-            stats["messages"] += tlog.messages - before
-            tlog.flush()
+            stats["messages"] = tlog.messages
             if now >= next_status:
                 progress(f"  {now - t0:6.0f} s  {stats['samples']} samples, {stats['lost']} lost, "
                          f"{stats['messages']} messages")
@@ -54,14 +56,28 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
             time.sleep(POLL_S)
     except KeyboardInterrupt:
         interrupted = True
-    except InputError:
-        progress("warning: the link went away; the log is kept up to here")
+    except (InputError, DiskFull) as exc:        # the link went away; no room for the log
+        stopped = exc
     finally:
         link.close()
-        tlog.close()
+        try:
+            tlog.close()
+        except DiskFull as exc:                  # the last records did not fit
+            stopped = stopped or exc
+    stats["messages"] = tlog.messages
     stats["seconds"] = time.monotonic() - t0
     stats["interrupted"] = interrupted
+    stats["stopped"] = stopped
     return stats
+
+
+def _heartbeat(link) -> None:
+    """The host's HEARTBEAT; a port that went away under the write (pyserial's
+    SerialException is an OSError) is the link lost, as a failed read is."""
+    try:
+        link.heartbeat()
+    except OSError as exc:
+        raise InputError(f"telemetry link lost: {exc}") from None
 
 
 def _count(stats, seq):

@@ -25,6 +25,7 @@ from ..sim.dialect import dialect
 from ..sim.faults import check_faults, imu_fault_codes, link_close_frame
 from ..sim.lockstep import FirmwareError, SimLink, actuators, start_firmware
 from ..sim.sil import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
+from .errors import NO_ROOM, DiskFull
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 from .tlog import TlogWriter, create_log
 
@@ -91,12 +92,18 @@ class _TelemetryLog:
         decode = self.codec.decode
         out = [decode(msgid, payload) for msgid, payload in self.tap.read()]
         if self.tap.write_failed:
-            raise OSError(f"cannot write {self._file.name}")
+            # The file ends with the last whole record that fitted; the run stops here.
+            code = self.tap.write_errno
+            if code in NO_ROOM:
+                raise DiskFull(self._file.name, os.strerror(code))
+            raise OSError(code, os.strerror(code), self._file.name)
         return out
 
     def close(self) -> None:
-        self._file.close()
-        os.close(self.fd)
+        try:
+            self._file.close()
+        finally:
+            os.close(self.fd)
 
     def read_until(self, time_us: int) -> list:
         """Read until the loop at ``time_us`` has all its telemetry."""

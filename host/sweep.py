@@ -31,8 +31,9 @@ import numpy as np
 from heliquad import _firmware
 
 from ..sim.dialect import dialect
+from ..sim.errors import FirmwareError
 from . import __version__, paper
-from .errors import InputError, Terminated
+from .errors import DiskFull, InputError, Terminated
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
 from .gains import firmware_gains
@@ -92,12 +93,24 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=MEA
 
 
 def _write_manifest(out_dir, manifest) -> None:
-    write_json(os.path.join(out_dir, MANIFEST), manifest)
+    path = os.path.join(out_dir, MANIFEST)
+    existed = os.path.exists(path)
+    try:
+        write_json(path, manifest)
+    except DiskFull as exc:
+        if existed:
+            exc.also("its previous version is kept")
+        raise
 
 
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
-    """Run the plan on ``session``; returns the manifest (also written to ``out_dir``)."""
+    """Run the plan on ``session``; returns the manifest (also written to ``out_dir``).
+
+    Ctrl-C and SIGTERM end the sweep in order (the manifest says so; the return is normal).
+    Any other error that ends it (a full disk, the firmware died, the link lost) stops the
+    excitation, records the error in the manifest's ``aborted`` and the frequency that was
+    running in ``in_progress_hz``, and is raised again."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
     gains = dataclasses.asdict(firmware_gains(plan.axis))      # what the firmware flies
     manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
@@ -114,6 +127,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             current = f
             entry = measure(session, plan, f, amp, limits, progress).entry
             manifest["frequencies"].append(entry)
+            current = None
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
             progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {entry.get('freq_hz', f):.4g} Hz  "
@@ -123,15 +137,49 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 break
         else:
             manifest["complete"] = True
-    except KeyboardInterrupt as exc:
-        session.tel.stop_excitation()
-        how = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted (Ctrl-C)"
-        manifest["aborted"] = how
-        manifest["in_progress_hz"] = current          # None: during the hover, before any
-        progress(f"{how}: the excitation is stopped; the log and manifest are kept")
-    finally:
-        _write_manifest(out_dir, manifest)
+    except BaseException as exc:
+        _stop_excitation(session)
+        manifest["in_progress_hz"] = current          # None: during the hover, or between two
+        if isinstance(exc, KeyboardInterrupt):
+            how = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted (Ctrl-C)"
+            manifest["aborted"] = how
+            _keep_manifest(out_dir, manifest, exc)
+            progress(f"{how}: the excitation is stopped; the log and manifest are kept")
+            return manifest
+        manifest["aborted"] = _one_line(exc)
+        _keep_manifest(out_dir, manifest, exc)
+        raise
+    _write_manifest(out_dir, manifest)
     return manifest
+
+
+def _stop_excitation(session) -> None:
+    """Ask the firmware to stop the excitation, as far as the link still carries it."""
+    try:
+        session.tel.stop_excitation()
+    except Exception:                  # the port went away: nothing more can be sent on it
+        pass
+
+
+def _one_line(exc: BaseException) -> str:
+    """An error that ended a sweep, in one line for the manifest."""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, (DiskFull, FirmwareError, InputError)):
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _keep_manifest(out_dir, manifest, exc: BaseException) -> None:
+    """The last manifest of a sweep that ``exc`` ended. If it cannot be written either, the
+    one line raised says both (and the previous manifest stays as it was)."""
+    try:
+        _write_manifest(out_dir, manifest)
+    except DiskFull as failed:
+        if isinstance(exc, DiskFull):
+            exc.also(f"{MANIFEST} could not be updated either")
+            exc.clauses.extend(failed.clauses)
+            return
+        raise failed.also(f"the sweep had stopped: {manifest['aborted']}") from exc
 
 
 def saturation_text(entry) -> str:

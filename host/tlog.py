@@ -1,9 +1,10 @@
 """MAVLink telemetry logs (.tlog): each message as an 8-byte big-endian timestamp (us) then
 the raw MAVLink packet, the format QGroundControl and pymavlink's tools read.
 
-The writer flushes as it goes, so a crash or Ctrl-C leaves a valid log up to the last whole
-message, and it never writes over a file that exists (:func:`create_log`): a log is a record
-of a flight or a rig session that cannot be made again.
+The writer's file only ever ends with a whole record, so a crash, Ctrl-C or a full disk leaves
+a valid log up to the last whole message flushed, and it never writes over a file that exists
+(:func:`create_log`): a log is a record of a flight or a rig session that cannot be made
+again.
 
 The reader takes every well-formed record (a timestamp, then a whole packet of a known
 message whose CRC verifies) and resynchronises past damage: where a record does not verify,
@@ -17,6 +18,7 @@ order of time.
 from __future__ import annotations
 
 import dataclasses
+import os
 import struct
 import warnings
 
@@ -25,13 +27,13 @@ __all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog"]
 _STAMP = struct.Struct(">Q")
 
 
-def create_log(path):
+def create_log(path, buffering: int = -1):
     """A new file for a log, opened for binary writing; one that exists is never truncated
-    (InputError naming it and how to go on)."""
+    (InputError naming it and how to go on). ``buffering`` as for :func:`open`."""
     from .errors import InputError
 
     try:
-        return open(path, "xb")
+        return open(path, "xb", buffering=buffering)
     except FileExistsError:
         raise InputError(f"{path} exists: heliquad never writes over a log; give another "
                          "name (or move the old one away)") from None
@@ -40,23 +42,84 @@ def create_log(path):
 
 
 class TlogWriter:
-    """Append MAVLink packets with timestamps to a .tlog file."""
+    """Append MAVLink packets with timestamps to a new .tlog file.
+
+    Records wait in memory until :meth:`flush` (a session flushes after every read of its
+    link). The file only ever ends with a whole record:
+
+    * a Ctrl-C or SIGTERM during a flush leaves the records it had not written waiting, and
+      the next flush (or :meth:`close`) goes on from the file's size, so none is lost or
+      written twice;
+    * a write that finds no room (a full disk, a file-size limit) cuts the file back to its
+      last whole record, stops the log and raises :class:`DiskFull` naming the file; any
+      other write error does the same with an OSError. Every record before it is kept.
+    """
 
     def __init__(self, path):
         self.path = path
-        self._fh = create_log(path)
-        self.messages = 0
+        self._fh = create_log(path, buffering=0)
+        # (bytes of whole records in the file, records waiting): one attribute, replaced in
+        # one step, so that an interrupt never finds the two out of step.
+        self._state = (0, [])
+        self.messages = 0                    # whole records in the file
+        self.failed: BaseException | None = None    # what stopped the log
 
     def write(self, timestamp_us: int, packet: bytes) -> None:
-        self._fh.write(_STAMP.pack(int(timestamp_us)))
-        self._fh.write(packet)
-        self.messages += 1
+        if self.failed is not None:
+            raise self.failed
+        self._state[1].append(_STAMP.pack(int(timestamp_us)) + bytes(packet))
 
     def flush(self) -> None:
-        self._fh.flush()
+        """Write the waiting records (:class:`DiskFull` or OSError when they do not fit)."""
+        if self.failed is not None:
+            raise self.failed
+        size, records = self._state
+        if not records:
+            return
+        data = b"".join(records)
+        fd = self._fh.fileno()
+        # An earlier flush interrupted by a signal may have written part of these already.
+        done = os.fstat(fd).st_size - size
+        try:
+            with memoryview(data) as view:
+                while done < len(data):
+                    done += self._fh.write(view[done:])
+        except OSError as exc:
+            self._stop(exc, size, records)
+            raise self.failed from None
+        self._state = (size + len(data), [])
+        self.messages += len(records)
+
+    def _stop(self, exc: OSError, size: int, records: list) -> None:
+        """A write failed: keep the whole records that reached the file, cut the rest."""
+        from .errors import DiskFull, no_room
+
+        fd = self._fh.fileno()
+        written, kept = os.fstat(fd).st_size - size, 0
+        whole = 0
+        for record in records:
+            if kept + len(record) > written:
+                break
+            kept += len(record)
+            whole += 1
+        try:
+            os.ftruncate(fd, size + kept)
+        except OSError:
+            pass                          # the reader skips a record cut short
+        self._state = (size + kept, [])
+        self.messages += whole
+        self.failed = DiskFull.from_os_error(self.path, exc) if no_room(exc) else \
+            OSError(exc.errno, exc.strerror, self.path)
 
     def close(self) -> None:
-        if not self._fh.closed:
+        """Flush what waits and close the file (once; a log stopped by a failed write is
+        closed as it was cut)."""
+        if self._fh.closed:
+            return
+        try:
+            if self.failed is None:
+                self.flush()
+        finally:
             self._fh.close()
 
     def __enter__(self):

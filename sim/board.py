@@ -26,9 +26,12 @@ MAX_LAG_S = 0.1
 
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
-              dmp_image: str | None = None, ready=print, firmware: str = "host") -> dict:
-    """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters."""
+              dmp_image: str | None = None, ready=None, firmware: str = "host") -> dict:
+    """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters. ``ready`` is told
+    when the telemetry port is there (default: a line on stdout, flushed at once, for
+    whatever waits for it)."""
 
+    ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     frames, late = 0, 0
@@ -36,10 +39,12 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
                         telemetry_path=os.path.abspath(telemetry_path))
     try:
         link = SimLink(fw)
-        ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")
         kind = dialect().HQ_SENSOR_NONE            # until the firmware says what it set up
-        t0 = time.monotonic()
         try:
+            # Said inside: a Ctrl-C from whoever waited for the line stops the board as any
+            # later one does.
+            ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)")
+            t0 = time.monotonic()
             while duration_s is None or frames * dt_s < duration_s:
                 frames += 1
                 target = t0 + frames * dt_s
@@ -57,5 +62,5 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
         finally:
             link.close()
     finally:
-        fw.stop()                                  # the firmware removes its links itself
+        fw.stop()                          # its links and temporary folder go with it
     return {"frames": frames, "resyncs": late}

@@ -14,6 +14,7 @@ import dataclasses
 import os
 import selectors
 import shutil
+import signal
 import subprocess
 import sys
 import sysconfig
@@ -71,23 +72,30 @@ class HostFirmware:
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
         cmd = self.command()
-        self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
-        self.workdir = self._tmp.name
-        self.sim_link_path = os.path.join(self.workdir, "sim-link")
-        self.telemetry_path = telemetry_path or os.path.join(self.workdir, "telemetry")
-        cmd += ["--sim-link", self.sim_link_path, "--telemetry", self.telemetry_path,
-                "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s", str(int(idle_timeout_s))]
-        if dmp_image:
-            cmd += ["--dmp-image", dmp_image]
-        self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
-        self._stderr = open(self.stderr_path, "w+")
-        # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and the
-        # tool ends the run in order (stops the excitation, keeps the records, then stops
-        # the firmware) instead of losing the firmware under it.
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr,
-                                     start_new_session=True)
+        self.proc, self._stderr, self._links = None, None, {}
         self.summary = ""
-        self.imu_mode = self._wait_ready()
+        self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
+        try:
+            self.workdir = self._tmp.name
+            self.sim_link_path = os.path.join(self.workdir, "sim-link")
+            self.telemetry_path = telemetry_path or os.path.join(self.workdir, "telemetry")
+            cmd += ["--sim-link", self.sim_link_path, "--telemetry", self.telemetry_path,
+                    "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s", str(int(idle_timeout_s))]
+            if dmp_image:
+                cmd += ["--dmp-image", dmp_image]
+            self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
+            self._stderr = open(self.stderr_path, "w+")
+            # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and
+            # the tool ends the run in order (stops the excitation, keeps the records, then
+            # stops the firmware) instead of losing the firmware under it.
+            self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=self._stderr,
+                                         start_new_session=True)
+            self.imu_mode = self._wait_ready()
+        except BaseException:
+            # Whatever stops the start (the firmware's own failure, Ctrl-C, SIGTERM): no
+            # process or folder is left behind.
+            self.stop()
+            raise
 
     def command(self) -> list:
         """The firmware's command line, before the link options."""
@@ -114,6 +122,10 @@ class HostFirmware:
                 text += chunk
                 lines = text.splitlines()
                 if "ready" in (line.strip() for line in lines):
+                    # Where its links point, to remove them if it dies without doing so.
+                    self._links = {path: os.readlink(path)
+                                   for path in (self.sim_link_path, self.telemetry_path)
+                                   if os.path.islink(path)}
                     imu = [line.split(":", 1)[1].strip() for line in lines if line.startswith("imu:")]
                     return imu[0] if imu else "?"
             elif self.proc.poll() is not None:
@@ -149,24 +161,46 @@ class HostFirmware:
             pass
 
     def stop(self, timeout_s: float = 3.0) -> int | None:
-        """Ask the firmware to exit (SIGTERM), then kill it if it does not."""
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.proc.stdout:
+        """Ask the firmware to exit (SIGTERM), then kill it (its whole process group) if it
+        does not; remove the links it left (a killed firmware cannot remove its own) and the
+        temporary folder. Safe to call again, and it finishes even when a Ctrl-C or SIGTERM
+        interrupts the wait."""
+        proc = self.proc
+        try:
+            if proc is not None and proc.poll() is None:
+                proc.terminate()
+                proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            pass
+        finally:
+            if proc is not None and proc.poll() is None:
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)    # its session leader: pgid = pid
+                except ProcessLookupError:
+                    pass
+                proc.wait()
+            self._release()
+        return proc.returncode if proc is not None else None
+
+    def _release(self) -> None:
+        """What a stopped firmware leaves: its output pipe, its stderr file (its last line
+        kept as :attr:`summary`), its links and the temporary folder."""
+        if self.proc is not None and self.proc.stdout:
             self.proc.stdout.close()
-        if not self._stderr.closed:
+        if self._stderr is not None and not self._stderr.closed:
             # The firmware's last line: its counters (and, emulated, its loop figures).
             self.summary = "".join(self._stderr_lines(1))
-        self._stderr.close()
+            self._stderr.close()
+        for path, target in self._links.items():
+            try:
+                if os.readlink(path) == target:      # still the firmware's, not a newer one
+                    os.unlink(path)
+            except OSError:
+                pass                                 # removed already (the firmware did)
+        self._links = {}
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
-        return self.proc.returncode
 
     def __enter__(self):
         return self

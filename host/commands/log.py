@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import sys
 
 from ..cli_args import int_in, number_in
-from ..errors import InputError
+from ..errors import DiskFull, InputError
 from ..link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
@@ -12,7 +13,8 @@ __all__ = ["add_parser", "run"]
 HELP = """\
 Log every MAVLink message from a board's telemetry port to a .tlog (8-byte big-endian
 timestamp in us, then the packet; pymavlink reads it). The file is flushed as it goes, so
-Ctrl-C or a crash leaves a valid log. Lost samples are counted from the gaps in
+Ctrl-C or a crash leaves a valid log; a full disk or a link that goes away ends the session
+with one line and exit 1, the log kept up to its last whole record. Lost samples are counted from the gaps in
 HQ_SYSID_SAMPLE.seq; a summary is printed at the end, and a status line every 5 s.
 
 example: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --out flight.tlog
@@ -43,4 +45,10 @@ def run(args) -> int:
     print(f"{r['seconds']:.1f} s: {r['messages']} messages, {r['samples']} samples"
           + (f" (seq {r['first_seq']}..{r['last_seq']})" if r["samples"] else "")
           + f", {r['lost']} lost; wrote {args.out}")
+    stopped = r["stopped"]
+    if isinstance(stopped, DiskFull):
+        raise stopped.also("logging stopped; the log up to here is kept")
+    if stopped is not None:
+        sys.stderr.write(f"heliquad log: {stopped}; the log up to here is kept in {args.out}\n")
+        return 1
     return 0

@@ -8,7 +8,7 @@ import sys
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, int_in, number_in)
-from ..errors import InputError
+from ..errors import DiskFull, InputError
 
 __all__ = ["add_parser", "run"]
 
@@ -102,6 +102,8 @@ def run(args) -> int:
         r = run_sil(cfg, args.out)
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
+    except DiskFull as exc:
+        raise exc.also("the run is stopped; the log up to here is kept")
     print(f"{r.frames} frames ({r.frames / args.loop_hz:.2f} s simulated) in {r.wall_s:.2f} s "
           f"wall ({r.frames / args.loop_hz / r.wall_s:.2g}x real time); firmware "
           f"{args.firmware}; imu path {r.imu_mode}")

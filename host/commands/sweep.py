@@ -8,7 +8,7 @@ import sys
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, int_in, number_in)
-from ..errors import InputError
+from ..errors import DiskFull, InputError
 from ..link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
@@ -89,15 +89,19 @@ def run(args) -> int:
         if created and not os.listdir(args.out):     # nothing recorded: leave nothing behind
             os.rmdir(args.out)
         raise
-    print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
-          f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
     try:
+        print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
+              f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
         manifest = run_sweep(session, plan, args.out, source)
-    except Exception as exc:                      # the firmware died, the port went away
+    except Exception as exc:          # a full disk, the firmware died, the port went away
         from ...sim.lockstep import FirmwareError
 
-        if isinstance(exc, (FirmwareError, InputError)):
-            raise InputError(f"{exc} (the log and manifest so far are kept in {args.out})") from None
+        kept = f"the log and manifest so far are kept in {args.out}"
+        if isinstance(exc, DiskFull):
+            raise exc.also(kept)
+        # OSError: a write to the port (pyserial's SerialException) or to the log failed
+        if isinstance(exc, (FirmwareError, InputError, OSError)):
+            raise InputError(f"{exc} ({kept})") from None
         raise
     finally:
         session.close()
@@ -140,7 +144,11 @@ def _sweep_session(args, tlog):
         session = SilSession(cfg, tlog)
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
-    source["firmware"] = session.fw.record()
+    try:
+        source["firmware"] = session.fw.record()
+    except BaseException:                # Ctrl-C, or the image went away: nothing left running
+        session.close()
+        raise
     if args.fault:
         source["faults"] = list(args.fault)
     return session, source

@@ -241,7 +241,8 @@ PYBIND11_MODULE(_simcore, m) {
         }, "Read, frame and log what has arrived; [(msgid, payload)] of the wanted messages.")
         .def_property_readonly("last_time_us", &TelemetryTap::last_time_us)
         .def_property_readonly("packets", &TelemetryTap::packets)
-        .def_property_readonly("write_failed", &TelemetryTap::write_failed);
+        .def_property_readonly("write_failed", &TelemetryTap::write_failed)
+        .def_property_readonly("write_errno", &TelemetryTap::write_errno);
 
     py::class_<RigEngine>(m, "RigEngine")
         .def(py::init<SimLinkPort&, RigPlant&>(), py::arg("port"), py::arg("plant"),

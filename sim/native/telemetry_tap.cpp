@@ -78,6 +78,7 @@ void TelemetryTap::accept(uint32_t msgid, const uint8_t* packet, size_t total,
         for (int b = 7; b >= 0; --b) log_.push_back(static_cast<uint8_t>(t >> (8 * b)));
         log_.insert(log_.end(), pending_.begin() + static_cast<long>(at),
                     pending_.begin() + static_cast<long>(at + plen));
+        log_ends_.push_back(log_.size());
         at += plen;
     }
     pending_.clear();
@@ -87,16 +88,24 @@ void TelemetryTap::accept(uint32_t msgid, const uint8_t* packet, size_t total,
 
 void TelemetryTap::flush_log() {
     size_t done = 0;
-    while (done < log_.size()) {
+    while (!write_failed_ && done < log_.size()) {
         const ssize_t w = ::write(tlog_fd_, log_.data() + done, log_.size() - done);
         if (w < 0 && errno == EINTR) continue;
         if (w <= 0) {
+            // No room (or another error): keep the whole records that reached the file, cut
+            // a record left half written, and log nothing more.
+            write_errno_ = w < 0 ? errno : ENOSPC;
             write_failed_ = true;
+            const auto whole = std::upper_bound(log_ends_.begin(), log_ends_.end(), done);
+            const size_t kept = whole == log_ends_.begin() ? 0 : *(whole - 1);
+            if (::ftruncate(tlog_fd_, static_cast<off_t>(written_ + kept)) == 0) done = kept;
             break;
         }
         done += static_cast<size_t>(w);
     }
+    written_ += done;
     log_.clear();
+    log_ends_.clear();
 }
 
 }  // namespace hqsim

@@ -22,14 +22,18 @@ struct TappedMessage {
 
 class TelemetryTap {
 public:
-    // tel_fd: the telemetry pty (non-blocking); tlog_fd: the .tlog file, open for writing.
+    // tel_fd: the telemetry pty (non-blocking); tlog_fd: the .tlog file, new and empty, open
+    // for writing.
     TelemetryTap(int tel_fd, int tlog_fd, std::vector<uint32_t> wanted);
 
     // Everything that has arrived, logged; the wanted messages among it. Never blocks.
     std::vector<TappedMessage> read();
     int64_t last_time_us() const { return last_time_us_; }   // -1 before the first sample
     uint64_t packets() const { return packets_; }
+    // A write to the .tlog failed (then nothing more is logged; the file ends with the last
+    // whole record that reached it); write_errno() says why (ENOSPC, EFBIG: no room).
     bool write_failed() const { return write_failed_; }
+    int write_errno() const { return write_errno_; }
 
 private:
     void accept(uint32_t msgid, const uint8_t* packet, size_t total,
@@ -42,9 +46,12 @@ private:
     std::vector<uint8_t> pending_;     // packets whose loop is not known yet
     std::vector<size_t> pending_lengths_;
     std::vector<uint8_t> log_;         // stamped packets not yet written
+    std::vector<size_t> log_ends_;     // where each record in log_ ends
+    uint64_t written_ = 0;             // bytes in the .tlog: whole records only
     int64_t last_time_us_ = -1;
     uint64_t packets_ = 0;
     bool write_failed_ = false;
+    int write_errno_ = 0;
 };
 
 }  // namespace hqsim
