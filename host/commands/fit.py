@@ -4,7 +4,6 @@ from __future__ import annotations
 
 
 from ..errors import InputError
-from ..fit import format_tf
 
 __all__ = ["add_parser", "run", "print_models"]
 
@@ -83,6 +82,8 @@ def run(args) -> int:
 
 
 def print_models(result) -> None:
+    from ..fit import format_tf
+
     print(f"weights: {result.weights}")
     print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "
           f"{'stable':>6}  model")
