@@ -889,7 +889,7 @@ CASES = [
     case("flash binary.dat", "not an Intel HEX"),
     case("flash --check-only binary.dat", "not an Intel HEX"),
     case("flash --check-only missing.hex", "no such file"),
-    case("flash --check-only adir", "no such file"),
+    case("flash --check-only adir", "is a folder"),
     case("flash --check-only empty.dat", "no data"),
     case("flash --check-only text.hex", "not an Intel HEX"),
     case("flash --check-only checksum.hex", "not an Intel HEX"),
