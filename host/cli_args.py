@@ -129,7 +129,11 @@ def _log_gain(num, den, omega) -> float:
 def check_model(what: str, num, den) -> None:
     """An identified model the cascade can be validated with (continuous time): see
     :func:`transfer_function`, poles and zeros within MODEL_RATE_MAX, its gain across
-    0.01..1e4 rad/s within MODEL_GAIN_RANGE."""
+    0.01..1e4 rad/s within MODEL_GAIN_RANGE. A zero model (no response at all) is
+    validated as it is: only its denominator is checked."""
+    if np.all(np.asarray(num, dtype=float) == 0):
+        transfer_function(what, [1.0], den)
+        return
     num, den = transfer_function(what, num, den, leading_zeros=True)
     for name, roots in (("pole", np.roots(den)), ("zero", np.roots(num))):
         if roots.size and np.max(np.abs(roots)) > MODEL_RATE_MAX:

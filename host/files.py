@@ -421,8 +421,8 @@ def _models_schema():
 
 def read_models_json(path) -> dict:
     """MODELS.json, checked (docs/file-formats.md): each model proper (num no longer than
-    den, and both as long as its ``order`` says), den's leading coefficient not zero, a
-    numerator that is not all zeros, ``recommended`` an index into ``models`` or null. A
+    den, and both as long as its ``order`` says), den's leading coefficient not zero,
+    ``recommended`` an index into ``models`` or null. A
     model without ``order`` gets the one its coefficients have."""
     doc = read_json(path, "MODELS.json", _models_schema())
     for i, m in enumerate(doc["models"]):
@@ -437,8 +437,6 @@ def read_models_json(path) -> dict:
                        f"{deg_num}/{deg_den})", m[name])
         if m["den"][0] == 0:
             S.fail(path, f"{key}.den[0]", "must not be 0 (the leading coefficient)")
-        if not any(m["num"]):
-            S.fail(path, f"{key}.num", "is all zeros (no response)")
         with np.errstate(all="ignore"):
             scaled = np.asarray(m["num"] + m["den"], float) / float(m["den"][0])
         if not np.all(np.isfinite(scaled)):
