@@ -9,13 +9,25 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["add_firmware_argument", "add_fault_argument", "faults", "check_plant", "check_excitation",
+__all__ = ["add_firmware_argument", "add_fault_argument", "faults", "check_plant", "check_model",
+           "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
 
 #: The widest an excitation's cycle counts can be: HQ_EXCITATION carries them as uint16.
 MAX_CYCLES = 65535
 #: Seeds of the simulator's random generators (numpy: 0 .. 2**32 - 1).
 MAX_SEED = 2**32 - 1
+#: The highest degree of a plant or model (as of the fit's orders).
+MAX_DEGREE = 12
+#: A coefficient (den made monic) beyond this: the polynomial's roots drown in round-off.
+MAX_COEFFICIENT = 1e30
+#: A simulated plant's gain, rad/s per unit torque command: the median of |G(j omega)| over
+#: 0.01 rad/s to the loop's Nyquist rate. Beyond it nothing a gyro measures is left to see.
+PLANT_GAIN_RANGE = (1e-6, 1e6)
+#: A model to validate: poles and zeros up to this, rad/s, and its gain (the median of
+#: |G(j omega)| over 0.01..1e4 rad/s) in the range POINTS.csv's magnitudes may take.
+MODEL_RATE_MAX = 1e6
+MODEL_GAIN_RANGE = (1e-12, 1e12)
 
 
 def int_in(lo: int, hi: int):
@@ -77,18 +89,92 @@ def faults(args) -> tuple:
     return tuple(parse_fault(text) for text in args.fault)
 
 
+def transfer_function(what: str, num, den, leading_zeros: bool = False):
+    """``num/den`` as arrays with den monic, or an InputError naming ``what``: the
+    denominator of degree 1..MAX_DEGREE with a leading coefficient that is not zero, the
+    model proper, every coefficient finite and, den made monic, within MAX_COEFFICIENT.
+    ``leading_zeros``: a numerator may start with zeros (they are dropped)."""
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    if leading_zeros:
+        num = np.trim_zeros(num, "f")
+    if num.size == 0 or not np.any(num):
+        raise InputError(f"{what}: the numerator is zero (no response)")
+    if not 2 <= den.size <= MAX_DEGREE + 1:
+        raise InputError(f"{what}: the denominator needs 2 to {MAX_DEGREE + 1} coefficients "
+                         f"(degree 1 to {MAX_DEGREE}), got {den.size}")
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+        raise InputError(f"{what}: coefficients must be finite numbers")
+    if den[0] == 0 or num[0] == 0:
+        raise InputError(f"{what}: the leading coefficient of the "
+                         f"{'denominator' if den[0] == 0 else 'numerator'} is 0: drop leading zeros")
+    if num.size > den.size:
+        raise InputError(f"{what}: not proper (numerator degree {num.size - 1} above the "
+                         f"denominator's {den.size - 1}); a physical response is proper")
+    with np.errstate(all="ignore"):
+        num, den = num / den[0], den / den[0]
+    if not np.all(np.abs(np.concatenate([num, den])) <= MAX_COEFFICIENT):
+        raise InputError(f"{what}: with the denominator made monic a coefficient is beyond "
+                         f"{MAX_COEFFICIENT:g} (the poles would be lost in round-off)")
+    return num, den
+
+
+def _log_gain(num, den, omega) -> float:
+    """The median over ``omega`` of log10 |G(j omega)| (a resonance on the grid does not
+    dominate it, nor a pole on the imaginary axis)."""
+    with np.errstate(all="ignore"):
+        s = 1j * omega
+        return float(np.median(np.log10(np.abs(np.polyval(num, s) / np.polyval(den, s)))))
+
+
+def check_model(what: str, num, den) -> None:
+    """An identified model the cascade can be validated with (continuous time): see
+    :func:`transfer_function`, poles and zeros within MODEL_RATE_MAX, its gain across
+    0.01..1e4 rad/s within MODEL_GAIN_RANGE. A zero model (no response at all) is
+    validated as it is: only its denominator is checked."""
+    if np.all(np.asarray(num, dtype=float) == 0):
+        transfer_function(what, [1.0], den)
+        return
+    num, den = transfer_function(what, num, den, leading_zeros=True)
+    for name, roots in (("pole", np.roots(den)), ("zero", np.roots(num))):
+        if roots.size and np.max(np.abs(roots)) > MODEL_RATE_MAX:
+            raise InputError(f"{what}: a {name} at {np.max(np.abs(roots)):.3g} rad/s, beyond "
+                             f"{MODEL_RATE_MAX:g} rad/s: not an attitude model")
+    lo, hi = MODEL_GAIN_RANGE
+    gain = _log_gain(num, den, np.logspace(-2, 4, 200))
+    if not math.log10(lo) <= gain <= math.log10(hi):
+        raise InputError(f"{what}: its gain (about {10 ** gain:.3g}) is outside "
+                         f"[{lo:g}, {hi:g}]")
+
+
 def check_plant(args) -> None:
-    if len(args.den) < 2 or args.den[0] == 0 or len(args.num) > len(args.den):
-        raise InputError("--den needs a leading non-zero coefficient and a degree at least "
-                         "that of --num")
+    """The simulated rig can fly this plant: a transfer function (:func:`transfer_function`,
+    leading zeros refused) whose poles are no faster than the loop's Nyquist rate and whose
+    gain is within PLANT_GAIN_RANGE, or a vehicle file whose fastest mode the integrator can
+    follow at this loop rate. An unstable plant is allowed: the firmware's abort is what such
+    a run tests."""
     if not 0 <= args.collective <= 1:
         raise InputError("--collective must be in [0, 1]")
-    if not 0 < getattr(args, "loop_hz", 200.0) <= 2000:
+    loop_hz = getattr(args, "loop_hz", 200.0)
+    if not 0 < loop_hz <= 2000:
         raise InputError("--loop-hz must be in (0, 2000]")
     if getattr(args, "plant", "tf") == "vehicle":
         from ..sim.params import load_params
+        from ..sim.vehicle import check_step
 
-        load_params(args.params)                       # a bad file fails here, in one line
+        check_step(load_params(args.params), 1.0 / loop_hz)    # a bad file fails here, in one line
+        return
+    num, den = transfer_function("--num/--den", args.num, args.den)
+    nyquist = math.pi * loop_hz
+    fastest = float(np.max(np.abs(np.roots(den))))
+    if fastest > nyquist:
+        raise InputError(f"--num/--den: a pole at {fastest:.3g} rad/s is faster than the "
+                         f"{loop_hz:g} Hz loop's Nyquist rate ({nyquist:.3g} rad/s): its "
+                         "samples cannot show it (drop it; its DC gain stays in the numerator)")
+    lo, hi = PLANT_GAIN_RANGE
+    gain = _log_gain(num, den, np.logspace(-2, math.log10(nyquist), 200))
+    if not math.log10(lo) <= gain <= math.log10(hi):
+        raise InputError(f"--num/--den: the plant's gain (about {10 ** gain:.3g} rad/s per unit "
+                         f"torque command up to the Nyquist rate) is outside [{lo:g}, {hi:g}]")
 
 
 def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):

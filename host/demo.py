@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from . import paper
-from .cli_args import add_firmware_argument
+from .cli_args import MAX_SEED, add_firmware_argument, int_in
 from .errors import InputError
 
 __all__ = ["add_parser", "run_demo"]
@@ -31,21 +31,23 @@ def add_parser(sub, fmt) -> None:
                    help="output directory (default ./heliquad-demo)")
     p.add_argument("--axes", nargs="+", choices=tuple(paper.BANDS_HZ), default=list(paper.BANDS_HZ))
     p.add_argument("--ideal-sensor", action="store_true", help="no IMU noise, bias or latency")
-    p.add_argument("--seed", type=int, default=1, help="sensor-noise seed (default 1)")
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=1,
+                   help="sensor-noise seed (default 1)")
     add_firmware_argument(p)
     p.set_defaults(func=run_demo)
 
 
 def run_demo(args) -> int:
+    from .files import new_output_folder
+
+    new_output_folder(args.out, "the demo")                 # before the slow imports below
     from ..sim.sil import SilConfig
     from .session import SilSession
-    from .files import new_output_folder
     from .identify_session import identify_dir
     from .report import write_report
     from .sweep import SWEEP_TLOG, default_plan, run_sweep
     from .validate import load_gains, save_validation, validate_model
 
-    new_output_folder(args.out, "the demo")
     t0, sim_s, summary = time.monotonic(), 0.0, []
     for axis in args.axes:
         folder = os.path.join(args.out, axis)

@@ -162,23 +162,31 @@ def _source_text(source: str | None) -> str:
         try:
             with zipfile.ZipFile(source) as whl:
                 return whl.read(MEMBER).decode()
-        except (OSError, KeyError, zipfile.BadZipFile) as exc:
-            raise InputError(f"{source}: cannot read {MEMBER} ({exc})") from None
+        except (OSError, KeyError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
+            raise InputError(f"{source}: cannot read {MEMBER} "
+                             f"({exc.strerror if isinstance(exc, OSError) else exc})") from None
     try:
-        with open(source) as fh:
+        with open(source, encoding="utf-8") as fh:
             return fh.read()
     except OSError as exc:
         raise InputError(f"{source}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{source}: not UTF-8 text: not a Python source file") from None
 
 
 def _list(tree: ast.AST, name: str, size: int) -> bytes:
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name
                                                 for t in node.targets):
-            values = ast.literal_eval(node.value)
-            if len(values) != size or not all(isinstance(v, int) and 0 <= v <= 255
-                                               for v in values):
-                raise InputError(f"{name} has {len(values)} entries; expected {size} bytes")
+            try:
+                values = ast.literal_eval(node.value)
+            except (ValueError, TypeError, SyntaxError, MemoryError, RecursionError):
+                raise InputError(f"{name} is not a list of numbers") from None
+            if not isinstance(values, (list, tuple)):
+                raise InputError(f"{name} is not a list of numbers")
+            if len(values) != size or not all(type(v) is int and 0 <= v <= 255 for v in values):
+                raise InputError(f"{name} has {len(values)} entries; expected {size} bytes "
+                                 "(each 0..255)")
             return bytes(values)
     raise InputError(f"no {name} list found in the source")
 
@@ -186,7 +194,21 @@ def _list(tree: ast.AST, name: str, size: int) -> bytes:
 def read_dmp_firmware(source: str | None = None) -> DmpFirmware:
     """The MotionApps 2.0 image and tables from ``MPUConstants`` (checked: 1929, 192 and 47
     bytes, the tables parse, seven updates)."""
-    tree = ast.parse(_source_text(source))
+    text = _source_text(source)
+    try:
+        tree = ast.parse(text)
+    except (SyntaxError, ValueError) as exc:           # ValueError: a NUL byte
+        raise InputError(f"{source or MEMBER}: not Python source "
+                         f"({exc.msg if isinstance(exc, SyntaxError) else exc})") from None
+    except (MemoryError, RecursionError):
+        raise InputError(f"{source or MEMBER}: nested too deeply to read") from None
+    try:
+        return _read_parts(tree)
+    except InputError as exc:
+        raise InputError(f"{source or MEMBER}: {exc}") from None
+
+
+def _read_parts(tree) -> DmpFirmware:
     return _check(DmpFirmware(_list(tree, "dmpMemory", DMP_IMAGE_SIZE),
                               _list(tree, "dmpConfig", DMP_CONFIG_SIZE),
                               _list(tree, "dmpUpdates", DMP_UPDATES_SIZE)))
@@ -205,9 +227,12 @@ or pass it at run time:      heliquad sil ... --dmp-image dmp.bin
 
 
 def _cmd(args) -> int:
+    from .files import atomic_write, check_output
+
+    check_output(args.out, "--out")
     fw = read_dmp_firmware(args.source)
     data = pack_dmp_file(fw)
-    with open(args.out, "wb") as fh:
+    with atomic_write(args.out, "wb") as fh:
         fh.write(data)
     print(f"wrote {len(data)} bytes to {args.out}: image {len(fw.image)}, configuration "
           f"{len(fw.config)}, updates {len(fw.updates)} bytes "

@@ -6,14 +6,19 @@
   ``sigma,coherence``; one row per frequency, omega strictly increasing; phase wrapped or not.
 * MODELS.json: ``{"models": [...], "recommended": INDEX, ...}``, coefficients in descending
   powers of s, den monic.
+* A sweep folder's manifest.json, a gains file, validation.json and points_table.csv.
 
-Readers raise :class:`InputError` with a one-line message naming the file and the problem.
+There is one reader per format; every command and the library read through it. Each JSON
+reader checks its document against a schema (:mod:`.schema`). Readers raise
+:class:`InputError` with a one-line message naming the file and the key or row at fault.
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
+import functools
+import io
 import json
 import math
 import os
@@ -22,17 +27,59 @@ import warnings
 
 import numpy as np
 
+from . import schema as S
 from .errors import DiskFull, InputError, no_room
+from .paper import BANDS_HZ
 
-__all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_run_csv", "read_points_csv",
-           "write_run_csv", "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
+__all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_text", "read_run_csv", "read_points_csv",
+           "read_points_table", "read_json", "read_manifest", "read_models_json", "read_gains",
+           "read_validation", "check_output", "check_output_folder", "write_run_csv",
+           "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
            "atomic_write", "write_json", "save_figure", "new_output_folder"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
+TABLE_COLUMNS = ("freq_hz", "omega_rad_s", "magnitude", "phase_deg", "real", "imag", "coherence")
+AXES = tuple(BANDS_HZ)
 POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
 POINTS_OPTIONAL = ("sigma", "coherence")
 #: Largest spread of sample intervals, relative to the mean interval, still called uniform.
 UNIFORM_TOLERANCE = 0.01
+
+
+def _temporary_beside(path):
+    """(fd, name) of a new temporary file in ``path``'s folder; InputError if there is none."""
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        return tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
+
+
+def check_output(path, option: str) -> None:
+    """Refuse, before any work is done, an output file that could not be written: a folder,
+    or a name whose folder is missing, is a file, or takes no new file (tried with a
+    temporary file, removed again)."""
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        raise InputError(f"{option} {path}: is a folder; give a file name")
+    fd, tmp = _temporary_beside(path)
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def check_output_folder(path, option: str) -> None:
+    """As :func:`check_output`, for an output folder that may not exist yet: it, or the
+    nearest folder above it that exists, must be a folder that takes new files."""
+    given = os.fspath(path)
+    where = os.path.abspath(given)
+    while not os.path.lexists(where):
+        where = os.path.dirname(where)
+    if not os.path.isdir(where):
+        raise InputError(f"{option} {given}: {where} is a file, not a folder")
+    try:
+        check_output(os.path.join(where, ".heliquad-probe"), option)
+    except InputError:
+        raise InputError(f"{option} {given}: cannot write into {where}") from None
 
 
 @contextlib.contextmanager
@@ -43,12 +90,7 @@ def atomic_write(path, mode: str = "w"):
     file as it was and no temporary file behind; a write that finds no room raises
     :class:`DiskFull` naming ``path``, any other OSError an InputError."""
     path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp",
-                                   dir=folder)
-    except OSError as exc:
-        raise _write_error(path, exc) from None
+    fd, tmp = _temporary_beside(path)
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"newline": ""})) as fh:
             yield fh
@@ -73,10 +115,21 @@ def _write_error(path, exc: OSError) -> Exception:
 
 
 def write_json(path, doc) -> None:
-    """``doc`` as indented JSON, atomically (:func:`atomic_write`)."""
+    """``doc`` as indented JSON, atomically (:func:`atomic_write`); numbers that are not
+    finite are written as null (JSON has none, and the readers refuse Python's NaN)."""
     with atomic_write(path) as fh:
-        json.dump(doc, fh, indent=2)
+        json.dump(_finite_or_null(doc), fh, indent=2)
         fh.write("\n")
+
+
+def _finite_or_null(doc):
+    if isinstance(doc, float):
+        return doc if math.isfinite(doc) else None
+    if isinstance(doc, dict):
+        return {k: _finite_or_null(v) for k, v in doc.items()}
+    if isinstance(doc, (list, tuple)):
+        return [_finite_or_null(v) for v in doc]
+    return doc
 
 
 def save_figure(fig, path, **kwargs) -> None:
@@ -101,35 +154,79 @@ def new_output_folder(path, what: str) -> bool:
     return created
 
 
-def _read_table(path, required, optional=()):
-    """Read a headed CSV of numbers; returns {column: array} for required + present optional."""
+#: The largest CSV file read (a long RUN.csv at 200 Hz is a few MB).
+MAX_CSV_BYTES = 256 * 2**20
+#: The largest JSON file read (heliquad's own are a few kB; a manifest grows with frequencies).
+MAX_JSON_BYTES = 16 * 2**20
+#: POINTS.csv holds one row per excitation frequency; a fit of more would take minutes.
+MAX_POINTS = 10_000
+#: POINTS.csv: frequencies and magnitudes heliquad fits (outside them a file is in the wrong
+#: units, or its numbers cannot be scaled into double precision with a model's powers of s).
+OMEGA_RANGE = (1e-6, 1e9)
+MAGNITUDE_RANGE = (1e-12, 1e12)
+#: POINTS.csv: the highest frequency at most this many times the lowest (six decades).
+MAX_OMEGA_SPAN = 1e6
+#: RUN.csv: sampling rates, Hz, and the largest magnitude of a sample.
+RATE_RANGE_HZ = (1e-3, 1e7)
+MAX_SAMPLE = 1e150
+#: A manifest's loop rate (freq_hz x period_samples), Hz.
+LOOP_RANGE_HZ = (1.0, 1e4)
+#: A model's pure delay, s.
+MAX_DELAY_S = 10.0
+
+
+def read_text(path, limit: int, what: str = "file") -> str:
+    """The text of a file a user gave: UTF-8 (a byte-order mark is dropped), at most
+    ``limit`` bytes. InputError, naming the file, when it is missing, a folder, unreadable,
+    larger, not UTF-8 or empty."""
     try:
-        with open(path, newline="") as fh:
-            header = next(csv.reader(fh), None)
-            if header is None:
-                raise InputError(f"{path}: empty file (expected a header row: "
-                                 f"{','.join(required)})")
-            names = [h.strip() for h in header]
-            missing = [c for c in required if c not in names]
-            if missing:
-                raise InputError(f"{path}: missing column(s) {','.join(missing)}; header has "
-                                 f"{','.join(names) or 'nothing'} (expected {','.join(required)})")
-            wanted = list(required) + [c for c in optional if c in names]
-            cols = [names.index(c) for c in wanted]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")      # "empty input file" from numpy
-                data = np.loadtxt(fh, delimiter=",", usecols=cols, ndmin=2, dtype=float)
+        with open(path, "rb") as fh:
+            data = fh.read(limit + 1)
     except FileNotFoundError:
         raise InputError(f"{path}: no such file") from None
     except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a CSV file") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text CSV file") from None
+        raise InputError(f"{path}: is a folder, not a {what}") from None
+    except OSError as exc:
+        raise InputError(f"{path}: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        raise InputError(f"{path}: larger than {limit // 2**20} MiB: not a {what}")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not UTF-8 text (byte {exc.start}): not a {what}") from None
+    if not text.strip():
+        raise InputError(f"{path}: empty file (expected a {what})")
+    return text
+
+
+def _read_table(path, required, optional=(), what="CSV file"):
+    """Read a headed CSV of numbers; returns {column: array} for required + present optional.
+    Required columns must be finite; optional ones may hold nan (a value not known)."""
+    text = read_text(path, MAX_CSV_BYTES, what)
+    try:
+        fh = io.StringIO(text, newline="")
+        names = [h.strip() for h in next(csv.reader(fh))]
+        missing = [c for c in required if c not in names]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {','.join(missing)}; header has "
+                             f"{_short(','.join(names)) or 'nothing'} (expected "
+                             f"{','.join(required)})")
+        twice = sorted({c for c in names if c and names.count(c) > 1})
+        if twice:
+            raise InputError(f"{path}: column {twice[0]} appears twice in the header")
+        wanted = list(required) + [c for c in optional if c in names]
+        _check_row_lengths(path, text.splitlines()[1:], len(names))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")      # "empty input file" from numpy
+            data = np.loadtxt(fh, delimiter=",", usecols=[names.index(c) for c in wanted],
+                              ndmin=2, dtype=float)
+    except csv.Error as exc:
+        raise InputError(f"{path}: not a CSV file ({exc})") from None
     except ValueError as exc:
         if isinstance(exc, InputError):
             raise
-        first = str(exc).splitlines()[0] if str(exc) else "malformed row"
-        raise InputError(f"{path}: {first} (data rows count from 1 after the header)") from None
+        raise InputError(f"{path}: {_short(str(exc).splitlines()[0] if str(exc) else 'malformed row')}"
+                         " (data rows count from 1 after the header)") from None
     if data.shape[0] == 0:
         raise InputError(f"{path}: no data rows after the header")
     table = {c: data[:, i] for i, c in enumerate(wanted)}
@@ -140,17 +237,47 @@ def _read_table(path, required, optional=()):
     return table
 
 
+def _check_row_lengths(path, rows, n) -> None:
+    """Every data row has as many fields as the header (numpy would quietly ignore extra
+    ones in columns it does not read)."""
+    for i, row in enumerate(rows, 1):
+        if row.strip() and not row.lstrip().startswith("#") and row.count(",") != n - 1:
+            raise InputError(f"{path}: data row {i} has {row.count(',') + 1} fields; the header "
+                             f"has {n}")
+
+
+def _short(text: str, limit: int = 80) -> str:
+    """A value or text for a one-line message: control characters escaped, cut at ``limit``."""
+    text = text.encode("unicode_escape").decode("ascii") if not text.isprintable() else text
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _first_bad(path, column, values, ok, what) -> None:
+    """InputError naming the first data row of ``column`` whose value is not ``ok``."""
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        raise InputError(f"{path}: {column} at data row {bad[0] + 1} is {values[bad[0]]:g}; "
+                         f"it must be {what}")
+
+
 def read_run_csv(path):
     """Read a sine experiment. Returns ``(fs_hz, u, y)``."""
-    table = _read_table(path, RUN_COLUMNS)
+    table = _read_table(path, RUN_COLUMNS, what="RUN.csv (columns t_s,u,y)")
     t = table["t_s"]
     if t.size < 3:
         raise InputError(f"{path}: only {t.size} samples; a run needs many periods of data")
+    for c in RUN_COLUMNS:
+        _first_bad(path, c, table[c], np.abs(table[c]) <= MAX_SAMPLE,
+                   f"within +/-{MAX_SAMPLE:g}")
     dt = np.diff(t)
     bad = np.flatnonzero(dt <= 0)
     if bad.size:
         raise InputError(f"{path}: time t_s does not increase at data row {bad[0] + 2}")
     mean_dt = (t[-1] - t[0]) / (t.size - 1)
+    lo, hi = RATE_RANGE_HZ
+    if not lo <= 1.0 / mean_dt <= hi:
+        raise InputError(f"{path}: sampling rate {1.0 / mean_dt:.3g} Hz is outside "
+                         f"[{lo:g}, {hi:g}] Hz (t_s is in seconds)")
     spread = float(np.max(np.abs(dt - mean_dt)) / mean_dt)
     if spread > UNIFORM_TOLERANCE:
         row = int(np.argmax(np.abs(dt - mean_dt))) + 2
@@ -174,26 +301,210 @@ def read_points_csv(path):
     dict
         ``omega`` (rad/s), ``F`` (complex), and ``sigma`` / ``coherence`` arrays or None.
     """
-    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL)
-    omega = table["omega_rad_s"]
+    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL,
+                        what="POINTS.csv (columns omega_rad_s,magnitude,phase_rad)")
+    omega, mag = table["omega_rad_s"], table["magnitude"]
+    if omega.size > MAX_POINTS:
+        raise InputError(f"{path}: {omega.size} rows; a points file holds at most {MAX_POINTS} "
+                         "(one per excitation frequency)")
+    (wlo, whi), (mlo, mhi) = OMEGA_RANGE, MAGNITUDE_RANGE
+    _first_bad(path, "omega_rad_s", omega, (omega >= wlo) & (omega <= whi),
+               f"in [{wlo:g}, {whi:g}] rad/s")
     bad = np.flatnonzero(np.diff(omega) <= 0)
     if bad.size:
-        raise InputError(f"{path}: omega_rad_s does not increase at data row {bad[0] + 2}")
-    if omega[0] <= 0:
-        raise InputError(f"{path}: omega_rad_s must be positive (row 1 has {omega[0]:g})")
-    mag = table["magnitude"]
-    if np.any(mag <= 0):
-        raise InputError(f"{path}: magnitude must be positive and linear (not dB); data row "
-                         f"{np.flatnonzero(mag <= 0)[0] + 1} is {mag[mag <= 0][0]:g}")
+        raise InputError(f"{path}: omega_rad_s does not increase at data row {bad[0] + 2} "
+                         "(one row per frequency, in increasing order)")
+    if omega[-1] > MAX_OMEGA_SPAN * omega[0]:
+        raise InputError(f"{path}: omega_rad_s spans {omega[0]:g} to {omega[-1]:g} rad/s, more "
+                         f"than {math.log10(MAX_OMEGA_SPAN):g} decades: one model cannot be fitted "
+                         "to it (split the band)")
+    _first_bad(path, "magnitude", mag, mag > 0, "positive and linear (not dB)")
+    _first_bad(path, "magnitude", mag, (mag >= mlo) & (mag <= mhi), f"in [{mlo:g}, {mhi:g}]")
+    _first_bad(path, "phase_rad", table["phase_rad"], np.abs(table["phase_rad"]) <= 1e4,
+               "within +/-1e4 rad")
     out = {"omega": omega, "F": mag * np.exp(1j * table["phase_rad"]),
            "sigma": table.get("sigma"), "coherence": table.get("coherence")}
-    for name in POINTS_OPTIONAL:
-        col = out[name]
-        if col is not None and (np.any(~np.isfinite(col)) or np.any(col < 0)):
-            raise InputError(f"{path}: column {name} must be finite and non-negative")
-    if out["coherence"] is not None and np.any(out["coherence"] > 1):
-        raise InputError(f"{path}: coherence must lie in [0, 1]")
+    if out["sigma"] is not None:
+        s = out["sigma"]
+        _first_bad(path, "sigma", s, np.isfinite(s) & (s >= 0), "finite and non-negative")
+    if out["coherence"] is not None:
+        c = out["coherence"]
+        _first_bad(path, "coherence", c, np.isnan(c) | ((c >= 0) & (c <= 1)),
+                   "in [0, 1] (or nan: not known)")
     return out
+
+
+def read_points_table(path):
+    """Read the paper-style table ``heliquad identify`` writes (points_table.csv): columns
+    ``freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence`` (coherence may be nan)."""
+    table = _read_table(path, TABLE_COLUMNS[:-1], TABLE_COLUMNS[-1:],
+                        what="points table (" + ",".join(TABLE_COLUMNS) + ")")
+    if "coherence" not in table:
+        raise InputError(f"{path}: missing column coherence")
+    c = table["coherence"]
+    _first_bad(path, "coherence", c, np.isnan(c) | ((c >= 0) & (c <= 1)),
+               "in [0, 1] (or nan: not known)")
+    return table
+
+
+# --- JSON documents: one reader per format, each checked against its schema -----------------
+
+def read_json(path, what: str, schema):
+    """A JSON file checked against ``schema`` (:mod:`.schema`); InputError in one line naming
+    the file (and the key at fault) for anything else."""
+    text = read_text(path, MAX_JSON_BYTES, what)
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno} column "
+                         f"{exc.colno}): not a {what}") from None
+    except RecursionError:
+        raise InputError(f"{path}: JSON nested too deeply: not a {what}") from None
+    except ValueError:                       # an integer of thousands of digits
+        raise InputError(f"{path}: a number too long to read: not a {what}") from None
+    return schema.check(path, "", doc)
+
+
+@functools.cache
+def _manifest_schema():
+    from .link import INJECTIONS
+
+    frequency = S.Obj(
+        required={"requested_hz": S.Num(0, 1e6, lo_open=True), "samples": S.Int(0, 2**31),
+                  "status": S.Str()},
+        optional={"amplitude": S.Num(), "freq_hz": S.Num(0, 1e6, lo_open=True),
+                  "period_samples": S.Int(2, 2**31), "start_us": S.Int(0, 2**63 - 1),
+                  "end_us": S.Int(0, 2**63 - 1), "messages": S.List(S.Str()),
+                  **{k: S.Int(0, 2**31) for k in ("seq_gaps", "saturated", "collective_limited",
+                                                  "sensor_clipped")}})
+    return S.Obj(
+        required={"axis": S.Str(AXES), "inject": S.Str(tuple(INJECTIONS)),
+                  "frequencies": S.List(frequency, 0, 10_000)},
+        optional={"tlog": S.Str(file_name=True), "source": S.Obj(), "firmware": S.Str(),
+                  "gains": S.Null(S.Obj()), "started": S.Str(), "cycles": S.Int(1, 65535),
+                  "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
+                  "complete": S.Bool(), "aborted": S.Null(S.Str()),
+                  "in_progress_hz": S.Null(S.Num())})
+
+
+def read_manifest(path) -> dict:
+    """A sweep folder's manifest.json, checked (docs/file-formats.md): every frequency that
+    is ``ok`` has the frequency, period and sample window identification needs."""
+    doc = read_json(path, "sweep manifest (manifest.json)", _manifest_schema())
+    if doc["axis"] == "yaw" and doc["inject"] == "angle":
+        S.fail(path, "inject", "angle is not possible on yaw (rate only)")
+    for i, entry in enumerate(doc["frequencies"]):
+        key = f"frequencies[{i}]"
+        if entry["status"] == "ok":
+            for name in ("freq_hz", "period_samples", "start_us", "end_us"):
+                if name not in entry:
+                    S.fail(path, f"{key}.{name}", "is missing (the frequency's status is ok)")
+        if "start_us" in entry and entry["start_us"] > entry.get("end_us", math.inf):
+            S.fail(path, f"{key}.end_us", "is before start_us", entry["end_us"])
+        if "freq_hz" in entry and "period_samples" in entry:
+            loop_hz = entry["freq_hz"] * entry["period_samples"]
+            if not LOOP_RANGE_HZ[0] <= loop_hz <= LOOP_RANGE_HZ[1]:
+                S.fail(path, key, f"freq_hz x period_samples, the loop rate, is {loop_hz:g} Hz; "
+                       f"it must be in [{LOOP_RANGE_HZ[0]:g}, {LOOP_RANGE_HZ[1]:g}] Hz")
+    return doc
+
+
+@functools.cache
+def _models_schema():
+    pairs = S.List(S.Seq(("real", S.Num()), ("imag", S.Num())), 0, 12)
+    model = S.Obj(
+        required={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13)},
+        optional={"order": S.Seq(("M", S.Int(0, 12)), ("N", S.Int(1, 12))),
+                  "delay_s": S.Num(0, MAX_DELAY_S), "stable": S.Bool(), "degenerate": S.Bool(),
+                  "metrics": S.Obj(values=S.Null(S.Num())), "poles": pairs, "zeros": pairs,
+                  "dc_gain": S.Null(S.Num())})
+    log = S.Obj(optional={"first_regions": S.List(S.List(S.Int(0, 2**63), 2, 2))},
+                values=S.Int(0, 2**63))
+    return S.Obj(
+        required={"models": S.List(model, 1, 1000)},
+        optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(), "axis": S.Str(AXES),
+                  "points_file": S.Str(), "weights": S.Str(), "log": log,
+                  "skipped_frequencies": S.List(S.Str()),
+                  "saturated_frequencies": S.List(S.Str())})
+
+
+def read_models_json(path) -> dict:
+    """MODELS.json, checked (docs/file-formats.md): each model proper (num no longer than
+    den, and both as long as its ``order`` says), den's leading coefficient not zero,
+    ``recommended`` an index into ``models`` or null. A
+    model without ``order`` gets the one its coefficients have."""
+    doc = read_json(path, "MODELS.json", _models_schema())
+    for i, m in enumerate(doc["models"]):
+        key = f"models[{i}]"
+        deg_num, deg_den = m.setdefault("order", [len(m["num"]) - 1, len(m["den"]) - 1])
+        if deg_num > deg_den:
+            S.fail(path, f"{key}.order", "is improper (numerator degree above the "
+                   "denominator's)", m["order"])
+        for name, want in (("num", deg_num + 1), ("den", deg_den + 1)):
+            if len(m[name]) != want:
+                S.fail(path, f"{key}.{name}", f"must have {want} coefficients (order "
+                       f"{deg_num}/{deg_den})", m[name])
+        if m["den"][0] == 0:
+            S.fail(path, f"{key}.den[0]", "must not be 0 (the leading coefficient)")
+        with np.errstate(all="ignore"):
+            scaled = np.asarray(m["num"] + m["den"], float) / float(m["den"][0])
+        if not np.all(np.isfinite(scaled)):
+            S.fail(path, key, "has coefficients beyond double range once den is monic")
+    rec = doc.get("recommended")
+    if rec is not None and rec >= len(doc["models"]):
+        S.fail(path, "recommended", f"is not an index into models (0..{len(doc['models']) - 1})",
+               rec)
+    return doc
+
+
+@functools.cache
+def _gains_schema():
+    gain, tau_i, tau_d = S.Num(0, 1e4, lo_open=True), S.Num(0, 1e4), S.Num(0, 1e3)
+    rate = S.Seq(("Kc", gain), ("tau_I_s", tau_i), ("tau_D_s", tau_d))
+    angle = S.Seq(("Kc", gain), ("tau_D_s", tau_d))
+    return S.Obj(required={"rate": S.Obj(optional={a: rate for a in AXES}, strict=True)},
+                 optional={"angle": S.Obj(optional={a: angle for a in AXES if a != "yaw"},
+                                          strict=True)},
+                 strict=True)
+
+
+def read_gains(path, axis: str) -> tuple:
+    """A gains file's gains for ``axis``: ``(rate, angle)``, rate ``(Kc, tau_I, tau_D)`` and
+    angle ``(Kc, tau_D)`` (None for yaw, which is rate only). Keys and ranges:
+    docs/file-formats.md."""
+    doc = read_json(path, "gains file", _gains_schema())
+    if axis not in doc["rate"]:
+        S.fail(path, f"rate.{axis}", "is missing ([Kc, tau_I_s, tau_D_s])")
+    if axis != "yaw" and axis not in doc.get("angle", {}):
+        S.fail(path, f"angle.{axis}", "is missing ([Kc, tau_D_s])")
+    rate = tuple(float(v) for v in doc["rate"][axis])
+    return rate, None if axis == "yaw" else tuple(float(v) for v in doc["angle"][axis])
+
+
+@functools.cache
+def _validation_schema():
+    num = S.Null(S.Num())
+    loop = S.Obj(required={"closed_loop_stable": S.Bool()}, values=num)
+    return S.Obj(
+        required={"stable": S.Bool(), "loops": S.Obj(values=loop)},
+        optional={
+            "step": S.Obj(required={"size": S.Num(), "unit": S.Str()}, values=num),
+            "sine": S.Obj(required={"freq_hz": S.Num()}, values=num),
+            "turbulence": S.Obj(required={"level": S.Str(), "rate_rms_deg_s": S.Num(),
+                                          "gust_rate_rms_deg_s": S.Num()}),
+            "instability": S.Obj(required={"pole_rad_s": S.Num(0),
+                                           "band_top_rad_s": S.Num(0, lo_open=True),
+                                           "outside_band": S.Bool()})})
+
+
+def read_validation(path) -> dict:
+    """validation.json (``heliquad validate``), checked for what ``heliquad report`` shows."""
+    doc = read_json(path, "validation.json", _validation_schema())
+    if doc["stable"]:
+        for name in ("step", "sine"):
+            if name not in doc:
+                S.fail(path, name, "is missing (the cascade is stable)")
+    return doc
 
 
 def write_points_csv(path, points):

@@ -32,7 +32,6 @@ import dataclasses
 import re
 
 import numpy as np
-import scipy.optimize
 
 from .errors import InputError
 
@@ -186,16 +185,60 @@ def _sk_solve(x, F, m, n, w, start=None):
 
 
 def _scaled(omega_rad_s):
+    """Frequencies over their band's centre ``w0`` (the geometric mean of the lowest and the
+    highest, taken in logs so that neither overflows nor underflows)."""
     omega = np.asarray(omega_rad_s, dtype=float)
-    w0 = float(np.sqrt(omega.min() * omega.max()))
+    w0 = float(np.exp(0.5 * (np.log(omega.min()) + np.log(omega.max()))))
     return omega / w0, w0
+
+
+def _normalised(omega_rad_s, F, weights):
+    """The points as the fit works on them: ``(x, w0, F / g0, g0, w)``, frequencies over
+    ``w0`` (:func:`_scaled`), the response over its typical magnitude ``g0`` (the geometric
+    mean of ``|F|``) and weights of typical size 1 (their scale does not move the fit). An
+    InputError for points no fit can use."""
+    omega = np.asarray(omega_rad_s, dtype=float)
+    F = np.asarray(F, dtype=complex)
+    w = 1.0 / np.abs(F) if weights is None else np.asarray(weights, dtype=float)
+    if not (omega.ndim == 1 and omega.size == F.size == w.size and omega.size >= 1):
+        raise InputError("frequencies, responses and weights must be lists of one length")
+    if not (np.all(np.isfinite(omega)) and np.all(omega > 0) and np.all(np.diff(omega) > 0)):
+        raise InputError("frequencies must be finite, positive and strictly increasing")
+    if not (np.all(np.isfinite(F)) and np.all(F != 0)):
+        raise InputError("responses must be finite and not zero")
+    if not (np.all(np.isfinite(w)) and np.all(w > 0)):
+        raise InputError("weights must be finite and positive")
+    with np.errstate(all="ignore"):
+        g0 = float(np.exp(np.mean(np.log(np.abs(F)))))
+        w = w * g0
+        w = w / np.exp(np.mean(np.log(w)))
+    x, w0 = _scaled(omega)
+    if not (np.all(np.isfinite(w)) and np.all(w > 0) and np.all(np.isfinite(x)) and g0 > 0):
+        raise InputError("the points' frequencies, magnitudes or weights span more than double "
+                         "precision holds")
+    return x, w0, F / g0, g0, w
+
+
+def _check_unscaled(order, num, den, response, omega) -> None:
+    """The model in rad/s must still be the one fitted in scaled frequency: coefficients of
+    ``w0`` to the n-th power over- or underflow when the band is far from 1 rad/s."""
+    with np.errstate(all="ignore"):
+        ok = np.all(np.isfinite(num)) and np.all(np.isfinite(den)) and np.any(num != 0)
+        if ok:
+            got = model_response(num, den, 0.0, omega)
+            ok = bool(np.all(np.abs(got - response) <= 1e-6 * np.abs(response) + 1e-300))
+    if not ok:
+        raise InputError(f"order {order[0]}/{order[1]}: in rad/s the model's coefficients "
+                         "leave double precision (the band or the magnitudes are too far from "
+                         "1); give the points in other units")
 
 
 def _unscale(num, den, w0):
     """From ``s' = s / w0`` back to ``s``; the monic denominator stays monic."""
     n = len(den) - 1
-    den_s = np.asarray(den) * w0 ** (np.arange(n + 1))            # d'_i w0^(n-i), descending
-    num_s = np.asarray(num) * w0 ** (n - np.arange(len(num) - 1, -1, -1))
+    with np.errstate(over="ignore", under="ignore"):      # checked by _check_unscaled
+        den_s = np.asarray(den) * w0 ** (np.arange(n + 1))        # d'_i w0^(n-i), descending
+        num_s = np.asarray(num) * w0 ** (n - np.arange(len(num) - 1, -1, -1))
     return num_s, den_s
 
 
@@ -295,6 +338,8 @@ class _OutputError:
 
 
 def _refine(problem, x0, tau_max):
+    import scipy.optimize          # here: parsing an order must not wait for scipy
+
     lower, upper = (np.append(b, 0.0) for b in problem.bounds())
     lower, upper = lower[:x0.size], upper[:x0.size]
     if problem.delay:
@@ -353,11 +398,8 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     TfModel
         Without metrics; see :func:`heliquad.host.metrics.evaluate_model`.
     """
-    omega = np.asarray(omega_rad_s, dtype=float)
-    F = np.asarray(F, dtype=complex)
     m, n = order
-    w = 1.0 / np.abs(F) if weights is None else np.asarray(weights, dtype=float)
-    x, w0 = _scaled(omega)
+    x, w0, F, g0, w = _normalised(omega_rad_s, F, weights)
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
     problem = _OutputError(x, F, m, n, w, stable, delay)
     best_cost, best_params = np.inf, None
@@ -372,7 +414,8 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     den = problem.den(best_params)
     num = problem.num(best_params)
     tau = best_params[n] / w0 if delay else 0.0
-    num_s, den_s = _unscale(num, den, w0)
+    num_s, den_s = _unscale(num * g0, den, w0)
+    _check_unscaled(order, num_s, den_s, g0 * model_response(num, den, 0.0, x), x * w0)
     poles = np.roots(den_s)
     model = TfModel(order=(m, n), num=num_s, den=den_s, delay_s=float(tau),
                     stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay))

@@ -48,6 +48,8 @@ def check_image(path: str) -> ImageInfo:
     """Read and check a Teensy 3.5 image; InputError with the reason when it is not one."""
     from intelhex import HexRecordError, IntelHex, IntelHexError
 
+    if os.path.isdir(path):
+        raise InputError(f"{path}: is a folder, not an Intel HEX image")
     if not os.path.isfile(path):
         raise InputError(f"{path}: no such file")
     ih = IntelHex()

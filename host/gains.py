@@ -9,13 +9,11 @@ record these gains in their manifest; validation uses them unless given a gains 
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 
 from heliquad import _firmware
 
-from .errors import InputError
 from ..sim import dialect as names
 
 __all__ = ["Gains", "firmware_gains", "load_gains", "DERIVATIVE_FILTER_N"]
@@ -53,20 +51,11 @@ def _single(value: float) -> float:
 
 
 def load_gains(axis: str, path: str | None = None) -> Gains:
-    """The gains the firmware flies (:func:`firmware_gains`: the paper's), or a gains file:
+    """The gains the firmware flies (:func:`firmware_gains`: the paper's), or a gains file's
+    (:func:`heliquad.host.files.read_gains`, checked against its schema):
     ``{"rate": {"roll": [Kc, tau_I, tau_D], ...}, "angle": {"roll": [Kc, tau_D], ...}}``."""
     if path is None:
         return firmware_gains(axis)
-    try:
-        with open(path) as fh:
-            doc = json.load(fh)
-        rate = tuple(float(v) for v in doc["rate"][axis])
-        angle = tuple(float(v) for v in doc["angle"][axis]) if axis != "yaw" else None
-    except OSError as exc:
-        raise InputError(f"{path}: {exc.strerror}") from None
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"{path}: gains file needs rate.{axis} = [Kc, tau_I, tau_D]"
-                         f"{'' if axis == 'yaw' else f' and angle.{axis} = [Kc, tau_D]'} ({exc})") from None
-    if len(rate) != 3 or (angle is not None and len(angle) != 2) or min(rate) <= 0:
-        raise InputError(f"{path}: rate.{axis} needs 3 positive values, angle.{axis} 2")
-    return Gains(rate, angle)
+    from .files import read_gains
+
+    return Gains(*read_gains(path, axis))

@@ -10,7 +10,6 @@ omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or t
 
 from __future__ import annotations
 
-import json
 import math
 import os
 
@@ -27,16 +26,14 @@ __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 def _load(dir_path):
     from ..sim.dialect import dialect
+    from .files import read_manifest
     from .sweep import MANIFEST
     from .tlog import TlogDamage, read_tlog
 
-    try:
-        with open(os.path.join(dir_path, MANIFEST)) as fh:
-            manifest = json.load(fh)
-    except OSError:
-        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)") from None
-    except ValueError:
-        raise InputError(f"{dir_path}/{MANIFEST}: not valid JSON") from None
+    path = os.path.join(dir_path, MANIFEST)
+    if not os.path.lexists(path):
+        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
+    manifest = read_manifest(path)
     tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
     if not os.path.exists(tlog):
         raise InputError(f"{dir_path}: the log {os.path.basename(tlog)} is missing")
@@ -83,13 +80,13 @@ def _segments(manifest, samples):
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False) -> dict:
-    from .files import write_models_json, write_points_csv
-    from .fsf import estimate_fsf
+    manifest, samples, damage = _load(dir_path)
+    from .files import write_models_json, write_points_csv    # after the folder is read:
+    from .fsf import estimate_fsf                              # scipy and matplotlib are slow
     from .fit import n_parameters
     from .identify import fit_orders
     from .plot import write_bode, write_responses
 
-    manifest, samples, damage = _load(dir_path)
     if damage:
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  "every well-formed record was read")

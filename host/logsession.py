@@ -101,7 +101,8 @@ def summarise_tlog(path: str) -> dict:
         raise InputError(f"{path}: {exc.strerror or exc}") from None
     stats = {"messages": len(msgs), "samples": 0, "lost": 0, "first_seq": None,
              "last_seq": None, "types": collections.Counter(m.get_type() for _, m in msgs),
-             "damage": f"{path} is damaged: {damage.summary()}" if damage else None}
+             "damage": f"{path} is damaged: {damage.summary()}" if damage else None,
+             "bytes": damage.size}
     for _, m in msgs:
         if m.get_type() == "HQ_SYSID_SAMPLE":
             _count(stats, m.seq)

@@ -31,21 +31,10 @@ td.l{text-align:left}.flag{color:#a00;font-weight:bold}.ok{color:#070}
 img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}h2{border-bottom:2px solid #ccc}"""
 
 
-def _read_json(path):
-    """A folder's JSON file: None when it is not there; a damaged one is an InputError
-    (a report must not quietly leave out what it cannot read)."""
-    try:
-        with open(path) as fh:
-            doc = json.load(fh)
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise InputError(f"{path}: {exc.strerror or exc}") from None
-    except (ValueError, UnicodeDecodeError):
-        raise InputError(f"{path}: not valid JSON (damaged?)") from None
-    if not isinstance(doc, dict):
-        raise InputError(f"{path}: not a heliquad {os.path.basename(path)} (expected an object)")
-    return doc
+def _read(reader, path):
+    """A folder's file through its reader (:mod:`.files`): None when it is not there; a
+    damaged one is an InputError (a report must not quietly leave out what it cannot read)."""
+    return reader(path) if os.path.lexists(path) else None
 
 
 def _img(path, alt):
@@ -72,14 +61,18 @@ def _fmt(x, spec=".4g"):
 def _axis_section(folder):
     """One axis's part of the page and its quality flags: the sweep, the points, the models,
     the plots and the validation, each as far as the folder holds it."""
-    manifest = _read_json(os.path.join(folder, "manifest.json")) or {}
-    models = _read_json(os.path.join(folder, "models.json"))
-    validation = _read_json(os.path.join(folder, "validation.json"))
+    from .files import read_manifest, read_models_json, read_points_table, read_validation
+
+    manifest = _read(read_manifest, os.path.join(folder, "manifest.json")) or {}
+    models = _read(read_models_json, os.path.join(folder, "models.json"))
+    validation = _read(read_validation, os.path.join(folder, "validation.json"))
+    table = _read(read_points_table, os.path.join(folder, "points_table.csv"))
     axis = manifest.get("axis") or (models or {}).get("axis") or os.path.basename(folder)
     flags, parts = [], [f"<h2>{html.escape(str(axis))}</h2>"]
     if manifest:
         parts.append(_sweep_html(manifest, axis, flags))
-    parts.append(_points_html(os.path.join(folder, "points_table.csv"), axis, flags))
+    if table is not None:
+        parts.append(_points_html(table, axis, flags))
     if models:
         parts.append(_models_html(models, axis, flags))
     parts.append(_img(os.path.join(folder, "bode.png"), f"{axis} Bode plot"))
@@ -103,25 +96,28 @@ def _sweep_html(manifest, axis, flags):
     text += "<h3>Frequencies</h3>" + _table(
         ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,))
     for f in manifest.get("frequencies", []):
-        if f.get("status") != "ok":
-            flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz {f.get('status')}")
+        if f["status"] != "ok":
+            flags.append(f"{axis}: {f['requested_hz']:.3g} Hz {f['status']}")
         elif saturation_text(f):
-            flags.append(f"{axis}: {f.get('requested_hz', 0):.3g} Hz:{saturation_text(f)}")
+            flags.append(f"{axis}: {f['requested_hz']:.3g} Hz:{saturation_text(f)}")
     if manifest.get("aborted"):
         flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
     return text
 
 
-def _points_html(table_path, axis, flags):
-    """The paper-style points table (empty without one); flags low coherence."""
-    if not os.path.exists(table_path):
-        return ""
-    with open(table_path) as fh:
-        lines = [line.strip().split(",") for line in fh if line.strip()]
-    for row in lines[1:]:
-        if float(row[-1]) < LOW_COHERENCE:
-            flags.append(f"{axis}: low coherence {float(row[-1]):.2f} at {float(row[0]):.3g} Hz")
-    return "<h3>Frequency response (the paper's tables 4-6)</h3>" + _table(lines[0], lines[1:])
+def _points_html(table, axis, flags):
+    """The paper-style points table (:func:`.files.read_points_table`, written as identify
+    writes it); flags low coherence."""
+    from .files import TABLE_COLUMNS
+
+    digits = {"phase_deg": ".4f", "coherence": ".5f"}
+    rows = [[format(table[c][i], digits.get(c, ".6g")) for c in TABLE_COLUMNS]
+            for i in range(table["freq_hz"].size)]
+    for f, coherence in zip(table["freq_hz"], table["coherence"]):
+        if coherence < LOW_COHERENCE:
+            flags.append(f"{axis}: low coherence {coherence:.2f} at {f:.3g} Hz")
+    return ("<h3>Frequency response (the paper's tables 4-6)</h3>"
+            + _table(list(TABLE_COLUMNS), rows))
 
 
 def _models_html(models, axis, flags):
@@ -157,17 +153,21 @@ def _validation_html(validation, axis, flags):
     """The loops' margins, then the time responses, or where the cascade goes unstable
     (flagged)."""
     rows = [(name, _fmt(lp.get("gain_margin_db"), ".3g"), _fmt(lp.get("phase_margin_deg"), ".3g"),
-             _fmt(lp.get("gain_crossover_rad_s"), ".3g"), "stable" if lp.get("closed_loop_stable") else "UNSTABLE")
+             _fmt(lp.get("gain_crossover_rad_s"), ".3g"), "stable" if lp["closed_loop_stable"] else "UNSTABLE")
             for name, lp in validation["loops"].items()]
     text = "<h3>Closed-loop validation</h3>" + _table(
         ["loop", "gain margin (dB)", "phase margin (deg)", "crossover (rad/s)", "closed loop"], rows)
-    if validation.get("stable"):
+    if validation["stable"]:
         st, sn = validation["step"], validation["sine"]
         tb = validation.get("turbulence", {})
-        return text + (f"<p>Step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
-                       f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s. Sine "
-                       f"{sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} ({sn['tracking_rms_pct']:.0f} %)."
-                       + (f" {tb['level']} turbulence: rate RMS {tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
+        return text + (f"<p>Step {st['size']:g} {html.escape(st['unit'])}: rise "
+                       f"{_fmt(st.get('rise_time_s'), '.2f')} s, overshoot "
+                       f"{_fmt(st.get('overshoot_pct'), '.1f')} %, settling "
+                       f"{_fmt(st.get('settling_time_s'), '.2f')} s. Sine {sn['freq_hz']:g} Hz: "
+                       f"tracking RMS {_fmt(sn.get('tracking_rms'), '.3g')} "
+                       f"({_fmt(sn.get('tracking_rms_pct'), '.0f')} %)."
+                       + (f" {html.escape(tb['level'])} turbulence: rate RMS "
+                          f"{tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
                           f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
     from .validate import instability_text
 
@@ -179,8 +179,12 @@ def _validation_html(validation, axis, flags):
 
 def write_report(dir_path: str, out: str | None = None) -> str:
     """Write DIR/report.html (or ``out``); returns its path."""
+    from .files import check_output
+
     if not os.path.isdir(dir_path):
         raise InputError(f"{dir_path}: not a folder")
+    out = out or os.path.join(dir_path, "report.html")
+    check_output(out, "--out")
     folders = [dir_path] if os.path.exists(os.path.join(dir_path, "models.json")) else sorted(
         os.path.join(dir_path, d) for d in os.listdir(dir_path)
         if os.path.exists(os.path.join(dir_path, d, "models.json")))
@@ -198,7 +202,6 @@ def write_report(dir_path: str, out: str | None = None) -> str:
             f"<style>{STYLE}</style></head><body><h1>heliquad identification report</h1>"
             f"<p>{html.escape(os.path.abspath(dir_path))}, written {stamp}.</p><h2>Quality flags</h2>{flag_html}"
             + "".join(sections) + "</body></html>")
-    out = out or os.path.join(dir_path, "report.html")
     with atomic_write(out) as fh:
         fh.write(page)
     return out

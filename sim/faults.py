@@ -88,7 +88,10 @@ def parse_fault(text: str) -> Fault:
         duration_s = float(duration) if duration else None
     except ValueError:
         raise InputError(f"--fault {text!r}: T and D are seconds, e.g. silent@2:0.5") from None
-    return Fault(kind.strip().lower(), at_s, duration_s)
+    try:
+        return Fault(kind.strip().lower(), at_s, duration_s)
+    except InputError as exc:
+        raise InputError(f"--fault {text!r}: {exc}") from None
 
 
 def check_faults(faults, dt_us: int) -> None:

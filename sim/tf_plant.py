@@ -13,7 +13,6 @@ pairs follow the ZOH discretisation ``H(z)`` exactly; to first order
 
 from __future__ import annotations
 
-import control
 import numpy as np
 
 from heliquad import _simcore
@@ -37,6 +36,8 @@ class TfPlant:
     """
 
     def __init__(self, axis: str, num, den, dt_s: float):
+        import control          # here, not at the top: a command refused earlier never loads it
+
         if axis not in AXES:
             raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.axis = axis
@@ -93,6 +94,8 @@ class TfPlant:
         mixer injection identifies (this plant has no model of the closed loops)."""
         if inject != "mixer":
             raise ValueError("a transfer-function plant's truth is for mixer injection only")
+        import control
+
         z = np.exp(1j * np.asarray(omega_rad_s) * self.dt_s)
         Hd = control.sample_system(self.G, self.dt_s, method="zoh")
         num, den = np.asarray(Hd.num[0][0]), np.asarray(Hd.den[0][0])

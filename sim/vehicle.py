@@ -41,11 +41,45 @@ from heliquad import _simcore
 from .dialect import AXES
 from .params import VehicleParams, load_params
 
-__all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2"]
+__all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2", "fastest_rate_rad_s", "check_step"]
 
 GRAVITY_M_S2 = 9.80665
 #: One rig per axis (the dialect's HQ_AXIS names), or free flight.
 RIGS = (*AXES, "free")
+#: RK4 steps per loop period (the lockstep engine's).
+SUBSTEPS = 2
+#: RK4 is stable while an RK4 step times a mode's rate stays below about 2.8 (on the real
+#: and the imaginary axis alike); a vehicle file must keep it below this.
+RK4_LIMIT = 2.5
+#: The hinge's Coulomb friction is smoothed over this rate (sim/native/vehicle_model.cpp).
+FRICTION_SMOOTH_RAD_S = 0.01
+
+
+def fastest_rate_rad_s(p: VehicleParams) -> float:
+    """The fastest mode of the equations, 1/s: the rotors' lags, the rate damping (hinge,
+    gusts) and the smoothed hinge friction over the smallest inertia, the drag over the mass,
+    and the rotors' momentum at full speed over the smallest inertia (gyroscopic precession)."""
+    inertia = min(p.body.inertia_kg_m2)
+    c, a = p.central_rotor, p.arm_rotors
+    momentum = (c.rotor_inertia_kg_m2 * c.max_speed_rad_s
+                + 4 * a.rotor_inertia_kg_m2 * a.max_speed_rad_s)
+    damping = (p.rig.hinge_damping_n_m_s_rad + p.turbulence.rotational_damping_n_m_s_rad
+               + p.rig.hinge_friction_n_m / FRICTION_SMOOTH_RAD_S)
+    return max(1 / c.time_constant_s, 1 / a.time_constant_s, damping / inertia,
+               p.body.drag_n_s_m / p.body.mass_kg, momentum / inertia)
+
+
+def check_step(p: VehicleParams, dt_s: float) -> None:
+    """InputError when the integrator cannot follow the vehicle at this loop period (it would
+    diverge, whatever the firmware does)."""
+    from .errors import InputError
+
+    rate, h = fastest_rate_rad_s(p), dt_s / SUBSTEPS
+    if rate * h > RK4_LIMIT:
+        raise InputError(f"{p.source}: the vehicle's fastest mode ({rate:.3g} 1/s: rotor lag, "
+                         f"damping, friction or rotor momentum against the inertia) is too fast "
+                         f"for the simulator's {SUBSTEPS} steps per {1e3 * dt_s:g} ms loop "
+                         f"(at most {RK4_LIMIT / h:.3g} 1/s)")
 
 
 def rotation_matrix(q):
@@ -81,7 +115,7 @@ class Vehicle:
     """
 
     def __init__(self, params: VehicleParams | None = None, rig: str = "free",
-                 gravity_m_s2: float = GRAVITY_M_S2, substeps: int = 2):
+                 gravity_m_s2: float = GRAVITY_M_S2, substeps: int = SUBSTEPS):
         if rig not in RIGS:
             raise ValueError(f"rig must be one of {', '.join(RIGS)}")
         self.p = params or load_params()

@@ -50,11 +50,15 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import read_points_csv, write_models_json, write_models_mat
-    from ..fit import n_parameters, parse_order
+    from ..files import check_output, read_points_csv, write_models_json, write_models_mat
+
+    for option in ("json", "mat", "plot"):          # all writable, or none is written
+        if getattr(args, option):
+            check_output(getattr(args, option), f"--{option}")
+    points = read_points_csv(args.points)
+    from ..fit import n_parameters, parse_order     # after the file is read: scipy is slow
     from ..identify import fit_orders
 
-    points = read_points_csv(args.points)
     if args.order:
         orders = [parse_order(o) for o in args.order]
     else:

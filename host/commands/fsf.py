@@ -43,9 +43,9 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import read_run_csv, write_points_csv
-    from ..fsf import estimate_fsf
+    from ..files import check_output, read_run_csv, write_points_csv
 
+    check_output(args.out, "--out")
     freqs = args.freq_hz or [None]
     if len(freqs) not in (1, len(args.runs)):
         raise InputError(f"--freq-hz given {len(freqs)} times for {len(args.runs)} runs; "
@@ -55,6 +55,8 @@ def run(args) -> int:
     points, origin = [], {}
     for i, (path, freq) in enumerate(zip(args.runs, freqs), 1):
         fs_hz, u, y = read_run_csv(path)
+        from ..fsf import estimate_fsf          # after the file is read: scipy takes a while
+
         try:
             point = estimate_fsf(u, y, fs_hz, freq_hz=freq, harmonics=args.harmonics,
                                  discard_periods=args.discard_periods, offset=not args.no_offset)

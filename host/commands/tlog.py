@@ -22,10 +22,11 @@ def run(args) -> int:
     from ..logsession import summarise_tlog
 
     r = summarise_tlog(args.path)
-    if not r["messages"] and r["damage"]:
-        raise InputError(f"{args.path}: no MAVLink record in it (not a .tlog?)")
+    if not r["messages"]:
+        raise InputError(f"{args.path}: " + ("empty file" if not r["bytes"] else
+                                              "no MAVLink record in it (not a .tlog?)"))
     if r["damage"]:
-        print(f"warning: {r['damage']}", file=sys.stderr)
+        print(f"heliquad tlog: warning: {r['damage']}", file=sys.stderr)
     print(f"{args.path}: {r['messages']} messages over {r['span_s']:.2f} s; {r['samples']} "
           f"samples, {r['lost']} lost")
     for name, count in r["types"].most_common():

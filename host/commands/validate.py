@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 from ...sim import dialect as names
-from ..cli_args import MAX_SEED, int_in
+from ..cli_args import MAX_SEED, check_model, int_in
 from ..errors import InputError
 
 __all__ = ["add_parser", "run"]
@@ -40,19 +40,12 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import json
     import os
 
-    from ..validate import load_gains, save_validation, validate_model, validation_record
+    from ..files import check_output_folder, read_gains, read_models_json
 
-    try:
-        with open(args.models) as fh:
-            doc = json.load(fh)
-        models = doc["models"]
-    except OSError as exc:
-        raise InputError(f"{args.models}: {exc.strerror}") from None
-    except (ValueError, KeyError, TypeError):
-        raise InputError(f"{args.models}: not a MODELS.json (needs a \"models\" list)") from None
+    doc = read_models_json(args.models)
+    models = doc["models"]
     index = args.model if args.model is not None else doc.get("recommended")
     if index is None or not 0 <= index < len(models):
         raise InputError(f"{args.models}: no model {index!r} (the file has {len(models)}; "
@@ -61,14 +54,18 @@ def run(args) -> int:
     if axis not in names.AXES:
         raise InputError(f"{args.models} does not say which axis: give --axis roll|pitch|yaw")
     m = models[index]
-    try:
-        num, den, delay = m["num"], m["den"], float(m.get("delay_s", 0.0))
-    except (KeyError, TypeError):
-        raise InputError(f"{args.models}: model {index} has no num/den") from None
-    gains = load_gains(axis, args.gains)
+    num, den, delay = m["num"], m["den"], float(m.get("delay_s", 0.0))
+    check_model(f"{args.models}: models[{index}]", num, den)
+    file_gains = read_gains(args.gains, axis) if args.gains else None
+    out = args.out or os.path.dirname(os.path.abspath(args.models))
+    check_output_folder(out, "--out")
+
+    from ..validate import (Gains, load_gains, save_validation, validate_model,
+                            validation_record)
+
+    gains = Gains(*file_gains) if file_gains else load_gains(axis)
     turbulence = None if args.turbulence == "none" else args.turbulence
     report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
-    out = args.out or os.path.dirname(os.path.abspath(args.models))
     _print_validation(validation_record(report))
     written = save_validation(out, report, traces)
     print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
