@@ -27,6 +27,7 @@ import warnings
 
 import numpy as np
 
+from ..sim.userfiles import read_text
 from . import schema as S
 from .errors import DiskFull, InputError, no_room
 from .paper import BANDS_HZ
@@ -173,30 +174,6 @@ MAX_SAMPLE = 1e150
 LOOP_RANGE_HZ = (1.0, 1e4)
 #: A model's pure delay, s.
 MAX_DELAY_S = 10.0
-
-
-def read_text(path, limit: int, what: str = "file") -> str:
-    """The text of a file a user gave: UTF-8 (a byte-order mark is dropped), at most
-    ``limit`` bytes. InputError, naming the file, when it is missing, a folder, unreadable,
-    larger, not UTF-8 or empty."""
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(limit + 1)
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, not a {what}") from None
-    except OSError as exc:
-        raise InputError(f"{path}: {exc.strerror or exc}") from None
-    if len(data) > limit:
-        raise InputError(f"{path}: larger than {limit // 2**20} MiB: not a {what}")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise InputError(f"{path}: not UTF-8 text (byte {exc.start}): not a {what}") from None
-    if not text.strip():
-        raise InputError(f"{path}: empty file (expected a {what})")
-    return text
 
 
 def _read_table(path, required, optional=(), what="CSV file"):

@@ -15,6 +15,7 @@ import math
 import tomllib
 
 from .errors import InputError
+from .userfiles import read_text
 
 __all__ = ["VehicleParams", "RotorParams", "ArmRotorParams", "RigParams", "BodyParams",
            "TurbulenceParams", "ImuParams",
@@ -176,17 +177,7 @@ MAX_BYTES = 2**20
 
 def _read_toml(path) -> dict:
     """The TOML document of a file a user gave; InputError naming it for anything else."""
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: {exc.strerror or exc}") from None
-    if len(data) > MAX_BYTES:
-        raise InputError(f"{path}: larger than {MAX_BYTES // 1024} kB: not a vehicle file")
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text (TOML) file") from None
+    text = read_text(path, MAX_BYTES, "vehicle file (TOML)")
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -166,7 +166,8 @@ def heliquad(*args):
 @pytest.mark.parametrize("args, match", [
     (["--freq-hz", "80", "--amplitude", "0.05"], "excitation band [0.05, 50] Hz"),
     (["--freq-hz", "1", "--amplitude", "5", "--axis", "yaw", "--inject", "angle"], "rate-only"),
-    (["--freq-hz", "1", "--amplitude", "0.05", "--den", "0", "1"], "leading non-zero"),
+    (["--freq-hz", "1", "--amplitude", "0.05", "--den", "0", "1"],
+     "leading coefficient of the denominator is 0"),
     (["--freq-hz", "1", "--amplitude", "0.05", "--collective", "2"], "collective"),
 ])
 def test_sil_bad_input_is_one_line_exit_2(args, match, tmp_path):

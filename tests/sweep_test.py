@@ -221,8 +221,8 @@ def test_a_terminal_ctrl_c_or_sigterm_leaves_a_valid_log_and_manifest_and_nothin
     """Ctrl-C as a terminal sends it: SIGINT to the whole foreground process group (and
     SIGTERM, as a service manager sends it). The firmware runs in its own session, so only
     the tool gets it; the tool stops the excitation, writes the manifest with ``aborted`` set
-    and stops the firmware. Sent once the manifest exists, whenever that is: the outcome does
-    not depend on timing."""
+    and stops the firmware. Sent once the manifest exists and the log holds records, whenever
+    that is: the outcome does not depend on timing."""
     import os
     import signal
 
@@ -239,11 +239,14 @@ def test_a_terminal_ctrl_c_or_sigterm_leaves_a_valid_log_and_manifest_and_nothin
                             # SIGINT back to its default: a shell that ran the tests in the
                             # background hands it down ignored, and the Ctrl-C would be lost.
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    manifest_path = out / "manifest.json"
+    manifest_path, log_path = out / "manifest.json", out / "sweep.tlog"
+
+    def started():          # the manifest written, and the log holding its first records
+        return manifest_path.exists() and log_path.exists() and log_path.stat().st_size > 0
     deadline = time.monotonic() + 60
-    while not manifest_path.exists() and proc.poll() is None and time.monotonic() < deadline:
+    while not started() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert manifest_path.exists(), proc.communicate(timeout=60)
+    assert started(), proc.communicate(timeout=60)
     os.killpg(proc.pid, getattr(signal, signame))
     stdout, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 1, stderr
