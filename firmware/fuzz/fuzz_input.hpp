@@ -13,7 +13,10 @@
 
 #include <heliquad/mavlink.h>
 
+#include "../core/flight_controller.hpp"
 #include "../core/mpu6050.hpp"
+#include "../targets/host/clock.hpp"
+#include "../targets/host/motors.hpp"
 #include "../targets/host/mpu6050_emulator.hpp"
 
 namespace hqfuzz {
@@ -130,5 +133,28 @@ inline size_t any_packet(Reader& in, uint8_t* out, uint8_t seq) {
     in.bytes(payload, len);
     return frame_packet(out, msgid, payload, len, seq, how & 3 ? (how >> 3) & 3 : 0);
 }
+
+// The firmware as both targets fly it: the host build's clock and motors, the emulated
+// MPU6050 (given the made-up DMP firmware when the input's first choice is odd) and a
+// FlightController on them, initialised; its telemetry goes to a `Telemetry`.
+template <class Telemetry>
+struct Vehicle {
+    explicit Vehicle(Reader& in) : cfg(config(in, chip)), fc(cfg, chip, clock, telemetry, motors) {
+        fc.init();
+    }
+    hq::HostClock clock;
+    hq::HostMotors motors;
+    hq::Mpu6050Emulator chip;
+    Telemetry telemetry;
+    hq::FlightControllerConfig cfg;
+    hq::FlightController fc;
+
+private:
+    static hq::FlightControllerConfig config(Reader& in, hq::Mpu6050Emulator& chip) {
+        hq::FlightControllerConfig c;
+        if (in.u8() & 1) use_small_dmp(c.imu, chip);
+        return c;
+    }
+};
 
 }  // namespace hqfuzz

@@ -80,17 +80,9 @@ constexpr uint64_t kLoopUs = 5000;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Reader in(data, size);
-    hq::HostClock clock;
-    hq::HostMotors motors;
-    hq::Mpu6050Emulator chip;
-    NoTelemetry telemetry;
-    hq::FlightControllerConfig cfg;
-    if (in.u8() & 1) {
-        hqfuzz::use_small_dmp(cfg.imu, chip);
-    }
-    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
-    fc.init();
-    hq::SimLinkHandler handler(fc, clock, chip, motors, cfg.system_id, cfg.component_id);
+    hqfuzz::Vehicle<NoTelemetry> v(in);
+    hq::SimLinkHandler handler(v.fc, v.clock, v.chip, v.motors, v.cfg.system_id,
+                               v.cfg.component_id);
     Replies replies;
     mavlink_status_t tx{};
     uint8_t packet[hqfuzz::kMaxPacket];

@@ -109,16 +109,7 @@ void imu_fault(Reader& in, hq::Mpu6050Emulator& chip) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Reader in(data, size);
-    hq::HostClock clock;
-    hq::HostMotors motors;
-    hq::Mpu6050Emulator chip;
-    FuzzSerial telemetry;
-    hq::FlightControllerConfig cfg;
-    if (in.u8() & 1) {
-        hqfuzz::use_small_dmp(cfg.imu, chip);
-    }
-    hq::FlightController fc(cfg, chip, clock, telemetry, motors);
-    fc.init();
+    hqfuzz::Vehicle<FuzzSerial> v(in);
     hq::RcInput rc;
     const uint16_t rest[hq::kRcChannels] = {1500, 1500, 1000, 1500, 1000, 1000, 0, 0};
     for (int c = 0; c < hq::kRcChannels; ++c) rc.channel_us[c] = rest[c];
@@ -130,15 +121,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     while (!in.done() && loops < kMaxLoops) {
         switch (in.u8() % 7) {
             case 0:
-                telemetry.push(packet, hqfuzz::any_packet(in, packet, seq++));
+                v.telemetry.push(packet, hqfuzz::any_packet(in, packet, seq++));
                 break;
             case 1: {
                 uint8_t raw[64];
-                telemetry.push(raw, in.bytes(raw, in.u8() % sizeof raw));
+                v.telemetry.push(raw, in.bytes(raw, in.u8() % sizeof raw));
                 break;
             }
             case 2:
-                telemetry.push(packet, command_packet(in, packet, tx));
+                v.telemetry.push(packet, command_packet(in, packet, tx));
                 break;
             case 3: {
                 const uint8_t ch = in.u8() % hq::kRcChannels;
@@ -147,23 +138,23 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                 break;
             }
             case 4:
-                imu_fault(in, chip);
+                imu_fault(in, v.chip);
                 break;
             case 5:
-                telemetry.set_full(in.u8() & 1);
+                v.telemetry.set_full(in.u8() & 1);
                 break;
             default: {
                 const int n = 1 + in.u8() % 8;
                 for (int i = 0; i < n && loops < kMaxLoops; ++i, ++loops) {
                     const uint8_t step = in.u8();
-                    clock.set(clock.micros() + (step == 0xFF ? in.u32() : kLoopUs));
+                    v.clock.set(v.clock.micros() + (step == 0xFF ? in.u32() : kLoopUs));
                     uint8_t sample[hq::mpu6050::kDmpPacketSize];
                     in.bytes(sample, sizeof sample);
-                    chip.push_fifo(sample, chip.dmp_enabled() ? hq::mpu6050::kDmpPacketSize
+                    v.chip.push_fifo(sample, v.chip.dmp_enabled() ? hq::mpu6050::kDmpPacketSize
                                                               : hq::mpu6050::kRawPacketSize,
-                                   chip.dmp_enabled());
-                    fc.step(rc);
-                    check_rules(fc, motors);
+                                   v.chip.dmp_enabled());
+                    v.fc.step(rc);
+                    check_rules(v.fc, v.motors);
                 }
                 break;
             }
