@@ -105,8 +105,9 @@ def transfer_function(what: str, num, den, leading_zeros: bool = False):
     if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
         raise InputError(f"{what}: coefficients must be finite numbers")
     if den[0] == 0 or num[0] == 0:
-        raise InputError(f"{what}: the leading coefficient of the "
-                         f"{'denominator' if den[0] == 0 else 'numerator'} is 0: drop leading zeros")
+        part = "denominator" if den[0] == 0 else "numerator"
+        raise InputError(f"{what}: the leading coefficient of the {part} is 0: drop leading "
+                         "zeros")
     if num.size > den.size:
         raise InputError(f"{what}: not proper (numerator degree {num.size - 1} above the "
                          f"denominator's {den.size - 1}); a physical response is proper")

@@ -27,10 +27,10 @@ import warnings
 
 import numpy as np
 
+from ..sim import dialect as names
 from ..sim.userfiles import read_text
 from . import schema as S
 from .errors import DiskFull, InputError, no_room
-from .paper import BANDS_HZ
 
 __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_text", "read_run_csv", "read_points_csv",
            "read_points_table", "read_json", "read_manifest", "read_models_json", "read_gains",
@@ -40,7 +40,6 @@ __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_text", "read_run_csv", "read_p
 
 RUN_COLUMNS = ("t_s", "u", "y")
 TABLE_COLUMNS = ("freq_hz", "omega_rad_s", "magnitude", "phase_deg", "real", "imag", "coherence")
-AXES = tuple(BANDS_HZ)
 POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
 POINTS_OPTIONAL = ("sigma", "coherence")
 #: Largest spread of sample intervals, relative to the mean interval, still called uniform.
@@ -202,8 +201,9 @@ def _read_table(path, required, optional=(), what="CSV file"):
     except ValueError as exc:
         if isinstance(exc, InputError):
             raise
-        raise InputError(f"{path}: {_short(str(exc).splitlines()[0] if str(exc) else 'malformed row')}"
-                         " (data rows count from 1 after the header)") from None
+        first = str(exc).splitlines()[0] if str(exc) else "malformed row"
+        raise InputError(f"{path}: {_short(first)} (data rows count from 1 after the "
+                         "header)") from None
     if data.shape[0] == 0:
         raise InputError(f"{path}: no data rows after the header")
     table = {c: data[:, i] for i, c in enumerate(wanted)}
@@ -344,8 +344,6 @@ def read_json(path, what: str, schema):
 
 @functools.cache
 def _manifest_schema():
-    from .link import INJECTIONS
-
     frequency = S.Obj(
         required={"requested_hz": S.Num(0, 1e6, lo_open=True), "samples": S.Int(0, 2**31),
                   "status": S.Str()},
@@ -355,7 +353,7 @@ def _manifest_schema():
                   **{k: S.Int(0, 2**31) for k in ("seq_gaps", "saturated", "collective_limited",
                                                   "sensor_clipped")}})
     return S.Obj(
-        required={"axis": S.Str(AXES), "inject": S.Str(tuple(INJECTIONS)),
+        required={"axis": S.Str(tuple(names.AXES)), "inject": S.Str(tuple(names.INJECTIONS)),
                   "frequencies": S.List(frequency, 0, 10_000)},
         optional={"tlog": S.Str(file_name=True), "source": S.Obj(), "firmware": S.Str(),
                   "gains": S.Null(S.Obj()), "started": S.Str(), "cycles": S.Int(1, 65535),
@@ -399,8 +397,8 @@ def _models_schema():
                 values=S.Int(0, 2**63))
     return S.Obj(
         required={"models": S.List(model, 1, 1000)},
-        optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(), "axis": S.Str(AXES),
-                  "points_file": S.Str(), "weights": S.Str(), "log": log,
+        optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(),
+                  "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(), "log": log,
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str())})
 
@@ -439,8 +437,8 @@ def _gains_schema():
     gain, tau_i, tau_d = S.Num(0, 1e4, lo_open=True), S.Num(0, 1e4), S.Num(0, 1e3)
     rate = S.Seq(("Kc", gain), ("tau_I_s", tau_i), ("tau_D_s", tau_d))
     angle = S.Seq(("Kc", gain), ("tau_D_s", tau_d))
-    return S.Obj(required={"rate": S.Obj(optional={a: rate for a in AXES}, strict=True)},
-                 optional={"angle": S.Obj(optional={a: angle for a in AXES if a != "yaw"},
+    return S.Obj(required={"rate": S.Obj(optional={a: rate for a in names.AXES}, strict=True)},
+                 optional={"angle": S.Obj(optional={a: angle for a in names.AXES if a != "yaw"},
                                           strict=True)},
                  strict=True)
 
