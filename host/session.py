@@ -196,7 +196,16 @@ class SilSession:
             if self.link_close_frame is not None and first < self.link_close_frame:
                 last = min(last, self.link_close_frame - 1)
             self._run(first, last - first + 1, collect)
-        collect(self.telemetry.read_until(self.time_us))
+        try:
+            messages = self.telemetry.read_until(self.time_us)
+        except FirmwareError:
+            # Killed after its last reply, the firmware leaves the telemetry short: say so.
+            self.fw.wait_exit(0.5)
+            if not self.fw.alive():
+                raise FirmwareError(f"the firmware died at frame {self.frame} "
+                                    f"({self.fw.stderr_tail()})") from None
+            raise
+        collect(messages)
         return out
 
     def close_host_link(self) -> None:
