@@ -9,7 +9,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["add_firmware_argument", "add_fault_argument", "faults", "check_plant", "check_model",
+__all__ = ["add_firmware_argument", "firmware_amplitude", "add_fault_argument", "faults",
+           "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
 
@@ -65,6 +66,12 @@ def number_in(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = Fa
             raise argparse.ArgumentTypeError(f"{value:g} is outside {interval}")
         return value
     return parse
+
+
+def firmware_amplitude(inject: str, amplitude: float) -> float:
+    """``--amplitude`` in the firmware's units: deg (angle) and deg/s (rate) become rad and
+    rad/s; a mixer amplitude is already normalised."""
+    return amplitude if inject == "mixer" else math.radians(amplitude)
 
 
 def add_firmware_argument(p) -> None:

@@ -20,7 +20,7 @@ from ..sim.sil import SilConfig
 from .errors import InputError
 from .files import write_run_csv
 from .session import SilSession
-from .sweep import SweepPlan, measure
+from .sweep import SATURATION, SweepPlan, measure
 
 __all__ = ["SilResult", "run_sil", "TAIL_FRAMES"]
 
@@ -36,15 +36,18 @@ class SilResult:
     frames: int
     seq_gaps: int                  # HQ_SYSID_SAMPLE sequence gaps (dropped telemetry)
     actual_freq_hz: float
-    saturated_samples: int         # measured samples whose torque the mixer could not meet
+    saturation: dict               # measured samples that saturated, by kind (sweep.SATURATION)
     imu_mode: str
     wall_s: float                  # the whole run, firmware start-up included
     loop_s: float                  # the lockstep loop alone, hover included
     truth: complex                 # sampled-data truth at the actual frequency (nan if unknown)
-    collective_limited: int = 0    # measured samples whose collective gave way
-    sensor_clipped: int = 0        # measured samples whose gyro or accelerometer read full scale
     stopped: str | None = None     # why the excitation ended early, if it did
     firmware_summary: str = ""     # the firmware's own last word: counters, loop figures
+
+    @property
+    def saturated_samples(self) -> int:
+        """Measured samples whose torque command the mixer could not meet."""
+        return self.saturation["saturated"]
 
 
 def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
@@ -68,13 +71,11 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     write_run_csv(csv_path, watch.rows)
     e = watch.entry
     if e["status"].startswith("refused") or "did not start" in e["status"]:
-        raise FirmwareError(e["status"] + (f"; the log is kept in {tlog_path}"))
+        raise FirmwareError(f"{e['status']}; the log is kept in {tlog_path}")
     freq = e.get("freq_hz", math.nan)
     return SilResult(tlog_path=tlog_path, csv_path=csv_path, samples=e["samples"],
                      frames=frames, seq_gaps=e["seq_gaps"], actual_freq_hz=freq,
-                     saturated_samples=e["saturated"], imu_mode=imu_mode,
-                     collective_limited=e["collective_limited"],
-                     sensor_clipped=e["sensor_clipped"],
+                     saturation={key: e[key] for key in SATURATION}, imu_mode=imu_mode,
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=_truth(plant, freq, cfg.inject),
                      stopped=None if e["status"] == "ok" else e["status"],

@@ -145,8 +145,8 @@ def _saturated(manifest) -> list:
     """The measured frequencies during which something saturated, in words."""
     from .sweep import saturation_text
 
-    return [f"{e['freq_hz']:.4g} Hz{saturation_text(e)}" for e in manifest["frequencies"]
-            if e.get("status") == "ok" and "freq_hz" in e and saturation_text(e)]
+    return [f"{e['freq_hz']:.4g} Hz{said}" for e in manifest["frequencies"]
+            if e.get("status") == "ok" and "freq_hz" in e and (said := saturation_text(e))]
 
 
 def _write_table(path, points) -> None:

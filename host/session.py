@@ -19,7 +19,7 @@ import select
 import time
 from typing import Callable, Protocol
 
-from heliquad import _firmware, _simcore
+from heliquad import _simcore
 
 from ..sim.dialect import dialect
 from ..sim.faults import check_faults, imu_fault_codes, link_close_frame
@@ -151,7 +151,6 @@ class SilSession:
         self.dt_us = int(round(1e6 / cfg.loop_hz))
         check_faults(cfg.faults, self.dt_us)
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
-        self.mixer = _firmware.Mixer()                # the firmware's own mixer equations
         image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
         self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image,
                                  **image)
@@ -167,7 +166,6 @@ class SilSession:
         self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
         self.frame, self.kind, self.reply = 0, dialect().HQ_SENSOR_NONE, None
-        self.t0 = time.monotonic()
 
     @property
     def time_us(self) -> int:

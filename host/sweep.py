@@ -39,7 +39,8 @@ from .link import INPUT_OUTPUT, reason_text
 from .gains import firmware_gains
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "measure", "ExcitationWatch", "Limits",
-           "MANIFEST", "SWEEP_TLOG", "saturation_text"]
+           "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
+           "saturation_text"]
 
 MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
@@ -56,6 +57,11 @@ START_TIMEOUT_S = 3.0
 #: board) has lost its board: the link is gone or the board hung. The telemetry carries a
 #: sample every loop (200 Hz), so 2 s is 400 missing in a row.
 SAMPLE_TIMEOUT_S = 2.0
+#: The saturation counts of a frequency's window (manifest keys): the HQ_SATURATION bits that
+#: count a sample, and how a person is told.
+SATURATION = {"saturated": (("TORQUE",), "saturated the mixer"),
+              "collective_limited": (("COLLECTIVE",), "lost collective"),
+              "sensor_clipped": (("GYRO", "ACCEL"), "clipped the IMU")}
 
 
 def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
@@ -182,12 +188,17 @@ def _keep_manifest(out_dir, manifest, exc: BaseException) -> None:
         raise failed.also(f"the sweep had stopped: {manifest['aborted']}") from exc
 
 
+def saturation_summary(counts) -> str:
+    """``N saturated the mixer, ...`` for the saturation counts of a frequency's window (a
+    manifest entry, or any mapping with its keys), or "" when nothing saturated."""
+    return ", ".join(f"{counts[key]} {words}" for key, (_, words) in SATURATION.items()
+                     if counts.get(key))
+
+
 def saturation_text(entry) -> str:
     """`` (N saturated the mixer, ...)`` for what saturated in a frequency's window, or ""."""
-    words = {"saturated": "saturated the mixer", "collective_limited": "lost collective",
-             "sensor_clipped": "clipped the IMU"}
-    said = [f"{entry[k]} {w}" for k, w in words.items() if entry.get(k)]
-    return f" ({', '.join(said)})" if said else ""
+    said = saturation_summary(entry)
+    return f" ({said})" if said else ""
 
 
 class Limits:
@@ -223,9 +234,8 @@ class ExcitationWatch:
         mav = dialect()
         self.idle, self.running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
         self.normal_end = (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED)
-        self.flags = {"saturated": mav.HQ_SATURATION_TORQUE,
-                      "collective_limited": mav.HQ_SATURATION_COLLECTIVE,
-                      "sensor_clipped": mav.HQ_SATURATION_GYRO | mav.HQ_SATURATION_ACCEL}
+        self.flags = {key: sum(getattr(mav, f"HQ_SATURATION_{bit}") for bit in bits)
+                      for key, (bits, _) in SATURATION.items()}
         self.warning = mav.MAV_SEVERITY_WARNING
         self.plan, self.limits, self.progress = plan, limits, progress
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import math
 import sys
 
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
-                        check_excitation, check_plant, faults, finite, int_in, number_in)
+                        check_excitation, check_plant, faults, finite, firmware_amplitude,
+                        int_in, number_in)
 from ..errors import DiskFull, InputError
 
 __all__ = ["add_parser", "run"]
@@ -81,7 +81,7 @@ def run(args) -> int:
     check_plant(args)
     if args.inject == "angle" and args.axis == "yaw":
         raise InputError("yaw is rate-only: use --inject rate or mixer")
-    amplitude = math.radians(args.amplitude) if args.inject != "mixer" else args.amplitude
+    amplitude = firmware_amplitude(args.inject, args.amplitude)
     check_excitation([args.freq_hz], args.cycles, args.fade_cycles, args.loop_hz, amplitude,
                       args.inject)
     folder = os.path.dirname(os.path.abspath(args.out))
@@ -109,14 +109,12 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
-    from ..sweep import saturation_text
+    from ..sweep import saturation_summary
 
-    said = saturation_text({"saturated": r.saturated_samples,
-                            "collective_limited": r.collective_limited,
-                            "sensor_clipped": r.sensor_clipped})
+    said = saturation_summary(r.saturation)
     if said:
-        print(f"warning: measured samples: {said.strip()[1:-1]}; the record is not the "
-              "linear response: lower --amplitude", file=sys.stderr)
+        print(f"warning: measured samples: {said}; the record is not the linear response: "
+              "lower --amplitude", file=sys.stderr)
     if args.firmware != "host" and r.firmware_summary:
         print(f"the board: {r.firmware_summary.removeprefix('heliquad-fw-pil: ')}")
     print(f"wrote {r.tlog_path} and {r.csv_path}")

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import math
 import sys
 
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
-                        check_excitation, check_plant, faults, finite, int_in, number_in)
+                        check_excitation, check_plant, faults, finite, firmware_amplitude,
+                        int_in, number_in)
 from ..errors import DiskFull, InputError
 from ..link import DEFAULT_BAUD
 
@@ -68,9 +68,7 @@ def run(args) -> int:
     from ..files import new_output_folder
     from ..sweep import SWEEP_TLOG, default_plan, run_sweep
 
-    amp = None
-    if args.amplitude is not None:
-        amp = math.radians(args.amplitude) if args.inject != "mixer" else args.amplitude
+    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
     plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         from ...sim.sil import SilConfig
