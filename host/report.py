@@ -124,10 +124,12 @@ def _models_html(models, axis, flags):
     """The models with their metrics and the recommendation; flags a damaged log, unused
     frequencies, unstable models and no recommendation."""
     log = models.get("log") or {}
-    if log.get("skipped_bytes") or log.get("stamps_out_of_order"):
+    if log.get("skipped_bytes") or log.get("stamps_out_of_order") or \
+            log.get("stamps_not_loop_time"):
         flags.append(f"{axis}: the log is damaged: {log.get('skipped_bytes', 0)} bytes "
                      f"skipped in {log.get('damaged_regions', 0)} places, "
-                     f"{log.get('stamps_out_of_order', 0)} timestamps out of order")
+                     f"{log.get('stamps_out_of_order', 0)} timestamps out of order, "
+                     f"{log.get('stamps_not_loop_time', 0)} not their control loop's time")
     for text in models.get("skipped_frequencies") or []:
         flags.append(f"{axis}: {text} (not used)")
     rec = models.get("recommended")

@@ -11,8 +11,12 @@ message whose CRC verifies) and resynchronises past damage: where a record does 
 it skips byte by byte to the next offset where one does. What it skipped (where and how
 much) and the records whose timestamp goes back in time are counted in a
 :class:`TlogDamage`; a flipped bit in a packet costs that one message, not the rest of the log.
-A timestamp is not covered by the packet's CRC: a damaged one is seen only when it breaks the
-order of time.
+A timestamp is not covered by the packet's CRC. A damaged one is seen when it breaks the order
+of time, and in a simulated session's log whatever it does: there every record is stamped with
+the time of its control loop, the ``time_us`` of the first HQ_SYSID_SAMPLE at or after it (a
+log is taken for one when more than half of its HQ_SYSID_SAMPLE records carry their own
+``time_us`` as their stamp), so a record stamped otherwise is counted. On a board's log (the
+host's clock) a damaged stamp that keeps time in order cannot be seen.
 """
 
 from __future__ import annotations
@@ -135,6 +139,7 @@ class TlogDamage:
     size: int = 0                       # bytes in the file
     regions: list = dataclasses.field(default_factory=list)   # (offset, bytes) skipped
     out_of_order: list = dataclasses.field(default_factory=list)  # offsets of such records
+    off_loop: list = dataclasses.field(default_factory=list)  # offsets: not their loop's time
     messages: int = 0                   # well-formed records read
 
     @property
@@ -142,7 +147,7 @@ class TlogDamage:
         return sum(n for _, n in self.regions)
 
     def __bool__(self) -> bool:
-        return bool(self.regions or self.out_of_order)
+        return bool(self.regions or self.out_of_order or self.off_loop)
 
     def summary(self) -> str:
         """One line: what was skipped and where, or "" when nothing was wrong."""
@@ -155,13 +160,68 @@ class TlogDamage:
         if self.out_of_order:
             parts.append(f"{len(self.out_of_order)} timestamp{'s' if len(self.out_of_order) > 1 else ''}"
                          f" going back in time (the first at byte {self.out_of_order[0]})")
+        if self.off_loop:
+            parts.append(f"{len(self.off_loop)} timestamp{'s' if len(self.off_loop) > 1 else ''}"
+                         f" not the time of their control loop (the first at byte "
+                         f"{self.off_loop[0]})")
         return "; ".join(parts)
 
     def record(self) -> dict:
         """For a JSON file: the counts and the first places."""
         return {"bytes": self.size, "messages": self.messages, "skipped_bytes": self.skipped,
                 "damaged_regions": len(self.regions), "first_regions": self.regions[:10],
-                "stamps_out_of_order": len(self.out_of_order)}
+                "stamps_out_of_order": len(self.out_of_order),
+                "stamps_not_loop_time": len(self.off_loop)}
+
+
+class _LoopTimes:
+    """The check of a simulated session's stamps: each record's stamp against the ``time_us``
+    of the HQ_SYSID_SAMPLE that ends its loop. The records before a skipped region are not
+    checked (the sample that ended their loop may be what was lost), nor those after the last
+    sample. The verdict counts only when more than half of the samples carry their own time
+    as their stamp, which a log stamped by the host's clock never does."""
+
+    def __init__(self):
+        self.pending = []           # (offset, stamp) of the records since the last sample
+        self.off = []               # offsets of records not stamped with their loop's time
+        self.samples = self.own = 0
+
+    def sample(self, pos: int, stamp: int, time_us: int) -> None:
+        self.samples += 1
+        self.own += stamp == time_us
+        self.off.extend(p for p, s in self.pending if s != time_us)
+        if stamp != time_us:
+            self.off.append(pos)
+        self.pending = []
+
+    def verdict(self) -> list:
+        return self.off if 2 * self.own > self.samples else []
+
+
+def _record_at(data, pos: int, extras: dict):
+    """(msgid, packet length, payload length) of a well-formed record at ``pos``, or None."""
+    from ..sim.mavframe import STX_V2, packet_at
+
+    start = pos + _STAMP.size
+    found = packet_at(data, start, extras) if start < len(data) and data[start] == STX_V2 \
+        else None
+    return found or None
+
+
+def _resync(data, pos: int, extras: dict) -> tuple:
+    """(offset, record) of the next well-formed record after the damaged ``pos``, or
+    (the file's size, None) when none follows."""
+    from ..sim.mavframe import STX_V2
+
+    n, stamp_len, p = len(data), _STAMP.size, pos + 1
+    while p + stamp_len < n:
+        p = data.find(STX_V2, p + stamp_len) - stamp_len
+        if p < pos + 1:
+            break
+        if (found := _record_at(data, p, extras)) is not None:
+            return p, found
+        p += 1
+    return n, None
 
 
 def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
@@ -171,7 +231,7 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
     ``damage``: a :class:`TlogDamage` to fill; without one, damage is reported as a warning
     naming the file and what was skipped.
     """
-    from ..sim.mavframe import HEADER_LEN, STX_V2, Codec, packet_at
+    from ..sim.mavframe import HEADER_LEN, Codec
 
     with open(path, "rb") as fh:
         data = fh.read()
@@ -184,24 +244,15 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
     report.size = len(data)
     out, pos, n, last_stamp = [], 0, len(data), None
     stamp_len = _STAMP.size
-
-    def record_at(p):
-        """(msgid, packet length, payload length) of a well-formed record at p, or None."""
-        start = p + stamp_len
-        found = packet_at(data, start, extras) if start < n and data[start] == STX_V2 else None
-        return found or None
+    loop, sample_id = _LoopTimes(), getattr(mav_module, "MAVLINK_MSG_ID_HQ_SYSID_SAMPLE", None)
 
     while pos < n:
-        found = record_at(pos)
+        found = _record_at(data, pos, extras)
         if found is None:                       # damage: on to the next well-formed record
-            start, p = pos, pos + 1
-            while True:
-                p = data.find(STX_V2, p + stamp_len) - stamp_len if p + stamp_len < n else -1
-                if p < start + 1 or (found := record_at(p)) is not None:
-                    break
-                p += 1
-            pos = n if p < start + 1 else p
+            start = pos
+            pos, found = _resync(data, pos, extras)
             report.regions.append((start, pos - start))
+            loop.pending = []
             if found is None:
                 break
         msgid, total, length = found
@@ -210,10 +261,15 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
             report.out_of_order.append(pos)
         last_stamp = stamp
         report.messages += 1
+        body = pos + stamp_len + HEADER_LEN
+        if msgid == sample_id:              # time_us: the payload's first field (may be trimmed)
+            loop.sample(pos, stamp, int.from_bytes(data[body:body + min(8, length)], "little"))
+        else:
+            loop.pending.append((pos, stamp))
         if wanted is None or msgid in wanted:
-            body = pos + stamp_len + HEADER_LEN
             out.append((stamp, codec.decode(msgid, data[body:body + length])))
         pos += stamp_len + total
+    report.off_loop = loop.verdict()
     if damage is None and report:
         warnings.warn(f"{path}: damaged: {report.summary()}; read the {report.messages} "
                       "well-formed messages")

@@ -154,3 +154,29 @@ def test_a_log_damaged_in_the_middle_is_read_on_after_it(tmp_path):
     assert [stamp for stamp, _ in messages] == [1, 2, 4, 5]
     assert damage.regions == [(2 * len(records[0]), len(records[0]))]
     assert damage.messages == 4 and not damage.out_of_order
+
+
+def test_a_stamp_that_is_not_its_loops_time_is_reported(tmp_path):
+    # A simulated session stamps each record with its loop's time: a flipped stamp bit that
+    # keeps time in order is still seen there, and only that record is named.
+    import random
+
+    data = tlog_fuzz.loop_stamped_log(random.Random(3))
+    path = tmp_path / "loops.tlog"
+    path.write_bytes(data)
+    damage = tlog.TlogDamage()
+    messages = tlog.read_tlog(str(path), tlog_fuzz.DIALECT, damage=damage)
+    offsets = [0]
+    for _ in messages:
+        offsets.append(offsets[-1] + 8 + mavframe.packet_at(data, offsets[-1] + 8,
+                                                            tlog_fuzz.CODEC.extra_bytes)[1])
+    assert damage.off_loop == [offsets[4]] and not damage.regions and not damage.out_of_order
+    assert "1 timestamp not the time of their control loop" in damage.summary()
+    tlog_fuzz.check(b"\0" + data)
+    # Stamped by another clock (a board's log: the host's time), no stamp is held to a loop.
+    shifted = b"".join(struct.pack(">Q", stamp + 10**15) + data[at + 8:end]
+                       for (stamp, _), at, end in zip(messages, offsets, offsets[1:]))
+    path.write_bytes(shifted)
+    damage = tlog.TlogDamage()
+    tlog.read_tlog(str(path), tlog_fuzz.DIALECT, damage=damage)
+    assert not damage

@@ -159,6 +159,31 @@ def test_identify_reads_past_a_damaged_byte_and_the_report_flags_it(sweep, tmp_p
     assert "the log is damaged" in page and "No quality flags" not in page
 
 
+def test_a_flipped_timestamp_bit_in_a_sil_sweep_is_reported(sweep, tmp_path):
+    # No CRC covers a timestamp, and flipping its lowest bit keeps time in order; a simulated
+    # session stamps each record with its loop's time, so the one record is still named.
+    import json
+
+    folder = _copy(sweep, tmp_path / "stamp")
+    log = folder / "sweep.tlog"
+    data = bytearray(log.read_bytes())
+    pos = 0
+    while pos < len(data) // 3:
+        pos += 8 + 12 + data[pos + 9]                           # stamp, header + CRC, payload
+    data[pos + 7] ^= 0x01
+    log.write_bytes(bytes(data))
+    res = heliquad("identify", folder)
+    assert res.returncode == 0, res.stderr
+    assert "15 points" in res.stdout
+    assert f"1 timestamp not the time of their control loop (the first at byte {pos})" \
+        in res.stdout
+    doc = json.loads((folder / "models.json").read_text())
+    assert doc["log"]["stamps_not_loop_time"] == 1 and doc["log"]["skipped_bytes"] == 0
+    assert heliquad("report", folder).returncode == 0
+    page = (folder / "report.html").read_text()
+    assert "1 not their control loop&#x27;s time" in page          # html.escape'd
+
+
 def test_identify_refuses_a_log_of_another_session(sweep, tmp_path):
     import json
 

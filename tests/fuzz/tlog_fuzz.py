@@ -13,11 +13,14 @@ Contract checked per input (the file is written to one temporary file per proces
   verifies, right after its timestamp) found by reading from byte 0 and, where no record
   verifies, stepping one byte at a time to the next offset where one does, decoded from
   those records' payloads;
-- the damage it reports is exactly the bytes stepped over (offset and length of each run)
-  and the records whose timestamp is earlier than the one before; a warning comes if and
-  only if there is such damage, and no other warning;
+- the damage it reports is exactly the bytes stepped over (offset and length of each run),
+  the records whose timestamp is earlier than the one before and, in a log stamped by its
+  control loops (more than half of the HQ_SYSID_SAMPLE records stamped with their own
+  time_us), the records whose stamp is not the time_us of the first sample after them with no
+  stepped-over run between; a warning comes if and only if there is such damage, and no
+  other warning;
 - reading the file with the damaged runs cut out gives the same list, silently unless a
-  timestamp goes back in time.
+  timestamp is wrong.
 """
 
 from __future__ import annotations
@@ -68,7 +71,8 @@ def _scratch_file() -> tuple:
 
 def well_formed_records(data: bytes) -> tuple:
     """([(timestamp, msgid, payload)], [(offset, length) stepped over], [offsets of records
-    whose timestamp is earlier than the one before]) by the resynchronising rule, slowly."""
+    whose timestamp is earlier than the one before], [offsets of records not stamped with
+    their loop's time]) by the resynchronising rule, slowly."""
     def record_end(pos):
         start = pos + STAMP_LEN
         if len(data) - start < HEADER_LEN or data[start] != STX_V2:
@@ -76,7 +80,7 @@ def well_formed_records(data: bytes) -> tuple:
         end = packet_end(data, start)
         return end if end <= len(data) and verifies(data, start, BUILDER.extras) else None
 
-    records, skipped, back, pos, last = [], [], [], 0, None
+    records, skipped, back, pos, last, at, run = [], [], [], 0, None, [], []
     while pos < len(data):
         end = record_end(pos)
         if end is None:
@@ -85,6 +89,8 @@ def well_formed_records(data: bytes) -> tuple:
                 pos += 1
             skipped.append((first, pos - first))
             continue
+        at.append(pos)
+        run.append(len(skipped))          # the stepped-over runs before this record
         start = pos + STAMP_LEN
         stamp = _STAMP.unpack_from(data, pos)[0]
         if last is not None and stamp < last:
@@ -93,7 +99,24 @@ def well_formed_records(data: bytes) -> tuple:
         msgid = int.from_bytes(data[start + 7:start + HEADER_LEN], "little")
         records.append((stamp, msgid, data[start + HEADER_LEN:start + HEADER_LEN + data[start + 1]]))
         pos = end
-    return records, skipped, back
+    return records, skipped, back, not_loop_time(records, at, run)
+
+
+def not_loop_time(records: list, at: list, run: list) -> list:
+    """Offsets of the records whose stamp is not their loop's time, when the log is stamped
+    by its loops; each record's loop found by looking ahead for its sample."""
+    sample_id = DIALECT.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE
+    time_us = [int.from_bytes(p[:8], "little") if m == sample_id else None
+               for _, m, p in records]
+    samples = [i for i, t in enumerate(time_us) if t is not None]
+    if 2 * sum(records[i][0] == time_us[i] for i in samples) <= len(samples):
+        return []
+    off = []
+    for i, (stamp, _, _) in enumerate(records):
+        ends = next((j for j in samples if j >= i), None)
+        if ends is not None and run[ends] == run[i] and stamp != time_us[ends]:
+            off.append(at[i])
+    return off
 
 
 def read(data: bytes) -> tuple:
@@ -134,12 +157,12 @@ def check(data: bytes) -> list:
         assert isinstance(item, tuple) and len(item) == 2 and type(item[0]) is int
         assert item[1].get_type() in MESSAGE_TYPES
 
-    records, skipped, back = well_formed_records(content)
+    records, skipped, back, off = well_formed_records(content)
     want = [(stamp, CODEC.decode(msgid, payload)) for stamp, msgid, payload in records]
     assert _same_messages(messages, want), f"{len(messages)} read, {len(want)} well-formed"
-    assert damage.regions == skipped and damage.out_of_order == back
+    assert damage.regions == skipped and damage.out_of_order == back and damage.off_loop == off
     assert damage.messages == len(records) and damage.size == len(content)
-    if skipped or back:
+    if skipped or back or off:
         assert len(caught) == 1 and damage.summary() in caught[0], caught
         cut, pos = bytearray(), 0
         for first, length in skipped:
@@ -148,7 +171,10 @@ def check(data: bytes) -> list:
         cut += content[pos:]
         clean, caught, again = read(bytes(cut))
         assert _same_messages(clean, messages) and not again.regions
-    assert not caught or damage.out_of_order, caught
+        # Cut out, a damaged run no longer hides which loop the records before it were in.
+        assert not caught or again.out_of_order or again.off_loop, caught
+    else:
+        assert not caught, caught
     return messages
 
 
@@ -166,9 +192,25 @@ def seed_inputs() -> dict:
     seeds = {f"raw-{name.lower()}": b"\0" + r for name, r in zip(SEED_MESSAGES, records)}
     seeds["raw-log"] = b"\0" + b"".join(records)
     seeds["raw-log-cut"] = b"\0" + b"".join(records)[:-5]
+    seeds["raw-loop-stamped"] = b"\0" + loop_stamped_log(rng)
     for i in range(4):
         seeds[f"structured-{i}"] = bytes((STRUCTURED,)) + rng.randbytes(400)
     return seeds
+
+
+def loop_stamped_log(rng, loops: int = 6) -> bytes:
+    """A simulated session's log: each loop's messages, then its HQ_SYSID_SAMPLE, all stamped
+    with the sample's time_us; one record's stamp is one bit off."""
+    by_name = {cls.msgname: msgid for msgid, cls in CODEC.classes.items()}
+    out = []
+    for k in range(loops):
+        time_us = 5_000 * (k + 1)
+        for name in ("HEARTBEAT", "STATUSTEXT", "HQ_SYSID_SAMPLE")[k % 2:]:
+            values = sample_values(CODEC.classes[by_name[name]], rng)
+            if name == "HQ_SYSID_SAMPLE":
+                values["time_us"] = time_us
+            out.append(_STAMP.pack(time_us ^ (len(out) == 4)) + CODEC.encode(by_name[name], values))
+    return b"".join(out)
 
 
 def main(argv: list) -> None:
