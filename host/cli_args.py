@@ -159,7 +159,12 @@ def check_plant(args) -> None:
     leading zeros refused) whose poles are no faster than the loop's Nyquist rate and whose
     gain is within PLANT_GAIN_RANGE, or a vehicle file whose fastest mode the integrator can
     follow at this loop rate. An unstable plant is allowed: the firmware's abort is what such
-    a run tests."""
+    a run tests. A ``--dmp-image`` file is read here too, so a bad one is refused before
+    anything starts."""
+    if getattr(args, "dmp_image", None):
+        from .dmp_image import read_dmp_file
+
+        read_dmp_file(args.dmp_image)
     if not 0 <= args.collective <= 1:
         raise InputError("--collective must be in [0, 1]")
     loop_hz = getattr(args, "loop_hz", 200.0)

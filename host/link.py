@@ -58,6 +58,20 @@ def reason_text(code: int) -> str:
 DEFAULT_BAUD = 921600
 
 
+class _Sender:
+    """What the MAVLink encoder writes to: the port, where a failed write (the port gone,
+    or a board that stopped reading for a second) is the link lost, as a failed read is."""
+
+    def __init__(self, port):
+        self.port = port
+
+    def write(self, data) -> int:
+        try:
+            return self.port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise InputError(f"telemetry link lost: {exc}") from None
+
+
 class TelemetryLink:
     """A MAVLink connection to the firmware's telemetry port.
 
@@ -78,7 +92,7 @@ class TelemetryLink:
         except (serial.SerialException, OSError) as exc:
             raise InputError(f"cannot open {port}: {exc}") from None
         self.mav = self.mav_module.MAVLink(
-            self.serial, srcSystem=HOST_SYSTEM_ID,
+            _Sender(self.serial), srcSystem=HOST_SYSTEM_ID,
             srcComponent=self.mav_module.MAV_COMP_ID_MISSIONPLANNER)
         self.target = self.mav_module.MAV_COMP_ID_AUTOPILOT1
         self.mav.robust_parsing = True

@@ -14,6 +14,7 @@ arrive, every one of them logged to the session's .tlog.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import select
 import time
@@ -154,14 +155,16 @@ class SilSession:
         image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
         self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image,
                                  **image)
-        try:
+        with contextlib.ExitStack() as undo:       # a failure or Ctrl-C here stops it all
+            undo.callback(self.fw.stop)
             self.link = SimLink(self.fw)
+            undo.callback(self.link.close)
             self.tel = TelemetryLink(self.fw.telemetry_path)
+            undo.callback(self.tel.close)
             self.telemetry = _TelemetryLog(self.tel, tlog_path)
-        except BaseException:
-            self.fw.stop()
-            raise
-        self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
+            undo.callback(self.telemetry.close)
+            self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
+            undo.pop_all()
         # The tool's heartbeat, on exact frames so that runs repeat.
         self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
@@ -241,12 +244,13 @@ class SilSession:
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
 
     def close(self) -> None:
-        try:
-            self.tel.close()
-            self.link.close()
-        finally:
-            self.telemetry.close()
-            self.fw.stop()
+        """Close the links and the log and stop the firmware; each step runs even when one
+        before it fails (the firmware last, so that it is never left running)."""
+        with contextlib.ExitStack() as stack:
+            stack.callback(self.fw.stop)
+            stack.callback(self.telemetry.close)
+            stack.callback(self.link.close)
+            stack.callback(self.tel.close)
 
     def __enter__(self):
         return self

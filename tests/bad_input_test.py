@@ -881,8 +881,12 @@ CASES = [
     case("dmp-image --source short.py --out old.bin", "dmpMemory has 10"),
     case("dmp-image --source short.py --out binary.dat/dmp.bin", "binary.dat/dmp.bin"),
     case("dmp-image --source short.py --out adir", "adir"),
-    # sil that starts the firmware with a damaged DMP file: refused in one line
+    # a damaged DMP file: refused in one line before the firmware starts
     case(f"{SIL} --dmp-image bare.bin --out o", "bare"),
+    case(f"{SIL} --dmp-image old.bin --out o", "no HQDM magic"),
+    case("sweep --sil --axis roll --dmp-image old.bin --out s", "no HQDM magic"),
+    case("sweep --sil --axis roll --dmp-image missing.bin --out s", "missing.bin"),
+    case("board --dmp-image empty.dat --duration-s 1", "no HQDM magic"),
     # flash: images that are not Teensy 3.5 images, or would secure the chip; no loader
     case("flash binary.dat", "not an Intel HEX"),
     case("flash --check-only binary.dat", "not an Intel HEX"),

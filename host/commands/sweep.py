@@ -97,7 +97,7 @@ def run(args) -> int:
         kept = f"the log and manifest so far are kept in {args.out}"
         if isinstance(exc, DiskFull):
             raise exc.also(kept)
-        # OSError: a write to the port (pyserial's SerialException) or to the log failed
+        # OSError: a write to the log failed (not for want of room)
         if isinstance(exc, (FirmwareError, InputError, OSError)):
             raise InputError(f"{exc} ({kept})") from None
         raise
