@@ -400,7 +400,8 @@ def _models_schema():
         optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(),
                   "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(), "log": log,
                   "skipped_frequencies": S.List(S.Str()),
-                  "saturated_frequencies": S.List(S.Str())})
+                  "saturated_frequencies": S.List(S.Str()),
+                  "estimate": S.Str(("excitation", "input")), "sil_truth": S.Obj()})
 
 
 def read_models_json(path) -> dict:

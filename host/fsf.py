@@ -51,6 +51,9 @@ __all__ = [
     "FrequencyPoint",
     "RecursiveFsf",
     "estimate_fsf",
+    "estimate_against_excitation",
+    "period_segments",
+    "period_dfts",
     "estimate_frequency",
     "integer_period_consistent",
     "period_coherence",
@@ -103,6 +106,13 @@ class FrequencyPoint:
         ``{l: G_l}`` for ``l = 1..L``; NaN where the input does not excite ``l``.
     offset : float
         Estimated output offset ``c`` (0 when ``offset=False``).
+    estimate : str
+        ``"input"``: ``y`` regressed on the measured input ``u`` (the direct estimate, right
+        for open-loop data); ``"excitation"``: ``G = (Y/R) / (U/R)``, both against the
+        injected excitation ``r`` (:func:`estimate_against_excitation`, for closed-loop data).
+    coherence_ry, coherence_ru : float
+        With ``estimate="excitation"``: the coherence of ``r`` with ``y`` and with ``u``
+        (``coherence`` is the smaller); NaN otherwise.
     """
 
     omega_rad_s: float
@@ -114,6 +124,9 @@ class FrequencyPoint:
     method: str
     harmonics: dict
     offset: float = 0.0
+    estimate: str = "input"
+    coherence_ry: float = math.nan
+    coherence_ru: float = math.nan
 
     @property
     def magnitude(self) -> float:
@@ -276,6 +289,24 @@ def integer_period_consistent(u, fs_hz: float, freq_hz: float):
     return whole if f_stat < F_INTEGER_PERIOD else None
 
 
+def period_segments(n: int, period: float, discard_periods: int) -> tuple:
+    """(starts, length) of the whole excitation periods of an ``n``-sample record after
+    ``discard_periods`` settling periods; ``length`` is the period rounded down."""
+    start = int(math.ceil(discard_periods * period))
+    count = max(int((n - start) // period), 0)
+    return np.round(start + period * np.arange(count)).astype(int), int(math.floor(period))
+
+
+def period_dfts(x, omega_per_sample: float, starts, length: int) -> np.ndarray:
+    """The single-bin DFT of ``x`` at ``omega_per_sample`` over each segment, phase referred
+    to sample 0 (so the segments of a steady response agree)."""
+    starts = np.asarray(starts, dtype=int)
+    idx = starts[:, None] + np.arange(length)[None, :]
+    # exp(-j w (start_p + i)) = exp(-j w start_p) exp(-j w i): one kernel for every segment.
+    kernel = np.exp(-1j * omega_per_sample * np.arange(length))
+    return np.exp(-1j * omega_per_sample * starts) * (np.asarray(x)[idx] @ kernel)
+
+
 def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> float:
     """Magnitude-squared coherence of ``u`` and ``y`` at one frequency over given segments.
 
@@ -284,15 +315,10 @@ def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> floa
     period per segment means no leakage for an integer period. NaN for fewer than two
     segments, where coherence is 1 by construction and says nothing.
     """
-    starts = np.asarray(starts, dtype=int)
-    if starts.size < 2:
+    if len(starts) < 2:
         return float("nan")
-    idx = starts[:, None] + np.arange(length)[None, :]
-    # exp(-j w (start_p + i)) = exp(-j w start_p) exp(-j w i): one kernel for every segment.
-    kernel = np.exp(-1j * omega_per_sample * np.arange(length))
-    shift = np.exp(-1j * omega_per_sample * starts)
-    U = shift * (u[idx] @ kernel)
-    Y = shift * (y[idx] @ kernel)
+    U = period_dfts(u, omega_per_sample, starts, length)
+    Y = period_dfts(y, omega_per_sample, starts, length)
     den = np.sum(np.abs(U) ** 2) * np.sum(np.abs(Y) ** 2)
     if den == 0.0:
         return float("nan")
@@ -450,8 +476,7 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
              for l in range(1, int(harmonics) + 1)}
     sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0))
     w = 2 * np.pi / period
-    first = discard_periods * period
-    coh = period_coherence(u, y, w, first + period * np.arange((u.size - first) // period), period)
+    coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
     return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
                           period_samples=float(period), n_periods=int(n_periods), method="fsf",
                           harmonics=gains, offset=float(coef[-1]) if offset else 0.0)
@@ -481,9 +506,52 @@ def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
     noise_var = float(resid @ resid) / max(k.size - X.shape[1], 1)
     cov = noise_var * scipy.linalg.inv(X.T @ X)
     sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)) / abs(U[0])
-    seg_starts = np.round(start + period * np.arange(n_periods)).astype(int)
-    seg_len = int(math.floor(period))
-    coh = period_coherence(u, y, w, seg_starts, seg_len)
+    coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
     return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
                           period_samples=float(period), n_periods=n_periods, method="sinefit",
                           harmonics=gains, offset=float(coef_y[0]))
+
+
+def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
+                                harmonics: int = DEFAULT_HARMONICS,
+                                discard_periods: int = DEFAULT_DISCARD_PERIODS) -> FrequencyPoint:
+    """One point from closed-loop data: ``G = (Y/R) / (U/R)``, the FSF of the output and of
+    the input each against the injected excitation ``r``.
+
+    In a closed loop the disturbance reaches the input too (the controller answers it), so
+    regressing ``y`` on the measured ``u`` pulls the estimate towards ``-1 / K``; ``r`` is
+    not correlated with the disturbance, so both ratios to it are unbiased and so is their
+    quotient (to first order). ``sigma`` comes from the scatter of the per-period estimates
+    ``(Y_p - G U_p) / (T_u R_p)`` (``T_u = U/R``): what the record itself shows, not a model
+    of the noise. ``coherence`` is the smaller of the coherences of ``r`` with ``y`` and
+    with ``u``, both kept on the point.
+    """
+    r, u = _check_signals(r, u)
+    _, y = _check_signals(r, y)
+    try:
+        to_y = estimate_fsf(r, y, fs_hz, freq_hz, harmonics, discard_periods, offset=True)
+        to_u = estimate_fsf(r, u, fs_hz, freq_hz, harmonics, discard_periods, offset=True)
+    except InputError as exc:
+        raise InputError(f"the logged excitation: {exc}") from None
+    t_u = to_u.gain
+    if not (abs(t_u) > 0 and math.isfinite(abs(t_u))):
+        raise InputError(f"the input does not follow the excitation at {freq_hz:g} Hz")
+    gains = {l: to_y.harmonics[l] / to_u.harmonics[l] if to_u.harmonics[l] != 0 else
+             complex("nan+nanj") for l in to_y.harmonics}
+    g = gains[1]
+    period = to_y.period_samples
+    w = 2 * np.pi / period
+    starts, length = period_segments(r.size, period, discard_periods)
+    R, U, Y = (period_dfts(x, w, starts, length) for x in (r, u, y))
+    if len(starts) >= 2 and np.all(np.abs(R) > 0):
+        e = (Y - g * U) / (t_u * R)
+        sigma = math.sqrt(float(np.sum(np.abs(e - e.mean()) ** 2)) / (e.size - 1) / e.size)
+    else:              # one period: the two fits' residual sigmas, propagated
+        sigma = math.hypot(to_y.sigma, abs(g) * to_u.sigma) / abs(t_u)
+    coh_ry = period_coherence(r, y, w, starts, length)
+    coh_ru = period_coherence(r, u, w, starts, length)
+    return FrequencyPoint(omega_rad_s=to_y.omega_rad_s, gain=g, sigma=sigma,
+                          coherence=float(np.fmin(coh_ry, coh_ru)), period_samples=period,
+                          n_periods=to_y.n_periods, method=to_y.method, harmonics=gains,
+                          offset=to_y.offset, estimate="excitation", coherence_ry=coh_ry,
+                          coherence_ru=coh_ru)

@@ -72,17 +72,18 @@ def _segments(manifest, samples):
     state = np.array([m.exc_state for m in samples])
     u = np.array([getattr(m, u_name) for m in samples])
     y = np.array([getattr(m, y_name) for m in samples])
+    r = np.array([m.excitation for m in samples])
     for entry in manifest["frequencies"]:
         if entry.get("status") != "ok" or "start_us" not in entry:
             continue
         sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
-        yield entry, t[sel] * 1e-6, u[sel], y[sel]
+        yield entry, t[sel] * 1e-6, r[sel], u[sel], y[sel]
 
 
-def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False) -> dict:
+def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False,
+                 estimate: str = "excitation") -> dict:
     manifest, samples, damage = _load(dir_path)
     from .files import write_models_json, write_points_csv    # after the folder is read:
-    from .fsf import estimate_fsf                              # scipy and matplotlib are slow
     from .fit import n_parameters
     from .identify import fit_orders
     from .plot import write_bode, write_responses
@@ -91,21 +92,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  "every well-formed record was read")
     axis = manifest["axis"]
-    points, segments, skipped = [], [], []
-    for entry, t, u, y in _segments(manifest, samples):
-        fs = entry["freq_hz"] * entry["period_samples"]
-        if not len(t):
-            progress(f"  {entry['freq_hz']:.4g} Hz skipped: the log holds none of its samples")
-            skipped.append(f"{entry['freq_hz']:.4g} Hz: the log holds none of its samples")
-            continue
-        try:
-            p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
-        except InputError as exc:
-            progress(f"  {entry['freq_hz']:.4g} Hz skipped: {exc}")
-            skipped.append(f"{entry['freq_hz']:.4g} Hz: {exc}")
-            continue
-        points.append(p)
-        segments.append((entry["freq_hz"], t, u, y))
+    points, segments, skipped = _estimate_points(manifest, samples, estimate, progress)
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -127,10 +114,14 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(table, orders, delay=delay)
+    extra = {"log": damage.record(), "skipped_frequencies": skipped,
+             "saturated_frequencies": saturated, "estimate": estimate}
+    truth = _truth(dir_path, manifest, points, result, progress)
+    if truth:
+        extra["sil_truth"] = truth
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
-                      extra={"log": damage.record(), "skipped_frequencies": skipped,
-                             "saturated_frequencies": saturated})
+                      extra=extra)
     write_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
                models=result.models, recommended=result.recommended,
                title=f"{axis}, {manifest['inject']} injection: points and models")
@@ -138,7 +129,56 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
                     *INPUT_OUTPUT[manifest["inject"]],
                     title=f"{axis}: measured cycles per frequency (input dashed, output solid)")
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
-            "damage": damage, "skipped": skipped, "saturated": saturated}
+            "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth}
+
+
+def _truth(dir_path, manifest, points, result, progress) -> dict | None:
+    """A simulated sweep: the points' and the recommended model's errors against the
+    simulator's truth (:mod:`.truth`), said and returned for models.json."""
+    from .truth import sil_truth, truth_record
+
+    truth, why = sil_truth(manifest, dir_path)
+    if truth is None:
+        if manifest.get("source", {}).get("kind") == "sil":
+            progress(f"  no simulator truth: {why}")
+        return None
+    model = None if result.recommended is None else result.models[result.recommended]
+    record = truth_record(truth, points, model)
+    z = record["points_rms_error_over_sigma"]
+    said = (f"against the simulator's truth: points within {record['points_worst_db']:.2f} dB "
+            f"and {record['points_worst_deg']:.1f} deg"
+            + (f" (RMS error/sigma {z:.2f})" if z is not None else ""))
+    if model is not None:
+        said += (f"; the recommended model within {record['model_worst_db']:.2f} dB and "
+                 f"{record['model_worst_deg']:.1f} deg across the band")
+    progress(said)
+    return record
+
+
+def _estimate_points(manifest, samples, estimate, progress) -> tuple:
+    """(points, the records they came from, the frequencies skipped and why): one point per
+    measured frequency, against the excitation or the input (``estimate``)."""
+    from .fsf import estimate_against_excitation, estimate_fsf
+
+    points, segments, skipped = [], [], []
+    for entry, t, r, u, y in _segments(manifest, samples):
+        fs = entry["freq_hz"] * entry["period_samples"]
+        if not len(t):
+            progress(f"  {entry['freq_hz']:.4g} Hz skipped: the log holds none of its samples")
+            skipped.append(f"{entry['freq_hz']:.4g} Hz: the log holds none of its samples")
+            continue
+        try:
+            if estimate == "excitation":
+                p = estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1)
+            else:
+                p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
+        except InputError as exc:
+            progress(f"  {entry['freq_hz']:.4g} Hz skipped: {exc}")
+            skipped.append(f"{entry['freq_hz']:.4g} Hz: {exc}")
+            continue
+        points.append(p)
+        segments.append((entry["freq_hz"], t, u, y))
+    return points, segments, skipped
 
 
 def _saturated(manifest) -> list:

@@ -47,6 +47,16 @@ def test_sil_sweep_and_identify_recover_the_papers_models(axis, tmp_path):
     g = pts[:, 1] * np.exp(1j * pts[:, 2])
     assert np.max(np.abs(20 * np.log10(np.abs(g / truth)))) < 1.0
     assert np.max(np.abs(np.degrees(np.angle(g / truth)))) < 3.0
+    # identify's own record of the same: the points against excitation, and the truth
+    assert models["estimate"] == "excitation"
+    record = models["sil_truth"]
+    np.testing.assert_allclose([p["truth_db"] for p in record["points"]],
+                               20 * np.log10(np.abs(truth)), atol=1e-6)
+    assert record["points_worst_db"] == pytest.approx(
+        np.max(np.abs(20 * np.log10(np.abs(g / truth)))), abs=1e-4)    # points.csv: 12 digits
+    # the model has no delay, the sampled truth has the hold's half sample: up to 4 deg
+    assert record["model_worst_db"] < 1.0 and record["model_worst_deg"] < 5.0
+    assert "against the simulator's truth: points within" in res.stdout
     for name in ("points_table.csv", "bode.png", "responses.png", "sweep.tlog"):
         assert (out / name).stat().st_size > 0
 
@@ -75,6 +85,10 @@ def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
     assert manifest["source"]["kind"] == "port" and manifest["complete"]
     assert [round(f["freq_hz"], 3) for f in manifest["frequencies"]] == [2.985, 4.545]   # 200/67 and 200/44 Hz
     assert all(f["samples"] >= 3 * f["period_samples"] for f in manifest["frequencies"])
+    res = heliquad("identify", out, "--order", "0/1")
+    assert res.returncode == 0, res.stderr
+    assert "sil_truth" not in json.loads((out / "models.json").read_text())   # a board: none
+    assert "truth" not in res.stdout
 
 
 def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_path):
@@ -201,11 +215,13 @@ def test_identify_says_in_one_line_when_no_frequency_has_a_usable_excitation(tmp
                 fields.update(axis_cmd=0.0, rate=0.0)
             fh.write(struct.pack(">Q", ts))
             fh.write(codec.encode(getattr(mav, "MAVLINK_MSG_ID_" + m.get_type()), fields))
-    res = heliquad("identify", out)
-    assert res.returncode == 2 and "Traceback" not in res.stderr
-    assert len(res.stderr.strip().splitlines()) == 1
-    assert "0 frequency(ies) with a usable excitation" in res.stderr
-    assert "no component at 1 Hz" in res.stderr
+    for estimate, why in (("excitation", "the input does not follow the excitation at 1 Hz"),
+                          ("input", "no component at 1 Hz")):
+        res = heliquad("identify", out, "--estimate", estimate)
+        assert res.returncode == 2 and "Traceback" not in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1
+        assert "0 frequency(ies) with a usable excitation" in res.stderr
+        assert why in res.stderr
 
 
 def test_identify_refuses_a_folder_that_is_not_a_sweep(tmp_path):

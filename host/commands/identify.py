@@ -26,6 +26,11 @@ def add_parser(sub, fmt) -> None:
                    help="orders to fit (default: the paper's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
     p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
                    "(the loop's hold and the sensor's latency are real delays)")
+    p.add_argument("--estimate", choices=("excitation", "input"), default="excitation",
+                   help="excitation (default): each point as (Y/R)/(U/R), output and input "
+                        "against the logged excitation R, unbiased when the loop is closed "
+                        "and the air is not still; input: Y regressed on the measured input U "
+                        "(the direct estimate, right only for open-loop data)")
     p.add_argument("--mat", metavar="MODELS.mat",
                    help="also write the models for MATLAB to this file (a struct array, "
                         "docs/file-formats.md)")
@@ -41,7 +46,7 @@ def run(args) -> int:
     orders = [parse_order(o) for o in args.order] if args.order else None
     if not os.path.isdir(args.dir):
         raise InputError(f"{args.dir}: not a folder")
-    r = identify_dir(args.dir, orders, delay=args.delay)
+    r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate)
     print(f"{r['axis']}: {len(r['points'])} points")
     print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
     for p in sorted(r["points"], key=lambda q: q.omega_rad_s):

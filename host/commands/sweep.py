@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 from ...sim import dialect as names
@@ -63,8 +64,6 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
     from ..files import new_output_folder
     from ..sweep import SWEEP_TLOG, default_plan, run_sweep
 
@@ -136,8 +135,9 @@ def _sweep_session(args, tlog):
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
                     faults=faults(args), firmware=args.firmware)
     source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
-              "params": args.params, "turbulence": args.turbulence, "seed": args.seed,
-              "ideal_sensor": args.ideal_sensor}
+              "params": os.path.abspath(args.params) if args.params else None,
+              "turbulence": args.turbulence, "seed": args.seed,
+              "ideal_sensor": args.ideal_sensor, "collective": args.collective}
     try:
         session = SilSession(cfg, tlog)
     except FirmwareError as exc:
