@@ -351,13 +351,15 @@ def _manifest_schema():
                   "period_samples": S.Int(2, 2**31), "start_us": S.Int(0, 2**63 - 1),
                   "end_us": S.Int(0, 2**63 - 1), "messages": S.List(S.Str()),
                   **{k: S.Int(0, 2**31) for k in ("seq_gaps", "saturated", "collective_limited",
-                                                  "sensor_clipped")}})
+                                                  "sensor_clipped", "cycles")},
+                  "dwell_end": S.Str(("target", "cap", "amplitude")), "relative_sigma": S.Null(S.Num(0))})
     return S.Obj(
         required={"axis": S.Str(tuple(names.AXES)), "inject": S.Str(tuple(names.INJECTIONS)),
                   "frequencies": S.List(frequency, 0, 10_000)},
         optional={"tlog": S.Str(file_name=True), "source": S.Obj(), "firmware": S.Str(),
                   "gains": S.Null(S.Obj()), "started": S.Str(), "cycles": S.Int(1, 65535),
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
+                  "design": S.Obj(),
                   "complete": S.Bool(), "aborted": S.Null(S.Str()),
                   "in_progress_hz": S.Null(S.Num())})
 

@@ -157,3 +157,10 @@ class TelemetryLink:
         m = self.mav_module
         self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_STOP,
                                     m.HQ_AXIS_ROLL, m.HQ_INJECTION_ANGLE, 0.0, 0.0, 0, 0)
+
+    def finish_excitation(self) -> None:
+        """Finish the running excitation in order: the cycle under way completes, then the
+        planned fade-out (HQ_EXCITATION_FINISH)."""
+        m = self.mav_module
+        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_FINISH,
+                                    m.HQ_AXIS_ROLL, m.HQ_INJECTION_ANGLE, 0.0, 0.0, 0, 0)

@@ -130,7 +130,7 @@ class _ClosedLink:
     def _drop(self, *args, **kwargs) -> None:
         self.lost += 1
 
-    heartbeat = arm = set_mode = start_excitation = stop_excitation = _drop
+    heartbeat = arm = set_mode = start_excitation = stop_excitation = finish_excitation = _drop
 
     def close(self) -> None:
         pass

@@ -76,26 +76,67 @@ def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
 
 
 class SweepPlan:
-    """What a sweep does: axis, injection point, frequencies and amplitudes (firmware units)."""
+    """What a sweep does: axis, injection point, frequencies and amplitudes (firmware units).
+
+    ``amplitudes``: one per frequency, or None for a designed amplitude
+    (:class:`~heliquad.host.design.AmplitudeDesign`, given as ``design``). ``dwell``: a
+    :class:`~heliquad.host.design.Dwell` for the sequential dwell; without one every
+    frequency runs ``cycles`` measured cycles (the published dwell)."""
 
     def __init__(self, axis, inject, freqs_hz, amplitudes, cycles=MEASURED_CYCLES,
-                 fade_cycles=FADE_CYCLES):
+                 fade_cycles=FADE_CYCLES, dwell=None, design=None):
         if inject == "angle" and axis == "yaw":
             raise InputError("yaw is rate-only: use --inject rate or mixer")
         self.axis, self.inject = axis, inject
         self.freqs_hz = [float(f) for f in freqs_hz]
-        self.amplitudes = [float(a) for a in amplitudes]
+        self.amplitudes = [None if a is None else float(a) for a in amplitudes]
         self.cycles, self.fade_cycles = int(cycles), int(fade_cycles)
+        self.dwell, self.design = dwell, design
+
+    def cycles_for(self, freq_hz: float) -> int:
+        """The measured cycles a frequency's excitation is started with."""
+        return self.dwell.cycles(freq_hz) if self.dwell else self.cycles
+
+    def record(self) -> dict:
+        """The design, for the manifest."""
+        out = {"cycles": self.cycles} if self.dwell is None else {
+            "dwell": "sequential", "min_cycles": self.dwell.min_cycles,
+            "max_cycles": self.dwell.max_cycles, "max_dwell_s": self.dwell.max_dwell_s,
+            "target_sigma": self.dwell.target_sigma}
+        if self.design is not None:
+            out.update(amplitude="designed", swing_deg=self.design.swing_deg,
+                       amplitude_bound=self.design.bound)
+        return out
 
 
-def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=MEASURED_CYCLES):
-    """The paper's Table 1 (docs/paper.md): 15 log-spaced frequencies over the axis's band."""
+def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=None,
+                 dwell=None, swing_deg=None):
+    """The paper's Table 1 (docs/paper.md): 15 log-spaced frequencies over the axis's band.
+
+    ``cycles``: a fixed dwell of that many measured cycles (the published one: 8); without
+    it the dwell is sequential (``dwell``, default :class:`~heliquad.host.design.Dwell`).
+    ``amplitude``: one for every frequency; without it a mixer sweep's amplitudes are
+    designed for a swing of ``swing_deg`` (:class:`~heliquad.host.design.AmplitudeDesign`)
+    and angle and rate sweeps use :func:`default_amplitude`."""
+    from .design import AmplitudeDesign, Dwell, amplitude_bound
+
     if freqs_hz is None:
         lo, hi = paper.BANDS_HZ[axis]
         freqs_hz = np.logspace(math.log10(lo), math.log10(hi), N_FREQUENCIES)
-    amps = [amplitude if amplitude is not None else default_amplitude(axis, inject, f)
-            for f in freqs_hz]
-    return SweepPlan(axis, inject, freqs_hz, amps, cycles)
+    design = None
+    if amplitude is not None:
+        amps = [amplitude] * len(freqs_hz)
+    elif inject == "mixer":
+        design = AmplitudeDesign(amplitude_bound(inject))
+        if swing_deg is not None:
+            design.swing_deg = swing_deg
+        amps = [None] * len(freqs_hz)
+    else:
+        amps = [default_amplitude(axis, inject, f) for f in freqs_hz]
+    if cycles is not None:
+        return SweepPlan(axis, inject, freqs_hz, amps, cycles, design=design)
+    return SweepPlan(axis, inject, freqs_hz, amps, MEASURED_CYCLES, dwell=dwell or Dwell(),
+                     design=design)
 
 
 def _write_manifest(out_dir, manifest) -> None:
@@ -123,15 +164,18 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 "firmware": f"heliquad {__version__}", "gains": gains,
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "tlog": SWEEP_TLOG, "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
+                "design": plan.record(),
                 "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
                 "frequencies": [], "complete": False, "aborted": None}
     current = None
     try:
         _write_manifest(out_dir, manifest)
         session.hover()
+        last = None                              # (amplitude, rate per unit) just measured
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
             current = f
-            entry = measure(session, plan, f, amp, limits, progress).entry
+            entry, last = _measure_designed(session, plan, f, amp, last, limits, manifest,
+                                            progress)
             manifest["frequencies"].append(entry)
             current = None
             _write_manifest(out_dir, manifest)
@@ -157,6 +201,27 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         raise
     _write_manifest(out_dir, manifest)
     return manifest
+
+
+def _measure_designed(session, plan, f, amp, last, limits, manifest, progress):
+    """One frequency of a sweep, its amplitude designed when ``amp`` is None: (its manifest
+    entry, (amplitude, rate per unit) for the next). A designed amplitude found less than
+    half of what the swing target allows is finished after the least cycles (its entry
+    kept as superseded) and the frequency is measured again with the better one."""
+    redesign = None
+    if amp is None:
+        amp = plan.design.first() if last is None else plan.design.next(f, *last)
+        redesign = lambda rpu: plan.design.next(f, amp, rpu)   # noqa: E731
+    watch = measure(session, plan, f, amp, limits, progress, redesign=redesign)
+    if watch.again is not None and watch.entry["status"] == "ok":
+        watch.entry["status"] = (f"superseded: amplitude {amp:.3g} swung the rig far less "
+                                 f"than the target; measured again at {watch.again:.3g}")
+        manifest["frequencies"].append(watch.entry)
+        progress(f"  {watch.entry.get('freq_hz', f):.4g} Hz: amplitude {amp:.3g} is small for "
+                 f"the swing target; measuring again at {watch.again:.3g}")
+        amp = watch.again
+        watch = measure(session, plan, f, amp, limits, progress)
+    return watch.entry, (amp, watch.rate_per_unit())
 
 
 def _stop_excitation(session) -> None:
@@ -241,10 +306,20 @@ class ExcitationWatch:
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
         self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
-        self.rows = [] if keep_rows else None
+        self.keep_rows = keep_rows
+        self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
         self.started_us, self.last_sample_us = now_us, now_us
         self.seen_active, self.last_seq, self.fresh = False, None, False
         self.done, self.stop = False, False
+        self.finish = False                     # the dwell has its point: finish in order
+        self.redesign = None                    # amplitude -> a better one, designed
+        self.again = None                       # the amplitude to measure again with
+
+    @property
+    def rows(self):
+        """(t, u, y) of every full-amplitude sample, for RUN.csv (``keep_rows``)."""
+        t, _, u, y = self.record
+        return list(zip(t, u, y)) if self.keep_rows else None
 
     def __call__(self, m) -> None:
         if self.done:
@@ -287,14 +362,66 @@ class ExcitationWatch:
             for key, bits in self.flags.items():
                 if m.saturation & bits:
                     e[key] += 1
-            if self.rows is not None:
-                self.rows.append((m.time_us * 1e-6, getattr(m, self.u_name),
-                                  getattr(m, self.y_name)))
+            for column, value in zip(self.record, (m.time_us * 1e-6, m.excitation,
+                                                   getattr(m, self.u_name),
+                                                   getattr(m, self.y_name))):
+                column.append(value)
+            self._dwell()
         breach = self.limits.breach(self.plan.axis, m)
         if breach:
             return self._end(breach, stop=True)
         if self.seen_active and m.exc_state == self.idle:
-            self._end(_incomplete(e, self.plan))
+            self._end(_incomplete(e, self.plan, self.finish))
+
+    def _dwell(self) -> None:
+        """The sequential dwell, halfway through each cycle from the least cycles' last on
+        (so that a finish lands in that cycle, which the firmware completes): finish once
+        the point of the whole cycles so far, with that cycle added, is known well enough;
+        or, at the first such moment, when the amplitude turns out less than half of what
+        the swing target allows, finish to measure again."""
+        dwell, e = self.plan.dwell, self.entry
+        period = e.get("period_samples")
+        if dwell is None or self.finish or not period:
+            return
+        cycles, into = divmod(e["samples"], period)
+        if into != period // 2 or cycles < dwell.min_cycles - 1:
+            return
+        r, u, y = (column[:cycles * period] for column in self.record[1:])
+        fs = e["freq_hz"] * period
+        relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"])
+        used = cycles - 1                       # the first measured cycle is discarded
+        if used >= 1 and relative * math.sqrt(used / (used + 1)) <= dwell.target_sigma:
+            self.finish = True
+        elif cycles == dwell.min_cycles - 1 and self.redesign is not None:
+            better = self.redesign(self.rate_per_unit(require_end=False))
+            if better is not None and better >= 2 * e["amplitude"]:
+                self.finish, self.again = True, better
+
+    def rate_per_unit(self, require_end: bool = True) -> float:
+        """The measured rate per unit of excitation at the fundamental (NaN if unknown: an
+        excitation that did not end well, or an output that is not the rate)."""
+        from .design import response_per_unit
+
+        e = self.entry
+        if not e.get("period_samples") or self.y_name != "rate" or (
+                require_end and e["status"] != "ok"):
+            return math.nan
+        _, r, _, y = self.record
+        return response_per_unit(r, y, e["freq_hz"] * e["period_samples"], e["freq_hz"])
+
+    def conclude(self) -> None:
+        """A sequential dwell's record in the entry: the cycles measured, why the dwell
+        ended, and the point's relative sigma then."""
+        e, dwell = self.entry, self.plan.dwell
+        if dwell is None or e["status"] != "ok" or not e.get("period_samples"):
+            return
+        _, r, u, y = self.record
+        e["cycles"] = e["samples"] // e["period_samples"]
+        e["dwell_end"] = ("amplitude" if self.again is not None else "target") if self.finish \
+            else "cap"
+        relative = dwell.relative_sigma(r, u, y, e["freq_hz"] * e["period_samples"],
+                                        e["freq_hz"])
+        e["relative_sigma"] = relative if math.isfinite(relative) else None
 
     def check_time(self, now_us: int) -> None:
         """The timeouts, on the session's clock: no start, or samples that stopped."""
@@ -311,24 +438,41 @@ class ExcitationWatch:
 
 
 def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
-            keep_rows: bool = False) -> ExcitationWatch:
+            keep_rows: bool = False, redesign=None) -> ExcitationWatch:
     """One excitation on ``session``: start it, watch it to its end, stop it if the host
-    must. The one routine every experiment (a sweep's frequency, ``heliquad sil``) runs."""
+    must. The one routine every experiment (a sweep's frequency, ``heliquad sil``) runs.
+    ``redesign``: for a designed amplitude, rate per unit -> the amplitude the design would
+    now choose (the sequential dwell may finish early to measure again with it)."""
     watch = ExcitationWatch(plan, f, amp, limits or Limits(), session.time_us, progress,
                             keep_rows)
-    session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles, plan.fade_cycles)
+    watch.redesign = redesign
+    session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles_for(f),
+                                 plan.fade_cycles)
+    finishing = False
     while not watch.done:
         session.advance(watch)
         watch.check_time(session.time_us)
+        if watch.finish and not finishing:
+            session.tel.finish_excitation()
+            finishing = True
     if watch.stop:
         session.tel.stop_excitation()
+    watch.conclude()
     return watch
 
 
-def _incomplete(entry, plan) -> str | None:
+def _incomplete(entry, plan, finished: bool) -> str | None:
     """An excitation that ended without a stop message must still have all its measured
-    samples (a lost status message must not pass a truncated record as complete)."""
-    expected = plan.cycles * entry.get("period_samples", 0)
+    samples (a lost status message must not pass a truncated record as complete). One the
+    dwell finished early must hold whole cycles, at least the dwell's least."""
+    period = entry.get("period_samples", 0)
+    if finished:
+        least = plan.dwell.min_cycles * period
+        if entry["samples"] % period or entry["samples"] < least:
+            return (f"incomplete: {entry['samples']} measured samples were logged, not whole "
+                    f"cycles of {period} (at least {least})")
+        return None
+    expected = plan.cycles_for(entry["requested_hz"]) * period
     if entry["samples"] != expected:
         return f"incomplete: {entry['samples']} of {expected} measured samples were logged"
     return None

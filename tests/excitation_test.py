@@ -58,3 +58,52 @@ def test_stop():
     ex.next()
     ex.stop()
     assert not ex.active and ex.next() == 0.0
+
+
+def _run(ex):
+    """The values and measuring flags of the rest of an excitation."""
+    values, measuring = [], []
+    while ex.active:
+        measuring.append(ex.measuring)
+        values.append(ex.next())
+    return np.array(values), measuring
+
+
+@pytest.mark.parametrize("after, measured", [
+    (0, 1),               # in the fade-in: one full-amplitude cycle still runs
+    (2 * 50, 1),          # at the first measured sample: that cycle completes
+    (2 * 50 + 1, 1),
+    (3 * 50, 1),          # on a cycle's boundary: the fade-out starts there
+    (3 * 50 + 7, 2),      # mid-cycle: the cycle under way completes
+])
+def test_finish_completes_the_cycle_under_way_then_fades_out(after, measured):
+    ex = fw.Excitation()
+    ex.start(config(4.0, amp=0.5, cycles=20, fade=2), LOOP_HZ)
+    n = ex.period_samples
+    assert n == 50
+    head = [ex.next() for _ in range(after)]
+    assert ex.finish()
+    assert ex.config.cycles == measured and ex.total_samples == n * (measured + 4)
+    rest, measuring = _run(ex)
+    values = np.r_[head, rest]
+    assert values.size == n * (measured + 4)
+    k = np.arange(values.size)
+    full = 0.5 * np.sin(2 * math.pi * (k % n) / n)
+    # the fade-out is the planned one: the same envelope as an excitation of `measured` cycles
+    planned = fw.Excitation()
+    planned.start(config(4.0, amp=0.5, cycles=measured, fade=2), LOOP_HZ)
+    np.testing.assert_allclose(values, _run(planned)[0], atol=1e-7)
+    np.testing.assert_allclose(values[2 * n:(2 + measured) * n], full[2 * n:(2 + measured) * n],
+                               atol=1e-6)
+    assert abs(values[-1]) < 1e-3
+
+
+def test_finish_in_the_fade_out_or_idle_changes_nothing():
+    ex = fw.Excitation()
+    ex.start(config(4.0, cycles=3, fade=1), LOOP_HZ)
+    total = ex.total_samples
+    for _ in range(total - 10):
+        ex.next()
+    assert ex.finish() and ex.total_samples == total and ex.config.cycles == 3
+    _run(ex)
+    assert not ex.finish() and not ex.active

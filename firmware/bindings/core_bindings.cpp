@@ -191,6 +191,7 @@ void bind_supervisor(py::module_& m) {
             return static_cast<int>(s.start_excitation(c, now));
         }, py::arg("config"), py::arg("now_us"))
         .def("stop_excitation", &Supervisor::stop_excitation)
+        .def("finish_excitation", &Supervisor::finish_excitation)
         .def("update", &Supervisor::update, py::arg("inputs"))
         .def("fault", [](Supervisor& s, int why) { s.fault(static_cast<Reason>(why)); }, py::arg("why"))
         .def("imu_initialised", &Supervisor::imu_initialised, py::arg("now_us"), py::arg("timeout_us"))
@@ -358,6 +359,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def(py::init<>())
         .def("start", &Excitation::start)
         .def("stop", &Excitation::stop)
+        .def("finish", &Excitation::finish)
+        .def_property_readonly("config", [](const Excitation& e) { return e.config(); })
         .def("next", &Excitation::next)
         .def_property_readonly("active", &Excitation::active)
         .def_property_readonly("measuring", &Excitation::measuring)

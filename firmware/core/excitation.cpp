@@ -36,6 +36,19 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
 
 void Excitation::stop() { active_ = false; }
 
+bool Excitation::finish() {
+    if (!active_) return false;
+    const uint32_t fade = period_ * config_.fade_cycles;
+    // Whole full-amplitude cycles once the one under way ends (k_ is the next sample).
+    const uint32_t cycles = k_ <= fade ? 1u : (k_ - fade + period_ - 1u) / period_;
+    const uint64_t total = uint64_t{period_} * (uint64_t{cycles} + 2u * config_.fade_cycles);
+    if (total < total_) {
+        total_ = static_cast<uint32_t>(total);
+        config_.cycles = static_cast<uint16_t>(cycles);
+    }
+    return true;
+}
+
 bool Excitation::measuring() const {
     const uint32_t fade = period_ * config_.fade_cycles;
     return active_ && k_ >= fade && k_ < total_ - fade;

@@ -47,6 +47,12 @@ public:
     // duration, fade-in) are the Supervisor's (supervisor.hpp).
     bool start(const ExcitationConfig& config, float loop_rate_hz);
     void stop();
+    // Ends the excitation in order, earlier than planned: the full-amplitude cycle under way
+    // completes (at least one, when called during the fade-in), then the fade-out runs as at
+    // the planned end, so the vehicle is not kicked. config().cycles and total_samples()
+    // become what will have run; a finish during the fade-out changes nothing. False when
+    // idle.
+    bool finish();
 
     // The value for this loop sample, then advance; idle after the last one. 0 when idle.
     float next();

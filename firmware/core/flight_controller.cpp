@@ -194,6 +194,10 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
     if (ex.action == HQ_EXCITATION_STOP) {
         supervisor_.stop_excitation();
         last_exc_accepted_ = true;
+    } else if (ex.action == HQ_EXCITATION_FINISH) {
+        supervisor_.finish_excitation();             // the answer carries the new length
+        last_exc_accepted_ = true;
+        why = Reason::None;
     } else {
         ExcitationConfig cfg;
         cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor

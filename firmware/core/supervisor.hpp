@@ -159,6 +159,9 @@ public:
     Reason start_excitation(const ExcitationConfig& config, uint64_t now_us);
     // Stops a running excitation (StopCommand); false if none was running.
     bool stop_excitation();
+    // Ends a running excitation in order (Excitation::finish; it ends as Finished); false if
+    // none was running.
+    bool finish_excitation() { return excitation_.finish(); }
 
     // --- once per loop, before the control laws -----------------------------------------------
     // Applies the RC switches, the failsafes and the excitation's limits; returns the

@@ -9,6 +9,7 @@ from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                         check_excitation, check_plant, faults, finite, firmware_amplitude,
                         int_in, number_in)
+from .. import design
 from ..errors import DiskFull, InputError
 from ..link import DEFAULT_BAUD
 
@@ -16,8 +17,14 @@ __all__ = ["add_parser", "run"]
 
 HELP = """\
 Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
-(or --freqs-hz), each faded in over 2 cycles (the settling), measured for --cycles cycles,
-faded out. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
+(or --freqs-hz), each faded in over 2 cycles (the settling), measured, faded out.
+The dwell is sequential by default: at least 8 measured cycles (the paper's dwell), then
+until the point's standard deviation is --target-sigma of its magnitude (estimated against
+the excitation after every cycle) or --max-cycles (and at most 60 s) have run, when the
+firmware finishes the cycle under way and fades out; --cycles N gives every frequency
+exactly N. A mixer sweep's amplitude is designed per frequency for a rig swing of
+--swing-deg (from what the previous frequency measured, within the firmware's bound);
+--amplitude gives one for all. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
 default); --port talks to a board, or to a `heliquad board` pty, in real time. Writes
 DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
 windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond 80 deg or a
@@ -55,8 +62,20 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
                    help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
     p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
-                   "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: per frequency")
-    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), default=8, help="measured cycles per frequency (default 8)")
+                   "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: "
+                   "designed per frequency (mixer), 5 deg (angle), 10 deg/s (rate)")
+    p.add_argument("--swing-deg", type=number_in(0, 45, lo_open=True), metavar="D",
+                   help=f"mixer: the rig swing each designed amplitude aims at (default "
+                        f"{design.TARGET_SWING_DEG:g} deg)")
+    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), metavar="N",
+                   help="a fixed dwell: N measured cycles per frequency (the paper's: 8); "
+                        "default: the sequential dwell")
+    p.add_argument("--target-sigma", type=number_in(0, 1, lo_open=True), metavar="S",
+                   help=f"sequential dwell: end a frequency once its point's standard deviation "
+                        f"is S of its magnitude (default {design.TARGET_SIGMA:g})")
+    p.add_argument("--max-cycles", type=int_in(design.MIN_CYCLES, MAX_CYCLES), metavar="N",
+                   help=f"sequential dwell: the most measured cycles of a frequency (default "
+                        f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
     add_fault_argument(p, "--sil: ")
@@ -65,16 +84,15 @@ def add_parser(sub, fmt) -> None:
 
 def run(args) -> int:
     from ..files import new_output_folder
-    from ..sweep import SWEEP_TLOG, default_plan, run_sweep
+    from ..sweep import SWEEP_TLOG, run_sweep
 
-    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
-    plan = default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles)
+    plan = _plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         from ...sim.sil import SilConfig
 
         for f, a in zip(plan.freqs_hz, plan.amplitudes):
-            check_excitation([f], plan.cycles, plan.fade_cycles, SilConfig.loop_hz, a,
-                              args.inject)
+            check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz, a,
+                             args.inject)
     if not args.sil and args.fault:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
@@ -111,6 +129,27 @@ def run(args) -> int:
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
     return 1
+
+
+def _plan(args):
+    """The sweep's plan from the options: fixed or sequential dwell, fixed or designed
+    amplitudes."""
+    from ..sweep import default_plan
+
+    if args.cycles is not None and (args.target_sigma or args.max_cycles):
+        raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
+                         "the sequential dwell: give one or the other")
+    if args.swing_deg is not None and (args.amplitude is not None or args.inject != "mixer"):
+        raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
+                         "--amplitude or angle or rate injection")
+    dwell = None
+    if args.cycles is None:
+        dwell = design.Dwell()
+        dwell.target_sigma = args.target_sigma or dwell.target_sigma
+        dwell.max_cycles = args.max_cycles or dwell.max_cycles
+    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
+    return default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles, dwell,
+                        args.swing_deg)
 
 
 def _sweep_session(args, tlog):
