@@ -864,6 +864,15 @@ CASES = [
     case("demo --axes up --out d", "--axes"),
     case("demo --axes roll --out full", "not empty"),
     case("demo --firmware bogus --out d", "--firmware"),
+    case("demo --turbulence gale --out d", "--turbulence"),
+    # sweep's design options: out of range, or given with what they do not go with
+    case("sweep --sil --axis roll --target-sigma 0 --out s", "--target-sigma"),
+    case("sweep --sil --axis roll --target-sigma 2 --out s", "--target-sigma"),
+    case("sweep --sil --axis roll --max-cycles 3 --out s", "--max-cycles"),
+    case("sweep --sil --axis roll --swing-deg 90 --out s", "--swing-deg"),
+    case("sweep --sil --axis roll --swing-deg nan --out s", "--swing-deg"),
+    case("sweep --sil --axis roll --cycles 8 --max-cycles 20 --out s", "one or the other"),
+    case("sweep --sil --axis roll --amplitude 0.5 --swing-deg 5 --out s", "--swing-deg"),
     # dmp-image: sources that are not the mpu6050 package's, outputs that cannot be written
     case("dmp-image binary.dat", "--out"),
     case("dmp-image --source binary.dat --out dmp.bin", "binary.dat"),
