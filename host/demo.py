@@ -44,7 +44,7 @@ def run_demo(args) -> int:
     from .session import SilSession
     from .identify_session import identify_dir
     from .report import write_report
-    from .sweep import SWEEP_TLOG, default_plan, run_sweep
+    from .sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
     from .validate import load_gains, save_validation, validate_model
 
     t0, sim_s, summary = time.monotonic(), 0.0, []
@@ -58,9 +58,7 @@ def run_demo(args) -> int:
                         turbulence=args.turbulence)
         with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
             run_sweep(session, default_plan(axis), folder,
-                      {"kind": "sil", "plant": "vehicle", "ideal_sensor": args.ideal_sensor,
-                       "seed": args.seed, "turbulence": args.turbulence,
-                       "collective": cfg.collective, "firmware": session.fw.record()})
+                      {**sil_source(cfg), "firmware": session.fw.record()})
             sim_s += session.time_us * 1e-6
         print(f"== {axis}: identify", flush=True)
         try:

@@ -38,8 +38,8 @@ from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
 from .gains import firmware_gains
 
-__all__ = ["SweepPlan", "default_plan", "run_sweep", "measure", "ExcitationWatch", "Limits",
-           "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
+__all__ = ["SweepPlan", "default_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
+           "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
            "saturation_text"]
 
 MANIFEST = "manifest.json"
@@ -64,15 +64,11 @@ SATURATION = {"saturated": (("TORQUE",), "saturated the mixer"),
               "sensor_clipped": (("GYRO", "ACCEL"), "clipped the IMU")}
 
 
-def default_amplitude(axis: str, inject: str, freq_hz: float) -> float:
-    """Firmware-unit amplitude that keeps the response well above the gyro's quantisation
-    without saturating (docs/vehicle-model.md: the closed yaw loop needs more at low
-    frequency)."""
-    if inject == "mixer":
-        return 0.05 if axis != "yaw" else (1.0 if freq_hz < 0.4 else 0.3)
-    if inject == "rate":
-        return math.radians(10.0)
-    return math.radians(5.0)
+def default_amplitude(inject: str) -> float:
+    """The firmware-unit amplitude of an angle or rate sweep: a 5 deg angle or 10 deg/s rate
+    setpoint, responses in themselves (a mixer sweep's amplitudes are designed per
+    frequency, :mod:`.design`)."""
+    return math.radians(10.0) if inject == "rate" else math.radians(5.0)
 
 
 class SweepPlan:
@@ -132,7 +128,7 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
             design.swing_deg = swing_deg
         amps = [None] * len(freqs_hz)
     else:
-        amps = [default_amplitude(axis, inject, f) for f in freqs_hz]
+        amps = [default_amplitude(inject)] * len(freqs_hz)
     if cycles is not None:
         return SweepPlan(axis, inject, freqs_hz, amps, cycles, design=design)
     return SweepPlan(axis, inject, freqs_hz, amps, MEASURED_CYCLES, dwell=dwell or Dwell(),
@@ -148,6 +144,15 @@ def _write_manifest(out_dir, manifest) -> None:
         if existed:
             exc.also("its previous version is kept")
         raise
+
+
+def sil_source(cfg) -> dict:
+    """The manifest's ``source`` of a simulated sweep, from its SilConfig: what
+    :mod:`.truth` needs to rebuild the plant (docs/file-formats.md)."""
+    return {"kind": "sil", "plant": cfg.plant, "num": list(cfg.num), "den": list(cfg.den),
+            "params": os.path.abspath(cfg.params) if cfg.params else None,
+            "turbulence": cfg.turbulence, "seed": cfg.seed, "ideal_sensor": cfg.ideal_sensor,
+            "collective": cfg.collective}
 
 
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,

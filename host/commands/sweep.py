@@ -164,6 +164,7 @@ def _sweep_session(args, tlog):
     from ...sim.lockstep import FirmwareError
     from ...sim.sil import SilConfig
     from ..session import SilSession
+    from ..sweep import sil_source
 
     num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
     args.num, args.den = args.num or num, args.den or den
@@ -173,10 +174,7 @@ def _sweep_session(args, tlog):
                     plant=args.plant, rig=args.axis, params=args.params,
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
                     faults=faults(args), firmware=args.firmware)
-    source = {"kind": "sil", "plant": args.plant, "num": list(args.num), "den": list(args.den),
-              "params": os.path.abspath(args.params) if args.params else None,
-              "turbulence": args.turbulence, "seed": args.seed,
-              "ideal_sensor": args.ideal_sensor, "collective": args.collective}
+    source = sil_source(cfg)
     try:
         session = SilSession(cfg, tlog)
     except FirmwareError as exc:
