@@ -1,18 +1,22 @@
 """Closed-loop validation of an identified model (``heliquad validate``; docs/paper.md, step 4).
 
-The cascade of the paper, in continuous time as the paper's validation does: an inner PID
-rate loop ``C_r = Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))`` around the identified
-model ``G`` (rate in, rate out), and for roll and pitch an outer PD angle loop
-``C_a = Kc (1 + tau_D s / (tau_D/N s + 1))`` around ``T_r / s`` (angle is the integral of the
-rate). Yaw is rate-only. N is the firmware's derivative filter. The gains default to those
-the firmware flies (read from its bindings: the paper's). A model's delay enters as a
-3rd-order Pade approximant.
+The cascade of the paper as the firmware flies it (:mod:`.loops`): the firmware's discrete
+PID rate loop at its loop rate around the identified model ``G`` (rate in, rate out; the
+model's own sampled response, delay exact), and for roll and pitch the discrete PD angle
+loop around it (the angle is the integral of the rate). Yaw is rate-only. The gains default
+to those the firmware flies (read from its bindings: the paper's).
 
-Reported: gain and phase margins and crossovers of each loop, closed-loop stability (and,
-when unstable, how far above the identified band the unstable poles lie), the
-step response (rise time 10-90 %, overshoot, 2 % settling), sine tracking (0.5 Hz), and
-disturbance rejection under Dryden turbulence: the gust rate of the axis (sim/dryden.py)
-entering at the model's input, with the closed loop's rate and angle RMS against the gust's.
+Reported: for each loop (``rate``, and for roll and pitch ``angle`` and ``input``, the loop
+broken at the plant input with both closed) every crossover up to the Nyquist frequency,
+the smallest phase margin and the gain margin nearest 0 dB, each marked not validated when
+its crossover lies outside the band the model was identified over (the model says nothing
+there); closed-loop stability from the discrete closed loop's poles (and, when unstable,
+how far above the identified band they lie), the step response (rise time 10-90 %,
+overshoot, 2 % settling), sine tracking (0.5 Hz), and disturbance rejection under Dryden
+turbulence: the gust rate of the axis (sim/dryden.py) entering at the model's input, with
+the closed loop's rate and angle RMS against the gust's. With ``truth`` (the simulator's
+sampled responses of a simulated sweep), the same margins of the truth's loops beside
+them.
 
 Everything here is computed in SI units: angles in rad, rates and frequencies in rad/s,
 times in s, gain margins as ratios. Degrees, deg/s, dB and Hz are for people: they appear
@@ -25,37 +29,38 @@ from __future__ import annotations
 import math
 import os
 
-import control
 import numpy as np
 
+from . import loops as L
 from . import paper
 from ..sim import dialect as names
 from .files import write_json
 from .gains import DERIVATIVE_FILTER_N, Gains, load_gains
 
 # Gains and load_gains are host/gains.py's, here for the validation's callers.
-__all__ = ["Gains", "load_gains", "pid_tf", "build_loops", "validate_model", "validation_record",
-           "save_validation", "instability_text"]
+__all__ = ["Gains", "load_gains", "pid_tf", "validate_model", "validation_record",
+           "save_validation", "instability_text", "paper_band"]
 
-PADE_ORDER = 3
-DT_S = 0.005
+DT_S = L.LOOP_DT_S
 SINE_OMEGA_RAD_S = math.pi                      # 0.5 Hz
 STEP_ANGLE_RAD = math.radians(10.0)
 STEP_RATE_RAD_S = math.radians(30.0)
 DURATION_S = 30.0
 #: The sine's tracking error is measured over its last this many periods.
 SINE_MEASURED_PERIODS = 5
-#: Where the loop gains' frequency responses are evaluated (for the plot).
-LOOP_GAIN_OMEGA_RAD_S = np.logspace(-1, 3, 400)
+#: Where the loop gains' frequency responses are evaluated (for the plot): up to Nyquist.
+LOOP_GAIN_OMEGA_RAD_S = np.logspace(-1, math.log10(math.pi / DT_S * 0.999), 400)
 #: An instability this many times above the identified band's top is flagged as outside it.
 OUT_OF_BAND_FACTOR = 3.0
 
 
 def pid_tf(kc, tau_i, tau_d):
-    """The firmware's PID (firmware/core/pid.hpp) in continuous time, on the error as the
-    paper writes it: ``Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))``; no integral for
-    tau_I <= 0, no derivative for tau_D <= 0. (The firmware differentiates the measurement
-    only, which spares a setpoint step the derivative kick and leaves the loop the same.)"""
+    """The firmware's PID in continuous time, on the error as the paper writes it:
+    ``Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))``; no integral for tau_I <= 0, no
+    derivative for tau_D <= 0. (What the firmware flies is its Tustin form at the loop
+    rate, :mod:`.loops`; this is the continuous form it approximates.)"""
+    import control
+
     s = control.tf("s")
     c = kc * (1 + (1 / (tau_i * s) if tau_i > 0 else 0))
     if tau_d > 0:
@@ -63,46 +68,49 @@ def pid_tf(kc, tau_i, tau_d):
     return c
 
 
-def build_loops(num, den, delay_s, axis, gains: Gains):
-    """Transfer functions: plant G, inner loop L_r and T_r, outer loop L_a and T_a (or None)."""
-    G = control.tf(list(num), list(den))
-    if delay_s > 0:
-        G = G * control.tf(*control.pade(delay_s, PADE_ORDER))
-    C_r = pid_tf(*gains.rate)
-    L_r = C_r * G
-    T_r = control.feedback(L_r, 1)
-    if axis == "yaw" or gains.angle is None:
-        return {"G": G, "C_r": C_r, "L_r": L_r, "T_r": T_r, "L_a": None, "T_a": None, "C_a": None}
-    C_a = pid_tf(gains.angle[0], 0.0, gains.angle[1])
-    L_a = C_a * T_r * control.tf([1], [1, 0])
-    T_a = control.feedback(L_a, 1)
-    return {"G": G, "C_r": C_r, "L_r": L_r, "T_r": T_r, "L_a": L_a, "T_a": T_a, "C_a": C_a}
+def paper_band(axis) -> tuple:
+    """The paper's identification band of ``axis`` (its Table 1), rad/s: the band assumed
+    for a model whose file does not give its own."""
+    lo, hi = paper.BANDS_HZ[axis]
+    return (2 * math.pi * lo, 2 * math.pi * hi)
 
 
-def _margins(L, T):
-    """Margins and crossovers of the loop gain ``L``, and whether its closed loop ``T`` is
-    stable; None where a margin or crossover does not exist."""
-    # For some loops (a zero at the origin) python-control meets NaN responses, which its
-    # comparisons drop; numpy need not warn about them
-    with np.errstate(invalid="ignore"):
-        gm, pm_deg, _, wcg, wcp, _ = control.stability_margins(L, returnall=False)
-    poles = control.poles(T)
-    unstable = poles[np.real(poles) >= 0]
-    finite = lambda x: float(x) if np.isfinite(x) else None      # noqa: E731
-    return {"gain_margin": finite(gm) if gm > 0 else None,
-            "phase_margin_rad": None if not np.isfinite(pm_deg) else math.radians(pm_deg),
-            "gain_crossover_rad_s": finite(wcp),
-            "phase_crossover_rad_s": finite(wcg),
-            "closed_loop_stable": bool(unstable.size == 0),
-            "unstable_pole_rad_s": float(np.max(np.abs(unstable))) if unstable.size else None}
+def _unstable_pole(poles):
+    """The fastest closed-loop pole on or outside the unit circle, as an s-plane magnitude
+    (rad/s), or None."""
+    out = poles[np.abs(poles) >= 1 - 1e-9]
+    if not out.size:
+        return None
+    return float(np.max(np.abs(np.log(out.astype(complex))))) / DT_S
 
 
-def _instability(report, axis):
-    """Where the cascade goes unstable, against the band the model was identified over
-    (the paper's Table 1): far above it, the model is extrapolated and says little."""
+def _loops_report(functions, band, closed):
+    """Each loop's margins (:func:`heliquad.host.loops.margins`) and its closed loop's
+    stability from the discrete poles ``closed`` (``{"rate": poles, "cascade": poles}``)."""
+    out = {}
+    for name, f in functions.items():
+        poles = closed["rate" if name == "rate" else "cascade"]
+        fast = _unstable_pole(poles)
+        out[name] = {**L.margins(f, band, DT_S), "closed_loop_stable": fast is None,
+                     "unstable_pole_rad_s": fast}
+    return out
+
+
+def truth_margins(truth, axis, gains, band):
+    """The margins of the truth's loops (:func:`heliquad.host.loops.margins`): ``truth`` is
+    ``(h, h_a)``, the simulator's sampled rate and angle responses (functions of rad/s;
+    ``h_a`` None when not known)."""
+    h, h_a = truth
+    functions = L.loop_functions(h, None if axis == "yaw" else h_a, gains, DT_S)
+    return {name: L.margins(f, band, DT_S) for name, f in functions.items()}
+
+
+def _instability(report, band):
+    """Where the cascade goes unstable, against the band the model was identified over:
+    far above it, the model is extrapolated and says little."""
     freq = max(lp["unstable_pole_rad_s"] for lp in report["loops"].values()
                if lp["unstable_pole_rad_s"] is not None)
-    top = 2 * math.pi * paper.BANDS_HZ[axis][1]
+    top = band[1]
     return {"pole_rad_s": freq, "band_top_rad_s": top,
             "outside_band": bool(freq > OUT_OF_BAND_FACTOR * top)}
 
@@ -119,14 +127,19 @@ def instability_text(report) -> str:
     return f"the cascade is unstable with these gains: {where}, inside what was identified"
 
 
-def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0):
+def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0,
+                   band_rad_s=None, truth=None):
     """Margins, step, sine tracking and turbulence rejection, in SI units.
 
-    Returns ``(report, traces)``. ``report``: ``axis``, the model (``num``, ``den``,
-    ``delay_s``), ``gains``; ``loops``: per loop (``rate``, and ``angle`` for roll and
-    pitch) ``gain_margin`` (a ratio), ``phase_margin_rad``, ``gain_crossover_rad_s``,
-    ``phase_crossover_rad_s``, ``closed_loop_stable``, ``unstable_pole_rad_s``;
-    ``stable``; when unstable ``instability`` (:func:`instability_text`), else ``step``
+    ``band_rad_s``: the band the model was identified over (default the paper's for the
+    axis). ``truth``: ``(h, h_a)``, the simulator's sampled responses, for
+    :func:`truth_margins`. Returns ``(report, traces)``. ``report``: ``axis``, the model
+    (``num``, ``den``, ``delay_s``), ``gains``, ``band_rad_s``; ``loops``: per loop
+    (``rate``; ``angle`` and ``input`` for roll and pitch) the margins of
+    :func:`heliquad.host.loops.margins` (``gain_margin`` a ratio, ``phase_margin_rad``,
+    their crossovers, every crossover, ``not_validated``), ``closed_loop_stable``,
+    ``unstable_pole_rad_s``; ``stable``; with ``truth``, ``truth`` (per loop, the same
+    margins); when unstable ``instability`` (:func:`instability_text`), else ``step``
     (``quantity`` angle or rate, ``size`` in rad or rad/s, ``rise_time_s``,
     ``overshoot_pct``, ``settling_time_s``), ``sine`` (``omega_rad_s``, ``amplitude``,
     ``tracking_rms`` in the step's unit, ``tracking_rms_pct``) and, with ``turbulence``,
@@ -136,27 +149,33 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
     (reference, response) and ``turbulence`` (``gust``, ``rate``, ``angle``) in rad and
     rad/s. :func:`validation_record` turns the report into validation.json.
     """
-    loops = build_loops(num, den, delay_s, axis, gains)
-    outer = loops["T_a"] is not None
+    band = tuple(band_rad_s) if band_rad_s is not None else paper_band(axis)
+    h, h_a = L.model_responses(num, den, delay_s)
+    outer = axis != "yaw" and gains.angle is not None
+    functions = L.loop_functions(h, h_a if outer else None, gains, DT_S)
+    cascade = L.discrete_cascade(num, den, delay_s, gains, DT_S, outer=outer)
+    closed = {"rate": L.discrete_cascade(num, den, delay_s, gains, DT_S, outer=False).poles(),
+              "cascade": cascade.poles()}
     report = {"axis": axis, "num": list(map(float, num)), "den": list(map(float, den)),
-              "delay_s": float(delay_s), "gains": {"rate": list(gains.rate),
-                                                   "angle": None if gains.angle is None else list(gains.angle)},
-              "loops": {"rate": _margins(loops["L_r"], loops["T_r"])}}
+              "delay_s": float(delay_s), "band_rad_s": [float(b) for b in band],
+              "gains": {"rate": list(gains.rate),
+                        "angle": None if gains.angle is None else list(gains.angle)},
+              "loops": _loops_report(functions, band, closed)}
+    if truth is not None:
+        report["truth"] = truth_margins(truth, axis, gains, band)
     w = LOOP_GAIN_OMEGA_RAD_S
     traces = {"t": np.arange(0.0, DURATION_S, DT_S),
-              "loop_gains": {"omega_rad_s": w, "rate": loops["L_r"](1j * w)}}
-    if outer:
-        report["loops"]["angle"] = _margins(loops["L_a"], loops["T_a"])
-        traces["loop_gains"]["angle"] = loops["L_a"](1j * w)
+              "loop_gains": {"omega_rad_s": w, **{k: f(w) for k, f in functions.items()}}}
     report["stable"] = all(lp["closed_loop_stable"] for lp in report["loops"].values())
     if not report["stable"]:
-        report["instability"] = _instability(report, axis)
+        report["instability"] = _instability(report, band)
         return report, traces
-    T, t = (loops["T_a"] if outer else loops["T_r"]), traces["t"]
-    report["step"], traces["step"] = _step(T, t, outer)
-    report["sine"], traces["sine"] = _sine(T, t, report["step"]["size"])
+    t = traces["t"]
+    report["step"], traces["step"] = _step(cascade, t, outer)
+    report["sine"], traces["sine"] = _sine(cascade, t, report["step"]["size"], outer)
     if turbulence:
-        report["turbulence"], traces["turbulence"] = _turbulence(loops, axis, outer, t, turbulence, seed)
+        report["turbulence"], traces["turbulence"] = _turbulence(cascade, axis, outer, t,
+                                                                 turbulence, seed)
     return report, traces
 
 
@@ -164,34 +183,37 @@ def _rms(x):
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def _step(T, t, outer):
+def _respond(cascade, t, ref=None, d=None):
+    """The discrete closed loop's outputs (rate, and angle with the outer loop) for a
+    reference and a disturbance sequence on the loop's time grid ``t``."""
+    import control
+
+    zero = np.zeros(t.size)
+    u = np.vstack([zero if ref is None else ref, zero if d is None else d])
+    return np.atleast_2d(control.forced_response(cascade, t, u).outputs)
+
+
+def _step(cascade, t, outer):
     """The closed loop's response to a step of the reference: 10 deg of angle with the
     outer loop, else 30 deg/s of rate (in rad, rad/s)."""
+    import control
+
     size = STEP_ANGLE_RAD if outer else STEP_RATE_RAD_S
     ref = np.full(t.size, size)
-    out = control.forced_response(T, t, ref).outputs
-    info = _step_info(T, t, out)
+    out = _respond(cascade, t, ref=ref)[1 if outer else 0]
+    with np.errstate(divide="ignore", invalid="ignore"):    # final value 0: NaN times
+        info = control.step_info(out, T=t)
     return ({"quantity": "angle" if outer else "rate", "size": size,
              "rise_time_s": float(info["RiseTime"]), "overshoot_pct": float(info["Overshoot"]),
              "settling_time_s": float(info["SettlingTime"])},
             (ref, out))
 
 
-def _step_info(T, t, step):
-    """python-control's step figures of ``T``; from the simulated ``step`` when its own time
-    grid fails (poles decades apart, or a very slow loop)."""
-    with np.errstate(divide="ignore", invalid="ignore"):    # final value 0: NaN times
-        try:
-            return control.step_info(T)
-        except (IndexError, ValueError, np.linalg.LinAlgError):
-            return control.step_info(step, T=t)
-
-
-def _sine(T, t, amplitude):
+def _sine(cascade, t, amplitude, outer):
     """Tracking of a sine reference of ``amplitude`` at SINE_OMEGA_RAD_S, measured over its
     last periods (the start-up transient gone)."""
     ref = amplitude * np.sin(SINE_OMEGA_RAD_S * t)
-    out = control.forced_response(T, t, ref).outputs
+    out = _respond(cascade, t, ref=ref)[1 if outer else 0]
     last = t >= t[-1] - SINE_MEASURED_PERIODS * 2 * math.pi / SINE_OMEGA_RAD_S
     rms = _rms((out - ref)[last])
     return ({"omega_rad_s": SINE_OMEGA_RAD_S, "amplitude": amplitude, "tracking_rms": rms,
@@ -199,7 +221,7 @@ def _sine(T, t, amplitude):
             (ref, out))
 
 
-def _turbulence(loops, axis, outer, t, level, seed):
+def _turbulence(cascade, axis, outer, t, level, seed):
     """The axis's Dryden gust rate (rad/s) entering at the model's input, references zero.
 
     The identified models map a rate (command) to a rate, so the gust rate enters where the
@@ -212,16 +234,13 @@ def _turbulence(loops, axis, outer, t, level, seed):
     tp = load_params().turbulence
     d = Dryden(level, tp.altitude_m, tp.span_m, DT_S, seed)
     gust = d.block(t.size)[:, 3 + names.AXES[axis]]             # gust rates p, q, r, rad/s
-    s = control.tf("s")
-    G, C_r = loops["G"], loops["C_r"]
-    outer_gain = (1 + loops["C_a"] / s) if outer else 1
-    to_rate = control.feedback(G, C_r * outer_gain)          # rate / d, d at the plant input
-    rate = control.forced_response(to_rate, t, gust).outputs
+    outputs = _respond(cascade, t, d=gust)
+    rate = outputs[0]
     out = {"level": level, "seed": seed, "gust_rate_rms_rad_s": float(np.std(gust)),
            "rate_rms_rad_s": _rms(rate)}
     trace = {"gust": gust, "rate": rate}
     if outer:
-        angle = control.forced_response(to_rate / s, t, gust).outputs
+        angle = outputs[1]
         out["angle_rms_rad"] = _rms(angle)
         out["angle_max_rad"] = float(np.max(np.abs(angle)))
         trace["angle"] = angle
@@ -232,8 +251,10 @@ def validation_record(report) -> dict:
     """validation.json's content (docs/file-formats.md): the report of :func:`validate_model`
     in the units people read: gain margins in dB, phase margins, angles and rates in deg
     and deg/s, the sine's frequency in Hz; crossovers and poles stay in rad/s."""
-    doc = {key: report[key] for key in ("axis", "num", "den", "delay_s", "gains")}
+    doc = {key: report[key] for key in ("axis", "num", "den", "delay_s", "gains", "band_rad_s")}
     doc["loops"] = {name: _loop_record(lp) for name, lp in report["loops"].items()}
+    if "truth" in report:
+        doc["truth_loops"] = {name: _margins_record(lp) for name, lp in report["truth"].items()}
     doc["stable"] = report["stable"]
     if "instability" in report:
         doc["instability"] = dict(report["instability"])
@@ -257,12 +278,24 @@ def validation_record(report) -> dict:
     return doc
 
 
-def _loop_record(lp) -> dict:
+def _margins_record(lp) -> dict:
+    """A loop's margins in dB and degrees, every crossover with them."""
     gm, pm = lp["gain_margin"], lp["phase_margin_rad"]
     return {"gain_margin_db": None if gm is None else 20 * math.log10(gm),
             "phase_margin_deg": None if pm is None else math.degrees(pm),
-            **{k: lp[k] for k in ("gain_crossover_rad_s", "phase_crossover_rad_s",
-                                  "closed_loop_stable", "unstable_pole_rad_s")}}
+            **{k: lp[k] for k in ("gain_crossover_rad_s", "phase_crossover_rad_s")},
+            "gain_crossovers": [{"omega_rad_s": c["omega_rad_s"],
+                                 "phase_margin_deg": math.degrees(c["phase_margin_rad"]),
+                                 "in_band": c["in_band"]} for c in lp["gain_crossovers"]],
+            "phase_crossovers": [{"omega_rad_s": c["omega_rad_s"],
+                                  "gain_margin_db": 20 * math.log10(c["gain_margin"]),
+                                  "in_band": c["in_band"]} for c in lp["phase_crossovers"]],
+            "not_validated": list(lp["not_validated"])}
+
+
+def _loop_record(lp) -> dict:
+    return {**_margins_record(lp), "closed_loop_stable": lp["closed_loop_stable"],
+            "unstable_pole_rad_s": lp["unstable_pole_rad_s"]}
 
 
 def save_validation(folder, report, traces) -> list:

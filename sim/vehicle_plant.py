@@ -21,7 +21,7 @@ from .imu_model import ImuModel
 from .params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle
 
-__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z", "pid_z_coeffs"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
@@ -155,6 +155,12 @@ class VehiclePlant:
         C[1, 6] = 1.0
         return A, b, C
 
+    def sampled(self, omega_rad_s):
+        """Logged torque command -> logged rate and logged angle at ``omega_rad_s``:
+        ``(h_rate, h_angle)``, arrays (ZOH-sampled at the loop period, with the latency)."""
+        h_rate, h_angle = self._sampled(np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s))
+        return h_rate, h_angle
+
     def _sampled(self, z):
         """Logged torque command -> logged [rate, angle] at the points ``z`` (ZOH, latency)."""
         A, b, C = self.linearise()
@@ -196,17 +202,28 @@ class VehiclePlant:
         return out if np.ndim(omega_rad_s) else out[0]
 
 
-def pid_z(gains, dt_s, z):
-    """The firmware's Pid (firmware/core/pid.cpp) as two z-domain transfer functions:
-    ``C_PI`` on the error (P + Tustin integral) and ``D_m`` on the measurement (Tustin,
-    filtered derivative): output = C_PI (r - y) + D_m y."""
-    kc, ti, td, n = gains.kc, gains.tau_i_s, gains.tau_d_s, gains.derivative_filter_n
-    zi = 1.0 / z
-    c_pi = kc + (kc * dt_s / (2 * ti) * (1 + zi) / (1 - zi) if ti > 0 else 0.0)
-    d_m = 0.0
-    if td > 0:
-        tf = td / n
+def pid_z_coeffs(kc, tau_i_s, tau_d_s, derivative_filter_n, dt_s):
+    """The firmware's Pid (firmware/core/pid.cpp) as two z-domain transfer functions, each
+    ``(num, den)`` in descending powers of ``z``: ``C_PI`` on the error (P and the Tustin
+    integral) and ``D_m`` on the measurement (the Tustin filtered derivative), so that
+    output = C_PI (r - y) + D_m y. No integral for tau_I <= 0, no derivative for tau_D <= 0."""
+    if tau_i_s > 0:
+        ki = kc * dt_s / (2 * tau_i_s)           # kc + ki (z + 1) / (z - 1)
+        c_pi = ([kc + ki, ki - kc], [1.0, -1.0])
+    else:
+        c_pi = ([kc], [1.0])
+    d_m = ([0.0], [1.0])
+    if tau_d_s > 0:
+        tf = tau_d_s / derivative_filter_n
         a = (2 * tf - dt_s) / (2 * tf + dt_s)
-        b = 2 * kc * td / (2 * tf + dt_s)
-        d_m = -b * (1 - zi) / (1 - a * zi)
+        b = 2 * kc * tau_d_s / (2 * tf + dt_s)
+        d_m = ([-b, b], [1.0, -a])                # -b (z - 1) / (z - a)
     return c_pi, d_m
+
+
+def pid_z(gains, dt_s, z):
+    """:func:`pid_z_coeffs` of the firmware's ``gains`` evaluated at the points ``z``:
+    ``(C_PI(z), D_m(z))``."""
+    (pn, pd), (dn, dd) = pid_z_coeffs(gains.kc, gains.tau_i_s, gains.tau_d_s,
+                                      gains.derivative_filter_n, dt_s)
+    return np.polyval(pn, z) / np.polyval(pd, z), np.polyval(dn, z) / np.polyval(dd, z)

@@ -21,23 +21,29 @@ def test_papers_models_and_gains_give_stable_loops_with_margins(axis):
     assert report["stable"]
     for loop in report["loops"].values():
         assert loop["closed_loop_stable"] and loop["phase_margin_rad"] > math.radians(30)
-    assert set(report["loops"]) == ({"rate"} if axis == "yaw" else {"rate", "angle"})
+    assert set(report["loops"]) == ({"rate"} if axis == "yaw" else {"rate", "angle", "input"})
     assert report["turbulence"]["rate_rms_rad_s"] < report["turbulence"]["gust_rate_rms_rad_s"]
 
 
 def test_rate_loop_phase_margin_matches_a_hand_computation():
-    # L(jw) = Kc (1 + 1/(tau_I jw) + tau_D jw / (tau_D/10 jw + 1)) * 28.19 / ((jw)^2 + 5.13 jw + 22.93)
+    # The firmware's PID at 200 Hz, written out from its recurrences: P, the trapezoidal
+    # integral Kc T/(2 tau_I) (z + 1)/(z - 1) on the error, and the filtered derivative on the
+    # measurement -b (z - 1)/(z - a) (a = (2 tau_f - T)/(2 tau_f + T), b = 2 Kc tau_D/(2 tau_f
+    # + T), tau_f = tau_D/10). Broken at the plant input: L = (C_PI - D_m) G(jw).
     kc, ti, td = paper.RATE_GAINS["roll"]
+    T, tf = 0.005, td / 10
 
     def L(w):
-        s = 1j * w
-        return kc * (1 + 1 / (ti * s) + td * s / (td / 10 * s + 1)) * 28.19 / (s * s + 5.13 * s + 22.93)
+        z, s = np.exp(1j * w * T), 1j * w
+        c_pi = kc + kc * T / (2 * ti) * (z + 1) / (z - 1)
+        d_m = -2 * kc * td / (2 * tf + T) * (z - 1) / (z - (2 * tf - T) / (2 * tf + T))
+        return (c_pi - d_m) * 28.19 / (s * s + 5.13 * s + 22.93)
 
     wc = scipy.optimize.brentq(lambda w: abs(L(w)) - 1, 1.0, 100.0)
     pm = math.pi + np.angle(L(wc))
     report, _ = validate_model([28.19], [1, 5.13, 22.93], 0.0, "roll", load_gains("roll"), None)
-    assert report["loops"]["rate"]["phase_margin_rad"] == pytest.approx(pm, abs=1e-3)
-    assert report["loops"]["rate"]["gain_crossover_rad_s"] == pytest.approx(wc, rel=1e-3)
+    assert report["loops"]["rate"]["phase_margin_rad"] == pytest.approx(pm, abs=1e-6)
+    assert report["loops"]["rate"]["gain_crossover_rad_s"] == pytest.approx(wc, rel=1e-6)
 
 
 def test_delay_costs_phase_margin():
@@ -81,12 +87,13 @@ def test_the_report_and_traces_are_in_si_units(roll_validation):
 def test_the_record_is_the_report_in_degrees_db_and_hz(roll_validation):
     report, _ = roll_validation
     doc = validation_record(report)
-    assert set(doc) == {"axis", "num", "den", "delay_s", "gains", "loops", "stable", "step",
-                        "sine", "turbulence"}
+    assert set(doc) == {"axis", "num", "den", "delay_s", "gains", "band_rad_s", "loops", "stable",
+                        "step", "sine", "turbulence"}
     for name, loop in report["loops"].items():
         rec = doc["loops"][name]
         assert set(rec) == {"gain_margin_db", "phase_margin_deg", "gain_crossover_rad_s",
-                            "phase_crossover_rad_s", "closed_loop_stable", "unstable_pole_rad_s"}
+                            "phase_crossover_rad_s", "closed_loop_stable", "unstable_pole_rad_s",
+                            "gain_crossovers", "phase_crossovers", "not_validated"}
         assert rec["phase_margin_deg"] == pytest.approx(math.degrees(loop["phase_margin_rad"]))
         assert rec["gain_crossover_rad_s"] == loop["gain_crossover_rad_s"]
     rate_gm = report["loops"]["rate"]["gain_margin"]

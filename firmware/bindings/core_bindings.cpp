@@ -11,6 +11,7 @@
 #include "core/attitude.hpp"
 #include "core/controllers.hpp"
 #include "core/excitation.hpp"
+#include "core/flight_controller.hpp"
 #include "core/loop_load.hpp"
 #include "core/mixer.hpp"
 #include "core/mpu6050.hpp"
@@ -226,6 +227,8 @@ void bind_supervisor(py::module_& m) {
 
 PYBIND11_MODULE(_firmware, m) {
     m.doc() = "heliquad firmware core (host build), for tests and the simulator";
+    // The control loop's rate the firmware runs at unless configured otherwise, Hz.
+    m.attr("LOOP_RATE_HZ") = FlightControllerConfig{}.loop_rate_hz;
 
     py::enum_<Axis>(m, "Axis").value("ROLL", Axis::Roll).value("PITCH", Axis::Pitch)
         .value("YAW", Axis::Yaw);
