@@ -403,7 +403,10 @@ def _models_schema():
                   "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(), "log": log,
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
-                  "estimate": S.Str(("excitation", "input")), "sil_truth": S.Obj()})
+                  "estimate": S.Str(("excitation", "input")), "sil_truth": S.Obj(),
+                  "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
+                                      ("high", S.Num(0, 1e7, lo_open=True))),
+                  "broken_loop": S.Obj()})
 
 
 def read_models_json(path) -> dict:
@@ -428,6 +431,9 @@ def read_models_json(path) -> dict:
             scaled = np.asarray(m["num"] + m["den"], float) / float(m["den"][0])
         if not np.all(np.isfinite(scaled)):
             S.fail(path, key, "has coefficients beyond double range once den is monic")
+    band = doc.get("band_rad_s")
+    if band is not None and not band[0] <= band[1]:
+        S.fail(path, "band_rad_s", "must be [low, high] with low <= high", band)
     rec = doc.get("recommended")
     if rec is not None and rec >= len(doc["models"]):
         S.fail(path, "recommended", f"is not an index into models (0..{len(doc['models']) - 1})",
@@ -462,10 +468,14 @@ def read_gains(path, axis: str) -> tuple:
 @functools.cache
 def _validation_schema():
     num = S.Null(S.Num())
-    loop = S.Obj(required={"closed_loop_stable": S.Bool()}, values=num)
+    loop = S.Obj(required={"closed_loop_stable": S.Bool()},
+                 optional={"gain_crossovers": S.List(S.Obj()), "phase_crossovers": S.List(S.Obj()),
+                           "not_validated": S.List(S.Str())}, values=num)
     return S.Obj(
         required={"stable": S.Bool(), "loops": S.Obj(values=loop)},
         optional={
+            "band_rad_s": S.Seq(("low", S.Num(0)), ("high", S.Num(0))),
+            "truth_loops": S.Obj(), "measured_loop": S.Obj(),
             "step": S.Obj(required={"size": S.Num(), "unit": S.Str()}, values=num),
             "sine": S.Obj(required={"freq_hz": S.Num()}, values=num),
             "turbulence": S.Obj(required={"level": S.Str(), "rate_rms_deg_s": S.Num(),
@@ -519,12 +529,15 @@ def model_to_dict(model) -> dict:
 
 
 def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None,
-                      extra=None):
+                      extra=None, band_rad_s=None):
     """Write MODELS.json; the file is replaced atomically so a failure never truncates it.
     ``extra``: more top-level entries (identify adds the log's condition and the frequencies
-    it could not use)."""
+    it could not use). ``band_rad_s``: the lowest and highest frequency of the points the
+    models were fitted to (validation trusts a model only there)."""
     doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
            "reason": reason, **(extra or {})}
+    if band_rad_s is not None:
+        doc["band_rad_s"] = [float(band_rad_s[0]), float(band_rad_s[1])]
     if axis is not None:
         doc["axis"] = axis
     if source is not None:

@@ -113,6 +113,11 @@ class FrequencyPoint:
     coherence_ry, coherence_ru : float
         With ``estimate="excitation"``: the coherence of ``r`` with ``y`` and with ``u``
         (``coherence`` is the smaller); NaN otherwise.
+    input_gain : complex
+        With ``estimate="excitation"``: ``U/R``, how the input followed the excitation (in a
+        loop broken where ``r`` is injected, ``L = R/U - 1``); NaN otherwise.
+    input_sigma : float
+        Standard deviation of ``input_gain`` (NaN without it).
     """
 
     omega_rad_s: float
@@ -127,6 +132,8 @@ class FrequencyPoint:
     estimate: str = "input"
     coherence_ry: float = math.nan
     coherence_ru: float = math.nan
+    input_gain: complex = complex("nan+nanj")
+    input_sigma: float = math.nan
 
     @property
     def magnitude(self) -> float:
@@ -554,4 +561,4 @@ def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
                           coherence=float(np.fmin(coh_ry, coh_ru)), period_samples=period,
                           n_periods=to_y.n_periods, method=to_y.method, harmonics=gains,
                           offset=to_y.offset, estimate="excitation", coherence_ry=coh_ry,
-                          coherence_ru=coh_ru)
+                          coherence_ru=coh_ru, input_gain=t_u, input_sigma=to_u.sigma)

@@ -30,6 +30,7 @@ class FitResult:
     recommended: int | None
     reason: str
     weights: str
+    band_rad_s: tuple = ()
 
 
 def point_weights(points: dict, mode: str = "auto"):
@@ -76,4 +77,5 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
         evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
         models.append(model)
     index, reason = recommend(models)
-    return FitResult(models=models, recommended=index, reason=reason, weights=mode)
+    return FitResult(models=models, recommended=index, reason=reason, weights=mode,
+                     band_rad_s=(float(np.min(points["omega"])), float(np.max(points["omega"]))))

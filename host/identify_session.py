@@ -116,12 +116,15 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     result = fit_orders(table, orders, delay=delay)
     extra = {"log": damage.record(), "skipped_frequencies": skipped,
              "saturated_frequencies": saturated, "estimate": estimate}
+    loop = _broken_loop(manifest, points, estimate, progress)
+    if loop:
+        extra["broken_loop"] = loop
     truth = _truth(dir_path, manifest, points, result, progress)
     if truth:
         extra["sil_truth"] = truth
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
-                      extra=extra)
+                      extra=extra, band_rad_s=result.band_rad_s)
     write_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
                models=result.models, recommended=result.recommended,
                title=f"{axis}, {manifest['inject']} injection: points and models")
@@ -152,6 +155,39 @@ def _truth(dir_path, manifest, points, result, progress) -> dict | None:
         said += (f"; the recommended model within {record['model_worst_db']:.2f} dB and "
                  f"{record['model_worst_deg']:.1f} deg across the band")
     progress(said)
+    return record
+
+
+def _broken_loop(manifest, points, estimate, progress) -> dict | None:
+    """The loop broken where the excitation enters, measured from the points' ``U/R``
+    (``L = R/U - 1``), its margins where the points reach its crossovers; said, and
+    returned for models.json (None when no loop closes there or the points were not
+    estimated against the excitation)."""
+    from .loops import broken_loop, measured_loop_name
+    from .validate import margins_record
+
+    name = measured_loop_name(manifest["inject"], manifest["axis"])
+    pts = sorted(points, key=lambda p: p.omega_rad_s)
+    t_u = np.array([p.input_gain for p in pts])
+    if estimate != "excitation" or name is None or len(pts) < 2 or \
+            not np.all(np.isfinite(t_u)) or np.any(t_u == 0):
+        return None
+    m = broken_loop([p.omega_rad_s for p in pts], t_u)
+    record = {"loop": name, "injection": manifest["inject"], **margins_record(m),
+              "unmeasured": m["unmeasured"],
+              "points": [{"freq_hz": p.freq_hz, "magnitude_db": float(20 * np.log10(abs(v))),
+                          "phase_deg": float(np.degrees(np.angle(v)))}
+                         for p, v in zip(pts, m["L"])]}
+    del record["not_validated"]
+    said = []
+    if record["gain_margin_db"] is not None:
+        said.append(f"gain margin {record['gain_margin_db']:.1f} dB at "
+                    f"{record['phase_crossover_rad_s']:.3g} rad/s")
+    if record["phase_margin_deg"] is not None:
+        said.append(f"phase margin {record['phase_margin_deg']:.1f} deg at "
+                    f"{record['gain_crossover_rad_s']:.3g} rad/s")
+    said += [f"no {why}" for why in record["unmeasured"]]
+    progress(f"the {name} loop broken at the excitation, measured: {'; '.join(said)}")
     return record
 
 

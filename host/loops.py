@@ -127,7 +127,7 @@ def _roots(f, grid, values) -> list:
 
 
 def _in_band(omega, band) -> bool:
-    return band[0] * (1 - BAND_SLACK) <= omega <= band[1] * (1 + BAND_SLACK)
+    return bool(band[0] * (1 - BAND_SLACK) <= omega <= band[1] * (1 + BAND_SLACK))
 
 
 def margins(L, band_rad_s, dt_s=LOOP_DT_S) -> dict:
@@ -245,3 +245,51 @@ def discrete_cascade(num, den, delay_s, gains, dt_s=LOOP_DT_S, outer=True):
         wiring += [{"rate": 1.0}, {"ref": 1.0, "angle": -1.0}, {"angle": 1.0}]
         outputs.append("angle")
     return _blocks_closed(blocks, wiring, ["ref", "d"], outputs, dt_s)
+
+
+def measured_loop_name(inject: str, axis: str):
+    """The loop a broken-loop measurement sees, ``L = -(u - r) / u``, by where ``r`` is
+    injected: at the plant input (mixer) the whole loop there (``input``; yaw's ``rate``);
+    at the rate setpoint (rate) the angle loop; None where no loop closes around the
+    injection (angle injection, or rate injection on yaw)."""
+    if inject == "mixer":
+        return "rate" if axis == "yaw" else "input"
+    if inject == "rate" and axis != "yaw":
+        return "angle"
+    return None
+
+
+def interpolated(omega, L):
+    """The loop gain between measured points ``L`` at ``omega`` (increasing): log magnitude
+    and unwrapped phase linear in log frequency; NaN outside the points."""
+    lw = np.log(np.asarray(omega, dtype=float))
+    lm, ph = np.log(np.abs(L)), np.unwrap(np.angle(L))
+
+    def at(w):
+        x = np.log(np.atleast_1d(np.asarray(w, dtype=float)))
+        out = np.exp(np.interp(x, lw, lm) + 1j * np.interp(x, lw, ph))
+        out[(x < lw[0] - 1e-12) | (x > lw[-1] + 1e-12)] = complex("nan+nanj")
+        return out
+
+    return at
+
+
+def broken_loop(omega, input_gain, dt_s=LOOP_DT_S) -> dict:
+    """Margins of the loop measured through the excitation: ``L = R/U - 1`` at each point
+    (``input_gain`` = U/R), between the points (:func:`interpolated`). A margin whose
+    crossover the points do not reach is left out, with ``unmeasured`` saying so."""
+    omega = np.asarray(omega, dtype=float)
+    L = 1.0 / np.asarray(input_gain, dtype=complex) - 1.0
+    out = margins(interpolated(omega, L), (omega[0], omega[-1]), dt_s)
+    out["not_validated"] = []
+    lo, hi = omega[0], omega[-1]
+    db = 20 * np.log10(np.abs(L))
+    span = f"between {lo:.3g} and {hi:.3g} rad/s"
+    out["unmeasured"] = []
+    if not out["gain_crossovers"]:
+        out["unmeasured"].append(f"phase margin: |L| does not cross 0 dB {span} (from "
+                                 f"{db[0]:.1f} to {db[-1]:.1f} dB)")
+    if not out["phase_crossovers"]:
+        out["unmeasured"].append(f"gain margin: the phase of L does not cross -180 deg {span}")
+    out["omega_rad_s"], out["L"] = omega, L
+    return out

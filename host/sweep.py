@@ -212,21 +212,24 @@ def _measure_designed(session, plan, f, amp, last, limits, manifest, progress):
     """One frequency of a sweep, its amplitude designed when ``amp`` is None: (its manifest
     entry, (amplitude, rate per unit) for the next). A designed amplitude found less than
     half of what the swing target allows is finished after the least cycles (its entry
-    kept as superseded) and the frequency is measured again with the better one."""
+    kept as superseded) and the frequency is measured again with the better one; so is one
+    whose input, amplified by the loop near its crossover, swings past the linear range."""
     redesign = None
     if amp is None:
         amp = plan.design.first() if last is None else plan.design.next(f, *last)
-        redesign = lambda rpu: plan.design.next(f, amp, rpu)   # noqa: E731
+        redesign = lambda rpu, ipu: plan.design.next(f, amp, rpu, ipu)   # noqa: E731
     watch = measure(session, plan, f, amp, limits, progress, redesign=redesign)
     if watch.again is not None and watch.entry["status"] == "ok":
-        watch.entry["status"] = (f"superseded: amplitude {amp:.3g} swung the rig far less "
-                                 f"than the target; measured again at {watch.again:.3g}")
+        why = ("swung the rig far less than the target" if watch.again > amp else
+               "swung the axis's command past the linear range")
+        watch.entry["status"] = (f"superseded: amplitude {amp:.3g} {why}; measured again at "
+                                 f"{watch.again:.3g}")
         manifest["frequencies"].append(watch.entry)
-        progress(f"  {watch.entry.get('freq_hz', f):.4g} Hz: amplitude {amp:.3g} is small for "
-                 f"the swing target; measuring again at {watch.again:.3g}")
+        progress(f"  {watch.entry.get('freq_hz', f):.4g} Hz: amplitude {amp:.3g} {why}; "
+                 f"measuring again at {watch.again:.3g}")
         amp = watch.again
         watch = measure(session, plan, f, amp, limits, progress)
-    return watch.entry, (amp, watch.rate_per_unit())
+    return watch.entry, (amp, watch.rate_per_unit(), watch.rate_per_unit(of="input"))
 
 
 def _stop_excitation(session) -> None:
@@ -395,24 +398,32 @@ class ExcitationWatch:
         fs = e["freq_hz"] * period
         relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"])
         used = cycles - 1                       # the first measured cycle is discarded
+        if cycles == dwell.min_cycles - 1 and self.redesign is not None:
+            better = self.redesign(self.rate_per_unit(require_end=False),
+                                   self.rate_per_unit(require_end=False, of="input"))
+            if better is not None and better <= 0.75 * e["amplitude"]:
+                self.finish, self.again = True, better      # past the linear range: too late
+                return                                      # for any precision to help
+            if better is not None and better >= 2 * e["amplitude"] and not (
+                    used >= 1 and relative * math.sqrt(used / (used + 1)) <= dwell.target_sigma):
+                self.finish, self.again = True, better
+                return
         if used >= 1 and relative * math.sqrt(used / (used + 1)) <= dwell.target_sigma:
             self.finish = True
-        elif cycles == dwell.min_cycles - 1 and self.redesign is not None:
-            better = self.redesign(self.rate_per_unit(require_end=False))
-            if better is not None and better >= 2 * e["amplitude"]:
-                self.finish, self.again = True, better
 
-    def rate_per_unit(self, require_end: bool = True) -> float:
-        """The measured rate per unit of excitation at the fundamental (NaN if unknown: an
-        excitation that did not end well, or an output that is not the rate)."""
+    def rate_per_unit(self, require_end: bool = True, of: str = "rate") -> float:
+        """The measured rate (``of="input"``: input) per unit of excitation at the
+        fundamental (NaN if unknown: an excitation that did not end well, or an output
+        that is not the rate)."""
         from .design import response_per_unit
 
         e = self.entry
         if not e.get("period_samples") or self.y_name != "rate" or (
                 require_end and e["status"] != "ok"):
             return math.nan
-        _, r, _, y = self.record
-        return response_per_unit(r, y, e["freq_hz"] * e["period_samples"], e["freq_hz"])
+        _, r, u, y = self.record
+        return response_per_unit(r, u if of == "input" else y, e["freq_hz"] * e["period_samples"],
+                                 e["freq_hz"])
 
     def conclude(self) -> None:
         """A sequential dwell's record in the entry: the cycles measured, why the dwell

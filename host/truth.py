@@ -20,7 +20,7 @@ import numpy as np
 from . import schema as S
 from .errors import InputError
 
-__all__ = ["sil_truth", "truth_record"]
+__all__ = ["sil_truth", "sil_truth_loops", "truth_record"]
 
 #: Model errors are measured on this many log-spaced frequencies across the points' band.
 BAND_GRID = 100
@@ -36,9 +36,8 @@ def _source_schema():
                            "collective": S.Num(0, 1)})
 
 
-def sil_truth(manifest, dir_path: str):
-    """``(truth(omega) -> complex array, None)`` for a simulated sweep, or ``(None, why
-    not)`` (a board's sweep; a plant that cannot be rebuilt)."""
+def _sweep_plant(manifest, dir_path):
+    """``(plant, None)`` rebuilt from a simulated sweep's manifest, or ``(None, why not)``."""
     source = manifest.get("source") or {}
     if source.get("kind") != "sil":
         return None, "not a simulated sweep"
@@ -48,9 +47,32 @@ def sil_truth(manifest, dir_path: str):
               if "period_samples" in e and "freq_hz" in e}
         if len(fs) != 1:
             return None, "the manifest does not give one loop rate"
-        plant = _plant(manifest, source, dir_path, 1.0 / fs.pop())
+        return _plant(manifest, source, dir_path, 1.0 / fs.pop()), None
     except InputError as exc:
         return None, str(exc)
+
+
+def sil_truth_loops(manifest, dir_path: str):
+    """``((h, h_a), None)``: a simulated sweep's plant as the loops see it, the sampled
+    responses from the torque command to the logged rate and to the logged angle (functions
+    of rad/s; ``h_a`` None for a transfer-function plant, which has no angle of its own);
+    or ``(None, why not)``."""
+    plant, why = _sweep_plant(manifest, dir_path)
+    if plant is None:
+        return None, why
+    if manifest["source"]["plant"] == "tf":
+        return ((lambda omega: np.asarray(plant.truth(np.asarray(omega, float), "mixer"))),
+                None), None
+    return ((lambda omega: plant.sampled(omega)[0]), (lambda omega: plant.sampled(omega)[1])), None
+
+
+def sil_truth(manifest, dir_path: str):
+    """``(truth(omega) -> complex array, None)`` for a simulated sweep, or ``(None, why
+    not)`` (a board's sweep; a plant that cannot be rebuilt)."""
+    plant, why = _sweep_plant(manifest, dir_path)
+    if plant is None:
+        return None, why
+    source = manifest["source"]
     inject = manifest["inject"]
     if source["plant"] == "tf" and inject != "mixer":
         return None, "a transfer-function plant's truth is for mixer injection only"

@@ -38,7 +38,7 @@ from .files import write_json
 from .gains import DERIVATIVE_FILTER_N, Gains, load_gains
 
 # Gains and load_gains are host/gains.py's, here for the validation's callers.
-__all__ = ["Gains", "load_gains", "pid_tf", "validate_model", "validation_record",
+__all__ = ["Gains", "load_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
            "save_validation", "instability_text", "paper_band"]
 
 DT_S = L.LOOP_DT_S
@@ -128,12 +128,14 @@ def instability_text(report) -> str:
 
 
 def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0,
-                   band_rad_s=None, truth=None):
+                   band_rad_s=None, truth=None, measured=None):
     """Margins, step, sine tracking and turbulence rejection, in SI units.
 
     ``band_rad_s``: the band the model was identified over (default the paper's for the
     axis). ``truth``: ``(h, h_a)``, the simulator's sampled responses, for
-    :func:`truth_margins`. Returns ``(report, traces)``. ``report``: ``axis``, the model
+    :func:`truth_margins`. ``measured``: models.json's ``broken_loop`` (the loop measured
+    through the excitation), carried into the report as ``measured_loop`` for a second
+    opinion. Returns ``(report, traces)``. ``report``: ``axis``, the model
     (``num``, ``den``, ``delay_s``), ``gains``, ``band_rad_s``; ``loops``: per loop
     (``rate``; ``angle`` and ``input`` for roll and pitch) the margins of
     :func:`heliquad.host.loops.margins` (``gain_margin`` a ratio, ``phase_margin_rad``,
@@ -163,6 +165,8 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
               "loops": _loops_report(functions, band, closed)}
     if truth is not None:
         report["truth"] = truth_margins(truth, axis, gains, band)
+    if measured is not None and measured.get("loop") in functions:
+        report["measured_loop"] = dict(measured)
     w = LOOP_GAIN_OMEGA_RAD_S
     traces = {"t": np.arange(0.0, DURATION_S, DT_S),
               "loop_gains": {"omega_rad_s": w, **{k: f(w) for k, f in functions.items()}}}
@@ -253,8 +257,10 @@ def validation_record(report) -> dict:
     and deg/s, the sine's frequency in Hz; crossovers and poles stay in rad/s."""
     doc = {key: report[key] for key in ("axis", "num", "den", "delay_s", "gains", "band_rad_s")}
     doc["loops"] = {name: _loop_record(lp) for name, lp in report["loops"].items()}
+    if "measured_loop" in report:
+        doc["measured_loop"] = report["measured_loop"]
     if "truth" in report:
-        doc["truth_loops"] = {name: _margins_record(lp) for name, lp in report["truth"].items()}
+        doc["truth_loops"] = {name: margins_record(lp) for name, lp in report["truth"].items()}
     doc["stable"] = report["stable"]
     if "instability" in report:
         doc["instability"] = dict(report["instability"])
@@ -278,8 +284,9 @@ def validation_record(report) -> dict:
     return doc
 
 
-def _margins_record(lp) -> dict:
-    """A loop's margins in dB and degrees, every crossover with them."""
+def margins_record(lp) -> dict:
+    """A loop's margins (:func:`heliquad.host.loops.margins`) in dB and degrees, every
+    crossover with them, for validation.json and models.json."""
     gm, pm = lp["gain_margin"], lp["phase_margin_rad"]
     return {"gain_margin_db": None if gm is None else 20 * math.log10(gm),
             "phase_margin_deg": None if pm is None else math.degrees(pm),
@@ -294,7 +301,7 @@ def _margins_record(lp) -> dict:
 
 
 def _loop_record(lp) -> dict:
-    return {**_margins_record(lp), "closed_loop_stable": lp["closed_loop_stable"],
+    return {**margins_record(lp), "closed_loop_stable": lp["closed_loop_stable"],
             "unstable_pole_rad_s": lp["unstable_pole_rad_s"]}
 
 

@@ -103,6 +103,16 @@ def test_the_design_steps_at_most_4x_and_never_past_the_bound():
     assert d.next(1.0, 0.3, float("nan")) == 0.3                 # nothing measured: keep it
 
 
+def test_the_input_swings_at_most_half_the_bound():
+    # Near the crossover the loop amplifies the excitation at the plant input: with 2 units
+    # of input per unit of excitation, an amplitude past 0.25 would swing the command past
+    # half the bound, however little the rig moves.
+    d = AmplitudeDesign(bound=1.0, swing_deg=10.0)
+    assert d.next(10.0, 0.5, 1e-3, 2.0) == pytest.approx(0.25)
+    assert d.next(10.0, 0.5, 1e-3, 0.5) == 1.0                  # a quiet input: the bound
+    assert d.next(10.0, 0.5, 1e-3, 40.0) == pytest.approx(0.0125)  # below 1/4 when it must
+
+
 def test_the_cap_is_the_most_cycles_within_the_most_time_but_never_below_the_least():
     d = Dwell()
     assert d.cycles(4.0) == 48 and d.cycles(0.5) == 30 and d.cycles(0.1) == 8

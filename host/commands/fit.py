@@ -71,7 +71,7 @@ def run(args) -> int:
                         stable=not args.allow_unstable)
     print_models(result)
     write_models_json(args.json, result.models, result.recommended, result.reason,
-                      source=args.points, weights=result.weights)
+                      source=args.points, weights=result.weights, band_rad_s=result.band_rad_s)
     print(f"wrote {args.json}")
     if args.mat:
         write_models_mat(args.mat, result.models, result.recommended)

@@ -10,10 +10,15 @@ from ..errors import InputError
 __all__ = ["add_parser", "run"]
 
 HELP = """\
-Check an identified model in closed loop, as the paper does: its cascade (PID rate
-loop on the model; for roll and pitch a PD angle loop around it) with the paper's gains or a
-gains file ({"rate": {"roll": [Kc, tau_I, tau_D]}, "angle": {"roll": [Kc, tau_D]}}).
-Reports gain and phase margins of each loop, the step response, 0.5 Hz sine tracking, and
+Check an identified model in closed loop as the firmware flies it: its discrete PID rate
+loop at the loop rate (200 Hz) around the model, and for roll and pitch the PD angle loop
+around that, with the firmware's gains or a gains file ({"rate": {"roll": [Kc, tau_I,
+tau_D]}, "angle": {"roll": [Kc, tau_D]}}). Reports the gain and phase margins of each loop
+(rate; angle; input: broken at the plant input with both loops closed) from every crossover
+up to the Nyquist frequency, and marks a margin "not validated" when its crossover lies
+outside the band the model was identified over (models.json's band_rad_s: sweep further,
+e.g. --freqs-hz up to 40 Hz, to validate it). For a simulated sweep's models the simulator's
+own loop margins are printed beside them. Then the step response, 0.5 Hz sine tracking and
 rejection of Dryden turbulence; writes validation.json and validation.png. Exit code 1 if
 the cascade is unstable.
 
@@ -65,24 +70,73 @@ def run(args) -> int:
 
     gains = Gains(*file_gains) if file_gains else load_gains(axis)
     turbulence = None if args.turbulence == "none" else args.turbulence
-    report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed)
+    band = doc.get("band_rad_s")
+    if band is None:
+        print(f"{args.models} does not give the band its models were identified over; "
+              f"the paper's {axis} band is assumed")
+    report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed,
+                                    band_rad_s=band, truth=_truth(args.models),
+                                    measured=doc.get("broken_loop"))
     _print_validation(validation_record(report))
     written = save_validation(out, report, traces)
     print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
     return 0 if report["stable"] else 1
 
 
+def _truth(models_path):
+    """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder
+    (identify writes it there), else None."""
+    import os
+
+    from ..files import read_manifest
+    from ..sweep import MANIFEST
+    from ..truth import sil_truth_loops
+
+    folder = os.path.dirname(os.path.abspath(models_path))
+    path = os.path.join(folder, MANIFEST)
+    if not os.path.exists(path):
+        return None
+    try:
+        truth, _ = sil_truth_loops(read_manifest(path), folder)
+    except InputError:                  # a damaged manifest beside: no truth, not an error
+        return None
+    return truth
+
+
+def _margins_text(lp) -> str:
+    gm = "inf" if lp["gain_margin_db"] is None else f"{lp['gain_margin_db']:.1f} dB"
+    if lp["phase_crossover_rad_s"] is not None:
+        gm += f" at {lp['phase_crossover_rad_s']:.3g} rad/s"
+    pm = "none" if lp["phase_margin_deg"] is None else f"{lp['phase_margin_deg']:.1f} deg"
+    if lp["gain_crossover_rad_s"] is not None:
+        pm += f" at {lp['gain_crossover_rad_s']:.3g} rad/s"
+    return f"gain margin {gm}, phase margin {pm}"
+
+
 def _print_validation(r) -> None:
     """The validation as validation.json records it (degrees, deg/s and dB)."""
+    from ..loops import LOOP_DT_S
+
     coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
     print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
           + (f" * exp(-{r['delay_s'] * 1e3:.3g} ms s)" if r["delay_s"] else ""))
+    lo, hi = r["band_rad_s"]
+    print(f"  identified over {lo:.3g}-{hi:.3g} rad/s; the firmware's loops at "
+          f"{1 / LOOP_DT_S:g} Hz:")
     for name, lp in r["loops"].items():
-        gm = "inf" if lp["gain_margin_db"] is None else f"{lp['gain_margin_db']:.1f} dB"
-        pm = "none" if lp["phase_margin_deg"] is None else f"{lp['phase_margin_deg']:.1f} deg"
-        wc = "-" if lp["gain_crossover_rad_s"] is None else f"{lp['gain_crossover_rad_s']:.2f} rad/s"
-        print(f"  {name:5s} loop: gain margin {gm}, phase margin {pm} at {wc}; closed loop "
+        print(f"  {name:5s} loop: {_margins_text(lp)}; closed loop "
               f"{'stable' if lp['closed_loop_stable'] else 'UNSTABLE'}")
+        for why in lp["not_validated"]:
+            print(f"        not validated: {why}")
+        measured = r.get("measured_loop")
+        if measured and measured["loop"] == name:
+            said = [] if measured["gain_margin_db"] is None and measured["phase_margin_deg"] \
+                is None else [_margins_text(measured)]
+            said += [f"no {why}" for why in measured.get("unmeasured", [])]
+            print(f"        measured through the excitation ({measured['injection']} injection): "
+                  + "; ".join(said))
+        if name in r.get("truth_loops", {}):
+            print(f"        simulator's truth: {_margins_text(r['truth_loops'][name])}")
     if not r["stable"]:
         from ..validate import instability_text
 
