@@ -393,6 +393,7 @@ def _models_schema():
         required={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13)},
         optional={"order": S.Seq(("M", S.Int(0, 12)), ("N", S.Int(1, 12))),
                   "delay_s": S.Num(0, MAX_DELAY_S), "stable": S.Bool(), "degenerate": S.Bool(),
+                  "integrator": S.Bool(),
                   "metrics": S.Obj(values=S.Null(S.Num())), "poles": pairs, "zeros": pairs,
                   "dc_gain": S.Null(S.Num())})
     log = S.Obj(optional={"first_regions": S.List(S.List(S.Int(0, 2**63), 2, 2))},
@@ -404,6 +405,8 @@ def _models_schema():
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
                   "estimate": S.Str(("excitation", "input")), "sil_truth": S.Obj(),
+                  "quality": S.Obj(required={"level": S.Str(("good", "acceptable", "poor")),
+                                             "why": S.Str()}),
                   "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
                                       ("high", S.Num(0, 1e7, lo_open=True))),
                   "broken_loop": S.Obj()})
@@ -515,6 +518,7 @@ def model_to_dict(model) -> dict:
     """A :class:`~heliquad.host.fit.TfModel` as the MODELS.json entry."""
     return {
         "order": list(model.order),
+        "integrator": bool(model.integrator),
         "num": [float(c) for c in model.num],
         "den": [float(c) for c in model.den],
         "delay_s": float(model.delay_s),
@@ -538,6 +542,11 @@ def write_models_json(path, models, recommended, reason, source=None, weights=No
            "reason": reason, **(extra or {})}
     if band_rad_s is not None:
         doc["band_rad_s"] = [float(band_rad_s[0]), float(band_rad_s[1])]
+    if recommended is not None:
+        from .metrics import quality
+
+        level, why = quality(models[recommended])
+        doc["quality"] = {"level": level, "why": why}
     if axis is not None:
         doc["axis"] = axis
     if source is not None:

@@ -35,7 +35,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response", "format_tf"]
+__all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response", "format_tf",
+           "order_name"]
 
 #: Sanathanan-Koerner iterations at most, and the relative change that stops them early.
 SK_MAX_ITER = 30
@@ -74,6 +75,9 @@ class TfModel:
     degenerate : bool
         A pole ran to the edge of the allowed range (``POLE_RANGE`` times the band's centre
         frequency, or as far below): the points do not support this order.
+    integrator : bool
+        One of the ``n`` poles is fixed at the origin (order ``M/Ni``): a rate that
+        integrates the command, as a free rig's does; ``stable`` then speaks of the others.
     metrics : dict
         Filled by :func:`heliquad.host.metrics.evaluate_model`.
     """
@@ -85,7 +89,14 @@ class TfModel:
     stable: bool = True
     delay_fitted: bool = False
     degenerate: bool = False
+    integrator: bool = False
     metrics: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def structure(self) -> tuple:
+        """The order as :func:`parse_order` gives it: ``(m, n)``, or ``(m, n, 1)`` with an
+        integrator."""
+        return (*self.order, 1) if self.integrator else tuple(self.order)
 
     @property
     def poles(self) -> np.ndarray:
@@ -113,16 +124,22 @@ def model_response(num, den, delay_s, omega_rad_s) -> np.ndarray:
     return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay_s)
 
 
-_ORDER_RE = re.compile(r"^\s*(\d+)\s*/\s*(\d+)\s*$")
+_ORDER_RE = re.compile(r"^\s*(\d+)\s*/\s*(\d+)\s*(i?)\s*$")
 
 
 def parse_order(text: str) -> tuple:
-    """Parse ``"M/N"`` (numerator/denominator degree) into ``(M, N)``."""
+    """Parse ``"M/N"`` (numerator/denominator degree) into ``(M, N)``, and ``"M/Ni"`` (one of
+    the N poles at the origin: an integrator) into ``(M, N, 1)``."""
     match = _ORDER_RE.match(str(text))
     if not match:
         raise InputError(f"order {text!r} is not of the form M/N (numerator/denominator "
-                         "degree, e.g. 0/2)")
+                         "degree, e.g. 0/2; 0/2i puts one of the poles at the origin)")
     m, n = int(match.group(1)), int(match.group(2))
+    if match.group(3):
+        if n < 2 or m > n - 1:
+            raise InputError(f"order {text}: an integrator order needs N >= 2 and M <= N - 1 "
+                             "(e.g. 0/2i: K / (s (s + a)))")
+        return m, n, 1
     if n < 1:
         raise InputError(f"order {text}: the denominator degree must be at least 1")
     if m > n:
@@ -134,9 +151,16 @@ def parse_order(text: str) -> tuple:
 
 
 def n_parameters(order, delay: bool) -> int:
-    """Real parameters of a model: ``m + 1`` numerator, ``n`` denominator, optional delay."""
-    m, n = order
-    return m + 1 + n + int(delay)
+    """Real parameters of a model: ``m + 1`` numerator, ``n`` denominator (``n - 1`` with an
+    integrator: its pole is fixed), optional delay."""
+    m, n = order[:2]
+    return m + 1 + n - int(len(order) > 2 and bool(order[2])) + int(delay)
+
+
+def order_name(order, delay: bool = False) -> str:
+    """``"0/2"``, ``"0/2i"`` with an integrator, ``+d`` with a fitted delay."""
+    integrator = "i" if len(order) > 2 and order[2] else ""
+    return f"{order[0]}/{order[1]}{integrator}" + ("+d" if delay else "")
 
 
 # --- Levy and Sanathanan-Koerner (linear, in scaled frequency) -----------------------------
@@ -398,6 +422,8 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     TfModel
         Without metrics; see :func:`heliquad.host.metrics.evaluate_model`.
     """
+    if len(order) > 2 and order[2]:
+        return _fit_integrator(omega_rad_s, F, order, weights, delay, stable)
     m, n = order
     x, w0, F, g0, w = _normalised(omega_rad_s, F, weights)
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
@@ -424,6 +450,23 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
         at_bound = np.isclose(best_params[:n], lo, atol=1e-3) | np.isclose(best_params[:n], hi, atol=1e-3)
         model.degenerate = bool(np.any(at_bound))
     return model
+
+
+def _fit_integrator(omega_rad_s, F, order, weights, delay, stable) -> TfModel:
+    """``M/Ni``: ``G = N / (s D)``. Since ``|F - N/(s D)| = |s F - N/D| / w``, this is the
+    ``M/(N-1)`` fit of ``s F`` with each weight over its frequency, the same problem."""
+    omega = np.asarray(omega_rad_s, dtype=float)
+    F = np.asarray(F, dtype=complex)
+    w = (1.0 / np.abs(F)) if weights is None else np.asarray(weights, dtype=float)
+    if not (omega.shape == F.shape == w.shape and np.all(omega > 0)):
+        raise InputError("frequencies, responses and weights must be lists of one length, "
+                         "the frequencies positive")
+    m, n = order[:2]
+    inner = fit_tf(omega, F * 1j * omega, (m, n - 1), weights=w / omega, delay=delay,
+                   stable=stable)
+    return TfModel(order=(m, n), num=inner.num, den=np.polymul(inner.den, [1.0, 0.0]),
+                   delay_s=inner.delay_s, stable=inner.stable, delay_fitted=inner.delay_fitted,
+                   degenerate=inner.degenerate, integrator=True)
 
 
 def format_tf(model) -> str:

@@ -11,10 +11,23 @@ import dataclasses
 import numpy as np
 
 from .errors import InputError
-from .fit import TfModel, fit_tf, n_parameters
-from .metrics import cifer_weight, evaluate_model, recommend
+from . import paper
+from .fit import TfModel, fit_tf, n_parameters, order_name
+from .metrics import cifer_weight, evaluate_model, quality, recommend
 
-__all__ = ["WEIGHT_MODES", "FitResult", "point_weights", "fit_orders"]
+__all__ = ["WEIGHT_MODES", "FitResult", "point_weights", "fit_orders", "default_orders",
+           "INTEGRATOR_ORDERS"]
+
+#: Integrator structures tried beside the paper's orders: K / (s (s + a)), the rate of a
+#: free rig driven through one lag, and with one more pole and a zero for the rotors and the
+#: sampling.
+INTEGRATOR_ORDERS = ((0, 2, 1), (1, 3, 1))
+
+
+def default_orders(axis: str) -> tuple:
+    """The orders identify fits unless told: the paper's for the axis and the integrator
+    structures."""
+    return tuple(paper.DEFAULT_ORDERS[axis]) + INTEGRATOR_ORDERS
 
 WEIGHT_MODES = ("auto", "sigma", "coherence", "none")
 #: Sigmas below this fraction of |F| are raised to it (noise-free simulations give sigma ~ 0,
@@ -31,6 +44,7 @@ class FitResult:
     reason: str
     weights: str
     band_rad_s: tuple = ()
+    quality: tuple = ()
 
 
 def point_weights(points: dict, mode: str = "auto"):
@@ -66,7 +80,7 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
     for order in orders:
         k = n_parameters(order, delay)
         if 2 * n_points < k + 1:
-            raise InputError(f"order {order[0]}/{order[1]}{' with delay' if delay else ''} has "
+            raise InputError(f"order {order_name(order)}{' with delay' if delay else ''} has "
                              f"{k} unknowns; it needs at least {(k + 2) // 2} points, "
                              f"the file has {n_points}")
     w, mode = point_weights(points, weights)
@@ -78,4 +92,5 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,
-                     band_rad_s=(float(np.min(points["omega"])), float(np.max(points["omega"]))))
+                     band_rad_s=(float(np.min(points["omega"])), float(np.max(points["omega"]))),
+                     quality=() if index is None else quality(models[index]))

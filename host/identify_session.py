@@ -15,7 +15,6 @@ import os
 
 import numpy as np
 
-from . import paper
 from .errors import InputError
 from .files import atomic_write
 from .link import INPUT_OUTPUT
@@ -85,7 +84,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     manifest, samples, damage = _load(dir_path)
     from .files import write_models_json, write_points_csv    # after the folder is read:
     from .fit import n_parameters
-    from .identify import fit_orders
+    from .identify import default_orders, fit_orders
     from .plot import write_bode, write_responses
 
     if damage:
@@ -109,7 +108,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
              "coherence": np.array([p.coherence for p in points])}
     order = np.argsort(table["omega"])
     table = {k: v[order] for k, v in table.items()}
-    wanted = orders or paper.DEFAULT_ORDERS[axis]
+    wanted = orders or default_orders(axis)
     orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")

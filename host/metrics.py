@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from .fit import TfModel, n_parameters
+from .fit import TfModel, n_parameters, order_name
 
-__all__ = ["evaluate_model", "recommend", "cifer_weight", "J_ACCEPTABLE", "J_EXCELLENT"]
+__all__ = ["evaluate_model", "recommend", "quality", "cifer_weight", "J_ACCEPTABLE", "J_EXCELLENT"]
 
 #: CIFER guideline: J at or below this is an acceptable model.
 J_ACCEPTABLE = 100.0
@@ -29,9 +29,9 @@ J_ACCEPTABLE = 100.0
 J_EXCELLENT = 50.0
 #: Phase weight in J: 0.01745 dB^2 per deg^2 (1 dB of magnitude ~ 7.57 deg of phase).
 J_PHASE_WEIGHT = 0.01745
-#: A higher order must lower AICc by at least this to count as clearly better
-#: (Burnham and Anderson: a difference above 10 is essentially no support for the worse).
-AICC_CLEAR = 10.0
+#: A model is visibly worse than another when its J is above twice the other's and higher by
+#: more than this (J = 5 is about 0.5 dB of RMS magnitude error: a gap a Bode plot shows).
+J_VISIBLE = 5.0
 
 
 def cifer_weight(coherence) -> np.ndarray:
@@ -59,7 +59,7 @@ def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> d
     resid = np.asarray(weights, dtype=float) * (F - G)
     rss = max(float(np.sum(np.abs(resid) ** 2)), np.finfo(float).tiny)
     n_obs = 2 * omega.size
-    k = n_parameters(model.order, model.delay_fitted)
+    k = n_parameters(model.structure, model.delay_fitted)
     aicc = n_obs * math.log(rss / n_obs) + 2 * k
     aicc = aicc + 2 * k * (k + 1) / (n_obs - k - 1) if n_obs - k - 1 > 0 else float("inf")
     model.metrics.update({
@@ -73,15 +73,21 @@ def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> d
     return model.metrics
 
 
-def recommend(models) -> tuple:
-    """Pick a model: the simplest stable one with acceptable J, unless a higher one is clearly
-    better. Degenerate models (a pole at the edge of the allowed range: the order is more
-    than the points support) are never picked.
+def _visibly_better(models, i, j) -> bool:
+    """Model ``j``'s fit is visibly better than model ``i``'s (:data:`J_VISIBLE`)."""
+    Ji, Jj = models[i].metrics["J"], models[j].metrics["J"]
+    return Ji > 2 * Jj and Ji - Jj > J_VISIBLE
 
-    "Clearly better" means: the simpler model is not already excellent (J > 50), and the
-    other, also stable and acceptable, lowers AICc by more than 10 and at least halves J.
-    Without an acceptable stable model, the stable one with the lowest J is chosen, and the
-    reason says so.
+
+def recommend(models) -> tuple:
+    """Pick a model by a stated rule: among the stable, non-degenerate models with acceptable
+    fit (J <= 100), the lowest AICc (the information criterion weighs fit against
+    parameters); then, if another acceptable model fits visibly better (J less than half
+    and lower by more than 5), the lowest AICc among those instead, so the pick is never
+    visibly worse than another candidate. Degenerate models (a pole at the edge of the
+    allowed range: the order is more than the points support) are never picked. Without an
+    acceptable stable model, the stable one with the lowest J is chosen, and the reason
+    says so (:func:`quality` then says poor).
 
     Returns
     -------
@@ -90,30 +96,41 @@ def recommend(models) -> tuple:
     stable = [i for i, m in enumerate(models) if m.stable and not m.degenerate]
     if not stable:
         return None, "no stable, non-degenerate model; none is recommended"
-    key = lambda i: (models[i].metrics["n_parameters"], models[i].order[1])  # noqa: E731
-    acceptable = sorted((i for i in stable if models[i].metrics["J"] <= J_ACCEPTABLE), key=key)
+    acceptable = [i for i in stable if models[i].metrics["J"] <= J_ACCEPTABLE]
     if not acceptable:
         best = min(stable, key=lambda i: models[i].metrics["J"])
         return best, (f"no stable model reaches J <= {J_ACCEPTABLE:g}; "
                       f"{_name(models[best])} has the lowest J ({models[best].metrics['J']:.1f})")
-    pick = acceptable[0]
-    base = models[pick].metrics
-    reason = (f"{_name(models[pick])} is the lowest-order stable model with acceptable fit "
-              f"(J = {base['J']:.2f} <= {J_ACCEPTABLE:g})")
-    if base["J"] > J_EXCELLENT:
-        better = [i for i in acceptable[1:]
-                  if models[i].metrics["aicc"] < base["aicc"] - AICC_CLEAR
-                  and models[i].metrics["J"] <= 0.5 * base["J"]]
-        if better:
-            alt = min(better, key=lambda i: models[i].metrics["aicc"])
-            m = models[alt].metrics
-            reason = (f"{_name(models[alt])} is clearly better than {_name(models[pick])}: "
-                      f"J {m['J']:.1f} vs {base['J']:.1f}, AICc lower by "
-                      f"{base['aicc'] - m['aicc']:.1f}")
-            pick = alt
+    aicc = lambda i: models[i].metrics["aicc"]                  # noqa: E731
+    pick = min(acceptable, key=aicc)
+    reason = (f"{_name(models[pick])} has the lowest AICc ({aicc(pick):.1f}) of the stable "
+              f"models with acceptable fit (J = {models[pick].metrics['J']:.2f} <= "
+              f"{J_ACCEPTABLE:g})")
+    better = [j for j in acceptable if _visibly_better(models, pick, j)]
+    while better:
+        alt = min(better, key=aicc)
+        reason = (f"{_name(models[alt])} fits visibly better than {_name(models[pick])}, which "
+                  f"has the lowest AICc: J {models[alt].metrics['J']:.2f} against "
+                  f"{models[pick].metrics['J']:.2f}")
+        pick = alt
+        better = [j for j in acceptable if _visibly_better(models, pick, j)]
     return pick, reason
 
 
+def quality(model) -> tuple:
+    """``(level, why)`` of a recommended model: ``good`` (J <= 50, hard to tell from the
+    data), ``acceptable`` (J <= 100), ``poor`` (more: the best the orders tried could do is
+    still far from the points; try other orders or look at the points)."""
+    J = model.metrics["J"]
+    worst = (f"worst point {model.metrics['max_mag_err_db']:.2f} dB, "
+             f"{model.metrics['max_phase_err_deg']:.1f} deg")
+    if J <= J_EXCELLENT:
+        return "good", f"J = {J:.2f} <= {J_EXCELLENT:g}; {worst}"
+    if J <= J_ACCEPTABLE:
+        return "acceptable", f"J = {J:.1f} <= {J_ACCEPTABLE:g}; {worst}"
+    return "poor", (f"J = {J:.0f} > {J_ACCEPTABLE:g}: no order tried fits the points well; "
+                    f"{worst}")
+
+
 def _name(model) -> str:
-    m, n = model.order
-    return f"{m}/{n}" + (" with delay" if model.delay_fitted else "")
+    return order_name(model.structure) + (" with delay" if model.delay_fitted else "")

@@ -7,7 +7,7 @@ import pytest
 
 from heliquad.host import paper
 from heliquad.host.errors import InputError
-from heliquad.host.fit import fit_levy, fit_tf, model_response, parse_order
+from heliquad.host.fit import TfModel, fit_levy, fit_tf, model_response, parse_order
 from heliquad.host.identify import fit_orders
 from heliquad.host.metrics import evaluate_model, recommend
 
@@ -117,22 +117,47 @@ def test_unstable_models_are_never_recommended():
     assert result.recommended is None and "no stable" in result.reason
 
 
-def test_recommendation_prefers_the_lowest_acceptable_order():
+def test_recommendation_is_the_lowest_aicc_of_the_acceptable_models():
+    # The paper's roll model with 2 % noise and sigma weights: the higher orders fit the
+    # noise no better than 0/2 and pay for their parameters in AICc.
     num, den = paper.MODELS["roll"][(0, 2)]
     omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), N_POINTS)
-    points = {"omega": omega, "F": noisy(model_response(num, den, 0.0, omega), 4, 0.02)}
+    F = model_response(num, den, 0.0, omega)
+    points = {"omega": omega, "F": noisy(F, 4, 0.02), "sigma": 0.02 * np.abs(F)}
     result = fit_orders(points, paper.DEFAULT_ORDERS["roll"])
     assert result.models[result.recommended].order == (0, 2)
-    assert "lowest-order" in result.reason
+    assert "lowest AICc" in result.reason and result.quality[0] == "good"
+    aicc = [m.metrics["aicc"] for m in result.models
+            if m.stable and not m.degenerate and m.metrics["J"] <= 100]
+    assert result.models[result.recommended].metrics["aicc"] == min(aicc)
 
 
-def test_recommendation_moves_up_when_a_higher_order_is_clearly_better():
+def test_the_recommendation_is_never_visibly_worse_than_another_candidate():
+    # Noise-free third-order data: whatever AICc says, the pick's J is never above twice
+    # another acceptable model's and 5 more.
     num, den, _, centre = SYNTHETIC["third order with zeros"]
     omega = band(centre)
     points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
     result = fit_orders(points, [(0, 1), (0, 2), (2, 3)])
     assert result.models[result.recommended].order == (2, 3)
-    assert result.models[0].metrics["J"] > 100 or "clearly better" in result.reason
+    pick = result.models[result.recommended].metrics["J"]
+    for m in result.models:
+        if m.stable and not m.degenerate and m.metrics["J"] <= 100:
+            assert not (pick > 2 * m.metrics["J"] and pick - m.metrics["J"] > 5)
+
+
+def test_visibly_better_fit_overrides_aicc():
+    # Two acceptable models: AICc prefers one (its weighted residuals are smaller), the
+    # other's J is a tenth of it and 20 lower: the rule takes the one that fits visibly
+    # better, and says why.
+    a = TfModel((0, 1), np.array([1.0]), np.array([1.0, 1.0]),
+                metrics={"J": 30.0, "aicc": -50.0, "n_parameters": 2})
+    b = TfModel((0, 2), np.array([1.0]), np.array([1.0, 1.0, 1.0]),
+                metrics={"J": 3.0, "aicc": -40.0, "n_parameters": 3})
+    index, reason = recommend([a, b])
+    assert index == 1 and "fits visibly better" in reason
+    b.metrics["J"] = 26.0                      # lower, but not visibly: AICc decides
+    assert recommend([a, b])[0] == 0
 
 
 def test_metrics_of_an_exact_model():
@@ -159,17 +184,36 @@ def test_cifer_cost_of_a_known_error():
                               rel=1e-6)
 
 
-@pytest.mark.parametrize("text, expected", [("0/2", (0, 2)), (" 2 / 4 ", (2, 4))])
+@pytest.mark.parametrize("text, expected", [("0/2", (0, 2)), (" 2 / 4 ", (2, 4)),
+                                            ("0/2i", (0, 2, 1)), ("1/3i", (1, 3, 1))])
 def test_parse_order(text, expected):
     assert parse_order(text) == expected
 
 
 @pytest.mark.parametrize("text, match", [("2", "form M/N"), ("a/b", "form M/N"),
                                          ("3/2", "improper"), ("0/0", "at least 1"),
-                                         ("-1/2", "form M/N")])
+                                         ("-1/2", "form M/N"), ("0/1i", "integrator"),
+                                         ("2/2i", "integrator")])
 def test_parse_order_rejects(text, match):
     with pytest.raises(InputError, match=match):
         parse_order(text)
+
+
+def test_an_integrator_structure_recovers_a_free_rigs_rate_response():
+    # K e^(-s T) / (s (s + a)), a rate that integrates the command through one lag, with
+    # 2 % noise: the 0/2i fit with delay recovers K, a and T, its pole at the origin exact,
+    # and counts one parameter less than 0/2.
+    omega = 2 * np.pi * np.geomspace(0.5, 4.5, N_POINTS)
+    F = model_response([500.0], [1.0, 32.0, 0.0], 0.0125, omega)
+    model = fit_tf(omega, noisy(F, 5, 0.01), (0, 2, 1), delay=True)
+    assert model.integrator and model.structure == (0, 2, 1) and model.den[-1] == 0.0
+    assert model.num[-1] == pytest.approx(500, rel=0.05)
+    assert model.den[1] == pytest.approx(32, rel=0.05)
+    assert model.delay_s == pytest.approx(0.0125, abs=1e-3)
+    assert model.stable and not model.degenerate
+    evaluate_model(model, omega, F, 1 / np.abs(F))
+    assert model.metrics["n_parameters"] == 3              # K, a, T (the pole at 0 is fixed)
+    assert model.dc_gain == math.inf
 
 
 def test_too_few_points_for_the_order():

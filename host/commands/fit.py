@@ -86,7 +86,7 @@ def run(args) -> int:
 
 
 def print_models(result) -> None:
-    from ..fit import format_tf
+    from ..fit import format_tf, order_name
 
     print(f"weights: {result.weights}")
     print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "
@@ -94,10 +94,12 @@ def print_models(result) -> None:
     for i, m in enumerate(result.models):
         k = m.metrics
         mark = "*" if i == result.recommended else " "
-        order = f"{m.order[0]}/{m.order[1]}{'+d' if m.delay_fitted else ''}"
+        order = order_name(m.structure, m.delay_fitted)
         print(f"{mark}{order:>7} {k['J']:9.3g} {100 * k['rms']:8.3g} {k['aicc']:10.4g} "
               f"{k['max_mag_err_db']:7.3f} {k['max_phase_err_deg']:8.2f} "
               f"{'yes' if m.stable else 'NO':>6}  {format_tf(m)}"
               + ("  [degenerate: a pole reached the edge of the allowed range; the points "
                  "do not support this order]" if m.degenerate else ""))
     print(f"recommended: {result.reason}")
+    if result.quality:
+        print(f"quality: {result.quality[0]} ({result.quality[1]})")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 
@@ -12,8 +13,13 @@ __all__ = ["add_parser", "run"]
 
 HELP = """\
 Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
-paper's table (points_table.csv), fitted models (models.json, the paper's orders for the axis
-unless --order) and plots (bode.png; responses.png, input dashed, output solid).
+paper's table (points_table.csv), fitted models (models.json: the paper's orders for the axis
+and the integrator structures 0/2i and 1/3i, unless --order; with --delay each with a
+fitted delay) and plots (bode.png; responses.png, input dashed, output solid). The
+recommended model is the lowest AICc among the stable models of acceptable fit, unless
+another fits visibly better; its quality (good, acceptable, poor) is said and recorded.
+When the loop closes around the excitation (mixer injection), the loop broken there is
+measured too, L = R/U - 1, with its margins where the sweep reaches its crossovers.
 """
 
 
@@ -23,9 +29,11 @@ def add_parser(sub, fmt) -> None:
                        description=HELP, formatter_class=fmt)
     p.add_argument("dir", metavar="DIR")
     p.add_argument("--order", action="append", metavar="M/N",
-                   help="orders to fit (default: the paper's per axis: 0/2 0/3 2/4, yaw 0/1 2/2 2/3)")
-    p.add_argument("--delay", action="store_true", help="fit a pure time delay with each model "
-                   "(the loop's hold and the sensor's latency are real delays)")
+                   help="an order to fit, again for more (M/Ni: one pole at the origin); "
+                        "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i")
+    p.add_argument("--delay", action=argparse.BooleanOptionalAction, default=False,
+                   help="fit a pure time delay with each model (the loop's hold and the "
+                        "sensor's latency are real delays)")
     p.add_argument("--estimate", choices=("excitation", "input"), default="excitation",
                    help="excitation (default): each point as (Y/R)/(U/R), output and input "
                         "against the logged excitation R, unbiased when the loop is closed "
