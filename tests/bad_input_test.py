@@ -386,6 +386,8 @@ FILES = {
     "f_models_truth": sweep(full=True, replace={"models.json": models(sil_truth={
         "points": [{"freq_hz": 1.0, "error_over_sigma": "far"}], "points_worst_db": 0.1,
         "points_worst_deg": 1.0})}),
+    "f_points_ry": sweep(full=True, replace={
+        "points.csv": "omega_rad_s,magnitude,phase_rad,coherence_ry\n12.57,0.18,-2.7,1.2\n"}),
     "f_manifest_bad": sweep(top(frequencies=[{"requested_hz": "2"}]), full=True),
     "f_validation_list": sweep(full=True, replace={"validation.json": "[]"}),
     "f_validation_no_stable": sweep(full=True, replace={"validation.json": '{"loops": {}}'}),
@@ -847,6 +849,7 @@ CASES = [
     case("report f_models_dir", "is a folder"),
     case("report f_models_replay", "replay.points[0].nrmse"),
     case("report f_models_truth", "sil_truth.points[0].error_over_sigma"),
+    case("report f_points_ry", "coherence_ry at data row 1"),
     case("report f_manifest_bad", "frequencies[0].requested_hz"),
     case("report f_validation_list", "validation.json"),
     case("report f_validation_no_stable", "stable is missing"),
