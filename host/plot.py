@@ -207,7 +207,7 @@ def _response_panel(ax, segment, input_name, output_name, replay):
     title = f"{f:.3g} Hz"
     if replay is not None:
         right.plot(t[replay.start:replay.start + replay.y.size], replay.y, "--",
-                   color=REPLAY_COLOUR, lw=1, label="replay: the input through the model")
+                   color=REPLAY_COLOUR, lw=1, label="replay: the model driven by the input")
         title += f", replay error {100 * replay.nrmse:.1f} %"
     for side, label, colour in ((ax, u_label, INPUT_COLOUR), (right, y_label, OUTPUT_COLOUR)):
         side.set_ylabel(label, color=colour, fontsize=7)

@@ -2,17 +2,22 @@
 against the measured output.
 
 A sweep measures each frequency over whole periods of the excitation (``period_samples``,
-the period the FSF analyses). For a linear model ``G`` and an input that repeats with the
-record, the model's periodic steady state is exact in the frequency domain: the DFT of the
-input over the whole periods, each bin ``k`` multiplied by ``G(j omega_k)`` (its delay
-included), transformed back. The periods identification discards (the transient after the
-fade-in) are left out here too. The DC bin is left out as well: a constant in the input
-(trim) or the output (a gyro's bias) lies outside the band the model was fitted to, so the
-replay carries the measured output's mean and the error is measured on what varies.
+the period the FSF analyses). After the periods identification discards (the transient
+after the fade-in), the input's mean period (its synchronous average over the whole periods
+left: the part of the input that repeats with the excitation, its fundamental and
+harmonics) is taken through the model in the frequency domain: its DFT, each harmonic ``l``
+multiplied by ``G(j l omega)`` (the delay included), transformed back and repeated over the
+periods. That is the model's periodic steady state for that input, exact when the record is
+periodic. What the input holds that does not repeat with the excitation (in a closed loop,
+the controller's answer to a gust or to sensor noise) is not replayed: its effect on the
+output is mixed with the disturbance it answers, which the model does not know. The DC term
+is left out too: a constant in the input (trim) or the output (a gyro's bias) lies outside
+the band the model was fitted to, so the replay carries the measured output's mean.
 
 The replay error of a frequency is ``rms(y - replay) / rms(y - mean(y))`` over the replayed
 samples: 0 when the model explains the output; what it does not explain is the model's own
-error, noise, turbulence, a transient that has not died out, or a nonlinearity.
+error, the part of the output that does not repeat (noise, turbulence, a transient that has
+not died out) and a nonlinearity.
 
 Nothing here is used to estimate points or to choose a model: it is a check of the
 recommended one, drawn in responses.png and listed by ``heliquad report``.
@@ -42,8 +47,8 @@ class Replay:
     start : int
         Index, into the record, of the first replayed sample (after the discarded periods).
     y : numpy.ndarray
-        The model's steady-state output for the record's input from ``start`` on, whole
-        periods, plus the measured output's mean over them.
+        The model's periodic steady-state output for the input's mean period, over the whole
+        periods from ``start`` on, plus the measured output's mean over them.
     periods : int
         Whole periods replayed.
     nrmse : float
@@ -62,8 +67,8 @@ def replay_record(response, u, y, fs_hz: float, period_samples,
                   discard_periods: int = DEFAULT_DISCARD_PERIODS) -> Replay:
     """The replay of one record (input ``u``, output ``y``, sampled at ``fs_hz``, excited with
     a period of ``period_samples``, a whole number): ``response(omega_rad_s)``, the model's
-    complex frequency response (for instance ``TfModel.response``), applied to the whole
-    periods after ``discard_periods``."""
+    complex frequency response (for instance ``TfModel.response``), applied to the input's
+    mean period over the whole periods after ``discard_periods``."""
     u, y = np.asarray(u, float), np.asarray(y, float)
     if u.shape != y.shape or u.ndim != 1:
         raise InputError("input and output must be one-dimensional and of equal length")
@@ -77,13 +82,13 @@ def replay_record(response, u, y, fs_hz: float, period_samples,
         raise InputError(f"a record of {u.size} samples has no whole period of {period} after "
                          f"the {discard_periods} discarded")
     n = periods * period
-    u_rec, y_rec = u[start:start + n], y[start:start + n]
-    spectrum = np.fft.rfft(u_rec)
-    omega = 2 * np.pi * fs_hz * np.arange(1, spectrum.size) / n
+    y_rec = y[start:start + n]
+    mean_period = u[start:start + n].reshape(periods, period).mean(axis=0)
+    spectrum = np.fft.rfft(mean_period)
     gain = np.zeros(spectrum.size, complex)
-    gain[1:] = response(omega)
+    gain[1:] = response(2 * np.pi * fs_hz * np.arange(1, spectrum.size) / period)
+    replay = np.tile(np.fft.irfft(gain * spectrum, period), periods)
     varying = y_rec - y_rec.mean()
-    replay = np.fft.irfft(gain * spectrum, n)
     spread = math.sqrt(float(np.mean(varying ** 2)))
     misfit = math.sqrt(float(np.mean((varying - replay) ** 2)))
     return Replay(freq_hz=fs_hz / period, start=start, y=replay + y_rec.mean(), periods=periods,
