@@ -194,8 +194,8 @@ def _truth_flags(truth, axis, flags):
     if far:
         worst = max(far, key=lambda p: p["error_over_sigma"])
         flags.append(f"{axis}: {len(far)} of {len(truth['points'])} points are more than "
-                     f"{TRUTH_SIGMAS:g} sigma from the simulator's truth (their error bars "
-                     f"understate the error; the worst, {worst['freq_hz']:.3g} Hz: "
+                     f"{TRUTH_SIGMAS:g} sigma from the simulator's truth (the worst, "
+                     f"{worst['freq_hz']:.3g} Hz: "
                      f"{worst['error_over_sigma']:.1f} sigma, {_fmt(worst.get('error_db'), '.3f')} dB, "
                      f"{_fmt(worst.get('error_deg'), '.2f')} deg)")
 
@@ -244,10 +244,10 @@ def _checks_html(models):
         said.append("No model is recommended, so none is replayed.")
     elif replay:
         errors = [100 * p["nrmse"] for p in replay["points"] if p.get("nrmse") is not None]
-        said.append(f"Replay: each frequency's measured input through the recommended model "
-                    f"({_order(models['models'][models['recommended']])}), in its periodic steady "
-                    f"state after {replay.get('discard_periods', 1)} discarded period(s), against "
-                    f"the measured output (dashed in the responses): error "
+        said.append(f"Replay: each frequency's measured input (its mean period after "
+                    f"{replay.get('discard_periods', 1)} discarded) through the recommended model "
+                    f"({_order(models['models'][models['recommended']])}), its periodic steady "
+                    f"state against the measured output (dashed in the responses): error "
                     + (f"{min(errors):.2g} to {max(errors):.2g} % of the output's RMS "
                        "(per frequency in the table above)." if errors else "not known."))
     truth = models.get("sil_truth")
