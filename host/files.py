@@ -3,7 +3,8 @@
 * RUN.csv: header row, columns ``t_s,u,y`` (in any order, extra columns ignored), uniformly
   sampled, time strictly increasing.
 * POINTS.csv: header row, columns ``omega_rad_s,magnitude,phase_rad`` and optionally
-  ``sigma,coherence``; one row per frequency, omega strictly increasing; phase wrapped or not.
+  ``sigma,coherence`` and ``coherence_ry,coherence_ru``; one row per frequency, omega strictly
+  increasing; phase wrapped or not.
 * MODELS.json: ``{"models": [...], "recommended": INDEX, ...}``, coefficients in descending
   powers of s, den monic.
 * A sweep folder's manifest.json, a gains file, validation.json and points_table.csv.
@@ -32,7 +33,7 @@ from ..sim.userfiles import read_text
 from . import schema as S
 from .errors import DiskFull, InputError, no_room
 
-__all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "read_text", "read_run_csv", "read_points_csv",
+__all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "POINTS_EXCITATION", "read_text", "read_run_csv", "read_points_csv",
            "read_points_table", "read_json", "read_manifest", "read_models_json", "read_gains",
            "read_validation", "check_output", "check_output_folder", "write_run_csv",
            "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
@@ -42,6 +43,9 @@ RUN_COLUMNS = ("t_s", "u", "y")
 TABLE_COLUMNS = ("freq_hz", "omega_rad_s", "magnitude", "phase_deg", "real", "imag", "coherence")
 POINTS_COLUMNS = ("omega_rad_s", "magnitude", "phase_rad")
 POINTS_OPTIONAL = ("sigma", "coherence")
+#: POINTS.csv's columns for points estimated against the excitation r (``heliquad
+#: identify``): the coherence of r with the output and with the input.
+POINTS_EXCITATION = ("coherence_ry", "coherence_ru")
 #: Largest spread of sample intervals, relative to the mean interval, still called uniform.
 UNIFORM_TOLERANCE = 0.01
 
@@ -276,9 +280,10 @@ def read_points_csv(path):
     Returns
     -------
     dict
-        ``omega`` (rad/s), ``F`` (complex), and ``sigma`` / ``coherence`` arrays or None.
+        ``omega`` (rad/s), ``F`` (complex), and ``sigma``, ``coherence``, ``coherence_ry``,
+        ``coherence_ru``: arrays, or None for a column the file does not have.
     """
-    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL,
+    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL + POINTS_EXCITATION,
                         what="POINTS.csv (columns omega_rad_s,magnitude,phase_rad)")
     omega, mag = table["omega_rad_s"], table["magnitude"]
     if omega.size > MAX_POINTS:
@@ -300,14 +305,15 @@ def read_points_csv(path):
     _first_bad(path, "phase_rad", table["phase_rad"], np.abs(table["phase_rad"]) <= 1e4,
                "within +/-1e4 rad")
     out = {"omega": omega, "F": mag * np.exp(1j * table["phase_rad"]),
-           "sigma": table.get("sigma"), "coherence": table.get("coherence")}
+           **{c: table.get(c) for c in POINTS_OPTIONAL + POINTS_EXCITATION}}
     if out["sigma"] is not None:
         s = out["sigma"]
         _first_bad(path, "sigma", s, np.isfinite(s) & (s >= 0), "finite and non-negative")
-    if out["coherence"] is not None:
-        c = out["coherence"]
-        _first_bad(path, "coherence", c, np.isnan(c) | ((c >= 0) & (c <= 1)),
-                   "in [0, 1] (or nan: not known)")
+    for name in ("coherence", *POINTS_EXCITATION):
+        if out[name] is not None:
+            c = out[name]
+            _first_bad(path, name, c, np.isnan(c) | ((c >= 0) & (c <= 1)),
+                       "in [0, 1] (or nan: not known)")
     return out
 
 
@@ -404,12 +410,34 @@ def _models_schema():
                   "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(), "log": log,
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
-                  "estimate": S.Str(("excitation", "input")), "sil_truth": S.Obj(),
+                  "estimate": S.Str(("excitation", "input")), "sil_truth": _sil_truth_schema(),
+                  "replay": _replay_schema(),
                   "quality": S.Obj(required={"level": S.Str(("good", "acceptable", "poor")),
                                              "why": S.Str()}),
                   "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
                                       ("high", S.Num(0, 1e7, lo_open=True))),
                   "broken_loop": S.Obj()})
+
+
+def _sil_truth_schema():
+    """models.json's ``sil_truth`` (:func:`heliquad.host.truth.truth_record`), as far as
+    ``heliquad report`` reads it."""
+    num = S.Null(S.Num())
+    point = S.Obj(required={"freq_hz": S.Num(0, lo_open=True)},
+                  optional={k: num for k in ("truth_db", "truth_deg", "error_db", "error_deg",
+                                             "error_over_sigma")})
+    return S.Obj(required={"points": S.List(point), "points_worst_db": S.Num(),
+                           "points_worst_deg": S.Num()},
+                 optional={k: num for k in ("points_rms_error_over_sigma", "model_worst_db",
+                                            "model_worst_deg")})
+
+
+def _replay_schema():
+    """models.json's ``replay``: the recommended model's replay of each frequency's record."""
+    point = S.Obj(required={"freq_hz": S.Num(0, lo_open=True), "periods": S.Int(1, 2**31),
+                            "nrmse": S.Null(S.Num(0))})
+    return S.Obj(required={"model": S.Int(0, 999), "points": S.List(point)},
+                 optional={"discard_periods": S.Int(0, 2**31)})
 
 
 def read_models_json(path) -> dict:
@@ -499,13 +527,17 @@ def read_validation(path) -> dict:
 
 
 def write_points_csv(path, points):
-    """Write :class:`~heliquad.host.fsf.FrequencyPoint` objects, sorted by frequency."""
+    """Write :class:`~heliquad.host.fsf.FrequencyPoint` objects, sorted by frequency; the
+    columns of :data:`POINTS_EXCITATION` too when any point was estimated against the
+    excitation."""
     rows = sorted(points, key=lambda p: p.omega_rad_s)
+    extra = POINTS_EXCITATION if any(p.estimate == "excitation" for p in rows) else ()
     with atomic_write(path) as fh:
-        fh.write(",".join(POINTS_COLUMNS + POINTS_OPTIONAL) + "\n")
+        fh.write(",".join(POINTS_COLUMNS + POINTS_OPTIONAL + extra) + "\n")
         for p in rows:
             fh.write(f"{p.omega_rad_s:.12g},{p.magnitude:.12g},{p.phase_rad:.12g},"
-                     f"{p.sigma:.6g},{p.coherence:.6g}\n")
+                     f"{p.sigma:.6g},{p.coherence:.6g}"
+                     + "".join(f",{getattr(p, c):.6g}" for c in extra) + "\n")
 
 
 def _clean(x):

@@ -73,6 +73,20 @@ def point_weights(points: dict, mode: str = "auto"):
     return 1.0 / mag, mode
 
 
+#: A zero this many times below the band's bottom is one the points cannot place.
+ZERO_BELOW = 10.0
+
+
+def _flag_far_zeros(model: TfModel, omega_min: float) -> None:
+    """A zero far below the band (a DC behaviour no point constrains: a fitted 2/4 put one at
+    0.12 rad/s under a 3.1 rad/s band, flipping the sign of its DC gain and making the
+    integral loop unstable there) marks the model degenerate, like a pole at the range's
+    edge: the points do not support it."""
+    zeros = model.zeros
+    if zeros.size and np.any(np.abs(zeros) < omega_min / ZERO_BELOW):
+        model.degenerate = True
+
+
 def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
                stable: bool = True) -> FitResult:
     """Fit every order to the points, evaluate each model and recommend one."""
@@ -89,6 +103,7 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
         model: TfModel = fit_tf(points["omega"], points["F"], order, weights=w, delay=delay,
                                 stable=stable)
         evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
+        _flag_far_zeros(model, float(np.min(points["omega"])))
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,

@@ -5,7 +5,9 @@ as measured, takes the full-amplitude samples (HQ_EXCITATION_STATE_RUNNING) in i
 the FSF with the exact frequency the firmware reported. Writes, inside DIR:
 ``points.csv`` (the POINTS format), ``points_table.csv`` (the paper's tables 4-6: frequency,
 omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or those given),
-``bode.png`` and ``responses.png`` (input dashed, output solid, per frequency).
+``bode.png`` (points, models and the points' coherence) and ``responses.png`` (per
+frequency the input and the output on their own axes, with the recommended model's replay of
+the output, :mod:`.replay`).
 """
 
 from __future__ import annotations
@@ -85,7 +87,6 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     from .files import write_models_json, write_points_csv    # after the folder is read:
     from .fit import n_parameters
     from .identify import default_orders, fit_orders
-    from .plot import write_bode, write_responses
 
     if damage:
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
@@ -121,17 +122,59 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False
     truth = _truth(dir_path, manifest, points, result, progress)
     if truth:
         extra["sil_truth"] = truth
+    replays = _replays(result, points, segments)
+    if replays is not None:
+        extra["replay"] = _replay_record(result.recommended, replays)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
                       extra=extra, band_rad_s=result.band_rad_s)
-    write_bode(os.path.join(dir_path, "bode.png"), table["omega"], table["F"], sigma=table["sigma"],
-               models=result.models, recommended=result.recommended,
-               title=f"{axis}, {manifest['inject']} injection: points and models")
-    write_responses(os.path.join(dir_path, "responses.png"), segments,
-                    *INPUT_OUTPUT[manifest["inject"]],
-                    title=f"{axis}: measured cycles per frequency (input dashed, output solid)")
+    _write_plots(dir_path, manifest, points, segments, result, replays)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
-            "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth}
+            "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
+            "records": segments, "replays": replays}
+
+
+def _replays(result, points, segments):
+    """The recommended model's replay of each record (:mod:`.replay`), or None when no model
+    is recommended."""
+    from .fsf import DEFAULT_DISCARD_PERIODS
+    from .replay import replay_points
+
+    if result.recommended is None:
+        return None
+    return replay_points(result.models[result.recommended], points, segments,
+                         DEFAULT_DISCARD_PERIODS)
+
+
+def _replay_record(recommended, replays) -> dict:
+    """models.json's ``replay``: the replayed model's index and, per frequency, the whole
+    periods replayed and the replay's error."""
+    from .fsf import DEFAULT_DISCARD_PERIODS
+
+    return {"model": recommended, "discard_periods": DEFAULT_DISCARD_PERIODS,
+            "points": [{"freq_hz": r.freq_hz, "periods": r.periods, "nrmse": r.nrmse}
+                       for r in sorted(replays, key=lambda r: r.freq_hz)]}
+
+
+def _write_plots(dir_path, manifest, points, segments, result, replays) -> None:
+    """bode.png (the points with their coherence, and the models) and responses.png (each
+    record, with the recommended model's replay)."""
+    from .plot import COHERENCE_KEYS, write_bode, write_responses
+    from .report import LOW_COHERENCE
+
+    axis, inject = manifest["axis"], manifest["inject"]
+    ranked = sorted(points, key=lambda p: p.omega_rad_s)
+    write_bode(os.path.join(dir_path, "bode.png"), np.array([p.omega_rad_s for p in ranked]),
+               np.array([p.gain for p in ranked]), sigma=np.array([p.sigma for p in ranked]),
+               models=result.models, recommended=result.recommended,
+               title=f"{axis}, {inject} injection: points, models and coherence",
+               coherence={k: np.array([getattr(p, k) for p in ranked]) for k in COHERENCE_KEYS},
+               gate=LOW_COHERENCE)
+    said = "dashed: the recommended model's replay" if replays is not None else \
+        "no model recommended, so no replay"
+    write_responses(os.path.join(dir_path, "responses.png"), segments, *INPUT_OUTPUT[inject],
+                    title=f"{axis}: measured cycles, input (left axis) and output (right axis); "
+                          f"{said}", replays=replays)
 
 
 def _truth(dir_path, manifest, points, result, progress) -> dict | None:

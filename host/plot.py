@@ -20,8 +20,8 @@ import numpy as np
 
 from .files import save_figure
 
-__all__ = ["new_figure", "plot_bode", "plot_responses", "plot_validation", "write_bode",
-           "write_responses", "write_validation"]
+__all__ = ["new_figure", "plot_bode", "plot_coherence", "plot_responses", "plot_validation",
+           "write_bode", "write_responses", "write_validation"]
 
 #: Dense grid points per plotted model curve.
 CURVE_POINTS = 400
@@ -30,6 +30,15 @@ SIGNAL_UNITS = {"axis_cmd": "torque cmd", "rate_sp": "rad/s", "angle_sp": "rad",
                 "rate": "rad/s", "angle": "rad"}
 #: Columns of the per-frequency responses figure.
 RESPONSE_COLUMNS = 3
+#: The responses figure's colours: each signal's and its axis's (labels and ticks).
+INPUT_COLOUR, OUTPUT_COLOUR, REPLAY_COLOUR = "tab:blue", "tab:orange", "k"
+#: The coherence panel's series: the coherence of the excitation r with the output and with
+#: the input (points estimated against the excitation), as (key, label, marker style); the
+#: second hollow and larger, so that equal values show both.
+EXCITATION_COHERENCES = (("coherence_ry", "r -> y", {"marker": "o", "ms": 5}),
+                         ("coherence_ru", "r -> u", {"marker": "s", "ms": 8, "mfc": "none"}))
+#: Every coherence a points table may hold.
+COHERENCE_KEYS = ("coherence", *(key for key, _, _ in EXCITATION_COHERENCES))
 
 
 def new_figure(rows=1, cols=1, figsize=(8, 6), **subplots):
@@ -43,17 +52,22 @@ def new_figure(rows=1, cols=1, figsize=(8, 6), **subplots):
 
 # -- Bode plot of points and models --------------------------------------------------------
 
-def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title=""):
-    """Bode plot of frequency-response points and fitted models onto ``axes``, a pair of
-    Axes (magnitude, phase); returns their figure.
+def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
+              coherence=None, gate=None):
+    """Bode plot of frequency-response points and fitted models onto ``axes``: a pair of
+    Axes (magnitude, phase), or three with the points' coherence in the third; returns
+    their figure.
 
     Magnitude in dB, phase in degrees, frequency in Hz (log scale). ``omega`` in rad/s,
     ``F`` complex. ``sigma`` is the standard deviation of each complex point; it is drawn as
     the magnitude band ``20 log10(1 +/- sigma/|F|)`` and the phase band ``asin(sigma/|F|)``.
     ``models``: :class:`~heliquad.host.fit.TfModel`; the one at index ``recommended`` is
-    drawn heavier.
+    drawn heavier. ``coherence``: a mapping with any of ``coherence``, ``coherence_ry``,
+    ``coherence_ru`` (arrays beside ``omega``, NaN where not known; as
+    :func:`~heliquad.host.files.read_points_csv` returns them), drawn with the quality
+    ``gate`` by :func:`plot_coherence`.
     """
-    ax_mag, ax_ph = axes
+    ax_mag, ax_ph, *rest = axes
     omega = np.asarray(omega, float)
     f_hz = omega / (2 * np.pi)
     mag_db = 20 * np.log10(np.abs(F))
@@ -70,16 +84,51 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="")
             model_db = 20 * np.log10(np.abs(resp))
         ax_mag.semilogx(dense / (2 * np.pi), model_db, lw=width, label=label)
         ax_ph.semilogx(dense / (2 * np.pi), ph, lw=width)
-    ax_mag.set_xscale("log")
+    if rest:
+        plot_coherence(rest[0], omega, coherence, gate)
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")
-    ax_ph.set_xlabel("frequency (Hz)")
-    for ax in (ax_mag, ax_ph):
+    for ax in (ax_mag, ax_ph, *rest):
+        ax.set_xscale("log")
         ax.grid(True, which="both", alpha=0.3)
+    (rest or [ax_ph])[0].set_xlabel("frequency (Hz)")
     ax_mag.legend(fontsize=8)
     if title:
         ax_mag.set_title(title)
     return ax_mag.figure
+
+
+def plot_coherence(ax, omega, coherence, gate=None):
+    """Each point's coherence onto ``ax`` against frequency (Hz), and the quality ``gate``
+    (the tool's is :data:`heliquad.host.report.LOW_COHERENCE`) as a line when given; returns
+    its figure.
+
+    ``coherence`` as :func:`plot_bode` takes it: with ``coherence_ry`` and ``coherence_ru``
+    (points estimated against the excitation) those two are drawn, else the single
+    ``coherence``; with none the panel says so.
+    """
+    coherence = coherence or {}
+    f_hz = np.asarray(omega, float) / (2 * np.pi)
+    series = [(coherence[key], label, style) for key, label, style in EXCITATION_COHERENCES
+              if _known(coherence.get(key))]
+    if not series and _known(coherence.get("coherence")):
+        series = [(coherence["coherence"], "coherence", {"marker": "o", "ms": 5})]
+    for values, label, style in series:
+        ax.plot(f_hz, values, ls="none", label=label, **style)
+    if gate is not None:
+        ax.axhline(gate, color="tab:red", ls="--", lw=1, label=f"quality gate {gate:g}")
+    if not series:
+        ax.text(0.5, 0.5, "no coherence in the points", transform=ax.transAxes, ha="center",
+                va="center", fontsize=8)
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("coherence")
+    ax.legend(fontsize=7, loc="lower left", ncol=3)
+    return ax.figure
+
+
+def _known(values) -> bool:
+    """An array of coherences with at least one that is known (not NaN)."""
+    return values is not None and bool(np.any(np.isfinite(np.asarray(values, float))))
 
 
 def _bode_points(ax_mag, ax_ph, f_hz, mag_db, phase_deg, F, sigma):
@@ -105,50 +154,82 @@ def _model_label(model, recommended):
     return tag + (" (recommended)" if recommended else "")
 
 
-def write_bode(path, omega, F, sigma=None, models=(), recommended=None, title=""):
-    """:func:`plot_bode` in a figure of its own, written to ``path`` (format from its
-    extension)."""
-    fig, axes = new_figure(2, 1, figsize=(8, 7), sharex=True)
-    plot_bode(axes, omega, F, sigma, models, recommended, title)
+def write_bode(path, omega, F, sigma=None, models=(), recommended=None, title="",
+               coherence=None, gate=None):
+    """:func:`plot_bode` in a figure of its own, with the coherence panel under it when
+    ``coherence`` holds any known value, written to ``path`` (format from its extension)."""
+    if any(_known((coherence or {}).get(key)) for key in COHERENCE_KEYS):
+        fig, axes = new_figure(3, 1, figsize=(8, 8.5), sharex=True,
+                               gridspec_kw={"height_ratios": [3, 3, 1.6]})
+    else:
+        fig, axes = new_figure(2, 1, figsize=(8, 7), sharex=True)
+    plot_bode(axes, omega, F, sigma, models, recommended, title, coherence, gate)
     save_figure(fig, path, dpi=110)
 
 
 # -- a sweep's time responses --------------------------------------------------------------
 
-def plot_responses(axes, segments, input_name, output_name):
-    """The measured cycles of each frequency, input dashed and output solid, one frequency
-    per Axes of ``axes`` (any shape, taken in row order; Axes left over are hidden);
-    returns their figure.
+def plot_responses(axes, segments, input_name, output_name, replays=None):
+    """The measured cycles of each frequency, one frequency per Axes of ``axes`` (any shape,
+    taken in row order; Axes left over are hidden): the input on the Axes' own (left) y axis,
+    the output on a twin (right) y axis with its own unit, each axis labelled and coloured as
+    its signal; and, where given, a model's replay of the output (dashed, on the output's
+    axis, its error in the title). Returns their figure; the lines carry labels for a legend
+    (:func:`write_responses` puts one under the figure).
 
     ``segments``: ``(freq_hz, t_s, u, y)`` per frequency; ``input_name``, ``output_name``:
     the logged signals ``u`` and ``y`` are (``axis_cmd``, ``rate_sp``, ``angle_sp``;
-    ``rate``, ``angle``), for the labels.
+    ``rate``, ``angle``), for the labels. ``replays``: beside ``segments``, a
+    :class:`~heliquad.host.replay.Replay` or None for each.
     """
     flat = np.asarray(axes, dtype=object).ravel()
     if len(flat) < len(segments):
         raise ValueError(f"{len(segments)} frequencies need as many axes, got {len(flat)}")
-    u_unit, y_unit = SIGNAL_UNITS[input_name], SIGNAL_UNITS[output_name]
-    for ax, (f, t, u, y) in zip(flat, segments):
-        t = np.asarray(t) - t[0]
-        ax.plot(t, u, "--", lw=1, label=f"input: {input_name} ({u_unit})")
-        ax.plot(t, y, lw=1, label=f"output: {output_name} ({y_unit})")
-        ax.set_title(f"{f:.3g} Hz", fontsize=9)
-        ax.set_xlabel("time (s)", fontsize=8)
-        ax.set_ylabel(f"{u_unit} | {y_unit}", fontsize=7)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
+    replays = list(replays) if replays is not None else [None] * len(segments)
+    if len(replays) != len(segments):
+        raise ValueError(f"{len(segments)} frequencies need as many replays, got {len(replays)}")
+    for ax, segment, replay in zip(flat, segments, replays):
+        _response_panel(ax, segment, input_name, output_name, replay)
     for ax in flat[len(segments):]:
         ax.axis("off")
-    flat[0].legend(fontsize=7)
     return flat[0].figure
 
 
-def write_responses(path, segments, input_name, output_name, title=""):
+def _response_panel(ax, segment, input_name, output_name, replay):
+    """One frequency's input on ``ax``, its output (and replay) on a twin y axis."""
+    f, t, u, y = segment
+    t = np.asarray(t) - t[0]
+    u_label = f"input: {input_name} ({SIGNAL_UNITS[input_name]})"
+    y_label = f"output: {output_name} ({SIGNAL_UNITS[output_name]})"
+    right = ax.twinx()
+    ax.plot(t, u, color=INPUT_COLOUR, lw=1, label=u_label)
+    right.plot(t, y, color=OUTPUT_COLOUR, lw=1, label=y_label)
+    title = f"{f:.3g} Hz"
+    if replay is not None:
+        right.plot(t[replay.start:replay.start + replay.y.size], replay.y, "--",
+                   color=REPLAY_COLOUR, lw=1, label="replay: the model driven by the input")
+        title += f", replay error {100 * replay.nrmse:.1f} %"
+    for side, label, colour in ((ax, u_label, INPUT_COLOUR), (right, y_label, OUTPUT_COLOUR)):
+        side.set_ylabel(label, color=colour, fontsize=7)
+        side.tick_params(axis="y", colors=colour, labelsize=7)
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel("time (s)", fontsize=8)
+    ax.tick_params(axis="x", labelsize=7)
+    ax.grid(alpha=0.3)
+
+
+def write_responses(path, segments, input_name, output_name, title="", replays=None):
     """:func:`plot_responses` in a figure of its own (three frequencies a row), written to
     ``path``."""
     rows = max(1, math.ceil(len(segments) / RESPONSE_COLUMNS))
-    fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(12, 2.4 * rows), squeeze=False)
-    plot_responses(axes, segments, input_name, output_name)
+    fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(13, 2.7 * rows), squeeze=False)
+    plot_responses(axes, segments, input_name, output_name, replays)
+    lines = {}                                  # one entry a label, inputs first
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            lines.setdefault(label, handle)
+    if lines:
+        fig.legend(lines.values(), lines.keys(), loc="outside lower center", ncols=3, fontsize=8)
     if title:
         fig.suptitle(title)
     save_figure(fig, path, dpi=90)

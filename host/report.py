@@ -2,10 +2,13 @@
 
 DIR is a sweep folder (manifest.json, after ``heliquad identify`` and optionally
 ``heliquad validate``), or a folder of such folders (one per axis). The page holds every
-table (frequencies, the paper-style points table, models and their metrics, validation),
-every plot (embedded as PNG data, so the file stands alone), and the quality flags:
-low-coherence points, unstable or degenerate models, no recommended model, aborted
-frequencies, an unstable cascade.
+table (frequencies, the paper-style points table with each point's coherences with the
+excitation, the recommended model's replay error and, for a simulated sweep, its error
+against the simulator's truth; models and their metrics, how the points were estimated, the
+replay and the truth in a line each; validation), every plot (embedded as PNG data, so the
+file stands alone), and the quality flags: low-coherence points, points further than 3 sigma
+from the simulator's truth, unstable models, no recommended model, a damaged log, frequencies
+not measured, not used or saturated, an unstable cascade.
 """
 
 from __future__ import annotations
@@ -17,13 +20,28 @@ import json
 import math
 import os
 
+import numpy as np
+
 from .errors import InputError
 from .files import atomic_write
 from .sweep import saturation_text
 
 __all__ = ["write_report", "LOW_COHERENCE"]
 
+#: A point whose coherence is below this is flagged (and drawn as the gate in bode.png).
 LOW_COHERENCE = 0.6
+#: A simulated sweep's point further than this many of its sigmas from the truth is flagged.
+TRUTH_SIGMAS = 3.0
+#: Two frequencies of one folder's files are the same point within this relative difference
+#: (points_table.csv holds six digits).
+SAME_FREQUENCY = 1e-4
+#: points.csv's coherences with the excitation, and their headers in the report.
+POINT_COHERENCES = {"coherence_ry": "coherence r->y", "coherence_ru": "coherence r->u"}
+#: models.json's ``estimate``, in words.
+ESTIMATES = {"excitation": "Points estimated against the logged excitation r: G = (Y/R) / (U/R), "
+                           "unbiased with the loop closed.",
+             "input": "Points estimated against the measured input u (the direct estimate, "
+                      "right for open-loop data; biased when the loop is closed and the air moves)."}
 STYLE = """body{font-family:sans-serif;margin:2em;max-width:1100px;color:#222}
 table{border-collapse:collapse;margin:0.5em 0 1.5em;font-size:0.9em}
 td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}th{background:#eee}
@@ -61,20 +79,23 @@ def _fmt(x, spec=".4g"):
 def _axis_section(folder):
     """One axis's part of the page and its quality flags: the sweep, the points, the models,
     the plots and the validation, each as far as the folder holds it."""
-    from .files import read_manifest, read_models_json, read_points_table, read_validation
+    from .files import (read_manifest, read_models_json, read_points_csv, read_points_table,
+                        read_validation)
 
     manifest = _read(read_manifest, os.path.join(folder, "manifest.json")) or {}
     models = _read(read_models_json, os.path.join(folder, "models.json"))
     validation = _read(read_validation, os.path.join(folder, "validation.json"))
     table = _read(read_points_table, os.path.join(folder, "points_table.csv"))
+    points = _read(read_points_csv, os.path.join(folder, "points.csv"))
     axis = manifest.get("axis") or (models or {}).get("axis") or os.path.basename(folder)
     flags, parts = [], [f"<h2>{html.escape(str(axis))}</h2>"]
     if manifest:
         parts.append(_sweep_html(manifest, axis, flags))
     if table is not None:
-        parts.append(_points_html(table, axis, flags))
+        parts.append(_points_html(table, points, models or {}, axis, flags))
     if models:
         parts.append(_models_html(models, axis, flags))
+        parts.append(_checks_html(models))
     parts.append(_img(os.path.join(folder, "bode.png"), f"{axis} Bode plot"))
     parts.append(_img(os.path.join(folder, "responses.png"), f"{axis} time responses"))
     if validation:
@@ -105,19 +126,78 @@ def _sweep_html(manifest, axis, flags):
     return text
 
 
-def _points_html(table, axis, flags):
+def _points_html(table, points, models, axis, flags):
     """The paper-style points table (:func:`.files.read_points_table`, written as identify
-    writes it); flags low coherence."""
+    writes it), and beside each point what else the folder knows of it: its coherences with
+    the excitation (points.csv), the recommended model's replay error and, for a simulated
+    sweep, its error against the simulator's truth (models.json). Flags low coherence and
+    points further than :data:`TRUTH_SIGMAS` sigma from the truth."""
     from .files import TABLE_COLUMNS
 
+    freqs = table["freq_hz"]
+    columns = _point_columns(freqs, points, models)
     digits = {"phase_deg": ".4f", "coherence": ".5f"}
     rows = [[format(table[c][i], digits.get(c, ".6g")) for c in TABLE_COLUMNS]
-            for i in range(table["freq_hz"].size)]
-    for f, coherence in zip(table["freq_hz"], table["coherence"]):
+            + [cells[i] for _, cells in columns] for i in range(freqs.size)]
+    for i, (f, coherence) in enumerate(zip(freqs, table["coherence"])):
         if coherence < LOW_COHERENCE:
-            flags.append(f"{axis}: low coherence {coherence:.2f} at {f:.3g} Hz")
-    return ("<h3>Frequency response (the paper's tables 4-6)</h3>"
-            + _table(list(TABLE_COLUMNS), rows))
+            each = "".join(f", {name} {cells[i]}" for name, cells in columns
+                           if name.startswith("coherence "))
+            flags.append(f"{axis}: low coherence {coherence:.2f} at {f:.3g} Hz{each}")
+    _truth_flags(models.get("sil_truth"), axis, flags)
+    return ("<h3>Frequency response (the paper's tables 4-6, then the checks of each point)</h3>"
+            + _table(list(TABLE_COLUMNS) + [name for name, _ in columns], rows))
+
+
+def _point_columns(freqs, points, models):
+    """The columns after the paper's: ``(header, cells)`` for what points.csv and
+    models.json hold of the points at ``freqs`` (Hz)."""
+    columns = []
+    if points is not None:
+        rows = [{"freq_hz": w / (2 * math.pi), **{k: points[k][i] for k in POINT_COHERENCES
+                                                  if points.get(k) is not None}}
+                for i, w in enumerate(points["omega"])]
+        columns += [(name, _column(freqs, rows, key, ".4f"))
+                    for key, name in POINT_COHERENCES.items() if points.get(key) is not None]
+    replay = models.get("replay")
+    if replay and models.get("recommended") is not None:
+        columns.append(("replay error %", _column(freqs, replay["points"], "nrmse", ".3g", 100)))
+    truth = models.get("sil_truth")
+    if truth:
+        columns += [(name, _column(freqs, truth["points"], key, spec))
+                    for key, name, spec in (("error_db", "truth error dB", ".3f"),
+                                            ("error_deg", "truth error deg", ".2f"),
+                                            ("error_over_sigma", "truth error / sigma", ".2f"))]
+    return columns
+
+
+def _column(freqs, entries, key, spec, factor=1.0):
+    """The cells of ``key`` (times ``factor``) of ``entries`` (objects with ``freq_hz``) at
+    each of ``freqs``, matched to the tables' six digits; "-" where none matches or the
+    value is not known."""
+    at_hz = np.array([e["freq_hz"] for e in entries], float)
+    cells = []
+    for f in freqs:
+        i = int(np.argmin(np.abs(at_hz - f))) if at_hz.size else -1
+        value = entries[i].get(key) if i >= 0 and abs(at_hz[i] - f) <= SAME_FREQUENCY * f \
+            else None
+        cells.append(_fmt(None if value is None else factor * float(value), spec))
+    return cells
+
+
+def _truth_flags(truth, axis, flags):
+    """One flag for the points further than :data:`TRUTH_SIGMAS` of their sigma from the
+    simulator's truth (a simulated sweep's ``sil_truth`` only: a board has no truth)."""
+    if not truth:
+        return
+    far = [p for p in truth["points"] if (p.get("error_over_sigma") or 0) > TRUTH_SIGMAS]
+    if far:
+        worst = max(far, key=lambda p: p["error_over_sigma"])
+        flags.append(f"{axis}: {len(far)} of {len(truth['points'])} points are more than "
+                     f"{TRUTH_SIGMAS:g} sigma from the simulator's truth (the worst, "
+                     f"{worst['freq_hz']:.3g} Hz: "
+                     f"{worst['error_over_sigma']:.1f} sigma, {_fmt(worst.get('error_db'), '.3f')} dB, "
+                     f"{_fmt(worst.get('error_deg'), '.2f')} deg)")
 
 
 def _models_html(models, axis, flags):
@@ -137,7 +217,9 @@ def _models_html(models, axis, flags):
     for i, m in enumerate(models["models"]):
         k = m.get("metrics", {})
         tf = f"[{', '.join(f'{c:.5g}' for c in m['num'])}] / [{', '.join(f'{c:.5g}' for c in m['den'])}]"
-        rows.append(("*" if i == rec else "", f"{m['order'][0]}/{m['order'][1]}", _fmt(k.get("J"), ".3g"),
+        if m.get("delay_s"):
+            tf += f" * exp(-{m['delay_s']:.4g} s)"
+        rows.append(("*" if i == rec else "", _order(m), _fmt(k.get("J"), ".3g"),
                      _fmt(100 * k["rms"], ".3g") if k.get("rms") is not None else "-",
                      _fmt(k.get("aicc"), ".4g"), _fmt(k.get("max_mag_err_db"), ".3f"),
                      _fmt(k.get("max_phase_err_deg"), ".2f"),
@@ -149,6 +231,42 @@ def _models_html(models, axis, flags):
     return ("<h3>Models</h3>" + _table(
         ["", "order", "J", "rms %", "AICc", "max dB", "max deg", "stable", "degenerate", "G(s)"],
         rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.get('reason')))}</p>")
+
+
+def _checks_html(models):
+    """How the points were estimated, the recommended model's replay and, for a simulated
+    sweep, how far the points and the model are from the simulator's truth."""
+    said = []
+    if models.get("estimate"):
+        said.append(ESTIMATES[models["estimate"]])
+    replay = models.get("replay")
+    if models.get("recommended") is None:
+        said.append("No model is recommended, so none is replayed.")
+    elif replay:
+        errors = [100 * p["nrmse"] for p in replay["points"] if p.get("nrmse") is not None]
+        said.append(f"Replay: each frequency's measured input (its mean period after "
+                    f"{replay.get('discard_periods', 1)} discarded) through the recommended model "
+                    f"({_order(models['models'][models['recommended']])}), its periodic steady "
+                    f"state against the measured output (dashed in the responses): error "
+                    + (f"{min(errors):.2g} to {max(errors):.2g} % of the output's RMS "
+                       "(per frequency in the table above)." if errors else "not known."))
+    truth = models.get("sil_truth")
+    if truth:
+        z = truth.get("points_rms_error_over_sigma")
+        text = (f"Against the simulator's truth: the points within {truth['points_worst_db']:.2f} dB "
+                f"and {truth['points_worst_deg']:.1f} deg"
+                + (f" (RMS error/sigma {z:.2f}, about 1 when sigma is honest)" if z is not None else ""))
+        if truth.get("model_worst_db") is not None and models.get("recommended") is not None:
+            text += (f"; the recommended model within {truth['model_worst_db']:.2f} dB and "
+                     f"{_fmt(truth.get('model_worst_deg'), '.1f')} deg across the band")
+        said.append(text + ".")
+    return "".join(f"<p>{html.escape(t)}</p>" for t in said)
+
+
+def _order(model) -> str:
+    """A models.json model's order, ``0/2`` or ``0/2 + delay``."""
+    m, n = model["order"]
+    return f"{m}/{n}" + (" + delay" if model.get("delay_s") else "")
 
 
 def _validation_html(validation, axis, flags):

@@ -111,8 +111,9 @@ def _instability(report, band):
     freq = max(lp["unstable_pole_rad_s"] for lp in report["loops"].values()
                if lp["unstable_pole_rad_s"] is not None)
     top = band[1]
-    return {"pole_rad_s": freq, "band_top_rad_s": top,
-            "outside_band": bool(freq > OUT_OF_BAND_FACTOR * top)}
+    return {"pole_rad_s": freq, "band_top_rad_s": top, "band_bottom_rad_s": band[0],
+            "outside_band": bool(freq > OUT_OF_BAND_FACTOR * top
+                                 or freq < band[0] / OUT_OF_BAND_FACTOR)}
 
 
 def instability_text(report) -> str:
@@ -121,6 +122,9 @@ def instability_text(report) -> str:
     where = (f"closed-loop poles at {inst['pole_rad_s']:.3g} rad/s, "
              f"{inst['pole_rad_s'] / inst['band_top_rad_s']:.2g}x the identified band's top "
              f"({inst['band_top_rad_s']:.3g} rad/s)")
+    if inst["pole_rad_s"] < inst.get("band_bottom_rad_s", 0.0):
+        where = (f"closed-loop poles at {inst['pole_rad_s']:.3g} rad/s, below the identified "
+                 f"band's bottom ({inst['band_bottom_rad_s']:.3g} rad/s)")
     if inst["outside_band"]:
         return (f"the cascade is unstable with these gains: {where}, where the model has no data; "
                 "check with a model that rolls off there, or on the rig")

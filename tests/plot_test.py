@@ -7,11 +7,14 @@ import sys
 
 import numpy as np
 import pytest
+from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 
 from heliquad.host import paper
 from heliquad.host.fit import TfModel
-from heliquad.host.plot import new_figure, plot_bode, plot_responses
+from heliquad.host.plot import new_figure, plot_bode, plot_responses, write_bode
+from heliquad.host.replay import replay_record
+from heliquad.host.report import LOW_COHERENCE
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
@@ -46,6 +49,12 @@ def test_bode_draws_onto_the_given_axes_and_returns_their_figure():
     assert "0/2  J=0.5 (recommended)" in labels and "measured (1 sigma)" in labels
 
 
+def twin(ax):
+    """The output's axis that plot_responses set beside ``ax``."""
+    (other,) = [a for a in ax.get_shared_x_axes().get_siblings(ax) if a is not ax]
+    return other
+
+
 def test_responses_fill_the_axes_in_row_order_and_hide_the_rest():
     fig, axes = new_figure(2, 3, squeeze=False)
     t = np.arange(0, 2, 0.005)
@@ -54,9 +63,79 @@ def test_responses_fill_the_axes_in_row_order_and_hide_the_rest():
     assert plot_responses(axes, segments, "axis_cmd", "rate") is fig
     flat = axes.ravel()
     assert [ax.get_title() for ax in flat[:4]] == ["0.5 Hz", "1 Hz", "2 Hz", "4 Hz"]
-    assert all(len(ax.lines) == 2 for ax in flat[:4])
+    assert all(len(ax.lines) == 1 and len(twin(ax).lines) == 1 for ax in flat[:4])
     assert not flat[4].axison and not flat[5].axison
-    assert "rad/s" in flat[0].lines[1].get_label()
+    assert "rad/s" in twin(flat[0]).lines[0].get_label()
+
+
+def test_input_and_output_each_have_an_axis_of_their_own_coloured_as_their_line():
+    # A torque command of order 1 against a rate of order 1e-3: on one axis the rate would
+    # be a flat line. Each gets its own scale, labelled with its unit in its line's colour.
+    fig, axes = new_figure(1, 1, squeeze=False)
+    t = np.arange(0, 2, 0.005)
+    u, y = np.sin(2 * np.pi * t), 1e-3 * np.sin(2 * np.pi * t - 1)
+    plot_responses(axes, [(1.0, t, u, y)], "axis_cmd", "rate")
+    left = axes[0, 0]
+    right = twin(left)
+    assert right.get_ylim()[1] < 2e-3 < 0.5 < left.get_ylim()[1]
+    for ax, unit in ((left, "torque cmd"), (right, "rad/s")):
+        label = ax.yaxis.get_label()
+        assert unit in label.get_text()
+        assert to_rgba(label.get_color()) == to_rgba(ax.lines[0].get_color())
+        assert to_rgba(ax.yaxis.get_ticklabels()[0].get_color()) == to_rgba(ax.lines[0].get_color())
+
+
+def test_a_replay_is_drawn_over_its_analysed_periods_on_the_output_axis():
+    fig, axes = new_figure(1, 2, squeeze=False)
+    t = np.arange(0, 4, 0.01)                              # 4 periods of 100 samples
+    u, y = np.sin(2 * np.pi * t), 0.5 * np.sin(2 * np.pi * t - 1)
+    replay = replay_record(lambda w: 0.5 * np.exp(-1j * np.ones_like(w)), u, y, 100.0, 100)
+    plot_responses(axes, [(1.0, t, u, y), (1.0, t, u, y)], "rate_sp", "rate", [replay, None])
+    drawn = twin(axes[0, 0]).lines[-1]
+    assert drawn.get_label().startswith("replay")
+    np.testing.assert_allclose(drawn.get_xdata(), t[100:])       # the first period discarded
+    np.testing.assert_allclose(drawn.get_ydata(), y[100:], atol=1e-9)
+    assert axes[0, 0].get_title() == "1 Hz, replay error 0.0 %"
+    assert len(twin(axes[0, 1]).lines) == 1 and axes[0, 1].get_title() == "1 Hz"
+
+
+def coherence_panel(coherence, n=8):
+    fig, axes = new_figure(3, 1, sharex=True)
+    omega, F = roll_points(n)
+    plot_bode(axes, omega, F, models=[roll_model()], coherence=coherence, gate=LOW_COHERENCE)
+    return axes[2]
+
+
+def test_the_coherence_panel_shows_r_to_y_and_r_to_u_and_the_gate():
+    ry, ru = np.linspace(0.99, 0.9, 8), np.linspace(0.95, 0.3, 8)
+    ax = coherence_panel({"coherence": np.fmin(ry, ru), "coherence_ry": ry, "coherence_ru": ru})
+    points = {line.get_label(): line for line in ax.lines if line.get_linestyle() == "None"}
+    assert sorted(points) == ["r -> u", "r -> y"]
+    np.testing.assert_allclose(points["r -> y"].get_ydata(), ry)
+    np.testing.assert_allclose(points["r -> u"].get_ydata(), ru)
+    omega, _ = roll_points()
+    np.testing.assert_allclose(points["r -> u"].get_xdata(), omega / (2 * np.pi))
+    (gate,) = [line for line in ax.lines if line.get_label().startswith("quality gate")]
+    assert set(gate.get_ydata()) == {LOW_COHERENCE}
+    assert ax.get_xscale() == "log" and ax.get_xlabel() == "frequency (Hz)"
+
+
+def test_the_coherence_panel_draws_what_the_points_have():
+    # points.csv of `heliquad fsf`, or an older identify: one coherence, or none at all
+    only = coherence_panel({"coherence": np.full(8, 0.97), "coherence_ry": None})
+    assert [line.get_label() for line in only.lines if line.get_linestyle() == "None"] == ["coherence"]
+    unknown = coherence_panel({"coherence": np.full(8, np.nan)})
+    assert not [line for line in unknown.lines if line.get_linestyle() == "None"]
+    assert "no coherence" in unknown.texts[0].get_text()
+
+
+def test_write_bode_adds_the_coherence_panel_when_the_points_have_coherence(tmp_path):
+    from matplotlib.image import imread
+
+    omega, F = roll_points()
+    write_bode(tmp_path / "two.png", omega, F)
+    write_bode(tmp_path / "three.png", omega, F, coherence={"coherence": np.ones(8)})
+    assert imread(tmp_path / "three.png").shape[0] > 1.15 * imread(tmp_path / "two.png").shape[0]
 
 
 def test_responses_refuse_too_few_axes():

@@ -15,7 +15,8 @@ Sanathanan-Koerner iterations, then an output-error refinement with stable poles
 (docs/paper.md, step 3). Prints each model's metrics and the recommended one.
 
 POINTS.csv: a header row, columns omega_rad_s,magnitude,phase_rad (rad/s, linear, rad;
-omega strictly increasing) and optionally sigma,coherence.
+omega strictly increasing) and optionally sigma,coherence (and coherence_ry,coherence_ru,
+which heliquad identify writes; --plot draws the coherences under the Bode plot).
 MODELS.json (written): {"models": [{"order": [M, N], "num": [...], "den": [...],
 "delay_s": 0.0, "stable": true, "metrics": {"rms", "J", "aicc", ...}, "poles", "zeros",
 "dc_gain"}, ...], "recommended": INDEX, "reason": "..."}; coefficients in descending
@@ -41,7 +42,8 @@ def add_parser(sub, fmt) -> None:
                    help="do not constrain poles to the left half plane (unstable results "
                         "are flagged)")
     p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
-    p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models")
+    p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models "
+                   "(and the points' coherence, when the file has it)")
     p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB (a "
                    "struct array, docs/file-formats.md)")
     p.set_defaults(func=run)
@@ -78,9 +80,11 @@ def run(args) -> int:
         print(f"wrote {args.mat}")
     if args.plot:
         from ..plot import write_bode
+        from ..report import LOW_COHERENCE
 
         write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
-                   models=result.models, recommended=result.recommended, title=str(args.points))
+                   models=result.models, recommended=result.recommended, title=str(args.points),
+                   coherence=points, gate=LOW_COHERENCE)
         print(f"wrote {args.plot}")
     return 0
 
