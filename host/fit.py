@@ -279,43 +279,106 @@ def _params_to_den(params, n):
 # --- output-error refinement (variable projection) -----------------------------------------
 
 class _OutputError:
-    """Residuals ``w (F - N/D e^{-j x tau'})`` with ``N`` solved linearly for given poles."""
+    """Residuals ``w (F - N/D e^{-j x tau'})`` with ``N`` solved linearly for given poles, and
+    their Jacobian.
+
+    For parameters ``theta`` (pole parameters, then the delay) the residual is the variable
+    projection ``r = b - A A^+ b``: ``A`` stacks the real and imaginary parts of the complex
+    basis ``A_c = vander * w e^{-s tau} / D(s)`` and ``b`` those of ``w F``. Each parameter
+    scales the basis row by row, ``dA_c/dtheta_k = g_k * A_c`` with ``g_k = -dD/dtheta_k / D``
+    for a pole parameter and ``g = -s`` for the delay, so the Jacobian (Golub and Pereyra's
+    full form) is ``-(P_perp dA_k a + (A^+)^T dA_k^T r)``, ``a = A^+ b``. One singular value
+    decomposition per parameter vector serves both (cached on the vector).
+    """
 
     def __init__(self, x, F, m, n, w, stable, delay):
         self.x, self.F, self.m, self.n, self.w = x, F, m, n, w
         self.stable, self.delay = stable, delay
         self.s = 1j * x
         self.vander = np.column_stack([self.s ** i for i in range(m, -1, -1)])
+        # free coefficients: D = s^n + sum_k c_k s^(n-k), dD/dc_k = s^(n-k)
+        self.powers = np.column_stack([self.s ** i for i in range(n - 1, -1, -1)])
+        rhs = w * F
+        self.b = np.concatenate([rhs.real, rhs.imag])
+        self._key, self._state = None, None
 
     def den(self, params):
         if self.stable:
             return _params_to_den(params[:self.n], self.n)
         return np.concatenate([[1.0], params[:self.n]])
 
-    def num(self, params):
-        basis = self._basis(params)
-        A = np.vstack([basis.real, basis.imag])
-        rhs = self.w * self.F
-        sol, *_ = np.linalg.lstsq(A, np.concatenate([rhs.real, rhs.imag]), rcond=None)
-        return sol
+    def _den_terms(self, params):
+        """``D(s)`` at the points and ``dD/dtheta_k / D`` (a column per pole parameter)."""
+        n, s = self.n, self.s[:, None]
+        if not self.stable:
+            D = self.s ** n + self.powers @ params[:n]
+            return D, self.powers / D[:, None]
+        e = np.exp(np.clip(params[:n], -LOG_LIMIT, LOG_LIMIT))
+        moving = np.abs(params[:n]) < LOG_LIMIT        # a clipped parameter moves nothing
+        k = 2 * (n // 2)
+        quad = s * s + e[0:k:2] * s + e[1:k:2]              # s^2 + e^p s + e^q, per factor
+        factors = np.hstack([quad, s + e[k:]])              # and s + e^r for odd n
+        dlog = np.empty((self.s.size, n), dtype=complex)
+        dlog[:, 0:k:2] = e[0:k:2] * s / quad
+        dlog[:, 1:k:2] = e[1:k:2] / quad
+        dlog[:, k:] = e[k:] / factors[:, n // 2:]
+        return np.prod(factors, axis=1), dlog * moving
 
-    def _basis(self, params):
+    def _solve(self, params):
+        """The projection at ``params`` (cached): None where the basis is not finite, else
+        ``(r, U, sv, Vt, A_c, model, dlogD)`` with ``A = U diag(sv) Vt`` truncated as
+        numpy's lstsq truncates, and ``model = A_c a``."""
+        key = params.tobytes()
+        if key == self._key:
+            return self._state
         tau = params[self.n] if self.delay else 0.0
         # A trial step may put a pole on a point's frequency: the basis is then not finite,
         # which residuals() answers with a large cost; numpy need not warn about it.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            factor = self.w * np.exp(-self.s * tau) / np.polyval(self.den(params), self.s)
-            return self.vander * factor[:, None]
+        with np.errstate(all="ignore"):
+            D, dlog = self._den_terms(params)
+            A_c = self.vander * (self.w * np.exp(-self.s * tau) / D)[:, None]
+        A = np.vstack([A_c.real, A_c.imag])
+        state = None
+        if np.all(np.isfinite(A)) and np.all(np.isfinite(dlog)):
+            U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+            keep = sv > np.finfo(float).eps * max(A.shape) * sv[0]
+            U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
+            coef = Vt.T @ ((U.T @ self.b) / sv)
+            model = A_c @ coef
+            r = self.b - np.concatenate([model.real, model.imag])
+            state = (r, U, sv, Vt, A_c, model, dlog)
+        self._key, self._state = key, state
+        return state
+
+    def num(self, params):
+        """The numerator's coefficients (scaled frequency, descending) for ``params``; not
+        finite where the basis is not."""
+        state = self._solve(params)
+        if state is None:
+            return np.full(self.m + 1, np.nan)
+        _, U, sv, Vt = state[:4]
+        return Vt.T @ ((U.T @ self.b) / sv)
 
     def residuals(self, params):
-        basis = self._basis(params)
-        A = np.vstack([basis.real, basis.imag])
-        rhs = self.w * self.F
-        b = np.concatenate([rhs.real, rhs.imag])
-        if not np.all(np.isfinite(A)):
-            return b * 1e6                     # a trial step off the map: a large, finite cost
-        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
-        return b - A @ sol
+        state = self._solve(params)
+        if state is None:
+            return self.b * 1e6                # a trial step off the map: a large, finite cost
+        return state[0]
+
+    def jacobian(self, params):
+        """``dr/dtheta``, one column per parameter."""
+        state = self._solve(params)
+        if state is None:
+            return np.zeros((self.b.size, params.size))
+        r, U, sv, Vt, A_c, model, dlog = state
+        g = -dlog if not self.delay else np.column_stack([-dlog, -self.s])
+        half = self.s.size
+        moved = g * model[:, None]                              # dA_k a, complex
+        moved = np.vstack([moved.real, moved.imag])
+        pulled = (A_c.conj().T @ (g.conj() * (r[:half] + 1j * r[half:])[:, None])).real
+        term1 = moved - U @ (U.T @ moved)                      # P_perp dA_k a
+        term2 = U @ ((Vt @ pulled) / sv[:, None])              # (A^+)^T dA_k^T r
+        return -(term1 + term2)
 
     def bounds(self):
         """Lower and upper bounds of the pole parameters (none for free coefficients)."""
@@ -347,9 +410,10 @@ def _refine(problem, x0, tau_max):
         x0 = x0.copy()
         x0[-1] = np.clip(x0[-1], 0.0, tau_max)
     try:
-        res = scipy.optimize.least_squares(problem.residuals, x0, bounds=(lower, upper),
-                                           method="trf", x_scale="jac", xtol=1e-15,
-                                           ftol=1e-15, gtol=1e-15, max_nfev=400 * (x0.size + 1))
+        res = scipy.optimize.least_squares(problem.residuals, x0, jac=problem.jacobian,
+                                           bounds=(lower, upper), method="trf", x_scale="jac",
+                                           xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                                           max_nfev=400 * (x0.size + 1))
     except (ValueError, np.linalg.LinAlgError):
         return x0, float(np.sum(problem.residuals(x0) ** 2))
     return res.x, float(np.sum(res.fun ** 2))
