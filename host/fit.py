@@ -298,8 +298,9 @@ class _OutputError:
         self.vander = np.column_stack([self.s ** i for i in range(m, -1, -1)])
         # free coefficients: D = s^n + sum_k c_k s^(n-k), dD/dc_k = s^(n-k)
         self.powers = np.column_stack([self.s ** i for i in range(n - 1, -1, -1)])
-        rhs = w * F
-        self.b = np.concatenate([rhs.real, rhs.imag])
+        self.rhs = w * F
+        self.b = np.concatenate([self.rhs.real, self.rhs.imag])
+        self.rcond = np.finfo(float).eps * max(2 * x.size, m + 1)    # numpy lstsq's cut
         self._key, self._state = None, None
 
     def den(self, params):
@@ -309,25 +310,31 @@ class _OutputError:
 
     def _den_terms(self, params):
         """``D(s)`` at the points and ``dD/dtheta_k / D`` (a column per pole parameter)."""
-        n, s = self.n, self.s[:, None]
+        n, s = self.n, self.s
         if not self.stable:
-            D = self.s ** n + self.powers @ params[:n]
+            D = s ** n + self.powers @ params[:n]
             return D, self.powers / D[:, None]
         e = np.exp(np.clip(params[:n], -LOG_LIMIT, LOG_LIMIT))
-        moving = np.abs(params[:n]) < LOG_LIMIT        # a clipped parameter moves nothing
         k = 2 * (n // 2)
-        quad = s * s + e[0:k:2] * s + e[1:k:2]              # s^2 + e^p s + e^q, per factor
-        factors = np.hstack([quad, s + e[k:]])              # and s + e^r for odd n
-        dlog = np.empty((self.s.size, n), dtype=complex)
-        dlog[:, 0:k:2] = e[0:k:2] * s / quad
-        dlog[:, 1:k:2] = e[1:k:2] / quad
-        dlog[:, k:] = e[k:] / factors[:, n // 2:]
-        return np.prod(factors, axis=1), dlog * moving
+        sc = s[:, None]
+        inv = 1.0 / (sc * (sc + e[0:k:2]) + e[1:k:2])         # 1 / (s^2 + e^p s + e^q)
+        dlog = np.empty((s.size, n), dtype=complex)
+        dlog[:, 0:k:2] = sc * e[0:k:2] * inv
+        dlog[:, 1:k:2] = e[1:k:2] * inv
+        D = 1.0 / np.prod(inv, axis=1)
+        if n % 2:                                                # and s + e^r
+            D *= s + e[-1]
+            dlog[:, -1] = e[-1] / (s + e[-1])
+        clipped = np.abs(params[:n]) >= LOG_LIMIT                # such a parameter moves nothing
+        if clipped.any():
+            dlog[:, clipped] = 0.0
+        return D, dlog
 
     def _solve(self, params):
         """The projection at ``params`` (cached): None where the basis is not finite, else
-        ``(r, U, sv, Vt, A_c, model, dlogD)`` with ``A = U diag(sv) Vt`` truncated as
-        numpy's lstsq truncates, and ``model = A_c a``."""
+        ``(r, rc, U, sv, Vt, A_c, model, dlogD)``: ``r`` the residuals, ``rc`` the same as
+        complex numbers, ``A = U diag(sv) Vt`` truncated as numpy's lstsq truncates, and
+        ``model = A_c a``."""
         key = params.tobytes()
         if key == self._key:
             return self._state
@@ -337,16 +344,15 @@ class _OutputError:
         with np.errstate(all="ignore"):
             D, dlog = self._den_terms(params)
             A_c = self.vander * (self.w * np.exp(-self.s * tau) / D)[:, None]
-        A = np.vstack([A_c.real, A_c.imag])
+            finite = np.isfinite(A_c.sum() + dlog.sum())
         state = None
-        if np.all(np.isfinite(A)) and np.all(np.isfinite(dlog)):
-            U, sv, Vt = np.linalg.svd(A, full_matrices=False)
-            keep = sv > np.finfo(float).eps * max(A.shape) * sv[0]
+        if finite:
+            U, sv, Vt = np.linalg.svd(np.vstack([A_c.real, A_c.imag]), full_matrices=False)
+            keep = sv > self.rcond * sv[0]
             U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
-            coef = Vt.T @ ((U.T @ self.b) / sv)
-            model = A_c @ coef
-            r = self.b - np.concatenate([model.real, model.imag])
-            state = (r, U, sv, Vt, A_c, model, dlog)
+            model = A_c @ (Vt.T @ ((U.T @ self.b) / sv))
+            rc = self.rhs - model
+            state = (np.concatenate([rc.real, rc.imag]), rc, U, sv, Vt, A_c, model, dlog)
         self._key, self._state = key, state
         return state
 
@@ -356,7 +362,7 @@ class _OutputError:
         state = self._solve(params)
         if state is None:
             return np.full(self.m + 1, np.nan)
-        _, U, sv, Vt = state[:4]
+        U, sv, Vt = state[2:5]
         return Vt.T @ ((U.T @ self.b) / sv)
 
     def residuals(self, params):
@@ -370,14 +376,16 @@ class _OutputError:
         state = self._solve(params)
         if state is None:
             return np.zeros((self.b.size, params.size))
-        r, U, sv, Vt, A_c, model, dlog = state
-        g = -dlog if not self.delay else np.column_stack([-dlog, -self.s])
-        half = self.s.size
-        moved = g * model[:, None]                              # dA_k a, complex
+        _, rc, U, sv, Vt, A_c, model, dlog = state
+        g = np.empty((self.s.size, params.size), dtype=complex)   # dA_k = g_k * A_c, row-wise
+        g[:, :self.n] = -dlog
+        if self.delay:
+            g[:, self.n] = -self.s
+        moved = g * model[:, None]                                # dA_k a
         moved = np.vstack([moved.real, moved.imag])
-        pulled = (A_c.conj().T @ (g.conj() * (r[:half] + 1j * r[half:])[:, None])).real
-        term1 = moved - U @ (U.T @ moved)                      # P_perp dA_k a
-        term2 = U @ ((Vt @ pulled) / sv[:, None])              # (A^+)^T dA_k^T r
+        pulled = (A_c.conj().T @ (g.conj() * rc[:, None])).real   # dA_k^T r
+        term1 = moved - U @ (U.T @ moved)                        # P_perp dA_k a
+        term2 = U @ ((Vt @ pulled) / sv[:, None])                # (A^+)^T dA_k^T r
         return -(term1 + term2)
 
     def bounds(self):

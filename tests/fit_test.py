@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from heliquad.host import fit as fit_module
 from heliquad.host import paper
 from heliquad.host.errors import InputError
 from heliquad.host.fit import fit_levy, fit_tf, model_response, parse_order
@@ -198,3 +199,37 @@ def test_an_order_the_points_do_not_support_is_flagged_degenerate():
     evaluate_model(model, omega, F, 1 / np.abs(F))
     assert model.degenerate
     assert recommend([model])[0] is None
+
+
+# --- the refinement's Jacobian and the choice of starts --------------------------------------
+
+def finite_difference_jacobian(fun, params, step=1e-6):
+    columns = []
+    for k in range(params.size):
+        h = step * max(1.0, abs(params[k]))
+        e = np.zeros_like(params)
+        e[k] = h
+        columns.append((fun(params + e) - fun(params - e)) / (2 * h))
+    return np.column_stack(columns)
+
+
+@pytest.mark.parametrize("delay", [False, True], ids=["no delay", "delay"])
+@pytest.mark.parametrize("stable", [True, False], ids=["log factors", "free coefficients"])
+@pytest.mark.parametrize("order", [(0, 1), (0, 2), (1, 3), (2, 4), (2, 5)])
+def test_the_analytic_jacobian_matches_finite_differences(order, stable, delay):
+    # At random parameters the residual is far from zero, so both terms of the projection's
+    # derivative count (dropping the one in r, Kaufman's approximation, misses by far more).
+    m, n = order
+    rng = np.random.default_rng(10 * m + n + 100 * stable + 1000 * delay)
+    x = np.logspace(-0.75, 0.75, N_POINTS)
+    F = noisy(model_response([1.2, 0.5], [1, 0.8, 1.1, 0.3], 0.2, x), 5, 0.03)
+    problem = fit_module._OutputError(x, F, m, n, 1 / np.abs(F), stable, delay)
+    for _ in range(3):
+        params = (rng.uniform(-2, 2, n) if stable
+                  else np.poly(-rng.uniform(0.3, 2.0, n))[1:] * rng.uniform(0.5, 1.5, n))
+        if delay:
+            params = np.append(params, rng.uniform(0.0, 0.5))
+        J = problem.jacobian(params)
+        J_fd = finite_difference_jacobian(problem.residuals, params)
+        assert J.shape == J_fd.shape == (2 * N_POINTS, n + delay)
+        assert np.max(np.abs(J - J_fd)) <= 1e-6 * np.max(np.abs(J_fd))
