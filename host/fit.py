@@ -12,11 +12,19 @@ in three stages (docs/method.md has the derivations):
    error approaches the output error; this removes Levy's over-weighting of high frequencies.
 3. **Output-error refinement**: minimise ``sum w_k^2 |F_k - G(j w_k)|^2`` by a trust-region
    Gauss-Newton method (scipy.optimize.least_squares) over the poles and the delay only: for
-   fixed poles and delay the numerator is linear and is solved exactly (variable projection).
-   The denominator is parametrised as a product of ``s^2 + e^p s + e^q`` factors (and one
-   ``s + e^r`` for odd ``n``), which is stable for every parameter value, so the result is
-   stable by construction. Several starts (Levy, SK with the given and with unit weights, and
-   for a delay a grid of delays) are refined; the best is kept.
+   fixed poles and delay the numerator is linear and is solved exactly (variable projection),
+   and the Jacobian of the projected residual is analytic (every parameter scales the basis
+   ``s^i / D(s) e^{-s tau}`` point by point). The denominator is parametrised as a product of
+   ``s^2 + e^p s + e^q`` factors (and one ``s + e^r`` for odd ``n``), which is stable for
+   every parameter value, so the result is stable by construction.
+
+   Starts, of four kinds: Levy, SK with the given weights, SK with unit weights, and for
+   ``n >= 2`` the next-lower order's SK poles with one fast pole. Without a delay each is
+   refined and the best kept. With a delay each kind is built at every delay of a grid over
+   ``[0, pi / omega_max]`` (the data with that delay removed); the cost of every start as it
+   stands (one evaluation, no refinement) picks the five lowest of each kind, those are
+   refined briefly, the two best of them on until they converge, and the best of all is kept.
+   Tests hold this to the best of refining every start on the grid.
 
 With ``stable=False`` the refinement works on the free denominator coefficients instead, and
 the model's ``stable`` flag reports what came out.
@@ -42,6 +50,16 @@ SK_MAX_ITER = 30
 SK_TOL = 1e-12
 #: Delays tried as starts, as a fraction of the largest delay (pi / omega_max).
 DELAY_GRID = np.linspace(0.0, 1.0, 13)
+#: With a delay, of each kind of start (Levy, SK, unit-weight SK, next-lower order with a fast
+#: pole) this many are refined: those of lowest cost before refinement across DELAY_GRID.
+#: None refines every start fully (the exhaustive search, kept to test the choice against).
+STARTS_PER_KIND = 5
+#: A refinement stops after this many residual evaluations per parameter (plus one).
+REFINE_EVALUATIONS = 400
+#: With a delay the chosen starts are first refined for this many evaluations per parameter
+#: (plus one); the CONTINUED lowest-cost of them then go on to REFINE_EVALUATIONS.
+SCREEN_EVALUATIONS = 5
+CONTINUED = 2
 #: Roots on the imaginary axis (after reflection) are moved left by this fraction of
 #: omega_0 so that the log parametrisation exists.
 AXIS_MARGIN = 1e-6
@@ -408,7 +426,9 @@ class _OutputError:
         return np.concatenate([p, [tau]]) if self.delay else p
 
 
-def _refine(problem, x0, tau_max):
+def _refine(problem, x0, tau_max, evaluations):
+    """Output-error refinement from ``x0``: ``(params, cost, done)``, ``done`` when it stopped
+    by its tolerances rather than after ``evaluations`` per parameter (plus one)."""
     import scipy.optimize          # here: parsing an order must not wait for scipy
 
     lower, upper = (np.append(b, 0.0) for b in problem.bounds())
@@ -421,28 +441,64 @@ def _refine(problem, x0, tau_max):
         res = scipy.optimize.least_squares(problem.residuals, x0, jac=problem.jacobian,
                                            bounds=(lower, upper), method="trf", x_scale="jac",
                                            xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                                           max_nfev=400 * (x0.size + 1))
+                                           max_nfev=evaluations * (x0.size + 1))
     except (ValueError, np.linalg.LinAlgError):
-        return x0, float(np.sum(problem.residuals(x0) ** 2))
-    return res.x, float(np.sum(res.fun ** 2))
+        return x0, float(np.sum(problem.residuals(x0) ** 2)), True
+    return res.x, float(np.sum(res.fun ** 2)), bool(res.status != 0)
 
 
 def _starts(x, F, m, n, w, delay, tau_max):
-    """Initial (den, tau) pairs in scaled frequency."""
+    """Initial ``(den, tau, kind)`` in scaled frequency: at each trial delay (0 alone without
+    a delay) the Levy, SK and unit-weight SK denominators and, for ``n >= 2``, the next-lower
+    order's SK poles with a fast pole; ``kind`` names which of these a start is."""
     taus = DELAY_GRID * tau_max if delay else [0.0]
     starts = []
     for tau in taus:
         Fd = F * np.exp(1j * x * tau)             # the data with the trial delay removed
         levy = _levy_solve(x, Fd, m, n, w)
-        starts.append((levy[1], tau))
-        starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau))
-        starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau))
+        starts.append((levy[1], tau, "levy"))
+        starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau, "sk"))
+        starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau, "sk-unit"))
         if n >= 2:
             # The next-lower order's poles and one fast pole above the band: the start that
             # reaches "this order is one more than the data need" without a local minimum.
             lower = _sk_solve(x, Fd, min(m, n - 1), n - 1, w)[1]
-            starts.append((np.polymul(lower, [1.0, FAST_POLE * x.max()]), tau))
+            starts.append((np.polymul(lower, [1.0, FAST_POLE * x.max()]), tau, "lower+fast"))
     return starts
+
+
+def _chosen(problem, starts):
+    """The parameter vectors worth refining, from the ``(den, tau, kind)`` starts.
+
+    Without a delay, every start. With one, of each kind the STARTS_PER_KIND whose cost as
+    they stand (one residual evaluation each, no refinement) is lowest across the delay grid;
+    every start when STARTS_PER_KIND is None.
+    """
+    usable = [(problem.initial(den, tau), kind) for den, tau, kind in starts
+              if np.all(np.isfinite(den))]
+    if not problem.delay or STARTS_PER_KIND is None:
+        return [params for params, _ in usable]
+    cost = [float(np.sum(problem.residuals(params) ** 2)) for params, _ in usable]
+    chosen = []
+    for kind in dict.fromkeys(kind for _, kind in usable):
+        of_kind = [i for i, (_, k) in enumerate(usable) if k == kind]
+        chosen += sorted(of_kind, key=cost.__getitem__)[:STARTS_PER_KIND]
+    return [usable[i][0] for i in sorted(chosen)]
+
+
+def _refined(problem, starts, tau_max):
+    """``(params, cost)`` of the refined starts (see :func:`_chosen`). Every start is refined
+    fully without a delay. With one, each chosen start is refined for SCREEN_EVALUATIONS,
+    which tells the minima apart, and the CONTINUED lowest that have not converged go on
+    from there to REFINE_EVALUATIONS."""
+    chosen = _chosen(problem, starts)
+    if not problem.delay or STARTS_PER_KIND is None:
+        return [_refine(problem, params, tau_max, REFINE_EVALUATIONS)[:2] for params in chosen]
+    screened = sorted((_refine(problem, params, tau_max, SCREEN_EVALUATIONS)
+                       for params in chosen), key=lambda result: result[1])
+    continued = [_refine(problem, params, tau_max, REFINE_EVALUATIONS)[:2]
+                 for params, _, done in screened[:CONTINUED] if not done]
+    return [result[:2] for result in screened] + continued
 
 
 def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
@@ -475,10 +531,7 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
     problem = _OutputError(x, F, m, n, w, stable, delay)
     best_cost, best_params = np.inf, None
-    for den0, tau0 in _starts(x, F, m, n, w, delay, tau_max):
-        if not np.all(np.isfinite(den0)):
-            continue
-        params, cost = _refine(problem, problem.initial(den0, tau0), tau_max)
+    for params, cost in _refined(problem, _starts(x, F, m, n, w, delay, tau_max), tau_max):
         if cost < best_cost:
             best_cost, best_params = cost, params
     if best_params is None:
