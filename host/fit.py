@@ -12,11 +12,19 @@ in three stages (docs/method.md has the derivations):
    error approaches the output error; this removes Levy's over-weighting of high frequencies.
 3. **Output-error refinement**: minimise ``sum w_k^2 |F_k - G(j w_k)|^2`` by a trust-region
    Gauss-Newton method (scipy.optimize.least_squares) over the poles and the delay only: for
-   fixed poles and delay the numerator is linear and is solved exactly (variable projection).
-   The denominator is parametrised as a product of ``s^2 + e^p s + e^q`` factors (and one
-   ``s + e^r`` for odd ``n``), which is stable for every parameter value, so the result is
-   stable by construction. Several starts (Levy, SK with the given and with unit weights, and
-   for a delay a grid of delays) are refined; the best is kept.
+   fixed poles and delay the numerator is linear and is solved exactly (variable projection),
+   and the Jacobian of the projected residual is analytic (every parameter scales the basis
+   ``s^i / D(s) e^{-s tau}`` point by point). The denominator is parametrised as a product of
+   ``s^2 + e^p s + e^q`` factors (and one ``s + e^r`` for odd ``n``), which is stable for
+   every parameter value, so the result is stable by construction.
+
+   Starts, of four kinds: Levy, SK with the given weights, SK with unit weights, and for
+   ``n >= 2`` the next-lower order's SK poles with one fast pole. Without a delay each is
+   refined and the best kept. With a delay each kind is built at every delay of a grid over
+   ``[0, pi / omega_max]`` (the data with that delay removed); the cost of every start as it
+   stands (one evaluation, no refinement) picks the five lowest of each kind, those are
+   refined briefly, the two best of them on until they converge, and the best of all is kept.
+   Tests hold this to the best of refining every start on the grid.
 
 With ``stable=False`` the refinement works on the free denominator coefficients instead, and
 the model's ``stable`` flag reports what came out.
@@ -43,6 +51,16 @@ SK_MAX_ITER = 30
 SK_TOL = 1e-12
 #: Delays tried as starts, as a fraction of the largest delay (pi / omega_max).
 DELAY_GRID = np.linspace(0.0, 1.0, 13)
+#: With a delay, of each kind of start (Levy, SK, unit-weight SK, next-lower order with a fast
+#: pole) this many are refined: those of lowest cost before refinement across DELAY_GRID.
+#: None refines every start fully (the exhaustive search, kept to test the choice against).
+STARTS_PER_KIND = 5
+#: A refinement stops after this many residual evaluations per parameter (plus one).
+REFINE_EVALUATIONS = 400
+#: With a delay the chosen starts are first refined for this many evaluations per parameter
+#: (plus one); the CONTINUED lowest-cost of them then go on to REFINE_EVALUATIONS.
+SCREEN_EVALUATIONS = 5
+CONTINUED = 2
 #: Roots on the imaginary axis (after reflection) are moved left by this fraction of
 #: omega_0 so that the log parametrisation exists.
 AXIS_MARGIN = 1e-6
@@ -303,43 +321,114 @@ def _params_to_den(params, n):
 # --- output-error refinement (variable projection) -----------------------------------------
 
 class _OutputError:
-    """Residuals ``w (F - N/D e^{-j x tau'})`` with ``N`` solved linearly for given poles."""
+    """Residuals ``w (F - N/D e^{-j x tau'})`` with ``N`` solved linearly for given poles, and
+    their Jacobian.
+
+    For parameters ``theta`` (pole parameters, then the delay) the residual is the variable
+    projection ``r = b - A A^+ b``: ``A`` stacks the real and imaginary parts of the complex
+    basis ``A_c = vander * w e^{-s tau} / D(s)`` and ``b`` those of ``w F``. Each parameter
+    scales the basis row by row, ``dA_c/dtheta_k = g_k * A_c`` with ``g_k = -dD/dtheta_k / D``
+    for a pole parameter and ``g = -s`` for the delay, so the Jacobian (Golub and Pereyra's
+    full form) is ``-(P_perp dA_k a + (A^+)^T dA_k^T r)``, ``a = A^+ b``. One singular value
+    decomposition per parameter vector serves both (cached on the vector).
+    """
 
     def __init__(self, x, F, m, n, w, stable, delay):
         self.x, self.F, self.m, self.n, self.w = x, F, m, n, w
         self.stable, self.delay = stable, delay
         self.s = 1j * x
         self.vander = np.column_stack([self.s ** i for i in range(m, -1, -1)])
+        # free coefficients: D = s^n + sum_k c_k s^(n-k), dD/dc_k = s^(n-k)
+        self.powers = np.column_stack([self.s ** i for i in range(n - 1, -1, -1)])
+        self.rhs = w * F
+        self.b = np.concatenate([self.rhs.real, self.rhs.imag])
+        self.rcond = np.finfo(float).eps * max(2 * x.size, m + 1)    # numpy lstsq's cut
+        self._key, self._state = None, None
 
     def den(self, params):
         if self.stable:
             return _params_to_den(params[:self.n], self.n)
         return np.concatenate([[1.0], params[:self.n]])
 
-    def num(self, params):
-        basis = self._basis(params)
-        A = np.vstack([basis.real, basis.imag])
-        rhs = self.w * self.F
-        sol, *_ = np.linalg.lstsq(A, np.concatenate([rhs.real, rhs.imag]), rcond=None)
-        return sol
+    def _den_terms(self, params):
+        """``D(s)`` at the points and ``dD/dtheta_k / D`` (a column per pole parameter)."""
+        n, s = self.n, self.s
+        if not self.stable:
+            D = s ** n + self.powers @ params[:n]
+            return D, self.powers / D[:, None]
+        e = np.exp(np.clip(params[:n], -LOG_LIMIT, LOG_LIMIT))
+        k = 2 * (n // 2)
+        sc = s[:, None]
+        inv = 1.0 / (sc * (sc + e[0:k:2]) + e[1:k:2])         # 1 / (s^2 + e^p s + e^q)
+        dlog = np.empty((s.size, n), dtype=complex)
+        dlog[:, 0:k:2] = sc * e[0:k:2] * inv
+        dlog[:, 1:k:2] = e[1:k:2] * inv
+        D = 1.0 / np.prod(inv, axis=1)
+        if n % 2:                                                # and s + e^r
+            D *= s + e[-1]
+            dlog[:, -1] = e[-1] / (s + e[-1])
+        clipped = np.abs(params[:n]) >= LOG_LIMIT                # such a parameter moves nothing
+        if clipped.any():
+            dlog[:, clipped] = 0.0
+        return D, dlog
 
-    def _basis(self, params):
+    def _solve(self, params):
+        """The projection at ``params`` (cached): None where the basis is not finite, else
+        ``(r, rc, U, sv, Vt, A_c, model, dlogD)``: ``r`` the residuals, ``rc`` the same as
+        complex numbers, ``A = U diag(sv) Vt`` truncated as numpy's lstsq truncates, and
+        ``model = A_c a``."""
+        key = params.tobytes()
+        if key == self._key:
+            return self._state
         tau = params[self.n] if self.delay else 0.0
         # A trial step may put a pole on a point's frequency: the basis is then not finite,
         # which residuals() answers with a large cost; numpy need not warn about it.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            factor = self.w * np.exp(-self.s * tau) / np.polyval(self.den(params), self.s)
-            return self.vander * factor[:, None]
+        with np.errstate(all="ignore"):
+            D, dlog = self._den_terms(params)
+            A_c = self.vander * (self.w * np.exp(-self.s * tau) / D)[:, None]
+            finite = np.isfinite(A_c.sum() + dlog.sum())
+        state = None
+        if finite:
+            U, sv, Vt = np.linalg.svd(np.vstack([A_c.real, A_c.imag]), full_matrices=False)
+            keep = sv > self.rcond * sv[0]
+            U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
+            model = A_c @ (Vt.T @ ((U.T @ self.b) / sv))
+            rc = self.rhs - model
+            state = (np.concatenate([rc.real, rc.imag]), rc, U, sv, Vt, A_c, model, dlog)
+        self._key, self._state = key, state
+        return state
+
+    def num(self, params):
+        """The numerator's coefficients (scaled frequency, descending) for ``params``; not
+        finite where the basis is not."""
+        state = self._solve(params)
+        if state is None:
+            return np.full(self.m + 1, np.nan)
+        U, sv, Vt = state[2:5]
+        return Vt.T @ ((U.T @ self.b) / sv)
 
     def residuals(self, params):
-        basis = self._basis(params)
-        A = np.vstack([basis.real, basis.imag])
-        rhs = self.w * self.F
-        b = np.concatenate([rhs.real, rhs.imag])
-        if not np.all(np.isfinite(A)):
-            return b * 1e6                     # a trial step off the map: a large, finite cost
-        sol, *_ = np.linalg.lstsq(A, b, rcond=None)
-        return b - A @ sol
+        state = self._solve(params)
+        if state is None:
+            return self.b * 1e6                # a trial step off the map: a large, finite cost
+        return state[0]
+
+    def jacobian(self, params):
+        """``dr/dtheta``, one column per parameter."""
+        state = self._solve(params)
+        if state is None:
+            return np.zeros((self.b.size, params.size))
+        _, rc, U, sv, Vt, A_c, model, dlog = state
+        g = np.empty((self.s.size, params.size), dtype=complex)   # dA_k = g_k * A_c, row-wise
+        g[:, :self.n] = -dlog
+        if self.delay:
+            g[:, self.n] = -self.s
+        moved = g * model[:, None]                                # dA_k a
+        moved = np.vstack([moved.real, moved.imag])
+        pulled = (A_c.conj().T @ (g.conj() * rc[:, None])).real   # dA_k^T r
+        term1 = moved - U @ (U.T @ moved)                        # P_perp dA_k a
+        term2 = U @ ((Vt @ pulled) / sv[:, None])                # (A^+)^T dA_k^T r
+        return -(term1 + term2)
 
     def bounds(self):
         """Lower and upper bounds of the pole parameters (none for free coefficients)."""
@@ -361,7 +450,9 @@ class _OutputError:
         return np.concatenate([p, [tau]]) if self.delay else p
 
 
-def _refine(problem, x0, tau_max):
+def _refine(problem, x0, tau_max, evaluations):
+    """Output-error refinement from ``x0``: ``(params, cost, done)``, ``done`` when it stopped
+    by its tolerances rather than after ``evaluations`` per parameter (plus one)."""
     import scipy.optimize          # here: parsing an order must not wait for scipy
 
     lower, upper = (np.append(b, 0.0) for b in problem.bounds())
@@ -371,30 +462,67 @@ def _refine(problem, x0, tau_max):
         x0 = x0.copy()
         x0[-1] = np.clip(x0[-1], 0.0, tau_max)
     try:
-        res = scipy.optimize.least_squares(problem.residuals, x0, bounds=(lower, upper),
-                                           method="trf", x_scale="jac", xtol=1e-15,
-                                           ftol=1e-15, gtol=1e-15, max_nfev=400 * (x0.size + 1))
+        res = scipy.optimize.least_squares(problem.residuals, x0, jac=problem.jacobian,
+                                           bounds=(lower, upper), method="trf", x_scale="jac",
+                                           xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                                           max_nfev=evaluations * (x0.size + 1))
     except (ValueError, np.linalg.LinAlgError):
-        return x0, float(np.sum(problem.residuals(x0) ** 2))
-    return res.x, float(np.sum(res.fun ** 2))
+        return x0, float(np.sum(problem.residuals(x0) ** 2)), True
+    return res.x, float(np.sum(res.fun ** 2)), bool(res.status != 0)
 
 
 def _starts(x, F, m, n, w, delay, tau_max):
-    """Initial (den, tau) pairs in scaled frequency."""
+    """Initial ``(den, tau, kind)`` in scaled frequency: at each trial delay (0 alone without
+    a delay) the Levy, SK and unit-weight SK denominators and, for ``n >= 2``, the next-lower
+    order's SK poles with a fast pole; ``kind`` names which of these a start is."""
     taus = DELAY_GRID * tau_max if delay else [0.0]
     starts = []
     for tau in taus:
         Fd = F * np.exp(1j * x * tau)             # the data with the trial delay removed
         levy = _levy_solve(x, Fd, m, n, w)
-        starts.append((levy[1], tau))
-        starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau))
-        starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau))
+        starts.append((levy[1], tau, "levy"))
+        starts.append((_sk_solve(x, Fd, m, n, w, levy)[1], tau, "sk"))
+        starts.append((_sk_solve(x, Fd, m, n, np.ones_like(w))[1], tau, "sk-unit"))
         if n >= 2:
             # The next-lower order's poles and one fast pole above the band: the start that
             # reaches "this order is one more than the data need" without a local minimum.
             lower = _sk_solve(x, Fd, min(m, n - 1), n - 1, w)[1]
-            starts.append((np.polymul(lower, [1.0, FAST_POLE * x.max()]), tau))
+            starts.append((np.polymul(lower, [1.0, FAST_POLE * x.max()]), tau, "lower+fast"))
     return starts
+
+
+def _chosen(problem, starts):
+    """The parameter vectors worth refining, from the ``(den, tau, kind)`` starts.
+
+    Without a delay, every start. With one, of each kind the STARTS_PER_KIND whose cost as
+    they stand (one residual evaluation each, no refinement) is lowest across the delay grid;
+    every start when STARTS_PER_KIND is None.
+    """
+    usable = [(problem.initial(den, tau), kind) for den, tau, kind in starts
+              if np.all(np.isfinite(den))]
+    if not problem.delay or STARTS_PER_KIND is None:
+        return [params for params, _ in usable]
+    cost = [float(np.sum(problem.residuals(params) ** 2)) for params, _ in usable]
+    chosen = []
+    for kind in dict.fromkeys(kind for _, kind in usable):
+        of_kind = [i for i, (_, k) in enumerate(usable) if k == kind]
+        chosen += sorted(of_kind, key=cost.__getitem__)[:STARTS_PER_KIND]
+    return [usable[i][0] for i in sorted(chosen)]
+
+
+def _refined(problem, starts, tau_max):
+    """``(params, cost)`` of the refined starts (see :func:`_chosen`). Every start is refined
+    fully without a delay. With one, each chosen start is refined for SCREEN_EVALUATIONS,
+    which tells the minima apart, and the CONTINUED lowest that have not converged go on
+    from there to REFINE_EVALUATIONS."""
+    chosen = _chosen(problem, starts)
+    if not problem.delay or STARTS_PER_KIND is None:
+        return [_refine(problem, params, tau_max, REFINE_EVALUATIONS)[:2] for params in chosen]
+    screened = sorted((_refine(problem, params, tau_max, SCREEN_EVALUATIONS)
+                       for params in chosen), key=lambda result: result[1])
+    continued = [_refine(problem, params, tau_max, REFINE_EVALUATIONS)[:2]
+                 for params, _, done in screened[:CONTINUED] if not done]
+    return [result[:2] for result in screened] + continued
 
 
 def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
@@ -429,10 +557,7 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
     problem = _OutputError(x, F, m, n, w, stable, delay)
     best_cost, best_params = np.inf, None
-    for den0, tau0 in _starts(x, F, m, n, w, delay, tau_max):
-        if not np.all(np.isfinite(den0)):
-            continue
-        params, cost = _refine(problem, problem.initial(den0, tau0), tau_max)
+    for params, cost in _refined(problem, _starts(x, F, m, n, w, delay, tau_max), tau_max):
         if cost < best_cost:
             best_cost, best_params = cost, params
     if best_params is None:
