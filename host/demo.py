@@ -62,7 +62,7 @@ def run_demo(args) -> int:
             sim_s += session.time_us * 1e-6
         print(f"== {axis}: identify", flush=True)
         try:
-            identified = identify_dir(folder, delay=True, progress=print)
+            identified = identify_dir(folder, progress=print)
         except InputError as exc:                 # a failed sweep: say so, go on
             print(f"== {axis}: not identified: {exc}")
             summary.append((axis, None, str(exc), float("nan"), float("nan")))

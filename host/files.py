@@ -399,7 +399,7 @@ def _models_schema():
         required={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13)},
         optional={"order": S.Seq(("M", S.Int(0, 12)), ("N", S.Int(1, 12))),
                   "delay_s": S.Num(0, MAX_DELAY_S), "stable": S.Bool(), "degenerate": S.Bool(),
-                  "integrator": S.Bool(),
+                  "degenerate_why": S.Str(), "integrator": S.Bool(),
                   "metrics": S.Obj(values=S.Null(S.Num())), "poles": pairs, "zeros": pairs,
                   "dc_gain": S.Null(S.Num())})
     log = S.Obj(optional={"first_regions": S.List(S.List(S.Int(0, 2**63), 2, 2))},
@@ -556,6 +556,7 @@ def model_to_dict(model) -> dict:
         "delay_s": float(model.delay_s),
         "stable": bool(model.stable),
         "degenerate": bool(model.degenerate),
+        **({"degenerate_why": model.degenerate_why} if model.degenerate_why else {}),
         "metrics": {k: _clean(v) if isinstance(v, float) else v
                     for k, v in model.metrics.items()},
         "poles": [[float(p.real), float(p.imag)] for p in model.poles],

@@ -91,8 +91,12 @@ class TfModel:
     delay_fitted : bool
         The delay was a free parameter of the fit (it may have come out as 0).
     degenerate : bool
-        A pole ran to the edge of the allowed range (``POLE_RANGE`` times the band's centre
-        frequency, or as far below): the points do not support this order.
+        The points do not support this order: a pole ran to the edge of the allowed range
+        (``POLE_RANGE`` times the band's centre frequency, or as far below), or (flagged by
+        :func:`heliquad.host.identify.fit_orders`) a zero lies far below the band or all but
+        cancels a pole.
+    degenerate_why : str
+        Which of these, in words ("" when not degenerate).
     integrator : bool
         One of the ``n`` poles is fixed at the origin (order ``M/Ni``): a rate that
         integrates the command, as a free rig's does; ``stable`` then speaks of the others.
@@ -108,6 +112,7 @@ class TfModel:
     delay_fitted: bool = False
     degenerate: bool = False
     integrator: bool = False
+    degenerate_why: str = ""
     metrics: dict = dataclasses.field(default_factory=dict)
 
     @property
@@ -573,7 +578,8 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     if stable:
         lo, hi = problem.bounds()
         at_bound = np.isclose(best_params[:n], lo, atol=1e-3) | np.isclose(best_params[:n], hi, atol=1e-3)
-        model.degenerate = bool(np.any(at_bound))
+        if np.any(at_bound):
+            model.degenerate, model.degenerate_why = True, "a pole reached the edge of the allowed range"
     return model
 
 
@@ -591,7 +597,8 @@ def _fit_integrator(omega_rad_s, F, order, weights, delay, stable) -> TfModel:
                    stable=stable)
     return TfModel(order=(m, n), num=inner.num, den=np.polymul(inner.den, [1.0, 0.0]),
                    delay_s=inner.delay_s, stable=inner.stable, delay_fitted=inner.delay_fitted,
-                   degenerate=inner.degenerate, integrator=True)
+                   degenerate=inner.degenerate, degenerate_why=inner.degenerate_why,
+                   integrator=True)
 
 
 def format_tf(model) -> str:

@@ -82,9 +82,34 @@ def _flag_far_zeros(model: TfModel, omega_min: float) -> None:
     0.12 rad/s under a 3.1 rad/s band, flipping the sign of its DC gain and making the
     integral loop unstable there) marks the model degenerate, like a pole at the range's
     edge: the points do not support it."""
-    zeros = model.zeros
-    if zeros.size and np.any(np.abs(zeros) < omega_min / ZERO_BELOW):
+    far = [z for z in model.zeros if abs(z) < omega_min / ZERO_BELOW]
+    if far:
         model.degenerate = True
+        model.degenerate_why = (f"a zero at {abs(far[0]):.3g} rad/s, more than {ZERO_BELOW:g} "
+                                f"times below the band")
+
+
+#: A pole and a zero whose joint factor ``(s - z) / (s - p)`` stays within this of 1 at every
+#: point (0.04 dB, 0.3 deg) change nothing the points can show: the order is one the data do
+#: not need, and the pair is the fit's way of spending its spare parameters.
+CANCEL = 5e-3
+
+
+def _flag_cancelling(model: TfModel, omega) -> None:
+    """A zero that all but cancels a pole across the band marks the model degenerate: on
+    noise-free points a 2/4 fitted to a 0/2 with delay placed a pair of each at 1322 rad/s,
+    1e-5 apart, and won on AICc by rounding error."""
+    poles = list(model.poles)
+    s = 1j * np.asarray(omega, dtype=float)
+    for z in model.zeros:
+        if not poles:
+            return
+        nearest = min(range(len(poles)), key=lambda i: abs(poles[i] - z))
+        if np.max(np.abs((s - z) / (s - poles[nearest]) - 1.0)) < CANCEL:
+            model.degenerate = True
+            model.degenerate_why = f"a zero cancels a pole at {abs(z):.4g} rad/s"
+            return
+        poles.pop(nearest)
 
 
 def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
@@ -104,6 +129,7 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
                                 stable=stable)
         evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
         _flag_far_zeros(model, float(np.min(points["omega"])))
+        _flag_cancelling(model, points["omega"])
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,

@@ -81,7 +81,7 @@ def _segments(manifest, samples):
         yield entry, t[sel] * 1e-6, r[sel], u[sel], y[sel]
 
 
-def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = False,
+def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
                  estimate: str = "excitation") -> dict:
     manifest, samples, damage = _load(dir_path)
     from .files import write_models_json, write_points_csv    # after the folder is read:

@@ -223,7 +223,8 @@ def _models_html(models, axis, flags):
                      _fmt(100 * k["rms"], ".3g") if k.get("rms") is not None else "-",
                      _fmt(k.get("aicc"), ".4g"), _fmt(k.get("max_mag_err_db"), ".3f"),
                      _fmt(k.get("max_phase_err_deg"), ".2f"),
-                     "yes" if m.get("stable") else "NO", "yes" if m.get("degenerate") else "", tf))
+                     "yes" if m.get("stable") else "NO",
+                     (m.get("degenerate_why") or "yes") if m.get("degenerate") else "", tf))
         if not m.get("stable"):
             flags.append(f"{axis}: model {m['order'][0]}/{m['order'][1]} is unstable")
     if rec is None:
@@ -264,9 +265,10 @@ def _checks_html(models):
 
 
 def _order(model) -> str:
-    """A models.json model's order, ``0/2`` or ``0/2 + delay``."""
+    """A models.json model's order, ``0/2``, ``0/2i`` (a pole at the origin) or ``0/2 + delay``."""
     m, n = model["order"]
-    return f"{m}/{n}" + (" + delay" if model.get("delay_s") else "")
+    return f"{m}/{n}" + ("i" if model.get("integrator") else "") + \
+        (" + delay" if model.get("delay_s") else "")
 
 
 def _validation_html(validation, axis, flags):

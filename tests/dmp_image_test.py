@@ -4,7 +4,6 @@ embedding (CMake HQ_DMP_IMAGE). The firmware here is made up, in the same form a
 package's MPUConstants.py; the real one is not in this repository. One test runs on the real
 package when it is on this machine."""
 
-import glob
 import importlib.metadata
 import pathlib
 import re
@@ -18,7 +17,7 @@ import zlib
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.dmp_image import (DmpFirmware, pack_dmp_file, read_dmp_file,
+from heliquad.host.dmp_image import (pack_dmp_file, read_dmp_file,
                                      read_dmp_firmware, table_entries, unpack_dmp_file)
 from heliquad.host.errors import InputError
 from heliquad.sim.lockstep import FirmwareError, HostFirmware

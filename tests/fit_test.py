@@ -243,6 +243,33 @@ def test_an_order_the_points_do_not_support_is_flagged_degenerate():
     evaluate_model(model, omega, F, 1 / np.abs(F))
     assert model.degenerate
     assert recommend([model])[0] is None
+    assert "edge of the allowed range" in model.degenerate_why
+
+
+def points_of(num, den, delay_s, omega):
+    F = model_response(num, den, delay_s, omega)
+    return {"omega": omega, "F": F, "sigma": 0.01 * np.abs(F)}
+
+
+def test_a_zero_that_cancels_a_pole_marks_the_model_degenerate():
+    # On noise-free 0/2 points with a delay, a 2/4 can put a pole pair and a zero pair 1e-5
+    # apart far above the band and match the points to rounding error; its AICc is then
+    # lower by chance. The pair changes nothing the points show: degenerate, not recommended.
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 12)
+    result = fit_orders(points_of([28.19], [1, 5.13, 22.93], 0.02, omega),
+                        [(0, 2), (2, 4)], delay=True)
+    spare = result.models[1]
+    assert spare.degenerate and spare.degenerate_why.startswith("a zero cancels a pole")
+    assert result.recommended == 0
+
+
+@pytest.mark.parametrize("order", [o for o in paper.MODELS["roll"] if o[0] > 0])
+def test_a_model_whose_zeros_shape_the_band_is_not_flagged(order):
+    # The paper's roll models with zeros, on their own points: the zeros matter in the band.
+    num, den = paper.MODELS["roll"][order]
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 15)
+    result = fit_orders(points_of(num, den, 0.0, omega), [order])
+    assert not result.models[0].degenerate, result.models[0].degenerate_why
 
 
 # --- the refinement's Jacobian and the choice of starts --------------------------------------

@@ -3,7 +3,6 @@ run exactly as PJRC's command-line loader expects for a Teensy 3.5."""
 
 from __future__ import annotations
 
-import os
 import pathlib
 import stat
 import sys

@@ -68,7 +68,7 @@ def test_report_shows_each_points_checks_and_how_the_points_were_estimated(sessi
     recorded = json.loads((session / "models.json").read_text())["replay"]["points"]
     assert replay_errors == [float(f"{100 * p['nrmse']:.3g}") for p in recorded]
     assert "estimated against the logged excitation r" in page
-    assert "through the recommended model (0/2), its periodic steady state" in page
+    assert "through the recommended model (0/2 + delay), its periodic steady state" in page
     assert "Against the simulator&#x27;s truth: the points within" in page
 
 

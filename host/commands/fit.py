@@ -102,8 +102,8 @@ def print_models(result) -> None:
         print(f"{mark}{order:>7} {k['J']:9.3g} {100 * k['rms']:8.3g} {k['aicc']:10.4g} "
               f"{k['max_mag_err_db']:7.3f} {k['max_phase_err_deg']:8.2f} "
               f"{'yes' if m.stable else 'NO':>6}  {format_tf(m)}"
-              + ("  [degenerate: a pole reached the edge of the allowed range; the points "
-                 "do not support this order]" if m.degenerate else ""))
+              + (f"  [degenerate: {m.degenerate_why or 'flagged'}; the points do not "
+                 "support this order]" if m.degenerate else ""))
     print(f"recommended: {result.reason}")
     if result.quality:
         print(f"quality: {result.quality[0]} ({result.quality[1]})")

@@ -14,8 +14,8 @@ __all__ = ["add_parser", "run"]
 HELP = """\
 Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
 paper's table (points_table.csv), fitted models (models.json: the paper's orders for the axis
-and the integrator structures 0/2i and 1/3i, unless --order; with --delay each with a
-fitted delay) and plots (bode.png; responses.png, input dashed, output solid). The
+and the integrator structures 0/2i and 1/3i, unless --order; each with a fitted delay
+unless --no-delay) and plots (bode.png; responses.png, input dashed, output solid). The
 recommended model is the lowest AICc among the stable models of acceptable fit, unless
 another fits visibly better; its quality (good, acceptable, poor) is said and recorded.
 When the loop closes around the excitation (mixer injection), the loop broken there is
@@ -31,9 +31,9 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--order", action="append", metavar="M/N",
                    help="an order to fit, again for more (M/Ni: one pole at the origin); "
                         "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i")
-    p.add_argument("--delay", action=argparse.BooleanOptionalAction, default=False,
-                   help="fit a pure time delay with each model (the loop's hold and the "
-                        "sensor's latency are real delays)")
+    p.add_argument("--delay", action=argparse.BooleanOptionalAction, default=True,
+                   help="fit a pure time delay with each model (default: the loop's hold "
+                        "and the sensor's latency are real delays); --no-delay fits none")
     p.add_argument("--estimate", choices=("excitation", "input"), default="excitation",
                    help="excitation (default): each point as (Y/R)/(U/R), output and input "
                         "against the logged excitation R, unbiased when the loop is closed "
