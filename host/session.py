@@ -26,7 +26,7 @@ from ..sim.dialect import dialect
 from ..sim.faults import check_faults, imu_fault_codes, link_close_frame
 from ..sim.lockstep import FirmwareError, SimLink, actuators, start_firmware
 from ..sim.sil import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
-from .errors import NO_ROOM, DiskFull
+from .errors import NO_ROOM, DiskFull, InputError
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 from .tlog import TlogWriter, create_log
 
@@ -37,6 +37,10 @@ __all__ = ["Session", "SilSession", "PortSession", "TELEMETRY_BATCH"]
 TELEMETRY_BATCH = 50
 #: How long to wait for a loop's telemetry (its HQ_SYSID_SAMPLE) after its reply.
 TELEMETRY_TIMEOUT_S = 2.0
+#: A sweep over a port waits this long (seconds) for the board's first sample, and this long
+#: for the pilot to arm it, before it gives up.
+FIRST_SAMPLE_WAIT_S = 5.0
+ARM_WAIT_S = 120.0
 #: While a batch runs, the telemetry link is read this often (the firmware buffers 64 KiB).
 ENGINE_POLL_S = 0.002
 
@@ -51,8 +55,9 @@ class Session(Protocol):
     @property
     def time_us(self) -> int: ...
 
-    def hover(self) -> None:
-        """Bring the vehicle to a hover on its rig (on a board, the pilot does)."""
+    def hover(self, progress=print) -> None:
+        """Bring the vehicle to a hover on its rig (on a board, the pilot does, and the
+        session waits until the board says it is armed)."""
 
     def advance(self, handle: Callable) -> None:
         """Let time pass; call ``handle`` with each message of interest that arrives."""
@@ -238,7 +243,7 @@ class SilSession:
             self.kind = self.reply.sensor_kind
         self.link.check(result.status, result.failed_frame, result.last)
 
-    def hover(self) -> None:
+    def hover(self, progress=print) -> None:
         """Boot, arm and hover for the settling time."""
         settle = int(round(self.cfg.settle_s * self.cfg.loop_hz))
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
@@ -279,8 +284,26 @@ class PortSession:
     def time_us(self) -> int:
         return int((time.monotonic() - self.t0) * 1e6)
 
-    def hover(self) -> None:
-        """On a board the pilot arms and hovers; nothing to do."""
+    def hover(self, progress=print) -> None:
+        """On a board the pilot arms and hovers: wait until the board's samples say it is
+        armed (an excitation sent before would be refused), saying so once if it is not."""
+        start, seen, said = time.monotonic(), False, False
+        while True:
+            for m in self.advance():
+                if m.get_type() == "HQ_SYSID_SAMPLE":
+                    if m.armed:
+                        return
+                    seen = True
+            waited = time.monotonic() - start
+            if not seen and waited > FIRST_SAMPLE_WAIT_S:
+                raise InputError(f"no samples from the board in {FIRST_SAMPLE_WAIT_S:g} s: is "
+                                 f"{self.tel.serial.port} its telemetry port, and is it running?")
+            if seen and not said:
+                progress("waiting for the board to be armed (the pilot's arm switch) ...")
+                said = True
+            if waited > ARM_WAIT_S:
+                raise InputError(f"the board was not armed within {ARM_WAIT_S:g} s; arm it, "
+                                 "then run the sweep again")
 
     def advance(self, handle=None) -> list:
         """Wait one poll period, send the heartbeat when due, and pass what arrived to

@@ -175,7 +175,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     current = None
     try:
         _write_manifest(out_dir, manifest)
-        session.hover()
+        session.hover(progress)
         last = None                              # (amplitude, rate per unit) just measured
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
             current = f

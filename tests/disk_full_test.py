@@ -228,7 +228,7 @@ def test_a_sweep_that_a_full_disk_stops_keeps_its_manifest_and_stops_the_excitat
         tel = Link()
         time_us = 0
 
-        def hover(self):
+        def hover(self, progress=None):
             pass
 
         def advance(self, handle=None):
