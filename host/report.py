@@ -106,7 +106,7 @@ def _axis_section(folder):
 
 def _sweep_html(manifest, axis, flags):
     """The session's source and the frequencies tried; flags those not measured and an
-    early end."""
+    early end (not those superseded: measured again with a better amplitude)."""
     src = manifest.get("source", {})
     text = (f"<p>Injection: <b>{html.escape(str(manifest.get('inject')))}</b>; source: "
             f"{html.escape(json.dumps(src))}; firmware {html.escape(str(manifest.get('firmware')))}; "
@@ -117,6 +117,8 @@ def _sweep_html(manifest, axis, flags):
     text += "<h3>Frequencies</h3>" + _table(
         ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,))
     for f in manifest.get("frequencies", []):
+        if f["status"].startswith("superseded"):
+            continue             # the sequential design measured it again: nothing is wrong
         if f["status"] != "ok":
             flags.append(f"{axis}: {f['requested_hz']:.3g} Hz {f['status']}")
         elif saturation_text(f):

@@ -1,5 +1,6 @@
 """The HTML report (heliquad report) and the demo (heliquad demo)."""
 
+import shutil
 import re
 import subprocess
 import sys
@@ -35,7 +36,6 @@ def test_report_holds_every_table_and_plot(session):
 
 def test_report_flags_low_coherence_and_aborts(session, tmp_path):
     import json
-    import shutil
 
     copy = tmp_path / "copy"
     shutil.copytree(session, copy)
@@ -48,6 +48,24 @@ def test_report_flags_low_coherence_and_aborts(session, tmp_path):
     assert heliquad("report", copy).returncode == 0
     page = (copy / "report.html").read_text()
     assert "low coherence 0.31" in page and "sweep stopped: interrupted" in page
+
+
+def test_a_superseded_frequency_is_listed_but_not_flagged(session, tmp_path):
+    # The sequential design measures a frequency again when its first amplitude was wrong;
+    # the first record stays in the table with its reason, and is not a quality problem.
+    import json
+
+    copy = tmp_path / "superseded"
+    shutil.copytree(session, copy)
+    manifest = json.loads((copy / "manifest.json").read_text())
+    first = dict(manifest["frequencies"][0], status="superseded: amplitude 0.1 swung the rig "
+                 "far less than the target; measured again at 0.4")
+    manifest["frequencies"].insert(0, first)
+    (copy / "manifest.json").write_text(json.dumps(manifest))
+    assert heliquad("report", copy).returncode == 0
+    page = (copy / "report.html").read_text()
+    flags = page[page.index("Quality flags"):page.index("<h2", page.index("Quality flags"))]
+    assert "superseded: amplitude 0.1" in page and "superseded" not in flags
 
 
 def test_report_shows_each_points_checks_and_how_the_points_were_estimated(session):
@@ -82,7 +100,6 @@ def test_identify_draws_the_coherence_panel_under_the_bode_plot(session):
 def edited_copy(session, tmp_path, edit):
     """A copy of the session whose models.json ``edit`` changes in place."""
     import json
-    import shutil
 
     copy = tmp_path / "copy"
     shutil.copytree(session, copy)
