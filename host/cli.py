@@ -10,6 +10,7 @@ recorded.
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 
@@ -21,10 +22,19 @@ __all__ = ["main"]
 EXIT_INPUT = 2
 #: A run that stopped early and kept its records (a full disk; a sweep's abort).
 EXIT_STOPPED = 1
+#: What argparse takes for a negative number rather than an option (no option of heliquad's
+#: looks like one).
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error and exit code 2."""
+    """argparse with a one-line error and exit code 2, and negative numbers in exponent
+    form (``--den 1 -1e5``) read as values: argparse's own test knows only ``-1`` and
+    ``-1.5`` and took ``-1e5`` for an unknown option."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_NUMBER
 
     def error(self, message):
         sys.stderr.write(f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -572,6 +572,8 @@ CASES = [
     case(f"{SIL} --num 1 --den 1 1 1 1 1 1 1 1 1 1 1 1 1 1 --out o", "degree 1 to 12"),
     case(f"{SIL} --num 1 --den 1e-300 1 --out o", "beyond"),
     case(f"{SIL} --num 1 --den 1 1e300 --out o", "beyond"),
+    # a negative number in exponent form is a value, not an unknown option
+    case(f"{SIL} --num 1 --den 1 -1e5 --out o", "a pole at 1e+05 rad/s is faster"),
     case(f"{SIL} --num 1e200 --den 1e-200 1 --out o", "beyond"),
     case(f"{SIL} --num 1e300 --den 1 5 --out o", "beyond"),
     case(f"{SIL} --num 1e10 --den 1 5 --out o", "gain"),

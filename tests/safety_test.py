@@ -56,6 +56,30 @@ def test_an_excitation_is_refused_while_disarmed_and_says_why(rig):
                for m in samples)
 
 
+def test_an_unknown_excitation_action_is_refused_and_a_running_excitation_goes_on(rig):
+    # An HQ_EXCITATION whose action is none of STOP, START, FINISH (a newer host, a bit
+    # flip) is refused with its reason; it neither starts nor stops anything.
+    from heliquad.host.link import TARGET_SYSTEM
+
+    rig.hover()
+    rig.ping()
+    _, status = rig.excitation_answer(freq_hz=2.0, cycles=20)
+    assert status.accepted
+    rig.tel.mav.hq_excitation_send(TARGET_SYSTEM, rig.tel.target, 7, MAV.HQ_AXIS_PITCH,
+                                   MAV.HQ_INJECTION_MIXER, 3.0, 0.5, 5, 1)
+    t, answer = rig.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS")
+    assert answer.accepted == 0 and answer.reason == reason("BAD_ACTION")
+    assert answer.state != MAV.HQ_EXCITATION_STATE_IDLE and answer.axis == MAV.HQ_AXIS_ROLL
+    assert "excitation refused: unknown action" in texts(rig, t)
+    rig.ping()
+    rig.step(20)
+    samples = [m for _, m in rig.of_type("HQ_SYSID_SAMPLE", t)]
+    assert samples and all(m.exc_state != MAV.HQ_EXCITATION_STATE_IDLE
+                           and m.axis == MAV.HQ_AXIS_ROLL for m in samples)
+    _, fw_status = rig.until(lambda m: m.get_type() == "HQ_FW_STATUS")
+    assert fw_status.exc_refused == 1 and fw_status.last_reason == reason("BAD_ACTION")
+
+
 @pytest.mark.parametrize("change, why", [
     ({"amplitude": 1e30}, "AMPLITUDE"),
     ({"amplitude": float("nan")}, "AMPLITUDE"),

@@ -198,7 +198,7 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
         supervisor_.finish_excitation();             // the answer carries the new length
         last_exc_accepted_ = true;
         why = Reason::None;
-    } else {
+    } else if (ex.action == HQ_EXCITATION_START) {
         ExcitationConfig cfg;
         cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
         cfg.injection = static_cast<Injection>(ex.injection);
@@ -208,6 +208,12 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
         cfg.fade_cycles = ex.fade_cycles;
         why = supervisor_.start_excitation(cfg, now_us);
         last_exc_accepted_ = why == Reason::None;
+    } else {
+        // An action this firmware does not know: refused, and nothing else changes (a
+        // running excitation goes on; only STOP stops one).
+        why = Reason::BadAction;
+        supervisor_.refuse_excitation(why);
+        last_exc_accepted_ = false;
     }
     send_excitation_status(why);
 }

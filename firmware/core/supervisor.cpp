@@ -53,6 +53,7 @@ const char* reason_text(Reason reason) {
         case Reason::ImuRecovered: return "IMU recovered";
         case Reason::ImuInitFailed: return "IMU re-initialisation failed";
         case Reason::BadMode: return "mode refused: unknown mode";
+        case Reason::BadAction: return "excitation refused: unknown action";
     }
     return "unknown reason";
 }
@@ -295,11 +296,13 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us) 
 Reason Supervisor::start_excitation(const ExcitationConfig& config, uint64_t now_us) {
     Reason r = check_excitation(config, now_us);
     if (r == Reason::None && !excitation_.start(config, loop_rate_hz_)) r = Reason::Frequency;
-    if (r != Reason::None) {
-        ++counters_.exc_refused;
-        emit(r, Severity::Warning);
-    }
+    if (r != Reason::None) refuse_excitation(r);
     return r;
+}
+
+void Supervisor::refuse_excitation(Reason why) {
+    ++counters_.exc_refused;
+    emit(why, Severity::Warning);
 }
 
 bool Supervisor::stop_excitation() {

@@ -69,6 +69,7 @@ enum class Reason : uint8_t {
     ImuRecovered = HQ_REASON_IMU_RECOVERED,
     ImuInitFailed = HQ_REASON_IMU_INIT_FAILED,
     BadMode = HQ_REASON_BAD_MODE,
+    BadAction = HQ_REASON_BAD_ACTION,
 };
 constexpr uint8_t kReasonCount = HQ_REASON_ENUM_END;
 
@@ -157,6 +158,9 @@ public:
     void disarm_command();
     Reason set_mode(uint32_t custom_mode);
     Reason start_excitation(const ExcitationConfig& config, uint64_t now_us);
+    // Counts and announces a refused excitation request (for a refusal decided outside the
+    // Supervisor's checks, such as an unknown HQ_EXCITATION action).
+    void refuse_excitation(Reason why);
     // Stops a running excitation (StopCommand); false if none was running.
     bool stop_excitation();
     // Ends a running excitation in order (Excitation::finish; it ends as Finished); false if
