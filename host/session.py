@@ -106,10 +106,16 @@ class _TelemetryLog:
         return out
 
     def close(self) -> None:
+        """Log what is left on the link (packets of a loop cut short get the last loop's
+        time, not lost), then close the log."""
         try:
-            self._file.close()
+            if not self.tap.write_failed:
+                self.tap.drain()
         finally:
-            os.close(self.fd)
+            try:
+                self._file.close()
+            finally:
+                os.close(self.fd)
 
     def read_until(self, time_us: int) -> list:
         """Read until the loop at ``time_us`` has all its telemetry."""

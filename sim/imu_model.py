@@ -22,7 +22,7 @@ from .params import ImuParams
 
 __all__ = ["ImuModel"]
 
-UG_TO_M_S2 = 9.80665e-6
+UG_TO_M_S2 = _simcore.GRAVITY_M_S2 * 1e-6
 
 
 class ImuModel:

@@ -43,7 +43,7 @@ from .params import VehicleParams, load_params
 
 __all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2", "fastest_rate_rad_s", "check_step"]
 
-GRAVITY_M_S2 = 9.80665
+GRAVITY_M_S2 = _simcore.GRAVITY_M_S2       # standard gravity, the simulator core's
 #: One rig per axis (the dialect's HQ_AXIS names), or free flight.
 RIGS = (*AXES, "free")
 #: RK4 steps per loop period (the lockstep engine's).

@@ -155,3 +155,32 @@ def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
         stamp(t) + p for t, p in zip((5000, 5000, 10000, 10000), loops))
     assert [m.get_type() for _, m in read_tlog(str(path), mav)] == [
         "ATTITUDE", "HQ_SYSID_SAMPLE", "ATTITUDE", "HQ_SYSID_SAMPLE"]
+
+
+def test_the_tap_drained_at_the_end_keeps_a_loop_cut_short(tmp_path):
+    # The firmware said why it stopped (STATUSTEXT) and died before the loop's sample: at the
+    # session's end the tap logs it with the last loop's time instead of dropping it.
+    from heliquad.sim.mavframe import Codec
+    from heliquad.sim.dialect import dialect
+    from heliquad.host.tlog import read_tlog
+
+    mav = dialect()
+    codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
+    text = codec.encode(mav.MAVLINK_MSG_ID_STATUSTEXT, {
+        "severity": 2, "text": b"motors off: IMU stale", "id": 0, "chunk_seq": 0})
+    r, w = os.pipe()
+    os.set_blocking(r, False)
+    path = tmp_path / "tap.tlog"
+    with open(path, "wb") as fh:
+        tap = _simcore.TelemetryTap(r, fh.fileno(), [mav.MAVLINK_MSG_ID_STATUSTEXT])
+        os.write(w, _sysid(codec, mav, 5000, 1) + text)
+        assert len(tap.read()) == 1                  # handed over; logged with its loop's time
+        assert len(list(read_tlog(str(path), mav))) == 1         # which is not known yet
+        os.write(w, text)
+        got = tap.drain()
+    os.close(r)
+    os.close(w)
+    assert len(got) == 1 and tap.packets == 3
+    logged = list(read_tlog(str(path), mav))
+    assert [m.get_type() for _, m in logged] == ["HQ_SYSID_SAMPLE", "STATUSTEXT", "STATUSTEXT"]
+    assert [t for t, _ in logged] == [5000, 5000, 5000]

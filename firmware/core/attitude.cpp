@@ -44,7 +44,6 @@ Quat dmp_to_frd(const Quat& q) { return normalise(Quat{q.w, q.x, -q.y, -q.z}); }
 Vec3 chip_to_frd(const Vec3& v) { return Vec3{v.x, -v.y, -v.z}; }
 
 namespace {
-constexpr float kStandardGravity = 9.80665f;
 // 1 at x = 0, falling linearly to 0 at x = limit (and 0 beyond); a limit <= 0 disables it.
 float ramp_down(float x, float limit) {
     if (!(limit > 0.0f)) return 1.0f;
@@ -63,7 +62,7 @@ void ComplementaryFilter::update(const Vec3& gyro, const Vec3& accel, float dt_s
         const Vec3 de{2.0f * (q.x * q.z - q.w * q.y), 2.0f * (q.y * q.z + q.w * q.x),
                       q.w * q.w - q.x * q.x - q.y * q.y + q.z * q.z};
         const float rate = std::sqrt(gyro.x * gyro.x + gyro.y * gyro.y + gyro.z * gyro.z);
-        float weight = ramp_down(std::fabs(an / kStandardGravity - 1.0f), config_.accel_band_g) *
+        float weight = ramp_down(std::fabs(an / kGravity - 1.0f), config_.accel_band_g) *
                        ramp_down(rate, config_.rate_limit_rad_s);
         if (in_flight) {
             const float cos_tilt = de.z > 1.0f ? 1.0f : (de.z < -1.0f ? -1.0f : de.z);

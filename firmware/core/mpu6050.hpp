@@ -76,7 +76,6 @@ constexpr uint16_t kDmpSettleBytes = 3;   // MotionApps waits for more than 2 FI
 // and accel high halves use the same scales (docs/mpu6050.md). The one definition: the
 // simulator's packet encoder (sim/native/fifo_packets.*) and its Python names use these.
 constexpr double kGyroLsbPerDegS = 16.4, kAccelLsbPerG = 16384.0, kQuatScale = 1073741824.0;
-constexpr float kGravity = 9.80665f;
 
 // One entry of a MotionApps DMP table (dmpConfig, dmpUpdates): bank, offset, length, then
 // `length` data bytes for DMP memory. A length of 0 marks a special command, whose code is the

@@ -17,6 +17,9 @@ enum class Axis : uint8_t { Roll = HQ_AXIS_ROLL, Pitch = HQ_AXIS_PITCH, Yaw = HQ
 constexpr int kAxes = HQ_AXIS_ENUM_END;
 constexpr int kAngleAxes = 2;          // roll and pitch: yaw has no angle loop
 
+// Standard gravity, m/s^2: the accelerometer's g and the attitude filter's 1 g.
+constexpr float kGravity = 9.80665f;
+
 // Flight mode (HQ_MODE): which loops run. Independent of being armed and of an excitation.
 enum class FlightMode : uint8_t { Angle = HQ_MODE_ANGLE, Rate = HQ_MODE_RATE };
 

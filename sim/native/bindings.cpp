@@ -57,6 +57,16 @@ std::array<float, kMotors> motors(const std::vector<double>& m) {
     return f;
 }
 
+// The tap's messages as [(msgid, payload bytes)].
+py::list tapped_list(const std::vector<TappedMessage>& got) {
+    py::list out;
+    for (const auto& m : got) {
+        out.append(py::make_tuple(
+            m.msgid, py::bytes(reinterpret_cast<const char*>(m.payload.data()), m.payload.size())));
+    }
+    return out;
+}
+
 py::array_t<double> to_array(const State& s) {
     py::array_t<double> a(kStates);
     std::memcpy(a.mutable_data(), s.data(), sizeof(double) * kStates);
@@ -77,6 +87,7 @@ PYBIND11_MODULE(_simcore, m) {
     m.doc() = "heliquad simulator core: plants, MPU6050 FIFO packets, sim link, lockstep engine";
     // The chip's scales and packet sizes (the firmware driver's) and the sensor frame's FIFO
     // capacity and RC channels (the dialect's), for Python.
+    m.attr("GRAVITY_M_S2") = kGravity;
     m.attr("GYRO_LSB_PER_DEG_S") = kGyroLsbPerDegS;
     m.attr("ACCEL_LSB_PER_G") = kAccelLsbPerG;
     m.attr("QUAT_SCALE") = kQuatScale;
@@ -231,14 +242,17 @@ PYBIND11_MODULE(_simcore, m) {
                 py::gil_scoped_release release;
                 got = t.read();
             }
-            py::list out;
-            for (const auto& m : got) {
-                out.append(py::make_tuple(m.msgid, py::bytes(reinterpret_cast<const char*>(
-                                                                 m.payload.data()),
-                                                             m.payload.size())));
-            }
-            return out;
+            return tapped_list(got);
         }, "Read, frame and log what has arrived; [(msgid, payload)] of the wanted messages.")
+        .def("drain", [](TelemetryTap& t) {
+            std::vector<TappedMessage> got;
+            {
+                py::gil_scoped_release release;
+                got = t.drain();
+            }
+            return tapped_list(got);
+        }, "read(), then log the packets still waiting for a loop's sample with the last "
+           "loop's time; for the end of a session.")
         .def_property_readonly("last_time_us", &TelemetryTap::last_time_us)
         .def_property_readonly("packets", &TelemetryTap::packets)
         .def_property_readonly("write_failed", &TelemetryTap::write_failed)

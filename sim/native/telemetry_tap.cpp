@@ -73,6 +73,20 @@ void TelemetryTap::accept(uint32_t msgid, const uint8_t* packet, size_t total,
     // trimmed trailing zero bytes, which read as zero).
     uint64_t t = 0;
     for (size_t b = 0; b < 8 && b < len; ++b) t |= static_cast<uint64_t>(payload[b]) << (8 * b);
+    stamp_pending(t);
+    last_time_us_ = static_cast<int64_t>(t);
+}
+
+std::vector<TappedMessage> TelemetryTap::drain() {
+    std::vector<TappedMessage> out = read();
+    if (!pending_lengths_.empty()) {
+        stamp_pending(last_time_us_ < 0 ? 0 : static_cast<uint64_t>(last_time_us_));
+        flush_log();
+    }
+    return out;
+}
+
+void TelemetryTap::stamp_pending(uint64_t t) {
     size_t at = 0;
     for (const size_t plen : pending_lengths_) {
         for (int b = 7; b >= 0; --b) log_.push_back(static_cast<uint8_t>(t >> (8 * b)));
@@ -83,7 +97,6 @@ void TelemetryTap::accept(uint32_t msgid, const uint8_t* packet, size_t total,
     }
     pending_.clear();
     pending_lengths_.clear();
-    last_time_us_ = static_cast<int64_t>(t);
 }
 
 void TelemetryTap::flush_log() {

@@ -5,7 +5,8 @@
 //
 // Stamping: each loop's telemetry ends with its HQ_SYSID_SAMPLE (docs/link-contract.md), so a
 // packet gets the time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Packets
-// after the last one wait for the next.
+// after the last one wait for the next; at the end of a session drain() logs them with the
+// last loop's time, so nothing the firmware sent is lost.
 #pragma once
 
 #include <cstdint>
@@ -28,6 +29,10 @@ public:
 
     // Everything that has arrived, logged; the wanted messages among it. Never blocks.
     std::vector<TappedMessage> read();
+    // read(), then the packets still waiting for their loop's sample (a loop cut short: the
+    // firmware died, or the session ended) logged with the last loop's time (0 before the
+    // first). For the end of a session.
+    std::vector<TappedMessage> drain();
     int64_t last_time_us() const { return last_time_us_; }   // -1 before the first sample
     uint64_t packets() const { return packets_; }
     // A write to the .tlog failed (then nothing more is logged; the file ends with the last
@@ -39,6 +44,7 @@ private:
     void accept(uint32_t msgid, const uint8_t* packet, size_t total,
                 std::vector<TappedMessage>* out);
     void flush_log();
+    void stamp_pending(uint64_t t);
 
     int tel_fd_, tlog_fd_;
     std::vector<uint32_t> wanted_;
