@@ -44,6 +44,7 @@ def add_parser(sub, fmt) -> None:
 
 def run(args) -> int:
     from ..files import check_output, read_run_csv, write_points_csv
+    from ..report import LOW_COHERENCE
 
     check_output(args.out, "--out")
     freqs = args.freq_hz or [None]
@@ -69,7 +70,7 @@ def run(args) -> int:
         origin[key] = path
         points.append(point)
         print(f"[{i}/{len(args.runs)}] {path}: {_describe_point(point)}", flush=True)
-        if point.coherence < 0.6:
+        if point.coherence < LOW_COHERENCE:
             print(f"warning: {path}: low coherence {point.coherence:.2f}; the point is "
                   "unreliable", file=sys.stderr)
     write_points_csv(args.out, points)
