@@ -3,9 +3,9 @@
 For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's test rig
 (the paper's vehicle, docs/paper.md, and its IMU with noise, bias and latency); a sweep
 over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
-with the paper's orders and a fitted delay (the loop's hold and the DMP's latency are real
-delays); closed-loop validation with the paper's gains; and one HTML report for all three
-axes. It prints each axis's recommended model against the simulator's own truth, with the
+with the paper's orders and two integrator structures, each with a fitted delay (the loop's
+hold and the DMP's latency are real delays); closed-loop validation with the paper's gains
+in the firmware's discrete loops; and one HTML report for all three axes. It prints each axis's recommended model against the simulator's own truth, with the
 worst error across the band.
 """
 

@@ -95,12 +95,21 @@ def _flag_far_zeros(model: TfModel, omega_min: float) -> None:
 CANCEL = 5e-3
 
 
-def _flag_cancelling(model: TfModel, omega) -> None:
-    """A zero that all but cancels a pole across the band marks the model degenerate: on
-    noise-free points a 2/4 fitted to a 0/2 with delay placed a pair of each at 1322 rad/s,
-    1e-5 apart, and won on AICc by rounding error."""
+def _flag_spare_zeros(model: TfModel, omega) -> None:
+    """A zero that changes nothing the points show marks the model degenerate: one so far
+    above the band that its factor ``1 - s/z`` stays within CANCEL of 1 (the yaw demo's 2/3
+    put one at 2.4e7 rad/s, a numerator coefficient of 1e-5: a 1/3 in disguise), or one that
+    all but cancels a pole across the band (on noise-free points a 2/4 fitted to a 0/2 with
+    delay placed a pair of each at 1322 rad/s, 1e-5 apart, and won on AICc by rounding)."""
+    omega = np.asarray(omega, dtype=float)
+    far = [z for z in model.zeros if np.max(omega) < CANCEL * abs(z)]
+    if far:
+        model.degenerate = True
+        model.degenerate_why = (f"a zero at {abs(far[0]):.3g} rad/s, so far above the band "
+                                "that it changes nothing there")
+        return
     poles = list(model.poles)
-    s = 1j * np.asarray(omega, dtype=float)
+    s = 1j * omega
     for z in model.zeros:
         if not poles:
             return
@@ -129,7 +138,7 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
                                 stable=stable)
         evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
         _flag_far_zeros(model, float(np.min(points["omega"])))
-        _flag_cancelling(model, points["omega"])
+        _flag_spare_zeros(model, points["omega"])
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,
