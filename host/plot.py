@@ -386,10 +386,12 @@ def _mark_margins(ax_mag, ax_ph, w, phase, lp, colour, n):
                 lw=1, ls=":")
         ax.plot([at], [value], "o", ms=6, color=colour, mfc=colour if in_band else "none",
                 gid="margin" if in_band else "margin not validated", label="_margin")
+        right = math.log(at / w[0]) > 0.7 * math.log(w[-1] / w[0])    # label to its left
         ax.annotate(text + ("" if in_band else " not validated"), (at, value),
-                    xytext=(4, 3 + 8 * n), textcoords="offset points", fontsize=6,
-                    color=colour, alpha=1 if in_band else NOT_VALIDATED_ALPHA, clip_on=True,
-                    in_layout=False)
+                    xytext=(-4 if right else 4, 3 + 8 * n), textcoords="offset points",
+                    ha="right" if right else "left", fontsize=6, color=colour,
+                    alpha=1 if in_band else NOT_VALIDATED_ALPHA, clip_on=True, in_layout=False,
+                    bbox={"fc": "white", "ec": "none", "alpha": 0.7, "pad": 0.5})
     return levels
 
 
