@@ -37,7 +37,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run_demo(args) -> int:
-    from .files import new_output_folder
+    from .files import new_output_folder, read_models_json
 
     new_output_folder(args.out, "the demo")                 # before the slow imports below
     from ..sim.sil import SilConfig
@@ -45,7 +45,7 @@ def run_demo(args) -> int:
     from .identify_session import identify_dir
     from .report import write_report
     from .sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
-    from .validate import load_gains, save_validation, validate_model
+    from .validate import load_gains, save_validation, sweep_inputs, validate_model
 
     t0, sim_s, summary = time.monotonic(), 0.0, []
     for axis in args.axes:
@@ -70,9 +70,10 @@ def run_demo(args) -> int:
         result = identified["result"]
         model = result.models[result.recommended] if result.recommended is not None else None
         if model is not None:
-            gains = load_gains(axis)
-            report, traces = validate_model(model.num, model.den, model.delay_s, axis, gains,
-                                            "moderate", args.seed)
+            models_path = os.path.join(folder, "models.json")
+            report, traces = validate_model(
+                model.num, model.den, model.delay_s, axis, load_gains(axis), "moderate",
+                args.seed, **sweep_inputs(models_path, read_models_json(models_path)))
             save_validation(folder, report, traces)
         summary.append(_compare(axis, model, result.reason, identified["truth"]))
     report_path = write_report(args.out)

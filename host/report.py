@@ -5,10 +5,13 @@ DIR is a sweep folder (manifest.json, after ``heliquad identify`` and optionally
 table (frequencies, the paper-style points table with each point's coherences with the
 excitation, the recommended model's replay error and, for a simulated sweep, its error
 against the simulator's truth; models and their metrics, how the points were estimated, the
-replay and the truth in a line each; validation), every plot (embedded as PNG data, so the
-file stands alone), and the quality flags: low-coherence points, points further than 3 sigma
-from the simulator's truth, unstable models, no recommended model, a damaged log, frequencies
-not measured, not used or saturated, an unstable cascade.
+replay and the truth in a line each; validation: each loop's margins, the model's beside those
+measured through the excitation and the simulator's truth's), every plot (embedded as PNG
+data, so the file stands alone), and the quality flags: low-coherence points, points further
+than 3 sigma from the simulator's truth, unstable models, no recommended model, a damaged
+log, frequencies not measured, not used or saturated, an unstable cascade, margins read
+outside the identified band (not validated), and margins read inside it that the simulator's
+truth puts more than 1 dB or 3 deg away.
 """
 
 from __future__ import annotations
@@ -273,32 +276,130 @@ def _order(model) -> str:
         (" + delay" if model.get("delay_s") else "")
 
 
+#: The loops of validation.json and where each is broken, for the report.
+LOOPS = {"rate": "rate loop: broken at the plant input, the angle loop open",
+         "angle": "angle loop: broken at the rate setpoint, the rate loop closed",
+         "input": "input loop: broken at the plant input, both loops closed"}
+#: The model's margin and the simulator's truth's, in band, further apart than these are
+#: flagged (dB, deg).
+TRUTH_MARGIN_DB, TRUTH_MARGIN_DEG = 1.0, 3.0
+#: A reported margin of a loop: (its name, its key, the key of its crossover, the list of
+#: crossovers it is read at, its unit and format).
+MARGINS = (("gain margin", "gain_margin_db", "phase_crossover_rad_s", "phase_crossovers",
+            "dB", ".1f"),
+           ("phase margin", "phase_margin_deg", "gain_crossover_rad_s", "gain_crossovers",
+            "deg", ".1f"))
+
+
 def _validation_html(validation, axis, flags):
-    """The loops' margins, then the time responses, or where the cascade goes unstable
-    (flagged)."""
-    rows = [(name, _fmt(lp.get("gain_margin_db"), ".3g"), _fmt(lp.get("phase_margin_deg"), ".3g"),
-             _fmt(lp.get("gain_crossover_rad_s"), ".3g"), "stable" if lp["closed_loop_stable"] else "UNSTABLE")
-            for name, lp in validation["loops"].items()]
-    text = "<h3>Closed-loop validation</h3>" + _table(
-        ["loop", "gain margin (dB)", "phase margin (deg)", "crossover (rad/s)", "closed loop"], rows)
+    """Each loop's margins (the model's, measured through the excitation, the simulator's
+    truth) with what is not validated or not measured, then the time responses, or where
+    the cascade goes unstable (flagged); flags margins not validated and, in band, margins
+    the truth does not confirm."""
+    band = validation.get("band_rad_s")
+    text = "<h3>Closed-loop validation</h3>"
+    if band:
+        text += (f"<p>The model was identified over {band[0]:.3g}-{band[1]:.3g} rad/s; a margin "
+                 "whose crossover lies outside that band is not validated: the model has no "
+                 "data there.</p>")
+    text += "".join(_loop_html(name, lp, validation) for name, lp in validation["loops"].items())
+    _margin_flags(validation, axis, flags)
     if validation["stable"]:
-        st, sn = validation["step"], validation["sine"]
-        tb = validation.get("turbulence", {})
-        return text + (f"<p>Step {st['size']:g} {html.escape(st['unit'])}: rise "
-                       f"{_fmt(st.get('rise_time_s'), '.2f')} s, overshoot "
-                       f"{_fmt(st.get('overshoot_pct'), '.1f')} %, settling "
-                       f"{_fmt(st.get('settling_time_s'), '.2f')} s. Sine {sn['freq_hz']:g} Hz: "
-                       f"tracking RMS {_fmt(sn.get('tracking_rms'), '.3g')} "
-                       f"({_fmt(sn.get('tracking_rms_pct'), '.0f')} %)."
-                       + (f" {html.escape(tb['level'])} turbulence: rate RMS "
-                          f"{tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
-                          f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
+        return text + _responses_html(validation)
     from .validate import instability_text
 
     why = instability_text(validation) if "instability" in validation else \
         "the cascade is unstable with these gains"
     flags.append(f"{axis}: {why}")
     return text + f"<p>{html.escape(why[0].upper() + why[1:])}.</p>"
+
+
+def _loop_html(name, lp, validation):
+    """One loop's table: the model's margins, those measured through the excitation when
+    the sweep measured this loop, the simulator's truth's when known; then the sentences
+    on what is not validated or not measured."""
+    note = "stable" if lp["closed_loop_stable"] else "UNSTABLE"
+    out = [m for m, *_ in MARGINS if _in_band(lp, m) is False]
+    if out:
+        note += f"; {' and '.join(out)} not validated"
+    rows = [("model", *_margin_cells(lp), note)]
+    said = [f"not validated: {why}" for why in lp.get("not_validated", [])]
+    measured = validation.get("measured_loop")
+    if measured and measured.get("loop") == name:
+        points = measured.get("points") or []
+        hz = [p["freq_hz"] for p in points]
+        reach = (f", {len(hz)} points, {2 * math.pi * min(hz):.3g}-{2 * math.pi * max(hz):.3g} "
+                 "rad/s" if hz else "")
+        rows.append(("measured through the excitation",
+                     *_margin_cells(measured, "not measured", "not measured"),
+                     f"{measured.get('injection')} injection{reach}"))
+        said += [f"not measured: {why}" for why in measured.get("unmeasured", [])]
+    truth = validation.get("truth_loops", {}).get(name)
+    if truth:
+        rows.append(("simulator's truth", *_margin_cells(truth), ""))
+    return (f"<h4>{html.escape(LOOPS.get(name, name))}</h4>"
+            + _table(["", "gain margin (dB)", "at (rad/s)", "phase margin (deg)", "at (rad/s)",
+                      "closed loop / note"], rows, left=(0, 5))
+            + "".join(f"<p>{html.escape(s[0].upper() + s[1:])}.</p>" for s in said))
+
+
+def _margin_cells(lp, no_gm="inf", no_pm="none"):
+    """A loop's gain margin (dB; ``no_gm`` without a phase crossover), phase margin (deg;
+    ``no_pm`` without a gain crossover) and where each is read (rad/s)."""
+    gm, pm = lp.get("gain_margin_db"), lp.get("phase_margin_deg")
+    return (no_gm if gm is None else _fmt(gm, ".3g"), _fmt(lp.get("phase_crossover_rad_s"), ".3g"),
+            no_pm if pm is None else _fmt(pm, ".3g"), _fmt(lp.get("gain_crossover_rad_s"), ".3g"))
+
+
+def _in_band(lp, margin):
+    """Whether a loop's ``margin`` (a name of :data:`MARGINS`) is read inside the identified
+    band, by its crossover's ``in_band``; None when the loop has no such margin or the file
+    lists no crossovers."""
+    _, _, at_key, list_key, _, _ = next(m for m in MARGINS if m[0] == margin)
+    at = lp.get(at_key)
+    match = [c for c in lp.get(list_key) or [] if c.get("omega_rad_s") == at]
+    return bool(match[0].get("in_band")) if at is not None and match else None
+
+
+def _margin_flags(validation, axis, flags):
+    """One flag when any margin of the model is not validated, naming them and where their
+    crossovers lie; one for each margin read in band that the simulator's truth puts
+    further than :data:`TRUTH_MARGIN_DB` or :data:`TRUTH_MARGIN_DEG` away."""
+    out, truths = [], validation.get("truth_loops", {})
+    for name, lp in validation["loops"].items():
+        for margin, key, at_key, _, unit, spec in MARGINS:
+            where = _in_band(lp, margin)
+            if where is False:
+                out.append((name, margin, lp[at_key]))
+            truth = truths.get(name, {}).get(key)
+            limit = TRUTH_MARGIN_DB if unit == "dB" else TRUTH_MARGIN_DEG
+            if where and truth is not None and abs(lp[key] - truth) > limit:
+                flags.append(f"{axis}: the {name} loop's {margin} is {lp[key]:{spec}} {unit} on "
+                             f"the model and {truth:{spec}} {unit} on the simulator's truth, "
+                             f"more than {limit:g} {unit} apart, inside the identified band")
+    if out:
+        lo, hi = validation["band_rad_s"]
+        at = [w for _, _, w in out]
+        each = ", ".join(f"the {name} loop's {margin} at {w:.3g} rad/s" for name, margin, w in out)
+        flags.append(f"{axis}: {len(out)} margin{'s' if len(out) > 1 else ''} not validated, read "
+                     f"outside the identified band ({lo:.3g}-{hi:.3g} rad/s) where the model has "
+                     f"no data: {each}; a sweep covering {min(lo, *at):.3g}-{max(hi, *at):.3g} "
+                     "rad/s would measure the model there")
+
+
+def _responses_html(validation):
+    """The step, the sine tracking and the turbulence rejection, in a paragraph."""
+    st, sn = validation["step"], validation["sine"]
+    tb = validation.get("turbulence", {})
+    return (f"<p>Step {st['size']:g} {html.escape(st['unit'])}: rise "
+            f"{_fmt(st.get('rise_time_s'), '.2f')} s, overshoot "
+            f"{_fmt(st.get('overshoot_pct'), '.1f')} %, settling "
+            f"{_fmt(st.get('settling_time_s'), '.2f')} s. Sine {sn['freq_hz']:g} Hz: "
+            f"tracking RMS {_fmt(sn.get('tracking_rms'), '.3g')} {html.escape(st['unit'])} "
+            f"({_fmt(sn.get('tracking_rms_pct'), '.0f')} %)."
+            + (f" {html.escape(tb['level'])} turbulence: rate RMS "
+               f"{tb['rate_rms_deg_s']:.2f} deg/s from gusts of "
+               f"{tb['gust_rate_rms_deg_s']:.1f} deg/s." if tb else "") + "</p>")
 
 
 def write_report(dir_path: str, out: str | None = None) -> str:

@@ -39,7 +39,7 @@ from .gains import DERIVATIVE_FILTER_N, Gains, load_gains
 
 # Gains and load_gains are host/gains.py's, here for the validation's callers.
 __all__ = ["Gains", "load_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
-           "save_validation", "instability_text", "paper_band"]
+           "save_validation", "instability_text", "paper_band", "sweep_inputs"]
 
 DT_S = L.LOOP_DT_S
 SINE_OMEGA_RAD_S = math.pi                      # 0.5 Hz
@@ -96,13 +96,12 @@ def _loops_report(functions, band, closed):
     return out
 
 
-def truth_margins(truth, axis, gains, band):
-    """The margins of the truth's loops (:func:`heliquad.host.loops.margins`): ``truth`` is
+def truth_functions(truth, axis, gains):
+    """The truth's loops (:func:`heliquad.host.loops.loop_functions`): ``truth`` is
     ``(h, h_a)``, the simulator's sampled rate and angle responses (functions of rad/s;
-    ``h_a`` None when not known)."""
+    ``h_a`` None when not known, and then only the rate loop)."""
     h, h_a = truth
-    functions = L.loop_functions(h, None if axis == "yaw" else h_a, gains, DT_S)
-    return {name: L.margins(f, band, DT_S) for name, f in functions.items()}
+    return L.loop_functions(h, None if axis == "yaw" else h_a, gains, DT_S)
 
 
 def _instability(report, band):
@@ -131,13 +130,42 @@ def instability_text(report) -> str:
     return f"the cascade is unstable with these gains: {where}, inside what was identified"
 
 
+def sweep_inputs(models_path, doc) -> dict:
+    """:func:`validate_model`'s keywords for a model of the MODELS.json ``doc`` read from
+    ``models_path``: the band its models were identified over (``band_rad_s``, None when
+    the file does not say), the loop measured through the excitation (``measured``, its
+    ``broken_loop``) and, when the file sits in a simulated sweep's folder (identify writes
+    it there), the simulator's loop responses (``truth``)."""
+    return {"band_rad_s": doc.get("band_rad_s"), "measured": doc.get("broken_loop"),
+            "truth": _sweep_truth(models_path)}
+
+
+def _sweep_truth(models_path):
+    """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder,
+    else None."""
+    from .errors import InputError
+    from .files import read_manifest
+    from .sweep import MANIFEST
+    from .truth import sil_truth_loops
+
+    folder = os.path.dirname(os.path.abspath(models_path))
+    path = os.path.join(folder, MANIFEST)
+    if not os.path.exists(path):
+        return None
+    try:
+        truth, _ = sil_truth_loops(read_manifest(path), folder)
+    except InputError:                  # a damaged manifest beside: no truth, not an error
+        return None
+    return truth
+
+
 def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0,
                    band_rad_s=None, truth=None, measured=None):
     """Margins, step, sine tracking and turbulence rejection, in SI units.
 
     ``band_rad_s``: the band the model was identified over (default the paper's for the
     axis). ``truth``: ``(h, h_a)``, the simulator's sampled responses, for
-    :func:`truth_margins`. ``measured``: models.json's ``broken_loop`` (the loop measured
+    :func:`truth_functions`. ``measured``: models.json's ``broken_loop`` (the loop measured
     through the excitation), carried into the report as ``measured_loop`` for a second
     opinion. Returns ``(report, traces)``. ``report``: ``axis``, the model
     (``num``, ``den``, ``delay_s``), ``gains``, ``band_rad_s``; ``loops``: per loop
@@ -151,7 +179,8 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
     ``tracking_rms`` in the step's unit, ``tracking_rms_pct``) and, with ``turbulence``,
     ``turbulence`` (``level``, ``seed``, ``gust_rate_rms_rad_s``, ``rate_rms_rad_s``,
     ``angle_rms_rad``, ``angle_max_rad``). ``traces``: ``t`` (s), ``loop_gains``
-    (``omega_rad_s`` and each loop's complex gain), and when stable ``step`` and ``sine``
+    (``omega_rad_s``, each loop's complex gain there and, with ``truth``, ``truth``: each
+    of the truth's loops' complex gain), and when stable ``step`` and ``sine``
     (reference, response) and ``turbulence`` (``gust``, ``rate``, ``angle``) in rad and
     rad/s. :func:`validation_record` turns the report into validation.json.
     """
@@ -167,13 +196,15 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
               "gains": {"rate": list(gains.rate),
                         "angle": None if gains.angle is None else list(gains.angle)},
               "loops": _loops_report(functions, band, closed)}
-    if truth is not None:
-        report["truth"] = truth_margins(truth, axis, gains, band)
-    if measured is not None and measured.get("loop") in functions:
-        report["measured_loop"] = dict(measured)
     w = LOOP_GAIN_OMEGA_RAD_S
     traces = {"t": np.arange(0.0, DURATION_S, DT_S),
               "loop_gains": {"omega_rad_s": w, **{k: f(w) for k, f in functions.items()}}}
+    if truth is not None:
+        truths = truth_functions(truth, axis, gains)
+        report["truth"] = {name: L.margins(f, band, DT_S) for name, f in truths.items()}
+        traces["loop_gains"]["truth"] = {name: f(w) for name, f in truths.items()}
+    if measured is not None and measured.get("loop") in functions:
+        report["measured_loop"] = dict(measured)
     report["stable"] = all(lp["closed_loop_stable"] for lp in report["loops"].values())
     if not report["stable"]:
         report["instability"] = _instability(report, band)

@@ -1,7 +1,9 @@
 """The HTML report (heliquad report) and the demo (heliquad demo)."""
 
-import shutil
+import html
+import json
 import re
+import shutil
 import subprocess
 import sys
 
@@ -23,6 +25,19 @@ def session(tmp_path_factory):
     return out
 
 
+def quality_flags(page):
+    """The quality flags of a report page, unescaped."""
+    return [html.unescape(f) for f in re.findall(r'<li class="flag">(.*?)</li>', page)]
+
+
+def only_margins_not_validated(page):
+    """The page's only flag is the one on margins read outside the band: this session's
+    sweep (0.7-3 Hz) does not reach the loops' phase crossovers nor the angle loop's gain
+    crossover."""
+    flags = quality_flags(page)
+    return len(flags) == 1 and flags[0].startswith("roll: 3 margins not validated")
+
+
 def test_report_holds_every_table_and_plot(session):
     res = heliquad("report", session)
     assert res.returncode == 0, res.stderr
@@ -31,12 +46,10 @@ def test_report_holds_every_table_and_plot(session):
                    "Closed-loop validation", "phase margin"):
         assert needle in page
     assert page.count("data:image/png;base64,") == 3          # Bode, responses, validation
-    assert "No quality flags" in page
+    assert only_margins_not_validated(page)
 
 
 def test_report_flags_low_coherence_and_aborts(session, tmp_path):
-    import json
-
     copy = tmp_path / "copy"
     shutil.copytree(session, copy)
     table = (copy / "points_table.csv").read_text().splitlines()
@@ -53,8 +66,6 @@ def test_report_flags_low_coherence_and_aborts(session, tmp_path):
 def test_a_superseded_frequency_is_listed_but_not_flagged(session, tmp_path):
     # The sequential design measures a frequency again when its first amplitude was wrong;
     # the first record stays in the table with its reason, and is not a quality problem.
-    import json
-
     copy = tmp_path / "superseded"
     shutil.copytree(session, copy)
     manifest = json.loads((copy / "manifest.json").read_text())
@@ -72,8 +83,6 @@ def test_report_shows_each_points_checks_and_how_the_points_were_estimated(sessi
     # The points table goes on past the paper's columns: the coherences with the excitation
     # (points.csv), the recommended model's replay error and, for this simulated sweep, each
     # point's error against the simulator's truth (models.json).
-    import json
-
     assert heliquad("report", session).returncode == 0
     page = (session / "report.html").read_text()
     header = re.search(r"<tr>(<th>freq_hz</th>.*?)</tr>", page).group(1)
@@ -97,15 +106,14 @@ def test_identify_draws_the_coherence_panel_under_the_bode_plot(session):
     assert imread(session / "bode.png").shape[0] == round(8.5 * 110)
 
 
-def edited_copy(session, tmp_path, edit):
-    """A copy of the session whose models.json ``edit`` changes in place."""
-    import json
-
+def edited_copy(session, tmp_path, edit, name="models.json"):
+    """A copy of the session whose ``name`` (models.json, validation.json) ``edit`` changes
+    in place; its report."""
     copy = tmp_path / "copy"
     shutil.copytree(session, copy)
-    doc = json.loads((copy / "models.json").read_text())
+    doc = json.loads((copy / name).read_text())
     edit(doc)
-    (copy / "models.json").write_text(json.dumps(doc))
+    (copy / name).write_text(json.dumps(doc))
     assert heliquad("report", copy).returncode == 0
     return (copy / "report.html").read_text()
 
@@ -123,8 +131,69 @@ def test_a_board_sweep_has_no_truth_to_show_or_flag(session, tmp_path):
     def board(doc):
         del doc["sil_truth"]
 
-    page = edited_copy(session, tmp_path, board)
-    assert "truth" not in page and "No quality flags" in page
+    shutil.copytree(session, tmp_path / "board")
+    validation = json.loads((session / "validation.json").read_text())
+    del validation["truth_loops"]                       # validate found no simulator beside
+    (tmp_path / "board" / "validation.json").write_text(json.dumps(validation))
+    page = edited_copy(tmp_path / "board", tmp_path, board)
+    assert "truth" not in page and only_margins_not_validated(page)
+
+
+def loop_section(page, name):
+    """The part of the page on one loop of the validation: its table and sentences."""
+    start = page.index(f"<h4>{name} loop: broken")
+    end = min(i for i in (page.find("<h4>", start + 1), page.find("<p>Step", start)) if i > 0)
+    return html.unescape(page[start:end])
+
+
+def test_report_shows_each_loops_margins_with_what_is_not_validated_or_measured(session):
+    # The sweep (0.7-3 Hz, mixer injection on the simulated tf plant) measures the input loop
+    # through the excitation; the simulator knows the rate loop's truth (a tf plant has no
+    # angle of its own); the rate and input loops' phase crossovers and the angle loop's
+    # gain crossover lie outside the band.
+    assert heliquad("report", session).returncode == 0
+    page = (session / "report.html").read_text()
+    v = json.loads((session / "validation.json").read_text())
+    lo, hi = v["band_rad_s"]
+    for name, lp in v["loops"].items():
+        part = loop_section(page, name)
+        assert "<td class=\"l\">model</td>" in part and lp["not_validated"]
+        assert all(f"Not validated: {why}." in part for why in lp["not_validated"])
+        assert ("simulator's truth" in part) == (name == "rate")
+        assert ("measured through the excitation" in part) == (name == "input")
+    measured = loop_section(page, "input")
+    assert v["measured_loop"]["unmeasured"] and v["measured_loop"]["gain_margin_db"] is None
+    assert "<td>not measured</td>" in measured
+    assert all(f"Not measured: {why}." in measured for why in v["measured_loop"]["unmeasured"])
+    assert f"<td>{v['measured_loop']['phase_margin_deg']:.3g}</td>" in measured
+    (flag,) = quality_flags(page)
+    assert flag.startswith(f"roll: 3 margins not validated, read outside the identified band "
+                           f"({lo:.3g}-{hi:.3g} rad/s)")
+    assert f"the angle loop's phase margin at {v['loops']['angle']['gain_crossover_rad_s']:.3g} " \
+        "rad/s" in flag and "the rate loop's phase margin" not in flag
+
+
+def test_a_margin_in_band_the_simulators_truth_does_not_confirm_is_flagged(session, tmp_path):
+    # The rate loop's phase margin is read in band (8.8 rad/s) and matches the truth: no flag.
+    # Told 5 deg more than the truth, it is flagged; with every crossover in band, nothing is
+    # flagged as not validated.
+    v = json.loads((session / "validation.json").read_text())
+    rate, truth = v["loops"]["rate"], v["truth_loops"]["rate"]
+    assert [c["in_band"] for c in rate["gain_crossovers"]] == [True]
+    assert abs(rate["phase_margin_deg"] - truth["phase_margin_deg"]) < 3
+
+    def off(doc):
+        doc["loops"]["rate"]["phase_margin_deg"] = truth["phase_margin_deg"] + 5
+        for lp in doc["loops"].values():
+            lp["not_validated"] = []
+            for c in lp["gain_crossovers"] + lp["phase_crossovers"]:
+                c["in_band"] = True
+
+    page = edited_copy(session, tmp_path, off, "validation.json")
+    (flag,) = quality_flags(page)
+    assert flag == (f"roll: the rate loop's phase margin is {truth['phase_margin_deg'] + 5:.1f} "
+                    f"deg on the model and {truth['phase_margin_deg']:.1f} deg on the "
+                    "simulator's truth, more than 3 deg apart, inside the identified band")
 
 
 def test_without_a_recommended_model_nothing_is_replayed(session, tmp_path):

@@ -112,16 +112,132 @@ def test_the_record_is_the_report_in_degrees_db_and_hz(roll_validation):
     json.dumps(doc)                                   # plain JSON: no numpy types left
 
 
+def loop_gain_axes(fig):
+    """The loop-gain panel's magnitude and phase Axes, by their labels."""
+    (mag,) = [ax for ax in fig.axes if ax.get_ylabel() == "magnitude (dB)"]
+    (ph,) = [ax for ax in fig.axes if ax.get_ylabel() == "phase (deg)"]
+    return mag, ph
+
+
 def test_the_validation_plot_draws_in_degrees_onto_the_given_axes(roll_validation):
     report, traces = roll_validation
     fig, axes = new_figure(2, 2)
     assert plot_validation(axes, report, traces) is fig
-    step_ax, loops_ax = axes[0, 0], axes[1, 1]
+    step_ax = axes[0, 0]
     assert max(step_ax.lines[0].get_ydata()) == pytest.approx(10)
     assert step_ax.get_ylabel() == "roll (deg)" and axes[0, 1].get_title() == "sine tracking, 0.5 Hz"
-    pm = math.degrees(report["loops"]["rate"]["phase_margin_rad"])
-    assert loops_ax.lines[0].get_label() == f"rate loop L_r: PM {pm:.0f} deg"
-    assert len(loops_ax.lines) == 3                   # both loops and the 0 dB line
+    # the fourth panel's place is split: magnitude over phase, sharing the frequency axis
+    mag, ph = loop_gain_axes(fig)
+    assert axes[1, 1] not in fig.axes and len(fig.axes) == 5
+    assert mag.get_shared_x_axes().joined(mag, ph) and mag.get_title() == "loop gains"
+    assert ph.get_xlabel() == "frequency (rad/s)" and ph.get_xscale() == "log"
+    curves = {line.get_label(): line for line in mag.lines if line.get_linestyle() == "-"}
+    assert {"rate loop L_r", "angle loop L_a", "input loop L_in"} <= set(curves)
+    L = traces["loop_gains"]["input"]
+    np.testing.assert_allclose(curves["input loop L_in"].get_ydata(), 20 * np.log10(np.abs(L)))
+    assert -180 in [line.get_ydata()[0] for line in ph.lines if len(line.get_xdata()) == 2
+                    and line.get_xdata()[0] == 0]
+
+
+def test_each_loops_phase_is_drawn_on_the_turn_its_phase_margin_reads_off():
+    # A slow pole puts the input loop's phase below -180 deg at the grid's first frequency,
+    # where the principal angle is +122 deg: unwrapped from there the curve would sit a turn
+    # too high, its phase margin read off nothing.
+    from heliquad.host.plot import plot_loop_gains
+
+    den = list(np.polymul([1, 0.05], [1, 5.13, 22.93]))
+    report, traces = validate_model([28.19], den, 0.0, "roll", load_gains("roll"), None)
+    gains = traces["loop_gains"]
+    assert np.angle(gains["input"][0]) > 0
+    fig, axes = new_figure(2, 1, sharex=True)
+    assert plot_loop_gains(axes, report, gains) is fig
+    w = gains["omega_rad_s"]
+    colours = {"tab:blue": "rate", "tab:orange": "angle", "tab:green": "input"}
+    curves = {colours[line.get_color()]: line.get_ydata() for line in axes[1].lines
+              if line.get_color() in colours and len(line.get_xdata()) == len(w)}
+    assert set(curves) == {"rate", "angle", "input"}
+    for key, phase in curves.items():
+        lp = report["loops"][key]
+        at = np.interp(math.log(lp["gain_crossover_rad_s"]), np.log(w), phase)
+        assert at == pytest.approx(-180 + math.degrees(lp["phase_margin_rad"]), abs=0.5), key
+
+
+def margin_marks(ax):
+    """The margin markers on ``ax``: ``[(x, y, validated, hollow)]``."""
+    return [(line.get_xdata()[0], line.get_ydata()[0], line.get_gid() == "margin",
+             line.get_markerfacecolor() == "none")
+            for line in ax.lines if (line.get_gid() or "").startswith("margin")]
+
+
+def mark_at(marks, x):
+    (found,) = [m for m in marks if m[0] == pytest.approx(x)]
+    return found
+
+
+def test_each_margin_is_marked_at_its_crossover_hollow_when_not_validated(roll_validation):
+    # The paper's band for roll is 3.1-28 rad/s: the rate loop crosses 0 dB inside it, the
+    # angle loop below it (1.5 rad/s): margins validated and not, on the same plot.
+    report, traces = roll_validation
+    fig, axes = new_figure(2, 2)
+    plot_validation(axes, report, traces)
+    mag, ph = loop_gain_axes(fig)
+    pms, gms = margin_marks(ph), margin_marks(mag)
+    expected = []
+    for lp in report["loops"].values():
+        wc = lp["gain_crossover_rad_s"]
+        _, y, validated, hollow = mark_at(pms, wc)
+        assert y == pytest.approx(-180 + math.degrees(lp["phase_margin_rad"]))
+        expected.append(next(c["in_band"] for c in lp["gain_crossovers"] if c["omega_rad_s"] == wc))
+        assert validated == expected[-1] != hollow
+        if lp["gain_margin"] is not None:
+            wp = lp["phase_crossover_rad_s"]
+            _, y, validated, hollow = mark_at(gms, wp)
+            assert y == pytest.approx(-20 * math.log10(lp["gain_margin"]))
+            expected.append(next(c["in_band"] for c in lp["phase_crossovers"]
+                                 if c["omega_rad_s"] == wp))
+            assert validated == expected[-1] != hollow
+    assert len(pms) + len(gms) == len(expected) and True in expected and False in expected
+    said = [t.get_text() for ax in (mag, ph) for t in ax.texts]
+    not_validated = sum(len(lp["not_validated"]) for lp in report["loops"].values())
+    assert sum(t.endswith(" not validated") for t in said) == not_validated == expected.count(False)
+    assert f"PM {math.degrees(report['loops']['rate']['phase_margin_rad']):.0f} deg" in said
+
+
+def test_the_truth_is_dashed_and_the_measured_points_sit_on_their_loop():
+    # A simulated sweep's validation: the truth's loops beside the model's, and the points
+    # of the input loop measured through the excitation (here the model's own loop at five
+    # frequencies where its phase is below -180 deg, recorded wrapped to +-180 deg as
+    # identify records them: drawn on the model's turn).
+    from heliquad.host.loops import model_responses
+
+    num, den = paper.MODELS["roll"][paper.CHOSEN_ORDER["roll"]]
+    truth = model_responses([1.3 * c for c in num], den, 0.01)
+    _, plain = validate_model(num, den, 0.02, "roll", load_gains("roll"), None)
+    w, L = plain["loop_gains"]["omega_rad_s"], plain["loop_gains"]["input"]
+    at = [300, 320, 340, 360, 380]
+    measured = {"loop": "input", "injection": "mixer", "unmeasured": [],
+                "points": [{"freq_hz": w[i] / (2 * math.pi), "magnitude_db": 20 * math.log10(abs(L[i])),
+                            "phase_deg": math.degrees(np.angle(L[i]))} for i in at]}
+    report, traces = validate_model(num, den, 0.02, "roll", load_gains("roll"), None,
+                                    truth=truth, measured=measured)
+    assert set(traces["loop_gains"]["truth"]) == {"rate", "angle", "input"}
+    fig, axes = new_figure(2, 2)
+    plot_validation(axes, report, traces)
+    mag, ph = loop_gain_axes(fig)
+    dashed = [line for line in mag.lines if line.get_linestyle() == "--"]
+    assert len(dashed) == 3 and dashed[0].get_label() == "simulator's truth"
+    np.testing.assert_allclose(dashed[2].get_ydata(),
+                               20 * np.log10(np.abs(traces["loop_gains"]["truth"]["input"])))
+    (points,) = [line for line in ph.lines if line.get_marker() == "D"]
+    (curve,) = [line for line in mag.lines if line.get_label() == "input loop L_in"]
+    assert points.get_color() == curve.get_color()
+    (model_phase,) = [line for line in ph.lines if line.get_color() == curve.get_color()
+                      and line.get_linestyle() == "-" and len(line.get_xdata()) == len(w)]
+    np.testing.assert_allclose(points.get_xdata(), w[at])
+    np.testing.assert_allclose(points.get_ydata(), model_phase.get_ydata()[at], atol=1e-9)
+    assert np.all(points.get_ydata() < -180)
+    labels = [t.get_text() for t in mag.get_legend().get_texts()]
+    assert "measured through the excitation (input)" in labels
 
 
 def cli(*args):

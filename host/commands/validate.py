@@ -65,42 +65,20 @@ def run(args) -> int:
     out = args.out or os.path.dirname(os.path.abspath(args.models))
     check_output_folder(out, "--out")
 
-    from ..validate import (Gains, load_gains, save_validation, validate_model,
+    from ..validate import (Gains, load_gains, save_validation, sweep_inputs, validate_model,
                             validation_record)
 
     gains = Gains(*file_gains) if file_gains else load_gains(axis)
     turbulence = None if args.turbulence == "none" else args.turbulence
-    band = doc.get("band_rad_s")
-    if band is None:
+    if doc.get("band_rad_s") is None:
         print(f"{args.models} does not give the band its models were identified over; "
               f"the paper's {axis} band is assumed")
     report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed,
-                                    band_rad_s=band, truth=_truth(args.models),
-                                    measured=doc.get("broken_loop"))
+                                    **sweep_inputs(args.models, doc))
     _print_validation(validation_record(report))
     written = save_validation(out, report, traces)
     print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
     return 0 if report["stable"] else 1
-
-
-def _truth(models_path):
-    """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder
-    (identify writes it there), else None."""
-    import os
-
-    from ..files import read_manifest
-    from ..sweep import MANIFEST
-    from ..truth import sil_truth_loops
-
-    folder = os.path.dirname(os.path.abspath(models_path))
-    path = os.path.join(folder, MANIFEST)
-    if not os.path.exists(path):
-        return None
-    try:
-        truth, _ = sil_truth_loops(read_manifest(path), folder)
-    except InputError:                  # a damaged manifest beside: no truth, not an error
-        return None
-    return truth
 
 
 def _margins_text(lp) -> str:
