@@ -499,14 +499,23 @@ def read_gains(path, axis: str) -> tuple:
 @functools.cache
 def _validation_schema():
     num = S.Null(S.Num())
+    crossing = S.Obj(required={"omega_rad_s": S.Num(0)}, optional={"in_band": S.Bool()},
+                     values=num)
+    crossings = {"gain_crossovers": S.List(crossing), "phase_crossovers": S.List(crossing)}
     loop = S.Obj(required={"closed_loop_stable": S.Bool()},
-                 optional={"gain_crossovers": S.List(S.Obj()), "phase_crossovers": S.List(S.Obj()),
-                           "not_validated": S.List(S.Str())}, values=num)
+                 optional={**crossings, "not_validated": S.List(S.Str())}, values=num)
+    truth = S.Obj(optional={**crossings, "not_validated": S.List(S.Str()),
+                            "closed_loop_stable": S.Bool()}, values=num)
+    point = S.Obj(required={"freq_hz": S.Num(0, lo_open=True), "magnitude_db": S.Num(),
+                            "phase_deg": S.Num()})
+    measured = S.Obj(required={"loop": S.Str(), "injection": S.Str()},
+                     optional={**crossings, "unmeasured": S.List(S.Str()),
+                               "points": S.List(point)}, values=num)
     return S.Obj(
         required={"stable": S.Bool(), "loops": S.Obj(values=loop)},
         optional={
             "band_rad_s": S.Seq(("low", S.Num(0)), ("high", S.Num(0))),
-            "truth_loops": S.Obj(), "measured_loop": S.Obj(),
+            "truth_loops": S.Obj(values=truth), "measured_loop": measured,
             "step": S.Obj(required={"size": S.Num(), "unit": S.Str()}, values=num),
             "sine": S.Obj(required={"freq_hz": S.Num()}, values=num),
             "turbulence": S.Obj(required={"level": S.Str(), "rate_rms_deg_s": S.Num(),

@@ -394,6 +394,13 @@ FILES = {
     "f_validation_no_step": sweep(full=True, replace={"validation.json": '{"loops": {}, "stable": true}'}),
     "f_validation_loops_text": sweep(full=True, replace={"validation.json": '{"loops": "x", "stable": false}'}),
     "f_validation_binary": sweep(full=True, replace={"validation.json": b"\x89PNG\r\n"}),
+    "f_validation_measured": sweep(full=True, replace={"validation.json": json.dumps({
+        "loops": {}, "stable": False, "measured_loop": {
+            "loop": "input", "injection": "mixer",
+            "points": [{"freq_hz": "one", "magnitude_db": 3.0, "phase_deg": -120.0}]}})}),
+    "f_validation_truth": sweep(full=True, replace={"validation.json": json.dumps({
+        "loops": {}, "stable": False,
+        "truth_loops": {"rate": {"gain_crossovers": [{"in_band": True}]}}})}),
     "f_table_text": sweep(full=True, replace={"points_table.csv": "not,a\ntable\n"}),
     "f_table_coherence": sweep(full=True, replace={
         "points_table.csv": "freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence\n"
@@ -857,6 +864,8 @@ CASES = [
     case("report f_validation_no_stable", "stable is missing"),
     case("report f_validation_no_step", "step is missing"),
     case("report f_validation_loops_text", "loops must be a JSON object"),
+    case("report f_validation_measured", "measured_loop.points[0].freq_hz"),
+    case("report f_validation_truth", "truth_loops.rate.gain_crossovers[0].omega_rad_s is missing"),
     case("report f_validation_binary", "not UTF-8"),
     case("report f_table_text", "missing column"),
     case("report f_table_coherence", "coherence at data row 1"),
