@@ -3,8 +3,8 @@
 For each axis, turbulence level and seed: a default `heliquad sweep --sil` of the 6-DoF
 vehicle on the axis's rig, then `heliquad identify`, and the figures identify records in
 models.json (`sil_truth`): the worst point error across the band (dB, deg), the RMS of
-point error / reported sigma, the recommended model (its order) and its worst error, and the session's
-simulated time (the log's span: the rig time the sweep cost).
+point error / reported sigma, the recommended model (its order) and its worst error, and
+the session's simulated time (the log's span: the rig time the sweep cost).
 
 `--before` runs the earlier design for comparison: a fixed dwell of 8 cycles at the earlier
 default mixer amplitude (0.05 on roll and pitch; 0.3 on yaw, which then had 1.0 below
@@ -52,12 +52,13 @@ def one(folder, axis, level, seed, before, delay):
     doc = json.loads(open(os.path.join(folder, "models.json")).read())
     truth = doc["sil_truth"]
     span = summarise_tlog(os.path.join(folder, "sweep.tlog"))["span_s"]
+    from heliquad.host.fit import order_name
+
     rec = doc.get("recommended")
     pick = "none"
     if rec is not None:
         m = doc["models"][rec]
-        pick = f"{m['order'][0]}/{m['order'][1]}{'i' if m.get('integrator') else ''}" + \
-            ("+d" if m.get("delay_s") else "")
+        pick = order_name((*m["order"], int(bool(m.get("integrator")))), bool(m.get("delay_s")))
     return {"pick": pick, "db": truth["points_worst_db"], "deg": truth["points_worst_deg"],
             "z": truth["points_rms_error_over_sigma"], "model_db": truth.get("model_worst_db"),
             "model_deg": truth.get("model_worst_deg"), "rig_s": span}

@@ -5,8 +5,9 @@ For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's t
 over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
 with the paper's orders and two integrator structures, each with a fitted delay (the loop's
 hold and the DMP's latency are real delays); closed-loop validation with the paper's gains
-in the firmware's discrete loops; and one HTML report for all three axes. It prints each axis's recommended model against the simulator's own truth, with the
-worst error across the band.
+in the firmware's discrete loops; and one HTML report for all three axes. It prints each
+axis's recommended model against the simulator's own truth, with the worst error across
+the band.
 """
 
 from __future__ import annotations

@@ -93,8 +93,8 @@ class TfModel:
     degenerate : bool
         The points do not support this order: a pole ran to the edge of the allowed range
         (``POLE_RANGE`` times the band's centre frequency, or as far below), or (flagged by
-        :func:`heliquad.host.identify.fit_orders`) a zero lies far below the band or all but
-        cancels a pole.
+        :func:`heliquad.host.identify.fit_orders`) a zero lies far below or far above the band
+        or all but cancels a pole.
     degenerate_why : str
         Which of these, in words ("" when not degenerate).
     integrator : bool

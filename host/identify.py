@@ -75,50 +75,50 @@ def point_weights(points: dict, mode: str = "auto"):
 
 #: A zero this many times below the band's bottom is one the points cannot place.
 ZERO_BELOW = 10.0
-
-
-def _flag_far_zeros(model: TfModel, omega_min: float) -> None:
-    """A zero far below the band (a DC behaviour no point constrains: a fitted 2/4 put one at
-    0.12 rad/s under a 3.1 rad/s band, flipping the sign of its DC gain and making the
-    integral loop unstable there) marks the model degenerate, like a pole at the range's
-    edge: the points do not support it."""
-    far = [z for z in model.zeros if abs(z) < omega_min / ZERO_BELOW]
-    if far:
-        model.degenerate = True
-        model.degenerate_why = (f"a zero at {abs(far[0]):.3g} rad/s, more than {ZERO_BELOW:g} "
-                                f"times below the band")
-
-
-#: A pole and a zero whose joint factor ``(s - z) / (s - p)`` stays within this of 1 at every
-#: point (0.04 dB, 0.3 deg) change nothing the points can show: the order is one the data do
-#: not need, and the pair is the fit's way of spending its spare parameters.
+#: A zero whose factor ``1 - s/z``, or with a pole ``(s - z) / (s - p)``, stays within this
+#: of 1 at every point (0.04 dB, 0.3 deg) changes nothing the points can show: the order is
+#: one the data do not need, and the zero is the fit's way of spending a spare parameter.
 CANCEL = 5e-3
 
 
-def _flag_spare_zeros(model: TfModel, omega) -> None:
-    """A zero that changes nothing the points show marks the model degenerate: one so far
-    above the band that its factor ``1 - s/z`` stays within CANCEL of 1 (the yaw demo's 2/3
-    put one at 2.4e7 rad/s, a numerator coefficient of 1e-5: a 1/3 in disguise), or one that
-    all but cancels a pole across the band (on noise-free points a 2/4 fitted to a 0/2 with
-    delay placed a pair of each at 1322 rad/s, 1e-5 apart, and won on AICc by rounding)."""
-    omega = np.asarray(omega, dtype=float)
-    far = [z for z in model.zeros if np.max(omega) < CANCEL * abs(z)]
+def _unsupported_zero(model: TfModel, omega):
+    """Why a zero of ``model`` is one the points at ``omega`` do not support, or None:
+
+    - one so far above the band that ``1 - s/z`` stays within CANCEL of 1 (the yaw demo's
+      2/3 put one at 2.4e7 rad/s, a numerator coefficient of 1e-5: a 1/3 in disguise);
+    - one that all but cancels a pole across the band (on noise-free points a 2/4 fitted to
+      a 0/2 with delay placed a pair of each at 1322 rad/s, 1e-5 apart, and won on AICc by
+      rounding);
+    - one far below the band (a DC behaviour no point constrains: a fitted 2/4 put one at
+      0.12 rad/s under a 3.1 rad/s band, flipping the sign of its DC gain and making the
+      integral loop unstable there).
+    """
+    zeros = model.zeros
+    far = [z for z in zeros if np.max(omega) < CANCEL * abs(z)]
     if far:
-        model.degenerate = True
-        model.degenerate_why = (f"a zero at {abs(far[0]):.3g} rad/s, so far above the band "
-                                "that it changes nothing there")
-        return
-    poles = list(model.poles)
-    s = 1j * omega
-    for z in model.zeros:
+        return (f"a zero at {abs(far[0]):.3g} rad/s, so far above the band that it changes "
+                "nothing there")
+    poles, s = list(model.poles), 1j * omega
+    for z in zeros:
         if not poles:
-            return
+            break
         nearest = min(range(len(poles)), key=lambda i: abs(poles[i] - z))
         if np.max(np.abs((s - z) / (s - poles[nearest]) - 1.0)) < CANCEL:
-            model.degenerate = True
-            model.degenerate_why = f"a zero cancels a pole at {abs(z):.4g} rad/s"
-            return
+            return f"a zero cancels a pole at {abs(z):.4g} rad/s"
         poles.pop(nearest)
+    below = [z for z in zeros if abs(z) < np.min(omega) / ZERO_BELOW]
+    if below:
+        return (f"a zero at {abs(below[0]):.3g} rad/s, more than {ZERO_BELOW:g} times below "
+                "the band")
+    return None
+
+
+def _flag_unsupported_zeros(model: TfModel, omega) -> None:
+    """A zero the points do not support (:func:`_unsupported_zero`) marks the model
+    degenerate, like a pole at the allowed range's edge, and says why."""
+    why = _unsupported_zero(model, np.asarray(omega, dtype=float))
+    if why:
+        model.degenerate, model.degenerate_why = True, why
 
 
 def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
@@ -137,8 +137,7 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
         model: TfModel = fit_tf(points["omega"], points["F"], order, weights=w, delay=delay,
                                 stable=stable)
         evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
-        _flag_far_zeros(model, float(np.min(points["omega"])))
-        _flag_spare_zeros(model, points["omega"])
+        _flag_unsupported_zeros(model, points["omega"])
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,

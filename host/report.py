@@ -271,8 +271,9 @@ def _checks_html(models):
 
 def _order(model) -> str:
     """A models.json model's order, ``0/2``, ``0/2i`` (a pole at the origin) or ``0/2 + delay``."""
-    m, n = model["order"]
-    return f"{m}/{n}" + ("i" if model.get("integrator") else "") + \
+    from .fit import order_name
+
+    return order_name((*model["order"], int(bool(model.get("integrator"))))) + \
         (" + delay" if model.get("delay_s") else "")
 
 

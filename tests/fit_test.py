@@ -266,11 +266,11 @@ def test_a_zero_that_cancels_a_pole_marks_the_model_degenerate():
 def test_a_zero_far_above_the_band_marks_the_model_degenerate():
     # The yaw demo's 2/3 with delay: a numerator coefficient of 1e-5 put a zero at 2.4e7
     # rad/s, a 1/3 in disguise that validate cannot take; not recommended, and it says why.
-    from heliquad.host.identify import _flag_spare_zeros
+    from heliquad.host.identify import _flag_unsupported_zeros
 
     model = TfModel(order=(2, 3), num=np.array([1.0999e-05, 262.25, 1424.2]),
                     den=np.array([1.0, 46.014, 244.0, 21.618]), delay_s=0.00367)
-    _flag_spare_zeros(model, 2 * np.pi * np.logspace(math.log10(0.15), math.log10(1.6), 15))
+    _flag_unsupported_zeros(model, 2 * np.pi * np.logspace(math.log10(0.15), math.log10(1.6), 15))
     assert model.degenerate and model.degenerate_why.startswith("a zero at 2.38e+07 rad/s")
 
 
