@@ -17,6 +17,7 @@
 #include "../hal/clock.hpp"
 #include "../hal/i2c.hpp"
 #include "../hal/motors.hpp"
+#include "../hal/param_storage.hpp"
 #include "../hal/rc_input.hpp"
 #include "../hal/serial.hpp"
 #include "controllers.hpp"
@@ -43,6 +44,8 @@ struct FlightControllerConfig {
     // IMU's configured rate.
     SafetyLimits safety{};
     StickLimits sticks{};
+    // Where the parameters persist (nullptr: defaults at every start, nothing saved).
+    ParamStorage* storage = nullptr;
 };
 
 struct LoopState {               // what the last loop computed, for telemetry and tests
