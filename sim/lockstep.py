@@ -67,7 +67,7 @@ class HostFirmware:
 
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
-                 reply_timeout_s: float | None = None):
+                 reply_timeout_s: float | None = None, params_file: str | None = None):
         self.loop_hz = loop_hz
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
@@ -83,6 +83,8 @@ class HostFirmware:
                     "--loop-hz", repr(float(loop_hz)), "--idle-timeout-s", str(int(idle_timeout_s))]
             if dmp_image:
                 cmd += ["--dmp-image", dmp_image]
+            if params_file:                   # where the parameters persist (default: nowhere)
+                cmd += ["--params", os.path.abspath(params_file)]
             self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
             self._stderr = open(self.stderr_path, "w+")
             # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and

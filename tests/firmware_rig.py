@@ -126,13 +126,13 @@ class FirmwareRig:
         """Send the host's HEARTBEAT and step until the firmware has processed it; the loop
         time at which it did (a COMMAND_ACK sent with it marks the loop)."""
         # One write: both arrive together, so the ACK marks the heartbeat's own loop (the
-        # firmware answers MAV_CMD_REQUEST_MESSAGE without acting).
+        # firmware answers a command it does not support, a mission waypoint, without acting).
         mav = self.tel.mav
         self.tel.serial.write(
             mav.heartbeat_encode(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
-            + mav.command_long_encode(1, 1, MAV.MAV_CMD_REQUEST_MESSAGE, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+            + mav.command_long_encode(1, 1, MAV.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
         t, _ = self.until(lambda m: m.get_type() == "COMMAND_ACK"
-                          and m.command == MAV.MAV_CMD_REQUEST_MESSAGE)
+                          and m.command == MAV.MAV_CMD_NAV_WAYPOINT)
         return t
 
     def hover(self, frames: int = 60):

@@ -15,6 +15,7 @@
 #include "core/loop_load.hpp"
 #include "core/mixer.hpp"
 #include "core/mpu6050.hpp"
+#include "core/params.hpp"
 #include "core/pid.hpp"
 #include "core/rc.hpp"
 #include "core/supervisor.hpp"
@@ -229,6 +230,31 @@ PYBIND11_MODULE(_firmware, m) {
     m.doc() = "heliquad firmware core (host build), for tests and the simulator";
     // The control loop's rate the firmware runs at unless configured otherwise, Hz.
     m.attr("LOOP_RATE_HZ") = FlightControllerConfig{}.loop_rate_hz;
+
+    // The parameter table (params.hpp), in param_index order, with each default.
+    struct ParamRow {
+        std::string name, units;
+        float minimum, maximum, default_value;
+        bool integer, armed_ok;
+    };
+    py::class_<ParamRow>(m, "ParamRow")
+        .def_readonly("name", &ParamRow::name)
+        .def_readonly("units", &ParamRow::units)
+        .def_readonly("minimum", &ParamRow::minimum)
+        .def_readonly("maximum", &ParamRow::maximum)
+        .def_readonly("default", &ParamRow::default_value)
+        .def_readonly("integer", &ParamRow::integer)
+        .def_readonly("armed_ok", &ParamRow::armed_ok);
+    m.def("param_table", []() {
+        const Params defaults;
+        std::vector<ParamRow> rows;
+        for (int i = 0; i < kParamCount; ++i) {
+            const ParamInfo& p = param_info(i);
+            rows.push_back({p.name, p.units, p.min, p.max, defaults.get(i),
+                            (p.flags & kParamInteger) != 0, (p.flags & kParamArmedOk) != 0});
+        }
+        return rows;
+    });
 
     py::enum_<Axis>(m, "Axis").value("ROLL", Axis::Roll).value("PITCH", Axis::Pitch)
         .value("YAW", Axis::Yaw);

@@ -44,6 +44,14 @@ void AttitudeController::reset() {
     for (auto& p : pid_) p.reset();
 }
 
+void AttitudeController::set_gains(const CascadeGains& gains) {
+    for (int a = 0; a < kAngleAxes; ++a) pid_[a].set_gains(gains.angle[a]);
+}
+
+void RateController::set_gains(const CascadeGains& gains) {
+    for (int a = 0; a < kAxes; ++a) pid_[a].set_gains(gains.rate[a]);
+}
+
 RateController::RateController(const CascadeGains& gains)
     : pid_{Pid(gains.rate[0]), Pid(gains.rate[1]), Pid(gains.rate[2])} {}
 
@@ -85,6 +93,11 @@ CascadeOutput Cascade::update(const CascadeInput& in) {
 void Cascade::reset() {
     attitude_.reset();
     rate_.reset();
+}
+
+void Cascade::set_gains(const CascadeGains& gains) {
+    attitude_.set_gains(gains);
+    rate_.set_gains(gains);
 }
 
 }  // namespace hq

@@ -28,6 +28,7 @@ public:
     // Angle setpoints and measured angles (rad) -> roll and pitch rate setpoints (rad/s).
     Vec3 update(const Euler& setpoint, const Euler& measured, float dt_s);
     void reset();
+    void set_gains(const CascadeGains& gains);
     // The loop of roll or pitch; nullptr for yaw, which has no angle loop.
     const Pid* loop(Axis axis) const {
         const int a = static_cast<int>(axis);
@@ -44,6 +45,7 @@ public:
     // Rate setpoints and measured body rates (rad/s) -> normalised torque commands.
     Vec3 update(const Vec3& setpoint, const Vec3& measured, float dt_s);
     void reset();
+    void set_gains(const CascadeGains& gains);
     const Pid* loop(Axis axis) const {
         const int a = static_cast<int>(axis);
         return a < kAxes ? &pid_[a] : nullptr;
@@ -84,6 +86,9 @@ public:
     explicit Cascade(const CascadeGains& gains) : attitude_(gains), rate_(gains) {}
     CascadeOutput update(const CascadeInput& in);
     void reset();
+    // New gains; each loop keeps its state (the integral term is in output units, so the
+    // change is bumpless).
+    void set_gains(const CascadeGains& gains);
     const AttitudeController& attitude() const { return attitude_; }
     const RateController& rate() const { return rate_; }
 

@@ -13,12 +13,12 @@ static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
 
 namespace {
 
-constexpr uint64_t kSlowPeriodUs = 1000000;  // HEARTBEAT, HQ_FW_STATUS: 1 Hz
+// Parameters are saved once they have not changed for this long (a ground station's
+// "param load" sends dozens in a row: one save, not dozens of flash erases).
+constexpr uint64_t kSaveQuietUs = 500000;
 // dt outside [kDtMin, kDtMax] x nominal is clamped (a late or early loop must not make the
 // derivative or integral jump).
 constexpr float kDtMin = 0.25f, kDtMax = 4.0f;
-// STATUSTEXT.text, NUL-terminated when shorter.
-constexpr size_t kStatusTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
@@ -42,11 +42,36 @@ bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) &&
 FlightController::FlightController(const FlightControllerConfig& config, I2cBus& i2c,
                                    Clock& clock, SerialPort& telemetry, MotorOutputs& motors)
     : config_(config), i2c_(i2c), clock_(clock), telemetry_(telemetry), motors_(motors),
-      imu_(config.imu), filter_(config.attitude_filter), cascade_(config.gains), mixer_(config.geometry),
-      supervisor_(config.safety, config.loop_rate_hz) {}
+      imu_(config.imu), filter_(config.attitude_filter), cascade_(config.tunables.gains),
+      mixer_(config.geometry), supervisor_(config.tunables.safety, config.loop_rate_hz),
+      params_(config.tunables),
+      streams_{{MAVLINK_MSG_ID_HEARTBEAT, 1000000, 1000000, 0, false},
+               {MAVLINK_MSG_ID_HQ_FW_STATUS, 1000000, 1000000, 0, false},
+               {MAVLINK_MSG_ID_SYS_STATUS, 1000000, 1000000, 0, false},
+               {MAVLINK_MSG_ID_ATTITUDE, 1, 1, 0, false},          // every loop
+               {MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, 100000, 100000, 0, false},
+               {MAVLINK_MSG_ID_SCALED_IMU, 100000, 100000, 0, false},
+               {MAVLINK_MSG_ID_RC_CHANNELS, 200000, 200000, 0, false},
+               {MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, false}} {}   // on request only
 
 InitResult FlightController::init() {
     motors_.disarm();
+    load_params();
+    apply_params(kParamEsc, clock_.micros());
+    imu_init_ = init_imu();
+    return imu_init_;
+}
+
+// Initialises the IMU on the path IMU_PATH names (the DMP only when the build has its
+// firmware) and tells the Supervisor; a STATUSTEXT when the chip is missing or the DMP
+// set-up fell back to the raw path.
+InitResult FlightController::init_imu() {
+    Mpu6050Config imu = config_.imu;
+    if (params_.values().imu_path == ImuPath::Raw) {
+        imu.dmp_image = imu.dmp_config = imu.dmp_updates = nullptr;
+        imu.dmp_image_size = imu.dmp_config_size = imu.dmp_updates_size = 0;
+    }
+    imu_.configure(imu);
     const InitResult r = imu_.init(i2c_, clock_);
     if (r == InitResult::OkRawFallback) {
         send_statustext(MAV_SEVERITY_WARNING, dmp_failure_text(imu_.dmp_failure()));
@@ -54,7 +79,63 @@ InitResult FlightController::init() {
         send_statustext(MAV_SEVERITY_CRITICAL, "IMU: MPU6050 not found");
     }
     supervisor_.imu_initialised(clock_.micros(), imu_timeout_for(imu_.sample_rate_hz()));
+    filter_.reset();
     return r;
+}
+
+void FlightController::load_params() {
+    if (config_.storage == nullptr) return;              // defaults, nothing to say
+    uint8_t record[ParamStorage::kMaxBytes];
+    size_t n = 0;
+    const StoreStatus st = config_.storage->load(record, sizeof(record), n);
+    LoadReport r;
+    if (st == StoreStatus::Ok) r = params_.decode(record, n);
+    if (st == StoreStatus::Corrupt || r.status == LoadReport::Status::Corrupt) {
+        send_statustext(MAV_SEVERITY_WARNING, "params: store corrupt; defaults loaded");
+    } else if (r.status == LoadReport::Status::Empty) {
+        send_statustext(MAV_SEVERITY_INFO, "params: none stored; defaults");
+    } else if (r.out_of_range > 0) {
+        char text[MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN];
+        set_result_text(SetResult::Range, r.first_bad, text, sizeof(text));
+        send_statustext(MAV_SEVERITY_WARNING, text);     // that one stays at its default
+    }
+}
+
+// The parameters' values into the parts that fly with them. The gains and bounds take
+// effect at once (the PID keeps its integral term, so a gain change is bumpless); the ESC
+// endpoints and the IMU's path only when `changed` says so, and only while disarmed (the
+// protocol refuses them while armed).
+void FlightController::apply_params(uint8_t changed, uint64_t now_us) {
+    const Tunables& t = params_.values();
+    cascade_.set_gains(t.gains);
+    supervisor_.set_limits(t.safety);
+    if (supervisor_.armed()) return;
+    if (changed & kParamEsc) motors_.set_endpoints(t.esc);
+    if (changed & kParamImu) {
+        imu_init_ = init_imu();
+        supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));
+    }
+}
+
+void FlightController::save_params_when_due(uint64_t now_us) {
+    if (params_dirty_ && !supervisor_.armed() && now_us - params_changed_us_ >= kSaveQuietUs) {
+        save_params();
+    }
+}
+
+// Only while disarmed: on flash this blocks for tens of milliseconds.
+bool FlightController::save_params() {
+    params_dirty_ = false;
+    if (config_.storage == nullptr) {
+        send_statustext(MAV_SEVERITY_INFO, "params: no storage; kept until restart");
+        return false;
+    }
+    uint8_t record[Params::kRecordBytes];
+    const size_t n = params_.encode(record, sizeof(record));
+    const bool ok = config_.storage->save(record, n);
+    send_statustext(ok ? MAV_SEVERITY_INFO : MAV_SEVERITY_CRITICAL,
+                    ok ? "params: saved" : "params: save failed; not stored");
+    return ok;
 }
 
 float FlightController::clamp_dt(uint64_t now_us) {
@@ -75,6 +156,7 @@ void FlightController::step(const RcInput& rc) {
     const uint64_t now = clock_.micros();
     const float dt = clamp_dt(now);
     state_.dt_s = dt;
+    rc_ = rc;
     SupervisorInputs in;
     in.now_us = now;
     in.rc = rc;
@@ -87,6 +169,7 @@ void FlightController::step(const RcInput& rc) {
     run_control(rc, excitation, dt);
     send_events();
     send_telemetry();
+    save_params_when_due(now);
     ++loops_;
 }
 
@@ -101,6 +184,7 @@ bool FlightController::read_imu(float dt_s) {
         state_.attitude = to_euler(filter_.quaternion());
     }
     state_.rate = s.gyro_rad_s;
+    state_.accel = s.accel_m_s2;
     state_.sensor_clipped = static_cast<uint8_t>((s.gyro_clipped ? HQ_SATURATION_GYRO : 0) |
                                                  (s.accel_clipped ? HQ_SATURATION_ACCEL : 0));
     return true;
@@ -115,111 +199,16 @@ void FlightController::recover_imu(uint64_t now_us) {
     }
     // Disarmed: the motors are off, so the loop may stop for the start-up waits and the
     // whole MotionApps DMP set-up, done again as at boot (about 0.3 s on the board).
-    const InitResult r = imu_.init(i2c_, clock_);
-    const bool ok = r == InitResult::OkDmp || r == InitResult::OkRaw;
+    imu_init_ = imu_.init(i2c_, clock_);
+    const bool ok = imu_init_ == InitResult::OkDmp || imu_init_ == InitResult::OkRaw;
     supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));   // its path's rate
     supervisor_.imu_recovery_result(
         health == ImuHealth::Unconfigured ? Reason::ImuReset : Reason::ImuStalled, ok, now_us);
     filter_.reset();
 }
 
-void FlightController::handle_commands(const RcInput& rc, uint64_t now_us) {
-    uint8_t buf[64];
-    size_t n;
-    while ((n = telemetry_.read(buf, sizeof(buf))) > 0) {
-        for (size_t i = 0; i < n; ++i) {
-            mavlink_message_t msg;
-            mavlink_status_t status;
-            if (mavlink_frame_char_buffer(&rx_msg_, &rx_status_, buf[i], &msg, &status) ==
-                MAVLINK_FRAMING_OK) {
-                handle_message(msg, rc, now_us);
-            }
-        }
-    }
-}
-
-void FlightController::handle_message(const mavlink_message_t& msg, const RcInput& rc,
-                                      uint64_t now_us) {
-    switch (msg.msgid) {
-        case MAVLINK_MSG_ID_HEARTBEAT:
-            // The host's, not our own echoed back by a router.
-            if (msg.sysid != config_.system_id) supervisor_.host_heartbeat(now_us);
-            return;
-        case MAVLINK_MSG_ID_COMMAND_LONG:
-            handle_command_long(msg, rc, now_us);
-            return;
-        case MAVLINK_MSG_ID_SET_MODE: {
-            mavlink_set_mode_t sm;
-            mavlink_msg_set_mode_decode(&msg, &sm);
-            if (sm.target_system == config_.system_id) supervisor_.set_mode(sm.custom_mode);
-            return;
-        }
-        case MAVLINK_MSG_ID_HQ_EXCITATION:
-            handle_excitation(msg, now_us);
-            return;
-        default:
-            return;
-    }
-}
-
-void FlightController::handle_command_long(const mavlink_message_t& msg, const RcInput& rc,
-                                           uint64_t now_us) {
-    mavlink_command_long_t cmd;
-    mavlink_msg_command_long_decode(&msg, &cmd);
-    if (cmd.target_system != config_.system_id) return;
-    uint8_t result = MAV_RESULT_UNSUPPORTED;
-    Reason why = Reason::None;
-    if (cmd.command == MAV_CMD_COMPONENT_ARM_DISARM) {
-        if (cmd.param1 > 0.5f) {
-            why = supervisor_.arm_command(rc, now_us);
-            result = why == Reason::None ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
-        } else {
-            supervisor_.host_heartbeat(now_us);
-            supervisor_.disarm_command();
-            result = MAV_RESULT_ACCEPTED;
-        }
-    }
-    mavlink_message_t out;
-    mavlink_msg_command_ack_pack_status(config_.system_id, config_.component_id, &tx_status_,
-                                        &out, cmd.command, result, 0, static_cast<int32_t>(why),
-                                        msg.sysid, msg.compid);
-    send(out);
-}
-
-void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t now_us) {
-    mavlink_hq_excitation_t ex;
-    mavlink_msg_hq_excitation_decode(&msg, &ex);
-    if (ex.target_system != config_.system_id) return;
-    Reason why = Reason::StopCommand;
-    if (ex.action == HQ_EXCITATION_STOP) {
-        supervisor_.stop_excitation();
-        last_exc_accepted_ = true;
-    } else if (ex.action == HQ_EXCITATION_FINISH) {
-        supervisor_.finish_excitation();             // the answer carries the new length
-        last_exc_accepted_ = true;
-        why = Reason::None;
-    } else if (ex.action == HQ_EXCITATION_START) {
-        ExcitationConfig cfg;
-        cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
-        cfg.injection = static_cast<Injection>(ex.injection);
-        cfg.freq_hz = ex.freq_hz;
-        cfg.amplitude = ex.amplitude;
-        cfg.cycles = ex.cycles;
-        cfg.fade_cycles = ex.fade_cycles;
-        why = supervisor_.start_excitation(cfg, now_us);
-        last_exc_accepted_ = why == Reason::None;
-    } else {
-        // An action this firmware does not know: refused, and nothing else changes (a
-        // running excitation goes on; only STOP stops one).
-        why = Reason::BadAction;
-        supervisor_.refuse_excitation(why);
-        last_exc_accepted_ = false;
-    }
-    send_excitation_status(why);
-}
-
 void FlightController::run_control(const RcInput& rc, float excitation, float dt_s) {
-    const Sticks s = sticks(rc, config_.sticks);
+    const Sticks s = sticks(rc, params_.values().sticks);
     const ExcitationConfig& exc = supervisor_.excitation_config();
     CascadeInput in;
     in.mode = supervisor_.mode();
@@ -254,93 +243,6 @@ void FlightController::run_control(const RcInput& rc, float excitation, float dt
     state_.excitation = 0.0f;         // nothing reached the vehicle
     motors_.disarm();
     cascade_.reset();                 // nothing integrates while the motors are off
-}
-
-void FlightController::send(const mavlink_message_t& msg) {
-    uint8_t buf[MAVLINK_MAX_PACKET_LEN];
-    const uint16_t len = mavlink_msg_to_send_buffer(buf, &msg);
-    if (telemetry_.write(buf, len) < len) telemetry_dropped_ += len;
-}
-
-void FlightController::send_statustext(uint8_t severity, const char* text) {
-    // The packer copies the whole field: give it a zero-padded copy, never the literal itself.
-    char padded[kStatusTextLen] = {};
-    for (size_t i = 0; i < kStatusTextLen && text[i] != '\0'; ++i) padded[i] = text[i];
-    mavlink_message_t msg;
-    mavlink_msg_statustext_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                       severity, padded, 0, 0);
-    send(msg);
-}
-
-void FlightController::send_events() {
-    Event e;
-    while (supervisor_.next_event(e)) send_statustext(static_cast<uint8_t>(e.severity), reason_text(e.reason));
-    Reason why;
-    if (supervisor_.take_excitation_end(why)) send_excitation_status(why);
-}
-
-void FlightController::send_excitation_status(Reason reason) {
-    const Excitation& ex = supervisor_.excitation();
-    const ExcitationConfig& cfg = ex.config();
-    mavlink_message_t msg;
-    mavlink_msg_hq_excitation_status_pack_status(
-        config_.system_id, config_.component_id, &tx_status_, &msg, clock_.micros(),
-        last_exc_accepted_ ? 1 : 0, static_cast<uint8_t>(ex.state()), static_cast<uint8_t>(reason),
-        static_cast<uint8_t>(cfg.axis), static_cast<uint8_t>(cfg.injection), ex.actual_freq_hz(),
-        ex.period_samples(), ex.total_samples());
-    send(msg);
-}
-
-uint8_t FlightController::sensor_kind() const {
-    return static_cast<uint8_t>(imu_.mode());       // SensorMode is HQ_SENSOR_KIND
-}
-
-void FlightController::send_telemetry() {
-    // Order matters to the simulator: HQ_SYSID_SAMPLE is the last message of every loop, so
-    // a reader that has it has the whole loop's telemetry.
-    const uint64_t now = clock_.micros();
-    const Supervisor& sup = supervisor_;
-    const uint8_t armed = sup.armed() ? 1 : 0;
-    const auto mode = static_cast<uint8_t>(sup.mode());
-    const auto exc_state = static_cast<uint8_t>(sup.excitation_state());
-    mavlink_message_t msg;
-    if (loops_ == 0 || now - last_slow_us_ >= kSlowPeriodUs) {
-        last_slow_us_ = now;
-        const auto base = static_cast<uint8_t>(MAV_MODE_FLAG_CUSTOM_MODE_ENABLED |
-                                               (armed ? MAV_MODE_FLAG_SAFETY_ARMED : 0));
-        const uint8_t system_status = armed ? MAV_STATE_ACTIVE
-                                      : sup.imu_stale() ? MAV_STATE_CRITICAL : MAV_STATE_STANDBY;
-        mavlink_msg_heartbeat_pack_status(config_.system_id, config_.component_id, &tx_status_,
-                                          &msg, MAV_TYPE_QUADROTOR, MAV_AUTOPILOT_GENERIC, base,
-                                          mode, system_status);
-        send(msg);
-        const Mpu6050Counters& c = imu_.counters();
-        const SupervisorCounters& f = sup.counters();
-        const LoopLoad::Report load = load_.take();
-        mavlink_msg_hq_fw_status_pack_status(
-            config_.system_id, config_.component_id, &tx_status_, &msg, now, loops_, c.packets,
-            c.dropped, c.overflows, c.resyncs, c.bad_packets, c.bus_errors, telemetry_dropped_,
-            dt_clamped_, f.non_finite, sensor_kind(), armed, mode, exc_state,
-            static_cast<uint8_t>(sup.last_reason()), f.rc_failsafes, f.host_failsafes, f.imu_stale,
-            f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped, load.median,
-            load.max, load.overruns);
-        send(msg);
-    }
-    mavlink_msg_attitude_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                     static_cast<uint32_t>(now / 1000), state_.attitude.roll,
-                                     state_.attitude.pitch, state_.attitude.yaw, state_.rate.x,
-                                     state_.rate.y, state_.rate.z);
-    send(msg);
-    const ExcitationConfig& exc = sup.excitation_config();
-    const int a = static_cast<int>(exc.axis);
-    const float angle_sp = a < kAngleAxes ? (a == 0 ? state_.angle_sp.roll : state_.angle_sp.pitch)
-                                          : 0.0f;
-    mavlink_msg_hq_sysid_sample_pack_status(
-        config_.system_id, config_.component_id, &tx_status_, &msg, now, seq_++,
-        static_cast<uint8_t>(exc.axis), static_cast<uint8_t>(exc.injection), exc_state, armed,
-        mode, state_.excitation, angle_sp, state_.rate_sp[a], state_.rate[a], state_.attitude[a],
-        state_.torque[a], state_.motor, state_.saturation);
-    send(msg);
 }
 
 }  // namespace hq

@@ -165,6 +165,8 @@ struct Mpu6050Counters {
 class Mpu6050 {
 public:
     explicit Mpu6050(const Mpu6050Config& config) : config_(config) {}
+    // The set-up the next init() applies.
+    void configure(const Mpu6050Config& config) { config_ = config; }
 
     InitResult init(I2cBus& bus, Clock& clock);
 

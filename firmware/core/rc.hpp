@@ -16,20 +16,24 @@ namespace hq {
 namespace rc {
 constexpr int kRoll = 0, kPitch = 1, kThrottle = 2, kYaw = 3, kArm = 4, kMode = 5;
 constexpr uint16_t kCenterUs = 1500, kMinUs = 1000, kHalfSpanUs = 500;
-// A two-position switch reads about 1000 or 2000 us; "high" needs a clear margin above the
-// centre so that a mid-travel or noisy pulse never counts as a deliberate arm or rate mode,
-// and "low" a valid pulse clearly below it (no signal is neither).
-constexpr uint16_t kSwitchHighUs = 1700;
-constexpr uint16_t kSwitchLowUs = 1300;
-// Throttle at most 10 % of travel counts as low for arming (sticks rest at 1000 +/- a few us).
-constexpr uint16_t kThrottleLowUs = 1100;
 }  // namespace rc
+
+// Where the switches and the throttle change meaning (parameters RC_SW_HIGH, RC_SW_LOW,
+// RC_THR_LOW). A two-position switch reads about 1000 or 2000 us; "high" needs a clear margin
+// above the centre so that a mid-travel or noisy pulse never counts as a deliberate arm or
+// rate mode, and "low" a valid pulse clearly below it (no signal is neither). Throttle at
+// most 10 % of travel counts as low for arming (sticks rest at 1000 +/- a few us).
+struct RcThresholds {
+    uint16_t switch_high_us = 1700;
+    uint16_t switch_low_us = 1300;
+    uint16_t throttle_low_us = 1100;
+};
 
 // Largest setpoints the sticks command at full deflection.
 struct StickLimits {
-    float angle_rad = 0.5236f;      // 30 deg of roll or pitch (angle mode)
-    float rate_rad_s = 3.4907f;     // 200 deg/s of roll or pitch rate (rate mode)
-    float yaw_rate_rad_s = 1.5708f; // 90 deg/s of yaw rate (both modes)
+    float angle_rad = 0.52359878f;      // 30 deg of roll or pitch (angle mode)
+    float rate_rad_s = 3.4906585f;      // 200 deg/s of roll or pitch rate (rate mode)
+    float yaw_rate_rad_s = 1.5707963f;  // 90 deg/s of yaw rate (both modes)
 };
 
 // The sticks as setpoints: angles for angle mode, rates for rate mode (yaw is always a rate).
@@ -46,11 +50,11 @@ float throttle(const RcInput& in);
 Sticks sticks(const RcInput& in, const StickLimits& limits);
 
 inline bool has_signal(const RcInput& in, int channel) { return in.channel_us[channel] != 0; }
-inline bool switch_high(const RcInput& in, int channel) {
-    return in.channel_us[channel] > rc::kSwitchHighUs;
+inline bool switch_high(const RcInput& in, int channel, const RcThresholds& t) {
+    return in.channel_us[channel] > t.switch_high_us;
 }
-inline bool switch_low(const RcInput& in, int channel) {
-    return has_signal(in, channel) && in.channel_us[channel] < rc::kSwitchLowUs;
+inline bool switch_low(const RcInput& in, int channel, const RcThresholds& t) {
+    return has_signal(in, channel) && in.channel_us[channel] < t.switch_low_us;
 }
 
 }  // namespace hq

@@ -113,9 +113,9 @@ void Supervisor::host_heartbeat(uint64_t now_us) {
 
 Reason Supervisor::check_arm(const RcInput& rc, uint64_t now_us) const {
     if (rc.age_us > limits_.rc_timeout_us) return Reason::NoRc;
-    if (!switch_high(rc, rc::kArm)) return Reason::ArmSwitchLow;
+    if (!switch_high(rc, rc::kArm, limits_.rc)) return Reason::ArmSwitchLow;
     if (!has_signal(rc, rc::kThrottle)) return Reason::NoThrottle;
-    if (rc.channel_us[rc::kThrottle] >= rc::kThrottleLowUs) return Reason::ThrottleHigh;
+    if (rc.channel_us[rc::kThrottle] >= limits_.rc.throttle_low_us) return Reason::ThrottleHigh;
     if (!imu_fresh(now_us)) return Reason::ImuNotReady;
     return Reason::None;
 }
@@ -183,7 +183,7 @@ void Supervisor::apply_mode_switch(const RcInput& rc) {
     // The switch acts when it moves (and when it first shows a position), so SET_MODE is not
     // overridden by a switch that stays put; a move during an excitation waits for its end.
     if (has_signal(rc, rc::kMode)) {
-        const FlightMode pos = switch_high(rc, rc::kMode) ? FlightMode::Rate : FlightMode::Angle;
+        const FlightMode pos = switch_high(rc, rc::kMode, limits_.rc) ? FlightMode::Rate : FlightMode::Angle;
         if (!mode_switch_known_ || pos != mode_switch_) {
             mode_switch_known_ = true;
             mode_switch_ = pos;
@@ -214,7 +214,7 @@ void Supervisor::apply_rc(const RcInput& rc, uint64_t now_us) {
         }
         return;
     }
-    const bool high = switch_high(rc, rc::kArm);
+    const bool high = switch_high(rc, rc::kArm, limits_.rc);
     if (armed_ && !high) {
         disarm(Reason::RcSwitch);
     } else if (!armed_ && high && arm_switch_ == SwitchPos::Low) {
@@ -225,7 +225,7 @@ void Supervisor::apply_rc(const RcInput& rc, uint64_t now_us) {
         else refuse_arm(r);
     }
     arm_switch_ = high ? SwitchPos::High
-                : switch_low(rc, rc::kArm) ? SwitchPos::Low : SwitchPos::Unknown;
+                : switch_low(rc, rc::kArm, limits_.rc) ? SwitchPos::Low : SwitchPos::Unknown;
     apply_mode_switch(rc);
 }
 
@@ -345,6 +345,12 @@ float Supervisor::run_excitation(const SupervisorInputs& in) {
 }
 
 // --- IMU recovery ---------------------------------------------------------------------------
+
+void Supervisor::set_limits(const SafetyLimits& limits) {
+    const uint32_t imu_timeout_us = limits_.imu_timeout_us;
+    limits_ = limits;
+    limits_.imu_timeout_us = imu_timeout_us;
+}
 
 void Supervisor::imu_initialised(uint64_t now_us, uint32_t timeout_us) {
     last_imu_attempt_us_ = now_us;

@@ -28,6 +28,7 @@
 #include <cstdint>
 
 #include "../hal/rc_input.hpp"
+#include "rc.hpp"
 #include "excitation.hpp"
 #include "types.hpp"
 
@@ -121,6 +122,8 @@ struct SafetyLimits {
     float max_duration_s = 300.0f;
     // Every excitation fades in (and out) over at least this many cycles.
     uint16_t min_fade_cycles = 1;
+    // The arm and mode switches' positions and the throttle that is low enough to arm.
+    RcThresholds rc{};
 };
 
 // The IMU timeout for a sensor delivering rate_hz samples: five samples, at most 50 ms.
@@ -199,6 +202,8 @@ public:
     Reason last_reason() const { return last_reason_; }
     const SupervisorCounters& counters() const { return counters_; }
     const SafetyLimits& limits() const { return limits_; }
+    // New bounds (the parameters changed); the IMU timeout stays the one the chip's rate set.
+    void set_limits(const SafetyLimits& limits);
 
     // --- what the loop reports -------------------------------------------------------------
     // The oldest event not yet taken (STATUSTEXT); false when there is none.

@@ -1,7 +1,10 @@
 // heliquad-fw-host: the firmware's host build, driven in lockstep by the simulator.
 //
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
-//                    [--idle-timeout-s 10]
+//                    [--idle-timeout-s 10] [--params FILE]
+//
+// Parameters (the MAVLink parameter protocol, docs/parameters.md) persist in --params FILE,
+// created at the first save; without it every start has the defaults and nothing is saved.
 //
 // DMP firmware (the MotionApps image and its tables, a file made with `heliquad dmp-image`):
 // --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the raw FIFO
@@ -30,6 +33,7 @@
 #include "clock.hpp"
 #include "i2c.hpp"
 #include "motors.hpp"
+#include "param_storage.hpp"
 #include "serial.hpp"
 #include "mpu6050_emulator.hpp"
 #include "sim_link_handler.hpp"
@@ -40,7 +44,7 @@ volatile std::sig_atomic_t g_stop = 0;   // the one global: signal handlers need
 void on_signal(int) { g_stop = 1; }
 
 struct Options {
-    std::string sim_link, telemetry, dmp_image;
+    std::string sim_link, telemetry, dmp_image, params;
     float loop_hz = 200.0f;
     int idle_timeout_s = 10;
 };
@@ -48,7 +52,7 @@ struct Options {
 [[noreturn]] void usage(const char* msg) {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
-                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10]\n",
+                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10] [--params FILE]\n",
                  msg);
     std::exit(2);
 }
@@ -63,6 +67,7 @@ Options parse(int argc, char** argv) {
         if (a == "--sim-link") o.sim_link = v;
         else if (a == "--telemetry") o.telemetry = v;
         else if (a == "--dmp-image") o.dmp_image = v;
+        else if (a == "--params") o.params = v;
         else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
         else if (a == "--idle-timeout-s") o.idle_timeout_s = std::atoi(v);
         else usage(("unknown option " + a).c_str());
@@ -121,6 +126,8 @@ int main(int argc, char** argv) {
     static hq::Mpu6050Emulator chip;
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = opt.loop_hz;
+    static hq::FileParamStorage storage(opt.params);
+    if (!opt.params.empty()) cfg.storage = &storage;
     if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image
         if (const char* bad = hq::use_dmp_file(dmp_file.data(), dmp_file.size(), cfg.imu)) {
             usage((opt.dmp_image + ": " + bad).c_str());
@@ -147,16 +154,20 @@ int main(int argc, char** argv) {
     int exit_code = 0;
     uint8_t buf[512];
 
+    // What init() sent (the parameters' and the IMU's start-up messages) waits for the first
+    // frame: the simulator opens the telemetry port before it steps, and opening a serial
+    // port discards what was already waiting there.
+    bool stepped = false;
     while (!g_stop) {
         // Telemetry ships as a USB CDC device ships it: in chunks, once a chunk is buffered,
         // after a frame marked `sync` (the simulator pauses to read it), or when the sim link
         // has been quiet for a moment. Fewer, larger writes keep the lockstep fast.
         if (telemetry.buffered() >= kTelemetryChunk) telemetry.flush();
-        const long wait_us = telemetry.buffered() ? kTelemetryQuietUs : kIdlePollUs;
+        const long wait_us = telemetry.buffered() && stepped ? kTelemetryQuietUs : kIdlePollUs;
         // Telemetry input (commands) is polled in the same call unless it is already known
         // to be waiting for the next step.
         if (!sim.wait_readable_us(wait_us, telemetry.input_pending() ? nullptr : &telemetry)) {
-            telemetry.flush();
+            if (stepped) telemetry.flush();
             if (Wall::now() - last_input >= std::chrono::seconds(opt.idle_timeout_s)) {
                 std::fprintf(stderr, "heliquad-fw-host: no sensor frame for %d s; exiting\n",
                              opt.idle_timeout_s);
@@ -166,6 +177,7 @@ int main(int argc, char** argv) {
             continue;
         }
         last_input = Wall::now();
+        stepped = true;
         const size_t n = sim.read(buf, sizeof(buf));
         const uint32_t lost_before = handler.lost();
         if (!handler.feed(buf, n, replies)) {

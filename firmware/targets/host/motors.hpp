@@ -19,10 +19,14 @@ public:
     void disarm() override {
         for (float& v : value_) v = 0.0f;
     }
+    // The simulator takes thrust fractions: the endpoints are kept, not used.
+    void set_endpoints(const EscEndpoints& endpoints) override { endpoints_ = endpoints; }
+    const EscEndpoints& endpoints() const { return endpoints_; }
     const float* values() const { return value_; }
 
 private:
     float value_[5] = {0, 0, 0, 0, 0};
+    EscEndpoints endpoints_{};
 };
 
 }  // namespace hq

@@ -26,9 +26,6 @@ namespace {
 constexpr uint32_t kLoopHz = 200;
 constexpr uint32_t kTelemetryBaud = 921600;
 
-// ESC endpoints; the ESCs on the rig are calibrated to 1000-2000 us.
-constexpr hq::teensy::EscCalibration kEscCalibration{};
-
 hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResult init) {
     using hq::teensy::LedPattern;
     if (fc.armed()) return LedPattern::Armed;
@@ -65,7 +62,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     led_set(true);
 
     static Ftm0Motors motors;
-    motors.begin(kEscCalibration);
+    motors.begin(hq::EscEndpoints{});     // the stop pulse until the parameters say otherwise
     static Uart0Serial telemetry;
     if (!telemetry.begin(kTelemetryBaud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     static Ftm3RcInput rc;
@@ -76,6 +73,8 @@ extern "C" [[noreturn]] void hq_teensy_main() {
 
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
+    cfg.cpu_hz = kCoreHz;                             // SYS_STATUS load from the cycle counter
+    cfg.link_bytes_per_s = kTelemetryBaud / 10;       // 8N1: ten bits a byte
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
     const hq::InitResult init = fc.init();

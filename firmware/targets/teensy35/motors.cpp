@@ -16,15 +16,11 @@ uint32_t g_stop_counts[5] = {0, 0, 0, 0, 0};
 // CnSC and CnV interleave (C0SC, C0V, C1SC, ...): two registers between channels.
 inline volatile uint32_t& channel_value(int i) { return reg_at<FTM0::C0V>(i, 2); }
 inline volatile uint32_t& channel_control(int i) { return reg_at<FTM0::C0SC>(i, 2); }
-
-bool plausible(uint16_t min_us, uint16_t max_us) {
-    return min_us >= 800 && max_us <= 2200 && max_us > min_us;
-}
 }  // namespace
 
-void Ftm0Motors::begin(const EscCalibration& cal) {
+void Ftm0Motors::begin(const EscEndpoints& cal) {
     for (int i = 0; i < 5; ++i) {
-        const bool ok = plausible(cal.min_us[i], cal.max_us[i]);
+        const bool ok = plausible_endpoints(cal.min_us[i], cal.max_us[i]);
         cal_.min_us[i] = ok ? cal.min_us[i] : 1000;
         cal_.max_us[i] = ok ? cal.max_us[i] : 2000;
     }
@@ -47,6 +43,16 @@ void Ftm0Motors::begin(const EscCalibration& cal) {
     PORTC::PCR3::write(pcr);
     PORTC::PCR4::write(pcr);
     PORTD::PCR4::write(pcr);
+}
+
+void Ftm0Motors::set_endpoints(const EscEndpoints& endpoints) {
+    for (int i = 0; i < 5; ++i) {
+        if (!plausible_endpoints(endpoints.min_us[i], endpoints.max_us[i])) continue;
+        cal_.min_us[i] = endpoints.min_us[i];
+        cal_.max_us[i] = endpoints.max_us[i];
+        g_stop_counts[i] = cal_.min_us[i] * kCountsPerUs;
+    }
+    disarm();
 }
 
 void Ftm0Motors::write(int i, uint16_t us) {

@@ -18,11 +18,6 @@
 
 namespace hq::teensy {
 
-struct EscCalibration {
-    // Pulse widths in microseconds: min is the stop pulse, max is full thrust.
-    uint16_t min_us[5] = {1000, 1000, 1000, 1000, 1000};
-    uint16_t max_us[5] = {2000, 2000, 2000, 2000, 2000};
-};
 
 class Ftm0Motors final : public MotorOutputs {
 public:
@@ -30,14 +25,16 @@ public:
     static constexpr uint32_t kCountsPerUs = 15;                 // bus 60 MHz / 4
     static constexpr uint32_t kPeriodCounts = 1000000 / kPwmHz * kCountsPerUs;
 
-    // Calibrations outside 800..2200 us, or with max <= min, are replaced by 1000/2000.
-    void begin(const EscCalibration& cal);
+    // Endpoints outside 800..2200 us, or with max <= min, are replaced by 1000/2000.
+    void begin(const EscEndpoints& cal);
     void set(const float thrust_fraction[5]) override;
     void disarm() override;
+    // Implausible endpoints keep that ESC's previous ones; the stop pulses go out at once.
+    void set_endpoints(const EscEndpoints& endpoints) override;
 
 private:
     void write(int i, uint16_t us);
-    EscCalibration cal_{};
+    EscEndpoints cal_{};
 };
 
 // Drives every ESC channel to its stop pulse if FTM0 is running; for the fault path.

@@ -1,0 +1,313 @@
+#include "params.hpp"
+
+#include <cmath>
+
+namespace hq {
+
+namespace {
+
+// Degrees and seconds on the link, radians and microseconds inside. The conversions run in
+// double so that a default of pi/4 reads back as 45 and 45 gives the same float as pi/4.
+constexpr double kDegPerRad = 57.29577951308232;
+
+float to_deg(float rad) { return static_cast<float>(static_cast<double>(rad) * kDegPerRad); }
+float to_rad(float deg) { return static_cast<float>(static_cast<double>(deg) / kDegPerRad); }
+
+// --- accessors, one template per kind of field ---------------------------------------------
+template <int A, float PidGains::*F>
+float rate_get(const Tunables& t) { return t.gains.rate[A].*F; }
+template <int A, float PidGains::*F>
+void rate_set(Tunables& t, float v) { t.gains.rate[A].*F = v; }
+template <int A, float PidGains::*F>
+float angle_get(const Tunables& t) { return t.gains.angle[A].*F; }
+template <int A, float PidGains::*F>
+void angle_set(Tunables& t, float v) { t.gains.angle[A].*F = v; }
+
+template <float SafetyLimits::*F>
+float safety_get(const Tunables& t) { return t.safety.*F; }
+template <float SafetyLimits::*F>
+void safety_set(Tunables& t, float v) { t.safety.*F = v; }
+template <float SafetyLimits::*F>
+float safety_deg_get(const Tunables& t) { return to_deg(t.safety.*F); }
+template <float SafetyLimits::*F>
+void safety_deg_set(Tunables& t, float v) { t.safety.*F = to_rad(v); }
+template <uint32_t SafetyLimits::*F>
+float safety_s_get(const Tunables& t) { return static_cast<float>(t.safety.*F * 1e-6); }
+template <uint32_t SafetyLimits::*F>
+void safety_s_set(Tunables& t, float v) {
+    t.safety.*F = static_cast<uint32_t>(std::lround(static_cast<double>(v) * 1e6));
+}
+template <int I>
+float amp_get(const Tunables& t) { return t.safety.max_amplitude[I]; }
+template <int I>
+void amp_set(Tunables& t, float v) { t.safety.max_amplitude[I] = v; }
+template <int I>
+float amp_deg_get(const Tunables& t) { return to_deg(t.safety.max_amplitude[I]); }
+template <int I>
+void amp_deg_set(Tunables& t, float v) { t.safety.max_amplitude[I] = to_rad(v); }
+float fade_get(const Tunables& t) { return t.safety.min_fade_cycles; }
+void fade_set(Tunables& t, float v) { t.safety.min_fade_cycles = static_cast<uint16_t>(v); }
+
+template <uint16_t RcThresholds::*F>
+float rc_get(const Tunables& t) { return t.safety.rc.*F; }
+template <uint16_t RcThresholds::*F>
+void rc_set(Tunables& t, float v) { t.safety.rc.*F = static_cast<uint16_t>(v); }
+
+template <float StickLimits::*F>
+float stick_get(const Tunables& t) { return to_deg(t.sticks.*F); }
+template <float StickLimits::*F>
+void stick_set(Tunables& t, float v) { t.sticks.*F = to_rad(v); }
+
+template <int I, bool Max>
+float esc_get(const Tunables& t) { return Max ? t.esc.max_us[I] : t.esc.min_us[I]; }
+template <int I, bool Max>
+void esc_set(Tunables& t, float v) {
+    (Max ? t.esc.max_us[I] : t.esc.min_us[I]) = static_cast<uint16_t>(v);
+}
+
+float imu_path_get(const Tunables& t) { return static_cast<float>(t.imu_path); }
+void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(static_cast<uint8_t>(v)); }
+
+constexpr uint8_t kGain = kParamArmedOk;
+constexpr uint8_t kInt = kParamInteger;
+constexpr uint8_t kEsc = kParamInteger | kParamEsc;
+
+#define HQ_RATE(AX, A)                                                                          \
+    {"RATE_" AX "_KC", "1/(rad/s)", 0.01f, 50.0f, kGain, rate_get<A, &PidGains::kc>,           \
+     rate_set<A, &PidGains::kc>},                                                               \
+    {"RATE_" AX "_TI", "s", 0.0f, 100.0f, kGain, rate_get<A, &PidGains::tau_i_s>,               \
+     rate_set<A, &PidGains::tau_i_s>},                                                          \
+    {"RATE_" AX "_TD", "s", 0.0f, 1.0f, kGain, rate_get<A, &PidGains::tau_d_s>,                 \
+     rate_set<A, &PidGains::tau_d_s>},                                                          \
+    {"RATE_" AX "_IMAX", "", 0.0f, 1.0f, kGain, rate_get<A, &PidGains::integral_limit>,         \
+     rate_set<A, &PidGains::integral_limit>}
+#define HQ_ANGLE(AX, A)                                                                         \
+    {"ANG_" AX "_KC", "1/s", 0.01f, 20.0f, kGain, angle_get<A, &PidGains::kc>,                  \
+     angle_set<A, &PidGains::kc>},                                                              \
+    {"ANG_" AX "_TD", "s", 0.0f, 1.0f, kGain, angle_get<A, &PidGains::tau_d_s>,                 \
+     angle_set<A, &PidGains::tau_d_s>}
+#define HQ_ESC(N, I)                                                                            \
+    {"ESC" N "_MIN", "us", 800.0f, 1100.0f, kEsc, esc_get<I, false>, esc_set<I, false>},        \
+    {"ESC" N "_MAX", "us", 1500.0f, 2200.0f, kEsc, esc_get<I, true>, esc_set<I, true>}
+
+// The order is the protocol's param_index: append, never reorder (a ground station may
+// cache by index within a session; the stored record is keyed by name).
+const ParamInfo kParams[kParamCount] = {
+    HQ_RATE("RLL", 0), HQ_RATE("PIT", 1), HQ_RATE("YAW", 2),
+    HQ_ANGLE("RLL", 0), HQ_ANGLE("PIT", 1),
+    {"EXC_MAX_ANG", "deg", 1.0f, 60.0f, 0, amp_deg_get<0>, amp_deg_set<0>},
+    {"EXC_MAX_RATE", "deg/s", 1.0f, 300.0f, 0, amp_deg_get<1>, amp_deg_set<1>},
+    {"EXC_MAX_MIX", "", 0.01f, 1.0f, 0, amp_get<2>, amp_set<2>},
+    {"EXC_MIN_FREQ", "Hz", 0.01f, 10.0f, 0, safety_get<&SafetyLimits::min_freq_hz>,
+     safety_set<&SafetyLimits::min_freq_hz>},
+    {"EXC_MAX_DUR", "s", 1.0f, 3600.0f, 0, safety_get<&SafetyLimits::max_duration_s>,
+     safety_set<&SafetyLimits::max_duration_s>},
+    {"EXC_MIN_FADE", "cycles", 1.0f, 100.0f, kInt, fade_get, fade_set},
+    {"FS_RC_TIMEOUT", "s", 0.1f, 2.0f, 0, safety_s_get<&SafetyLimits::rc_timeout_us>,
+     safety_s_set<&SafetyLimits::rc_timeout_us>},
+    {"FS_HOST_TIMEOUT", "s", 0.5f, 10.0f, 0, safety_s_get<&SafetyLimits::host_timeout_us>,
+     safety_s_set<&SafetyLimits::host_timeout_us>},
+    {"FS_ABORT_ANG", "deg", 10.0f, 90.0f, 0, safety_deg_get<&SafetyLimits::abort_angle_rad>,
+     safety_deg_set<&SafetyLimits::abort_angle_rad>},
+    {"FS_ABORT_RATE", "deg/s", 30.0f, 1500.0f, 0,
+     safety_deg_get<&SafetyLimits::abort_rate_rad_s>, safety_deg_set<&SafetyLimits::abort_rate_rad_s>},
+    HQ_ESC("1", 0), HQ_ESC("2", 1), HQ_ESC("3", 2), HQ_ESC("4", 3), HQ_ESC("5", 4),
+    {"RC_SW_HIGH", "us", 1550.0f, 1900.0f, kInt, rc_get<&RcThresholds::switch_high_us>,
+     rc_set<&RcThresholds::switch_high_us>},
+    {"RC_SW_LOW", "us", 1100.0f, 1450.0f, kInt, rc_get<&RcThresholds::switch_low_us>,
+     rc_set<&RcThresholds::switch_low_us>},
+    {"RC_THR_LOW", "us", 1000.0f, 1300.0f, kInt, rc_get<&RcThresholds::throttle_low_us>,
+     rc_set<&RcThresholds::throttle_low_us>},
+    {"STK_ANG_MAX", "deg", 5.0f, 60.0f, 0, stick_get<&StickLimits::angle_rad>,
+     stick_set<&StickLimits::angle_rad>},
+    {"STK_RATE_MAX", "deg/s", 10.0f, 720.0f, 0, stick_get<&StickLimits::rate_rad_s>,
+     stick_set<&StickLimits::rate_rad_s>},
+    {"STK_YAW_MAX", "deg/s", 10.0f, 360.0f, 0, stick_get<&StickLimits::yaw_rate_rad_s>,
+     stick_set<&StickLimits::yaw_rate_rad_s>},
+    {"IMU_PATH", "", 0.0f, 1.0f, kInt | kParamImu, imu_path_get, imu_path_set},
+};
+
+#undef HQ_RATE
+#undef HQ_ANGLE
+#undef HQ_ESC
+
+constexpr uint32_t kMagic = 0x31505148u;     // "HQP1", little-endian
+
+void put32(uint8_t* p, uint32_t v) {
+    for (int i = 0; i < 4; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
+}
+uint32_t get32(const uint8_t* p) {
+    return static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 |
+           static_cast<uint32_t>(p[2]) << 16 | static_cast<uint32_t>(p[3]) << 24;
+}
+uint32_t float_bits(float f) {
+    uint32_t u;
+    static_assert(sizeof(u) == sizeof(f), "IEEE single");
+    __builtin_memcpy(&u, &f, sizeof(u));
+    return u;
+}
+float bits_float(uint32_t u) {
+    float f;
+    __builtin_memcpy(&f, &u, sizeof(f));
+    return f;
+}
+
+size_t name_length(const char* name, size_t len) {
+    size_t n = 0;
+    while (n < len && name[n] != '\0') ++n;
+    return n;
+}
+
+uint32_t name_hash(const char* name) {
+    return crc32(reinterpret_cast<const uint8_t*>(name), name_length(name, kParamNameLen));
+}
+
+bool acceptable(const ParamInfo& p, float value) {
+    return std::isfinite(value) && value >= p.min && value <= p.max &&
+           (!(p.flags & kParamInteger) || value == std::floor(value));
+}
+
+// Appends text, keeping room for the terminating NUL.
+struct Writer {
+    char* out;
+    size_t capacity, n = 0;
+    void put(char c) {
+        if (n + 1 < capacity) out[n++] = c;
+        out[n] = '\0';
+    }
+    void put(const char* s, size_t len = 0xFFFF) {
+        for (size_t i = 0; i < len && s[i] != '\0'; ++i) put(s[i]);
+    }
+    // A range bound as the table writes it: whole numbers plain, others with up to four
+    // decimals, trailing zeros dropped.
+    void number(float v) {
+        if (v < 0) {
+            put('-');
+            v = -v;
+        }
+        const auto scaled = static_cast<uint32_t>(std::lround(static_cast<double>(v) * 1e4));
+        char digits[12];
+        int k = 0;
+        for (uint32_t whole = scaled / 10000; k == 0 || whole > 0; whole /= 10) {
+            digits[k++] = static_cast<char>('0' + whole % 10);
+        }
+        while (k > 0) put(digits[--k]);
+        uint32_t frac = scaled % 10000;
+        if (frac == 0) return;
+        put('.');
+        for (uint32_t div = 1000; frac > 0; div /= 10) {
+            put(static_cast<char>('0' + frac / div));
+            frac %= div;
+        }
+    }
+};
+
+}  // namespace
+
+uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc) {
+    // CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320), bit by bit: no table in flash.
+    crc = ~crc;
+    for (size_t i = 0; i < n; ++i) {
+        crc ^= data[i];
+        for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+    }
+    return ~crc;
+}
+
+const ParamInfo& param_info(int index) { return kParams[index]; }
+
+int param_index(const char* name, size_t len) {
+    const size_t n = name_length(name, len);
+    for (int i = 0; i < kParamCount; ++i) {
+        const char* p = kParams[i].name;
+        size_t k = 0;
+        while (k < n && p[k] == name[k]) ++k;
+        if (k == n && p[k] == '\0') return i;
+    }
+    return -1;
+}
+
+float Params::get(int index) const { return kParams[index].get(values_); }
+
+float Params::default_value(int index) const { return kParams[index].get(defaults_); }
+
+SetResult Params::set(int index, float value, bool armed, bool exciting) {
+    if (index < 0 || index >= kParamCount) return SetResult::Unknown;
+    const ParamInfo& p = kParams[index];
+    if (exciting) return SetResult::Excitation;
+    if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
+    if (!(std::isfinite(value) && value >= p.min && value <= p.max)) return SetResult::Range;
+    if (!acceptable(p, value)) return SetResult::NotInteger;
+    p.set(values_, value);
+    return SetResult::Ok;
+}
+
+size_t Params::encode(uint8_t* out, size_t capacity) const {
+    if (capacity < kRecordBytes) return 0;
+    put32(out, kMagic);
+    put32(out + 4, kParamCount);                 // count (16 bits), reserved (16 bits, 0)
+    uint8_t* p = out + 8;
+    for (int i = 0; i < kParamCount; ++i, p += 8) {
+        put32(p, name_hash(kParams[i].name));
+        put32(p + 4, float_bits(get(i)));
+    }
+    put32(p, crc32(out, static_cast<size_t>(p - out)));
+    return kRecordBytes;
+}
+
+LoadReport Params::decode(const uint8_t* data, size_t n) {
+    LoadReport r;
+    if (n == 0) return r;                        // Empty
+    r.status = LoadReport::Status::Corrupt;
+    if (n < 12 || get32(data) != kMagic) return r;
+    const uint32_t count = get32(data + 4) & 0xFFFFu;
+    if (n != 12 + 8 * static_cast<size_t>(count) || crc32(data, n - 4) != get32(data + n - 4)) {
+        return r;
+    }
+    r.status = LoadReport::Status::Ok;
+    uint32_t hashes[kParamCount];
+    for (int i = 0; i < kParamCount; ++i) hashes[i] = name_hash(kParams[i].name);
+    for (uint32_t e = 0; e < count; ++e) {
+        const uint8_t* p = data + 8 + 8 * e;
+        const uint32_t h = get32(p);
+        for (int i = 0; i < kParamCount; ++i) {
+            if (hashes[i] != h) continue;        // a parameter this firmware no longer has
+            const float v = bits_float(get32(p + 4));
+            if (acceptable(kParams[i], v)) {
+                kParams[i].set(values_, v);
+                ++r.loaded;
+            } else if (r.out_of_range++ == 0) {
+                r.first_bad = i;
+            }
+            break;
+        }
+    }
+    return r;
+}
+
+void set_result_text(SetResult result, int index, char* out, size_t capacity) {
+    Writer w{out, capacity};
+    if (capacity == 0) return;
+    out[0] = '\0';
+    if (index < 0 || index >= kParamCount) {
+        w.put("params: no such parameter");
+        return;
+    }
+    const ParamInfo& p = kParams[index];
+    w.put(p.name);
+    switch (result) {
+        case SetResult::Range:
+            w.put(" out of range ");
+            w.number(p.min);
+            w.put("..");
+            w.number(p.max);
+            break;
+        case SetResult::NotInteger: w.put(" takes whole numbers only"); break;
+        case SetResult::Armed: w.put(" changes only while disarmed"); break;
+        case SetResult::Excitation: w.put(": not while exciting"); break;
+        case SetResult::Unknown: w.put(": no such parameter"); break;
+        case SetResult::Ok: w.put(" set"); break;
+    }
+}
+
+}  // namespace hq

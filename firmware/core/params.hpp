@@ -1,0 +1,107 @@
+// Parameters: every value the firmware flies with that a user may change without reflashing
+// (gains, excitation limits, failsafe bounds, ESC endpoints, RC thresholds, stick scaling,
+// the IMU's data path),
+// as the MAVLink parameter protocol names them, with their units and ranges, and their
+// stored form. No I/O: the FlightController answers the protocol and owns the storage.
+//
+// Rules (docs/parameters.md lists every parameter):
+//   - A value outside its range, not finite, or not whole for an integer parameter is refused
+//     and the old value stays.
+//   - While an excitation runs nothing may change (a record is of one controller); while
+//     armed only the gains may change; everything else waits for disarm.
+//   - The stored record is name-keyed (a CRC-32 of each name), so a firmware that adds or
+//     drops a parameter still reads the others; it ends in a CRC-32 of the whole record. A
+//     record that fails its checks gives the defaults, a stored value out of range gives
+//     that parameter's default; both are reported.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "../hal/motors.hpp"
+#include "controllers.hpp"
+#include "rc.hpp"
+#include "supervisor.hpp"
+
+namespace hq {
+
+// Which IMU data path init() sets up (IMU_PATH).
+enum class ImuPath : uint8_t { Dmp = 0, Raw = 1 };
+
+// Everything a parameter sets. The defaults are the flight values of each part.
+struct Tunables {
+    CascadeGains gains = CascadeGains::paper_defaults();
+    SafetyLimits safety{};
+    StickLimits sticks{};
+    EscEndpoints esc{};
+    ImuPath imu_path = ImuPath::Dmp;   // DMP when the build has its firmware, else raw
+};
+
+enum ParamFlag : uint8_t {
+    kParamInteger = 1,    // MAV_PARAM_TYPE_INT32: whole values only
+    kParamArmedOk = 2,    // may change while armed (the gains)
+    kParamImu = 4,        // takes effect when the IMU is next initialised (done at once, disarmed)
+    kParamEsc = 8,        // an ESC endpoint: the motors are told at once (disarmed)
+};
+
+struct ParamInfo {
+    const char* name;     // at most 16 characters (PARAM_VALUE.param_id)
+    const char* units;    // as the docs print them
+    float min, max;       // inclusive
+    uint8_t flags;
+    float (*get)(const Tunables&);
+    void (*set)(Tunables&, float);
+};
+
+constexpr int kParamCount = 43;
+constexpr size_t kParamNameLen = 16;
+
+const ParamInfo& param_info(int index);
+// The index of a name given as a PARAM_* message's 16-character field (NUL-terminated when
+// shorter); -1 when there is no such parameter.
+int param_index(const char* name, size_t len = kParamNameLen);
+uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc = 0);
+
+enum class SetResult : uint8_t {
+    Ok = 0,
+    Unknown,         // no such parameter
+    Range,           // not finite, or outside [min, max]
+    NotInteger,      // an integer parameter given a fraction
+    Armed,           // only the gains may change while armed
+    Excitation,      // nothing changes while an excitation runs
+};
+
+// What a stored record held.
+struct LoadReport {
+    enum class Status : uint8_t { Ok, Empty, Corrupt } status = Status::Empty;
+    int loaded = 0;          // values taken from the record
+    int out_of_range = 0;    // stored values refused (their defaults kept)
+    int first_bad = -1;      // the first of those
+};
+
+class Params {
+public:
+    explicit Params(const Tunables& defaults = Tunables{}) : defaults_(defaults), values_(defaults) {}
+
+    const Tunables& values() const { return values_; }
+    const Tunables& defaults() const { return defaults_; }
+    float get(int index) const;
+    float default_value(int index) const;
+    SetResult set(int index, float value, bool armed, bool exciting);
+    void reset() { values_ = defaults_; }
+
+    // The record saved to ParamStorage: its length, 0 if capacity is too small.
+    size_t encode(uint8_t* out, size_t capacity) const;
+    // Takes the values of a stored record (status Empty: n == 0).
+    LoadReport decode(const uint8_t* data, size_t n);
+    static constexpr size_t kRecordBytes = 8 + 8 * kParamCount + 4;
+
+private:
+    Tunables defaults_;
+    Tunables values_;
+};
+
+// "NAME out of range [min, max]" and the like, for STATUSTEXT (at most 49 characters).
+void set_result_text(SetResult result, int index, char* out, size_t capacity);
+
+}  // namespace hq

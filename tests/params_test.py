@@ -1,0 +1,456 @@
+"""The firmware as ground stations speak to it, with pymavlink's own ``mavutil`` as the
+client: the parameter protocol (fetch, set, read back, fly with it, persisted across a
+restart, a corrupt store, refusals), the standard messages and commands, broadcast targets,
+and the modes' names.
+
+The firmware is stepped frame by frame (lockstep), and the client reads the telemetry pty
+between frames, so everything checked is firmware time; a wall-clock bound only stops a hang.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+
+from heliquad import _firmware
+from heliquad.sim.dialect import dialect
+from heliquad.sim.lockstep import SimLink
+from heliquad.sim.tf_plant import TfPlant
+
+from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
+from firmwares import FIRMWARES, start
+
+MAV = dialect()
+# mavutil loads a dialect by module name, MAVLink 2 only with MAVLINK20 set (as MAVProxy
+# sets it): the project's generated module, under its own name.
+os.environ["MAVLINK20"] = "1"
+import pymavlink.dialects.v20 as _v20  # noqa: E402
+
+sys.modules.setdefault("pymavlink.dialects.v20.heliquad", MAV)
+_v20.heliquad = MAV
+PARAMS = [(p.name, p.minimum, p.maximum, p.default, p.integer) for p in _firmware.param_table()]
+NAMES = [p[0] for p in PARAMS]
+
+
+class Client:
+    """The firmware on a roll tf plant, stepped in lockstep, with a mavutil client on its
+    telemetry port."""
+
+    def __init__(self, fw):
+        self.fw = fw
+        self.link = SimLink(fw)
+        self.plant = TfPlant("roll", *ROLL, DT_US * 1e-6)
+        self.rc = list(RC_REST)
+        self.frame, self.kind = 0, MAV.HQ_SENSOR_NONE
+        self.conn = mavutil.mavlink_connection(fw.telemetry_path, dialect="heliquad",
+                                               source_system=255, source_component=190)
+        self.mav = self.conn.mav
+        self.seen = []
+        self.cursor = 0           # until() looks at messages from here on
+
+    def close(self):
+        self.conn.close()
+        self.link.close()
+
+    def step(self, n=1):
+        for _ in range(n):
+            self.frame += 1
+            reply = self.link.step(self.frame * DT_US, self.plant.fifo(self.kind), self.kind, self.rc)
+            self.kind = reply.sensor_kind
+            self.plant.step_motors(reply.motor)
+            self.read()
+
+    def read(self):
+        while True:
+            m = self.conn.recv_match(blocking=False)
+            if m is None:
+                return
+            if m.get_type() != "BAD_DATA":
+                self.seen.append(m)
+
+    def until(self, pred, frames=400):
+        """The first message from the cursor on that satisfies pred, stepping until it
+        arrives; the cursor moves past it."""
+        for _ in range(frames + 1):
+            for i in range(self.cursor, len(self.seen)):
+                if pred(self.seen[i]):
+                    self.cursor = i + 1
+                    return self.seen[i]
+            self.cursor = len(self.seen)
+            self.step()
+        raise AssertionError(f"not seen within {frames} frames")
+
+    def sent(self):
+        """Marks a request just sent: its answers are looked for from here on."""
+        self.cursor = len(self.seen)
+
+    def of_type(self, name):
+        return [m for m in self.seen if m.get_type() == name]
+
+    def text(self, fragment, frames=400):
+        return self.until(lambda m: m.get_type() == "STATUSTEXT" and fragment in m.text, frames)
+
+    def fetch(self):
+        self.sent()
+        self.mav.param_request_list_send(1, 1)
+        values = {}
+        self.until(lambda m: m.get_type() == "PARAM_VALUE"
+                   and values.setdefault(m.param_id, m) and len(values) == m.param_count)
+        return values
+
+    def set(self, name, value):
+        """PARAM_SET; the PARAM_VALUE that answers it."""
+        self.sent()
+        start = self.cursor
+        self.mav.param_set_send(1, 1, name.encode(), float(value), MAV.MAV_PARAM_TYPE_REAL32)
+        m = self.until(lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == name)
+        during, self.cursor = self.seen[start:self.cursor], start   # its STATUSTEXT may follow
+        return m, during
+
+    def command(self, command, *params, target=(1, 1)):
+        self.sent()
+        start = self.cursor
+        self.mav.command_long_send(*target, command, 0, *(list(params) + [0] * (7 - len(params))))
+        ack = self.until(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command)
+        self.cursor = start                 # what the command sent may come before its ACK
+        return ack
+
+    def heartbeat(self):
+        self.mav.heartbeat_send(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def hover(self):
+        self.rc[4] = 1000
+        self.step(10)
+        self.rc[4] = ARM_HIGH
+        self.step(10)
+        self.rc[2] = THROTTLE_HOVER
+        self.step(100)
+
+
+@pytest.fixture
+def client(tmp_path):
+    with start("host", params_file=str(tmp_path / "params.bin")) as fw:
+        c = Client(fw)
+        yield c
+        c.close()
+
+
+# --- the table ----------------------------------------------------------------------------
+
+def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
+    assert len(NAMES) == len(set(NAMES)) == 43
+    for name, lo, hi, default, integer in PARAMS:
+        assert 0 < len(name) <= 16 and name == name.upper(), name
+        assert lo <= default <= hi, name
+        assert not integer or default == int(default), name
+
+
+def test_the_defaults_are_the_flight_values():
+    g = _firmware.CascadeGains.paper_defaults()
+    table = {p[0]: p[3] for p in PARAMS}
+    roll = g.rate(_firmware.Axis.ROLL)
+    assert table["RATE_RLL_KC"] == pytest.approx(roll.kc, rel=1e-7)
+    assert table["RATE_RLL_TI"] == pytest.approx(roll.tau_i_s, rel=1e-7)
+    assert table["ANG_PIT_TD"] == pytest.approx(g.angle(_firmware.Axis.PITCH).tau_d_s, rel=1e-7)
+    limits = _firmware.SafetyLimits()
+    assert table["EXC_MAX_ANG"] == 45.0                    # reads back as the degrees it is
+    assert table["FS_ABORT_ANG"] == pytest.approx(math.degrees(limits.abort_angle_rad), abs=1e-4)
+    assert table["FS_HOST_TIMEOUT"] == limits.host_timeout_us * 1e-6
+    assert table["ESC1_MIN"] == 1000 and table["ESC5_MAX"] == 2000
+
+
+# --- the protocol, with mavutil -------------------------------------------------------------
+
+def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path):
+    store = tmp_path / "params.bin"
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.text("params: none stored; defaults")
+        values = c.fetch()
+        assert sorted(values) == sorted(NAMES)
+        assert {m.param_index for m in values.values()} == set(range(43))
+        assert values["RATE_RLL_KC"].param_value == pytest.approx(2.422, rel=1e-6)
+        assert values["ESC3_MAX"].param_type == MAV.MAV_PARAM_TYPE_INT32
+        m, _ = c.set("RATE_RLL_KC", 3.5)
+        assert m.param_value == pytest.approx(3.5)
+        c.mav.param_request_read_send(1, 1, b"RATE_RLL_KC", -1)
+        back = c.until(lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == "RATE_RLL_KC")
+        assert back.param_value == pytest.approx(3.5) and back.param_index == NAMES.index("RATE_RLL_KC")
+        c.text("params: saved")                        # half a second after the last change
+        c.close()
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        values = c.fetch()
+        c.close()
+    assert values["RATE_RLL_KC"].param_value == pytest.approx(3.5)
+    assert values["RATE_PIT_KC"].param_value == pytest.approx(2.386, rel=1e-6)
+
+
+def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
+    store = tmp_path / "params.bin"
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.set("EXC_MAX_DUR", 120)
+        c.text("params: saved")
+        c.close()
+    data = bytearray(store.read_bytes())
+    data[20] ^= 0x40                                   # one bit of one stored value
+    store.write_bytes(bytes(data))
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        warning = c.text("params: store corrupt; defaults loaded")
+        assert warning.severity == MAV.MAV_SEVERITY_WARNING
+        values = c.fetch()
+        c.close()
+    assert values["EXC_MAX_DUR"].param_value == 300.0
+
+
+def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
+    store = tmp_path / "params.bin"
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.set("RATE_YAW_TD", 0.05)
+        c.text("params: saved")
+        c.close()
+    # Rewrite one entry with a value outside its range, and the record's CRC to match.
+    import struct
+    import zlib
+
+    data = bytearray(store.read_bytes())
+    index = NAMES.index("RATE_YAW_TD")
+    struct.pack_into("<f", data, 8 + 8 * index + 4, 7.0)
+    struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
+    store.write_bytes(bytes(data))
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.text("RATE_YAW_TD out of range 0..1")
+        values = c.fetch()
+        c.close()
+    assert values["RATE_YAW_TD"].param_value == pytest.approx(0.043, rel=1e-6)
+
+
+@pytest.mark.parametrize("name, value, why", [
+    ("RATE_RLL_KC", 80.0, "RATE_RLL_KC out of range 0.01..50"),
+    ("RATE_RLL_KC", float("nan"), "RATE_RLL_KC out of range 0.01..50"),
+    ("ESC2_MIN", 1050.5, "ESC2_MIN takes whole numbers only"),
+    ("ESC2_MIN", 1300, "ESC2_MIN out of range 800..1100"),
+])
+def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
+    before = client.fetch()[name].param_value
+    m, during = client.set(name, value)
+    assert m.param_value == before
+    # The STATUSTEXT goes out in the loop that refuses, before the PARAM_VALUE.
+    assert why in [x.text for x in during if x.get_type() == "STATUSTEXT"]
+
+
+def test_an_unknown_name_is_answered_with_a_statustext(client):
+    client.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, MAV.MAV_PARAM_TYPE_REAL32)
+    client.text("params: no such parameter")
+
+
+def test_while_armed_only_the_gains_change_and_nothing_is_saved_until_disarm(client):
+    client.hover()
+    m, _ = client.set("FS_ABORT_ANG", 60)
+    assert m.param_value == pytest.approx(80.0, abs=1e-4)
+    client.text("FS_ABORT_ANG changes only while disarmed")
+    m, _ = client.set("RATE_PIT_KC", 2.0)
+    assert m.param_value == pytest.approx(2.0)
+    client.step(200)                                   # a second: armed, so no save
+    assert not [x for x in client.of_type("STATUSTEXT") if x.text == "params: saved"]
+    client.rc[4] = 1000                                # disarm with the switch
+    client.text("params: saved")
+
+
+def test_nothing_changes_while_an_excitation_runs(client):
+    client.hover()
+    client.heartbeat()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, 2.0, 0.05, 20, 1)
+    client.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS" and m.accepted)
+    m, _ = client.set("RATE_RLL_KC", 3.0)
+    assert m.param_value == pytest.approx(2.422, rel=1e-6)
+    client.text("RATE_RLL_KC: not while exciting")
+
+
+def _loop_response(client, freq_hz, amplitude=0.03, cycles=24, settle=8):
+    """Rate mode, a mixer-injection sine on roll: at the excitation's frequency, the rate
+    controller C = -(u - r) / y, the closed loop y / r and the plant y / u, from the whole
+    periods of the full-amplitude samples after the first `settle` (the loop's transient)."""
+    first = len(client.seen)
+    client.heartbeat()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, freq_hz, amplitude, cycles, 1)
+    status = client.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS" and m.accepted)
+    for _ in range(int(status.total_samples) // 100 + 2):
+        client.heartbeat()
+        client.step(100)
+    running = [m for m in client.seen[first:] if m.get_type() == "HQ_SYSID_SAMPLE"
+               and m.exc_state == MAV.HQ_EXCITATION_STATE_RUNNING]
+    running = running[settle * status.period_samples:]
+    n = status.period_samples * (len(running) // status.period_samples)
+    r = np.array([m.excitation for m in running[:n]])
+    u = np.array([m.axis_cmd for m in running[:n]])
+    y = np.array([m.rate for m in running[:n]])
+    basis = np.exp(-2j * np.pi * np.arange(n) / status.period_samples)
+    R, U, Y = (basis @ x for x in (r, u, y))
+    return -(U - R) / Y, Y / R, Y / U
+
+
+def test_the_firmware_flies_with_a_new_rate_gain_as_the_gain_predicts(client):
+    """In rate mode with the sticks centred the rate setpoint is 0, so the rate PID's output
+    is C(jw) times the measured rate: doubling Kc doubles C at every frequency (ideal form:
+    Kc scales P, I and D), and the closed loop y/r = G / (1 + G C) moves to what the plant G
+    measured in the first run predicts for 2 C."""
+    client.hover()
+    ack = client.command(MAV.MAV_CMD_DO_SET_MODE, MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                         MAV.HQ_MODE_RATE)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    c1, t1, g1 = _loop_response(client, 2.0)
+    kc = client.fetch()["RATE_RLL_KC"].param_value
+    client.set("RATE_RLL_KC", 2 * kc)
+    c2, t2, g2 = _loop_response(client, 2.0)
+    assert abs(c2 / c1) == pytest.approx(2.0, rel=0.01)
+    assert math.degrees(abs(np.angle(c2 / c1))) < 0.5
+    predicted = g1 / (1 + g1 * 2 * c1)
+    assert abs(t2 / predicted) == pytest.approx(1.0, rel=0.02)
+    assert math.degrees(abs(np.angle(t2 / predicted))) < 1.5
+    assert abs(t2 - t1) > 0.3 * abs(t1)               # and the change is no small one
+
+
+# --- standard telemetry ---------------------------------------------------------------------
+
+def test_standard_messages_describe_the_vehicle(client):
+    client.hover()
+    client.step(220)
+    status = client.of_type("SYS_STATUS")[-1]
+    gyro, rc = MAV.MAV_SYS_STATUS_SENSOR_3D_GYRO, MAV.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+    assert status.onboard_control_sensors_health & gyro and status.onboard_control_sensors_health & rc
+    assert status.onboard_control_sensors_enabled & MAV.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    assert status.load == 0                            # the host build has no cycle counter
+    channels = client.of_type("RC_CHANNELS")[-1]
+    assert channels.chancount == 6
+    assert [channels.chan1_raw, channels.chan3_raw, channels.chan5_raw] == [1500, THROTTLE_HOVER, ARM_HIGH]
+    sample = [m for m in client.seen if m.get_type() == "HQ_SYSID_SAMPLE"][-1]
+    servo = client.of_type("SERVO_OUTPUT_RAW")[-1]
+    assert servo.servo1_raw == pytest.approx(1000 + 1000 * sample.motor[0], abs=15)
+    assert 1000 < servo.servo2_raw < 2000
+    imu = client.of_type("SCALED_IMU")[-1]
+    assert math.hypot(imu.xacc, imu.yacc, imu.zacc) == pytest.approx(1000, rel=0.05)
+    # The default rates: 10 Hz servo and IMU, 5 Hz RC, 1 Hz status, over the last 2 s.
+    window = client.seen[-3 * 400:]
+    counts = {k: sum(m.get_type() == k for m in window) for k in
+              ("SERVO_OUTPUT_RAW", "SCALED_IMU", "RC_CHANNELS", "SYS_STATUS", "HQ_SYSID_SAMPLE")}
+    per_s = {k: v / (counts["HQ_SYSID_SAMPLE"] / 200) for k, v in counts.items()}
+    assert per_s["SERVO_OUTPUT_RAW"] == pytest.approx(10, rel=0.15)
+    assert per_s["RC_CHANNELS"] == pytest.approx(5, rel=0.25)
+
+
+def test_autopilot_version_on_request_and_the_capabilities_a_ground_station_reads(client):
+    ack = client.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    v = client.until(lambda m: m.get_type() == "AUTOPILOT_VERSION")
+    caps = v.capabilities
+    assert caps & MAV.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    assert caps & MAV.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    from importlib.metadata import version
+
+    major, minor, patch = (int(x) for x in version("heliquad").split(".")[:3])
+    assert v.flight_sw_version >> 8 == (major << 16) | (minor << 8) | patch
+    ack = client.command(MAV.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 1)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+
+
+def test_set_message_interval_within_what_the_link_carries(client):
+    ack = client.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_SCALED_IMU, 20000)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    first = len(client.seen)
+    client.step(200)
+    got = sum(m.get_type() == "SCALED_IMU" for m in client.seen[first:])
+    assert got == pytest.approx(50, abs=2)            # 50 Hz over a second
+    ack = client.command(MAV.MAV_CMD_GET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_SCALED_IMU)
+    interval = client.until(lambda m: m.get_type() == "MESSAGE_INTERVAL")
+    assert interval.interval_us == 20000
+    # Every stream at the loop rate is more than the 921600-baud link carries.
+    results = [client.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, msgid, 1).result
+               for msgid in (MAV.MAVLINK_MSG_ID_SYS_STATUS, MAV.MAVLINK_MSG_ID_RC_CHANNELS,
+                             MAV.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, MAV.MAVLINK_MSG_ID_HQ_FW_STATUS)]
+    assert MAV.MAV_RESULT_DENIED in results
+    client.text("interval refused: more than the link carries")
+    # The link contract's messages keep their rates; -1 turns a stream off.
+    assert client.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_HEARTBEAT, 5e5).result \
+        == MAV.MAV_RESULT_DENIED
+    assert client.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE, 1e5).result \
+        == MAV.MAV_RESULT_DENIED
+    assert client.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_SCALED_IMU, -1).result \
+        == MAV.MAV_RESULT_ACCEPTED
+    first = len(client.seen)
+    client.step(100)
+    assert not [m for m in client.seen[first:] if m.get_type() == "SCALED_IMU"]
+
+
+def test_every_command_is_acknowledged_and_broadcast_targets_are_ours(client):
+    # Unknown commands: UNSUPPORTED; broadcast (0, 0) and our own address both answered.
+    assert client.command(MAV.MAV_CMD_NAV_TAKEOFF).result == MAV.MAV_RESULT_UNSUPPORTED
+    assert client.command(MAV.MAV_CMD_NAV_TAKEOFF, target=(0, 0)).result == MAV.MAV_RESULT_UNSUPPORTED
+    ack = client.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_SYS_STATUS, target=(0, 0))
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED and ack.target_system == 255
+    # COMMAND_INT is answered as COMMAND_LONG is.
+    client.mav.command_int_send(0, 0, 0, MAV.MAV_CMD_DO_SET_MODE, 0, 0,
+                                MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, MAV.HQ_MODE_RATE, 0, 0, 0, 0, 0)
+    ack = client.until(lambda m: m.get_type() == "COMMAND_ACK" and m.command == MAV.MAV_CMD_DO_SET_MODE)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    # Another vehicle's commands are not ours: no answer.
+    first = len(client.seen)
+    client.mav.command_long_send(7, 1, MAV.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 0)
+    client.step(100)
+    assert not [m for m in client.seen[first:] if m.get_type() == "COMMAND_ACK"]
+
+
+def test_modes_by_their_usual_names(client):
+    """mavutil names a multirotor's custom modes as ArduCopter's: STABILIZE for angle mode,
+    ACRO for rate mode; arming and an excitation leave the mode as it is."""
+    hb = client.until(lambda m: m.get_type() == "HEARTBEAT")
+    assert mavutil.mode_string_v10(hb) == "STABILIZE"
+    client.hover()
+    client.heartbeat()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, 2.0, 0.05, 20, 1)
+    client.step(5)
+    hb = client.until(lambda m: m.get_type() == "HEARTBEAT")
+    assert hb.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED and mavutil.mode_string_v10(hb) == "STABILIZE"
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_STOP, 0, 0, 0, 0, 0, 0)
+    client.step(50)
+    client.conn.set_mode("ACRO")                       # mavutil's own mode change
+    client.heartbeat()
+    hb = client.until(lambda m: m.get_type() == "HEARTBEAT" and m.custom_mode == MAV.HQ_MODE_RATE)
+    assert mavutil.mode_string_v10(hb) == "ACRO"
+    assert client.conn.flightmode == "ACRO"
+
+
+def test_preflight_storage_resets_to_the_defaults_and_saves(client):
+    client.set("STK_ANG_MAX", 20)
+    ack = client.command(MAV.MAV_CMD_PREFLIGHT_STORAGE, MAV.PARAM_RESET_FACTORY_DEFAULT)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    assert client.fetch()["STK_ANG_MAX"].param_value == pytest.approx(30.0, abs=1e-4)
+    ack = client.command(MAV.MAV_CMD_PREFLIGHT_STORAGE, MAV.PARAM_WRITE_PERSISTENT)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    client.text("params: saved")
+
+
+def test_the_parameters_page_lists_the_table_as_the_firmware_has_it():
+    import pathlib
+    import re
+
+    page = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "parameters.md").read_text()
+    rows = re.findall(r"^\| `(\w+)` \| (\S+) \| (\S+) \.\. (\S+) \| (\S+) \| (int|real) \|", page, re.M)
+    assert [r[0] for r in rows] == NAMES
+    for (name, units, lo, hi, default, kind), p in zip(rows, _firmware.param_table()):
+        assert units == (p.units or "-"), name
+        assert (float(lo), float(hi)) == (pytest.approx(p.minimum), pytest.approx(p.maximum)), name
+        assert float(default) == pytest.approx(p.default, rel=1e-6), name
+        assert (kind == "int") == p.integer, name
