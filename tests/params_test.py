@@ -23,7 +23,7 @@ from heliquad.sim.lockstep import SimLink
 from heliquad.sim.tf_plant import TfPlant
 
 from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
-from firmwares import FIRMWARES, start
+from firmwares import start
 
 MAV = dialect()
 # mavutil loads a dialect by module name, MAVLink 2 only with MAVLINK20 set (as MAVProxy

@@ -112,6 +112,9 @@ void FlightController::handle_message(const mavlink_message_t& msg, const RcInpu
         case MAVLINK_MSG_ID_PARAM_SET:
             handle_param_set(msg, now_us);
             return;
+        case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL:
+            refuse_file_transfer(msg);
+            return;
         default:
             return;
     }
@@ -266,6 +269,30 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
         last_exc_accepted_ = false;
     }
     send_excitation_status(why);
+}
+
+// MAVLink FTP is not served: every request gets a NAK "unknown command", so a ground station
+// that tries it first (MAVProxy fetches parameters over FTP when it can) falls back to the
+// parameter protocol at once instead of after its timeouts. The payload's header: seq (2),
+// session, opcode, size, req_opcode, burst_complete, padding, offset (4), then data.
+void FlightController::refuse_file_transfer(const mavlink_message_t& msg) {
+    mavlink_file_transfer_protocol_t in;
+    mavlink_msg_file_transfer_protocol_decode(&msg, &in);
+    if (!for_us(in.target_system, in.target_component)) return;
+    uint8_t payload[MAVLINK_MSG_FILE_TRANSFER_PROTOCOL_FIELD_PAYLOAD_LEN] = {};
+    const uint16_t seq = static_cast<uint16_t>((in.payload[0] | in.payload[1] << 8) + 1);
+    payload[0] = static_cast<uint8_t>(seq);
+    payload[1] = static_cast<uint8_t>(seq >> 8);
+    payload[2] = in.payload[2];                          // the session asked for
+    payload[3] = MAV_FTP_OPCODE_NAK;
+    payload[4] = 1;                                      // one byte of data: the error
+    payload[5] = in.payload[3];                          // the request's opcode
+    payload[12] = MAV_FTP_ERR_UNKNOWNCOMMAND;
+    mavlink_message_t out;
+    mavlink_msg_file_transfer_protocol_pack_status(config_.system_id, config_.component_id,
+                                                   &tx_status_, &out, 0, msg.sysid, msg.compid,
+                                                   payload);
+    send(out);
 }
 
 // --- the parameter protocol ----------------------------------------------------------------
