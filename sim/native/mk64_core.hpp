@@ -12,7 +12,7 @@
 // * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
 //   loop uses all the time: DWT_CYCCNT, SysTick, UART0, I2C0 with the MPU6050 on it, FTM0 and
 //   FTM3, and the watchdog; and the flash module (FTFE), whose status a parameter save polls
-//   without end. Their Python classes are views onto these (one model each).
+//   hundreds of thousands of times. Their Python classes are views onto these (one model each).
 // * A reset the chip would perform (the watchdog's) stops the run with its cause (kReset);
 //   Python raises it as ChipReset.
 // * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
