@@ -212,7 +212,9 @@ class HostFirmware:
 class PilFirmware(HostFirmware):
     """The Teensy 3.5 image in the emulated MK64FX512 (``python -m heliquad.sim.pil``):
     the same ptys and frames as the host build, the image as flashed to the board inside.
-    ``image``: the .elf (default: the installed one). The emulated chip runs slower than the
+    ``image``: the .elf (default: the installed one). ``params_file``: keep the board's
+    parameter flash in that file across runs (``--params``; the file holds the two flash
+    sectors, docs/processor-in-the-loop.md). The emulated chip runs slower than the
     host build, and one loop may hold the bus for an IMU re-initialisation, so its start-up
     and reply timeouts are longer; each loop is also bounded in emulated time inside."""
 
@@ -220,15 +222,20 @@ class PilFirmware(HostFirmware):
     start_timeout_s = 120.0
     reply_timeout_s = 60.0
 
-    def __init__(self, *args, image: str | None = None, **kwargs):
+    def __init__(self, *args, image: str | None = None, params_file: str | None = None,
+                 **kwargs):
         self.image = image
+        self.params_file = params_file
         super().__init__(*args, **kwargs)
 
     def command(self) -> list:
         from .firmware_image import teensy35_image
 
         self.image = os.path.abspath(self.image or str(teensy35_image("elf")))
-        return [sys.executable, "-m", "heliquad.sim.pil", "--image", self.image]
+        cmd = [sys.executable, "-m", "heliquad.sim.pil", "--image", self.image]
+        if self.params_file:
+            cmd += ["--params", os.path.abspath(self.params_file)]
+        return cmd
 
     def record(self) -> dict:
         import hashlib

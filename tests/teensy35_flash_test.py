@@ -478,3 +478,47 @@ def test_a_save_on_the_running_loop_with_the_slowest_flash_keeps_the_watchdog_fe
     print(f"save with the maximum times: {seconds * 1e3:.1f} ms emulated")
     assert MAX_TIMES[0] + 130 * MAX_TIMES[1] < seconds < board.chip.wdog.timeout_s()
     assert storage.load() == (OK, record)
+
+
+# ------------------------------------------------ the processor-in-the-loop's parameter file ---
+
+def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
+    """--params FILE: the file's two sectors are in the flash before the boot; after the image
+    changes them (a save, here called directly) they are written back."""
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    from heliquad.sim.pil import PilBoard
+
+    path = tmp_path / "params.bin"
+    path.write_bytes(_slot(3, b"kept") + b"\xff" * SECTOR_BYTES)
+    pil = PilBoard(str(boot.IMAGE), params_file=str(path))
+    pil.boot()
+    storage = Storage(pil.board)
+    assert storage.load() == (OK, b"kept")
+    pil.params.keep()
+    assert path.read_bytes() == _slot(3, b"kept") + b"\xff" * SECTOR_BYTES, "nothing changed"
+    assert storage.save(b"changed") is True
+    pil.params.keep()                                 # what each frame does after its loop
+    assert path.read_bytes() == _slot(3, b"kept") + _slot(4, b"changed")
+    assert not (tmp_path / "params.bin.tmp").exists()
+
+    new_board = PilBoard(str(boot.IMAGE), params_file=str(tmp_path / "none.bin"))
+    new_board.boot()
+    assert new_board.board.read_param_flash() == b"\xff" * 2 * SECTOR_BYTES
+    assert not (tmp_path / "none.bin").exists(), "created only when the image writes"
+
+
+def test_the_drop_in_takes_a_params_file_and_refuses_one_of_the_wrong_size(tmp_path):
+    boot.require_image()
+    from heliquad.sim.errors import FirmwareError
+    from heliquad.sim.lockstep import PilFirmware
+
+    good = tmp_path / "good.bin"
+    good.write_bytes(_slot(1, b"abc") + b"\xff" * SECTOR_BYTES)
+    with PilFirmware(image=str(boot.IMAGE), params_file=str(good)) as fw:
+        assert fw.alive()
+    assert good.read_bytes() == _slot(1, b"abc") + b"\xff" * SECTOR_BYTES
+    bad = tmp_path / "bad.bin"
+    bad.write_bytes(b"\x00" * 100)
+    with pytest.raises(FirmwareError, match="100 bytes.*8192 bytes"):
+        PilFirmware(image=str(boot.IMAGE), params_file=str(bad))
