@@ -68,6 +68,8 @@ class HostFirmware:
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
                  reply_timeout_s: float | None = None, params_file: str | None = None):
+        """``params_file``: where the firmware keeps its parameters across runs (``--params``;
+        the host build's record, the emulated Teensy's two flash sectors); default none."""
         self.loop_hz = loop_hz
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
@@ -214,7 +216,9 @@ class HostFirmware:
 class PilFirmware(HostFirmware):
     """The Teensy 3.5 image in the emulated MK64FX512 (``python -m heliquad.sim.pil``):
     the same ptys and frames as the host build, the image as flashed to the board inside.
-    ``image``: the .elf (default: the installed one). The emulated chip runs slower than the
+    ``image``: the .elf (default: the installed one). ``params_file``: keep the board's
+    parameter flash in that file across runs (``--params``; the file holds the two flash
+    sectors, docs/processor-in-the-loop.md). The emulated chip runs slower than the
     host build, and one loop may hold the bus for an IMU re-initialisation, so its start-up
     and reply timeouts are longer; each loop is also bounded in emulated time inside."""
 

@@ -2,7 +2,7 @@
 the host build ``heliquad-fw-host`` (processor in the loop).
 
     python -m heliquad.sim.pil --sim-link PATH --telemetry PATH [--image ELF]
-                               [--loop-hz 200] [--idle-timeout-s 10]
+                               [--loop-hz 200] [--idle-timeout-s 10] [--params FILE]
 
 It honours the host build's link contract (docs/link-contract.md): it creates the same two
 ptys and publishes their slave devices as the PATH symlinks, prints ``ready`` once the image
@@ -25,7 +25,11 @@ output goes through the chip's pins and peripherals, as on the rig:
   host's bytes into UART0's RX pin; a frame marked ``sync`` also lets the board run until
   what it has queued is on the wire, so the simulator can read that loop's telemetry;
 * armed, mode and sensor kind come from ``hq_loop_report``, the state the image keeps in RAM
-  for a debug probe.
+  for a debug probe;
+* with ``--params FILE`` the board's parameter flash (the two sectors the image keeps its
+  parameters in) is kept in FILE across runs, as the host build keeps its parameters with
+  the same option: restored before the boot, written back whenever the image has changed it
+  (:class:`ParamFile`).
 
 Time is the emulated chip's: core cycles from retired instructions (sim/mk64/timing.py
 states the cycle model) and device events, never the host's clock, so two runs of the same
@@ -85,10 +89,64 @@ class ImageFault(RuntimeError):
     """The image stopped in a way a board would not recover from by itself."""
 
 
-class PilBoard:
-    """The Teensy 3.5 on the simulated rig, one lockstep frame at a time."""
+class ParamFileError(ValueError):
+    """A --params file that cannot be the board's parameter flash."""
 
-    def __init__(self, elf: str):
+
+class ParamFile:
+    """The board's parameter flash kept in a file across runs, as a board keeps it across
+    power cycles. The file holds the two sectors exactly as the flash does (8 KiB; the slot
+    format is the image's, docs/teensy35.md), not the host build's parameter file. A file
+    that does not exist yet is a new board: the sectors stay erased, and the file is created
+    when the image first writes them. :meth:`keep` writes the file back (whole, replaced in
+    one rename) when a flash command has changed the flash since the last time."""
+
+    def __init__(self, board, path: str):
+        self.board, self.path = board, path
+        try:
+            self.start, self.end = board.param_flash_range()
+        except KeyError:
+            raise ImageFault("the image has no parameter flash (hq_param_flash_start): it is "
+                             "older than the parameter storage; --params needs a newer one") \
+                from None
+        self._changes = board.chip.ftfe.changes
+
+    def restore(self) -> None:
+        """The file's bytes into the sectors (before the boot)."""
+        size = self.end - self.start
+        try:
+            with open(self.path, "rb") as fh:
+                data = fh.read(size + 1)
+        except FileNotFoundError:
+            return
+        if len(data) != size:
+            raise ParamFileError(f"{self.path}: {len(data)} bytes; the Teensy image's parameter "
+                                 f"file holds its two flash sectors, {size} bytes")
+        self.board.write_param_flash(data)
+        self._changes = self.board.chip.ftfe.changes
+
+    def keep(self) -> None:
+        """Write the sectors back if the image has changed them. A write that fails is said
+        on stderr; the run goes on (the flash itself still has them)."""
+        changes = self.board.chip.ftfe.changes
+        if changes == self._changes:
+            return
+        self._changes = changes
+        tmp = self.path + ".tmp"
+        try:
+            with open(tmp, "wb") as fh:
+                fh.write(self.board.read_param_flash())
+            os.replace(tmp, self.path)
+        except OSError as e:
+            print(f"heliquad-fw-pil: the parameters could not be kept in {self.path}: {e}",
+                  file=sys.stderr, flush=True)
+
+
+class PilBoard:
+    """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
+    keep the parameter flash in that file (:class:`ParamFile`)."""
+
+    def __init__(self, elf: str, params_file: str | None = None):
         from .mk64 import Teensy35
 
         self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
@@ -98,6 +156,7 @@ class PilBoard:
             if not image.has(needed):
                 raise ImageFault(f"{elf} has no {needed}: not a heliquad Teensy 3.5 image "
                                  "(or one older than the processor-in-the-loop target)")
+        self.params = ParamFile(self.board, params_file) if params_file else None
         self.report_address = image.symbol(REPORT_SYMBOL).address
         self.waits = 0
         self._wait_target = None
@@ -147,8 +206,12 @@ class PilBoard:
         """Reset to the main loop's first sleep, before the first tick (the stack painted
         first, for its high-water mark)."""
         image = self.machine.image
+        if self.params:
+            self.params.restore()
         self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
+        if self.params:
+            self.params.keep()
         self.machine.core.keep_records = False
         self.board.mpu.log.clear()
         self.board.chip.i2c0.transfers.clear()
@@ -199,6 +262,8 @@ class PilBoard:
             self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
         self.rc_pulses(rc_us)
         self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
+        if self.params:
+            self.params.keep()
         if sync:
             self._drain_uart()
         self._collect_telemetry()
@@ -339,6 +404,10 @@ def parse(argv):
                    help="exit when no sensor frame arrives for this long (wall time)")
     p.add_argument("--dmp-image", help="refused: the Teensy image carries its DMP firmware "
                                        "from its build")
+    p.add_argument("--params", metavar="FILE",
+                   help="keep the board's parameter flash (two 4 KiB sectors, 8 KiB) in FILE "
+                        "across runs: restored before the boot, written when the image "
+                        "changes it; a missing FILE is a new board")
     args = p.parse_args(argv)
     if args.loop_hz != IMAGE_LOOP_HZ:
         _usage(f"--loop-hz {args.loop_hz:g}: the Teensy image runs its loop at "
@@ -465,9 +534,9 @@ def _open(args):
     except ImageNotFound as e:
         _usage(str(e))
     try:
-        board = PilBoard(elf)
+        board = PilBoard(elf, args.params)
         board.boot()
-    except (ImageFault, OSError) as e:
+    except (ImageFault, ParamFileError, OSError) as e:
         _usage(str(e))
     try:
         sim, tel = Pty(args.sim_link), Pty(args.telemetry)

@@ -84,6 +84,17 @@ def test_hex_holds_exactly_the_elf_load_image(img, loaded):
     assert loaded.compare_hex(img.hex) == []
 
 
+def test_the_parameter_sectors_hold_nothing_of_the_image(elf, hexfile):
+    """The top two 4 KiB sectors are the parameter storage's (mk64fx512.ld): nothing is linked
+    there. The function that launches a flash command and waits for it runs from RAM: it is
+    in .data, copied there at start-up."""
+    sym = elf["symbols"]
+    assert (sym["hq_param_flash_start"], sym["hq_param_flash_end"]) == (0x7E000, FLASH_SIZE)
+    assert max(hexfile.addresses()) < sym["hq_param_flash_start"]
+    data_addr, data_size, _, _ = elf["sections"][".data"]
+    assert SRAM_LOW <= data_addr <= sym["hq_ftfe_run"] < data_addr + data_size
+
+
 def test_initial_stack_pointer_is_the_top_of_sram_and_8_aligned(elf):
     sp = elf["vectors"][0]
     assert SRAM_LOW < sp <= SRAM_TOP and sp % 8 == 0

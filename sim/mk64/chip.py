@@ -4,6 +4,7 @@ that connects them."""
 from __future__ import annotations
 
 from .clocks import IRC48M_HZ, ClockTree, Mcg, Osc, Sim, check_tree
+from .ftfe import Fmc, Ftfe
 from .ftm import Ftm
 from .i2c import I2c
 from .image import Image
@@ -41,6 +42,8 @@ class Mk64:
         self.uart0 = m.attach(Uart(m, self, 0))
         self.ftm0 = m.attach(Ftm(m, self, 0, ("SCGC6", "FTM0")))
         self.ftm3 = m.attach(Ftm(m, self, 3, ("SCGC3", "FTM3")))
+        self.ftfe = m.attach(Ftfe(m, self))
+        self.fmc = m.attach(Fmc(m, self))
         m.pre_reset_listeners.append(self._before_reset)
         m.reset_listeners.append(self._on_reset)
         self.ready = True
@@ -112,7 +115,7 @@ class Mk64:
         if not self.ready:
             return
         core = self.machine.core
-        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog):
+        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog, self.ftfe):
             core.set_clocked(dev.device, dev.clocked())
 
     @property

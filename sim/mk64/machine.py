@@ -23,8 +23,8 @@ unicorn leaves out on an M-profile core.
 What runs at every block, every busy peripheral access and every interrupt is native: the
 block accounting and the event deadline, the event queue (Python's events included, so
 every event runs in one order), the NVIC's state, exception entry and return, WFI, and the
-models of DWT, SysTick, UART0, I2C0, FTM0, FTM3 and the watchdog (their Python classes are
-views). The native core calls back into Python (through ctypes function pointers, which take
+models of DWT, SysTick, UART0, I2C0, FTM0, FTM3, the watchdog and the flash module (their
+Python classes are views), and the flash module's read-collision check. The native core calls back into Python (through ctypes function pointers, which take
 the GIL) for a block not decoded yet, the FPU-enable check until the first FPU instruction and
 an access to a device modelled in Python; it returns from a run for a Python event, a
 breakpoint, a fault or a reset a native model caused (raised as :class:`ChipReset`). This
@@ -58,7 +58,7 @@ _INTR_UNDEF = 1
  _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
- GPIO_IN_DEVICE) = range(8)
+ GPIO_IN_DEVICE, FTFE_DEVICE) = range(9)
 # Block flags in the native table (Block::kMaskOp ...).
 _MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
 
@@ -164,6 +164,7 @@ class Machine:
         uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         uc.ctl_set_cpu_model(A.UC_CPU_ARM_CORTEX_M4)        # before anything else
         uc.mem_map(FLASH_BASE, FLASH_SIZE, UC_PROT_READ | UC_PROT_EXEC)
+        uc.mem_write(FLASH_BASE, b"\xff" * FLASH_SIZE)            # an erased chip
         uc.mem_map(SRAM_BASE, SRAM_SIZE, UC_PROT_ALL)
         self.uc = uc
         self._native = _Native(uc, self)

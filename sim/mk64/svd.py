@@ -37,7 +37,7 @@ MODELLED = (
     "PORTA", "PORTB", "PORTC", "PORTD", "PORTE",
     "GPIOA", "GPIOB", "GPIOC", "GPIOD", "GPIOE",
     "I2C0", "UART0", "FTM0", "FTM3", "PIT",
-    "SystemControl", "SysTick", "NVIC", "MCM",
+    "SystemControl", "SysTick", "NVIC", "MCM", "FTFE", "FMC",
 )
 
 REGMAP_PATH = pathlib.Path(__file__).with_name("regmap.py")

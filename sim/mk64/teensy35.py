@@ -39,6 +39,8 @@ MPU6050_ADDRESS = 0x68
 
 FATAL_SYMBOL = "hq_fatal"
 STEP_SYMBOL = "hq::FlightController::step"
+#: The parameter storage's flash sectors, [start, end) (the linker script's symbols).
+PARAM_FLASH_SYMBOLS = ("hq_param_flash_start", "hq_param_flash_end")
 
 
 def signal(letter: str, bit: int, mux: int):
@@ -124,6 +126,27 @@ class Teensy35:
 
     def run(self, instructions=None, seconds=None) -> Stop:
         return self.machine.run(instructions=instructions, seconds=seconds)
+
+    # -- the parameter flash -----------------------------------------------------------------
+    def param_flash_range(self) -> tuple:
+        """[start, end) of the image's parameter sectors; KeyError for an image without them
+        (one older than the parameter storage)."""
+        image = self.machine.image
+        start, end = (image.symbol(name).address for name in PARAM_FLASH_SYMBOLS)
+        return start, end
+
+    def read_param_flash(self) -> bytes:
+        """The parameter sectors' bytes as the flash holds them now."""
+        start, end = self.param_flash_range()
+        return self.machine.read(start, end - start)
+
+    def write_param_flash(self, data: bytes):
+        """Set the parameter sectors' bytes (all of them) as a debug probe would; the program
+        itself can change them only through the flash module."""
+        start, end = self.param_flash_range()
+        if len(data) != end - start:
+            raise ValueError(f"{len(data)} bytes for {end - start} bytes of parameter flash")
+        self.machine.write(start, bytes(data))
 
     # -- board wiring ---------------------------------------------------------------------------
     def _i2c_pins_connected(self) -> bool:

@@ -463,6 +463,52 @@ void bind_mk64(py::module_& m) {
             c.wdog.log.clear();
             return out;
         })
+        // FTFE
+        .def("ftfe_setup", [](Core& c, const py::dict& d) {
+            Ftfe& f = c.ftfe;
+            f.L = layout(d);
+            f.flash_size = d["flash_size"].cast<uint32_t>();
+            f.sector = d["sector"].cast<uint32_t>();
+            f.config = d["config"].cast<uint32_t>();
+            f.erase_sector_s = d["erase_sector_s"].cast<double>();
+            f.program_phrase_s = d["program_phrase_s"].cast<double>();
+            if (!f.flash_size || !f.sector || (f.sector & (f.sector - 1)) || f.flash_size % 32) {
+                throw std::invalid_argument("FTFE: flash size and sector size");
+            }
+            f.setup();
+            f.reset(c);
+        })
+        .def("ftfe_reg", [](const Core& c, uint32_t offset) { return c.ftfe.v.at(offset); })
+        .def("ftfe_times", [](const Core& c) {
+            return py::make_tuple(c.ftfe.erase_sector_s, c.ftfe.program_phrase_s);
+        })
+        .def("ftfe_set_times", [](Core& c, double erase_sector_s, double program_phrase_s) {
+            c.ftfe.erase_sector_s = erase_sector_s;
+            c.ftfe.program_phrase_s = program_phrase_s;
+        }, py::arg("erase_sector_s"), py::arg("program_phrase_s"))
+        .def("ftfe_state", [](const Core& c) {
+            const Ftfe& f = c.ftfe;
+            py::dict d;
+            d["busy"] = f.busy;
+            d["command"] = f.command;
+            d["address"] = f.address;
+            d["started"] = f.started;
+            d["changes"] = f.changes;
+            return d;
+        })
+        .def("ftfe_take_log", [](Core& c) {
+            py::list out;
+            for (const auto& e : c.ftfe.log) {
+                out.append(py::make_tuple(e.start, e.end, e.code, e.address, e.fstat));
+            }
+            c.ftfe.log.clear();
+            return out;
+        })
+        .def("ftfe_take_notes", [](Core& c) {
+            auto out = std::move(c.ftfe.notes);
+            c.ftfe.notes.clear();
+            return out;
+        })
         // the MPU6050 slaves: the register model is the Python object's (heliquad._firmware)
         .def("mpu_new", [](Core& c, py::object emu, int address) {
             auto s = std::make_unique<MpuSlave>();

@@ -129,6 +129,7 @@ void Core::reset(double core_hz) {
     if (ftm0.ready) ftm0.reset();
     if (ftm3.ready) ftm3.reset();
     if (wdog.ready) wdog.reset();
+    if (ftfe.ready) ftfe.reset(*this);
 }
 
 void Core::add_block(Block b) {
@@ -301,6 +302,7 @@ void Core::dispatch(const HeapEntry& e) {
         case Ev::Ftm3Tof: ftm3.on_tof(*this); break;
         case Ev::WdogTimeout: wdog.expired(*this); break;
         case Ev::WdogWindow: wdog.window(*this); break;
+        case Ev::FtfeDone: ftfe.complete(*this); break;
         case Ev::Python: break;
     }
 }
@@ -658,7 +660,8 @@ void Core::commit() {
 // block then runs, or the handler of an exception taken there runs instead. Otherwise, and when
 // the budget would be exceeded, the run stops before the block (it does not run). The PC unicorn
 // holds inside a block hook may be stale (chained blocks do not store it), so the block's
-// address is the return address of an exception taken here.
+// address is the return address of an exception taken here. A block in program flash while the
+// flash module runs a command is a read collision: the run stops with a fault before it.
 void Core::on_block(uint64_t address, uint32_t size) {
     ++counts.blocks;
     const uint32_t a = static_cast<uint32_t>(address);
@@ -704,6 +707,12 @@ void Core::on_block(uint64_t address, uint32_t size) {
         if (inline_taken_) {
             return;
         }
+    }
+    if (ftfe.busy && a < ftfe.flash_size) {        // a fetch from flash while it is programmed
+        fault("ReadCollision", ftfe.collision(a), a, true, a);
+        inline_fault_ = true;
+        stop_now();
+        return;
     }
     if (fpu_watch_ && (b->flags & (Block::kVfp | Block::kIsb))) {
         ++counts.fpu_checks;
@@ -760,6 +769,7 @@ bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
         case kFtm3: return ftm3.read(*this, address, size, out);
         case kWdog: return wdog.read(*this, address, size, out);
         case kGpioIn: return gpio_in.read(address, size, out);
+        case kFtfe: return ftfe.read(*this, address, size, out);
         default: return false;
     }
 }
@@ -773,6 +783,7 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kFtm0: return ftm0.write(*this, address, size, value);
         case kFtm3: return ftm3.write(*this, address, size, value);
         case kWdog: return wdog.write(*this, address, size, value);
+        case kFtfe: return ftfe.write(*this, address, size, value);
         default: return false;
     }
 }

@@ -11,7 +11,8 @@
 //   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
 // * The NVIC's state, exception entry and return, WFI sleep, and the models of the devices the
 //   loop uses all the time: DWT_CYCCNT, SysTick, UART0, I2C0 with the MPU6050 on it, FTM0 and
-//   FTM3, and the watchdog. Their Python classes are views onto these (one model each).
+//   FTM3, and the watchdog; and the flash module (FTFE), whose status a parameter save polls
+//   hundreds of thousands of times. Their Python classes are views onto these (one model each).
 // * A reset the chip would perform (the watchdog's) stops the run with its cause (kReset);
 //   Python raises it as ChipReset.
 // * Whatever needs Python (a block not decoded yet, the FPU-enable check until the first FPU
@@ -88,7 +89,7 @@ struct Block {
 
 enum class Ev : uint8_t {
     Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof,
-    WdogTimeout, WdogWindow
+    WdogTimeout, WdogWindow, FtfeDone
 };
 
 // Why run() returned.
@@ -372,6 +373,47 @@ struct Wdog {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
+// The flash memory module (FTFE) and the program flash it erases and programs (sim/mk64/ftfe.py's
+// notes describe the model). The flash's bytes are unicorn's memory at 0: a command changes
+// them when it completes; the program itself can never store there. While a command runs
+// (CCIF = 0), an instruction fetched from program flash is a read collision: the run stops
+// with a fault (Core::on_block checks every block against `busy`).
+struct Ftfe {
+    Layout L;
+    bool ready = false;
+    uint32_t oFSTAT, oFCNFG, oFSEC, oFOPT, oFPROT3, oFPROT2, oFPROT1, oFPROT0, oFEPROT, oFDPROT;
+    uint32_t oFCCOB[12];                   // FCCOB0..FCCOBB
+    uint32_t CCIF, RDCOLERR, ACCERR, FPVIOL, MGSTAT0, FCNFG_WRITABLE;
+    std::vector<uint8_t> v;                // by register offset
+    // The program flash at 0: its size, its sector (the erase unit), the flash configuration
+    // field (FPROT, FSEC, FOPT, FEPROT, FDPROT are loaded from it at reset), and how long the
+    // two commands take (model parameters, from the data sheet's typical figures).
+    uint32_t flash_size = 0, sector = 0, config = 0;
+    double erase_sector_s = 0.0, program_phrase_s = 0.0;
+    bool busy = false;                     // a command runs: CCIF reads 0
+    uint64_t done_event = 0;
+    uint8_t command = 0;                   // the running command, applied when it completes
+    uint32_t address = 0;
+    uint8_t data[8] = {};
+    uint64_t started = 0;
+    uint64_t changes = 0;                  // commands that changed the flash, never reset
+    struct Command { uint64_t start, end; uint8_t code; uint32_t address; uint8_t fstat; };
+    std::vector<Command> log;              // until taken (Core::keep_records)
+    std::vector<std::pair<uint64_t, std::string>> notes;   // documented misuse, until taken
+
+    void setup();
+    void reset(Core& c);
+    bool protected_range(uint32_t lo, uint32_t n) const;
+    uint8_t launch_check(uint8_t code, uint32_t at) const;
+    void launch(Core& c);
+    void complete(Core& c);
+    std::string collision(uint32_t pc);
+    uint32_t read_reg(Core& c, uint32_t offset);
+    void write_reg(Core& c, uint32_t offset, uint8_t value);
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
 // The GPIO ports' input registers (PDIR), read natively from the value the Python pin model
 // (sim/mk64/port.py) keeps here: it owns the pins and pushes a port's input word whenever a
 // pin's level may have changed; every other GPIO and PORT access goes to it. An interrupt
@@ -387,7 +429,8 @@ struct GpioInputs {
 class Core {
 public:
     enum Device : int {
-        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kDevices
+        kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kFtfe,
+        kDevices
     };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
@@ -473,6 +516,12 @@ public:
 
     // -- memory ---------------------------------------------------------------------------
     bool read32(uint32_t address, uint32_t& out) const;
+    bool mem_read(uint32_t address, void* out, size_t n) const {
+        return uc_.mem_read(uc_.handle, address, out, n) == 0;
+    }
+    bool mem_write(uint32_t address, const void* data, size_t n) {
+        return uc_.mem_write(uc_.handle, address, data, n) == 0;
+    }
     uint32_t reg(int id) const;
     void set_reg(int id, uint32_t value);
     void set_pc(uint32_t value);
@@ -489,10 +538,11 @@ public:
     I2c i2c0;
     Ftm ftm0, ftm3;
     Wdog wdog;
+    Ftfe ftfe;
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     GpioInputs gpio_in;
-    bool clocked[kDevices] = {true, true, false, false, false, false, true, true};
+    bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
     // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
     // watchdog's write log until taken (for tests and inspection); a long lockstep run turns

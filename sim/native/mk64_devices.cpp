@@ -1,7 +1,8 @@
 // The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0,
-// I2C0 with the MPU6050, FTM0/FTM3 and the watchdog. Their behaviour is documented where their
-// Python views live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py, wdog.py); register offsets and
-// bits come from the SVD tables through Python (Layout), never typed here.
+// I2C0 with the MPU6050, FTM0/FTM3 and the watchdog; and the flash module (FTFE), whose
+// status a parameter save polls hundreds of thousands of times. Their behaviour is documented
+// where their Python views live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py, wdog.py, ftfe.py);
+// register offsets and bits come from the SVD tables through Python (Layout), never typed here.
 #include <algorithm>
 #include <cmath>
 #include <cstdarg>
@@ -1232,6 +1233,186 @@ bool Wdog::write(Core& c, uint32_t address, unsigned size, uint64_t value) {
         return true;
     }
     return write_regs(*this, c, address, size, value);
+}
+
+}  // namespace hqsim::mk64
+
+// -- FTFE -------------------------------------------------------------------------------------
+namespace hqsim::mk64 {
+
+namespace {
+constexpr uint8_t kProgramPhrase = 0x07, kEraseSector = 0x09;
+constexpr uint32_t kPhrase = 8;
+// Program Phrase: the phrase's byte k (address + k) is written to FCCOB kPhraseOrder[k]
+// (the FCCOB group is big-endian within each longword: FCCOB4..7 hold bytes 3..0, FCCOB8..B
+// bytes 7..4), so a longword store to FCCOB7's address or FCCOBB's lands in address order.
+constexpr int kPhraseOrder[kPhrase] = {7, 6, 5, 4, 11, 10, 9, 8};
+}  // namespace
+
+void Ftfe::setup() {
+    oFSTAT = L["FSTAT"]; oFCNFG = L["FCNFG"]; oFSEC = L["FSEC"]; oFOPT = L["FOPT"];
+    oFPROT3 = L["FPROT3"]; oFPROT2 = L["FPROT2"]; oFPROT1 = L["FPROT1"]; oFPROT0 = L["FPROT0"];
+    oFEPROT = L["FEPROT"]; oFDPROT = L["FDPROT"];
+    static const char* const names[12] = {"FCCOB0", "FCCOB1", "FCCOB2", "FCCOB3", "FCCOB4",
+                                          "FCCOB5", "FCCOB6", "FCCOB7", "FCCOB8", "FCCOB9",
+                                          "FCCOBA", "FCCOBB"};
+    for (int i = 0; i < 12; ++i) oFCCOB[i] = L[names[i]];
+    CCIF = L["FSTAT.CCIF"]; RDCOLERR = L["FSTAT.RDCOLERR"]; ACCERR = L["FSTAT.ACCERR"];
+    FPVIOL = L["FSTAT.FPVIOL"]; MGSTAT0 = L["FSTAT.MGSTAT0"];
+    FCNFG_WRITABLE = L["FCNFG.CCIE"] | L["FCNFG.RDCOLLIE"] | L["FCNFG.ERSAREQ"] |
+                     L["FCNFG.ERSSUSP"];
+    ready = true;
+}
+
+// A reset abandons a running command (its event went with the core's queue): the cells it
+// was changing keep what they held. The protection and security bytes load from the flash
+// configuration field (backdoor key 0-7, FPROT3..0 8-11, FSEC, FOPT, FEPROT, FDPROT 12-15).
+void Ftfe::reset(Core& c) {
+    v.assign(L.reset.begin(), L.reset.end());
+    busy = false;
+    done_event = 0;
+    command = 0;
+    address = 0;
+    log.clear();
+    notes.clear();
+    uint8_t field[16];
+    if (!c.mem_read(config, field, sizeof field)) std::fill(field, field + 16, uint8_t{0xFF});
+    v[oFPROT3] = field[8]; v[oFPROT2] = field[9]; v[oFPROT1] = field[10]; v[oFPROT0] = field[11];
+    v[oFSEC] = field[12]; v[oFOPT] = field[13]; v[oFEPROT] = field[14]; v[oFDPROT] = field[15];
+    v[oFSTAT] = static_cast<uint8_t>(CCIF);          // the reset sequence has completed
+}
+
+// FPROT: one bit per 1/32 of the program flash, 0 = protected; FPROT0 holds regions 31..24.
+bool Ftfe::protected_range(uint32_t lo, uint32_t n) const {
+    const uint32_t prot = uint32_t{v[oFPROT0]} << 24 | uint32_t{v[oFPROT1]} << 16 |
+                          uint32_t{v[oFPROT2]} << 8 | v[oFPROT3];
+    const uint32_t region = flash_size / 32;
+    for (uint32_t r = lo / region; r <= (lo + n - 1) / region; ++r) {
+        if (!(prot >> r & 1u)) return true;
+    }
+    return false;
+}
+
+// The command check the module makes at launch: ACCERR for a command not modelled, an
+// address outside the program flash or not aligned (a phrase: 8 bytes; Erase Flash Sector:
+// 16 bytes, anywhere in the sector); FPVIOL for a protected target.
+uint8_t Ftfe::launch_check(uint8_t code, uint32_t at) const {
+    if (code == kEraseSector) {
+        if ((at & 0xFu) || at >= flash_size) return static_cast<uint8_t>(ACCERR);
+        if (protected_range(at & ~(sector - 1), sector)) return static_cast<uint8_t>(FPVIOL);
+        return 0;
+    }
+    if (code == kProgramPhrase) {
+        if ((at & (kPhrase - 1)) || at >= flash_size) return static_cast<uint8_t>(ACCERR);
+        if (protected_range(at, kPhrase)) return static_cast<uint8_t>(FPVIOL);
+        return 0;
+    }
+    return static_cast<uint8_t>(ACCERR);
+}
+
+void Ftfe::launch(Core& c) {
+    command = v[oFCCOB[0]];
+    address = uint32_t{v[oFCCOB[1]]} << 16 | uint32_t{v[oFCCOB[2]]} << 8 | v[oFCCOB[3]];
+    for (uint32_t k = 0; k < kPhrase; ++k) data[k] = v[oFCCOB[kPhraseOrder[k]]];
+    started = c.now();
+    v[oFSTAT] &= static_cast<uint8_t>(~MGSTAT0);
+    const uint8_t error = launch_check(command, address);
+    if (error) {
+        v[oFSTAT] |= error;
+        if (c.keep_records) log.push_back({started, started, command, address, v[oFSTAT]});
+        return;
+    }
+    busy = true;
+    v[oFSTAT] &= static_cast<uint8_t>(~CCIF);
+    const double seconds = command == kEraseSector ? erase_sector_s : program_phrase_s;
+    done_event = c.at(c.cycles_after(seconds, started), Ev::FtfeDone);
+    if (c.keep_records) log.push_back({started, 0, command, address, 0});
+}
+
+// The command's effect, when it completes. Programming can only clear bits (the cells keep
+// old AND new); a phrase that does not then read as asked fails the module's verify
+// (MGSTAT0). The manual forbids programming a phrase twice between erases: noted.
+void Ftfe::complete(Core& c) {
+    done_event = 0;
+    busy = false;
+    if (command == kEraseSector) {
+        const std::vector<uint8_t> erased(sector, 0xFF);
+        c.mem_write(address & ~(sector - 1), erased.data(), sector);
+    } else {
+        uint8_t cells[kPhrase];
+        c.mem_read(address, cells, kPhrase);
+        bool blank = true, verified = true;
+        for (uint32_t k = 0; k < kPhrase; ++k) {
+            blank = blank && cells[k] == 0xFF;
+            cells[k] &= data[k];
+            verified = verified && cells[k] == data[k];
+        }
+        c.mem_write(address, cells, kPhrase);
+        if (!blank) {
+            notes.emplace_back(c.now(), format("Program Phrase at 0x%06X: the phrase was not "
+                                               "erased (the manual allows one program per erase)",
+                                               address));
+        }
+        if (!verified) v[oFSTAT] |= static_cast<uint8_t>(MGSTAT0);
+    }
+    ++changes;
+    v[oFSTAT] |= static_cast<uint8_t>(CCIF);
+    if (c.keep_records && !log.empty() && log.back().end == 0) {
+        log.back().end = c.now();
+        log.back().fstat = v[oFSTAT];
+    }
+}
+
+std::string Ftfe::collision(uint32_t pc) {
+    v[oFSTAT] |= static_cast<uint8_t>(RDCOLERR);
+    return format("instruction fetch from program flash at 0x%08X while a flash command runs "
+                  "(0x%02X at 0x%06X, launched at cycle %llu, CCIF = 0): ",
+                  pc, command, address, static_cast<unsigned long long>(started)) +
+           "a read collision (FTFE_FSTAT.RDCOLERR; on the chip the fetched bits are undefined). "
+           "Code that launches a command and waits for CCIF must run from RAM with interrupts "
+           "masked";
+}
+
+uint32_t Ftfe::read_reg(Core&, uint32_t o) { return v[o]; }
+
+void Ftfe::write_reg(Core& c, uint32_t o, uint8_t value) {
+    if (o == oFSTAT) {
+        const uint8_t before = v[oFSTAT];
+        v[oFSTAT] &= static_cast<uint8_t>(~(value & (RDCOLERR | ACCERR | FPVIOL)));
+        if ((value & CCIF) && !busy) {
+            if (before & (ACCERR | FPVIOL)) {
+                notes.emplace_back(c.now(), "command launched with ACCERR or FPVIOL set: not "
+                                            "launched (clear them first)");
+            } else {
+                launch(c);
+            }
+        }
+    } else if (o == oFCNFG) {
+        v[o] = static_cast<uint8_t>((v[o] & ~FCNFG_WRITABLE) | (value & FCNFG_WRITABLE));
+        if (value & FCNFG_WRITABLE) {
+            notes.emplace_back(c.now(), format("FCNFG = 0x%02X: the command-complete and "
+                                               "read-collision interrupts and erase suspend are "
+                                               "not modelled", value));
+        }
+    } else if (o == oFPROT3 || o == oFPROT2 || o == oFPROT1 || o == oFPROT0 || o == oFEPROT ||
+               o == oFDPROT) {
+        v[o] &= value;                 // in normal mode protection can only be added
+    } else if (o != oFSEC && o != oFOPT) {
+        if (busy) {
+            notes.emplace_back(c.now(), format("FCCOB write (offset 0x%X) while a command runs: "
+                                               "ignored", o));
+        } else {
+            v[o] = value;
+        }
+    }
+}
+
+bool Ftfe::read(Core& c, uint32_t address_, unsigned size, uint64_t& out) {
+    return read_regs(*this, c, address_, size, out);
+}
+
+bool Ftfe::write(Core& c, uint32_t address_, unsigned size, uint64_t value) {
+    return write_regs(*this, c, address_, size, value);
 }
 
 }  // namespace hqsim::mk64

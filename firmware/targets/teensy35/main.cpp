@@ -2,8 +2,9 @@
 //
 // Start-up, in order: clocks (a failure ends in the fault path, blink code 1-5, the ESCs
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
-// the telemetry UART; RC capture; the I2C bus; the FlightController and its IMU start-up
-// (MPU6050 reset, configuration and, with an image built in, the DMP upload); the 200 Hz
+// the telemetry UART; RC capture; the I2C bus; the FlightController (its parameters in the
+// top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
+// configuration and, with an image built in, the DMP upload); the 200 Hz
 // loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the
 // RC input, run one FlightController step, record the cycles it took (HQ_FW_STATUS reports
 // their median and maximum each second, and the overruns), update the LED, sleep until the
@@ -17,6 +18,7 @@
 #include "led.hpp"
 #include "loop_timer.hpp"
 #include "motors.hpp"
+#include "param_storage.hpp"
 #include "rc_input.hpp"
 #include "serial.hpp"
 #include "watchdog.hpp"
@@ -70,11 +72,13 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static I2c0Bus i2c;
     i2c.begin();
     static TeensyClock clock;
+    static FlashParamStorage storage;         // the top two flash sectors (param_storage.hpp)
 
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
     cfg.cpu_hz = kCoreHz;                             // SYS_STATUS load from the cycle counter
     cfg.link_bytes_per_s = kTelemetryBaud / 10;       // 8N1: ten bits a byte
+    cfg.storage = &storage;
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
     const hq::InitResult init = fc.init();

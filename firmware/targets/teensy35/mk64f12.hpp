@@ -4778,6 +4778,539 @@ struct MR : Reg<uint8_t, 0x4007F007u> {
 };
 }  // namespace RCM
 
+namespace FTFE {
+constexpr uint32_t BASE = 0x40020000u;
+struct FSTAT : Reg<uint8_t, 0x40020000u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t MGSTAT0 = 0x1u;
+    static constexpr uint8_t FPVIOL = 0x10u;
+    static constexpr uint8_t ACCERR = 0x20u;
+    static constexpr uint8_t RDCOLERR = 0x40u;
+    static constexpr uint8_t CCIF = 0x80u;
+};
+struct FCNFG : Reg<uint8_t, 0x40020001u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EEERDY = 0x1u;
+    static constexpr uint8_t RAMRDY = 0x2u;
+    static constexpr uint8_t PFLSH = 0x4u;
+    static constexpr uint8_t SWAP = 0x8u;
+    static constexpr uint8_t ERSSUSP = 0x10u;
+    static constexpr uint8_t ERSAREQ = 0x20u;
+    static constexpr uint8_t RDCOLLIE = 0x40u;
+    static constexpr uint8_t CCIE = 0x80u;
+};
+struct FSEC : Reg<uint8_t, 0x40020002u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SEC_SHIFT = 0;
+    static constexpr uint8_t SEC_MASK = 0x3u;
+    static constexpr uint8_t SEC(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0x3u); }
+    static constexpr uint32_t FSLACC_SHIFT = 2;
+    static constexpr uint8_t FSLACC_MASK = 0xCu;
+    static constexpr uint8_t FSLACC(uint32_t v) { return static_cast<uint8_t>((v << 2) & 0xCu); }
+    static constexpr uint32_t MEEN_SHIFT = 4;
+    static constexpr uint8_t MEEN_MASK = 0x30u;
+    static constexpr uint8_t MEEN(uint32_t v) { return static_cast<uint8_t>((v << 4) & 0x30u); }
+    static constexpr uint32_t KEYEN_SHIFT = 6;
+    static constexpr uint8_t KEYEN_MASK = 0xC0u;
+    static constexpr uint8_t KEYEN(uint32_t v) { return static_cast<uint8_t>((v << 6) & 0xC0u); }
+};
+struct FOPT : Reg<uint8_t, 0x40020003u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t OPT_SHIFT = 0;
+    static constexpr uint8_t OPT_MASK = 0xFFu;
+    static constexpr uint8_t OPT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB3 : Reg<uint8_t, 0x40020004u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB2 : Reg<uint8_t, 0x40020005u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB1 : Reg<uint8_t, 0x40020006u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB0 : Reg<uint8_t, 0x40020007u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB7 : Reg<uint8_t, 0x40020008u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB6 : Reg<uint8_t, 0x40020009u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB5 : Reg<uint8_t, 0x4002000Au> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB4 : Reg<uint8_t, 0x4002000Bu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOBB : Reg<uint8_t, 0x4002000Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOBA : Reg<uint8_t, 0x4002000Du> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB9 : Reg<uint8_t, 0x4002000Eu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FCCOB8 : Reg<uint8_t, 0x4002000Fu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCOBn_SHIFT = 0;
+    static constexpr uint8_t CCOBn_MASK = 0xFFu;
+    static constexpr uint8_t CCOBn(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FPROT3 : Reg<uint8_t, 0x40020010u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PROT_SHIFT = 0;
+    static constexpr uint8_t PROT_MASK = 0xFFu;
+    static constexpr uint8_t PROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FPROT2 : Reg<uint8_t, 0x40020011u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PROT_SHIFT = 0;
+    static constexpr uint8_t PROT_MASK = 0xFFu;
+    static constexpr uint8_t PROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FPROT1 : Reg<uint8_t, 0x40020012u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PROT_SHIFT = 0;
+    static constexpr uint8_t PROT_MASK = 0xFFu;
+    static constexpr uint8_t PROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FPROT0 : Reg<uint8_t, 0x40020013u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PROT_SHIFT = 0;
+    static constexpr uint8_t PROT_MASK = 0xFFu;
+    static constexpr uint8_t PROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FEPROT : Reg<uint8_t, 0x40020016u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EPROT_SHIFT = 0;
+    static constexpr uint8_t EPROT_MASK = 0xFFu;
+    static constexpr uint8_t EPROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FDPROT : Reg<uint8_t, 0x40020017u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t DPROT_SHIFT = 0;
+    static constexpr uint8_t DPROT_MASK = 0xFFu;
+    static constexpr uint8_t DPROT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+}  // namespace FTFE
+
+namespace FMC {
+constexpr uint32_t BASE = 0x4001F000u;
+struct PFAPR : Reg<uint32_t, 0x4001F000u> {
+    static constexpr uint32_t RESET_VALUE = 0xF8003Fu;
+    static constexpr uint32_t M0AP_SHIFT = 0;
+    static constexpr uint32_t M0AP_MASK = 0x3u;
+    static constexpr uint32_t M0AP(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x3u); }
+    static constexpr uint32_t M1AP_SHIFT = 2;
+    static constexpr uint32_t M1AP_MASK = 0xCu;
+    static constexpr uint32_t M1AP(uint32_t v) { return static_cast<uint32_t>((v << 2) & 0xCu); }
+    static constexpr uint32_t M2AP_SHIFT = 4;
+    static constexpr uint32_t M2AP_MASK = 0x30u;
+    static constexpr uint32_t M2AP(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0x30u); }
+    static constexpr uint32_t M3AP_SHIFT = 6;
+    static constexpr uint32_t M3AP_MASK = 0xC0u;
+    static constexpr uint32_t M3AP(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0xC0u); }
+    static constexpr uint32_t M4AP_SHIFT = 8;
+    static constexpr uint32_t M4AP_MASK = 0x300u;
+    static constexpr uint32_t M4AP(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x300u); }
+    static constexpr uint32_t M5AP_SHIFT = 10;
+    static constexpr uint32_t M5AP_MASK = 0xC00u;
+    static constexpr uint32_t M5AP(uint32_t v) { return static_cast<uint32_t>((v << 10) & 0xC00u); }
+    static constexpr uint32_t M6AP_SHIFT = 12;
+    static constexpr uint32_t M6AP_MASK = 0x3000u;
+    static constexpr uint32_t M6AP(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x3000u); }
+    static constexpr uint32_t M7AP_SHIFT = 14;
+    static constexpr uint32_t M7AP_MASK = 0xC000u;
+    static constexpr uint32_t M7AP(uint32_t v) { return static_cast<uint32_t>((v << 14) & 0xC000u); }
+    static constexpr uint32_t M0PFD = 0x10000u;
+    static constexpr uint32_t M1PFD = 0x20000u;
+    static constexpr uint32_t M2PFD = 0x40000u;
+    static constexpr uint32_t M3PFD = 0x80000u;
+    static constexpr uint32_t M4PFD = 0x100000u;
+    static constexpr uint32_t M5PFD = 0x200000u;
+    static constexpr uint32_t M6PFD = 0x400000u;
+    static constexpr uint32_t M7PFD = 0x800000u;
+};
+struct PFB0CR : Reg<uint32_t, 0x4001F004u> {
+    static constexpr uint32_t RESET_VALUE = 0x3004001Fu;
+    static constexpr uint32_t B0SEBE = 0x1u;
+    static constexpr uint32_t B0IPE = 0x2u;
+    static constexpr uint32_t B0DPE = 0x4u;
+    static constexpr uint32_t B0ICE = 0x8u;
+    static constexpr uint32_t B0DCE = 0x10u;
+    static constexpr uint32_t CRC_SHIFT = 5;
+    static constexpr uint32_t CRC_MASK = 0xE0u;
+    static constexpr uint32_t CRC(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xE0u); }
+    static constexpr uint32_t B0MW_SHIFT = 17;
+    static constexpr uint32_t B0MW_MASK = 0x60000u;
+    static constexpr uint32_t B0MW(uint32_t v) { return static_cast<uint32_t>((v << 17) & 0x60000u); }
+    static constexpr uint32_t S_B_INV = 0x80000u;
+    static constexpr uint32_t CINV_WAY_SHIFT = 20;
+    static constexpr uint32_t CINV_WAY_MASK = 0xF00000u;
+    static constexpr uint32_t CINV_WAY(uint32_t v) { return static_cast<uint32_t>((v << 20) & 0xF00000u); }
+    static constexpr uint32_t CLCK_WAY_SHIFT = 24;
+    static constexpr uint32_t CLCK_WAY_MASK = 0xF000000u;
+    static constexpr uint32_t CLCK_WAY(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xF000000u); }
+    static constexpr uint32_t B0RWSC_SHIFT = 28;
+    static constexpr uint32_t B0RWSC_MASK = 0xF0000000u;
+    static constexpr uint32_t B0RWSC(uint32_t v) { return static_cast<uint32_t>((v << 28) & 0xF0000000u); }
+};
+struct PFB1CR : Reg<uint32_t, 0x4001F008u> {
+    static constexpr uint32_t RESET_VALUE = 0x3004001Fu;
+    static constexpr uint32_t B1SEBE = 0x1u;
+    static constexpr uint32_t B1IPE = 0x2u;
+    static constexpr uint32_t B1DPE = 0x4u;
+    static constexpr uint32_t B1ICE = 0x8u;
+    static constexpr uint32_t B1DCE = 0x10u;
+    static constexpr uint32_t B1MW_SHIFT = 17;
+    static constexpr uint32_t B1MW_MASK = 0x60000u;
+    static constexpr uint32_t B1MW(uint32_t v) { return static_cast<uint32_t>((v << 17) & 0x60000u); }
+    static constexpr uint32_t B1RWSC_SHIFT = 28;
+    static constexpr uint32_t B1RWSC_MASK = 0xF0000000u;
+    static constexpr uint32_t B1RWSC(uint32_t v) { return static_cast<uint32_t>((v << 28) & 0xF0000000u); }
+};
+struct TAGVDW0S0 : Reg<uint32_t, 0x4001F100u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW0S1 : Reg<uint32_t, 0x4001F104u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW0S2 : Reg<uint32_t, 0x4001F108u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW0S3 : Reg<uint32_t, 0x4001F10Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW1S0 : Reg<uint32_t, 0x4001F110u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW1S1 : Reg<uint32_t, 0x4001F114u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW1S2 : Reg<uint32_t, 0x4001F118u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW1S3 : Reg<uint32_t, 0x4001F11Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW2S0 : Reg<uint32_t, 0x4001F120u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW2S1 : Reg<uint32_t, 0x4001F124u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW2S2 : Reg<uint32_t, 0x4001F128u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW2S3 : Reg<uint32_t, 0x4001F12Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW3S0 : Reg<uint32_t, 0x4001F130u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW3S1 : Reg<uint32_t, 0x4001F134u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW3S2 : Reg<uint32_t, 0x4001F138u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct TAGVDW3S3 : Reg<uint32_t, 0x4001F13Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t valid = 0x1u;
+    static constexpr uint32_t tag_SHIFT = 5;
+    static constexpr uint32_t tag_MASK = 0x7FFE0u;
+    static constexpr uint32_t tag(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0x7FFE0u); }
+};
+struct DATAW0S0U : Reg<uint32_t, 0x4001F200u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S1U : Reg<uint32_t, 0x4001F208u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S2U : Reg<uint32_t, 0x4001F210u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S3U : Reg<uint32_t, 0x4001F218u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S0L : Reg<uint32_t, 0x4001F204u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S1L : Reg<uint32_t, 0x4001F20Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S2L : Reg<uint32_t, 0x4001F214u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW0S3L : Reg<uint32_t, 0x4001F21Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S0U : Reg<uint32_t, 0x4001F220u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S1U : Reg<uint32_t, 0x4001F228u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S2U : Reg<uint32_t, 0x4001F230u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S3U : Reg<uint32_t, 0x4001F238u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S0L : Reg<uint32_t, 0x4001F224u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S1L : Reg<uint32_t, 0x4001F22Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S2L : Reg<uint32_t, 0x4001F234u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW1S3L : Reg<uint32_t, 0x4001F23Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S0U : Reg<uint32_t, 0x4001F240u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S1U : Reg<uint32_t, 0x4001F248u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S2U : Reg<uint32_t, 0x4001F250u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S3U : Reg<uint32_t, 0x4001F258u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S0L : Reg<uint32_t, 0x4001F244u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S1L : Reg<uint32_t, 0x4001F24Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S2L : Reg<uint32_t, 0x4001F254u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW2S3L : Reg<uint32_t, 0x4001F25Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S0U : Reg<uint32_t, 0x4001F260u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S1U : Reg<uint32_t, 0x4001F268u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S2U : Reg<uint32_t, 0x4001F270u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S3U : Reg<uint32_t, 0x4001F278u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S0L : Reg<uint32_t, 0x4001F264u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S1L : Reg<uint32_t, 0x4001F26Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S2L : Reg<uint32_t, 0x4001F274u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATAW3S3L : Reg<uint32_t, 0x4001F27Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t data_SHIFT = 0;
+    static constexpr uint32_t data_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t data(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+}  // namespace FMC
+
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
 struct DHCSR : Reg<uint32_t, 0xE000EDF0u> {
