@@ -444,8 +444,12 @@ class _DropIn:
         self.uplink = b""
 
     def flush_telemetry(self) -> None:
+        """Put the queued telemetry on the link; before the first frame, nothing: what the
+        boot sent (the parameters' and the IMU's start-up messages) waits for the simulator,
+        which opens the telemetry port before it steps (opening a serial port discards what
+        was already waiting), as the host build does."""
         out = self.board.telemetry_out
-        if out:
+        if out and self.frames:
             del out[:self.tel.write_some(bytes(out))]
 
     def serve(self) -> int:

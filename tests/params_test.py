@@ -23,7 +23,7 @@ from heliquad.sim.lockstep import SimLink
 from heliquad.sim.tf_plant import TfPlant
 
 from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
-from firmwares import start
+from firmwares import FIRMWARES, start
 
 MAV = dialect()
 # mavutil loads a dialect by module name, MAVLink 2 only with MAVLINK20 set (as MAVProxy
@@ -166,9 +166,13 @@ def test_the_defaults_are_the_flight_values():
 
 # --- the protocol, with mavutil -------------------------------------------------------------
 
-def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path):
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path, firmware):
+    """On the host build the store is a file; on the Teensy image (emulated) it is the two
+    flash sectors, kept in a file across the emulator's runs as the chip keeps them across a
+    reset or a power cycle."""
     store = tmp_path / "params.bin"
-    with start("host", params_file=str(store)) as fw:
+    with start(firmware, params_file=str(store)) as fw:
         c = Client(fw)
         c.text("params: none stored; defaults")
         values = c.fetch()
@@ -183,7 +187,7 @@ def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path):
         assert back.param_value == pytest.approx(3.5) and back.param_index == NAMES.index("RATE_RLL_KC")
         c.text("params: saved")                        # half a second after the last change
         c.close()
-    with start("host", params_file=str(store)) as fw:
+    with start(firmware, params_file=str(store)) as fw:
         c = Client(fw)
         values = c.fetch()
         c.close()
