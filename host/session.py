@@ -79,7 +79,7 @@ class _TelemetryLog:
     def __init__(self, tel, tlog_path: str):
         self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
-        self.fd = os.open(tel.serial.port, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+        self.fd = os.open(tel.name, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
         try:
             self._file = create_log(tlog_path)
         except BaseException:
@@ -303,7 +303,7 @@ class PortSession:
             waited = time.monotonic() - start
             if not seen and waited > FIRST_SAMPLE_WAIT_S:
                 raise InputError(f"no samples from the board in {FIRST_SAMPLE_WAIT_S:g} s: is "
-                                 f"{self.tel.serial.port} its telemetry port, and is it running?")
+                                 f"{self.tel.name} its telemetry port, and is it running?")
             if seen and not said:
                 progress("waiting for the board to be armed (the pilot's arm switch) ...")
                 said = True
