@@ -4,7 +4,8 @@ telemetry pty alike (same code).
 
 Commands out (HEARTBEAT, arm/disarm, mode, excitation), telemetry in; every packet received
 is written to the .tlog if one is given. Timestamps are the host's clock unless the caller
-passes one (the SIL passes simulated time, so runs repeat exactly).
+passes one (the SIL stamps its run's start plus simulated time, so runs repeat apart from
+that offset).
 """
 
 from __future__ import annotations
@@ -100,7 +101,7 @@ class TelemetryLink:
 
     def read_packets(self) -> list:
         """Raw ``(msgid, packet, payload)`` of what has arrived, not logged (never blocks).
-        For callers that stamp the log themselves (the SIL stamps simulated time)."""
+        For callers that stamp the log themselves."""
         data = self.transport.read()
         if not data:
             return []

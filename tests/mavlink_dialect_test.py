@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -29,10 +30,12 @@ def heliquad(*args, env=None):
 def sil_log(tmp_path_factory):
     """A heliquad .tlog: a short SIL run (every message the firmware sends in a run)."""
     run = tmp_path_factory.mktemp("sil") / "run"
+    before = time.time()
     res = heliquad("sil", "--freq-hz", 2, "--amplitude", 0.05, "--cycles", 2,
                    "--fade-cycles", 1, "--out", run)
+    after = time.time()
     assert res.returncode == 0, res.stderr
-    return run.with_suffix(".tlog")
+    return run.with_suffix(".tlog"), (before, after)
 
 
 @pytest.fixture
@@ -51,20 +54,22 @@ def private_pymavlink(tmp_path):
     return site / "pymavlink", env
 
 
-def mavlogdump(pymavlink_dir, env, log):
-    """pymavlink's mavlogdump.py --dialect heliquad on a log: (type, data) per message."""
+def dumped_rows(pymavlink_dir, env, log):
+    """pymavlink's mavlogdump.py --dialect heliquad --format json on a log, one object per
+    message (``meta``: type, timestamp in s; ``data``: the fields)."""
     res = subprocess.run([sys.executable, str(pymavlink_dir / "tools" / "mavlogdump.py"),
                           "--dialect", "heliquad", "--format", "json", str(log)],
                          capture_output=True, text=True, timeout=600, env=env)
     assert res.returncode == 0, res.stderr
-    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
-    return [(r["meta"]["type"], r["data"]) for r in rows]
+    return [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+
 
 
 def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavlink, sil_log):
     # After --install, mavlogdump.py --dialect heliquad decodes every record of a heliquad
     # log, heliquad's own messages field by field as heliquad's reader does.
     pymavlink_dir, env = private_pymavlink
+    sil_log, (before, after) = sil_log
     real_before = sorted(os.listdir(REAL_V20))
     res = heliquad("mavlink-dialect", "--install", env=env)
     assert res.returncode == 0, res.stderr
@@ -73,7 +78,8 @@ def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavli
     assert (v20 / "heliquad.py").is_file() and (v20 / "heliquad.xml").is_file()
     assert sorted(os.listdir(REAL_V20)) == real_before          # the real one untouched
 
-    dumped = mavlogdump(pymavlink_dir, env, sil_log)
+    rows = dumped_rows(pymavlink_dir, env, sil_log)
+    dumped = [(r["meta"]["type"], r["data"]) for r in rows]
     ours = read_tlog(str(sil_log), dialect())
     assert [t for t, _ in dumped] == [m.get_type() for _, m in ours]      # no BAD_DATA
     samples = [d for t, d in dumped if t == "HQ_SYSID_SAMPLE"]
@@ -83,6 +89,12 @@ def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavli
         [(m.time_us, m.seq, m.excitation) for m in ours_samples]
     status = [d for t, d in dumped if t == "HQ_EXCITATION_STATUS"]
     assert status and status[-1]["freq_hz"] == pytest.approx(2.0, rel=0.05)
+    # The SIL log's stamps: the run's start on the wall clock plus simulated time, so the
+    # tool shows when the run was made (not 1970).
+    stamps = [r["meta"]["timestamp"] for r in rows if r["meta"]["type"] == "HQ_SYSID_SAMPLE"]
+    starts = {round(s * 1e6) - d["time_us"] for s, d in zip(stamps, samples)}
+    assert len(starts) == 1 or max(starts) - min(starts) <= 1          # float seconds
+    assert before * 1e6 <= min(starts) <= after * 1e6
 
 
 def test_the_folder_holds_the_dialect_and_a_module_that_matches_the_firmware(tmp_path):
