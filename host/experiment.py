@@ -4,7 +4,8 @@ frequency on the simulated rig that also keeps its samples.
 The session (:class:`heliquad.host.session.SilSession`) boots, arms and hovers the rig;
 :func:`heliquad.host.sweep.measure`, the routine every sweep frequency runs, starts the
 excitation and watches it to its end with the same safety checks. Every telemetry packet
-goes to ``RUN.tlog`` stamped with simulated time; the full-amplitude samples go to
+goes to ``RUN.tlog`` stamped with the run's start (wall clock) plus simulated time; the
+full-amplitude samples go to
 ``RUN.csv`` (``t_s,u,y``, see :data:`heliquad.host.link.INPUT_OUTPUT`) for ``heliquad fsf``.
 """
 
@@ -43,6 +44,7 @@ class SilResult:
     truth: complex                 # sampled-data truth at the actual frequency (nan if unknown)
     stopped: str | None = None     # why the excitation ended early, if it did
     firmware_summary: str = ""     # the firmware's own last word: counters, loop figures
+    start_us: int = 0              # the log's stamps: this (the wall clock at the start) + sim time
 
     @property
     def saturated_samples(self) -> int:
@@ -50,9 +52,10 @@ class SilResult:
         return self.saturation["saturated"]
 
 
-def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
+def run_sil(cfg: SilConfig, out_base: str, progress=print, start_us: int | None = None) -> SilResult:
     """Run the experiment; writes ``out_base.tlog`` and ``out_base.csv``, never over files
-    that exist (InputError before anything starts)."""
+    that exist (InputError before anything starts). ``start_us``: what the log's stamps count
+    from (default: the wall clock now, :class:`SilSession`)."""
     tlog_path, csv_path = out_base + ".tlog", out_base + ".csv"
     for path in (tlog_path, csv_path):
         if os.path.lexists(path):
@@ -61,13 +64,14 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
     plan = SweepPlan(cfg.axis, cfg.inject, [cfg.freq_hz], [cfg.amplitude], cfg.cycles,
                      cfg.fade_cycles)
     t0 = time.monotonic()
-    with SilSession(cfg, tlog_path) as session:
+    with SilSession(cfg, tlog_path, start_us) as session:
         session.hover()
         watch = measure(session, plan, cfg.freq_hz, cfg.amplitude, progress=progress,
                         keep_rows=True)
         session.advance(frames=TAIL_FRAMES)
         loop_s = time.monotonic() - t0
         plant, imu_mode, frames = session.plant, session.fw.imu_mode, session.frame
+        start_us = session.start_us
     write_run_csv(csv_path, watch.rows)
     e = watch.entry
     if e["status"].startswith("refused") or "did not start" in e["status"]:
@@ -79,7 +83,7 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print) -> SilResult:
                      wall_s=time.monotonic() - t0, loop_s=loop_s,
                      truth=_truth(plant, freq, cfg.inject),
                      stopped=None if e["status"] == "ok" else e["status"],
-                     firmware_summary=session.fw.summary)
+                     firmware_summary=session.fw.summary, start_us=start_us)
 
 
 def _truth(plant, freq_hz: float, inject: str) -> complex:

@@ -362,7 +362,8 @@ def _manifest_schema():
     return S.Obj(
         required={"axis": S.Str(tuple(names.AXES)), "inject": S.Str(tuple(names.INJECTIONS)),
                   "frequencies": S.List(frequency, 0, 10_000)},
-        optional={"tlog": S.Str(file_name=True), "source": S.Obj(), "firmware": S.Str(),
+        optional={"tlog": S.Str(file_name=True), "tlog_start_us": S.Null(S.Int(0, 2**63 - 1)),
+                  "source": S.Obj(), "firmware": S.Str(),
                   "gains": S.Null(S.Obj()), "started": S.Str(), "cycles": S.Int(1, 65535),
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
                   "design": S.Obj(),

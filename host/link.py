@@ -1,19 +1,18 @@
 """The telemetry link: how the host tool talks to the firmware, on a real board over USB
-serial and on the SIL's telemetry pty alike (same code).
+serial, over a network link (UDP or TCP, :mod:`heliquad.host.connection`) and on the SIL's
+telemetry pty alike (same code).
 
 Commands out (HEARTBEAT, arm/disarm, mode, excitation), telemetry in; every packet received
 is written to the .tlog if one is given. Timestamps are the host's clock unless the caller
-passes one (the SIL passes simulated time, so runs repeat exactly).
+passes one (the SIL stamps its run's start plus simulated time, so runs repeat apart from
+that offset).
 """
 
 from __future__ import annotations
 
-import os
 import time
 
-import serial
-
-from .errors import InputError
+from .connection import open_connection
 from ..sim import dialect as names
 from ..sim.mavframe import Codec, Framer
 from ..sim.dialect import dialect
@@ -58,41 +57,28 @@ def reason_text(code: int) -> str:
 DEFAULT_BAUD = 921600
 
 
-class _Sender:
-    """What the MAVLink encoder writes to: the port, where a failed write (the port gone,
-    or a board that stopped reading for a second) is the link lost, as a failed read is."""
-
-    def __init__(self, port):
-        self.port = port
-
-    def write(self, data) -> int:
-        try:
-            return self.port.write(data)
-        except (serial.SerialException, OSError) as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
-
-
 class TelemetryLink:
     """A MAVLink connection to the firmware's telemetry port.
 
     Parameters
     ----------
     port : str
-        Serial device (``/dev/ttyACM0`` for a Teensy, or the SIL's telemetry pty).
+        A connection string (:mod:`heliquad.host.connection`): a serial device
+        (``/dev/ttyACM0`` or ``COM3`` for a Teensy, or the SIL's telemetry pty) or a network
+        link (``udpin:``, ``udpout:``, ``tcp:``, ``tcpin:`` ``HOST:PORT``).
     baud : int
-        Baud rate (ignored by USB CDC and ptys; the Teensy's UART0 runs at DEFAULT_BAUD).
+        Baud rate of a serial device (ignored by USB CDC, ptys and the network; the
+        Teensy's UART0 runs at DEFAULT_BAUD).
     tlog : TlogWriter, optional
         Where every received packet is logged.
     """
 
     def __init__(self, port: str, baud: int = DEFAULT_BAUD, tlog=None):
         self.mav_module = dialect()
-        try:
-            self.serial = serial.Serial(port, baudrate=baud, timeout=0, write_timeout=1.0)
-        except (serial.SerialException, OSError) as exc:
-            raise InputError(f"cannot open {port}: {exc}") from None
+        self.name = str(port)
+        self.transport = open_connection(self.name, baud)
         self.mav = self.mav_module.MAVLink(
-            _Sender(self.serial), srcSystem=HOST_SYSTEM_ID,
+            self.transport, srcSystem=HOST_SYSTEM_ID,
             srcComponent=self.mav_module.MAV_COMP_ID_MISSIONPLANNER)
         self.target = self.mav_module.MAV_COMP_ID_AUTOPILOT1
         self.mav.robust_parsing = True
@@ -103,17 +89,22 @@ class TelemetryLink:
         self.bytes_in = 0
 
     def close(self) -> None:
-        self.serial.close()
+        self.transport.close()
+
+    def fileno(self) -> int:
+        """What to wait on (select) for data to arrive."""
+        return self.transport.fileno()
+
+    def write(self, data) -> int:
+        """Raw bytes out (packed messages); a lost link is an InputError."""
+        return self.transport.write(data)
 
     def read_packets(self) -> list:
         """Raw ``(msgid, packet, payload)`` of what has arrived, not logged (never blocks).
-        For callers that stamp the log themselves (the SIL stamps simulated time)."""
-        try:
-            data = os.read(self.serial.fileno(), 65536)
-        except BlockingIOError:
+        For callers that stamp the log themselves."""
+        data = self.transport.read()
+        if not data:
             return []
-        except OSError as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
         self.bytes_in += len(data)
         return self.framer.feed(data)
 
@@ -133,6 +124,11 @@ class TelemetryLink:
                 if wanted is None or msgid in wanted]
 
     def heartbeat(self) -> None:
+        """The host's HEARTBEAT. A listening network link that has not heard its peer yet
+        has nowhere to send it: then it is skipped (the next one goes once the peer is
+        known); any other command raises the InputError that says so."""
+        if not self.transport.can_send:
+            return
         m = self.mav_module
         self.mav.heartbeat_send(m.MAV_TYPE_GCS, m.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 

@@ -51,6 +51,10 @@ class Session(Protocol):
     (simulated, or wall time since the session opened)."""
 
     tel: TelemetryLink
+    #: What the log's stamps count from: a simulated session's records are stamped with this
+    #: (the run's start, us since 1970 on the wall clock) plus the simulated time of their
+    #: loop; None where the host's clock stamps them (a board).
+    start_us: int | None
 
     @property
     def time_us(self) -> int: ...
@@ -68,24 +72,25 @@ class Session(Protocol):
 
 class _TelemetryLog:
     """Reads the telemetry link and logs every packet with the simulated time of its loop:
-    each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped with the
-    time_us of the first HQ_SYSID_SAMPLE at or after it in the stream. Repeatable, without a
-    read per frame. Framing and logging are C++ (``_simcore.TelemetryTap``); the messages of
+    each loop's telemetry ends with its HQ_SYSID_SAMPLE, so every packet is stamped with
+    ``start_us`` plus the time_us of the first HQ_SYSID_SAMPLE at or after it in the stream.
+    Repeatable apart from ``start_us``, without a read per frame. Framing and logging are C++ (``_simcore.TelemetryTap``); the messages of
     interest are decoded here with the host tool's codec.
 
     The tap has its own descriptor on the link, as a wire tap would: when the host tool
     closes its end (the ``link`` fault), what the firmware sends is still logged."""
 
-    def __init__(self, tel, tlog_path: str):
+    def __init__(self, tel, tlog_path: str, start_us: int):
         self.codec = tel.codec
         self.ids = {name: tel.ids[name] for name in SESSION_MESSAGES}
-        self.fd = os.open(tel.serial.port, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+        self.fd = os.open(tel.name, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
         try:
             self._file = create_log(tlog_path)
         except BaseException:
             os.close(self.fd)
             raise
-        self.tap = _simcore.TelemetryTap(self.fd, self._file.fileno(), list(self.ids.values()))
+        self.tap = _simcore.TelemetryTap(self.fd, self._file.fileno(), list(self.ids.values()),
+                                         start_us)
 
     @property
     def last_time_us(self):
@@ -151,15 +156,18 @@ class SilSession:
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
     code as for a board) and :meth:`advance`. Every telemetry packet is logged to ``tlog``
-    with simulated time.
+    stamped with ``start_us`` (the wall clock when the session began, us since 1970; given,
+    for a test that wants two logs byte for byte) plus the simulated time of its loop, so
+    tools show when the run happened while the run itself stays the same every time.
 
     The frames themselves run in C++ (``heliquad._simcore.RigEngine``, in its own thread):
     the plant, the FIFO packets and the sim link, with the batch's RC inputs and random
     inputs drawn here beforehand. Meanwhile this thread reads and logs the telemetry. Commands
     and heartbeats go out between batches only, so a run is the same every time."""
 
-    def __init__(self, cfg: SilConfig, tlog_path: str):
+    def __init__(self, cfg: SilConfig, tlog_path: str, start_us: int | None = None):
         self.cfg = cfg
+        self.start_us = int(time.time() * 1e6) if start_us is None else int(start_us)
         self.dt_us = int(round(1e6 / cfg.loop_hz))
         check_faults(cfg.faults, self.dt_us)
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
@@ -172,7 +180,7 @@ class SilSession:
             undo.callback(self.link.close)
             self.tel = TelemetryLink(self.fw.telemetry_path)
             undo.callback(self.tel.close)
-            self.telemetry = _TelemetryLog(self.tel, tlog_path)
+            self.telemetry = _TelemetryLog(self.tel, tlog_path, self.start_us)
             undo.callback(self.telemetry.close)
             self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
             undo.pop_all()
@@ -274,6 +282,8 @@ class PortSession:
     """A board (or a ``heliquad board`` pty) as a session: wall-clock time, the link
     logging every packet with the host's clock."""
 
+    start_us = None                 # the host's clock stamps the log, not an offset
+
     def __init__(self, port: str, tlog_path: str, baud: int = DEFAULT_BAUD, poll_s: float = 0.05):
         self.tel = TelemetryLink(port, baud=baud)   # the port first: a bad one creates nothing
         try:
@@ -303,7 +313,7 @@ class PortSession:
             waited = time.monotonic() - start
             if not seen and waited > FIRST_SAMPLE_WAIT_S:
                 raise InputError(f"no samples from the board in {FIRST_SAMPLE_WAIT_S:g} s: is "
-                                 f"{self.tel.serial.port} its telemetry port, and is it running?")
+                                 f"{self.tel.name} its telemetry port, and is it running?")
             if seen and not said:
                 progress("waiting for the board to be armed (the pilot's arm switch) ...")
                 said = True

@@ -168,7 +168,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
                 "firmware": f"heliquad {__version__}", "gains": gains,
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "tlog": SWEEP_TLOG, "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
+                "tlog": SWEEP_TLOG, "tlog_start_us": getattr(session, "start_us", None),
+                "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
                 "design": plan.record(),
                 "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
                 "frequencies": [], "complete": False, "aborted": None}

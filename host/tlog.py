@@ -13,14 +13,19 @@ much) and the records whose timestamp goes back in time are counted in a
 :class:`TlogDamage`; a flipped bit in a packet costs that one message, not the rest of the log.
 A timestamp is not covered by the packet's CRC. A damaged one is seen when it breaks the order
 of time, and in a simulated session's log whatever it does: there every record is stamped with
-the time of its control loop, the ``time_us`` of the first HQ_SYSID_SAMPLE at or after it (a
-log is taken for one when more than half of its HQ_SYSID_SAMPLE records carry their own
-``time_us`` as their stamp), so a record stamped otherwise is counted. On a board's log (the
-host's clock) a damaged stamp that keeps time in order cannot be seen.
+the run's start (a fixed offset, the wall clock when it began) plus the time of its control
+loop, the ``time_us`` of the first HQ_SYSID_SAMPLE at or after it. A log is taken for one
+when more than half of its HQ_SYSID_SAMPLE records are stamped with their own ``time_us``
+plus one and the same offset (older logs: an offset of 0), so a record stamped otherwise is
+counted. On a board's log (the host's clock) a damaged stamp that keeps time in order cannot
+be seen.
+
+Analysis never reads the stamps: each sample's time is its ``time_us``, inside its CRC.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import os
 import struct
@@ -175,27 +180,34 @@ class TlogDamage:
 
 
 class _LoopTimes:
-    """The check of a simulated session's stamps: each record's stamp against the ``time_us``
-    of the HQ_SYSID_SAMPLE that ends its loop. The records before a skipped region are not
-    checked (the sample that ended their loop may be what was lost), nor those after the last
-    sample. The verdict counts only when more than half of the samples carry their own time
-    as their stamp, which a log stamped by the host's clock never does."""
+    """The check of a simulated session's stamps: each record's stamp against the offset plus
+    the ``time_us`` of the HQ_SYSID_SAMPLE that ends its loop. The offset is the one most
+    samples share (the run's start); the verdict counts only when more than half of the
+    samples share it, which a log stamped by the host's clock never does. The records before
+    a skipped region are not checked (the sample that ended their loop may be what was
+    lost), nor those after the last sample."""
 
     def __init__(self):
         self.pending = []           # (offset, stamp) of the records since the last sample
-        self.off = []               # offsets of records not stamped with their loop's time
-        self.samples = self.own = 0
+        self.loops = []             # (offset, stamp, time_us, the loop's other records)
 
     def sample(self, pos: int, stamp: int, time_us: int) -> None:
-        self.samples += 1
-        self.own += stamp == time_us
-        self.off.extend(p for p, s in self.pending if s != time_us)
-        if stamp != time_us:
-            self.off.append(pos)
+        self.loops.append((pos, stamp, time_us, self.pending))
         self.pending = []
 
     def verdict(self) -> list:
-        return self.off if 2 * self.own > self.samples else []
+        """Offsets of the records not stamped with their loop's time (and the shared offset)."""
+        if not self.loops:
+            return []
+        shift, count = collections.Counter(s - t for _, s, t, _ in self.loops).most_common(1)[0]
+        if 2 * count <= len(self.loops):
+            return []
+        off = []
+        for pos, stamp, time_us, records in self.loops:
+            off.extend(p for p, s in records if s != time_us + shift)
+            if stamp != time_us + shift:
+                off.append(pos)
+        return off
 
 
 def _record_at(data, pos: int, extras: dict):

@@ -733,6 +733,20 @@ CASES = [
     case("log --port /dev/null --baud abc --out l.tlog", "--baud"),
     case("log --port /dev/null --out adir --duration-s 0.1", "/dev/null"),
     case("log --port /dev/null", "--out"),
+    # log and sweep over a network: addresses that are not ones, schemes heliquad does not open
+    case("log --port tcp:127.0.0.1 --out l.tlog", "expected tcp:HOST:PORT"),
+    case("log --port udpin:0.0.0.0:0 --out l.tlog", "the port must be a number from 1 to 65535"),
+    case("log --port udpout:127.0.0.1:x --out l.tlog", "not 'x'"),
+    case("log --port uds:/tmp/x --out l.tlog", "unknown connection uds:"),
+    case("sweep --port tcp:a:b:c --axis roll --out s", "expected tcp:HOST:PORT"),
+    case("sweep --port udpin:300.1.1.1:14550 --axis roll --out s", "cannot open udpin:300.1.1.1:14550"),
+    # mavlink-dialect: an output that is not a folder, a Python that is not one
+    case("mavlink-dialect --out binary.dat", "exists and is not a folder"),
+    case("mavlink-dialect --python missing --out d", "--python missing: cannot run it"),
+    case("mavlink-dialect --python adir --install", "--python adir: cannot run it"),
+    case("mavlink-dialect --python points.csv", "--python points.csv: cannot run it"),
+    case("mavlink-dialect --out", "expected one argument"),
+    case("mavlink-dialect --frobnicate", "unrecognized"),
     # tlog: damaged, empty, binary, folders; a damaged log is read with a warning (exit 0)
     case("tlog binary.dat", "no MAVLink record"),
     case("tlog .", "is a directory"),

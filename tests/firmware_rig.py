@@ -65,7 +65,7 @@ class FirmwareRig:
     def _read(self, wait: bool) -> int:
         """Decode what the link has (waiting up to 50 ms for it with ``wait``); how many
         bytes came."""
-        fd = self.tel.serial.fileno()
+        fd = self.tel.fileno()
         if wait:
             select.select([fd], [], [], 0.05)
         before = self.tel.bytes_in
@@ -128,7 +128,7 @@ class FirmwareRig:
         # One write: both arrive together, so the ACK marks the heartbeat's own loop (the
         # firmware answers a command it does not support, a mission waypoint, without acting).
         mav = self.tel.mav
-        self.tel.serial.write(
+        self.tel.write(
             mav.heartbeat_encode(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
             + mav.command_long_encode(1, 1, MAV.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
         t, _ = self.until(lambda m: m.get_type() == "COMMAND_ACK"

@@ -173,10 +173,16 @@ def test_a_stamp_that_is_not_its_loops_time_is_reported(tmp_path):
     assert damage.off_loop == [offsets[4]] and not damage.regions and not damage.out_of_order
     assert "1 timestamp not the time of their control loop" in damage.summary()
     tlog_fuzz.check(b"\0" + data)
-    # Stamped by another clock (a board's log: the host's time), no stamp is held to a loop.
-    shifted = b"".join(struct.pack(">Q", stamp + 10**15) + data[at + 8:end]
-                       for (stamp, _), at, end in zip(messages, offsets, offsets[1:]))
-    path.write_bytes(shifted)
-    damage = tlog.TlogDamage()
-    tlog.read_tlog(str(path), tlog_fuzz.DIALECT, damage=damage)
-    assert not damage
+    # Stamped from the run's start (a SIL log since it carries the wall clock): the same record.
+    def restamped(stamp_of):
+        path.write_bytes(b"".join(struct.pack(">Q", stamp_of(stamp)) + data[at + 8:end]
+                                  for (stamp, _), at, end in zip(messages, offsets, offsets[1:])))
+        damage = tlog.TlogDamage()
+        tlog.read_tlog(str(path), tlog_fuzz.DIALECT, damage=damage)
+        return damage
+
+    assert restamped(lambda stamp: stamp + 1_790_000_000_000_000).off_loop == [offsets[4]]
+    # Stamped by another clock (a board's log: the host's time, as each record is read, so
+    # it runs on against the loops'), no stamp is held to a loop.
+    later = iter(range(0, 7 * len(messages), 7))
+    assert not restamped(lambda stamp: stamp + 10**15 + next(later))

@@ -95,3 +95,303 @@ def test_a_board_never_armed_or_silent_ends_with_one_line(board_session, monkeyp
     with pytest.raises(InputError, match="^the board was not armed within 0 s; arm it, then "
                                          "run the sweep again$"):
         session.hover(lambda text: None)
+
+
+# --- The link over a network: a forwarder between a board's pty and UDP or TCP -------------
+
+class Relay:
+    """What a network forwarder does (MAVProxy's --out, ser2net, a companion computer's
+    router): the bytes of a board's serial port (a pty path) to and from a socket, in a
+    thread. ``mode``: ``udp`` (listens; sends to whoever sent to it last), ``udp-push``
+    (sends to a given port: the client listens), ``tcp`` (listens for one client),
+    ``tcp-out`` (connects to a listening client)."""
+
+    def __init__(self, board_port, mode, client_port=None):
+        import serial
+        import socket
+        import threading
+
+        self.board = serial.Serial(str(board_port), timeout=0)     # raw mode, as a reader sets
+        self.mode, self.peer, self.conn = mode, None, None
+        if mode.startswith("udp"):
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.bind(("127.0.0.1", 0))
+            if mode == "udp-push":
+                self.peer = ("127.0.0.1", client_port)
+        elif mode == "tcp":
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            self.sock.bind(("127.0.0.1", 0))
+            self.sock.listen(1)
+        else:
+            self.sock, self.client_port = None, client_port
+        self.port = self.sock.getsockname()[1] if self.sock else None
+        self.to_client = self.to_board = 0
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _connect_out(self):
+        import socket
+
+        try:
+            self.conn = socket.create_connection(("127.0.0.1", self.client_port), timeout=1)
+        except OSError:
+            self.conn = None                     # not listening yet: the next turn tries again
+
+    def _run(self):
+        import select
+
+        while not self.stopping.is_set():
+            if self.mode == "tcp-out" and self.conn is None:
+                self._connect_out()
+            readers = [self.board.fileno()] + [s for s in (self.sock, self.conn) if s]
+            ready, _, _ = select.select(readers, [], [], 0.05)
+            try:
+                self._forward(ready)
+            except OSError:                      # the client went away: wait for the next
+                if self.conn is not None:
+                    self.conn.close()
+                self.conn = None
+
+    def _forward(self, ready):
+        if self.board.fileno() in ready:
+            self._to_client(self.board.read(65536))
+        if self.sock in ready and self.mode == "tcp":
+            self.conn, _ = self.sock.accept()
+        elif self.sock in ready:
+            data, self.peer = self.sock.recvfrom(65536) if self.mode == "udp" else \
+                (self.sock.recv(65536), self.peer)
+            self._to_board(data)
+        if self.conn is not None and self.conn in ready:
+            data = self.conn.recv(65536)
+            if not data:
+                raise ConnectionResetError("closed")
+            self._to_board(data)
+
+    def _to_client(self, data):
+        if self.mode.startswith("udp") and self.peer:
+            self.sock.sendto(data, self.peer)
+        elif self.conn is not None:
+            self.conn.sendall(data)
+        else:
+            return                               # nobody to send to yet: dropped
+        self.to_client += len(data)
+
+    def _to_board(self, data):
+        self.board.write(data)
+        self.to_board += len(data)
+
+    def close(self):
+        self.stopping.set()
+        self.thread.join(timeout=10)
+        for s in (self.conn, self.sock):
+            if s is not None:
+                s.close()
+        self.board.close()
+
+
+def free_port(kind):
+    """A port nothing listens on now (the client binds it next)."""
+    import socket
+
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM if kind == "udp" else socket.SOCK_STREAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+#: client connection -> the relay's mode
+NETWORK_CASES = {"udpout": "udp", "udpin": "udp-push", "tcp": "tcp", "tcpin": "tcp-out"}
+
+
+def relay_and_connection(board_port, kind):
+    """A relay from the board's port, and the client's connection string to it."""
+    client_port = free_port("udp" if kind.startswith("udp") else "tcp")
+    relay = Relay(board_port, NETWORK_CASES[kind], client_port)
+    port = relay.port if kind in ("udpout", "tcp") else client_port
+    host = "127.0.0.1" if kind in ("udpout", "tcp") else "0.0.0.0"
+    return relay, f"{kind}:{host}:{port}"
+
+
+def until(condition, what, timeout_s=60.0):
+    """Poll until condition() holds (a hang guard, never a measurement)."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"no {what} within {timeout_s:g} s (hang guard)"
+        time.sleep(0.01)
+
+
+def heartbeats_in(data: bytes) -> int:
+    from heliquad.sim.dialect import dialect
+    from heliquad.sim.mavframe import Codec, Framer
+
+    codec = Codec(dialect())
+    hb = dialect().MAVLINK_MSG_ID_HEARTBEAT
+    return sum(msgid == hb for msgid, _, _ in Framer(codec).feed(data))
+
+
+@pytest.mark.parametrize("kind", NETWORK_CASES)
+def test_the_link_carries_telemetry_and_commands_over_the_network(kind):
+    # The same TelemetryLink over a forwarder: the board's samples come in, the host's
+    # heartbeat goes out. A listening link (udpin:, tcpin:) sends only once it has heard from
+    # the board: its first heartbeat is skipped, a command refused in one line saying why.
+    board = FakeBoard()
+    relay, conn = relay_and_connection(board.port, kind)
+    link = TelemetryLink(conn)
+    try:
+        if kind in ("udpin", "tcpin"):
+            link.heartbeat()                                  # nowhere to go yet: skipped
+            with pytest.raises(InputError, match=f"^{conn} has heard nothing from the board yet"):
+                link.arm(False)
+        if kind == "tcpin":
+            until(lambda: relay.conn is not None, "connection from the relay")
+        seqs = []
+
+        def got_samples():
+            link.heartbeat()           # as a session does: udpout's relay learns its address
+            board.send_samples(1, armed=True)
+            seqs.extend(m.seq for m in link.poll(only=("HQ_SYSID_SAMPLE",)))
+            return len(seqs) >= 5
+
+        until(got_samples, "samples over the link")
+        assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+        received = bytearray()
+
+        def board_heard_a_heartbeat():
+            link.heartbeat()
+            try:
+                received.extend(os.read(board.main, 65536))
+            except BlockingIOError:
+                pass
+            return heartbeats_in(bytes(received)) > 0
+
+        os.set_blocking(board.main, False)
+        until(board_heard_a_heartbeat, "heartbeat at the board")
+    finally:
+        link.close()
+        relay.close()
+        board.close()
+
+
+def test_a_tcp_board_that_hangs_up_is_the_link_lost():
+    board = FakeBoard()
+    relay, conn = relay_and_connection(board.port, "tcp")
+    link = TelemetryLink(conn)
+    try:
+        until(lambda: relay.conn is not None, "the connection")
+        relay.close()                                           # the forwarder goes away
+        with pytest.raises(InputError, match=f"^telemetry link lost: {conn}: "):
+            until(lambda: link.poll() is None, "the link lost")
+    finally:
+        link.close()
+        board.close()
+
+
+@pytest.mark.parametrize("conn, says", [
+    ("tcp:127.0.0.1:{closed}", "cannot open tcp:127.0.0.1:{closed}: Connection refused"),
+    ("udpout:127.0.0.1", "udpout:127.0.0.1: expected udpout:HOST:PORT"),
+    ("tcp:127.0.0.1:http", "tcp:127.0.0.1:http: the port must be a number from 1 to 65535, not 'http'"),
+    ("udpin:0.0.0.0:70000", "udpin:0.0.0.0:70000: the port must be a number from 1 to 65535"),
+    ("tcp:no-such-host.invalid:5760", "cannot open tcp:no-such-host.invalid:5760: "),
+    ("ws:127.0.0.1:5760", "ws:127.0.0.1:5760: unknown connection ws:; use a serial device or "
+                          "one of udpin:HOST:PORT"),
+])
+def test_a_bad_network_connection_is_one_line_naming_it(conn, says, tmp_path):
+    closed = free_port("tcp")
+    conn, says = conn.format(closed=closed), says.format(closed=closed)
+    res = heliquad("log", "--port", conn, "--out", tmp_path / "x.tlog")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert res.stderr.startswith(f"heliquad log: error: {says}") and res.stderr.count("\n") == 1
+    assert not (tmp_path / "x.tlog").exists()          # the link first: nothing created
+
+
+def heliquad(*args, **kw):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=120, **kw)
+
+
+@pytest.fixture(scope="module")
+def running_board(tmp_path_factory):
+    """``heliquad board``: the simulated rig in real time, its telemetry on a pty."""
+    import signal
+    import subprocess
+    import sys
+
+    port = tmp_path_factory.mktemp("board") / "rig"
+    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
+                              str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert "board running" in board.stdout.readline()
+        yield port
+    finally:
+        board.send_signal(signal.SIGINT)
+        board.communicate(timeout=30)
+
+
+@pytest.mark.parametrize("kind", ["udpout", "udpin", "tcp"])
+def test_heliquad_log_records_a_board_over_the_network(running_board, kind, tmp_path):
+    # heliquad log --port udp...: a forwarded board is logged as a serial one is, every
+    # sample between the first and the last there. Stopped with Ctrl-C once the log holds
+    # a second of samples.
+    import signal
+    import subprocess
+    import sys
+
+    from heliquad.host.logsession import summarise_tlog
+
+    relay, conn = relay_and_connection(running_board, kind)
+    out = tmp_path / "net.tlog"
+    log = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "log", "--port", conn,
+                            "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    try:
+        until(lambda: out.exists() and summarise_tlog(str(out))["samples"] >= 200
+              or log.poll() is not None, "a second of samples in the log")
+        log.send_signal(signal.SIGINT)
+        stdout, stderr = log.communicate(timeout=60)
+    finally:
+        if log.poll() is None:
+            log.kill()
+            log.communicate()
+        relay.close()
+    assert log.returncode == 0, stderr
+    s = summarise_tlog(str(out))
+    assert s["damage"] is None and s["lost"] == 0
+    assert s["samples"] == s["last_seq"] - s["first_seq"] + 1 >= 200
+    assert relay.to_board > 0                  # the host's heartbeats reached the board
+
+
+MAVUTIL_CLIENT = """
+import sys
+from pymavlink import mavutil
+m = mavutil.mavlink_connection(sys.argv[1])
+m.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+hb = m.recv_match(type="HEARTBEAT", blocking=True, timeout=60)
+att = m.recv_match(type="ATTITUDE", blocking=True, timeout=60)
+print(hb.get_srcSystem(), hb.type, att is not None)
+"""
+
+
+@pytest.mark.parametrize("kind", ["udpout", "tcp"])
+def test_pymavlink_reads_the_forwarded_board(running_board, kind):
+    # The same forwarder serves pymavlink's own tools: mavutil connects as a ground station
+    # would and decodes the board's HEARTBEAT and ATTITUDE (common messages).
+    import subprocess
+    import sys
+
+    relay, conn = relay_and_connection(running_board, kind)
+    try:
+        res = subprocess.run([sys.executable, "-c", MAVUTIL_CLIENT, conn], capture_output=True,
+                             text=True, timeout=120,
+                             env=dict(os.environ, MAVLINK20="1", MAVLINK_DIALECT="common"))
+    finally:
+        relay.close()
+    assert res.returncode == 0, res.stderr
+    sysid, mav_type, attitude = res.stdout.split()
+    assert sysid == "1" and attitude == "True"

@@ -105,6 +105,26 @@ def test_single_bit_flips_in_a_sweep_log_are_read_past_and_reported(sweep_log, t
     assert not silent, silent
 
 
+def test_a_sil_sweeps_log_counts_from_the_start_its_manifest_records(sweep_log):
+    # Every record: the run's start (the wall clock, manifest's tlog_start_us) plus its
+    # loop's simulated time, so pymavlink's tools date it; the reader finds nothing amiss.
+    import datetime
+    import json
+
+    from heliquad.host.tlog import TlogDamage, read_tlog
+    from heliquad.sim.dialect import dialect
+
+    manifest = json.loads((sweep_log.parent / "manifest.json").read_text())
+    start = manifest["tlog_start_us"]
+    damage = TlogDamage()
+    samples = [(t, m) for t, m in read_tlog(str(sweep_log), dialect(), damage=damage)
+               if m.get_type() == "HQ_SYSID_SAMPLE"]
+    assert not damage and len(samples) > 1000
+    assert {t - m.time_us for t, m in samples} == {start}
+    started = datetime.datetime.fromisoformat(manifest["started"]).timestamp()
+    assert abs(start * 1e-6 - started) < 600         # the same run (a hang guard's margin)
+
+
 def test_a_missing_port_is_one_line_exit_2(tmp_path):
     res = heliquad("log", "--port", tmp_path / "nope", "--out", tmp_path / "x.tlog")
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1

@@ -134,7 +134,7 @@ def test_our_own_heartbeat_echoed_back_does_not_count_as_the_hosts(rig):
     last_heartbeat = rig.ping()
     echo = MAV.MAVLink(None, srcSystem=1, srcComponent=1)
     for _ in range(400):
-        rig.tel.serial.write(echo.heartbeat_encode(2, 0, 0, 0, 0).pack(echo))
+        rig.tel.write(echo.heartbeat_encode(2, 0, 0, 0, 0).pack(echo))
         rig.step()
         ends = [m for _, m in rig.of_type("HQ_EXCITATION_STATUS", last_heartbeat)
                 if m.state == MAV.HQ_EXCITATION_STATE_IDLE]

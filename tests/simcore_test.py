@@ -157,6 +157,42 @@ def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
         "ATTITUDE", "HQ_SYSID_SAMPLE", "ATTITUDE", "HQ_SYSID_SAMPLE"]
 
 
+def test_the_tap_stamps_the_runs_start_plus_each_loops_time(tmp_path):
+    # A SIL log carries the wall clock of its run's start plus simulated time (tools show the
+    # date the run was made); the tap's own clock stays simulated. The reader takes the
+    # shared offset for a simulated log's and still names a record stamped otherwise.
+    from heliquad.sim.mavframe import Codec
+    from heliquad.sim.dialect import dialect
+    from heliquad.host.tlog import TlogDamage, read_tlog
+
+    mav = dialect()
+    codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
+    text = codec.encode(mav.MAVLINK_MSG_ID_STATUSTEXT, {
+        "severity": 6, "text": b"hello", "id": 0, "chunk_seq": 0})
+    start = 1_790_000_000_123_456                           # 2026-09-21, in us since 1970
+    stream = b"".join(text + _sysid(codec, mav, 5000 * k, k) for k in range(1, 4))
+    r, w = os.pipe()
+    os.set_blocking(r, False)
+    path = tmp_path / "tap.tlog"
+    with open(path, "wb") as fh:
+        tap = _simcore.TelemetryTap(r, fh.fileno(), [], start)
+        os.write(w, stream + text)
+        tap.read()
+        tap.drain()
+    os.close(r)
+    os.close(w)
+    assert tap.last_time_us == 15000 and tap.offset_us == start
+    damage = TlogDamage()
+    logged = read_tlog(str(path), mav, damage=damage)
+    assert [t - start for t, _ in logged] == [5000, 5000, 10000, 10000, 15000, 15000, 15000]
+    assert not damage
+    data = bytearray(path.read_bytes())
+    data[7] ^= 1                                            # the first record's stamp, 1 us off
+    path.write_bytes(bytes(data))
+    read_tlog(str(path), mav, damage=damage)
+    assert damage.off_loop == [0]
+
+
 def test_the_tap_drained_at_the_end_keeps_a_loop_cut_short(tmp_path):
     # The firmware said why it stopped (STATUSTEXT) and died before the loop's sample: at the
     # session's end the tap logs it with the last loop's time instead of dropping it.

@@ -6,6 +6,7 @@ import sys
 
 from ..cli_args import int_in, number_in
 from ..errors import DiskFull, InputError
+from ..connection import CONNECTION_HELP
 from ..link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
@@ -17,7 +18,12 @@ Ctrl-C or a crash leaves a valid log; a full disk or a link that goes away ends 
 with one line and exit 1, the log kept up to its last whole record. Lost samples are counted from the gaps in
 HQ_SYSID_SAMPLE.seq; a summary is printed at the end, and a status line every 5 s.
 
-example: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --out flight.tlog
+--port takes a serial device or a network link (udpin:, udpout:, tcp:, tcpin:), as MAVProxy
+and mavutil write them; a listening link (udpin:, tcpin:) sends the host's heartbeat once it
+has heard from the board.
+
+examples: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --out flight.tlog
+          heliquad log --port udpin:0.0.0.0:14550 --out flight.tlog   (a forwarder sends there)
 """
 
 
@@ -25,11 +31,11 @@ example: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --o
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("log", help="log a board's (or a SIL's) telemetry to a .tlog",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--port", required=True, metavar="DEVICE",
-                   help="serial device: /dev/ttyACM0 for a Teensy, or a heliquad board pty")
+    p.add_argument("--port", required=True, metavar="CONN", help=CONNECTION_HELP)
     p.add_argument("--out", required=True, metavar="FILE.tlog")
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
+                        "and network links)")
     p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
                    "(default: until Ctrl-C)")
     p.set_defaults(func=run)

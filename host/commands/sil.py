@@ -18,7 +18,8 @@ driven in lockstep over a pty by the simulated rig (a transfer-function plant fr
 axis's normalised torque command to its body rate, rad/s), armed and held at hover, and
 excited over the telemetry link exactly as a real board would be.
 
-Writes RUN.tlog (every telemetry message, stamped with simulated time; pymavlink reads it)
+Writes RUN.tlog (every telemetry message, stamped with the run's start on the wall clock
+plus simulated time, so tools show when it ran; pymavlink reads it)
 and RUN.csv (t_s,u,y over the full-amplitude cycles, for heliquad fsf). u and y follow the
 injection point: mixer -> u torque command, y rate; rate -> u rate setpoint, y rate (rad/s);
 angle -> u angle setpoint, y angle (rad).

@@ -11,6 +11,7 @@ from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_a
                         int_in, number_in)
 from .. import design
 from ..errors import DiskFull, InputError
+from ..connection import CONNECTION_HELP
 from ..link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
@@ -25,7 +26,8 @@ firmware finishes the cycle under way and fades out; --cycles N gives every freq
 exactly N. A mixer sweep's amplitude is designed per frequency for a rig swing of
 --swing-deg (from what the previous frequency measured, within the firmware's bound);
 --amplitude gives one for all. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
-default); --port talks to a board, or to a `heliquad board` pty, in real time. Writes
+default); --port talks to a board in real time: its serial port, a `heliquad board` pty, or
+a network link (udpin:HOST:PORT, udpout:, tcp:, tcpin:, as MAVProxy writes them). Writes
 DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
 windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond 80 deg or a
 rate beyond 400 deg/s stops the excitation and the sweep (exit 1).
@@ -45,9 +47,10 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
-    where.add_argument("--port", metavar="DEVICE", help="a board's telemetry port (or a heliquad board pty)")
+    where.add_argument("--port", metavar="CONN", help=CONNECTION_HELP)
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB and ptys)")
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
+                        "and network links)")
     p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=finite, nargs="+", metavar="B",

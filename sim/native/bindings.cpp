@@ -234,8 +234,10 @@ PYBIND11_MODULE(_simcore, m) {
         .def_readonly("last", &BatchResult::last);
 
     py::class_<TelemetryTap>(m, "TelemetryTap")
-        .def(py::init<int, int, std::vector<uint32_t>>(), py::arg("tel_fd"), py::arg("tlog_fd"),
-             py::arg("wanted"))
+        .def(py::init<int, int, std::vector<uint32_t>, uint64_t>(), py::arg("tel_fd"),
+             py::arg("tlog_fd"), py::arg("wanted"), py::arg("offset_us") = 0,
+             "offset_us: added to every record's stamp (the run's start, us since 1970); "
+             "last_time_us stays simulated time.")
         .def("read", [](TelemetryTap& t) {
             std::vector<TappedMessage> got;
             {
@@ -254,6 +256,7 @@ PYBIND11_MODULE(_simcore, m) {
         }, "read(), then log the packets still waiting for a loop's sample with the last "
            "loop's time; for the end of a session.")
         .def_property_readonly("last_time_us", &TelemetryTap::last_time_us)
+        .def_property_readonly("offset_us", &TelemetryTap::offset_us)
         .def_property_readonly("packets", &TelemetryTap::packets)
         .def_property_readonly("write_failed", &TelemetryTap::write_failed)
         .def_property_readonly("write_errno", &TelemetryTap::write_errno);

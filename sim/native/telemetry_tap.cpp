@@ -19,8 +19,9 @@ constexpr size_t kSignature = MAVLINK_SIGNATURE_BLOCK_LEN;
 
 }  // namespace
 
-TelemetryTap::TelemetryTap(int tel_fd, int tlog_fd, std::vector<uint32_t> wanted)
-    : tel_fd_(tel_fd), tlog_fd_(tlog_fd), wanted_(std::move(wanted)) {}
+TelemetryTap::TelemetryTap(int tel_fd, int tlog_fd, std::vector<uint32_t> wanted,
+                           uint64_t offset_us)
+    : tel_fd_(tel_fd), tlog_fd_(tlog_fd), wanted_(std::move(wanted)), offset_us_(offset_us) {}
 
 std::vector<TappedMessage> TelemetryTap::read() {
     std::vector<TappedMessage> out;
@@ -86,7 +87,8 @@ std::vector<TappedMessage> TelemetryTap::drain() {
     return out;
 }
 
-void TelemetryTap::stamp_pending(uint64_t t) {
+void TelemetryTap::stamp_pending(uint64_t loop_us) {
+    const uint64_t t = loop_us + offset_us_;
     size_t at = 0;
     for (const size_t plen : pending_lengths_) {
         for (int b = 7; b >= 0; --b) log_.push_back(static_cast<uint8_t>(t >> (8 * b)));

@@ -16,8 +16,9 @@ Contract checked per input (the file is written to one temporary file per proces
 - the damage it reports is exactly the bytes stepped over (offset and length of each run),
   the records whose timestamp is earlier than the one before and, in a log stamped by its
   control loops (more than half of the HQ_SYSID_SAMPLE records stamped with their own
-  time_us), the records whose stamp is not the time_us of the first sample after them with no
-  stepped-over run between; a warning comes if and only if there is such damage, and no
+  time_us plus one and the same offset, the run's start), the records whose stamp is not
+  that offset plus the time_us of the first sample after them with no stepped-over run
+  between; a warning comes if and only if there is such damage, and no
   other warning;
 - reading the file with the damaged runs cut out gives the same list, silently unless a
   timestamp is wrong.
@@ -103,18 +104,21 @@ def well_formed_records(data: bytes) -> tuple:
 
 
 def not_loop_time(records: list, at: list, run: list) -> list:
-    """Offsets of the records whose stamp is not their loop's time, when the log is stamped
-    by its loops; each record's loop found by looking ahead for its sample."""
+    """Offsets of the records whose stamp is not their loop's time plus the run's start,
+    when the log is stamped by its loops (the start: the offset most samples share); each
+    record's loop found by looking ahead for its sample."""
     sample_id = DIALECT.MAVLINK_MSG_ID_HQ_SYSID_SAMPLE
     time_us = [int.from_bytes(p[:8], "little") if m == sample_id else None
                for _, m, p in records]
     samples = [i for i, t in enumerate(time_us) if t is not None]
-    if 2 * sum(records[i][0] == time_us[i] for i in samples) <= len(samples):
+    shifts = [records[i][0] - time_us[i] for i in samples]
+    start = max(set(shifts), key=shifts.count) if shifts else 0
+    if 2 * shifts.count(start) <= len(samples):
         return []
     off = []
     for i, (stamp, _, _) in enumerate(records):
         ends = next((j for j in samples if j >= i), None)
-        if ends is not None and run[ends] == run[i] and stamp != time_us[ends]:
+        if ends is not None and run[ends] == run[i] and stamp != start + time_us[ends]:
             off.append(at[i])
     return off
 

@@ -1,0 +1,138 @@
+"""``heliquad mavlink-dialect``: pymavlink's own tools decode heliquad's logs with the module
+it makes. Hermetic: the install goes into a copy of pymavlink on a private PYTHONPATH, never
+into the real site-packages."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import pytest
+
+import pymavlink
+
+from heliquad.host.tlog import read_tlog
+from heliquad.sim.dialect import dialect
+
+REAL_V20 = os.path.join(os.path.dirname(pymavlink.__file__), "dialects", "v20")
+#: The definitions a copy keeps (every other generated dialect is 80 MB nobody here needs).
+KEPT_DIALECTS = {"__init__", "common", "standard", "minimal"}
+
+
+def heliquad(*args, env=None):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=600, env=env)
+
+
+@pytest.fixture(scope="module")
+def sil_log(tmp_path_factory):
+    """A heliquad .tlog: a short SIL run (every message the firmware sends in a run)."""
+    run = tmp_path_factory.mktemp("sil") / "run"
+    before = time.time()
+    res = heliquad("sil", "--freq-hz", 2, "--amplitude", 0.05, "--cycles", 2,
+                   "--fade-cycles", 1, "--out", run)
+    after = time.time()
+    assert res.returncode == 0, res.stderr
+    return run.with_suffix(".tlog"), (before, after)
+
+
+@pytest.fixture
+def private_pymavlink(tmp_path):
+    """A copy of the installed pymavlink in its own folder, and the environment that makes
+    Python import it instead of the real one."""
+    def ignore(folder, names):
+        skip = {n for n in names if n == "__pycache__"}
+        if os.path.basename(os.path.dirname(folder)) == "dialects":     # dialects/v10, v20
+            skip |= {n for n in names if os.path.splitext(n)[0] not in KEPT_DIALECTS}
+        return skip
+
+    site = tmp_path / "site"
+    shutil.copytree(os.path.dirname(pymavlink.__file__), site / "pymavlink", ignore=ignore)
+    env = dict(os.environ, PYTHONPATH=str(site), MAVLINK_DIALECT="common")
+    return site / "pymavlink", env
+
+
+def dumped_rows(pymavlink_dir, env, log):
+    """pymavlink's mavlogdump.py --dialect heliquad --format json on a log, one object per
+    message (``meta``: type, timestamp in s; ``data``: the fields)."""
+    res = subprocess.run([sys.executable, str(pymavlink_dir / "tools" / "mavlogdump.py"),
+                          "--dialect", "heliquad", "--format", "json", str(log)],
+                         capture_output=True, text=True, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr
+    return [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+
+
+
+def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavlink, sil_log):
+    # After --install, mavlogdump.py --dialect heliquad decodes every record of a heliquad
+    # log, heliquad's own messages field by field as heliquad's reader does.
+    pymavlink_dir, env = private_pymavlink
+    sil_log, (before, after) = sil_log
+    real_before = sorted(os.listdir(REAL_V20))
+    res = heliquad("mavlink-dialect", "--install", env=env)
+    assert res.returncode == 0, res.stderr
+    v20 = pymavlink_dir / "dialects" / "v20"
+    assert f"installed heliquad.py into {v20}" in res.stdout
+    assert (v20 / "heliquad.py").is_file() and (v20 / "heliquad.xml").is_file()
+    assert sorted(os.listdir(REAL_V20)) == real_before          # the real one untouched
+
+    rows = dumped_rows(pymavlink_dir, env, sil_log)
+    dumped = [(r["meta"]["type"], r["data"]) for r in rows]
+    ours = read_tlog(str(sil_log), dialect())
+    assert [t for t, _ in dumped] == [m.get_type() for _, m in ours]      # no BAD_DATA
+    samples = [d for t, d in dumped if t == "HQ_SYSID_SAMPLE"]
+    ours_samples = [m for _, m in ours if m.get_type() == "HQ_SYSID_SAMPLE"]
+    assert len(samples) > 200
+    assert [(d["time_us"], d["seq"], d["excitation"]) for d in samples] == \
+        [(m.time_us, m.seq, m.excitation) for m in ours_samples]
+    status = [d for t, d in dumped if t == "HQ_EXCITATION_STATUS"]
+    assert status and status[-1]["freq_hz"] == pytest.approx(2.0, rel=0.05)
+    # The SIL log's stamps: the run's start on the wall clock plus simulated time, so the
+    # tool shows when the run was made (not 1970).
+    stamps = [r["meta"]["timestamp"] for r in rows if r["meta"]["type"] == "HQ_SYSID_SAMPLE"]
+    starts = {round(s * 1e6) - d["time_us"] for s, d in zip(stamps, samples)}
+    assert len(starts) == 1 or max(starts) - min(starts) <= 1          # float seconds
+    assert before * 1e6 <= min(starts) <= after * 1e6
+
+
+def test_the_folder_holds_the_dialect_and_a_module_that_matches_the_firmware(tmp_path):
+    # --out DIR: the XML, the definitions it includes, and a module with the firmware's
+    # messages (ids and CRC seeds, so the same bytes decode); a second run changes nothing,
+    # and a file there that holds something else is never written over.
+    import importlib.util
+
+    out = tmp_path / "dialect"
+    res = heliquad("mavlink-dialect", "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert sorted(os.listdir(out)) == sorted(["heliquad.xml", "common.xml", "standard.xml",
+                                              "minimal.xml", "heliquad.py"])
+    spec = importlib.util.spec_from_file_location("heliquad_dialect_copy", out / "heliquad.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    firmware = dialect()
+    hq = {i: c for i, c in firmware.mavlink_map.items() if c.msgname.startswith("HQ_")}
+    assert len(hq) >= 5
+    for msgid, cls in hq.items():
+        assert module.mavlink_map[msgid].msgname == cls.msgname
+        assert module.mavlink_map[msgid].crc_extra == cls.crc_extra
+
+    assert heliquad("mavlink-dialect", "--out", out).returncode == 0     # same files: fine
+    (out / "heliquad.xml").write_text("my edits")
+    res = heliquad("mavlink-dialect", "--out", out)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    assert f"{out / 'heliquad.xml'} exists and holds something else" in res.stderr
+    assert (out / "heliquad.xml").read_text() == "my edits"
+
+
+def test_a_python_without_pymavlink_or_none_is_one_line(tmp_path):
+    bare = tmp_path / "bare-python"
+    bare.write_text(f"#!/bin/sh\nexec {sys.executable} -S \"$@\"\n")      # no site-packages
+    bare.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    for python, says in ((bare, f"--python {bare}: it has no pymavlink"),
+                         (tmp_path / "nope", f"--python {tmp_path / 'nope'}: cannot run it")):
+        res = heliquad("mavlink-dialect", "--install", "--python", python, env=env)
+        assert res.returncode == 2 and res.stderr.count("\n") == 1, res.stderr
+        assert says in res.stderr and "Traceback" not in res.stderr
