@@ -26,17 +26,19 @@ MAX_LAG_S = 0.1
 
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
-              dmp_image: str | None = None, ready=None, firmware: str = "host") -> dict:
+              dmp_image: str | None = None, ready=None, firmware: str = "host",
+              params_file: str | None = None) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters. ``ready`` is told
     when the telemetry port is there (default: a line on stdout, flushed at once, for
-    whatever waits for it)."""
+    whatever waits for it). ``params_file``: where the firmware keeps its parameters
+    (default: nowhere; every start has the defaults)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
     plant = TfPlant(axis, num, den, dt_s)
     frames, late = 0, 0
     fw = start_firmware(firmware, loop_hz=loop_hz, dmp_image=dmp_image,
-                        telemetry_path=os.path.abspath(telemetry_path))
+                        telemetry_path=os.path.abspath(telemetry_path), params_file=params_file)
     try:
         link = SimLink(fw)
         kind = dialect().HQ_SENSOR_NONE            # until the firmware says what it set up
