@@ -46,7 +46,7 @@ def run_demo(args) -> int:
     from .identify_session import identify_dir
     from .report import write_report
     from .sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
-    from .validate import load_gains, save_validation, sweep_inputs, validate_model
+    from .validate import model_gains, save_validation, sweep_inputs, validate_model
 
     t0, sim_s, summary = time.monotonic(), 0.0, []
     for axis in args.axes:
@@ -72,9 +72,10 @@ def run_demo(args) -> int:
         model = result.models[result.recommended] if result.recommended is not None else None
         if model is not None:
             models_path = os.path.join(folder, "models.json")
+            doc = read_models_json(models_path)
             report, traces = validate_model(
-                model.num, model.den, model.delay_s, axis, load_gains(axis), "moderate",
-                args.seed, **sweep_inputs(models_path, read_models_json(models_path)))
+                model.num, model.den, model.delay_s, axis, model_gains(doc, axis)[0], "moderate",
+                args.seed, **sweep_inputs(models_path, doc))
             save_validation(folder, report, traces)
         summary.append(_compare(axis, model, result.reason, identified["truth"]))
     report_path = write_report(args.out)

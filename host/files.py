@@ -364,7 +364,8 @@ def _manifest_schema():
                   "frequencies": S.List(frequency, 0, 10_000)},
         optional={"tlog": S.Str(file_name=True), "tlog_start_us": S.Null(S.Int(0, 2**63 - 1)),
                   "source": S.Obj(), "firmware": S.Str(),
-                  "gains": S.Null(S.Obj()), "started": S.Str(), "cycles": S.Int(1, 65535),
+                  "gains": S.Null(_recorded_gains_schema()), "params": S.Null(S.Obj(values=S.Num())),
+                  "started": S.Str(), "cycles": S.Int(1, 65535),
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
                   "design": S.Obj(),
                   "complete": S.Bool(), "aborted": S.Null(S.Str()),
@@ -417,7 +418,15 @@ def _models_schema():
                                              "why": S.Str()}),
                   "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
                                       ("high", S.Num(0, 1e7, lo_open=True))),
-                  "broken_loop": S.Obj()})
+                  "broken_loop": S.Obj(), "gains": _recorded_gains_schema()})
+
+
+def _recorded_gains_schema():
+    """The gains a sweep recorded from its board (manifest.json, carried into models.json):
+    rate ``[Kc, tau_I_s, tau_D_s]``, angle ``[Kc, tau_D_s]`` or null (yaw)."""
+    gain, tau_i, tau_d = S.Num(0, 1e4, lo_open=True), S.Num(0, 1e4), S.Num(0, 1e3)
+    return S.Obj(required={"rate": S.Seq(("Kc", gain), ("tau_I_s", tau_i), ("tau_D_s", tau_d))},
+                 optional={"angle": S.Null(S.Seq(("Kc", gain), ("tau_D_s", tau_d)))})
 
 
 def _sil_truth_schema():

@@ -116,6 +116,8 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     result = fit_orders(table, orders, delay=delay)
     extra = {"log": damage.record(), "skipped_frequencies": skipped,
              "saturated_frequencies": saturated, "estimate": estimate}
+    if manifest.get("gains"):
+        extra["gains"] = manifest["gains"]       # what the board flew, for validate
     loop = _broken_loop(manifest, points, estimate, progress)
     if loop:
         extra["broken_loop"] = loop

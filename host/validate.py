@@ -38,7 +38,7 @@ from .files import write_json
 from .gains import DERIVATIVE_FILTER_N, Gains, load_gains
 
 # Gains and load_gains are host/gains.py's, here for the validation's callers.
-__all__ = ["Gains", "load_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
+__all__ = ["Gains", "load_gains", "model_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
            "save_validation", "instability_text", "paper_band", "sweep_inputs"]
 
 DT_S = L.LOOP_DT_S
@@ -128,6 +128,18 @@ def instability_text(report) -> str:
         return (f"the cascade is unstable with these gains: {where}, where the model has no data; "
                 "check with a model that rolls off there, or on the rig")
     return f"the cascade is unstable with these gains: {where}, inside what was identified"
+
+
+def model_gains(doc, axis: str):
+    """The gains to validate a MODELS.json ``doc``'s models with, and where they come from:
+    those its sweep read from the board it flew (``gains``, recorded by identify), else the
+    firmware's defaults."""
+    from .gains import recorded_gains
+
+    recorded = recorded_gains(doc)
+    if recorded is not None:
+        return recorded, "the board's, as its sweep read them"
+    return load_gains(axis), "the firmware's defaults (the models' file records none)"
 
 
 def sweep_inputs(models_path, doc) -> dict:

@@ -35,7 +35,8 @@ def add_parser(sub, fmt) -> None:
                    help="which model (default: the recommended one)")
     p.add_argument("--axis", choices=tuple(names.AXES),
                    help="axis of the model (default: the file's \"axis\" entry)")
-    p.add_argument("--gains", metavar="FILE", help="gains file (default: the paper's gains)")
+    p.add_argument("--gains", metavar="FILE", help="gains file (default: the gains the sweep read from the board, which identify "
+                        "records in the models' file; else the firmware's defaults, the paper's)")
     p.add_argument("--turbulence", choices=("none", "light", "moderate", "severe"),
                    default="moderate", help="Dryden level for disturbance rejection (default moderate)")
     p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
@@ -65,10 +66,12 @@ def run(args) -> int:
     out = args.out or os.path.dirname(os.path.abspath(args.models))
     check_output_folder(out, "--out")
 
-    from ..validate import (Gains, load_gains, save_validation, sweep_inputs, validate_model,
+    from ..validate import (Gains, model_gains, save_validation, sweep_inputs, validate_model,
                             validation_record)
 
-    gains = Gains(*file_gains) if file_gains else load_gains(axis)
+    gains, where = (Gains(*file_gains), args.gains) if file_gains else model_gains(doc, axis)
+    print(f"gains: {where}: rate {_gains_text(gains.rate)}"
+          + ("" if gains.angle is None else f", angle {_gains_text(gains.angle)}"))
     turbulence = None if args.turbulence == "none" else args.turbulence
     if doc.get("band_rad_s") is None:
         print(f"{args.models} does not give the band its models were identified over; "
@@ -79,6 +82,10 @@ def run(args) -> int:
     written = save_validation(out, report, traces)
     print(f"wrote {' and '.join(os.path.join(out, name) for name in written)}")
     return 0 if report["stable"] else 1
+
+
+def _gains_text(values) -> str:
+    return "[" + ", ".join(f"{v:g}" for v in values) + "]"
 
 
 def _margins_text(lp) -> str:
