@@ -8,6 +8,8 @@
 * MODELS.json: ``{"models": [...], "recommended": INDEX, ...}``, coefficients in descending
   powers of s, den monic.
 * A sweep folder's manifest.json, a gains file, validation.json and points_table.csv.
+* A .params file (a board's parameters): MAVProxy's ``NAME VALUE`` lines or
+  QGroundControl's ``SYSID COMPID NAME VALUE TYPE``; written as QGroundControl's.
 
 There is one reader per format; every command and the library read through it. Each JSON
 reader checks its document against a schema (:mod:`.schema`). Readers raise
@@ -37,7 +39,8 @@ __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "POINTS_EXCITATION", "read_text", "r
            "read_points_table", "read_json", "read_manifest", "read_models_json", "read_gains",
            "read_validation", "check_output", "check_output_folder", "write_run_csv",
            "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
-           "atomic_write", "write_json", "save_figure", "new_output_folder"]
+           "atomic_write", "write_json", "save_figure", "new_output_folder", "read_params_file",
+           "write_params_file"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
 TABLE_COLUMNS = ("freq_hz", "omega_rad_s", "magnitude", "phase_deg", "real", "imag", "coherence")
@@ -632,3 +635,78 @@ def write_models_mat(path, models, recommended):
     with atomic_write(path, "wb") as fh:
         scipy.io.savemat(fh, {"models": array,
                               "recommended": float(0 if recommended is None else recommended + 1)})
+
+
+#: A parameter file is a few kB (a firmware has tens of parameters, ArduPilot about 1000).
+MAX_PARAMS_BYTES = 2**20
+#: QGroundControl's columns (and MAVProxy's two: NAME VALUE).
+QGC_COLUMNS = "Vehicle-Id Component-Id Name Value Type"
+
+
+def read_params_file(path) -> list:
+    """A .params file: ``[(name, value, type or None)]`` in the file's order. Lines are
+    MAVProxy's ``NAME VALUE`` (whitespace or a comma between) or QGroundControl's ``SYSID
+    COMPID NAME VALUE TYPE`` (tabs), told apart by their number of fields; ``#`` starts a
+    comment. A bad line is one InputError naming the file and the line."""
+    from .params import TYPE_NAMES, check_name
+
+    text = read_text(path, MAX_PARAMS_BYTES, "parameter file (.params)")
+    out, first = [], {}
+    for number, line in enumerate(text.splitlines(), 1):
+        fields = line.split("#", 1)[0].replace(",", " ").split()
+        if not fields:
+            continue
+        where = f"{path}, line {number}"
+        if len(fields) not in (2, 5):
+            raise InputError(f"{where}: {len(fields)} fields; expected NAME VALUE (MAVProxy) "
+                             "or SYSID COMPID NAME VALUE TYPE (QGroundControl)")
+        name, value = fields[-3:-1] if len(fields) == 5 else fields
+        ptype = _params_ints(where, fields) if len(fields) == 5 else None
+        if ptype is not None and ptype not in TYPE_NAMES:
+            raise InputError(f"{where}: type {ptype} is not a MAV_PARAM_TYPE (1 to 10)")
+        try:
+            check_name(name)
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
+        if name in first:
+            raise InputError(f"{where}: {name} again (first on line {first[name]})")
+        first[name] = number
+        out.append((name, _params_value(where, name, value), ptype))
+    if not out:
+        raise InputError(f"{path}: no parameters in it (only comments)")
+    return out
+
+
+def _params_ints(where: str, fields) -> int:
+    """A QGroundControl line's system and component ids (checked) and its type."""
+    try:
+        sysid, compid, ptype = int(fields[0]), int(fields[1]), int(fields[4])
+    except ValueError:
+        raise InputError(f"{where}: the system id, component id and type must be whole "
+                         "numbers") from None
+    if not (0 <= sysid <= 255 and 0 <= compid <= 255):
+        raise InputError(f"{where}: system and component ids are 0 to 255")
+    return ptype
+
+
+def _params_value(where: str, name: str, text: str) -> float:
+    try:
+        value = float(int(text, 16)) if text.lower().startswith(("0x", "-0x")) else float(text)
+    except ValueError:
+        raise InputError(f"{where}: {name}'s value {_short(text)!r} is not a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"{where}: {name}'s value {text} is not a finite number")
+    return value
+
+
+def write_params_file(path, params, header: str = "") -> None:
+    """``params`` (:class:`~heliquad.host.params.Param`) as QGroundControl writes them: a
+    header comment, then ``1<TAB>1<TAB>NAME<TAB>VALUE<TAB>TYPE`` per parameter, by name;
+    each value the shortest decimal that reads back as the same single-precision float
+    (a whole-number type's as an integer). Written whole (:func:`atomic_write`)."""
+    lines = ["# Onboard parameters for Vehicle 1", "#"]
+    lines += [f"# {h}" for h in header.splitlines()] + ["#", f"# {QGC_COLUMNS}"]
+    for p in sorted(params, key=lambda p: p.name):
+        lines.append(f"1\t1\t{p.name}\t{p.text()}\t{p.type}")
+    with atomic_write(path) as fh:
+        fh.write("\n".join(lines) + "\n")

@@ -160,3 +160,25 @@ class TelemetryLink:
         m = self.mav_module
         self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_FINISH,
                                     m.HQ_AXIS_ROLL, m.HQ_INJECTION_ANGLE, 0.0, 0.0, 0, 0)
+
+    # --- the MAVLink parameter protocol (host/params.py) ---------------------------------
+
+    @property
+    def can_send(self) -> bool:
+        """Whether what is sent reaches the board (a listening network link must have heard
+        it first; :mod:`heliquad.host.connection`)."""
+        return self.transport.can_send
+
+    def request_params(self) -> None:
+        """PARAM_REQUEST_LIST: the board sends every parameter as PARAM_VALUE."""
+        self.mav.param_request_list_send(TARGET_SYSTEM, self.target)
+
+    def request_param(self, name: str = "", index: int = -1) -> None:
+        """PARAM_REQUEST_READ of one parameter, by name (``index`` -1) or by index."""
+        self.mav.param_request_read_send(TARGET_SYSTEM, self.target, name.encode("ascii"),
+                                         int(index))
+
+    def set_param(self, name: str, value: float, param_type: int) -> None:
+        """PARAM_SET; the value is carried as the float value itself, whatever its type."""
+        self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"), float(value),
+                                int(param_type))

@@ -16,8 +16,8 @@ __all__ = ["COMMANDS", "add_parsers"]
 #: Module of each subcommand, relative to :mod:`heliquad.host`.
 COMMANDS = ("commands.fsf", "commands.fit", "commands.sil", "commands.board",
             "commands.validate", "commands.log", "commands.tlog", "commands.sweep",
-            "commands.identify", "commands.report", "demo", "dmp_image", "flash",
-            "mavlink_dialect")
+            "commands.identify", "commands.report", "commands.params", "demo", "dmp_image",
+            "flash", "mavlink_dialect")
 
 
 def add_parsers(sub, fmt) -> None:

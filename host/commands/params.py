@@ -1,0 +1,141 @@
+"""A board's parameters over the MAVLink parameter protocol (``heliquad params``)."""
+
+from __future__ import annotations
+
+import sys
+
+from ..cli_args import finite, int_in
+from ..connection import CONNECTION_HELP
+from ..errors import InputError
+from ..link import DEFAULT_BAUD
+
+__all__ = ["add_parser", "run"]
+
+HELP = """\
+Read and change the board's parameters over its telemetry link, with MAVLink's parameter
+protocol (what QGroundControl and MAVProxy use): the firmware answers PARAM_REQUEST_LIST,
+PARAM_REQUEST_READ and PARAM_SET with PARAM_VALUE. Values travel as single-precision
+floats; whole-number parameters (INT32) take whole numbers only.
+
+  list            every parameter: name, value, type
+  get NAME        one parameter
+  set NAME VALUE  set it and check the board's answer; a value the board refuses (out of
+                  its range, or while it flies) is one line quoting the board's reason
+  save FILE       every parameter into FILE (QGroundControl's .params format; never over a
+                  file that exists)
+  load FILE       set every parameter of FILE (QGroundControl's or MAVProxy's format) that
+                  differs from the board, checking each; the ones refused are listed, the
+                  rest still set (exit 1 when any was refused)
+
+A list lost on the way is asked for again by index; every request goes again a few times
+before the board is given up on. The host's heartbeat goes out all along, as the firmware
+wants. File formats: docs/file-formats.md (.params); ground stations:
+docs/ground-stations.md.
+
+examples: heliquad params --port /dev/ttyACM0 list
+          heliquad params --port udpin:0.0.0.0:14550 set RATE_ROLL_P 2.5
+          heliquad params --port /dev/ttyACM0 save rig-2026-11-24.params
+"""
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("params", help="list, get, set, save and load the board's parameters",
+                       description=HELP, formatter_class=fmt)
+    p.add_argument("--port", required=True, metavar="CONN", help=CONNECTION_HELP)
+    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, "
+                        "ptys and network links)")
+    actions = p.add_subparsers(dest="action", metavar="ACTION")
+    actions.required = True
+    actions.add_parser("list", help="every parameter: name, value, type")
+    actions.add_parser("get", help="one parameter").add_argument("name", metavar="NAME")
+    setter = actions.add_parser("set", help="set one parameter and check the board took it")
+    setter.add_argument("name", metavar="NAME")
+    setter.add_argument("value", metavar="VALUE", type=finite)
+    actions.add_parser("save", help="every parameter into a new .params file").add_argument(
+        "file", metavar="FILE")
+    actions.add_parser("load", help="set the parameters of a .params file").add_argument(
+        "file", metavar="FILE")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import os
+
+    from ..files import check_output, read_params_file
+    from ..link import TelemetryLink
+    from ..params import ParamClient, check_name
+
+    entries = None
+    if args.action == "save":
+        if os.path.lexists(args.file):
+            raise InputError(f"{args.file} exists: heliquad never writes over a parameter "
+                             "file; give another name")
+        check_output(args.file, "save")
+    elif args.action == "load":
+        entries = [(name, value) for name, value, _ in read_params_file(args.file)]
+    elif args.action in ("get", "set"):
+        check_name(args.name)
+    link = TelemetryLink(args.port, baud=args.baud)
+    try:
+        client = ParamClient(link, progress=lambda text: print(text, flush=True))
+        return _ACTIONS[args.action](client, args, entries)
+    finally:
+        link.close()
+
+
+def _list(client, args, entries) -> int:
+    from ..params import TYPE_NAMES
+
+    params = client.fetch_all()
+    width = max([len("NAME")] + [len(p.name) for p in params])
+    print(f"{'NAME':<{width}}  {'VALUE':>14}  TYPE")
+    for p in params:
+        print(f"{p.name:<{width}}  {p.text():>14}  {TYPE_NAMES.get(p.type, p.type)}")
+    return 0
+
+
+def _get(client, args, entries) -> int:
+    p = client.get(args.name)
+    print(f"{p.name} {p.text()}")
+    return 0
+
+
+def _set(client, args, entries) -> int:
+    param = client.get(args.name)
+    got = client.set(param, args.value)
+    same = " (unchanged)" if got.text() == param.text() else ""
+    print(f"{got.name}: {param.text()} -> {got.text()}{same}")
+    return 0
+
+
+def _save(client, args, entries) -> int:
+    import datetime
+
+    from .. import __version__
+    from ..files import write_params_file
+
+    params = client.fetch_all()
+    when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    write_params_file(args.file, params,
+                      header=f"heliquad {__version__}, from {client.link.name}, {when}")
+    print(f"wrote {len(params)} parameters to {args.file}")
+    return 0
+
+
+def _load(client, args, entries) -> int:
+    from ..params import load_params
+
+    print(f"loading {len(entries)} parameters from {args.file}", flush=True)
+    r = load_params(client, entries)
+    refused = r["refused"]
+    print(f"{len(r['changed'])} set, {r['unchanged']} already so, {len(refused)} refused")
+    if refused:
+        names = ", ".join(name for name, _ in refused)
+        sys.stderr.write(f"heliquad params: the board refused {len(refused)} of "
+                         f"{len(entries)} parameters from {args.file}: {names} (why: above)\n")
+        return 1
+    return 0
+
+
+_ACTIONS = {"list": _list, "get": _get, "set": _set, "save": _save, "load": _load}
