@@ -9,7 +9,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["add_firmware_argument", "firmware_amplitude", "add_fault_argument", "faults",
+__all__ = ["add_firmware_argument", "add_param_store_argument", "firmware_amplitude", "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
@@ -72,6 +72,14 @@ def firmware_amplitude(inject: str, amplitude: float) -> float:
     """``--amplitude`` in the firmware's units: deg (angle) and deg/s (rate) become rad and
     rad/s; a mixer amplitude is already normalised."""
     return amplitude if inject == "mixer" else math.radians(amplitude)
+
+
+def add_param_store_argument(p) -> None:
+    """--param-store FILE: where the simulated board keeps its firmware parameters."""
+    p.add_argument("--param-store", metavar="FILE",
+                   help="keep the firmware's parameters (docs/parameters.md) in FILE across runs, "
+                        "as a board keeps them in its flash: read at start, written at each save "
+                        "(default: every run starts with the defaults and nothing is saved)")
 
 
 def add_firmware_argument(p) -> None:

@@ -24,8 +24,9 @@ __all__ = ["TelemetryLink", "INPUT_OUTPUT", "SESSION_MESSAGES", "HEARTBEAT_PERIO
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point.
 INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
-#: The messages a session driver (SIL or board) reads while an excitation runs.
-SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT")
+#: The messages a session driver (SIL or board) reads while an excitation runs, and the
+#: parameters' answers (a sweep reads the board's parameters through its session).
+SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT", "PARAM_VALUE")
 #: How often a session sends the host's HEARTBEAT: the firmware stops an excitation 1.5 s
 #: after the last one (and disarms a vehicle armed by command), so a few late ones must not
 #: end a run.

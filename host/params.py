@@ -33,7 +33,7 @@ from .errors import InputError
 from .link import HEARTBEAT_PERIOD_S
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
-           "same_value", "check_name", "load_params"]
+           "same_value", "check_name", "load_params", "session_params"]
 
 #: How long one request waits for its answer before it is sent again.
 ANSWER_WAIT_S = 1.0
@@ -307,3 +307,43 @@ def load_params(client: ParamClient, entries, progress=print) -> dict:
         out["changed"].append((name, param.text(), got.text()))
         progress(f"  {name}: {param.text()} -> {got.text()}")
     return out
+
+
+class _SessionLink:
+    """A session (:mod:`heliquad.host.session`) as :class:`ParamClient`'s link: requests go
+    out on its telemetry link, answers come from :meth:`advance` (which lets its time pass:
+    simulated frames on the SIL, a poll period on a board), and the session sends the host's
+    HEARTBEAT itself."""
+
+    def __init__(self, session):
+        self.session = session
+        self.name = getattr(session.tel, "name", "the session's link")
+
+    @property
+    def can_send(self) -> bool:
+        return getattr(self.session.tel, "can_send", True)
+
+    def heartbeat(self) -> None:
+        pass
+
+    def poll(self, only=MESSAGES) -> list:
+        return [m for m in self.session.advance() if m.get_type() in only]
+
+    def request_params(self) -> None:
+        self.session.tel.request_params()
+
+    def request_param(self, name: str = "", index: int = -1) -> None:
+        self.session.tel.request_param(name=name, index=index)
+
+
+def session_params(session, progress=print) -> dict | None:
+    """Every parameter of the board a session flies, ``{name: value}`` in the board's order,
+    as a sweep records them; None, said once, when the board sends none (a firmware without
+    parameters)."""
+    try:
+        params = ParamClient(_SessionLink(session)).fetch_all()
+    except NoAnswer as exc:
+        progress(f"warning: no parameters from the board, so the sweep records no gains: {exc}")
+        return None
+    progress(f"read {len(params)} parameters from the board")
+    return {p.name: float(str(np.float32(p.value))) for p in params}   # 2.422, not 2.4219999

@@ -173,7 +173,7 @@ class SilSession:
         self.plant = make_plant(cfg, self.dt_us * 1e-6)
         image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
         self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image,
-                                 **image)
+                                 params_file=cfg.param_store, **image)
         with contextlib.ExitStack() as undo:       # a failure or Ctrl-C here stops it all
             undo.callback(self.fw.stop)
             self.link = SimLink(self.fw)

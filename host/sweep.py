@@ -7,7 +7,7 @@ HQ_EXCITATION_STATUS (which gives the exact frequency used), watches every HQ_SY
 until the excitation ends (:class:`ExcitationWatch`), and the sweep moves on. ``heliquad sil``
 is the same routine for one frequency. Everything is logged to ``DIR/sweep.tlog``;
 ``DIR/manifest.json`` (axis, injection, frequencies requested and used, sample windows,
-the gains the firmware flies, firmware version, start time, aborts) is rewritten after every
+the parameters and gains read from the board, firmware version, start time, aborts) is rewritten after every
 frequency, so Ctrl-C or a breach leaves a valid, identifiable session.
 
 Safety: the firmware enforces its own rules (docs/safety.md): it refuses an excitation out
@@ -36,7 +36,7 @@ from . import __version__, paper
 from .errors import DiskFull, InputError, Terminated
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
-from .gains import firmware_gains
+from .gains import gains_from_params
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
@@ -155,6 +155,19 @@ def sil_source(cfg) -> dict:
             "collective": cfg.collective}
 
 
+def _record_params(session, axis: str, manifest: dict, progress) -> None:
+    """What the board flies: every parameter it has, read from it, and the axis's gains
+    among them (host/gains.py)."""
+    from .params import session_params
+
+    params = session_params(session, progress)
+    if params is None:
+        return
+    manifest["params"] = params
+    gains = gains_from_params(axis, params)
+    manifest["gains"] = None if gains is None else dataclasses.asdict(gains)
+
+
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
     """Run the plan on ``session``; returns the manifest (also written to ``out_dir``).
@@ -164,9 +177,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     excitation, records the error in the manifest's ``aborted`` and the frequency that was
     running in ``in_progress_hz``, and is raised again."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
-    gains = dataclasses.asdict(firmware_gains(plan.axis))      # what the firmware flies
     manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
-                "firmware": f"heliquad {__version__}", "gains": gains,
+                "firmware": f"heliquad {__version__}", "gains": None, "params": None,
                 "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "tlog": SWEEP_TLOG, "tlog_start_us": getattr(session, "start_us", None),
                 "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
@@ -177,6 +189,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     try:
         _write_manifest(out_dir, manifest)
         session.hover(progress)
+        _record_params(session, plan.axis, manifest, progress)
+        _write_manifest(out_dir, manifest)
         last = None                              # (amplitude, rate per unit) just measured
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
             current = f

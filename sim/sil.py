@@ -55,6 +55,7 @@ class SilConfig:
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
     firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
+    param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
 
 
 class Plant(Protocol):

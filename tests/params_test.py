@@ -254,7 +254,11 @@ def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
 
 def test_an_unknown_name_is_answered_with_a_statustext(client):
     client.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, MAV.MAV_PARAM_TYPE_REAL32)
-    client.text("params: no such parameter")
+    client.text("params: no NO_SUCH_PARAM")
+    client.mav.param_request_read_send(1, 1, b"", 43)
+    client.text("params: no index 43")
+    client.mav.param_request_read_send(1, 1, b"RATE_RLL_KCX", -1)
+    client.text("params: no RATE_RLL_KCX")
 
 
 def test_while_armed_only_the_gains_change_and_nothing_is_saved_until_disarm(client):
@@ -458,3 +462,41 @@ def test_the_parameters_page_lists_the_table_as_the_firmware_has_it():
         assert (float(lo), float(hi)) == (pytest.approx(p.minimum), pytest.approx(p.maximum)), name
         assert float(default) == pytest.approx(p.default, rel=1e-6), name
         assert (kind == "int") == p.integer, name
+
+
+def _heliquad(*args):
+    import subprocess
+
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
+
+
+def test_a_sweep_records_the_gains_the_board_flies_and_identify_and_validate_use_them(tmp_path):
+    """The board's rate gain changed through the protocol: the sweep reads it back from the
+    board, identify carries it into models.json, validate says it validates with it."""
+    import json
+
+    store = tmp_path / "params.bin"
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.set("RATE_RLL_KC", 3.1)
+        c.set("ANG_RLL_TD", 0.09)
+        c.text("params: saved")
+        c.close()
+    out = tmp_path / "sweep"
+    res = _heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2, 4,
+                    "--param-store", store, "--out", out)
+    assert res.returncode == 0, res.stderr
+    assert "read 43 parameters from the board" in res.stdout
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["params"]["RATE_RLL_KC"] == 3.1 and manifest["params"]["ESC1_MIN"] == 1000
+    assert manifest["gains"] == {"rate": [3.1, 0.439, 0.051], "angle": [1.488, 0.09]}
+    res = _heliquad("identify", out, "--order", "0/2", "--no-delay")
+    assert res.returncode == 0, res.stderr
+    models = json.loads((out / "models.json").read_text())
+    assert models["gains"] == manifest["gains"]
+    res = _heliquad("validate", out / "models.json", "--turbulence", "none")
+    assert "gains: the board's, as its sweep read them: rate [3.1, 0.439, 0.051], angle [1.488, 0.09]" \
+        in res.stdout, res.stdout + res.stderr
+    validation = json.loads((out / "validation.json").read_text())
+    assert validation["gains"] == {"rate": [3.1, 0.439, 0.051], "angle": [1.488, 0.09]}

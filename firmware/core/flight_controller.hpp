@@ -134,6 +134,7 @@ private:
     void handle_param_set(const mavlink_message_t& msg, uint64_t now_us);
     void handle_param_read(const mavlink_message_t& msg);
     void refuse_file_transfer(const mavlink_message_t& msg);
+    void send_unknown_param(const char* name, int index);
     bool for_us(uint8_t target_system, uint8_t target_component) const;
     Stream* stream(uint32_t msgid);
     bool stream_due(Stream& s, uint64_t now_us);

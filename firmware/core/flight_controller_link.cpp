@@ -304,10 +304,30 @@ void FlightController::handle_param_read(const mavlink_message_t& msg) {
     const int index = r.param_index >= 0 ? (r.param_index < kParamCount ? r.param_index : -1)
                                          : param_index(r.param_id);
     if (index < 0) {
-        send_statustext(MAV_SEVERITY_WARNING, "params: no such parameter");
+        send_unknown_param(r.param_id, r.param_index);
         return;
     }
     params_pending_ |= 1ull << index;
+}
+
+// "params: no NAME" (or "params: no index N"), for a name or index this firmware lacks.
+void FlightController::send_unknown_param(const char* name, int index) {
+    char text[kStatusTextLen] = "params: no ";
+    size_t n = 11;
+    if (name[0] != '\0' || index < 0) {
+        for (size_t i = 0; i < kParamNameLen && name[i] != '\0'; ++i) text[n++] = name[i];
+    } else {
+        const char* what = "index ";
+        while (*what) text[n++] = *what++;
+        char digits[6];
+        int k = 0;
+        for (unsigned v = static_cast<unsigned>(index); k == 0 || v > 0; v /= 10) {
+            digits[k++] = static_cast<char>('0' + v % 10);
+        }
+        while (k > 0) text[n++] = digits[--k];
+    }
+    text[n] = '\0';
+    send_statustext(MAV_SEVERITY_WARNING, text);
 }
 
 // PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one and a
@@ -317,13 +337,17 @@ void FlightController::handle_param_set(const mavlink_message_t& msg, uint64_t n
     mavlink_msg_param_set_decode(&msg, &ps);
     if (!for_us(ps.target_system, ps.target_component)) return;
     const int index = param_index(ps.param_id);
+    if (index < 0) {
+        send_unknown_param(ps.param_id, -1);
+        return;
+    }
     const SetResult r = params_.set(index, ps.param_value, supervisor_.armed(),
                                     supervisor_.excitation().active());
     if (r != SetResult::Ok) {
         char text[kStatusTextLen];
         set_result_text(r, index, text, sizeof(text));
         send_statustext(MAV_SEVERITY_WARNING, text);
-        if (index >= 0) params_pending_ |= 1ull << index;
+        params_pending_ |= 1ull << index;
         return;
     }
     apply_params(param_info(index).flags, now_us);

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 
 from ...sim import dialect as names
-from ..cli_args import add_firmware_argument, check_plant, finite, number_in
+from ..cli_args import add_firmware_argument, add_param_store_argument, check_plant, finite, number_in
 from ..errors import InputError
 
 __all__ = ["add_parser", "run"]
@@ -16,7 +16,7 @@ period of wall-clock time. Its telemetry port appears at --telemetry; connect an
 tool to it as to a board's serial port (any baud rate is accepted and ignored). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 Ground stations list and set its parameters (heliquad params, MAVProxy's param commands);
-with --params they persist in a file across runs.
+with --param-store they persist in a file across runs.
 
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
@@ -37,10 +37,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--collective", type=number_in(0, 1), default=0.4)
     p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
     p.add_argument("--dmp-image", metavar="FILE")
-    p.add_argument("--params", metavar="FILE",
-                   help="keep the firmware's parameters in FILE across runs, as the board keeps "
-                        "them in its flash (created at the first save; default: every run "
-                        "starts with the defaults and nothing is saved)")
+    add_param_store_argument(p)
     add_firmware_argument(p)
     p.set_defaults(func=run)
 
@@ -58,7 +55,7 @@ def run(args) -> int:
     try:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
-                      dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.params)
+                      dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store)
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
     print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "

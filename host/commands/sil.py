@@ -6,6 +6,7 @@ import sys
 
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+                        add_param_store_argument,
                         check_excitation, check_plant, faults, finite, firmware_amplitude,
                         int_in, number_in)
 from ..errors import DiskFull, InputError
@@ -68,6 +69,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--out", required=True, metavar="RUN",
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
     add_firmware_argument(p)
+    add_param_store_argument(p)
     add_fault_argument(p)
     p.set_defaults(func=run)
 
@@ -96,6 +98,7 @@ def run(args) -> int:
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
+                    param_store=args.param_store,
                     ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware)
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")

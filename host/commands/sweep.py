@@ -7,6 +7,7 @@ import sys
 
 from ...sim import dialect as names
 from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+                        add_param_store_argument,
                         check_excitation, check_plant, faults, finite, firmware_amplitude,
                         int_in, number_in)
 from .. import design
@@ -81,6 +82,7 @@ def add_parser(sub, fmt) -> None:
                         f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
+    add_param_store_argument(p)
     add_fault_argument(p, "--sil: ")
     p.set_defaults(func=run)
 
@@ -100,6 +102,9 @@ def run(args) -> int:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
         raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    if not args.sil and args.param_store:
+        raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
+                         "set them with heliquad params)")
     created = new_output_folder(args.out, "a sweep")
     try:
         session, source = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
@@ -176,7 +181,7 @@ def _sweep_session(args, tlog):
                     inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                     plant=args.plant, rig=args.axis, params=args.params,
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                    faults=faults(args), firmware=args.firmware)
+                    faults=faults(args), firmware=args.firmware, param_store=args.param_store)
     source = sil_source(cfg)
     try:
         session = SilSession(cfg, tlog)
