@@ -395,3 +395,67 @@ def test_pymavlink_reads_the_forwarded_board(running_board, kind):
     assert res.returncode == 0, res.stderr
     sysid, mav_type, attitude = res.stdout.split()
     assert sysid == "1" and attitude == "True"
+
+
+MAVUTIL_PARAMS = """
+import os, sys
+os.environ["MAVLINK20"] = "1"
+import pymavlink.dialects.v20 as v20
+from heliquad.sim.dialect import dialect
+MAV = dialect()
+sys.modules["pymavlink.dialects.v20.heliquad"] = v20.heliquad = MAV
+from pymavlink import mavutil
+m = mavutil.mavlink_connection(sys.argv[1], dialect="heliquad", source_system=255,
+                               source_component=190)
+m.mav.heartbeat_send(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+m.wait_heartbeat(timeout=60)
+values, count = {}, None
+m.mav.param_request_list_send(1, 1)
+for _ in range(200):
+    p = m.recv_match(type="PARAM_VALUE", blocking=True, timeout=1)
+    if p is None:                      # lost on the way: ask again for what is missing
+        for i in range(count or 0):
+            if i not in values:
+                m.mav.param_request_read_send(1, 1, b"", i)
+        if count is None:
+            m.mav.param_request_list_send(1, 1)
+        continue
+    count = p.param_count
+    values[p.param_index] = (p.param_id, p.param_value)
+    if len(values) == count:
+        break
+
+def set_and_read(value):
+    m.mav.param_set_send(1, 1, b"RATE_RLL_KC", value, MAV.MAV_PARAM_TYPE_REAL32)
+    for _ in range(100):
+        p = m.recv_match(type="PARAM_VALUE", blocking=True, timeout=1)
+        if p is not None and p.param_id == "RATE_RLL_KC":
+            return p.param_value
+    return None
+
+old = dict(values.values())["RATE_RLL_KC"]
+new = set_and_read(2.9)
+back = set_and_read(old)
+print(len(values), count, round(new, 4), round(back, 4))
+"""
+
+
+@pytest.mark.parametrize("kind", ["udpout", "tcp"])
+def test_parameters_over_the_network_with_mavutil_and_heliquad_params(running_board, kind):
+    # Through the forwarder, pymavlink's mavutil as a ground station: every parameter of the
+    # simulated board fetched, a gain set and set back; then heliquad params lists them.
+    import subprocess
+    import sys
+
+    relay, conn = relay_and_connection(running_board, kind)
+    try:
+        res = subprocess.run([sys.executable, "-c", MAVUTIL_PARAMS, conn], capture_output=True,
+                             text=True, timeout=300)
+        listed = heliquad("params", "--port", conn, "list")
+    finally:
+        relay.close()
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["43", "43", "2.9", "2.422"]
+    assert listed.returncode == 0, listed.stderr
+    rows = [line.split() for line in listed.stdout.splitlines() if line.startswith("RATE_")]
+    assert len(rows) == 12 and ["RATE_RLL_KC", "2.422", "REAL32"] in rows
