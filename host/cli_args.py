@@ -74,9 +74,24 @@ def firmware_amplitude(inject: str, amplitude: float) -> float:
     return amplitude if inject == "mixer" else math.radians(amplitude)
 
 
+def _param_store(path: str) -> str:
+    """A parameter store's path: a file (or none yet) in a folder that exists."""
+    import argparse
+    import os
+
+    if os.path.isdir(path):
+        raise argparse.ArgumentTypeError(f"{path} is a folder, not a parameter store file")
+    if os.path.exists(path) and not os.path.isfile(path):
+        raise argparse.ArgumentTypeError(f"{path} is not a regular file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise argparse.ArgumentTypeError(f"folder {folder} does not exist")
+    return path
+
+
 def add_param_store_argument(p) -> None:
     """--param-store FILE: where the simulated board keeps its firmware parameters."""
-    p.add_argument("--param-store", metavar="FILE",
+    p.add_argument("--param-store", metavar="FILE", type=_param_store,
                    help="keep the firmware's parameters (docs/parameters.md) in FILE across runs, "
                         "as a board keeps them in its flash: read at start, written at each save "
                         "(default: every run starts with the defaults and nothing is saved)")

@@ -622,6 +622,10 @@ CASES = [
     # sil that starts the firmware: an existing log is never written over
     case(f"{SIL} --out old", "exists"),
     # board: absurd plants, numbers, a telemetry path that exists
+    case("board --telemetry t --param-store adir", "adir is a folder, not a parameter store"),
+    case("board --telemetry t --param-store nodir/p.bin", "nodir does not exist"),
+    case(f"{SIL} --out o --param-store adir", "adir is a folder"),
+    case("sweep --axis roll --port /dev/null --param-store p.bin --out o", "--param-store needs --sil"),
     case("board --telemetry t --duration-s -1", "--duration-s"),
     case("board --telemetry t --duration-s nan", "--duration-s"),
     case("board --telemetry t --duration-s 0", "--duration-s"),
