@@ -127,7 +127,7 @@ private:
                         const RcInput& rc, uint64_t now_us);
     uint8_t command_result(uint16_t command, const float p[7], const RcInput& rc,
                            uint64_t now_us, Reason& why);
-    uint8_t storage_command(int action);
+    uint8_t storage_command(uint32_t action);
     uint8_t interval_command(uint32_t msgid, float interval_us);
     uint8_t request_message(uint32_t msgid);
     void handle_excitation(const mavlink_message_t& msg, uint64_t now_us);

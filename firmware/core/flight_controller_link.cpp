@@ -32,6 +32,15 @@ int16_t saturate16(float v) {
 }
 
 // The largest encoded length of a message (header, payload, checksum; no signature).
+// A command parameter that carries a whole number (a mode, a message id, an action): the
+// number, or kNotWhole for anything else (a fraction, a negative, a NaN, a value past 2^24,
+// which a float carries inexactly), so no float is ever converted out of range.
+constexpr uint32_t kNotWhole = UINT32_MAX;
+uint32_t whole(float v) {
+    if (!(v >= 0.0f && v <= 16777216.0f) || v != std::floor(v)) return kNotWhole;
+    return static_cast<uint32_t>(v);
+}
+
 uint32_t packet_bytes(uint32_t msgid) {
     const mavlink_msg_entry_t* e = mavlink_get_msg_entry(msgid);
     return (e ? e->max_msg_len : 255u) + MAVLINK_NUM_NON_PAYLOAD_BYTES;
@@ -147,30 +156,31 @@ uint8_t FlightController::command_result(uint16_t command, const float p[7], con
             return MAV_RESULT_ACCEPTED;
         case MAV_CMD_DO_SET_MODE:
             // param1 the base mode (custom modes only), param2 the custom mode (HQ_MODE).
-            if (!(static_cast<uint32_t>(p[0]) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)) {
+            if (whole(p[0]) == kNotWhole || !(whole(p[0]) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)) {
                 why = Reason::BadMode;
                 return MAV_RESULT_DENIED;
             }
-            why = supervisor_.set_mode(static_cast<uint32_t>(p[1]));
+            why = supervisor_.set_mode(whole(p[1]));       // kNotWhole is no mode: BAD_MODE
             return why == Reason::None ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
         case MAV_CMD_SET_MESSAGE_INTERVAL:
-            return interval_command(static_cast<uint32_t>(p[0]), p[1]);
+            return interval_command(whole(p[0]), p[1]);
         case MAV_CMD_GET_MESSAGE_INTERVAL: {
-            const Stream* s = stream(static_cast<uint32_t>(p[0]));
+            const uint32_t msgid = whole(p[0]);
+            const Stream* s = stream(msgid);
             mavlink_message_t out;
             const int32_t us = s == nullptr ? 0 : (s->interval_us == 0 ? -1 : static_cast<int32_t>(s->interval_us));
             mavlink_msg_message_interval_pack_status(config_.system_id, config_.component_id,
-                                                     &tx_status_, &out, static_cast<uint16_t>(p[0]), us);
+                                                     &tx_status_, &out, static_cast<uint16_t>(msgid), us);
             send(out);
             return MAV_RESULT_ACCEPTED;
         }
         case MAV_CMD_REQUEST_MESSAGE:
-            return request_message(static_cast<uint32_t>(p[0]));
+            return request_message(whole(p[0]));
         case MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return request_message(MAVLINK_MSG_ID_AUTOPILOT_VERSION);
         case MAV_CMD_PREFLIGHT_STORAGE:
             if (supervisor_.armed()) return MAV_RESULT_DENIED;
-            return storage_command(static_cast<int>(p[0]));
+            return storage_command(whole(p[0]));
         default:
             return MAV_RESULT_UNSUPPORTED;
     }
@@ -178,7 +188,7 @@ uint8_t FlightController::command_result(uint16_t command, const float p[7], con
 
 // MAV_CMD_PREFLIGHT_STORAGE's parameter action: read the stored values again, save now, or
 // back to the defaults (saved like any change).
-uint8_t FlightController::storage_command(int action) {
+uint8_t FlightController::storage_command(uint32_t action) {
     const uint64_t now = clock_.micros();
     if (action == PARAM_READ_PERSISTENT) {
         params_.reset();

@@ -134,25 +134,85 @@ inline size_t any_packet(Reader& in, uint8_t* out, uint8_t seq) {
     return frame_packet(out, msgid, payload, len, seq, how & 3 ? (how >> 3) & 3 : 0);
 }
 
+// Parameter storage in memory, with what the input says is stored: nothing, a store its own
+// check finds damaged, a valid record with one value (and its CRC) from the input, or any
+// bytes at all. Saves succeed or fail as the input says.
+class MemoryStorage final : public hq::ParamStorage {
+public:
+    void fill(Reader& in) {
+        const uint8_t kind = in.u8();
+        status_ = hq::StoreStatus::Ok;
+        size_ = 0;
+        fail_ = (kind & 0x10) != 0;
+        switch (kind % 4) {
+            case 0: status_ = hq::StoreStatus::Empty; break;
+            case 1: status_ = hq::StoreStatus::Corrupt; break;
+            case 2: {
+                size_ = hq::Params().encode(data_, sizeof data_);
+                const size_t at = 8 + 8 * (in.u8() % hq::kParamCount) + 4;
+                in.bytes(data_ + at, 4);
+                const uint32_t crc = hq::crc32(data_, size_ - 4);
+                for (int i = 0; i < 4; ++i) data_[size_ - 4 + i] = static_cast<uint8_t>(crc >> (8 * i));
+                break;
+            }
+            default: size_ = in.bytes(data_, in.u16() % sizeof data_); break;
+        }
+    }
+    hq::StoreStatus load(uint8_t* data, size_t capacity, size_t& n) override {
+        n = size_ < capacity ? size_ : capacity;
+        std::memcpy(data, data_, n);
+        return status_;
+    }
+    bool save(const uint8_t* data, size_t n) override {
+        if (fail_ || n > sizeof data_) return false;
+        std::memcpy(data_, data, n);
+        size_ = n;
+        status_ = hq::StoreStatus::Ok;
+        return true;
+    }
+
+private:
+    uint8_t data_[hq::ParamStorage::kMaxBytes] = {};
+    size_t size_ = 0;
+    hq::StoreStatus status_ = hq::StoreStatus::Empty;
+    bool fail_ = false;
+};
+
+// Every parameter within its range: what the firmware flies with is never a value a set or
+// a stored record could not give it legitimately.
+inline bool params_in_range(const hq::Params& p) {
+    for (int i = 0; i < hq::kParamCount; ++i) {
+        const hq::ParamInfo& info = hq::param_info(i);
+        const float v = p.get(i);
+        if (!(v >= info.min && v <= info.max)) return false;
+    }
+    return true;
+}
+
 // The firmware as both targets fly it: the host build's clock and motors, the emulated
-// MPU6050 (given the made-up DMP firmware when the input's first choice is odd) and a
-// FlightController on them, initialised; its telemetry goes to a `Telemetry`.
+// MPU6050 (given the made-up DMP firmware when the input's first choice is odd), a parameter
+// store holding what the input says, and a FlightController on them, initialised; its
+// telemetry goes to a `Telemetry`.
 template <class Telemetry>
 struct Vehicle {
-    explicit Vehicle(Reader& in) : cfg(config(in, chip)), fc(cfg, chip, clock, telemetry, motors) {
+    explicit Vehicle(Reader& in) : cfg(config(in, chip, storage)), fc(cfg, chip, clock, telemetry, motors) {
         fc.init();
     }
     hq::HostClock clock;
     hq::HostMotors motors;
     hq::Mpu6050Emulator chip;
+    MemoryStorage storage;
     Telemetry telemetry;
     hq::FlightControllerConfig cfg;
     hq::FlightController fc;
 
 private:
-    static hq::FlightControllerConfig config(Reader& in, hq::Mpu6050Emulator& chip) {
+    static hq::FlightControllerConfig config(Reader& in, hq::Mpu6050Emulator& chip,
+                                             MemoryStorage& storage) {
         hq::FlightControllerConfig c;
         if (in.u8() & 1) use_small_dmp(c.imu, chip);
+        storage.fill(in);
+        c.storage = &storage;
         return c;
     }
 };

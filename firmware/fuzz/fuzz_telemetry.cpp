@@ -1,10 +1,11 @@
 // libFuzzer target: the firmware's telemetry command path. A FlightController on the emulated
 // MPU6050 gets fuzz-chosen bytes on its telemetry link (any message of the dialect, framed
 // with a correct CRC, with any length; raw bytes; well-formed commands with fuzzed fields:
-// HEARTBEAT, arm/disarm, SET_MODE, HQ_EXCITATION), fuzzed RC inputs, IMU data and IMU faults,
-// and runs loops between them. Besides the sanitizers, every loop checks the rules a pilot
-// relies on: motors off unless armed, never an excitation while disarmed, motor commands
-// finite and within 0..1.
+// HEARTBEAT, arm/disarm and the other commands it answers, SET_MODE, HQ_EXCITATION, the
+// parameter protocol with real names), fuzzed RC inputs, IMU data and IMU faults, a fuzzed
+// parameter store, and runs loops between them. Besides the sanitizers, every loop checks
+// the rules a pilot relies on: motors off unless armed, never an excitation while disarmed,
+// motor commands finite and within 0..1, every parameter within its range.
 //
 //   build: cmake -S firmware -B build/fuzz -DCMAKE_CXX_COMPILER=clang++ -DHQ_FUZZ=ON
 //   run:   build/fuzz/fuzz_telemetry CORPUS -max_total_time=60   (or tests/fuzz/run.py)
@@ -44,6 +45,8 @@ private:
 };
 
 constexpr uint64_t kLoopUs = 5000;
+// The host's ids: a ground station's.
+constexpr uint8_t kGcs = MAV_COMP_ID_MISSIONPLANNER;
 constexpr int kMaxLoops = 48;              // per input: keeps executions fast
 
 void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
@@ -54,26 +57,61 @@ void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
     }
     if (!fc.armed() && fc.supervisor().excitation().active()) std::abort();
     if (!fc.armed() && fc.state().excitation != 0.0f) std::abort();
+    if (!hqfuzz::params_in_range(fc.params())) std::abort();
 }
 
-// The host's ids: a ground station's.
-constexpr uint8_t kGcs = MAV_COMP_ID_MISSIONPLANNER;
+// The commands the firmware answers, for COMMAND_LONG with fuzzed parameters.
+constexpr uint16_t kCommands[] = {MAV_CMD_COMPONENT_ARM_DISARM, MAV_CMD_DO_SET_MODE,
+                                  MAV_CMD_SET_MESSAGE_INTERVAL, MAV_CMD_GET_MESSAGE_INTERVAL,
+                                  MAV_CMD_REQUEST_MESSAGE, MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+                                  MAV_CMD_PREFLIGHT_STORAGE};
+
+// A PARAM_SET of a real parameter, the value inside its range, at an edge, or any float.
+void param_set(Reader& in, mavlink_status_t& tx, mavlink_message_t& msg) {
+    const int index = in.u8() % hq::kParamCount;
+    const hq::ParamInfo& p = hq::param_info(index);
+    char name[hq::kParamNameLen] = {};
+    for (size_t i = 0; i < hq::kParamNameLen && p.name[i] != '\0'; ++i) name[i] = p.name[i];
+    const uint8_t how = in.u8();
+    const float value = how % 3 == 0 ? in.f32()
+                        : how % 3 == 1 ? p.min + (p.max - p.min) * (in.u8() / 255.0f)
+                                       : ((how & 8) ? p.max : p.min);
+    mavlink_msg_param_set_pack_status(255, kGcs, &tx, &msg, 1, MAV_COMP_ID_AUTOPILOT1, name, value,
+                                      MAV_PARAM_TYPE_REAL32);
+}
+
 
 // A command with fuzzed fields but the right shape, so deep states (armed, exciting) are
 // reachable: the fuzzer only has to find field values, not checksums.
 size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
     mavlink_message_t msg;
-    switch (in.u8() % 5) {
+    switch (in.u8() % 7) {
+        case 5:
+            param_set(in, tx, msg);
+            break;
+        case 6:
+            if (in.u8() & 1) {
+                mavlink_msg_param_request_list_pack_status(255, kGcs, &tx, &msg, 1, 0);
+            } else {
+                const char by_index[hq::kParamNameLen] = {};     // the packer copies all 16
+                mavlink_msg_param_request_read_pack_status(255, kGcs, &tx, &msg, 1, 0, by_index,
+                                                           static_cast<int16_t>(in.u16()));
+            }
+            break;
         case 0:
             mavlink_msg_heartbeat_pack_status(255, kGcs, &tx, &msg, MAV_TYPE_GCS,
                                               MAV_AUTOPILOT_INVALID, 0, 0, 0);
             break;
-        case 1:
-            mavlink_msg_command_long_pack_status(255, kGcs, &tx, &msg, in.u8() & 1 ? 1 : in.u8(),
-                                                 MAV_COMP_ID_AUTOPILOT1,
-                                                 in.u8() & 1 ? MAV_CMD_COMPONENT_ARM_DISARM : in.u16(),
-                                                 0, in.f32(), in.f32(), 0, 0, 0, 0, 0);
+        case 1: {
+            const uint8_t target = in.u8() & 1 ? 1 : in.u8();
+            const uint8_t pick = in.u8();
+            const uint16_t command = pick & 1 ? kCommands[(pick >> 1) % (sizeof kCommands / sizeof kCommands[0])]
+                                              : in.u16();
+            mavlink_msg_command_long_pack_status(255, kGcs, &tx, &msg, target,
+                                                 MAV_COMP_ID_AUTOPILOT1, command, 0, in.f32(),
+                                                 in.f32(), 0, 0, 0, 0, 0);
             break;
+        }
         case 2:
             // Every HQ_MODE, and 0 and one above, which are refused.
             mavlink_msg_set_mode_pack_status(255, kGcs, &tx, &msg, 1,
