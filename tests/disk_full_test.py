@@ -234,6 +234,9 @@ def test_a_sweep_that_a_full_disk_stops_keeps_its_manifest_and_stops_the_excitat
         def advance(self, handle=None):
             raise DiskFull(tmp_path / "sweep.tlog", "No space left on device")
 
+    # The board's parameters are read before the first frequency, through the same advance:
+    # here the disk fills once the frequency runs.
+    monkeypatch.setattr(sweep_module, "_record_params", lambda *args: None)
     plan = default_plan("roll", "mixer", [1.0, 2.0])
     with pytest.raises(DiskFull) as raised:
         run_sweep(Session(), plan, str(tmp_path), {"kind": "test"}, progress=lambda *_: None)
