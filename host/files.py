@@ -699,11 +699,19 @@ def _params_value(where: str, name: str, text: str) -> float:
     return value
 
 
-def write_params_file(path, params, header: str = "") -> None:
+def write_params_file(path, params, header: str = "", layout: str = "qgc") -> None:
     """``params`` (:class:`~heliquad.host.params.Param`) as QGroundControl writes them: a
     header comment, then ``1<TAB>1<TAB>NAME<TAB>VALUE<TAB>TYPE`` per parameter, by name;
-    each value the shortest decimal that reads back as the same single-precision float
-    (a whole-number type's as an integer). Written whole (:func:`atomic_write`)."""
+    with ``layout="mavproxy"``, as MAVProxy's ``param save`` does (``NAME VALUE``, which its
+    ``param load`` reads). Each value the shortest decimal that reads back as the same
+    single-precision float (a whole-number type's as an integer). Written whole
+    (:func:`atomic_write`)."""
+    if layout == "mavproxy":
+        lines = [f"# {h}" for h in header.splitlines()]
+        lines += [f"{p.name:<16} {p.text()}" for p in sorted(params, key=lambda p: p.name)]
+        with atomic_write(path) as fh:
+            fh.write("\n".join(lines) + "\n")
+        return
     lines = ["# Onboard parameters for Vehicle 1", "#"]
     lines += [f"# {h}" for h in header.splitlines()] + ["#", f"# {QGC_COLUMNS}"]
     for p in sorted(params, key=lambda p: p.name):

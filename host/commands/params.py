@@ -21,8 +21,9 @@ floats; whole-number parameters (INT32) take whole numbers only.
   get NAME        one parameter
   set NAME VALUE  set it and check the board's answer; a value the board refuses (out of
                   its range, or while it flies) is one line quoting the board's reason
-  save FILE       every parameter into FILE (QGroundControl's .params format; never over a
-                  file that exists)
+  save FILE       every parameter into FILE (QGroundControl's .params format, or with
+                  --mavproxy MAVProxy's, which its param load reads; never over a file that
+                  exists)
   load FILE       set every parameter of FILE (QGroundControl's or MAVProxy's format) that
                   differs from the board, checking each; the ones refused are listed, the
                   rest still set (exit 1 when any was refused)
@@ -33,7 +34,7 @@ wants. File formats: docs/file-formats.md (.params); ground stations:
 docs/ground-stations.md.
 
 examples: heliquad params --port /dev/ttyACM0 list
-          heliquad params --port udpin:0.0.0.0:14550 set RATE_ROLL_P 2.5
+          heliquad params --port udpin:0.0.0.0:14550 set RATE_RLL_KC 2.5
           heliquad params --port /dev/ttyACM0 save rig-2026-11-24.params
 """
 
@@ -52,8 +53,11 @@ def add_parser(sub, fmt) -> None:
     setter = actions.add_parser("set", help="set one parameter and check the board took it")
     setter.add_argument("name", metavar="NAME")
     setter.add_argument("value", metavar="VALUE", type=finite)
-    actions.add_parser("save", help="every parameter into a new .params file").add_argument(
-        "file", metavar="FILE")
+    saver = actions.add_parser("save", help="every parameter into a new .params file")
+    saver.add_argument("file", metavar="FILE")
+    saver.add_argument("--mavproxy", action="store_true",
+                       help="MAVProxy's layout (NAME VALUE), which its param load reads, instead "
+                            "of QGroundControl's")
     actions.add_parser("load", help="set the parameters of a .params file").add_argument(
         "file", metavar="FILE")
     p.set_defaults(func=run)
@@ -118,7 +122,8 @@ def _save(client, args, entries) -> int:
     params = client.fetch_all()
     when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     write_params_file(args.file, params,
-                      header=f"heliquad {__version__}, from {client.link.name}, {when}")
+                      header=f"heliquad {__version__}, from {client.link.name}, {when}",
+                      layout="mavproxy" if args.mavproxy else "qgc")
     print(f"wrote {len(params)} parameters to {args.file}")
     return 0
 
