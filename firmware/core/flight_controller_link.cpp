@@ -474,7 +474,7 @@ void FlightController::send_fw_status(uint64_t now_us) {
     last_load_ = load_.take();
     // The link's drop rate over the last second, for SYS_STATUS.
     const uint32_t total = bytes_sent_ + bytes_dropped_;
-    drop_rate_ = total == 0 ? 0 : static_cast<uint16_t>(10000ull * bytes_dropped_ / total);
+    drop_rate_ = static_cast<uint16_t>(total == 0 ? 0 : 10000ull * bytes_dropped_ / total);
     bytes_sent_ = bytes_dropped_ = 0;
     mavlink_message_t msg;
     mavlink_msg_hq_fw_status_pack_status(
