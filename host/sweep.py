@@ -37,6 +37,9 @@ from .errors import DiskFull, InputError, Terminated
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
 from .gains import gains_from_params
+# Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
+# import leaves Python to end by SIGINT even after the tool has stopped in order.
+from .params import session_params
 
 __all__ = ["SweepPlan", "default_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
@@ -158,8 +161,6 @@ def sil_source(cfg) -> dict:
 def _record_params(session, axis: str, manifest: dict, progress) -> None:
     """What the board flies: every parameter it has, read from it, and the axis's gains
     among them (host/gains.py)."""
-    from .params import session_params
-
     params = session_params(session, progress)
     if params is None:
         return
