@@ -19,7 +19,7 @@ from heliquad import _firmware
 from ..sim import dialect as names
 
 __all__ = ["Gains", "firmware_gains", "load_gains", "gains_from_params", "recorded_gains",
-           "DERIVATIVE_FILTER_N"]
+           "single", "DERIVATIVE_FILTER_N"]
 
 #: The derivative filter's N (tau_f = tau_D / N) of the firmware's rate loop, which it flies.
 DERIVATIVE_FILTER_N = float(_firmware.CascadeGains.paper_defaults().rate(
@@ -40,12 +40,12 @@ def firmware_gains(axis: str) -> Gains:
     g = _firmware.CascadeGains.paper_defaults()
     which = _firmware.Axis(names.AXES[axis])
     r = g.rate(which)
-    rate = (_single(r.kc), _single(r.tau_i_s), _single(r.tau_d_s))
+    rate = (single(r.kc), single(r.tau_i_s), single(r.tau_d_s))
     try:
         a = g.angle(which)
     except ValueError:                     # yaw: no angle loop
         return Gains(rate, None)
-    return Gains(rate, (_single(a.kc), _single(a.tau_d_s)))
+    return Gains(rate, (single(a.kc), single(a.tau_d_s)))
 
 
 #: The parameters' name for each axis (RATE_RLL_KC, ANG_PIT_TD, ...).
@@ -58,8 +58,8 @@ def gains_from_params(axis: str, params: dict) -> Gains | None:
     parameters do not hold them all."""
     ax = PARAM_AXIS[axis]
     try:
-        rate = tuple(_single(params[f"RATE_{ax}_{k}"]) for k in ("KC", "TI", "TD"))
-        angle = None if axis == "yaw" else tuple(_single(params[f"ANG_{ax}_{k}"])
+        rate = tuple(single(params[f"RATE_{ax}_{k}"]) for k in ("KC", "TI", "TD"))
+        angle = None if axis == "yaw" else tuple(single(params[f"ANG_{ax}_{k}"])
                                                   for k in ("KC", "TD"))
     except KeyError:
         return None
@@ -77,7 +77,7 @@ def recorded_gains(doc: dict | None) -> Gains | None:
                  None if angle is None else tuple(float(v) for v in angle))
 
 
-def _single(value: float) -> float:
+def single(value: float) -> float:
     """A single-precision number as the shortest decimal that rounds back to it."""
     return float(str(np.float32(value)))
 

@@ -337,8 +337,8 @@ class _SessionLink:
 
 
 def session_params(session, progress=print) -> dict | None:
-    """Every parameter of the board a session flies, ``{name: value}`` in the board's order,
-    as a sweep records them; None, said once, when the board sends none (a firmware without
+    """Every parameter of the board a session flies, ``{name: value}`` in the board's order
+    (the values as carried); None, said once, when the board sends none (a firmware without
     parameters)."""
     try:
         params = ParamClient(_SessionLink(session)).fetch_all()
@@ -346,4 +346,4 @@ def session_params(session, progress=print) -> dict | None:
         progress(f"warning: no parameters from the board, so the sweep records no gains: {exc}")
         return None
     progress(f"read {len(params)} parameters from the board")
-    return {p.name: float(str(np.float32(p.value))) for p in params}   # 2.422, not 2.4219999
+    return {p.name: p.value for p in params}

@@ -36,7 +36,7 @@ from . import __version__, paper
 from .errors import DiskFull, InputError, Terminated
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
-from .gains import gains_from_params
+from .gains import gains_from_params, single
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .params import session_params
@@ -164,7 +164,7 @@ def _record_params(session, axis: str, manifest: dict, progress) -> None:
     params = session_params(session, progress)
     if params is None:
         return
-    manifest["params"] = params
+    manifest["params"] = {name: single(v) for name, v in params.items()}   # 2.422, not 2.4219999
     gains = gains_from_params(axis, params)
     manifest["gains"] = None if gains is None else dataclasses.asdict(gains)
 

@@ -195,13 +195,21 @@ def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path, fi
     assert values["RATE_PIT_KC"].param_value == pytest.approx(2.386, rel=1e-6)
 
 
-def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
+def _stored(tmp_path, **values):
+    """A host build's parameter store holding ``values``, set through the protocol and saved
+    by the firmware."""
     store = tmp_path / "params.bin"
     with start("host", params_file=str(store)) as fw:
         c = Client(fw)
-        c.set("EXC_MAX_DUR", 120)
+        for name, value in values.items():
+            c.set(name, value)
         c.text("params: saved")
         c.close()
+    return store
+
+
+def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
+    store = _stored(tmp_path, EXC_MAX_DUR=120)
     data = bytearray(store.read_bytes())
     data[20] ^= 0x40                                   # one bit of one stored value
     store.write_bytes(bytes(data))
@@ -215,12 +223,7 @@ def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
 
 
 def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
-    store = tmp_path / "params.bin"
-    with start("host", params_file=str(store)) as fw:
-        c = Client(fw)
-        c.set("RATE_YAW_TD", 0.05)
-        c.text("params: saved")
-        c.close()
+    store = _stored(tmp_path, RATE_YAW_TD=0.05)
     # Rewrite one entry with a value outside its range, and the record's CRC to match.
     import struct
     import zlib
@@ -493,13 +496,7 @@ def test_a_sweep_records_the_gains_the_board_flies_and_identify_and_validate_use
     board, identify carries it into models.json, validate says it validates with it."""
     import json
 
-    store = tmp_path / "params.bin"
-    with start("host", params_file=str(store)) as fw:
-        c = Client(fw)
-        c.set("RATE_RLL_KC", 3.1)
-        c.set("ANG_RLL_TD", 0.09)
-        c.text("params: saved")
-        c.close()
+    store = _stored(tmp_path, RATE_RLL_KC=3.1, ANG_RLL_TD=0.09)
     out = tmp_path / "sweep"
     res = _heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2, 4,
                     "--param-store", store, "--out", out)

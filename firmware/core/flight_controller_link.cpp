@@ -320,23 +320,9 @@ void FlightController::handle_param_read(const mavlink_message_t& msg) {
     params_pending_ |= 1ull << index;
 }
 
-// "params: no NAME" (or "params: no index N"), for a name or index this firmware lacks.
 void FlightController::send_unknown_param(const char* name, int index) {
-    char text[kStatusTextLen] = "params: no ";
-    size_t n = 11;
-    if (name[0] != '\0' || index < 0) {
-        for (size_t i = 0; i < kParamNameLen && name[i] != '\0'; ++i) text[n++] = name[i];
-    } else {
-        const char* what = "index ";
-        while (*what) text[n++] = *what++;
-        char digits[6];
-        int k = 0;
-        for (unsigned v = static_cast<unsigned>(index); k == 0 || v > 0; v /= 10) {
-            digits[k++] = static_cast<char>('0' + v % 10);
-        }
-        while (k > 0) text[n++] = digits[--k];
-    }
-    text[n] = '\0';
+    char text[kStatusTextLen];
+    unknown_param_text(name, index, text, sizeof(text));
     send_statustext(MAV_SEVERITY_WARNING, text);
 }
 

@@ -204,16 +204,6 @@ struct Writer {
 
 }  // namespace
 
-uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc) {
-    // CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320), bit by bit: no table in flash.
-    crc = ~crc;
-    for (size_t i = 0; i < n; ++i) {
-        crc ^= data[i];
-        for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-    }
-    return ~crc;
-}
-
 const ParamInfo& param_info(int index) { return kParams[index]; }
 
 int param_index(const char* name, size_t len) {
@@ -283,6 +273,19 @@ LoadReport Params::decode(const uint8_t* data, size_t n) {
         }
     }
     return r;
+}
+
+void unknown_param_text(const char* name, int index, char* out, size_t capacity) {
+    if (capacity == 0) return;
+    out[0] = '\0';
+    Writer w{out, capacity};
+    w.put("params: no ");
+    if (name[0] != '\0' || index < 0) {
+        w.put(name, kParamNameLen);                      // not NUL-terminated at 16
+        return;
+    }
+    w.put("index ");
+    w.number(static_cast<float>(index));
 }
 
 void set_result_text(SetResult result, int index, char* out, size_t capacity) {

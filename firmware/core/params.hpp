@@ -19,6 +19,7 @@
 #include <cstdint>
 
 #include "../hal/motors.hpp"
+#include "crc32.hpp"
 #include "controllers.hpp"
 #include "rc.hpp"
 #include "supervisor.hpp"
@@ -60,7 +61,6 @@ const ParamInfo& param_info(int index);
 // The index of a name given as a PARAM_* message's 16-character field (NUL-terminated when
 // shorter); -1 when there is no such parameter.
 int param_index(const char* name, size_t len = kParamNameLen);
-uint32_t crc32(const uint8_t* data, size_t n, uint32_t crc = 0);
 
 enum class SetResult : uint8_t {
     Ok = 0,
@@ -100,6 +100,10 @@ private:
     Tunables defaults_;
     Tunables values_;
 };
+
+// "params: no NAME", or "params: no index N" for a request by index (empty name), for a
+// parameter this firmware lacks: STATUSTEXT, at most 27 characters.
+void unknown_param_text(const char* name, int index, char* out, size_t capacity);
 
 // "NAME out of range [min, max]" and the like, for STATUSTEXT (at most 49 characters).
 void set_result_text(SetResult result, int index, char* out, size_t capacity);

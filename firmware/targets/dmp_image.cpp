@@ -1,19 +1,12 @@
 #include "dmp_image.hpp"
 
+#include "../core/crc32.hpp"
+
 namespace hq {
 
 namespace {
 
 uint16_t le16(const uint8_t* p) { return static_cast<uint16_t>(p[0] | (p[1] << 8)); }
-
-uint32_t crc32_update(uint32_t crc, const uint8_t* p, size_t n) {
-    // CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320), as zlib.crc32.
-    for (size_t i = 0; i < n; ++i) {
-        crc ^= p[i];
-        for (int b = 0; b < 8; ++b) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-    }
-    return crc;
-}
 
 }  // namespace
 
@@ -38,8 +31,8 @@ const char* use_dmp_file(const uint8_t* data, size_t n, Mpu6050Config& imu) {
     }
     const uint32_t stored = static_cast<uint32_t>(le16(data + 12)) |
                             (static_cast<uint32_t>(le16(data + 14)) << 16);
-    uint32_t crc = crc32_update(0xFFFFFFFFu, data, 12);
-    crc = crc32_update(crc, data + kHeaderSize, n - kHeaderSize) ^ 0xFFFFFFFFu;
+    // The CRC-32 of the header's first 12 bytes and then everything after the header.
+    const uint32_t crc = crc32(data + kHeaderSize, n - kHeaderSize, crc32(data, 12));
     if (crc != stored) return "DMP firmware file: CRC-32 mismatch (damaged)";
     imu.dmp_image = data + kHeaderSize;
     imu.dmp_image_size = image;
