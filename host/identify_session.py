@@ -29,7 +29,7 @@ def _load(dir_path):
     from ..sim.dialect import dialect
     from .files import read_manifest
     from .sweep import MANIFEST
-    from .tlog import TlogDamage, read_tlog
+    from .tlog import TlogDamage, read_tlog_table
 
     path = os.path.join(dir_path, MANIFEST)
     if not os.path.lexists(path):
@@ -40,8 +40,7 @@ def _load(dir_path):
         raise InputError(f"{dir_path}: the log {os.path.basename(tlog)} is missing")
     damage = TlogDamage()
     try:
-        samples = [m for _, m in read_tlog(tlog, dialect(), only=("HQ_SYSID_SAMPLE",),
-                                           damage=damage)]
+        samples = read_tlog_table(tlog, dialect(), "HQ_SYSID_SAMPLE", damage=damage)
     except OSError as exc:
         raise InputError(f"{tlog}: {exc.strerror or exc}") from None
     _check_log_matches(dir_path, manifest, samples)
@@ -55,13 +54,16 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 
     idle = dialect().HQ_EXCITATION_STATE_IDLE
     want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))
-    for m in samples:
-        if m.exc_state != idle and (m.axis, m.injection) != want:
-            names = {v: k for k, v in AXES.items()}, {v: k for k, v in INJECTIONS.items()}
-            raise InputError(f"{dir_path}: the log excites {names[0].get(m.axis, m.axis)} with "
-                             f"{names[1].get(m.injection, m.injection)} injection, the manifest "
-                             f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
-                             "log and the manifest are not of one session")
+    other = (samples.exc_state != idle) & ((samples.axis != want[0]) |
+                                           (samples.injection != want[1]))
+    if other.any():
+        first = samples[np.flatnonzero(other)[0]]
+        names = {v: k for k, v in AXES.items()}, {v: k for k, v in INJECTIONS.items()}
+        axis, injection = int(first.axis), int(first.injection)
+        raise InputError(f"{dir_path}: the log excites {names[0].get(axis, axis)} with "
+                         f"{names[1].get(injection, injection)} injection, the manifest "
+                         f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
+                         "log and the manifest are not of one session")
 
 
 def _segments(manifest, samples):
@@ -69,11 +71,10 @@ def _segments(manifest, samples):
 
     running = dialect().HQ_EXCITATION_STATE_RUNNING
     u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
-    t = np.array([m.time_us for m in samples], dtype=np.int64)
-    state = np.array([m.exc_state for m in samples])
-    u = np.array([getattr(m, u_name) for m in samples])
-    y = np.array([getattr(m, y_name) for m in samples])
-    r = np.array([m.excitation for m in samples])
+    t = samples.time_us.astype(np.int64)
+    state = samples.exc_state
+    u, y = samples[u_name].astype(float), samples[y_name].astype(float)
+    r = samples.excitation.astype(float)
     for entry in manifest["frequencies"]:
         if entry.get("status") != "ok" or "start_us" not in entry:
             continue

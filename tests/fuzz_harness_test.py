@@ -96,6 +96,26 @@ def test_the_framer_harness_catches_a_framer_that_loses_a_packet(monkeypatch):
         framer_fuzz.check(framer_fuzz.seed_inputs()["raw-all"])
 
 
+def test_long_damaged_loop_stamped_logs_read_as_the_slow_rule_reads_them():
+    # The reader chains records by their headers and checks them in runs of hundreds to tens
+    # of thousands at a time; a damaged place starts a short run again. Logs long enough for
+    # several runs, damaged near the ends of runs and in stamps, against the byte-by-byte rule.
+    rng = random.Random(11)
+    log = tlog_fuzz.loop_stamped_log(rng, loops=1500)
+    for trial in range(6):
+        data = bytearray(log)
+        for _ in range(rng.choice((1, 3, 12))):
+            at = rng.randrange(len(data))
+            kind = rng.randrange(3)
+            if kind == 0:
+                data[at] ^= 1 << rng.randrange(8)
+            elif kind == 1:
+                del data[at:at + rng.randint(1, 40)]
+            else:
+                data[at:at] = rng.randbytes(rng.randint(1, 40))
+        assert len(tlog_fuzz.check(bytes((0,)) + bytes(data))) > 2500
+
+
 def test_the_tlog_harness_catches_a_reader_that_loses_a_message(monkeypatch):
     read_tlog = tlog.read_tlog
     monkeypatch.setattr(tlog, "read_tlog", lambda path, mav, **kw: read_tlog(path, mav, **kw)[:-1])

@@ -21,7 +21,9 @@ Contract checked per input (the file is written to one temporary file per proces
   between; a warning comes if and only if there is such damage, and no
   other warning;
 - reading the file with the damaged runs cut out gives the same list, silently unless a
-  timestamp is wrong.
+  timestamp is wrong;
+- ``read_tlog_table`` of HQ_SYSID_SAMPLE gives the same samples, field for field, and the
+  same damage.
 """
 
 from __future__ import annotations
@@ -135,7 +137,19 @@ def read(data: bytes) -> tuple:
     damage = tlog.TlogDamage()
     again = tlog.read_tlog(path, DIALECT, damage=damage)
     assert _same_messages(again, messages)
+    _check_table(path, messages, damage)
     return messages, [str(w.message) for w in caught], damage
+
+
+def _check_table(path, messages: list, damage) -> None:
+    """read_tlog_table's HQ_SYSID_SAMPLE records: read_tlog's, and its damage."""
+    table_damage = tlog.TlogDamage()
+    table = tlog.read_tlog_table(path, DIALECT, "HQ_SYSID_SAMPLE", damage=table_damage)
+    assert table_damage == damage
+    samples = [m for _, m in messages if m.get_type() == "HQ_SYSID_SAMPLE"]
+    assert len(table) == len(samples)
+    for row, m in zip(table, samples):
+        assert same_fields({name: row[name].tolist() for name in table.dtype.names}, vars(m))
 
 
 def _same_messages(got: list, want: list) -> bool:
