@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.signal
 
 __all__ = ["Dryden", "LEVELS_KT"]
 
@@ -42,6 +41,8 @@ MIN_CONVECTION_M_S = 1.0
 
 def _discrete(num, den, dt):
     """ZOH discretisation of a continuous filter num/den, as (b, a) for lfilter."""
+    import scipy.signal
+
     b, a, _ = scipy.signal.cont2discrete((num, den), dt, method="zoh")
     return np.atleast_2d(b)[0], np.asarray(a, dtype=float)
 
@@ -92,6 +93,12 @@ class Dryden:
         self.states = [np.zeros(max(len(a), len(b)) - 1) for b, a in self.filters]
         self.noise_gain = math.sqrt(math.pi / dt_s)
         self.rng = np.random.default_rng(seed)
+        # scipy.signal is imported here, when the turbulence is made (before a run, never
+        # inside one): a module that merely imports this one (the vehicle plant, and through
+        # it heliquad identify's loop analysis) must not wait about 0.5 s for it.
+        import scipy.signal
+
+        self._lfilter = scipy.signal.lfilter
 
     def step(self) -> np.ndarray:
         """The next sample: [u, v, w] gust velocity (m/s), [p, q, r] gust rates (rad/s)."""
@@ -104,5 +111,5 @@ class Dryden:
         out = np.empty((samples, 6))
         for i, n in enumerate((n_u, n_v, n_w, n_p, n_w, n_v)):
             b, a = self.filters[i]
-            out[:, i], self.states[i] = scipy.signal.lfilter(b, a, n, zi=self.states[i])
+            out[:, i], self.states[i] = self._lfilter(b, a, n, zi=self.states[i])
         return out
