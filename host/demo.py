@@ -8,16 +8,29 @@ hold and the DMP's latency are real delays); closed-loop validation with the pap
 in the firmware's discrete loops; and one HTML report for all three axes. It prints each
 axis's recommended model against the simulator's own truth, with the worst error across
 the band.
+
+The axes run side by side, each in a process of its own (:mod:`.workers`), its progress
+lines shown with its name in front. Ctrl-C or SIGTERM stops every axis in order (each sweep
+stops its excitation and keeps its log and manifest) and ends the demo without a report; an
+axis that fails is said, the others go on, and the demo ends with exit code 1.
 """
 
 from __future__ import annotations
 
+import importlib
+import json
 import os
+import signal
+import sys
 import time
+import traceback
 
 from . import paper
 from .cli_args import MAX_SEED, add_firmware_argument, int_in
-from .errors import InputError
+from .errors import DiskFull, InputError, Terminated
+
+#: The demo's exit code when an axis failed (the others' records and the report are kept).
+EXIT_STOPPED = 1
 
 __all__ = ["add_parser", "run_demo"]
 
@@ -38,50 +51,121 @@ def add_parser(sub, fmt) -> None:
 
 
 def run_demo(args) -> int:
-    from .files import new_output_folder, read_models_json
+    from .files import new_output_folder
+    from .workers import run_children
 
-    new_output_folder(args.out, "the demo")                 # before the slow imports below
-    from ..sim.sil import SilConfig
-    from .session import SilSession
-    from .identify_session import identify_dir
+    new_output_folder(args.out, "the demo")
+    t0 = time.monotonic()
+    options = {"out": args.out, "ideal_sensor": args.ideal_sensor, "seed": args.seed,
+               "firmware": args.firmware, "turbulence": args.turbulence}
+    # Each axis in a process of its own, side by side; Ctrl-C stops them all in order.
+    children = run_children([(axis, [sys.executable, "-c", AXIS_COMMAND,
+                                     json.dumps({**options, "axis": axis})])
+                             for axis in args.axes])
+    summary, sim_s, failed = [], 0.0, []
+    for child in children:
+        result = child.result or {"status": "failed",
+                                  "error": f"it ended (exit code {child.returncode}) "
+                                           "without a result"}
+        if result["status"] == "done":
+            summary.append(tuple(result["summary"]))
+            sim_s += result["sim_s"]
+        else:
+            failed.append(child.name)
+            print(f"== {child.name}: failed: {result['error']}")
+            summary.append((child.name, None, f"failed: {result['error']}", float("nan"),
+                            float("nan")))
+    report_path = _report(args.out)
+    _print_summary(summary, report_path, time.monotonic() - t0, sim_s)
+    return EXIT_STOPPED if failed else 0
+
+
+def _report(out: str) -> str | None:
+    """The HTML report of every axis that got so far, or None (said) when none did."""
     from .report import write_report
+
+    try:
+        return write_report(out)
+    except InputError as exc:
+        print(f"no report: {exc}")
+        return None
+
+
+#: What a child of the demo runs: one axis (its options as JSON in argv).
+AXIS_COMMAND = "from heliquad.host.demo import axis_main; axis_main()"
+_STOPPED_BY: list = []
+
+
+def _on_signal(signum, frame):
+    _STOPPED_BY.append(signum)
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def axis_main() -> None:
+    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis,
+    and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
+    ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C and SIGTERM stop it in order
+    (the sweep keeps its log and manifest)."""
+    from .workers import send_result
+
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
+    options = json.loads(sys.argv[1])
+    try:
+        result = {"status": "done", **_run_axis(**options)}
+    except KeyboardInterrupt as exc:
+        result = {"status": "stopped",
+                  "error": "terminated" if isinstance(exc, Terminated) else "interrupted"}
+    except (InputError, DiskFull, OSError) as exc:
+        result = {"status": "failed", "error": str(exc)}
+    except Exception as exc:                       # noqa: BLE001 - one axis's failure, said
+        traceback.print_exc()
+        result = {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+    send_result(result)
+
+
+def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
+    """One axis of the demo in ``out/AXIS``: ``{"summary": _compare's row, "sim_s": ...}``."""
+    # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
+    # import leaves Python to end by SIGINT after the tool has stopped in order.
+    from ..sim.sil import SilConfig
+    from .files import read_models_json
+    from .identify_session import identify_dir
+    from .session import SilSession
     from .sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
     from .validate import model_gains, save_validation, sweep_inputs, validate_model
 
-    t0, sim_s, summary = time.monotonic(), 0.0, []
-    for axis in args.axes:
-        folder = os.path.join(args.out, axis)
-        os.makedirs(folder, exist_ok=True)
-        print(f"== {axis}: sweep on the {axis} rig, {args.firmware} firmware in the loop",
-              flush=True)
-        cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
-                        ideal_sensor=args.ideal_sensor, seed=args.seed, firmware=args.firmware,
-                        turbulence=args.turbulence)
-        with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
-            run_sweep(session, default_plan(axis), folder,
-                      {**sil_source(cfg), "firmware": session.fw.record()})
-            sim_s += session.time_us * 1e-6
-        print(f"== {axis}: identify", flush=True)
-        try:
-            identified = identify_dir(folder, progress=print)
-        except InputError as exc:                 # a failed sweep: say so, go on
-            print(f"== {axis}: not identified: {exc}")
-            summary.append((axis, None, str(exc), float("nan"), float("nan")))
-            continue
-        result = identified["result"]
-        model = result.models[result.recommended] if result.recommended is not None else None
-        if model is not None:
-            models_path = os.path.join(folder, "models.json")
-            doc = read_models_json(models_path)
-            report, traces = validate_model(
-                model.num, model.den, model.delay_s, axis, model_gains(doc, axis)[0], "moderate",
-                args.seed, **sweep_inputs(models_path, doc))
-            save_validation(folder, report, traces)
-        summary.append(_compare(axis, model, result.reason, identified["truth"]))
-    report_path = write_report(args.out)
-    wall = time.monotonic() - t0
-    _print_summary(summary, report_path, wall, sim_s)
-    return 0
+    importlib.import_module(".fsf", __package__)        # a sweep's dwell check uses it
+    folder = os.path.join(out, axis)
+    os.makedirs(folder, exist_ok=True)
+    print(f"== sweep on the {axis} rig, {firmware} firmware in the loop")
+    cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
+                    ideal_sensor=ideal_sensor, seed=seed, firmware=firmware,
+                    turbulence=turbulence)
+    with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
+        run_sweep(session, default_plan(axis), folder,
+                  {**sil_source(cfg), "firmware": session.fw.record()})
+        sim_s = session.time_us * 1e-6
+    if _STOPPED_BY:                  # the sweep ended in order on Ctrl-C or SIGTERM: stop
+        raise Terminated() if _STOPPED_BY[0] == signal.SIGTERM else KeyboardInterrupt()
+    print("== identify")
+    try:
+        identified = identify_dir(folder, progress=print)
+    except InputError as exc:                 # a failed sweep: say so, go on
+        print(f"== not identified: {exc}")
+        return {"summary": (axis, None, str(exc), float("nan"), float("nan")), "sim_s": sim_s}
+    result = identified["result"]
+    model = result.models[result.recommended] if result.recommended is not None else None
+    if model is not None:
+        print("== validate")
+        models_path = os.path.join(folder, "models.json")
+        doc = read_models_json(models_path)
+        report, traces = validate_model(
+            model.num, model.den, model.delay_s, axis, model_gains(doc, axis)[0], "moderate",
+            seed, **sweep_inputs(models_path, doc))
+        save_validation(folder, report, traces)
+    return {"summary": _compare(axis, model, result.reason, identified["truth"]),
+            "sim_s": sim_s}
 
 
 def _compare(axis, model, reason, truth):
@@ -99,4 +183,5 @@ def _print_summary(summary, report_path, wall, sim_s) -> None:
     for axis, text, reason, db, deg in summary:
         print(f"{axis:>6}: {text}\n        error {db:.2f} dB, {deg:.1f} deg; {reason}")
     print(f"\n{sim_s:.0f} s simulated in {wall:.0f} s ({sim_s / wall:.1f}x real time)")
-    print(f"report: {os.path.abspath(report_path)}")
+    if report_path is not None:
+        print(f"report: {os.path.abspath(report_path)}")
