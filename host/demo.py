@@ -150,7 +150,8 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
         raise Terminated() if _STOPPED_BY[0] == signal.SIGTERM else KeyboardInterrupt()
     print("== identify")
     try:
-        identified = identify_dir(folder, progress=print)
+        # The plots here, not beside: the axes keep every core busy already.
+        identified = identify_dir(folder, progress=print, plots_beside=False)
     except InputError as exc:                 # a failed sweep: say so, go on
         print(f"== not identified: {exc}")
         return {"summary": (axis, None, str(exc), float("nan"), float("nan")), "sim_s": sim_s}

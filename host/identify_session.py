@@ -83,9 +83,20 @@ def _segments(manifest, samples):
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
-                 estimate: str = "excitation") -> dict:
+                 estimate: str = "excitation", plots_beside: bool = True) -> dict:
+    """``plots_beside``: draw the plots in a process of their own while the models are
+    fitted (:class:`~heliquad.host.plot_process.PlotProcess`), else here, after them."""
     manifest, samples, damage = _load(dir_path)
-    from .files import write_models_json, write_points_csv    # after the folder is read:
+    from .plot_process import InlinePlots, PlotProcess      # after the folder is read
+
+    with (PlotProcess() if plots_beside else InlinePlots()) as plots:
+        return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+                         estimate)
+
+
+def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+              estimate) -> dict:
+    from .files import write_models_json, write_points_csv
     from .fit import n_parameters
     from .identify import default_orders, fit_orders
 
@@ -94,6 +105,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
                  "every well-formed record was read")
     axis = manifest["axis"]
     points, segments, skipped = _estimate_points(manifest, samples, estimate, progress)
+    plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -131,7 +143,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
                       extra=extra, band_rad_s=result.band_rad_s)
-    _write_plots(dir_path, manifest, points, segments, result, replays)
+    _write_plots(plots, dir_path, manifest, points, result, replays)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
             "records": segments, "replays": replays}
@@ -159,25 +171,26 @@ def _replay_record(recommended, replays) -> dict:
                        for r in sorted(replays, key=lambda r: r.freq_hz)]}
 
 
-def _write_plots(dir_path, manifest, points, segments, result, replays) -> None:
+def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
-    record, with the recommended model's replay)."""
-    from .plot import COHERENCE_KEYS, write_bode, write_responses
+    record, with the recommended model's replay), by the plotting process ``plots``."""
+    from .plot import COHERENCE_KEYS
     from .report import LOW_COHERENCE
 
     axis, inject = manifest["axis"], manifest["inject"]
     ranked = sorted(points, key=lambda p: p.omega_rad_s)
-    write_bode(os.path.join(dir_path, "bode.png"), np.array([p.omega_rad_s for p in ranked]),
-               np.array([p.gain for p in ranked]), sigma=np.array([p.sigma for p in ranked]),
-               models=result.models, recommended=result.recommended,
-               title=f"{axis}, {inject} injection: points, models and coherence",
-               coherence={k: np.array([getattr(p, k) for p in ranked]) for k in COHERENCE_KEYS},
-               gate=LOW_COHERENCE)
+    bode = {"path": os.path.join(dir_path, "bode.png"),
+            "omega": np.array([p.omega_rad_s for p in ranked]),
+            "F": np.array([p.gain for p in ranked]), "sigma": np.array([p.sigma for p in ranked]),
+            "models": result.models, "recommended": result.recommended,
+            "title": f"{axis}, {inject} injection: points, models and coherence",
+            "coherence": {k: np.array([getattr(p, k) for p in ranked]) for k in COHERENCE_KEYS},
+            "gate": LOW_COHERENCE}
     said = "dashed: the recommended model's replay" if replays is not None else \
         "no model recommended, so no replay"
-    write_responses(os.path.join(dir_path, "responses.png"), segments, *INPUT_OUTPUT[inject],
-                    title=f"{axis}: measured cycles, input (left axis) and output (right axis); "
-                          f"{said}", replays=replays)
+    plots.finish(bode, {"path": os.path.join(dir_path, "responses.png"), "replays": replays,
+                        "title": f"{axis}: measured cycles, input (left axis) and output "
+                                 f"(right axis); {said}"})
 
 
 def _truth(dir_path, manifest, points, result, progress) -> dict | None:

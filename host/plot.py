@@ -18,10 +18,11 @@ import math
 
 import numpy as np
 
-from .files import save_figure
+from .files import atomic_write, save_figure
 
 __all__ = ["new_figure", "plot_bode", "plot_coherence", "plot_loop_gains", "plot_responses",
-           "plot_validation", "write_bode", "write_responses", "write_validation"]
+           "plot_validation", "write_bode", "write_responses", "write_validation",
+           "ResponsesFigure"]
 
 #: Dense grid points per plotted model curve.
 CURVE_POINTS = 400
@@ -38,6 +39,7 @@ RESPONSE_COLUMNS = 3
 RESPONSE_PANEL_IN = 2.7
 RESPONSE_MARGINS_IN = {"left": 0.75, "right": 0.75, "top": 0.55, "bottom": 0.65}
 RESPONSE_GAPS_IN = (1.4, 0.75)
+RESPONSE_DPI = 90
 #: The responses figure's colours: each signal's and its axis's (labels and ticks).
 INPUT_COLOUR, OUTPUT_COLOUR, REPLAY_COLOUR = "tab:blue", "tab:orange", "k"
 #: The coherence panel's series: the coherence of the excitation r with the output and with
@@ -49,13 +51,13 @@ EXCITATION_COHERENCES = (("coherence_ry", "r -> y", {"marker": "o", "ms": 5}),
 COHERENCE_KEYS = ("coherence", *(key for key, _, _ in EXCITATION_COHERENCES))
 
 
-def new_figure(rows=1, cols=1, figsize=(8, 6), layout="constrained", **subplots):
+def new_figure(rows=1, cols=1, figsize=(8, 6), layout="constrained", dpi=None, **subplots):
     """A figure of ``rows`` x ``cols`` axes with constrained layout (or ``layout``), made
     without pyplot (so no backend is involved), and its axes (as ``Figure.subplots`` returns
     them)."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, layout=layout)
+    fig = Figure(figsize=figsize, layout=layout, dpi=dpi)
     return fig, fig.subplots(rows, cols, **subplots)
 
 
@@ -217,6 +219,13 @@ def plot_responses(axes, segments, input_name, output_name, replays=None):
 
 def _response_panel(ax, segment, input_name, output_name, replay):
     """One frequency's input on ``ax``, its output (and replay) on a twin y axis."""
+    _response_replay(ax, _response_record(ax, segment, input_name, output_name), segment,
+                     replay)
+
+
+def _response_record(ax, segment, input_name, output_name):
+    """One frequency's record: its input on ``ax``, its output on a twin y axis (returned),
+    each axis labelled and coloured as its signal."""
     f, t, u, y = segment
     t = np.asarray(t) - t[0]
     u_label = f"input: {input_name} ({SIGNAL_UNITS[input_name]})"
@@ -224,37 +233,81 @@ def _response_panel(ax, segment, input_name, output_name, replay):
     right = ax.twinx()
     ax.plot(t, u, color=INPUT_COLOUR, lw=1, label=u_label)
     right.plot(t, y, color=OUTPUT_COLOUR, lw=1, label=y_label)
-    title = f"{f:.3g} Hz"
-    if replay is not None:
-        right.plot(t[replay.start:replay.start + replay.y.size], replay.y, "--",
-                   color=REPLAY_COLOUR, lw=1, label="replay: the model driven by the input")
-        title += f", replay error {100 * replay.nrmse:.1f} %"
     for side, label, colour in ((ax, u_label, INPUT_COLOUR), (right, y_label, OUTPUT_COLOUR)):
         side.set_ylabel(label, color=colour, fontsize=7)
         side.tick_params(axis="y", colors=colour, labelsize=7)
-    ax.set_title(title, fontsize=9)
     ax.set_xlabel("time (s)", fontsize=8)
     ax.tick_params(axis="x", labelsize=7)
     ax.grid(alpha=0.3)
+    return right
+
+
+def _response_replay(ax, right, segment, replay) -> list:
+    """One frequency's title and, when ``replay`` is given, the replay (dashed, on the
+    output's axis ``right``, its error in the title); the artists added."""
+    f, t, _, _ = segment
+    t = np.asarray(t) - t[0]
+    title, added = f"{f:.3g} Hz", []
+    if replay is not None:
+        added += right.plot(t[replay.start:replay.start + replay.y.size], replay.y, "--",
+                            color=REPLAY_COLOUR, lw=1, label="replay: the model driven by the input")
+        title += f", replay error {100 * replay.nrmse:.1f} %"
+    return [ax.set_title(title, fontsize=9), *added]
+
+
+class ResponsesFigure:
+    """:func:`plot_responses` in a figure of its own (three frequencies a row, a fixed
+    layout), made in two steps for a caller that has the records before the model: making
+    it draws the records and renders the picture, which is most of the work;
+    :meth:`save` adds the replays, the panels' titles, the legend and the title onto the
+    rendered picture and writes it. A replay is drawn on its output's axis as the record
+    set it (a replay that ran past the record's range would be cut at the panel's edge)."""
+
+    def __init__(self, segments, input_name, output_name):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        rows = max(1, math.ceil(len(segments) / RESPONSE_COLUMNS))
+        self.fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(13, RESPONSE_PANEL_IN * rows),
+                                    layout=None, dpi=RESPONSE_DPI, squeeze=False)
+        _fixed_layout(self.fig, rows, RESPONSE_COLUMNS, RESPONSE_MARGINS_IN, RESPONSE_GAPS_IN)
+        flat = axes.ravel()
+        self.segments = list(segments)
+        self.panels = [(ax, _response_record(ax, segment, input_name, output_name))
+                       for ax, segment in zip(flat, self.segments)]
+        for ax in flat[len(self.segments):]:
+            ax.axis("off")
+        FigureCanvasAgg(self.fig).draw()
+        for _, right in self.panels:
+            right.set_autoscaley_on(False)          # the rendered axes stay as they are
+
+    def save(self, path, title="", replays=None) -> None:
+        """Add ``replays`` (beside the records, a :class:`~heliquad.host.replay.Replay` or
+        None each) and ``title``, and write the picture to ``path`` (PNG)."""
+        from matplotlib.image import imsave
+
+        fig = self.fig
+        replays = list(replays) if replays is not None else [None] * len(self.segments)
+        added = [a for (ax, right), segment, replay in zip(self.panels, self.segments, replays)
+                 for a in _response_replay(ax, right, segment, replay)]
+        lines = {}                                  # one entry a label, inputs first
+        for ax in fig.axes:
+            for handle, label in zip(*ax.get_legend_handles_labels()):
+                lines.setdefault(label, handle)
+        if lines:
+            added.append(fig.legend(lines.values(), lines.keys(), loc="lower center", ncols=3,
+                                    fontsize=8))
+        if title:
+            added.append(fig.suptitle(title))
+        for artist in added:
+            fig.draw_artist(artist)
+        with atomic_write(path, "wb") as fh:
+            imsave(fh, np.asarray(fig.canvas.buffer_rgba()), format="png", dpi=fig.dpi)
 
 
 def write_responses(path, segments, input_name, output_name, title="", replays=None):
     """:func:`plot_responses` in a figure of its own (three frequencies a row), written to
-    ``path``."""
-    rows = max(1, math.ceil(len(segments) / RESPONSE_COLUMNS))
-    fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(13, RESPONSE_PANEL_IN * rows),
-                           layout=None, squeeze=False)
-    _fixed_layout(fig, rows, RESPONSE_COLUMNS, RESPONSE_MARGINS_IN, RESPONSE_GAPS_IN)
-    plot_responses(axes, segments, input_name, output_name, replays)
-    lines = {}                                  # one entry a label, inputs first
-    for ax in fig.axes:
-        for handle, label in zip(*ax.get_legend_handles_labels()):
-            lines.setdefault(label, handle)
-    if lines:
-        fig.legend(lines.values(), lines.keys(), loc="lower center", ncols=3, fontsize=8)
-    if title:
-        fig.suptitle(title)
-    save_figure(fig, path, dpi=90)
+    ``path`` (PNG; :class:`ResponsesFigure` in one go)."""
+    ResponsesFigure(segments, input_name, output_name).save(path, title, replays)
 
 
 # -- closed-loop validation ----------------------------------------------------------------

@@ -184,6 +184,17 @@ def test_a_flipped_timestamp_bit_in_a_sil_sweep_is_reported(sweep, tmp_path):
     assert "1 not their control loop&#x27;s time" in page          # html.escape'd
 
 
+@pytest.mark.parametrize("plot", ["bode.png", "responses.png"])
+def test_a_plot_identify_cannot_write_is_one_line_and_the_rest_is_written(sweep, tmp_path,
+                                                                          plot):
+    # The plots are drawn by a process of their own; what fails there is said here, as any
+    # file that cannot be written is.
+    folder = _copy(sweep, tmp_path / "blocked")
+    (folder / plot).mkdir()                         # a folder where the picture would go
+    one_line_error(heliquad("identify", folder), "cannot write", plot)
+    assert (folder / "models.json").exists() and (folder / plot).is_dir()
+
+
 def test_identify_refuses_a_log_of_another_session(sweep, tmp_path):
     import json
 

@@ -1,0 +1,167 @@
+"""identify's plots drawn in a process of its own, beside the fits.
+
+Drawing is most of what ``heliquad identify`` spends on a long session (matplotlib's import,
+and the responses figure's dozens of axes), and it needs little from the fits: the records
+are known before any model. So a process of its own imports matplotlib and draws and renders
+the records (:class:`~heliquad.host.plot.ResponsesFigure`) while this one fits; once the
+models are known it draws bode.png and finishes responses.png (the replays, the titles and
+the legend onto the rendered picture), and says it is done or what failed, which is raised
+here.
+
+Ctrl-C does not reach the process: it ends when this side closes its pipe (the command is
+interrupted or fails), after the step it is in, so a picture is never left half written.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pickle
+import subprocess
+import sys
+from multiprocessing.connection import Connection
+
+from .errors import InputError
+
+__all__ = ["PlotProcess", "InlinePlots", "serve"]
+
+#: How long, once the pipe is closed, the process may take to end before it is stopped.
+END_WAIT_S = 30.0
+
+
+class PlotProcess:
+    """The plotting process, as a context manager: :meth:`records`, then :meth:`finish`.
+
+    A fresh interpreter (``python -c``, not multiprocessing's spawn, which would run the
+    caller's main script again) in a process group of its own, so a terminal's Ctrl-C
+    reaches this side only; the two talk through its stdin and stdout."""
+
+    def __init__(self):
+        theirs_in, ours_out = os.pipe()
+        ours_in, theirs_out = os.pipe()
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-c", SERVE], stdin=theirs_in,
+                                         stdout=theirs_out, process_group=0)
+        except BaseException:
+            os.close(ours_out)
+            os.close(ours_in)
+            raise
+        finally:
+            os.close(theirs_in)
+            os.close(theirs_out)
+        self.conn = Connection(ours_out, readable=False)
+        self.answers = Connection(ours_in, writable=False)
+
+    def records(self, segments, input_name: str, output_name: str) -> None:
+        """Start drawing the responses figure's records (``(freq_hz, t_s, u, y)`` each)."""
+        self._send(("records", segments, input_name, output_name))
+
+    def finish(self, bode: dict, responses: dict) -> None:
+        """Write bode.png (``write_bode``'s arguments) and responses.png (``path``, ``title``,
+        ``replays``) and wait until both are written; what failed there is raised here."""
+        self._send(("finish", bode, responses))
+        try:
+            status, detail = self.answers.recv()
+        except EOFError:
+            raise self._ended() from None
+        if status == "error":
+            raise detail
+
+    def _send(self, message) -> None:
+        try:
+            self.conn.send(message)
+        except BrokenPipeError:
+            raise self._ended() from None
+
+    def _ended(self) -> InputError:
+        return InputError(f"the plots were not drawn: their process ended (exit code "
+                          f"{self.proc.poll()})")
+
+    def close(self) -> None:
+        """Close the pipes (the process ends after the step it is in) and wait for it."""
+        self.conn.close()
+        self.answers.close()
+        try:
+            self.proc.wait(END_WAIT_S)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class InlinePlots:
+    """:class:`PlotProcess`'s steps in this process, one after the other: where every core
+    is busy anyway (the demo runs its axes side by side), another interpreter would only
+    add its own start to the work."""
+
+    def __init__(self):
+        self.figure = None
+
+    def records(self, segments, input_name: str, output_name: str) -> None:
+        from .plot import ResponsesFigure
+
+        self.figure = ResponsesFigure(segments, input_name, output_name)
+
+    def finish(self, bode: dict, responses: dict) -> None:
+        from .plot import write_bode
+
+        write_bode(**bode)
+        self.figure.save(**responses)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.figure = None
+
+
+#: What the plotting process runs.
+SERVE = "from heliquad.host.plot_process import serve; serve()"
+
+
+def serve() -> None:
+    """The plotting process (:data:`SERVE`): records, then finish, each as it arrives on
+    stdin, the answer on stdout. It imports what it draws with while the records are being
+    estimated, and ends when stdin closes, at once: the interpreter's own clean-up
+    (matplotlib's) would only keep the command waiting."""
+    for name in ("matplotlib.backends.backend_agg", "matplotlib.figure", "heliquad.host.fit",
+                 "heliquad.host.replay"):        # before the records and the models come
+        importlib.import_module(name)
+    from . import plot
+
+    conn = Connection(os.dup(0), writable=False)
+    answers = Connection(os.dup(1), readable=False)
+    os.dup2(2, 1)                               # the answers' pipe is theirs alone
+    sys.stdout = sys.stderr
+    figure = None
+    try:
+        while True:
+            message = conn.recv()
+            if message[0] == "records":
+                figure = plot.ResponsesFigure(*message[1:])
+                continue
+            try:
+                plot.write_bode(**message[1])
+                figure.save(**message[2])
+                answers.send(("done", None))
+            except Exception as exc:            # noqa: BLE001 - said to the other side
+                answers.send(("error", _sendable(exc)))
+    except (EOFError, BrokenPipeError):
+        pass
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+def _sendable(exc: Exception) -> Exception:
+    """``exc`` if it goes through a pipe whole, else an InputError saying it."""
+    try:
+        pickle.loads(pickle.dumps(exc))
+        return exc
+    except Exception:                           # noqa: BLE001
+        return InputError(f"the plots were not drawn: {type(exc).__name__}: {exc}")
