@@ -40,6 +40,10 @@ RESPONSE_PANEL_IN = 2.7
 RESPONSE_MARGINS_IN = {"left": 0.75, "right": 0.75, "top": 0.55, "bottom": 0.65}
 RESPONSE_GAPS_IN = (1.4, 0.75)
 RESPONSE_DPI = 90
+#: The Bode figure's fixed layout, inches: margins (the y labels, the title, the frequency
+#: axis) and the gap between its panels (constrained layout took 40 % of its drawing).
+BODE_MARGINS_IN = {"left": 0.8, "right": 0.25, "top": 0.4, "bottom": 0.6}
+BODE_GAP_IN = 0.25
 #: The responses figure's colours: each signal's and its axis's (labels and ticks).
 INPUT_COLOUR, OUTPUT_COLOUR, REPLAY_COLOUR = "tab:blue", "tab:orange", "k"
 #: The coherence panel's series: the coherence of the excitation r with the output and with
@@ -181,10 +185,11 @@ def write_bode(path, omega, F, sigma=None, models=(), recommended=None, title=""
     """:func:`plot_bode` in a figure of its own, with the coherence panel under it when
     ``coherence`` holds any known value, written to ``path`` (format from its extension)."""
     if any(_known((coherence or {}).get(key)) for key in COHERENCE_KEYS):
-        fig, axes = new_figure(3, 1, figsize=(8, 8.5), sharex=True,
+        fig, axes = new_figure(3, 1, figsize=(8, 8.5), layout=None, sharex=True,
                                gridspec_kw={"height_ratios": [3, 3, 1.6]})
     else:
-        fig, axes = new_figure(2, 1, figsize=(8, 7), sharex=True)
+        fig, axes = new_figure(2, 1, figsize=(8, 7), layout=None, sharex=True)
+    _fixed_layout(fig, len(axes), 1, BODE_MARGINS_IN, (0.0, BODE_GAP_IN))
     plot_bode(axes, omega, F, sigma, models, recommended, title, coherence, gate)
     save_figure(fig, path, dpi=110)
 
