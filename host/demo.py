@@ -182,7 +182,10 @@ def _compare(axis, model, reason, truth):
 def _print_summary(summary, report_path, wall, sim_s) -> None:
     print("\n== identified versus the simulator's truth (worst error across each axis's band)")
     for axis, text, reason, db, deg in summary:
-        print(f"{axis:>6}: {text}\n        error {db:.2f} dB, {deg:.1f} deg; {reason}")
+        if text is None:
+            print(f"{axis:>6}: no model; {reason}")
+        else:
+            print(f"{axis:>6}: {text}\n        error {db:.2f} dB, {deg:.1f} deg; {reason}")
     print(f"\n{sim_s:.0f} s simulated in {wall:.0f} s ({sim_s / wall:.1f}x real time)")
     if report_path is not None:
         print(f"report: {os.path.abspath(report_path)}")

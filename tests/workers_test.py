@@ -123,6 +123,39 @@ def test_ctrl_c_or_sigterm_is_passed_on_once_and_the_children_stop_in_order(sign
     assert out.splitlines()[-1] == f"parent stopped: {raised}"
 
 
+# An axis of the demo as a stand-in: pitch breaks, the others report a model.
+FAKE_AXIS = """
+import json, sys
+from heliquad.host.workers import send_result
+options = json.loads(sys.argv[1])
+print("flying", options["axis"])
+if options["axis"] == "pitch":
+    raise RuntimeError("the pitch rig broke")
+send_result({"status": "done", "sim_s": 10.0,
+             "summary": [options["axis"], "(1) / (1 s + 1)", "the only model", 0.01, 0.1]})
+"""
+
+
+def test_a_failing_axis_of_the_demo_is_said_and_the_others_are_summarised(
+        monkeypatch, tmp_path, capsys):
+    import argparse
+
+    from heliquad.host import demo
+
+    monkeypatch.setattr(demo, "AXIS_COMMAND", FAKE_AXIS)
+    args = argparse.Namespace(out=str(tmp_path / "demo"), axes=["roll", "pitch", "yaw"],
+                              ideal_sensor=False, seed=1, firmware="host", turbulence=None)
+    assert demo.run_demo(args) == demo.EXIT_STOPPED
+    out, err = capsys.readouterr()
+    assert "[roll] flying roll" in out and "[yaw] flying yaw" in out
+    assert "[pitch] RuntimeError: the pitch rig broke" in err
+    assert "== pitch: failed: it ended (exit code 1) without a result" in out
+    summary = out[out.index("== identified versus"):]
+    assert "roll: (1) / (1 s + 1)" in summary and "yaw: (1) / (1 s + 1)" in summary
+    assert "pitch: no model; failed: it ended (exit code 1) without a result" in summary
+    assert "20 s simulated" in summary and "no report: " in out
+
+
 @pytest.mark.parametrize("stop, aborted, code", [
     ("ctrl_c", "interrupted (Ctrl-C)", 130), ("sigterm", "terminated (SIGTERM)", 143)])
 def test_the_demo_stopped_stops_every_axis_in_order_and_keeps_their_records(
