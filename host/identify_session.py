@@ -86,10 +86,11 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
                  estimate: str = "excitation", plots_beside: bool = True) -> dict:
     """``plots_beside``: draw the plots in a process of their own while the models are
     fitted (:class:`~heliquad.host.plot_process.PlotProcess`), else here, after them."""
-    manifest, samples, damage = _load(dir_path)
-    from .plot_process import InlinePlots, PlotProcess      # after the folder is read
+    from .plot_process import InlinePlots, PlotProcess
 
+    # The plotting process starts first: its imports overlap reading the log.
     with (PlotProcess() if plots_beside else InlinePlots()) as plots:
+        manifest, samples, damage = _load(dir_path)
         return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
                          estimate)
 

@@ -51,6 +51,7 @@ class PlotProcess:
             os.close(theirs_out)
         self.conn = Connection(ours_out, readable=False)
         self.answers = Connection(ours_in, writable=False)
+        self.writing = False                    # finish sent: it may be writing a picture
 
     def records(self, segments, input_name: str, output_name: str) -> None:
         """Start drawing the responses figure's records (``(freq_hz, t_s, u, y)`` each)."""
@@ -59,6 +60,7 @@ class PlotProcess:
     def finish(self, bode: dict, responses: dict) -> None:
         """Write bode.png (``write_bode``'s arguments) and responses.png (``path``, ``title``,
         ``replays``) and wait until both are written; what failed there is raised here."""
+        self.writing = True
         self._send(("finish", bode, responses))
         try:
             status, detail = self.answers.recv()
@@ -78,9 +80,12 @@ class PlotProcess:
                           f"{self.proc.poll()})")
 
     def close(self) -> None:
-        """Close the pipes (the process ends after the step it is in) and wait for it."""
+        """Close the pipes and wait for the process to end: after the step it is in once
+        it may be writing a picture, at once before (it has written nothing then)."""
         self.conn.close()
         self.answers.close()
+        if not self.writing:
+            self.proc.kill()
         try:
             self.proc.wait(END_WAIT_S)
         except subprocess.TimeoutExpired:
