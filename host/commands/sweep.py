@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 
@@ -91,6 +92,10 @@ def run(args) -> int:
     from ..files import new_output_folder
     from ..sweep import SWEEP_TLOG, run_sweep
 
+    # fsf (with scipy) is imported now, not by the first dwell check or amplitude design
+    # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
+    # SIGINT after the tool has stopped in order.
+    importlib.import_module("heliquad.host.fsf")
     plan = _plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         from ...sim.sil import SilConfig
