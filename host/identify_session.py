@@ -106,7 +106,6 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
                  "every well-formed record was read")
     axis = manifest["axis"]
     points, segments, skipped = _estimate_points(manifest, samples, estimate, progress)
-    plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -116,6 +115,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         aborted = f"; the sweep ended early: {manifest['aborted']}" if manifest.get("aborted") else ""
         raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
                          f"a fit needs at least 2{why}{aborted}")
+    plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     write_points_csv(os.path.join(dir_path, "points.csv"), points)
     _write_table(os.path.join(dir_path, "points_table.csv"), points)
     table = {"omega": np.array([p.omega_rad_s for p in points]),
