@@ -33,7 +33,9 @@ import sys
 import tempfile
 import time
 
-AXES = ("roll", "pitch", "yaw")
+from heliquad.host import paper
+
+AXES = tuple(paper.BANDS_HZ)    # the demo's axes
 DEMO_SEED = 1                   # heliquad demo's default seed
 SIL_COMMON = ("--axis", "roll", "--inject", "mixer", "--amplitude", 0.05, "--fade-cycles", 1)
 SIL_SHORT = ("--freq-hz", 10, "--cycles", 1)
