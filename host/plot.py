@@ -36,8 +36,10 @@ RESPONSE_COLUMNS = 3
 #: (the legend), and the gaps between panels (the output's labels and the next input's
 #: across, the title and the time axis down). Fixed rather than constrained: working out a
 #: layout for its dozens of axes cost more than drawing them (0.6 s of 1.6 s for 15 panels).
-RESPONSE_PANEL_IN = 2.7
-RESPONSE_MARGINS_IN = {"left": 0.75, "right": 0.75, "top": 0.55, "bottom": 0.65}
+RESPONSE_PANEL_IN = 1.9
+RESPONSE_MARGINS_IN = {"left": 0.75, "right": 0.75, "top": 0.85, "bottom": 0.65}
+#: The responses figure's title: its top this far below the figure's, inches.
+RESPONSE_TITLE_IN = 0.15
 RESPONSE_GAPS_IN = (1.4, 0.75)
 RESPONSE_DPI = 90
 #: The Bode figure's fixed layout, inches: margins (the y labels, the title, the frequency
@@ -272,8 +274,10 @@ class ResponsesFigure:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
 
         rows = max(1, math.ceil(len(segments) / RESPONSE_COLUMNS))
-        self.fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(13, RESPONSE_PANEL_IN * rows),
-                                    layout=None, dpi=RESPONSE_DPI, squeeze=False)
+        height = (RESPONSE_MARGINS_IN["top"] + RESPONSE_MARGINS_IN["bottom"]
+                  + rows * RESPONSE_PANEL_IN + (rows - 1) * RESPONSE_GAPS_IN[1])
+        self.fig, axes = new_figure(rows, RESPONSE_COLUMNS, figsize=(13, height), layout=None,
+                                    dpi=RESPONSE_DPI, squeeze=False)
         _fixed_layout(self.fig, rows, RESPONSE_COLUMNS, RESPONSE_MARGINS_IN, RESPONSE_GAPS_IN)
         flat = axes.ravel()
         self.segments = list(segments)
@@ -302,7 +306,8 @@ class ResponsesFigure:
             added.append(fig.legend(lines.values(), lines.keys(), loc="lower center", ncols=3,
                                     fontsize=8))
         if title:
-            added.append(fig.suptitle(title))
+            added.append(fig.suptitle(title, y=1 - RESPONSE_TITLE_IN / fig.get_figheight(),
+                                      va="top"))
         for artist in added:
             fig.draw_artist(artist)
         with atomic_write(path, "wb") as fh:
