@@ -176,6 +176,9 @@ MAX_OMEGA_SPAN = 1e6
 #: RUN.csv: sampling rates, Hz, and the largest magnitude of a sample.
 RATE_RANGE_HZ = (1e-3, 1e7)
 MAX_SAMPLE = 1e150
+#: A sweep's signal (manifest.json and models.json ``signal``): the paper's dwell, one sine
+#: at a time, or one multisine for the whole band.
+SWEEP_SIGNALS = ("dwell", "multisine")
 #: A manifest's loop rate (freq_hz x period_samples), Hz.
 LOOP_RANGE_HZ = (1.0, 1e4)
 #: A model's pure delay, s.
@@ -372,7 +375,7 @@ def _manifest_schema():
                   "gains": S.Null(_recorded_gains_schema()), "params": S.Null(S.Obj(values=S.Num())),
                   "started": S.Str(), "cycles": S.Int(1, 65535),
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
-                  "design": S.Obj(), "signal": S.Str(("dwell", "multisine")),
+                  "design": S.Obj(), "signal": S.Str(SWEEP_SIGNALS),
                   "complete": S.Bool(), "aborted": S.Null(S.Str()),
                   "in_progress_hz": S.Null(S.Num())})
 
@@ -432,6 +435,7 @@ def _models_schema():
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
                   "estimate": S.Str(("excitation", "input")), "sil_truth": _sil_truth_schema(),
+                  "signal": S.Str(SWEEP_SIGNALS),
                   "replay": _replay_schema(),
                   "quality": S.Obj(required={"level": S.Str(("good", "acceptable", "poor")),
                                              "why": S.Str()}),

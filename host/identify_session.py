@@ -115,7 +115,8 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(table, orders, delay=delay)
     extra = {"log": damage.record(), "skipped_frequencies": skipped,
-             "saturated_frequencies": saturated, "estimate": estimate}
+             "saturated_frequencies": saturated, "estimate": estimate,
+             "signal": manifest.get("signal", "dwell")}
     if manifest.get("gains"):
         extra["gains"] = manifest["gains"]       # what the board flew, for validate
     loop = _broken_loop(manifest, points, estimate, progress)

@@ -166,23 +166,34 @@ def _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles):
             best = (n, orders, periods)
     if best is None:
         raise InputError(f"a multisine over {lo:g}-{hi:g} Hz needs more than {rig_time_s:g} s: "
-                         f"{min_periods} periods of its lowest line and the fades do not fit")
+                         f"{min_periods} whole periods of a base frequency below its lowest line, "
+                         "and the fades, do not fit (a longer rig time, or a higher lowest "
+                         "frequency)")
     return best
 
 
 def design(band_hz, peak: float, lines: int = LINES, rig_time_s: float = RIG_TIME_S,
            min_periods: int = MIN_PERIODS, fade_cycles: int = FADE_CYCLES,
-           fs_hz: float | None = None, weights=None) -> Multisine:
+           fs_hz: float | None = None, weights=None, like: Multisine | None = None) -> Multisine:
     """A multisine over ``band_hz`` (lo, hi) with declared peak ``peak`` (injection units)
     that fits ``rig_time_s``; ``weights`` (one per line after rounding, default equal) are
-    the lines' relative amplitudes."""
+    the lines' relative amplitudes. ``like``: keep that multisine's period and lines, and
+    fill ``rig_time_s`` with as many whole periods as fit (a longer or shorter record of the
+    same points)."""
     fs_hz = float(fs_hz or _firmware.LOOP_RATE_HZ)
     if not 0 < band_hz[0] < band_hz[1] <= fs_hz / 4:
         raise InputError(f"band {band_hz[0]:g}-{band_hz[1]:g} Hz: the lowest must be above 0 "
                          f"and below the highest, at most {fs_hz / 4:g} Hz")
     if not 2 <= lines <= MAX_LINES:
         raise InputError(f"lines must be from 2 to {MAX_LINES}, got {lines}")
-    n, orders, periods = _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles)
+    if like is None:
+        n, orders, periods = _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles)
+    else:
+        n, orders = like.period_samples, list(like.orders)
+        periods = int((rig_time_s * fs_hz - 2 * like.fade_samples) // n)
+        if periods < min_periods:
+            raise InputError(f"{rig_time_s:g} s holds fewer than {min_periods} periods of "
+                             f"{n / fs_hz:g} s and the fades")
     w = np.ones(len(orders)) if weights is None else np.asarray(weights, dtype=float)
     if w.shape != (len(orders),) or not np.all(np.isfinite(w) & (w > 0)):
         raise InputError(f"weights: {len(orders)} positive numbers wanted")

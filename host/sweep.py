@@ -155,19 +155,21 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
 
 
 def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=None,
-                   band_hz=None) -> SweepPlan:
+                   band_hz=None, like=None) -> SweepPlan:
     """A multisine over the axis's Table 1 band (or ``band_hz``) in ``rig_time_s``
     (:func:`heliquad.host.multisine.design`). ``amplitude`` is its peak; without it, the
     dwell's amplitude for angle and rate injection (the same largest setpoint), and for
-    mixer injection the designed dwell's first amplitude, a quarter of the firmware's bound."""
-    from .design import START_FRACTION, amplitude_bound
+    mixer injection the firmware's bound: the designed dwell reaches it on a rig in
+    turbulence, and a multisine shares its power among its lines (on the vehicle's rigs in
+    still air the roll rig then swings about 5 deg). ``like``: the same lines as that
+    :class:`~heliquad.host.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
+    from .design import amplitude_bound
     from .multisine import LINES, RIG_TIME_S, design
 
     if amplitude is None:
-        amplitude = START_FRACTION * amplitude_bound(inject) if inject == "mixer" else \
-            default_amplitude(inject)
+        amplitude = amplitude_bound(inject) if inject == "mixer" else default_amplitude(inject)
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
-                rig_time_s or RIG_TIME_S)
+                rig_time_s or RIG_TIME_S, like=like)
     return SweepPlan.of_multisine(axis, inject, ms)
 
 

@@ -44,8 +44,8 @@ angle -> angle setpoint and angle.
 --signal multisine excites the whole band at once instead: --lines log-spaced lines (default
 15) on harmonics of one base period, phases for a low crest factor, faded in and out over a
 cycle of the lowest line, as many whole base periods as fit --rig-time (default 60 s, at
-least 3 periods); --amplitude is its peak (default: 5 deg angle, 10 deg/s rate, a quarter of
-the bound at the mixer). identify estimates every line from the one record.
+least 3 periods); --amplitude is its peak (default: 5 deg angle, 10 deg/s rate, the
+firmware's bound at the mixer). identify estimates every line from the one record.
 
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
          heliquad sweep --axis roll --sil --signal multisine --out roll_ms
