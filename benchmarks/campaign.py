@@ -127,7 +127,8 @@ def sil_section(tmp: str, repeat: int) -> None:
 #: The sections in the order they run; --skip leaves any out.
 SECTIONS = {"demo": demo_section, "identify": identify_section, "sil": sil_section}
 # A fourth section is to come here: the rig time per axis, the sequential dwell against a
-# multisine at equal accuracy (a function of (tmp, repeat) added to SECTIONS as "rig").
+# multisine at equal accuracy (a function of (tmp, repeat) added to SECTIONS as "rig"; for
+# now benchmarks/rig_time.py measures it on its own).
 
 
 def main(argv=None) -> None:

@@ -176,6 +176,9 @@ MAX_OMEGA_SPAN = 1e6
 #: RUN.csv: sampling rates, Hz, and the largest magnitude of a sample.
 RATE_RANGE_HZ = (1e-3, 1e7)
 MAX_SAMPLE = 1e150
+#: A sweep's signal (manifest.json and models.json ``signal``): the paper's dwell, one sine
+#: at a time, or one multisine for the whole band.
+SWEEP_SIGNALS = ("dwell", "multisine")
 #: A manifest's loop rate (freq_hz x period_samples), Hz.
 LOOP_RANGE_HZ = (1.0, 1e4)
 #: A model's pure delay, s.
@@ -361,7 +364,9 @@ def _manifest_schema():
                   "end_us": S.Int(0, 2**63 - 1), "messages": S.List(S.Str()),
                   **{k: S.Int(0, 2**31) for k in ("seq_gaps", "saturated", "collective_limited",
                                                   "sensor_clipped", "cycles")},
-                  "dwell_end": S.Str(("target", "cap", "amplitude")), "relative_sigma": S.Null(S.Num(0))})
+                  "dwell_end": S.Str(("target", "cap", "amplitude")), "relative_sigma": S.Null(S.Num(0)),
+                  "signal": S.Str(tuple(names.SIGNALS)),
+                  "orders": S.List(S.Int(1, 2**31), 1, 16), "fade_samples": S.Int(0, 2**31)})
     return S.Obj(
         required={"axis": S.Str(tuple(names.AXES)), "inject": S.Str(tuple(names.INJECTIONS)),
                   "frequencies": S.List(frequency, 0, 10_000)},
@@ -370,9 +375,21 @@ def _manifest_schema():
                   "gains": S.Null(_recorded_gains_schema()), "params": S.Null(S.Obj(values=S.Num())),
                   "started": S.Str(), "cycles": S.Int(1, 65535),
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
-                  "design": S.Obj(),
+                  "design": S.Obj(), "signal": S.Str(SWEEP_SIGNALS),
                   "complete": S.Bool(), "aborted": S.Null(S.Str()),
                   "in_progress_hz": S.Null(S.Num())})
+
+
+def _check_orders(path, key, entry) -> None:
+    """A multisine's lines: strictly increasing, each at least four samples per cycle."""
+    orders = entry.get("orders")
+    if orders is None:
+        S.fail(path, f"{key}.orders", "is missing (a multisine whose status is ok)")
+    if any(b <= a for a, b in zip(orders, orders[1:])):
+        S.fail(path, f"{key}.orders", "must be strictly increasing", orders)
+    if 4 * orders[-1] > entry["period_samples"]:
+        S.fail(path, f"{key}.orders", f"the highest line has fewer than 4 samples per cycle of "
+               f"the {entry['period_samples']}-sample period", orders[-1])
 
 
 def read_manifest(path) -> dict:
@@ -387,6 +404,8 @@ def read_manifest(path) -> dict:
             for name in ("freq_hz", "period_samples", "start_us", "end_us"):
                 if name not in entry:
                     S.fail(path, f"{key}.{name}", "is missing (the frequency's status is ok)")
+        if entry["status"] == "ok" and entry.get("signal") == "multisine":
+            _check_orders(path, key, entry)
         if "start_us" in entry and entry["start_us"] > entry.get("end_us", math.inf):
             S.fail(path, f"{key}.end_us", "is before start_us", entry["end_us"])
         if "freq_hz" in entry and "period_samples" in entry:
@@ -416,6 +435,7 @@ def _models_schema():
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
                   "estimate": S.Str(("excitation", "input")), "sil_truth": _sil_truth_schema(),
+                  "signal": S.Str(SWEEP_SIGNALS),
                   "replay": _replay_schema(),
                   "quality": S.Obj(required={"level": S.Str(("good", "acceptable", "poor")),
                                              "why": S.Str()}),

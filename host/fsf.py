@@ -52,6 +52,8 @@ __all__ = [
     "RecursiveFsf",
     "estimate_fsf",
     "estimate_against_excitation",
+    "estimate_multisine",
+    "estimate_multisine_against_excitation",
     "period_segments",
     "period_dfts",
     "estimate_frequency",
@@ -118,6 +120,10 @@ class FrequencyPoint:
         loop broken where ``r`` is injected, ``L = R/U - 1``); NaN otherwise.
     input_sigma : float
         Standard deviation of ``input_gain`` (NaN without it).
+    order : int
+        The harmonic of the record's (base) period this point is at: 1 for a sine; a
+        multisine's line (:func:`estimate_multisine`), whose ``period_samples`` is the base
+        period.
     """
 
     omega_rad_s: float
@@ -134,6 +140,7 @@ class FrequencyPoint:
     coherence_ru: float = math.nan
     input_gain: complex = complex("nan+nanj")
     input_sigma: float = math.nan
+    order: int = 1
 
     @property
     def magnitude(self) -> float:
@@ -232,12 +239,28 @@ class RecursiveFsf:
         return complex(self.theta[list(self.orders).index(harmonic)])
 
 
-def _harmonic_orders(harmonics: int) -> tuple:
-    """Parameter order of the paper: 0, 1, -1, 2, -2, ..., L, -L."""
-    if int(harmonics) != harmonics or not 1 <= harmonics <= 20:
-        raise InputError(f"harmonics must be an integer from 1 to 20, got {harmonics}")
+def _positive_orders(harmonics) -> tuple:
+    """The positive harmonic orders: ``1..L`` for an integer ``L`` (a sine's fundamental and
+    its overtones), or the given strictly increasing orders (a multisine's lines)."""
+    if isinstance(harmonics, (int, np.integer)) or (
+            isinstance(harmonics, float) and harmonics == int(harmonics)):
+        if not 1 <= harmonics <= 20:
+            raise InputError(f"harmonics must be an integer from 1 to 20, got {harmonics}")
+        return tuple(range(1, int(harmonics) + 1))
+    try:
+        orders = tuple(int(h) for h in harmonics)
+    except (TypeError, ValueError):
+        raise InputError(f"harmonics must be an integer from 1 to 20 or a list of orders, "
+                         f"got {harmonics!r}") from None
+    if not orders or orders[0] < 1 or any(b <= a for a, b in zip(orders, orders[1:])):
+        raise InputError(f"harmonic orders must be positive and strictly increasing, got {orders}")
+    return orders
+
+
+def _harmonic_orders(harmonics) -> tuple:
+    """Parameter order of the paper: 0, 1, -1, 2, -2, ..., L, -L (or the given orders)."""
     orders = [0]
-    for l in range(1, int(harmonics) + 1):
+    for l in _positive_orders(harmonics):
         orders += [l, -l]
     return tuple(orders)
 
@@ -405,10 +428,11 @@ def fsf_first_row(period: int, discard_periods: int) -> int:
     return (int(discard_periods) + 1) * int(period) - 1
 
 
-def fsf_design_matrix(u, period: int, harmonics: int, first_row: int,
+def fsf_design_matrix(u, period: int, harmonics, first_row: int,
                       offset: bool = False) -> np.ndarray:
     """Real FSF regressors for rows ``first_row..end``, one regressor per row of the result
-    (shape ``(2L + 1 [+ 1], rows)``): ``[f_0, 2Re f_1, -2Im f_1, ..., (1)]``.
+    (shape ``(2L + 1 [+ 1], rows)``): ``[f_0, 2Re f_l1, -2Im f_l1, ..., (1)]`` for the
+    orders ``l1, l2, ...`` of ``harmonics`` (``1..L`` for an integer).
 
     With ``exp(-j l w_d k) = c - j s`` (``c = cos(l w_d k)``, ``s = sin(l w_d k)``) the
     sliding sum is ``C - j S`` with real sliding sums ``C = sum u c`` and ``S = sum u s`` over
@@ -416,27 +440,27 @@ def fsf_design_matrix(u, period: int, harmonics: int, first_row: int,
     ``2 Re f_l = 2 (c C + s S) / N`` and ``-2 Im f_l = -2 (s C - c S) / N``: real arithmetic
     only. The window of row ``first_row`` starts ``period - 1`` samples earlier.
     """
-    L = int(harmonics)
+    orders = _positive_orders(harmonics)
     lo = max(first_row - period + 1, 0)
     keep = first_row - lo
     seg = u[lo:]
     reps = -(-(seg.size + lo % period) // period)
-    Xt = np.empty((2 * L + 1 + int(offset), u.size - first_row))
+    Xt = np.empty((2 * len(orders) + 1 + int(offset), u.size - first_row))
     Xt[0] = _sliding_sum(seg, period)[keep:] / period
     # One harmonic at a time: arrays of one record length stay in cache.
-    for l in range(1, L + 1):
+    for j, l in enumerate(orders, 1):
         angle = 2 * np.pi * ((l * np.arange(period)) % period) / period
         c = np.tile(np.cos(angle), reps)[lo % period:][:seg.size]    # c[k] = cos(l w_d k)
         s = np.tile(np.sin(angle), reps)[lo % period:][:seg.size]
         C = _sliding_sum(seg * c, period)[keep:]
         S = _sliding_sum(seg * s, period)[keep:]
         c, s = c[keep:], s[keep:]
-        np.multiply(c, C, out=Xt[2 * l - 1])
-        Xt[2 * l - 1] += s * S
-        Xt[2 * l - 1] *= 2.0 / period
-        np.multiply(c, S, out=Xt[2 * l])
-        Xt[2 * l] -= s * C
-        Xt[2 * l] *= 2.0 / period
+        np.multiply(c, C, out=Xt[2 * j - 1])
+        Xt[2 * j - 1] += s * S
+        Xt[2 * j - 1] *= 2.0 / period
+        np.multiply(c, S, out=Xt[2 * j])
+        Xt[2 * j] -= s * C
+        Xt[2 * j] *= 2.0 / period
     if offset:
         Xt[-1] = 1.0
     return Xt
@@ -449,7 +473,17 @@ def _sliding_sum(x, window: int) -> np.ndarray:
     return csum
 
 
-def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
+@dataclasses.dataclass
+class _FsfSolution:
+    """The batch FSF's least-squares solution over given orders."""
+    orders: tuple
+    gains: dict           # {l: G_l}, NaN where the input does not excite l
+    sigmas: dict          # {l: sqrt(E|dG_l|^2)}
+    offset: float
+    n_periods: int
+
+
+def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0) -> _FsfSolution:
     start = fsf_first_row(period, discard_periods)
     n_periods = (u.size - start) // period
     if n_periods < 1:
@@ -457,7 +491,8 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
                          f"{discard_periods + 2} periods of {period} samples (one fills the filter)")
     # Real form: G_0 f_0 + sum_l 2 Re(G_l f_l) = G_0 f_0 + sum_l (a_l 2Re f_l + b_l (-2Im f_l))
     # with G_l = a_l + j b_l. Every complete row is used, as RLS uses them.
-    Xt = fsf_design_matrix(u, period, harmonics, start, offset)
+    Xt = fsf_design_matrix(u, period, orders, start, offset)
+    n_lines = len(orders)
     ridge = np.full(Xt.shape[0], 2.0)          # |G_l|^2 + |G_-l|^2 = 2 (a^2 + b^2)
     ridge[0] = 1.0                            # f_0 and the offset are real
     if offset:
@@ -465,12 +500,14 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
     yy = y[start:]
     gram = Xt @ Xt.T
     # Excitation per harmonic from the Gram diagonal: sum |f_l|^2 = (|2Re f|^2 + |2Im f|^2)/4.
-    # Checked before solving: without excitation the system is singular.
+    # Checked before solving: without excitation the system is singular. A sine's reference
+    # is its fundamental, a multisine's its strongest line.
     diag = np.diag(gram)
-    amp = np.sqrt(np.r_[diag[0], (diag[1:2 * harmonics:2] + diag[2:2 * harmonics + 1:2]) / 4])
-    if not amp[1] > NO_EXCITATION_RELATIVE * float(np.sqrt(u[start:] @ u[start:])):
-        raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
-    excited = amp >= EXCITED_FRACTION * amp[1]
+    amp = np.sqrt(np.r_[diag[0], (diag[1:2 * n_lines:2] + diag[2:2 * n_lines + 1:2]) / 4])
+    reference = amp[1] if orders[0] == 1 else float(np.max(amp[1:]))
+    if not reference > NO_EXCITATION_RELATIVE * float(np.sqrt(u[start:] @ u[start:])):
+        raise InputError(f"the input has no component at {fs_hz * orders[0] / period:g} Hz")
+    excited = amp >= EXCITED_FRACTION * reference
     A = gram + np.diag(ridge) / p0
     coef = scipy.linalg.solve(A, Xt @ yy, assume_a="pos")
     resid = yy - coef @ Xt
@@ -479,14 +516,23 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
     noise_var = float(resid @ resid) / dof
     A_inv = scipy.linalg.inv(A)
     cov = noise_var * A_inv @ gram @ A_inv
-    gains = {l: complex(coef[2 * l - 1], coef[2 * l]) if excited[l] else complex("nan+nanj")
-             for l in range(1, int(harmonics) + 1)}
-    sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0))
+    nan = complex("nan+nanj")
+    gains = {l: complex(coef[2 * j - 1], coef[2 * j]) if excited[j] else nan
+             for j, l in enumerate(orders, 1)}
+    sigmas = {l: math.sqrt(max(cov[2 * j - 1, 2 * j - 1] + cov[2 * j, 2 * j], 0.0))
+              for j, l in enumerate(orders, 1)}
+    return _FsfSolution(tuple(orders), gains, sigmas, float(coef[-1]) if offset else 0.0,
+                        int(n_periods))
+
+
+def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
+    sol = _fsf_solution(u, y, fs_hz, period, _positive_orders(harmonics), discard_periods,
+                        offset, p0)
     w = 2 * np.pi / period
     coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
-    return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
-                          period_samples=float(period), n_periods=int(n_periods), method="fsf",
-                          harmonics=gains, offset=float(coef[-1]) if offset else 0.0)
+    return FrequencyPoint(omega_rad_s=w * fs_hz, gain=sol.gains[1], sigma=sol.sigmas[1],
+                          coherence=coh, period_samples=float(period), n_periods=sol.n_periods,
+                          method="fsf", harmonics=sol.gains, offset=sol.offset)
 
 
 def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
@@ -562,3 +608,86 @@ def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
                           n_periods=to_y.n_periods, method=to_y.method, harmonics=gains,
                           offset=to_y.offset, estimate="excitation", coherence_ry=coh_ry,
                           coherence_ru=coh_ru, input_gain=t_u, input_sigma=to_u.sigma)
+
+
+def _multisine_checks(u, y, fs_hz, period, orders):
+    u, y = _check_signals(u, y)
+    orders = _positive_orders(orders)
+    if not fs_hz > 0:
+        raise InputError(f"sampling rate must be positive, got {fs_hz}")
+    if int(period) != period or period < 4 * orders[-1]:
+        raise InputError(f"a multisine's period must be a whole number of samples, at least 4 "
+                         f"per cycle of its highest line ({4 * orders[-1]}), got {period}")
+    return u, y, int(period), orders
+
+
+def estimate_multisine(u, y, fs_hz: float, period: int, orders,
+                       discard_periods: int = 0, offset: bool = True,
+                       p0: float | None = None) -> list:
+    """Every line of a multisine record: one :class:`FrequencyPoint` per excited harmonic
+    ``l`` of ``orders`` of the base period of ``period`` samples, from one FSF fit of the
+    whole record (the batch form of :class:`RecursiveFsf` with the same orders and ``p0``).
+
+    With ``discard_periods=0`` the regression starts once the filter holds one whole
+    period: an impulse response shorter than the period has forgotten what came before (the
+    fade-in), so that period is the settling. ``sigma`` per line from the fit's covariance;
+    ``coherence`` per line over the whole periods after the first (NaN with fewer than
+    two). A line the input does not excite is left out."""
+    u, y, period, orders = _multisine_checks(u, y, fs_hz, period, orders)
+    power = float(np.mean(u ** 2))
+    if not power > 0.0:
+        raise InputError("the input is zero: it excites none of the multisine's lines")
+    p0 = DEFAULT_P0_RELATIVE / power if p0 is None else p0
+    sol = _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0)
+    segments = period_segments(u.size, period, max(discard_periods, 1))
+    points = []
+    for l in orders:
+        if not np.isfinite(sol.gains[l]):
+            continue
+        w = 2 * np.pi * l / period
+        points.append(FrequencyPoint(
+            omega_rad_s=w * fs_hz, gain=sol.gains[l], sigma=sol.sigmas[l],
+            coherence=period_coherence(u, y, w, *segments), period_samples=float(period),
+            n_periods=sol.n_periods, method="fsf", harmonics={1: sol.gains[l]},
+            offset=sol.offset, order=l))
+    return points
+
+
+def estimate_multisine_against_excitation(r, u, y, fs_hz: float, period: int, orders,
+                                          discard_periods: int = 0) -> list:
+    """Every line of a closed-loop multisine record, ``G_l = (Y/R)_l / (U/R)_l``: the FSF of
+    the output and of the input against the logged excitation ``r``
+    (:func:`estimate_against_excitation` for each line at once). ``sigma`` per line from the
+    scatter of the per-period estimates after the first period (the FSF's filter fill),
+    with two or more such periods; else the two fits' sigmas propagated."""
+    r, u, period, orders = _multisine_checks(r, u, fs_hz, period, orders)
+    _, y = _check_signals(r, y)
+    try:
+        to_y = {p.order: p for p in estimate_multisine(r, y, fs_hz, period, orders,
+                                                       discard_periods)}
+        to_u = {p.order: p for p in estimate_multisine(r, u, fs_hz, period, orders,
+                                                       discard_periods)}
+    except InputError as exc:
+        raise InputError(f"the logged excitation: {exc}") from None
+    starts, length = period_segments(r.size, period, max(discard_periods, 1))
+    points = []
+    for l in sorted(to_y):
+        py, pu = to_y[l], to_u[l]
+        t_u = pu.gain
+        if not (abs(t_u) > 0 and math.isfinite(abs(t_u))):
+            continue                                  # the input does not follow this line
+        g = py.gain / t_u
+        w = 2 * np.pi * l / period
+        R, U, Y = (period_dfts(x, w, starts, length) for x in (r, u, y))
+        if len(starts) >= 2 and np.all(np.abs(R) > 0):
+            e = (Y - g * U) / (t_u * R)
+            sigma = math.sqrt(float(np.sum(np.abs(e - e.mean()) ** 2)) / (e.size - 1) / e.size)
+        else:
+            sigma = math.hypot(py.sigma, abs(g) * pu.sigma) / abs(t_u)
+        coh_ry = period_coherence(r, y, w, starts, length)
+        coh_ru = period_coherence(r, u, w, starts, length)
+        points.append(dataclasses.replace(
+            py, gain=g, sigma=sigma, coherence=float(np.fmin(coh_ry, coh_ru)),
+            harmonics={1: g}, estimate="excitation", coherence_ry=coh_ry, coherence_ru=coh_ru,
+            input_gain=t_u, input_sigma=pu.sigma))
+    return points

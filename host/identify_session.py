@@ -105,7 +105,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  "every well-formed record was read")
     axis = manifest["axis"]
-    points, segments, skipped = _estimate_points(manifest, samples, estimate, progress)
+    points, segments, firsts, skipped = _estimate_points(manifest, samples, estimate, progress)
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -129,7 +129,8 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(table, orders, delay=delay)
     extra = {"log": damage.record(), "skipped_frequencies": skipped,
-             "saturated_frequencies": saturated, "estimate": estimate}
+             "saturated_frequencies": saturated, "estimate": estimate,
+             "signal": manifest.get("signal", "dwell")}
     if manifest.get("gains"):
         extra["gains"] = manifest["gains"]       # what the board flew, for validate
     loop = _broken_loop(manifest, points, estimate, progress)
@@ -138,7 +139,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     truth = _truth(dir_path, manifest, points, result, progress)
     if truth:
         extra["sil_truth"] = truth
-    replays = _replays(result, points, segments)
+    replays = _replays(result, firsts, segments)
     if replays is not None:
         extra["replay"] = _replay_record(result.recommended, replays)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
@@ -147,12 +148,12 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     _write_plots(plots, dir_path, manifest, points, result, replays)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
-            "records": segments, "replays": replays}
+            "records": segments, "record_points": firsts, "replays": replays}
 
 
 def _replays(result, points, segments):
-    """The recommended model's replay of each record (:mod:`.replay`), or None when no model
-    is recommended."""
+    """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
+    record's first point), or None when no model is recommended."""
     from .fsf import DEFAULT_DISCARD_PERIODS
     from .replay import replay_points
 
@@ -251,29 +252,51 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
 
 
 def _estimate_points(manifest, samples, estimate, progress) -> tuple:
-    """(points, the records they came from, the frequencies skipped and why): one point per
-    measured frequency, against the excitation or the input (``estimate``)."""
-    from .fsf import estimate_against_excitation, estimate_fsf
-
-    points, segments, skipped = [], [], []
+    """(points, the records they came from, each record's first point, the frequencies
+    skipped and why): one point per measured frequency of a dwell, one per line of a
+    multisine, against the excitation or the input (``estimate``)."""
+    points, segments, firsts, skipped = [], [], [], []
     for entry, t, r, u, y in _segments(manifest, samples):
-        fs = entry["freq_hz"] * entry["period_samples"]
+        what = _entry_name(entry)
         if not len(t):
-            progress(f"  {entry['freq_hz']:.4g} Hz skipped: the log holds none of its samples")
-            skipped.append(f"{entry['freq_hz']:.4g} Hz: the log holds none of its samples")
+            progress(f"  {what} skipped: the log holds none of its samples")
+            skipped.append(f"{what}: the log holds none of its samples")
             continue
         try:
-            if estimate == "excitation":
-                p = estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1)
-            else:
-                p = estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)
+            found = _estimate_entry(entry, r, u, y, estimate)
         except InputError as exc:
-            progress(f"  {entry['freq_hz']:.4g} Hz skipped: {exc}")
-            skipped.append(f"{entry['freq_hz']:.4g} Hz: {exc}")
+            progress(f"  {what} skipped: {exc}")
+            skipped.append(f"{what}: {exc}")
             continue
-        points.append(p)
+        points += found
         segments.append((entry["freq_hz"], t, u, y))
-    return points, segments, skipped
+        firsts.append(found[0])
+    return points, segments, firsts, skipped
+
+
+def _entry_name(entry) -> str:
+    if entry.get("signal") == "multisine":
+        return f"the multisine of base {entry['freq_hz']:.4g} Hz"
+    return f"{entry['freq_hz']:.4g} Hz"
+
+
+def _estimate_entry(entry, r, u, y, estimate) -> list:
+    """The points of one excitation's full-amplitude record: a sine's one (the first period
+    discarded), or every line of a multisine (its first period fills the FSF's filter)."""
+    from .fsf import (estimate_against_excitation, estimate_fsf, estimate_multisine,
+                      estimate_multisine_against_excitation)
+
+    fs = entry["freq_hz"] * entry["period_samples"]
+    if entry.get("signal") == "multisine":
+        args = (fs, entry["period_samples"], entry["orders"])
+        found = estimate_multisine_against_excitation(r, u, y, *args) \
+            if estimate == "excitation" else estimate_multisine(u, y, *args)
+        if not found:
+            raise InputError("the input follows none of its lines")
+        return found
+    if estimate == "excitation":
+        return [estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1)]
+    return [estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)]
 
 
 def _saturated(manifest) -> list:

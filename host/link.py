@@ -143,11 +143,19 @@ class TelemetryLink:
                                names.MODES[mode])
 
     def start_excitation(self, axis: str, injection: str, freq_hz: float, amplitude: float,
-                         cycles: int, fade_cycles: int) -> None:
-        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target,
-                                    self.mav_module.HQ_EXCITATION_START, names.AXES[axis],
-                                    names.INJECTIONS[injection], float(freq_hz), float(amplitude),
-                                    int(cycles), int(fade_cycles))
+                         cycles: int, fade_cycles: int, harmonics=None) -> None:
+        """Start a sine, or with ``harmonics`` (``[(order, amplitude, phase_rad), ...]``) a
+        multisine of base frequency ``freq_hz`` whose declared peak is ``amplitude``."""
+        m = self.mav_module
+        signal, orders, amps, phases = m.HQ_SIGNAL_SINE, [0] * 16, [0.0] * 16, [0.0] * 16
+        if harmonics is not None:
+            signal = m.HQ_SIGNAL_MULTISINE
+            for i, (order, amp, phase) in enumerate(harmonics):
+                orders[i], amps[i], phases[i] = int(order), float(amp), float(phase)
+        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_START,
+                                    names.AXES[axis], names.INJECTIONS[injection], float(freq_hz),
+                                    float(amplitude), int(cycles), int(fade_cycles), signal,
+                                    orders, amps, phases)
 
     def stop_excitation(self) -> None:
         """Stop any excitation (axis and injection are not read with STOP)."""

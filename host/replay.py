@@ -98,9 +98,10 @@ def replay_record(response, u, y, fs_hz: float, period_samples,
 def replay_points(model, points, records, discard_periods: int = DEFAULT_DISCARD_PERIODS):
     """The replay through ``model`` (a :class:`~heliquad.host.fit.TfModel`) of each record
     ``(freq_hz, t_s, u, y)`` that the point beside it (a
-    :class:`~heliquad.host.fsf.FrequencyPoint`) was estimated from, at that point's period."""
+    :class:`~heliquad.host.fsf.FrequencyPoint`; a multisine's record: any of its lines) was
+    estimated from, at that point's (base) period: every line of the record is replayed."""
     out = []
     for p, (_, _, u, y) in zip(points, records):
-        fs_hz = p.omega_rad_s * p.period_samples / (2 * np.pi)
+        fs_hz = p.omega_rad_s * p.period_samples / (2 * np.pi * p.order)
         out.append(replay_record(model.response, u, y, fs_hz, p.period_samples, discard_periods))
     return out

@@ -107,6 +107,21 @@ def _axis_section(folder):
     return "".join(parts), flags
 
 
+def signal_text(manifest) -> str:
+    """Which excitation the sweep used, in words (a manifest from before multisines has no
+    ``signal``: a dwell)."""
+    design = manifest.get("design") or {}
+    if manifest.get("signal") != "multisine":
+        n = sum(1 for f in manifest.get("frequencies", []) if f.get("status") == "ok")
+        return f"dwell, one sine at a time ({n} frequencies measured)"
+    return (f"multisine, {len(design.get('orders', []))} lines "
+            f"{_fmt(design.get('freqs_hz', [math.nan])[0])}-"
+            f"{_fmt(design.get('freqs_hz', [math.nan])[-1])} Hz on harmonics of "
+            f"{_fmt(design.get('base_hz'))} Hz, {design.get('periods')} periods, peak "
+            f"{_fmt(design.get('peak'))}, crest factor {_fmt(design.get('crest_factor'))}, "
+            f"{_fmt(design.get('duration_s'))} s of excitation")
+
+
 def _sweep_html(manifest, axis, flags):
     """The session's source and the frequencies tried; flags those not measured and an
     early end (not those superseded: measured again with a better amplitude)."""
@@ -115,6 +130,7 @@ def _sweep_html(manifest, axis, flags):
             f"{html.escape(json.dumps(src))}; firmware {html.escape(str(manifest.get('firmware')))}; "
             f"started {html.escape(str(manifest.get('started')))}; gains "
             f"{html.escape(json.dumps(manifest.get('gains')))}.</p>")
+    text += f"<p>Signal: {html.escape(signal_text(manifest))}.</p>"
     rows = [(_fmt(f.get("requested_hz")), _fmt(f.get("freq_hz")), f.get("period_samples", "-"),
              f.get("samples", 0), f.get("status")) for f in manifest.get("frequencies", [])]
     text += "<h3>Frequencies</h3>" + _table(

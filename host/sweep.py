@@ -41,7 +41,7 @@ from .gains import gains_from_params, single
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .params import session_params
 
-__all__ = ["SweepPlan", "default_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
+__all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
            "saturation_text"]
 
@@ -91,13 +91,29 @@ class SweepPlan:
         self.amplitudes = [None if a is None else float(a) for a in amplitudes]
         self.cycles, self.fade_cycles = int(cycles), int(fade_cycles)
         self.dwell, self.design = dwell, design
+        self.multisine = None
+
+    @classmethod
+    def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
+        """One excitation: the multisine (:mod:`.multisine`), its base frequency, declared
+        peak, whole periods and fade."""
+        plan = cls(axis, inject, [multisine.base_hz], [multisine.peak], multisine.periods,
+                   multisine.fade_cycles)
+        plan.multisine = multisine
+        return plan
+
+    @property
+    def signal(self) -> str:
+        return "dwell" if self.multisine is None else "multisine"
 
     def cycles_for(self, freq_hz: float) -> int:
-        """The measured cycles a frequency's excitation is started with."""
+        """The measured cycles (a multisine: base periods) an excitation is started with."""
         return self.dwell.cycles(freq_hz) if self.dwell else self.cycles
 
     def record(self) -> dict:
         """The design, for the manifest."""
+        if self.multisine is not None:
+            return self.multisine.record()
         out = {"cycles": self.cycles} if self.dwell is None else {
             "dwell": "sequential", "min_cycles": self.dwell.min_cycles,
             "max_cycles": self.dwell.max_cycles, "max_dwell_s": self.dwell.max_dwell_s,
@@ -136,6 +152,25 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
         return SweepPlan(axis, inject, freqs_hz, amps, cycles, design=design)
     return SweepPlan(axis, inject, freqs_hz, amps, MEASURED_CYCLES, dwell=dwell or Dwell(),
                      design=design)
+
+
+def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=None,
+                   band_hz=None, like=None) -> SweepPlan:
+    """A multisine over the axis's Table 1 band (or ``band_hz``) in ``rig_time_s``
+    (:func:`heliquad.host.multisine.design`). ``amplitude`` is its peak; without it, the
+    dwell's amplitude for angle and rate injection (the same largest setpoint), and for
+    mixer injection the firmware's bound: the designed dwell reaches it on a rig in
+    turbulence, and a multisine shares its power among its lines (on the vehicle's rigs in
+    still air the roll rig then swings about 5 deg). ``like``: the same lines as that
+    :class:`~heliquad.host.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
+    from .design import amplitude_bound
+    from .multisine import LINES, RIG_TIME_S, design
+
+    if amplitude is None:
+        amplitude = amplitude_bound(inject) if inject == "mixer" else default_amplitude(inject)
+    ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
+                rig_time_s or RIG_TIME_S, like=like)
+    return SweepPlan.of_multisine(axis, inject, ms)
 
 
 def _write_manifest(out_dir, manifest) -> None:
@@ -185,7 +220,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
                 "design": plan.record(),
                 "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
-                "frequencies": [], "complete": False, "aborted": None}
+                "signal": plan.signal, "frequencies": [], "complete": False, "aborted": None}
     current = None
     try:
         _write_manifest(out_dir, manifest)
@@ -201,7 +236,9 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             current = None
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
-            progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {entry.get('freq_hz', f):.4g} Hz  "
+            what = f"{entry.get('freq_hz', f):.4g} Hz" if plan.multisine is None else \
+                f"multisine, {len(plan.multisine.orders)} lines on {entry.get('freq_hz', f):.4g} Hz"
+            progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {what}  "
                      f"{entry['samples']} samples{saturation_text(entry)}  {entry['status']}")
             if entry["status"] != "ok":
                 manifest["aborted"] = entry["status"]
@@ -329,6 +366,8 @@ class ExcitationWatch:
         self.plan, self.limits, self.progress = plan, limits, progress
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
+        if plan.multisine is not None:
+            self.entry.update(signal="multisine", orders=list(plan.multisine.orders))
         self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
         self.keep_rows = keep_rows
         self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
@@ -369,6 +408,8 @@ class ExcitationWatch:
             return self._end(f"refused by the firmware: {reason_text(m.reason)}")
         if "freq_hz" not in self.entry:
             self.entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
+            if self.plan.multisine is not None:
+                self.entry["fade_samples"] = int(m.fade_samples)
         if m.state == self.idle and m.reason not in self.normal_end:
             self._end(f"stopped by the firmware: {reason_text(m.reason)}")
 
@@ -479,7 +520,8 @@ def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
                             keep_rows)
     watch.redesign = redesign
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles_for(f),
-                                 plan.fade_cycles)
+                                 plan.fade_cycles,
+                                 plan.multisine.harmonics() if plan.multisine else None)
     finishing = False
     while not watch.done:
         session.advance(watch)

@@ -8,7 +8,8 @@ names and their numbers come from the generated module, never from a copy:
 * ``AXES``: HQ_AXIS, ``{"roll": 0, "pitch": 1, "yaw": 2}`` (the value is also the body axis
   index, x y z, in the firmware and the simulator);
 * ``INJECTIONS``: HQ_INJECTION, ``{"angle": ..., "rate": ..., "mixer": ...}``;
-* ``MODES``: HQ_MODE, ``{"angle": ..., "rate": ...}``.
+* ``MODES``: HQ_MODE, ``{"angle": ..., "rate": ...}``;
+* ``SIGNALS``: HQ_SIGNAL, ``{"sine": ..., "multisine": ...}``.
 
 They are made on first use, so importing a module that names them does not need the
 generated module yet: a missing one is the InputError of :func:`dialect` where it is used.
@@ -20,11 +21,12 @@ import types
 
 from .errors import InputError
 
-# AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
+# AXES, INJECTIONS, MODES and SIGNALS are made on first use (__getattr__), so not listed here.
 __all__ = ["dialect", "enum_values", "NAMED_ENUMS"]
 
 #: The lower-case name sets above: module attribute -> dialect enum.
-NAMED_ENUMS = {"AXES": "HQ_AXIS", "INJECTIONS": "HQ_INJECTION", "MODES": "HQ_MODE"}
+NAMED_ENUMS = {"AXES": "HQ_AXIS", "INJECTIONS": "HQ_INJECTION", "MODES": "HQ_MODE",
+               "SIGNALS": "HQ_SIGNAL"}
 
 _made: dict = {}
 

@@ -107,3 +107,99 @@ def test_finish_in_the_fade_out_or_idle_changes_nothing():
     assert ex.finish() and ex.total_samples == total and ex.config.cycles == 3
     _run(ex)
     assert not ex.finish() and not ex.active
+
+
+# --- multisine ------------------------------------------------------------------------------
+
+def multisine(harmonics, base=0.5, peak=None, cycles=3, fade=1):
+    """A multisine config; ``peak`` defaults to the sum's true peak (computed in double)."""
+    c = config(base, cycles=cycles, fade=fade)
+    c.signal = fw.Signal.MULTISINE
+    c.harmonics = harmonics
+    if peak is None:
+        n = round(LOOP_HZ / base)
+        k = np.arange(n)
+        peak = max(abs(sum(a * np.sin(2 * np.pi * h * k / n + p) for h, a, p in harmonics)))
+    c.amplitude = peak
+    return c
+
+
+def play(ex):
+    values = []
+    while ex.active:
+        values.append(ex.next())
+    return np.array(values)
+
+
+def test_a_multisine_is_the_sum_of_its_harmonics_with_exact_phases_and_its_fades():
+    lines = [(3, 0.2, 0.0), (7, 0.1, 1.0), (20, 0.05, -2.5)]
+    ex = fw.Excitation()
+    assert ex.start(multisine(lines, base=0.5, cycles=3, fade=2), LOOP_HZ)
+    n = ex.period_samples
+    assert n == 400
+    fade = 2 * math.ceil(400 / 3)                  # two cycles of the lowest line
+    assert ex.fade_samples == fade and ex.total_samples == 3 * n + 2 * fade
+    values = play(ex)
+    k = np.arange(values.size)
+    full = sum(a * np.sin(2 * np.pi * h * k / n + p) for h, a, p in lines)
+    # Full amplitude between the fades, to float precision; periodic with period N.
+    mid = slice(fade, fade + 3 * n)
+    np.testing.assert_allclose(values[mid], full[mid], atol=2e-6)
+    np.testing.assert_allclose(values[fade:fade + n], values[fade + n:fade + 2 * n], atol=1e-6)
+    # The fades start and end at zero and stay below the full signal.
+    assert values[0] == 0.0 and abs(values[-1]) < 1e-3
+    assert np.all(np.abs(values[:fade]) <= np.abs(full[:fade]) + 1e-6)
+    assert not ex.peak_exceeded
+
+
+@pytest.mark.parametrize("lines, why", [
+    ([(5, 0.1, 0.0), (5, 0.1, 0.0)], "repeated order"),
+    ([(7, 0.1, 0.0), (5, 0.1, 0.0)], "not increasing"),
+    ([(0, 0.1, 0.0), (5, 0.1, 0.0)], "order 0"),
+    ([(5, 0.1, 0.0), (101, 0.1, 0.0)], "fewer than 4 samples per cycle"),
+    ([(5, math.nan, 0.0)], "amplitude NaN"),
+    ([(5, -0.1, 0.0)], "negative amplitude"),
+    ([(5, 0.1, math.inf)], "phase infinite"),
+    ([], "no harmonics"),
+])
+def test_a_multisine_with_impossible_harmonics_does_not_start(lines, why):
+    ex = fw.Excitation()
+    assert not ex.start(multisine(lines, base=0.5, peak=1.0), LOOP_HZ), why
+    assert not ex.active
+
+
+def test_a_declared_peak_below_the_signal_rms_is_refused():
+    lines = [(3, 0.2, 0.0), (5, 0.2, 1.0)]
+    rms = math.sqrt(2 * 0.2 ** 2 / 2)
+    ex = fw.Excitation()
+    assert not ex.start(multisine(lines, peak=0.95 * rms), LOOP_HZ)
+    assert ex.start(multisine(lines, peak=rms), LOOP_HZ)      # possible: checked as it plays
+
+
+def test_a_sample_beyond_the_declared_peak_is_never_output_and_stops_the_excitation():
+    lines = [(3, 0.2, 0.0), (5, 0.2, 1.0)]
+    true_peak = multisine(lines).amplitude
+    ex = fw.Excitation()
+    assert ex.start(multisine(lines, peak=0.8 * true_peak, fade=1), LOOP_HZ)
+    values = play(ex)
+    assert ex.peak_exceeded and not ex.active
+    assert values.size < ex.total_samples
+    assert np.max(np.abs(values)) <= 0.8 * true_peak * (1 + 1e-3)
+    assert values[-1] == 0.0                       # the offending sample was not output
+    # The true peak declared: it plays to the end.
+    assert ex.start(multisine(lines, fade=1), LOOP_HZ)
+    assert play(ex).size == ex.total_samples and not ex.peak_exceeded
+
+
+def test_the_host_design_s_declared_peak_holds_in_the_firmware_s_float_arithmetic():
+    from heliquad.host import multisine as design, paper
+
+    for band in paper.BANDS_HZ.values():
+        ms = design.design(band, 0.25)
+        c = multisine(ms.harmonics(), base=ms.base_hz, peak=ms.peak, cycles=ms.periods)
+        ex = fw.Excitation()
+        assert ex.start(c, LOOP_HZ) and ex.period_samples == ms.period_samples
+        assert ex.fade_samples == ms.fade_samples
+        values = play(ex)
+        assert not ex.peak_exceeded and values.size == ex.total_samples
+        assert np.max(np.abs(values)) == pytest.approx(ms.peak, rel=1e-3)

@@ -8,6 +8,7 @@ import pytest
 from heliquad.host.baselines import estimate_dft, estimate_h1
 from heliquad.host.errors import InputError
 from heliquad.host.fsf import (RecursiveFsf, estimate_against_excitation, estimate_frequency,
+                               estimate_multisine, estimate_multisine_against_excitation,
                                estimate_fsf, period_coherence)
 from heliquad.sim.dwell import simulate_sine_dwell
 
@@ -170,24 +171,39 @@ def test_baselines_agree_with_fsf_on_clean_data(estimator):
     assert abs(base.gain / truth(*ROLL, f) - 1) < 1e-6
 
 
-def closed_loop(period, cycles, kp, gust_std, seed, amplitude=1.0):
-    """The roll model (ZOH at FS_HZ) under proportional rate feedback ``u = r - kp y`` with
-    slow gusts added to the plant input: (r, u, y), one sample per loop, and the sampled truth
-    at the excitation's frequency."""
+def roll_zoh():
+    """The roll model sampled with a zero-order hold at FS_HZ: (Ad, Bd, Cd)."""
     import scipy.signal as sig
 
     A, B, C, D = sig.tf2ss(*ROLL)
     Ad, Bd, Cd, _, _ = sig.cont2discrete((A, B, C, D), 1 / FS_HZ, method="zoh")
+    return Ad, Bd, Cd
+
+
+def sampled_truth(z):
+    Ad, Bd, Cd = roll_zoh()
+    return np.array([(Cd @ np.linalg.solve(zi * np.eye(2) - Ad, Bd)).item()
+                     for zi in np.atleast_1d(z)])
+
+
+def closed_loop(period, cycles, kp, gust_std, seed, amplitude=1.0, r=None):
+    """The roll model (ZOH at FS_HZ) under proportional rate feedback ``u = r - kp y`` with
+    slow gusts added to the plant input: (r, u, y), one sample per loop, and the sampled truth
+    at the excitation's frequency. ``r``: another excitation (of ``period * cycles``
+    samples) than the sine of that period."""
+    import scipy.signal as sig
+
+    Ad, Bd, Cd = roll_zoh()
     n = period * cycles
     gust = sig.lfilter([0.03], [1, -0.97], np.random.default_rng(seed).normal(0, gust_std, n))
-    r = amplitude * np.sin(2 * np.pi * np.arange(n) / period)
+    if r is None:
+        r = amplitude * np.sin(2 * np.pi * np.arange(n) / period)
     x, u, y = np.zeros(2), np.zeros(n), np.zeros(n)
     for k in range(n):
         y[k] = Cd[0] @ x
         u[k] = r[k] - kp * y[k]
         x = Ad @ x + Bd[:, 0] * (u[k] + gust[k])
-    z = np.exp(2j * np.pi / period)
-    return r, u, y, (Cd @ np.linalg.solve(z * np.eye(2) - Ad, Bd)).item()
+    return r, u, y, sampled_truth(np.exp(2j * np.pi / period))[0]
 
 
 def test_against_the_excitation_is_exact_in_a_noise_free_closed_loop():
@@ -226,3 +242,98 @@ def test_an_excitation_the_input_does_not_follow_is_refused():
         estimate_against_excitation(r, np.zeros_like(r), y, FS_HZ, 2.0)
     with pytest.raises(InputError, match="the logged excitation: the input is zero"):
         estimate_against_excitation(np.zeros_like(r), r, y, FS_HZ, 2.0)
+
+
+# --- multisine: every line from one record ----------------------------------------------------
+
+#: A 10 s base period (the roll model's impulse response is e^-25 of its start after it, so
+#: the FSF's finite-impulse-response form is exact to round-off) and lines 0.3-5.5 Hz.
+MS_PERIOD = 2000
+MS_ORDERS = (3, 5, 8, 13, 21, 34, 55)
+
+
+def multisine_input(periods, seed=0):
+    k = np.arange(MS_PERIOD * periods)
+    phases = np.random.default_rng(seed).uniform(0, 2 * np.pi, len(MS_ORDERS))
+    return sum(0.2 * np.sin(2 * np.pi * h * k / MS_PERIOD + p) for h, p in zip(MS_ORDERS, phases))
+
+
+def open_loop(u):
+    import scipy.signal as sig
+
+    Ad, Bd, Cd = roll_zoh()
+    num, den = sig.ss2tf(Ad, Bd, Cd, np.zeros((1, 1)))
+    return sig.lfilter(num[0], den, u)
+
+
+def test_every_line_of_a_noise_free_multisine_is_exact_from_one_record():
+    u = multisine_input(3)
+    y = open_loop(u) + 0.2                        # from rest, with an output offset
+    points = estimate_multisine(u, y, FS_HZ, MS_PERIOD, MS_ORDERS)
+    assert [p.order for p in points] == list(MS_ORDERS)
+    want = sampled_truth(np.exp(2j * np.pi * np.array(MS_ORDERS) / MS_PERIOD))
+    got = np.array([p.gain for p in points])
+    np.testing.assert_allclose(got / want, 1.0, atol=1e-6)
+    assert [p.freq_hz for p in points] == pytest.approx(
+        [FS_HZ * h / MS_PERIOD for h in MS_ORDERS], rel=1e-12)
+    assert all(p.coherence == pytest.approx(1.0) for p in points)
+    assert all(p.offset == pytest.approx(0.2, abs=1e-6) for p in points)
+
+
+def test_the_recursive_and_batch_fsf_agree_on_a_multisine():
+    u = multisine_input(3, seed=1)
+    y = open_loop(u) + np.random.default_rng(2).normal(0, 0.05, u.size)
+    p0 = 1e5
+    batch = estimate_multisine(u, y, FS_HZ, MS_PERIOD, MS_ORDERS, p0=p0)
+    rls = RecursiveFsf(MS_PERIOD, harmonics=MS_ORDERS, discard_periods=0, p0=p0)
+    for a, b in zip(u, y):
+        rls.update(a, b)
+    for p in batch:
+        assert abs(rls.gain(p.order) - p.gain) <= 1e-6 * abs(p.gain)
+
+
+def test_each_line_s_sigma_describes_its_scatter_under_noise():
+    z = []
+    want = sampled_truth(np.exp(2j * np.pi * np.array(MS_ORDERS) / MS_PERIOD))
+    for seed in range(10):
+        u = multisine_input(4)
+        y = open_loop(u) + np.random.default_rng(seed).normal(0, 0.2, u.size)
+        points = estimate_multisine(u, y, FS_HZ, MS_PERIOD, MS_ORDERS)
+        z += [abs(p.gain - w) / p.sigma for p, w in zip(points, want)]
+        assert all(0 < p.coherence < 1 for p in points)
+    assert 0.6 < math.sqrt(np.mean(np.square(z))) < 1.6
+
+
+def test_a_closed_loop_multisine_against_the_excitation_is_exact_and_unbiased():
+    want = sampled_truth(np.exp(2j * np.pi * np.array(MS_ORDERS) / MS_PERIOD))
+    r = multisine_input(4)
+    r, u, y, _ = closed_loop(MS_PERIOD, 4, kp=3.0, gust_std=0.0, seed=0, r=r)
+    points = estimate_multisine_against_excitation(r, u, y, FS_HZ, MS_PERIOD, MS_ORDERS)
+    np.testing.assert_allclose(np.array([p.gain for p in points]) / want, 1.0, atol=1e-5)
+    assert all(p.estimate == "excitation" and p.coherence == pytest.approx(1.0) for p in points)
+    # Gusts (as strong against each 0.2 line as the sine test's against its 1.0 sine): the
+    # direct estimate is pulled towards -1/kp at the low lines; against the
+    # excitation the mean over records is the truth within 3 standard errors.
+    direct, against = [], []
+    for seed in range(8):
+        r, u, y, _ = closed_loop(MS_PERIOD, 4, kp=3.0, gust_std=0.6, seed=seed, r=r)
+        direct.append([p.gain for p in estimate_multisine(u, y, FS_HZ, MS_PERIOD, MS_ORDERS)])
+        against.append([p.gain for p in estimate_multisine_against_excitation(
+            r, u, y, FS_HZ, MS_PERIOD, MS_ORDERS)])
+    direct, against = np.array(direct) / want, np.array(against) / want
+    low = direct[:, :3].ravel()                   # the three lowest lines, where gusts are
+    assert abs(np.mean(low) - 1) > 3 * np.std(low) / math.sqrt(len(low))
+    spread = np.std(against, axis=0) / math.sqrt(len(against))
+    assert np.all(np.abs(np.mean(against, axis=0) - 1) < 3 * spread + 1e-9)
+
+
+@pytest.mark.parametrize("period, orders, match", [
+    (2000, (5, 3), "strictly increasing"),
+    (2000, (0, 3), "positive"),
+    (100, (3, 30), "at least 4 per cycle"),
+    (1999.5, (3, 5), "whole number"),
+])
+def test_a_multisine_s_bad_lines_or_period_are_refused(period, orders, match):
+    u = multisine_input(3)
+    with pytest.raises(InputError, match=match):
+        estimate_multisine(u, u, FS_HZ, period, orders)

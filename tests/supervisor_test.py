@@ -550,3 +550,54 @@ def test_the_cascade_gains_have_no_yaw_angle_loop():
     assert gains.angle(fw.Axis.PITCH).kc == pytest.approx(1.501)
     with pytest.raises(ValueError, match="yaw has no angle loop"):
         gains.angle(fw.Axis.YAW)
+
+
+def multisine(freq=0.5, lines=((3, 0.05, 0.0), (9, 0.05, 1.0)), peak=0.1, cycles=2):
+    c = config(freq=freq, amp=peak, cycles=cycles)
+    c.signal = fw.Signal.MULTISINE
+    c.harmonics = list(lines)
+    return c
+
+
+@pytest.mark.parametrize("freq, lines, why", [
+    (0.5, ((3, 0.05, 0.0), (9, 0.05, 1.0)), "NONE"),
+    # Every line in the band: the lowest at least 0.05 Hz, the highest at most 50 Hz.
+    (0.0125, ((4, 0.05, 0.0), (9, 0.05, 1.0)), "NONE"),
+    (0.0125, ((3, 0.05, 0.0), (9, 0.05, 1.0)), "FREQUENCY"),
+    (0.5, ((3, 0.05, 0.0), (101, 0.05, 1.0)), "HARMONICS"),   # fewer than 4 samples a cycle
+    (1.0, ((3, 0.05, 0.0), (51, 0.05, 1.0)), "HARMONICS"),
+    (0.5, ((9, 0.05, 0.0), (3, 0.05, 1.0)), "HARMONICS"),
+    (0.5, (), "HARMONICS"),
+])
+def test_a_multisine_s_lines_must_be_in_the_band_and_well_formed(freq, lines, why):
+    b = armed_bench()
+    assert b.sup.start_excitation(multisine(freq, lines, cycles=1), b.t) == reason(why)
+
+
+def test_a_multisine_s_peak_is_bounded_like_a_sine_s_amplitude_and_its_length_capped():
+    b = armed_bench()
+    assert b.sup.start_excitation(multisine(peak=1.01), b.t) == reason("AMPLITUDE")
+    # 0.5 Hz base: 2 s periods, fades of one cycle of line 3 (134 samples) each way.
+    assert b.sup.start_excitation(multisine(cycles=150), b.t) == reason("DURATION")
+    assert b.sup.start_excitation(multisine(cycles=149), b.t) == reason("NONE")
+
+
+def test_an_unknown_signal_is_refused():
+    b = armed_bench()
+    c = multisine()
+    c.signal = fw.Signal(7)
+    assert b.sup.start_excitation(c, b.t) == reason("HARMONICS")
+
+
+def test_a_multisine_that_passes_its_declared_peak_stops_with_the_reason_and_says_so():
+    b = armed_bench()
+    assert b.sup.start_excitation(multisine(peak=0.06), b.t) == reason("NONE")
+    values = []
+    for _ in range(2000):
+        b.heartbeat()
+        values += b.step()
+        if b.sup.excitation_state == fw.ExcitationState.IDLE:
+            break
+    assert b.sup.take_excitation_end() == reason("PEAK")
+    assert max(abs(v) for v in values) <= 0.06 * (1 + 1e-3)
+    assert reason("PEAK") in b.reasons() and b.sup.counters.exc_stopped == 1

@@ -6,6 +6,7 @@
 #include <array>
 #include <memory>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/attitude.hpp"
@@ -374,6 +375,9 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("yaw_torque_unit_nm", &Mixer::yaw_torque_unit_nm)
         .def_property_readonly("hover_arm_thrust_n", &Mixer::hover_arm_thrust_n);
 
+    py::enum_<Signal>(m, "Signal").value("SINE", Signal::Sine)
+        .value("MULTISINE", Signal::Multisine);
+    m.attr("MAX_HARMONICS") = kMaxHarmonics;
     py::enum_<ExcitationState>(m, "ExcitationState").value("IDLE", ExcitationState::Idle)
         .value("FADING", ExcitationState::Fading).value("RUNNING", ExcitationState::Running);
     py::class_<ExcitationConfig>(m, "ExcitationConfig")
@@ -383,7 +387,27 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readwrite("freq_hz", &ExcitationConfig::freq_hz)
         .def_readwrite("amplitude", &ExcitationConfig::amplitude)
         .def_readwrite("cycles", &ExcitationConfig::cycles)
-        .def_readwrite("fade_cycles", &ExcitationConfig::fade_cycles);
+        .def_readwrite("fade_cycles", &ExcitationConfig::fade_cycles)
+        .def_readwrite("signal", &ExcitationConfig::signal)
+        .def_property("harmonics",
+            [](const ExcitationConfig& c) {
+                py::list out;
+                for (int i = 0; i < c.harmonics; ++i) {
+                    out.append(py::make_tuple(c.harmonic[i].order, c.harmonic[i].amplitude,
+                                              c.harmonic[i].phase_rad));
+                }
+                return out;
+            },
+            [](ExcitationConfig& c, const std::vector<std::tuple<uint16_t, float, float>>& hs) {
+                if (hs.size() > static_cast<size_t>(kMaxHarmonics)) {
+                    throw py::value_error("at most 16 harmonics");
+                }
+                c.harmonics = static_cast<uint8_t>(hs.size());
+                for (size_t i = 0; i < hs.size(); ++i) {
+                    c.harmonic[i] = Harmonic{std::get<0>(hs[i]), std::get<1>(hs[i]), std::get<2>(hs[i])};
+                }
+            },
+            "[(order, amplitude, phase_rad), ...] of a multisine");
     py::class_<Excitation>(m, "Excitation")
         .def(py::init<>())
         .def("start", &Excitation::start)
@@ -396,6 +420,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("period_samples", &Excitation::period_samples)
         .def_property_readonly("actual_freq_hz", &Excitation::actual_freq_hz)
         .def_property_readonly("total_samples", &Excitation::total_samples)
+        .def_property_readonly("fade_samples", &Excitation::fade_samples)
+        .def_property_readonly("peak_exceeded", &Excitation::peak_exceeded)
         .def_property_readonly("state", &Excitation::state);
 
     py::enum_<InitResult>(m, "InitResult")

@@ -9,10 +9,42 @@ constexpr float kTwoPi = 6.283185307179586f;
 // At least four samples per period: a sine needs more than two (Nyquist), and the FSF's
 // harmonics are meaningless much closer to it.
 constexpr float kMinSamplesPerPeriod = 4.0f;
+constexpr uint32_t kMinSamplesPerCycle = 4;
+
+float raised_cosine(uint32_t i, uint32_t length) {
+    return 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(i) / static_cast<float>(length)));
+}
 }  // namespace
+
+uint16_t lowest_order(const ExcitationConfig& c) {
+    return c.signal == Signal::Multisine && c.harmonics > 0 ? c.harmonic[0].order : 1;
+}
+
+uint16_t highest_order(const ExcitationConfig& c) {
+    return c.signal == Signal::Multisine && c.harmonics > 0 ? c.harmonic[c.harmonics - 1].order : 1;
+}
+
+bool harmonics_valid(const ExcitationConfig& c, uint32_t period_samples) {
+    if (c.signal == Signal::Sine) return true;
+    if (c.signal != Signal::Multisine || c.harmonics == 0 || c.harmonics > kMaxHarmonics) return false;
+    float power = 0.0f;
+    uint32_t previous = 0;
+    for (int i = 0; i < c.harmonics; ++i) {
+        const Harmonic& h = c.harmonic[i];
+        if (h.order <= previous || uint64_t{h.order} * kMinSamplesPerCycle > period_samples ||
+            !(std::isfinite(h.amplitude) && h.amplitude > 0.0f) || !std::isfinite(h.phase_rad)) {
+            return false;
+        }
+        previous = h.order;
+        power += 0.5f * h.amplitude * h.amplitude;
+    }
+    // The peak of a signal is at least its RMS.
+    return std::isfinite(power) && c.amplitude * c.amplitude >= power * (1.0f - Excitation::kPeakMargin);
+}
 
 bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     active_ = false;
+    peak_exceeded_ = false;
     if (!(config.freq_hz > 0.0f) || !(loop_rate_hz > 0.0f) || !std::isfinite(loop_rate_hz) ||
         config.freq_hz * kMinSamplesPerPeriod > loop_rate_hz || config.cycles == 0 ||
         !std::isfinite(config.amplitude)) {
@@ -22,14 +54,23 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     const double samples = static_cast<double>(loop_rate_hz) / static_cast<double>(config.freq_hz);
     if (!(samples <= static_cast<double>(kMaxPeriodSamples))) return false;
     const uint32_t period = static_cast<uint32_t>(std::llround(samples));
-    const uint64_t total =
-        uint64_t{period} * (uint64_t{config.cycles} + 2u * uint64_t{config.fade_cycles});
+    if (!harmonics_valid(config, period)) return false;
+    // The fade lasts whole cycles of the lowest harmonic (whole periods for a sine).
+    const uint32_t lowest = lowest_order(config);
+    const uint64_t fade = uint64_t{config.fade_cycles} * ((period + lowest - 1u) / lowest);
+    const uint64_t total = uint64_t{period} * config.cycles + 2u * fade;
     if (total > kMaxTotalSamples) return false;
     config_ = config;
+    if (config_.signal == Signal::Sine) {          // one harmonic: the fundamental
+        config_.harmonics = 1;
+        config_.harmonic[0] = Harmonic{1, config.amplitude, 0.0f};
+    }
     period_ = period;
     actual_freq_hz_ = loop_rate_hz / static_cast<float>(period_);
     total_ = static_cast<uint32_t>(total);
+    fade_ = static_cast<uint32_t>(fade);
     k_ = 0;
+    for (uint32_t& index : index_) index = 0;
     active_ = true;
     return true;
 }
@@ -38,10 +79,9 @@ void Excitation::stop() { active_ = false; }
 
 bool Excitation::finish() {
     if (!active_) return false;
-    const uint32_t fade = period_ * config_.fade_cycles;
-    // Whole full-amplitude cycles once the one under way ends (k_ is the next sample).
-    const uint32_t cycles = k_ <= fade ? 1u : (k_ - fade + period_ - 1u) / period_;
-    const uint64_t total = uint64_t{period_} * (uint64_t{cycles} + 2u * config_.fade_cycles);
+    // Whole full-amplitude periods once the one under way ends (k_ is the next sample).
+    const uint32_t cycles = k_ <= fade_ ? 1u : (k_ - fade_ + period_ - 1u) / period_;
+    const uint64_t total = uint64_t{period_} * cycles + 2u * uint64_t{fade_};
     if (total < total_) {
         total_ = static_cast<uint32_t>(total);
         config_.cycles = static_cast<uint16_t>(cycles);
@@ -50,8 +90,7 @@ bool Excitation::finish() {
 }
 
 bool Excitation::measuring() const {
-    const uint32_t fade = period_ * config_.fade_cycles;
-    return active_ && k_ >= fade && k_ < total_ - fade;
+    return active_ && k_ >= fade_ && k_ < total_ - fade_;
 }
 
 ExcitationState Excitation::state() const {
@@ -61,18 +100,34 @@ ExcitationState Excitation::state() const {
 
 float Excitation::next() {
     if (!active_) return 0.0f;
-    const uint32_t fade = period_ * config_.fade_cycles;
     float envelope = 1.0f;
-    if (k_ < fade) {
-        envelope = 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(k_) /
-                                           static_cast<float>(fade)));
-    } else if (k_ >= total_ - fade) {
-        envelope = 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(total_ - k_) /
-                                           static_cast<float>(fade)));
+    if (k_ < fade_) {
+        envelope = raised_cosine(k_, fade_);
+    } else if (k_ >= total_ - fade_) {
+        envelope = raised_cosine(total_ - k_, fade_);
     }
-    const uint32_t phase = k_ % period_;          // exact: no accumulated phase error
-    const float value = config_.amplitude * envelope *
-                        std::sin(kTwoPi * static_cast<float>(phase) / static_cast<float>(period_));
+    const float n = static_cast<float>(period_);
+    float value;
+    if (config_.signal == Signal::Sine) {
+        value = config_.amplitude * envelope * std::sin(kTwoPi * static_cast<float>(index_[0]) / n);
+    } else {
+        float sum = 0.0f;
+        for (int i = 0; i < config_.harmonics; ++i) {
+            const Harmonic& h = config_.harmonic[i];
+            sum += h.amplitude * std::sin(kTwoPi * static_cast<float>(index_[i]) / n + h.phase_rad);
+        }
+        if (!(std::fabs(sum) <= config_.amplitude * (1.0f + kPeakMargin))) {
+            peak_exceeded_ = true;                // not output: stop at once
+            active_ = false;
+            return 0.0f;
+        }
+        value = envelope * sum;
+    }
+    // Exact phase indices: (order * k) mod period, advanced without accumulated error.
+    for (int i = 0; i < config_.harmonics; ++i) {
+        index_[i] += config_.harmonic[i].order;
+        if (index_[i] >= period_) index_[i] -= period_;
+    }
     if (++k_ >= total_) active_ = false;      // that was the last sample
     return value;
 }

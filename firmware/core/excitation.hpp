@@ -1,9 +1,19 @@
-// Sine excitation for frequency-response experiments (the paper's step 1, docs/paper.md).
+// Excitation for frequency-response experiments (the paper's step 1, docs/paper.md): one
+// sine (the paper's dwell) or a multisine, a sum of sines at chosen harmonics of one base
+// period (the whole band in one record, docs/method.md).
 //
-// The period is an integer number N of loop samples, so every period ends exactly where it
-// started and the host's FSF sees a perfectly periodic input; the frequency actually used,
-// loop_rate / N, is reported. The sine fades in and out over whole periods with a raised
-// cosine so the vehicle is not kicked; the measured cycles in between have full amplitude.
+// The (base) period is an integer number N of loop samples, so every period ends exactly where
+// it started and the host's FSF sees a perfectly periodic input; the frequency actually used,
+// loop_rate / N, is reported. Harmonic h is a_h sin(2 pi ((h k) mod N) / N + phi_h) at loop
+// sample k, its phase index kept as an exact integer. The signal fades in and out with a
+// raised cosine so the vehicle is not kicked, over fade_cycles cycles of its lowest harmonic
+// (whole periods for a sine); the measured periods in between have full amplitude.
+//
+// A multisine's amplitude is the peak the sender declares for the sum (it chose the phases
+// for a low crest factor and knows the peak). The Supervisor bounds that peak like a sine's
+// amplitude; every sample is checked against it, and a sample beyond it (with a round-off
+// margin) is not output: the excitation stops at once and says so (peak_exceeded()).
+//
 // Injection points follow ArduPilot's SID_AXIS idea: the signal is added at the angle
 // setpoint, the rate setpoint, or the mixer's torque input of one axis.
 #pragma once
@@ -29,20 +39,51 @@ enum class ExcitationState : uint8_t {
     Running = HQ_EXCITATION_STATE_RUNNING,
 };
 
+// The waveform (HQ_SIGNAL).
+enum class Signal : uint8_t {
+    Sine = HQ_SIGNAL_SINE,
+    Multisine = HQ_SIGNAL_MULTISINE,
+};
+
+// The most harmonics a multisine has (HQ_EXCITATION's arrays).
+constexpr int kMaxHarmonics = 16;
+
+struct Harmonic {
+    uint16_t order = 0;            // h: the harmonic of the base period
+    float amplitude = 0.0f;        // injection units
+    float phase_rad = 0.0f;
+};
+
 struct ExcitationConfig {
     Axis axis = Axis::Roll;
     Injection injection = Injection::Mixer;
-    float freq_hz = 1.0f;          // requested; the nearest integer-period frequency is used
-    float amplitude = 0.0f;        // injection units: rad (angle), rad/s (rate), normalised (mixer)
-    uint16_t cycles = 10;          // full-amplitude cycles
-    uint16_t fade_cycles = 1;      // cycles of fade in, and again of fade out
+    // Requested (base) frequency; the nearest integer-period frequency is used.
+    float freq_hz = 1.0f;
+    // Injection units: rad (angle), rad/s (rate), normalised (mixer). A sine's amplitude; a
+    // multisine's declared peak.
+    float amplitude = 0.0f;
+    uint16_t cycles = 10;          // full-amplitude (base) periods
+    uint16_t fade_cycles = 1;      // cycles of the lowest harmonic of fade in, and again out
+    Signal signal = Signal::Sine;
+    uint8_t harmonics = 0;         // multisine: how many of harmonic[] are used
+    Harmonic harmonic[kMaxHarmonics] = {};
 };
+
+// The multisine's own checks (not the safety bounds): 1..kMaxHarmonics harmonics, strictly
+// increasing orders from 1, each with at least four samples per cycle of a period_samples
+// base period, finite positive amplitudes, finite phases, and a declared peak no lower than
+// the sum's RMS (no signal is below its RMS everywhere). A sine passes trivially.
+bool harmonics_valid(const ExcitationConfig& config, uint32_t period_samples);
+// The lowest and highest harmonic order (1 and 1 for a sine).
+uint16_t lowest_order(const ExcitationConfig& config);
+uint16_t highest_order(const ExcitationConfig& config);
 
 class Excitation {
 public:
     // Arms the excitation; returns false (and stays idle) for an impossible request:
     // frequency not in (0, loop_rate/4], a period longer than kMaxPeriodSamples, no cycles,
-    // a total length that does not fit the sample counter, or a non-finite amplitude.
+    // a total length that does not fit the sample counter, a non-finite amplitude, or
+    // harmonics that fail harmonics_valid().
     // This is the signal generator's own guard; the safety bounds (amplitude, band,
     // duration, fade-in) are the Supervisor's (supervisor.hpp).
     bool start(const ExcitationConfig& config, float loop_rate_hz);
@@ -54,7 +95,8 @@ public:
     // idle.
     bool finish();
 
-    // The value for this loop sample, then advance; idle after the last one. 0 when idle.
+    // The value for this loop sample, then advance; idle after the last one. 0 when idle,
+    // and 0 (and idle, peak_exceeded()) for a sample beyond the declared peak.
     float next();
 
     bool active() const { return active_; }
@@ -63,6 +105,9 @@ public:
     float actual_freq_hz() const { return actual_freq_hz_; }
     uint32_t sample() const { return k_; }
     uint32_t total_samples() const { return total_; }
+    uint32_t fade_samples() const { return fade_; }
+    // True when the last start ended because a sample passed the declared peak.
+    bool peak_exceeded() const { return peak_exceeded_; }
     // Of the sample the next call to next() returns: true in the full-amplitude cycles
     // (between the fades); the state (idle, fading or running).
     bool measuring() const;
@@ -72,11 +117,15 @@ public:
     static constexpr uint32_t kMaxPeriodSamples = 1u << 24;
     // Whole excitations stay well inside the 32-bit sample counter.
     static constexpr uint64_t kMaxTotalSamples = 1ull << 31;
+    // Round-off allowed above a declared peak: the sender computes it in double, the
+    // firmware the signal in float (sinf is accurate to a few ulp).
+    static constexpr float kPeakMargin = 1e-3f;
 
 private:
     ExcitationConfig config_{};
-    bool active_ = false;
-    uint32_t period_ = 0, total_ = 0, k_ = 0;
+    bool active_ = false, peak_exceeded_ = false;
+    uint32_t period_ = 0, total_ = 0, k_ = 0, fade_ = 0;
+    uint32_t index_[kMaxHarmonics] = {};     // (order * k) mod period, per harmonic
     float actual_freq_hz_ = 0.0f;
 };
 

@@ -131,6 +131,7 @@ private:
     uint8_t interval_command(uint32_t msgid, float interval_us);
     uint8_t request_message(uint32_t msgid);
     void handle_excitation(const mavlink_message_t& msg, uint64_t now_us);
+    static void read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg);
     void handle_param_set(const mavlink_message_t& msg, uint64_t now_us);
     void handle_param_read(const mavlink_message_t& msg);
     void refuse_file_transfer(const mavlink_message_t& msg);

@@ -249,6 +249,28 @@ uint8_t FlightController::request_message(uint32_t msgid) {
     return MAV_RESULT_ACCEPTED;
 }
 
+// A multisine's harmonics: the entries before the first zero order. A non-zero order after
+// it leaves none, so the request is refused (HQ_REASON_HARMONICS) rather than cut short.
+static_assert(sizeof(mavlink_hq_excitation_t::harmonic) / sizeof(uint16_t) == kMaxHarmonics,
+              "HQ_EXCITATION carries kMaxHarmonics harmonics");
+void FlightController::read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg) {
+    cfg.signal = static_cast<Signal>(ex.signal);        // checked by the Supervisor
+    if (cfg.signal != Signal::Multisine) return;
+    uint8_t count = 0;
+    bool gap = false;
+    for (int i = 0; i < kMaxHarmonics; ++i) {
+        if (ex.harmonic[i] == 0) {
+            gap = true;
+        } else if (gap) {
+            count = 0;
+            break;
+        } else {
+            cfg.harmonic[count++] = Harmonic{ex.harmonic[i], ex.harmonic_amp[i], ex.harmonic_phase[i]};
+        }
+    }
+    cfg.harmonics = count;
+}
+
 void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t now_us) {
     mavlink_hq_excitation_t ex;
     mavlink_msg_hq_excitation_decode(&msg, &ex);
@@ -269,6 +291,7 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
         cfg.amplitude = ex.amplitude;
         cfg.cycles = ex.cycles;
         cfg.fade_cycles = ex.fade_cycles;
+        read_harmonics(ex, cfg);
         why = supervisor_.start_excitation(cfg, now_us);
         last_exc_accepted_ = why == Reason::None;
     } else {
@@ -430,7 +453,7 @@ void FlightController::send_excitation_status(Reason reason) {
         config_.system_id, config_.component_id, &tx_status_, &msg, clock_.micros(),
         last_exc_accepted_ ? 1 : 0, static_cast<uint8_t>(ex.state()), static_cast<uint8_t>(reason),
         static_cast<uint8_t>(cfg.axis), static_cast<uint8_t>(cfg.injection), ex.actual_freq_hz(),
-        ex.period_samples(), ex.total_samples());
+        ex.period_samples(), ex.total_samples(), static_cast<uint8_t>(cfg.signal), ex.fade_samples());
     send(msg);
 }
 

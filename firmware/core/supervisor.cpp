@@ -54,6 +54,8 @@ const char* reason_text(Reason reason) {
         case Reason::ImuInitFailed: return "IMU re-initialisation failed";
         case Reason::BadMode: return "mode refused: unknown mode";
         case Reason::BadAction: return "excitation refused: unknown action";
+        case Reason::Harmonics: return "excitation refused: bad signal or harmonics";
+        case Reason::Peak: return "excitation stopped: signal passed its peak";
     }
     return "unknown reason";
 }
@@ -280,15 +282,26 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us) 
           c.amplitude <= limits_.max_amplitude[injection])) {
         return Reason::Amplitude;
     }
-    if (!(std::isfinite(c.freq_hz) && c.freq_hz >= limits_.min_freq_hz &&
-          c.freq_hz <= limits_.max_freq_fraction * loop_rate_hz_)) {
+    if (!(std::isfinite(c.freq_hz) && c.freq_hz > 0.0f)) return Reason::Frequency;
+    // The period actually used is an integer number of loops (excitation.hpp).
+    const float period = std::round(loop_rate_hz_ / c.freq_hz);
+    if (!(period >= 1.0f && period <= static_cast<float>(Excitation::kMaxPeriodSamples))) {
+        return Reason::Frequency;
+    }
+    if (!harmonics_valid(c, static_cast<uint32_t>(period))) return Reason::Harmonics;
+    // Every excited frequency (a sine's one; a multisine's lowest and highest harmonic) is
+    // inside the band.
+    if (!(c.freq_hz * static_cast<float>(lowest_order(c)) >= limits_.min_freq_hz &&
+          c.freq_hz * static_cast<float>(highest_order(c)) <=
+              limits_.max_freq_fraction * loop_rate_hz_)) {
         return Reason::Frequency;
     }
     if (c.cycles == 0) return Reason::Cycles;
     if (c.fade_cycles < limits_.min_fade_cycles) return Reason::Fade;
-    // The period actually used is an integer number of loops (excitation.hpp).
-    const float period_s = std::round(loop_rate_hz_ / c.freq_hz) / loop_rate_hz_;
-    const float cycles = static_cast<float>(c.cycles) + 2.0f * static_cast<float>(c.fade_cycles);
+    const float lowest = static_cast<float>(lowest_order(c));
+    const float fade = static_cast<float>(c.fade_cycles) * std::ceil(period / lowest);
+    const float period_s = period / loop_rate_hz_;
+    const float cycles = static_cast<float>(c.cycles) + 2.0f * fade / period;
     if (!(cycles * period_s <= limits_.max_duration_s)) return Reason::Duration;
     return Reason::None;
 }
@@ -340,7 +353,9 @@ float Supervisor::run_excitation(const SupervisorInputs& in) {
     exc_state_ = excitation_.state();
     if (!excitation_.active()) return 0.0f;
     const float value = excitation_.next();
-    if (!excitation_.active()) end_excitation(Reason::Finished);
+    if (!excitation_.active()) {
+        end_excitation(excitation_.peak_exceeded() ? Reason::Peak : Reason::Finished);
+    }
     return value;
 }
 

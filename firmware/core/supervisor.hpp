@@ -71,6 +71,8 @@ enum class Reason : uint8_t {
     ImuInitFailed = HQ_REASON_IMU_INIT_FAILED,
     BadMode = HQ_REASON_BAD_MODE,
     BadAction = HQ_REASON_BAD_ACTION,
+    Harmonics = HQ_REASON_HARMONICS,
+    Peak = HQ_REASON_PEAK,
 };
 constexpr uint8_t kReasonCount = HQ_REASON_ENUM_END;
 

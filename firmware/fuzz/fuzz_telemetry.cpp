@@ -1,11 +1,12 @@
 // libFuzzer target: the firmware's telemetry command path. A FlightController on the emulated
 // MPU6050 gets fuzz-chosen bytes on its telemetry link (any message of the dialect, framed
 // with a correct CRC, with any length; raw bytes; well-formed commands with fuzzed fields:
-// HEARTBEAT, arm/disarm and the other commands it answers, SET_MODE, HQ_EXCITATION, the
-// parameter protocol with real names), fuzzed RC inputs, IMU data and IMU faults, a fuzzed
-// parameter store, and runs loops between them. Besides the sanitizers, every loop checks
-// the rules a pilot relies on: motors off unless armed, never an excitation while disarmed,
-// motor commands finite and within 0..1, every parameter within its range.
+// HEARTBEAT, arm/disarm and the other commands it answers, SET_MODE, HQ_EXCITATION (sines and
+// multisines), the parameter protocol with real names), fuzzed RC inputs, IMU data and IMU
+// faults, a fuzzed parameter store, and runs loops between them. Besides the sanitizers,
+// every loop checks the rules a pilot relies on: motors off unless armed, never an
+// excitation while disarmed nor beyond its declared peak, motor commands finite and within
+// 0..1, every parameter within its range.
 //
 //   build: cmake -S firmware -B build/fuzz -DCMAKE_CXX_COMPILER=clang++ -DHQ_FUZZ=ON
 //   run:   build/fuzz/fuzz_telemetry CORPUS -max_total_time=60   (or tests/fuzz/run.py)
@@ -57,6 +58,13 @@ void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
     }
     if (!fc.armed() && fc.supervisor().excitation().active()) std::abort();
     if (!fc.armed() && fc.state().excitation != 0.0f) std::abort();
+    // Never beyond the bound of its injection point, nor a multisine's declared peak.
+    const hq::ExcitationConfig& exc = fc.supervisor().excitation_config();
+    if (fc.state().excitation != 0.0f &&
+        !(std::fabs(fc.state().excitation) <=
+          exc.amplitude * (1.0f + hq::Excitation::kPeakMargin))) {
+        std::abort();
+    }
     if (!hqfuzz::params_in_range(fc.params())) std::abort();
 }
 
@@ -122,11 +130,26 @@ size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
             const uint8_t axis = in.u8(), injection = in.u8(), action = in.u8();
             const float freq = (axis & 0x80) ? in.f32() : 0.5f + (in.u8() % 40) * 0.25f;
             const float amp = (injection & 0x80) ? in.f32() : (in.u8() % 100) * 0.01f;
+            const uint8_t cycles = in.u8() % 8, fade = in.u8() % 3;
+            // A sine, a multisine (lines in order or not, any float amplitude and phase, a
+            // gap before the last), or an unknown signal.
+            const uint8_t signal = in.u8() % (HQ_SIGNAL_ENUM_END + 1);
+            uint16_t orders[hq::kMaxHarmonics] = {};
+            float amps[hq::kMaxHarmonics] = {}, phases[hq::kMaxHarmonics] = {};
+            const int lines = signal == HQ_SIGNAL_MULTISINE ? in.u8() % (hq::kMaxHarmonics + 1) : 0;
+            for (int i = 0; i < lines; ++i) {
+                const uint8_t how = in.u8();
+                orders[i] = static_cast<uint16_t>((how & 0x80) ? in.u8() * 256 + in.u8()
+                                                               : 1 + i * (1 + how % 4));
+                amps[i] = (how & 0x40) ? in.f32() : (in.u8() % 50) * 0.01f;
+                phases[i] = (how & 0x20) ? in.f32() : (in.u8() % 64) * 0.1f;
+            }
             // Every axis and injection point, and one unknown of each.
             mavlink_msg_hq_excitation_pack_status(
                 255, kGcs, &tx, &msg, 1, MAV_COMP_ID_AUTOPILOT1,
                 action % HQ_EXCITATION_ACTION_ENUM_END, axis % (HQ_AXIS_ENUM_END + 1),
-                injection % (HQ_INJECTION_ENUM_END + 1), freq, amp, in.u8() % 8, in.u8() % 3);
+                injection % (HQ_INJECTION_ENUM_END + 1), freq, amp, cycles, fade, signal, orders,
+                amps, phases);
             break;
         }
     }

@@ -1,4 +1,5 @@
-"""An axis's sine sweep on the simulated rig or a board (``heliquad sweep``)."""
+"""An axis's sweep (the paper's sine dwells, or one multisine) on the simulated rig or a
+board (``heliquad sweep``)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,10 @@ from .. import design
 from ..errors import DiskFull, InputError
 from ..connection import CONNECTION_HELP
 from ..link import DEFAULT_BAUD
+from ..multisine import LINES, MAX_LINES, RIG_TIME_S
+
+#: The longest rig time the firmware allows (SafetyLimits.max_duration_s).
+MAX_RIG_TIME_S = 300.0
 
 __all__ = ["add_parser", "run"]
 
@@ -37,7 +42,14 @@ Input and output for `heliquad identify`: mixer -> the axis's torque command and
 (the plant; default, the paper's rate-in rate-out model); rate -> rate setpoint and rate;
 angle -> angle setpoint and angle.
 
+--signal multisine excites the whole band at once instead: --lines log-spaced lines (default
+15) on harmonics of one base period, phases for a low crest factor, faded in and out over a
+cycle of the lowest line, as many whole base periods as fit --rig-time (default 60 s, at
+least 3 periods); --amplitude is its peak (default: 5 deg angle, 10 deg/s rate, the
+firmware's bound at the mixer). identify estimates every line from the one record.
+
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
+         heliquad sweep --axis roll --sil --signal multisine --out roll_ms
 """
 
 
@@ -81,6 +93,15 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--max-cycles", type=int_in(design.MIN_CYCLES, MAX_CYCLES), metavar="N",
                    help=f"sequential dwell: the most measured cycles of a frequency (default "
                         f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
+    p.add_argument("--signal", choices=("dwell", "multisine"), default="dwell",
+                   help="dwell (default, the paper's): one sine per frequency; multisine: "
+                        "every line of the band at once, in one periodic record")
+    p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
+                   help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
+                        "the nearest harmonic of the base period")
+    p.add_argument("--rig-time", type=number_in(10, MAX_RIG_TIME_S), metavar="S",
+                   help=f"multisine: the seconds it may last, fades included (default "
+                        f"{RIG_TIME_S:g}); as many whole base periods as fit")
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
     add_param_store_argument(p)
@@ -100,7 +121,10 @@ def run(args) -> int:
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         from ...sim.sil import SilConfig
 
-        for f, a in zip(plan.freqs_hz, plan.amplitudes):
+        if plan.multisine is not None:       # its lines in the band, its peak in bounds
+            check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
+                             plan.multisine.peak, args.inject)
+        for f, a in zip(plan.freqs_hz, plan.amplitudes) if plan.multisine is None else ():
             check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz, a,
                              args.inject)
     if not args.sil and args.fault:
@@ -118,8 +142,8 @@ def run(args) -> int:
             os.rmdir(args.out)
         raise
     try:
-        print(f"sweep: {args.axis}, {args.inject} injection, {len(plan.freqs_hz)} frequencies "
-              f"{plan.freqs_hz[0]:.3g}-{plan.freqs_hz[-1]:.3g} Hz -> {args.out}", flush=True)
+        print(f"sweep: {args.axis}, {args.inject} injection, {_what(plan)} -> {args.out}",
+              flush=True)
         manifest = run_sweep(session, plan, args.out, source)
     except Exception as exc:          # a full disk, the firmware died, the port went away
         from ...sim.lockstep import FirmwareError
@@ -144,6 +168,17 @@ def run(args) -> int:
     return 1
 
 
+def _what(plan) -> str:
+    if plan.multisine is None:
+        return (f"{len(plan.freqs_hz)} frequencies {plan.freqs_hz[0]:.3g}-"
+                f"{plan.freqs_hz[-1]:.3g} Hz")
+    ms = plan.multisine
+    return (f"multisine: {len(ms.orders)} lines {ms.freqs_hz[0]:.3g}-{ms.freqs_hz[-1]:.3g} Hz "
+            f"on a {ms.period_samples / ms.fs_hz:.3g} s period, {ms.periods} periods, "
+            f"{ms.duration_s:.0f} s, peak {ms.peak:.3g} (crest factor "
+            f"{ms.record()['crest_factor']:.2f})")
+
+
 def _plan(args):
     """The sweep's plan from the options: fixed or sequential dwell, fixed or designed
     amplitudes."""
@@ -155,14 +190,38 @@ def _plan(args):
     if args.swing_deg is not None and (args.amplitude is not None or args.inject != "mixer"):
         raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
                          "--amplitude or angle or rate injection")
+    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
+    if args.signal == "multisine":
+        return _multisine_plan(args, amp)
+    if args.lines is not None or args.rig_time is not None:
+        raise InputError("--lines and --rig-time shape a multisine: add --signal multisine")
     dwell = None
     if args.cycles is None:
         dwell = design.Dwell()
         dwell.target_sigma = args.target_sigma or dwell.target_sigma
         dwell.max_cycles = args.max_cycles or dwell.max_cycles
-    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
     return default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles, dwell,
                         args.swing_deg)
+
+
+def _multisine_plan(args, amp):
+    """A multisine's plan: over the axis's band, or from the lowest to the highest of
+    --freqs-hz; --amplitude is its peak."""
+    from ..sweep import multisine_plan
+
+    given = [o for o, v in (("--cycles", args.cycles), ("--target-sigma", args.target_sigma),
+                            ("--max-cycles", args.max_cycles), ("--swing-deg", args.swing_deg))
+             if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} shape a dwell; a multisine's length is "
+                         "--rig-time")
+    band = None
+    if args.freqs_hz is not None:
+        if len(args.freqs_hz) < 2 or min(args.freqs_hz) == max(args.freqs_hz):
+            raise InputError("--freqs-hz with --signal multisine: the band's two edges "
+                             "(lowest and highest)")
+        band = (min(args.freqs_hz), max(args.freqs_hz))
+    return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time, band)
 
 
 def _sweep_session(args, tlog):
