@@ -15,11 +15,16 @@
   run's time less its share of the lockstep at the rate the difference between the two
   shows.
 
+* rig: the rig time per axis for the paper's dwell and for one multisine at equal accuracy
+  (``benchmarks/rig_time.py``, its own docstring says how; ``--repeat`` seeds under
+  turbulence).
+
 Each figure is the median of ``--repeat`` runs (default 3); the machine's other load moves
 them, so compare figures taken in one run. There are no targets here; the tests never
 measure speed.
 
-    python benchmarks/campaign.py [--skip demo] [--skip identify] [--skip sil] [--repeat N]
+    python benchmarks/campaign.py [--skip demo] [--skip identify] [--skip sil] [--skip rig]
+                                  [--repeat N]
 """
 
 from __future__ import annotations
@@ -124,11 +129,17 @@ def sil_section(tmp: str, repeat: int) -> None:
           "real time")
 
 
+def rig_section(tmp: str, repeat: int) -> None:
+    """Rig time per axis, the paper's dwell against one multisine at equal accuracy:
+    benchmarks/rig_time.py (still air, then moderate turbulence over ``repeat`` seeds)."""
+    import rig_time          # beside this script
+
+    rig_time.main(["--seeds", str(repeat)])
+
+
 #: The sections in the order they run; --skip leaves any out.
-SECTIONS = {"demo": demo_section, "identify": identify_section, "sil": sil_section}
-# A fourth section is to come here: the rig time per axis, the sequential dwell against a
-# multisine at equal accuracy (a function of (tmp, repeat) added to SECTIONS as "rig"; for
-# now benchmarks/rig_time.py measures it on its own).
+SECTIONS = {"demo": demo_section, "identify": identify_section, "sil": sil_section,
+            "rig": rig_section}
 
 
 def main(argv=None) -> None:
