@@ -586,28 +586,40 @@ def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
         to_u = estimate_fsf(r, u, fs_hz, freq_hz, harmonics, discard_periods, offset=True)
     except InputError as exc:
         raise InputError(f"the logged excitation: {exc}") from None
-    t_u = to_u.gain
-    if not (abs(t_u) > 0 and math.isfinite(abs(t_u))):
+    if not _follows(to_u.gain):
         raise InputError(f"the input does not follow the excitation at {freq_hz:g} Hz")
     gains = {l: to_y.harmonics[l] / to_u.harmonics[l] if to_u.harmonics[l] != 0 else
              complex("nan+nanj") for l in to_y.harmonics}
-    g = gains[1]
-    period = to_y.period_samples
-    w = 2 * np.pi / period
-    starts, length = period_segments(r.size, period, discard_periods)
+    return _against_excitation(r, u, y, to_y, to_u, 1,
+                               period_segments(r.size, to_y.period_samples, discard_periods),
+                               harmonics=gains)
+
+
+def _follows(t_u) -> bool:
+    """Whether the input follows the excitation: ``U/R`` non-zero and finite."""
+    return abs(t_u) > 0 and math.isfinite(abs(t_u))
+
+
+def _against_excitation(r, u, y, to_y, to_u, order, segments, **fields) -> FrequencyPoint:
+    """The point ``G = (Y/R) / (U/R)`` at harmonic ``order`` of the record's period, from the
+    FSF points of ``y`` and of ``u`` against ``r`` (their coherences, of ``r`` with each,
+    were taken over ``segments``, the whole periods used here). ``sigma`` from the scatter
+    of the per-period estimates ``(Y_p - G U_p) / (T_u R_p)`` with two or more periods,
+    else the two fits' sigmas propagated."""
+    t_u = to_u.gain
+    g = to_y.gain / t_u
+    starts, length = segments
+    w = 2 * np.pi * order / to_y.period_samples
     R, U, Y = (period_dfts(x, w, starts, length) for x in (r, u, y))
     if len(starts) >= 2 and np.all(np.abs(R) > 0):
         e = (Y - g * U) / (t_u * R)
         sigma = math.sqrt(float(np.sum(np.abs(e - e.mean()) ** 2)) / (e.size - 1) / e.size)
     else:              # one period: the two fits' residual sigmas, propagated
         sigma = math.hypot(to_y.sigma, abs(g) * to_u.sigma) / abs(t_u)
-    coh_ry = period_coherence(r, y, w, starts, length)
-    coh_ru = period_coherence(r, u, w, starts, length)
-    return FrequencyPoint(omega_rad_s=to_y.omega_rad_s, gain=g, sigma=sigma,
-                          coherence=float(np.fmin(coh_ry, coh_ru)), period_samples=period,
-                          n_periods=to_y.n_periods, method=to_y.method, harmonics=gains,
-                          offset=to_y.offset, estimate="excitation", coherence_ry=coh_ry,
-                          coherence_ru=coh_ru, input_gain=t_u, input_sigma=to_u.sigma)
+    return dataclasses.replace(
+        to_y, gain=g, sigma=sigma, coherence=float(np.fmin(to_y.coherence, to_u.coherence)),
+        estimate="excitation", coherence_ry=to_y.coherence, coherence_ru=to_u.coherence,
+        input_gain=t_u, input_sigma=to_u.sigma, **fields)
 
 
 def _multisine_checks(u, y, fs_hz, period, orders):
@@ -639,7 +651,7 @@ def estimate_multisine(u, y, fs_hz: float, period: int, orders,
         raise InputError("the input is zero: it excites none of the multisine's lines")
     p0 = DEFAULT_P0_RELATIVE / power if p0 is None else p0
     sol = _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0)
-    segments = period_segments(u.size, period, max(discard_periods, 1))
+    segments = _multisine_segments(u.size, period, discard_periods)
     points = []
     for l in orders:
         if not np.isfinite(sol.gains[l]):
@@ -669,25 +681,13 @@ def estimate_multisine_against_excitation(r, u, y, fs_hz: float, period: int, or
                                                        discard_periods)}
     except InputError as exc:
         raise InputError(f"the logged excitation: {exc}") from None
-    starts, length = period_segments(r.size, period, max(discard_periods, 1))
-    points = []
-    for l in sorted(to_y):
-        py, pu = to_y[l], to_u[l]
-        t_u = pu.gain
-        if not (abs(t_u) > 0 and math.isfinite(abs(t_u))):
-            continue                                  # the input does not follow this line
-        g = py.gain / t_u
-        w = 2 * np.pi * l / period
-        R, U, Y = (period_dfts(x, w, starts, length) for x in (r, u, y))
-        if len(starts) >= 2 and np.all(np.abs(R) > 0):
-            e = (Y - g * U) / (t_u * R)
-            sigma = math.sqrt(float(np.sum(np.abs(e - e.mean()) ** 2)) / (e.size - 1) / e.size)
-        else:
-            sigma = math.hypot(py.sigma, abs(g) * pu.sigma) / abs(t_u)
-        coh_ry = period_coherence(r, y, w, starts, length)
-        coh_ru = period_coherence(r, u, w, starts, length)
-        points.append(dataclasses.replace(
-            py, gain=g, sigma=sigma, coherence=float(np.fmin(coh_ry, coh_ru)),
-            harmonics={1: g}, estimate="excitation", coherence_ry=coh_ry, coherence_ru=coh_ru,
-            input_gain=t_u, input_sigma=pu.sigma))
-    return points
+    segments = _multisine_segments(r.size, period, discard_periods)
+    return [_against_excitation(r, u, y, to_y[l], to_u[l], l, segments,
+                                harmonics={1: to_y[l].gain / to_u[l].gain})
+            for l in sorted(to_y) if _follows(to_u[l].gain)]
+
+
+def _multisine_segments(n: int, period: int, discard_periods: int) -> tuple:
+    """The whole periods a multisine's coherence and scatter use: after the first (the FSF's
+    filter fill) and any further discarded ones."""
+    return period_segments(n, period, max(discard_periods, 1))

@@ -89,6 +89,11 @@ class Multisine:
         """The excitation's length, fades included (the rig time it costs)."""
         return (self.period_samples * self.periods + 2 * self.fade_samples) / self.fs_hz
 
+    @property
+    def crest_factor(self) -> float:
+        """The period's peak over its RMS."""
+        return crest_factor(self.period())
+
     def harmonics(self) -> list:
         """``[(order, amplitude, phase_rad), ...]`` as HQ_EXCITATION carries them."""
         return list(zip(self.orders, self.amplitudes, self.phases))
@@ -103,7 +108,7 @@ class Multisine:
                 "period_samples": self.period_samples, "orders": list(self.orders),
                 "freqs_hz": [float(f) for f in self.freqs_hz],
                 "amplitudes": list(self.amplitudes), "phases_rad": list(self.phases),
-                "peak": self.peak, "crest_factor": crest_factor(self.period()),
+                "peak": self.peak, "crest_factor": self.crest_factor,
                 "periods": self.periods, "fade_cycles": self.fade_cycles,
                 "duration_s": self.duration_s}
 

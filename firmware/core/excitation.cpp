@@ -24,6 +24,11 @@ uint16_t highest_order(const ExcitationConfig& c) {
     return c.signal == Signal::Multisine && c.harmonics > 0 ? c.harmonic[c.harmonics - 1].order : 1;
 }
 
+uint64_t fade_samples_for(const ExcitationConfig& c, uint32_t period_samples) {
+    const uint32_t lowest = lowest_order(c);
+    return uint64_t{c.fade_cycles} * ((period_samples + lowest - 1u) / lowest);
+}
+
 bool harmonics_valid(const ExcitationConfig& c, uint32_t period_samples) {
     if (c.signal == Signal::Sine) return true;
     if (c.signal != Signal::Multisine || c.harmonics == 0 || c.harmonics > kMaxHarmonics) return false;
@@ -55,9 +60,7 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     if (!(samples <= static_cast<double>(kMaxPeriodSamples))) return false;
     const uint32_t period = static_cast<uint32_t>(std::llround(samples));
     if (!harmonics_valid(config, period)) return false;
-    // The fade lasts whole cycles of the lowest harmonic (whole periods for a sine).
-    const uint32_t lowest = lowest_order(config);
-    const uint64_t fade = uint64_t{config.fade_cycles} * ((period + lowest - 1u) / lowest);
+    const uint64_t fade = fade_samples_for(config, period);
     const uint64_t total = uint64_t{period} * config.cycles + 2u * fade;
     if (total > kMaxTotalSamples) return false;
     config_ = config;

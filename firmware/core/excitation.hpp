@@ -74,6 +74,9 @@ struct ExcitationConfig {
 // base period, finite positive amplitudes, finite phases, and a declared peak no lower than
 // the sum's RMS (no signal is below its RMS everywhere). A sine passes trivially.
 bool harmonics_valid(const ExcitationConfig& config, uint32_t period_samples);
+// The length of each fade for a base period of period_samples: fade_cycles whole cycles of
+// the lowest harmonic, rounded up to a sample (whole periods for a sine).
+uint64_t fade_samples_for(const ExcitationConfig& config, uint32_t period_samples);
 // The lowest and highest harmonic order (1 and 1 for a sine).
 uint16_t lowest_order(const ExcitationConfig& config);
 uint16_t highest_order(const ExcitationConfig& config);

@@ -31,7 +31,6 @@ int16_t saturate16(float v) {
     return static_cast<int16_t>(v > 32767.0f ? 32767.0f : (v < -32767.0f ? -32767.0f : v));
 }
 
-// The largest encoded length of a message (header, payload, checksum; no signature).
 // A command parameter that carries a whole number (a mode, a message id, an action): the
 // number, or kNotWhole for anything else (a fraction, a negative, a NaN, a value past 2^24,
 // which a float carries inexactly), so no float is ever converted out of range.
@@ -41,6 +40,7 @@ uint32_t whole(float v) {
     return static_cast<uint32_t>(v);
 }
 
+// The largest encoded length of a message (header, payload, checksum; no signature).
 uint32_t packet_bytes(uint32_t msgid) {
     const mavlink_msg_entry_t* e = mavlink_get_msg_entry(msgid);
     return (e ? e->max_msg_len : 255u) + MAVLINK_NUM_NON_PAYLOAD_BYTES;

@@ -298,8 +298,7 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us) 
     }
     if (c.cycles == 0) return Reason::Cycles;
     if (c.fade_cycles < limits_.min_fade_cycles) return Reason::Fade;
-    const float lowest = static_cast<float>(lowest_order(c));
-    const float fade = static_cast<float>(c.fade_cycles) * std::ceil(period / lowest);
+    const float fade = static_cast<float>(fade_samples_for(c, static_cast<uint32_t>(period)));
     const float period_s = period / loop_rate_hz_;
     const float cycles = static_cast<float>(c.cycles) + 2.0f * fade / period;
     if (!(cycles * period_s <= limits_.max_duration_s)) return Reason::Duration;

@@ -124,9 +124,10 @@ def run(args) -> int:
         if plan.multisine is not None:       # its lines in the band, its peak in bounds
             check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
                              plan.multisine.peak, args.inject)
-        for f, a in zip(plan.freqs_hz, plan.amplitudes) if plan.multisine is None else ():
-            check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz, a,
-                             args.inject)
+        else:
+            for f, a in zip(plan.freqs_hz, plan.amplitudes):
+                check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz,
+                                 a, args.inject)
     if not args.sil and args.fault:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
@@ -175,8 +176,7 @@ def _what(plan) -> str:
     ms = plan.multisine
     return (f"multisine: {len(ms.orders)} lines {ms.freqs_hz[0]:.3g}-{ms.freqs_hz[-1]:.3g} Hz "
             f"on a {ms.period_samples / ms.fs_hz:.3g} s period, {ms.periods} periods, "
-            f"{ms.duration_s:.0f} s, peak {ms.peak:.3g} (crest factor "
-            f"{ms.record()['crest_factor']:.2f})")
+            f"{ms.duration_s:.0f} s, peak {ms.peak:.3g} (crest factor {ms.crest_factor:.2f})")
 
 
 def _plan(args):
