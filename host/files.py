@@ -139,9 +139,16 @@ def _finite_or_null(doc):
     return doc
 
 
+#: zlib's level for the PNGs heliquad writes: 1 writes a figure's picture in about a quarter
+#: of the default's (6) time, in a file about a fifth larger.
+PNG_COMPRESS_LEVEL = 1
+
+
 def save_figure(fig, path, **kwargs) -> None:
     """A matplotlib figure to ``path`` (format from its extension), atomically."""
     fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
+    if fmt == "png":
+        kwargs.setdefault("pil_kwargs", {"compress_level": PNG_COMPRESS_LEVEL})
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format=fmt, **kwargs)
 

@@ -19,12 +19,12 @@ in three stages (docs/method.md has the derivations):
    every parameter value, so the result is stable by construction.
 
    Starts, of four kinds: Levy, SK with the given weights, SK with unit weights, and for
-   ``n >= 2`` the next-lower order's SK poles with one fast pole. Without a delay each is
-   refined and the best kept. With a delay each kind is built at every delay of a grid over
-   ``[0, pi / omega_max]`` (the data with that delay removed); the cost of every start as it
-   stands (one evaluation, no refinement) picks the five lowest of each kind, those are
-   refined briefly, the two best of them on until they converge, and the best of all is kept.
-   Tests hold this to the best of refining every start on the grid.
+   ``n >= 2`` the next-lower order's SK poles with one fast pole; with a delay each kind is
+   built at every delay of a grid over ``[0, pi / omega_max]`` (the data with that delay
+   removed), and the cost of every start as it stands (one evaluation, no refinement) picks
+   the five lowest of each kind. The starts are refined briefly, the two best of them on until
+   they converge, and the best of all is kept. Tests hold this to the best of refining every
+   start fully, with a delay and without.
 
 With ``stable=False`` the refinement works on the free denominator coefficients instead, and
 the model's ``stable`` flag reports what came out.
@@ -51,15 +51,16 @@ SK_MAX_ITER = 30
 SK_TOL = 1e-12
 #: Delays tried as starts, as a fraction of the largest delay (pi / omega_max).
 DELAY_GRID = np.linspace(0.0, 1.0, 13)
-#: With a delay, of each kind of start (Levy, SK, unit-weight SK, next-lower order with a fast
-#: pole) this many are refined: those of lowest cost before refinement across DELAY_GRID.
+#: Of each kind of start (Levy, SK, unit-weight SK, next-lower order with a fast pole) this
+#: many are refined: those of lowest cost before refinement across DELAY_GRID (without a
+#: delay there is one of each kind).
 #: None refines every start fully (the exhaustive search, kept to test the choice against).
 STARTS_PER_KIND = 5
 #: A refinement stops after this many residual evaluations per parameter (plus one).
 REFINE_EVALUATIONS = 400
-#: With a delay the chosen starts are first refined for this many evaluations per parameter
+#: The chosen starts are first refined for this many evaluations per parameter
 #: (plus one); the CONTINUED lowest-cost of them then go on to REFINE_EVALUATIONS.
-SCREEN_EVALUATIONS = 5
+SCREEN_EVALUATIONS = 10
 CONTINUED = 2
 #: Roots on the imaginary axis (after reflection) are moved left by this fraction of
 #: omega_0 so that the log parametrisation exists.
@@ -497,15 +498,14 @@ def _starts(x, F, m, n, w, delay, tau_max):
 
 
 def _chosen(problem, starts):
-    """The parameter vectors worth refining, from the ``(den, tau, kind)`` starts.
-
-    Without a delay, every start. With one, of each kind the STARTS_PER_KIND whose cost as
-    they stand (one residual evaluation each, no refinement) is lowest across the delay grid;
-    every start when STARTS_PER_KIND is None.
+    """The parameter vectors worth refining, from the ``(den, tau, kind)`` starts: of each
+    kind the STARTS_PER_KIND whose cost as they stand (one residual evaluation each, no
+    refinement) is lowest (across the delay grid with a delay; without one there is a start
+    of each kind, so every start); every start when STARTS_PER_KIND is None.
     """
     usable = [(problem.initial(den, tau), kind) for den, tau, kind in starts
               if np.all(np.isfinite(den))]
-    if not problem.delay or STARTS_PER_KIND is None:
+    if STARTS_PER_KIND is None:
         return [params for params, _ in usable]
     cost = [float(np.sum(problem.residuals(params) ** 2)) for params, _ in usable]
     chosen = []
@@ -516,12 +516,12 @@ def _chosen(problem, starts):
 
 
 def _refined(problem, starts, tau_max):
-    """``(params, cost)`` of the refined starts (see :func:`_chosen`). Every start is refined
-    fully without a delay. With one, each chosen start is refined for SCREEN_EVALUATIONS,
-    which tells the minima apart, and the CONTINUED lowest that have not converged go on
-    from there to REFINE_EVALUATIONS."""
+    """``(params, cost)`` of the refined starts (see :func:`_chosen`): each chosen start is
+    refined for SCREEN_EVALUATIONS, which tells the minima apart, and the CONTINUED lowest
+    that have not converged go on from there to REFINE_EVALUATIONS. Every start is refined
+    fully when STARTS_PER_KIND is None (the exhaustive search the tests hold this to)."""
     chosen = _chosen(problem, starts)
-    if not problem.delay or STARTS_PER_KIND is None:
+    if STARTS_PER_KIND is None:
         return [_refine(problem, params, tau_max, REFINE_EVALUATIONS)[:2] for params in chosen]
     screened = sorted((_refine(problem, params, tau_max, SCREEN_EVALUATIONS)
                        for params in chosen), key=lambda result: result[1])

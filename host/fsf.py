@@ -39,8 +39,6 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.linalg
-import scipy.optimize
 
 from .errors import InputError
 
@@ -272,6 +270,8 @@ def estimate_frequency(u, fs_hz: float) -> float:
     maximises the power that a least-squares sine fit at that frequency explains (the
     four-parameter sine fit), which is exact for a noise-free sine.
     """
+    import scipy.optimize          # here: identify, which knows its frequencies, need not wait
+
     u = np.asarray(u, dtype=float) - np.mean(u)
     n = u.size
     if n < 8 or not np.any(u):
@@ -509,12 +509,12 @@ def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0) -> _
         raise InputError(f"the input has no component at {fs_hz * orders[0] / period:g} Hz")
     excited = amp >= EXCITED_FRACTION * reference
     A = gram + np.diag(ridge) / p0
-    coef = scipy.linalg.solve(A, Xt @ yy, assume_a="pos")
+    coef = np.linalg.solve(A, Xt @ yy)
     resid = yy - coef @ Xt
     n_free = int(excited[0]) + 2 * int(np.sum(excited[1:])) + int(offset)
     dof = max(yy.size - n_free, 1)
     noise_var = float(resid @ resid) / dof
-    A_inv = scipy.linalg.inv(A)
+    A_inv = np.linalg.inv(A)
     cov = noise_var * A_inv @ gram @ A_inv
     nan = complex("nan+nanj")
     gains = {l: complex(coef[2 * j - 1], coef[2 * j]) if excited[j] else nan
@@ -557,7 +557,7 @@ def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
              for l in range(1, int(harmonics) + 1)}
     resid = y[start:stop] - X @ coef_y
     noise_var = float(resid @ resid) / max(k.size - X.shape[1], 1)
-    cov = noise_var * scipy.linalg.inv(X.T @ X)
+    cov = noise_var * np.linalg.inv(X.T @ X)
     sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)) / abs(U[0])
     coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
     return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
