@@ -131,6 +131,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     from ..sim.sil import SilConfig
     from .files import read_models_json
     from .identify_session import identify_dir
+    from .plot_process import InlinePlots
     from .session import SilSession
     from .sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
     from .validate import model_gains, save_validation, sweep_inputs, validate_model
@@ -151,7 +152,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     print("== identify")
     try:
         # The plots here, not beside: the axes keep every core busy already.
-        identified = identify_dir(folder, progress=print, plots_beside=False)
+        identified = identify_dir(folder, progress=print, plots=InlinePlots())
     except InputError as exc:                 # a failed sweep: say so, go on
         print(f"== not identified: {exc}")
         return {"summary": (axis, None, str(exc), float("nan"), float("nan")), "sim_s": sim_s}

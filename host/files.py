@@ -144,12 +144,20 @@ def _finite_or_null(doc):
 PNG_COMPRESS_LEVEL = 1
 
 
+#: How heliquad's figures draw their text: without FreeType's hinting (matplotlib's default
+#: hints every glyph, most of what a figure's tick labels cost: identify's responses figure
+#: drew its 300 labels in 0.22 s instead of 0.30 s), the glyphs a shade softer.
+FIGURE_RC = {"text.hinting": "none"}
+
+
 def save_figure(fig, path, **kwargs) -> None:
     """A matplotlib figure to ``path`` (format from its extension), atomically."""
+    import matplotlib
+
     fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
     if fmt == "png":
         kwargs.setdefault("pil_kwargs", {"compress_level": PNG_COMPRESS_LEVEL})
-    with atomic_write(path, "wb") as fh:
+    with atomic_write(path, "wb") as fh, matplotlib.rc_context(FIGURE_RC):
         fig.savefig(fh, format=fmt, **kwargs)
 
 

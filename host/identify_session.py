@@ -83,16 +83,20 @@ def _segments(manifest, samples):
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
-                 estimate: str = "excitation", plots_beside: bool = True) -> dict:
-    """``plots_beside``: draw the plots in a process of their own while the models are
-    fitted (:class:`~heliquad.host.plot_process.PlotProcess`), else here, after them."""
-    from .plot_process import InlinePlots, PlotProcess
+                 estimate: str = "excitation", plots=None) -> dict:
+    """``plots``: what draws the plots (a :mod:`~heliquad.host.plot_process` object the
+    caller has started and will close); by default a
+    :class:`~heliquad.host.plot_process.PlotProcess` of its own, which draws them in a
+    process of its own while the models are fitted."""
+    from .plot_process import PlotProcess
 
-    # The plotting process starts first: its imports overlap reading the log.
-    with (PlotProcess() if plots_beside else InlinePlots()) as plots:
-        manifest, samples, damage = _load(dir_path)
-        return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
-                         estimate)
+    if plots is None:
+        # The plotting process starts first: its imports overlap reading the log.
+        with PlotProcess() as plots:
+            return identify_dir(dir_path, orders, progress, delay, estimate, plots)
+    manifest, samples, damage = _load(dir_path)
+    return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+                     estimate)
 
 
 def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,

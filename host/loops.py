@@ -36,7 +36,6 @@ import numpy as np
 
 from heliquad import _firmware
 
-from ..sim.vehicle_plant import pid_z_coeffs
 from .gains import DERIVATIVE_FILTER_N
 
 __all__ = ["LOOP_DT_S", "loop_functions", "model_responses", "margins", "discrete_cascade",
@@ -52,11 +51,15 @@ SEARCH_POINTS = 4000
 SEARCH_BELOW = 100.0
 #: A crossover within this fraction of the band's edges is inside it (rounding).
 BAND_SLACK = 0.02
+#: A crossover is refined to this fraction of its frequency.
+ROOT_RTOL = 1e-12
 
 
 def _controller(gains, dt_s):
     """``((C_PI, D_m) of the rate loop, (K_o, D_o) of the angle loop or None)``, each a
     ``(num, den)`` pair in z."""
+    from ..sim.vehicle_plant import pid_z_coeffs     # here: the plant's module is a big one
+
     rate = pid_z_coeffs(*gains.rate, DERIVATIVE_FILTER_N, dt_s)
     if gains.angle is None:
         return rate, None
@@ -112,18 +115,35 @@ def loop_functions(h, h_a, gains, dt_s=LOOP_DT_S) -> dict:
 
 def _roots(f, grid, values) -> list:
     """The roots of the real function ``f`` where ``values`` (``f`` on ``grid``) change
-    sign, refined."""
-    import scipy.optimize          # here: importing this module must not wait for scipy
-
+    sign, each refined by bisection to ROOT_RTOL of its frequency (a crossing whose ``f``
+    is not finite inside its interval is none)."""
     with np.errstate(invalid="ignore"):
         change = np.nonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)[0]
     out = []
     for i in change:
-        try:
-            out.append(float(scipy.optimize.brentq(f, grid[i], grid[i + 1], rtol=1e-12)))
-        except (ValueError, RuntimeError):          # not finite inside: not a crossing
-            continue
+        root = _bisect(f, float(grid[i]), float(grid[i + 1]), float(values[i]))
+        if root is not None:
+            out.append(root)
     return out
+
+
+def _bisect(f, lo: float, hi: float, f_lo: float):
+    """The sign change of ``f`` in ``[lo, hi]`` (``f(lo) = f_lo``, of the other sign than
+    ``f(hi)``), halved until ROOT_RTOL of it; None where ``f`` is not finite inside. (Here
+    rather than scipy.optimize.brentq: a few dozen evaluations of an interpolation, and
+    importing scipy.optimize cost identify a fifth of a second.)"""
+    while hi - lo > ROOT_RTOL * hi:
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid)
+        if not math.isfinite(f_mid):
+            return None
+        if f_mid == 0.0:
+            return mid
+        if (f_mid < 0) == (f_lo < 0):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 def _in_band(omega, band) -> bool:

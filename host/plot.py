@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .files import PNG_COMPRESS_LEVEL, atomic_write, save_figure
+from .files import FIGURE_RC, PNG_COMPRESS_LEVEL, atomic_write, save_figure
 
 __all__ = ["new_figure", "plot_bode", "plot_coherence", "plot_loop_gains", "plot_responses",
            "plot_validation", "write_bode", "write_responses", "write_validation",
@@ -300,6 +300,24 @@ def _response_replay(ax, right, segment, replay) -> list:
     return [ax.set_title(title, fontsize=9), *added]
 
 
+def _envelope(t, v, columns: int) -> tuple:
+    """``(t, v)`` as a line ``columns`` pixels wide draws it: of each run of samples that
+    falls into one column, its lowest and highest in the order they came (a 6000-sample
+    record on a 260-pixel panel: 520 points instead of 6000, the same picture; the
+    rasteriser's time goes with the points). Short records are left as they are."""
+    v = np.asarray(v)
+    per = v.size // max(columns, 1)
+    if per < 4:
+        return t, v
+    whole = v.size // per * per
+    runs = v[:whole].reshape(-1, per)
+    lo, hi = runs.argmin(axis=1), runs.argmax(axis=1)
+    starts = np.arange(runs.shape[0]) * per
+    keep = np.column_stack([starts + np.minimum(lo, hi), starts + np.maximum(lo, hi)]).ravel()
+    keep = np.concatenate([[0], keep, np.arange(whole, v.size)])
+    return np.asarray(t)[keep], v[keep]
+
+
 class ResponsesFigure:
     """:func:`plot_responses` in a figure of its own (three frequencies a row, a fixed
     layout), made in two steps for a caller that has the records before the model: making
@@ -316,50 +334,78 @@ class ResponsesFigure:
     that ran past the record's range is cut at the panel's edge)."""
 
     def __init__(self, segments, input_name, output_name):
+        import matplotlib
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
-        from matplotlib.ticker import MaxNLocator
 
         rows = max(1, math.ceil(len(segments) / RESPONSE_COLUMNS))
         height = (RESPONSE_MARGINS_IN["top"] + RESPONSE_MARGINS_IN["bottom"]
                   + rows * RESPONSE_PANEL_IN + (rows - 1) * RESPONSE_GAPS_IN[1])
         self.fig = Figure(figsize=(13, height), dpi=RESPONSE_DPI)
-        renderer = FigureCanvasAgg(self.fig).get_renderer()
+        FigureCanvasAgg(self.fig)
         grid = self.fig.add_gridspec(rows, RESPONSE_COLUMNS, **_fixed_layout_params(
             self.fig, rows, RESPONSE_COLUMNS, RESPONSE_MARGINS_IN, RESPONSE_GAPS_IN))
         self.ax = self.fig.add_subplot(grid[0])
         self.right = self.ax.twinx()
-        labels = _response_axes(self.ax, self.right, input_name, output_name)
-        for side, at in ((self.ax.yaxis, -RESPONSE_LABEL_AT), (self.right.yaxis, 1 + RESPONSE_LABEL_AT)):
-            side.set_label_coords(at, 0.5)
-        self.ax.xaxis.set_label_coords(0.5, -RESPONSE_XLABEL_AT)
-        self.ax.set_title("", fontsize=9, y=1.0)      # where it goes: no search for a place
-        for axis in (self.ax.xaxis, self.ax.yaxis, self.right.yaxis):
-            axis.set_major_locator(MaxNLocator(RESPONSE_TICKS))
-        u_line, = self.ax.plot([], [], color=INPUT_COLOUR, lw=1, label=labels[0])
-        y_line, = self.right.plot([], [], color=OUTPUT_COLOUR, lw=1, label=labels[1])
-        self.fig.patch.draw(renderer)
+        lines = self._style(input_name, output_name)
         self.segments, self.panels = list(segments), []
-        for spec, (_, t, u, y) in zip(grid, self.segments):
-            self.ax.set_position(spec.get_position(self.fig))     # and its twin's
-            u_line.set_data(np.asarray(t) - t[0], u)
-            y_line.set_data(np.asarray(t) - t[0], y)
-            for side in (self.ax, self.right):             # both, before either scales:
-                side.relim()                               # they share the time axis
+        places = [spec.get_position(self.fig) for spec, _ in zip(grid, self.segments)]
+        with matplotlib.rc_context(FIGURE_RC):
+            self._draw_records(places, *lines)
+
+    def _style(self, input_name, output_name) -> tuple:
+        """The pair of Axes labelled and coloured, their labels and title at fixed places,
+        and their two (empty) lines, the input's and the output's."""
+        from matplotlib.ticker import MaxNLocator
+
+        ax, right = self.ax, self.right
+        labels = _response_axes(ax, right, input_name, output_name)
+        ax.yaxis.set_label_coords(-RESPONSE_LABEL_AT, 0.5)
+        right.yaxis.set_label_coords(1 + RESPONSE_LABEL_AT, 0.5)
+        ax.xaxis.set_label_coords(0.5, -RESPONSE_XLABEL_AT)
+        ax.set_title("", fontsize=9, y=1.0)           # where it goes: no search for a place
+        for axis in (ax.xaxis, ax.yaxis, right.yaxis):
+            axis.set_major_locator(MaxNLocator(RESPONSE_TICKS))
+        return (ax.plot([], [], color=INPUT_COLOUR, lw=1, label=labels[0])[0],
+                right.plot([], [], color=OUTPUT_COLOUR, lw=1, label=labels[1])[0])
+
+    def _draw_records(self, places, u_line, y_line) -> None:
+        """Each record drawn by the pair of Axes at its panel's place; the places and
+        scales kept."""
+        renderer = self.fig.canvas.get_renderer()
+        self.fig.patch.draw(renderer)
+        columns = int(places[0].width * self.fig.bbox.width) if places else 1
+        for place, (_, t, u, y) in zip(places, self.segments):
+            self.ax.set_position(place)                         # and its twin's
+            t = np.asarray(t) - t[0]
+            u_line.set_data(*_envelope(t, u, columns))
+            y_line.set_data(*_envelope(t, y, columns))
+            for side in (self.ax, self.right):              # both, before either scales:
+                side.relim()                                # they share the time axis
             self.ax.autoscale_view()
             self.right.autoscale_view(scalex=False)
             self.ax.draw(renderer)
             self.right.draw(renderer)
-            self.panels.append((spec.get_position(self.fig), self.ax.get_xlim(),
-                                self.ax.get_ylim(), self.right.get_ylim()))
+            self.panels.append((place, self.ax.get_xlim(), self.ax.get_ylim(),
+                                self.right.get_ylim()))
 
     def save(self, path, title="", replays=None) -> None:
         """Add ``replays`` (beside the records, a :class:`~heliquad.host.replay.Replay` or
         None each) and ``title``, and write the picture to ``path`` (PNG)."""
+        import matplotlib
         from matplotlib.image import imsave
 
-        fig, ax, right = self.fig, self.ax, self.right
         replays = list(replays) if replays is not None else [None] * len(self.segments)
+        with matplotlib.rc_context(FIGURE_RC):
+            self._draw_replays(replays, title)
+        with atomic_write(path, "wb") as fh:
+            imsave(fh, np.asarray(self.fig.canvas.buffer_rgba()), format="png",
+                   dpi=self.fig.dpi, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
+
+    def _draw_replays(self, replays, title) -> None:
+        """The replays and the panels' titles, each at its panel's place and scales; the
+        legend and the figure's title."""
+        fig, ax, right = self.fig, self.ax, self.right
         for (place, xlim, ylim, right_ylim), segment, replay in zip(self.panels, self.segments,
                                                                    replays):
             ax.set_position(place)
@@ -379,9 +425,6 @@ class ResponsesFigure:
                                       va="top"))
         for artist in added:
             fig.draw_artist(artist)
-        with atomic_write(path, "wb") as fh:
-            imsave(fh, np.asarray(fig.canvas.buffer_rgba()), format="png", dpi=fig.dpi,
-                   pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
 
 
 def write_responses(path, segments, input_name, output_name, title="", replays=None):

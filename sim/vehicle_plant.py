@@ -11,7 +11,6 @@ rate; sampled with the zero-order hold of the loop period as the logged data are
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from heliquad import _simcore
 
@@ -163,6 +162,8 @@ class VehiclePlant:
 
     def _sampled(self, z):
         """Logged torque command -> logged [rate, angle] at the points ``z`` (ZOH, latency)."""
+        import scipy.linalg       # here: importing the plant (identify's loops do) need not wait
+
         A, b, C = self.linearise()
         n = A.shape[0]
         M = np.zeros((n + 1, n + 1))

@@ -177,3 +177,44 @@ def assert_one_line_error(res, match):
     assert len(lines) == 1, res.stderr
     assert "Traceback" not in res.stderr
     assert re.search(match, lines[0]), lines[0]
+
+
+def _subcommands(parser) -> list:
+    import argparse
+
+    (action,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return list(action.choices)
+
+
+def test_a_command_line_builds_only_the_command_it_names():
+    # Every command's module is imported only for --help or a name that is not a command;
+    # the name each module's parser takes is the one COMMANDS files it under.
+    from heliquad.host.cli import _build_parser
+    from heliquad.host.commands import COMMANDS
+
+    assert _subcommands(_build_parser([])) == list(COMMANDS)
+    assert _subcommands(_build_parser(["--version"])) == list(COMMANDS)
+    assert _subcommands(_build_parser(["identfy", "x"])) == list(COMMANDS)
+    for name in COMMANDS:
+        assert _subcommands(_build_parser([name, "--help"])) == [name]
+
+
+def test_a_misspelt_command_is_told_the_commands_there_are():
+    res = heliquad("identfy", "somewhere")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert "invalid choice: 'identfy'" in res.stderr and "identify" in res.stderr
+    assert "mavlink-dialect" in res.stderr
+
+
+@pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
+def test_the_command_line_keeps_openblas_to_one_thread_unless_told(given, expected):
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given:
+        env["OPENBLAS_NUM_THREADS"] = given
+    res = subprocess.run([sys.executable, "-c", "import os, heliquad.host.cli; "
+                          "print(os.environ['OPENBLAS_NUM_THREADS'])"],
+                         capture_output=True, text=True, env=env, timeout=60)
+    assert res.stdout.strip() == expected
+

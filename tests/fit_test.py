@@ -251,16 +251,31 @@ def points_of(num, den, delay_s, omega):
     return {"omega": omega, "F": F, "sigma": 0.01 * np.abs(F)}
 
 
-def test_a_zero_that_cancels_a_pole_marks_the_model_degenerate():
-    # On noise-free 0/2 points with a delay, a 2/4 can put a pole pair and a zero pair 1e-5
-    # apart far above the band and match the points to rounding error; its AICc is then
-    # lower by chance. The pair changes nothing the points show: degenerate, not recommended.
+def test_a_spare_order_that_matches_noise_free_points_to_rounding_is_not_recommended():
+    # On noise-free 0/2 points with a delay, a 2/4 can spend its spare pair of poles and zeros
+    # far above the band (a zero pair cancelling a pole pair, or a zero so far up it changes
+    # nothing) and match the points to rounding error; its AICc is then lower by chance.
+    # What it adds changes nothing the points show: degenerate, not recommended.
     omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 12)
     result = fit_orders(points_of([28.19], [1, 5.13, 22.93], 0.02, omega),
                         [(0, 2), (2, 4)], delay=True)
     spare = result.models[1]
-    assert spare.degenerate and spare.degenerate_why.startswith("a zero cancels a pole")
+    assert spare.metrics["max_mag_err_db"] < 1e-6
+    assert spare.degenerate and spare.degenerate_why.startswith(("a zero cancels a pole",
+                                                                  "a zero at"))
     assert result.recommended == 0
+
+
+def test_a_zero_that_cancels_a_pole_marks_the_model_degenerate():
+    # What a 2/4 fitted to those points once did: a pair of each at 1322 rad/s, 1e-5 apart.
+    from heliquad.host.identify import _flag_unsupported_zeros
+
+    pair = [1.0, 2 * 0.5 * 1322.0, 1322.0 ** 2]
+    near = [1.0, 2 * 0.5 * 1322.0 * (1 + 1e-5), (1322.0 * (1 + 1e-5)) ** 2]
+    model = TfModel(order=(2, 4), num=28.19 * np.array(near) / near[-1] * pair[-1],
+                    den=np.polymul([1, 5.13, 22.93], pair), delay_s=0.02)
+    _flag_unsupported_zeros(model, 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 12))
+    assert model.degenerate and model.degenerate_why.startswith("a zero cancels a pole at 1322")
 
 
 def test_a_zero_far_above_the_band_marks_the_model_degenerate():
@@ -348,9 +363,9 @@ SEVERAL_MINIMA = (("yaw", (0, 1), 0.015, 0.01, 1, (2, 3)), ("yaw", (0, 1), 0.015
 LONG_VALLEY = ("yaw", (0, 1), 0.010, 0.02, 2, (2, 2))
 #: Points on which a screen of 5 evaluations a parameter misses the best minimum without a
 #: delay (of 1620 sets of the three axes' paper models, delays, noise and orders up to 3/4,
-#: these two; a screen of SCREEN_EVALUATIONS misses none of them).
+#: seven, by up to 5 %; a screen of SCREEN_EVALUATIONS misses none of them).
 SHORT_SCREEN_MISSES = (("roll", (0, 3), 0.020, 0.03, 2, (3, 4)),
-                       ("yaw", (2, 2), 0.0, 0.03, 1, (3, 4)))
+                       ("pitch", (0, 2), 0.010, 0.03, 1, (2, 4)))
 
 
 def fit_cost(monkeypatch, case, per_kind, delay=True, screen=None):
@@ -399,3 +414,76 @@ def test_a_shorter_screen_misses_it_on_these_sets(monkeypatch, exhaustive_cost, 
     assert fit_module.SCREEN_EVALUATIONS > 5
     short = fit_cost(monkeypatch, case, fit_module.STARTS_PER_KIND, delay=False, screen=5)
     assert short > exhaustive_cost(case, delay=False) * 1.005
+
+
+# -- the refinement's solver ----------------------------------------------------------------
+
+def test_the_solver_finds_a_minimum_inside_the_box_as_scipy_does():
+    # Output-error problems at random starts: the solver reaches the cost scipy's trust-region
+    # reflective solver reaches (to round-off), converged by its tolerances.
+    import scipy.optimize
+
+    x = np.logspace(-0.75, 0.75, N_POINTS)
+    F = noisy(model_response([1.2, 0.5], [1, 0.8, 1.1], 0.2, x), 3, 0.02)
+    problem = fit_module._OutputError(x, F, 1, 2, 1 / np.abs(F), True, True)
+    lower, upper = (np.append(b, 0.0) for b in problem.bounds())
+    upper[-1] = np.pi / x.max()
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        x0 = np.append(rng.uniform(-1, 1, 2), rng.uniform(0, upper[-1]))
+        got, r, done = fit_module._least_squares(problem.residuals, problem.jacobian, x0,
+                                                 lower, upper, 2000)
+        ref = scipy.optimize.least_squares(problem.residuals, x0, jac=problem.jacobian,
+                                           bounds=(lower, upper), x_scale="jac",
+                                           xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        assert done
+        assert r @ r <= np.sum(ref.fun ** 2) * (1 + 1e-9)
+        np.testing.assert_allclose(got, ref.x, rtol=1e-6, atol=1e-8)
+
+
+def test_the_solver_stops_on_a_bound_the_minimum_lies_beyond():
+    # min (x0 - 3)^2 + 10 (x1 + 2)^2 over [0, 1] x [-1, 1]: the corner (1, -1), each
+    # parameter held on its bound, converged.
+    def fun(p):
+        return np.array([p[0] - 3.0, math.sqrt(10) * (p[1] + 2.0)])
+
+    def jac(p):
+        return np.array([[1.0, 0.0], [0.0, math.sqrt(10)]])
+
+    got, r, done = fit_module._least_squares(fun, jac, np.array([0.5, 0.5]), np.array([0.0, -1.0]),
+                                             np.array([1.0, 1.0]), 100)
+    assert done and got.tolist() == [1.0, -1.0]
+    assert r @ r == pytest.approx(4.0 + 10.0)
+
+
+def rosenbrock(p):
+    """Rosenbrock's valley as residuals, and their Jacobian."""
+    return (np.array([10.0 * (p[1] - p[0] ** 2), 1.0 - p[0]]),
+            np.array([[-20.0 * p[0], 10.0], [-1.0, 0.0]]))
+
+
+@pytest.mark.parametrize("budget", [500, 5])
+def test_the_solver_follows_a_curved_valley_to_its_end_or_says_it_did_not(budget):
+    # From the classic start: the minimum (1, 1) to 1e-8; or, with too few evaluations,
+    # not done, and somewhere finite.
+    inf = np.full(2, np.inf)
+    got, r, done = fit_module._least_squares(lambda p: rosenbrock(p)[0],
+                                             lambda p: rosenbrock(p)[1],
+                                             np.array([-1.2, 1.0]), -inf, inf, budget)
+    assert done == (budget == 500) and np.all(np.isfinite(got))
+    if done:
+        np.testing.assert_allclose(got, [1.0, 1.0], atol=1e-8)
+
+
+def test_the_solver_takes_a_jacobian_without_full_rank():
+    # Two parameters only their sum matters to (a zero cancelling a pole does this to a fit):
+    # the shortest step, no singular matrix.
+    def fun(p):
+        return np.array([p[0] + p[1] - 1.0, 2.0 * (p[0] + p[1] - 1.0)])
+
+    def jac(p):
+        return np.array([[1.0, 1.0], [2.0, 2.0]])
+
+    inf = np.full(2, np.inf)
+    got, r, done = fit_module._least_squares(fun, jac, np.array([3.0, -4.0]), -inf, inf, 50)
+    assert done and r @ r < 1e-20 and got.sum() == pytest.approx(1.0)

@@ -91,3 +91,15 @@ def test_a_model_identified_past_the_crossovers_gives_the_truths_margins():
     # the truth's own figures: the roll rate loop as flown is close to its limits
     assert 20 * math.log10(report["truth"]["rate"]["gain_margin"]) == pytest.approx(1.63, abs=0.05)
     assert math.degrees(report["truth"]["rate"]["phase_margin_rad"]) == pytest.approx(22.7, abs=0.2)
+
+
+def test_a_crossing_is_refined_to_its_frequency_s_rounding():
+    grid = np.linspace(1.0, 10.0, 10)
+    f = lambda w: math.cos(w)                            # noqa: E731
+    roots = loops._roots(f, grid, np.cos(grid))
+    np.testing.assert_allclose(roots, [math.pi / 2, 3 * math.pi / 2, 5 * math.pi / 2],
+                               rtol=2 * loops.ROOT_RTOL)
+    # a sign change across a pole (the function not finite inside) is no crossing
+    pole = lambda w: 1.0 / (w - 2.5) if w != 2.5 else math.nan   # noqa: E731
+    assert loops._roots(lambda w: math.inf if abs(w - 2.5) < 1e-3 else pole(w),
+                        np.array([2.0, 3.0]), np.array([pole(2.0), pole(3.0)])) == []

@@ -160,3 +160,36 @@ print(matplotlib.get_backend())
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().lower() == "pdf"
     assert (tmp_path / "bode.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_envelope_keeps_each_column_s_extremes_in_order():
+    from heliquad.host.plot import _envelope
+
+    t = np.arange(6000) * 0.005
+    y = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 41 * t)
+    te, ye = _envelope(t, y, 260)
+    assert te.size < 600 and np.all(np.diff(te) > 0)           # in time order, far fewer
+    per = y.size // 260
+    for k in range(0, 260 * per, per):                          # each column's extremes kept
+        assert y[k:k + per].max() in ye and y[k:k + per].min() in ye
+    assert (te[0], te[-1]) == (t[0], t[-1])
+    short = np.arange(100.0)
+    assert _envelope(short, short, 260)[1] is short             # nothing to thin
+
+
+def test_the_responses_figure_gives_each_record_its_own_scales(tmp_path):
+    from matplotlib.image import imread
+
+    from heliquad.host.plot import ResponsesFigure
+
+    t = np.arange(0, 4, 0.005)
+    slow = (0.5, t, 0.1 * np.sin(np.pi * t), 2e-3 * np.sin(np.pi * t - 1))
+    fast = (2.0, t[:400] + 7.0, 3.0 * np.sin(4 * np.pi * t[:400]), 50 * np.sin(4 * np.pi * t[:400]))
+    figure = ResponsesFigure([slow, fast, slow, fast], "axis_cmd", "rate")
+    (p0, x0, y0, r0), (p1, x1, y1, r1) = figure.panels[:2]
+    assert x0[0] <= 0 and 3.99 <= x0[1] < 4.5 and 1.99 <= x1[1] < 2.3    # time from 0, its own
+    assert 0.1 <= y0[1] < 0.15 and 3.0 <= y1[1] < 4.0                     # each input's scale
+    assert 2e-3 <= r0[1] < 3e-3 and 50 <= r1[1] < 60                      # each output's
+    assert p1.x0 > p0.x1 and figure.panels[3][0].y1 < p0.y0             # across, then down
+    figure.save(tmp_path / "responses.png", title="two records")
+    assert imread(tmp_path / "responses.png").shape[:2] == figure.fig.canvas.get_width_height()[::-1]

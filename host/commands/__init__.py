@@ -3,8 +3,8 @@
 Every command module has ``add_parser(sub, fmt)``, which adds its subparser and sets
 ``func`` to its ``run(args) -> exit code``. The modules here hold the commands that are a
 front end to library code elsewhere in :mod:`heliquad.host`; ``demo``, ``dmp-image``,
-``flash`` and ``mavlink-dialect`` live in the modules that do their work. :data:`COMMANDS` is the order
-``heliquad --help`` lists them in.
+``flash`` and ``mavlink-dialect`` live in the modules that do their work. :data:`COMMANDS`
+names them, in the order ``heliquad --help`` lists them.
 """
 
 from __future__ import annotations
@@ -13,14 +13,20 @@ import importlib
 
 __all__ = ["COMMANDS", "add_parsers"]
 
-#: Module of each subcommand, relative to :mod:`heliquad.host`.
-COMMANDS = ("commands.fsf", "commands.fit", "commands.sil", "commands.board",
-            "commands.validate", "commands.log", "commands.tlog", "commands.sweep",
-            "commands.identify", "commands.report", "commands.params", "demo", "dmp_image",
-            "flash", "mavlink_dialect")
+#: Each subcommand's name and module (relative to :mod:`heliquad.host`), in the order
+#: ``heliquad --help`` lists them.
+COMMANDS = {"fsf": "commands.fsf", "fit": "commands.fit", "sil": "commands.sil",
+            "board": "commands.board", "validate": "commands.validate", "log": "commands.log",
+            "tlog": "commands.tlog", "sweep": "commands.sweep", "identify": "commands.identify",
+            "report": "commands.report", "params": "commands.params", "demo": "demo",
+            "dmp-image": "dmp_image", "flash": "flash", "mavlink-dialect": "mavlink_dialect"}
 
 
-def add_parsers(sub, fmt) -> None:
-    """Add every subcommand's parser to ``sub`` (argparse subparsers)."""
-    for name in COMMANDS:
-        importlib.import_module(f"heliquad.host.{name}").add_parser(sub, fmt)
+def add_parsers(sub, fmt, argv=()) -> None:
+    """Add the subcommands' parsers to ``sub`` (argparse subparsers): only the one the
+    command line ``argv`` names, when its first word is a command, else every one (to list
+    them, or to say which there are). A command then pays for importing its own module
+    only, not every command's (numpy, the vehicle, the dialect: a tenth of a second)."""
+    named = next((word for word in argv if not word.startswith("-")), None)
+    for name in [named] if named in COMMANDS else COMMANDS:
+        importlib.import_module(f"heliquad.host.{COMMANDS[name]}").add_parser(sub, fmt)

@@ -15,9 +15,10 @@ HELP = """\
 Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
 paper's table (points_table.csv), fitted models (models.json: the paper's orders for the axis
 and the integrator structures 0/2i and 1/3i, unless --order; each with a fitted delay
-unless --no-delay) and plots (bode.png; responses.png, input dashed, output solid). The
-recommended model is the lowest AICc among the stable models of acceptable fit, unless
-another fits visibly better; its quality (good, acceptable, poor) is said and recorded.
+unless --no-delay) and plots (bode.png; responses.png: each record's input and output,
+with the recommended model's replay of the output dashed). The recommended model is the
+lowest AICc among the stable models of acceptable fit, unless another fits visibly better;
+its quality (good, acceptable, poor) is said and recorded.
 When the loop closes around the excitation (mixer injection), the loop broken there is
 measured too, L = R/U - 1, with its margins where the sweep reaches its crossovers.
 """
@@ -48,13 +49,17 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..fit import parse_order
-    from ..identify_session import identify_dir
+    from ..plot_process import PlotProcess
 
-    orders = [parse_order(o) for o in args.order] if args.order else None
     if not os.path.isdir(args.dir):
         raise InputError(f"{args.dir}: not a folder")
-    r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate)
+    with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
+        from ..fit import parse_order
+        from ..identify_session import identify_dir
+
+        orders = [parse_order(o) for o in args.order] if args.order else None
+        r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
+                         plots=plots)
     print(f"{r['axis']}: {len(r['points'])} points")
     print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
     for p in sorted(r["points"], key=lambda q: q.omega_rad_s):
