@@ -159,7 +159,8 @@ def serve() -> None:
     from . import plot
 
     figure = None
-    while (message := inbox.get()) is not None:
+    while (raw := inbox.get()) is not None:
+        message = pickle.loads(raw)
         if message[0] == "records":
             figure = plot.ResponsesFigure(*message[1:])
             continue
@@ -182,10 +183,12 @@ def serve() -> None:
 
 
 def _receive(conn, inbox) -> None:
-    """Every message on ``conn`` into ``inbox``, then None once it closes."""
+    """Every message on ``conn`` into ``inbox`` as it came (pickled: unpickling here could
+    import numpy while the other thread imports it, and a module imported from two threads
+    at once can be seen half made), then None once it closes."""
     try:
         while True:
-            inbox.put(conn.recv())
+            inbox.put(conn.recv_bytes())
     except (EOFError, OSError):
         inbox.put(None)
 
