@@ -218,3 +218,30 @@ def test_the_command_line_keeps_openblas_to_one_thread_unless_told(given, expect
                          capture_output=True, text=True, env=env, timeout=60)
     assert res.stdout.strip() == expected
 
+
+
+def test_fsf_of_a_multisine_run_gives_every_line(tmp_path):
+    # A multisine's periodic steady state through the roll model (seven lines on a 0.25 Hz
+    # base, 4 periods at 200 Hz): a point per line, each the model's response to 1e-6.
+    from heliquad.host.files import read_points_csv
+
+    fs, base, orders = 200.0, 0.25, [2, 3, 4, 6, 8, 11, 16]
+    t = np.arange(4 * int(fs / base)) / fs
+    u, y = np.zeros_like(t), np.zeros_like(t)
+    for k, l in enumerate(orders):
+        w = 2 * np.pi * base * l
+        G = np.polyval(ROLL[0], 1j * w) / np.polyval(ROLL[1], 1j * w)
+        phase = -np.pi * k * k / len(orders)                        # Schroeder's phases
+        u += 0.1 * np.sin(w * t + phase)
+        y += 0.1 * abs(G) * np.sin(w * t + phase + np.angle(G))
+    np.savetxt(tmp_path / "ms.csv", np.column_stack([t, u, y]), delimiter=",",
+               header="t_s,u,y", comments="")
+    res = heliquad("fsf", tmp_path / "ms.csv", "--freq-hz", base, "--orders", *orders,
+                   "--out", tmp_path / "points.csv")
+    assert res.returncode == 0 and res.stderr == "", res.stderr
+    assert "multisine, 7 line(s)" in res.stdout
+    got = read_points_csv(tmp_path / "points.csv")
+    w = 2 * np.pi * base * np.array(orders)
+    truth = np.polyval(ROLL[0], 1j * w) / np.polyval(ROLL[1], 1j * w)
+    np.testing.assert_allclose(got["omega"], w, rtol=1e-9)
+    np.testing.assert_allclose(got["F"], truth, rtol=1e-6)

@@ -5,37 +5,56 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli_args import number_in
+from ..cli_args import int_in, number_in
 from ..errors import InputError
 
 __all__ = ["add_parser", "run"]
 
 HELP = """\
-Estimate one frequency-response point per sine experiment with the frequency sampling
-filter (FSF) and least squares (the paper's step 2, docs/paper.md).
+Estimate frequency-response points with the frequency sampling filter (FSF) and least
+squares (the paper's step 2, docs/paper.md): one point per sine experiment, or, with
+--orders, one point per line of a multisine experiment (a sum of sines at harmonics of one
+base frequency, all estimated from the one record).
 
 RUN.csv: a header row, then columns t_s,u,y (seconds, input, output; any order, other
-columns ignored), uniformly sampled, one sine frequency per file.
-POINTS.csv (written): omega_rad_s,magnitude,phase_rad,sigma,coherence, one row per run,
+columns ignored), uniformly sampled, one sine frequency (or one multisine) per file.
+POINTS.csv (written): omega_rad_s,magnitude,phase_rad,sigma,coherence, one row per point,
 sorted by frequency; magnitude linear, phase in radians, sigma the standard deviation of
 the complex gain, coherence the magnitude-squared coherence at that frequency.
 
-example: heliquad fsf runs/*.csv --discard-periods 2 --out points.csv
+examples: heliquad fsf runs/*.csv --discard-periods 2 --out points.csv
+          heliquad fsf multisine.csv --freq-hz 0.1 --orders 5 7 10 14 20 28 40 --out points.csv
 """
 
+#: Settling periods dropped by default: a sine's first period; none of a multisine's (the
+#: filter's first base period is its settling).
+DISCARD_SINE, DISCARD_MULTISINE = 1, 0
+#: A multisine run's input has at least this share of its variation at its lines, or its
+#: base frequency or lines were given wrong (an exact multisine: all of it, noise aside).
+MIN_LINE_SHARE = 0.5
+#: Harmonics of a sine run's FSF model by default (as in the paper).
+HARMONICS = 3
 
 
 def add_parser(sub, fmt) -> None:
-    p = sub.add_parser("fsf", help="frequency-response points from sine runs",
+    p = sub.add_parser("fsf", help="frequency-response points from sine or multisine runs",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("runs", nargs="+", metavar="RUN.csv", help="one sine experiment per file")
+    p.add_argument("runs", nargs="+", metavar="RUN.csv", help="one experiment per file")
     p.add_argument("--freq-hz", type=number_in(0, 1e6, lo_open=True), action="append", metavar="F",
-                   help="excitation frequency: once for all runs or once per run "
-                        "(default: found from the input signal)")
-    p.add_argument("--harmonics", type=int, default=3, metavar="L",
-                   help="harmonics -L..L in the FSF model (default 3, as in the paper)")
-    p.add_argument("--discard-periods", type=int, default=1, metavar="K",
-                   help="settling periods dropped at the start of each run (default 1)")
+                   help="excitation frequency (a multisine's base frequency): once for all "
+                        "runs or once per run (default for sines: found from the input signal; "
+                        "a multisine needs it)")
+    p.add_argument("--orders", type=int_in(1, 1_000_000), nargs="+", metavar="L",
+                   help="the runs are multisines with lines at these harmonics of the base "
+                        "frequency --freq-hz (whose period must be a whole number of samples): "
+                        "one point per line the input excites")
+    p.add_argument("--harmonics", type=int_in(1, 50), metavar="L",
+                   help=f"sine runs: harmonics -L..L in the FSF model (default {HARMONICS}, "
+                        "as in the paper)")
+    p.add_argument("--discard-periods", type=int_in(0, 1_000_000), metavar="K",
+                   help=f"settling periods dropped at the start of each run (default "
+                        f"{DISCARD_SINE} for a sine; {DISCARD_MULTISINE} for a multisine, whose "
+                        "first base period the filter takes to settle)")
     p.add_argument("--no-offset", action="store_true",
                    help="do not estimate a constant output offset")
     p.add_argument("--out", required=True, metavar="POINTS.csv", help="points file to write")
@@ -44,38 +63,107 @@ def add_parser(sub, fmt) -> None:
 
 def run(args) -> int:
     from ..files import check_output, read_run_csv, write_points_csv
-    from ..report import LOW_COHERENCE
 
     check_output(args.out, "--out")
+    freqs = _frequencies(args)
+    points, origin = [], {}
+    for i, (path, freq) in enumerate(zip(args.runs, freqs), 1):
+        fs_hz, u, y = read_run_csv(path)
+        try:
+            found = _estimate(args, u, y, fs_hz, freq)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        for point in found:
+            key = round(point.omega_rad_s, 9)
+            if key in origin:
+                raise InputError(f"{path} and {origin[key]} are both at {point.freq_hz:.6g} "
+                                 "Hz; one point per frequency")
+            origin[key] = path
+        points += found
+        _say(i, len(args.runs), path, found, multisine=args.orders is not None)
+    write_points_csv(args.out, points)
+    print(f"wrote {len(points)} point(s) to {args.out}")
+    return 0
+
+
+def _frequencies(args) -> list:
+    """Each run's frequency (None: found from its input), the options checked together."""
     freqs = args.freq_hz or [None]
     if len(freqs) not in (1, len(args.runs)):
         raise InputError(f"--freq-hz given {len(freqs)} times for {len(args.runs)} runs; "
                          "give it once for all runs or once per run")
-    if len(freqs) == 1:
-        freqs = freqs * len(args.runs)
-    points, origin = [], {}
-    for i, (path, freq) in enumerate(zip(args.runs, freqs), 1):
-        fs_hz, u, y = read_run_csv(path)
-        from ..fsf import estimate_fsf          # after the file is read: scipy takes a while
+    if args.orders is not None:
+        if freqs == [None]:
+            raise InputError("--orders needs --freq-hz, the multisine's base frequency")
+        if args.harmonics is not None:
+            raise InputError("--harmonics is for sine runs; a multisine's lines are --orders")
+        if any(b <= a for a, b in zip(args.orders, args.orders[1:])):
+            raise InputError(f"--orders must be strictly increasing, got {args.orders}")
+    return freqs * len(args.runs) if len(freqs) == 1 else freqs
 
-        try:
-            point = estimate_fsf(u, y, fs_hz, freq_hz=freq, harmonics=args.harmonics,
-                                 discard_periods=args.discard_periods, offset=not args.no_offset)
-        except InputError as exc:
-            raise InputError(f"{path}: {exc}") from None
-        key = round(point.omega_rad_s, 9)
-        if key in origin:
-            raise InputError(f"{path} and {origin[key]} are both at {point.freq_hz:.6g} Hz; "
-                             "one point per frequency")
-        origin[key] = path
-        points.append(point)
-        print(f"[{i}/{len(args.runs)}] {path}: {_describe_point(point)}", flush=True)
-        if point.coherence < LOW_COHERENCE:
-            print(f"warning: {path}: low coherence {point.coherence:.2f}; the point is "
-                  "unreliable", file=sys.stderr)
-    write_points_csv(args.out, points)
-    print(f"wrote {len(points)} point(s) to {args.out}")
-    return 0
+
+def _estimate(args, u, y, fs_hz, freq) -> list:
+    """One run's points: a sine's one, or every line of a multisine its input excites."""
+    from ..fsf import estimate_fsf, estimate_multisine   # after the file is read
+
+    if args.orders is None:
+        discard = DISCARD_SINE if args.discard_periods is None else args.discard_periods
+        return [estimate_fsf(u, y, fs_hz, freq_hz=freq,
+                             harmonics=HARMONICS if args.harmonics is None else args.harmonics,
+                             discard_periods=discard, offset=not args.no_offset)]
+    period = fs_hz / freq
+    if abs(period - round(period)) > 1e-6 * period:
+        raise InputError(f"the base period, {fs_hz:.6g} Hz / {freq:.6g} Hz = {period:.6g} "
+                         "samples, is not a whole number: a multisine's lines are harmonics "
+                         "of a whole period (give its exact base frequency)")
+    if 4 * args.orders[-1] > round(period):
+        raise InputError(f"line {args.orders[-1]} has fewer than 4 per cycle of the "
+                         f"{round(period)} samples of the base period: above the lines the "
+                         "FSF can estimate")
+    discard = DISCARD_MULTISINE if args.discard_periods is None else args.discard_periods
+    share = _line_share(u, round(period), args.orders, discard)
+    if share < MIN_LINE_SHARE:
+        raise InputError(f"{100 * share:.0f} % of the input's variation lies at the --orders "
+                         f"harmonics of {freq:.6g} Hz (at least {100 * MIN_LINE_SHARE:.0f} % "
+                         "from a multisine of those lines): is that its exact base frequency, "
+                         "and are those its lines?")
+    found = estimate_multisine(u, y, fs_hz, round(period), args.orders, discard_periods=discard,
+                               offset=not args.no_offset)
+    if not found:
+        raise InputError("the input excites none of the lines --orders names")
+    return found
+
+
+def _line_share(u, period: int, orders, discard: int) -> float:
+    """The share of ``u``'s variation (its mean removed) over its whole periods after
+    ``discard`` that lies at the harmonics ``orders`` of the period: the DFT of ``n`` whole
+    periods has each harmonic ``l`` at bin ``n l``."""
+    import numpy as np
+
+    start = discard * period
+    n = (len(u) - start) // period
+    if n < 1:
+        return 1.0                      # too short to tell: the estimate says so
+    spectrum = np.abs(np.fft.rfft(np.asarray(u[start:start + n * period], float))) ** 2
+    total = float(np.sum(spectrum[1:]))
+    lines = float(np.sum(spectrum[[n * l for l in orders if n * l < spectrum.size]]))
+    return lines / total if total > 0 else 1.0
+
+
+def _say(i, n, path, points, multisine) -> None:
+    """The run's points, and a warning for each of low coherence."""
+    from ..report import LOW_COHERENCE
+
+    if multisine:
+        print(f"[{i}/{n}] {path}: multisine, {len(points)} line(s)", flush=True)
+        for p in points:
+            print(f"    line {p.order}: {_describe_point(p)}", flush=True)
+    else:
+        print(f"[{i}/{n}] {path}: {_describe_point(points[0])}", flush=True)
+    for p in points:
+        if p.coherence < LOW_COHERENCE:
+            print(f"warning: {path}: low coherence {p.coherence:.2f} at {p.freq_hz:.4g} Hz; "
+                  "the point is unreliable", file=sys.stderr)
 
 
 def _describe_point(p) -> str:
