@@ -119,7 +119,6 @@ def main():
     parser.add_argument("--exhaustive", action="store_true",
                         help="also refine every start of the delay grid (slow)")
     args = parser.parse_args()
-    import scipy.optimize  # noqa: F401  (imported before timing: fit_tf imports it lazily)
 
     print(f"{'axis':>5} {'set':>3} {'noise':>5} {'fit':>3} {'levy us':>7} {'plain ms':>8} "
           f"{'x levy':>7} {'cost':>11} {'delay ms':>8} {'x levy':>7} {'cost':>11} "

@@ -44,8 +44,9 @@ def loop_cycles(folder: str) -> tuple:
     armed before the excitation, and at its full amplitude."""
     d = dialect()
     status = read_tlog_table(f"{folder}/sweep.tlog", d, "HQ_FW_STATUS")
-    idle = [(int(s.loop_cycles_median), int(s.loop_cycles_max)) for s in status
-            if s.armed and s.exc_state == d.HQ_EXCITATION_STATE_IDLE]
+    running_at = [k for k, s in enumerate(status) if s.exc_state != d.HQ_EXCITATION_STATE_IDLE]
+    before = status[:running_at[0]] if running_at else status
+    idle = [(int(s.loop_cycles_median), int(s.loop_cycles_max)) for s in before if s.armed]
     running = [(int(s.loop_cycles_median), int(s.loop_cycles_max)) for s in status
                if s.exc_state == d.HQ_EXCITATION_STATE_RUNNING]
     if not idle or not running:

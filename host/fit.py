@@ -64,7 +64,8 @@ REFINE_EVALUATIONS = 400
 SCREEN_EVALUATIONS = 10
 CONTINUED = 2
 #: The refinement's tolerance (relative: the cost's decrease, the step, the gradient) and
-#: its first damping (relative to the scaled diagonal of J^T J, which is 1 at the start).
+#: its first damping (relative to the scaled J^T J, whose diagonal is 1 at the start; a
+#: parameter near a bound it is moving towards is damped more, :func:`_damped_step`).
 LSQ_TOL = 1e-15
 LSQ_DAMPING = 1e-3
 #: Roots on the imaginary axis (after reflection) are moved left by this fraction of
@@ -476,43 +477,36 @@ def _refine(problem, x0, tau_max, evaluations):
 def _least_squares(fun, jac, x0, lower, upper, max_nfev):
     """Minimise ``|fun(x)|^2`` for ``lower <= x <= upper`` from ``x0`` (clipped into the box),
     ``jac`` its Jacobian: ``(x, fun(x), done)``, ``done`` when it stopped by its tolerances
-    rather than after ``max_nfev`` evaluations of ``fun``.
+    (or where the residuals or the Jacobian are not finite) rather than after ``max_nfev``
+    evaluations of ``fun``.
 
-    Levenberg-Marquardt with Nielsen's update of the damping, scaled by the largest norm
-    each Jacobian column has had (Moré's scaling), over the box by projection: a parameter
-    on a bound that the gradient pushes outward is held for the step, and the step is
-    clipped into the box. It stops when the cost's decrease, the step or the free gradient
-    falls to LSQ_TOL relative (the round-off of the cost), or the cost to zero. Here rather
-    than scipy.optimize's trust-region solver: the problems are a few parameters by a few
-    dozen residuals, and importing scipy.optimize cost a fifth of a second of every
+    Levenberg-Marquardt with Nielsen's update of the damping, in parameters scaled by the
+    largest norm each Jacobian column has had (Moré's scaling), over the box by projection: a
+    parameter on a bound that the gradient pushes outward is held for the step, and the step
+    is clipped into the box. It stops when the cost's decrease, the step or the free
+    gradient falls to LSQ_TOL relative (the round-off of the cost), or the cost to zero. Here
+    rather than scipy.optimize's trust-region solver: the problems are a few parameters by a
+    few dozen residuals, and importing scipy.optimize cost a fifth of a second of every
     identify."""
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
-    r = fun(x)
-    cost, nfev = float(r @ r), 1
-    J = jac(x)
+    r, J = fun(x), jac(x)
+    nfev, damping, grow = 1, LSQ_DAMPING, 2.0
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return x, r, True
+    cost = float(r @ r)
     scale = np.maximum(np.linalg.norm(J, axis=0), np.finfo(float).tiny)
-    damping, grow = LSQ_DAMPING, 2.0               # the scaled J^T J's diagonal is 1 at first
     while nfev < max_nfev:
         g = J.T @ r
-        held = ((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0))
-        free = ~held
+        free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         if cost == 0.0 or not free.any() or \
                 np.max(np.abs(g[free]) / scale[free]) <= LSQ_TOL * max(cost, 1e-300) ** 0.5:
             return x, r, True
-        # Coleman and Li's scaling: a parameter that the gradient moves towards a bound is
-        # damped by its distance to it, so that steps do not zigzag against the bound.
-        room = np.where(g > 0, x - lower, np.where(g < 0, upper - x, np.inf))
-        weight = scale ** 2 / np.where(np.isfinite(room), np.maximum(room, 1e-300), 1.0)
-        # the damped step as a least-squares problem of its own: [J; sqrt(damping W)] s = [-r; 0]
-        # (no J^T J formed; a Jacobian without full rank, as where a zero cancels a pole,
-        # gives the shortest step)
-        step = np.zeros_like(x)
-        stacked = np.vstack([J[:, free], np.diag(np.sqrt(damping * weight[free]))])
-        step[free] = np.linalg.lstsq(stacked, np.concatenate([-r, np.zeros(free.sum())]),
-                                     rcond=None)[0]
+        step = _damped_step(J, r, g, x, lower, upper, scale, free, damping)
+        if step is None:
+            return x, r, True
         trial = np.clip(x + step, lower, upper)
         step = trial - x
-        if np.linalg.norm(scale * step) <= LSQ_TOL * np.linalg.norm(scale * x) + 1e-300:
+        if np.linalg.norm(step) <= LSQ_TOL * (LSQ_TOL + np.linalg.norm(x)):
             return x, r, True
         r_trial = fun(trial)
         nfev += 1
@@ -520,10 +514,11 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev):
         Js = J @ step
         predicted = -(2.0 * (g @ step) + Js @ Js)         # the linear model's decrease
         ratio = (cost - cost_trial) / predicted if predicted > 0 else -1.0
-        if ratio > 0:
+        if ratio > 0 and np.isfinite(cost_trial):
             converged = cost - cost_trial <= LSQ_TOL * cost
-            x, r, cost = trial, r_trial, cost_trial
-            J = jac(x)
+            x, r, cost, J = trial, r_trial, cost_trial, jac(trial)
+            if not np.all(np.isfinite(J)):
+                return x, r, True
             scale = np.maximum(scale, np.linalg.norm(J, axis=0))
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
             grow = 2.0
@@ -533,6 +528,28 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev):
             damping *= grow
             grow *= 2.0
     return x, r, False
+
+
+def _damped_step(J, r, g, x, lower, upper, scale, free, damping):
+    """The damped Gauss-Newton step of the free parameters, or None where it cannot be
+    found. It is solved as a least-squares problem of its own in the scaled parameters
+    ``z = scale * step``: ``[J / scale; sqrt(damping / room)] z = [-r; 0]`` (no J^T J, no
+    scale squared, so nothing overflows; a Jacobian without full rank, as where a zero
+    cancels a pole, gives the shortest step). ``room`` is Coleman and Li's: a parameter that
+    the gradient moves towards a bound is damped by its distance to that bound (1 where
+    there is none), so that steps do not zigzag against it."""
+    room = np.where(g > 0, x - lower, np.where(g < 0, upper - x, np.inf))
+    room = np.where(np.isfinite(room), np.maximum(room, 1e-300), 1.0)[free]
+    stacked = np.vstack([J[:, free] / scale[free], np.diag(np.sqrt(damping / room))])
+    if not np.all(np.isfinite(stacked)):
+        return None
+    try:
+        z = np.linalg.lstsq(stacked, np.concatenate([-r, np.zeros(room.size)]), rcond=None)[0]
+    except np.linalg.LinAlgError:
+        return None
+    step = np.zeros_like(x)
+    step[free] = z / scale[free]
+    return step
 
 
 def _starts(x, F, m, n, w, delay, tau_max):
@@ -620,7 +637,11 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
     problem = _OutputError(x, F, m, n, w, stable, delay)
     best_cost, best_params = np.inf, None
-    for params, cost in _refined(problem, _starts(x, F, m, n, w, delay, tau_max), tau_max):
+    # Weights that span hundreds of decades (sigma from 1e-8 to 1e238 is a valid file) make
+    # infinite costs, which lose to every finite one, and numpy need not warn about them.
+    with np.errstate(over="ignore", invalid="ignore"):
+        refined = _refined(problem, _starts(x, F, m, n, w, delay, tau_max), tau_max)
+    for params, cost in refined:
         if cost < best_cost:
             best_cost, best_params = cost, params
     if best_params is None:

@@ -129,9 +129,12 @@ def _roots(f, grid, values) -> list:
 
 def _bisect(f, lo: float, hi: float, f_lo: float):
     """The sign change of ``f`` in ``[lo, hi]`` (``f(lo) = f_lo``, of the other sign than
-    ``f(hi)``), halved until ROOT_RTOL of it; None where ``f`` is not finite inside. (Here
+    ``f(hi)``), halved until ROOT_RTOL of it; None where it is no root: ``f`` not finite
+    where it is tried, or, at the end, larger than at either end of the interval (a sign
+    change across a pole, where ``f`` grows without bound rather than vanishing). (Here
     rather than scipy.optimize.brentq: a few dozen evaluations of an interpolation, and
     importing scipy.optimize cost identify a fifth of a second.)"""
+    bound = max(abs(f_lo), abs(f(hi)))
     while hi - lo > ROOT_RTOL * hi:
         mid = 0.5 * (lo + hi)
         f_mid = f(mid)
@@ -143,7 +146,9 @@ def _bisect(f, lo: float, hi: float, f_lo: float):
             lo, f_lo = mid, f_mid
         else:
             hi = mid
-    return 0.5 * (lo + hi)
+    mid = 0.5 * (lo + hi)
+    f_mid = f(mid)
+    return mid if math.isfinite(f_mid) and abs(f_mid) <= bound else None
 
 
 def _in_band(omega, band) -> bool:

@@ -92,15 +92,18 @@ def _fixed_layout_params(fig, rows: int, cols: int, margins: dict, gaps: tuple) 
 
 
 def _log_ticks(ax) -> None:
-    """A logarithmic x axis labelled in plain numbers (0.1, 1, 10; and at 2 and 5 of each
-    decade when the axis spans less than two), not matplotlib's powers of ten, which cost a
-    mathtext parser (a tenth of a second, most of what a Bode figure's drawing spends)."""
+    """A logarithmic x axis labelled in plain numbers (0.1, 1, 10), not matplotlib's powers
+    of ten, which cost a mathtext parser (a tenth of a second, most of what a Bode figure's
+    drawing spent). Between the decades: every tick when the axis spans less than one (a
+    narrow band may hold no decade at all), those at 2 and 5 when it spans less than two."""
     from matplotlib.ticker import FuncFormatter
 
     def minor(x, _pos=None) -> str:
         lo, hi = ax.get_xlim()
-        if x <= 0 or hi <= 0 or lo <= 0 or hi / lo >= 100:
+        if not (x > 0 and hi > lo > 0) or hi / lo >= 100:
             return ""
+        if hi / lo < 10:
+            return f"{x:.3g}"
         lead = x / 10 ** math.floor(math.log10(x) + 1e-9)
         return f"{x:g}" if min(abs(lead - 2), abs(lead - 5)) < 1e-6 else ""
 
@@ -314,7 +317,7 @@ def _envelope(t, v, columns: int) -> tuple:
     lo, hi = runs.argmin(axis=1), runs.argmax(axis=1)
     starts = np.arange(runs.shape[0]) * per
     keep = np.column_stack([starts + np.minimum(lo, hi), starts + np.maximum(lo, hi)]).ravel()
-    keep = np.concatenate([[0], keep, np.arange(whole, v.size)])
+    keep = np.unique(np.concatenate([[0], keep, np.arange(whole, v.size)]))  # in order, once
     return np.asarray(t)[keep], v[keep]
 
 
@@ -384,6 +387,10 @@ class ResponsesFigure:
                 side.relim()                                # they share the time axis
             self.ax.autoscale_view()
             self.right.autoscale_view(scalex=False)
+            for side, line in ((self.ax, u_line), (self.right, y_line)):
+                if not np.isfinite(line.get_ydata()).any():     # nothing to scale to: not
+                    side.set_ylim(-1.0, 1.0)                    # the last panel's scale
+                    side.set_autoscaley_on(True)
             self.ax.draw(renderer)
             self.right.draw(renderer)
             self.panels.append((place, self.ax.get_xlim(), self.ax.get_ylim(),
@@ -391,7 +398,8 @@ class ResponsesFigure:
 
     def save(self, path, title="", replays=None) -> None:
         """Add ``replays`` (beside the records, a :class:`~heliquad.host.replay.Replay` or
-        None each) and ``title``, and write the picture to ``path`` (PNG)."""
+        None each) and ``title``, and write the picture to ``path`` (PNG). Once: what it
+        adds stays on the picture."""
         import matplotlib
         from matplotlib.image import imsave
 

@@ -32,6 +32,8 @@ __all__ = ["PlotProcess", "InlinePlots", "serve"]
 
 #: How long, once the pipe is closed, the process may take to end before it is stopped.
 END_WAIT_S = 30.0
+#: How long to wait for the exit code of a process whose pipe broke.
+ENDED_WAIT_S = 5.0
 
 
 class PlotProcess:
@@ -57,21 +59,30 @@ class PlotProcess:
         self.conn = Connection(ours_out, readable=False)
         self.answers = Connection(ours_in, writable=False)
         self.writing = False                    # finish sent: it may be writing a picture
+        self.failed = None                      # the process ended before finish
 
     def records(self, segments, input_name: str, output_name: str) -> None:
-        """Start drawing the responses figure's records (``(freq_hz, t_s, u, y)`` each)."""
-        self._send(("records", segments, input_name, output_name))
+        """Start drawing the responses figure's records (``(freq_hz, t_s, u, y)`` each).
+        Should the process have ended, that is said by :meth:`finish`: what the caller
+        writes meanwhile (the points, the models) is not to be lost to a picture."""
+        try:
+            self._send(("records", segments, input_name, output_name))
+        except InputError as exc:
+            self.failed = exc
 
     def finish(self, bode: dict, responses: dict) -> None:
         """Write bode.png (``write_bode``'s arguments) and responses.png (``path``, ``title``,
         ``replays``) and wait until both are written; what failed there is raised here."""
+        if self.failed is not None:
+            raise self.failed
         self.writing = True
         self._send(("bode", bode))
         self._send(("responses", responses))
-        failed = [self._answer(), self._answer()]
-        for exc in failed:
-            if exc is not None:
+        for exc in [self._answer(), self._answer()]:
+            if isinstance(exc, (InputError, OSError)):      # a full disk, a folder not ours
                 raise exc
+            if exc is not None:                             # matplotlib broken, say
+                raise InputError(f"the plots were not drawn: {type(exc).__name__}: {exc}")
 
     def _send(self, message) -> None:
         try:
@@ -88,8 +99,11 @@ class PlotProcess:
         return detail if status == "error" else None
 
     def _ended(self) -> InputError:
-        return InputError(f"the plots were not drawn: their process ended (exit code "
-                          f"{self.proc.poll()})")
+        try:
+            code = self.proc.wait(ENDED_WAIT_S)     # its pipe is closed: it has ended, or is
+        except subprocess.TimeoutExpired:          # ending
+            code = None
+        return InputError(f"the plots were not drawn: their process ended (exit code {code})")
 
     def close(self) -> None:
         """Close the pipes and wait for the process to end: after the step it is in once
@@ -143,43 +157,78 @@ SERVE = "from heliquad.host.plot_process import serve; serve()"
 
 def serve() -> None:
     """The plotting process (:data:`SERVE`): the records, then bode.png and responses.png,
-    each as it arrives on stdin, the answer to each picture on stdout. A thread reads stdin from
-    the start, so the other side's sending never waits for the imports, which are done while
-    the records are being estimated. It ends when stdin closes, at once: the interpreter's
-    own clean-up (matplotlib's) would only keep the command waiting."""
+    each as it arrives on stdin, the answer to each picture on stdout. A thread reads stdin
+    from the start, so the other side's sending never waits for the imports, which are done
+    while the records are being estimated. What fails before a picture (an import, the
+    records) is the answer to each picture it spoils, not a traceback on the terminal. It
+    ends when stdin closes, at once: the interpreter's own clean-up (matplotlib's) would
+    only keep the command waiting."""
     conn = Connection(os.dup(0), writable=False)
     answers = Connection(os.dup(1), readable=False)
     os.dup2(2, 1)                               # the answers' pipe is theirs alone
     sys.stdout = sys.stderr
     inbox = queue.SimpleQueue()
     threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
-    for name in ("matplotlib.backends.backend_agg", "matplotlib.figure", "heliquad.host.fit",
-                 "heliquad.host.replay"):        # before the records and the models come
-        importlib.import_module(name)
-    from . import plot
-
-    figure = None
+    try:
+        for name in ("matplotlib.backends.backend_agg", "matplotlib.figure",
+                     "heliquad.host.fit", "heliquad.host.replay"):   # before the records come
+            importlib.import_module(name)
+        from . import plot
+        broken = None
+    except Exception as exc:                    # noqa: BLE001 - said to the other side
+        plot, broken = None, exc
+    state = {"plot": plot, "broken": broken, "figure": broken}
     while (raw := inbox.get()) is not None:
-        message = pickle.loads(raw)
-        if message[0] == "records":
-            figure = plot.ResponsesFigure(*message[1:])
-            continue
+        answer = _handle(raw, state)
+        if answer is _END:
+            break
         try:
-            if message[0] == "bode":
-                plot.write_bode(**message[1])
-            else:
-                figure.save(**message[1])
-            answers.send(("done", None))
+            if answer is not None:
+                answers.send(answer)
         except BrokenPipeError:
             break
-        except Exception as exc:                # noqa: BLE001 - said to the other side
-            try:
-                answers.send(("error", _sendable(exc)))
-            except BrokenPipeError:
-                break
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
+
+
+#: What :func:`_handle` answers to a message it cannot read while nothing else is broken.
+_END = ("end", None)
+
+
+def _handle(raw, state):
+    """The answer to one pickled message: None to the records (they have none), ``("done",
+    None)`` or ``("error", exc)`` to a picture, _END to one that cannot be read (not ours,
+    unless the imports failed, which is then the answer). ``state``: the ``plot`` module,
+    what ``broken`` the imports, and the records' ``figure`` (or what they raised)."""
+    try:
+        message = pickle.loads(raw)
+    except Exception:                           # noqa: BLE001
+        return _END if state["broken"] is None else ("error", _sendable(state["broken"]))
+    try:
+        if message[0] == "records":
+            state["figure"] = state["broken"] or state["plot"].ResponsesFigure(*message[1:])
+            return None
+        _draw(state["plot"], state["broken"], state["figure"], message)
+        return ("done", None)
+    except Exception as exc:                    # noqa: BLE001 - said to the other side
+        if message[0] == "records":
+            state["figure"] = exc
+            return None
+        return ("error", _sendable(exc))
+
+
+def _draw(plot, broken, figure, message) -> None:
+    """One picture: bode.png, or responses.png onto the records' ``figure``; raises what
+    spoils it (``broken``: the imports' failure; ``figure``: the records' failure)."""
+    if broken is not None:
+        raise broken
+    if message[0] == "bode":
+        plot.write_bode(**message[1])
+    elif isinstance(figure, Exception):
+        raise figure
+    else:
+        figure.save(**message[1])
 
 
 def _receive(conn, inbox) -> None:

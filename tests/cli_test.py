@@ -195,6 +195,8 @@ def test_a_command_line_builds_only_the_command_it_names():
     assert _subcommands(_build_parser([])) == list(COMMANDS)
     assert _subcommands(_build_parser(["--version"])) == list(COMMANDS)
     assert _subcommands(_build_parser(["identfy", "x"])) == list(COMMANDS)
+    assert _subcommands(_build_parser(["-h", "identify"])) == list(COMMANDS)
+    assert _subcommands(_build_parser(["--", "identify", "x"])) == list(COMMANDS)
     for name in COMMANDS:
         assert _subcommands(_build_parser([name, "--help"])) == [name]
 
@@ -213,18 +215,17 @@ def test_the_command_line_keeps_openblas_to_one_thread_unless_told(given, expect
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if given:
         env["OPENBLAS_NUM_THREADS"] = given
-    res = subprocess.run([sys.executable, "-c", "import os, heliquad.host.cli; "
-                          "print(os.environ['OPENBLAS_NUM_THREADS'])"],
+    res = subprocess.run([sys.executable, "-c", "import os, sys, heliquad.host.cli; "
+                          "print(os.environ['OPENBLAS_NUM_THREADS'], 'numpy' in sys.modules)"],
                          capture_output=True, text=True, env=env, timeout=60)
-    assert res.stdout.strip() == expected
+    assert res.stdout.split() == [expected, "False"]          # set before numpy is imported
 
 
 
-def test_fsf_of_a_multisine_run_gives_every_line(tmp_path):
-    # A multisine's periodic steady state through the roll model (seven lines on a 0.25 Hz
-    # base, 4 periods at 200 Hz): a point per line, each the model's response to 1e-6.
-    from heliquad.host.files import read_points_csv
-
+def multisine_run(path, jitter=0.0, input_noise=0.0):
+    """A multisine's periodic steady state through the roll model (seven lines on a 0.25 Hz
+    base, 4 periods at 200 Hz) as RUN.csv; the timestamps jittered by ``jitter`` of the
+    interval, the logged input with white noise of that standard deviation."""
     fs, base, orders = 200.0, 0.25, [2, 3, 4, 6, 8, 11, 16]
     t = np.arange(4 * int(fs / base)) / fs
     u, y = np.zeros_like(t), np.zeros_like(t)
@@ -234,14 +235,60 @@ def test_fsf_of_a_multisine_run_gives_every_line(tmp_path):
         phase = -np.pi * k * k / len(orders)                        # Schroeder's phases
         u += 0.1 * np.sin(w * t + phase)
         y += 0.1 * abs(G) * np.sin(w * t + phase + np.angle(G))
-    np.savetxt(tmp_path / "ms.csv", np.column_stack([t, u, y]), delimiter=",",
-               header="t_s,u,y", comments="")
+    rng = np.random.default_rng(3)
+    t = t + jitter / fs * rng.uniform(-1, 1, t.size)
+    u = u + input_noise * rng.standard_normal(t.size)
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="t_s,u,y", comments="")
+    return base, orders
+
+
+@pytest.mark.parametrize("named, jitter", [(None, 0.0), ([2, 4, 8], 0.0), (None, 0.003)])
+def test_fsf_of_a_multisine_run_gives_a_point_per_line(named, jitter, tmp_path):
+    # Every line, each the model's response to 1e-6; or those named, to 1 % (the lines left
+    # out of the FSF's model leak into the others' a little: 0.1 % here); timestamps
+    # jittered by 0.3 % of the interval: the base period is still found whole.
+    from heliquad.host.files import read_points_csv
+
+    base, orders = multisine_run(tmp_path / "ms.csv", jitter=jitter)
+    orders = named or orders
     res = heliquad("fsf", tmp_path / "ms.csv", "--freq-hz", base, "--orders", *orders,
                    "--out", tmp_path / "points.csv")
     assert res.returncode == 0 and res.stderr == "", res.stderr
-    assert "multisine, 7 line(s)" in res.stdout
+    assert f"multisine, {len(orders)} line(s)" in res.stdout
     got = read_points_csv(tmp_path / "points.csv")
     w = 2 * np.pi * base * np.array(orders)
     truth = np.polyval(ROLL[0], 1j * w) / np.polyval(ROLL[1], 1j * w)
-    np.testing.assert_allclose(got["omega"], w, rtol=1e-9)
-    np.testing.assert_allclose(got["F"], truth, rtol=1e-6)
+    np.testing.assert_allclose(got["omega"], w, rtol=1e-4)
+    np.testing.assert_allclose(got["F"], truth, rtol=1e-2 if named else 1e-3 if jitter else 1e-6)
+
+
+def test_fsf_takes_a_multisine_whose_input_is_noisy_and_refuses_a_wrong_base(tmp_path):
+    # Noise in the input as strong as the multisine itself: still a multisine of these lines.
+    # The same record read with a base frequency a harmonic off: none of the lines is there.
+    base, orders = multisine_run(tmp_path / "ms.csv", input_noise=0.25)
+    ok = heliquad("fsf", tmp_path / "ms.csv", "--freq-hz", base, "--orders", *orders,
+                  "--out", tmp_path / "points.csv")
+    assert ok.returncode == 0 and "multisine, 7 line(s)" in ok.stdout, ok.stderr
+    wrong = heliquad("fsf", tmp_path / "ms.csv", "--freq-hz", 2 * base, "--orders", 5, 7,
+                     "--out", tmp_path / "other.csv")
+    assert_one_line_error(wrong, "exact base frequency")
+    assert not (tmp_path / "other.csv").exists()
+
+
+#: Valid points whose sigmas span 246 decades: weights from 1e8 to 1e-238.
+EXTREME_SIGMA = """omega_rad_s,magnitude,phase_rad,sigma
+0.0015685468666967863,2.376295660031014e-10,0.13838996184400454,4.027584638572843e+184
+0.9023815289310845,29507906.020784054,-0.38167181000867206,1.2217410388488216e-08
+42.89224569739084,0.0013788495495198616,-1.1358431679273335,5.205024339095458e+187
+294.7254058051131,6.4292450127982316e-12,2.5349908670855195,5.316349095937748e+238
+"""
+
+
+@pytest.mark.parametrize("order, code", [("1/2", 0), ("0/1", 2)])
+def test_fit_of_points_with_extreme_sigmas_is_a_model_or_one_line(order, code, tmp_path):
+    # Its costs overflow: a model, or "no fit could be started"; no traceback, no warning.
+    (tmp_path / "p.csv").write_text(EXTREME_SIGMA)
+    res = heliquad("fit", tmp_path / "p.csv", "--order", order, "--json", tmp_path / "m.json")
+    assert res.returncode == code
+    assert res.stderr == "" if code == 0 else \
+        res.stderr.count("\n") == 1 and "no fit could be started" in res.stderr, res.stderr

@@ -487,3 +487,14 @@ def test_the_solver_takes_a_jacobian_without_full_rank():
     inf = np.full(2, np.inf)
     got, r, done = fit_module._least_squares(fun, jac, np.array([3.0, -4.0]), -inf, inf, 50)
     assert done and r @ r < 1e-20 and got.sum() == pytest.approx(1.0)
+
+
+def test_the_solver_stops_where_the_residuals_or_the_jacobian_are_not_finite():
+    inf = np.full(2, np.inf)
+    nan_r = (lambda p: np.array([np.nan, p[0]]), lambda p: np.eye(2))
+    huge_j = (lambda p: np.array([p[0] - 1.0, p[1]]), lambda p: np.diag([1e200, 1e-200]))
+    inf_j = (lambda p: np.array([p[0] - 1.0, p[1]]), lambda p: np.diag([np.inf, 1.0]))
+    for fun, jac in (nan_r, huge_j, inf_j):
+        with np.errstate(over="ignore", invalid="ignore"):
+            got, r, done = fit_module._least_squares(fun, jac, np.array([3.0, 2.0]), -inf, inf, 50)
+        assert done and got.shape == (2,)

@@ -169,6 +169,8 @@ def test_the_envelope_keeps_each_column_s_extremes_in_order():
     y = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 41 * t)
     te, ye = _envelope(t, y, 260)
     assert te.size < 600 and np.all(np.diff(te) > 0)           # in time order, far fewer
+    ramp_t, _ = _envelope(t, t, 260)                            # extremes at the runs' ends
+    assert np.all(np.diff(ramp_t) > 0)                          # each sample once
     per = y.size // 260
     for k in range(0, 260 * per, per):                          # each column's extremes kept
         assert y[k:k + per].max() in ye and y[k:k + per].min() in ye
@@ -193,3 +195,21 @@ def test_the_responses_figure_gives_each_record_its_own_scales(tmp_path):
     assert p1.x0 > p0.x1 and figure.panels[3][0].y1 < p0.y0             # across, then down
     figure.save(tmp_path / "responses.png", title="two records")
     assert imread(tmp_path / "responses.png").shape[:2] == figure.fig.canvas.get_width_height()[::-1]
+
+
+@pytest.mark.parametrize("band_hz, some", [((0.62, 0.93), {"0.7", "0.8", "0.9"}),
+                                           ((1.1, 1.9), {"1.2", "1.5", "1.8"}),
+                                           ((0.15, 1.6), {"0.2", "0.5", "1"})])
+def test_the_frequency_axis_is_labelled_however_narrow_the_band(band_hz, some):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig, axes = new_figure(2, 1, layout=None, sharex=True)
+    f = np.linspace(*band_hz, 6)
+    plot_bode(axes, 2 * np.pi * f, 1 / (2j * np.pi * f + 1))
+    FigureCanvasAgg(fig).draw()
+    ax = axes[1]
+    lo, hi = ax.get_xlim()
+    shown = {t.get_text() for t in ax.xaxis.get_ticklabels(which="both")
+             if t.get_text() and lo <= t.get_position()[0] <= hi}
+    assert some <= shown, shown
+    assert not any("$" in text for text in shown)                   # plain numbers

@@ -195,6 +195,42 @@ def test_a_plot_identify_cannot_write_is_one_line_and_the_rest_is_written(sweep,
     assert (folder / "models.json").exists() and (folder / plot).is_dir()
 
 
+def test_a_broken_matplotlib_is_one_line_and_the_points_and_models_are_written(sweep,
+                                                                              tmp_path):
+    # The plotting process cannot import what it draws with: said in one line, named, and
+    # identify's own results are kept.
+    import os
+    import subprocess
+    import sys
+
+    folder = _copy(sweep, tmp_path / "nompl")
+    fake = tmp_path / "fake" / "matplotlib"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ImportError('matplotlib is broken here')\n")
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "fake")}
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", "identify", folder],
+                         capture_output=True, text=True, env=env, timeout=300)
+    one_line_error(res, "the plots were not drawn", "ImportError", "matplotlib is broken here")
+    assert (folder / "models.json").exists() and (folder / "points.csv").exists()
+    assert not (folder / "bode.png").exists() and not (folder / "responses.png").exists()
+
+
+def test_a_plotting_process_that_died_loses_identify_nothing(sweep, tmp_path):
+    # Killed before anything reached it: identify still writes its points and models, then
+    # says the plots were not drawn.
+    from heliquad.host.errors import InputError
+    from heliquad.host.identify_session import identify_dir
+    from heliquad.host.plot_process import PlotProcess
+
+    folder = _copy(sweep, tmp_path / "died")
+    with PlotProcess() as plots:
+        plots.proc.kill()
+        plots.proc.wait()
+        with pytest.raises(InputError, match=r"their process ended \(exit code -9\)"):
+            identify_dir(str(folder), progress=lambda *_: None, plots=plots)
+    assert (folder / "models.json").exists() and (folder / "points.csv").exists()
+
+
 def test_identify_refuses_a_log_of_another_session(sweep, tmp_path):
     import json
 

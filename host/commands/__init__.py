@@ -25,8 +25,9 @@ COMMANDS = {"fsf": "commands.fsf", "fit": "commands.fit", "sil": "commands.sil",
 def add_parsers(sub, fmt, argv=()) -> None:
     """Add the subcommands' parsers to ``sub`` (argparse subparsers): only the one the
     command line ``argv`` names, when its first word is a command, else every one (to list
-    them, or to say which there are). A command then pays for importing its own module
-    only, not every command's (numpy, the vehicle, the dialect: a tenth of a second)."""
-    named = next((word for word in argv if not word.startswith("-")), None)
+    them, to say which there are, or for an option before the command: ``heliquad -h
+    identify``). A command then pays for importing its own module only, not every
+    command's (numpy, the vehicle, the dialect: a tenth of a second)."""
+    named = argv[0] if argv else None
     for name in [named] if named in COMMANDS else COMMANDS:
         importlib.import_module(f"heliquad.host.{COMMANDS[name]}").add_parser(sub, fmt)

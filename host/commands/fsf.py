@@ -29,9 +29,12 @@ examples: heliquad fsf runs/*.csv --discard-periods 2 --out points.csv
 #: Settling periods dropped by default: a sine's first period; none of a multisine's (the
 #: filter's first base period is its settling).
 DISCARD_SINE, DISCARD_MULTISINE = 1, 0
-#: A multisine run's input has at least this share of its variation at its lines, or its
-#: base frequency or lines were given wrong (an exact multisine: all of it, noise aside).
-MIN_LINE_SHARE = 0.5
+#: A multisine run's base period may differ from a whole number of samples by this much
+#: (relative): the sampling rate is estimated from the timestamps, which may jitter.
+PERIOD_TOLERANCE = 1e-4
+#: A multisine run's input has a line at least this many times the power of the frequencies
+#: around it, or its base frequency or lines were given wrong.
+LINE_SNR = 10.0
 #: Harmonics of a sine run's FSF model by default (as in the paper).
 HARMONICS = 3
 
@@ -112,7 +115,7 @@ def _estimate(args, u, y, fs_hz, freq) -> list:
                              harmonics=HARMONICS if args.harmonics is None else args.harmonics,
                              discard_periods=discard, offset=not args.no_offset)]
     period = fs_hz / freq
-    if abs(period - round(period)) > 1e-6 * period:
+    if abs(period - round(period)) > PERIOD_TOLERANCE * period:
         raise InputError(f"the base period, {fs_hz:.6g} Hz / {freq:.6g} Hz = {period:.6g} "
                          "samples, is not a whole number: a multisine's lines are harmonics "
                          "of a whole period (give its exact base frequency)")
@@ -121,12 +124,11 @@ def _estimate(args, u, y, fs_hz, freq) -> list:
                          f"{round(period)} samples of the base period: above the lines the "
                          "FSF can estimate")
     discard = DISCARD_MULTISINE if args.discard_periods is None else args.discard_periods
-    share = _line_share(u, round(period), args.orders, discard)
-    if share < MIN_LINE_SHARE:
-        raise InputError(f"{100 * share:.0f} % of the input's variation lies at the --orders "
-                         f"harmonics of {freq:.6g} Hz (at least {100 * MIN_LINE_SHARE:.0f} % "
-                         "from a multisine of those lines): is that its exact base frequency, "
-                         "and are those its lines?")
+    if not _a_line_stands_out(u, round(period), args.orders, discard):
+        raise InputError(f"none of the --orders lines of {freq:.6g} Hz stands out of the "
+                         f"input's spectrum ({LINE_SNR:g} times the power of the frequencies "
+                         "around it): is that the multisine's exact base frequency, and are "
+                         "those its lines?")
     found = estimate_multisine(u, y, fs_hz, round(period), args.orders, discard_periods=discard,
                                offset=not args.no_offset)
     if not found:
@@ -134,20 +136,27 @@ def _estimate(args, u, y, fs_hz, freq) -> list:
     return found
 
 
-def _line_share(u, period: int, orders, discard: int) -> float:
-    """The share of ``u``'s variation (its mean removed) over its whole periods after
-    ``discard`` that lies at the harmonics ``orders`` of the period: the DFT of ``n`` whole
-    periods has each harmonic ``l`` at bin ``n l``."""
+def _a_line_stands_out(u, period: int, orders, discard: int) -> bool:
+    """Whether the power of ``u`` at one of the harmonics ``orders`` of the period, at least,
+    is LINE_SNR times the median power of the frequencies around it that are no harmonic
+    (within two harmonics either side), over the whole periods after ``discard``: with ``n``
+    whole periods, harmonic ``l`` is DFT bin ``n l`` and the bins between are no harmonic.
+    A wrong base frequency puts nothing special at those bins; what else drives the input
+    (noise, a disturbance the loop answers) spreads over all of them. True when it cannot
+    tell (fewer than two whole periods)."""
     import numpy as np
 
     start = discard * period
     n = (len(u) - start) // period
-    if n < 1:
-        return 1.0                      # too short to tell: the estimate says so
-    spectrum = np.abs(np.fft.rfft(np.asarray(u[start:start + n * period], float))) ** 2
-    total = float(np.sum(spectrum[1:]))
-    lines = float(np.sum(spectrum[[n * l for l in orders if n * l < spectrum.size]]))
-    return lines / total if total > 0 else 1.0
+    if n < 2:
+        return True
+    power = np.abs(np.fft.rfft(np.asarray(u[start:start + n * period], float))) ** 2
+    for line in orders:
+        at = n * line
+        around = [k for k in range(at - 2 * n, at + 2 * n + 1) if k % n and 0 < k < power.size]
+        if at < power.size and around and power[at] > LINE_SNR * np.median(power[around]):
+            return True
+    return False
 
 
 def _say(i, n, path, points, multisine) -> None:
