@@ -50,7 +50,8 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--orders", type=int_in(1, 1_000_000), nargs="+", metavar="L",
                    help="the runs are multisines with lines at these harmonics of the base "
                         "frequency --freq-hz (whose period must be a whole number of samples): "
-                        "one point per line the input excites")
+                        "one point per line the input excites (give them after the RUN.csv "
+                        "files, or before another option)")
     p.add_argument("--harmonics", type=int_in(1, 50), metavar="L",
                    help=f"sine runs: harmonics -L..L in the FSF model (default {HARMONICS}, "
                         "as in the paper)")
