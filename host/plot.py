@@ -64,13 +64,13 @@ EXCITATION_COHERENCES = (("coherence_ry", "r -> y", {"marker": "o", "ms": 5}),
 COHERENCE_KEYS = ("coherence", *(key for key, _, _ in EXCITATION_COHERENCES))
 
 
-def new_figure(rows=1, cols=1, figsize=(8, 6), layout="constrained", dpi=None, **subplots):
+def new_figure(rows=1, cols=1, figsize=(8, 6), layout="constrained", **subplots):
     """A figure of ``rows`` x ``cols`` axes with constrained layout (or ``layout``), made
     without pyplot (so no backend is involved), and its axes (as ``Figure.subplots`` returns
     them)."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, layout=layout, dpi=dpi)
+    fig = Figure(figsize=figsize, layout=layout)
     return fig, fig.subplots(rows, cols, **subplots)
 
 

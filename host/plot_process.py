@@ -79,10 +79,8 @@ class PlotProcess:
         self._send(("bode", bode))
         self._send(("responses", responses))
         for exc in [self._answer(), self._answer()]:
-            if isinstance(exc, (InputError, OSError)):      # a full disk, a folder not ours
+            if exc is not None:
                 raise exc
-            if exc is not None:                             # matplotlib broken, say
-                raise InputError(f"the plots were not drawn: {type(exc).__name__}: {exc}")
 
     def _send(self, message) -> None:
         try:
@@ -243,9 +241,13 @@ def _receive(conn, inbox) -> None:
 
 
 def _sendable(exc: Exception) -> Exception:
-    """``exc`` if it goes through a pipe whole, else an InputError saying it."""
-    try:
-        pickle.loads(pickle.dumps(exc))
-        return exc
-    except Exception:                           # noqa: BLE001
-        return InputError(f"the plots were not drawn: {type(exc).__name__}: {exc}")
+    """What the other side is to raise for ``exc``: ``exc`` itself when it is an input or
+    a file's error (a full disk, a folder not ours) that goes through a pipe whole, else an
+    InputError naming it (matplotlib broken, say)."""
+    if isinstance(exc, (InputError, OSError)):
+        try:
+            pickle.loads(pickle.dumps(exc))
+            return exc
+        except Exception:                       # noqa: BLE001
+            pass
+    return InputError(f"the plots were not drawn: {type(exc).__name__}: {exc}")

@@ -120,18 +120,14 @@ def _estimate(args, u, y, fs_hz, freq) -> list:
         raise InputError(f"the base period, {fs_hz:.6g} Hz / {freq:.6g} Hz = {period:.6g} "
                          "samples, is not a whole number: a multisine's lines are harmonics "
                          "of a whole period (give its exact base frequency)")
-    if 4 * args.orders[-1] > round(period):
-        raise InputError(f"line {args.orders[-1]} has fewer than 4 per cycle of the "
-                         f"{round(period)} samples of the base period: above the lines the "
-                         "FSF can estimate")
     discard = DISCARD_MULTISINE if args.discard_periods is None else args.discard_periods
+    found = estimate_multisine(u, y, fs_hz, round(period), args.orders, discard_periods=discard,
+                               offset=not args.no_offset)     # which checks lines and period
     if not _a_line_stands_out(u, round(period), args.orders, discard):
         raise InputError(f"none of the --orders lines of {freq:.6g} Hz stands out of the "
                          f"input's spectrum ({LINE_SNR:g} times the power of the frequencies "
                          "around it): is that the multisine's exact base frequency, and are "
                          "those its lines?")
-    found = estimate_multisine(u, y, fs_hz, round(period), args.orders, discard_periods=discard,
-                               offset=not args.no_offset)
     if not found:
         raise InputError("the input excites none of the lines --orders names")
     return found
