@@ -51,6 +51,7 @@ def private_pymavlink(tmp_path):
     site = tmp_path / "site"
     shutil.copytree(os.path.dirname(pymavlink.__file__), site / "pymavlink", ignore=ignore)
     env = dict(os.environ, PYTHONPATH=str(site), MAVLINK_DIALECT="common")
+    env.pop("MAVLINK20", None)          # as a user's shell has it: pymavlink starts in v1.0
     return site / "pymavlink", env
 
 
@@ -76,6 +77,7 @@ def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavli
     v20 = pymavlink_dir / "dialects" / "v20"
     assert f"installed heliquad.py into {v20}" in res.stdout
     assert (v20 / "heliquad.py").is_file() and (v20 / "heliquad.xml").is_file()
+    assert (pymavlink_dir / "dialects" / "v10" / "heliquad.py").is_file()
     assert sorted(os.listdir(REAL_V20)) == real_before          # the real one untouched
 
     rows = dumped_rows(pymavlink_dir, env, sil_log)
@@ -97,6 +99,46 @@ def test_installed_dialect_lets_mavlogdump_decode_a_heliquad_log(private_pymavli
     assert before * 1e6 <= min(starts) <= after * 1e6
 
 
+#: Reads a log with pymavlink's mavutil as a user's script does, the dialect named only by
+#: MAVLINK_DIALECT: the HQ_SYSID_SAMPLE count and the module that decoded them.
+COUNT_SAMPLES = """
+import sys
+from pymavlink import mavutil
+log = mavutil.mavlink_connection(sys.argv[1])
+count = 0
+while log.recv_match(type="HQ_SYSID_SAMPLE") is not None:
+    count += 1
+print(count, mavutil.mavlink.__name__)
+"""
+
+
+def test_installed_dialect_serves_pymavlink_started_in_mavlink_1(private_pymavlink, sil_log,
+                                                                  tmp_path):
+    # Without MAVLINK20 in the environment pymavlink loads dialects/v10 first: with
+    # MAVLINK_DIALECT=heliquad its import failed, and so did mavgraph.py --dialect heliquad
+    # (which never sets MAVLINK20). With the MAVLink 1 module installed beside the v20 one
+    # both read the log, pymavlink moving to the v20 module at its first MAVLink 2 frame.
+    pymavlink_dir, env = private_pymavlink
+    sil_log, _ = sil_log
+    assert heliquad("mavlink-dialect", "--install", env=env).returncode == 0
+    samples = sum(m.get_type() == "HQ_SYSID_SAMPLE" for _, m in read_tlog(str(sil_log), dialect()))
+    res = subprocess.run([sys.executable, "-c", COUNT_SAMPLES, str(sil_log)], capture_output=True,
+                         text=True, timeout=600, env=dict(env, MAVLINK_DIALECT="heliquad"))
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == [str(samples), "pymavlink.dialects.v20.heliquad"]
+
+    # mavgraph.py's time axis uses Axes.plot_date, which matplotlib 3.9 deprecated and later
+    # releases removed (pymavlink's defect, not the dialect's): --xaxis plots against a field.
+    picture = tmp_path / "rate.png"
+    res = subprocess.run([sys.executable, str(pymavlink_dir / "tools" / "mavgraph.py"),
+                          "--dialect", "heliquad", "--output", str(picture),
+                          "--xaxis", "HQ_SYSID_SAMPLE.time_us", str(sil_log),
+                          "HQ_SYSID_SAMPLE.rate"],
+                         capture_output=True, text=True, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def test_the_folder_holds_the_dialect_and_a_module_that_matches_the_firmware(tmp_path):
     # --out DIR: the XML, the definitions it includes, and a module with the firmware's
     # messages (ids and CRC seeds, so the same bytes decode); a second run changes nothing,
@@ -107,7 +149,8 @@ def test_the_folder_holds_the_dialect_and_a_module_that_matches_the_firmware(tmp
     res = heliquad("mavlink-dialect", "--out", out)
     assert res.returncode == 0, res.stderr
     assert sorted(os.listdir(out)) == sorted(["heliquad.xml", "common.xml", "standard.xml",
-                                              "minimal.xml", "heliquad.py"])
+                                              "minimal.xml", "heliquad.py", "v10"])
+    assert os.listdir(out / "v10") == ["heliquad.py"]
     spec = importlib.util.spec_from_file_location("heliquad_dialect_copy", out / "heliquad.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
