@@ -360,3 +360,21 @@ def test_a_folder_of_axes_gives_a_summary_row_per_axis(session, tmp_path):
     rows = summary_rows((tmp_path / "report.html").read_text())
     assert sorted(rows) == ["pitch", "roll"]
     assert all(verdict.startswith("usable for design") for _, _, verdict, _ in rows.values())
+
+
+def test_a_model_of_too_low_an_order_is_flagged_off_the_truth(session, tmp_path):
+    # The tf plant is second order; identified as first order without delay, the recommended
+    # model is about 10 dB and 80 deg off the simulator's truth and fits its points poorly:
+    # both are flags, and the summary says to check first.
+    copy = tmp_path / "low"
+    shutil.copytree(session, copy)
+    (copy / "validation.json").unlink()
+    res = heliquad("identify", copy, "--order", "0/1", "--no-delay")
+    assert res.returncode == 0, res.stderr
+    assert heliquad("report", copy).returncode == 0
+    flags = quality_flags((copy / "report.html").read_text())
+    assert any(f.startswith("roll: the recommended model is up to ") and "do not design on it"
+               in f for f in flags), flags
+    assert any(f.startswith("roll: the recommended model fits its points poorly") for f in flags)
+    truth = json.loads((copy / "models.json").read_text())["sil_truth"]
+    assert truth["model_worst_db"] > 3 and truth["model_worst_deg"] > 30
