@@ -39,7 +39,7 @@ __all__ = ["RUN_COLUMNS", "POINTS_COLUMNS", "POINTS_EXCITATION", "read_text", "r
            "read_points_table", "read_json", "read_manifest", "read_models_json", "read_gains",
            "read_validation", "check_output", "check_output_folder", "write_run_csv",
            "write_points_csv", "write_models_json", "write_models_mat", "model_to_dict",
-           "atomic_write", "write_json", "save_figure", "new_output_folder", "read_params_file",
+           "atomic_write", "write_json", "save_figure", "figure_format", "check_figure_output", "new_output_folder", "read_params_file",
            "write_params_file"]
 
 RUN_COLUMNS = ("t_s", "u", "y")
@@ -150,11 +150,46 @@ PNG_COMPRESS_LEVEL = 1
 FIGURE_RC = {"text.hinting": "none"}
 
 
+#: Figure formats matplotlib writes only with a program outside Python: the rcParams entry
+#: that names the program. pgf sets its text with TeX (xelatex by default), and without it
+#: matplotlib fails after the figure is drawn.
+FIGURE_FORMAT_PROGRAMS = {"pgf": "pgf.texsystem"}
+
+
+def figure_format(path) -> str:
+    """The format a figure is written in: its file name's extension (any case), PNG when it
+    has none."""
+    return os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
+
+
+def check_figure_output(path, option: str) -> None:
+    """:func:`check_output` for a figure, and refuse, before any work is done, a file name
+    whose extension is no format matplotlib can write here (or whose format needs a program
+    that is not installed): the error would otherwise come once the work was done."""
+    import shutil
+
+    import matplotlib
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    fmt, given = figure_format(path), os.fspath(path)
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if fmt not in formats:
+        raise InputError(f"{option} {given}: .{_short(fmt, 20)} is not an image format "
+                         f"heliquad can write; end the name with one of "
+                         f"{', '.join('.' + f for f in sorted(formats))}")
+    program = matplotlib.rcParams[FIGURE_FORMAT_PROGRAMS[fmt]] if fmt in FIGURE_FORMAT_PROGRAMS \
+        else None
+    if program and shutil.which(program) is None:
+        raise InputError(f"{option} {given}: .{fmt} figures need {program}, which is not "
+                         "installed; write .pdf or .svg instead")
+    check_output(path, option)
+
+
 def save_figure(fig, path, **kwargs) -> None:
-    """A matplotlib figure to ``path`` (format from its extension), atomically."""
+    """A matplotlib figure to ``path`` (format :func:`figure_format`), atomically."""
     import matplotlib
 
-    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".") or "png"
+    fmt = figure_format(path)
     if fmt == "png":
         kwargs.setdefault("pil_kwargs", {"compress_level": PNG_COMPRESS_LEVEL})
     with atomic_write(path, "wb") as fh, matplotlib.rc_context(FIGURE_RC):

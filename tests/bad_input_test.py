@@ -562,6 +562,8 @@ CASES = [
     case("fit points.csv --json m.json --mat binary.dat/m.mat", "binary.dat/m.mat"),
     case("fit points.csv --json m.json --plot binary.dat/b.png", "binary.dat/b.png"),
     case("fit points.csv --json m.json --plot adir", "adir"),
+    case("fit points.csv --order 0/2 --json m.json --plot b.xyz", ".xyz is not an image format"),
+    case("fit points.csv --json m.json --mat m.mat --plot b.png.txt", ".txt is not an image"),
     # sil: numbers out of range or not finite, absurd plants, damaged vehicle files, outputs
     case(f"{SIL.replace('1 ', '1e-9 ', 1)} --out o", "excitation band"),
     case("sil --freq-hz nan --amplitude 0.05 --out o", "--freq-hz"),

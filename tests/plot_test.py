@@ -213,3 +213,21 @@ def test_the_frequency_axis_is_labelled_however_narrow_the_band(band_hz, some):
              if t.get_text() and lo <= t.get_position()[0] <= hi}
     assert some <= shown, shown
     assert not any("$" in text for text in shown)                   # plain numbers
+
+
+def test_a_figure_name_is_checked_for_its_format_before_any_work(tmp_path, monkeypatch):
+    """heliquad fit --plot: the extension picks the format (any case; PNG without one); one
+    matplotlib cannot write, or pgf without the TeX it needs, is refused up front."""
+    from heliquad.host.errors import InputError
+    from heliquad.host.files import check_figure_output, figure_format
+
+    assert [figure_format(n) for n in ("b.PNG", "b.svg", "bode", "a.b/c")] == \
+        ["png", "svg", "png", "png"]
+    for name in ("b.png", "b.PDF", "bode"):
+        check_figure_output(tmp_path / name, "--plot")
+    with pytest.raises(InputError, match=r"--plot .*b\.xyz: \.xyz is not an image format.*\.png"):
+        check_figure_output(tmp_path / "b.xyz", "--plot")
+    monkeypatch.setenv("PATH", str(tmp_path))              # no TeX on it
+    with pytest.raises(InputError, match=r"\.pgf figures need \w+latex"):
+        check_figure_output(tmp_path / "b.pgf", "--plot")
+    assert list(tmp_path.iterdir()) == []                   # nothing written by a check

@@ -21,6 +21,9 @@ MODELS.json (written): {"models": [{"order": [M, N], "num": [...], "den": [...],
 "delay_s": 0.0, "stable": true, "metrics": {"rms", "J", "aicc", ...}, "poles", "zeros",
 "dc_gain"}, ...], "recommended": INDEX, "reason": "..."}; coefficients in descending
 powers of s, den monic.
+Outputs: every one (--json, --mat, --plot) is checked before the fit, so a name that cannot
+be written (a missing folder; a --plot extension that is no image format matplotlib writes,
+docs/file-formats.md) is refused in one line and nothing is written.
 
 example: heliquad fit points.csv --order 0/2 --order 0/3 --order 2/4 --json models.json --plot bode.png
 """
@@ -43,7 +46,9 @@ def add_parser(sub, fmt) -> None:
                         "are flagged)")
     p.add_argument("--json", required=True, metavar="MODELS.json", help="models file to write")
     p.add_argument("--plot", metavar="BODE.png", help="write a Bode plot of points and models "
-                   "(and the points' coherence, when the file has it)")
+                   "(and the points' coherence, when the file has it); the format is the "
+                   "name's extension (.png, .pdf, .svg, ... any matplotlib writes; PNG when "
+                   "there is none), checked with the other outputs before anything is done")
     p.add_argument("--mat", metavar="MODELS.mat", help="also write the models for MATLAB (a "
                    "struct array, docs/file-formats.md)")
     p.set_defaults(func=run)
@@ -52,11 +57,14 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import check_output, read_points_csv, write_models_json, write_models_mat
+    from ..files import (check_figure_output, check_output, read_points_csv, write_models_json,
+                         write_models_mat)
 
-    for option in ("json", "mat", "plot"):          # all writable, or none is written
+    for option in ("json", "mat"):                  # all writable, or none is written
         if getattr(args, option):
             check_output(getattr(args, option), f"--{option}")
+    if args.plot:
+        check_figure_output(args.plot, "--plot")
     points = read_points_csv(args.points)
     from ..fit import n_parameters, parse_order     # after the file is read: scipy is slow
     from ..identify import fit_orders

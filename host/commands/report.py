@@ -9,10 +9,14 @@ __all__ = ["add_parser", "run"]
 
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("report", help="one self-contained HTML page of a session",
-                       description="Write DIR/report.html: every table, model, metric and plot "
-                                   "of a sweep folder (or of a folder of them, one per axis), "
-                                   "with the quality flags (low coherence, unstable fits, "
-                                   "aborted frequencies).", formatter_class=fmt)
+                       description="Write DIR/report.html: a summary per axis (the "
+                                   "recommended model, its error against the simulator's "
+                                   "truth, the verdict, the next step), the quality flags "
+                                   "(what to act on: low coherence, unstable or poor fits, "
+                                   "aborted frequencies, errors beyond 1 dB or 5 deg of the "
+                                   "truth) and what is not validated, then every table, "
+                                   "model, metric and plot of a sweep folder (or of a folder "
+                                   "of them, one per axis).", formatter_class=fmt)
     p.add_argument("dir", metavar="DIR")
     p.add_argument("--out", metavar="FILE.html")
     p.set_defaults(func=run)
