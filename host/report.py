@@ -27,6 +27,7 @@ import numpy as np
 
 from .errors import InputError
 from .files import atomic_write
+from .identify_session import cut_text
 from .sweep import saturation_text
 
 __all__ = ["write_report", "LOW_COHERENCE"]
@@ -131,10 +132,15 @@ def _sweep_html(manifest, axis, flags):
             f"started {html.escape(str(manifest.get('started')))}; gains "
             f"{html.escape(json.dumps(manifest.get('gains')))}.</p>")
     text += f"<p>Signal: {html.escape(signal_text(manifest))}.</p>"
+    cut = cut_text(manifest)
+    if cut:
+        text += f"<p><b>{html.escape(cut[0].upper() + cut[1:])}.</b></p>"
     rows = [(_fmt(f.get("requested_hz")), _fmt(f.get("freq_hz")), f.get("period_samples", "-"),
-             f.get("samples", 0), f.get("status")) for f in manifest.get("frequencies", [])]
+             f.get("samples", 0), _lost_cell(f), f.get("garbage_bytes", "-"), f.get("status"))
+            for f in manifest.get("frequencies", [])]
     text += "<h3>Frequencies</h3>" + _table(
-        ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,))
+        ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "lost on the link",
+         "garbage bytes", "status"], rows, left=(6,))
     for f in manifest.get("frequencies", []):
         if f["status"].startswith("superseded"):
             continue             # the sequential design measured it again: nothing is wrong
@@ -145,6 +151,15 @@ def _sweep_html(manifest, axis, flags):
     if manifest.get("aborted"):
         flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
     return text
+
+
+def _lost_cell(entry) -> str:
+    """A frequency's samples lost on the link: ``N (x %)``, or "-" where the manifest
+    predates the count."""
+    if "lost" not in entry:
+        return "-"
+    total = entry.get("samples", 0) + entry["lost"]
+    return f"{entry['lost']} ({100 * entry['lost'] / total:.1f} %)" if total else "0"
 
 
 def _points_html(table, points, models, axis, flags):

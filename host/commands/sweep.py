@@ -148,10 +148,14 @@ def run(args) -> int:
         manifest = run_sweep(session, plan, args.out, source)
     except Exception as exc:          # a full disk, the firmware died, the port went away
         from ...sim.lockstep import FirmwareError
+        from ..connection import LinkLost
 
         kept = f"the log and manifest so far are kept in {args.out}"
         if isinstance(exc, DiskFull):
             raise exc.also(kept)
+        if isinstance(exc, LinkLost):     # the board went away, as a silent one: exit 1
+            sys.stderr.write(f"heliquad sweep: the board went away: {exc} ({kept})\n")
+            return 1
         # OSError: a write to the log failed (not for want of room)
         if isinstance(exc, (FirmwareError, InputError, OSError)):
             raise InputError(f"{exc} ({kept})") from None
