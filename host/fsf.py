@@ -385,9 +385,7 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
         Prior covariance as in :class:`RecursiveFsf` (the estimate equals RLS with the same
         ``p0``); default ``DEFAULT_P0_RELATIVE / mean(u^2)``.
     present : array_like of bool, optional
-        Which samples of ``y`` arrived (a record with samples lost on the link); the others
-        are left out of the regression. ``u`` must be complete (the excitation, completed
-        by :func:`complete_excitation`).
+        Which samples of ``y`` arrived; the rows of the others are left out (``u`` complete).
 
     Returns
     -------

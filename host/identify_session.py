@@ -22,7 +22,7 @@ from .errors import InputError
 from .files import atomic_write
 from .link import INPUT_OUTPUT
 
-__all__ = ["identify_dir", "INPUT_OUTPUT", "cut_text"]
+__all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 
 
@@ -65,18 +65,6 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
                          f"{names[1].get(injection, injection)} injection, the manifest "
                          f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
                          "log and the manifest are not of one session")
-
-
-def cut_text(manifest) -> str | None:
-    """``the sweep was cut: WHY (K of N frequencies measured)`` for a sweep that did not
-    complete (Ctrl-C, a breach, a board that went away), or None."""
-    if manifest.get("complete", True):
-        return None
-    measured = sum(1 for f in manifest["frequencies"] if f.get("status") == "ok")
-    planned = manifest.get("planned_hz")
-    of = f" of {len(planned)}" if planned else ""
-    return (f"the sweep was cut: {manifest.get('aborted') or 'it did not complete'} "
-            f"({measured}{of} frequencies measured)")
 
 
 def _segments(manifest, samples):
@@ -150,6 +138,8 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     from .files import write_models_json, write_points_csv
     from .fit import n_parameters
     from .identify import default_orders, fit_orders
+
+    from .sweep import cut_text
 
     cut = cut_text(manifest)
     if cut:

@@ -27,8 +27,7 @@ import numpy as np
 
 from .errors import InputError
 from .files import atomic_write
-from .identify_session import cut_text
-from .sweep import saturation_text
+from .sweep import cut_text, saturation_text
 
 __all__ = ["write_report", "LOW_COHERENCE"]
 

@@ -43,7 +43,7 @@ from .params import session_params
 
 __all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
-           "saturation_text", "loss_text", "MAX_LOST_SHARE", "MAX_LOST_RUN"]
+           "saturation_text", "loss_text", "cut_text", "MAX_LOST_SHARE", "MAX_LOST_RUN"]
 
 MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
@@ -332,6 +332,18 @@ def loss_text(entry) -> str:
     if entry.get("garbage_bytes"):
         said += f", {entry['garbage_bytes']} garbage bytes"
     return said
+
+
+def cut_text(manifest) -> str | None:
+    """``the sweep was cut: WHY (K of N frequencies measured)`` for a sweep that did not
+    complete (Ctrl-C, a breach, a board that went away), or None."""
+    if manifest.get("complete", True):
+        return None
+    measured = sum(1 for f in manifest["frequencies"] if f.get("status") == "ok")
+    planned = manifest.get("planned_hz")
+    of = f" of {len(planned)}" if planned else ""
+    return (f"the sweep was cut: {manifest.get('aborted') or 'it did not complete'} "
+            f"({measured}{of} frequencies measured)")
 
 
 def saturation_summary(counts) -> str:
