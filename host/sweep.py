@@ -551,7 +551,8 @@ class ExcitationWatch:
         if into != period // 2 or cycles < dwell.min_cycles - 1:
             return
         fs = e["freq_hz"] * period
-        relative = dwell.relative_sigma(*self.columns(cycles * period), fs, e["freq_hz"])
+        r, u, y, present = self.columns(cycles * period)
+        relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"], present)
         used = cycles - 1                       # the first measured cycle is discarded
         if cycles == dwell.min_cycles - 1 and self.redesign is not None:
             better = self.redesign(self.rate_per_unit(require_end=False),
@@ -589,8 +590,9 @@ class ExcitationWatch:
         e["cycles"] = (e["samples"] + e["lost"]) // e["period_samples"]
         e["dwell_end"] = ("amplitude" if self.again is not None else "target") if self.finish \
             else "cap"
-        relative = dwell.relative_sigma(*self.columns(), e["freq_hz"] * e["period_samples"],
-                                        e["freq_hz"])
+        r, u, y, present = self.columns()
+        relative = dwell.relative_sigma(r, u, y, e["freq_hz"] * e["period_samples"],
+                                        e["freq_hz"], present)
         e["relative_sigma"] = relative if math.isfinite(relative) else None
 
     def check_time(self, now_us: int) -> None:
