@@ -28,7 +28,14 @@ import serial
 
 from .errors import InputError
 
-__all__ = ["open_connection", "NETWORK_KINDS", "CONNECTION_HELP"]
+__all__ = ["open_connection", "NETWORK_KINDS", "CONNECTION_HELP", "LinkLost"]
+
+
+class LinkLost(InputError):
+    """The link went away while reading or writing (a board unplugged, a connection the
+    other end closed): ``telemetry link lost: ...``. An InputError for the commands that
+    have no other rule; a sweep ends on it as on a board that fell silent (exit 1, its
+    records kept)."""
 
 #: The network connections: scheme -> what it does.
 NETWORK_KINDS = {"udpin": "listen for UDP", "udp": "listen for UDP (as udpin:)",
@@ -76,7 +83,7 @@ class SerialPort:
         try:
             return self.serial.read(READ_SIZE)
         except (serial.SerialException, OSError) as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
+            raise LinkLost(f"telemetry link lost: {exc}") from None
 
     def write(self, data) -> int:
         """A failed write (the port gone, or a board that stopped reading for a second) is
@@ -84,7 +91,7 @@ class SerialPort:
         try:
             return self.serial.write(data)
         except (serial.SerialException, OSError) as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
+            raise LinkLost(f"telemetry link lost: {exc}") from None
 
     def fileno(self) -> int:
         return self.serial.fileno()
@@ -148,9 +155,9 @@ class NetworkPort:
             try:
                 data = self.conn.recv(READ_SIZE)
             except OSError as exc:
-                raise InputError(f"telemetry link lost: {self.name}: {exc.strerror or exc}") from None
+                raise LinkLost(f"telemetry link lost: {self.name}: {exc.strerror or exc}") from None
             if self.lost:
-                raise InputError(self.lost)
+                raise LinkLost(self.lost)
             if not data:
                 break
             chunks.append(bytes(data))
@@ -165,7 +172,7 @@ class NetworkPort:
                              "(udpout:HOST:PORT, tcp:HOST:PORT)")
         self.conn.write(bytes(data))
         if self.lost:
-            raise InputError(self.lost)
+            raise LinkLost(self.lost)
         return len(data)
 
     def fileno(self) -> int:

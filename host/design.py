@@ -79,29 +79,32 @@ class Dwell:
         """The cycles to start a frequency's excitation with: its cap."""
         return max(self.min_cycles, min(self.max_cycles, int(self.max_dwell_s * freq_hz)))
 
-    def relative_sigma(self, r, u, y, fs_hz: float, freq_hz: float) -> float:
+    def relative_sigma(self, r, u, y, fs_hz: float, freq_hz: float, present=None) -> float:
         """The point's sigma over its magnitude, from the record so far (inf when it cannot
-        be estimated yet)."""
+        be estimated yet); ``present``: which samples arrived (None: all)."""
         from .errors import InputError
         from .fsf import estimate_against_excitation
 
         try:
             p = estimate_against_excitation(np.asarray(r), np.asarray(u), np.asarray(y), fs_hz,
-                                            freq_hz, discard_periods=1)
+                                            freq_hz, discard_periods=1, present=present)
         except InputError:
             return math.inf
         return p.sigma / abs(p.gain) if abs(p.gain) > 0 else math.inf
 
 
-def response_per_unit(r, y, fs_hz: float, freq_hz: float) -> float:
+def response_per_unit(r, y, fs_hz: float, freq_hz: float, present=None) -> float:
     """``|Y/R|`` at the fundamental: the output (rate) per unit of excitation; NaN when the
-    record does not give it."""
+    record does not give it. ``present``: which samples arrived (None: all)."""
     from .errors import InputError
-    from .fsf import estimate_fsf
+    from .fsf import complete_excitation, estimate_fsf
 
     try:
+        if present is not None:
+            r = complete_excitation(r, present, round(fs_hz / freq_hz))
+            y = np.where(present, y, 0.0)
         return abs(estimate_fsf(np.asarray(r), np.asarray(y), fs_hz, freq_hz,
-                                discard_periods=1).gain)
+                                discard_periods=1, present=present).gain)
     except InputError:
         return math.nan
 

@@ -49,6 +49,9 @@ POINTS_OPTIONAL = ("sigma", "coherence")
 #: POINTS.csv's columns for points estimated against the excitation r (``heliquad
 #: identify``): the coherence of r with the output and with the input.
 POINTS_EXCITATION = ("coherence_ry", "coherence_ru")
+#: POINTS.csv's column for points whose record lost samples on the link (``heliquad
+#: identify``, when any did): the share lost, 0..1.
+POINTS_LOSS = ("lost_share",)
 #: Largest spread of sample intervals, relative to the mean interval, still called uniform.
 UNIFORM_TOLERANCE = 0.01
 
@@ -339,7 +342,7 @@ def read_points_csv(path):
         ``omega`` (rad/s), ``F`` (complex), and ``sigma``, ``coherence``, ``coherence_ry``,
         ``coherence_ru``: arrays, or None for a column the file does not have.
     """
-    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL + POINTS_EXCITATION,
+    table = _read_table(path, POINTS_COLUMNS, POINTS_OPTIONAL + POINTS_EXCITATION + POINTS_LOSS,
                         what="POINTS.csv (columns omega_rad_s,magnitude,phase_rad)")
     omega, mag = table["omega_rad_s"], table["magnitude"]
     if omega.size > MAX_POINTS:
@@ -361,7 +364,7 @@ def read_points_csv(path):
     _first_bad(path, "phase_rad", table["phase_rad"], np.abs(table["phase_rad"]) <= 1e4,
                "within +/-1e4 rad")
     out = {"omega": omega, "F": mag * np.exp(1j * table["phase_rad"]),
-           **{c: table.get(c) for c in POINTS_OPTIONAL + POINTS_EXCITATION}}
+           **{c: table.get(c) for c in POINTS_OPTIONAL + POINTS_EXCITATION + POINTS_LOSS}}
     if out["sigma"] is not None:
         s = out["sigma"]
         _first_bad(path, "sigma", s, np.isfinite(s) & (s >= 0), "finite and non-negative")
@@ -413,7 +416,9 @@ def _manifest_schema():
                   "period_samples": S.Int(2, 2**31), "start_us": S.Int(0, 2**63 - 1),
                   "end_us": S.Int(0, 2**63 - 1), "messages": S.List(S.Str()),
                   **{k: S.Int(0, 2**31) for k in ("seq_gaps", "saturated", "collective_limited",
-                                                  "sensor_clipped", "cycles")},
+                                                  "sensor_clipped", "cycles", "lost",
+                                                  "lost_run", "garbage_bytes")},
+                  "period_inferred": S.Bool(),
                   "dwell_end": S.Str(("target", "cap", "amplitude")), "relative_sigma": S.Null(S.Num(0)),
                   "signal": S.Str(tuple(names.SIGNALS)),
                   "orders": S.List(S.Int(1, 2**31), 1, 16), "fade_samples": S.Int(0, 2**31)})
@@ -427,7 +432,8 @@ def _manifest_schema():
                   "fade_cycles": S.Int(1, 65535), "limits": S.Obj(values=S.Num()),
                   "design": S.Obj(), "signal": S.Str(SWEEP_SIGNALS),
                   "complete": S.Bool(), "aborted": S.Null(S.Str()),
-                  "in_progress_hz": S.Null(S.Num())})
+                  "in_progress_hz": S.Null(S.Num()),
+                  "planned_hz": S.List(S.Num(0, 1e6, lo_open=True), 0, 10_000)})
 
 
 def _check_orders(path, key, entry) -> None:
@@ -624,6 +630,7 @@ def write_points_csv(path, points):
     excitation."""
     rows = sorted(points, key=lambda p: p.omega_rad_s)
     extra = POINTS_EXCITATION if any(p.estimate == "excitation" for p in rows) else ()
+    extra += POINTS_LOSS if any(p.lost_share > 0 for p in rows) else ()
     with atomic_write(path) as fh:
         fh.write(",".join(POINTS_COLUMNS + POINTS_OPTIONAL + extra) + "\n")
         for p in rows:

@@ -57,6 +57,7 @@ __all__ = [
     "estimate_frequency",
     "integer_period_consistent",
     "period_coherence",
+    "complete_excitation",
 ]
 
 #: Harmonics kept on each side of DC (the paper's step 2, docs/paper.md: l = 0, +/-1, +/-2, +/-3).
@@ -122,6 +123,9 @@ class FrequencyPoint:
         The harmonic of the record's (base) period this point is at: 1 for a sine; a
         multisine's line (:func:`estimate_multisine`), whose ``period_samples`` is the base
         period.
+    lost_share : float
+        The share of the record's samples lost on the link (0 when every one arrived;
+        ``heliquad identify`` sets it from the sweep's count).
     """
 
     omega_rad_s: float
@@ -139,6 +143,7 @@ class FrequencyPoint:
     input_gain: complex = complex("nan+nanj")
     input_sigma: float = math.nan
     order: int = 1
+    lost_share: float = 0.0
 
     @property
     def magnitude(self) -> float:
@@ -358,7 +363,8 @@ def period_coherence(u, y, omega_per_sample: float, starts, length: int) -> floa
 def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
                  harmonics: int = DEFAULT_HARMONICS,
                  discard_periods: int = DEFAULT_DISCARD_PERIODS,
-                 offset: bool = True, p0: float | None = None) -> FrequencyPoint:
+                 offset: bool = True, p0: float | None = None,
+                 present=None) -> FrequencyPoint:
     """Estimate one frequency-response point from a sine experiment (batch solver).
 
     Parameters
@@ -378,12 +384,15 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
     p0 : float, optional
         Prior covariance as in :class:`RecursiveFsf` (the estimate equals RLS with the same
         ``p0``); default ``DEFAULT_P0_RELATIVE / mean(u^2)``.
+    present : array_like of bool, optional
+        Which samples of ``y`` arrived; the rows of the others are left out (``u`` complete).
 
     Returns
     -------
     FrequencyPoint
     """
     u, y = _check_signals(u, y)
+    present = _check_present(present, u.size)
     harmonics = len(_harmonic_orders(harmonics)) // 2       # validates
     if not fs_hz > 0:
         raise InputError(f"sampling rate must be positive, got {fs_hz}")
@@ -409,8 +418,65 @@ def estimate_fsf(u, y, fs_hz: float, freq_hz: float | None = None,
     else:          # the firmware's periods are integers: use one if the input allows it
         whole = integer_period_consistent(u, fs_hz, freq_hz)
     if whole is not None and whole >= 2:
-        return _solve_fsf(u, y, fs_hz, whole, harmonics, discard_periods, offset, p0)
-    return _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods)
+        return _solve_fsf(u, y, fs_hz, whole, harmonics, discard_periods, offset, p0, present)
+    return _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods, present)
+
+
+def _check_present(present, n: int):
+    """The mask of the samples that arrived, or None when all did."""
+    if present is None:
+        return None
+    present = np.asarray(present, dtype=bool)
+    if present.shape != (n,):
+        raise InputError("the mask of arrived samples must have one entry per sample")
+    return None if present.all() else present
+
+
+def complete_excitation(r, present, period: int) -> np.ndarray:
+    """The excitation at every sample of a full-amplitude record some of whose samples were
+    lost: there it repeats every ``period`` samples exactly (the firmware's generator steps a
+    phase index modulo the period), so a lost sample takes the value of one a whole number
+    of periods away that arrived. InputError when some phase of the period arrived in no
+    period at all."""
+    r = np.array(r, dtype=float)
+    present = np.asarray(present, dtype=bool)
+    period = int(period)
+    phase = np.arange(r.size) % period
+    known = np.full(period, np.nan)
+    known[phase[present][::-1]] = r[present][::-1]          # the first arrival of each phase
+    if np.isnan(known[np.unique(phase)]).any():
+        raise InputError("samples lost at the same phase in every period: the excitation "
+                         "cannot be completed")
+    r[~present] = known[phase[~present]]
+    return r
+
+
+def fill_lost(x, present, r, period: int, gains: dict, offset: float) -> np.ndarray:
+    """``x`` (fitted against the complete excitation ``r`` with harmonic gains ``{l: G_l}``
+    and ``offset``) with each lost sample replaced by the fit's prediction there, so that
+    per-period transforms of the record are not biased by the holes. A filled sample
+    carries none of the noise, which the callers' sigmas account for (:func:`lost_factor`)."""
+    if present is None:
+        return x
+    lines = {l: g for l, g in gains.items() if np.isfinite(g)}
+    Xt = fsf_design_matrix(np.asarray(r, dtype=float), int(period), tuple(sorted(lines)), 0,
+                           offset=False)
+    coef = [0.0] + [part for l in sorted(lines) for part in (lines[l].real, lines[l].imag)]
+    return np.where(present, x, np.asarray(coef) @ Xt + offset)
+
+
+def lost_factor(present, segments) -> float:
+    """How much a sigma from the scatter of per-period transforms understates the truth
+    when lost samples were filled by the fit (:func:`fill_lost`): a period with ``n`` of its
+    ``N`` samples carries ``n/N`` of the noise a whole one does, while the estimate rests on
+    ``n/N`` of the rows, so the scatter's sigma is low by ``N/n`` over the periods used."""
+    if present is None:
+        return 1.0
+    starts, length = segments
+    if not len(starts):
+        return 1.0
+    arrived = sum(int(np.count_nonzero(present[s:s + length])) for s in starts)
+    return len(starts) * length / max(arrived, 1)
 
 
 def _check_signals(u, y):
@@ -483,7 +549,11 @@ class _FsfSolution:
     n_periods: int
 
 
-def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0) -> _FsfSolution:
+def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0,
+                  present=None) -> _FsfSolution:
+    """``present``: which samples of ``y`` arrived (None: all); the rows of the others are
+    left out of the regression (each row's regressor comes from ``u`` alone, which must be
+    complete)."""
     start = fsf_first_row(period, discard_periods)
     n_periods = (u.size - start) // period
     if n_periods < 1:
@@ -498,6 +568,8 @@ def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0) -> _
     if offset:
         ridge[-1] = 1.0
     yy = y[start:]
+    if present is not None and not np.all(present[start:]):
+        Xt, yy = Xt[:, present[start:]], yy[present[start:]]
     gram = Xt @ Xt.T
     # Excitation per harmonic from the Gram diagonal: sum |f_l|^2 = (|2Re f|^2 + |2Im f|^2)/4.
     # Checked before solving: without excitation the system is singular. A sine's reference
@@ -525,9 +597,10 @@ def _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0) -> _
                         int(n_periods))
 
 
-def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
+def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0, present=None):
     sol = _fsf_solution(u, y, fs_hz, period, _positive_orders(harmonics), discard_periods,
-                        offset, p0)
+                        offset, p0, present)
+    y = fill_lost(y, present, u, period, sol.gains, sol.offset)
     w = 2 * np.pi / period
     coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
     return FrequencyPoint(omega_rad_s=w * fs_hz, gain=sol.gains[1], sigma=sol.sigmas[1],
@@ -535,18 +608,20 @@ def _solve_fsf(u, y, fs_hz, period, harmonics, discard_periods, offset, p0):
                           method="fsf", harmonics=sol.gains, offset=sol.offset)
 
 
-def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
+def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods, present=None):
     start = int(math.ceil(discard_periods * period))
     n_periods = int((u.size - start) // period)
     stop = start + int(round(n_periods * period))
     w = 2 * np.pi / period
     k = np.arange(start, stop)
+    if present is not None:          # the samples that arrived: a sine fit needs no others
+        k = k[present[start:stop]]
     cols = [np.ones(k.size)]
     for l in range(1, int(harmonics) + 1):
         cols += [np.cos(l * w * k), np.sin(l * w * k)]
     X = np.column_stack(cols)
-    coef_u, *_ = np.linalg.lstsq(X, u[start:stop], rcond=None)
-    coef_y, *_ = np.linalg.lstsq(X, y[start:stop], rcond=None)
+    coef_u, *_ = np.linalg.lstsq(X, u[k], rcond=None)
+    coef_y, *_ = np.linalg.lstsq(X, y[k], rcond=None)
     # a cos + b sin = Re((a - j b) e^{j w k}): complex amplitude of harmonic l is a - j b.
     U = coef_u[1::2] - 1j * coef_u[2::2]
     Y = coef_y[1::2] - 1j * coef_y[2::2]
@@ -555,10 +630,16 @@ def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
         raise InputError(f"the input has no component at {fs_hz / period:g} Hz")
     gains = {l: complex(Y[l - 1] / U[l - 1]) if excited[l - 1] else complex("nan+nanj")
              for l in range(1, int(harmonics) + 1)}
-    resid = y[start:stop] - X @ coef_y
+    resid = y[k] - X @ coef_y
     noise_var = float(resid @ resid) / max(k.size - X.shape[1], 1)
     cov = noise_var * np.linalg.inv(X.T @ X)
     sigma = math.sqrt(max(cov[1, 1] + cov[2, 2], 0.0)) / abs(U[0])
+    if present is not None:          # the fit's prediction where samples were lost
+        every = np.arange(y.size)
+        fit = np.column_stack([np.ones(y.size)] + [f(l * w * every) for l in
+                                                   range(1, int(harmonics) + 1)
+                                                   for f in (np.cos, np.sin)]) @ coef_y
+        y = np.where(present, y, fit)
     coh = period_coherence(u, y, w, *period_segments(u.size, period, discard_periods))
     return FrequencyPoint(omega_rad_s=w * fs_hz, gain=gains[1], sigma=sigma, coherence=coh,
                           period_samples=float(period), n_periods=n_periods, method="sinefit",
@@ -567,7 +648,8 @@ def _solve_sinefit(u, y, fs_hz, period, harmonics, discard_periods):
 
 def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
                                 harmonics: int = DEFAULT_HARMONICS,
-                                discard_periods: int = DEFAULT_DISCARD_PERIODS) -> FrequencyPoint:
+                                discard_periods: int = DEFAULT_DISCARD_PERIODS,
+                                present=None) -> FrequencyPoint:
     """One point from closed-loop data: ``G = (Y/R) / (U/R)``, the FSF of the output and of
     the input each against the injected excitation ``r``.
 
@@ -578,21 +660,41 @@ def estimate_against_excitation(r, u, y, fs_hz: float, freq_hz: float,
     ``(Y_p - G U_p) / (T_u R_p)`` (``T_u = U/R``): what the record itself shows, not a model
     of the noise. ``coherence`` is the smaller of the coherences of ``r`` with ``y`` and
     with ``u``, both kept on the point.
+
+    ``present``: which samples arrived, for a full-amplitude record with samples lost on the
+    link (their values in ``r``, ``u`` and ``y`` are ignored). The excitation is completed
+    (:func:`complete_excitation`), the rows of lost samples are left out of both fits, the
+    per-period transforms use the fits' predictions there (:func:`fill_lost`), and the
+    scatter's sigma is raised by :func:`lost_factor`.
     """
+    present = _check_present(present, np.asarray(r).size)
+    if present is not None:
+        period = fs_hz / freq_hz
+        if abs(period - round(period)) > 1e-9 * period:
+            raise InputError("samples were lost from a record whose period is not a whole "
+                             "number of samples")
+        r = complete_excitation(r, present, round(period))
+        u, y = (np.where(present, x, 0.0) for x in (u, y))
     r, u = _check_signals(r, u)
     _, y = _check_signals(r, y)
     try:
-        to_y = estimate_fsf(r, y, fs_hz, freq_hz, harmonics, discard_periods, offset=True)
-        to_u = estimate_fsf(r, u, fs_hz, freq_hz, harmonics, discard_periods, offset=True)
+        to_y = estimate_fsf(r, y, fs_hz, freq_hz, harmonics, discard_periods, offset=True,
+                            present=present)
+        to_u = estimate_fsf(r, u, fs_hz, freq_hz, harmonics, discard_periods, offset=True,
+                            present=present)
     except InputError as exc:
         raise InputError(f"the logged excitation: {exc}") from None
     if not _follows(to_u.gain):
         raise InputError(f"the input does not follow the excitation at {freq_hz:g} Hz")
     gains = {l: to_y.harmonics[l] / to_u.harmonics[l] if to_u.harmonics[l] != 0 else
              complex("nan+nanj") for l in to_y.harmonics}
+    if present is not None:
+        period = int(to_y.period_samples)
+        y = fill_lost(y, present, r, period, to_y.harmonics, to_y.offset)
+        u = fill_lost(u, present, r, period, to_u.harmonics, to_u.offset)
     return _against_excitation(r, u, y, to_y, to_u, 1,
                                period_segments(r.size, to_y.period_samples, discard_periods),
-                               harmonics=gains)
+                               harmonics=gains, present=present)
 
 
 def _follows(t_u) -> bool:
@@ -600,7 +702,8 @@ def _follows(t_u) -> bool:
     return abs(t_u) > 0 and math.isfinite(abs(t_u))
 
 
-def _against_excitation(r, u, y, to_y, to_u, order, segments, **fields) -> FrequencyPoint:
+def _against_excitation(r, u, y, to_y, to_u, order, segments, present=None,
+                        **fields) -> FrequencyPoint:
     """The point ``G = (Y/R) / (U/R)`` at harmonic ``order`` of the record's period, from the
     FSF points of ``y`` and of ``u`` against ``r`` (their coherences, of ``r`` with each,
     were taken over ``segments``, the whole periods used here). ``sigma`` from the scatter
@@ -614,6 +717,7 @@ def _against_excitation(r, u, y, to_y, to_u, order, segments, **fields) -> Frequ
     if len(starts) >= 2 and np.all(np.abs(R) > 0):
         e = (Y - g * U) / (t_u * R)
         sigma = math.sqrt(float(np.sum(np.abs(e - e.mean()) ** 2)) / (e.size - 1) / e.size)
+        sigma *= lost_factor(present, segments)
     else:              # one period: the two fits' residual sigmas, propagated
         sigma = math.hypot(to_y.sigma, abs(g) * to_u.sigma) / abs(t_u)
     return dataclasses.replace(
@@ -635,7 +739,7 @@ def _multisine_checks(u, y, fs_hz, period, orders):
 
 def estimate_multisine(u, y, fs_hz: float, period: int, orders,
                        discard_periods: int = 0, offset: bool = True,
-                       p0: float | None = None) -> list:
+                       p0: float | None = None, present=None) -> list:
     """Every line of a multisine record: one :class:`FrequencyPoint` per excited harmonic
     ``l`` of ``orders`` of the base period of ``period`` samples, from one FSF fit of the
     whole record (the batch form of :class:`RecursiveFsf` with the same orders and ``p0``).
@@ -644,13 +748,16 @@ def estimate_multisine(u, y, fs_hz: float, period: int, orders,
     period: an impulse response shorter than the period has forgotten what came before (the
     fade-in), so that period is the settling. ``sigma`` per line from the fit's covariance;
     ``coherence`` per line over the whole periods after the first (NaN with fewer than
-    two). A line the input does not excite is left out."""
+    two). A line the input does not excite is left out. ``present``: as for
+    :func:`estimate_fsf` (``u`` complete, the rows of lost ``y`` left out)."""
     u, y, period, orders = _multisine_checks(u, y, fs_hz, period, orders)
+    present = _check_present(present, u.size)
     power = float(np.mean(u ** 2))
     if not power > 0.0:
         raise InputError("the input is zero: it excites none of the multisine's lines")
     p0 = DEFAULT_P0_RELATIVE / power if p0 is None else p0
-    sol = _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0)
+    sol = _fsf_solution(u, y, fs_hz, period, orders, discard_periods, offset, p0, present)
+    y = fill_lost(y, present, u, period, sol.gains, sol.offset)
     segments = _multisine_segments(u.size, period, discard_periods)
     points = []
     for l in orders:
@@ -666,23 +773,33 @@ def estimate_multisine(u, y, fs_hz: float, period: int, orders,
 
 
 def estimate_multisine_against_excitation(r, u, y, fs_hz: float, period: int, orders,
-                                          discard_periods: int = 0) -> list:
+                                          discard_periods: int = 0, present=None) -> list:
     """Every line of a closed-loop multisine record, ``G_l = (Y/R)_l / (U/R)_l``: the FSF of
     the output and of the input against the logged excitation ``r``
     (:func:`estimate_against_excitation` for each line at once). ``sigma`` per line from the
     scatter of the per-period estimates after the first period (the FSF's filter fill),
-    with two or more such periods; else the two fits' sigmas propagated."""
+    with two or more such periods; else the two fits' sigmas propagated. ``present``: as
+    for :func:`estimate_against_excitation`."""
+    present = _check_present(present, np.asarray(r).size)
+    if present is not None:
+        r = complete_excitation(r, present, int(period))
+        u, y = (np.where(present, x, 0.0) for x in (u, y))
     r, u, period, orders = _multisine_checks(r, u, fs_hz, period, orders)
     _, y = _check_signals(r, y)
     try:
         to_y = {p.order: p for p in estimate_multisine(r, y, fs_hz, period, orders,
-                                                       discard_periods)}
+                                                       discard_periods, present=present)}
         to_u = {p.order: p for p in estimate_multisine(r, u, fs_hz, period, orders,
-                                                       discard_periods)}
+                                                       discard_periods, present=present)}
     except InputError as exc:
         raise InputError(f"the logged excitation: {exc}") from None
     segments = _multisine_segments(r.size, period, discard_periods)
-    return [_against_excitation(r, u, y, to_y[l], to_u[l], l, segments,
+    if present is not None:
+        y = fill_lost(y, present, r, period, {l: p.gain for l, p in to_y.items()},
+                      next(iter(to_y.values())).offset if to_y else 0.0)
+        u = fill_lost(u, present, r, period, {l: p.gain for l, p in to_u.items()},
+                      next(iter(to_u.values())).offset if to_u else 0.0)
+    return [_against_excitation(r, u, y, to_y[l], to_u[l], l, segments, present=present,
                                 harmonics={1: to_y[l].gain / to_u[l].gain})
             for l in sorted(to_y) if _follows(to_u[l].gain)]
 

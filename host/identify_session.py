@@ -12,6 +12,7 @@ the output, :mod:`.replay`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 
@@ -67,6 +68,8 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 
 
 def _segments(manifest, samples):
+    """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
+    samples on their places in the sequence (:func:`_gridded`)."""
     from ..sim.dialect import dialect
 
     running = dialect().HQ_EXCITATION_STATE_RUNNING
@@ -75,11 +78,42 @@ def _segments(manifest, samples):
     state = samples.exc_state
     u, y = samples[u_name].astype(float), samples[y_name].astype(float)
     r = samples.excitation.astype(float)
+    seq = samples.seq.astype(np.int64)
     for entry in manifest["frequencies"]:
         if entry.get("status") != "ok" or "start_us" not in entry:
             continue
         sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
-        yield entry, t[sel] * 1e-6, r[sel], u[sel], y[sel]
+        yield (entry, *_gridded(seq[sel], t[sel] * 1e-6, r[sel], u[sel], y[sel]))
+
+
+def _gridded(seq, t, r, u, y):
+    """A record on its samples' places: a sample lost on the link (a gap in the sequence
+    numbers) is a hole, NaN in ``r``, ``u`` and ``y`` (its time interpolated), and
+    ``present`` says which arrived (None when none was lost)."""
+    if not seq.size:
+        return t, r, u, y, None
+    seq, first = np.unique(seq, return_index=True)          # in order, each sample once
+    t, r, u, y = (x[first] for x in (t, r, u, y))
+    n = int(seq[-1] - seq[0]) + 1
+    if n == seq.size:
+        return t, r, u, y, None
+    idx = seq - seq[0]
+    present = np.zeros(n, dtype=bool)
+    present[idx] = True
+    holes = []
+    for x in (r, u, y):
+        full = np.full(n, np.nan)
+        full[idx] = x
+        holes.append(full)
+    return (np.interp(np.arange(n), idx, t), *holes, present)
+
+
+def _lost_share(entry, present) -> float:
+    """The share of a frequency's measured samples lost on the link: the sweep's count (it
+    knows the edges of the window too), else the holes in the log's record."""
+    if "lost" in entry and entry.get("samples", 0) + entry["lost"] > 0:
+        return entry["lost"] / (entry["samples"] + entry["lost"])
+    return 0.0 if present is None else 1.0 - float(np.mean(present))
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
@@ -105,6 +139,11 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     from .fit import n_parameters
     from .identify import default_orders, fit_orders
 
+    from .sweep import cut_text
+
+    cut = cut_text(manifest)
+    if cut:
+        progress(f"warning: {cut}; the points are those it measured")
     if damage:
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  "every well-formed record was read")
@@ -258,21 +297,33 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
 def _estimate_points(manifest, samples, estimate, progress) -> tuple:
     """(points, the records they came from, each record's first point, the frequencies
     skipped and why): one point per measured frequency of a dwell, one per line of a
-    multisine, against the excitation or the input (``estimate``)."""
+    multisine, against the excitation or the input (``estimate``). A record that lost
+    samples on the link is estimated from those that arrived (each point's
+    ``lost_share``); one that lost more than the sweep allows is skipped."""
+    from .sweep import MAX_LOST_SHARE
+
     points, segments, firsts, skipped = [], [], [], []
-    for entry, t, r, u, y in _segments(manifest, samples):
+    for entry, t, r, u, y, present in _segments(manifest, samples):
         what = _entry_name(entry)
-        if not len(t):
-            progress(f"  {what} skipped: the log holds none of its samples")
-            skipped.append(f"{what}: the log holds none of its samples")
-            continue
+        lost = _lost_share(entry, present)
         try:
-            found = _estimate_entry(entry, r, u, y, estimate)
+            if not len(t):
+                raise InputError("the log holds none of its samples")
+            if lost > MAX_LOST_SHARE:
+                raise InputError(f"{100 * lost:.1f} % of its samples were lost on the link "
+                                 f"(at most {100 * MAX_LOST_SHARE:g} % is used)")
+            found = _estimate_entry(entry, r, u, y, estimate, present)
         except InputError as exc:
             progress(f"  {what} skipped: {exc}")
             skipped.append(f"{what}: {exc}")
             continue
-        points += found
+        points += [dataclasses.replace(p, lost_share=lost) for p in found]
+        if lost:
+            progress(f"  {what}: {100 * lost:.1f} % of its samples were lost on the link; "
+                     "estimated from the rest")
+        if present is not None:     # the plots and the replay: holes bridged by a line
+            k = np.arange(present.size)
+            u, y = (np.interp(k, k[present], x[present]) for x in (u, y))
         segments.append((entry["freq_hz"], t, u, y))
         firsts.append(found[0])
     return points, segments, firsts, skipped
@@ -284,23 +335,48 @@ def _entry_name(entry) -> str:
     return f"{entry['freq_hz']:.4g} Hz"
 
 
-def _estimate_entry(entry, r, u, y, estimate) -> list:
+def _estimate_entry(entry, r, u, y, estimate, present=None) -> list:
     """The points of one excitation's full-amplitude record: a sine's one (the first period
-    discarded), or every line of a multisine (its first period fills the FSF's filter)."""
+    discarded), or every line of a multisine (its first period fills the FSF's filter).
+    ``present``: which samples arrived (None: all)."""
     from .fsf import (estimate_against_excitation, estimate_fsf, estimate_multisine,
                       estimate_multisine_against_excitation)
 
     fs = entry["freq_hz"] * entry["period_samples"]
+    if estimate != "excitation" and present is not None:
+        u, y = _complete_input(entry, r, u, y, present)
     if entry.get("signal") == "multisine":
         args = (fs, entry["period_samples"], entry["orders"])
-        found = estimate_multisine_against_excitation(r, u, y, *args) \
-            if estimate == "excitation" else estimate_multisine(u, y, *args)
+        found = estimate_multisine_against_excitation(r, u, y, *args, present=present) \
+            if estimate == "excitation" else estimate_multisine(u, y, *args, present=present)
         if not found:
             raise InputError("the input follows none of its lines")
         return found
     if estimate == "excitation":
-        return [estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1)]
-    return [estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1)]
+        return [estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1,
+                                            present=present)]
+    return [estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1,
+                         present=present)]
+
+
+def _complete_input(entry, r, u, y, present):
+    """For the estimate against the input, whose regressors need every sample of ``u``:
+    the lost samples of ``u`` from its fit against the (completed) excitation; ``y``'s
+    lost rows are left out of the fit."""
+    from .fsf import complete_excitation, estimate_fsf, estimate_multisine, fill_lost
+
+    period = int(entry["period_samples"])
+    r = complete_excitation(r, present, period)
+    u0, y0 = np.where(present, u, 0.0), np.where(present, y, 0.0)
+    fs = entry["freq_hz"] * period
+    if entry.get("signal") == "multisine":
+        fits = estimate_multisine(r, u0, fs, period, entry["orders"], present=present)
+        gains = {p.order: p.gain for p in fits}
+        offset = fits[0].offset if fits else 0.0
+    else:
+        fit = estimate_fsf(r, u0, fs, entry["freq_hz"], discard_periods=1, present=present)
+        gains, offset = fit.harmonics, fit.offset
+    return fill_lost(u0, present, r, period, gains, offset), y0
 
 
 def _saturated(manifest) -> list:

@@ -33,7 +33,7 @@ import numpy as np
 
 from .errors import InputError
 from .files import atomic_write
-from .sweep import saturation_text
+from .sweep import cut_text, saturation_text
 
 __all__ = ["write_report", "LOW_COHERENCE"]
 
@@ -183,10 +183,15 @@ def _sweep_html(manifest, axis, flags):
     """The session's source and the frequencies tried; flags those not measured and an
     early end (not those superseded: measured again with a better amplitude)."""
     text = "<h3>Sweep</h3>" + _table(None, _source_rows(manifest), left=(0, 1), cls="source")
+    cut = cut_text(manifest)
+    if cut:
+        text += f"<p><b>{html.escape(cut[0].upper() + cut[1:])}.</b></p>"
     rows = [(_fmt(f.get("requested_hz")), _fmt(f.get("freq_hz")), f.get("period_samples", "-"),
-             f.get("samples", 0), f.get("status")) for f in manifest.get("frequencies", [])]
+             f.get("samples", 0), _lost_cell(f), f.get("garbage_bytes", "-"), f.get("status"))
+            for f in manifest.get("frequencies", [])]
     text += "<h3>Frequencies</h3>" + _table(
-        ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "status"], rows, left=(4,))
+        ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "lost on the link",
+         "garbage bytes", "status"], rows, left=(6,))
     for f in manifest.get("frequencies", []):
         if f["status"].startswith("superseded"):
             continue             # the sequential design measured it again: nothing is wrong
@@ -262,6 +267,15 @@ def _gains_text(gains) -> str:
         elif values is not None:
             out.append(f"{loop} loop {_value_text(values)}")
     return "; ".join(out) or "-"
+
+
+def _lost_cell(entry) -> str:
+    """A frequency's samples lost on the link: ``N (x %)``, or "-" where the manifest
+    predates the count."""
+    if "lost" not in entry:
+        return "-"
+    total = entry.get("samples", 0) + entry["lost"]
+    return f"{entry['lost']} ({100 * entry['lost'] / total:.1f} %)" if total else "0"
 
 
 def _points_html(table, points, models, axis, flags):

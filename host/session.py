@@ -300,6 +300,12 @@ class PortSession:
     def time_us(self) -> int:
         return int((time.monotonic() - self.t0) * 1e6)
 
+    @property
+    def garbage_bytes(self) -> int:
+        """Bytes the link's framer skipped so far: damaged packets and noise, which carry
+        no sample (a sweep counts them per frequency)."""
+        return self.tel.framer.skipped
+
     def hover(self, progress=print) -> None:
         """On a board the pilot arms and hovers: wait until the board's samples say it is
         armed (an excitation sent before would be refused), saying so once if it is not."""

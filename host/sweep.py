@@ -43,7 +43,7 @@ from .params import session_params
 
 __all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_source", "measure", "ExcitationWatch",
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
-           "saturation_text"]
+           "saturation_text", "loss_text", "cut_text", "MAX_LOST_SHARE", "MAX_LOST_RUN"]
 
 MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
@@ -60,6 +60,14 @@ START_TIMEOUT_S = 3.0
 #: board) has lost its board: the link is gone or the board hung. The telemetry carries a
 #: sample every loop (200 Hz), so 2 s is 400 missing in a row.
 SAMPLE_TIMEOUT_S = 2.0
+#: Samples lost on the link (telemetry radios drop packets; a damaged packet fails its CRC)
+#: are left out of the estimate (host/fsf.py: the excitation repeats every period, and least
+#: squares needs no sample it did not get). A frequency ends the sweep only when it lost
+#: more than this share of its measured samples (its sigma grows by 1/(1 - share)) ...
+MAX_LOST_SHARE = 0.05
+#: ... or more than this many in a row (0.25 s at 200 Hz): a link dropping out, not a packet
+#: lost now and then (at 2 % independent loss a run of 5 happens once in 3e8 samples).
+MAX_LOST_RUN = 50
 #: The saturation counts of a frequency's window (manifest keys): the HQ_SATURATION bits that
 #: count a sample, and how a person is told.
 SATURATION = {"saturated": (("TORQUE",), "saturated the mixer"),
@@ -220,7 +228,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
                 "design": plan.record(),
                 "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
-                "signal": plan.signal, "frequencies": [], "complete": False, "aborted": None}
+                "signal": plan.signal, "planned_hz": list(plan.freqs_hz), "frequencies": [],
+                "complete": False, "aborted": None}
     current = None
     try:
         _write_manifest(out_dir, manifest)
@@ -239,7 +248,8 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             what = f"{entry.get('freq_hz', f):.4g} Hz" if plan.multisine is None else \
                 f"multisine, {len(plan.multisine.orders)} lines on {entry.get('freq_hz', f):.4g} Hz"
             progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {what}  "
-                     f"{entry['samples']} samples{saturation_text(entry)}  {entry['status']}")
+                     f"{entry['samples']} samples{loss_text(entry)}{saturation_text(entry)}  "
+                     f"{entry['status']}")
             if entry["status"] != "ok":
                 manifest["aborted"] = entry["status"]
                 break
@@ -314,6 +324,28 @@ def _keep_manifest(out_dir, manifest, exc: BaseException) -> None:
         raise failed.also(f"the sweep had stopped: {manifest['aborted']}") from exc
 
 
+def loss_text(entry) -> str:
+    """``, N lost (x %)`` for the samples a frequency's window lost on the link (and the
+    garbage bytes the link carried meanwhile), or ""."""
+    lost, total = entry.get("lost", 0), entry.get("samples", 0) + entry.get("lost", 0)
+    said = f", {lost} lost ({100 * lost / total:.1f} %)" if lost and total else ""
+    if entry.get("garbage_bytes"):
+        said += f", {entry['garbage_bytes']} garbage bytes"
+    return said
+
+
+def cut_text(manifest) -> str | None:
+    """``the sweep was cut: WHY (K of N frequencies measured)`` for a sweep that did not
+    complete (Ctrl-C, a breach, a board that went away), or None."""
+    if manifest.get("complete", True):
+        return None
+    measured = sum(1 for f in manifest["frequencies"] if f.get("status") == "ok")
+    planned = manifest.get("planned_hz")
+    of = f" of {len(planned)}" if planned else ""
+    return (f"the sweep was cut: {manifest.get('aborted') or 'it did not complete'} "
+            f"({measured}{of} frequencies measured)")
+
+
 def saturation_summary(counts) -> str:
     """``N saturated the mixer, ...`` for the saturation counts of a frequency's window (a
     manifest entry, or any mapping with its keys), or "" when nothing saturated."""
@@ -353,7 +385,13 @@ class ExcitationWatch:
     (HQ_SYSID_SAMPLE.saturation): samples whose torque command the mixer could not meet
     (``saturated``), whose collective gave way (``collective_limited``), whose gyro or
     accelerometer read full scale (``sensor_clipped``); and gaps in the samples' sequence
-    numbers (``seq_gaps``, lost telemetry)."""
+    numbers (``seq_gaps``, lost telemetry).
+
+    Samples lost inside the full-amplitude window are kept as holes in the record (NaN,
+    ``present`` False) so that every sample keeps its place in the period; ``lost`` counts
+    them (with those lost at the window's edges, once the window is known) and ``lost_run``
+    the longest run. More than :data:`MAX_LOST_RUN` in a row, or more than
+    :data:`MAX_LOST_SHARE` of the window, ends the frequency."""
 
     def __init__(self, plan, f, amp, limits: Limits, now_us: int, progress=print,
                  keep_rows: bool = False):
@@ -365,14 +403,20 @@ class ExcitationWatch:
         self.warning = mav.MAV_SEVERITY_WARNING
         self.plan, self.limits, self.progress = plan, limits, progress
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,
+                      "lost": 0, "lost_run": 0,
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
         if plan.multisine is not None:
             self.entry.update(signal="multisine", orders=list(plan.multisine.orders))
         self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
         self.keep_rows = keep_rows
         self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
+        self.present = []                       # False where a sample of it was lost
+        self.dt_us = None                       # the loop's period, from the samples
+        self.first_run_seq = self.last_run_seq = None
+        self.edge_room = [0, None]              # samples lost just before / after the window
         self.started_us, self.last_sample_us = now_us, now_us
         self.seen_active, self.last_seq, self.fresh = False, None, False
+        self.last_time_us = None
         self.done, self.stop = False, False
         self.finish = False                     # the dwell has its point: finish in order
         self.redesign = None                    # amplitude -> a better one, designed
@@ -380,9 +424,18 @@ class ExcitationWatch:
 
     @property
     def rows(self):
-        """(t, u, y) of every full-amplitude sample, for RUN.csv (``keep_rows``)."""
+        """(t, u, y) of every full-amplitude sample that arrived, for RUN.csv
+        (``keep_rows``)."""
         t, _, u, y = self.record
-        return list(zip(t, u, y)) if self.keep_rows else None
+        return [row for row, ok in zip(zip(t, u, y), self.present) if ok] \
+            if self.keep_rows else None
+
+    def columns(self, n=None):
+        """(r, u, y, present) of the first ``n`` samples of the window (all by default) as
+        arrays, ``present`` None when none was lost."""
+        r, u, y = (np.asarray(c[:n], dtype=float) for c in self.record[1:])
+        present = np.asarray(self.present[:n], dtype=bool)
+        return r, u, y, (None if present.all() else present)
 
     def __call__(self, m) -> None:
         if self.done:
@@ -406,37 +459,83 @@ class ExcitationWatch:
         # board's link) the status of its end, which carries the same fields.
         if not m.accepted:                       # only a start is ever refused
             return self._end(f"refused by the firmware: {reason_text(m.reason)}")
-        if "freq_hz" not in self.entry:
+        if "freq_hz" not in self.entry or self.entry.pop("period_inferred", False):
             self.entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
             if self.plan.multisine is not None:
                 self.entry["fade_samples"] = int(m.fade_samples)
         if m.state == self.idle and m.reason not in self.normal_end:
             self._end(f"stopped by the firmware: {reason_text(m.reason)}")
 
+    def _infer_period(self) -> None:
+        """The start's answer was lost on the link: the period the firmware chose from the
+        request (the nearest whole number of loop samples, excitation.cpp), on the loop
+        period the samples show; an answer that arrives later overrides it."""
+        e = self.entry
+        if "freq_hz" in e or not self.dt_us:
+            return
+        loop_hz = 1e6 / self.dt_us
+        period = max(int(round(loop_hz / e["requested_hz"])), 1)
+        e.update(freq_hz=loop_hz / period, period_samples=period, period_inferred=True)
+        if self.plan.multisine is not None:
+            lowest = self.plan.multisine.orders[0]
+            e["fade_samples"] = self.plan.fade_cycles * -(-period // lowest)
+
     def _sample(self, m) -> None:
         e = self.entry
+        gap = 0
         if self.last_seq is not None and m.seq > self.last_seq + 1:
-            e["seq_gaps"] += m.seq - self.last_seq - 1
-        self.last_seq, self.fresh = m.seq, True
+            gap = m.seq - self.last_seq - 1
+            e["seq_gaps"] += gap
+        if self.last_seq is not None and m.seq > self.last_seq:
+            self.dt_us = (m.time_us - self.last_time_us) / (m.seq - self.last_seq)
+        running_before = self.last_seq is not None and self.last_seq == self.last_run_seq
+        self.last_seq, self.last_time_us, self.fresh = m.seq, m.time_us, True
         if m.exc_state != self.idle:
             self.seen_active = True
         if m.exc_state == self.running:
-            e.setdefault("start_us", int(m.time_us))
-            e["end_us"] = int(m.time_us)
-            e["samples"] += 1
-            for key, bits in self.flags.items():
-                if m.saturation & bits:
-                    e[key] += 1
-            for column, value in zip(self.record, (m.time_us * 1e-6, m.excitation,
-                                                   getattr(m, self.u_name),
-                                                   getattr(m, self.y_name))):
-                column.append(value)
-            self._dwell()
+            if self.first_run_seq is None:
+                self.first_run_seq, self.edge_room[0] = m.seq, gap
+            self._running(m, gap if running_before else 0)
+            if self.done:
+                return
+        elif self.last_run_seq is not None and self.edge_room[1] is None:
+            self.edge_room[1] = m.seq - self.last_run_seq - 1
         breach = self.limits.breach(self.plan.axis, m)
         if breach:
             return self._end(breach, stop=True)
         if self.seen_active and m.exc_state == self.idle:
-            self._end(_incomplete(e, self.plan, self.finish))
+            self._end(_incomplete(e, self.plan, self.finish, self.edge_room) or
+                      _too_lossy(e))
+
+    def _running(self, m, holes: int) -> None:
+        """A full-amplitude sample, after ``holes`` lost inside the window."""
+        e = self.entry
+        self._infer_period()
+        e.setdefault("start_us", int(m.time_us))
+        e["end_us"] = int(m.time_us)
+        e["samples"] += 1
+        self.last_run_seq = m.seq
+        if holes:
+            e["lost"] += holes
+            e["lost_run"] = max(e["lost_run"], holes)
+            t0 = self.record[0][-1]
+            for i in range(1, holes + 1):
+                for column, value in zip(self.record, (t0 + i * self.dt_us * 1e-6, math.nan,
+                                                       math.nan, math.nan)):
+                    column.append(value)
+                self.present.append(False)
+            if holes > MAX_LOST_RUN:
+                return self._end(f"lost {holes} samples in a row on the link (more than "
+                                 f"{MAX_LOST_RUN}): the link is dropping out", stop=True)
+        for key, bits in self.flags.items():
+            if m.saturation & bits:
+                e[key] += 1
+        for column, value in zip(self.record, (m.time_us * 1e-6, m.excitation,
+                                               getattr(m, self.u_name),
+                                               getattr(m, self.y_name))):
+            column.append(value)
+        self.present.append(True)
+        self._dwell()
 
     def _dwell(self) -> None:
         """The sequential dwell, halfway through each cycle from the least cycles' last on
@@ -448,12 +547,12 @@ class ExcitationWatch:
         period = e.get("period_samples")
         if dwell is None or self.finish or not period:
             return
-        cycles, into = divmod(e["samples"], period)
+        cycles, into = divmod(len(self.present), period)
         if into != period // 2 or cycles < dwell.min_cycles - 1:
             return
-        r, u, y = (column[:cycles * period] for column in self.record[1:])
         fs = e["freq_hz"] * period
-        relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"])
+        r, u, y, present = self.columns(cycles * period)
+        relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"], present)
         used = cycles - 1                       # the first measured cycle is discarded
         if cycles == dwell.min_cycles - 1 and self.redesign is not None:
             better = self.redesign(self.rate_per_unit(require_end=False),
@@ -478,9 +577,9 @@ class ExcitationWatch:
         if not e.get("period_samples") or self.y_name != "rate" or (
                 require_end and e["status"] != "ok"):
             return math.nan
-        _, r, u, y = self.record
+        r, u, y, present = self.columns()
         return response_per_unit(r, u if of == "input" else y, e["freq_hz"] * e["period_samples"],
-                                 e["freq_hz"])
+                                 e["freq_hz"], present)
 
     def conclude(self) -> None:
         """A sequential dwell's record in the entry: the cycles measured, why the dwell
@@ -488,12 +587,12 @@ class ExcitationWatch:
         e, dwell = self.entry, self.plan.dwell
         if dwell is None or e["status"] != "ok" or not e.get("period_samples"):
             return
-        _, r, u, y = self.record
-        e["cycles"] = e["samples"] // e["period_samples"]
+        e["cycles"] = (e["samples"] + e["lost"]) // e["period_samples"]
         e["dwell_end"] = ("amplitude" if self.again is not None else "target") if self.finish \
             else "cap"
+        r, u, y, present = self.columns()
         relative = dwell.relative_sigma(r, u, y, e["freq_hz"] * e["period_samples"],
-                                        e["freq_hz"])
+                                        e["freq_hz"], present)
         e["relative_sigma"] = relative if math.isfinite(relative) else None
 
     def check_time(self, now_us: int) -> None:
@@ -515,10 +614,28 @@ def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
     """One excitation on ``session``: start it, watch it to its end, stop it if the host
     must. The one routine every experiment (a sweep's frequency, ``heliquad sil``) runs.
     ``redesign``: for a designed amplitude, rate per unit -> the amplitude the design would
-    now choose (the sequential dwell may finish early to measure again with it)."""
+    now choose (the sequential dwell may finish early to measure again with it). A link
+    that goes away (the board unplugged) ends it as a board that fell silent does: with
+    that status, the records kept. The bytes the link's framer skipped meanwhile (damage,
+    noise) are counted in the entry's ``garbage_bytes`` where the session counts them."""
+    from .connection import LinkLost
+
     watch = ExcitationWatch(plan, f, amp, limits or Limits(), session.time_us, progress,
                             keep_rows)
     watch.redesign = redesign
+    garbage = getattr(session, "garbage_bytes", None)
+    try:
+        _watch(session, plan, f, amp, watch)
+    except LinkLost as exc:
+        watch.done = True
+        watch.entry["status"] = f"the board went away: {exc}"
+    if garbage is not None:
+        watch.entry["garbage_bytes"] = session.garbage_bytes - garbage
+    watch.conclude()
+    return watch
+
+
+def _watch(session, plan, f, amp, watch) -> None:
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles_for(f),
                                  plan.fade_cycles,
                                  plan.multisine.harmonics() if plan.multisine else None)
@@ -531,22 +648,46 @@ def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
             finishing = True
     if watch.stop:
         session.tel.stop_excitation()
-    watch.conclude()
-    return watch
 
 
-def _incomplete(entry, plan, finished: bool) -> str | None:
+def _incomplete(entry, plan, finished: bool, edge_room=(0, 0)) -> str | None:
     """An excitation that ended without a stop message must still have all its measured
-    samples (a lost status message must not pass a truncated record as complete). One the
-    dwell finished early must hold whole cycles, at least the dwell's least."""
+    samples (a lost status message must not pass a truncated record as complete), those
+    that arrived and those lost on the link: holes inside the window, and at its edges no
+    more than the samples lost there (``edge_room``: lost just before its first sample and
+    just after its last). One the dwell finished early must hold whole cycles, at least the
+    dwell's least. Sets the entry's ``lost`` to every sample of the window not logged."""
     period = entry.get("period_samples", 0)
+    span = entry["samples"] + entry["lost"]               # first to last that arrived
+    room = edge_room[0] + (edge_room[1] or 0)
+    if not period:
+        return (f"incomplete: {entry['samples']} measured samples were logged and the "
+                "excitation's period is not known (its status and samples were lost)")
     if finished:
         least = plan.dwell.min_cycles * period
-        if entry["samples"] % period or entry["samples"] < least:
-            return (f"incomplete: {entry['samples']} measured samples were logged, not whole "
-                    f"cycles of {period} (at least {least})")
-        return None
-    expected = plan.cycles_for(entry["requested_hz"]) * period
-    if entry["samples"] != expected:
-        return f"incomplete: {entry['samples']} of {expected} measured samples were logged"
+        whole = -(-span // period) * period
+        if whole - span > room or whole < least:
+            return (f"incomplete: {entry['samples']} measured samples were logged"
+                    f"{_lost_text(entry)}, not whole cycles of {period} (at least {least})")
+        expected = whole
+    else:
+        expected = plan.cycles_for(entry["requested_hz"]) * period
+        if not 0 <= expected - span <= room:
+            return (f"incomplete: {entry['samples']} of {expected} measured samples were "
+                    f"logged{_lost_text(entry)}")
+    entry["lost_run"] = max(entry["lost_run"], expected - span)   # at the edges: at most
+    entry["lost"] = expected - entry["samples"]
+    return None
+
+
+def _lost_text(entry) -> str:
+    return f" ({entry['lost']} lost on the link)" if entry["lost"] else ""
+
+
+def _too_lossy(entry) -> str | None:
+    """Why a complete window lost too much of itself on the link to be measured, or None."""
+    total = entry["samples"] + entry["lost"]
+    if total and entry["lost"] > MAX_LOST_SHARE * total:
+        return (f"lost {entry['lost']} of {total} measured samples on the link "
+                f"({100 * entry['lost'] / total:.1f} %, more than {100 * MAX_LOST_SHARE:g} %)")
     return None

@@ -192,7 +192,8 @@ def test_a_firmware_stop_interrupted_still_stops_it_and_removes_its_links(tmp_pa
 
 def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     # The board's firmware killed under a sweep over its port: the sweep ends with one
-    # line, its manifest says why and at which frequency, its log is kept.
+    # line, its manifest says why and at which frequency, its log is kept. The board went
+    # away: exit 1, as for one that fell silent (issue 27's rule).
     rig, out = tmp_path / "rig", tmp_path / "sweep"
     board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
     assert "board running" in board.readline()
@@ -201,9 +202,11 @@ def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     wait_for(lambda: size(out / "sweep.tlog") > UNDER_WAY, "a log under way", sweep.proc)
     os.kill(board.firmware_pid(), signal.SIGKILL)
     code, _, err = sweep.finish()
-    assert code == 2 and f"kept in {out}" in one_line(err)
+    assert code == 1 and f"kept in {out}" in one_line(err)
+    assert "the board went away: telemetry link lost" in one_line(err)
     manifest = json.loads((out / "manifest.json").read_text())
-    assert manifest["aborted"] and manifest["in_progress_hz"] == 0.5 and not manifest["complete"]
+    assert manifest["aborted"].startswith("the board went away") and not manifest["complete"]
+    assert manifest["frequencies"][-1]["requested_hz"] == 0.5
     assert_log_readable(out / "sweep.tlog")
     assert board.finish()[0] == 2
     assert not os.path.lexists(rig)

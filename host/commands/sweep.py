@@ -147,15 +147,7 @@ def run(args) -> int:
               flush=True)
         manifest = run_sweep(session, plan, args.out, source)
     except Exception as exc:          # a full disk, the firmware died, the port went away
-        from ...sim.lockstep import FirmwareError
-
-        kept = f"the log and manifest so far are kept in {args.out}"
-        if isinstance(exc, DiskFull):
-            raise exc.also(kept)
-        # OSError: a write to the log failed (not for want of room)
-        if isinstance(exc, (FirmwareError, InputError, OSError)):
-            raise InputError(f"{exc} ({kept})") from None
-        raise
+        return _ended(exc, args.out)
     finally:
         session.close()
     done = sum(1 for f in manifest["frequencies"] if f["status"] == "ok")
@@ -167,6 +159,24 @@ def run(args) -> int:
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
     return 1
+
+
+def _ended(exc, out) -> int:
+    """A sweep ended by an error: the board went away (exit 1, as a silent one), or the one
+    line the command line gives ``exc``, saying that the records are kept."""
+    from ...sim.lockstep import FirmwareError
+    from ..connection import LinkLost
+
+    kept = f"the log and manifest so far are kept in {out}"
+    if isinstance(exc, DiskFull):
+        raise exc.also(kept)
+    if isinstance(exc, LinkLost):
+        sys.stderr.write(f"heliquad sweep: the board went away: {exc} ({kept})\n")
+        return 1
+    # OSError: a write to the log failed (not for want of room)
+    if isinstance(exc, (FirmwareError, InputError, OSError)):
+        raise InputError(f"{exc} ({kept})") from None
+    raise exc
 
 
 def _what(plan) -> str:
