@@ -188,6 +188,8 @@ class TelemetryLink:
                                          int(index))
 
     def set_param(self, name: str, value: float, param_type: int) -> None:
-        """PARAM_SET; the value is carried as the float value itself, whatever its type."""
-        self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"), float(value),
-                                int(param_type))
+        """PARAM_SET; a real value as the float itself, a whole-number type's byte-wise (its
+        bytes in the float's, :func:`heliquad.host.params.encode_value`)."""
+        from .params import encode_value
+        self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"),
+                                encode_value(value, param_type), int(param_type))

@@ -65,6 +65,9 @@ void esc_set(Tunables& t, float v) {
     (Max ? t.esc.max_us[I] : t.esc.min_us[I]) = static_cast<uint16_t>(v);
 }
 
+float gcs_get(const Tunables& t) { return t.safety.gcs_sysid; }
+void gcs_set(Tunables& t, float v) { t.safety.gcs_sysid = static_cast<uint8_t>(v); }
+
 float imu_path_get(const Tunables& t) { return static_cast<float>(t.imu_path); }
 void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(static_cast<uint8_t>(v)); }
 
@@ -125,6 +128,7 @@ const ParamInfo kParams[kParamCount] = {
     {"STK_YAW_MAX", "deg/s", 10.0f, 360.0f, 0, stick_get<&StickLimits::yaw_rate_rad_s>,
      stick_set<&StickLimits::yaw_rate_rad_s>},
     {"IMU_PATH", "", 0.0f, 1.0f, kInt | kParamImu, imu_path_get, imu_path_set},
+    {"MAV_GCS_SYSID", "", 0.0f, 255.0f, kInt, gcs_get, gcs_set},
 };
 
 #undef HQ_RATE

@@ -54,7 +54,7 @@ struct ParamInfo {
     void (*set)(Tunables&, float);
 };
 
-constexpr int kParamCount = 43;
+constexpr int kParamCount = 44;
 constexpr size_t kParamNameLen = 16;
 
 const ParamInfo& param_info(int index);
