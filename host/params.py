@@ -94,10 +94,10 @@ class NoAnswer(InputError):
 #: The byte-wise encoding of the whole-number types: the value's bytes at the start of the
 #: float's four (little-endian, as MAVLink's mavlink_param_union_t lays them out).
 _INT_FORMATS = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
-#: How far a written value may lie from the float32 it stands for: a tenth of the smallest
+#: How far a written value may lie from the float32 it stands for: half the smallest
 #: difference MAVProxy's ``param load`` treats as a change (pymavlink's mavparm mindelta,
 #: 1e-6, absolute), so a file loaded back there sends no set.
-FILE_VALUE_TOLERANCE = 1e-7
+FILE_VALUE_TOLERANCE = 5e-7
 
 
 def encode_value(value: float, param_type: int) -> float:

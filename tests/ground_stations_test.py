@@ -60,15 +60,45 @@ def armed_board(tmp_path):
     b.stop()
 
 
-def mavsdk_system(board):
-    mavsdk = pytest.importorskip("mavsdk", reason="MAVSDK (pip install mavsdk) is not installed")
-    from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
+class Sdk:
+    """MAVSDK on the board's pty, and the plugins a test asks for; closed in the order MAVSDK
+    requires (plugins and systems before the instance)."""
 
-    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    assert sdk.add_any_connection(f"serial://{board.device}:921600") == ConnectionResult.SUCCESS
-    system = sdk.first_autopilot(GUARD_S)
-    assert system is not None, "MAVSDK found no autopilot on the board's link"
-    return mavsdk, sdk, system
+    def __init__(self, board):
+        pytest.importorskip("mavsdk", reason="MAVSDK (pip install mavsdk) is not installed")
+        from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
+
+        self.sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        url = f"serial://{board.device}:921600"
+        assert self.sdk.add_any_connection(url) == ConnectionResult.SUCCESS
+        self.system = self.sdk.first_autopilot(GUARD_S)
+        assert self.system is not None, "MAVSDK found no autopilot on the board's link"
+        self.plugins = []
+
+    def plugin(self, cls):
+        self.plugins.append(cls(self.system))
+        return self.plugins[-1]
+
+    def close(self):
+        import gc
+
+        self.plugins.clear()
+        self.system = None
+        gc.collect()
+        self.sdk.destroy()
+
+
+@pytest.fixture
+def sdk_on():
+    made = []
+
+    def connect(board):
+        made.append(Sdk(board))
+        return made[-1]
+
+    yield connect
+    for s in made:
+        s.close()
 
 
 def first(subscribe, predicate=lambda v: True):
@@ -85,14 +115,13 @@ def first(subscribe, predicate=lambda v: True):
     return seen[0], handle
 
 
-def test_mavsdk_reads_and_sets_integer_and_real_parameters(disarmed_board):
+def test_mavsdk_reads_and_sets_integer_and_real_parameters(disarmed_board, sdk_on):
     """The 14 non-zero integer parameters read as their values (they read as raw float bits
     while the board encoded them C-cast); set_param_int and set_param_float are taken and read
     back."""
-    mavsdk, sdk, system = mavsdk_system(disarmed_board)
     from mavsdk.plugins.param import Param
 
-    param = Param(system)
+    param = sdk_on(disarmed_board).plugin(Param)
     everything = param.get_all_params()
     ints = {p.name: p.value for p in everything.int_params}
     floats = {p.name: p.value for p in everything.float_params}
@@ -103,15 +132,16 @@ def test_mavsdk_reads_and_sets_integer_and_real_parameters(disarmed_board):
     assert param.get_param_int("ESC1_MAX") == 1900
     param.set_param_float("RATE_YAW_KC", 6.5)
     assert param.get_param_float("RATE_YAW_KC") == 6.5
-    sdk.destroy()
 
 
-def test_mavsdk_reports_a_refused_set_as_a_refusal_not_a_timeout(armed_board):
+def test_mavsdk_reports_a_refused_set_as_a_refusal_not_a_timeout(armed_board, sdk_on):
     """Armed, only the gains may change: MAVSDK hears PARAM_ERROR and says why at once."""
-    mavsdk, sdk, system = mavsdk_system(armed_board)
     from mavsdk.plugins.param import Param, ParamError, ParamResult
+    from mavsdk.plugins.telemetry import Telemetry
 
-    param = Param(system)
+    sdk = sdk_on(armed_board)
+    first(sdk.plugin(Telemetry).subscribe_armed, bool)        # the pilot has armed it
+    param = sdk.plugin(Param)
     with pytest.raises(ParamError) as refused:
         param.set_param_int("ESC1_MAX", 1900)
     assert refused.value.result == ParamResult.PERMISSION_DENIED
@@ -119,31 +149,26 @@ def test_mavsdk_reports_a_refused_set_as_a_refusal_not_a_timeout(armed_board):
         param.set_param_float("RATE_YAW_KC", 80.0)            # beyond 0.01 .. 50
     assert refused.value.result == ParamResult.VALUE_OUT_OF_RANGE
     assert param.get_param_int("ESC1_MAX") == 2000
-    sdk.destroy()
 
 
-def test_mavsdk_hears_the_imu_and_whether_the_vehicle_is_armable(disarmed_board):
+def test_mavsdk_hears_the_imu_and_whether_the_vehicle_is_armable(disarmed_board, sdk_on):
     """imu() yields (HIGHRES_IMU: one g, body z down), and health says armable only while an
     arm command would arm: the board's pilot holds the arm switch low, so it is not."""
-    mavsdk, sdk, system = mavsdk_system(disarmed_board)
     from mavsdk.plugins.telemetry import Telemetry
 
-    telemetry = Telemetry(system)
+    telemetry = sdk_on(disarmed_board).plugin(Telemetry)
     imu, _ = first(telemetry.subscribe_imu)
     acc = imu.acceleration_frd
     assert (acc.forward_m_s2 ** 2 + acc.right_m_s2 ** 2 + acc.down_m_s2 ** 2) ** 0.5 == \
         pytest.approx(9.81, rel=0.05)
     health, _ = first(telemetry.subscribe_health)
     assert health.is_armable is False                   # arm switch low: a command would not arm
-    sdk.destroy()
 
 
-def test_mavsdk_hears_an_armable_vehicle(armed_board):
+def test_mavsdk_hears_an_armable_vehicle(armed_board, sdk_on):
     """The pre-arm check bit is healthy while armed (and whenever a command would arm)."""
-    mavsdk, sdk, system = mavsdk_system(armed_board)
     from mavsdk.plugins.telemetry import Telemetry
 
-    telemetry = Telemetry(system)
+    telemetry = sdk_on(armed_board).plugin(Telemetry)
     health, _ = first(telemetry.subscribe_health, lambda h: h.is_armable)
     assert health.is_armable
-    sdk.destroy()

@@ -574,7 +574,7 @@ def test_a_refused_set_is_answered_with_param_error_to_the_asker(client, name, v
     client.mav.param_set_send(1, 1, name.encode(), value, REAL32)
     m = client.until(lambda m: m.get_type() == "PARAM_ERROR")
     assert m.param_id == name and m.error == getattr(MAV, "MAV_PARAM_ERROR_" + error)
-    assert (m.target_system, m.target_component) == (255, 0)
+    assert (m.target_system, m.target_component) == (255, 190)      # the mavutil client
 
 
 def test_while_armed_a_set_of_a_bound_is_denied_with_param_error(client):

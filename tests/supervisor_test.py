@@ -191,8 +191,9 @@ def test_rc_lost_disarms_and_the_vehicle_does_not_rearm_when_the_link_returns():
 def test_host_lost_disarms_a_vehicle_armed_by_command_within_the_timeout():
     b = Bench()
     b.rc = rc(arm=True)
+    b.heartbeat()
     b.step(2)
-    b.sup.arm_command(b.rc, b.t)
+    b.sup.arm_command(b.rc, b.t)        # a known station's command is a sign of life
     last = b.t
     loops = 0
     while b.sup.armed:
@@ -627,9 +628,10 @@ def test_an_excitation_belongs_to_the_station_that_commanded_it():
     b.arm_by_switch()
     b.sup.heartbeat(255, 190, GCS, b.t)
     b.sup.heartbeat(254, 190, GCS, b.t)
-    assert b.sup.start_excitation(config(cycles=1000), b.t, STATION_A) == reason("NONE")
+    assert b.sup.start_excitation(config(cycles=200), b.t, STATION_A) == reason("NONE")
     assert b.sup.excitation_owner == STATION_A
     last_a = b.t
+    b.step()
     while b.sup.excitation_state != fw.ExcitationState.IDLE:
         b.sup.heartbeat(254, 190, GCS, b.t)           # only B goes on
         b.step()
