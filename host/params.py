@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from .errors import InputError
-from .link import HEARTBEAT_PERIOD_S
+from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
@@ -91,32 +91,10 @@ class NoAnswer(InputError):
     """A request went unanswered after every retry."""
 
 
-#: The byte-wise encoding of the whole-number types: the value's bytes at the start of the
-#: float's four (little-endian, as MAVLink's mavlink_param_union_t lays them out).
-_INT_FORMATS = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
 #: How far a written value may lie from the float32 it stands for: half the smallest
 #: difference MAVProxy's ``param load`` treats as a change (pymavlink's mavparm mindelta,
 #: 1e-6, absolute), so a file loaded back there sends no set.
 FILE_VALUE_TOLERANCE = 5e-7
-
-
-def encode_value(value: float, param_type: int) -> float:
-    """The PARAM_SET/PARAM_VALUE float field for ``value``: a real one itself, a whole-number
-    type's bytes in the float's."""
-    fmt = _INT_FORMATS.get(int(param_type))
-    if fmt is None:
-        return float(value)
-    raw = struct.pack(fmt, int(value)).ljust(4, b"\0")
-    return struct.unpack("<f", raw)[0]
-
-
-def decode_value(raw: float, param_type: int) -> float:
-    """A PARAM_VALUE's number from its float field (:func:`encode_value` undone)."""
-    fmt = _INT_FORMATS.get(int(param_type))
-    if fmt is None:
-        return float(raw)
-    data = struct.pack("<f", raw)
-    return float(struct.unpack(fmt, data[:struct.calcsize(fmt)])[0])
 
 
 def value_text(value: float, param_type: int | None = None) -> str:

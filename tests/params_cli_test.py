@@ -18,7 +18,8 @@ import pytest
 from heliquad.host.errors import InputError
 from heliquad.host.files import read_params_file, write_params_file
 from heliquad.host.link import TelemetryLink
-from heliquad.host.params import NoAnswer, Param, ParamClient, ParamRefused, value_text
+from heliquad.host.params import (NoAnswer, Param, ParamClient, ParamRefused, decode_value,
+                                  encode_value, value_text)
 from heliquad.sim.dialect import dialect
 from heliquad.sim.mavframe import Codec, Framer
 
@@ -76,9 +77,9 @@ class ParamBoard:
 
     def _value(self, name, drop=False):
         if not drop:
-            self._send(self.mav.param_value_encode(
-                name.encode(), self.values[name], self.types[name], len(self.names),
-                self.names.index(name)))
+            self._send(self.mav.param_value_encode(          # byte-wise, as the firmware
+                name.encode(), encode_value(self.values[name], self.types[name]),
+                self.types[name], len(self.names), self.names.index(name)))
 
     def _text(self, text):
         self._send(self.mav.statustext_encode(MAV.MAV_SEVERITY_WARNING, text.encode()))
@@ -122,13 +123,14 @@ class ParamBoard:
             self._text(f"params: no {name}")
             return
         lo, hi = self.ranges[name]
-        if lo <= m.param_value <= hi:
-            self.values[name] = m.param_value
+        value = decode_value(m.param_value, m.param_type)
+        if lo <= value <= hi:
+            self.values[name] = value
             self._value(name, drop=name in self.drop_set)
             self.drop_set.discard(name)
         else:                          # refused: the old value, then why
             self._value(name)
-            self._text(f"params: {name} {m.param_value:g} outside {lo:g}..{hi:g}")
+            self._text(f"params: {name} {value:g} outside {lo:g}..{hi:g}")
 
     def close(self):
         self.stopping.set()
