@@ -588,6 +588,59 @@ def test_while_armed_a_set_of_a_bound_is_denied_with_param_error(client):
     assert m.error == MAV.MAV_PARAM_ERROR_PERMISSION_DENIED
 
 
+def _set_raw(client, name, raw, kind, frames=20):
+    """PARAM_SET in the given form; its PARAM_VALUE, and everything that came within `frames`
+    loops after it (a refusal's PARAM_ERROR and STATUSTEXT would be there)."""
+    client.sent()
+    start = client.cursor
+    client.mav.param_set_send(1, 1, name.encode(), raw, kind)
+    m = client.until(lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == name)
+    client.step(frames)
+    return m, client.seen[start:]
+
+
+def _refusals(messages, name):
+    return [m for m in messages if (m.get_type() == "PARAM_ERROR" and m.param_id == name)
+            or (m.get_type() == "STATUSTEXT" and name in m.text)]
+
+
+def test_a_set_to_the_value_it_has_is_answered_with_it_even_while_armed_or_exciting(client):
+    """A PARAM_SET whose value equals the parameter's (after rounding to its type: a whole
+    number for an integer parameter) changes nothing, so the rules about changes (armed,
+    exciting) do not apply: it is answered with that value, in the form it came in, and never
+    refused (docs/parameters.md). MAVProxy's `param load` of an unchanged file re-sends every
+    integer parameter it misreads. Another value is still refused, and nothing is saved."""
+    current = client.fetch()
+    abort = current["FS_ABORT_ANG"].param_value
+    esc = decode_value(current["ESC1_MIN"].param_value, INT32)
+    kc = current["RATE_RLL_KC"].param_value
+    client.heartbeat()
+    client.hover()
+    for name, raw, kind, want in [("FS_ABORT_ANG", abort, REAL32, abort),
+                                  ("ESC1_MIN", float(esc), REAL32, esc),        # MAVProxy's form
+                                  ("ESC1_MIN", esc + 0.3, REAL32, esc),         # rounds to it
+                                  ("ESC1_MIN", encode_value(esc, INT32), INT32, esc)]:
+        m, after = _set_raw(client, name, raw, kind)
+        assert decode_value(m.param_value, m.param_type) == pytest.approx(want, abs=0)
+        assert m.param_type == (INT32 if kind == INT32 else REAL32)
+        assert not _refusals(after, name), (name, raw)
+    m, after = _set_raw(client, "FS_ABORT_ANG", 60.0, REAL32)             # a change: refused
+    assert m.param_value == abort
+    assert any("changes only while disarmed" in x.text for x in _refusals(after, "FS_ABORT_ANG")
+               if x.get_type() == "STATUSTEXT")
+    client.heartbeat()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, 2.0, 0.05, 20, 1)
+    client.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS" and m.accepted)
+    m, after = _set_raw(client, "RATE_RLL_KC", kc, REAL32)
+    assert m.param_value == kc and not _refusals(after, "RATE_RLL_KC")
+    m, after = _set_raw(client, "RATE_RLL_KC", 3.0, REAL32)
+    assert m.param_value == kc and _refusals(after, "RATE_RLL_KC")
+    client.rc[4] = 1000                                  # disarm: nothing changed, no save
+    client.step(300)
+    assert not [x for x in client.of_type("STATUSTEXT") if x.text == "params: saved"]
+
+
 def _heliquad(*args):
     import subprocess
 

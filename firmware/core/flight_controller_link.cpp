@@ -421,6 +421,7 @@ void FlightController::handle_param_set(const mavlink_message_t& msg, uint64_t n
                                     supervisor_.excitation().active());
     if (as_float) params_as_float_ |= 1ull << index;      // answered in the form it came in
     params_pending_ |= 1ull << index;
+    if (r == SetResult::Unchanged) return;               // answered with the value it has
     if (r != SetResult::Ok) {
         send_param_error(msg, ps.param_id, index, param_error(r));
         char text[kStatusTextLen];

@@ -166,6 +166,13 @@ uint32_t name_hash(const char* name) {
     return crc32(reinterpret_cast<const uint8_t*>(name), name_length(name, kParamNameLen));
 }
 
+// `value` rounded to the parameter's type (an integer parameter's to the nearest whole number;
+// a real one is a float already) equals `current`.
+bool same_value(const ParamInfo& p, float value, float current) {
+    const float typed = (p.flags & kParamInteger) ? std::round(value) : value;
+    return std::isfinite(typed) && typed == current;
+}
+
 bool acceptable(const ParamInfo& p, float value) {
     return std::isfinite(value) && value >= p.min && value <= p.max &&
            (!(p.flags & kParamInteger) || value == std::floor(value));
@@ -228,6 +235,10 @@ float Params::default_value(int index) const { return kParams[index].get(default
 SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (index < 0 || index >= kParamCount) return SetResult::Unknown;
     const ParamInfo& p = kParams[index];
+    // A set to the value it has changes nothing, so no rule about changes applies (armed,
+    // exciting): a ground station re-sending a value it read (MAVProxy's `param load` of an
+    // unchanged file, where it misreads an integer) is answered with that value, not refused.
+    if (same_value(p, value, get(index))) return SetResult::Unchanged;
     if (exciting) return SetResult::Excitation;
     if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
     if (!(std::isfinite(value) && value >= p.min && value <= p.max)) return SetResult::Range;
@@ -314,6 +325,7 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
         case SetResult::Excitation: w.put(": not while exciting"); break;
         case SetResult::Unknown: w.put(": no such parameter"); break;
         case SetResult::Ok: w.put(" set"); break;
+        case SetResult::Unchanged: w.put(" unchanged"); break;
     }
 }
 

@@ -69,6 +69,7 @@ enum class SetResult : uint8_t {
     NotInteger,      // an integer parameter given a fraction
     Armed,           // only the gains may change while armed
     Excitation,      // nothing changes while an excitation runs
+    Unchanged,       // the value it has (after rounding to its type): taken, nothing changes
 };
 
 // What a stored record held.
