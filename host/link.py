@@ -10,6 +10,8 @@ that offset).
 
 from __future__ import annotations
 
+import struct
+
 import time
 
 from .connection import open_connection
@@ -56,6 +58,28 @@ def reason_text(code: int) -> str:
 #: 3.3 V USB-serial cable): about 22 kB/s of telemetry needs more than 115200 baud carries
 #: (11.5 kB/s). USB CDC and the SIL's ptys ignore the rate.
 DEFAULT_BAUD = 921600
+
+
+#: The byte-wise encoding of the whole-number types: the value's bytes at the start of the
+#: float's four (little-endian, as MAVLink's mavlink_param_union_t lays them out).
+_INT_FORMATS = {1: "<B", 2: "<b", 3: "<H", 4: "<h", 5: "<I", 6: "<i"}
+def encode_value(value: float, param_type: int) -> float:
+    """The PARAM_SET/PARAM_VALUE float field for ``value``: a real one itself, a whole-number
+    type's bytes in the float's."""
+    fmt = _INT_FORMATS.get(int(param_type))
+    if fmt is None:
+        return float(value)
+    raw = struct.pack(fmt, int(value)).ljust(4, b"\0")
+    return struct.unpack("<f", raw)[0]
+
+
+def decode_value(raw: float, param_type: int) -> float:
+    """A PARAM_VALUE's number from its float field (:func:`encode_value` undone)."""
+    fmt = _INT_FORMATS.get(int(param_type))
+    if fmt is None:
+        return float(raw)
+    data = struct.pack("<f", raw)
+    return float(struct.unpack(fmt, data[:struct.calcsize(fmt)])[0])
 
 
 class TelemetryLink:
@@ -188,6 +212,7 @@ class TelemetryLink:
                                          int(index))
 
     def set_param(self, name: str, value: float, param_type: int) -> None:
-        """PARAM_SET; the value is carried as the float value itself, whatever its type."""
-        self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"), float(value),
-                                int(param_type))
+        """PARAM_SET; a real value as the float itself, a whole-number type's byte-wise (its
+        bytes in the float's, :func:`encode_value`)."""
+        self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"),
+                                encode_value(value, param_type), int(param_type))

@@ -11,10 +11,12 @@ The protocol (MAVLink's common messages, as the firmware speaks it):
 * PARAM_SET: the board answers with PARAM_VALUE, the new value if it took it, the unchanged
   one if it refused, with a STATUSTEXT saying why.
 
-Values travel as single-precision floats, whatever the parameter's type: MAV_PARAM_TYPE_REAL32
-for real values, INT32 for whole numbers, carried as the float value itself (C-cast encoding,
-as ArduPilot does). So a value is compared after rounding to float32, and a whole number is
-exact up to 2^24.
+Values travel in a single-precision float field, whatever the parameter's type:
+MAV_PARAM_TYPE_REAL32 for real values, INT32 for whole numbers, whose four bytes are carried
+in the float's (byte-wise encoding, as the firmware says in AUTOPILOT_VERSION's capabilities
+and as MAVSDK and QGroundControl read every autopilot but ArduPilot). So a real value is
+compared after rounding to float32, and a whole number is exact over the int32 range (this
+tool still refuses one past 2^24, which a C-cast reader would not get exactly).
 
 Every exchange sends the host's HEARTBEAT while it waits (the firmware wants one at least
 every 1.5 s); a request without an answer is sent again (``retries`` times) before the board
@@ -25,14 +27,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 import time
 
 import numpy as np
 
 from .errors import InputError
-from .link import HEARTBEAT_PERIOD_S
+from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
+           "encode_value", "decode_value",
            "same_value", "check_name", "load_params", "session_params"]
 
 #: How long one request waits for its answer before it is sent again.
@@ -87,15 +91,33 @@ class NoAnswer(InputError):
     """A request went unanswered after every retry."""
 
 
+#: How far a written value may lie from the float32 it stands for: half the smallest
+#: difference MAVProxy's ``param load`` treats as a change (pymavlink's mavparm mindelta,
+#: 1e-6, absolute), so a file loaded back there sends no set.
+FILE_VALUE_TOLERANCE = 5e-7
+
+
 def value_text(value: float, param_type: int | None = None) -> str:
     """A value as written and shown: a whole-number type's as an integer, a real one as the
-    shortest decimal that reads back as the same single-precision float."""
+    shortest decimal that reads back as the same single-precision float and lies within
+    :data:`FILE_VALUE_TOLERANCE` of it (so every client's reader, in float32 or in double,
+    gets the board's value back: 89.99999 would be the same float32 as 89.99999237, but
+    MAVProxy compares in double)."""
     if param_type in INTEGER_TYPES:
         return str(int(value))
     f = np.float32(value)
+    exact = float(f)
     if f == 0 or 1e-4 <= abs(f) < 1e16:
-        return np.format_float_positional(f, unique=True, trim="-")
-    return np.format_float_scientific(f, unique=True, trim="-")
+        text = np.format_float_positional(f, unique=True, trim="-")
+    else:
+        text = np.format_float_scientific(f, unique=True, trim="-")
+    if abs(float(text) - exact) <= FILE_VALUE_TOLERANCE:
+        return text
+    for digits in range(len(text.replace("-", "").replace(".", "")), 18):
+        text = f"{exact:.{digits}g}"
+        if abs(float(text) - exact) <= FILE_VALUE_TOLERANCE:
+            break
+    return text
 
 
 def same_value(a: float, b: float) -> bool:
@@ -160,7 +182,8 @@ class ParamClient:
             if m.get_type() == "STATUSTEXT":
                 self.texts.append(m.text)
                 continue
-            p = Param(m.param_id, float(m.param_value), int(m.param_type), int(m.param_index))
+            p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
+                      int(m.param_index))
             self.fresh[p.name] = p
             if m.param_count:
                 self.count = int(m.param_count)

@@ -27,11 +27,13 @@ MAX_LAG_S = 0.1
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
-              params_file: str | None = None) -> dict:
+              params_file: str | None = None, armed: bool = True) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C). Returns counters. ``ready`` is told
     when the telemetry port is there (default: a line on stdout, flushed at once, for
     whatever waits for it). ``params_file``: where the firmware keeps its parameters
-    (default: nowhere; every start has the defaults)."""
+    (default: nowhere; every start has the defaults). ``armed=False``: the pilot leaves the
+    arm switch and the throttle low (a ground station then sees a disarmed vehicle, whose
+    every parameter may change)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -56,8 +58,9 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
                 elif now - target > MAX_LAG_S:
                     late += 1
                     t0 = now - frames * dt_s            # resynchronise to real time
-                reply = rig_step(link, plant, frames, int(round(frames * dt_s * 1e6)), kind,
-                                 collective)
+                # The RC of frame 0 is the pilot's at rest: arm switch and throttle low.
+                reply = rig_step(link, plant, frames if armed else 0,
+                                 int(round(frames * dt_s * 1e6)), kind, collective)
                 kind = reply.sensor_kind
         except KeyboardInterrupt:
             pass

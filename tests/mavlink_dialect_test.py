@@ -4,7 +4,6 @@ into the real site-packages."""
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -16,9 +15,9 @@ import pymavlink
 from heliquad.host.tlog import read_tlog
 from heliquad.sim.dialect import dialect
 
+from private_pymavlink import private_pymavlink as make_private_pymavlink
+
 REAL_V20 = os.path.join(os.path.dirname(pymavlink.__file__), "dialects", "v20")
-#: The definitions a copy keeps (every other generated dialect is 80 MB nobody here needs).
-KEPT_DIALECTS = {"__init__", "common", "standard", "minimal"}
 
 
 def heliquad(*args, env=None):
@@ -42,17 +41,9 @@ def sil_log(tmp_path_factory):
 def private_pymavlink(tmp_path):
     """A copy of the installed pymavlink in its own folder, and the environment that makes
     Python import it instead of the real one."""
-    def ignore(folder, names):
-        skip = {n for n in names if n == "__pycache__"}
-        if os.path.basename(os.path.dirname(folder)) == "dialects":     # dialects/v10, v20
-            skip |= {n for n in names if os.path.splitext(n)[0] not in KEPT_DIALECTS}
-        return skip
-
-    site = tmp_path / "site"
-    shutil.copytree(os.path.dirname(pymavlink.__file__), site / "pymavlink", ignore=ignore)
-    env = dict(os.environ, PYTHONPATH=str(site), MAVLINK_DIALECT="common")
+    pymavlink_dir, env = make_private_pymavlink(tmp_path / "site")
     env.pop("MAVLINK20", None)          # as a user's shell has it: pymavlink starts in v1.0
-    return site / "pymavlink", env
+    return pymavlink_dir, env
 
 
 def dumped_rows(pymavlink_dir, env, log):

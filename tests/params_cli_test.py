@@ -18,7 +18,8 @@ import pytest
 from heliquad.host.errors import InputError
 from heliquad.host.files import read_params_file, write_params_file
 from heliquad.host.link import TelemetryLink
-from heliquad.host.params import NoAnswer, Param, ParamClient, ParamRefused, value_text
+from heliquad.host.params import (NoAnswer, Param, ParamClient, ParamRefused, decode_value,
+                                  encode_value, value_text)
 from heliquad.sim.dialect import dialect
 from heliquad.sim.mavframe import Codec, Framer
 
@@ -76,9 +77,9 @@ class ParamBoard:
 
     def _value(self, name, drop=False):
         if not drop:
-            self._send(self.mav.param_value_encode(
-                name.encode(), self.values[name], self.types[name], len(self.names),
-                self.names.index(name)))
+            self._send(self.mav.param_value_encode(          # byte-wise, as the firmware
+                name.encode(), encode_value(self.values[name], self.types[name]),
+                self.types[name], len(self.names), self.names.index(name)))
 
     def _text(self, text):
         self._send(self.mav.statustext_encode(MAV.MAV_SEVERITY_WARNING, text.encode()))
@@ -122,13 +123,14 @@ class ParamBoard:
             self._text(f"params: no {name}")
             return
         lo, hi = self.ranges[name]
-        if lo <= m.param_value <= hi:
-            self.values[name] = m.param_value
+        value = decode_value(m.param_value, m.param_type)
+        if lo <= value <= hi:
+            self.values[name] = value
             self._value(name, drop=name in self.drop_set)
             self.drop_set.discard(name)
         else:                          # refused: the old value, then why
             self._value(name)
-            self._text(f"params: {name} {m.param_value:g} outside {lo:g}..{hi:g}")
+            self._text(f"params: {name} {value:g} outside {lo:g}..{hi:g}")
 
     def close(self):
         self.stopping.set()
@@ -355,3 +357,66 @@ def test_a_bad_line_is_one_error_naming_file_and_line(tmp_path, text, says):
         read_params_file(path)
     assert str(raised.value).startswith(f"{path}") and says in str(raised.value)
     assert "\n" not in str(raised.value)
+
+
+# --- the digits a file holds (issue 27, item 6) --------------------------------------------
+
+#: pymavlink's mavparm (MAVProxy's `param load`) treats a file value within this of the value
+#: it holds as unchanged (MAVParmDict.mindelta, absolute, compared in double).
+MAVPROXY_MINDELTA = 1e-6
+
+
+def _float32_values():
+    """Every firmware default, and 300 float32 values spread over each real parameter's
+    range with their neighbours one unit in the last place away (fixed seed): the values a
+    board can hold."""
+    from heliquad import _firmware
+
+    rng = np.random.default_rng(27)
+    out = []
+    for p in _firmware.param_table():
+        ptype = INT32 if p.integer else REAL32
+        out.append((p.name, np.float32(p.default), ptype))
+        if p.integer:
+            continue
+        for f in rng.uniform(p.minimum, p.maximum, 100).astype(np.float32):
+            for g in (f, np.nextafter(f, np.float32(np.inf)), np.nextafter(f, np.float32(-np.inf))):
+                if p.minimum <= g <= p.maximum:
+                    out.append((p.name, g, ptype))
+    return out
+
+
+@pytest.mark.parametrize("layout", ["qgc", "mavproxy"])
+def test_every_value_a_file_holds_reads_back_as_its_float32_and_mavproxy_sees_no_change(
+        tmp_path, layout):
+    """`heliquad params save` (both layouts): each value reads back in Python as the same
+    float32, and lies within MAVProxy's 1e-6 of it (pymavlink's own mavparm.load, given the
+    float32s as MAVProxy holds them, sends no set: an unchanged file loads as unchanged)."""
+    from pymavlink import mavparm
+
+    values = _float32_values()
+    assert len(values) > 3000
+    for start in range(0, len(values), 44):            # a file per board's worth of names
+        chunk = {name: (v, t) for name, v, t in values[start:start + 44]}
+        path = tmp_path / f"{layout}-{start}.params"
+        params = [Param(n, float(v), t, i) for i, (n, (v, t)) in enumerate(chunk.items())]
+        write_params_file(path, params, layout=layout)
+        read = {name: value for name, value, _ in read_params_file(path)}
+        assert set(read) == set(chunk)
+        for name, (v, _) in chunk.items():
+            assert np.float32(read[name]) == v, (name, float(v), read[name])
+            assert abs(read[name] - float(v)) <= MAVPROXY_MINDELTA / 2, (name, float(v))
+        if layout == "mavproxy":
+            held = mavparm.MAVParmDict()
+            held.update({name: float(v) for name, (v, _) in chunk.items()})
+            sent = []
+
+            class Board:                                   # records what a load would send
+                def param_set_send(self, name, value, parm_type=None):
+                    sent.append((name, value))
+
+                def recv_match(self, **kwargs):
+                    return None
+
+            held.load(str(path), mav=Board())
+            assert sent == []

@@ -18,6 +18,7 @@ import pytest
 from pymavlink import mavutil
 
 from heliquad import _firmware
+from heliquad.host.params import decode_value, encode_value
 from heliquad.sim.dialect import dialect
 from heliquad.sim.lockstep import SimLink
 from heliquad.sim.tf_plant import TfPlant
@@ -35,6 +36,7 @@ sys.modules.setdefault("pymavlink.dialects.v20.heliquad", MAV)
 _v20.heliquad = MAV
 PARAMS = [(p.name, p.minimum, p.maximum, p.default, p.integer) for p in _firmware.param_table()]
 NAMES = [p[0] for p in PARAMS]
+REAL32, INT32 = MAV.MAV_PARAM_TYPE_REAL32, MAV.MAV_PARAM_TYPE_INT32
 
 
 class Client:
@@ -143,7 +145,7 @@ def client(tmp_path):
 # --- the table ----------------------------------------------------------------------------
 
 def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
-    assert len(NAMES) == len(set(NAMES)) == 43
+    assert len(NAMES) == len(set(NAMES)) == 44
     for name, lo, hi, default, integer in PARAMS:
         assert 0 < len(name) <= 16 and name == name.upper(), name
         assert lo <= default <= hi, name
@@ -177,7 +179,7 @@ def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path, fi
         c.text("params: none stored; defaults")
         values = c.fetch()
         assert sorted(values) == sorted(NAMES)
-        assert {m.param_index for m in values.values()} == set(range(43))
+        assert {m.param_index for m in values.values()} == set(range(44))
         assert values["RATE_RLL_KC"].param_value == pytest.approx(2.422, rel=1e-6)
         assert values["ESC3_MAX"].param_type == MAV.MAV_PARAM_TYPE_INT32
         m, _ = c.set("RATE_RLL_KC", 3.5)
@@ -248,9 +250,10 @@ def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     ("ESC2_MIN", 1300, "ESC2_MIN out of range 800..1100"),
 ])
 def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
-    before = client.fetch()[name].param_value
+    before = client.fetch()[name]
     m, during = client.set(name, value)
-    assert m.param_value == before
+    assert decode_value(m.param_value, m.param_type) == \
+        decode_value(before.param_value, before.param_type)
     # The STATUSTEXT goes out in the loop that refuses, before the PARAM_VALUE.
     assert why in [x.text for x in during if x.get_type() == "STATUSTEXT"]
 
@@ -258,8 +261,8 @@ def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
 def test_an_unknown_name_is_answered_with_a_statustext(client):
     client.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, MAV.MAV_PARAM_TYPE_REAL32)
     client.text("params: no NO_SUCH_PARAM")
-    client.mav.param_request_read_send(1, 1, b"", 43)
-    client.text("params: no index 43")
+    client.mav.param_request_read_send(1, 1, b"", 44)
+    client.text("params: no index 44")
     client.mav.param_request_read_send(1, 1, b"RATE_RLL_KCX", -1)
     client.text("params: no RATE_RLL_KCX")
 
@@ -369,13 +372,46 @@ def test_standard_messages_describe_the_vehicle(any_client):
     assert 1000 < servo.servo2_raw < 2000
     imu = client.of_type("SCALED_IMU")[-1]
     assert math.hypot(imu.xacc, imu.yacc, imu.zacc) == pytest.approx(1000, rel=0.05)
+    hr = client.of_type("HIGHRES_IMU")[-1]            # SI units: MAVSDK's imu()
+    assert math.hypot(hr.xacc, hr.yacc, hr.zacc) == pytest.approx(9.81, rel=0.05)
+    assert hr.fields_updated == 0x3F
+    prearm = MAV.MAV_SYS_STATUS_PREARM_CHECK           # armed: healthy (MAVSDK's is_armable)
+    assert status.onboard_control_sensors_present & prearm
+    assert status.onboard_control_sensors_health & prearm
     # The default rates: 10 Hz servo and IMU, 5 Hz RC, 1 Hz status, over the last 2 s.
     window = client.seen[-3 * 400:]
     counts = {k: sum(m.get_type() == k for m in window) for k in
-              ("SERVO_OUTPUT_RAW", "SCALED_IMU", "RC_CHANNELS", "SYS_STATUS", "HQ_SYSID_SAMPLE")}
+              ("SERVO_OUTPUT_RAW", "SCALED_IMU", "HIGHRES_IMU", "RC_CHANNELS", "SYS_STATUS",
+               "HQ_SYSID_SAMPLE")}
     per_s = {k: v / (counts["HQ_SYSID_SAMPLE"] / 200) for k, v in counts.items()}
     assert per_s["SERVO_OUTPUT_RAW"] == pytest.approx(10, rel=0.15)
+    assert per_s["HIGHRES_IMU"] == pytest.approx(10, rel=0.15)
     assert per_s["RC_CHANNELS"] == pytest.approx(5, rel=0.25)
+
+
+def test_the_pre_arm_bit_says_whether_an_arm_command_would_arm(client):
+    """Disarmed with the arm switch low, a command would be refused: not healthy."""
+    client.step(420)
+    status = client.of_type("SYS_STATUS")[-1]
+    prearm = MAV.MAV_SYS_STATUS_PREARM_CHECK
+    assert status.onboard_control_sensors_present & prearm
+    assert not status.onboard_control_sensors_health & prearm
+
+
+@pytest.mark.parametrize("firmware, uid, uid2", [
+    ("host", 0x48512D484F535401, bytes(18)),
+    pytest.param("teensy35", 0x4D4B363400000001,
+                 bytes.fromhex("00004851" "00454D55" "4D4B3634" "00000001") + bytes(2),
+                 marks=pytest.mark.pil)])
+def test_autopilot_version_carries_the_boards_unique_id(tmp_path, firmware, uid, uid2):
+    """The Teensy's is the chip's (SIM_UIDH..UIDL, the emulated chip's fixed id); the host
+    build's a fixed stand-in."""
+    with start(firmware) as fw:
+        c = Client(fw)
+        c.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        v = c.until(lambda m: m.get_type() == "AUTOPILOT_VERSION")
+        c.close()
+    assert v.uid == uid and bytes(v.uid2) == uid2
 
 
 def test_autopilot_version_on_request_and_the_capabilities_a_ground_station_reads(client):
@@ -384,7 +420,8 @@ def test_autopilot_version_on_request_and_the_capabilities_a_ground_station_read
     v = client.until(lambda m: m.get_type() == "AUTOPILOT_VERSION")
     caps = v.capabilities
     assert caps & MAV.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    assert caps & MAV.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    assert caps & MAV.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    assert not caps & MAV.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
     from importlib.metadata import version
 
     major, minor, patch = (int(x) for x in version("heliquad").split(".")[:3])
@@ -484,6 +521,126 @@ def test_the_parameters_page_lists_the_table_as_the_firmware_has_it():
         assert (kind == "int") == p.integer, name
 
 
+def _documented_defaults():
+    import pathlib
+    import re
+
+    page = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "parameters.md").read_text()
+    rows = re.findall(r"^\| `(\w+)` \| \S+ \| \S+ \.\. \S+ \| (\S+) \| (int|real) \|", page, re.M)
+    return {name: float(default) for name, default, _ in rows}
+
+
+def test_every_default_reads_over_the_protocol_exactly_as_documented(client):
+    """STK_YAW_MAX read 89.99999237 where the page says 90: every value, as a client decodes
+    it, is the float32 of the documented number, not merely close to it."""
+    documented = _documented_defaults()
+    values = client.fetch()
+    got = {n: decode_value(m.param_value, m.param_type) for n, m in values.items()}
+    assert {n: got[n] for n in documented} == \
+        {n: float(np.float32(v)) for n, v in documented.items()}
+
+
+def test_integer_parameters_travel_bytewise_and_a_set_in_either_form_is_taken(client):
+    """INT32 values are byte-wise (MAVSDK's and QGroundControl's reading for a generic
+    autopilot); a PARAM_SET typed INT32 is read byte-wise (MAVSDK, QGroundControl), one typed
+    REAL32 as the number (MAVProxy, pymavlink) and answered in that form, and a C-cast INT32
+    (ArduPilot's convention) as the number it carries."""
+    esc = client.fetch()["ESC1_MAX"]
+    assert esc.param_type == INT32 and esc.param_value == encode_value(2000, INT32)
+    assert np.float32(esc.param_value).view(np.int32) == 2000
+    for raw, kind, want in [(encode_value(1900, INT32), INT32, 1900), (1950.0, REAL32, 1950),
+                            (1850.0, INT32, 1850)]:
+        client.sent()
+        client.mav.param_set_send(1, 1, b"ESC1_MAX", raw, kind)
+        m = client.until(lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == "ESC1_MAX")
+        assert decode_value(m.param_value, m.param_type) == want
+        assert m.param_type == (REAL32 if kind == REAL32 else INT32)
+    assert decode_value(client.fetch()["ESC1_MAX"].param_value, INT32) == 1850
+
+
+def test_every_integer_range_keeps_the_two_encodings_apart():
+    """A byte-wise value is a denormal float below 2^23, never a whole number but 0: so a
+    C-cast set is told from a byte-wise one without doubt (firmware decode_param_value)."""
+    assert all(p[2] < 2 ** 23 and p[1] >= 0 for p in PARAMS if p[4])
+
+
+@pytest.mark.skipif(not hasattr(MAV, "MAVLINK_MSG_ID_PARAM_ERROR"),
+                    reason="pymavlink's common.xml has no PARAM_ERROR (2.4.50 has)")
+@pytest.mark.parametrize("name, value, error", [
+    ("RATE_RLL_KC", 80.0, "VALUE_OUT_OF_RANGE"), ("ESC2_MIN", 1050.5, "VALUE_OUT_OF_RANGE"),
+    ("NO_SUCH_PARAM", 1.0, "DOES_NOT_EXIST")])
+def test_a_refused_set_is_answered_with_param_error_to_the_asker(client, name, value, error):
+    client.sent()
+    client.mav.param_set_send(1, 1, name.encode(), value, REAL32)
+    m = client.until(lambda m: m.get_type() == "PARAM_ERROR")
+    assert m.param_id == name and m.error == getattr(MAV, "MAV_PARAM_ERROR_" + error)
+    assert (m.target_system, m.target_component) == (255, 190)      # the mavutil client
+
+
+def test_while_armed_a_set_of_a_bound_is_denied_with_param_error(client):
+    if not hasattr(MAV, "MAVLINK_MSG_ID_PARAM_ERROR"):
+        pytest.skip("pymavlink's common.xml has no PARAM_ERROR (2.4.50 has)")
+    client.heartbeat()
+    client.hover()
+    client.sent()
+    client.mav.param_set_send(1, 1, b"ESC1_MIN", encode_value(1050, INT32), INT32)
+    m = client.until(lambda m: m.get_type() == "PARAM_ERROR")
+    assert m.error == MAV.MAV_PARAM_ERROR_PERMISSION_DENIED
+
+
+def _set_raw(client, name, raw, kind, frames=20):
+    """PARAM_SET in the given form; its PARAM_VALUE, and everything that came within `frames`
+    loops after it (a refusal's PARAM_ERROR and STATUSTEXT would be there)."""
+    client.sent()
+    start = client.cursor
+    client.mav.param_set_send(1, 1, name.encode(), raw, kind)
+    m = client.until(lambda m: m.get_type() == "PARAM_VALUE" and m.param_id == name)
+    client.step(frames)
+    return m, client.seen[start:]
+
+
+def _refusals(messages, name):
+    return [m for m in messages if (m.get_type() == "PARAM_ERROR" and m.param_id == name)
+            or (m.get_type() == "STATUSTEXT" and name in m.text)]
+
+
+def test_a_set_to_the_value_it_has_is_answered_with_it_even_while_armed_or_exciting(client):
+    """A PARAM_SET whose value equals the parameter's (after rounding to its type: a whole
+    number for an integer parameter) changes nothing, so the rules about changes (armed,
+    exciting) do not apply: it is answered with that value, in the form it came in, and never
+    refused (docs/parameters.md). MAVProxy's `param load` of an unchanged file re-sends every
+    integer parameter it misreads. Another value is still refused, and nothing is saved."""
+    current = client.fetch()
+    abort = current["FS_ABORT_ANG"].param_value
+    esc = decode_value(current["ESC1_MIN"].param_value, INT32)
+    kc = current["RATE_RLL_KC"].param_value
+    client.heartbeat()
+    client.hover()
+    for name, raw, kind, want in [("FS_ABORT_ANG", abort, REAL32, abort),
+                                  ("ESC1_MIN", float(esc), REAL32, esc),        # MAVProxy's form
+                                  ("ESC1_MIN", esc + 0.3, REAL32, esc),         # rounds to it
+                                  ("ESC1_MIN", encode_value(esc, INT32), INT32, esc)]:
+        m, after = _set_raw(client, name, raw, kind)
+        assert decode_value(m.param_value, m.param_type) == pytest.approx(want, abs=0)
+        assert m.param_type == (INT32 if kind == INT32 else REAL32)
+        assert not _refusals(after, name), (name, raw)
+    m, after = _set_raw(client, "FS_ABORT_ANG", 60.0, REAL32)             # a change: refused
+    assert m.param_value == abort
+    assert any("changes only while disarmed" in x.text for x in _refusals(after, "FS_ABORT_ANG")
+               if x.get_type() == "STATUSTEXT")
+    client.heartbeat()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, 2.0, 0.05, 20, 1)
+    client.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS" and m.accepted)
+    m, after = _set_raw(client, "RATE_RLL_KC", kc, REAL32)
+    assert m.param_value == kc and not _refusals(after, "RATE_RLL_KC")
+    m, after = _set_raw(client, "RATE_RLL_KC", 3.0, REAL32)
+    assert m.param_value == kc and _refusals(after, "RATE_RLL_KC")
+    client.rc[4] = 1000                                  # disarm: nothing changed, no save
+    client.step(300)
+    assert not [x for x in client.of_type("STATUSTEXT") if x.text == "params: saved"]
+
+
 def _heliquad(*args):
     import subprocess
 
@@ -501,7 +658,7 @@ def test_a_sweep_records_the_gains_the_board_flies_and_identify_and_validate_use
     res = _heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2, 4,
                     "--param-store", store, "--out", out)
     assert res.returncode == 0, res.stderr
-    assert "read 43 parameters from the board" in res.stdout
+    assert "read 44 parameters from the board" in res.stdout
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["params"]["RATE_RLL_KC"] == 3.1 and manifest["params"]["ESC1_MIN"] == 1000
     assert manifest["gains"] == {"rate": [3.1, 0.439, 0.051], "angle": [1.488, 0.09]}
@@ -538,10 +695,10 @@ def test_heliquad_params_against_the_simulated_board(tmp_path):
         saved = tmp_path / "rig.parm"
         assert _heliquad("params", "--port", port, "save", "--mavproxy", saved).returncode == 0
         lines = [ln.split() for ln in saved.read_text().splitlines() if not ln.startswith("#")]
-        assert len(lines) == 43 and ["RATE_YAW_KC", "6.5"] in lines
+        assert len(lines) == 44 and ["RATE_YAW_KC", "6.5"] in lines
         assert _heliquad("params", "--port", port, "set", "RATE_YAW_KC", 7).returncode == 0
         res = _heliquad("params", "--port", port, "load", saved)
-        assert res.returncode == 0 and "1 set, 42 already so, 0 refused" in res.stdout, res.stdout
+        assert res.returncode == 0 and "1 set, 43 already so, 0 refused" in res.stdout, res.stdout
     finally:
         board.send_signal(signal.SIGINT)
         board.communicate(timeout=60)

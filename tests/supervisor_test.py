@@ -191,8 +191,9 @@ def test_rc_lost_disarms_and_the_vehicle_does_not_rearm_when_the_link_returns():
 def test_host_lost_disarms_a_vehicle_armed_by_command_within_the_timeout():
     b = Bench()
     b.rc = rc(arm=True)
+    b.heartbeat()
     b.step(2)
-    b.sup.arm_command(b.rc, b.t)
+    b.sup.arm_command(b.rc, b.t)        # a known station's command is a sign of life
     last = b.t
     loops = 0
     while b.sup.armed:
@@ -601,3 +602,58 @@ def test_a_multisine_that_passes_its_declared_peak_stops_with_the_reason_and_say
     assert b.sup.take_excitation_end() == reason("PEAK")
     assert max(abs(v) for v in values) <= 0.06 * (1 + 1e-3)
     assert reason("PEAK") in b.reasons() and b.sup.counters.exc_stopped == 1
+
+
+# --- who the host is ------------------------------------------------------------------------
+
+GCS, QUAD = MAV.MAV_TYPE_GCS, MAV.MAV_TYPE_QUADROTOR
+STATION_A, STATION_B = fw.station_id(255, 190), fw.station_id(254, 190)
+
+
+def test_only_a_ground_stations_heartbeat_counts_as_the_host():
+    """Another vehicle (system 2, a quadrotor) on the same link is no host: it neither lets
+    an excitation start nor keeps a command-armed vehicle armed."""
+    b = Bench()
+    b.arm_by_switch()
+    assert not b.sup.heartbeat(2, 1, QUAD, b.t)
+    assert b.sup.start_excitation(config(), b.t, fw.station_id(2, 1)) == reason("NO_HOST")
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NONE")
+
+
+def test_an_excitation_belongs_to_the_station_that_commanded_it():
+    """A second ground station's heartbeat does not keep an excitation alive once the one
+    that commanded it went quiet: it stops within the host timeout of that station's last."""
+    b = Bench()
+    b.arm_by_switch()
+    b.sup.heartbeat(255, 190, GCS, b.t)
+    b.sup.heartbeat(254, 190, GCS, b.t)
+    assert b.sup.start_excitation(config(cycles=200), b.t, STATION_A) == reason("NONE")
+    assert b.sup.excitation_owner == STATION_A
+    last_a = b.t
+    b.step()
+    while b.sup.excitation_state != fw.ExcitationState.IDLE:
+        b.sup.heartbeat(254, 190, GCS, b.t)           # only B goes on
+        b.step()
+        assert b.t - last_a <= LIMITS.host_timeout_us + DT_US, "ran on on another's heartbeat"
+    assert b.t - last_a > LIMITS.host_timeout_us
+    assert reason("HOST_LOST") in b.reasons()
+
+
+def test_a_station_whose_own_heartbeat_is_stale_cannot_start_an_excitation():
+    b = Bench()
+    b.arm_by_switch()
+    b.sup.heartbeat(254, 190, GCS, b.t)               # B is alive, A never spoke
+    assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NO_HOST")
+    assert b.sup.start_excitation(config(), b.t, STATION_B) == reason("NONE")
+
+
+def test_mav_gcs_sysid_pins_the_host_to_one_system():
+    limits = fw.SafetyLimits()
+    limits.gcs_sysid = 255
+    b = Bench(limits)
+    b.arm_by_switch()
+    assert not b.sup.heartbeat(254, 190, GCS, b.t)    # another ground station: ignored
+    assert b.sup.start_excitation(config(), b.t, STATION_B) == reason("NO_HOST")
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NONE")

@@ -346,6 +346,64 @@ def test_preemption_tail_chaining_and_primask(tmp_path):
                                                 ("return", 16), ("enter", 18), ("return", 18)]
 
 
+# ------------------------------------------------------------ IT blocks ----------------------
+
+# A Thumb IT block whose load is the first touch of a page (a TLB fill) or a peripheral
+# access (the protection hook): unicorn rolls the CPU state back to that instruction to call
+# the hook, IT bits included, and the block then goes on; what runs after the block must not
+# inherit those bits (unicorn 2.1.4 leaves them, and the next block ran as if still inside
+# the IT block: an instruction skipped). The lookup is the shape GCC gives a switch of
+# string literals (hq::reason_text in the image): the image's STATUSTEXTs came out empty.
+IT_BLOCK_ASM = ASM_RESET_ONLY + """
+    movs r0, #3
+    movs r2, #0
+    movs r4, #0
+    bl lookup                    @ r0 = table[3]: a TLB fill inside an ITTE LS block
+    mov r2, r0                   @ after the return: both must run
+    movs r4, #7
+    ldr r1, =0xE0001004          @ DWT_CYCCNT: a peripheral read inside an ITT EQ block
+    movs r5, #0
+    movs r6, #0
+    movs r7, #0
+    cmp r5, r5
+    itt eq
+    ldreq r3, [r1]
+    moveq r6, #1
+    cmp r5, #1                   @ NE from here: a leftover EQ would skip what follows
+    b 1f
+1:  movs r5, #9
+    movs r7, #11
+    ldr r1, =result
+    stmia r1, {r2, r4, r5, r6, r7}
+    bkpt #0
+    .ltorg
+lookup:
+    cmp r0, #35
+    itte ls
+    ldrls r3, =table
+    ldrls.w r0, [r3, r0, lsl #2]
+    ldrhi r0, =0
+    bx lr
+    .ltorg
+    .section .rodata
+    .balign 4096                 @ a page of its own, never touched before the lookup
+table: .word 0x100, 0x101, 0x102, 0x103, 0x104
+    .bss
+result: .space 20
+"""
+
+
+def test_what_follows_an_it_block_whose_access_called_a_hook_runs_unconditionally(tmp_path):
+    chip = Mk64(build(tmp_path, "it_block", IT_BLOCK_ASM, asm=True))
+    m = chip.machine
+    assert m.run(instructions=100_000).reason == "bkpt"
+    looked_up, after_return, after_branch, in_block, after_branch_2 = words(m, "result", 5)
+    assert looked_up == 0x103                   # the lookup's value reached its caller
+    assert after_return == 7
+    assert in_block == 1
+    assert (after_branch, after_branch_2) == (9, 11)
+
+
 # ------------------------------------------------------------ time base -----------------------
 
 CYCCNT_ASM = ASM_RESET_ONLY + """

@@ -160,7 +160,8 @@ void bind_supervisor(py::module_& m) {
         .def_readwrite("min_freq_hz", &SafetyLimits::min_freq_hz)
         .def_readwrite("max_freq_fraction", &SafetyLimits::max_freq_fraction)
         .def_readwrite("max_duration_s", &SafetyLimits::max_duration_s)
-        .def_readwrite("min_fade_cycles", &SafetyLimits::min_fade_cycles);
+        .def_readwrite("min_fade_cycles", &SafetyLimits::min_fade_cycles)
+        .def_readwrite("gcs_sysid", &SafetyLimits::gcs_sysid);
 
     py::class_<SupervisorInputs>(m, "SupervisorInputs")
         .def(py::init([](uint64_t now_us, const RcInput& rc, bool imu_sample, const Euler& att,
@@ -180,19 +181,29 @@ void bind_supervisor(py::module_& m) {
         .def_readonly("exc_stopped", &SupervisorCounters::exc_stopped)
         .def_readonly("events_dropped", &SupervisorCounters::events_dropped);
 
+    m.def("station_id", &station_id, py::arg("sysid"), py::arg("compid"),
+          "A ground station's identity as the Supervisor keeps it.");
+
     py::class_<Supervisor>(m, "Supervisor")
         .def(py::init<const SafetyLimits&, float>(), py::arg("limits") = SafetyLimits(),
              py::arg("loop_rate_hz") = 200.0f)
-        .def("host_heartbeat", &Supervisor::host_heartbeat, py::arg("now_us"))
-        .def("arm_command", [](Supervisor& s, const RcInput& rc, uint64_t now) {
-            return static_cast<int>(s.arm_command(rc, now));
-        }, py::arg("rc"), py::arg("now_us"), "HQ_REASON_NONE (0) when armed, else why not.")
+        .def("host_heartbeat", &Supervisor::host_heartbeat, py::arg("now_us"),
+             py::arg("station") = kAnyStation)
+        .def("heartbeat", &Supervisor::heartbeat, py::arg("sysid"), py::arg("compid"),
+             py::arg("mav_type"), py::arg("now_us"),
+             "A HEARTBEAT from another system; True if it counted as the host's.")
+        .def("arm_command", [](Supervisor& s, const RcInput& rc, uint64_t now, StationId who) {
+            return static_cast<int>(s.arm_command(rc, now, who));
+        }, py::arg("rc"), py::arg("now_us"), py::arg("station") = kAnyStation,
+           "HQ_REASON_NONE (0) when armed, else why not.")
         .def("disarm_command", &Supervisor::disarm_command)
         .def("set_mode", [](Supervisor& s, uint32_t mode) { return static_cast<int>(s.set_mode(mode)); },
              py::arg("custom_mode"))
-        .def("start_excitation", [](Supervisor& s, const ExcitationConfig& c, uint64_t now) {
-            return static_cast<int>(s.start_excitation(c, now));
-        }, py::arg("config"), py::arg("now_us"))
+        .def("start_excitation", [](Supervisor& s, const ExcitationConfig& c, uint64_t now,
+                                    StationId who) {
+            return static_cast<int>(s.start_excitation(c, now, who));
+        }, py::arg("config"), py::arg("now_us"), py::arg("station") = kAnyStation)
+        .def_property_readonly("excitation_owner", &Supervisor::excitation_owner)
         .def("stop_excitation", &Supervisor::stop_excitation)
         .def("finish_excitation", &Supervisor::finish_excitation)
         .def("update", &Supervisor::update, py::arg("inputs"))

@@ -51,6 +51,8 @@ FlightController::FlightController(const FlightControllerConfig& config, I2cBus&
                {MAVLINK_MSG_ID_ATTITUDE, 1, 1, 0, false},          // every loop
                {MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, 100000, 100000, 0, false},
                {MAVLINK_MSG_ID_SCALED_IMU, 100000, 100000, 0, false},
+               // SI units: what MAVSDK's imu() and other clients wait for
+               {MAVLINK_MSG_ID_HIGHRES_IMU, 100000, 100000, 0, false},
                {MAVLINK_MSG_ID_RC_CHANNELS, 200000, 200000, 0, false},
                {MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, false}} {}   // on request only
 

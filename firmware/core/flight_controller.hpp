@@ -8,7 +8,8 @@
 //
 // Telemetry (flight_controller_link.cpp; docs/link-contract.md): every loop ATTITUDE and
 // HQ_SYSID_SAMPLE (always the loop's last message); HEARTBEAT, HQ_FW_STATUS and SYS_STATUS
-// once a second; SERVO_OUTPUT_RAW, SCALED_IMU and RC_CHANNELS at 10, 10 and 5 Hz; each but
+// once a second; SERVO_OUTPUT_RAW, SCALED_IMU, HIGHRES_IMU and RC_CHANNELS at 10, 10, 10 and
+// 5 Hz; each but
 // HEARTBEAT and HQ_SYSID_SAMPLE at the interval SET_MESSAGE_INTERVAL asks for, within what
 // the link carries. HQ_EXCITATION_STATUS in answer to every HQ_EXCITATION and when an
 // excitation ends; STATUSTEXT for every Supervisor event and parameter refusal; COMMAND_ACK
@@ -56,6 +57,11 @@ struct FlightControllerConfig {
     uint32_t link_bytes_per_s = 92160;
     // CPU cycles per second of the target's cycle counter (SYS_STATUS load); 0: none.
     uint32_t cpu_hz = 0;
+    // The board's unique id (AUTOPILOT_VERSION.uid, and uid2 whole): the chip's own on the
+    // Teensy (SIM_UIDH..UIDL, 128 bits, most significant word first); the host build's
+    // stand-in is targets/host/main.cpp's.
+    uint64_t uid = 0;
+    uint8_t uid2[18] = {};
 };
 
 struct LoopState {               // what the last loop computed, for telemetry and tests
@@ -107,7 +113,7 @@ public:
         uint64_t next_us;
         bool requested;          // once, in the next loop (MAV_CMD_REQUEST_MESSAGE)
     };
-    static constexpr int kStreams = 8;
+    static constexpr int kStreams = 9;
 
 private:
     // flight_controller.cpp: the loop
@@ -126,7 +132,7 @@ private:
     void handle_command(const mavlink_message_t& msg, uint16_t command, const float p[7],
                         const RcInput& rc, uint64_t now_us);
     uint8_t command_result(uint16_t command, const float p[7], const RcInput& rc,
-                           uint64_t now_us, Reason& why);
+                           uint64_t now_us, StationId who, Reason& why);
     uint8_t storage_command(uint32_t action);
     uint8_t interval_command(uint32_t msgid, float interval_us);
     uint8_t request_message(uint32_t msgid);
@@ -150,6 +156,9 @@ private:
     void send_servo_output(uint64_t now_us);
     void send_rc_channels(uint64_t now_us);
     void send_scaled_imu(uint64_t now_us);
+    void send_highres_imu(uint64_t now_us);
+    void send_param_error(const mavlink_message_t& to, const char* name, int index,
+                          uint8_t error);
     void send_params();
     bool send_param_value(int index);
     void send_excitation_status(Reason reason);
@@ -182,6 +191,7 @@ private:
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
     InitResult imu_init_ = InitResult::NoDevice;
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index
+    uint64_t params_as_float_ = 0;           // of those, answers to a set sent as REAL32
     bool params_dirty_ = false;              // changed since the last save
     uint64_t params_changed_us_ = 0;
     mavlink_status_t tx_status_{};

@@ -14,7 +14,7 @@ namespace {
 
 // STATUSTEXT.text, NUL-terminated when shorter.
 constexpr size_t kStatusTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
-// PARAM_VALUEs sent per loop while a list is being sent: 43 in 22 loops (0.11 s at 200 Hz),
+// PARAM_VALUEs sent per loop while a list is being sent: 44 in 22 loops (0.11 s at 200 Hz),
 // about 15 kB/s on top of the loop's telemetry.
 constexpr int kParamsPerLoop = 2;
 // SET_MESSAGE_INTERVAL keeps the streams within this share of the link.
@@ -52,6 +52,55 @@ void copy_name(char out[kParamNameLen], const char* name) {
     for (; i < kParamNameLen; ++i) out[i] = '\0';
 }
 
+// --- the parameter encoding ----------------------------------------------------------------
+// PARAM_VALUE.param_value is a float whatever the type. Integer parameters are sent byte-wise
+// (the int32's bytes in the float's, MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE): what
+// MAVSDK reads for every autopilot but ArduPilot and QGroundControl for every autopilot but
+// ArduPilot (its APM plugin alone converts). docs/ground-stations.md says who reads what.
+float encode_param_int(float value) {
+    const int32_t i = static_cast<int32_t>(value);       // whole and in range (params.cpp)
+    float f;
+    __builtin_memcpy(&f, &i, sizeof(f));
+    return f;
+}
+
+// A PARAM_SET's value, by the type the client said: REAL32 is the number itself (MAVProxy
+// and pymavlink send every value so, as they would to ArduPilot), an integer type its bytes.
+// An integer type whose bytes are no acceptable value but whose float is a whole number is
+// a C-cast client's (ArduPilot's convention): every integer parameter lies below 2^23
+// (params.cpp), so the two readings never both give a whole number in range but 0, the same
+// in both.
+float decode_param_value(const ParamInfo& info, float raw, uint8_t type) {
+    if (!(info.flags & kParamInteger) || type == MAV_PARAM_TYPE_REAL32) return raw;
+    uint32_t bits;
+    __builtin_memcpy(&bits, &raw, sizeof(bits));
+    int64_t v;
+    switch (type) {
+        case MAV_PARAM_TYPE_UINT8: v = static_cast<uint8_t>(bits); break;
+        case MAV_PARAM_TYPE_INT8: v = static_cast<int8_t>(bits); break;
+        case MAV_PARAM_TYPE_UINT16: v = static_cast<uint16_t>(bits); break;
+        case MAV_PARAM_TYPE_INT16: v = static_cast<int16_t>(bits); break;
+        case MAV_PARAM_TYPE_UINT32: v = bits; break;
+        case MAV_PARAM_TYPE_INT32: v = static_cast<int32_t>(bits); break;
+        default: return raw;                               // 64-bit types: not ours
+    }
+    const auto bytewise = static_cast<float>(v);
+    const bool bytewise_ok = bytewise >= info.min && bytewise <= info.max;
+    const bool cast_ok = raw >= info.min && raw <= info.max && raw == std::floor(raw);
+    return (!bytewise_ok && cast_ok) ? raw : bytewise;
+}
+
+// PARAM_ERROR's codes (MAV_PARAM_ERROR; its values, should the common.xml in use lack it).
+constexpr uint8_t kParamErrorNoSuch = 1, kParamErrorRange = 2, kParamErrorDenied = 3;
+uint8_t param_error(SetResult r) {
+    switch (r) {
+        case SetResult::Unknown: return kParamErrorNoSuch;
+        case SetResult::Armed:
+        case SetResult::Excitation: return kParamErrorDenied;
+        default: return kParamErrorRange;                  // out of range, not whole
+    }
+}
+
 }  // namespace
 
 bool FlightController::for_us(uint8_t target_system, uint8_t target_component) const {
@@ -80,8 +129,12 @@ void FlightController::handle_message(const mavlink_message_t& msg, const RcInpu
                                       uint64_t now_us) {
     switch (msg.msgid) {
         case MAVLINK_MSG_ID_HEARTBEAT:
-            // The host's, not our own echoed back by a router.
-            if (msg.sysid != config_.system_id) supervisor_.host_heartbeat(now_us);
+            // Another system's (not our own echoed back by a router): the Supervisor decides
+            // whether it is a ground station that counts as the host.
+            if (msg.sysid != config_.system_id) {
+                supervisor_.heartbeat(msg.sysid, msg.compid, mavlink_msg_heartbeat_get_type(&msg),
+                                      now_us);
+            }
             return;
         case MAVLINK_MSG_ID_COMMAND_LONG: {
             mavlink_command_long_t c;
@@ -135,7 +188,7 @@ void FlightController::handle_message(const mavlink_message_t& msg, const RcInpu
 void FlightController::handle_command(const mavlink_message_t& msg, uint16_t command,
                                       const float p[7], const RcInput& rc, uint64_t now_us) {
     Reason why = Reason::None;
-    const uint8_t result = command_result(command, p, rc, now_us, why);
+    const uint8_t result = command_result(command, p, rc, now_us, station_id(msg.sysid, msg.compid), why);
     mavlink_message_t out;
     mavlink_msg_command_ack_pack_status(config_.system_id, config_.component_id, &tx_status_,
                                         &out, command, result, 0, static_cast<int32_t>(why),
@@ -144,14 +197,13 @@ void FlightController::handle_command(const mavlink_message_t& msg, uint16_t com
 }
 
 uint8_t FlightController::command_result(uint16_t command, const float p[7], const RcInput& rc,
-                                         uint64_t now_us, Reason& why) {
+                                         uint64_t now_us, StationId who, Reason& why) {
     switch (command) {
         case MAV_CMD_COMPONENT_ARM_DISARM:
             if (p[0] > 0.5f) {
-                why = supervisor_.arm_command(rc, now_us);
+                why = supervisor_.arm_command(rc, now_us, who);
                 return why == Reason::None ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
             }
-            supervisor_.host_heartbeat(now_us);
             supervisor_.disarm_command();
             return MAV_RESULT_ACCEPTED;
         case MAV_CMD_DO_SET_MODE:
@@ -292,7 +344,7 @@ void FlightController::handle_excitation(const mavlink_message_t& msg, uint64_t 
         cfg.cycles = ex.cycles;
         cfg.fade_cycles = ex.fade_cycles;
         read_harmonics(ex, cfg);
-        why = supervisor_.start_excitation(cfg, now_us);
+        why = supervisor_.start_excitation(cfg, now_us, station_id(msg.sysid, msg.compid));
         last_exc_accepted_ = why == Reason::None;
     } else {
         // An action this firmware does not know: refused, and nothing else changes (a
@@ -337,6 +389,7 @@ void FlightController::handle_param_read(const mavlink_message_t& msg) {
     const int index = r.param_index >= 0 ? (r.param_index < kParamCount ? r.param_index : -1)
                                          : param_index(r.param_id);
     if (index < 0) {
+        send_param_error(msg, r.param_id, r.param_index, kParamErrorNoSuch);
         send_unknown_param(r.param_id, r.param_index);
         return;
     }
@@ -349,41 +402,64 @@ void FlightController::send_unknown_param(const char* name, int index) {
     send_statustext(MAV_SEVERITY_WARNING, text);
 }
 
-// PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one and a
-// STATUSTEXT saying why it was refused.
+// PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one, a STATUSTEXT
+// saying why, and PARAM_ERROR to the station that asked (MAVSDK and QGroundControl report
+// that as the refusal; MAVProxy and pymavlink read the unchanged value).
 void FlightController::handle_param_set(const mavlink_message_t& msg, uint64_t now_us) {
     mavlink_param_set_t ps;
     mavlink_msg_param_set_decode(&msg, &ps);
     if (!for_us(ps.target_system, ps.target_component)) return;
     const int index = param_index(ps.param_id);
     if (index < 0) {
+        send_param_error(msg, ps.param_id, -1, kParamErrorNoSuch);
         send_unknown_param(ps.param_id, -1);
         return;
     }
-    const SetResult r = params_.set(index, ps.param_value, supervisor_.armed(),
+    const bool as_float = ps.param_type == MAV_PARAM_TYPE_REAL32;
+    const float value = decode_param_value(param_info(index), ps.param_value, ps.param_type);
+    const SetResult r = params_.set(index, value, supervisor_.armed(),
                                     supervisor_.excitation().active());
+    if (as_float) params_as_float_ |= 1ull << index;      // answered in the form it came in
+    params_pending_ |= 1ull << index;
+    if (r == SetResult::Unchanged) return;               // answered with the value it has
     if (r != SetResult::Ok) {
+        send_param_error(msg, ps.param_id, index, param_error(r));
         char text[kStatusTextLen];
         set_result_text(r, index, text, sizeof(text));
         send_statustext(MAV_SEVERITY_WARNING, text);
-        params_pending_ |= 1ull << index;
         return;
     }
     apply_params(param_info(index).flags, now_us);
-    params_pending_ |= 1ull << index;
     params_dirty_ = true;
     params_changed_us_ = now_us;
+}
+
+void FlightController::send_param_error(const mavlink_message_t& to, const char* name, int index,
+                                        uint8_t error) {
+#ifdef MAVLINK_MSG_ID_PARAM_ERROR
+    char id[kParamNameLen];
+    copy_name(id, name);
+    mavlink_message_t out;
+    mavlink_msg_param_error_pack_status(config_.system_id, config_.component_id, &tx_status_, &out,
+                                        to.sysid, to.compid, id, static_cast<int16_t>(index), error);
+    send(out);
+#else
+    (void)to, (void)name, (void)index, (void)error;     // a common.xml without PARAM_ERROR
+#endif
 }
 
 bool FlightController::send_param_value(int index) {
     const ParamInfo& info = param_info(index);
     char name[kParamNameLen];
     copy_name(name, info.name);
+    const bool integer = (info.flags & kParamInteger) != 0;
+    const bool as_float = !integer || (params_as_float_ & (1ull << index)) != 0;
+    const float value = as_float ? params_.get(index) : encode_param_int(params_.get(index));
     mavlink_message_t msg;
     mavlink_msg_param_value_pack_status(
-        config_.system_id, config_.component_id, &tx_status_, &msg, name, params_.get(index),
-        (info.flags & kParamInteger) ? MAV_PARAM_TYPE_INT32 : MAV_PARAM_TYPE_REAL32,
-        kParamCount, static_cast<uint16_t>(index));
+        config_.system_id, config_.component_id, &tx_status_, &msg, name, value,
+        as_float ? MAV_PARAM_TYPE_REAL32 : MAV_PARAM_TYPE_INT32, kParamCount,
+        static_cast<uint16_t>(index));
     return send(msg);
 }
 
@@ -392,6 +468,7 @@ void FlightController::send_params() {
         const int index = __builtin_ctzll(params_pending_);
         if (!send_param_value(index)) return;           // the link is full: next loop
         params_pending_ &= ~(1ull << index);
+        params_as_float_ &= ~(1ull << index);
     }
 }
 
@@ -503,7 +580,7 @@ void FlightController::send_sys_status() {
                              MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL |
                              MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION |
                              MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | MAV_SYS_STATUS_SENSOR_RC_RECEIVER |
-                             MAV_SYS_STATUS_AHRS;
+                             MAV_SYS_STATUS_AHRS | MAV_SYS_STATUS_PREARM_CHECK;
     uint32_t enabled = present;
     if (sup.mode() != FlightMode::Angle) enabled &= ~MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION;
     if (!sup.armed()) enabled &= ~MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
@@ -514,6 +591,10 @@ void FlightController::send_sys_status() {
         health &= ~(MAV_SYS_STATUS_SENSOR_3D_GYRO | MAV_SYS_STATUS_SENSOR_3D_ACCEL | MAV_SYS_STATUS_AHRS);
     }
     if (rc_.age_us > sup.limits().rc_timeout_us) health &= ~MAV_SYS_STATUS_SENSOR_RC_RECEIVER;
+    // Pre-arm: healthy while a command would arm now (or it is armed): MAVSDK's is_armable.
+    if (!sup.armed() && sup.arm_check(rc_, clock_.micros()) != Reason::None) {
+        health &= ~MAV_SYS_STATUS_PREARM_CHECK;
+    }
     // Load: the median loop's share of its period, in 0.1 % (the target's cycle counter).
     uint16_t load = 0;
     if (config_.cpu_hz > 0) {
@@ -533,17 +614,16 @@ void FlightController::send_sys_status() {
 
 void FlightController::send_autopilot_version() {
     const uint8_t none[8] = {};
-    const uint8_t uid2[18] = {};
     const uint64_t capabilities = MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT |
                                   MAV_PROTOCOL_CAPABILITY_COMMAND_INT |
                                   MAV_PROTOCOL_CAPABILITY_MAVLINK2 |
-                                  MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST;
+                                  MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE;
     const uint32_t version = (HQ_FW_VERSION_MAJOR << 24) | (HQ_FW_VERSION_MINOR << 16) |
                              (HQ_FW_VERSION_PATCH << 8) | FIRMWARE_VERSION_TYPE_DEV;
     mavlink_message_t msg;
     mavlink_msg_autopilot_version_pack_status(config_.system_id, config_.component_id,
                                               &tx_status_, &msg, capabilities, version, 0, 0, 0,
-                                              none, none, none, 0, 0, 0, uid2);
+                                              none, none, none, 0, 0, config_.uid, config_.uid2);
     send(msg);
 }
 
@@ -589,6 +669,19 @@ void FlightController::send_scaled_imu(uint64_t now_us) {
     send(msg);
 }
 
+void FlightController::send_highres_imu(uint64_t now_us) {
+    // m/s^2 and rad/s as measured (FRD body axes); nothing else is measured, and
+    // fields_updated says so (accelerometer and gyro bits only).
+    constexpr uint16_t kAccelGyro = 0x3F;
+    const Vec3& a = state_.accel;
+    const Vec3& g = state_.rate;
+    mavlink_message_t msg;
+    mavlink_msg_highres_imu_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
+                                        now_us, a.x, a.y, a.z, g.x, g.y, g.z, 0, 0, 0, 0, 0, 0, 0,
+                                        kAccelGyro, 0);
+    send(msg);
+}
+
 void FlightController::send_stream(uint32_t msgid, uint64_t now_us) {
     switch (msgid) {
         case MAVLINK_MSG_ID_HEARTBEAT: send_heartbeat(); return;
@@ -596,6 +689,7 @@ void FlightController::send_stream(uint32_t msgid, uint64_t now_us) {
         case MAVLINK_MSG_ID_SYS_STATUS: send_sys_status(); return;
         case MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: send_servo_output(now_us); return;
         case MAVLINK_MSG_ID_SCALED_IMU: send_scaled_imu(now_us); return;
+        case MAVLINK_MSG_ID_HIGHRES_IMU: send_highres_imu(now_us); return;
         case MAVLINK_MSG_ID_RC_CHANNELS: send_rc_channels(now_us); return;
         case MAVLINK_MSG_ID_AUTOPILOT_VERSION: send_autopilot_version(); return;
         case MAVLINK_MSG_ID_ATTITUDE: {

@@ -65,6 +65,9 @@ void esc_set(Tunables& t, float v) {
     (Max ? t.esc.max_us[I] : t.esc.min_us[I]) = static_cast<uint16_t>(v);
 }
 
+float gcs_get(const Tunables& t) { return t.safety.gcs_sysid; }
+void gcs_set(Tunables& t, float v) { t.safety.gcs_sysid = static_cast<uint8_t>(v); }
+
 float imu_path_get(const Tunables& t) { return static_cast<float>(t.imu_path); }
 void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(static_cast<uint8_t>(v)); }
 
@@ -125,6 +128,7 @@ const ParamInfo kParams[kParamCount] = {
     {"STK_YAW_MAX", "deg/s", 10.0f, 360.0f, 0, stick_get<&StickLimits::yaw_rate_rad_s>,
      stick_set<&StickLimits::yaw_rate_rad_s>},
     {"IMU_PATH", "", 0.0f, 1.0f, kInt | kParamImu, imu_path_get, imu_path_set},
+    {"MAV_GCS_SYSID", "", 0.0f, 255.0f, kInt, gcs_get, gcs_set},
 };
 
 #undef HQ_RATE
@@ -160,6 +164,13 @@ size_t name_length(const char* name, size_t len) {
 
 uint32_t name_hash(const char* name) {
     return crc32(reinterpret_cast<const uint8_t*>(name), name_length(name, kParamNameLen));
+}
+
+// `value` rounded to the parameter's type (an integer parameter's to the nearest whole number;
+// a real one is a float already) equals `current`.
+bool same_value(const ParamInfo& p, float value, float current) {
+    const float typed = (p.flags & kParamInteger) ? std::round(value) : value;
+    return std::isfinite(typed) && typed == current;
 }
 
 bool acceptable(const ParamInfo& p, float value) {
@@ -224,6 +235,10 @@ float Params::default_value(int index) const { return kParams[index].get(default
 SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (index < 0 || index >= kParamCount) return SetResult::Unknown;
     const ParamInfo& p = kParams[index];
+    // A set to the value it has changes nothing, so no rule about changes applies (armed,
+    // exciting): a ground station re-sending a value it read (MAVProxy's `param load` of an
+    // unchanged file, where it misreads an integer) is answered with that value, not refused.
+    if (same_value(p, value, get(index))) return SetResult::Unchanged;
     if (exciting) return SetResult::Excitation;
     if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
     if (!(std::isfinite(value) && value >= p.min && value <= p.max)) return SetResult::Range;
@@ -310,6 +325,7 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
         case SetResult::Excitation: w.put(": not while exciting"); break;
         case SetResult::Unknown: w.put(": no such parameter"); break;
         case SetResult::Ok: w.put(" set"); break;
+        case SetResult::Unchanged: w.put(" unchanged"); break;
     }
 }
 

@@ -54,7 +54,7 @@ struct ParamInfo {
     void (*set)(Tunables&, float);
 };
 
-constexpr int kParamCount = 43;
+constexpr int kParamCount = 44;
 constexpr size_t kParamNameLen = 16;
 
 const ParamInfo& param_info(int index);
@@ -69,6 +69,7 @@ enum class SetResult : uint8_t {
     NotInteger,      // an integer parameter given a fraction
     Armed,           // only the gains may change while armed
     Excitation,      // nothing changes while an excitation runs
+    Unchanged,       // the value it has (after rounding to its type): taken, nothing changes
 };
 
 // What a stored record held.

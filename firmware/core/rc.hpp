@@ -33,7 +33,8 @@ struct RcThresholds {
 struct StickLimits {
     float angle_rad = 0.52359878f;      // 30 deg of roll or pitch (angle mode)
     float rate_rad_s = 3.4906585f;      // 200 deg/s of roll or pitch rate (rate mode)
-    float yaw_rate_rad_s = 1.5707963f;  // 90 deg/s of yaw rate (both modes)
+    float yaw_rate_rad_s = 1.57079637f; // 90 deg/s of yaw rate (both modes; the float
+                                        // nearest pi/2, which reads back as 90)
 };
 
 // The sticks as setpoints: angles for angle mode, rates for rate mode (yaw is always a rate).

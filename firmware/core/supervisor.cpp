@@ -100,17 +100,55 @@ bool Supervisor::take_excitation_end(Reason& why) {
 
 // --- arming ---------------------------------------------------------------------------------
 
+int Supervisor::station_slot(StationId who) const {
+    for (int i = 0; i < kStations; ++i) {
+        if (stations_[i].seen && stations_[i].id == who) return i;
+    }
+    return -1;
+}
+
+bool Supervisor::station_alive(StationId who, uint64_t now_us) const {
+    const int i = station_slot(who);
+    return i >= 0 && now_us - stations_[i].last_us <= limits_.host_timeout_us;
+}
+
 bool Supervisor::host_alive(uint64_t now_us) const {
-    return host_seen_ && now_us - last_host_us_ <= limits_.host_timeout_us;
+    for (const Station& s : stations_) {
+        if (s.seen && now_us - s.last_us <= limits_.host_timeout_us) return true;
+    }
+    return false;
+}
+
+uint64_t Supervisor::last_host_heartbeat_us() const {
+    uint64_t last = 0;
+    for (const Station& s : stations_) last = s.seen && s.last_us > last ? s.last_us : last;
+    return last;
 }
 
 bool Supervisor::imu_fresh(uint64_t now_us) const {
     return imu_seen_ && now_us - last_imu_us_ <= limits_.imu_timeout_us;
 }
 
-void Supervisor::host_heartbeat(uint64_t now_us) {
-    host_seen_ = true;
-    last_host_us_ = now_us;
+bool Supervisor::heartbeat(uint8_t sysid, uint8_t compid, uint8_t mav_type, uint64_t now_us) {
+    if (mav_type != MAV_TYPE_GCS || sysid == 0) return false;     // a vehicle, a camera ...
+    if (limits_.gcs_sysid != 0 && sysid != limits_.gcs_sysid) return false;
+    host_heartbeat(now_us, station_id(sysid, compid));
+    return true;
+}
+
+void Supervisor::host_heartbeat(uint64_t now_us, StationId who) {
+    int slot = station_slot(who);
+    if (slot < 0) {                          // a new station: a free slot, else the oldest
+        slot = 0;
+        for (int i = 0; i < kStations; ++i) {
+            if (!stations_[i].seen) {
+                slot = i;
+                break;
+            }
+            if (stations_[i].last_us < stations_[slot].last_us) slot = i;
+        }
+    }
+    stations_[slot] = Station{true, who, now_us};
 }
 
 Reason Supervisor::check_arm(const RcInput& rc, uint64_t now_us) const {
@@ -143,8 +181,9 @@ void Supervisor::disarm(Reason why) {
     if (excitation_.active()) end_excitation(why, false);
 }
 
-Reason Supervisor::arm_command(const RcInput& rc, uint64_t now_us) {
-    host_heartbeat(now_us);                     // a command is a sign of life
+Reason Supervisor::arm_command(const RcInput& rc, uint64_t now_us, StationId who) {
+    // A command is a sign of life of a ground station already heard (a vehicle's is not).
+    if (station_slot(who) >= 0) host_heartbeat(now_us, who);
     if (armed_) return Reason::None;
     const Reason r = check_arm(rc, now_us);
     if (r != Reason::None) {
@@ -265,11 +304,12 @@ float Supervisor::update(const SupervisorInputs& in) {
 
 // --- the excitation -------------------------------------------------------------------------
 
-Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us) const {
+Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us,
+                                    StationId who) const {
     const auto axis = static_cast<uint8_t>(c.axis);
     const auto injection = static_cast<uint8_t>(c.injection);
     if (!armed_) return Reason::Disarmed;
-    if (!host_alive(now_us)) return Reason::NoHost;
+    if (!station_alive(who, now_us)) return Reason::NoHost;     // its own heartbeat
     if (excitation_.active()) return Reason::Busy;
     if (axis >= kAxes || injection >= kInjections ||
         (c.axis == Axis::Yaw && c.injection == Injection::Angle)) {
@@ -305,9 +345,11 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us) 
     return Reason::None;
 }
 
-Reason Supervisor::start_excitation(const ExcitationConfig& config, uint64_t now_us) {
-    Reason r = check_excitation(config, now_us);
+Reason Supervisor::start_excitation(const ExcitationConfig& config, uint64_t now_us,
+                                    StationId who) {
+    Reason r = check_excitation(config, now_us, who);
     if (r == Reason::None && !excitation_.start(config, loop_rate_hz_)) r = Reason::Frequency;
+    if (r == Reason::None) exc_owner_ = who;
     if (r != Reason::None) refuse_excitation(r);
     return r;
 }
@@ -334,7 +376,7 @@ void Supervisor::end_excitation(Reason why, bool announce) {
 Reason Supervisor::excitation_limit(const SupervisorInputs& in) const {
     const ExcitationConfig& c = excitation_.config();
     const int a = static_cast<int>(c.axis);
-    if (!host_alive(in.now_us)) return Reason::HostLost;
+    if (!station_alive(exc_owner_, in.now_us)) return Reason::HostLost;   // its owner's
     // The yaw rig's heading is free: only roll and pitch have an angle limit. A measurement
     // that is not a number is beyond every limit (the comparisons are written so).
     if (a < kAngleAxes && !(std::fabs(in.attitude[a]) <= limits_.abort_angle_rad)) {

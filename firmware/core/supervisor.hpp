@@ -9,14 +9,20 @@
 //   - Arming needs a live RC link, the arm switch (channel 5) high, a throttle signal that is
 //     low, and a fresh IMU sample; the switch arms on its low-to-high edge, a command arms
 //     with the switch already high. The switch not high always disarms, whatever armed.
+//   - The host is a ground station: only a HEARTBEAT of MAV_TYPE_GCS from another system
+//     counts (another vehicle's does not), and only from system gcs_sysid when that is set
+//     (MAV_GCS_SYSID, 0: any ground station). The loop passes every heartbeat to
+//     heartbeat(); the rules are here.
 //   - Failsafes, each: motors off, disarmed, an event. RC lost (no valid frame within
 //     rc_timeout_us); host lost (armed by command and no host HEARTBEAT within
 //     host_timeout_us); IMU stale (no fresh sample within imu_timeout_us); a non-finite
 //     value in the loop (reported by the loop with fault()).
 //   - An excitation starts only when armed, with a live host, in bounds (amplitude per
 //     injection point, frequency band, duration, fade-in), and always with its fade-in. It
-//     stops at once on disarm, when the host goes quiet, or when its axis's angle or rate
-//     passes the abort limits (the same limits the host tool checks as a second line).
+//     belongs to the ground station (system and component) that commanded it, whose own
+//     heartbeat must be fresh to start it and keeps it alive: another station's does not.
+//     It stops at once on disarm, when its station goes quiet, or when its axis's angle or
+//     rate passes the abort limits (the same limits the host tool checks as a second line).
 //   - The flight mode does not change while an excitation runs: SET_MODE is refused, and an
 //     RC mode switch change takes effect when the excitation ends.
 //   - A stale IMU is probed and re-initialised while disarmed (imu_recovery_due()).
@@ -126,7 +132,19 @@ struct SafetyLimits {
     uint16_t min_fade_cycles = 1;
     // The arm and mode switches' positions and the throttle that is low enough to arm.
     RcThresholds rc{};
+    // The one ground station's system id that counts as the host (MAV_GCS_SYSID, as
+    // ArduPilot names it); 0: any ground station.
+    uint8_t gcs_sysid = 0;
 };
+
+// A ground station on the link: (system id << 8) | component id. kAnyStation is the
+// identity of a caller that does not say who it is (the bindings' default): system 0 is
+// the broadcast address, never a sender.
+using StationId = uint16_t;
+constexpr StationId kAnyStation = 0;
+constexpr StationId station_id(uint8_t sysid, uint8_t compid) {
+    return static_cast<StationId>(sysid << 8 | compid);
+}
 
 // The IMU timeout for a sensor delivering rate_hz samples: five samples, at most 50 ms.
 uint32_t imu_timeout_for(float rate_hz);
@@ -158,11 +176,18 @@ public:
     Supervisor(const SafetyLimits& limits, float loop_rate_hz);
 
     // --- commands (the telemetry link); each answer is Reason::None when accepted ----------
-    void host_heartbeat(uint64_t now_us);
-    Reason arm_command(const RcInput& rc, uint64_t now_us);
+    // A HEARTBEAT from another system: counts as the host's when it is a ground station's
+    // (mav_type MAV_TYPE_GCS) and, with gcs_sysid set, from that system. True if it counted.
+    bool heartbeat(uint8_t sysid, uint8_t compid, uint8_t mav_type, uint64_t now_us);
+    // A ground station's sign of life (heartbeat() once it decided it counts).
+    void host_heartbeat(uint64_t now_us, StationId who = kAnyStation);
+    // A command is a sign of life of a station already known as a ground station.
+    Reason arm_command(const RcInput& rc, uint64_t now_us, StationId who = kAnyStation);
     void disarm_command();
     Reason set_mode(uint32_t custom_mode);
-    Reason start_excitation(const ExcitationConfig& config, uint64_t now_us);
+    // The excitation belongs to `who`: its heartbeat keeps it alive.
+    Reason start_excitation(const ExcitationConfig& config, uint64_t now_us,
+                            StationId who = kAnyStation);
     // Counts and announces a refused excitation request (for a refusal decided outside the
     // Supervisor's checks, such as an unknown HQ_EXCITATION action).
     void refuse_excitation(Reason why);
@@ -199,8 +224,12 @@ public:
     const Excitation& excitation() const { return excitation_; }
     const ExcitationConfig& excitation_config() const { return excitation_.config(); }
     bool imu_fresh(uint64_t now_us) const;
+    // What an arm command would be answered now (Reason::None: it would arm).
+    Reason arm_check(const RcInput& rc, uint64_t now_us) const { return check_arm(rc, now_us); }
     bool imu_stale() const { return imu_stale_; }
-    uint64_t last_host_heartbeat_us() const { return last_host_us_; }
+    uint64_t last_host_heartbeat_us() const;
+    // The station the running (or last) excitation belongs to.
+    StationId excitation_owner() const { return exc_owner_; }
     Reason last_reason() const { return last_reason_; }
     const SupervisorCounters& counters() const { return counters_; }
     const SafetyLimits& limits() const { return limits_; }
@@ -225,9 +254,12 @@ private:
     void check_imu(const SupervisorInputs& in);
     float run_excitation(const SupervisorInputs& in);
     Reason excitation_limit(const SupervisorInputs& in) const;
-    Reason check_excitation(const ExcitationConfig& config, uint64_t now_us) const;
+    Reason check_excitation(const ExcitationConfig& config, uint64_t now_us,
+                            StationId who) const;
     void end_excitation(Reason why, bool announce = true);
     bool host_alive(uint64_t now_us) const;
+    bool station_alive(StationId who, uint64_t now_us) const;
+    int station_slot(StationId who) const;
     void emit(Reason reason, Severity severity);
 
     enum class SwitchPos : uint8_t { Unknown, Low, High };
@@ -243,8 +275,16 @@ private:
     SwitchPos arm_switch_ = SwitchPos::Unknown;
     bool mode_switch_known_ = false, mode_switch_pending_ = false, mode_lock_reported_ = false;
     FlightMode mode_switch_ = FlightMode::Angle;
-    bool host_seen_ = false;
-    uint64_t last_host_us_ = 0;
+    // The ground stations heard from, most recent heartbeat each (a new one takes the slot
+    // heard from longest ago): enough for a GCS, a companion and a spare.
+    static constexpr int kStations = 4;
+    struct Station {
+        bool seen = false;
+        StationId id = 0;
+        uint64_t last_us = 0;
+    };
+    Station stations_[kStations];
+    StationId exc_owner_ = kAnyStation;
     bool imu_seen_ = false, imu_stale_ = false;
     uint64_t last_imu_us_ = 0, last_imu_attempt_us_ = 0;
     Reason last_imu_finding_ = Reason::None;

@@ -35,6 +35,9 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
                    "(default: run until Ctrl-C)")
     p.add_argument("--collective", type=number_in(0, 1), default=0.4)
+    p.add_argument("--disarmed", action="store_true",
+                   help="the pilot leaves the arm switch and throttle low (default: armed, "
+                        "hovering)")
     p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
@@ -55,7 +58,8 @@ def run(args) -> int:
     try:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
-                      dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store)
+                      dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
+                      armed=not args.disarmed)
     except FirmwareError as exc:
         raise InputError(str(exc)) from None
     print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "

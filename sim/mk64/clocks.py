@@ -70,10 +70,18 @@ class Sim(RegisterDevice):
     """System integration module: clock gates (SCGC1-7), dividers (CLKDIV1/2), SOPT2."""
 
     READ_ONLY = ("SDID", "FCFG2", "UIDH", "UIDMH", "UIDML", "UIDL")
+    #: The emulated chip's unique identification (SIM_UIDH, UIDMH, UIDML, UIDL; the SVD's
+    #: reset value is 0, a real chip's is its own): one fixed id, "HQ" "EMU" "MK64" and 1,
+    #: the same in every run (docs/teensy35-emulator.md).
+    UID = {"UIDH": 0x0000_4851, "UIDMH": 0x0045_4D55, "UIDML": 0x4D4B_3634, "UIDL": 0x0000_0001}
 
     def __init__(self, machine, chip):
         self.chip = chip
         super().__init__(machine, "SIM", span=0x1064)
+
+    def reset(self):
+        super().reset()
+        self.v.update(self.UID)
 
     def w_CLKDIV1(self, value, mask):
         self.v["CLKDIV1"] = value & 0xFFFF_0000

@@ -755,7 +755,7 @@ class _Native:
                       "uc_mem_read", "uc_mem_write", "uc_hook_add", "uc_mmio_map")}
         functions["handle"] = handle.value
         regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in
-                ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "CONTROL", "FPSCR",
+                ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "EPSR", "CONTROL", "FPSCR",
                  "PRIMASK", "BASEPRI", "FAULTMASK")}
         regs.update({f"S{i}": getattr(A, f"UC_ARM_REG_S{i}") for i in range(16)})
         self.core = Mk64Core(functions, regs, {k: address(v) for k, v in callbacks.items()},

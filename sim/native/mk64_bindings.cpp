@@ -106,7 +106,7 @@ void bind_mk64(py::module_& m) {
                  r.r2 = regs["R2"].cast<int>(); r.r3 = regs["R3"].cast<int>();
                  r.r12 = regs["R12"].cast<int>(); r.lr = regs["LR"].cast<int>();
                  r.pc = regs["PC"].cast<int>(); r.sp = regs["SP"].cast<int>();
-                 r.xpsr = regs["XPSR"].cast<int>(); r.control = regs["CONTROL"].cast<int>();
+                 r.xpsr = regs["XPSR"].cast<int>(); r.epsr = regs["EPSR"].cast<int>(); r.control = regs["CONTROL"].cast<int>();
                  r.fpscr = regs["FPSCR"].cast<int>(); r.primask = regs["PRIMASK"].cast<int>();
                  r.basepri = regs["BASEPRI"].cast<int>();
                  r.faultmask = regs["FAULTMASK"].cast<int>();

@@ -146,7 +146,24 @@ void Core::install_tlb(uint32_t sram_base, uint32_t sram_size) {
                  this, uint64_t{1}, uint64_t{0});
 }
 
-bool Core::grant_cb(void*, int, uint64_t, int, int64_t, void*) { return true; }
+// Unicorn 2.1.4 rolls the CPU state back to the accessing instruction before it calls a
+// protection or TLB-fill hook (cpu_restore_state: the PC, and the IT bits of an instruction
+// inside an IT block), and on a granted access the translated block goes on. The translation
+// tracks the IT state itself and keeps the CPU's copy at zero inside a block (QEMU writes it
+// only when a block leaves mid-IT-block), so a copy left set outlives the IT block: the next
+// block is looked up as if still inside one and its first instructions run conditionally (an
+// instruction after the return from a switch's table lookup was skipped: the Teensy image's
+// STATUSTEXTs went out empty). These hooks put the copy back to zero, the Thumb bit kept;
+// a fault that follows restores it again itself. tests/teensy35_boot_test.py has the case.
+void Core::clear_restored_it_bits() {
+    const uint64_t thumb_only = uint64_t{1} << 24;     // EPSR: T set, ICI/IT clear
+    uc_.reg_write(uc_.handle, r_.epsr, &thumb_only);
+}
+
+bool Core::grant_cb(void*, int, uint64_t, int, int64_t, void* user) {
+    static_cast<Core*>(user)->clear_restored_it_bits();
+    return true;
+}
 
 bool Core::tlb_fill_cb(void*, uint64_t vaddr, int type, TlbEntry* e, void* user) {
     Core* c = static_cast<Core*>(user);
@@ -161,6 +178,9 @@ bool Core::tlb_fill_cb(void*, uint64_t vaddr, int type, TlbEntry* e, void* user)
         c->xn_fetched_ = true;
         return false;                       // unicorn stops the run (UC_ERR_EXCEPTION)
     }
+    // A data access fills from inside a running block (see clear_restored_it_bits); a fetch
+    // fills while a block is translated, before its block hook reads the IT bits to stack.
+    if (!fetch) c->clear_restored_it_bits();
     const bool sram = a - c->sram_base_ < c->sram_size_;
     e->perms = UC_PROT_READ | UC_PROT_WRITE | ((sram && !fetch) || xn ? 0 : UC_PROT_EXEC);
     return true;

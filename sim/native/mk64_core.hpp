@@ -55,7 +55,7 @@ struct Uc {
 
 // unicorn's register numbers for the registers the core reads and writes (from arm_const).
 struct Regs {
-    int r0, r1, r2, r3, r12, lr, pc, sp, xpsr, control, fpscr, primask, basepri, faultmask;
+    int r0, r1, r2, r3, r12, lr, pc, sp, xpsr, epsr, control, fpscr, primask, basepri, faultmask;
     int s[16];
 };
 
@@ -525,6 +525,7 @@ public:
     uint32_t reg(int id) const;
     void set_reg(int id, uint32_t value);
     void set_pc(uint32_t value);
+    void clear_restored_it_bits();
 
     // -- the devices ----------------------------------------------------------------------
     bool dev_read(int dev, uint32_t address, unsigned size, uint64_t& out);

@@ -126,6 +126,9 @@ int main(int argc, char** argv) {
     static hq::Mpu6050Emulator chip;
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = opt.loop_hz;
+    // The host build has no chip id: a fixed stand-in, "HQ-HOST" and 1, so a ground station
+    // that keys on AUTOPILOT_VERSION.uid sees one stable, non-zero vehicle.
+    cfg.uid = 0x4851'2D48'4F53'5401ull;
     static hq::FileParamStorage storage(opt.params);
     if (!opt.params.empty()) cfg.storage = &storage;
     if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image

@@ -21,6 +21,7 @@
 #include "param_storage.hpp"
 #include "rc_input.hpp"
 #include "serial.hpp"
+#include "mk64f12.hpp"
 #include "watchdog.hpp"
 
 namespace {
@@ -36,6 +37,18 @@ hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResul
         return LedPattern::ImuFault;
     }
     return LedPattern::Disarmed;
+}
+
+// The chip's unique identification (SIM_UIDH..UIDL, 128 bits) as AUTOPILOT_VERSION carries
+// it: uid the low 64 bits (UIDML, UIDL), uid2 all 16 bytes, most significant first.
+void read_uid(hq::FlightControllerConfig& cfg) {
+    namespace sim = hq::mk64::SIM;
+    const uint32_t words[4] = {sim::UIDH::read(), sim::UIDMH::read(), sim::UIDML::read(),
+                               sim::UIDL::read()};
+    cfg.uid = static_cast<uint64_t>(words[2]) << 32 | words[3];
+    for (int w = 0; w < 4; ++w) {
+        for (int b = 0; b < 4; ++b) cfg.uid2[4 * w + b] = static_cast<uint8_t>(words[w] >> (24 - 8 * b));
+    }
 }
 
 }  // namespace
@@ -79,6 +92,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     cfg.cpu_hz = kCoreHz;                             // SYS_STATUS load from the cycle counter
     cfg.link_bytes_per_s = kTelemetryBaud / 10;       // 8N1: ten bits a byte
     cfg.storage = &storage;
+    read_uid(cfg);
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
     const hq::InitResult init = fc.init();
