@@ -15,6 +15,7 @@ from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_a
 from .. import design
 from ..errors import DiskFull, InputError
 from ..connection import CONNECTION_HELP
+from ..signals import ABORTED_BY, EXIT_CODES
 from ..link import DEFAULT_BAUD
 from ..multisine import LINES, MAX_LINES, RIG_TIME_S
 
@@ -166,7 +167,8 @@ def run(args) -> int:
     sys.stderr.write(f"heliquad sweep: {manifest['aborted']} ({done} of "
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
-    return 1
+    # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
+    return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
 
 
 def _what(plan) -> str:
