@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from .errors import InputError
+from .errors import BoardRefused, InputError, LinkLost
 from .link import HEARTBEAT_PERIOD_S
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
@@ -50,7 +50,13 @@ MAX_NAME = 16
 #: Whole numbers a single-precision float carries exactly.
 MAX_EXACT_INT = 2**24
 FLOAT32_MAX = float(np.finfo(np.float32).max)
-MESSAGES = ("PARAM_VALUE", "STATUSTEXT")
+MESSAGES = ("PARAM_VALUE", "STATUSTEXT", "HEARTBEAT")
+#: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
+#: (firmware/core/flight_controller.cpp's streams), half a second to spare.
+ARMED_WAIT_S = 1.5
+#: HEARTBEAT.base_mode's armed bit (MAV_MODE_FLAG_SAFETY_ARMED) and a ground station's
+#: type (MAV_TYPE_GCS: another program's heartbeat on a shared network link, not the board's).
+SAFETY_ARMED, MAV_TYPE_GCS = 128, 6
 #: MAV_PARAM_TYPE: the whole-number types (UINT8 .. INT64) and the real ones.
 INTEGER_TYPES = range(1, 9)
 TYPE_NAMES = {1: "UINT8", 2: "INT8", 3: "UINT16", 4: "INT16", 5: "UINT32", 6: "INT32",
@@ -74,7 +80,7 @@ class Param:
         return value_text(self.value, self.type)
 
 
-class ParamRefused(InputError):
+class ParamRefused(BoardRefused):
     """The board kept the old value of a parameter it was asked to set."""
 
     def __init__(self, name: str, asked: str, kept: str, reason: str | None):
@@ -83,8 +89,8 @@ class ParamRefused(InputError):
         super().__init__(f"the board refused {name} = {asked} and kept {kept}: {why}")
 
 
-class NoAnswer(InputError):
-    """A request went unanswered after every retry."""
+class NoAnswer(LinkLost):
+    """A request went unanswered after every retry: the board fell silent (exit 1)."""
 
 
 def value_text(value: float, param_type: int | None = None) -> str:
@@ -143,6 +149,7 @@ class ParamClient:
         self.progress = progress or (lambda text: None)
         self.answer_wait_s, self.retries, self.quiet_s = answer_wait_s, retries, quiet_s
         self.last_heartbeat = None
+        self.armed = None                         # as the board's last HEARTBEAT said
         self.by_index: dict[int, Param] = {}      # the list being fetched
         self.count = None                         # its length, once the board said
         self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
@@ -159,6 +166,10 @@ class ParamClient:
         for m in self.link.poll(only=MESSAGES):
             if m.get_type() == "STATUSTEXT":
                 self.texts.append(m.text)
+                continue
+            if m.get_type() == "HEARTBEAT":
+                if m.type != MAV_TYPE_GCS:
+                    self.armed = bool(m.base_mode & SAFETY_ARMED)
                 continue
             p = Param(m.param_id, float(m.param_value), int(m.param_type), int(m.param_index))
             self.fresh[p.name] = p
@@ -270,6 +281,13 @@ class ParamClient:
         self._wait(lambda: self._reason(param.name) is not None, REASON_WAIT_S)
         raise ParamRefused(param.name, value_text(value, param.type), got.text(),
                            self._reason(param.name))
+
+    def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
+        """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
+        None when none came. An armed board saves a changed parameter only once disarmed."""
+        self.armed = None
+        self._wait(lambda: self.armed is not None, wait_s)
+        return self.armed
 
     def _reason(self, name: str) -> str | None:
         """The STATUSTEXT that says why a set was refused: one naming the parameter, else
