@@ -15,18 +15,23 @@ can send only once the other end has sent to it (or, for ``tcpin:``, connected).
 :attr:`can_send` says whether it can yet; a write before that is an :class:`InputError`
 that says so.
 
-Every failure to open is one :class:`InputError` line naming the connection; so is a link
-lost while reading or writing (``telemetry link lost: ...``).
+Every failure to open is one :class:`InputError` line naming the connection (exit 2). A
+serial device or pty is opened for this program alone (an advisory lock, as pyserial's
+``exclusive=True`` takes): a second heliquad (or any program that locks its ports) on a
+port in use is refused with one line naming the port as busy, instead of stealing bytes
+from the first (:class:`LinkLost`, exit 1). A link lost while reading or writing is a
+:class:`LinkLost` (``telemetry link lost: ...``, exit 1).
 """
 
 from __future__ import annotations
 
+import errno
 import re
 import socket
 
 import serial
 
-from .errors import InputError
+from .errors import InputError, LinkLost
 
 __all__ = ["open_connection", "NETWORK_KINDS", "CONNECTION_HELP"]
 
@@ -68,15 +73,20 @@ class SerialPort:
     def __init__(self, name: str, baud: int):
         self.name = name
         try:
-            self.serial = serial.Serial(name, baudrate=baud, timeout=0, write_timeout=1.0)
+            self.serial = serial.Serial(name, baudrate=baud, timeout=0, write_timeout=1.0,
+                                        exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+                raise LinkLost(f"{name} is busy: another program has it open (a second "
+                               "heliquad log, params or sweep on the same port?); stop that "
+                               "one first") from None
             raise InputError(f"cannot open {name}: {exc}") from None
 
     def read(self) -> bytes:
         try:
             return self.serial.read(READ_SIZE)
         except (serial.SerialException, OSError) as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
+            raise LinkLost(f"telemetry link lost: {exc}") from None
 
     def write(self, data) -> int:
         """A failed write (the port gone, or a board that stopped reading for a second) is
@@ -84,7 +94,7 @@ class SerialPort:
         try:
             return self.serial.write(data)
         except (serial.SerialException, OSError) as exc:
-            raise InputError(f"telemetry link lost: {exc}") from None
+            raise LinkLost(f"telemetry link lost: {exc}") from None
 
     def fileno(self) -> int:
         return self.serial.fileno()
@@ -148,9 +158,9 @@ class NetworkPort:
             try:
                 data = self.conn.recv(READ_SIZE)
             except OSError as exc:
-                raise InputError(f"telemetry link lost: {self.name}: {exc.strerror or exc}") from None
+                raise LinkLost(f"telemetry link lost: {self.name}: {exc.strerror or exc}") from None
             if self.lost:
-                raise InputError(self.lost)
+                raise LinkLost(self.lost)
             if not data:
                 break
             chunks.append(bytes(data))
@@ -165,7 +175,7 @@ class NetworkPort:
                              "(udpout:HOST:PORT, tcp:HOST:PORT)")
         self.conn.write(bytes(data))
         if self.lost:
-            raise InputError(self.lost)
+            raise LinkLost(self.lost)
         return len(data)
 
     def fileno(self) -> int:
