@@ -33,8 +33,9 @@ MAX_LAG_S = 0.1
 SAVE_WAIT_S = 0.6
 #: The most telemetry that waits for a reader on the pty, the oldest dropped past it, as a
 #: board's USB or UART buffer holds a few KiB and not seconds: a tool that opens the port late
-#: reads at most this much of the past (0.19 s at the firmware's 22 kB/s), then the present.
-#: The largest the pty's line discipline holds in sight (firmware/targets/host/serial.hpp).
+#: reads about this much of the past (0.19 s at the firmware's 22 kB/s), then the present.
+#: The largest the pty's line discipline holds in sight (firmware/targets/host/serial.hpp); a
+#: write the kernel has not yet moved there is not seen, so one loop's more may wait.
 TELEMETRY_BACKLOG_BYTES = 4095
 #: How long the pilot's switch may take to disarm the board before the stop goes on without
 #: it (the firmware disarms on the frame the switch goes down).
