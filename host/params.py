@@ -54,9 +54,7 @@ MESSAGES = ("PARAM_VALUE", "STATUSTEXT", "HEARTBEAT")
 #: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
 #: (firmware/core/flight_controller.cpp's streams), half a second to spare.
 ARMED_WAIT_S = 1.5
-#: HEARTBEAT.base_mode's armed bit (MAV_MODE_FLAG_SAFETY_ARMED) and a ground station's
-#: type (MAV_TYPE_GCS: another program's heartbeat on a shared network link, not the board's).
-SAFETY_ARMED, MAV_TYPE_GCS = 128, 6
+
 #: MAV_PARAM_TYPE: the whole-number types (UINT8 .. INT64) and the real ones.
 INTEGER_TYPES = range(1, 9)
 TYPE_NAMES = {1: "UINT8", 2: "INT8", 3: "UINT16", 4: "INT16", 5: "UINT32", 6: "INT32",
@@ -168,8 +166,7 @@ class ParamClient:
                 self.texts.append(m.text)
                 continue
             if m.get_type() == "HEARTBEAT":
-                if m.type != MAV_TYPE_GCS:
-                    self.armed = bool(m.base_mode & SAFETY_ARMED)
+                self._heard(m)
                 continue
             p = Param(m.param_id, float(m.param_value), int(m.param_type), int(m.param_index))
             self.fresh[p.name] = p
@@ -281,6 +278,15 @@ class ParamClient:
         self._wait(lambda: self._reason(param.name) is not None, REASON_WAIT_S)
         raise ParamRefused(param.name, value_text(value, param.type), got.text(),
                            self._reason(param.name))
+
+    def _heard(self, heartbeat) -> None:
+        """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
+        on a shared network link says nothing of the board)."""
+        from ..sim.dialect import dialect
+
+        mav = dialect()
+        if heartbeat.type != mav.MAV_TYPE_GCS:
+            self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
 
     def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
         """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
