@@ -1,18 +1,31 @@
 """The ``heliquad`` command line: the parser, and the one place errors become exit codes.
 
-Every subcommand (one module each, :mod:`heliquad.host.commands`) reports bad input as one
-line on stderr (``heliquad SUB: error: ...``) and exits with code 2; no traceback reaches
-the user for an input problem. A full disk (``heliquad SUB: disk full: FILE ...``) exits 1,
-Ctrl-C 130, SIGTERM 143, each after the command has stopped what it runs and kept what it
-recorded.
+Exit codes, one rule for every command (docs/architecture.md, "Exit codes"):
+
+* 0: the command did its job.
+* 2: the user's input is wrong: arguments, files (``heliquad SUB: error: ...``, one line,
+  no traceback).
+* 1: the run could not do or finish its job for a reason outside the input: the board
+  refused (:class:`~heliquad.host.errors.BoardRefused`), the board went away or fell
+  silent (:class:`~heliquad.host.errors.LinkLost`, or an OSError that says a device or
+  connection is gone), a disk filled (``heliquad SUB: disk full: FILE ...``), a sweep that
+  stopped early; the records made so far are kept.
+* 130 (SIGINT, Ctrl-C), 143 (SIGTERM), 129 (SIGHUP: the terminal or SSH session closed),
+  each after the same orderly stop: what the command runs stopped, what it recorded kept
+  (host/signals.py; a signal the program was started with ignored stays ignored).
 """
 
 from __future__ import annotations
 
+if __name__ == "__main__":               # python -m heliquad.host.cli: signals first
+    from heliquad.host.signals import take_at_start
+
+    take_at_start()
+
 import argparse
+import errno
 import os
 import re
-import signal
 import sys
 
 # Before numpy is imported: heliquad's matrices are small (a fit's few dozen rows, the FSF's
@@ -22,13 +35,18 @@ import sys
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from . import __version__
-from .errors import DiskFull, InputError, Terminated, no_room
+from .errors import BoardRefused, DiskFull, InputError, LinkLost, no_room
+from .signals import EXIT_CODES, WORDS, settle, stopped_by, take_while_running
 
 __all__ = ["main"]
 
 EXIT_INPUT = 2
-#: A run that stopped early and kept its records (a full disk; a sweep's abort).
+#: A run that could not do or finish its job for a reason outside the input (the board
+#: refused, went away or fell silent; a full disk; a sweep's abort), its records kept.
 EXIT_STOPPED = 1
+#: What an OSError says when the device or connection under a run went away (a USB serial
+#: port unplugged: EIO or ENXIO; a connection reset): the board is gone, not the input wrong.
+LINK_GONE = frozenset({errno.EIO, errno.ENXIO, errno.ENODEV, errno.ECONNRESET})
 #: What argparse takes for a negative number rather than an option (no option of heliquad's
 #: looks like one).
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
@@ -65,40 +83,60 @@ def _build_parser(argv=None) -> argparse.ArgumentParser:
     return parser
 
 
-def _on_sigterm(signum, frame):
-    raise Terminated()
+#: Whether this process is the program (:func:`entry`), not a caller of :func:`main`.
+_program = False
 
 
 def main(argv=None) -> int:
-    """Entry point of the ``heliquad`` console script."""
+    """Entry point of the ``heliquad`` console script: the command's exit code."""
+    command = "heliquad"
     try:
         args = _build_parser(argv).parse_args(argv)
-    except InputError as exc:            # the parser's choices come from the generated dialect
-        sys.stderr.write(f"heliquad: error: {exc}\n")
-        return EXIT_INPUT
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    try:
+        command = f"heliquad {args.command}"
+        take_while_running()
         return args.func(args)
-    except InputError as exc:
-        sys.stderr.write(f"heliquad {args.command}: error: {exc}\n")
-        return EXIT_INPUT
-    except BrokenPipeError:              # e.g. piped into `head`: not an error
+    except BaseException as exc:                 # noqa: BLE001: every ending has its code
+        if _program:
+            settle()                             # a second signal cannot break the line
+        return _ending(command, exc)
+
+
+def _ending(command: str, exc: BaseException) -> int:
+    """Say why ``command`` ended in one line on stderr and return its exit code (the rule in
+    the module's docstring); an exception not of the rule goes on (a bug: its traceback)."""
+    if isinstance(exc, SystemExit):              # --help, --version, the parser's errors
+        raise exc
+    if isinstance(exc, BrokenPipeError):         # e.g. piped into `head`: not an error
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt as exc:
-        terminated = isinstance(exc, Terminated)
-        sys.stderr.write(f"heliquad {args.command}: {'terminated' if terminated else 'interrupted'}\n")
-        return 143 if terminated else 130
-    except DiskFull as exc:
-        sys.stderr.write(f"heliquad {args.command}: {exc}\n")
+    if isinstance(exc, KeyboardInterrupt):       # SIGINT, SIGTERM, SIGHUP: after the stop
+        signum = stopped_by(exc)
+        sys.stderr.write(f"{command}: {WORDS[signum]}\n")
+        return EXIT_CODES[signum]
+    if isinstance(exc, (LinkLost, BoardRefused)):
+        sys.stderr.write(f"{command}: error: {exc}\n")
         return EXIT_STOPPED
-    except OSError as exc:
-        if no_room(exc):
-            sys.stderr.write(f"heliquad {args.command}: {DiskFull.from_os_error(exc.filename or 'an output file', exc)}\n")
-            return EXIT_STOPPED
-        where = f": {exc.filename}" if exc.filename else ""
-        sys.stderr.write(f"heliquad {args.command}: error: {exc.strerror or exc}{where}\n")
+    if isinstance(exc, InputError):              # the parser's choices come from the dialect
+        sys.stderr.write(f"{command}: error: {exc}\n")
         return EXIT_INPUT
+    if isinstance(exc, DiskFull):
+        sys.stderr.write(f"{command}: {exc}\n")
+        return EXIT_STOPPED
+    if isinstance(exc, OSError):
+        return _os_error(command, exc)
+    raise exc
+
+
+def _os_error(command: str, exc: OSError) -> int:
+    if no_room(exc):
+        sys.stderr.write(f"{command}: {DiskFull.from_os_error(exc.filename or 'an output file', exc)}\n")
+        return EXIT_STOPPED
+    where = f": {exc.filename}" if exc.filename else ""
+    if exc.errno in LINK_GONE:
+        sys.stderr.write(f"{command}: error: the board went away: {exc.strerror or exc}{where}\n")
+        return EXIT_STOPPED
+    sys.stderr.write(f"{command}: error: {exc.strerror or exc}{where}\n")
+    return EXIT_INPUT
 
 
 def entry() -> None:
@@ -107,7 +145,10 @@ def entry() -> None:
     the modules it imported: 40-60 ms once scipy's are among them) would serve nothing: every
     file heliquad writes is closed before its command returns (and the tests read every
     command's outputs through this path)."""
+    global _program
+    _program = True
     code = main()
+    settle()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

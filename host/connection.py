@@ -15,27 +15,25 @@ can send only once the other end has sent to it (or, for ``tcpin:``, connected).
 :attr:`can_send` says whether it can yet; a write before that is an :class:`InputError`
 that says so.
 
-Every failure to open is one :class:`InputError` line naming the connection; so is a link
-lost while reading or writing (``telemetry link lost: ...``).
+Every failure to open is one :class:`InputError` line naming the connection (exit 2). A
+serial device or pty is opened for this program alone (an advisory lock, as pyserial's
+``exclusive=True`` takes): a second heliquad (or any program that locks its ports) on a
+port in use is refused with one line naming the port as busy, instead of stealing bytes
+from the first (:class:`LinkLost`, exit 1). A link lost while reading or writing is a
+:class:`LinkLost` (``telemetry link lost: ...``, exit 1).
 """
 
 from __future__ import annotations
 
+import errno
 import re
 import socket
 
 import serial
 
-from .errors import InputError
+from .errors import InputError, LinkLost
 
-__all__ = ["open_connection", "NETWORK_KINDS", "CONNECTION_HELP", "LinkLost"]
-
-
-class LinkLost(InputError):
-    """The link went away while reading or writing (a board unplugged, a connection the
-    other end closed): ``telemetry link lost: ...``. An InputError for the commands that
-    have no other rule; a sweep ends on it as on a board that fell silent (exit 1, its
-    records kept)."""
+__all__ = ["open_connection", "NETWORK_KINDS", "CONNECTION_HELP"]
 
 #: The network connections: scheme -> what it does.
 NETWORK_KINDS = {"udpin": "listen for UDP", "udp": "listen for UDP (as udpin:)",
@@ -75,8 +73,13 @@ class SerialPort:
     def __init__(self, name: str, baud: int):
         self.name = name
         try:
-            self.serial = serial.Serial(name, baudrate=baud, timeout=0, write_timeout=1.0)
+            self.serial = serial.Serial(name, baudrate=baud, timeout=0, write_timeout=1.0,
+                                        exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+                raise LinkLost(f"{name} is busy: another program has it open (a second "
+                               "heliquad log, params or sweep on the same port?); stop that "
+                               "one first") from None
             raise InputError(f"cannot open {name}: {exc}") from None
 
     def read(self) -> bytes:

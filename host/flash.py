@@ -132,10 +132,13 @@ def _cmd(args) -> int:
     print("press the program button on the Teensy if it does not start by itself", flush=True)
     try:
         rc = subprocess.run(cmd).returncode
-    except KeyboardInterrupt:
-        print("heliquad flash: interrupted; the board may hold a partial image: flash again",
-              file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:             # Ctrl-C, SIGTERM, SIGHUP: the signal's code
+        from .signals import EXIT_CODES, WORDS, stopped_by
+
+        signum = stopped_by(exc)
+        print(f"heliquad flash: {WORDS[signum]}; the board may hold a partial image: flash "
+              "again", file=sys.stderr)
+        return EXIT_CODES[signum]
     except OSError as exc:
         raise InputError(f"{loader}: {exc.strerror}") from None
     if rc != 0:

@@ -24,7 +24,10 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
             progress=print) -> dict:
     """Log until ``duration_s``, Ctrl-C (or SIGTERM), the link going away or a full disk;
     returns the summary of what the log holds. ``stopped``: why the session ended early
-    (an :class:`InputError` for the link, :class:`DiskFull` for the log), else None."""
+    (an :class:`InputError` for the link, :class:`DiskFull` for the log), else None;
+    ``interrupted``: the KeyboardInterrupt (Ctrl-C, or SIGTERM / SIGHUP as
+    :class:`~heliquad.host.errors.Terminated`) that ended it, else None: the caller says so
+    and exits with its code once the summary is out."""
     from .link import HEARTBEAT_PERIOD_S, TelemetryLink
     from .tlog import TlogWriter
 
@@ -37,7 +40,7 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
     stats = {"messages": 0, "samples": 0, "lost": 0, "first_seq": None, "last_seq": None}
     t0 = time.monotonic()
     next_status, next_heartbeat = t0 + STATUS_EVERY_S, t0
-    interrupted, stopped = False, None
+    interrupted, stopped = None, None
     try:
         while duration_s is None or time.monotonic() - t0 < duration_s:
             now = time.monotonic()
@@ -54,8 +57,8 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
                          f"{stats['messages']} messages")
                 next_status = now + STATUS_EVERY_S
             time.sleep(POLL_S)
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as exc:
+        interrupted = exc
     except (InputError, DiskFull) as exc:        # the link went away; no room for the log
         stopped = exc
     finally:

@@ -32,7 +32,7 @@ import time
 
 import numpy as np
 
-from .errors import InputError
+from .errors import BoardRefused, InputError, LinkLost
 from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
@@ -54,7 +54,11 @@ MAX_NAME = 16
 #: Whole numbers a single-precision float carries exactly.
 MAX_EXACT_INT = 2**24
 FLOAT32_MAX = float(np.finfo(np.float32).max)
-MESSAGES = ("PARAM_VALUE", "STATUSTEXT")
+MESSAGES = ("PARAM_VALUE", "STATUSTEXT", "HEARTBEAT")
+#: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
+#: (firmware/core/flight_controller.cpp's streams), half a second to spare.
+ARMED_WAIT_S = 1.5
+
 #: MAV_PARAM_TYPE: the whole-number types (UINT8 .. INT64) and the real ones.
 INTEGER_TYPES = range(1, 9)
 TYPE_NAMES = {1: "UINT8", 2: "INT8", 3: "UINT16", 4: "INT16", 5: "UINT32", 6: "INT32",
@@ -78,7 +82,7 @@ class Param:
         return value_text(self.value, self.type)
 
 
-class ParamRefused(InputError):
+class ParamRefused(BoardRefused):
     """The board kept the old value of a parameter it was asked to set."""
 
     def __init__(self, name: str, asked: str, kept: str, reason: str | None):
@@ -87,8 +91,8 @@ class ParamRefused(InputError):
         super().__init__(f"the board refused {name} = {asked} and kept {kept}: {why}")
 
 
-class NoAnswer(InputError):
-    """A request went unanswered after every retry."""
+class NoAnswer(LinkLost):
+    """A request went unanswered after every retry: the board fell silent (exit 1)."""
 
 
 #: How far a written value may lie from the float32 it stands for: half the smallest
@@ -165,6 +169,7 @@ class ParamClient:
         self.progress = progress or (lambda text: None)
         self.answer_wait_s, self.retries, self.quiet_s = answer_wait_s, retries, quiet_s
         self.last_heartbeat = None
+        self.armed = None                         # as the board's last HEARTBEAT said
         self.by_index: dict[int, Param] = {}      # the list being fetched
         self.count = None                         # its length, once the board said
         self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
@@ -181,6 +186,9 @@ class ParamClient:
         for m in self.link.poll(only=MESSAGES):
             if m.get_type() == "STATUSTEXT":
                 self.texts.append(m.text)
+                continue
+            if m.get_type() == "HEARTBEAT":
+                self._heard(m)
                 continue
             p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
                       int(m.param_index))
@@ -293,6 +301,22 @@ class ParamClient:
         self._wait(lambda: self._reason(param.name) is not None, REASON_WAIT_S)
         raise ParamRefused(param.name, value_text(value, param.type), got.text(),
                            self._reason(param.name))
+
+    def _heard(self, heartbeat) -> None:
+        """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
+        on a shared network link says nothing of the board)."""
+        from ..sim.dialect import dialect
+
+        mav = dialect()
+        if heartbeat.type != mav.MAV_TYPE_GCS:
+            self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
+        """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
+        None when none came. An armed board saves a changed parameter only once disarmed."""
+        self.armed = None
+        self._wait(lambda: self.armed is not None, wait_s)
+        return self.armed
 
     def _reason(self, name: str) -> str | None:
         """The STATUSTEXT that says why a set was refused: one naming the parameter, else

@@ -33,7 +33,8 @@ from heliquad import _firmware
 from ..sim.dialect import dialect
 from ..sim.errors import FirmwareError
 from . import __version__, paper
-from .errors import DiskFull, InputError, Terminated
+from .errors import DiskFull, InputError, LinkLost
+from .signals import ABORTED_BY, stopped_by
 from .files import write_json
 from .link import INPUT_OUTPUT, reason_text
 from .gains import gains_from_params, single
@@ -259,7 +260,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         _stop_excitation(session)
         manifest["in_progress_hz"] = current          # None: during the hover, or between two
         if isinstance(exc, KeyboardInterrupt):
-            how = "terminated (SIGTERM)" if isinstance(exc, Terminated) else "interrupted (Ctrl-C)"
+            how = ABORTED_BY[stopped_by(exc)]            # Ctrl-C, SIGTERM or SIGHUP
             manifest["aborted"] = how
             _keep_manifest(out_dir, manifest, exc)
             progress(f"{how}: the excitation is stopped; the log and manifest are kept")
@@ -618,8 +619,6 @@ def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
     that goes away (the board unplugged) ends it as a board that fell silent does: with
     that status, the records kept. The bytes the link's framer skipped meanwhile (damage,
     noise) are counted in the entry's ``garbage_bytes`` where the session counts them."""
-    from .connection import LinkLost
-
     watch = ExcitationWatch(plan, f, amp, limits or Limits(), session.time_us, progress,
                             keep_rows)
     watch.redesign = redesign

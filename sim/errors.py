@@ -2,7 +2,8 @@
 
 import errno
 
-__all__ = ["InputError", "FirmwareError", "DiskFull", "NO_ROOM", "no_room"]
+__all__ = ["InputError", "FirmwareError", "DiskFull", "LinkLost", "BoardRefused", "NO_ROOM",
+           "no_room"]
 
 #: What a write that found no room fails with: the file system is full (ENOSPC), the user's
 #: quota is used up (EDQUOT), or the file reached the largest size allowed (EFBIG: the file
@@ -20,6 +21,24 @@ class InputError(ValueError):
 
     The command-line interface prints ``str(error)`` on one line and exits with code 2.
     """
+
+
+class LinkLost(InputError):
+    """The board went away or fell silent: a serial port that disappeared, a network link
+    the other end closed, requests that went unanswered after every retry; or it cannot be
+    reached, its port held by another program. Not the user's
+    input: the command-line interface prints it on one line and exits with code 1.
+
+    A subclass of :class:`InputError` so that every place that ends a run in order on a
+    problem it can name (a sweep keeps its records and marks its manifest) does so for a
+    lost link too; only the exit code differs.
+    """
+
+
+class BoardRefused(InputError):
+    """The board refused a command it understood (a parameter it keeps, a start it will
+    not make). The command-line interface prints it on one line and exits with code 1; a
+    subclass of :class:`InputError` for the same reason as :class:`LinkLost`."""
 
 
 class FirmwareError(RuntimeError):

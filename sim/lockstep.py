@@ -67,9 +67,12 @@ class HostFirmware:
 
     def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
-                 reply_timeout_s: float | None = None, params_file: str | None = None):
+                 reply_timeout_s: float | None = None, params_file: str | None = None,
+                 telemetry_backlog_bytes: int = 0):
         """``params_file``: where the firmware keeps its parameters across runs (``--params``;
-        the host build's record, the emulated Teensy's two flash sectors); default none."""
+        the host build's record, the emulated Teensy's two flash sectors); default none.
+        ``telemetry_backlog_bytes``: the most telemetry that waits for a reader, the oldest
+        dropped past it (0: unbounded, the lockstep simulator reads all; docs/link-contract.md)."""
         self.loop_hz = loop_hz
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
@@ -87,6 +90,8 @@ class HostFirmware:
                 cmd += ["--dmp-image", dmp_image]
             if params_file:                   # where the parameters persist (default: nowhere)
                 cmd += ["--params", os.path.abspath(params_file)]
+            if telemetry_backlog_bytes:
+                cmd += ["--telemetry-backlog-bytes", str(int(telemetry_backlog_bytes))]
             self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
             self._stderr = open(self.stderr_path, "w+")
             # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and

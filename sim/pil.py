@@ -331,6 +331,10 @@ class Pty:
     """A pseudo-terminal whose slave device is published as ``link_path`` (a symlink), raw,
     with our own slave descriptor kept open so the master never sees EOF between users."""
 
+    #: The most a backlog bound can be: what the line discipline holds in sight of TIOCINQ
+    #: (Linux's N_TTY_BUF_SIZE, 4096, less one), as heliquad-fw-host's.
+    MAX_BACKLOG = 4095
+
     def __init__(self, link_path: str):
         self.master, slave = os.openpty()
         self.slave = slave
@@ -343,6 +347,29 @@ class Pty:
         except FileNotFoundError:
             pass
         os.symlink(self.slave_path, link_path)
+        os.set_blocking(self.slave, False)        # read only to drop the oldest: never wait
+
+    def drop_oldest(self, queued: bytearray, limit: int) -> int:
+        """Drop the oldest bytes of what waits for a reader (in the pty, then at the front
+        of ``queued``) past ``limit``; returns how many were dropped."""
+        import fcntl
+        import termios
+
+        waiting = struct.unpack("i", fcntl.ioctl(self.slave, termios.FIONREAD, b"\0" * 4))[0]
+        excess, dropped = waiting + len(queued) - limit, 0
+        while excess > 0 and waiting > 0:
+            try:
+                data = os.read(self.slave, min(excess, waiting, 4096))
+            except BlockingIOError:
+                break
+            if not data:
+                break
+            excess, waiting, dropped = excess - len(data), waiting - len(data), dropped + len(data)
+        if excess > 0:
+            cut = min(excess, len(queued))
+            del queued[:cut]
+            dropped += cut
+        return dropped
 
     def close(self) -> None:
         try:
@@ -404,6 +431,10 @@ def parse(argv):
                    help="exit when no sensor frame arrives for this long (wall time)")
     p.add_argument("--dmp-image", help="refused: the Teensy image carries its DMP firmware "
                                        "from its build")
+    p.add_argument("--telemetry-backlog-bytes", type=int, default=0, metavar="N",
+                   help="the most telemetry that waits for a reader, the oldest dropped past "
+                        "it, as a board's USB or UART buffer (default 0: unbounded, for the "
+                        "lockstep simulator)")
     p.add_argument("--params", metavar="FILE",
                    help="keep the board's parameter flash (two 4 KiB sectors, 8 KiB) in FILE "
                         "across runs: restored before the boot, written when the image "
@@ -414,6 +445,8 @@ def parse(argv):
                f"{IMAGE_LOOP_HZ:g} Hz")
     if args.idle_timeout_s <= 0:
         _usage("--idle-timeout-s must be positive")
+    if args.telemetry_backlog_bytes < 0:
+        _usage("--telemetry-backlog-bytes must not be negative")
     if args.dmp_image:
         _usage("--dmp-image: the Teensy image carries its DMP firmware from its build "
                "(-DHQ_DMP_IMAGE=FILE); the emulated board runs what the image has")
@@ -428,9 +461,10 @@ class _DropIn:
     """The board behind the two ptys: sensor frames in, replies and telemetry out, as
     heliquad-fw-host does (docs/link-contract.md)."""
 
-    def __init__(self, board, sim, tel, idle_timeout_s: float):
+    def __init__(self, board, sim, tel, idle_timeout_s: float, backlog_bytes: int = 0):
         from .mavframe import Codec, Framer
 
+        self.backlog_bytes = min(backlog_bytes, Pty.MAX_BACKLOG)
         self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
         self.mav = mav = dialect()
         # The vehicle's ids, as the board's.
@@ -449,6 +483,8 @@ class _DropIn:
         which opens the telemetry port before it steps (opening a serial port discards what
         was already waiting), as the host build does."""
         out = self.board.telemetry_out
+        if self.backlog_bytes:
+            self.dropped += self.tel.drop_oldest(out, self.backlog_bytes)
         if out and self.frames:
             del out[:self.tel.write_some(bytes(out))]
 
@@ -561,7 +597,7 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     board, sim, tel = _open(args)
-    drop_in = _DropIn(board, sim, tel, args.idle_timeout_s)
+    drop_in = _DropIn(board, sim, tel, args.idle_timeout_s, args.telemetry_backlog_bytes)
     exit_code = 0
     try:
         exit_code = drop_in.serve()

@@ -320,12 +320,11 @@ def heliquad(*args, **kw):
 def running_board(tmp_path_factory):
     """``heliquad board``: the simulated rig in real time, its telemetry on a pty."""
     import signal
-    import subprocess
-    import sys
+
+    from tool_runs import cli
 
     port = tmp_path_factory.mktemp("board") / "rig"
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    board = cli("board", "--telemetry", port)           # Ctrl-C-able however pytest started
     try:
         assert "board running" in board.stdout.readline()
         yield port
@@ -340,16 +339,13 @@ def test_heliquad_log_records_a_board_over_the_network(running_board, kind, tmp_
     # sample between the first and the last there. Stopped with Ctrl-C once the log holds
     # a second of samples.
     import signal
-    import subprocess
-    import sys
 
     from heliquad.host.logsession import summarise_tlog
+    from tool_runs import cli
 
     relay, conn = relay_and_connection(running_board, kind)
     out = tmp_path / "net.tlog"
-    log = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "log", "--port", conn,
-                            "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                           text=True)
+    log = cli("log", "--port", conn, "--out", out)      # Ctrl-C-able however pytest started
     try:
         until(lambda: out.exists() and summarise_tlog(str(out))["samples"] >= 200
               or log.poll() is not None, "a second of samples in the log")
@@ -360,7 +356,7 @@ def test_heliquad_log_records_a_board_over_the_network(running_board, kind, tmp_
             log.kill()
             log.communicate()
         relay.close()
-    assert log.returncode == 0, stderr
+    assert log.returncode == 130 and stderr == "heliquad log: interrupted\n", stderr
     s = summarise_tlog(str(out))
     assert s["damage"] is None and s["lost"] == 0
     assert s["samples"] == s["last_seq"] - s["first_seq"] + 1 >= 200

@@ -1,5 +1,6 @@
 """Every run ends cleanly, however it ends: normally, on a terminal's Ctrl-C (SIGINT to its
-process group), on SIGTERM, or with its firmware killed (SIGKILL) under it. Each leaves its
+process group), on SIGTERM, on SIGHUP (the terminal or SSH session closed: to its process
+group), or with its firmware killed (SIGKILL) under it. Each leaves its
 records readable (a sweep's manifest with ``aborted`` set and the frequency in progress),
 no process running (this test process adopts any orphan: tool_runs.adopting_orphans) and
 nothing in its TMPDIR (the firmware's temporary folder and links).
@@ -19,7 +20,11 @@ from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir, size,
 
 import teensy_image
 
-ENDINGS = ["normal", "ctrl-c", "sigterm", "firmware killed"]
+ENDINGS = ["normal", "ctrl-c", "sigterm", "sighup", "firmware killed"]
+#: How a signal ends every command (host/cli.py): the word said and the exit code, after
+#: the same orderly stop.
+BY_SIGNAL = {"ctrl-c": ("interrupted", 130), "sigterm": ("terminated", 143),
+             "sighup": ("hung up", 129)}
 #: Log bytes that show a run under way: about 150 loops of telemetry; a sweep's 100 kB are
 #: about 4 s simulated, past its 1.2 s of boot and hover and into its first frequency.
 UNDER_WAY, SWEEP_UNDER_WAY = 20_000, 100_000
@@ -36,12 +41,24 @@ def end_run(tool, ending, log, under_way=UNDER_WAY):
     if ending == "normal":
         return
     wait_for(lambda: size(log) > under_way, "a log under way", tool.proc)
+    send(tool, ending)
+
+
+def send(tool, ending):
     if ending == "ctrl-c":
         tool.ctrl_c()
     elif ending == "sigterm":
         tool.sigterm()
+    elif ending == "sighup":
+        tool.sighup()
     else:
         os.kill(tool.firmware_pid(), signal.SIGKILL)
+
+
+def assert_signal_ending(ending, code, err):
+    """One line naming the signal, and its exit code."""
+    word, expected = BY_SIGNAL[ending]
+    assert code == expected and one_line(err).endswith(f": {word}"), (code, err)
 
 
 def assert_log_readable(path):
@@ -55,17 +72,16 @@ def test_board(ending, tmpdir_, tmp_path):
     board = Tool("board", "--telemetry", rig, "--duration-s", 1 if ending == "normal" else 600,
                  tmpdir=tmpdir_)
     assert "board running" in board.readline()
-    if ending == "ctrl-c":
-        board.ctrl_c()
-    elif ending == "sigterm":
-        board.sigterm()
-    elif ending == "firmware killed":
-        os.kill(board.firmware_pid(), signal.SIGKILL)
+    if ending != "normal":
+        send(board, ending)
     code, out, err = board.finish()
-    if ending == "firmware killed":
-        assert code == 2 and "the firmware died" in one_line(err)
-    else:
+    if ending == "firmware killed":             # the board went away: exit 1
+        assert code == 1 and "the firmware died" in one_line(err)
+    elif ending == "normal":
         assert code == 0 and "stopped after" in out and err == "", err
+    else:
+        assert_signal_ending(ending, code, err)
+        assert "stopped after" in out
     assert not os.path.lexists(rig)             # its telemetry link goes with it
     assert_nothing_left(tmpdir_)
 
@@ -86,11 +102,15 @@ def test_log(ending, tmpdir_, tmp_path):
     if ending == "firmware killed":
         assert code == 1 and "telemetry link lost" in one_line(err) and "kept" in err
         board_code, _, board_err = board.finish()
-        assert board_code == 2 and "the firmware died" in one_line(board_err)
+        assert board_code == 1 and "the firmware died" in one_line(board_err)
     else:
-        assert code == 0 and err == "" and f"wrote {out}" in stdout, err
+        if ending == "normal":
+            assert code == 0 and err == "", err
+        else:
+            assert_signal_ending(ending, code, err)
+        assert f"wrote {out}" in stdout
         board.ctrl_c()
-        assert board.finish()[0] == 0
+        assert board.finish()[0] == 130
     assert_log_readable(out)
     assert not os.path.lexists(rig)
     assert_nothing_left(tmpdir_)
@@ -105,8 +125,9 @@ def test_sil(ending, tmpdir_, tmp_path):
     sil = Tool("sil", *what, "--amplitude", 0.05, "--out", run, tmpdir=tmpdir_)
     end_run(sil, ending, f"{run}.tlog")
     code, out, err = sil.finish()
-    expected = {"normal": (0, None), "ctrl-c": (130, "interrupted"),
-                "sigterm": (143, "terminated"), "firmware killed": (2, "the firmware died")}
+    # The firmware killed is the board gone: exit 1 (the rule in host/cli.py), not 2.
+    expected = {"normal": (0, None), "firmware killed": (1, "the firmware died"),
+                **{k: (code, word) for k, (word, code) in BY_SIGNAL.items()}}
     assert code == expected[ending][0], out + err
     if code:
         assert expected[ending][1] in one_line(err)
@@ -136,11 +157,12 @@ def test_sweep_sil(ending, firmware, tmpdir_, tmp_path):
     else:
         assert not manifest["complete"] and manifest["in_progress_hz"] == 0.05
         if ending == "firmware killed":
-            assert code == 2 and "the firmware died" in one_line(err), stdout + err
+            assert code == 1 and "the firmware died" in one_line(err), stdout + err
             assert manifest["aborted"].startswith("the firmware died at frame")
         else:
-            how = "interrupted (Ctrl-C)" if ending == "ctrl-c" else "terminated (SIGTERM)"
-            assert code == 1 and manifest["aborted"] == how, stdout + err
+            how = {"ctrl-c": "interrupted (Ctrl-C)", "sigterm": "terminated (SIGTERM)",
+                   "sighup": "hung up (SIGHUP)"}[ending]
+            assert code == BY_SIGNAL[ending][1] and manifest["aborted"] == how, stdout + err
             assert f"{how}: the excitation is stopped" in stdout
     assert_log_readable(out / "sweep.tlog")
     assert_nothing_left(tmpdir_)
@@ -208,6 +230,6 @@ def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     assert manifest["aborted"].startswith("the board went away") and not manifest["complete"]
     assert manifest["frequencies"][-1]["requested_hz"] == 0.5
     assert_log_readable(out / "sweep.tlog")
-    assert board.finish()[0] == 2
+    assert board.finish()[0] == 1
     assert not os.path.lexists(rig)
     assert_nothing_left(tmpdir_)

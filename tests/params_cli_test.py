@@ -237,6 +237,19 @@ def test_a_board_that_never_answers_is_given_up_on_in_one_line():
     assert board.heartbeats >= 1
 
 
+def test_a_silent_board_ends_the_command_with_exit_1():
+    # The board fell silent: not the user's input (exit 2) but the run that could not do
+    # its job (exit 1), one line.
+    board = ParamBoard(silent=True)
+    try:
+        res = heliquad("params", "--port", board.port, "get", "ANGLE_ROLL_P")
+    finally:
+        board.close()
+    assert res.returncode == 1, res.stderr
+    assert res.stderr.startswith("heliquad params: error: no answer to reading ANGLE_ROLL_P")
+    assert res.stderr.count("\n") == 1
+
+
 # --- the command ---------------------------------------------------------------------------
 
 def test_list_get_and_set_from_the_command_line(board):
@@ -252,7 +265,8 @@ def test_list_get_and_set_from_the_command_line(board):
     res = heliquad("params", "--port", board.port, "get", "ANGLE_ROLL_P")
     assert res.stdout == "ANGLE_ROLL_P 1.5\n"
     res = heliquad("params", "--port", board.port, "set", "RATE_ROLL_I", "-1")
-    assert res.returncode == 2 and res.stderr.count("\n") == 1
+    # The board refused: exit 1, as a load with a refusal (2: wrong arguments or files).
+    assert res.returncode == 1 and res.stderr.count("\n") == 1
     assert res.stderr == ('heliquad params: error: the board refused RATE_ROLL_I = -1 and kept '
                           '0.439: it says "params: RATE_ROLL_I -1 outside 0..100"\n')
 

@@ -124,6 +124,24 @@ def wait_for(condition, what: str, proc=None, timeout_s: float = HANG_GUARD_S) -
         time.sleep(POLL_S)
 
 
+def as_foreground_job() -> None:
+    """In a child about to run a tool (``preexec_fn``): SIGINT and SIGHUP back to their
+    defaults, as a terminal's foreground job has them. A shell that runs the tests in the
+    background (``(pytest ...) &``, as a CI runner or nohup does) hands SIGINT down ignored,
+    nohup SIGHUP, and heliquad keeps a signal it was started with ignored (POSIX's way for
+    background jobs): a test's Ctrl-C would be lost."""
+    for signum in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_DFL)
+
+
+def cli(*args, **popen_kw) -> subprocess.Popen:
+    """``heliquad ARGS`` started as a terminal's foreground job (:func:`as_foreground_job`),
+    its output on pipes as text: for tests that Ctrl-C it (``send_signal(SIGINT)``)."""
+    return subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=as_foreground_job, **popen_kw)
+
+
 def size(path) -> int:
     try:
         return os.path.getsize(path)
@@ -138,9 +156,7 @@ class Tool:
 
     def __init__(self, *args, tmpdir, file_limit: int | None = None, env=None):
         def prepare():
-            # SIGINT back to its default: a shell that ran the tests in the background hands
-            # it down ignored, and the Ctrl-C would be lost.
-            signal.signal(signal.SIGINT, signal.SIG_DFL)
+            as_foreground_job()
             if file_limit is not None:
                 resource.setrlimit(resource.RLIMIT_FSIZE, (file_limit, file_limit))
                 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
@@ -174,6 +190,10 @@ class Tool:
 
     def sigterm(self) -> None:
         os.kill(self.pid, signal.SIGTERM)
+
+    def sighup(self) -> None:
+        """The terminal or SSH session closed: SIGHUP to the foreground job's group."""
+        os.killpg(self.pid, signal.SIGHUP)
 
     def finish(self, timeout_s: float = HANG_GUARD_S):
         """Wait for it to end: (exit code, stdout, stderr)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from ...sim import dialect as names
 from ..cli_args import add_firmware_argument, add_param_store_argument, check_plant, finite, number_in
-from ..errors import InputError
+from ..errors import InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
@@ -16,7 +16,10 @@ period of wall-clock time. Its telemetry port appears at --telemetry; connect an
 tool to it as to a board's serial port (any baud rate is accepted and ignored). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 Ground stations list and set its parameters (heliquad params, MAVProxy's param commands);
-with --param-store they persist in a file across runs.
+with --param-store they persist in a file across runs. The firmware saves them only while
+disarmed: on an orderly stop (Ctrl-C, SIGTERM, SIGHUP, the end of --duration-s) the
+simulated pilot disarms first, as before a power-off, and the save completes before the
+board stops; then it exits with 130, 143, 129 (or 0 for --duration-s).
 
 example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 """
@@ -61,7 +64,10 @@ def run(args) -> int:
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
                       armed=not args.disarmed)
     except FirmwareError as exc:
-        raise InputError(str(exc)) from None
+        raise LinkLost(str(exc)) from None
     print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "
-          f"fell behind real time {r['resyncs']} time(s)")
+          f"fell behind real time {r['resyncs']} time(s)"
+          + ("" if r["landed"] else "; the board did not disarm, so nothing was saved"))
+    if r["stopped_by"] is not None:              # said, and its code, by the command line
+        raise r["stopped_by"]
     return 0

@@ -15,7 +15,8 @@ HELP = """\
 Log every MAVLink message from a board's telemetry port to a .tlog (8-byte big-endian
 timestamp in us, then the packet; pymavlink reads it). The file is flushed as it goes, so
 Ctrl-C or a crash leaves a valid log; a full disk or a link that goes away ends the session
-with one line and exit 1, the log kept up to its last whole record. Lost samples are counted from the gaps in
+with one line and exit 1, the log kept up to its last whole record. Ctrl-C, SIGTERM and
+SIGHUP end it after the summary, with exit 130, 143 and 129. Lost samples are counted from the gaps in
 HQ_SYSID_SAMPLE.seq; a summary is printed at the end, and a status line every 5 s.
 
 --port takes a serial device or a network link (udpin:, udpout:, tcp:, tcpin:), as MAVProxy
@@ -51,6 +52,8 @@ def run(args) -> int:
     print(f"{r['seconds']:.1f} s: {r['messages']} messages, {r['samples']} samples"
           + (f" (seq {r['first_seq']}..{r['last_seq']})" if r["samples"] else "")
           + f", {r['lost']} lost; wrote {args.out}")
+    if r["interrupted"] is not None:             # said, and its code, by the command line
+        raise r["interrupted"]
     stopped = r["stopped"]
     if isinstance(stopped, DiskFull):
         raise stopped.also("logging stopped; the log up to here is kept")

@@ -21,6 +21,8 @@ floats; whole-number parameters (INT32) take whole numbers only.
   get NAME        one parameter
   set NAME VALUE  set it and check the board's answer; a value the board refuses (out of
                   its range, or while it flies) is one line quoting the board's reason
+                  (exit 1). The firmware saves a change only while disarmed: on an armed
+                  board the change is in force at once and saved when it disarms (said)
   save FILE       every parameter into FILE (QGroundControl's .params format, or with
                   --mavproxy MAVProxy's, which its param load reads; never over a file that
                   exists)
@@ -29,7 +31,8 @@ floats; whole-number parameters (INT32) take whole numbers only.
                   rest still set (exit 1 when any was refused)
 
 A list lost on the way is asked for again by index; every request goes again a few times
-before the board is given up on. The host's heartbeat goes out all along, as the firmware
+before the board is given up on (exit 1, as for a refusal; exit 2 is for wrong arguments
+or files). The host's heartbeat goes out all along, as the firmware
 wants. File formats: docs/file-formats.md (.params); ground stations:
 docs/ground-stations.md.
 
@@ -109,7 +112,10 @@ def _set(client, args, entries) -> int:
     param = client.get(args.name)
     got = client.set(param, args.value)
     same = " (unchanged)" if got.text() == param.text() else ""
-    print(f"{got.name}: {param.text()} -> {got.text()}{same}")
+    when = ""
+    if not same and client.is_armed():
+        when = " (in force now; the board is armed: it saves the change when it disarms)"
+    print(f"{got.name}: {param.text()} -> {got.text()}{same}{when}")
     return 0
 
 

@@ -9,7 +9,7 @@ from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_a
                         add_param_store_argument,
                         check_excitation, check_plant, faults, finite, firmware_amplitude,
                         int_in, number_in)
-from ..errors import DiskFull, InputError
+from ..errors import DiskFull, InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
@@ -104,8 +104,8 @@ def run(args) -> int:
         raise InputError("--turbulence needs --plant vehicle")
     try:
         r = run_sil(cfg, args.out)
-    except FirmwareError as exc:
-        raise InputError(str(exc)) from None
+    except FirmwareError as exc:         # the board is gone (exit 1), not the user's input
+        raise LinkLost(str(exc)) from None
     except DiskFull as exc:
         raise exc.also("the run is stopped; the log up to here is kept")
     print(f"{r.frames} frames ({r.frames / args.loop_hz:.2f} s simulated) in {r.wall_s:.2f} s "

@@ -13,8 +13,9 @@ from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_a
                         check_excitation, check_plant, faults, finite, firmware_amplitude,
                         int_in, number_in)
 from .. import design
-from ..errors import DiskFull, InputError
+from ..errors import DiskFull, InputError, LinkLost
 from ..connection import CONNECTION_HELP
+from ..signals import ABORTED_BY, EXIT_CODES
 from ..link import DEFAULT_BAUD
 from ..multisine import LINES, MAX_LINES, RIG_TIME_S
 
@@ -158,23 +159,23 @@ def run(args) -> int:
     sys.stderr.write(f"heliquad sweep: {manifest['aborted']} ({done} of "
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
-    return 1
+    # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
+    return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
 
 
 def _ended(exc, out) -> int:
     """A sweep ended by an error: the board went away (exit 1, as a silent one), or the one
     line the command line gives ``exc``, saying that the records are kept."""
     from ...sim.lockstep import FirmwareError
-    from ..connection import LinkLost
 
     kept = f"the log and manifest so far are kept in {out}"
     if isinstance(exc, DiskFull):
         raise exc.also(kept)
-    if isinstance(exc, LinkLost):
+    if isinstance(exc, (LinkLost, FirmwareError)):      # the board (or the SIL's firmware) is gone
         sys.stderr.write(f"heliquad sweep: the board went away: {exc} ({kept})\n")
         return 1
     # OSError: a write to the log failed (not for want of room)
-    if isinstance(exc, (FirmwareError, InputError, OSError)):
+    if isinstance(exc, (InputError, OSError)):
         raise InputError(f"{exc} ({kept})") from None
     raise exc
 

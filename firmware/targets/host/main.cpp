@@ -1,7 +1,11 @@
 // heliquad-fw-host: the firmware's host build, driven in lockstep by the simulator.
 //
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
-//                    [--idle-timeout-s 10] [--params FILE]
+//                    [--idle-timeout-s 10] [--params FILE] [--telemetry-backlog-bytes N]
+//
+// --telemetry-backlog-bytes N bounds what waits for a reader on the telemetry pty (default
+// 0: unbounded, for the lockstep simulator): when nobody reads, the oldest bytes are dropped,
+// as a board's USB or UART buffer holds a few KiB, not seconds (heliquad board uses it).
 //
 // Parameters (the MAVLink parameter protocol, docs/parameters.md) persist in --params FILE,
 // created at the first save; without it every start has the defaults and nothing is saved.
@@ -47,12 +51,14 @@ struct Options {
     std::string sim_link, telemetry, dmp_image, params;
     float loop_hz = 200.0f;
     int idle_timeout_s = 10;
+    long telemetry_backlog_bytes = 0;
 };
 
 [[noreturn]] void usage(const char* msg) {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
-                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10] [--params FILE]\n",
+                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10] [--params FILE] "
+                 "[--telemetry-backlog-bytes N]\n",
                  msg);
     std::exit(2);
 }
@@ -70,11 +76,13 @@ Options parse(int argc, char** argv) {
         else if (a == "--params") o.params = v;
         else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
         else if (a == "--idle-timeout-s") o.idle_timeout_s = std::atoi(v);
+        else if (a == "--telemetry-backlog-bytes") o.telemetry_backlog_bytes = std::atol(v);
         else usage(("unknown option " + a).c_str());
     }
     if (o.sim_link.empty() || o.telemetry.empty()) usage("--sim-link and --telemetry are required");
     if (!(o.loop_hz > 0.0f && o.loop_hz <= 2000.0f)) usage("--loop-hz must be in (0, 2000]");
     if (o.idle_timeout_s <= 0) usage("--idle-timeout-s must be positive");
+    if (o.telemetry_backlog_bytes < 0) usage("--telemetry-backlog-bytes must not be negative");
     return o;
 }
 
@@ -120,6 +128,7 @@ int main(int argc, char** argv) {
     static hq::PtySerial sim, telemetry;        // 64 KiB buffers each: not on the stack
     if (!sim.open(opt.sim_link)) usage(sim.error().c_str());
     if (!telemetry.open(opt.telemetry)) usage(telemetry.error().c_str());
+    telemetry.bound_backlog(static_cast<size_t>(opt.telemetry_backlog_bytes));
 
     hq::HostClock clock;
     hq::HostMotors motors;
@@ -196,8 +205,9 @@ int main(int argc, char** argv) {
     telemetry.flush();
     std::fprintf(stderr,
                  "heliquad-fw-host: %u loops, %u frames lost, %u repeated, %u telemetry bytes "
-                 "dropped\n",
-                 fc.loops(), handler.lost(), handler.repeated(), fc.telemetry_dropped());
+                 "dropped, %zu unread telemetry bytes dropped\n",
+                 fc.loops(), handler.lost(), handler.repeated(), fc.telemetry_dropped(),
+                 telemetry.discarded());
     sim.close();
     telemetry.close();
     return exit_code;

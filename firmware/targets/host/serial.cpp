@@ -6,6 +6,7 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <sys/ioctl.h>
 #include <time.h>
 #include <termios.h>
 #include <unistd.h>
@@ -36,6 +37,8 @@ bool PtySerial::open(const std::string& link_path) {
     cfmakeraw(&tio);
     tcsetattr(slave_, TCSANOW, &tio);
     fcntl(master_, F_SETFL, fcntl(master_, F_GETFL) | O_NONBLOCK);
+    // Our own slave descriptor reads only to drop the oldest bytes (drop_oldest): never wait.
+    fcntl(slave_, F_SETFL, fcntl(slave_, F_GETFL) | O_NONBLOCK);
     link_path_ = link_path;
     ::unlink(link_path.c_str());
     if (::symlink(name, link_path.c_str()) != 0) {
@@ -68,7 +71,29 @@ size_t PtySerial::write(const uint8_t* data, size_t n) {
     return n;
 }
 
+void PtySerial::drop_oldest() {
+    int waiting = 0;                          // what no reader has taken from the pty yet
+    if (::ioctl(slave_, TIOCINQ, &waiting) != 0 || waiting < 0) waiting = 0;
+    const size_t total = static_cast<size_t>(waiting) + count_;
+    if (total <= backlog_limit_) return;
+    size_t excess = total - backlog_limit_;
+    uint8_t scrap[512];
+    while (excess > 0 && waiting > 0) {       // the oldest first: those in the pty
+        const size_t want = excess < sizeof(scrap) ? excess : sizeof(scrap);
+        const ssize_t r = ::read(slave_, scrap, want);
+        if (r <= 0) break;                    // a reader took them meanwhile
+        excess -= static_cast<size_t>(r);
+        waiting -= static_cast<int>(r);
+        discarded_ += static_cast<size_t>(r);
+    }
+    if (excess > count_) excess = count_;     // then the front of this buffer
+    head_ = (head_ + excess) % kBufferSize;
+    count_ -= excess;
+    discarded_ += excess;
+}
+
 bool PtySerial::flush() {
+    if (backlog_limit_ > 0) drop_oldest();
     while (count_ > 0) {
         const size_t chunk = head_ + count_ <= kBufferSize ? count_ : kBufferSize - head_;
         const ssize_t w = ::write(master_, buf_ + head_, chunk);

@@ -27,7 +27,18 @@ public:
     size_t write(const uint8_t* data, size_t n) override;
 
     // Push buffered bytes to the pty without blocking. Returns false if the pty failed.
+    // With a backlog bound (bound_backlog), the oldest bytes go first when no reader keeps up.
     bool flush();
+    // Bound what waits for a reader (in the pty and in this buffer together) to `bytes`, as
+    // a board's USB or UART buffer is bounded: when nobody reads, the oldest bytes are
+    // dropped, so a reader that opens late gets at most `bytes` of the past, then the
+    // present. 0 (the default): unbounded, for the lockstep simulator, which reads every
+    // loop's telemetry however far it runs ahead of real time. At most kMaxBacklog, what the
+    // pty's line discipline holds in sight of TIOCINQ.
+    void bound_backlog(size_t bytes) { backlog_limit_ = bytes < kMaxBacklog ? bytes : kMaxBacklog; }
+    static constexpr size_t kMaxBacklog = 4095;   // Linux N_TTY_BUF_SIZE (4096), less one
+    // Bytes dropped by the backlog bound so far.
+    size_t discarded() const { return discarded_; }
     size_t buffered() const { return count_; }
     // Block until input arrives here or timeout_us passes; false on timeout. `also`, if
     // given, is polled in the same call and told whether it has input (see read()).
@@ -47,6 +58,8 @@ private:
     bool maybe_input_ = true;     // false: the last poll found nothing, read() skips the call
     uint8_t buf_[kBufferSize];
     size_t head_ = 0, count_ = 0;
+    size_t backlog_limit_ = 0, discarded_ = 0;
+    void drop_oldest();
 };
 
 }  // namespace hq
