@@ -44,9 +44,9 @@ LOW_COHERENCE = 0.6
 #: change a controller designed on the model. Loops are designed to margins of 6 dB and
 #: 45 deg (MIL-F-9490D's, the usual requirement); 1 dB moves the gain margin by a sixth and
 #: 5 deg the phase margin by a ninth, what a designer's own guard on them absorbs, and
-#: CIFER's cost weighs 1 dB about like 7.6 deg, so the two are of a size. The project's bar
-#: since issue 5 (the demo's models are within 0.06-0.22 dB and 1.2-1.9 deg); a model several
-#: dB or tens of degrees off is flagged.
+#: CIFER's cost weighs 1 dB about like 7.6 deg, so the two are of a size. The same bar the
+#: demo's test holds its models to (they are within 0.06-0.22 dB and 1.2-1.9 deg); a model
+#: several dB or tens of degrees off is flagged.
 ACCURACY_DB, ACCURACY_DEG = 1.0, 5.0
 #: Points' sigmas (median, relative to their magnitude) below this are round-off, not noise:
 #: telemetry's single-precision floats resolve 6e-8 of a value, and a noise-free simulation

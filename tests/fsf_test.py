@@ -339,7 +339,7 @@ def test_a_multisine_s_bad_lines_or_period_are_refused(period, orders, match):
         estimate_multisine(u, u, FS_HZ, period, orders)
 
 
-# --- Records with samples lost on the link (issue 27, item 11) -----------------------------
+# --- Records with samples lost on the link -----------------------------------------------
 
 def lose(n, share, seed, keep_first_period=0):
     """A mask of the samples that arrived: each lost with probability ``share``."""

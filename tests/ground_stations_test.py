@@ -24,6 +24,7 @@ import pytest
 from heliquad.sim.dialect import dialect
 
 from private_pymavlink import private_pymavlink
+from tool_runs import cli
 
 MAV = dialect()
 #: A guard against a hang, never a measure: clients and the board on a loaded machine.
@@ -75,10 +76,9 @@ class Board:
 
     def __init__(self, tmp_path, *extra):
         self.port = str(tmp_path / "board")
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry", self.port,
-             "--param-store", str(tmp_path / "store.bin"), *extra],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # Ctrl-C-able however pytest was started (tool_runs.cli: SIGINT at its default).
+        self.proc = cli("board", "--telemetry", self.port,
+                        "--param-store", tmp_path / "store.bin", *extra)
         line = self.proc.stdout.readline()
         assert "board running" in line, self.proc.stderr.read()
         self.device = os.path.realpath(self.port)

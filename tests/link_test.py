@@ -319,18 +319,10 @@ def heliquad(*args, **kw):
 @pytest.fixture(scope="module")
 def running_board(tmp_path_factory):
     """``heliquad board``: the simulated rig in real time, its telemetry on a pty."""
-    import signal
+    import tool_runs
 
-    from tool_runs import cli
-
-    port = tmp_path_factory.mktemp("board") / "rig"
-    board = cli("board", "--telemetry", port)           # Ctrl-C-able however pytest started
-    try:
-        assert "board running" in board.stdout.readline()
+    with tool_runs.running_board(tmp_path_factory.mktemp("board")) as port:
         yield port
-    finally:
-        board.send_signal(signal.SIGINT)
-        board.communicate(timeout=30)
 
 
 @pytest.mark.parametrize("kind", ["udpout", "udpin", "tcp"])

@@ -1,13 +1,11 @@
-"""Sweeps through links that lose or damage data (issue 27, items 11 and 15): a relay between
+"""Sweeps through links that lose or damage data: a relay between
 ``heliquad board`` and ``heliquad sweep --port`` that corrupts bytes or drops whole packets,
 each with a seeded random pattern (the same damage to the same stream every time; where the
 excitation falls in the stream is the only thing timing changes, and no assertion depends on
 it), and guard timeouts far beyond what a run takes."""
 
-import contextlib
 import json
 import os
-import signal
 import subprocess
 import sys
 import threading
@@ -15,6 +13,8 @@ import tty
 
 import numpy as np
 import pytest
+
+from tool_runs import running_board
 
 #: A roll sweep short enough for the suite: three of the band's frequencies, six measured
 #: cycles each (about 11 s of excitation in real time).
@@ -28,20 +28,6 @@ DROP_PACKET_RATE = 0.02
 def heliquad(*args, timeout=600):
     return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout)
-
-
-@contextlib.contextmanager
-def running_board(tmp_path):
-    """``heliquad board``: the roll rig in real time, its telemetry on a pty (the path)."""
-    port = tmp_path / "rig"
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port)], stdout=subprocess.PIPE, text=True)
-    try:
-        assert "board running" in board.stdout.readline()
-        yield port
-    finally:
-        board.send_signal(signal.SIGINT)
-        board.communicate(timeout=30)
 
 
 class DamagingRelay:

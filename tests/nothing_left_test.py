@@ -215,7 +215,7 @@ def test_a_firmware_stop_interrupted_still_stops_it_and_removes_its_links(tmp_pa
 def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     # The board's firmware killed under a sweep over its port: the sweep ends with one
     # line, its manifest says why and at which frequency, its log is kept. The board went
-    # away: exit 1, as for one that fell silent (issue 27's rule).
+    # away: exit 1, as for one that fell silent (host/cli.py's rule).
     rig, out = tmp_path / "rig", tmp_path / "sweep"
     board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
     assert "board running" in board.readline()

@@ -373,7 +373,7 @@ def test_a_bad_line_is_one_error_naming_file_and_line(tmp_path, text, says):
     assert "\n" not in str(raised.value)
 
 
-# --- the digits a file holds (issue 27, item 6) --------------------------------------------
+# --- the digits a file holds --------------------------------------------------------------
 
 #: pymavlink's mavparm (MAVProxy's `param load`) treats a file value within this of the value
 #: it holds as unchanged (MAVParmDict.mindelta, absolute, compared in double).

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import os
+import pathlib
 import resource
 import signal
 import subprocess
@@ -140,6 +141,21 @@ def cli(*args, **popen_kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=as_foreground_job, **popen_kw)
+
+
+@contextlib.contextmanager
+def running_board(folder, *args):
+    """``heliquad board ARGS`` (the roll rig in real time) as a foreground job, its telemetry
+    on the pty ``folder``/rig (the path yielded); stopped with Ctrl-C, however pytest was
+    started."""
+    port = pathlib.Path(folder) / "rig"
+    board = cli("board", "--telemetry", port, *args)
+    try:
+        assert "board running" in board.stdout.readline()
+        yield port
+    finally:
+        board.send_signal(signal.SIGINT)
+        board.communicate(timeout=HANG_GUARD_S)
 
 
 def size(path) -> int:
