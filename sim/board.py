@@ -45,7 +45,8 @@ DISARM_WAIT_S = 1.0
 def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
-              params_file: str | None = None, armed: bool = True) -> dict:
+              params_file: str | None = None, armed: bool = True,
+              backlog_bytes: int = TELEMETRY_BACKLOG_BYTES) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
     (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
@@ -53,7 +54,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
     whatever waits for it). ``params_file``: where the firmware keeps its parameters
     (default: nowhere; every start has the defaults). ``armed=False``: the pilot leaves the
     arm switch and the throttle low (a ground station then sees a disarmed vehicle, whose
-    every parameter may change)."""
+    every parameter may change). ``backlog_bytes``: the most telemetry that waits for a
+    reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -61,7 +63,7 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
     run = {"frames": 0, "resyncs": 0, "stopped_by": None, "landed": False}
     fw = start_firmware(firmware, loop_hz=loop_hz, dmp_image=dmp_image,
                         telemetry_path=os.path.abspath(telemetry_path), params_file=params_file,
-                        telemetry_backlog_bytes=TELEMETRY_BACKLOG_BYTES)
+                        telemetry_backlog_bytes=backlog_bytes)
     try:
         link = SimLink(fw)
         try:

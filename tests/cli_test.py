@@ -292,3 +292,12 @@ def test_fit_of_points_with_extreme_sigmas_is_a_model_or_one_line(order, code, t
     assert res.returncode == code
     assert res.stderr == "" if code == 0 else \
         res.stderr.count("\n") == 1 and "no fit could be started" in res.stderr, res.stderr
+
+
+def test_the_boards_backlog_option_and_the_simulator_agree_on_its_bound():
+    # heliquad board --backlog-bytes: the parser's default and largest value (kept out of the
+    # simulator's import for the command line's start-up) is the simulator's bound.
+    from heliquad.host.commands.board import MAX_BACKLOG_BYTES
+    from heliquad.sim.board import TELEMETRY_BACKLOG_BYTES
+
+    assert MAX_BACKLOG_BYTES == TELEMETRY_BACKLOG_BYTES

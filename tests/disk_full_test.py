@@ -48,7 +48,10 @@ def assert_disk_full(code, err, path):
 @pytest.fixture
 def board(tmpdir_, tmp_path):
     rig = tmp_path / "rig"
-    board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
+    # All its telemetry kept for the reader (a stalled one would lose some past the default
+    # bound): the log's every sample is asserted.
+    board = Tool("board", "--telemetry", rig, "--duration-s", 600, "--backlog-bytes", 0,
+                 tmpdir=tmpdir_)
     assert "board running" in board.readline()
     yield board, rig
     board.ctrl_c()

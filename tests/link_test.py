@@ -321,7 +321,8 @@ def running_board(tmp_path_factory):
     """``heliquad board``: the simulated rig in real time, its telemetry on a pty."""
     import tool_runs
 
-    with tool_runs.running_board(tmp_path_factory.mktemp("board")) as port:
+    # All its telemetry kept for the reader: a log's every sample is asserted.
+    with tool_runs.running_board(tmp_path_factory.mktemp("board"), "--backlog-bytes", 0) as port:
         yield port
 
 

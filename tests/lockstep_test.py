@@ -242,7 +242,8 @@ def test_free_running_board_streams_telemetry_in_real_time(firmware, tmp_path):
         env["HQ_TEENSY35_ELF"] = image_for(firmware)["firmware_image"]
     launched = time.monotonic()
     proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                             str(port), "--duration-s", "30", "--firmware", firmware],
+                             str(port), "--duration-s", "30", "--firmware", firmware,
+                             "--backlog-bytes", "0"],          # every sample: no gap asserted
                             stdout=subprocess.PIPE, text=True, env=env,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:

@@ -18,8 +18,11 @@ def session(tmp_path_factory):
     """A 4 s logging session from a free-running simulated board."""
     folder = tmp_path_factory.mktemp("log")
     port, out = folder / "rig", folder / "session.tlog"
+    # All its telemetry kept for the reader (--backlog-bytes 0): "0 lost" is asserted, and a
+    # reader a loaded machine stalls would lose some past the default bound.
     board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port), "--duration-s", "7"], stdout=subprocess.PIPE, text=True)
+                              str(port), "--duration-s", "7", "--backlog-bytes", "0"],
+                             stdout=subprocess.PIPE, text=True)
     try:
         assert "board running" in board.stdout.readline()
         res = heliquad("log", "--port", port, "--out", out, "--duration-s", 4)

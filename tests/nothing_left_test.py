@@ -61,6 +61,11 @@ def assert_signal_ending(ending, code, err):
     assert code == expected and one_line(err).endswith(f": {word}"), (code, err)
 
 
+#: The board keeps all its telemetry for its reader (--backlog-bytes 0): a log's every sample
+#: is asserted, and a reader a loaded machine stalls would lose some past the default bound.
+KEEP_ALL = ("--backlog-bytes", 0)
+
+
 def assert_log_readable(path):
     s = summarise_tlog(str(path))
     assert s["samples"] > 0 and s["damage"] is None and s["lost"] == 0, s
@@ -70,7 +75,7 @@ def assert_log_readable(path):
 def test_board(ending, tmpdir_, tmp_path):
     rig = tmp_path / "rig"
     board = Tool("board", "--telemetry", rig, "--duration-s", 1 if ending == "normal" else 600,
-                 tmpdir=tmpdir_)
+                 *KEEP_ALL, tmpdir=tmpdir_)
     assert "board running" in board.readline()
     if ending != "normal":
         send(board, ending)
@@ -89,7 +94,7 @@ def test_board(ending, tmpdir_, tmp_path):
 @pytest.mark.parametrize("ending", ENDINGS)
 def test_log(ending, tmpdir_, tmp_path):
     rig, out = tmp_path / "rig", tmp_path / "flight.tlog"
-    board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
+    board = Tool("board", "--telemetry", rig, "--duration-s", 600, *KEEP_ALL, tmpdir=tmpdir_)
     assert "board running" in board.readline()
     log = Tool("log", "--port", rig, "--out", out,
                *(["--duration-s", 1] if ending == "normal" else []), tmpdir=tmpdir_)
@@ -217,7 +222,7 @@ def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     # line, its manifest says why and at which frequency, its log is kept. The board went
     # away: exit 1, as for one that fell silent (host/cli.py's rule).
     rig, out = tmp_path / "rig", tmp_path / "sweep"
-    board = Tool("board", "--telemetry", rig, "--duration-s", 600, tmpdir=tmpdir_)
+    board = Tool("board", "--telemetry", rig, "--duration-s", 600, *KEEP_ALL, tmpdir=tmpdir_)
     assert "board running" in board.readline()
     sweep = Tool("sweep", "--axis", "roll", "--port", rig, "--freqs-hz", 0.5, "--cycles", 10,
                  "--out", out, tmpdir=tmpdir_)

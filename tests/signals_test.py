@@ -142,7 +142,8 @@ def test_a_second_program_on_a_port_in_use_is_refused_and_the_first_loses_nothin
     from heliquad.host.logsession import summarise_tlog
 
     rig, out = tmp_path / "rig", tmp_path / "flight.tlog"
-    board = Tool("board", "--telemetry", rig, tmpdir=tmpdir_)
+    # All its telemetry kept for the reader: the first log's every sample is asserted.
+    board = Tool("board", "--telemetry", rig, "--backlog-bytes", 0, tmpdir=tmpdir_)
     assert "board running" in board.readline()
     log = Tool("log", "--port", rig, "--out", out, tmpdir=tmpdir_)
     assert "logging" in log.readline()

@@ -77,8 +77,10 @@ def test_sil_sweep_and_identify_recover_the_papers_models(axis, tmp_path):
 @contextlib.contextmanager
 def running_board(port, duration_s):
     """``heliquad board`` publishing its telemetry at ``port`` (the Popen), stopped at the end."""
+    # All its telemetry kept for the reader (--backlog-bytes 0): no lost sample is asserted,
+    # and a reader a loaded machine stalls would lose some past the default bound.
     board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
-                              str(port), "--duration-s", str(duration_s)],
+                              str(port), "--duration-s", str(duration_s), "--backlog-bytes", "0"],
                              stdout=subprocess.PIPE, text=True)
     try:
         assert "board running" in board.stdout.readline()

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 
 from ...sim import dialect as names
-from ..cli_args import add_firmware_argument, add_param_store_argument, check_plant, finite, number_in
+from ..cli_args import (add_firmware_argument, add_param_store_argument, check_plant, finite,
+                        int_in, number_in)
 from ..errors import InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
+
+#: The board's default and largest telemetry backlog: sim/board.py's TELEMETRY_BACKLOG_BYTES
+#: (written here too so that the parser does not import the simulator; tests/cli_test.py
+#: holds the two equal).
+MAX_BACKLOG_BYTES = 4095
 
 HELP = """\
 Run the simulated rig in real time as if it were a board on a serial port: the host
@@ -41,6 +47,12 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--disarmed", action="store_true",
                    help="the pilot leaves the arm switch and throttle low (default: armed, "
                         "hovering)")
+    p.add_argument("--backlog-bytes", type=int_in(0, MAX_BACKLOG_BYTES), metavar="N",
+                   help="the most telemetry that waits for a reader, the oldest dropped past "
+                        "it, as a board's USB or UART buffer holds a few KiB (default "
+                        f"{MAX_BACKLOG_BYTES}, the most the pty shows: a tool that opens the "
+                        "port late reads about 0.2 s of the past, and one that stalls longer "
+                        "loses samples); 0 keeps all of it, however late the reader")
     p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
@@ -62,7 +74,8 @@ def run(args) -> int:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
-                      armed=not args.disarmed)
+                      armed=not args.disarmed,
+                      **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None
     print(f"stopped after {r['frames']} frames ({r['frames'] / args.loop_hz:.1f} s); "
