@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 import time
 
 import numpy as np

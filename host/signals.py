@@ -37,7 +37,8 @@ _ignored_at_start: set = set()
 def _command() -> str:
     """`` COMMAND`` when the command line names one, for the one line said."""
     words = [a for a in sys.argv[1:] if not a.startswith("-")]
-    return f" {words[0]}" if words and words[0].isidentifier() else ""
+    # A command's name: letters and dashes (mavlink-dialect), nothing a user typed to confuse.
+    return f" {words[0]}" if words and words[0].replace("-", "_").isidentifier() else ""
 
 
 def _ended_at_start(signum, frame) -> None:

@@ -64,7 +64,7 @@ SAMPLE_TIMEOUT_S = 2.0
 #: Samples lost on the link (telemetry radios drop packets; a damaged packet fails its CRC)
 #: are left out of the estimate (host/fsf.py: the excitation repeats every period, and least
 #: squares needs no sample it did not get). A frequency ends the sweep only when it lost
-#: more than this share of its measured samples (its sigma grows by 1/(1 - share)) ...
+#: more than this share of its measured samples (its sigma grows by 1/sqrt(1 - share)) ...
 MAX_LOST_SHARE = 0.05
 #: ... or more than this many in a row (0.25 s at 200 Hz): a link dropping out, not a packet
 #: lost now and then (at 2 % independent loss a run of 5 happens once in 3e8 samples).

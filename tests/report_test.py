@@ -321,7 +321,7 @@ def test_demo_identifies_the_vehicle_within_a_dB_and_5_degrees(tmp_path):
     db, deg = map(float, re.search(r"error ([\d.]+) dB, ([\d.]+) deg", res.stdout).groups())
     assert db < 1.0 and deg < 5.0
     assert (out / "report.html").exists() and (out / "roll" / "validation.png").exists()
-    # Issue 27: its report opens with the axis's summary and raises no quality flag.
+    # Its report opens with the axis's summary and raises no quality flag.
     page = (out / "report.html").read_text()
     assert not quality_flags(page), quality_flags(page)
     _, error, verdict, _ = summary_rows(page)["roll"]
@@ -378,3 +378,16 @@ def test_a_model_of_too_low_an_order_is_flagged_off_the_truth(session, tmp_path)
     assert any(f.startswith("roll: the recommended model fits its points poorly") for f in flags)
     truth = json.loads((copy / "models.json").read_text())["sil_truth"]
     assert truth["model_worst_db"] > 3 and truth["model_worst_deg"] > 30
+
+
+@pytest.mark.parametrize("n_points", [1, 2, 5, 15, 40])
+def test_the_honest_sigma_bound_is_the_99_percent_point_of_its_chi_square(n_points):
+    # RMS error/sigma of n complex points whose sigma is honest: sqrt(chi2(2n) / 2n). The
+    # bound the report reads "about 1" under is its 99 % point (15 points: 1.30, where a
+    # fixed 2 let sigmas understated by half pass).
+    from scipy.stats import chi2
+
+    from heliquad.host.report import honest_sigma_bound
+
+    exact = (chi2.ppf(0.99, 2 * n_points) / (2 * n_points)) ** 0.5
+    assert honest_sigma_bound(n_points) == pytest.approx(exact, rel=5e-3)   # the approximation

@@ -16,7 +16,8 @@ import time
 
 import pytest
 
-from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir, size, wait_for
+from tool_runs import (Tool, as_foreground_job, assert_nothing_left, one_line, private_tmpdir,
+                       size, wait_for)
 
 #: A console script as pip writes it (``from heliquad.host.program import entry; entry()``),
 #: that sends itself SIGINT as the interpreter starts importing the module named first on
@@ -43,8 +44,7 @@ def tmpdir_(tmp_path):
         yield tmp
 
 
-def _foreground():
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+_foreground = as_foreground_job
 
 
 # Where a Ctrl-C can land while `heliquad params` starts: the command line's own modules
@@ -58,6 +58,14 @@ def test_a_ctrl_c_while_the_program_imports_is_one_line_and_130(target, tmp_path
                           tmp_path / "no-board", "list"], capture_output=True, text=True,
                          timeout=120, preexec_fn=_foreground)
     assert (res.returncode, res.stderr) == (130, "heliquad params: interrupted\n"), res.stderr
+
+
+def test_a_ctrl_c_at_start_names_a_command_with_a_dash(tmp_path):
+    res = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT, "argparse", "mavlink-dialect",
+                          "--out", tmp_path / "d"], capture_output=True, text=True, timeout=120,
+                         preexec_fn=_foreground)
+    assert (res.returncode, res.stderr) == (130, "heliquad mavlink-dialect: interrupted\n")
+    assert not (tmp_path / "d").exists()
 
 
 def test_the_console_script_is_the_program_module():
