@@ -132,11 +132,17 @@ def _os_error(command: str, exc: OSError) -> int:
         sys.stderr.write(f"{command}: {DiskFull.from_os_error(exc.filename or 'an output file', exc)}\n")
         return EXIT_STOPPED
     where = f": {exc.filename}" if exc.filename else ""
-    if exc.errno in LINK_GONE:
+    if exc.errno in LINK_GONE and _not_a_file(exc.filename):
         sys.stderr.write(f"{command}: error: the board went away: {exc.strerror or exc}{where}\n")
         return EXIT_STOPPED
     sys.stderr.write(f"{command}: error: {exc.strerror or exc}{where}\n")
     return EXIT_INPUT
+
+
+def _not_a_file(filename) -> bool:
+    """Whether an OSError's file is a device or none (a socket, a port): an EIO from a user's
+    file on a failing disk is that file's problem, not a board gone."""
+    return not filename or os.path.realpath(os.fsdecode(filename)).startswith("/dev/")
 
 
 def entry() -> None:

@@ -238,6 +238,7 @@ def _drain(fd: int, quiet_s: float = 0.5) -> int:
     ("OSError(errno.ENXIO, 'No such device or address', '/dev/ttyACM0')", 1),
     ("InputError('--freq-hz must be positive')", 2),
     ("OSError(errno.EACCES, 'Permission denied', 'out.csv')", 2),
+    ("OSError(errno.EIO, 'Input/output error', 'points.csv')", 2),   # a failing disk's file
     ("KeyboardInterrupt()", 130), ("Terminated()", 143), ("HungUp()", 129),
 ])
 def test_one_rule_turns_every_ending_into_its_exit_code(exc, code, capsys):
