@@ -248,6 +248,10 @@ def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     ("RATE_RLL_KC", float("nan"), "RATE_RLL_KC out of range 0.01..50"),
     ("ESC2_MIN", 1050.5, "ESC2_MIN takes whole numbers only"),
     ("ESC2_MIN", 1300, "ESC2_MIN out of range 800..1100"),
+    ("RATE_RLL_KC", float("inf"), "RATE_RLL_KC out of range 0.01..50"),
+    ("RATE_RLL_IMAX", 1e-40, "RATE_RLL_IMAX out of range 0..1"),         # a denormal
+    ("RATE_RLL_TI", 5e-4, "RATE_RLL_TI is 0 (off) or at least 0.001"),
+    ("ANG_PIT_TD", 1e-30, "ANG_PIT_TD is 0 (off) or at least 0.001"),
 ])
 def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
     before = client.fetch()[name]
@@ -703,3 +707,113 @@ def test_heliquad_params_against_the_simulated_board(tmp_path):
     finally:
         board.send_signal(signal.SIGINT)
         board.communicate(timeout=60)
+
+
+# --- the type a set names, and the time constants' floor ----------------------------------
+
+INTEGER_TYPES = {  # MAV_PARAM_TYPE: struct format, range
+    "UINT8": ("<B", 0, 2 ** 8 - 1), "INT8": ("<b", -2 ** 7, 2 ** 7 - 1),
+    "UINT16": ("<H", 0, 2 ** 16 - 1), "INT16": ("<h", -2 ** 15, 2 ** 15 - 1),
+    "UINT32": ("<I", 0, 2 ** 32 - 1), "INT32": ("<i", -2 ** 31, 2 ** 31 - 1)}
+
+
+def _bytewise(value, fmt, size, sign_extend):
+    """The float a byte-wise encoder sends: the narrow value's bytes, the rest zero (a
+    zeroed union) or, for a signed type, its sign extension."""
+    import struct
+    low = struct.pack(fmt, value)
+    pad = b"\xff" if sign_extend and value < 0 else b"\x00"
+    return struct.unpack("<f", low + pad * (4 - size))[0]
+
+
+def test_every_integer_type_in_either_encoding_reads_every_value_of_every_integer_parameter():
+    """The firmware's decoder, for every integer parameter, every value of its range, every
+    integer type that holds it, byte-wise (zero- or sign-extended) and C-cast: the value.
+    Truncating a C-cast float's bits to 8 or 16 bits read 1.0 as UINT8 and 255.0 as INT16
+    as 0, which is in range (IMU_PATH, MAV_GCS_SYSID's pin silently removed)."""
+    import struct
+    checked = 0
+    for index, (name, lo, hi, _, integer) in enumerate(PARAMS):
+        if not integer:
+            continue
+        for tname, (fmt, tlo, thi) in INTEGER_TYPES.items():
+            kind = getattr(MAV, "MAV_PARAM_TYPE_" + tname)
+            size = struct.calcsize(fmt)
+            for v in range(max(int(lo), tlo), min(int(hi), thi) + 1):
+                for raw in {_bytewise(v, fmt, size, False), _bytewise(v, fmt, size, True),
+                            float(v)}:
+                    got = _firmware.decode_param_value(index, raw, kind)
+                    assert got == v, (name, tname, v, raw, got)
+                    checked += 1
+    assert checked > 5000
+
+
+def test_a_set_of_a_real_parameter_typed_as_an_integer_is_refused_and_the_motors_run_on(client):
+    """An INT32-typed set of RATE_RLL_TI = 1 carried the float whose bits are 1 (1.4e-45):
+    taken, the PID went NaN and the failsafe cut the motors in flight. Now the type is
+    refused (PARAM_ERROR, STATUSTEXT, the unchanged value) and the vehicle flies on."""
+    for name in ("RATE_RLL_TI", "RATE_RLL_KC"):
+        assert _firmware.decode_param_value(NAMES.index(name), encode_value(1, INT32), INT32) \
+            is None
+        assert _firmware.decode_param_value(NAMES.index(name), 1.0, REAL32) == 1.0
+    before = client.fetch()["RATE_RLL_TI"].param_value
+    client.heartbeat()
+    client.hover()
+    m, after = _set_raw(client, "RATE_RLL_TI", encode_value(1, INT32), INT32, frames=100)
+    assert m.param_value == before and m.param_type == REAL32
+    assert any(x.get_type() == "STATUSTEXT" and x.text == "RATE_RLL_TI sent with the wrong type"
+               for x in after)
+    if hasattr(MAV, "MAVLINK_MSG_ID_PARAM_ERROR"):
+        errors = [x for x in after if x.get_type() == "PARAM_ERROR"]
+        assert errors and errors[0].param_id == "RATE_RLL_TI"
+        assert errors[0].error == getattr(MAV, "MAV_PARAM_ERROR_TYPE_MISMATCH",
+                                          MAV.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE)
+    assert not [x for x in after if x.get_type() == "STATUSTEXT" and "non-finite" in x.text]
+    samples = [x for x in after if x.get_type() == "HQ_SYSID_SAMPLE"]
+    assert samples and all(s.armed for s in samples)
+    m, _ = client.set("RATE_RLL_TI", 0.0)                            # 0: off, taken armed
+    assert m.param_value == 0.0
+
+
+@pytest.mark.parametrize("name, raw, kind, want", [
+    ("IMU_PATH", 1.0, "UINT8", 1), ("MAV_GCS_SYSID", 255.0, "INT16", 255),
+    ("MAV_GCS_SYSID", 200.0, "UINT8", 200)])
+def test_a_c_cast_set_of_a_narrow_type_is_read_as_the_number(client, name, raw, kind, want):
+    m, after = _set_raw(client, name, raw, getattr(MAV, "MAV_PARAM_TYPE_" + kind))
+    assert decode_value(m.param_value, m.param_type) == want
+    assert not _refusals(after, name)
+
+
+def test_a_station_mav_gcs_sysid_excludes_can_neither_stay_alive_nor_excite(client):
+    """The mavutil client is system 255. It heartbeats, MAV_GCS_SYSID becomes 200, the pilot
+    arms, and 255 sends an arm command every 0.5 s for 5 s (the host timeout is 1.5 s): each
+    is refused, and so is its excitation (it was accepted: a command kept the slot alive)."""
+    client.heartbeat()
+    client.step(2)
+    m, _ = client.set("MAV_GCS_SYSID", 200)
+    assert m.param_value == encode_value(200, INT32) or m.param_value == 200.0
+    client.hover()
+    for _ in range(10):
+        ack = client.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        assert ack.result == MAV.MAV_RESULT_DENIED and ack.result_param2 == MAV.HQ_REASON_NO_HOST
+        client.step(100)
+    client.sent()
+    client.mav.hq_excitation_send(1, 1, MAV.HQ_EXCITATION_START, MAV.HQ_AXIS_ROLL,
+                                  MAV.HQ_INJECTION_MIXER, 2.0, 0.05, 20, 1)
+    status = client.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS")
+    assert not status.accepted and status.reason == MAV.HQ_REASON_NO_HOST
+
+
+def test_the_pre_arm_bit_says_not_armable_without_a_live_ground_station(client):
+    """Switch high (no edge), throttle low, IMU fresh: only the host is missing, and a
+    command would be refused NO_HOST, so the pre-arm bit is not healthy; with the station's
+    heartbeat it is."""
+    prearm = MAV.MAV_SYS_STATUS_PREARM_CHECK
+    client.rc[4] = ARM_HIGH
+    client.step(420)
+    assert not client.of_type("SYS_STATUS")[-1].onboard_control_sensors_health & prearm
+    for _ in range(5):
+        client.heartbeat()
+        client.step(50)
+    assert client.of_type("SYS_STATUS")[-1].onboard_control_sensors_health & prearm
+    assert not client.of_type("HQ_SYSID_SAMPLE")[-1].armed

@@ -165,3 +165,22 @@ def test_rate_loop_holds_a_rate_on_a_toy_plant():
         cmd = ctl.update(sp, fw.Vec3(*p), DT).to_list()
         p = [pk + DT * (2 * ck - pk) for pk, ck in zip(p, cmd)]
     assert p == pytest.approx([0.5, -0.3, 0.2], abs=1e-3)
+
+
+@pytest.mark.parametrize("tau_i", [1.4e-45, 1e-38, 5e-4])
+def test_an_integral_time_below_the_floor_never_makes_the_output_non_finite(tau_i):
+    """Defence in depth behind the parameters' floor (0 or at least 1 ms): a tau_I below
+    fw.MIN_TIME_CONSTANT_S (a denormal: 1.4e-45 is the INT32 1 read as a float) turns the
+    integral off instead of dividing by it; Kc dt / (2 tau_I) would be infinite and the
+    output NaN from the first zero error on."""
+    assert fw.MIN_TIME_CONSTANT_S == pytest.approx(1e-3)
+    pid = fw.Pid(gains(2.422, tau_i, 0.051))
+    for k in range(200):
+        setpoint = 0.0 if k < 50 else 0.1
+        out = pid.update(setpoint, 0.02 * math.sin(0.1 * k), DT)
+        assert math.isfinite(out) and math.isfinite(pid.i_term), (k, out)
+    assert pid.i_term == 0.0
+    below, pd = fw.Pid(gains(2.422, tau_i, 0.051)), fw.Pid(gains(2.422, 0.0, 0.051))
+    for k in range(50):                                  # exactly the PD (tau_I = 0: off)
+        y = 0.02 * math.sin(0.1 * k)
+        assert below.update(0.1, y, DT) == pd.update(0.1, y, DT)

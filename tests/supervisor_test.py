@@ -71,6 +71,7 @@ class Bench:
 ])
 def test_arming_by_command_needs_a_live_rc_link_the_switch_high_and_the_throttle_low(channels, why):
     b = Bench()
+    b.heartbeat()
     b.step(4)
     assert b.sup.arm_command(channels, b.t) == reason(why)
     assert not b.sup.armed and b.sup.counters.arm_refused == 1
@@ -80,6 +81,7 @@ def test_arming_by_command_needs_a_live_rc_link_the_switch_high_and_the_throttle
 def test_arming_by_command_works_when_every_check_passes():
     b = Bench()
     b.rc = rc(arm=True)
+    b.heartbeat()
     b.step(4)
     assert not b.sup.armed                     # the switch was high from the start: no edge
     assert b.sup.arm_command(b.rc, b.t) == reason("NONE")
@@ -89,6 +91,7 @@ def test_arming_by_command_works_when_every_check_passes():
 def test_arming_needs_a_fresh_imu_sample():
     b = Bench()
     b.rc = rc(arm=True)                        # high from the start: only a command can arm
+    b.heartbeat()
     b.step(4, imu=False)                       # the IMU never delivered
     assert b.sup.arm_command(b.rc, b.t) == reason("IMU_NOT_READY")
     b.step(1)
@@ -128,6 +131,7 @@ def test_the_arm_switch_not_high_always_disarms_whatever_armed(arm_by, switch_us
         b.arm_by_switch()
     else:
         b.rc = rc(arm=True)
+        b.heartbeat()
         b.step(2)
         assert b.sup.arm_command(b.rc, b.t) == reason("NONE")
     b.rc = fw.RcInput([1500, 1500, 1000, 1500, switch_us, 1000, 0, 0], 0)
@@ -192,9 +196,9 @@ def test_host_lost_disarms_a_vehicle_armed_by_command_within_the_timeout():
     b = Bench()
     b.rc = rc(arm=True)
     b.heartbeat()
+    last = b.t                          # the last heartbeat: a command is none
     b.step(2)
-    b.sup.arm_command(b.rc, b.t)        # a known station's command is a sign of life
-    last = b.t
+    assert b.sup.arm_command(b.rc, b.t) == reason("NONE")
     loops = 0
     while b.sup.armed:
         b.step()
@@ -657,3 +661,80 @@ def test_mav_gcs_sysid_pins_the_host_to_one_system():
     assert b.sup.start_excitation(config(), b.t, STATION_B) == reason("NO_HOST")
     assert b.sup.heartbeat(255, 190, GCS, b.t)
     assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NONE")
+
+
+def test_an_arm_command_needs_a_live_ground_station_and_the_rc_switch_does_not():
+    """A command arms only for a ground station whose own heartbeat is fresh (and that
+    MAV_GCS_SYSID allows): with none alive, with only another station alive, from a vehicle,
+    or after the station went quiet, it is refused NO_HOST and says so, and the pre-arm
+    check agrees. The pilot's switch arms without any host (the host-lost failsafe is for
+    command arming only)."""
+    b = Bench()
+    b.rc = rc(arm=True)
+    b.step(4)
+    assert b.sup.arm_check(b.rc, b.t) == reason("NO_HOST")
+    assert b.sup.arm_command(b.rc, b.t, fw.station_id(7, 1)) == reason("NO_HOST")
+    assert not b.sup.armed and b.reasons() == [reason("NO_HOST")]
+    assert b.sup.counters.arm_refused == 1
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    assert b.sup.arm_check(b.rc, b.t) == reason("NONE")
+    assert not b.sup.heartbeat(2, 1, QUAD, b.t)                   # another vehicle
+    for who in (fw.station_id(2, 1), STATION_B, fw.station_id(255, 191)):
+        assert b.sup.arm_command(b.rc, b.t, who) == reason("NO_HOST"), who
+        b.step()
+        assert not b.sup.armed
+    b.step(int(LIMITS.host_timeout_us / DT_US) + 1)              # A went quiet
+    assert b.sup.arm_check(b.rc, b.t) == reason("NO_HOST")
+    assert b.sup.arm_command(b.rc, b.t, STATION_A) == reason("NO_HOST")
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    assert b.sup.arm_command(b.rc, b.t, STATION_A) == reason("NONE") and b.sup.armed
+    b.sup.disarm_command()
+    b.reasons()                                                   # taken
+    b.step(int(2 * LIMITS.host_timeout_us / DT_US))               # no host at all now
+    b.arm_by_switch()
+    b.step(int(2 * LIMITS.host_timeout_us / DT_US))
+    assert b.sup.armed and reason("NO_HOST") not in b.reasons()
+
+
+def test_a_station_mav_gcs_sysid_excludes_is_forgotten_and_its_commands_keep_nothing_alive():
+    """Station 255 is heard, then MAV_GCS_SYSID is set to 200: 255 is no host any more. Its
+    arm commands every 0.5 s neither arm nor keep it alive, and 5 s on (the timeout is
+    1.5 s) its excitation is refused; at once after the change too."""
+    b = Bench()
+    b.rc = rc(arm=True)
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    b.step(2)
+    limits = fw.SafetyLimits()
+    limits.gcs_sysid = 200
+    b.sup.set_limits(limits)
+    assert b.sup.arm_check(b.rc, b.t) == reason("NO_HOST")
+    assert b.sup.arm_command(b.rc, b.t, STATION_A) == reason("NO_HOST")
+    assert not b.sup.heartbeat(255, 190, GCS, b.t)
+    b.arm_by_switch()                                               # the pilot flies
+    assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NO_HOST")
+    for _ in range(10):                                             # 5 s of arm commands
+        b.step(100)
+        b.sup.arm_command(b.rc, b.t, STATION_A)
+    assert b.sup.start_excitation(config(), b.t, STATION_A) == reason("NO_HOST")
+    assert b.sup.excitation_state == fw.ExcitationState.IDLE
+    assert b.sup.heartbeat(200, 190, GCS, b.t)                      # the allowed one
+    assert b.sup.start_excitation(config(), b.t, fw.station_id(200, 190)) == reason("NONE")
+
+
+def test_a_fifth_station_never_evicts_the_running_excitations_owner():
+    """Four slots: with MAV_GCS_SYSID = 0 a fifth ground-station component takes the slot
+    heard from longest ago, but never the one whose excitation runs: the excitation goes on
+    while its own station's heartbeats go on."""
+    b = Bench()
+    b.arm_by_switch()
+    assert b.sup.heartbeat(255, 190, GCS, b.t)
+    assert b.sup.start_excitation(config(cycles=200), b.t, STATION_A) == reason("NONE")
+    for loop in range(300):                                         # 1.5 s
+        if loop % 50 == 0:
+            assert b.sup.heartbeat(255, 190, GCS, b.t)              # A, every 0.25 s
+        b.step()
+        for compid in range(1, 6):                                  # five others, each loop
+            assert b.sup.heartbeat(250, compid, GCS, b.t)
+        assert b.sup.excitation_state != fw.ExcitationState.IDLE, loop
+    assert b.sup.take_excitation_end() is None
+    assert b.sup.excitation_owner == STATION_A

@@ -1079,7 +1079,8 @@ def test_watchdog_resets_the_chip_when_the_loop_stops_running():
 def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     """The receive side of the telemetry UART: an arm command sent into UART0's RX pin at
     921600 baud reaches the FlightController through the RX interrupt and ring, and is
-    refused over TX with the reason (no RC link), as on the host build."""
+    refused over TX with the reason (no ground station heartbeat: the sender never sent
+    one), as on the host build."""
     require_image()
     pytest.importorskip("heliquad._firmware")
     from heliquad.sim.dialect import dialect
@@ -1102,7 +1103,7 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     for ack in acks:
         assert ack.command == mav_mod.MAV_CMD_COMPONENT_ARM_DISARM
         assert ack.result == mav_mod.MAV_RESULT_DENIED
-        assert ack.result_param2 == mav_mod.HQ_REASON_NO_RC
+        assert ack.result_param2 == mav_mod.HQ_REASON_NO_HOST
     assert board.chip.uart0.overruns == 0
 
 

@@ -196,6 +196,11 @@ void bind_supervisor(py::module_& m) {
             return static_cast<int>(s.arm_command(rc, now, who));
         }, py::arg("rc"), py::arg("now_us"), py::arg("station") = kAnyStation,
            "HQ_REASON_NONE (0) when armed, else why not.")
+        .def("arm_check", [](const Supervisor& s, const RcInput& rc, uint64_t now) {
+            return static_cast<int>(s.arm_check(rc, now));
+        }, py::arg("rc"), py::arg("now_us"),
+           "What an arm command from a live ground station would be answered now.")
+        .def("set_limits", &Supervisor::set_limits, py::arg("limits"))
         .def("disarm_command", &Supervisor::disarm_command)
         .def("set_mode", [](Supervisor& s, uint32_t mode) { return static_cast<int>(s.set_mode(mode)); },
              py::arg("custom_mode"))
@@ -248,6 +253,7 @@ PYBIND11_MODULE(_firmware, m) {
         std::string name, units;
         float minimum, maximum, default_value;
         bool integer, armed_ok;
+        float floor;          // a time constant's least value but 0 (off); 0 for the others
     };
     py::class_<ParamRow>(m, "ParamRow")
         .def_readonly("name", &ParamRow::name)
@@ -256,17 +262,29 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readonly("maximum", &ParamRow::maximum)
         .def_readonly("default", &ParamRow::default_value)
         .def_readonly("integer", &ParamRow::integer)
-        .def_readonly("armed_ok", &ParamRow::armed_ok);
+        .def_readonly("armed_ok", &ParamRow::armed_ok)
+        .def_readonly("floor", &ParamRow::floor);
     m.def("param_table", []() {
         const Params defaults;
         std::vector<ParamRow> rows;
         for (int i = 0; i < kParamCount; ++i) {
             const ParamInfo& p = param_info(i);
             rows.push_back({p.name, p.units, p.min, p.max, defaults.get(i),
-                            (p.flags & kParamInteger) != 0, (p.flags & kParamArmedOk) != 0});
+                            (p.flags & kParamInteger) != 0, (p.flags & kParamArmedOk) != 0,
+                            (p.flags & kParamTimeConstant) ? kMinTimeConstantS : 0.0f});
         }
         return rows;
     });
+    m.def("decode_param_value", [](int index, float raw, uint8_t type) -> py::object {
+        float value = 0.0f;
+        if (index < 0 || index >= kParamCount ||
+            !decode_param_value(param_info(index), raw, type, value)) {
+            return py::none();
+        }
+        return py::float_(value);
+    }, py::arg("index"), py::arg("raw"), py::arg("param_type"),
+       "A PARAM_SET's value as the firmware reads it by the type it names; None when the type "
+       "does not fit the parameter.");
 
     py::enum_<Axis>(m, "Axis").value("ROLL", Axis::Roll).value("PITCH", Axis::Pitch)
         .value("YAW", Axis::Yaw);
@@ -326,6 +344,7 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readwrite("output_min", &PidGains::output_min)
         .def_readwrite("output_max", &PidGains::output_max)
         .def_readwrite("integral_limit", &PidGains::integral_limit);
+    m.attr("MIN_TIME_CONSTANT_S") = kMinTimeConstantS;
     py::class_<Pid>(m, "Pid")
         .def(py::init<const PidGains&>())
         .def("update", &Pid::update, py::arg("setpoint"), py::arg("measurement"), py::arg("dt_s"))

@@ -158,7 +158,7 @@ private:
     void send_scaled_imu(uint64_t now_us);
     void send_highres_imu(uint64_t now_us);
     void send_param_error(const mavlink_message_t& to, const char* name, int index,
-                          uint8_t error);
+                          SetResult why);
     void send_params();
     bool send_param_value(int index);
     void send_excitation_status(Reason reason);

@@ -64,42 +64,29 @@ float encode_param_int(float value) {
     return f;
 }
 
-// A PARAM_SET's value, by the type the client said: REAL32 is the number itself (MAVProxy
-// and pymavlink send every value so, as they would to ArduPilot), an integer type its bytes.
-// An integer type whose bytes are no acceptable value but whose float is a whole number is
-// a C-cast client's (ArduPilot's convention): every integer parameter lies below 2^23
-// (params.cpp), so the two readings never both give a whole number in range but 0, the same
-// in both.
-float decode_param_value(const ParamInfo& info, float raw, uint8_t type) {
-    if (!(info.flags & kParamInteger) || type == MAV_PARAM_TYPE_REAL32) return raw;
-    uint32_t bits;
-    __builtin_memcpy(&bits, &raw, sizeof(bits));
-    int64_t v;
-    switch (type) {
-        case MAV_PARAM_TYPE_UINT8: v = static_cast<uint8_t>(bits); break;
-        case MAV_PARAM_TYPE_INT8: v = static_cast<int8_t>(bits); break;
-        case MAV_PARAM_TYPE_UINT16: v = static_cast<uint16_t>(bits); break;
-        case MAV_PARAM_TYPE_INT16: v = static_cast<int16_t>(bits); break;
-        case MAV_PARAM_TYPE_UINT32: v = bits; break;
-        case MAV_PARAM_TYPE_INT32: v = static_cast<int32_t>(bits); break;
-        default: return raw;                               // 64-bit types: not ours
-    }
-    const auto bytewise = static_cast<float>(v);
-    const bool bytewise_ok = bytewise >= info.min && bytewise <= info.max;
-    const bool cast_ok = raw >= info.min && raw <= info.max && raw == std::floor(raw);
-    return (!bytewise_ok && cast_ok) ? raw : bytewise;
-}
+#ifdef MAVLINK_MSG_ID_PARAM_ERROR
+// MAV_PARAM_ERROR_TYPE_MISMATCH where the common.xml in use has it, else
+// VALUE_OUT_OF_RANGE (the value as sent is not one the parameter takes).
+template <typename E, typename = void>
+struct TypeMismatch {
+    static constexpr uint8_t value = E::MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE;
+};
+template <typename E>
+struct TypeMismatch<E, decltype(void(E::MAV_PARAM_ERROR_TYPE_MISMATCH))> {
+    static constexpr uint8_t value = E::MAV_PARAM_ERROR_TYPE_MISMATCH;
+};
 
-// PARAM_ERROR's codes (MAV_PARAM_ERROR; its values, should the common.xml in use lack it).
-constexpr uint8_t kParamErrorNoSuch = 1, kParamErrorRange = 2, kParamErrorDenied = 3;
+// PARAM_ERROR's code for a refusal (MAV_PARAM_ERROR).
 uint8_t param_error(SetResult r) {
     switch (r) {
-        case SetResult::Unknown: return kParamErrorNoSuch;
+        case SetResult::Unknown: return MAV_PARAM_ERROR_DOES_NOT_EXIST;
         case SetResult::Armed:
-        case SetResult::Excitation: return kParamErrorDenied;
-        default: return kParamErrorRange;                  // out of range, not whole
+        case SetResult::Excitation: return MAV_PARAM_ERROR_PERMISSION_DENIED;
+        case SetResult::Type: return TypeMismatch<MAV_PARAM_ERROR>::value;
+        default: return MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE;     // out of range, not whole
     }
 }
+#endif
 
 }  // namespace
 
@@ -389,7 +376,7 @@ void FlightController::handle_param_read(const mavlink_message_t& msg) {
     const int index = r.param_index >= 0 ? (r.param_index < kParamCount ? r.param_index : -1)
                                          : param_index(r.param_id);
     if (index < 0) {
-        send_param_error(msg, r.param_id, r.param_index, kParamErrorNoSuch);
+        send_param_error(msg, r.param_id, r.param_index, SetResult::Unknown);
         send_unknown_param(r.param_id, r.param_index);
         return;
     }
@@ -411,19 +398,21 @@ void FlightController::handle_param_set(const mavlink_message_t& msg, uint64_t n
     if (!for_us(ps.target_system, ps.target_component)) return;
     const int index = param_index(ps.param_id);
     if (index < 0) {
-        send_param_error(msg, ps.param_id, -1, kParamErrorNoSuch);
+        send_param_error(msg, ps.param_id, -1, SetResult::Unknown);
         send_unknown_param(ps.param_id, -1);
         return;
     }
     const bool as_float = ps.param_type == MAV_PARAM_TYPE_REAL32;
-    const float value = decode_param_value(param_info(index), ps.param_value, ps.param_type);
-    const SetResult r = params_.set(index, value, supervisor_.armed(),
-                                    supervisor_.excitation().active());
+    float value = 0.0f;
+    const SetResult r = !decode_param_value(param_info(index), ps.param_value, ps.param_type, value)
+                            ? SetResult::Type
+                            : params_.set(index, value, supervisor_.armed(),
+                                          supervisor_.excitation().active());
     if (as_float) params_as_float_ |= 1ull << index;      // answered in the form it came in
     params_pending_ |= 1ull << index;
     if (r == SetResult::Unchanged) return;               // answered with the value it has
     if (r != SetResult::Ok) {
-        send_param_error(msg, ps.param_id, index, param_error(r));
+        send_param_error(msg, ps.param_id, index, r);
         char text[kStatusTextLen];
         set_result_text(r, index, text, sizeof(text));
         send_statustext(MAV_SEVERITY_WARNING, text);
@@ -435,16 +424,17 @@ void FlightController::handle_param_set(const mavlink_message_t& msg, uint64_t n
 }
 
 void FlightController::send_param_error(const mavlink_message_t& to, const char* name, int index,
-                                        uint8_t error) {
+                                        SetResult why) {
 #ifdef MAVLINK_MSG_ID_PARAM_ERROR
     char id[kParamNameLen];
     copy_name(id, name);
     mavlink_message_t out;
     mavlink_msg_param_error_pack_status(config_.system_id, config_.component_id, &tx_status_, &out,
-                                        to.sysid, to.compid, id, static_cast<int16_t>(index), error);
+                                        to.sysid, to.compid, id, static_cast<int16_t>(index),
+                                        param_error(why));
     send(out);
 #else
-    (void)to, (void)name, (void)index, (void)error;     // a common.xml without PARAM_ERROR
+    (void)to, (void)name, (void)index, (void)why;       // a common.xml without PARAM_ERROR
 #endif
 }
 
@@ -672,7 +662,9 @@ void FlightController::send_scaled_imu(uint64_t now_us) {
 void FlightController::send_highres_imu(uint64_t now_us) {
     // m/s^2 and rad/s as measured (FRD body axes); nothing else is measured, and
     // fields_updated says so (accelerometer and gyro bits only).
-    constexpr uint16_t kAccelGyro = 0x3F;
+    constexpr uint16_t kAccelGyro = HIGHRES_IMU_UPDATED_XACC | HIGHRES_IMU_UPDATED_YACC |
+                                    HIGHRES_IMU_UPDATED_ZACC | HIGHRES_IMU_UPDATED_XGYRO |
+                                    HIGHRES_IMU_UPDATED_YGYRO | HIGHRES_IMU_UPDATED_ZGYRO;
     const Vec3& a = state_.accel;
     const Vec3& g = state_.rate;
     mavlink_message_t msg;

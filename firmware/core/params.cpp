@@ -72,22 +72,23 @@ float imu_path_get(const Tunables& t) { return static_cast<float>(t.imu_path); }
 void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(static_cast<uint8_t>(v)); }
 
 constexpr uint8_t kGain = kParamArmedOk;
+constexpr uint8_t kTime = kParamArmedOk | kParamTimeConstant;
 constexpr uint8_t kInt = kParamInteger;
 constexpr uint8_t kEsc = kParamInteger | kParamEsc;
 
 #define HQ_RATE(AX, A)                                                                          \
     {"RATE_" AX "_KC", "1/(rad/s)", 0.01f, 50.0f, kGain, rate_get<A, &PidGains::kc>,           \
      rate_set<A, &PidGains::kc>},                                                               \
-    {"RATE_" AX "_TI", "s", 0.0f, 100.0f, kGain, rate_get<A, &PidGains::tau_i_s>,               \
+    {"RATE_" AX "_TI", "s", 0.0f, 100.0f, kTime, rate_get<A, &PidGains::tau_i_s>,               \
      rate_set<A, &PidGains::tau_i_s>},                                                          \
-    {"RATE_" AX "_TD", "s", 0.0f, 1.0f, kGain, rate_get<A, &PidGains::tau_d_s>,                 \
+    {"RATE_" AX "_TD", "s", 0.0f, 1.0f, kTime, rate_get<A, &PidGains::tau_d_s>,                 \
      rate_set<A, &PidGains::tau_d_s>},                                                          \
     {"RATE_" AX "_IMAX", "", 0.0f, 1.0f, kGain, rate_get<A, &PidGains::integral_limit>,         \
      rate_set<A, &PidGains::integral_limit>}
 #define HQ_ANGLE(AX, A)                                                                         \
     {"ANG_" AX "_KC", "1/s", 0.01f, 20.0f, kGain, angle_get<A, &PidGains::kc>,                  \
      angle_set<A, &PidGains::kc>},                                                              \
-    {"ANG_" AX "_TD", "s", 0.0f, 1.0f, kGain, angle_get<A, &PidGains::tau_d_s>,                 \
+    {"ANG_" AX "_TD", "s", 0.0f, 1.0f, kTime, angle_get<A, &PidGains::tau_d_s>,                 \
      angle_set<A, &PidGains::tau_d_s>}
 #define HQ_ESC(N, I)                                                                            \
     {"ESC" N "_MIN", "us", 800.0f, 1100.0f, kEsc, esc_get<I, false>, esc_set<I, false>},        \
@@ -173,8 +174,18 @@ bool same_value(const ParamInfo& p, float value, float current) {
     return std::isfinite(typed) && typed == current;
 }
 
+// A normal float (or 0) within the range: never NaN, infinite or denormal (a denormal gain
+// or time constant is no setting anyone means, and 1/tau of one overflows).
+bool in_range(const ParamInfo& p, float value) {
+    return (value == 0.0f || std::isnormal(value)) && value >= p.min && value <= p.max;
+}
+
+bool below_floor(const ParamInfo& p, float value) {
+    return (p.flags & kParamTimeConstant) && value != 0.0f && value < kMinTimeConstantS;
+}
+
 bool acceptable(const ParamInfo& p, float value) {
-    return std::isfinite(value) && value >= p.min && value <= p.max &&
+    return in_range(p, value) && !below_floor(p, value) &&
            (!(p.flags & kParamInteger) || value == std::floor(value));
 }
 
@@ -241,7 +252,8 @@ SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (same_value(p, value, get(index))) return SetResult::Unchanged;
     if (exciting) return SetResult::Excitation;
     if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
-    if (!(std::isfinite(value) && value >= p.min && value <= p.max)) return SetResult::Range;
+    if (!in_range(p, value)) return SetResult::Range;
+    if (below_floor(p, value)) return SetResult::BelowFloor;
     if (!acceptable(p, value)) return SetResult::NotInteger;
     p.set(values_, value);
     return SetResult::Ok;
@@ -290,6 +302,57 @@ LoadReport Params::decode(const uint8_t* data, size_t n) {
     return r;
 }
 
+namespace {
+
+// An integer type's reading of a PARAM_SET's float. Byte-wise (MAVSDK, QGroundControl), the
+// value's bytes sit in the float's low bytes and the bits above are the narrow value's zero
+// or sign extension; anything else is a C-cast client's (ArduPilot's convention: the number
+// itself), whose whole numbers but 0 always have exponent bits above the low 16. For the
+// 32-bit types, which have no bits above, every integer parameter lies below 2^23
+// (params_test), so a byte-wise value is a denormal float (never whole but 0) and a C-cast
+// one's bits a number beyond 2^30: the reading that lands in range is the one meant.
+float decode_integer(const ParamInfo& info, float raw, uint8_t type) {
+    uint32_t bits;
+    __builtin_memcpy(&bits, &raw, sizeof(bits));
+    int64_t v;
+    uint32_t high;                                     // the bits above the narrow value
+    switch (type) {
+        case MAV_PARAM_TYPE_UINT8: v = static_cast<uint8_t>(bits), high = 0xFFFFFF00u; break;
+        case MAV_PARAM_TYPE_INT8: v = static_cast<int8_t>(bits), high = 0xFFFFFF00u; break;
+        case MAV_PARAM_TYPE_UINT16: v = static_cast<uint16_t>(bits), high = 0xFFFF0000u; break;
+        case MAV_PARAM_TYPE_INT16: v = static_cast<int16_t>(bits), high = 0xFFFF0000u; break;
+        case MAV_PARAM_TYPE_UINT32: v = bits, high = 0; break;
+        default: v = static_cast<int32_t>(bits), high = 0; break;          // INT32
+    }
+    const auto bytewise = static_cast<float>(v);
+    if (high != 0) {
+        const uint32_t above = bits & high;
+        const bool extension = above == 0 || (v < 0 && above == high);
+        return extension ? bytewise : raw;
+    }
+    const bool bytewise_ok = bytewise >= info.min && bytewise <= info.max;
+    const bool cast_ok = raw >= info.min && raw <= info.max && raw == std::floor(raw);
+    return (!bytewise_ok && cast_ok) ? raw : bytewise;
+}
+
+bool integer_type(uint8_t type) {
+    return type == MAV_PARAM_TYPE_UINT8 || type == MAV_PARAM_TYPE_INT8 ||
+           type == MAV_PARAM_TYPE_UINT16 || type == MAV_PARAM_TYPE_INT16 ||
+           type == MAV_PARAM_TYPE_UINT32 || type == MAV_PARAM_TYPE_INT32;
+}
+
+}  // namespace
+
+bool decode_param_value(const ParamInfo& info, float raw, uint8_t type, float& value) {
+    if (type == MAV_PARAM_TYPE_REAL32) {
+        value = raw;
+        return true;
+    }
+    if (!(info.flags & kParamInteger) || !integer_type(type)) return false;
+    value = decode_integer(info, raw, type);
+    return true;
+}
+
 void unknown_param_text(const char* name, int index, char* out, size_t capacity) {
     if (capacity == 0) return;
     out[0] = '\0';
@@ -326,6 +389,11 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
         case SetResult::Unknown: w.put(": no such parameter"); break;
         case SetResult::Ok: w.put(" set"); break;
         case SetResult::Unchanged: w.put(" unchanged"); break;
+        case SetResult::BelowFloor:
+            w.put(" is 0 (off) or at least ");
+            w.number(kMinTimeConstantS);
+            break;
+        case SetResult::Type: w.put(" sent with the wrong type"); break;
     }
 }
 

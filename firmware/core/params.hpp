@@ -5,8 +5,9 @@
 // stored form. No I/O: the FlightController answers the protocol and owns the storage.
 //
 // Rules (docs/parameters.md lists every parameter):
-//   - A value outside its range, not finite, or not whole for an integer parameter is refused
-//     and the old value stays.
+//   - A value outside its range, not a normal float (NaN, infinite, denormal; 0 is taken), not
+//     whole for an integer parameter, or between 0 and kMinTimeConstantS for a time constant
+//     (0: off) is refused and the old value stays; so is a PARAM_SET whose type does not fit.
 //   - While an excitation runs nothing may change (a record is of one controller); while
 //     armed only the gains may change; everything else waits for disarm.
 //   - The stored record is name-keyed (a CRC-32 of each name), so a firmware that adds or
@@ -43,6 +44,7 @@ enum ParamFlag : uint8_t {
     kParamArmedOk = 2,    // may change while armed (the gains)
     kParamImu = 4,        // takes effect when the IMU is next initialised (done at once, disarmed)
     kParamEsc = 8,        // an ESC endpoint: the motors are told at once (disarmed)
+    kParamTimeConstant = 16,  // 0 (off) or at least kMinTimeConstantS (pid.hpp)
 };
 
 struct ParamInfo {
@@ -65,12 +67,21 @@ int param_index(const char* name, size_t len = kParamNameLen);
 enum class SetResult : uint8_t {
     Ok = 0,
     Unknown,         // no such parameter
-    Range,           // not finite, or outside [min, max]
+    Range,           // not a normal float (0 is), or outside [min, max]
     NotInteger,      // an integer parameter given a fraction
     Armed,           // only the gains may change while armed
     Excitation,      // nothing changes while an excitation runs
     Unchanged,       // the value it has (after rounding to its type): taken, nothing changes
+    BelowFloor,      // a time constant between 0 (off) and kMinTimeConstantS
+    Type,            // a PARAM_SET whose MAV_PARAM_TYPE does not fit the parameter
 };
+
+// A PARAM_SET's value as the type it names says to read it (docs/parameters.md). False when
+// the type does not fit the parameter: a real parameter takes MAV_PARAM_TYPE_REAL32 only (an
+// integer type's bytes would be taken as a float's: 1 as 1.4e-45); an integer parameter takes
+// REAL32 (the number itself, as MAVProxy and pymavlink send it) or an 8-, 16- or 32-bit
+// integer type, byte-wise or C-cast.
+bool decode_param_value(const ParamInfo& info, float raw, uint8_t type, float& value);
 
 // What a stored record held.
 struct LoadReport {

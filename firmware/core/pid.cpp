@@ -36,7 +36,7 @@ float Pid::update(float setpoint, float measurement, float dt_s) {
 
     // Integral, trapezoidal; held while saturated in the direction it would grow.
     float i_next = i_;
-    if (gains_.tau_i_s > 0.0f) {
+    if (gains_.tau_i_s >= kMinTimeConstantS) {         // below the floor: off, never infinite
         i_next = i_ + gains_.kc * dt_s / (2.0f * gains_.tau_i_s) * (error + prev_error_);
         i_next = clamp(i_next, -gains_.integral_limit, gains_.integral_limit);
     } else {

@@ -12,14 +12,24 @@
 //   is not allowed to grow further in the direction of the saturation.
 // - Integral limit and output limits.
 // - The P, I and D terms of the last update are readable for logging.
-// - tau_I <= 0 disables the integral (a PD controller, as in the paper's outer loop).
+// - tau_I <= 0 disables the integral (a PD controller, as in the paper's outer loop), and
+//   so does a tau_I below kMinTimeConstantS: the parameters never give one (they take 0 or
+//   at least the floor), and should a caller do, the integral is off rather than infinite.
+//   The derivative is finite for any tau_D >= 0 (its denominator is at least dt).
 #pragma once
 
 namespace hq {
 
+// The shortest integral or derivative time the parameters take, s: a fifth of the 5 ms loop
+// period. Below it the discrete terms are no longer the continuous PID (the Tustin integral
+// adds Kc dt / (2 tau_I) of the error sum per loop, 2.5 Kc at the floor; the derivative
+// filter's tau_D / N is a fiftieth of a loop), and at a tiny tau_I (a denormal float)
+// Kc dt / (2 tau_I) overflows to infinity and the output to NaN.
+constexpr float kMinTimeConstantS = 1e-3f;
+
 struct PidGains {
     float kc = 0.0f;        // proportional gain Kc (output units per error unit)
-    float tau_i_s = 0.0f;   // integral time tau_I, s; <= 0 disables the integral
+    float tau_i_s = 0.0f;   // integral time tau_I, s; below kMinTimeConstantS: no integral
     float tau_d_s = 0.0f;   // derivative time tau_D, s; 0 disables the derivative
     float derivative_filter_n = 10.0f;  // N: tau_f = tau_D / N
     float output_min = -1.0f;

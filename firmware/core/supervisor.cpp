@@ -24,7 +24,7 @@ const char* reason_text(Reason reason) {
         case Reason::Finished: return "excitation finished";
         case Reason::StopCommand: return "excitation stopped by command";
         case Reason::Disarmed: return "excitation refused: disarmed";
-        case Reason::NoHost: return "excitation refused: no host heartbeat";
+        case Reason::NoHost: return "refused: no heartbeat from this ground station";
         case Reason::Busy: return "excitation refused: one is already running";
         case Reason::AxisInjection: return "excitation refused: bad axis or injection";
         case Reason::InjectionMode: return "excitation refused: needs angle mode";
@@ -107,14 +107,18 @@ int Supervisor::station_slot(StationId who) const {
     return -1;
 }
 
+bool Supervisor::station_allowed(StationId who) const {
+    return limits_.gcs_sysid == 0 || (who >> 8) == limits_.gcs_sysid;
+}
+
 bool Supervisor::station_alive(StationId who, uint64_t now_us) const {
     const int i = station_slot(who);
-    return i >= 0 && now_us - stations_[i].last_us <= limits_.host_timeout_us;
+    return i >= 0 && station_allowed(who) && now_us - stations_[i].last_us <= limits_.host_timeout_us;
 }
 
 bool Supervisor::host_alive(uint64_t now_us) const {
     for (const Station& s : stations_) {
-        if (s.seen && now_us - s.last_us <= limits_.host_timeout_us) return true;
+        if (s.seen && station_alive(s.id, now_us)) return true;
     }
     return false;
 }
@@ -137,18 +141,23 @@ bool Supervisor::heartbeat(uint8_t sysid, uint8_t compid, uint8_t mav_type, uint
 }
 
 void Supervisor::host_heartbeat(uint64_t now_us, StationId who) {
+    if (!station_allowed(who)) return;       // MAV_GCS_SYSID excludes it
     int slot = station_slot(who);
-    if (slot < 0) {                          // a new station: a free slot, else the oldest
-        slot = 0;
-        for (int i = 0; i < kStations; ++i) {
-            if (!stations_[i].seen) {
-                slot = i;
-                break;
-            }
-            if (stations_[i].last_us < stations_[slot].last_us) slot = i;
-        }
-    }
+    if (slot < 0) slot = free_slot();
     stations_[slot] = Station{true, who, now_us};
+}
+
+int Supervisor::free_slot() const {
+    // A new station takes a free slot, else the one heard from longest ago, but never the
+    // slot of the station whose excitation runs: a fifth station does not stop it.
+    const bool owned = excitation_.active();
+    int slot = -1;
+    for (int i = 0; i < kStations; ++i) {
+        if (!stations_[i].seen) return i;
+        if (owned && stations_[i].id == exc_owner_) continue;
+        if (slot < 0 || stations_[i].last_us < stations_[slot].last_us) slot = i;
+    }
+    return slot;                             // kStations > 1: one slot is never the owner's
 }
 
 Reason Supervisor::check_arm(const RcInput& rc, uint64_t now_us) const {
@@ -158,6 +167,10 @@ Reason Supervisor::check_arm(const RcInput& rc, uint64_t now_us) const {
     if (rc.channel_us[rc::kThrottle] >= limits_.rc.throttle_low_us) return Reason::ThrottleHigh;
     if (!imu_fresh(now_us)) return Reason::ImuNotReady;
     return Reason::None;
+}
+
+Reason Supervisor::arm_check(const RcInput& rc, uint64_t now_us) const {
+    return host_alive(now_us) ? check_arm(rc, now_us) : Reason::NoHost;
 }
 
 void Supervisor::arm(ArmSource source) {
@@ -182,10 +195,12 @@ void Supervisor::disarm(Reason why) {
 }
 
 Reason Supervisor::arm_command(const RcInput& rc, uint64_t now_us, StationId who) {
-    // A command is a sign of life of a ground station already heard (a vehicle's is not).
-    if (station_slot(who) >= 0) host_heartbeat(now_us, who);
-    if (armed_) return Reason::None;
-    const Reason r = check_arm(rc, now_us);
+    // Only a ground station whose own HEARTBEAT is fresh (and that MAV_GCS_SYSID allows)
+    // may arm: the host-lost failsafe then watches it. A command is no heartbeat: it keeps
+    // no station alive.
+    const bool host = station_alive(who, now_us);
+    if (armed_ && host) return Reason::None;
+    const Reason r = host ? check_arm(rc, now_us) : Reason::NoHost;
     if (r != Reason::None) {
         refuse_arm(r);
         return r;
@@ -406,6 +421,10 @@ void Supervisor::set_limits(const SafetyLimits& limits) {
     const uint32_t imu_timeout_us = limits_.imu_timeout_us;
     limits_ = limits;
     limits_.imu_timeout_us = imu_timeout_us;
+    // A station MAV_GCS_SYSID now excludes is forgotten: it is no host any more.
+    for (Station& s : stations_) {
+        if (s.seen && !station_allowed(s.id)) s = Station{};
+    }
 }
 
 void Supervisor::imu_initialised(uint64_t now_us, uint32_t timeout_us) {

@@ -181,7 +181,8 @@ public:
     bool heartbeat(uint8_t sysid, uint8_t compid, uint8_t mav_type, uint64_t now_us);
     // A ground station's sign of life (heartbeat() once it decided it counts).
     void host_heartbeat(uint64_t now_us, StationId who = kAnyStation);
-    // A command is a sign of life of a station already known as a ground station.
+    // Arms when `who` is a ground station whose own heartbeat is fresh (NoHost otherwise)
+    // and the checks pass. A command is no sign of life: only a HEARTBEAT keeps a station.
     Reason arm_command(const RcInput& rc, uint64_t now_us, StationId who = kAnyStation);
     void disarm_command();
     Reason set_mode(uint32_t custom_mode);
@@ -224,8 +225,9 @@ public:
     const Excitation& excitation() const { return excitation_; }
     const ExcitationConfig& excitation_config() const { return excitation_.config(); }
     bool imu_fresh(uint64_t now_us) const;
-    // What an arm command would be answered now (Reason::None: it would arm).
-    Reason arm_check(const RcInput& rc, uint64_t now_us) const { return check_arm(rc, now_us); }
+    // What an arm command from a live ground station would be answered now (Reason::None:
+    // it would arm; NoHost when no ground station is alive).
+    Reason arm_check(const RcInput& rc, uint64_t now_us) const;
     bool imu_stale() const { return imu_stale_; }
     uint64_t last_host_heartbeat_us() const;
     // The station the running (or last) excitation belongs to.
@@ -234,6 +236,7 @@ public:
     const SupervisorCounters& counters() const { return counters_; }
     const SafetyLimits& limits() const { return limits_; }
     // New bounds (the parameters changed); the IMU timeout stays the one the chip's rate set.
+    // A station a new gcs_sysid excludes is forgotten.
     void set_limits(const SafetyLimits& limits);
 
     // --- what the loop reports -------------------------------------------------------------
@@ -259,7 +262,9 @@ private:
     void end_excitation(Reason why, bool announce = true);
     bool host_alive(uint64_t now_us) const;
     bool station_alive(StationId who, uint64_t now_us) const;
+    bool station_allowed(StationId who) const;
     int station_slot(StationId who) const;
+    int free_slot() const;
     void emit(Reason reason, Severity severity);
 
     enum class SwitchPos : uint8_t { Unknown, Low, High };
@@ -276,7 +281,8 @@ private:
     bool mode_switch_known_ = false, mode_switch_pending_ = false, mode_lock_reported_ = false;
     FlightMode mode_switch_ = FlightMode::Angle;
     // The ground stations heard from, most recent heartbeat each (a new one takes the slot
-    // heard from longest ago): enough for a GCS, a companion and a spare.
+    // heard from longest ago, never the running excitation's owner's): enough for a GCS, a
+    // companion and a spare.
     static constexpr int kStations = 4;
     struct Station {
         bool seen = false;
