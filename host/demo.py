@@ -10,7 +10,7 @@ axis's recommended model against the simulator's own truth, with the worst error
 the band.
 
 The axes run side by side, each in a process of its own (:mod:`.workers`), its progress
-lines shown with its name in front. Ctrl-C or SIGTERM stops every axis in order (each sweep
+lines shown with its name in front. Ctrl-C, SIGTERM or SIGHUP stops every axis in order (each sweep
 stops its excitation and keeps its log and manifest) and ends the demo without a report; an
 axis that fails is said, the others go on, and the demo ends with exit code 1.
 """
@@ -27,7 +27,8 @@ import traceback
 
 from . import paper
 from .cli_args import MAX_SEED, add_firmware_argument, int_in
-from .errors import DiskFull, InputError, Terminated
+from .errors import DiskFull, InputError
+from .signals import WORDS, stop_exception, stopped_by
 
 #: The demo's exit code when an axis failed (the others' records and the report are kept).
 EXIT_STOPPED = 1
@@ -98,24 +99,25 @@ _STOPPED_BY: list = []
 
 def _on_signal(signum, frame):
     _STOPPED_BY.append(signum)
-    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+    raise stop_exception(signum)
 
 
 def axis_main() -> None:
     """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis,
     and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
-    ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C and SIGTERM stop it in order
+    ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C, SIGTERM and SIGHUP stop it in order
     (the sweep keeps its log and manifest)."""
     from .workers import send_result
 
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:    # nohup's stays ignored
+        signal.signal(signal.SIGHUP, _on_signal)
     options = json.loads(sys.argv[1])
     try:
         result = {"status": "done", **_run_axis(**options)}
     except KeyboardInterrupt as exc:
-        result = {"status": "stopped",
-                  "error": "terminated" if isinstance(exc, Terminated) else "interrupted"}
+        result = {"status": "stopped", "error": WORDS[stopped_by(exc)]}
     except (InputError, DiskFull, OSError) as exc:
         result = {"status": "failed", "error": str(exc)}
     except Exception as exc:                       # noqa: BLE001 - one axis's failure, said
@@ -147,8 +149,8 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
         run_sweep(session, default_plan(axis), folder,
                   {**sil_source(cfg), "firmware": session.fw.record()})
         sim_s = session.time_us * 1e-6
-    if _STOPPED_BY:                  # the sweep ended in order on Ctrl-C or SIGTERM: stop
-        raise Terminated() if _STOPPED_BY[0] == signal.SIGTERM else KeyboardInterrupt()
+    if _STOPPED_BY:                  # the sweep ended in order on a signal: stop
+        raise stop_exception(_STOPPED_BY[0])
     print("== identify")
     try:
         # The plots here, not beside: the axes keep every core busy already.

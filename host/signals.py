@@ -56,10 +56,17 @@ def take_at_start() -> None:
         signal.signal(signum, _ended_at_start)
 
 
-def _raise_stop(signum, frame):
+def stop_exception(signum: int) -> KeyboardInterrupt:
+    """What a stop by ``signum`` raises where it lands: KeyboardInterrupt (SIGINT),
+    :class:`Terminated` (SIGTERM), :class:`HungUp` (SIGHUP); :func:`stopped_by` reads it
+    back."""
     from .errors import HungUp, Terminated
 
-    raise HungUp() if signum == signal.SIGHUP else Terminated()
+    return {signal.SIGTERM: Terminated, signal.SIGHUP: HungUp}.get(signum, KeyboardInterrupt)()
+
+
+def _raise_stop(signum, frame):
+    raise stop_exception(signum)
 
 
 def take_while_running() -> None:

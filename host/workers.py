@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 
-from .errors import Terminated
+from .signals import EXIT_CODES, stopped_by
 
 __all__ = ["Child", "start_child", "run_children", "send_result", "RESULT_FD_VARIABLE"]
 
@@ -134,8 +134,8 @@ def run_children(commands, out=None, err=None) -> list:
     their output (on ``out`` and ``err``, default this process's) until each has ended, and
     return them, each with its result and exit code.
 
-    Ctrl-C (KeyboardInterrupt) or SIGTERM (:class:`Terminated`) here is passed on to every
-    child still running, once, as SIGINT or SIGTERM to its process group; this process
+    Ctrl-C (KeyboardInterrupt), SIGTERM or SIGHUP (host/signals.py) here is passed on to every
+    child still running, once, as the same signal to its process group; this process
     then waits for them to stop (ignoring further signals; after STOP_GRACE_S it kills
     them) and raises it again."""
     children, pump = [], None
@@ -146,7 +146,7 @@ def run_children(commands, out=None, err=None) -> list:
         pump.run()
     except KeyboardInterrupt as exc:
         with _ignoring_signals():
-            _signal_all(children, signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+            _signal_all(children, stopped_by(exc))
             pump = pump or _Pump(children, out or sys.stdout, err or sys.stderr)
             if not pump.run(time.monotonic() + STOP_GRACE_S):
                 _signal_all(children, signal.SIGKILL)
@@ -175,8 +175,8 @@ def _wait_all(children) -> None:
 
 @contextlib.contextmanager
 def _ignoring_signals():
-    """SIGINT and SIGTERM ignored inside (the children are stopping in order)."""
-    before = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
+    """SIGINT, SIGTERM and SIGHUP ignored inside (the children are stopping in order)."""
+    before = {s: signal.signal(s, signal.SIG_IGN) for s in EXIT_CODES}
     try:
         yield
     finally:

@@ -157,7 +157,8 @@ def test_a_failing_axis_of_the_demo_is_said_and_the_others_are_summarised(
 
 
 @pytest.mark.parametrize("stop, aborted, code", [
-    ("ctrl_c", "interrupted (Ctrl-C)", 130), ("sigterm", "terminated (SIGTERM)", 143)])
+    ("ctrl_c", "interrupted (Ctrl-C)", 130), ("sigterm", "terminated (SIGTERM)", 143),
+    ("sighup", "hung up (SIGHUP)", 129)])           # passed on as SIGHUP, said as such
 def test_the_demo_stopped_stops_every_axis_in_order_and_keeps_their_records(
         stop, aborted, code, tmp_path):
     # Sent once both axes' sweeps have started logging (yaw's takes several seconds more
