@@ -102,8 +102,8 @@ class TelemetryLink:
         self.mav_module = dialect()
         self.name = str(port)
         self.transport = open_connection(self.name, baud)
-        self.mav = self.mav_module.MAVLink(
-            self.transport, srcSystem=HOST_SYSTEM_ID,
+        self.mav = self.mav_module.MAVLink(          # every message out goes through write()
+            self, srcSystem=HOST_SYSTEM_ID,
             srcComponent=self.mav_module.MAV_COMP_ID_MISSIONPLANNER)
         self.target = self.mav_module.MAV_COMP_ID_AUTOPILOT1
         self.mav.robust_parsing = True

@@ -26,7 +26,7 @@ from ..sim.dialect import dialect
 from ..sim.faults import check_faults, imu_fault_codes, link_close_frame
 from ..sim.lockstep import FirmwareError, SimLink, actuators, start_firmware
 from ..sim.sil import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
-from .errors import NO_ROOM, DiskFull, InputError
+from .errors import NO_ROOM, DiskFull, InputError, LinkLost
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 from .tlog import TlogWriter, create_log
 
@@ -152,6 +152,22 @@ class _ClosedLink:
         pass
 
 
+class _FirmwareTelemetry(TelemetryLink):
+    """The SIL's telemetry link to its own firmware: a write that finds the link gone
+    because the firmware died reports the death (``died`` raises it), not a lost link."""
+
+    def __init__(self, path: str, died: Callable[[], None]):
+        super().__init__(path)
+        self._died = died
+
+    def write(self, data) -> int:
+        try:
+            return super().write(data)
+        except LinkLost:
+            self._died()
+            raise
+
+
 class SilSession:
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
@@ -178,7 +194,7 @@ class SilSession:
             undo.callback(self.fw.stop)
             self.link = SimLink(self.fw)
             undo.callback(self.link.close)
-            self.tel = TelemetryLink(self.fw.telemetry_path)
+            self.tel = _FirmwareTelemetry(self.fw.telemetry_path, self._raise_if_died)
             undo.callback(self.tel.close)
             self.telemetry = _TelemetryLog(self.tel, tlog_path, self.start_us)
             undo.callback(self.telemetry.close)
@@ -220,13 +236,18 @@ class SilSession:
             messages = self.telemetry.read_until(self.time_us)
         except FirmwareError:
             # Killed after its last reply, the firmware leaves the telemetry short: say so.
-            self.fw.wait_exit(0.5)
-            if not self.fw.alive():
-                raise FirmwareError(f"the firmware died at frame {self.frame} "
-                                    f"({self.fw.stderr_tail()})") from None
+            self._raise_if_died()
             raise
         collect(messages)
         return out
+
+    def _raise_if_died(self) -> None:
+        """A link that failed because the firmware died (killed, crashed) is that death,
+        said as such, whichever end noticed it first; otherwise nothing."""
+        self.fw.wait_exit(0.5)
+        if not self.fw.alive():
+            raise FirmwareError(f"the firmware died at frame {self.frame} "
+                                f"({self.fw.stderr_tail()})") from None
 
     def close_host_link(self) -> None:
         """The host tool closes its end of the telemetry link (the ``link`` fault): from now
