@@ -38,7 +38,7 @@ import sys
 import tempfile
 import time
 
-from heliquad.host import paper
+from heliquad.host.records import paper
 
 AXES = tuple(paper.BANDS_HZ)    # the demo's axes
 DEMO_SEED = 1                   # heliquad demo's default seed
@@ -48,7 +48,7 @@ SIL_LONG = ("--freq-hz", 0.5, "--cycles", 20)
 
 
 def command(*args) -> list:
-    return [sys.executable, "-m", "heliquad.host.cli", *map(str, args)]
+    return [sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)]
 
 
 def heliquad(*args) -> tuple:

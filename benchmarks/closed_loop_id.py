@@ -25,7 +25,7 @@ LEVELS = ("none", "light", "moderate", "severe")
 
 
 def heliquad(*args):
-    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                          capture_output=True, text=True)
     if res.returncode:
         raise SystemExit(f"heliquad {' '.join(map(str, args))}: {res.stderr.strip()}")
@@ -39,7 +39,7 @@ def before_options(axis):
 
 def one(folder, axis, level, seed, before, delay):
     """Sweep and identify; the figures of one run."""
-    from heliquad.host.logsession import summarise_tlog
+    from heliquad.host.acquire.log_session import summarise_tlog
 
     sweep = ["sweep", "--sil", "--axis", axis, "--seed", seed, "--out", folder]
     if level != "none":
@@ -52,7 +52,7 @@ def one(folder, axis, level, seed, before, delay):
     doc = json.loads(open(os.path.join(folder, "models.json")).read())
     truth = doc["sil_truth"]
     span = summarise_tlog(os.path.join(folder, "sweep.tlog"))["span_s"]
-    from heliquad.host.fit import order_name
+    from heliquad.host.estimate.fit import order_name
 
     rec = doc.get("recommended")
     pick = "none"
@@ -67,7 +67,7 @@ def one(folder, axis, level, seed, before, delay):
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    from heliquad.sim import dialect
+    from heliquad.sim.base import dialect
 
     parser.add_argument("--axes", nargs="+", choices=tuple(dialect.AXES),
                         default=list(dialect.AXES))

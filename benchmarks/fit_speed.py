@@ -1,6 +1,6 @@
 """Benchmark: transfer-function fits with and without a fitted delay, time and cost.
 
-Point sets like a sweep's: each of the paper's models of an axis (host/paper.py MODELS)
+Point sets like a sweep's: each of the paper's models of an axis (host/records/paper.py MODELS)
 at 15 log-spaced frequencies across the axis's band (paper.BANDS_HZ), times a pure delay
 (15 ms by default) and a zero-order hold at 200 Hz ((1 - e^{-sT}) / (sT): half a sample of
 delay and a slight droop), times (1 + e) with e complex Gaussian noise of the given RMS
@@ -14,7 +14,7 @@ the one the fit minimises, sum |F - G|^2 / |F|^2 over the points, and tau the fi
 The last lines give, per point set, the total time of the axis's orders with a delay.
 
 `--exhaustive` also fits with a delay refining every start of the delay grid fully (the
-search fit_tf made before it chose among them; host/fit.py STARTS_PER_KIND = None), once,
+search fit_tf made before it chose among them; host/estimate/fit.py STARTS_PER_KIND = None), once,
 and prints its time and by how much its cost is below the one found (relative; 0 or
 negative when the chosen starts found the same minimum or a better one).
 
@@ -39,8 +39,8 @@ N_POINTS = 15
 def point_set(axis, truth, delay_s, noise, seed):
     """``(omega, F)``: the paper's ``truth`` model of ``axis`` with a delay, a zero-order
     hold and complex noise of RMS ``noise``."""
-    from heliquad.host import paper
-    from heliquad.host.fit import model_response
+    from heliquad.host.records import paper
+    from heliquad.host.estimate.fit import model_response
 
     num, den = paper.MODELS[axis][truth]
     lo, hi = paper.BANDS_HZ[axis]
@@ -69,7 +69,7 @@ def cost(model, omega, F):
 
 def exhaustive(omega, F, order):
     """CPU time and model of a delay fit that refines every start of the delay grid."""
-    from heliquad.host import fit
+    from heliquad.host.estimate import fit
 
     chosen = fit.STARTS_PER_KIND
     fit.STARTS_PER_KIND = None
@@ -82,8 +82,8 @@ def exhaustive(omega, F, order):
 def one_set(axis, truth, noise, args):
     """Fit every order of the axis to one point set; print a line per order. Returns the
     total delay-fit time over the orders."""
-    from heliquad.host import paper
-    from heliquad.host.fit import fit_levy, fit_tf
+    from heliquad.host.records import paper
+    from heliquad.host.estimate.fit import fit_levy, fit_tf
 
     omega, F = point_set(axis, truth, args.delay_ms * 1e-3, noise, args.seed)
     levy, _ = best_time(lambda: fit_levy(omega, F, truth), max(args.repeats, 20))
@@ -107,7 +107,7 @@ def one_set(axis, truth, noise, args):
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    from heliquad.host import paper
+    from heliquad.host.records import paper
 
     parser.add_argument("--axes", nargs="+", choices=tuple(paper.MODELS),
                         default=["roll", "yaw"])

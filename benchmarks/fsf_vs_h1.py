@@ -11,14 +11,17 @@ reported in samples per second.
 
 import argparse
 import math
+import pathlib
+import sys
 import time
 
 import numpy as np
 import scipy.signal
 
-from heliquad.host.baselines import estimate_h1
-from heliquad.host.fsf import RecursiveFsf, estimate_fsf
-from heliquad.sim.dwell import simulate_sine_dwell
+from heliquad.host.estimate.baselines import estimate_h1
+from heliquad.host.estimate.fsf import RecursiveFsf, estimate_fsf
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
+from dwell_plant import simulate_sine_dwell  # noqa: E402  (the tests' exact sine-dwell plant)
 
 FS_HZ = 200.0
 DURATION_S = 600.0

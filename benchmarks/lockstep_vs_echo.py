@@ -28,8 +28,8 @@ import time
 
 import serial
 
-from heliquad.host.experiment import run_sil
-from heliquad.sim.sil import SilConfig
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.sim.rig.setup import SilConfig
 
 ECHO_C = r"""
 #define _GNU_SOURCE

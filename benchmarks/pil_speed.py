@@ -26,8 +26,8 @@ LOOP_HZ = 200.0
 
 
 def run(firmware: str, cycles: int, elf: str | None, out: str):
-    from heliquad.host.experiment import run_sil
-    from heliquad.sim.sil import SilConfig
+    from heliquad.host.acquire.experiment import run_sil
+    from heliquad.sim.rig.setup import SilConfig
 
     cfg = SilConfig(axis="roll", inject="mixer", freq_hz=1.0, amplitude=0.05, cycles=cycles,
                     fade_cycles=1, firmware=firmware,
@@ -42,8 +42,8 @@ def board_alone(elf: str, loops: int):
     outputs out), without the ptys, the codec or the simulator: wall time, and the board's
     own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
     accesses and events)."""
-    from heliquad.sim.mpu6050_packets import raw_packet
-    from heliquad.sim.pil import PilBoard
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
+    from heliquad.sim.chip.pil import PilBoard
 
     board = PilBoard(elf)
     board.boot()
@@ -70,7 +70,7 @@ def main() -> int:
     p.add_argument("--board-loops", type=int, default=1000,
                    help="loops of the board driven alone (default 1000)")
     args = p.parse_args()
-    from heliquad.sim.firmware_image import teensy35_image
+    from heliquad.sim.base.firmware_image import teensy35_image
 
     elf = args.elf or str(teensy35_image("elf"))
     print(f"image: {elf}")

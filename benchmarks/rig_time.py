@@ -29,11 +29,12 @@ import tempfile
 
 import numpy as np
 
-from heliquad.host.identify_session import identify_dir
-from heliquad.host.session import SilSession
-from heliquad.host.sweep import SWEEP_TLOG, default_plan, multisine_plan, run_sweep, sil_source
-from heliquad.sim.dialect import AXES
-from heliquad.sim.sil import SilConfig
+from heliquad.host.campaign.identify import identify_dir
+from heliquad.host.acquire.session import SilSession
+from heliquad.host.acquire.sweep import (SWEEP_TLOG, default_plan, multisine_plan, run_sweep,
+                                         sil_source)
+from heliquad.sim.base.dialect import AXES
+from heliquad.sim.rig.setup import SilConfig
 
 
 def quiet(*_args, **_kwargs):

@@ -9,7 +9,7 @@ little rotation) so the attitude filter and the cascade run, and reports:
   ran meanwhile excluded): median and maximum over the loops;
 * instructions per loop including interrupts (step entry to the next step entry, sleep
   excluded: it retires none), and interrupts per loop;
-* core cycles per loop by the emulator's stated cycle model (sim/mk64/timing.py), against
+* core cycles per loop by the emulator's stated cycle model (sim/chip/timing.py), against
   the baseline of the loop's budget at 200 Hz: 600 000 cycles at 120 MHz (the ratio is the
   loop's CPU load, estimated);
 * the stack high-water mark: the stack region (from the end of .bss to the initial SP) is
@@ -28,8 +28,8 @@ import subprocess
 import sys
 import time
 
-from heliquad.sim.mk64 import Teensy35
-from heliquad.sim.mk64.machine import Stop
+from heliquad.sim.chip import Teensy35
+from heliquad.sim.chip.machine import Stop
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DEFAULT_ELF = ROOT / "build" / "teensy35" / "heliquad-fw-teensy35.elf"
@@ -62,7 +62,7 @@ def imu_sample():
     """One raw FIFO packet of a level vehicle at rest, rotating a little (None when the
     packet encoders are not built)."""
     try:
-        from heliquad.sim.mpu6050_packets import raw_packet
+        from heliquad.sim.sensor.mpu6050_packets import raw_packet
     except ImportError:
         return None
     return raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])

@@ -10,7 +10,7 @@ baseline measured in the same run. It prints, for each: the median cycles per lo
 largest, each as a share of the 5 ms loop's budget (600 000 cycles at 120 MHz), and the
 median's ratio to the baseline's.
 
-The cycles are the emulator's stated cycle model (sim/mk64/timing.py), not a board's: the
+The cycles are the emulator's stated cycle model (sim/chip/timing.py), not a board's: the
 ratios between signals are what to read; a board's own HQ_FW_STATUS gives its absolute
 figures (``heliquad log``).
 
@@ -23,8 +23,8 @@ import subprocess
 import sys
 import tempfile
 
-from heliquad.host.tlog import read_tlog_table
-from heliquad.sim.dialect import dialect
+from heliquad.host.records.tlog import read_tlog_table
+from heliquad.sim.base.dialect import dialect
 
 BUDGET = 120e6 / 200                    # cycles of one 5 ms loop at 120 MHz
 SWEEP = ("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--firmware", "teensy35")
@@ -66,7 +66,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for k, (name, options) in enumerate(signals(args.rig_time).items()):
             folder = f"{tmp}/{k}"
-            res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", *SWEEP, *options,
+            res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *SWEEP, *options,
                                   "--out", folder], capture_output=True, text=True)
             if res.returncode != 0:
                 raise SystemExit(f"the {name} sweep failed: {res.stderr.strip()[-1000:]}")

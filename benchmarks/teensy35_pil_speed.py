@@ -26,7 +26,7 @@ import pathlib
 import pstats
 import time
 
-from heliquad.sim.mk64 import Teensy35
+from heliquad.sim.chip import Teensy35
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DEFAULT_ELF = ROOT / "build" / "teensy35" / "heliquad-fw-teensy35.elf"
@@ -37,7 +37,7 @@ WARM_UP = 50
 
 
 def sample():
-    from heliquad.sim.mpu6050_packets import raw_packet
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
     return raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
 
 

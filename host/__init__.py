@@ -1,9 +1,8 @@
-"""heliquad's host side: logging, frequency-response estimation, fitting, reports, CLI.
-
-Modules: ``fsf`` (FSF estimator), ``baselines`` (DFT and Welch H1), ``fit`` (Levy, SK and
-output-error fitting), ``metrics`` (J, AICc, recommendation), ``identify`` (points to
-models), ``files`` (file formats), ``plot``, ``demo``, ``cli``.
-"""
+"""heliquad's host tool, by stage: ``records`` (file formats, the floor), ``process``
+(signals, child processes), ``estimate`` (points and fits), ``acquire`` (links, sessions,
+sweeps), ``validate`` (closed loop, truth, replay), ``present`` (plots, report),
+``campaign`` (a session's identification end to end), ``commands`` (one module per
+command) and ``cli`` (the program and its parser). docs/architecture.md maps them."""
 
 __version__ = "0.1.0"
 

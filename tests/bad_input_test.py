@@ -1028,7 +1028,7 @@ def session(tmp_path_factory):
 
 
 def heliquad(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120, cwd=cwd)
 
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import scipy.io
 
-from heliquad.host import paper
-from heliquad.sim.dwell import simulate_sine_dwell
+from heliquad.host.records import paper
+from dwell_plant import simulate_sine_dwell
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
 
 def heliquad(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, cwd=cwd, timeout=120)
 
 
@@ -189,7 +189,7 @@ def _subcommands(parser) -> list:
 def test_a_command_line_builds_only_the_command_it_names():
     # Every command's module is imported only for --help or a name that is not a command;
     # the name each module's parser takes is the one COMMANDS files it under.
-    from heliquad.host.cli import _build_parser
+    from heliquad.host.cli.parser import _build_parser
     from heliquad.host.commands import COMMANDS
 
     assert _subcommands(_build_parser([])) == list(COMMANDS)
@@ -215,7 +215,7 @@ def test_the_command_line_keeps_openblas_to_one_thread_unless_told(given, expect
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     if given:
         env["OPENBLAS_NUM_THREADS"] = given
-    res = subprocess.run([sys.executable, "-c", "import os, sys, heliquad.host.cli; "
+    res = subprocess.run([sys.executable, "-c", "import os, sys, heliquad.host.cli.parser; "
                           "print(os.environ['OPENBLAS_NUM_THREADS'], 'numpy' in sys.modules)"],
                          capture_output=True, text=True, env=env, timeout=60)
     assert res.stdout.split() == [expected, "False"]          # set before numpy is imported
@@ -247,7 +247,7 @@ def test_fsf_of_a_multisine_run_gives_a_point_per_line(named, jitter, tmp_path):
     # Every line, each the model's response to 1e-6; or those named, to 1 % (the lines left
     # out of the FSF's model leak into the others' a little: 0.1 % here); timestamps
     # jittered by 0.3 % of the interval: the base period is still found whole.
-    from heliquad.host.files import read_points_csv
+    from heliquad.host.records.files import read_points_csv
 
     base, orders = multisine_run(tmp_path / "ms.csv", jitter=jitter)
     orders = named or orders
@@ -298,6 +298,6 @@ def test_the_boards_backlog_option_and_the_simulator_agree_on_its_bound():
     # heliquad board --backlog-bytes: the parser's default and largest value (kept out of the
     # simulator's import for the command line's start-up) is the simulator's bound.
     from heliquad.host.commands.board import MAX_BACKLOG_BYTES
-    from heliquad.sim.board import TELEMETRY_BACKLOG_BYTES
+    from heliquad.sim.rig.board import TELEMETRY_BACKLOG_BYTES
 
     assert MAX_BACKLOG_BYTES == TELEMETRY_BACKLOG_BYTES

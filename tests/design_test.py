@@ -1,4 +1,4 @@
-"""Experiment design under disturbance (host/design.py): the sequential dwell and the
+"""Experiment design under disturbance (host/acquire/design.py): the sequential dwell and the
 designed amplitudes, on the simulated rig with the firmware in the loop."""
 
 import json
@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from heliquad.host.design import AmplitudeDesign, Dwell
-from heliquad.host.tlog import read_tlog
-from heliquad.sim.dialect import dialect
+from heliquad.host.acquire.design import AmplitudeDesign, Dwell
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.base.dialect import dialect
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=900)
 
 
@@ -69,7 +69,7 @@ def test_a_designed_amplitude_aims_at_the_swing_and_a_small_first_one_is_measure
     # after the least cycles, so it is finished there and measured again at the designed
     # amplitude; the next frequency is designed from that response. (In still air the
     # first record would already be good enough and would be kept.)
-    from heliquad.host.fsf import estimate_fsf
+    from heliquad.host.estimate.fsf import estimate_fsf
 
     out = tmp_path / "designed"
     manifest = sweep(out, "--swing-deg", 4, "--freqs-hz", 0.6, 0.7, "--turbulence", "moderate",

@@ -2,7 +2,7 @@
 
 firmware/mavlink/heliquad.xml (with the common.xml it includes) is the only place where an
 enum's numbers, its entries' names and its messages' array lengths are written. Python takes
-them from the generated module (``heliquad._mavlink``, and the names of sim/dialect.py), C++
+them from the generated module (``heliquad._mavlink``, and the names of sim/base/dialect.py), C++
 from the generated headers. These tests check what each language exposes against the XML,
 and scan the sources (not generated code, not build folders) for a hand copy:
 
@@ -42,16 +42,18 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host import link, paper
-from heliquad.sim import dialect as names
-from heliquad.sim import faults, vehicle
-from heliquad.sim.dialect import dialect
+from heliquad.host.acquire import link
+from heliquad.host.records import paper
+from heliquad.sim.base import dialect as names
+from heliquad.sim.rig import faults
+from heliquad.sim.plant import vehicle
+from heliquad.sim.base.dialect import dialect
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 XML = ROOT / "firmware" / "mavlink" / "heliquad.xml"
 MAV = dialect()
 #: Copies still to remove, per file: the commands' argparse choices and checks of axis and
-#: injection names. They switch to sim/dialect.py's names once the command line reports a
+#: injection names. They switch to sim/base/dialect.py's names once the command line reports a
 #: missing dialect module while it builds its parser (the choices then need the module). A new
 #: copy in these files fails, and so does one fewer (lower the count).
 PENDING = {}
@@ -151,7 +153,7 @@ def enum_fields() -> set:
 
 @functools.cache
 def name_lists() -> list:
-    """Each heliquad enum's lower-case names in value order (sim/dialect.py's names)."""
+    """Each heliquad enum's lower-case names in value order (sim/base/dialect.py's names)."""
     return [list(names.enum_values(enum)) for enum in xml_enums()]
 
 
@@ -297,7 +299,7 @@ def test_no_hand_copy_in_python():
             continue
         offenders += [f"{rel}:{c}" for c in copies]
     assert not offenders, ("write these with the generated dialect's names (heliquad._mavlink, "
-                           "sim/dialect.py), not as copies:\n" + "\n".join(offenders))
+                           "sim/base/dialect.py), not as copies:\n" + "\n".join(offenders))
 
 
 # --- C++ sources -------------------------------------------------------------------------------
@@ -329,7 +331,7 @@ def _enum_copies(code) -> list:
 @functools.cache
 def short_names() -> dict:
     """{enum: {"STOP_COMMAND": value, ...}}: every dialect enum's entries without their shared
-    prefix (sim/dialect.py's names, upper case), as a C++ enumerator would spell them."""
+    prefix (sim/base/dialect.py's names, upper case), as a C++ enumerator would spell them."""
     return {enum: {name.upper(): v for name, v in names.enum_values(enum).items()}
             for enum in MAV.enums}
 

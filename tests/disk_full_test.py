@@ -14,8 +14,8 @@ import sys
 
 import pytest
 
-from heliquad.host.errors import DiskFull
-from heliquad.host.logsession import summarise_tlog
+from heliquad.sim.base.errors import DiskFull
+from heliquad.host.acquire.log_session import summarise_tlog
 from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir
 
 import teensy_image
@@ -35,7 +35,7 @@ def assert_whole_log(path):
     assert 0 < os.path.getsize(path) <= LIMIT
     s = summarise_tlog(str(path))
     assert s["damage"] is None and s["samples"] > 0 and s["lost"] == 0, s
-    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", "tlog", str(path)],
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "tlog", str(path)],
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 0 and res.stderr == "", res.stderr
 
@@ -123,8 +123,8 @@ def run_limited(code: str, limit: int) -> subprocess.CompletedProcess:
 def test_a_manifest_that_does_not_fit_leaves_the_previous_one_whole(tmp_path):
     path = tmp_path / "manifest.json"
     res = run_limited(f"""
-from heliquad.host.errors import DiskFull
-from heliquad.host.files import write_json
+from heliquad.sim.base.errors import DiskFull
+from heliquad.host.records.files import write_json
 write_json({str(path)!r}, {{"aborted": None}})
 try:
     write_json({str(path)!r}, {{"aborted": "x" * 1000}})
@@ -141,9 +141,9 @@ def test_the_tlog_writer_keeps_whole_records_only(tmp_path):
     # whole, every later write is refused, and closing writes nothing more.
     path = tmp_path / "w.tlog"
     res = run_limited(f"""
-from heliquad.host.errors import DiskFull
-from heliquad.host.tlog import TlogWriter
-from heliquad.sim.dialect import dialect
+from heliquad.sim.base.errors import DiskFull
+from heliquad.host.records.tlog import TlogWriter
+from heliquad.sim.base.dialect import dialect
 mav = dialect().MAVLink(None, srcSystem=1, srcComponent=1)
 w, n = TlogWriter({str(path)!r}), 0
 try:
@@ -166,8 +166,8 @@ w.close()
     assert res.returncode == 0, res.stderr
     text, kept = res.stdout.rsplit(maxsplit=1)
     assert text == f"disk full: {path} (File too large)"
-    from heliquad.host.tlog import TlogDamage, read_tlog
-    from heliquad.sim.dialect import dialect
+    from heliquad.host.records.tlog import TlogDamage, read_tlog
+    from heliquad.sim.base.dialect import dialect
 
     damage = TlogDamage()
     msgs = read_tlog(str(path), dialect(), damage=damage)
@@ -179,8 +179,8 @@ w.close()
 def test_a_flush_interrupted_by_a_signal_writes_every_record_once(tmp_path):
     # Ctrl-C (or SIGTERM) during a flush, after part of it reached the file: the next flush
     # goes on where the file ends.
-    from heliquad.host.tlog import TlogDamage, TlogWriter, read_tlog
-    from heliquad.sim.dialect import dialect
+    from heliquad.host.records.tlog import TlogDamage, TlogWriter, read_tlog
+    from heliquad.sim.base.dialect import dialect
 
     mav = dialect().MAVLink(None, srcSystem=1, srcComponent=1)
     w = TlogWriter(str(tmp_path / "i.tlog"))
@@ -215,8 +215,8 @@ def test_a_sweep_that_a_full_disk_stops_keeps_its_manifest_and_stops_the_excitat
     """run_sweep's own path, on a session whose log fills the disk mid-frequency: the
     excitation is stopped, the manifest records why and the frequency in progress; and when
     even that manifest does not fit, the previous one stays and the one line says so."""
-    from heliquad.host import sweep as sweep_module
-    from heliquad.host.sweep import default_plan, run_sweep
+    from heliquad.host.acquire import sweep as sweep_module
+    from heliquad.host.acquire.sweep import default_plan, run_sweep
 
     class Link:
         stops = 0

@@ -17,10 +17,10 @@ import zlib
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.dmp_image import (pack_dmp_file, read_dmp_file,
-                                     read_dmp_firmware, table_entries, unpack_dmp_file)
-from heliquad.host.errors import InputError
-from heliquad.sim.lockstep import FirmwareError, HostFirmware
+from heliquad.host.commands.dmp_image import (pack_dmp_file, read_dmp_file, read_dmp_firmware,
+                                              table_entries, unpack_dmp_file)
+from heliquad.sim.base.errors import InputError
+from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware
 
 from fake_dmp import FAKE_CONFIG, FAKE_DMP, FAKE_IMAGE, FAKE_UPDATES, write_fake_dmp
 
@@ -86,7 +86,7 @@ def test_cli_writes_the_file_and_refuses_a_wrong_source(tmp_path):
     good, bad = tmp_path / "good.py", tmp_path / "bad.py"
     good.write_text(constants_py())
     bad.write_text(constants_py(image=FAKE_IMAGE[:100]))
-    cli = [sys.executable, "-m", "heliquad.host.cli", "dmp-image"]
+    cli = [sys.executable, "-m", "heliquad.host.cli.parser", "dmp-image"]
     res = subprocess.run(cli + ["--source", str(good), "--out", str(tmp_path / "d.bin")],
                          capture_output=True, text=True)
     assert res.returncode == 0 and "image 1929, configuration 192, updates 47" in res.stdout

@@ -1,9 +1,9 @@
-"""Dryden turbulence (sim/dryden.py): intensities, scales, seeding."""
+"""Dryden turbulence (sim/plant/dryden.py): intensities, scales, seeding."""
 
 import numpy as np
 import pytest
 
-from heliquad.sim.dryden import LEVELS_KT, Dryden
+from heliquad.sim.plant.dryden import LEVELS_KT, Dryden
 
 DT = 0.005
 
@@ -47,8 +47,8 @@ def test_dryden_blocks_give_the_same_stream_as_single_steps():
 def test_imu_model_noise_bias_and_latency():
     # The sensor as the firmware sees it on the roll rig: the C++ plant adds the residual
     # bias and the drawn noise, and delays the sample by the DMP's latency.
-    from heliquad.sim.params import load_params
-    from heliquad.sim.vehicle_plant import VehiclePlant
+    from heliquad.sim.plant.vehicle_params import load_params
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     p = load_params().imu
     plant = VehiclePlant("roll", "roll", DT, seed=3)
@@ -67,8 +67,8 @@ def test_imu_model_noise_bias_and_latency():
 
 
 def test_imu_noise_is_the_same_stream_in_blocks_and_frames():
-    from heliquad.sim.params import load_params
-    from heliquad.sim.imu_model import ImuModel
+    from heliquad.sim.plant.vehicle_params import load_params
+    from heliquad.sim.plant.imu_model import ImuModel
 
     a, b = ImuModel(load_params().imu, seed=5), ImuModel(load_params().imu, seed=5)
     np.testing.assert_array_equal(np.vstack([a.noise(1) for _ in range(50)]),

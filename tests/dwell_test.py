@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from heliquad.sim.dwell import simulate_sine_dwell
+from dwell_plant import simulate_sine_dwell
 
 ROLL = ([28.19], [1, 5.13, 22.93])
 
@@ -32,7 +32,7 @@ def test_noise_is_seeded():
 
 
 def test_csv_round_trip(tmp_path):
-    from heliquad.host.files import read_run_csv
+    from heliquad.host.records.files import read_run_csv
 
     d = simulate_sine_dwell(*ROLL, 2.0, cycles=2)
     d.to_csv(tmp_path / "run.csv")

@@ -192,7 +192,8 @@ def test_a_sample_beyond_the_declared_peak_is_never_output_and_stops_the_excitat
 
 
 def test_the_host_design_s_declared_peak_holds_in_the_firmware_s_float_arithmetic():
-    from heliquad.host import multisine as design, paper
+    from heliquad.host.acquire import multisine as design
+    from heliquad.host.records import paper
 
     for band in paper.BANDS_HZ.values():
         ms = design.design(band, 0.25)

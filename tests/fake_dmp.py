@@ -5,7 +5,7 @@ firmware is InvenSense's and is never in this repository; the emulated chip runs
 so any firmware of the right form exercises the driver's set-up and the emulator's check."""
 
 from heliquad import _firmware as fw
-from heliquad.host.dmp_image import DmpFirmware, pack_dmp_file
+from heliquad.host.commands.dmp_image import DmpFirmware, pack_dmp_file
 
 FAKE_IMAGE = bytes((i * 7 + 3) & 0xFF for i in range(1929))
 

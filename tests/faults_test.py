@@ -1,11 +1,11 @@
-"""Fault schedules of the SIL (sim/faults.py): which frames carry which HQ_IMU_FAULT."""
+"""Fault schedules of the SIL (sim/rig/faults.py): which frames carry which HQ_IMU_FAULT."""
 
 import numpy as np
 import pytest
 
-from heliquad.host.errors import InputError
-from heliquad.sim.dialect import dialect
-from heliquad.sim.faults import Fault, imu_fault_codes, link_close_frame, parse_fault
+from heliquad.sim.base.errors import InputError
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.rig.faults import Fault, imu_fault_codes, link_close_frame, parse_fault
 
 MAV = dialect()
 DT_US = 5000
@@ -52,7 +52,7 @@ def test_bad_faults_are_input_errors(text, match):
 
 
 def test_a_fault_shorter_than_a_loop_between_two_frames_is_refused():
-    from heliquad.sim.faults import check_faults
+    from heliquad.sim.rig.faults import check_faults
 
     with pytest.raises(InputError, match="falls between two loops"):
         check_faults([parse_fault("silent@0.0012:0.0005")], DT_US)

@@ -1,4 +1,4 @@
-"""The Teensy 3.5 image in the install, and the one finder of it (heliquad.sim.firmware_image).
+"""The Teensy 3.5 image in the install, and the one finder of it (heliquad.sim.base.firmware_image).
 
 Three parts:
 
@@ -23,9 +23,9 @@ import sys
 
 import pytest
 
-from heliquad.sim import firmware_image
-from heliquad.sim.firmware_image import ImageNotFound, teensy35_image
-from heliquad.sim.lockstep import FirmwareError
+from heliquad.sim.base import firmware_image
+from heliquad.sim.base.firmware_image import ImageNotFound, teensy35_image
+from heliquad.sim.rig.lockstep import FirmwareError
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from teensy_image import ROOT, image  # noqa: E402
@@ -292,7 +292,7 @@ def run_fresh(args: list[str], cwd: pathlib.Path, **env_extra: str):
 
 def test_a_fresh_interpreter_finds_the_installed_image(tmp_path):
     found = installed_files()
-    res = run_fresh(["-c", "from heliquad.sim.firmware_image import teensy35_image as t; "
+    res = run_fresh(["-c", "from heliquad.sim.base.firmware_image import teensy35_image as t; "
                            "print(t()); print(t('hex'))"], cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert [pathlib.Path(line).resolve() for line in res.stdout.split()] == [found[ELF], found[HEX]]
@@ -300,11 +300,11 @@ def test_a_fresh_interpreter_finds_the_installed_image(tmp_path):
 
 def test_flash_defaults_to_the_installed_image(tmp_path):
     found = installed_files()
-    res = run_fresh(["-m", "heliquad.host.cli", "flash", "--check-only"], cwd=tmp_path)
+    res = run_fresh(["-m", "heliquad.host.cli.parser", "flash", "--check-only"], cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     path = res.stdout.split(": ")[0]
     assert pathlib.Path(path).resolve() == found[HEX]
-    res = run_fresh(["-m", "heliquad.host.cli", "flash", "--check-only"], cwd=tmp_path,
+    res = run_fresh(["-m", "heliquad.host.cli.parser", "flash", "--check-only"], cwd=tmp_path,
                     HQ_TEENSY35_ELF=str(tmp_path / "none.elf"))
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "none.hex" in res.stderr and PACKAGES in res.stderr

@@ -13,10 +13,10 @@ from __future__ import annotations
 import select
 import time
 
-from heliquad.host.link import TelemetryLink
-from heliquad.sim.dialect import dialect
-from heliquad.sim.lockstep import HostFirmware, SimLink
-from heliquad.sim.tf_plant import TfPlant
+from heliquad.host.acquire.link import TelemetryLink
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.rig.lockstep import HostFirmware, SimLink
+from heliquad.sim.plant.tf_plant import TfPlant
 
 MAV = dialect()
 ROLL = ((28.19,), (1.0, 5.13, 22.93))

@@ -1,7 +1,7 @@
 """The two firmwares a lockstep test can fly (not a test module: a helper the tests import).
 
 ``host``: the host build, heliquad-fw-host. ``teensy35``: the Teensy 3.5 image as flashed,
-in the emulated MK64FX512 (heliquad.sim.pil), the image built with the CMake preset by
+in the emulated MK64FX512 (heliquad.sim.chip.pil), the image built with the CMake preset by
 tests/teensy_image.py (skipped without the ARM toolchain, except in CI, where it must be
 there). Tests parametrised with :data:`FIRMWARES` run against both; the processor-in-the-
 loop cases carry the ``pil`` mark, so ``pytest -m pil`` runs only them and ``-m "not pil"``
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import pytest
 
-from heliquad.sim.lockstep import HostFirmware, start_firmware
+from heliquad.sim.rig.lockstep import HostFirmware, start_firmware
 
 import teensy_image
 

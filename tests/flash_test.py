@@ -10,7 +10,7 @@ import sys
 import pytest
 from intelhex import IntelHex
 
-from heliquad.host.cli import main
+from heliquad.host.cli.parser import main
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from teensy_image import image  # noqa: E402

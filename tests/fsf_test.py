@@ -5,12 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from heliquad.host.baselines import estimate_dft, estimate_h1
-from heliquad.host.errors import InputError
-from heliquad.host.fsf import (RecursiveFsf, estimate_against_excitation, estimate_frequency,
-                               estimate_multisine, estimate_multisine_against_excitation,
-                               estimate_fsf, period_coherence)
-from heliquad.sim.dwell import simulate_sine_dwell
+from heliquad.host.estimate.baselines import estimate_dft, estimate_h1
+from heliquad.sim.base.errors import InputError
+from heliquad.host.estimate.fsf import (RecursiveFsf, estimate_against_excitation,
+                                        estimate_frequency, estimate_multisine,
+                                        estimate_multisine_against_excitation, estimate_fsf,
+                                        period_coherence)
+from dwell_plant import simulate_sine_dwell
 
 ROLL = ([28.19], [1, 5.13, 22.93])          # the paper's chosen roll model (docs/paper.md)
 FS_HZ = 200.0
@@ -390,7 +391,7 @@ def test_the_sigma_of_a_record_with_lost_samples_covers_its_error():
 
 
 def test_a_phase_lost_in_every_period_is_refused():
-    from heliquad.host.fsf import complete_excitation
+    from heliquad.host.estimate.fsf import complete_excitation
 
     present = np.ones(400, dtype=bool)
     present[7::40] = False

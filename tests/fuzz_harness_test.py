@@ -16,8 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "fuzz"))
 import framer_fuzz  # noqa: E402
 import fuzz_input  # noqa: E402
 import tlog_fuzz  # noqa: E402
-from heliquad.host import tlog
-from heliquad.sim import mavframe  # noqa: E402
+from heliquad.host.records import tlog
+from heliquad.sim.base import framing as mavframe  # noqa: E402
 
 HARNESSES = {"tlog": tlog_fuzz, "framer": framer_fuzz}
 RANDOM_INPUTS = 1500                    # per harness and kind (raw, structured, mutated seed)

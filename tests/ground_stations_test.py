@@ -21,7 +21,7 @@ import threading
 
 import pytest
 
-from heliquad.sim.dialect import dialect
+from heliquad.sim.base.dialect import dialect
 
 from private_pymavlink import private_pymavlink
 from tool_runs import cli
@@ -235,7 +235,7 @@ class MavProxy:
     def __init__(self, board, folder):
         need("MAVProxy", MAVPROXY_INSTALL, MAVPROXY_VERSION)
         _, env = private_pymavlink(folder / "site")
-        res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", "mavlink-dialect",
+        res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "mavlink-dialect",
                               "--install"], capture_output=True, text=True, env=env,
                              timeout=GUARD_S * 5)
         assert res.returncode == 0, res.stderr
@@ -315,7 +315,7 @@ def test_mavproxy_fetches_sets_and_loads_the_parameters_of_an_armed_board(armed_
     only while disarmed"."""
     need("MAVProxy", MAVPROXY_INSTALL, MAVPROXY_VERSION)
     saved = tmp_path / "board.parm"
-    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", "params", "--port",
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "params", "--port",
                           armed_board.port, "save", "--mavproxy", str(saved)],
                          capture_output=True, text=True, timeout=GUARD_S * 5)
     assert res.returncode == 0, res.stderr

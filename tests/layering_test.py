@@ -82,6 +82,6 @@ def test_no_import_cycle():
 def test_the_graph_is_read_from_the_sources():
     # The scan itself must see real edges, or the two tests above pass vacuously.
     graph = _graph()
-    assert "heliquad.sim.dialect" in graph["heliquad.host.link"]
-    assert "heliquad.host.session" in graph["heliquad.host.experiment"]
-    assert "heliquad.sim.errors" in graph["heliquad.host.errors"]
+    assert "heliquad.sim.base.dialect" in graph["heliquad.host.acquire.link"]
+    assert "heliquad.host.acquire.session" in graph["heliquad.host.acquire.experiment"]
+    assert "heliquad.sim.base.errors" in graph["heliquad.host.cli.parser"]

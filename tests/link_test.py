@@ -5,8 +5,8 @@ import os
 
 import pytest
 
-from heliquad.host.errors import InputError
-from heliquad.host.link import TelemetryLink
+from heliquad.sim.base.errors import InputError
+from heliquad.host.acquire.link import TelemetryLink
 
 
 def test_a_send_on_a_port_that_went_away_is_the_link_lost():
@@ -30,7 +30,7 @@ class FakeBoard:
     """The board's end of a pty: HQ_SYSID_SAMPLEs written on demand, armed or not."""
 
     def __init__(self):
-        from heliquad.sim.dialect import dialect
+        from heliquad.sim.base.dialect import dialect
 
         self.main, side = os.openpty()
         self.port = os.ttyname(side)
@@ -52,7 +52,7 @@ class FakeBoard:
 
 @pytest.fixture
 def board_session(tmp_path):
-    from heliquad.host.session import PortSession
+    from heliquad.host.acquire.session import PortSession
 
     board = FakeBoard()
     session = PortSession(board.port, str(tmp_path / "s.tlog"), poll_s=0.0)
@@ -83,7 +83,7 @@ def test_a_board_already_armed_starts_at_once(board_session):
 
 
 def test_a_board_never_armed_or_silent_ends_with_one_line(board_session, monkeypatch):
-    from heliquad.host import session as session_module
+    from heliquad.host.acquire import session as session_module
 
     board, session = board_session
     monkeypatch.setattr(session_module, "FIRST_SAMPLE_WAIT_S", 0.0)
@@ -225,8 +225,8 @@ def until(condition, what, timeout_s=60.0):
 
 
 def heartbeats_in(data: bytes) -> int:
-    from heliquad.sim.dialect import dialect
-    from heliquad.sim.mavframe import Codec, Framer
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Codec, Framer
 
     codec = Codec(dialect())
     hb = dialect().MAVLINK_MSG_ID_HEARTBEAT
@@ -312,7 +312,7 @@ def heliquad(*args, **kw):
     import subprocess
     import sys
 
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120, **kw)
 
 
@@ -333,7 +333,7 @@ def test_heliquad_log_records_a_board_over_the_network(running_board, kind, tmp_
     # a second of samples.
     import signal
 
-    from heliquad.host.logsession import summarise_tlog
+    from heliquad.host.acquire.log_session import summarise_tlog
     from tool_runs import cli
 
     relay, conn = relay_and_connection(running_board, kind)
@@ -390,7 +390,7 @@ MAVUTIL_PARAMS = """
 import os, sys
 os.environ["MAVLINK20"] = "1"
 import pymavlink.dialects.v20 as v20
-from heliquad.sim.dialect import dialect
+from heliquad.sim.base.dialect import dialect
 MAV = dialect()
 sys.modules["pymavlink.dialects.v20.heliquad"] = v20.heliquad = MAV
 from pymavlink import mavutil

@@ -2,7 +2,7 @@
 
 Everything here runs a real firmware and talks to it over its two pseudo-terminals, as the
 tools do: the host build (heliquad-fw-host) and, where a test is parametrised with
-FIRMWARES, also the Teensy 3.5 image in the emulated chip (heliquad.sim.pil; the ``pil``
+FIRMWARES, also the Teensy 3.5 image in the emulated chip (heliquad.sim.chip.pil; the ``pil``
 mark). The two differ where the board does: the image's clock starts at its reset (its
 loop times are offset by the boot and jitter by tens of microseconds), and its telemetry
 leaves at the UART's line rate.
@@ -18,14 +18,14 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.host.fsf import estimate_fsf
-from heliquad.host.files import read_run_csv
-from heliquad.sim.dialect import dialect
-from heliquad.host.tlog import read_tlog
-from heliquad.sim.lockstep import FirmwareError, HostFirmware, SimLink
-from heliquad.host.experiment import run_sil
-from heliquad.sim.sil import SilConfig
-from heliquad.sim.tf_plant import TfPlant
+from heliquad.host.estimate.fsf import estimate_fsf
+from heliquad.host.records.files import read_run_csv
+from heliquad.sim.base.dialect import dialect
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware, SimLink
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.sim.rig.setup import SilConfig
+from heliquad.sim.plant.tf_plant import TfPlant
 
 from fake_dmp import write_fake_dmp
 from firmware_rig import FirmwareRig
@@ -177,7 +177,7 @@ def test_firmware_exits_by_itself_when_the_simulator_goes_away(firmware, tmp_pat
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120)
 
 
@@ -232,7 +232,7 @@ def test_free_running_board_streams_telemetry_in_real_time(firmware, tmp_path):
     # path like a serial port, sees 200 Hz samples without gaps, and, once the board is armed
     # and has the tool's heartbeat, can start an excitation. Pacing: the simulated clock never
     # runs ahead of the wall clock (it may fall behind on a loaded machine, so no lower bound).
-    from heliquad.host.link import TelemetryLink
+    from heliquad.host.acquire.link import TelemetryLink
 
     port = tmp_path / "rig"
     # SIGINT back to its default in the child: a shell that ran the tests in the background
@@ -241,7 +241,7 @@ def test_free_running_board_streams_telemetry_in_real_time(firmware, tmp_path):
     if firmware != "host":                      # the image the tests built
         env["HQ_TEENSY35_ELF"] = image_for(firmware)["firmware_image"]
     launched = time.monotonic()
-    proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
+    proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "board", "--telemetry",
                              str(port), "--duration-s", "30", "--firmware", firmware,
                              "--backlog-bytes", "0"],          # every sample: no gap asserted
                             stdout=subprocess.PIPE, text=True, env=env,
@@ -360,7 +360,7 @@ def _rig_points():
     """Five log-spaced frequencies over each axis's Table 1 band (docs/paper.md), with an amplitude
     that keeps the response well above the gyro's quantisation: the closed yaw loop holds
     the yaw rate to a few 0.001 rad/s LSBs below 0.4 Hz unless the excitation is large."""
-    from heliquad.host import paper
+    from heliquad.host.records import paper
 
     points = []
     for axis in ("roll", "pitch", "yaw"):
@@ -376,7 +376,7 @@ def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, 
     # Issue 4: the 6-DoF vehicle on its one-axis rig, the firmware flying it in angle mode,
     # noise-free, mixer injection; the FSF point matches the model linearised at the rig's
     # trim (through the firmware's mixer), ZOH-sampled, within 0.5 dB and 3 deg.
-    from heliquad.sim.vehicle_plant import VehiclePlant
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     cfg = SilConfig(axis=axis, inject="mixer", freq_hz=freq_hz, amplitude=amplitude, cycles=5,
                     plant="vehicle", rig=axis, ideal_sensor=True)
@@ -392,8 +392,8 @@ def test_vehicle_rig_identification_matches_the_simulators_truth(axis, freq_hz, 
 def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
     """The vehicle in free flight at hover throttle, armed, angle mode, ideal IMU (the
     control behaviour itself); roll and pitch angles (deg)."""
-    from heliquad.sim.vehicle import GRAVITY_M_S2
-    from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
+    from heliquad.sim.plant.vehicle import GRAVITY_M_S2
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant, mixer_for
 
     plant = VehiclePlant("roll", "free", 0.005, ideal_sensor=True)
     mixer = mixer_for(plant.params)
@@ -452,8 +452,8 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
     # turbulence, with the realistic IMU (noise, residual bias, DMP latency). The model applies gusts as drag
     # through the centre of mass and gust rates through rotational damping; rotor blowback
     # (gust-velocity moments) is not modelled yet, which is why the bound is this tight.
-    from heliquad.sim.vehicle import GRAVITY_M_S2
-    from heliquad.sim.vehicle_plant import VehiclePlant, mixer_for
+    from heliquad.sim.plant.vehicle import GRAVITY_M_S2
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant, mixer_for
 
     image = write_fake_dmp(tmp_path / "dmp.bin")
     plant = VehiclePlant("roll", "free", 0.005, turbulence="moderate", seed=1)
@@ -482,7 +482,7 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
 def test_identification_with_a_realistic_imu_needs_its_latency_in_the_truth(tmp_path):
     # Gyro and accelerometer noise at the datasheet's densities, a residual gyro bias, and the
     # DMP's one-sample latency: the logged rate is one loop late, so the truth carries z^-1.
-    from heliquad.sim.vehicle_plant import VehiclePlant
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     cfg = SilConfig(axis="roll", inject="mixer", freq_hz=2.0, amplitude=0.05, cycles=10,
                     plant="vehicle", rig="roll", seed=2)
@@ -507,7 +507,7 @@ def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, 
     # discrete PID; angle injection: u = angle setpoint, y = angle, the whole cascade. The truth
     # transcribes the Pid's Tustin recurrences into z (sim.vehicle_plant.pid_z). DMP path, so the
     # logged angle is the attitude itself.
-    from heliquad.sim.vehicle_plant import VehiclePlant
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     image = write_fake_dmp(tmp_path / "dmp.bin")
     cfg = SilConfig(axis=axis, inject=inject, freq_hz=freq_hz, amplitude=math.radians(amplitude_deg),
@@ -529,7 +529,7 @@ def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, 
 def test_sil_with_a_bad_parameter_file_is_one_line_naming_the_key(old, new, match, tmp_path):
     import importlib.resources
 
-    text = importlib.resources.files("heliquad.sim").joinpath("data", "vehicle.toml").read_text()
+    text = importlib.resources.files("heliquad.sim.plant").joinpath("vehicle.toml").read_text()
     bad = tmp_path / "vehicle.toml"
     bad.write_text(text.replace(old, new, 1))
     res = heliquad("sil", "--plant", "vehicle", "--freq-hz", 1, "--amplitude", 0.05,

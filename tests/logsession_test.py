@@ -5,11 +5,11 @@ import sys
 
 import pytest
 
-from heliquad.host.logsession import summarise_tlog
+from heliquad.host.acquire.log_session import summarise_tlog
 
 
 def heliquad(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120, **kw)
 
 
@@ -20,7 +20,7 @@ def session(tmp_path_factory):
     port, out = folder / "rig", folder / "session.tlog"
     # All its telemetry kept for the reader (--backlog-bytes 0): "0 lost" is asserted, and a
     # reader a loaded machine stalls would lose some past the default bound.
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
+    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "board", "--telemetry",
                               str(port), "--duration-s", "7", "--backlog-bytes", "0"],
                              stdout=subprocess.PIPE, text=True)
     try:
@@ -114,8 +114,8 @@ def test_a_sil_sweeps_log_counts_from_the_start_its_manifest_records(sweep_log):
     import datetime
     import json
 
-    from heliquad.host.tlog import TlogDamage, read_tlog
-    from heliquad.sim.dialect import dialect
+    from heliquad.host.records.tlog import TlogDamage, read_tlog
+    from heliquad.sim.base.dialect import dialect
 
     manifest = json.loads((sweep_log.parent / "manifest.json").read_text())
     start = manifest["tlog_start_us"]

@@ -1,4 +1,4 @@
-"""The cascade as the firmware flies it (host/loops.py): loop gains, margins, discrete loops."""
+"""The cascade as the firmware flies it (host/validate/loops.py): loop gains, margins, discrete loops."""
 
 import math
 
@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host import loops, paper
-from heliquad.host.fit import fit_tf
-from heliquad.host.gains import firmware_gains
-from heliquad.host.validate import validate_model
-from heliquad.sim.sil import SilConfig, make_plant
+from heliquad.host.validate import loops
+from heliquad.host.records import paper
+from heliquad.host.estimate.fit import fit_tf
+from heliquad.host.records.gains import firmware_gains
+from heliquad.host.validate.closed_loop import validate_model
+from heliquad.sim.rig.setup import SilConfig, make_plant
 
 DT = loops.LOOP_DT_S
 ROLL = paper.MODELS["roll"][(0, 2)]

@@ -29,7 +29,7 @@ KEEP_ALL = ("--backlog-bytes", 0)
 
 
 def heliquad(*args, timeout=600):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -43,8 +43,8 @@ class DamagingRelay:
     def __init__(self, board_port, corrupt=0.0, drop=0.0, seed=1):
         import serial
 
-        from heliquad.sim.dialect import dialect
-        from heliquad.sim.mavframe import Codec, Framer
+        from heliquad.sim.base.dialect import dialect
+        from heliquad.sim.base.framing import Codec, Framer
 
         self.board = serial.Serial(str(board_port), timeout=0)
         self.main, self.side = os.openpty()
@@ -117,7 +117,7 @@ def sweep_through(board_port, out, **damage):
 
 def points(folder):
     """(freq_hz, complex gain, sigma, lost_share or 0) of points.csv."""
-    from heliquad.host.files import read_points_csv
+    from heliquad.host.records.files import read_points_csv
 
     p = read_points_csv(str(folder / "points.csv"))
     lost = p["lost_share"] if p["lost_share"] is not None else np.zeros(p["omega"].size)
@@ -170,8 +170,8 @@ def stream(lose=(), status=True):
     out, and the start's answer (``status``) sent or lost."""
     import math
 
-    from heliquad.sim.dialect import dialect
-    from heliquad.sim.mavframe import Message
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Message
 
     mav = dialect()
     out = []
@@ -194,7 +194,7 @@ def stream(lose=(), status=True):
 
 
 def watch(messages):
-    from heliquad.host.sweep import ExcitationWatch, Limits, SweepPlan
+    from heliquad.host.acquire.sweep import ExcitationWatch, Limits, SweepPlan
 
     plan = SweepPlan("roll", "mixer", [2.0], [0.1], cycles=MEASURED, fade_cycles=FADE)
     w = ExcitationWatch(plan, 2.0, 0.1, Limits(), 0, progress=lambda *_: None)
@@ -239,7 +239,7 @@ def test_a_window_that_lost_too_much_ends_the_sweep_saying_so(lose, says):
 def test_a_window_cut_short_without_gaps_is_still_incomplete():
     # The excitation stopped early and its status was lost: no sequence gap accounts for the
     # missing samples, so it is not passed as complete.
-    from heliquad.sim.dialect import dialect
+    from heliquad.sim.base.dialect import dialect
 
     idle = dialect().HQ_EXCITATION_STATE_IDLE
     messages = stream()
@@ -262,7 +262,7 @@ def test_a_board_unplugged_mid_sweep_exits_1_as_a_silent_one_does(tmp_path):
         relay = DamagingRelay(board)
         os.set_blocking(relay.main, False)
         out = tmp_path / "sweep"
-        sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis",
+        sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "sweep", "--axis",
                                   "roll", "--port", relay.port, "--freqs-hz", "0.5", "--cycles",
                                   "10", "--out", str(out)],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -287,9 +287,9 @@ def test_identify_and_the_report_say_a_sweep_was_cut(tmp_path):
     # Three frequencies measured, the fourth refused (a board flashed with tighter limits would):
     # identify's first line says the sweep was cut and how much of it was measured, and so
     # does the report.
-    from heliquad.host.session import SilSession
-    from heliquad.host.sweep import SweepPlan, run_sweep
-    from heliquad.sim.sil import SilConfig
+    from heliquad.host.acquire.session import SilSession
+    from heliquad.host.acquire.sweep import SweepPlan, run_sweep
+    from heliquad.sim.rig.setup import SilConfig
 
     out = tmp_path / "cut"
     out.mkdir()

@@ -12,8 +12,8 @@ import pytest
 
 import pymavlink
 
-from heliquad.host.tlog import read_tlog
-from heliquad.sim.dialect import dialect
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.base.dialect import dialect
 
 from private_pymavlink import private_pymavlink as make_private_pymavlink
 
@@ -21,7 +21,7 @@ REAL_V20 = os.path.join(os.path.dirname(pymavlink.__file__), "dialects", "v20")
 
 
 def heliquad(*args, env=None):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=600, env=env)
 
 

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 import scipy.io
 
-from heliquad.host import paper
-from heliquad.host.files import write_models_json, write_models_mat
-from heliquad.host.fit import TfModel
+from heliquad.host.records import paper
+from heliquad.host.records.files import write_models_json, write_models_mat
+from heliquad.host.estimate.fit import TfModel
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 FIXED_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate")
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=300)
 
 

@@ -7,7 +7,7 @@ import struct
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.dmp_image import table_entries
+from heliquad.host.commands.dmp_image import table_entries
 
 # Made-up DMP firmware of MotionApps 2.0's form (the real one is InvenSense's and is not in
 # this repository); the driver and the emulator treat its bytes as opaque.

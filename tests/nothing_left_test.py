@@ -15,13 +15,13 @@ import signal
 
 import pytest
 
-from heliquad.host.logsession import summarise_tlog
+from heliquad.host.acquire.log_session import summarise_tlog
 from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir, size, wait_for
 
 import teensy_image
 
 ENDINGS = ["normal", "ctrl-c", "sigterm", "sighup", "firmware killed"]
-#: How a signal ends every command (host/cli.py): the word said and the exit code, after
+#: How a signal ends every command (host/cli/parser.py): the word said and the exit code, after
 #: the same orderly stop.
 BY_SIGNAL = {"ctrl-c": ("interrupted", 130), "sigterm": ("terminated", 143),
              "sighup": ("hung up", 129)}
@@ -130,7 +130,7 @@ def test_sil(ending, tmpdir_, tmp_path):
     sil = Tool("sil", *what, "--amplitude", 0.05, "--out", run, tmpdir=tmpdir_)
     end_run(sil, ending, f"{run}.tlog")
     code, out, err = sil.finish()
-    # The firmware killed is the board gone: exit 1 (the rule in host/cli.py), not 2.
+    # The firmware killed is the board gone: exit 1 (the rule in host/cli/parser.py), not 2.
     expected = {"normal": (0, None), "firmware killed": (1, "the firmware died"),
                 **{k: (code, word) for k, (word, code) in BY_SIGNAL.items()}}
     assert code == expected[ending][0], out + err
@@ -177,7 +177,7 @@ def test_a_firmware_start_interrupted_leaves_no_process_or_folder(monkeypatch):
     # Ctrl-C (or SIGTERM) while the firmware starts (the emulated Teensy takes seconds):
     # the process it had started is stopped and its folder removed before the
     # interrupt goes on.
-    from heliquad.sim.lockstep import HostFirmware
+    from heliquad.sim.rig.lockstep import HostFirmware
 
     started = []
     wait_ready = HostFirmware._wait_ready
@@ -198,7 +198,7 @@ def test_a_firmware_stop_interrupted_still_stops_it_and_removes_its_links(tmp_pa
     # A second Ctrl-C while the firmware is asked to exit: it is killed at once, and the
     # links it had no time to remove (here one outside its folder, as `heliquad board`
     # publishes) are removed for it, with the folder.
-    from heliquad.sim.lockstep import HostFirmware
+    from heliquad.sim.rig.lockstep import HostFirmware
 
     telemetry = tmp_path / "telemetry"
     fw = HostFirmware(telemetry_path=str(telemetry))
@@ -220,7 +220,7 @@ def test_a_firmware_stop_interrupted_still_stops_it_and_removes_its_links(tmp_pa
 def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     # The board's firmware killed under a sweep over its port: the sweep ends with one
     # line, its manifest says why and at which frequency, its log is kept. The board went
-    # away: exit 1, as for one that fell silent (host/cli.py's rule).
+    # away: exit 1, as for one that fell silent (host/cli/parser.py's rule).
     rig, out = tmp_path / "rig", tmp_path / "sweep"
     board = Tool("board", "--telemetry", rig, "--duration-s", 600, *KEEP_ALL, tmpdir=tmpdir_)
     assert "board running" in board.readline()

@@ -1,6 +1,6 @@
-"""The paper's published figures (host/paper.py, restated in docs/paper.md) against what the
+"""The paper's published figures (host/records/paper.py, restated in docs/paper.md) against what the
 firmware flies: the cascade gains are defined once, in the firmware
-(``CascadeGains::paper_defaults()``); host/paper.py keeps the published numbers as the
+(``CascadeGains::paper_defaults()``); host/records/paper.py keeps the published numbers as the
 reference, and these tests tie the two."""
 
 import pathlib
@@ -8,9 +8,9 @@ import pathlib
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host import paper
-from heliquad.host.gains import Gains, firmware_gains, load_gains
-from heliquad.sim.dialect import AXES
+from heliquad.host.records import paper
+from heliquad.host.records.gains import Gains, firmware_gains, load_gains
+from heliquad.sim.base.dialect import AXES
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
 #: Single precision: a decimal with a few digits is within half an ulp, 2^-24 relative.

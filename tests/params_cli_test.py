@@ -15,13 +15,13 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.host.errors import InputError
-from heliquad.host.files import read_params_file, write_params_file
-from heliquad.host.link import TelemetryLink
-from heliquad.host.params import (NoAnswer, Param, ParamClient, ParamRefused, decode_value,
-                                  encode_value, value_text)
-from heliquad.sim.dialect import dialect
-from heliquad.sim.mavframe import Codec, Framer
+from heliquad.sim.base.errors import InputError
+from heliquad.host.records.files import read_params_file, write_params_file
+from heliquad.host.acquire.link import TelemetryLink
+from heliquad.host.acquire.param_protocol import (NoAnswer, Param, ParamClient, ParamRefused,
+                                                  decode_value, encode_value, value_text)
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.framing import Codec, Framer
 
 MAV = dialect()
 REAL32, INT32 = MAV.MAV_PARAM_TYPE_REAL32, MAV.MAV_PARAM_TYPE_INT32
@@ -154,7 +154,7 @@ def client(board):
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120)
 
 

@@ -18,10 +18,10 @@ import pytest
 from pymavlink import mavutil
 
 from heliquad import _firmware
-from heliquad.host.params import decode_value, encode_value
-from heliquad.sim.dialect import dialect
-from heliquad.sim.lockstep import SimLink
-from heliquad.sim.tf_plant import TfPlant
+from heliquad.host.acquire.param_protocol import decode_value, encode_value
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.rig.lockstep import SimLink
+from heliquad.sim.plant.tf_plant import TfPlant
 
 from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
 from firmwares import FIRMWARES, start
@@ -648,7 +648,7 @@ def test_a_set_to_the_value_it_has_is_answered_with_it_even_while_armed_or_excit
 def _heliquad(*args):
     import subprocess
 
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
 
 

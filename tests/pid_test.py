@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.validate import pid_tf
-from heliquad.sim.vehicle_plant import pid_z
+from heliquad.host.validate.closed_loop import pid_tf
+from heliquad.sim.plant.vehicle_plant import pid_z
 
 DT = 0.005   # 200 Hz loop
 
@@ -103,7 +103,7 @@ def flown_rate_gains(axis=fw.Axis.ROLL):
 
 def test_matches_the_hosts_continuous_pid():
     # The firmware's roll rate loop. With setpoint 0 and measurement -e(t), the firmware PID is
-    # the host's continuous model (host/validate.py, pid_tf: Kc (1 + 1/(tau_I s) +
+    # the host's continuous model (host/validate/closed_loop.py, pid_tf: Kc (1 + 1/(tau_I s) +
     # tau_D s / (tau_D/N s + 1)), N its derivative filter) applied to e. The reference is
     # python-control's response on a 20x finer grid. Tustin's error is O((w dt)^2): at 2 Hz
     # and 200 Hz it is ~1e-3 of the output, so 1 % of the output's amplitude is the bound,
@@ -138,7 +138,7 @@ def steady_gain(pid, on_setpoint, f_hz, periods=40):
 
 @pytest.mark.parametrize("f_hz", [0.5, 4.0, 20.0])
 def test_the_simulators_z_domain_pid_is_the_firmwares(f_hz):
-    # sim/vehicle_plant.py states the firmware's Pid in z for the closed loops' truth: output
+    # sim/plant/vehicle_plant.py states the firmware's Pid in z for the closed loops' truth: output
     # = C_PI (r - y) + D_m y. The firmware's own steady state must be exactly that.
     g = flown_rate_gains()
     on_error, w = steady_gain(fw.Pid(g), True, f_hz)

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware
-from heliquad.host.files import read_run_csv
-from heliquad.host.fsf import estimate_fsf
-from heliquad.sim.dialect import dialect
-from heliquad.host.tlog import read_tlog
-from heliquad.sim.pil import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
-from heliquad.host.experiment import run_sil
-from heliquad.sim.sil import RC_CENTER_US, SilConfig
+from heliquad.host.records.files import read_run_csv
+from heliquad.host.estimate.fsf import estimate_fsf
+from heliquad.sim.base.dialect import dialect
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.chip.pil import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.sim.rig.setup import RC_CENTER_US, SilConfig
 
 from firmware_rig import FirmwareRig
 from firmwares import image_for, start
@@ -130,7 +130,7 @@ def test_a_loop_longer_than_its_period_shows_as_overruns(tmp_path_factory):
     budget = 600_000                                  # cycles of a 5 ms loop at 120 MHz
     for image, slow in ((str(teensy_image.image().elf), False),
                         (str(slow_dir / "heliquad-fw-teensy35.elf"), True)):
-        from heliquad.sim.lockstep import PilFirmware
+        from heliquad.sim.rig.lockstep import PilFirmware
 
         with PilFirmware(image=image) as fw:
             rig = FirmwareRig(fw)

@@ -1,4 +1,4 @@
-"""The plots (host/plot.py): they draw onto the caller's axes and return the figure, and
+"""The plots (host/present/plot.py): they draw onto the caller's axes and return the figure, and
 nothing in the tool picks a matplotlib backend."""
 
 import math
@@ -10,11 +10,11 @@ import pytest
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 
-from heliquad.host import paper
-from heliquad.host.fit import TfModel
-from heliquad.host.plot import new_figure, plot_bode, plot_responses, write_bode
-from heliquad.host.replay import replay_record
-from heliquad.host.report import LOW_COHERENCE
+from heliquad.host.records import paper
+from heliquad.host.estimate.fit import TfModel
+from heliquad.host.present.plot import new_figure, plot_bode, plot_responses, write_bode
+from heliquad.host.validate.replay import replay_record
+from heliquad.host.present.report import LOW_COHERENCE
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
@@ -151,7 +151,7 @@ def test_writing_a_plot_keeps_the_callers_backend(tmp_path):
 import matplotlib
 matplotlib.use("pdf")
 import numpy as np
-from heliquad.host.plot import write_bode
+from heliquad.host.present.plot import write_bode
 omega = np.array([1.0, 2.0, 4.0])
 write_bode({str(tmp_path / 'bode.png')!r}, omega, 1 / (1 + 1j * omega))
 print(matplotlib.get_backend())
@@ -163,7 +163,7 @@ print(matplotlib.get_backend())
 
 
 def test_the_envelope_keeps_each_column_s_extremes_in_order():
-    from heliquad.host.plot import _envelope
+    from heliquad.host.present.plot import _envelope
 
     t = np.arange(6000) * 0.005
     y = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 41 * t)
@@ -182,7 +182,7 @@ def test_the_envelope_keeps_each_column_s_extremes_in_order():
 def test_the_responses_figure_gives_each_record_its_own_scales(tmp_path):
     from matplotlib.image import imread
 
-    from heliquad.host.plot import ResponsesFigure
+    from heliquad.host.present.plot import ResponsesFigure
 
     t = np.arange(0, 4, 0.005)
     slow = (0.5, t, 0.1 * np.sin(np.pi * t), 2e-3 * np.sin(np.pi * t - 1))
@@ -218,8 +218,8 @@ def test_the_frequency_axis_is_labelled_however_narrow_the_band(band_hz, some):
 def test_a_figure_name_is_checked_for_its_format_before_any_work(tmp_path, monkeypatch):
     """heliquad fit --plot: the extension picks the format (any case; PNG without one); one
     matplotlib cannot write, or pgf without the TeX it needs, is refused up front."""
-    from heliquad.host.errors import InputError
-    from heliquad.host.files import check_figure_output, figure_format
+    from heliquad.sim.base.errors import InputError
+    from heliquad.host.records.files import check_figure_output, figure_format
 
     assert [figure_format(n) for n in ("b.PNG", "b.svg", "bode", "a.b/c")] == \
         ["png", "svg", "png", "png"]

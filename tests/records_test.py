@@ -9,7 +9,7 @@ import pytest
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120)
 
 
@@ -94,7 +94,7 @@ def test_sil_refuses_to_write_over_a_run(tmp_path, existing):
 
 
 def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
-    from heliquad.host.files import atomic_write, write_json
+    from heliquad.host.records.files import atomic_write, write_json
 
     path = tmp_path / "models.json"
     write_json(path, {"models": [1, 2, 3]})
@@ -108,8 +108,8 @@ def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
 
 
 def test_an_unwritable_folder_is_one_line(tmp_path):
-    from heliquad.host.errors import InputError
-    from heliquad.host.files import write_json
+    from heliquad.sim.base.errors import InputError
+    from heliquad.host.records.files import write_json
 
     with pytest.raises(InputError, match="cannot write .*no-such-folder"):
         write_json(tmp_path / "no-such-folder" / "x.json", {})
@@ -208,7 +208,7 @@ def test_a_broken_matplotlib_is_one_line_and_the_points_and_models_are_written(s
     fake.mkdir(parents=True)
     (fake / "__init__.py").write_text("raise ImportError('matplotlib is broken here')\n")
     env = {**os.environ, "PYTHONPATH": str(tmp_path / "fake")}
-    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli", "identify", folder],
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "identify", folder],
                          capture_output=True, text=True, env=env, timeout=300)
     one_line_error(res, "the plots were not drawn", "ImportError", "matplotlib is broken here")
     assert (folder / "models.json").exists() and (folder / "points.csv").exists()
@@ -218,9 +218,9 @@ def test_a_broken_matplotlib_is_one_line_and_the_points_and_models_are_written(s
 def test_a_plotting_process_that_died_loses_identify_nothing(sweep, tmp_path):
     # Killed before anything reached it: identify still writes its points and models, then
     # says the plots were not drawn.
-    from heliquad.host.errors import InputError
-    from heliquad.host.identify_session import identify_dir
-    from heliquad.host.plot_process import PlotProcess
+    from heliquad.sim.base.errors import InputError
+    from heliquad.host.campaign.identify import identify_dir
+    from heliquad.host.present.plot_process import PlotProcess
 
     folder = _copy(sweep, tmp_path / "died")
     with PlotProcess() as plots:

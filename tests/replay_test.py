@@ -1,4 +1,4 @@
-"""The replay (host/replay.py): a sweep's measured input through a model, against the
+"""The replay (host/validate/replay.py): a sweep's measured input through a model, against the
 measured output. Exact for a periodic steady state, blind to what does not repeat with the
 excitation; on a noise-free simulated sweep the simulator's own truth replays the output to
 a fraction of a percent, the identified model nearly as well, and a model 20 % off in gain
@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from heliquad.host.errors import InputError
-from heliquad.host.fit import TfModel, model_response
-from heliquad.host.replay import replay_points, replay_record
+from heliquad.sim.base.errors import InputError
+from heliquad.host.estimate.fit import TfModel, model_response
+from heliquad.host.validate.replay import replay_points, replay_record
 
 FS = 200.0
 PERIOD = 80                                   # 2.5 Hz at 200 Hz
@@ -77,7 +77,7 @@ def test_a_replay_needs_whole_periods():
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=600)
 
 
@@ -85,7 +85,7 @@ def heliquad(*args):
 def noise_free(tmp_path_factory):
     """A simulated sweep of the vehicle's roll rig with an ideal sensor (no noise, bias or
     latency) and no turbulence, identified with a delay."""
-    from heliquad.host.identify_session import identify_dir
+    from heliquad.host.campaign.identify import identify_dir
 
     out = tmp_path_factory.mktemp("replay") / "roll"
     res = heliquad("sweep", "--axis", "roll", "--sil", "--ideal-sensor", "--freqs-hz", 0.5, 1.5,
@@ -95,7 +95,7 @@ def noise_free(tmp_path_factory):
 
 
 def test_the_simulators_truth_replays_a_noise_free_sweep(noise_free):
-    from heliquad.host.truth import sil_truth
+    from heliquad.host.validate.truth import sil_truth
 
     out, identified = noise_free
     truth, why = sil_truth(identified["manifest"], str(out))

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from heliquad.sim.lockstep import HostFirmware
+from heliquad.sim.rig.lockstep import HostFirmware
 
 from fake_dmp import write_fake_dmp
 from firmware_rig import DT_US, MAV, FirmwareRig
@@ -59,7 +59,7 @@ def test_an_excitation_is_refused_while_disarmed_and_says_why(rig):
 def test_an_unknown_excitation_action_is_refused_and_a_running_excitation_goes_on(rig):
     # An HQ_EXCITATION whose action is none of STOP, START, FINISH (a newer host, a bit
     # flip) is refused with its reason; it neither starts nor stops anything.
-    from heliquad.host.link import TARGET_SYSTEM
+    from heliquad.host.acquire.link import TARGET_SYSTEM
 
     rig.hover()
     rig.ping()

@@ -1,5 +1,5 @@
-"""How heliquad's processes take signals, ports and their own stop (host/signals.py,
-host/cli.py): a Ctrl-C wherever it lands, a signal the program was started with ignored,
+"""How heliquad's processes take signals, ports and their own stop (host/process/signals.py,
+host/cli/parser.py): a Ctrl-C wherever it lands, a signal the program was started with ignored,
 SIGHUP, one program to a port, what a late reader of ``heliquad board`` gets, and the
 board's orderly stop that lands it and keeps its parameters.
 
@@ -19,7 +19,7 @@ import pytest
 from tool_runs import (Tool, as_foreground_job, assert_nothing_left, one_line, private_tmpdir,
                        size, wait_for)
 
-#: A console script as pip writes it (``from heliquad.host.program import entry; entry()``),
+#: A console script as pip writes it (``from heliquad.host.cli.program import entry; entry()``),
 #: that sends itself SIGINT as the interpreter starts importing the module named first on
 #: its command line: the signal lands there, whatever the machine's speed.
 INTERRUPTED_IMPORT = """
@@ -33,7 +33,7 @@ def importing(name, *args, **kwargs):
     return real_import(name, *args, **kwargs)
 builtins.__import__ = importing
 sys.argv[0] = "heliquad"
-from heliquad.host.program import entry
+from heliquad.host.cli.program import entry
 entry()
 """
 
@@ -48,10 +48,10 @@ _foreground = as_foreground_job
 
 
 # Where a Ctrl-C can land while `heliquad params` starts: the command line's own modules
-# (argparse, re, errors), the commands' parsers (parsing: `commands`, `cli_args`), and
+# (argparse, re, errors), the commands' parsers (parsing: `commands`, `shared_options`), and
 # while the command runs numpy (the parameters' values), the link's `connection` and
 # pyserial. Before the fix the first five gave a KeyboardInterrupt traceback and exit -2.
-@pytest.mark.parametrize("target", ["argparse", "re", "errors", "commands", "cli_args",
+@pytest.mark.parametrize("target", ["argparse", "re", "errors", "commands", "shared_options",
                                     "numpy", "connection", "serial"])
 def test_a_ctrl_c_while_the_program_imports_is_one_line_and_130(target, tmp_path):
     res = subprocess.run([sys.executable, "-c", INTERRUPTED_IMPORT, target, "params", "--port",
@@ -73,7 +73,7 @@ def test_the_console_script_is_the_program_module():
     from importlib.metadata import entry_points
 
     script, = [e for e in entry_points(group="console_scripts") if e.name == "heliquad"]
-    assert script.value == "heliquad.host.program:entry"
+    assert script.value == "heliquad.host.cli.program:entry"
 
 
 def _ignored(pid: int) -> int:
@@ -89,7 +89,7 @@ def test_a_command_started_with_sigint_ignored_keeps_ignoring_it_and_sigterm_sto
     # Ctrl-C is not for them. SIGTERM still stops it in order.
     rig = tmp_path / "rig"
     board = subprocess.Popen(
-        [sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry", str(rig)],
+        [sys.executable, "-m", "heliquad.host.cli.parser", "board", "--telemetry", str(rig)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=dict(os.environ, TMPDIR=str(tmpdir_)),
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
@@ -138,7 +138,7 @@ def test_the_board_lands_and_keeps_a_parameter_set_while_armed(send, tmpdir_, tm
 
 
 def _heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
 
 
@@ -147,7 +147,7 @@ def test_a_second_program_on_a_port_in_use_is_refused_and_the_first_loses_nothin
     # Two programs reading one serial port share its bytes: each gets some. The port is
     # opened for one program alone; the second says so in one line (exit 1) and the log
     # of the first has every sample.
-    from heliquad.host.logsession import summarise_tlog
+    from heliquad.host.acquire.log_session import summarise_tlog
 
     rig, out = tmp_path / "rig", tmp_path / "flight.tlog"
     # All its telemetry kept for the reader: the first log's every sample is asserted.
@@ -243,10 +243,10 @@ def _drain(fd: int, quiet_s: float = 0.5) -> int:
 ])
 def test_one_rule_turns_every_ending_into_its_exit_code(exc, code, capsys):
     # 2: the user's input; 1: the board refused, went away or fell silent, a disk filled;
-    # 130, 143, 129: SIGINT, SIGTERM, SIGHUP (host/cli.py).
-    from heliquad.host import cli
-    from heliquad.host.errors import (BoardRefused, DiskFull, HungUp, InputError, LinkLost,
-                                      Terminated)
+    # 130, 143, 129: SIGINT, SIGTERM, SIGHUP (host/cli/parser.py).
+    from heliquad.host.cli import parser as cli
+    from heliquad.sim.base.errors import BoardRefused, DiskFull, InputError, LinkLost
+    from heliquad.host.process.signals import HungUp, Terminated
 
     names = dict(errno=errno, LinkLost=LinkLost, BoardRefused=BoardRefused, DiskFull=DiskFull,
                  InputError=InputError, Terminated=Terminated, HungUp=HungUp)

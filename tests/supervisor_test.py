@@ -6,7 +6,7 @@ import math
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.sim.dialect import dialect
+from heliquad.sim.base.dialect import dialect
 
 MAV = dialect()
 LOOP_HZ = 200.0

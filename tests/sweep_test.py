@@ -10,14 +10,14 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.host import paper
-from heliquad.sim.tf_plant import TfPlant
+from heliquad.host.records import paper
+from heliquad.sim.plant.tf_plant import TfPlant
 
 from firmwares import FIRMWARES, image_for
 
 
 def heliquad(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=600)
 
 
@@ -79,7 +79,7 @@ def running_board(port, duration_s):
     """``heliquad board`` publishing its telemetry at ``port`` (the Popen), stopped at the end."""
     # All its telemetry kept for the reader (--backlog-bytes 0): no lost sample is asserted,
     # and a reader a loaded machine stalls would lose some past the default bound.
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "board", "--telemetry",
+    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "board", "--telemetry",
                               str(port), "--duration-s", str(duration_s), "--backlog-bytes", "0"],
                              stdout=subprocess.PIPE, text=True)
     try:
@@ -114,7 +114,7 @@ def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_
 
     port, out = tmp_path / "rig", tmp_path / "sweep"
     with running_board(port, 60) as board:
-        sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis",
+        sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "sweep", "--axis",
                                   "roll", "--port", str(port), "--freqs-hz", "0.5", "--cycles", "10",
                                   "--out", str(out)],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -152,9 +152,9 @@ def test_the_firmware_stops_a_sweep_at_its_angle_limit_and_the_log_is_kept(tmp_p
 def test_the_hosts_own_limit_stays_as_a_second_line(tmp_path):
     # Below the firmware's limits, the host's check (here tightened to 20 deg) stops the
     # excitation and the sweep, and says so.
-    from heliquad.host.sweep import default_plan, run_sweep
-    from heliquad.host.session import SilSession
-    from heliquad.sim.sil import SilConfig
+    from heliquad.host.acquire.sweep import default_plan, run_sweep
+    from heliquad.host.acquire.session import SilSession
+    from heliquad.sim.rig.setup import SilConfig
 
     plan = default_plan("roll", "rate", [0.2], math.radians(100))
     with SilSession(SilConfig(axis="roll", plant="vehicle", rig="roll", ideal_sensor=True),
@@ -169,9 +169,9 @@ def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
     # before anything starts (the firmware's own limits); a session that sends it anyway (a
     # board flashed with tighter limits would) is refused by the firmware, and the manifest
     # says why.
-    from heliquad.host.sweep import SweepPlan, run_sweep
-    from heliquad.host.session import SilSession
-    from heliquad.sim.sil import SilConfig
+    from heliquad.host.acquire.sweep import SweepPlan, run_sweep
+    from heliquad.host.acquire.session import SilSession
+    from heliquad.sim.rig.setup import SilConfig
 
     res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 1.0, "--amplitude", 3,
                    "--out", tmp_path / "cli")
@@ -211,9 +211,9 @@ def test_identify_says_in_one_line_when_no_frequency_has_a_usable_excitation(tmp
     # running but never reached the plant): every frequency is skipped with its reason.
     import struct
 
-    from heliquad.sim.mavframe import Codec
-    from heliquad.sim.dialect import dialect
-    from heliquad.host.tlog import read_tlog
+    from heliquad.sim.base.framing import Codec
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.host.records.tlog import read_tlog
 
     out = tmp_path / "flat"
     res = heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2,
@@ -261,7 +261,7 @@ def test_a_terminal_ctrl_c_or_sigterm_leaves_a_valid_log_and_manifest_and_nothin
     tmp.mkdir()
     # Three of the slowest frequencies the firmware allows (0.05-0.07 Hz x 14 cycles: 12 min
     # simulated, several seconds here).
-    proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", "sweep", "--axis", "yaw",
+    proc = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "sweep", "--axis", "yaw",
                              "--sil", "--ideal-sensor", "--freqs-hz", "0.05", "0.06", "0.07",
                              "--cycles", "10", "--out", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -280,7 +280,7 @@ def test_a_terminal_ctrl_c_or_sigterm_leaves_a_valid_log_and_manifest_and_nothin
     assert started(), proc.communicate(timeout=60)
     os.killpg(proc.pid, getattr(signal, signame))
     stdout, stderr = proc.communicate(timeout=60)
-    # The signal's own code, after the same orderly stop (host/cli.py).
+    # The signal's own code, after the same orderly stop (host/cli/parser.py).
     assert proc.returncode == {"SIGINT": 130, "SIGTERM": 143}[signame], stderr
     assert aborted in stdout and "Traceback" not in stderr
     manifest = json.loads(manifest_path.read_text())
@@ -333,7 +333,7 @@ def test_one_multisine_gives_the_whole_band_on_the_vehicle_s_rig_within_a_minute
     # multisine record, at most 60 s of excitation fades included, gives every line, each
     # within 0.5 dB and 3 deg of the simulator's sampled-data truth (benchmarks/rig_time.py
     # measures it against the dwell's points: within 0.1 dB and 1 deg).
-    from heliquad.host.report import signal_text
+    from heliquad.host.present.report import signal_text
 
     out = tmp_path / axis
     res = heliquad("sweep", "--axis", axis, "--sil", "--signal", "multisine", "--ideal-sensor",
@@ -370,10 +370,10 @@ def test_both_firmwares_play_a_multisine_and_every_line_is_found(name, tmp_path)
     # newlib sinf): a 40 s multisine on the roll transfer-function plant gives all 15 lines
     # within 0.1 dB and 0.5 deg of the sampled-data truth, and the firmware never passed the
     # declared peak (the sweep would have ended with PEAK).
-    from heliquad.host.identify_session import identify_dir
-    from heliquad.host.session import SilSession
-    from heliquad.host.sweep import SWEEP_TLOG, multisine_plan, run_sweep, sil_source
-    from heliquad.sim.sil import SilConfig
+    from heliquad.host.campaign.identify import identify_dir
+    from heliquad.host.acquire.session import SilSession
+    from heliquad.host.acquire.sweep import SWEEP_TLOG, multisine_plan, run_sweep, sil_source
+    from heliquad.sim.rig.setup import SilConfig
 
     num, den = paper.MODELS["roll"][paper.CHOSEN_ORDER["roll"]]
     cfg = SilConfig(axis="roll", inject="mixer", plant="tf", num=tuple(num), den=tuple(den),

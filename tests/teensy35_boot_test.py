@@ -31,11 +31,11 @@ import sys
 
 import pytest
 
-from heliquad.sim.mk64 import ChipReset, Fault, Mk64, Teensy35
-from heliquad.sim.mk64 import registers, svd
-from heliquad.sim.mk64.i2c import SCL_DIVIDER
-from heliquad.sim.mk64.machine import Stop
-from heliquad.sim.mk64.teensy35 import I2C_PINS, PINS
+from heliquad.sim.chip import ChipReset, Fault, Mk64, Teensy35
+from heliquad.sim.chip import registers, svd
+from heliquad.sim.chip.i2c import SCL_DIVIDER
+from heliquad.sim.chip.machine import Stop
+from heliquad.sim.chip.teensy35 import I2C_PINS, PINS
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 IMAGE = pathlib.Path(os.environ.get("HQ_TEENSY35_ELF",
@@ -144,9 +144,9 @@ def test_register_tables_match_the_svd():
         if os.environ.get("CI"):
             pytest.fail(str(e))
         pytest.skip(str(e).splitlines()[0])
-    from heliquad.sim.mk64 import regmap
+    from heliquad.sim.chip import regmap
     assert svd.parse(data) == regmap.PERIPHERALS, \
-        "sim/mk64/regmap.py is stale: python -m heliquad.sim.mk64.svd --write"
+        "sim/chip/regmap.py is stale: python -m heliquad.sim.chip.svd --write"
     assert svd.interrupts(data) == regmap.INTERRUPTS
 
 
@@ -624,7 +624,7 @@ def test_small_boot_clocks_i2c_uart_and_systick(mini_boot_elf):
 
 def test_small_boot_with_an_mpu6050_on_the_bus(mini_boot_elf):
     Mpu6050Emulator = pytest.importorskip("heliquad._firmware").Mpu6050Emulator
-    from heliquad.sim.mk64.i2c import Mpu6050Slave
+    from heliquad.sim.chip.i2c import Mpu6050Slave
     chip = Mk64(mini_boot_elf)
     m = chip.machine
     chip.i2c0.slaves.append(Mpu6050Slave(Mpu6050Emulator(), m))
@@ -921,7 +921,7 @@ def _flight(board, loops):
     """Run ``loops`` main loops as a lockstep driver does (one raw IMU sample a loop), and
     what a run must reproduce exactly: counts, times, the UART line with its stamps, the
     interrupts, the I2C traffic, the ESC commands, the watchdog's writes."""
-    from heliquad.sim.mpu6050_packets import raw_packet
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
     sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
     m = board.machine
     assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
@@ -991,7 +991,7 @@ def test_image_telemetry_reports_its_loop_cycles_over_uart0():
     measured with the board's own cycle counter."""
     require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.sim.dialect import dialect
+    from heliquad.sim.base.dialect import dialect
 
     board = Teensy35(IMAGE)
     assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
@@ -1038,7 +1038,7 @@ def test_image_runs_the_motionapps_sequence_on_the_emulated_chip(dmp_image_elf):
     the configuration table, the register writes and the updates in MotionApps' order) is
     what the register emulator requires before it produces DMP packets."""
     pytest.importorskip("heliquad._firmware")
-    from heliquad.host.dmp_image import read_dmp_file, table_entries
+    from heliquad.host.commands.dmp_image import read_dmp_file, table_entries
 
     elf, dmp = dmp_image_elf
     firmware = read_dmp_file(str(dmp))
@@ -1083,7 +1083,7 @@ def test_commands_on_uart0_rx_reach_the_firmware_and_are_answered():
     one), as on the host build."""
     require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.sim.dialect import dialect
+    from heliquad.sim.base.dialect import dialect
 
     mav_mod = dialect()
     board = Teensy35(IMAGE)

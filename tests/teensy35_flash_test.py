@@ -1,6 +1,6 @@
 """The emulated flash module (FTFE) and the Teensy image's parameter storage on it.
 
-* The model (sim/mk64/ftfe.py; native), driven register by register with no program or with
+* The model (sim/chip/ftfe.py; native), driven register by register with no program or with
   tiny programs compiled here: Erase Flash Sector and Program Phrase change the flash when
   they complete, after their data sheet times counted on the emulator's cycle clock;
   misaligned, unknown and out-of-range commands are refused (ACCERR), protected ones too
@@ -27,9 +27,9 @@ import zlib
 
 import pytest
 
-from heliquad.sim.mk64 import Fault, Mk64, Teensy35
-from heliquad.sim.mk64.ftfe import (ERASE_FLASH_SECTOR, ERASE_SECTOR_S, MAX_TIMES,
-                                    PROGRAM_PHRASE, PROGRAM_PHRASE_S, SECTOR_BYTES)
+from heliquad.sim.chip import Fault, Mk64, Teensy35
+from heliquad.sim.chip.ftfe import (ERASE_FLASH_SECTOR, ERASE_SECTOR_S, MAX_TIMES, PROGRAM_PHRASE,
+                                    PROGRAM_PHRASE_S, SECTOR_BYTES)
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import teensy35_boot_test as boot  # noqa: E402
@@ -487,7 +487,7 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
     changes them (a save, here called directly) they are written back."""
     boot.require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.sim.pil import PilBoard
+    from heliquad.sim.chip.pil import PilBoard
 
     path = tmp_path / "params.bin"
     path.write_bytes(_slot(3, b"kept") + b"\xff" * SECTOR_BYTES)
@@ -510,8 +510,8 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
 
 def test_the_drop_in_takes_a_params_file_and_refuses_one_of_the_wrong_size(tmp_path):
     boot.require_image()
-    from heliquad.sim.errors import FirmwareError
-    from heliquad.sim.lockstep import PilFirmware
+    from heliquad.sim.base.errors import FirmwareError
+    from heliquad.sim.rig.lockstep import PilFirmware
 
     good = tmp_path / "good.bin"
     good.write_bytes(_slot(1, b"abc") + b"\xff" * SECTOR_BYTES)

@@ -1,6 +1,6 @@
 """The Teensy 3.5 image as built by the CMake preset: what the chip and the loader need of it.
 
-Read with the emulator's ELF loader (heliquad.sim.mk64.image, pyelftools underneath) and
+Read with the emulator's ELF loader (heliquad.sim.chip.image, pyelftools underneath) and
 intelhex, never by running it (tests/teensy35_boot_test.py runs it in the emulated MK64FX512). A wrong byte here bricks a board or leaves an interrupt on the
 default handler, so each fact the boot ROM, the bootloader or the NVIC relies on is pinned.
 """
@@ -18,8 +18,8 @@ import pytest
 from elftools.elf.elffile import ELFFile
 from intelhex import IntelHex
 
-from heliquad.sim.mk64 import svd
-from heliquad.sim.mk64.image import Image
+from heliquad.sim.chip import svd
+from heliquad.sim.chip.image import Image
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from teensy_image import ROOT, image  # noqa: E402

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from heliquad.sim.firmware_image import ARM_TOOLCHAIN_PACKAGES
+from heliquad.sim.base.firmware_image import ARM_TOOLCHAIN_PACKAGES
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BUILD = ROOT / "build" / "teensy35"

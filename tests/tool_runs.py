@@ -28,7 +28,7 @@ HANG_GUARD_S = 120.0
 POLL_S = 0.02
 PR_SET_CHILD_SUBREAPER = 36
 #: The firmwares' command lines: the host build, and the Teensy image in the emulated chip.
-FIRMWARE_MARKS = ("heliquad-fw-host", "heliquad.sim.pil")
+FIRMWARE_MARKS = ("heliquad-fw-host", "heliquad.sim.chip.pil")
 
 
 def _prctl_subreaper(on: bool) -> None:
@@ -138,7 +138,7 @@ def as_foreground_job() -> None:
 def cli(*args, **popen_kw) -> subprocess.Popen:
     """``heliquad ARGS`` started as a terminal's foreground job (:func:`as_foreground_job`),
     its output on pipes as text: for tests that Ctrl-C it (``send_signal(SIGINT)``)."""
-    return subprocess.Popen([sys.executable, "-m", "heliquad.host.cli", *map(str, args)],
+    return subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=as_foreground_job, **popen_kw)
 
@@ -179,7 +179,7 @@ class Tool:
 
         self.args = [str(a) for a in args]
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "heliquad.host.cli", *self.args],
+            [sys.executable, "-m", "heliquad.host.cli.parser", *self.args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=dict(os.environ, TMPDIR=str(tmpdir), PYTHONUNBUFFERED="1", **(env or {})),
             start_new_session=True, preexec_fn=prepare)

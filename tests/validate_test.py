@@ -1,4 +1,4 @@
-"""Closed-loop validation (host/validate.py, heliquad validate)."""
+"""Closed-loop validation (host/validate/closed_loop.py, heliquad validate)."""
 
 import json
 import math
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from heliquad.host import paper
-from heliquad.host.plot import new_figure, plot_validation
-from heliquad.host.validate import load_gains, validate_model, validation_record
+from heliquad.host.records import paper
+from heliquad.host.present.plot import new_figure, plot_validation
+from heliquad.host.validate.closed_loop import load_gains, validate_model, validation_record
 
 
 @pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])
@@ -143,7 +143,7 @@ def test_each_loops_phase_is_drawn_on_the_turn_its_phase_margin_reads_off():
     # A slow pole puts the input loop's phase below -180 deg at the grid's first frequency,
     # where the principal angle is +122 deg: unwrapped from there the curve would sit a turn
     # too high, its phase margin read off nothing.
-    from heliquad.host.plot import plot_loop_gains
+    from heliquad.host.present.plot import plot_loop_gains
 
     den = list(np.polymul([1, 0.05], [1, 5.13, 22.93]))
     report, traces = validate_model([28.19], den, 0.0, "roll", load_gains("roll"), None)
@@ -208,7 +208,7 @@ def test_the_truth_is_dashed_and_the_measured_points_sit_on_their_loop():
     # of the input loop measured through the excitation (here the model's own loop at five
     # frequencies where its phase is below -180 deg, recorded wrapped to +-180 deg as
     # identify records them: drawn on the model's turn).
-    from heliquad.host.loops import model_responses
+    from heliquad.host.validate.loops import model_responses
 
     num, den = paper.MODELS["roll"][paper.CHOSEN_ORDER["roll"]]
     truth = model_responses([1.3 * c for c in num], den, 0.01)
@@ -241,7 +241,7 @@ def test_the_truth_is_dashed_and_the_measured_points_sit_on_their_loop():
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "heliquad.host.cli", "validate", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "validate", *map(str, args)],
                           capture_output=True, text=True, timeout=120)
 
 

@@ -1,4 +1,4 @@
-"""The 6-DoF vehicle model (sim/vehicle.py) and its parameter file (sim/params.py)."""
+"""The 6-DoF vehicle model (sim/plant/vehicle.py) and its parameter file (sim/plant/vehicle_params.py)."""
 
 import dataclasses
 import math
@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.errors import InputError
-from heliquad.sim.params import load_params
-from heliquad.sim.vehicle import GRAVITY_M_S2, Vehicle
+from heliquad.sim.base.errors import InputError
+from heliquad.sim.plant.vehicle_params import load_params
+from heliquad.sim.plant.vehicle import GRAVITY_M_S2, Vehicle
 
 PARAMS = load_params()
 
 
-from heliquad.sim.vehicle_plant import mixer_for, mixer_geometry
+from heliquad.sim.plant.vehicle_plant import mixer_for, mixer_geometry
 
 
 def settled(vehicle, u):
@@ -34,7 +34,7 @@ def edited(tmp_path, old, new):
 
 def _default_path():
     import importlib.resources
-    return str(importlib.resources.files("heliquad.sim").joinpath("data", "vehicle.toml"))
+    return str(importlib.resources.files("heliquad.sim.plant").joinpath("vehicle.toml"))
 
 
 def test_default_file_loads_with_the_papers_figures():
@@ -60,7 +60,7 @@ def test_parameter_errors_name_the_key(tmp_path, old, new, match):
 
 def test_the_firmware_mixer_is_built_for_the_shipped_vehicle():
     # The firmware flies MixerGeometry's defaults (firmware/core/mixer.hpp); the simulator's
-    # vehicle is sim/data/vehicle.toml. They are the same vehicle: the paper's arm length, cant
+    # vehicle is sim/plant/vehicle.toml. They are the same vehicle: the paper's arm length, cant
     # and weight, and the same rotor estimates (the weight to the 5 digits the firmware writes).
     flown, shipped = fw.MixerGeometry(), mixer_geometry(PARAMS)
     for name in ("arm_length_m", "cant_deg", "central_max_thrust_n", "arm_max_thrust_n",

@@ -1,4 +1,4 @@
-"""Child processes side by side (host/workers.py), and the demo's axes run that way: whole
+"""Child processes side by side (host/process/workers.py), and the demo's axes run that way: whole
 lines with each child's name, results apart from the output, a failing child reported while
 the others finish, and Ctrl-C or SIGTERM passed on to every child, which stops in order."""
 
@@ -12,14 +12,14 @@ import sys
 
 import pytest
 
-from heliquad.host.workers import run_children
+from heliquad.host.process.workers import run_children
 from tool_runs import Tool, assert_nothing_left, private_tmpdir, size, wait_for
 
 # A child that writes its lines a character at a time, each flushed: lines of two such
 # children arrive here cut anywhere, and must still be shown whole.
 CHATTY = """
 import os, sys
-from heliquad.host.workers import send_result
+from heliquad.host.process.workers import send_result
 name = sys.argv[1]
 for i in range(40):
     for ch in f"{name}-line-{i}\\n":
@@ -37,7 +37,7 @@ raise RuntimeError("this axis broke")
 # order, which it says, counting the signals it got.
 WAITING = """
 import signal, sys, time
-from heliquad.host.workers import send_result
+from heliquad.host.process.workers import send_result
 got = []
 def stop(signum, frame):
     got.append(signal.Signals(signum).name)
@@ -58,8 +58,8 @@ except KeyboardInterrupt:
 # does (SIGTERM raises Terminated).
 PARENT = """
 import signal, sys
-from heliquad.host.errors import Terminated
-from heliquad.host.workers import run_children
+from heliquad.sim.base.errors import Terminated
+from heliquad.host.process.workers import run_children
 def on_sigterm(signum, frame):
     raise Terminated()
 signal.signal(signal.SIGTERM, on_sigterm)
@@ -126,7 +126,7 @@ def test_ctrl_c_or_sigterm_is_passed_on_once_and_the_children_stop_in_order(sign
 # An axis of the demo as a stand-in: pitch breaks, the others report a model.
 FAKE_AXIS = """
 import json, sys
-from heliquad.host.workers import send_result
+from heliquad.host.process.workers import send_result
 options = json.loads(sys.argv[1])
 print("flying", options["axis"])
 if options["axis"] == "pitch":
@@ -140,7 +140,7 @@ def test_a_failing_axis_of_the_demo_is_said_and_the_others_are_summarised(
         monkeypatch, tmp_path, capsys):
     import argparse
 
-    from heliquad.host import demo
+    from heliquad.host.commands import demo
 
     monkeypatch.setattr(demo, "AXIS_COMMAND", FAKE_AXIS)
     args = argparse.Namespace(out=str(tmp_path / "demo"), axes=["roll", "pitch", "yaw"],

@@ -5,7 +5,7 @@
 # tree with the `teensy35` configure preset (CMakePresets.json: the toolchain file, Release,
 # -O2 -DNDEBUG), so it is the preset's image byte for byte, and heliquad-fw-teensy35.elf and
 # .hex are installed into the package at heliquad/firmware/teensy35/, where
-# heliquad.sim.firmware_image.teensy35_image() finds them (docs/teensy35.md).
+# heliquad.sim.base.firmware_image.teensy35_image() finds them (docs/teensy35.md).
 #
 #   HQ_TEENSY_IMAGE=AUTO (default)  build it when the toolchain is complete, else say why once
 #                   ON              the image is required: no toolchain is a configure error (CI)

@@ -1,25 +1,28 @@
-"""The ``heliquad`` subcommands, one module each.
+"""The ``heliquad`` subcommands: one module here per command, named after it (``dmp-image``
+is ``dmp_image.py``), and this registry of them.
 
 Every command module has ``add_parser(sub, fmt)``, which adds its subparser and sets
-``func`` to its ``run(args) -> exit code``. The modules here hold the commands that are a
-front end to library code elsewhere in :mod:`heliquad.host`; ``demo``, ``dmp-image``,
-``flash`` and ``mavlink-dialect`` live in the modules that do their work. :data:`COMMANDS`
-names them, in the order ``heliquad --help`` lists them.
+``func`` to its ``run(args) -> exit code``; the work itself lives in the stage packages
+(acquire, estimate, validate, present, campaign). :data:`COMMANDS` lists the commands in
+the order ``heliquad --help`` shows them; a command's module is imported only when that
+command runs (or when every command must be listed).
 """
 
 from __future__ import annotations
 
 import importlib
 
-__all__ = ["COMMANDS", "add_parsers"]
+__all__ = ["COMMANDS", "add_parsers", "module_of"]
 
-#: Each subcommand's name and module (relative to :mod:`heliquad.host`), in the order
-#: ``heliquad --help`` lists them.
-COMMANDS = {"fsf": "commands.fsf", "fit": "commands.fit", "sil": "commands.sil",
-            "board": "commands.board", "validate": "commands.validate", "log": "commands.log",
-            "tlog": "commands.tlog", "sweep": "commands.sweep", "identify": "commands.identify",
-            "report": "commands.report", "params": "commands.params", "demo": "demo",
-            "dmp-image": "dmp_image", "flash": "flash", "mavlink-dialect": "mavlink_dialect"}
+#: The subcommands, in the order ``heliquad --help`` lists them.
+COMMANDS = ("fsf", "fit", "sil", "board", "validate", "log", "tlog", "sweep", "identify",
+            "report", "params", "demo", "dmp-image", "flash", "mavlink-dialect")
+
+
+def module_of(command: str) -> str:
+    """The module that holds ``command``: ``heliquad.host.commands.<command>``, its dashes
+    as underscores."""
+    return f"{__name__}.{command.replace('-', '_')}"
 
 
 def add_parsers(sub, fmt, argv=()) -> None:
@@ -30,4 +33,4 @@ def add_parsers(sub, fmt, argv=()) -> None:
     command's (numpy, the vehicle, the dialect: a tenth of a second)."""
     named = argv[0] if argv else None
     for name in [named] if named in COMMANDS else COMMANDS:
-        importlib.import_module(f"heliquad.host.{COMMANDS[name]}").add_parser(sub, fmt)
+        importlib.import_module(module_of(name)).add_parser(sub, fmt)

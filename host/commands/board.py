@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 
-from ...sim import dialect as names
-from ..cli_args import (add_firmware_argument, add_param_store_argument, check_plant, finite,
-                        int_in, number_in)
-from ..errors import InputError, LinkLost
+from ...sim.base import dialect as names
+from .shared_options import (add_firmware_argument, add_param_store_argument, check_plant, finite,
+                             int_in, number_in)
+from ...sim.base.errors import InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
-#: The board's default and largest telemetry backlog: sim/board.py's TELEMETRY_BACKLOG_BYTES
+#: The board's default and largest telemetry backlog: sim/rig/board.py's TELEMETRY_BACKLOG_BYTES
 #: (written here too so that the parser does not import the simulator; tests/cli_test.py
 #: holds the two equal).
 MAX_BACKLOG_BYTES = 4095
@@ -63,8 +63,8 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ...sim.board import run_board
-    from ...sim.lockstep import FirmwareError
+    from ...sim.rig.board import run_board
+    from ...sim.rig.lockstep import FirmwareError
 
     check_plant(args)
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 
-from ..errors import InputError
+from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run", "print_models"]
 
@@ -57,8 +57,8 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import (check_figure_output, check_output, read_points_csv, write_models_json,
-                         write_models_mat)
+    from ..records.files import (check_figure_output, check_output, read_points_csv,
+                                 write_models_json, write_models_mat)
 
     for option in ("json", "mat"):                  # all writable, or none is written
         if getattr(args, option):
@@ -66,8 +66,8 @@ def run(args) -> int:
     if args.plot:
         check_figure_output(args.plot, "--plot")
     points = read_points_csv(args.points)
-    from ..fit import n_parameters, parse_order     # after the file is read: scipy is slow
-    from ..identify import fit_orders
+    from ..estimate.fit import n_parameters, parse_order     # after the file is read: scipy is slow
+    from ..estimate.models import fit_orders
 
     if args.order:
         orders = [parse_order(o) for o in args.order]
@@ -87,8 +87,8 @@ def run(args) -> int:
         write_models_mat(args.mat, result.models, result.recommended)
         print(f"wrote {args.mat}")
     if args.plot:
-        from ..plot import write_bode
-        from ..report import LOW_COHERENCE
+        from ..present.plot import write_bode
+        from ..present.report import LOW_COHERENCE
 
         write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
                    models=result.models, recommended=result.recommended, title=str(args.points),
@@ -98,7 +98,7 @@ def run(args) -> int:
 
 
 def print_models(result) -> None:
-    from ..fit import format_tf, order_name
+    from ..estimate.fit import format_tf, order_name
 
     print(f"weights: {result.weights}")
     print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "

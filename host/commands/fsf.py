@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli_args import int_in, number_in
-from ..errors import InputError
+from .shared_options import int_in, number_in
+from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run"]
 
@@ -66,7 +66,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import check_output, read_run_csv, write_points_csv
+    from ..records.files import check_output, read_run_csv, write_points_csv
 
     check_output(args.out, "--out")
     freqs = _frequencies(args)
@@ -108,7 +108,7 @@ def _frequencies(args) -> list:
 
 def _estimate(args, u, y, fs_hz, freq) -> list:
     """One run's points: a sine's one, or every line of a multisine its input excites."""
-    from ..fsf import estimate_fsf, estimate_multisine   # after the file is read
+    from ..estimate.fsf import estimate_fsf, estimate_multisine   # after the file is read
 
     if args.orders is None:
         discard = DISCARD_SINE if args.discard_periods is None else args.discard_periods
@@ -158,7 +158,7 @@ def _a_line_stands_out(u, period: int, orders, discard: int) -> bool:
 
 def _say(i, n, path, points, multisine) -> None:
     """The run's points, and a warning for each of low coherence."""
-    from ..report import LOW_COHERENCE
+    from ..present.report import LOW_COHERENCE
 
     if multisine:
         print(f"[{i}/{n}] {path}: multisine, {len(points)} line(s)", flush=True)

@@ -6,7 +6,7 @@ import argparse
 import math
 import sys
 
-from ..errors import InputError
+from ...sim.base.errors import InputError
 from .fit import print_models
 
 __all__ = ["add_parser", "run"]
@@ -49,13 +49,13 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..plot_process import PlotProcess
+    from ..present.plot_process import PlotProcess
 
     if not os.path.isdir(args.dir):
         raise InputError(f"{args.dir}: not a folder")
     with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
-        from ..fit import parse_order
-        from ..identify_session import identify_dir
+        from ..estimate.fit import parse_order
+        from ..campaign.identify import identify_dir
 
         orders = [parse_order(o) for o in args.order] if args.order else None
         r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
@@ -68,7 +68,7 @@ def run(args) -> int:
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
     if args.mat:
-        from ..files import write_models_mat
+        from ..records.files import write_models_mat
 
         write_models_mat(args.mat, r["result"].models, r["result"].recommended)
         print(f"wrote {args.mat}")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 
-from ..cli_args import int_in, number_in
-from ..errors import DiskFull, InputError
-from ..connection import CONNECTION_HELP
-from ..link import DEFAULT_BAUD
+from .shared_options import int_in, number_in
+from ...sim.base.errors import DiskFull, InputError
+from ..acquire.connection import CONNECTION_HELP
+from ..acquire.link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
 
@@ -43,7 +43,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..logsession import run_log
+    from ..acquire.log_session import run_log
 
     if args.duration_s is not None and args.duration_s <= 0:
         raise InputError("--duration-s must be positive")

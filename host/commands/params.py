@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 
-from ..cli_args import finite, int_in
-from ..connection import CONNECTION_HELP
-from ..errors import InputError
-from ..link import DEFAULT_BAUD
+from .shared_options import finite, int_in
+from ..acquire.connection import CONNECTION_HELP
+from ...sim.base.errors import InputError
+from ..acquire.link import DEFAULT_BAUD
 
 __all__ = ["add_parser", "run"]
 
@@ -69,9 +69,9 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..files import check_output, read_params_file
-    from ..link import TelemetryLink
-    from ..params import ParamClient, check_name
+    from ..records.files import check_output, read_params_file
+    from ..acquire.link import TelemetryLink
+    from ..acquire.param_protocol import ParamClient, check_name
 
     entries = None
     if args.action == "save":
@@ -92,7 +92,7 @@ def run(args) -> int:
 
 
 def _list(client, args, entries) -> int:
-    from ..params import TYPE_NAMES
+    from ..acquire.param_protocol import TYPE_NAMES
 
     params = client.fetch_all()
     width = max([len("NAME")] + [len(p.name) for p in params])
@@ -123,7 +123,7 @@ def _save(client, args, entries) -> int:
     import datetime
 
     from .. import __version__
-    from ..files import write_params_file
+    from ..records.files import write_params_file
 
     params = client.fetch_all()
     when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
@@ -135,7 +135,7 @@ def _save(client, args, entries) -> int:
 
 
 def _load(client, args, entries) -> int:
-    from ..params import load_params
+    from ..acquire.param_protocol import load_params
 
     print(f"loading {len(entries)} parameters from {args.file}", flush=True)
     r = load_params(client, entries)

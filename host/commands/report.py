@@ -23,7 +23,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..report import write_report
+    from ..present.report import write_report
 
     print(f"wrote {write_report(args.dir, args.out)}")
     return 0

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import sys
 
-from ...sim import dialect as names
-from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
-                        add_param_store_argument,
-                        check_excitation, check_plant, faults, finite, firmware_amplitude,
-                        int_in, number_in)
-from ..errors import DiskFull, InputError, LinkLost
+from ...sim.base import dialect as names
+from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+                             add_param_store_argument, check_excitation, check_plant, faults,
+                             finite, firmware_amplitude, int_in, number_in)
+from ...sim.base.errors import DiskFull, InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
@@ -31,7 +30,7 @@ example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --
 
 
 def add_parser(sub, fmt) -> None:
-    from ...sim.vehicle import RIGS
+    from ...sim.plant.vehicle import RIGS
 
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=HELP, formatter_class=fmt)
@@ -77,9 +76,9 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ...sim.lockstep import FirmwareError
-    from ...sim.sil import SilConfig
-    from ..experiment import run_sil
+    from ...sim.rig.lockstep import FirmwareError
+    from ...sim.rig.setup import SilConfig
+    from ..acquire.experiment import run_sil
 
     check_plant(args)
     if args.inject == "angle" and args.axis == "yaw":
@@ -113,7 +112,7 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
-    from ..sweep import saturation_summary
+    from ..acquire.sweep import saturation_summary
 
     said = saturation_summary(r.saturation)
     if said:

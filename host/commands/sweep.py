@@ -7,17 +7,16 @@ import importlib
 import os
 import sys
 
-from ...sim import dialect as names
-from ..cli_args import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
-                        add_param_store_argument,
-                        check_excitation, check_plant, faults, finite, firmware_amplitude,
-                        int_in, number_in)
-from .. import design
-from ..errors import DiskFull, InputError, LinkLost
-from ..connection import CONNECTION_HELP
-from ..signals import ABORTED_BY, EXIT_CODES
-from ..link import DEFAULT_BAUD
-from ..multisine import LINES, MAX_LINES, RIG_TIME_S
+from ...sim.base import dialect as names
+from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+                             add_param_store_argument, check_excitation, check_plant, faults,
+                             finite, firmware_amplitude, int_in, number_in)
+from ..acquire import design
+from ...sim.base.errors import DiskFull, InputError, LinkLost
+from ..acquire.connection import CONNECTION_HELP
+from ..process.signals import ABORTED_BY, EXIT_CODES
+from ..acquire.link import DEFAULT_BAUD
+from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 
 #: The longest rig time the firmware allows (SafetyLimits.max_duration_s).
 MAX_RIG_TIME_S = 300.0
@@ -111,16 +110,16 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..files import new_output_folder
-    from ..sweep import SWEEP_TLOG, run_sweep
+    from ..records.files import new_output_folder
+    from ..acquire.sweep import SWEEP_TLOG, run_sweep
 
     # fsf (with scipy) is imported now, not by the first dwell check or amplitude design
     # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
     # SIGINT after the tool has stopped in order.
-    importlib.import_module("heliquad.host.fsf")
+    importlib.import_module("heliquad.host.estimate.fsf")
     plan = _plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
-        from ...sim.sil import SilConfig
+        from ...sim.rig.setup import SilConfig
 
         if plan.multisine is not None:       # its lines in the band, its peak in bounds
             check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
@@ -166,7 +165,7 @@ def run(args) -> int:
 def _ended(exc, out) -> int:
     """A sweep ended by an error: the board went away (exit 1, as a silent one), or the one
     line the command line gives ``exc``, saying that the records are kept."""
-    from ...sim.lockstep import FirmwareError
+    from ...sim.rig.lockstep import FirmwareError
 
     kept = f"the log and manifest so far are kept in {out}"
     if isinstance(exc, DiskFull):
@@ -193,7 +192,7 @@ def _what(plan) -> str:
 def _plan(args):
     """The sweep's plan from the options: fixed or sequential dwell, fixed or designed
     amplitudes."""
-    from ..sweep import default_plan
+    from ..acquire.sweep import default_plan
 
     if args.cycles is not None and (args.target_sigma or args.max_cycles):
         raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
@@ -218,7 +217,7 @@ def _plan(args):
 def _multisine_plan(args, amp):
     """A multisine's plan: over the axis's band, or from the lowest to the highest of
     --freqs-hz; --amplitude is its peak."""
-    from ..sweep import multisine_plan
+    from ..acquire.sweep import multisine_plan
 
     given = [o for o, v in (("--cycles", args.cycles), ("--target-sigma", args.target_sigma),
                             ("--max-cycles", args.max_cycles), ("--swing-deg", args.swing_deg))
@@ -238,16 +237,16 @@ def _multisine_plan(args, amp):
 def _sweep_session(args, tlog):
     """The session a sweep drives (the firmware in the loop, or a board's port) and the
     manifest's record of its source."""
-    from .. import paper
-    from ..session import PortSession
+    from ..records import paper
+    from ..acquire.session import PortSession
 
     if not args.sil:
         return PortSession(args.port, tlog, args.baud), \
             {"kind": "port", "port": args.port, "baud": args.baud}
-    from ...sim.lockstep import FirmwareError
-    from ...sim.sil import SilConfig
-    from ..session import SilSession
-    from ..sweep import sil_source
+    from ...sim.rig.lockstep import FirmwareError
+    from ...sim.rig.setup import SilConfig
+    from ..acquire.session import SilSession
+    from ..acquire.sweep import sil_source
 
     num, den = paper.MODELS[args.axis][paper.CHOSEN_ORDER[args.axis]]
     args.num, args.den = args.num or num, args.den or den

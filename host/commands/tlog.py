@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
+from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run"]
 
@@ -19,7 +19,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..logsession import summarise_tlog
+    from ..acquire.log_session import summarise_tlog
 
     r = summarise_tlog(args.path)
     if not r["messages"]:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 
-from ...sim import dialect as names
-from ..cli_args import MAX_SEED, check_model, int_in
-from ..errors import InputError
+from ...sim.base import dialect as names
+from .shared_options import MAX_SEED, check_model, int_in
+from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run"]
 
@@ -48,7 +48,7 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..files import check_output_folder, read_gains, read_models_json
+    from ..records.files import check_output_folder, read_gains, read_models_json
 
     doc = read_models_json(args.models)
     models = doc["models"]
@@ -66,8 +66,9 @@ def run(args) -> int:
     out = args.out or os.path.dirname(os.path.abspath(args.models))
     check_output_folder(out, "--out")
 
-    from ..validate import (Gains, model_gains, save_validation, sweep_inputs, validate_model,
-                            validation_record)
+    from ..present.validation import save_validation
+    from ..validate.closed_loop import (Gains, model_gains, sweep_inputs,
+                                        validate_model, validation_record)
 
     gains, where = (Gains(*file_gains), args.gains) if file_gains else model_gains(doc, axis)
     print(f"gains: {where}: rate {_gains_text(gains.rate)}"
@@ -100,7 +101,7 @@ def _margins_text(lp) -> str:
 
 def _print_validation(r) -> None:
     """The validation as validation.json records it (degrees, deg/s and dB)."""
-    from ..loops import LOOP_DT_S
+    from ..validate.loops import LOOP_DT_S
 
     coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
     print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
@@ -123,7 +124,7 @@ def _print_validation(r) -> None:
         if name in r.get("truth_loops", {}):
             print(f"        simulator's truth: {_margins_text(r['truth_loops'][name])}")
     if not r["stable"]:
-        from ..validate import instability_text
+        from ..validate.closed_loop import instability_text
 
         print(f"  {instability_text(r)}; no time responses")
         return

@@ -1,6 +1,6 @@
 // The emulated core's hot path: block accounting, events, the NVIC, exception entry and
 // return, WFI, and the MMIO dispatch (mk64_core.hpp says what and why). Every rule here is the
-// one sim/mk64/machine.py documented when it did this in Python; the order of the checks at a
+// one sim/chip/machine.py documented when it did this in Python; the order of the checks at a
 // block boundary is kept, so instruction and cycle counts are the same.
 #include "mk64_core.hpp"
 

@@ -5,7 +5,7 @@
 // * The unicorn library is not linked: its entry points are taken at run time from the library
 //   the Python binding loaded (Uc below), and the hooks are installed as C functions.
 // * Time base: cycles and instructions per translated block from a table the Python decoder
-//   fills (sim/mk64/timing.py states the cycle model; nothing here changes it), exact to the
+//   fills (sim/chip/timing.py states the cycle model; nothing here changes it), exact to the
 //   instruction at every peripheral access (the PC is synced there).
 // * One event queue for every device, Python's included (a Python event stops the run and
 //   Python runs it), so events run in one (cycle, order) sequence whatever side owns them.
@@ -131,7 +131,7 @@ struct Dwt {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// SYST_CSR/RVR/CVR/CALIB on the core clock (see sim/mk64/scs.py's SysTick view).
+// SYST_CSR/RVR/CVR/CALIB on the core clock (see sim/chip/scs.py's SysTick view).
 struct SysTick {
     uint32_t base = 0, calib = 0, csr_reset = 0;
     uint32_t csr = 0, rvr = 0, stopped_value = 0;
@@ -161,7 +161,7 @@ struct Layout {
     uint32_t operator[](const std::string& name) const;
 };
 
-// UART0 at line rate (sim/mk64/uart.py's notes describe the model).
+// UART0 at line rate (sim/chip/uart.py's notes describe the model).
 struct Uart {
     Layout L;
     bool ready = false;                    // set up (its layout given)
@@ -226,7 +226,7 @@ struct MpuSlave {
     void stop(Core& c) { flush(c); }
 };
 
-// I2C0 as a byte-level master (sim/mk64/i2c.py's notes describe the model).
+// I2C0 as a byte-level master (sim/chip/i2c.py's notes describe the model).
 struct I2c {
     Layout L;
     bool ready = false;
@@ -273,7 +273,7 @@ struct I2c {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// A FlexTimer (FTM0, FTM3) in up-counting edge-aligned PWM and input capture (sim/mk64/ftm.py's
+// A FlexTimer (FTM0, FTM3) in up-counting edge-aligned PWM and input capture (sim/chip/ftm.py's
 // notes describe the model). The counter is not stepped: it is computed from time, from the
 // cycle and count it last started at (the anchor).
 struct Ftm {
@@ -331,7 +331,7 @@ struct Ftm {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// The watchdog (sim/mk64/wdog.py's notes describe the model). Its timings are in bus clocks
+// The watchdog (sim/chip/wdog.py's notes describe the model). Its timings are in bus clocks
 // and are worked out with the clocks of the moment; its constants (the unlock and refresh
 // words, the WCT, the LPO's rate) come from Python with the layout.
 struct Wdog {
@@ -373,7 +373,7 @@ struct Wdog {
     bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
 };
 
-// The flash memory module (FTFE) and the program flash it erases and programs (sim/mk64/ftfe.py's
+// The flash memory module (FTFE) and the program flash it erases and programs (sim/chip/ftfe.py's
 // notes describe the model). The flash's bytes are unicorn's memory at 0: a command changes
 // them when it completes; the program itself can never store there. While a command runs
 // (CCIF = 0), an instruction fetched from program flash is a read collision: the run stops
@@ -415,7 +415,7 @@ struct Ftfe {
 };
 
 // The GPIO ports' input registers (PDIR), read natively from the value the Python pin model
-// (sim/mk64/port.py) keeps here: it owns the pins and pushes a port's input word whenever a
+// (sim/chip/port.py) keeps here: it owns the pins and pushes a port's input word whenever a
 // pin's level may have changed; every other GPIO and PORT access goes to it. An interrupt
 // handler that reads a pin's level (the RC capture handler does at every edge) then costs no
 // call into Python.

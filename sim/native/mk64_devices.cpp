@@ -1,7 +1,7 @@
 // The emulated peripherals the flight loop uses all the time: DWT_CYCCNT, SysTick, UART0,
 // I2C0 with the MPU6050, FTM0/FTM3 and the watchdog; and the flash module (FTFE), whose
 // status a parameter save polls hundreds of thousands of times. Their behaviour is documented
-// where their Python views live (sim/mk64/scs.py, uart.py, i2c.py, ftm.py, wdog.py, ftfe.py);
+// where their Python views live (sim/chip/scs.py, uart.py, i2c.py, ftm.py, wdog.py, ftfe.py);
 // register offsets and bits come from the SVD tables through Python (Layout), never typed here.
 #include <algorithm>
 #include <cmath>
@@ -414,7 +414,7 @@ void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
 
 namespace {
 // An access of any width is split onto the registers it covers, low address first, as
-// sim/mk64/peripheral.py's RegisterDevice does: a register read whole and the bytes taken from
+// sim/chip/peripheral.py's RegisterDevice does: a register read whole and the bytes taken from
 // it, a part written merged into the register's stored value (so 8-bit registers see one
 // access per byte). An offset no register occupies makes the whole access the caller's (a bus
 // fault in Python). A write that resets the chip ends the access there.

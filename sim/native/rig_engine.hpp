@@ -1,6 +1,6 @@
 // The lockstep loop of a simulated rig, frame after frame, in its own thread: the plant's
 // sensor sample encoded as FIFO bytes, the sensor frame out, the firmware's reply in, the
-// plant stepped with the reply's motors. Python (host/session.py, SilSession) starts a batch of frames with
+// plant stepped with the reply's motors. Python (host/acquire/session.py, SilSession) starts a batch of frames with
 // their RC inputs and random inputs, reads the telemetry link meanwhile, then waits for it.
 #pragma once
 

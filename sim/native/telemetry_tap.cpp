@@ -11,7 +11,7 @@ namespace {
 // The MAVLink library's own constants. The tap frames for itself rather than with the library's
 // parser (mavlink_frame_char_buffer, which the firmware and the sim link use) because that
 // parser swallows the packet after a damaged header while it waits for the bogus length:
-// this framer scans on from the next start byte, as sim/mavframe.py does, and loses nothing.
+// this framer scans on from the next start byte, as sim/base/framing.py does, and loses nothing.
 constexpr uint8_t kStx2 = MAVLINK_STX;
 constexpr size_t kHeader = MAVLINK_NUM_HEADER_BYTES;
 constexpr size_t kCrc = MAVLINK_NUM_CHECKSUM_BYTES;

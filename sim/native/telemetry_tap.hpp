@@ -1,4 +1,4 @@
-// The simulator's logger of the firmware's telemetry link (host/session.py, _TelemetryLog): reads
+// The simulator's logger of the firmware's telemetry link (host/acquire/session.py, _TelemetryLog): reads
 // what has arrived, frames the MAVLink 2 packets (CRC checked with the dialect's CRC extras),
 // writes every packet to the .tlog stamped with simulated time (plus an offset: the run's
 // start on the wall clock), and hands the messages a tool asked for back to Python, which

@@ -1,4 +1,4 @@
-// Per-axis transfer-function plant (sim/tf_plant.py builds it): the axis's torque command, as
+// Per-axis transfer-function plant (sim/plant/tf_plant.py builds it): the axis's torque command, as
 // the firmware's own mixer equations say the motors produce it (hq::Mixer::achieved), through
 // G(z) (ZOH at the loop period, state space from python-control) to the body rate; the angle
 // is the trapezoid integral of the rate. The vehicle is otherwise held level, as on a rig.

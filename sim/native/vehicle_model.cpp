@@ -140,7 +140,7 @@ void VehicleRig::step(const float motor[kMotors], const double* gust) {
         return;
     }
     // Gust velocity through the airframe's linear drag (body, then to NED), gust rates
-    // through the rotational damping (sim/dryden.py).
+    // through the rotational damping (sim/plant/dryden.py).
     const double drag = model_.config().drag_n_s_m;
     const V3 force = rotate(rotation(&model_.x[6]), {drag * gust[0], drag * gust[1], drag * gust[2]});
     const double moment[3] = {rot_damping_ * gust[3], rot_damping_ * gust[4], rot_damping_ * gust[5]};

@@ -1,4 +1,4 @@
-// The 6-DoF heterogeneous multirotor's equations of motion (sim/vehicle.py documents the
+// The 6-DoF heterogeneous multirotor's equations of motion (sim/plant/vehicle.py documents the
 // physics and builds the geometry; docs/vehicle-model.md derives it). This is the one
 // implementation of the derivative and the RK4 step: Python's Vehicle calls it, and the
 // lockstep engine steps it frame after frame.
@@ -16,7 +16,7 @@ constexpr int kStates = 18;   // position NED (3), velocity NED (3), quaternion 
 using State = std::array<double, kStates>;
 
 // Everything the equations need, already in SI units and body axes (Python derives it from
-// the vehicle file: sim/vehicle.py, Vehicle._geometry).
+// the vehicle file: sim/plant/vehicle.py, Vehicle._geometry).
 struct VehicleConfig {
     double mass_kg = 0.93;
     std::array<double, 3> inertia_kg_m2{0.0, 0.0, 0.0};     // principal, body FRD

@@ -1,4 +1,4 @@
-"""Fuzz target: heliquad.sim.mavframe's Framer and Codec (the sim and telemetry links).
+"""Fuzz target: heliquad.sim.base.framing's Framer and Codec (the sim and telemetry links).
 
     python tests/fuzz/framer_fuzz.py CORPUS_DIR -max_total_time=60     (needs atheris)
 
@@ -27,9 +27,9 @@ import sys
 from fuzz_input import (CRC_LEN, CUT_RECIPE_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN,
                         STX_V2, ByteReader, StreamBuilder, reference_frames, same_fields,
                         sample_values, split_at, x25)
-from heliquad.sim import mavframe
-from heliquad.sim.mavframe import Codec, Framer
-from heliquad.sim.dialect import dialect
+from heliquad.sim.base import framing as mavframe
+from heliquad.sim.base.framing import Codec, Framer
+from heliquad.sim.base.dialect import dialect
 
 STRUCTURED = 0x01               # mode byte: build the stream from the input
 MAX_PAYLOAD = 255

@@ -9,7 +9,7 @@ dialect or an unknown one, with any payload length, and then damages, truncates 
 them. ``reference_frames`` is the framing rule written out slowly, as an oracle.
 
 The wire constants and the CRC below come from the MAVLink 2 serialisation spec, not from
-sim/mavframe.py, so the oracle does not share the parser's mistakes. Nothing here needs
+sim/base/framing.py, so the oracle does not share the parser's mistakes. Nothing here needs
 atheris; ``instrument`` is handed the atheris module by a harness's entry point.
 """
 

@@ -1,4 +1,4 @@
-"""Fuzz target: heliquad.host.tlog.read_tlog, the .tlog reader.
+"""Fuzz target: heliquad.host.records.tlog.read_tlog, the .tlog reader.
 
     python tests/fuzz/tlog_fuzz.py CORPUS_DIR -max_total_time=60     (needs atheris)
 
@@ -38,10 +38,10 @@ import warnings
 
 from fuzz_input import (HEADER_LEN, STAMP_LEN, STX_V2, ByteReader, StreamBuilder, packet_end,
                         same_fields, sample_values, verifies)
-from heliquad.host import tlog
-from heliquad.sim import mavframe
-from heliquad.sim.mavframe import Codec
-from heliquad.sim.dialect import dialect
+from heliquad.host.records import tlog
+from heliquad.sim.base import framing as mavframe
+from heliquad.sim.base.framing import Codec
+from heliquad.sim.base.dialect import dialect
 
 STRUCTURED = 0x01               # mode byte: build the file from the input
 DIALECT = dialect()

@@ -4,7 +4,7 @@
 No peripheral address in the Teensy 3.5 backends is typed by hand: every register the target
 uses is emitted here from NXP's CMSIS-SVD description of the MK64F12 family (the MK64FX512 on
 the Teensy 3.5 is one of them), plus the few ARMv7-M debug registers the SVD leaves out
-(sim/mk64/armv7m_debug.svd, written from the ARMv7-M Architecture Reference Manual).
+(sim/chip/armv7m_debug.svd, written from the ARMv7-M Architecture Reference Manual).
 
 Where the SVD comes from: the PyPI wheel of pyocd ships it as
 pyocd/debug/svd/svd_data.zip -> MK64F12.svd (BSD-3-Clause; its licence text is copied into
@@ -19,7 +19,7 @@ the generated header). Any of these works as --svd:
 --check compares instead of writing and exits 1 when the committed header is stale. The
 output is deterministic (same SVD, same bytes), which tests/teensy35_image_test.py relies on.
 
-The SVD is read by sim/mk64/svd.py, the same reader the emulated MK64FX512 uses for its
+The SVD is read by sim/chip/svd.py, the same reader the emulated MK64FX512 uses for its
 register tables, so the firmware and its emulator cannot disagree on an address.
 
 What is emitted, per register: a struct deriving from Reg<T, address> (read/write/set/clear
@@ -54,7 +54,7 @@ C_TYPES = {8: "uint8_t", 16: "uint16_t", 32: "uint32_t"}
 
 
 def _svd_module():
-    """The project's one SVD reader (sim/mk64/svd.py, the emulator's too), loaded by path so
+    """The project's one SVD reader (sim/chip/svd.py, the emulator's too), loaded by path so
     this script needs nothing installed."""
     spec = importlib.util.spec_from_file_location("hq_mk64_svd", ROOT / "sim" / "mk64" / "svd.py")
     module = importlib.util.module_from_spec(spec)

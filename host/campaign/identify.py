@@ -1,0 +1,397 @@
+"""``heliquad identify DIR``: from a sweep's log to points, models and plots.
+
+Reads ``DIR/manifest.json`` and ``DIR/sweep.tlog``; for each frequency the manifest marks
+as measured, takes the full-amplitude samples (HQ_EXCITATION_STATE_RUNNING) in its window, and runs
+the FSF with the exact frequency the firmware reported. Writes, inside DIR:
+``points.csv`` (the POINTS format), ``points_table.csv`` (the paper's tables 4-6: frequency,
+omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or those given),
+``bode.png`` (points, models and the points' coherence) and ``responses.png`` (per
+frequency the input and the output on their own axes, with the recommended model's replay of
+the output, :mod:`.replay`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+
+import numpy as np
+
+from ...sim.base.errors import InputError
+from ..records.files import atomic_write
+from ..acquire.link import INPUT_OUTPUT
+
+__all__ = ["identify_dir", "INPUT_OUTPUT"]
+
+
+
+def _load(dir_path):
+    from ...sim.base.dialect import dialect
+    from ..records.files import read_manifest
+    from ..acquire.sweep import MANIFEST
+    from ..records.tlog import TlogDamage, read_tlog_table
+
+    path = os.path.join(dir_path, MANIFEST)
+    if not os.path.lexists(path):
+        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
+    manifest = read_manifest(path)
+    tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
+    if not os.path.exists(tlog):
+        raise InputError(f"{dir_path}: the log {os.path.basename(tlog)} is missing")
+    damage = TlogDamage()
+    try:
+        samples = read_tlog_table(tlog, dialect(), "HQ_SYSID_SAMPLE", damage=damage)
+    except OSError as exc:
+        raise InputError(f"{tlog}: {exc.strerror or exc}") from None
+    _check_log_matches(dir_path, manifest, samples)
+    return manifest, samples, damage
+
+
+def _check_log_matches(dir_path, manifest, samples) -> None:
+    """The log's excitations are the manifest's: same axis and injection (a folder whose
+    log comes from another session is refused, not fitted)."""
+    from ...sim.base.dialect import AXES, INJECTIONS, dialect
+
+    idle = dialect().HQ_EXCITATION_STATE_IDLE
+    want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))
+    other = (samples.exc_state != idle) & ((samples.axis != want[0]) |
+                                           (samples.injection != want[1]))
+    if other.any():
+        first = samples[np.flatnonzero(other)[0]]
+        names = {v: k for k, v in AXES.items()}, {v: k for k, v in INJECTIONS.items()}
+        axis, injection = int(first.axis), int(first.injection)
+        raise InputError(f"{dir_path}: the log excites {names[0].get(axis, axis)} with "
+                         f"{names[1].get(injection, injection)} injection, the manifest "
+                         f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
+                         "log and the manifest are not of one session")
+
+
+def _segments(manifest, samples):
+    """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
+    samples on their places in the sequence (:func:`_gridded`)."""
+    from ...sim.base.dialect import dialect
+
+    running = dialect().HQ_EXCITATION_STATE_RUNNING
+    u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
+    t = samples.time_us.astype(np.int64)
+    state = samples.exc_state
+    u, y = samples[u_name].astype(float), samples[y_name].astype(float)
+    r = samples.excitation.astype(float)
+    seq = samples.seq.astype(np.int64)
+    for entry in manifest["frequencies"]:
+        if entry.get("status") != "ok" or "start_us" not in entry:
+            continue
+        sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
+        yield (entry, *_gridded(seq[sel], t[sel] * 1e-6, r[sel], u[sel], y[sel]))
+
+
+def _gridded(seq, t, r, u, y):
+    """A record on its samples' places: a sample lost on the link (a gap in the sequence
+    numbers) is a hole, NaN in ``r``, ``u`` and ``y`` (its time interpolated), and
+    ``present`` says which arrived (None when none was lost)."""
+    if not seq.size:
+        return t, r, u, y, None
+    seq, first = np.unique(seq, return_index=True)          # in order, each sample once
+    t, r, u, y = (x[first] for x in (t, r, u, y))
+    n = int(seq[-1] - seq[0]) + 1
+    if n == seq.size:
+        return t, r, u, y, None
+    idx = seq - seq[0]
+    present = np.zeros(n, dtype=bool)
+    present[idx] = True
+    holes = []
+    for x in (r, u, y):
+        full = np.full(n, np.nan)
+        full[idx] = x
+        holes.append(full)
+    return (np.interp(np.arange(n), idx, t), *holes, present)
+
+
+def _lost_share(entry, present) -> float:
+    """The share of a frequency's measured samples lost on the link: the sweep's count (it
+    knows the edges of the window too), else the holes in the log's record."""
+    if "lost" in entry and entry.get("samples", 0) + entry["lost"] > 0:
+        return entry["lost"] / (entry["samples"] + entry["lost"])
+    return 0.0 if present is None else 1.0 - float(np.mean(present))
+
+
+def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
+                 estimate: str = "excitation", plots=None) -> dict:
+    """``plots``: what draws the plots (a :mod:`~heliquad.host.present.plot_process` object the
+    caller has started and will close); by default a
+    :class:`~heliquad.host.present.plot_process.PlotProcess` of its own, which draws them in a
+    process of its own while the models are fitted."""
+    from ..present.plot_process import PlotProcess
+
+    if plots is None:
+        # The plotting process starts first: its imports overlap reading the log.
+        with PlotProcess() as plots:
+            return identify_dir(dir_path, orders, progress, delay, estimate, plots)
+    manifest, samples, damage = _load(dir_path)
+    return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+                     estimate)
+
+
+def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+              estimate) -> dict:
+    from ..records.files import write_models_json, write_points_csv
+    from ..estimate.fit import n_parameters
+    from ..estimate.models import default_orders, fit_orders
+
+    from ..acquire.sweep import cut_text
+
+    cut = cut_text(manifest)
+    if cut:
+        progress(f"warning: {cut}; the points are those it measured")
+    if damage:
+        progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
+                 "every well-formed record was read")
+    axis = manifest["axis"]
+    points, segments, firsts, skipped = _estimate_points(manifest, samples, estimate, progress)
+    saturated = _saturated(manifest)
+    for text in saturated:
+        progress(f"  warning: {text}: the record is not the linear response")
+    if len(points) < 2:
+        why = f" (skipped {'; '.join(skipped[:2])}{'; ...' if len(skipped) > 2 else ''})" \
+            if skipped else ""
+        aborted = f"; the sweep ended early: {manifest['aborted']}" if manifest.get("aborted") else ""
+        raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
+                         f"a fit needs at least 2{why}{aborted}")
+    plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
+    write_points_csv(os.path.join(dir_path, "points.csv"), points)
+    _write_table(os.path.join(dir_path, "points_table.csv"), points)
+    table = {"omega": np.array([p.omega_rad_s for p in points]),
+             "F": np.array([p.gain for p in points]), "sigma": np.array([p.sigma for p in points]),
+             "coherence": np.array([p.coherence for p in points])}
+    order = np.argsort(table["omega"])
+    table = {k: v[order] for k, v in table.items()}
+    wanted = orders or default_orders(axis)
+    orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
+    if not orders:
+        raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
+    result = fit_orders(table, orders, delay=delay)
+    extra = {"log": damage.record(), "skipped_frequencies": skipped,
+             "saturated_frequencies": saturated, "estimate": estimate,
+             "signal": manifest.get("signal", "dwell")}
+    if manifest.get("gains"):
+        extra["gains"] = manifest["gains"]       # what the board flew, for validate
+    loop = _broken_loop(manifest, points, estimate, progress)
+    if loop:
+        extra["broken_loop"] = loop
+    truth = _truth(dir_path, manifest, points, result, progress)
+    if truth:
+        extra["sil_truth"] = truth
+    replays = _replays(result, firsts, segments)
+    if replays is not None:
+        extra["replay"] = _replay_record(result.recommended, replays)
+    write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
+                      result.reason, source="points.csv", weights=result.weights, axis=axis,
+                      extra=extra, band_rad_s=result.band_rad_s)
+    _write_plots(plots, dir_path, manifest, points, result, replays)
+    return {"axis": axis, "points": points, "result": result, "manifest": manifest,
+            "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
+            "records": segments, "record_points": firsts, "replays": replays}
+
+
+def _replays(result, points, segments):
+    """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
+    record's first point), or None when no model is recommended."""
+    from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
+    from ..validate.replay import replay_points
+
+    if result.recommended is None:
+        return None
+    return replay_points(result.models[result.recommended], points, segments,
+                         DEFAULT_DISCARD_PERIODS)
+
+
+def _replay_record(recommended, replays) -> dict:
+    """models.json's ``replay``: the replayed model's index and, per frequency, the whole
+    periods replayed and the replay's error."""
+    from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
+
+    return {"model": recommended, "discard_periods": DEFAULT_DISCARD_PERIODS,
+            "points": [{"freq_hz": r.freq_hz, "periods": r.periods, "nrmse": r.nrmse}
+                       for r in sorted(replays, key=lambda r: r.freq_hz)]}
+
+
+def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
+    """bode.png (the points with their coherence, and the models) and responses.png (each
+    record, with the recommended model's replay), by the plotting process ``plots``."""
+    from ..present.plot import COHERENCE_KEYS
+    from ..present.report import LOW_COHERENCE
+
+    axis, inject = manifest["axis"], manifest["inject"]
+    ranked = sorted(points, key=lambda p: p.omega_rad_s)
+    bode = {"path": os.path.join(dir_path, "bode.png"),
+            "omega": np.array([p.omega_rad_s for p in ranked]),
+            "F": np.array([p.gain for p in ranked]), "sigma": np.array([p.sigma for p in ranked]),
+            "models": result.models, "recommended": result.recommended,
+            "title": f"{axis}, {inject} injection: points, models and coherence",
+            "coherence": {k: np.array([getattr(p, k) for p in ranked]) for k in COHERENCE_KEYS},
+            "gate": LOW_COHERENCE}
+    said = "dashed: the recommended model's replay" if replays is not None else \
+        "no model recommended, so no replay"
+    plots.finish(bode, {"path": os.path.join(dir_path, "responses.png"), "replays": replays,
+                        "title": f"{axis}: measured cycles, input (left axis) and output "
+                                 f"(right axis); {said}"})
+
+
+def _truth(dir_path, manifest, points, result, progress) -> dict | None:
+    """A simulated sweep: the points' and the recommended model's errors against the
+    simulator's truth (:mod:`.truth`), said and returned for models.json."""
+    from ..validate.truth import sil_truth, truth_record
+
+    truth, why = sil_truth(manifest, dir_path)
+    if truth is None:
+        if manifest.get("source", {}).get("kind") == "sil":
+            progress(f"  no simulator truth: {why}")
+        return None
+    model = None if result.recommended is None else result.models[result.recommended]
+    record = truth_record(truth, points, model)
+    z = record["points_rms_error_over_sigma"]
+    said = (f"against the simulator's truth: points within {record['points_worst_db']:.2f} dB "
+            f"and {record['points_worst_deg']:.1f} deg"
+            + (f" (RMS error/sigma {z:.2f})" if z is not None else ""))
+    if model is not None:
+        said += (f"; the recommended model within {record['model_worst_db']:.2f} dB and "
+                 f"{record['model_worst_deg']:.1f} deg across the band")
+    progress(said)
+    return record
+
+
+def _broken_loop(manifest, points, estimate, progress) -> dict | None:
+    """The loop broken where the excitation enters, measured from the points' ``U/R``
+    (``L = R/U - 1``), its margins where the points reach its crossovers; said, and
+    returned for models.json (None when no loop closes there or the points were not
+    estimated against the excitation)."""
+    from ..validate.loops import broken_loop, measured_loop_name
+    from ..validate.closed_loop import margins_record
+
+    name = measured_loop_name(manifest["inject"], manifest["axis"])
+    pts = sorted(points, key=lambda p: p.omega_rad_s)
+    t_u = np.array([p.input_gain for p in pts])
+    if estimate != "excitation" or name is None or len(pts) < 2 or \
+            not np.all(np.isfinite(t_u)) or np.any(t_u == 0):
+        return None
+    m = broken_loop([p.omega_rad_s for p in pts], t_u)
+    record = {"loop": name, "injection": manifest["inject"], **margins_record(m),
+              "unmeasured": m["unmeasured"],
+              "points": [{"freq_hz": p.freq_hz, "magnitude_db": float(20 * np.log10(abs(v))),
+                          "phase_deg": float(np.degrees(np.angle(v)))}
+                         for p, v in zip(pts, m["L"])]}
+    del record["not_validated"]
+    said = []
+    if record["gain_margin_db"] is not None:
+        said.append(f"gain margin {record['gain_margin_db']:.1f} dB at "
+                    f"{record['phase_crossover_rad_s']:.3g} rad/s")
+    if record["phase_margin_deg"] is not None:
+        said.append(f"phase margin {record['phase_margin_deg']:.1f} deg at "
+                    f"{record['gain_crossover_rad_s']:.3g} rad/s")
+    said += [f"no {why}" for why in record["unmeasured"]]
+    progress(f"the {name} loop broken at the excitation, measured: {'; '.join(said)}")
+    return record
+
+
+def _estimate_points(manifest, samples, estimate, progress) -> tuple:
+    """(points, the records they came from, each record's first point, the frequencies
+    skipped and why): one point per measured frequency of a dwell, one per line of a
+    multisine, against the excitation or the input (``estimate``). A record that lost
+    samples on the link is estimated from those that arrived (each point's
+    ``lost_share``); one that lost more than the sweep allows is skipped."""
+    from ..acquire.sweep import MAX_LOST_SHARE
+
+    points, segments, firsts, skipped = [], [], [], []
+    for entry, t, r, u, y, present in _segments(manifest, samples):
+        what = _entry_name(entry)
+        lost = _lost_share(entry, present)
+        try:
+            if not len(t):
+                raise InputError("the log holds none of its samples")
+            if lost > MAX_LOST_SHARE:
+                raise InputError(f"{100 * lost:.1f} % of its samples were lost on the link "
+                                 f"(at most {100 * MAX_LOST_SHARE:g} % is used)")
+            found = _estimate_entry(entry, r, u, y, estimate, present)
+        except InputError as exc:
+            progress(f"  {what} skipped: {exc}")
+            skipped.append(f"{what}: {exc}")
+            continue
+        points += [dataclasses.replace(p, lost_share=lost) for p in found]
+        if lost:
+            progress(f"  {what}: {100 * lost:.1f} % of its samples were lost on the link; "
+                     "estimated from the rest")
+        if present is not None:     # the plots and the replay: holes bridged by a line
+            k = np.arange(present.size)
+            u, y = (np.interp(k, k[present], x[present]) for x in (u, y))
+        segments.append((entry["freq_hz"], t, u, y))
+        firsts.append(found[0])
+    return points, segments, firsts, skipped
+
+
+def _entry_name(entry) -> str:
+    if entry.get("signal") == "multisine":
+        return f"the multisine of base {entry['freq_hz']:.4g} Hz"
+    return f"{entry['freq_hz']:.4g} Hz"
+
+
+def _estimate_entry(entry, r, u, y, estimate, present=None) -> list:
+    """The points of one excitation's full-amplitude record: a sine's one (the first period
+    discarded), or every line of a multisine (its first period fills the FSF's filter).
+    ``present``: which samples arrived (None: all)."""
+    from ..estimate.fsf import (estimate_against_excitation, estimate_fsf, estimate_multisine,
+                                estimate_multisine_against_excitation)
+
+    fs = entry["freq_hz"] * entry["period_samples"]
+    if estimate != "excitation" and present is not None:
+        u, y = _complete_input(entry, r, u, y, present)
+    if entry.get("signal") == "multisine":
+        args = (fs, entry["period_samples"], entry["orders"])
+        found = estimate_multisine_against_excitation(r, u, y, *args, present=present) \
+            if estimate == "excitation" else estimate_multisine(u, y, *args, present=present)
+        if not found:
+            raise InputError("the input follows none of its lines")
+        return found
+    if estimate == "excitation":
+        return [estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1,
+                                            present=present)]
+    return [estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1,
+                         present=present)]
+
+
+def _complete_input(entry, r, u, y, present):
+    """For the estimate against the input, whose regressors need every sample of ``u``:
+    the lost samples of ``u`` from its fit against the (completed) excitation; ``y``'s
+    lost rows are left out of the fit."""
+    from ..estimate.fsf import complete_excitation, estimate_fsf, estimate_multisine, fill_lost
+
+    period = int(entry["period_samples"])
+    r = complete_excitation(r, present, period)
+    u0, y0 = np.where(present, u, 0.0), np.where(present, y, 0.0)
+    fs = entry["freq_hz"] * period
+    if entry.get("signal") == "multisine":
+        fits = estimate_multisine(r, u0, fs, period, entry["orders"], present=present)
+        gains = {p.order: p.gain for p in fits}
+        offset = fits[0].offset if fits else 0.0
+    else:
+        fit = estimate_fsf(r, u0, fs, entry["freq_hz"], discard_periods=1, present=present)
+        gains, offset = fit.harmonics, fit.offset
+    return fill_lost(u0, present, r, period, gains, offset), y0
+
+
+def _saturated(manifest) -> list:
+    """The measured frequencies during which something saturated, in words."""
+    from ..acquire.sweep import saturation_text
+
+    return [f"{e['freq_hz']:.4g} Hz{said}" for e in manifest["frequencies"]
+            if e.get("status") == "ok" and "freq_hz" in e and (said := saturation_text(e))]
+
+
+def _write_table(path, points) -> None:
+    """The paper's tables 4-6: frequency, omega, magnitude, phase, real and imaginary parts."""
+    with atomic_write(path) as fh:
+        fh.write("freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence\n")
+        for p in sorted(points, key=lambda q: q.omega_rad_s):
+            fh.write(f"{p.freq_hz:.6g},{p.omega_rad_s:.6g},{p.magnitude:.6g},"
+                     f"{math.degrees(p.phase_rad):.4f},{p.gain.real:.6g},{p.gain.imag:.6g},"
+                     f"{p.coherence:.5f}\n")

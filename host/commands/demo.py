@@ -1,0 +1,195 @@
+"""``heliquad demo``: the whole identification campaign on the simulated vehicle.
+
+For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's test rig
+(the paper's vehicle, docs/paper.md, and its IMU with noise, bias and latency); a sweep
+over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
+with the paper's orders and two integrator structures, each with a fitted delay (the loop's
+hold and the DMP's latency are real delays); closed-loop validation with the paper's gains
+in the firmware's discrete loops; and one HTML report for all three axes. It prints each
+axis's recommended model against the simulator's own truth, with the worst error across
+the band.
+
+The axes run side by side, each in a process of its own (:mod:`.workers`), its progress
+lines shown with its name in front. Ctrl-C, SIGTERM or SIGHUP stops every axis in order (each sweep
+stops its excitation and keeps its log and manifest) and ends the demo without a report; an
+axis that fails is said, the others go on, and the demo ends with exit code 1.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import signal
+import sys
+import time
+import traceback
+
+from ..records import paper
+from .shared_options import MAX_SEED, add_firmware_argument, int_in
+from ...sim.base.errors import DiskFull, InputError
+from ..process.signals import WORDS, stop_exception, stopped_by
+
+#: The demo's exit code when an axis failed (the others' records and the report are kept).
+EXIT_STOPPED = 1
+
+__all__ = ["add_parser", "run_demo"]
+
+
+def add_parser(sub, fmt) -> None:
+    p = sub.add_parser("demo", help="the whole campaign on the simulated vehicle, all three axes",
+                       description=__doc__, formatter_class=fmt)
+    p.add_argument("--out", default="heliquad-demo", metavar="DIR",
+                   help="output directory (default ./heliquad-demo)")
+    p.add_argument("--axes", nargs="+", choices=tuple(paper.BANDS_HZ), default=list(paper.BANDS_HZ))
+    p.add_argument("--ideal-sensor", action="store_true", help="no IMU noise, bias or latency")
+    p.add_argument("--turbulence", choices=("light", "moderate", "severe"),
+                   help="Dryden turbulence on the rigs during the sweeps (default: still air)")
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=1,
+                   help="sensor-noise and turbulence seed (default 1)")
+    add_firmware_argument(p)
+    p.set_defaults(func=run_demo)
+
+
+def run_demo(args) -> int:
+    from ..records.files import new_output_folder
+    from ..process.workers import run_children
+
+    new_output_folder(args.out, "the demo")
+    t0 = time.monotonic()
+    options = {"out": args.out, "ideal_sensor": args.ideal_sensor, "seed": args.seed,
+               "firmware": args.firmware, "turbulence": args.turbulence}
+    # Each axis in a process of its own, side by side; Ctrl-C stops them all in order.
+    children = run_children([(axis, [sys.executable, "-c", AXIS_COMMAND,
+                                     json.dumps({**options, "axis": axis})])
+                             for axis in args.axes])
+    summary, sim_s, failed = [], 0.0, []
+    for child in children:
+        result = child.result or {"status": "failed",
+                                  "error": f"it ended (exit code {child.returncode}) "
+                                           "without a result"}
+        if result["status"] == "done":
+            summary.append(tuple(result["summary"]))
+            sim_s += result["sim_s"]
+        else:
+            failed.append(child.name)
+            print(f"== {child.name}: failed: {result['error']}")
+            summary.append((child.name, None, f"failed: {result['error']}", float("nan"),
+                            float("nan")))
+    report_path = _report(args.out)
+    _print_summary(summary, report_path, time.monotonic() - t0, sim_s)
+    return EXIT_STOPPED if failed else 0
+
+
+def _report(out: str) -> str | None:
+    """The HTML report of every axis that got so far, or None (said) when none did."""
+    from ..present.report import write_report
+
+    try:
+        return write_report(out)
+    except InputError as exc:
+        print(f"no report: {exc}")
+        return None
+
+
+#: What a child of the demo runs: one axis (its options as JSON in argv).
+AXIS_COMMAND = "from heliquad.host.commands.demo import axis_main; axis_main()"
+_STOPPED_BY: list = []
+
+
+def _on_signal(signum, frame):
+    _STOPPED_BY.append(signum)
+    raise stop_exception(signum)
+
+
+def axis_main() -> None:
+    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis,
+    and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
+    ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C, SIGTERM and SIGHUP stop it in order
+    (the sweep keeps its log and manifest)."""
+    from ..process.workers import send_result
+
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
+    if signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN:    # nohup's stays ignored
+        signal.signal(signal.SIGHUP, _on_signal)
+    options = json.loads(sys.argv[1])
+    try:
+        result = {"status": "done", **_run_axis(**options)}
+    except KeyboardInterrupt as exc:
+        result = {"status": "stopped", "error": WORDS[stopped_by(exc)]}
+    except (InputError, DiskFull, OSError) as exc:
+        result = {"status": "failed", "error": str(exc)}
+    except Exception as exc:                       # noqa: BLE001 - one axis's failure, said
+        traceback.print_exc()
+        result = {"status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+    send_result(result)
+
+
+def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
+    """One axis of the demo in ``out/AXIS``: ``{"summary": _compare's row, "sim_s": ...}``."""
+    # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
+    # import leaves Python to end by SIGINT after the tool has stopped in order.
+    from ...sim.rig.setup import SilConfig
+    from ..records.files import read_models_json
+    from ..campaign.identify import identify_dir
+    from ..present.plot_process import InlinePlots
+    from ..acquire.session import SilSession
+    from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
+    from ..present.validation import save_validation
+    from ..validate.closed_loop import model_gains, sweep_inputs, validate_model
+
+    importlib.import_module("..estimate.fsf", __package__)        # a sweep's dwell check uses it
+    folder = os.path.join(out, axis)
+    os.makedirs(folder, exist_ok=True)
+    print(f"== sweep on the {axis} rig, {firmware} firmware in the loop")
+    cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
+                    ideal_sensor=ideal_sensor, seed=seed, firmware=firmware,
+                    turbulence=turbulence)
+    with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
+        run_sweep(session, default_plan(axis), folder,
+                  {**sil_source(cfg), "firmware": session.fw.record()})
+        sim_s = session.time_us * 1e-6
+    if _STOPPED_BY:                  # the sweep ended in order on a signal: stop
+        raise stop_exception(_STOPPED_BY[0])
+    print("== identify")
+    try:
+        # The plots here, not beside: the axes keep every core busy already.
+        identified = identify_dir(folder, progress=print, plots=InlinePlots())
+    except InputError as exc:                 # a failed sweep: say so, go on
+        print(f"== not identified: {exc}")
+        return {"summary": (axis, None, str(exc), float("nan"), float("nan")), "sim_s": sim_s}
+    result = identified["result"]
+    model = result.models[result.recommended] if result.recommended is not None else None
+    if model is not None:
+        print("== validate")
+        models_path = os.path.join(folder, "models.json")
+        doc = read_models_json(models_path)
+        report, traces = validate_model(
+            model.num, model.den, model.delay_s, axis, model_gains(doc, axis)[0], "moderate",
+            seed, **sweep_inputs(models_path, doc))
+        save_validation(folder, report, traces)
+    return {"summary": _compare(axis, model, result.reason, identified["truth"]),
+            "sim_s": sim_s}
+
+
+def _compare(axis, model, reason, truth):
+    """Worst error of the recommended model against the simulator's sampled-data truth
+    across the band (identify's record of it, :mod:`.truth`)."""
+    from ..estimate.fit import format_tf
+
+    if model is None or not truth:
+        return (axis, None, reason, float("nan"), float("nan"))
+    return (axis, format_tf(model), reason, truth["model_worst_db"], truth["model_worst_deg"])
+
+
+def _print_summary(summary, report_path, wall, sim_s) -> None:
+    print("\n== identified versus the simulator's truth (worst error across each axis's band)")
+    for axis, text, reason, db, deg in summary:
+        if text is None:
+            print(f"{axis:>6}: no model; {reason}")
+        else:
+            print(f"{axis:>6}: {text}\n        error {db:.2f} dB, {deg:.1f} deg; {reason}")
+    print(f"\n{sim_s:.0f} s simulated in {wall:.0f} s ({sim_s / wall:.1f}x real time)")
+    if report_path is not None:
+        print(f"report: {os.path.abspath(report_path)}")

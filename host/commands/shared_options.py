@@ -1,0 +1,244 @@
+"""Command-line options, and the checks of them, shared by several subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from ...sim.base.errors import InputError
+
+__all__ = ["add_firmware_argument", "add_param_store_argument", "firmware_amplitude", "add_fault_argument", "faults",
+           "check_plant", "check_model",
+           "transfer_function", "check_excitation",
+           "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
+
+#: The widest an excitation's cycle counts can be: HQ_EXCITATION carries them as uint16.
+MAX_CYCLES = 65535
+#: Seeds of the simulator's random generators (numpy: 0 .. 2**32 - 1).
+MAX_SEED = 2**32 - 1
+#: The highest degree of a plant or model (as of the fit's orders).
+MAX_DEGREE = 12
+#: A coefficient (den made monic) beyond this: the polynomial's roots drown in round-off.
+MAX_COEFFICIENT = 1e30
+#: A simulated plant's gain, rad/s per unit torque command: the median of |G(j omega)| over
+#: 0.01 rad/s to the loop's Nyquist rate. Beyond it nothing a gyro measures is left to see.
+PLANT_GAIN_RANGE = (1e-6, 1e6)
+#: A model to validate: poles and zeros up to this, rad/s, and its gain (the median of
+#: |G(j omega)| over 0.01..1e4 rad/s) in the range POINTS.csv's magnitudes may take.
+MODEL_RATE_MAX = 1e6
+MODEL_GAIN_RANGE = (1e-12, 1e12)
+
+
+def int_in(lo: int, hi: int):
+    """An argparse type: an integer in [lo, hi], or a one-line error saying so."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"{value} is outside {lo}..{hi}")
+        return value
+    return parse
+
+
+def finite(text: str) -> float:
+    """An argparse type: a finite number (no nan or inf)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def number_in(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False):
+    """An argparse type: a finite number in the interval from lo to hi (open ends as
+    given), or a one-line error naming the interval."""
+    interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+
+    def parse(text: str) -> float:
+        value = finite(text)
+        if value < lo or value > hi or (lo_open and value == lo) or (hi_open and value == hi):
+            raise argparse.ArgumentTypeError(f"{value:g} is outside {interval}")
+        return value
+    return parse
+
+
+def firmware_amplitude(inject: str, amplitude: float) -> float:
+    """``--amplitude`` in the firmware's units: deg (angle) and deg/s (rate) become rad and
+    rad/s; a mixer amplitude is already normalised."""
+    return amplitude if inject == "mixer" else math.radians(amplitude)
+
+
+def _param_store(path: str) -> str:
+    """A parameter store's path: a file (or none yet) in a folder that exists."""
+    import argparse
+    import os
+
+    if os.path.isdir(path):
+        raise argparse.ArgumentTypeError(f"{path} is a folder, not a parameter store file")
+    if os.path.exists(path) and not os.path.isfile(path):
+        raise argparse.ArgumentTypeError(f"{path} is not a regular file")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise argparse.ArgumentTypeError(f"folder {folder} does not exist")
+    return path
+
+
+def add_param_store_argument(p) -> None:
+    """--param-store FILE: where the simulated board keeps its firmware parameters."""
+    p.add_argument("--param-store", metavar="FILE", type=_param_store,
+                   help="keep the firmware's parameters (docs/parameters.md) in FILE across runs, "
+                        "as a board keeps them in its flash: read at start, written at each save "
+                        "(default: every run starts with the defaults and nothing is saved)")
+
+
+def add_firmware_argument(p) -> None:
+    """--firmware: which firmware flies the simulated rig (sim.lockstep.FIRMWARES)."""
+    p.add_argument("--firmware", choices=("host", "teensy35"), default="host",
+                   help="host: the firmware's host build (default); teensy35: the Teensy 3.5 "
+                        "image itself, run instruction by instruction in the emulated "
+                        "MK64FX512 (processor in the loop: slower; the install builds the "
+                        "image when the ARM toolchain is present)")
+
+
+def add_fault_argument(p, prefix="") -> None:
+    p.add_argument("--fault", action="append", default=[], metavar="KIND@T[:D]",
+                   help=prefix + "inject a fault at T seconds of simulated time (repeatable): "
+                        "silent, nack (for D seconds, or to the end), reset, overflow (the "
+                        "MPU6050), link (the host closes its telemetry link); e.g. silent@3:0.5")
+
+
+def faults(args) -> tuple:
+    from ...sim.rig.faults import parse_fault
+
+    return tuple(parse_fault(text) for text in args.fault)
+
+
+def transfer_function(what: str, num, den, leading_zeros: bool = False):
+    """``num/den`` as arrays with den monic, or an InputError naming ``what``: the
+    denominator of degree 1..MAX_DEGREE with a leading coefficient that is not zero, the
+    model proper, every coefficient finite and, den made monic, within MAX_COEFFICIENT.
+    ``leading_zeros``: a numerator may start with zeros (they are dropped)."""
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    if leading_zeros:
+        num = np.trim_zeros(num, "f")
+    if num.size == 0 or not np.any(num):
+        raise InputError(f"{what}: the numerator is zero (no response)")
+    if not 2 <= den.size <= MAX_DEGREE + 1:
+        raise InputError(f"{what}: the denominator needs 2 to {MAX_DEGREE + 1} coefficients "
+                         f"(degree 1 to {MAX_DEGREE}), got {den.size}")
+    if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+        raise InputError(f"{what}: coefficients must be finite numbers")
+    if den[0] == 0 or num[0] == 0:
+        part = "denominator" if den[0] == 0 else "numerator"
+        raise InputError(f"{what}: the leading coefficient of the {part} is 0: drop leading "
+                         "zeros")
+    if num.size > den.size:
+        raise InputError(f"{what}: not proper (numerator degree {num.size - 1} above the "
+                         f"denominator's {den.size - 1}); a physical response is proper")
+    with np.errstate(all="ignore"):
+        num, den = num / den[0], den / den[0]
+    if not np.all(np.abs(np.concatenate([num, den])) <= MAX_COEFFICIENT):
+        raise InputError(f"{what}: with the denominator made monic a coefficient is beyond "
+                         f"{MAX_COEFFICIENT:g} (the poles would be lost in round-off)")
+    return num, den
+
+
+def _log_gain(num, den, omega) -> float:
+    """The median over ``omega`` of log10 |G(j omega)| (a resonance on the grid does not
+    dominate it, nor a pole on the imaginary axis)."""
+    with np.errstate(all="ignore"):
+        s = 1j * omega
+        return float(np.median(np.log10(np.abs(np.polyval(num, s) / np.polyval(den, s)))))
+
+
+def check_model(what: str, num, den) -> None:
+    """An identified model the cascade can be validated with (continuous time): see
+    :func:`transfer_function`, poles and zeros within MODEL_RATE_MAX, its gain across
+    0.01..1e4 rad/s within MODEL_GAIN_RANGE. A zero model (no response at all) is
+    validated as it is: only its denominator is checked."""
+    if np.all(np.asarray(num, dtype=float) == 0):
+        transfer_function(what, [1.0], den)
+        return
+    num, den = transfer_function(what, num, den, leading_zeros=True)
+    for name, roots in (("pole", np.roots(den)), ("zero", np.roots(num))):
+        if roots.size and np.max(np.abs(roots)) > MODEL_RATE_MAX:
+            raise InputError(f"{what}: a {name} at {np.max(np.abs(roots)):.3g} rad/s, beyond "
+                             f"{MODEL_RATE_MAX:g} rad/s: not an attitude model")
+    lo, hi = MODEL_GAIN_RANGE
+    gain = _log_gain(num, den, np.logspace(-2, 4, 200))
+    if not math.log10(lo) <= gain <= math.log10(hi):
+        raise InputError(f"{what}: its gain (about {10 ** gain:.3g}) is outside "
+                         f"[{lo:g}, {hi:g}]")
+
+
+def check_plant(args) -> None:
+    """The simulated rig can fly this plant: a transfer function (:func:`transfer_function`,
+    leading zeros refused) whose poles are no faster than the loop's Nyquist rate and whose
+    gain is within PLANT_GAIN_RANGE, or a vehicle file whose fastest mode the integrator can
+    follow at this loop rate. An unstable plant is allowed: the firmware's abort is what such
+    a run tests. A ``--dmp-image`` file is read here too, so a bad one is refused before
+    anything starts."""
+    if getattr(args, "dmp_image", None):
+        from .dmp_image import read_dmp_file
+
+        read_dmp_file(args.dmp_image)
+    if not 0 <= args.collective <= 1:
+        raise InputError("--collective must be in [0, 1]")
+    loop_hz = getattr(args, "loop_hz", 200.0)
+    if not 0 < loop_hz <= 2000:
+        raise InputError("--loop-hz must be in (0, 2000]")
+    if getattr(args, "plant", "tf") == "vehicle":
+        from ...sim.plant.vehicle_params import load_params
+        from ...sim.plant.vehicle import check_step
+
+        check_step(load_params(args.params), 1.0 / loop_hz)    # a bad file fails here, in one line
+        return
+    num, den = transfer_function("--num/--den", args.num, args.den)
+    nyquist = math.pi * loop_hz
+    fastest = float(np.max(np.abs(np.roots(den))))
+    if fastest > nyquist:
+        raise InputError(f"--num/--den: a pole at {fastest:.3g} rad/s is faster than the "
+                         f"{loop_hz:g} Hz loop's Nyquist rate ({nyquist:.3g} rad/s): its "
+                         "samples cannot show it (drop it; its DC gain stays in the numerator)")
+    lo, hi = PLANT_GAIN_RANGE
+    gain = _log_gain(num, den, np.logspace(-2, math.log10(nyquist), 200))
+    if not math.log10(lo) <= gain <= math.log10(hi):
+        raise InputError(f"--num/--den: the plant's gain (about {10 ** gain:.3g} rad/s per unit "
+                         f"torque command up to the Nyquist rate) is outside [{lo:g}, {hi:g}]")
+
+
+def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):
+    """Refuse, before anything starts, an excitation the firmware would refuse: the limits
+    are the firmware's own defaults (heliquad._firmware.SafetyLimits, the same C++ the
+    firmware compiles)."""
+    from heliquad import _firmware
+
+    from ..acquire.link import INJECTIONS
+
+    f32 = lambda x: float(np.float32(x))       # noqa: E731 - the firmware compares in float
+    lim = _firmware.SafetyLimits()
+    hi = f32(lim.max_freq_fraction * f32(loop_hz))
+    for f in freqs_hz:
+        if not lim.min_freq_hz <= f32(f) <= hi:
+            raise InputError(f"{f:g} Hz is outside the firmware's excitation band "
+                             f"[{lim.min_freq_hz:g}, {hi:g}] Hz at a {loop_hz:g} Hz loop")
+        duration = (cycles + 2 * fade_cycles) / f
+        if duration > lim.max_duration_s:
+            raise InputError(f"{cycles} cycles with {fade_cycles} of fade each way at {f:g} Hz "
+                             f"last {duration:.0f} s; the firmware allows "
+                             f"{lim.max_duration_s:g} s: fewer --cycles")
+    if fade_cycles < lim.min_fade_cycles:
+        raise InputError(f"--fade-cycles must be at least {lim.min_fade_cycles}")
+    if amplitude is not None:
+        top = lim.max_amplitude[INJECTIONS[inject]]
+        if f32(amplitude) > top:
+            unit = {"angle": f"{math.degrees(top):g} deg", "rate": f"{math.degrees(top):g} deg/s",
+                    "mixer": f"{top:g}"}[inject]
+            raise InputError(f"--amplitude is above the firmware's bound for {inject} "
+                             f"injection ({unit})")

@@ -1,0 +1,2 @@
+"""Presentation: plots and the HTML report. These draw results computed elsewhere.
+"""

@@ -1,0 +1,230 @@
+"""The 6-DoF vehicle as a plant for the firmware in the loop, and its linearised truth.
+
+:class:`VehiclePlant` wraps :class:`heliquad.sim.plant.vehicle.Vehicle` with the interface the
+lockstep runner uses (``fifo``, ``step_motors``, ``frame_inputs``). Its
+:meth:`VehiclePlant.truth` states what identification should find for mixer injection: the
+model linearised at the rig's trim (rotor speeds at the trim command, body at rest), from the
+axis's normalised torque command, through the firmware's own mixer equations, to the body
+rate; sampled with the zero-order hold of the loop period as the logged data are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from heliquad import _simcore
+
+from ..base.dialect import AXES
+from .dryden import Dryden
+from .imu_model import ImuModel
+from .vehicle_params import VehicleParams, load_params
+from .vehicle import GRAVITY_M_S2, Vehicle
+
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z", "pid_z_coeffs"]
+
+#: Finite-difference steps for the linearisation (state and normalised command).
+EPS_STATE = 1e-6
+EPS_COMMAND = 1e-3
+
+
+def mixer_geometry(params: VehicleParams):
+    """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
+    the shipped parameter file's: tests/vehicle_test.py)."""
+    from heliquad import _firmware as fw
+
+    g = fw.MixerGeometry()
+    g.arm_length_m = params.arm_rotors.arm_length_m
+    g.cant_deg = params.arm_rotors.cant_deg
+    g.central_max_thrust_n = params.central_rotor.max_thrust_n
+    g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
+    g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
+    g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
+    return g
+
+
+def mixer_for(params: VehicleParams):
+    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
+    from heliquad import _firmware as fw
+
+    return fw.Mixer(mixer_geometry(params))
+
+
+class VehiclePlant:
+    """The vehicle on a rig (or free), stepped by the motors' thrust fractions."""
+
+    def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
+                 trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0,
+                 ideal_sensor: bool = False):
+        if axis not in AXES:
+            raise ValueError(f"axis must be one of {', '.join(AXES)}")
+        self.params = params or load_params()
+        self.axis, self.index = axis, AXES[axis]
+        self.rig, self.dt_s = rig, dt_s
+        self.vehicle = Vehicle(self.params, rig=rig)
+        self.trim_collective = trim_collective
+        self.imu = None if ideal_sensor else ImuModel(self.params.imu, seed)
+        self.dryden = None
+        if turbulence:
+            t = self.params.turbulence
+            self.dryden = Dryden(turbulence, t.altitude_m, t.span_m, dt_s, seed)
+        # The per-frame work (gusts as forces and moments, the step, the IMU's bias and delay
+        # line, the specific force) runs in C++ (sim/native/vehicle_model.cpp); this class
+        # draws the random inputs and states the truth.
+        imu = self.imu.config() if self.imu else _simcore.ImuConfig()
+        self.core = _simcore.VehicleRig(self.vehicle.core, dt_s, imu,
+                                        self.params.turbulence.rotational_damping_n_m_s_rad)
+
+    @property
+    def rate_rad_s(self) -> float:
+        return float(self.vehicle.x[10 + self.index])
+
+    def frame_inputs(self, frames: int):
+        """The random inputs of the next ``frames`` frames: (IMU noise, gusts), each
+        ``frames`` x 6 or None. Gust velocity acts through the airframe's linear drag, gust
+        rates through the rotational damping (sim/plant/dryden.py)."""
+        noise = self.imu.noise(frames) if self.imu else None
+        gust = self.dryden.block(frames) if self.dryden else None
+        return noise, gust
+
+    def step_motors(self, motor) -> float:
+        """Hold the motors' thrust fractions for one period (this frame's gust applied)."""
+        gust = self.dryden.block(1) if self.dryden else None
+        self.core.step_motors(list(map(float, motor)), gust)
+        return self.rate_rad_s
+
+    def body_state(self):
+        x = self.vehicle.x
+        return list(x[6:10]), list(x[10:13])
+
+    def sensor_sample(self):
+        """(quaternion, gyro rad/s, accel m/s^2) as the MPU6050 reports them this frame."""
+        return self.core.sensor(self._noise())
+
+    def fifo(self, kind: int) -> bytes:
+        """This frame's FIFO bytes of the HQ_SENSOR_KIND ``kind``."""
+        return self.core.fifo(kind, self._noise())
+
+    def _noise(self):
+        """One frame's IMU noise (None for the ideal sensor)."""
+        return self.imu.noise(1) if self.imu else None
+
+    @property
+    def latency_samples(self) -> int:
+        return 0 if self.imu is None else self.params.imu.dmp_latency_samples
+
+    def specific_force(self):
+        """What an accelerometer at the centre of mass reads, m/s^2 in body FRD."""
+        return np.array(self.core.specific_force())
+
+    # --- truth -------------------------------------------------------------------------------
+    def linearise(self):
+        """(A, b, C): the model at trim, from the axis's torque command to [rate, angle].
+
+        States: the free axis's angle and rate and the five rotor speeds (on a rig the other
+        states do not move; in free flight this is the rotational part at hover with the other
+        axes held, which is what a one-axis experiment sees to first order). Input: the axis's
+        normalised torque command, through the firmware's mixer equations.
+        """
+        mixer = mixer_for(self.params)
+        from heliquad import _firmware as fw
+
+        def motors(cmd):
+            c = [0.0, 0.0, 0.0]
+            c[self.index] = cmd
+            return np.array(mixer.mix(fw.MixerCommand(self.trim_collective, *c)).motor)
+
+        u0 = motors(0.0)
+        v = Vehicle(self.params, rig=self.rig if self.rig != "free" else self.axis)
+        x0 = v.initial_state()
+        x0[13:18] = v.w_max * np.sqrt(u0)
+        idx = [10 + self.index] + list(range(13, 18))
+        f0 = v.derivative(x0, u0)[idx]
+        A = np.zeros((7, 7))                   # [rate, rotors x5, angle]
+        for j, k in enumerate(idx):
+            x1 = x0.copy()
+            x1[k] += EPS_STATE * max(1.0, abs(x0[k]))
+            A[:6, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
+        A[6, 0] = 1.0                          # d(angle)/dt = rate, small angles at trim
+        du = (motors(EPS_COMMAND) - motors(-EPS_COMMAND)) / (2 * EPS_COMMAND)
+        b = np.zeros(7)
+        b[:6] = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
+                 - v.derivative(x0, u0 - EPS_COMMAND * du)[idx]) / (2 * EPS_COMMAND)
+        C = np.zeros((2, 7))
+        C[0, 0] = 1.0
+        C[1, 6] = 1.0
+        return A, b, C
+
+    def sampled(self, omega_rad_s):
+        """Logged torque command -> logged rate and logged angle at ``omega_rad_s``:
+        ``(h_rate, h_angle)``, arrays (ZOH-sampled at the loop period, with the latency)."""
+        h_rate, h_angle = self._sampled(np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s))
+        return h_rate, h_angle
+
+    def _sampled(self, z):
+        """Logged torque command -> logged [rate, angle] at the points ``z`` (ZOH, latency)."""
+        import scipy.linalg       # here: importing the plant (identify's loops do) need not wait
+
+        A, b, C = self.linearise()
+        n = A.shape[0]
+        M = np.zeros((n + 1, n + 1))
+        M[:n, :n], M[:n, n] = A * self.dt_s, b * self.dt_s
+        E = scipy.linalg.expm(M)
+        Ad, bd = E[:n, :n], E[:n, n]
+        return np.array([C @ np.linalg.solve(zk * np.eye(n) - Ad, bd) * zk ** -self.latency_samples
+                         for zk in z]).T
+
+    def truth(self, omega_rad_s, inject: str = "mixer", gains=None):
+        """What identification should find for this injection point, at ``omega_rad_s``.
+
+        mixer: torque command -> rate, the plant. rate: rate setpoint -> rate, the inner loop
+        closed through the firmware's discrete PID. angle: angle setpoint -> angle, the whole
+        cascade (the logged angle is the attitude estimate: exact for the DMP path, where it
+        is the true attitude ``latency`` loops late; not for the raw path's filter).
+        All ZOH-sampled at the loop period, with the sensor's latency.
+        """
+        z = np.exp(1j * np.atleast_1d(omega_rad_s) * self.dt_s)
+        h_rate, h_angle = self._sampled(z)
+        if inject == "mixer":
+            out = h_rate
+        else:
+            from heliquad import _firmware as fw
+
+            g = gains or fw.CascadeGains.paper_defaults()
+            axis = fw.Axis(self.index)
+            c_pi, d_m = pid_z(g.rate(axis), self.dt_s, z)
+            inner_den = 1 + h_rate * (c_pi - d_m)
+            if inject == "rate":
+                out = h_rate * c_pi / inner_den
+            elif inject == "angle":
+                k_o, d_o = pid_z(g.angle(axis), self.dt_s, z)
+                out = h_angle * c_pi * k_o / (inner_den + c_pi * (k_o - d_o) * h_angle)
+            else:
+                raise ValueError("inject must be mixer, rate or angle")
+        return out if np.ndim(omega_rad_s) else out[0]
+
+
+def pid_z_coeffs(kc, tau_i_s, tau_d_s, derivative_filter_n, dt_s):
+    """The firmware's Pid (firmware/core/pid.cpp) as two z-domain transfer functions, each
+    ``(num, den)`` in descending powers of ``z``: ``C_PI`` on the error (P and the Tustin
+    integral) and ``D_m`` on the measurement (the Tustin filtered derivative), so that
+    output = C_PI (r - y) + D_m y. No integral for tau_I <= 0, no derivative for tau_D <= 0."""
+    if tau_i_s > 0:
+        ki = kc * dt_s / (2 * tau_i_s)           # kc + ki (z + 1) / (z - 1)
+        c_pi = ([kc + ki, ki - kc], [1.0, -1.0])
+    else:
+        c_pi = ([kc], [1.0])
+    d_m = ([0.0], [1.0])
+    if tau_d_s > 0:
+        tf = tau_d_s / derivative_filter_n
+        a = (2 * tf - dt_s) / (2 * tf + dt_s)
+        b = 2 * kc * tau_d_s / (2 * tf + dt_s)
+        d_m = ([-b, b], [1.0, -a])                # -b (z - 1) / (z - a)
+    return c_pi, d_m
+
+
+def pid_z(gains, dt_s, z):
+    """:func:`pid_z_coeffs` of the firmware's ``gains`` evaluated at the points ``z``:
+    ``(C_PI(z), D_m(z))``."""
+    (pn, pd), (dn, dd) = pid_z_coeffs(gains.kc, gains.tau_i_s, gains.tau_d_s,
+                                      gains.derivative_filter_n, dt_s)
+    return np.polyval(pn, z) / np.polyval(pd, z), np.polyval(dn, z) / np.polyval(dd, z)

@@ -1,0 +1,124 @@
+"""Free-running mode: the simulated rig behaves like a board on a serial port.
+
+``heliquad board`` starts the host firmware with a transfer-function plant and steps it in
+real time (one frame per loop period of wall-clock time), hovering with the arm switch up,
+and publishes the firmware's telemetry link as a pty. Any tool then connects to that path
+as it would to /dev/ttyACM0 (`heliquad log`, a sweep, QGroundControl over a serial link,
+or pymavlink). The simulator does not read the telemetry: if nobody does, the firmware's
+buffer fills and it drops and counts messages, as a UART would.
+
+An orderly stop (Ctrl-C, SIGTERM, SIGHUP, the end of ``duration_s``) lands first, as a pilot
+does before power-off: throttle low, arm switch down, and the firmware stepped (in lockstep,
+no longer in real time) until it reports disarmed and then for :data:`SAVE_WAIT_S`, so that
+the parameters it saves only while disarmed (``--param-store``) are saved before it stops.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+from ..base.dialect import dialect
+from .lockstep import SimLink, start_firmware
+from .setup import rc_disarmed, rig_step
+from ..plant.tf_plant import TfPlant
+
+__all__ = ["run_board"]
+
+#: If the simulator falls this far behind real time, it resynchronises instead of racing.
+MAX_LAG_S = 0.1
+#: How long the landed board runs on after it disarmed: the firmware saves changed parameters
+#: once disarmed and 0.5 s after the last change (kSaveQuietUs, firmware/core/
+#: flight_controller.cpp), plus 0.1 s to spare.
+SAVE_WAIT_S = 0.6
+#: The most telemetry that waits for a reader on the pty, the oldest dropped past it, as a
+#: board's USB or UART buffer holds a few KiB and not seconds: a tool that opens the port late
+#: reads about this much of the past (0.19 s at the firmware's 22 kB/s), then the present.
+#: The largest the pty's line discipline holds in sight (firmware/targets/host/serial.hpp); a
+#: write the kernel has not yet moved there is not seen, so one loop's more may wait.
+TELEMETRY_BACKLOG_BYTES = 4095
+#: How long the pilot's switch may take to disarm the board before the stop goes on without
+#: it (the firmware disarms on the frame the switch goes down).
+DISARM_WAIT_S = 1.0
+
+
+def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
+              collective: float = 0.4, duration_s: float | None = None,
+              dmp_image: str | None = None, ready=None, firmware: str = "host",
+              params_file: str | None = None, armed: bool = True,
+              backlog_bytes: int = TELEMETRY_BACKLOG_BYTES) -> dict:
+    """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
+    Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
+    (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
+    when the telemetry port is there (default: a line on stdout, flushed at once, for
+    whatever waits for it). ``params_file``: where the firmware keeps its parameters
+    (default: nowhere; every start has the defaults). ``armed=False``: the pilot leaves the
+    arm switch and the throttle low (a ground station then sees a disarmed vehicle, whose
+    every parameter may change). ``backlog_bytes``: the most telemetry that waits for a
+    reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it)."""
+
+    ready = ready or (lambda text: print(text, flush=True))
+    dt_s = 1.0 / loop_hz
+    plant = TfPlant(axis, num, den, dt_s)
+    run = {"frames": 0, "resyncs": 0, "stopped_by": None, "landed": False}
+    fw = start_firmware(firmware, loop_hz=loop_hz, dmp_image=dmp_image,
+                        telemetry_path=os.path.abspath(telemetry_path), params_file=params_file,
+                        telemetry_backlog_bytes=backlog_bytes)
+    try:
+        link = SimLink(fw)
+        try:
+            kind = _fly(link, plant, run, dt_s, collective, duration_s,
+                        lambda: ready(f"board running: telemetry on {telemetry_path} "
+                                      "(Ctrl-C to stop)"),
+                        rc=None if armed else rc_disarmed())
+            run["landed"] = _land(link, plant, run, dt_s, kind)
+        finally:
+            link.close()
+    finally:
+        fw.stop()                          # its links and temporary folder go with it
+    return run
+
+
+def _fly(link, plant, run, dt_s, collective, duration_s, say_ready, rc=None):
+    """Say ready, then hover in real time until ``duration_s`` or a KeyboardInterrupt (kept
+    in ``run``), the pilot's sticks ``rc`` (default: armed, hovering); returns the sensor
+    kind the firmware last asked for."""
+    kind = dialect().HQ_SENSOR_NONE            # until the firmware says what it set up
+    try:
+        # Said inside: a Ctrl-C from whoever waited for the line stops the board as any
+        # later one does.
+        say_ready()
+        t0 = time.monotonic()
+        while duration_s is None or run["frames"] * dt_s < duration_s:
+            run["frames"] += 1
+            target = t0 + run["frames"] * dt_s
+            now = time.monotonic()
+            if now < target:
+                time.sleep(target - now)
+            elif now - target > MAX_LAG_S:
+                run["resyncs"] += 1
+                t0 = now - run["frames"] * dt_s     # resynchronise to real time
+            reply = rig_step(link, plant, run["frames"], _us(run["frames"], dt_s), kind,
+                             collective, rc=rc)
+            kind = reply.sensor_kind
+    except KeyboardInterrupt as exc:             # Ctrl-C; SIGTERM, SIGHUP as its subclasses
+        run["stopped_by"] = exc
+    return kind
+
+
+def _land(link, plant, run, dt_s, kind) -> bool:
+    """The pilot's switch down and throttle low until the firmware reports disarmed, then
+    :data:`SAVE_WAIT_S` more (its pending parameter save); whether it disarmed."""
+    rc, armed, after = rc_disarmed(), True, 0
+    for _ in range(int(round((DISARM_WAIT_S + SAVE_WAIT_S) / dt_s))):
+        run["frames"] += 1
+        reply = rig_step(link, plant, run["frames"], _us(run["frames"], dt_s), kind, 0.0, rc=rc)
+        kind, armed = reply.sensor_kind, reply.armed
+        after = 0 if armed else after + 1
+        if after * dt_s >= SAVE_WAIT_S:
+            return True
+    return not armed
+
+
+def _us(frame: int, dt_s: float) -> int:
+    return int(round(frame * dt_s * 1e6))

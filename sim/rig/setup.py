@@ -1,0 +1,121 @@
+"""The simulated rig of a run with the firmware in the loop: its configuration, its plant,
+and the pilot's RC.
+
+The simulator plays the rig and the pilot: the plant (:class:`Plant`: a per-axis transfer
+function or the 6-DoF vehicle on a rig) gives the MPU6050's FIFO bytes and takes the
+firmware's motor commands; the pilot gives RC (throttle low, arm switch up, then hover
+throttle). The host tool's side of the run, the telemetry link and the log, is
+:class:`heliquad.host.acquire.session.SilSession`.
+
+Input and output of an experiment follow the injection point (HQ_INJECTION in the dialect):
+mixer -> u = the axis's total torque command, y = measured rate (the fit gives the plant);
+rate -> u = rate setpoint, y = measured rate (closed inner loop);
+angle -> u = angle setpoint, y = angle (closed cascade).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Protocol
+
+import numpy as np
+
+from ..plant.tf_plant import TfPlant
+
+__all__ = ["SilConfig", "Plant", "make_plant", "rig_step", "rc_block", "RC_CENTER_US",
+           "rc_disarmed", "BOOT_FRAMES", "ARM_FRAMES"]
+
+RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
+#: Frames with everything low after start (the firmware initialises), then arm switch up.
+BOOT_FRAMES, ARM_FRAMES = 20, 20
+
+
+@dataclasses.dataclass
+class SilConfig:
+    """One experiment. ``amplitude`` is in firmware units (rad, rad/s or normalised)."""
+
+    axis: str = "roll"
+    num: tuple = (28.19,)
+    den: tuple = (1.0, 5.13, 22.93)
+    inject: str = "mixer"
+    freq_hz: float = 1.0
+    amplitude: float = 0.05
+    cycles: int = 10
+    fade_cycles: int = 2
+    loop_hz: float = 200.0
+    collective: float = 0.4        # hover throttle, fraction of full stick travel
+    settle_s: float = 1.0          # hover before the excitation starts
+    dmp_image: str | None = None
+    plant: str = "tf"              # "tf" (num/den) or "vehicle" (the 6-DoF model)
+    rig: str = "roll"              # vehicle plant: roll, pitch, yaw or free
+    params: str | None = None      # vehicle parameter file (default: the shipped one)
+    turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
+    seed: int = 0                  # turbulence and sensor-noise seed
+    ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
+    faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
+    firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
+    firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
+    param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
+
+
+class Plant(Protocol):
+    """What flies on the simulated rig. ``core`` is its C++ model (``heliquad._simcore``),
+    which the batch engine steps; the methods step it from Python, one frame at a time."""
+
+    core: object
+
+    def fifo(self, kind: int) -> bytes:
+        """This frame's MPU6050 FIFO bytes of the HQ_SENSOR_KIND ``kind``."""
+
+    def step_motors(self, motor) -> float:
+        """Advance one loop period with these thrust fractions; the axis's rate, rad/s."""
+
+    def frame_inputs(self, frames: int):
+        """The random inputs (sensor noise, gusts) of the next ``frames`` frames, drawn in
+        Python so that a run repeats; (None, None) for a plant without any."""
+
+    def truth(self, omega_rad_s, inject: str = "mixer"):
+        """The sampled-data response identification should find at ``omega_rad_s``."""
+
+
+def make_plant(cfg: SilConfig, dt_s: float) -> Plant:
+    """The plant of a run: the per-axis transfer function or the 6-DoF vehicle on its rig."""
+    if cfg.plant == "tf":
+        return TfPlant(cfg.axis, cfg.num, cfg.den, dt_s)
+    from ..plant.vehicle_params import load_params
+    from ..plant.vehicle_plant import VehiclePlant
+
+    return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),
+                        trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed,
+                        ideal_sensor=cfg.ideal_sensor)
+
+
+def _rc(frame, collective):
+    rc = [RC_CENTER_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, RC_LOW_US, RC_CENTER_US, 0, 0]
+    if frame > BOOT_FRAMES:
+        rc[4] = RC_HIGH_US                                     # arm switch
+    if frame > BOOT_FRAMES + ARM_FRAMES:
+        rc[2] = int(round(RC_LOW_US + collective * (RC_HIGH_US - RC_LOW_US)))
+    return rc
+
+
+def rc_block(first: int, n: int, collective: float) -> np.ndarray:
+    """The pilot's RC of frames ``first`` .. ``first + n - 1``, one row each (uint16 us)."""
+    return np.array([_rc(f, collective) for f in range(first, first + n)], dtype=np.uint16)
+
+
+def rc_disarmed() -> list:
+    """The pilot's RC once landed: throttle low, arm switch down (the firmware disarms)."""
+    return _rc(0, 0.0)
+
+
+def rig_step(link, plant, frame, time_us, kind, collective, imu_fault=None, rc=None):
+    """One lockstep frame of the simulated rig, driven from Python (the free-running board
+    and tests): the plant's FIFO bytes and the pilot's RC out, the firmware's reply in, the
+    plant stepped with the reply's motors. :class:`heliquad.host.acquire.session.SilSession` runs batches
+    of the same in C++. ``imu_fault``: HQ_IMU_FAULT (default none); ``rc``: the pilot's RC
+    (default: boot, arm, hover as the frame number has it)."""
+    rc = _rc(frame, collective) if rc is None else rc
+    reply = link.step(time_us, plant.fifo(kind), kind, rc, imu_fault=imu_fault)
+    plant.step_motors(reply.motor)
+    return reply
