@@ -1,5 +1,6 @@
-"""The plots (host/present/plot.py): they draw onto the caller's axes and return the figure, and
-nothing in the tool picks a matplotlib backend."""
+"""The plots (host/present/: figure.py, bode.py, responses.py, validation.py): they draw
+onto the caller's axes and return the figure, and nothing in the tool picks a matplotlib
+backend."""
 
 import math
 import subprocess
@@ -12,7 +13,9 @@ from matplotlib.figure import Figure
 
 from heliquad.host.records import paper
 from heliquad.host.estimate.fit import TfModel
-from heliquad.host.present.plot import new_figure, plot_bode, plot_responses, write_bode
+from heliquad.host.present.figure import new_figure
+from heliquad.host.present.bode import plot_bode, write_bode
+from heliquad.host.present.responses import plot_responses
 from heliquad.host.validate.replay import replay_record
 from heliquad.host.present.report import LOW_COHERENCE
 
@@ -151,7 +154,7 @@ def test_writing_a_plot_keeps_the_callers_backend(tmp_path):
 import matplotlib
 matplotlib.use("pdf")
 import numpy as np
-from heliquad.host.present.plot import write_bode
+from heliquad.host.present.bode import write_bode
 omega = np.array([1.0, 2.0, 4.0])
 write_bode({str(tmp_path / 'bode.png')!r}, omega, 1 / (1 + 1j * omega))
 print(matplotlib.get_backend())
@@ -163,7 +166,7 @@ print(matplotlib.get_backend())
 
 
 def test_the_envelope_keeps_each_column_s_extremes_in_order():
-    from heliquad.host.present.plot import _envelope
+    from heliquad.host.present.responses import _envelope
 
     t = np.arange(6000) * 0.005
     y = np.sin(2 * np.pi * 0.7 * t) + 0.3 * np.sin(2 * np.pi * 41 * t)
@@ -182,7 +185,7 @@ def test_the_envelope_keeps_each_column_s_extremes_in_order():
 def test_the_responses_figure_gives_each_record_its_own_scales(tmp_path):
     from matplotlib.image import imread
 
-    from heliquad.host.present.plot import ResponsesFigure
+    from heliquad.host.present.responses import ResponsesFigure
 
     t = np.arange(0, 4, 0.005)
     slow = (0.5, t, 0.1 * np.sin(np.pi * t), 2e-3 * np.sin(np.pi * t - 1))

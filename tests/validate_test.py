@@ -10,7 +10,8 @@ import pytest
 import scipy.optimize
 
 from heliquad.host.records import paper
-from heliquad.host.present.plot import new_figure, plot_validation
+from heliquad.host.present.figure import new_figure
+from heliquad.host.present.validation import plot_validation
 from heliquad.host.validate.closed_loop import load_gains, validate_model, validation_record
 
 
@@ -143,7 +144,7 @@ def test_each_loops_phase_is_drawn_on_the_turn_its_phase_margin_reads_off():
     # A slow pole puts the input loop's phase below -180 deg at the grid's first frequency,
     # where the principal angle is +122 deg: unwrapped from there the curve would sit a turn
     # too high, its phase margin read off nothing.
-    from heliquad.host.present.plot import plot_loop_gains
+    from heliquad.host.present.validation import plot_loop_gains
 
     den = list(np.polymul([1, 0.05], [1, 5.13, 22.93]))
     report, traces = validate_model([28.19], den, 0.0, "roll", load_gains("roll"), None)

@@ -219,7 +219,7 @@ def _replay_record(recommended, replays) -> dict:
 def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
     record, with the recommended model's replay), by the plotting process ``plots``."""
-    from ..present.plot import COHERENCE_KEYS
+    from ..present.bode import COHERENCE_KEYS
     from ..present.report import LOW_COHERENCE
 
     axis, inject = manifest["axis"], manifest["inject"]

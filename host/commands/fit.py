@@ -87,7 +87,7 @@ def run(args) -> int:
         write_models_mat(args.mat, result.models, result.recommended)
         print(f"wrote {args.mat}")
     if args.plot:
-        from ..present.plot import write_bode
+        from ..present.bode import write_bode
         from ..present.report import LOW_COHERENCE
 
         write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],

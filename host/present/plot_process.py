@@ -3,7 +3,7 @@
 Drawing is most of what ``heliquad identify`` spends on a long session (matplotlib's import,
 and the responses figure's panels), and it needs little from the fits: the records are
 known before any model. So a process of its own imports matplotlib while this one reads the
-log, draws and renders the records (:class:`~heliquad.host.present.plot.ResponsesFigure`) while
+log, draws and renders the records (:class:`~heliquad.host.present.responses.ResponsesFigure`) while
 this one fits, and once the models are known draws bode.png and finishes responses.png (the
 replays, the titles and the legend onto the rendered picture); it says each is done or what
 failed, which is raised here. It reads its pipe in a thread of its own from the start, so
@@ -132,12 +132,12 @@ class InlinePlots:
         self.figure = None
 
     def records(self, segments, input_name: str, output_name: str) -> None:
-        from .plot import ResponsesFigure
+        from .responses import ResponsesFigure
 
         self.figure = ResponsesFigure(segments, input_name, output_name)
 
     def finish(self, bode: dict, responses: dict) -> None:
-        from .plot import write_bode
+        from .bode import write_bode
 
         write_bode(**bode)
         self.figure.save(**responses)
@@ -171,11 +171,12 @@ def serve() -> None:
         for name in ("matplotlib.backends.backend_agg", "matplotlib.figure",
                      "heliquad.host.estimate.fit", "heliquad.host.validate.replay"):   # before the records come
             importlib.import_module(name)
-        from . import plot
-        broken = None
+        from .bode import write_bode
+        from .responses import ResponsesFigure
+        drawers, broken = (write_bode, ResponsesFigure), None
     except Exception as exc:                    # noqa: BLE001 - said to the other side
-        plot, broken = None, exc
-    state = {"plot": plot, "broken": broken, "figure": broken}
+        drawers, broken = None, exc
+    state = {"drawers": drawers, "broken": broken, "figure": broken}
     while (raw := inbox.get()) is not None:
         answer = _handle(raw, state)
         if answer is _END:
@@ -197,17 +198,18 @@ _END = ("end", None)
 def _handle(raw, state):
     """The answer to one pickled message: None to the records (they have none), ``("done",
     None)`` or ``("error", exc)`` to a picture, _END to one that cannot be read (not ours,
-    unless the imports failed, which is then the answer). ``state``: the ``plot`` module,
-    what ``broken`` the imports, and the records' ``figure`` (or what they raised)."""
+    unless the imports failed, which is then the answer). ``state``: the ``drawers``
+    (write_bode and ResponsesFigure), what ``broken`` the imports, and the records'
+    ``figure`` (or what they raised)."""
     try:
         message = pickle.loads(raw)
     except Exception:                           # noqa: BLE001
         return _END if state["broken"] is None else ("error", _sendable(state["broken"]))
     try:
         if message[0] == "records":
-            state["figure"] = state["broken"] or state["plot"].ResponsesFigure(*message[1:])
+            state["figure"] = state["broken"] or state["drawers"][1](*message[1:])
             return None
-        _draw(state["plot"], state["broken"], state["figure"], message)
+        _draw(state["drawers"], state["broken"], state["figure"], message)
         return ("done", None)
     except Exception as exc:                    # noqa: BLE001 - said to the other side
         if message[0] == "records":
@@ -216,13 +218,13 @@ def _handle(raw, state):
         return ("error", _sendable(exc))
 
 
-def _draw(plot, broken, figure, message) -> None:
+def _draw(drawers, broken, figure, message) -> None:
     """One picture: bode.png, or responses.png onto the records' ``figure``; raises what
     spoils it (``broken``: the imports' failure; ``figure``: the records' failure)."""
     if broken is not None:
         raise broken
     if message[0] == "bode":
-        plot.write_bode(**message[1])
+        drawers[0](**message[1])
     elif isinstance(figure, Exception):
         raise figure
     else:
