@@ -1,6 +1,7 @@
 """The code's shape: no Python function in the tool, the simulator, the benchmarks or the
 firmware's scripts is longer than MAX_FUNCTION_LINES (a longer one is split into named
-pieces, each saying what it does), and the library changes no process-wide setting that
+pieces, each saying what it does), no module longer than MAX_MODULE_LINES (a longer one
+holds more than one concept: each gets a module named after it), and the library changes no process-wide setting that
 belongs to its caller (numpy's error handling, matplotlib's backend).
 
 Reads the sources with ``ast``; imports nothing from heliquad.
@@ -19,6 +20,19 @@ FOLDERS = ("host", "sim", "benchmarks", "firmware")
 MAX_FUNCTION_LINES = 60
 #: "path:function" -> why it may be longer. Empty: every function fits.
 EXEMPT: dict[str, str] = {}
+#: A module's length, every line counted.
+MAX_MODULE_LINES = 500
+#: Modules that may be longer, each with why: generated files, and numeric cores that hold
+#: one concept whose pieces only make sense together.
+LONG_MODULES = {
+    "sim/chip/regmap.py": "generated from NXP's SVD (python -m heliquad.sim.chip.svd --write)",
+    "sim/chip/machine.py": "the emulated Cortex-M4's core: memory map, time base, exception "
+                           "entry and return, one state machine",
+    "host/estimate/fsf.py": "the frequency sampling filter: the recursive and batch estimators "
+                            "and their closed-loop and multisine forms share one model",
+    "host/estimate/fit.py": "transfer-function fitting: Levy, Sanathanan-Koerner and the "
+                            "output-error refinement, each starting the next",
+}
 
 
 def long_functions(source: str, path: str = "<source>", limit: int = MAX_FUNCTION_LINES):
@@ -67,6 +81,17 @@ def test_no_function_is_longer_than_the_limit():
                 offenders.append(f"{where}: {lines} lines")
     assert not offenders, (f"functions over {MAX_FUNCTION_LINES} lines; split them into named "
                            "pieces:\n" + "\n".join(offenders))
+
+
+def test_no_module_is_longer_than_the_limit():
+    long = {path.relative_to(ROOT).as_posix(): len(path.read_text().splitlines())
+            for path in _sources()}
+    offenders = sorted(f"{path}: {n} lines" for path, n in long.items()
+                       if n > MAX_MODULE_LINES and path not in LONG_MODULES)
+    assert not offenders, (f"modules over {MAX_MODULE_LINES} lines; give each concept a "
+                           "module of its own:\n" + "\n".join(offenders))
+    assert not {p for p in LONG_MODULES if long.get(p, 0) <= MAX_MODULE_LINES}, \
+        "modules in LONG_MODULES that now fit (or are gone): drop them"
 
 
 def test_every_exemption_is_still_needed():

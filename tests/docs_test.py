@@ -95,3 +95,50 @@ def test_every_relative_link_reaches_a_file_in_the_repository(page):
         elif not resolved.exists():
             broken.append(f"{target} (no such file)")
     assert not broken, f"{page.relative_to(ROOT)}: broken links: " + ", ".join(broken)
+
+
+#: A path in a code span: a top-level folder of the repository, then a path (``*`` allowed).
+REPO_PATH = re.compile(r"^(?:host|sim|firmware|tests|benchmarks|docs|\.ci)/[\w./*-]*$")
+#: A file name in a code span of a room's paragraph: ``name.py``, ``name.*``, ``pil*.py``.
+FILE_NAME = re.compile(r"^[\w*]+\.(?:py|cpp|hpp|toml|xml|\*)$")
+#: A room's paragraph of docs/architecture.md starts with its folder in bold: **`sim/rig/`: ...
+ROOM = re.compile(r"^\*\*`([\w/]+)/`", re.MULTILINE)
+
+
+def _matches(pattern: str, tracked, folder: str = "") -> bool:
+    """Whether a tracked file matches ``pattern`` (under ``folder``, at any depth there)."""
+    rx = re.compile(re.escape(pattern).replace(r"\*", "[^/]*") + "$")
+    return any(rx.match(f) if not folder else
+               f.startswith(folder + "/") and rx.match(f.rsplit("/", 1)[-1]) for f in tracked)
+
+
+def _tracked_names():
+    return [p.relative_to(ROOT).as_posix() for p in _tracked_files()]
+
+
+def test_the_map_names_files_that_exist():
+    """docs/architecture.md is the map of the house: every path it names, and every file
+    name in a room's paragraph, is a file of that room (so the map cannot drift from it)."""
+    text = FENCE.sub("", (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8"))
+    tracked = [p.relative_to(ROOT).as_posix() for p in _tracked_files()]
+    folders = {f.rsplit("/", 1)[0] for f in tracked}
+    missing = []
+    rooms = list(ROOM.finditer(text))
+    for i, room in enumerate(rooms):
+        paragraph = text[room.start():text.find("\n\n", room.end())]
+        for span in re.findall(r"`([^`]+)`", paragraph):
+            if FILE_NAME.match(span) and not _matches(span, tracked, room.group(1)):
+                missing.append(f"{span} (in {room.group(1)}/)")
+    for span in re.findall(r"`([^`\s]+)`", text):
+        path = span.rstrip("/")
+        if REPO_PATH.match(span) and not (path in folders or _matches(path, tracked)):
+            missing.append(span)
+    assert rooms, "no room paragraphs found: the map's format changed"
+    assert not missing, "docs/architecture.md names what is not there: " + ", ".join(missing)
+
+
+def test_the_map_tells_no_history():
+    """The map says what is, not how it came to be: no issue numbers, no dates."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    dated = re.findall(r"\b(?:issues? \d+|20\d\d-\d\d-\d\d)\b", text, re.IGNORECASE)
+    assert not dated, dated
