@@ -14,7 +14,7 @@ from heliquad.host.records import paper
 from heliquad.host.estimate.fit import TfModel
 from heliquad.host.present.plot import new_figure, plot_bode, plot_responses, write_bode
 from heliquad.host.validate.replay import replay_record
-from heliquad.host.present.report import LOW_COHERENCE
+from heliquad.host.estimate.thresholds import LOW_COHERENCE
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
