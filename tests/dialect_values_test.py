@@ -42,7 +42,7 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.acquire import link
+from heliquad.host.acquire import excitation, link
 from heliquad.host.records import paper
 from heliquad.sim.base import dialect as names
 from heliquad.sim.rig import faults
@@ -113,8 +113,8 @@ def test_a_missing_dialect_module_is_one_line_where_it_is_needed(tmp_path):
     # its parser offers the dialect's axis and injection names, so building it reports the
     # module's absence, in one line.
     script = ("import sys; sys.modules['heliquad._mavlink'] = None\n"
-              "from heliquad.host import cli, link\n"
-              "sys.exit(cli.main(sys.argv[1:]))")
+              "from heliquad.host.acquire import link\nfrom heliquad.host.cli import parser\n"
+              "sys.exit(parser.main(sys.argv[1:]))")
     run = subprocess.run([sys.executable, "-c", script, "sweep", "--axis", "roll", "--sil",
                           "--out", str(tmp_path / "out")], capture_output=True, text=True,
                          timeout=60)
@@ -130,6 +130,8 @@ def test_data_keyed_by_the_names_names_every_entry():
         assert set(table) == axes
     assert set(paper.ANGLE_GAINS) == axes - {"yaw"}           # yaw has no angle loop
     assert set(link.INPUT_OUTPUT) == injections
+    assert set(excitation.UNITS) == injections
+    assert set(excitation.DEFAULT_SETPOINT) == injections - {"mixer"}   # designed at the mixer
     assert vehicle.RIGS == (*names.AXES, "free")
     imu = {k.replace("-", "_") for k in faults.KINDS} - {"link"}     # link: the host's own
     assert imu == set(names.enum_values("HQ_IMU_FAULT")) - {"none"}

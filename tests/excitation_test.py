@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-
-LOOP_HZ = 200.0
+from heliquad.sim.base.firmware_facts import LOOP_RATE_HZ as LOOP_HZ
 
 
 def config(freq, amp=1.0, cycles=10, fade=1, axis=fw.Axis.ROLL, inj=fw.Injection.MIXER):

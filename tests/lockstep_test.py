@@ -505,7 +505,7 @@ def test_identification_with_a_realistic_imu_needs_its_latency_in_the_truth(tmp_
 def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, amplitude_deg, tmp_path):
     # Rate injection: u = rate setpoint, y = rate, the inner loop closed through the firmware's
     # discrete PID; angle injection: u = angle setpoint, y = angle, the whole cascade. The truth
-    # transcribes the Pid's Tustin recurrences into z (sim.vehicle_plant.pid_z). DMP path, so the
+    # transcribes the Pid's Tustin recurrences into z (sim.plant.pid_model.pid_z). DMP path, so the
     # logged angle is the attitude itself.
     from heliquad.sim.plant.vehicle_plant import VehiclePlant
 

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
+from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 from heliquad.host.validate.closed_loop import pid_tf
-from heliquad.sim.plant.vehicle_plant import pid_z
+from heliquad.sim.plant.pid_model import pid_s_coeffs, pid_z, pid_z_coeffs
 
-DT = 0.005   # 200 Hz loop
+DT = LOOP_PERIOD_S   # the firmware's loop period (5 ms: 200 Hz)
 
 
 def gains(kc=1.0, tau_i=0.0, tau_d=0.0, lo=-1.0, hi=1.0, i_limit=1.0, n=10.0):
@@ -138,7 +139,7 @@ def steady_gain(pid, on_setpoint, f_hz, periods=40):
 
 @pytest.mark.parametrize("f_hz", [0.5, 4.0, 20.0])
 def test_the_simulators_z_domain_pid_is_the_firmwares(f_hz):
-    # sim/plant/vehicle_plant.py states the firmware's Pid in z for the closed loops' truth: output
+    # sim/plant/pid_model.py states the firmware's Pid in z for the closed loops' truth: output
     # = C_PI (r - y) + D_m y. The firmware's own steady state must be exactly that.
     g = flown_rate_gains()
     on_error, w = steady_gain(fw.Pid(g), True, f_hz)
@@ -146,6 +147,43 @@ def test_the_simulators_z_domain_pid_is_the_firmwares(f_hz):
     c_pi, d_m = pid_z(g, DT, np.exp(1j * w * DT))
     assert on_error == pytest.approx(c_pi, rel=1e-5)
     assert on_measurement == pytest.approx(d_m - c_pi, rel=1e-5)
+
+
+@pytest.mark.parametrize("axis", [fw.Axis.ROLL, fw.Axis.YAW])
+@pytest.mark.parametrize("on_setpoint", [True, False])
+def test_the_z_domain_pid_steps_as_the_firmwares(axis, on_setpoint):
+    # The same statement in z sample by sample: a unit step on the setpoint (or the
+    # measurement) from the second update on (the first is the firmware's start, which
+    # takes its one sample as the history), through C_PI on the error and D_m on the
+    # measurement, is the firmware's output to single precision, integral ramp included.
+    from scipy.signal import lfilter
+
+    g = flown_rate_gains(axis)
+    step = (np.arange(400) >= 1).astype(float)
+    pid = fw.Pid(g)
+    out = np.array([pid.update(x, 0.0, DT) if on_setpoint else pid.update(0.0, x, DT)
+                    for x in step])
+    (pn, pd), (dn, dd) = pid_z_coeffs(g.kc, g.tau_i_s, g.tau_d_s, g.derivative_filter_n, DT)
+    r, y = (step, 0 * step) if on_setpoint else (0 * step, step)
+    expected = lfilter(pn, pd, r - y) + lfilter(dn, dd, y)
+    assert out == pytest.approx(expected, rel=1e-5, abs=1e-5 * np.max(np.abs(expected)))
+
+
+def test_the_continuous_pid_is_the_z_domain_ones_limit():
+    # Both forms come from one reading of the gains (sim/plant/pid_model.py): at a short
+    # period the Tustin PID's response on the error is the continuous one's (their difference
+    # O((w dt)^2)), and the validation's python-control PID is the same polynomial pair.
+    g = flown_rate_gains()
+    num, den = pid_s_coeffs(g.kc, g.tau_i_s, g.tau_d_s, g.derivative_filter_n)
+    w = np.array([0.5, 5.0, 50.0])
+    continuous = np.polyval(num, 1j * w) / np.polyval(den, 1j * w)
+    dt = 1e-5
+    (pn, pd), (dn, dd) = pid_z_coeffs(g.kc, g.tau_i_s, g.tau_d_s, g.derivative_filter_n, dt)
+    z = np.exp(1j * w * dt)
+    on_error = np.polyval(pn, z) / np.polyval(pd, z) - np.polyval(dn, z) / np.polyval(dd, z)
+    assert on_error == pytest.approx(continuous, rel=1e-6)
+    C = pid_tf(g.kc, g.tau_i_s, g.tau_d_s)
+    assert np.asarray(C(1j * w)).ravel() == pytest.approx(continuous, rel=1e-12)
 
 
 def test_cascade_defaults_are_the_papers_gains():

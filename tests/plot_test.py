@@ -17,7 +17,7 @@ from heliquad.host.present.figure import new_figure
 from heliquad.host.present.bode import plot_bode, write_bode
 from heliquad.host.present.responses import plot_responses
 from heliquad.host.validate.replay import replay_record
-from heliquad.host.present.report import LOW_COHERENCE
+from heliquad.host.estimate.thresholds import LOW_COHERENCE
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 

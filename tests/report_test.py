@@ -142,7 +142,7 @@ def test_a_session_within_the_accuracy_opens_with_a_summary_and_no_flag(session)
     # truth, like the demo's: the page opens with its summary (the model, its error against
     # the truth, the verdict, the next step), no quality flag, and the margins it cannot
     # validate in one line with the sweep that would.
-    from heliquad.host.present.report import ACCURACY_DB, ACCURACY_DEG
+    from heliquad.host.estimate.thresholds import ACCURACY_DB, ACCURACY_DEG
 
     assert heliquad("report", session).returncode == 0
     page = (session / "report.html").read_text()
@@ -387,7 +387,7 @@ def test_the_honest_sigma_bound_is_the_99_percent_point_of_its_chi_square(n_poin
     # fixed 2 let sigmas understated by half pass).
     from scipy.stats import chi2
 
-    from heliquad.host.present.report import honest_sigma_bound
+    from heliquad.host.estimate.thresholds import honest_sigma_bound
 
     exact = (chi2.ppf(0.99, 2 * n_points) / (2 * n_points)) ** 0.5
     assert honest_sigma_bound(n_points) == pytest.approx(exact, rel=5e-3)   # the approximation

@@ -7,10 +7,10 @@ import pytest
 
 from heliquad import _firmware as fw
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.firmware_facts import LOOP_RATE_HZ as LOOP_HZ
 
 MAV = dialect()
-LOOP_HZ = 200.0
-DT_US = 5000
+DT_US = round(1e6 / LOOP_HZ)
 LIMITS = fw.SafetyLimits()
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
+from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 from heliquad.host.records import paper
 from heliquad.host.present.figure import new_figure
 from heliquad.host.present.validation import plot_validation
@@ -32,7 +33,7 @@ def test_rate_loop_phase_margin_matches_a_hand_computation():
     # measurement -b (z - 1)/(z - a) (a = (2 tau_f - T)/(2 tau_f + T), b = 2 Kc tau_D/(2 tau_f
     # + T), tau_f = tau_D/10). Broken at the plant input: L = (C_PI - D_m) G(jw).
     kc, ti, td = paper.RATE_GAINS["roll"]
-    T, tf = 0.005, td / 10
+    T, tf = LOOP_PERIOD_S, td / 10
 
     def L(w):
         z, s = np.exp(1j * w * T), 1j * w

@@ -186,7 +186,7 @@ void bind_supervisor(py::module_& m) {
 
     py::class_<Supervisor>(m, "Supervisor")
         .def(py::init<const SafetyLimits&, float>(), py::arg("limits") = SafetyLimits(),
-             py::arg("loop_rate_hz") = 200.0f)
+             py::arg("loop_rate_hz") = kLoopRateHz)
         .def("host_heartbeat", &Supervisor::host_heartbeat, py::arg("now_us"),
              py::arg("station") = kAnyStation)
         .def("heartbeat", &Supervisor::heartbeat, py::arg("sysid"), py::arg("compid"),
@@ -245,8 +245,10 @@ void bind_supervisor(py::module_& m) {
 
 PYBIND11_MODULE(_firmware, m) {
     m.doc() = "heliquad firmware core (host build), for tests and the simulator";
-    // The control loop's rate the firmware runs at unless configured otherwise, Hz.
-    m.attr("LOOP_RATE_HZ") = FlightControllerConfig{}.loop_rate_hz;
+    // The control loop's rate the firmware runs at unless configured otherwise, and the most
+    // the host build takes, Hz.
+    m.attr("LOOP_RATE_HZ") = kLoopRateHz;
+    m.attr("MAX_LOOP_RATE_HZ") = kMaxLoopRateHz;
 
     // The parameter table (params.hpp), in param_index order, with each default.
     struct ParamRow {

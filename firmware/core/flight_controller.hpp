@@ -40,8 +40,13 @@
 
 namespace hq {
 
+// The control loop's rate unless configured otherwise, and the most the host build runs
+// (its --loop-hz), Hz.
+constexpr float kLoopRateHz = 200.0f;
+constexpr float kMaxLoopRateHz = 2000.0f;
+
 struct FlightControllerConfig {
-    float loop_rate_hz = 200.0f;
+    float loop_rate_hz = kLoopRateHz;
     // The parameters' defaults (gains, limits, endpoints, thresholds, the IMU's path); the
     // values stored in `storage` replace them at init().
     Tunables tunables{};

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-__all__ = ["Dwell", "AmplitudeDesign", "amplitude_bound", "response_per_unit",
+__all__ = ["Dwell", "AmplitudeDesign", "response_per_unit",
            "TARGET_SWING_DEG", "TARGET_SIGMA", "MIN_CYCLES", "MAX_CYCLES", "MAX_DWELL_S"]
 
 #: The rig's swing each designed amplitude aims at, deg.
@@ -56,15 +56,6 @@ MAX_STEP = 4.0
 #: The most the axis's command (excitation and the loop's answer) may swing, as a fraction
 #: of the firmware's bound.
 INPUT_FRACTION = 0.5
-
-
-def amplitude_bound(inject: str) -> float:
-    """The firmware's largest amplitude for an injection point (SafetyLimits), its units."""
-    from heliquad import _firmware
-
-    from ...sim.base.dialect import INJECTIONS
-
-    return float(_firmware.SafetyLimits().max_amplitude[INJECTIONS[inject]])
 
 
 @dataclasses.dataclass

@@ -35,8 +35,7 @@ import math
 
 import numpy as np
 
-from heliquad import _firmware
-
+from ...sim.base import firmware_facts
 from ...sim.base.errors import InputError
 
 __all__ = ["Multisine", "design", "schroeder_phases", "low_crest_phases", "crest_factor",
@@ -44,7 +43,7 @@ __all__ = ["Multisine", "design", "schroeder_phases", "low_crest_phases", "crest
 
 #: Lines of a multisine: the dwell's 15 frequencies; the most HQ_EXCITATION carries.
 LINES = 15
-MAX_LINES = _firmware.MAX_HARMONICS
+MAX_LINES = firmware_facts.MAX_HARMONICS
 #: The rig time a multisine aims at, fades included, s.
 RIG_TIME_S = 60.0
 #: Whole base periods at full amplitude: the FSF's first fills its filter (the settling
@@ -185,7 +184,7 @@ def design(band_hz, peak: float, lines: int = LINES, rig_time_s: float = RIG_TIM
     the lines' relative amplitudes. ``like``: keep that multisine's period and lines, and
     fill ``rig_time_s`` with as many whole periods as fit (a longer or shorter record of the
     same points)."""
-    fs_hz = float(fs_hz or _firmware.LOOP_RATE_HZ)
+    fs_hz = float(fs_hz or firmware_facts.LOOP_RATE_HZ)
     if not 0 < band_hz[0] < band_hz[1] <= fs_hz / 4:
         raise InputError(f"band {band_hz[0]:g}-{band_hz[1]:g} Hz: the lowest must be above 0 "
                          f"and below the highest, at most {fs_hz / 4:g} Hz")

@@ -28,8 +28,7 @@ import os
 
 import numpy as np
 
-from heliquad import _firmware
-
+from ...sim.base import firmware_facts
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import FirmwareError
 from .. import __version__
@@ -37,6 +36,7 @@ from ..records import paper
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ..process.signals import ABORTED_BY, stopped_by
 from ..records.files import write_json
+from .excitation import amplitude_bound, default_amplitude, default_peak
 from .link import INPUT_OUTPUT, reason_text
 from ..records.gains import gains_from_params, single
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
@@ -54,8 +54,8 @@ MEASURED_CYCLES = 8
 FADE_CYCLES = 2
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
 #: millidegree: the firmware holds them in single precision).
-MAX_ANGLE_DEG = round(math.degrees(_firmware.SafetyLimits().abort_angle_rad), 3)
-MAX_RATE_DEG_S = round(math.degrees(_firmware.SafetyLimits().abort_rate_rad_s), 3)
+MAX_ANGLE_DEG = round(math.degrees(firmware_facts.ABORT_ANGLE_RAD), 3)
+MAX_RATE_DEG_S = round(math.degrees(firmware_facts.ABORT_RATE_RAD_S), 3)
 #: A frequency's excitation must start within this much (simulated or wall) time.
 START_TIMEOUT_S = 3.0
 #: A running excitation whose samples stop for this long (the session's time: wall clock on a
@@ -75,13 +75,6 @@ MAX_LOST_RUN = 50
 SATURATION = {"saturated": (("TORQUE",), "saturated the mixer"),
               "collective_limited": (("COLLECTIVE",), "lost collective"),
               "sensor_clipped": (("GYRO", "ACCEL"), "clipped the IMU")}
-
-
-def default_amplitude(inject: str) -> float:
-    """The firmware-unit amplitude of an angle or rate sweep: a 5 deg angle or 10 deg/s rate
-    setpoint, responses in themselves (a mixer sweep's amplitudes are designed per
-    frequency, :mod:`.design`)."""
-    return math.radians(10.0) if inject == "rate" else math.radians(5.0)
 
 
 class SweepPlan:
@@ -142,8 +135,8 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
     it the dwell is sequential (``dwell``, default :class:`~heliquad.host.acquire.design.Dwell`).
     ``amplitude``: one for every frequency; without it a mixer sweep's amplitudes are
     designed for a swing of ``swing_deg`` (:class:`~heliquad.host.acquire.design.AmplitudeDesign`)
-    and angle and rate sweeps use :func:`default_amplitude`."""
-    from .design import AmplitudeDesign, Dwell, amplitude_bound
+    and angle and rate sweeps use :func:`.excitation.default_amplitude`."""
+    from .design import AmplitudeDesign, Dwell
 
     if freqs_hz is None:
         lo, hi = paper.BANDS_HZ[axis]
@@ -173,11 +166,10 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     turbulence, and a multisine shares its power among its lines (on the vehicle's rigs in
     still air the roll rig then swings about 5 deg). ``like``: the same lines as that
     :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
-    from .design import amplitude_bound
     from .multisine import LINES, RIG_TIME_S, design
 
     if amplitude is None:
-        amplitude = amplitude_bound(inject) if inject == "mixer" else default_amplitude(inject)
+        amplitude = default_peak(inject)
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
                 rig_time_s or RIG_TIME_S, like=like)
     return SweepPlan.of_multisine(axis, inject, ms)

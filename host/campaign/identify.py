@@ -21,6 +21,7 @@ import numpy as np
 from ...sim.base.errors import InputError
 from ..records.files import atomic_write
 from ..acquire.link import INPUT_OUTPUT
+from ..estimate.thresholds import LOW_COHERENCE
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
@@ -220,7 +221,6 @@ def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
     record, with the recommended model's replay), by the plotting process ``plots``."""
     from ..present.bode import COHERENCE_KEYS
-    from ..present.report import LOW_COHERENCE
 
     axis, inject = manifest["axis"], manifest["inject"]
     ranked = sorted(points, key=lambda p: p.omega_rad_s)

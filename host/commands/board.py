@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 from ...sim.base import dialect as names
+from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from .shared_options import (add_firmware_argument, add_param_store_argument, check_plant, finite,
                              int_in, number_in)
 from ...sim.base.errors import InputError, LinkLost
@@ -53,7 +54,7 @@ def add_parser(sub, fmt) -> None:
                         f"{MAX_BACKLOG_BYTES}, the most the pty shows: a tool that opens the "
                         "port late reads about 0.2 s of the past, and one that stalls longer "
                         "loses samples); 0 keeps all of it, however late the reader")
-    p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0)
+    p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
     add_firmware_argument(p)

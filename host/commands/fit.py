@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 from ...sim.base.errors import InputError
+from ..estimate.thresholds import LOW_COHERENCE
 
 __all__ = ["add_parser", "run", "print_models"]
 
@@ -88,7 +89,6 @@ def run(args) -> int:
         print(f"wrote {args.mat}")
     if args.plot:
         from ..present.bode import write_bode
-        from ..present.report import LOW_COHERENCE
 
         write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
                    models=result.models, recommended=result.recommended, title=str(args.points),

@@ -7,6 +7,7 @@ import sys
 
 from .shared_options import int_in, number_in
 from ...sim.base.errors import InputError
+from ..estimate.thresholds import LOW_COHERENCE
 
 __all__ = ["add_parser", "run"]
 
@@ -158,8 +159,6 @@ def _a_line_stands_out(u, period: int, orders, discard: int) -> bool:
 
 def _say(i, n, path, points, multisine) -> None:
     """The run's points, and a warning for each of low coherence."""
-    from ..present.report import LOW_COHERENCE
-
     if multisine:
         print(f"[{i}/{n}] {path}: multisine, {len(points)} line(s)", flush=True)
         for p in points:

@@ -7,9 +7,11 @@ import math
 
 import numpy as np
 
+from ...sim.base import firmware_facts as facts
 from ...sim.base.errors import InputError
+from ..acquire.excitation import amplitude_bound, bound_text
 
-__all__ = ["add_firmware_argument", "add_param_store_argument", "firmware_amplitude", "add_fault_argument", "faults",
+__all__ = ["add_firmware_argument", "add_param_store_argument", "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
@@ -66,12 +68,6 @@ def number_in(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = Fa
             raise argparse.ArgumentTypeError(f"{value:g} is outside {interval}")
         return value
     return parse
-
-
-def firmware_amplitude(inject: str, amplitude: float) -> float:
-    """``--amplitude`` in the firmware's units: deg (angle) and deg/s (rate) become rad and
-    rad/s; a mixer amplitude is already normalised."""
-    return amplitude if inject == "mixer" else math.radians(amplitude)
 
 
 def _param_store(path: str) -> str:
@@ -190,9 +186,9 @@ def check_plant(args) -> None:
         read_dmp_file(args.dmp_image)
     if not 0 <= args.collective <= 1:
         raise InputError("--collective must be in [0, 1]")
-    loop_hz = getattr(args, "loop_hz", 200.0)
-    if not 0 < loop_hz <= 2000:
-        raise InputError("--loop-hz must be in (0, 2000]")
+    loop_hz = getattr(args, "loop_hz", facts.LOOP_RATE_HZ)
+    if not 0 < loop_hz <= facts.MAX_LOOP_RATE_HZ:
+        raise InputError(f"--loop-hz must be in (0, {facts.MAX_LOOP_RATE_HZ:g}]")
     if getattr(args, "plant", "tf") == "vehicle":
         from ...sim.plant.vehicle_params import load_params
         from ...sim.plant.vehicle import check_step
@@ -215,30 +211,21 @@ def check_plant(args) -> None:
 
 def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):
     """Refuse, before anything starts, an excitation the firmware would refuse: the limits
-    are the firmware's own defaults (heliquad._firmware.SafetyLimits, the same C++ the
-    firmware compiles)."""
-    from heliquad import _firmware
-
-    from ..acquire.link import INJECTIONS
-
+    are the firmware's own defaults (:mod:`heliquad.sim.base.firmware_facts`, read from the
+    same C++ the firmware compiles)."""
     f32 = lambda x: float(np.float32(x))       # noqa: E731 - the firmware compares in float
-    lim = _firmware.SafetyLimits()
-    hi = f32(lim.max_freq_fraction * f32(loop_hz))
+    hi = f32(facts.MAX_FREQ_FRACTION * f32(loop_hz))
     for f in freqs_hz:
-        if not lim.min_freq_hz <= f32(f) <= hi:
+        if not facts.MIN_FREQ_HZ <= f32(f) <= hi:
             raise InputError(f"{f:g} Hz is outside the firmware's excitation band "
-                             f"[{lim.min_freq_hz:g}, {hi:g}] Hz at a {loop_hz:g} Hz loop")
+                             f"[{facts.MIN_FREQ_HZ:g}, {hi:g}] Hz at a {loop_hz:g} Hz loop")
         duration = (cycles + 2 * fade_cycles) / f
-        if duration > lim.max_duration_s:
+        if duration > facts.MAX_DURATION_S:
             raise InputError(f"{cycles} cycles with {fade_cycles} of fade each way at {f:g} Hz "
                              f"last {duration:.0f} s; the firmware allows "
-                             f"{lim.max_duration_s:g} s: fewer --cycles")
-    if fade_cycles < lim.min_fade_cycles:
-        raise InputError(f"--fade-cycles must be at least {lim.min_fade_cycles}")
-    if amplitude is not None:
-        top = lim.max_amplitude[INJECTIONS[inject]]
-        if f32(amplitude) > top:
-            unit = {"angle": f"{math.degrees(top):g} deg", "rate": f"{math.degrees(top):g} deg/s",
-                    "mixer": f"{top:g}"}[inject]
-            raise InputError(f"--amplitude is above the firmware's bound for {inject} "
-                             f"injection ({unit})")
+                             f"{facts.MAX_DURATION_S:g} s: fewer --cycles")
+    if fade_cycles < facts.MIN_FADE_CYCLES:
+        raise InputError(f"--fade-cycles must be at least {facts.MIN_FADE_CYCLES}")
+    if amplitude is not None and f32(amplitude) > amplitude_bound(inject):
+        raise InputError(f"--amplitude is above the firmware's bound for {inject} "
+                         f"injection ({bound_text(inject)})")

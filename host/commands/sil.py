@@ -5,9 +5,11 @@ from __future__ import annotations
 import sys
 
 from ...sim.base import dialect as names
+from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
-                             finite, firmware_amplitude, int_in, number_in)
+                             finite, int_in, number_in)
+from ..acquire.excitation import firmware_amplitude
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
@@ -61,7 +63,8 @@ def add_parser(sub, fmt) -> None:
                         "firmware needs at least 1)")
     p.add_argument("--collective", type=number_in(0, 1), default=0.4,
                    help="hover throttle as a fraction of stick travel (default 0.4)")
-    p.add_argument("--loop-hz", type=number_in(1, 2000), default=200.0, help="firmware loop rate (default 200)")
+    p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ,
+                   help=f"firmware loop rate (default {LOOP_RATE_HZ:g})")
     p.add_argument("--dmp-image", metavar="FILE",
                    help="MotionApps 2.0 DMP firmware file for the firmware, made with "
                         "heliquad dmp-image (default: raw FIFO path)")

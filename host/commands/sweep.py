@@ -4,26 +4,26 @@ board (``heliquad sweep``)."""
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import sys
 
 from ...sim.base import dialect as names
+from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DURATION_S
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
-                             finite, firmware_amplitude, int_in, number_in)
+                             finite, int_in, number_in)
 from ..acquire import design
+from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ..acquire.connection import CONNECTION_HELP
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 
-#: The longest rig time the firmware allows (SafetyLimits.max_duration_s).
-MAX_RIG_TIME_S = 300.0
-
 __all__ = ["add_parser", "run"]
 
-HELP = """\
+HELP = f"""\
 Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
 (or --freqs-hz), each faded in over 2 cycles (the settling), measured, faded out.
 The dwell is sequential by default: at least 8 measured cycles (the paper's dwell), then
@@ -36,8 +36,8 @@ exactly N. A mixer sweep's amplitude is designed per frequency for a rig swing o
 default); --port talks to a board in real time: its serial port, a `heliquad board` pty, or
 a network link (udpin:HOST:PORT, udpout:, tcp:, tcpin:, as MAVProxy writes them). Writes
 DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
-windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond 80 deg or a
-rate beyond 400 deg/s stops the excitation and the sweep (exit 1).
+windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond {math.degrees(ABORT_ANGLE_RAD):g} deg or a
+rate beyond {math.degrees(ABORT_RATE_RAD_S):g} deg/s stops the excitation and the sweep (exit 1).
 Input and output for `heliquad identify`: mixer -> the axis's torque command and the rate
 (the plant; default, the paper's rate-in rate-out model); rate -> rate setpoint and rate;
 angle -> angle setpoint and angle.
@@ -45,7 +45,7 @@ angle -> angle setpoint and angle.
 --signal multisine excites the whole band at once instead: --lines log-spaced lines (default
 15) on harmonics of one base period, phases for a low crest factor, faded in and out over a
 cycle of the lowest line, as many whole base periods as fit --rig-time (default 60 s, at
-least 3 periods); --amplitude is its peak (default: 5 deg angle, 10 deg/s rate, the
+least 3 periods); --amplitude is its peak (default: {DEFAULT_SETPOINT['angle']:g} deg angle, {DEFAULT_SETPOINT['rate']:g} deg/s rate, the
 firmware's bound at the mixer). identify estimates every line from the one record.
 
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
@@ -79,8 +79,8 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
                    help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
     p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
-                   "frequencies: deg (angle), deg/s (rate), normalised (mixer); default: "
-                   "designed per frequency (mixer), 5 deg (angle), 10 deg/s (rate)")
+                   f"frequencies: {units_text()}; default: "
+                   f"designed per frequency (mixer), {defaults_text()}")
     p.add_argument("--swing-deg", type=number_in(0, 45, lo_open=True), metavar="D",
                    help=f"mixer: the rig swing each designed amplitude aims at (default "
                         f"{design.TARGET_SWING_DEG:g} deg)")
@@ -99,7 +99,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
                    help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
                         "the nearest harmonic of the base period")
-    p.add_argument("--rig-time", type=number_in(10, MAX_RIG_TIME_S), metavar="S",
+    p.add_argument("--rig-time", type=number_in(10, MAX_DURATION_S), metavar="S",
                    help=f"multisine: the seconds it may last, fades included (default "
                         f"{RIG_TIME_S:g}); as many whole base periods as fit")
     p.add_argument("--out", required=True, metavar="DIR")

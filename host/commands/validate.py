@@ -4,16 +4,17 @@ from __future__ import annotations
 
 
 from ...sim.base import dialect as names
+from ...sim.base.firmware_facts import LOOP_RATE_HZ
 from .shared_options import MAX_SEED, check_model, int_in
 from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run"]
 
-HELP = """\
+HELP = f"""\
 Check an identified model in closed loop as the firmware flies it: its discrete PID rate
-loop at the loop rate (200 Hz) around the model, and for roll and pitch the PD angle loop
-around that, with the firmware's gains or a gains file ({"rate": {"roll": [Kc, tau_I,
-tau_D]}, "angle": {"roll": [Kc, tau_D]}}). Reports the gain and phase margins of each loop
+loop at the loop rate ({LOOP_RATE_HZ:g} Hz) around the model, and for roll and pitch the PD angle loop
+around that, with the firmware's gains or a gains file ({{"rate": {{"roll": [Kc, tau_I,
+tau_D]}}, "angle": {{"roll": [Kc, tau_D]}}}}). Reports the gain and phase margins of each loop
 (rate; angle; input: broken at the plant input with both loops closed) from every crossover
 up to the Nyquist frequency, and marks a margin "not validated" when its crossover lies
 outside the band the model was identified over (models.json's band_rad_s: sweep further,

@@ -78,8 +78,8 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
 
 def plot_coherence(ax, omega, coherence, gate=None):
     """Each point's coherence onto ``ax`` against frequency (Hz), and the quality ``gate``
-    (the tool's is :data:`heliquad.host.present.report.LOW_COHERENCE`) as a line when given; returns
-    its figure.
+    (the tool's is :data:`heliquad.host.estimate.thresholds.LOW_COHERENCE`) as a line when
+    given; returns its figure.
 
     ``coherence`` as :func:`plot_bode` takes it: with ``coherence_ry`` and ``coherence_ru``
     (points estimated against the excitation) those two are drawn, else the single

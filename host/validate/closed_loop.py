@@ -35,6 +35,7 @@ from . import loops as L
 from ..records import paper
 from ...sim.base import dialect as names
 from ..records.gains import DERIVATIVE_FILTER_N, Gains, load_gains
+from ...sim.plant.pid_model import pid_s_coeffs
 
 # Gains and load_gains are host/records/gains.py's, here for the validation's callers.
 __all__ = ["Gains", "load_gains", "model_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
@@ -54,17 +55,13 @@ OUT_OF_BAND_FACTOR = 3.0
 
 
 def pid_tf(kc, tau_i, tau_d):
-    """The firmware's PID in continuous time, on the error as the paper writes it:
-    ``Kc (1 + 1/(tau_I s) + tau_D s / (tau_D/N s + 1))``; no integral for tau_I <= 0, no
-    derivative for tau_D <= 0. (What the firmware flies is its Tustin form at the loop
-    rate, :mod:`.loops`; this is the continuous form it approximates.)"""
+    """The firmware's PID in continuous time, on the error as the paper writes it, as a
+    python-control transfer function (:func:`heliquad.sim.plant.pid_model.pid_s_coeffs`,
+    with the firmware's derivative filter). What the firmware flies is its Tustin form at
+    the loop rate, :mod:`.loops`; this is the continuous form it approximates."""
     import control
 
-    s = control.tf("s")
-    c = kc * (1 + (1 / (tau_i * s) if tau_i > 0 else 0))
-    if tau_d > 0:
-        c = c + kc * tau_d * s / (tau_d / DERIVATIVE_FILTER_N * s + 1)
-    return c
+    return control.tf(*pid_s_coeffs(kc, tau_i, tau_d, DERIVATIVE_FILTER_N))
 
 
 def paper_band(axis) -> tuple:

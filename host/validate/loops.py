@@ -4,7 +4,7 @@ A point of identification is a sampled-data response: from the command the firmw
 to the rate it logged, one loop period apart, with the hold, the sensor's latency and any
 delay inside it. A model fitted to the points is that response, so the loops are built as
 the firmware flies them: the firmware's discrete PID (its Tustin recurrences, evaluated at
-``z = exp(j w T)``, :func:`heliquad.sim.plant.vehicle_plant.pid_z_coeffs`) in series with the
+``z = exp(j w T)``, :func:`heliquad.sim.plant.pid_model.pid_z_coeffs`) in series with the
 model's own response, delay exact, and no hold added (a second hold would count half a
 sample twice).
 
@@ -34,15 +34,15 @@ import math
 
 import numpy as np
 
-from heliquad import _firmware
-
+from ...sim.base.firmware_facts import LOOP_PERIOD_S
+from ...sim.plant.pid_model import pid_z_coeffs
 from ..records.gains import DERIVATIVE_FILTER_N
 
 __all__ = ["LOOP_DT_S", "loop_functions", "model_responses", "margins", "discrete_cascade",
            "LOOP_NAMES"]
 
-#: The firmware's control loop period, s.
-LOOP_DT_S = 1.0 / float(_firmware.LOOP_RATE_HZ)
+#: The firmware's control loop period, s (its one definition: the firmware's loop rate).
+LOOP_DT_S = LOOP_PERIOD_S
 #: The loops of a cascade, in the order they are reported.
 LOOP_NAMES = ("rate", "angle", "input")
 #: Crossovers are searched on this many log-spaced frequencies, then refined.
@@ -58,8 +58,6 @@ ROOT_RTOL = 1e-12
 def _controller(gains, dt_s):
     """``((C_PI, D_m) of the rate loop, (K_o, D_o) of the angle loop or None)``, each a
     ``(num, den)`` pair in z."""
-    from ...sim.plant.vehicle_plant import pid_z_coeffs     # here: the plant's module is a big one
-
     rate = pid_z_coeffs(*gains.rate, DERIVATIVE_FILTER_N, dt_s)
     if gains.angle is None:
         return rate, None

@@ -51,11 +51,12 @@ import time
 import tty
 
 from ..base.dialect import dialect
+from ..base.firmware_facts import LOOP_RATE_HZ
 
 from .machine import ChipReset, EmulationError
 
-#: The image's loop rate (firmware/targets/teensy35/main.cpp, kLoopHz).
-IMAGE_LOOP_HZ = 200.0
+#: The image's loop rate (firmware/targets/teensy35/main.cpp's kLoopHz: the firmware's).
+IMAGE_LOOP_HZ = LOOP_RATE_HZ
 #: Where a loop ends: the step is done and the image is about to sleep for the next tick.
 WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
 REPORT_SYMBOL = "hq_loop_report"
@@ -426,7 +427,7 @@ def parse(argv):
     p.add_argument("--telemetry", required=True, help="path for the telemetry pty symlink")
     p.add_argument("--image", help="the .elf (default: the image the install built)")
     p.add_argument("--loop-hz", type=float, default=IMAGE_LOOP_HZ,
-                   help="must be the image's loop rate, 200")
+                   help=f"must be the image's loop rate, {IMAGE_LOOP_HZ:g}")
     p.add_argument("--idle-timeout-s", type=int, default=10,
                    help="exit when no sensor frame arrives for this long (wall time)")
     p.add_argument("--dmp-image", help="refused: the Teensy image carries its DMP firmware "

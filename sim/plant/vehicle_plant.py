@@ -17,10 +17,11 @@ from heliquad import _simcore
 from ..base.dialect import AXES
 from .dryden import Dryden
 from .imu_model import ImuModel
+from .pid_model import pid_z
 from .vehicle_params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle
 
-__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "pid_z", "pid_z_coeffs"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
@@ -202,29 +203,3 @@ class VehiclePlant:
                 raise ValueError("inject must be mixer, rate or angle")
         return out if np.ndim(omega_rad_s) else out[0]
 
-
-def pid_z_coeffs(kc, tau_i_s, tau_d_s, derivative_filter_n, dt_s):
-    """The firmware's Pid (firmware/core/pid.cpp) as two z-domain transfer functions, each
-    ``(num, den)`` in descending powers of ``z``: ``C_PI`` on the error (P and the Tustin
-    integral) and ``D_m`` on the measurement (the Tustin filtered derivative), so that
-    output = C_PI (r - y) + D_m y. No integral for tau_I <= 0, no derivative for tau_D <= 0."""
-    if tau_i_s > 0:
-        ki = kc * dt_s / (2 * tau_i_s)           # kc + ki (z + 1) / (z - 1)
-        c_pi = ([kc + ki, ki - kc], [1.0, -1.0])
-    else:
-        c_pi = ([kc], [1.0])
-    d_m = ([0.0], [1.0])
-    if tau_d_s > 0:
-        tf = tau_d_s / derivative_filter_n
-        a = (2 * tf - dt_s) / (2 * tf + dt_s)
-        b = 2 * kc * tau_d_s / (2 * tf + dt_s)
-        d_m = ([-b, b], [1.0, -a])                # -b (z - 1) / (z - a)
-    return c_pi, d_m
-
-
-def pid_z(gains, dt_s, z):
-    """:func:`pid_z_coeffs` of the firmware's ``gains`` evaluated at the points ``z``:
-    ``(C_PI(z), D_m(z))``."""
-    (pn, pd), (dn, dd) = pid_z_coeffs(gains.kc, gains.tau_i_s, gains.tau_d_s,
-                                      gains.derivative_filter_n, dt_s)
-    return np.polyval(pn, z) / np.polyval(pd, z), np.polyval(dn, z) / np.polyval(dd, z)

@@ -19,6 +19,7 @@ import os
 import time
 
 from ..base.dialect import dialect
+from ..base.firmware_facts import LOOP_RATE_HZ
 from .lockstep import SimLink, start_firmware
 from .setup import rc_disarmed, rig_step
 from ..plant.tf_plant import TfPlant
@@ -42,7 +43,7 @@ TELEMETRY_BACKLOG_BYTES = 4095
 DISARM_WAIT_S = 1.0
 
 
-def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = 200.0,
+def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,

@@ -28,6 +28,7 @@ from heliquad._simcore import LinkStatus
 
 from ..base.dialect import dialect
 from ..base.errors import FirmwareError
+from ..base.firmware_facts import LOOP_RATE_HZ
 
 __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
            "find_firmware", "start_firmware", "FIRMWARES"]
@@ -65,7 +66,7 @@ class HostFirmware:
     #: How long one frame's reply may take before the link is declared dead.
     reply_timeout_s = REPLY_TIMEOUT_S
 
-    def __init__(self, loop_hz: float = 200.0, dmp_image: str | None = None,
+    def __init__(self, loop_hz: float = LOOP_RATE_HZ, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
                  reply_timeout_s: float | None = None, params_file: str | None = None,
                  telemetry_backlog_bytes: int = 0):

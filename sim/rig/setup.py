@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..base.firmware_facts import LOOP_RATE_HZ
 from ..plant.tf_plant import TfPlant
 
 __all__ = ["SilConfig", "Plant", "make_plant", "rig_step", "rc_block", "RC_CENTER_US",
@@ -42,7 +43,7 @@ class SilConfig:
     amplitude: float = 0.05
     cycles: int = 10
     fade_cycles: int = 2
-    loop_hz: float = 200.0
+    loop_hz: float = LOOP_RATE_HZ
     collective: float = 0.4        # hover throttle, fraction of full stick travel
     settle_s: float = 1.0          # hover before the excitation starts
     dmp_image: str | None = None

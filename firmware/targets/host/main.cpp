@@ -49,7 +49,7 @@ void on_signal(int) { g_stop = 1; }
 
 struct Options {
     std::string sim_link, telemetry, dmp_image, params;
-    float loop_hz = 200.0f;
+    float loop_hz = hq::kLoopRateHz;
     int idle_timeout_s = 10;
     long telemetry_backlog_bytes = 0;
 };
@@ -80,7 +80,7 @@ Options parse(int argc, char** argv) {
         else usage(("unknown option " + a).c_str());
     }
     if (o.sim_link.empty() || o.telemetry.empty()) usage("--sim-link and --telemetry are required");
-    if (!(o.loop_hz > 0.0f && o.loop_hz <= 2000.0f)) usage("--loop-hz must be in (0, 2000]");
+    if (!(o.loop_hz > 0.0f && o.loop_hz <= hq::kMaxLoopRateHz)) usage("--loop-hz must be in (0, 2000]");
     if (o.idle_timeout_s <= 0) usage("--idle-timeout-s must be positive");
     if (o.telemetry_backlog_bytes < 0) usage("--telemetry-backlog-bytes must not be negative");
     return o;

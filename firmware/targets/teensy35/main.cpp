@@ -26,7 +26,7 @@
 
 namespace {
 
-constexpr uint32_t kLoopHz = 200;
+constexpr uint32_t kLoopHz = static_cast<uint32_t>(hq::kLoopRateHz);
 constexpr uint32_t kTelemetryBaud = 921600;
 
 hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResult init) {

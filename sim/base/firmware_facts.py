@@ -1,0 +1,53 @@
+"""The firmware's facts that the simulator and the host tool use: the control loop's rate and
+period, the most the host build runs at, and the defaults of its SafetyLimits (the
+excitation's band, length, fade and amplitude bounds, and the abort limits).
+
+Each is defined once, in the firmware's C++ (firmware/core/flight_controller.hpp,
+supervisor.hpp, excitation.hpp, pid.hpp), and read here from its bindings
+(``heliquad._firmware``, the same code the firmware compiles); every Python use takes it from
+this module. tests/firmware_facts_test.py scans the Python sources for a copy.
+"""
+
+from __future__ import annotations
+
+from heliquad import _firmware
+
+from . import dialect
+
+__all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "ABORT_ANGLE_RAD",
+           "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION", "MAX_DURATION_S",
+           "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S", "max_amplitude",
+           "safety_limits"]
+
+#: The control loop's rate unless configured otherwise, Hz, and its period, s.
+LOOP_RATE_HZ = float(_firmware.LOOP_RATE_HZ)
+LOOP_PERIOD_S = 1.0 / LOOP_RATE_HZ
+#: The most the host build's loop runs at (its --loop-hz), Hz.
+MAX_LOOP_RATE_HZ = float(_firmware.MAX_LOOP_RATE_HZ)
+
+
+def safety_limits():
+    """A fresh copy of the firmware's default SafetyLimits (``heliquad._firmware``)."""
+    return _firmware.SafetyLimits()
+
+
+_LIMITS = safety_limits()
+#: The abort limits: an angle (roll, pitch) or a body rate beyond these ends an excitation.
+ABORT_ANGLE_RAD = float(_LIMITS.abort_angle_rad)
+ABORT_RATE_RAD_S = float(_LIMITS.abort_rate_rad_s)
+#: The excitation's band: from MIN_FREQ_HZ to MAX_FREQ_FRACTION of the loop rate.
+MIN_FREQ_HZ = float(_LIMITS.min_freq_hz)
+MAX_FREQ_FRACTION = float(_LIMITS.max_freq_fraction)
+#: The longest excitation, fades included, s; the fewest cycles of fade each way.
+MAX_DURATION_S = float(_LIMITS.max_duration_s)
+MIN_FADE_CYCLES = int(_LIMITS.min_fade_cycles)
+#: The most lines a multisine excitation carries.
+MAX_HARMONICS = int(_firmware.MAX_HARMONICS)
+#: The shortest integral or derivative time the PID takes, s (below it: no integral).
+MIN_TIME_CONSTANT_S = float(_firmware.MIN_TIME_CONSTANT_S)
+
+
+def max_amplitude(inject: str) -> float:
+    """The firmware's largest amplitude (a multisine's peak) at an injection point, in its
+    units: rad (angle), rad/s (rate), normalised torque command (mixer)."""
+    return float(_LIMITS.max_amplitude[dialect.INJECTIONS[inject]])
