@@ -67,7 +67,7 @@ def gains(**changes):
     return json.dumps(doc)
 
 
-VEHICLE = (pathlib.Path(__file__).resolve().parents[1] / "sim" / "data" / "vehicle.toml").read_text()
+VEHICLE = (pathlib.Path(__file__).resolve().parents[1] / "sim" / "plant" / "vehicle.toml").read_text()
 
 
 def vehicle(old, new):

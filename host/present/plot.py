@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 
-from ..records.files import FIGURE_RC, PNG_COMPRESS_LEVEL, atomic_write, save_figure
+from ..records.figures import FIGURE_RC, PNG_COMPRESS_LEVEL, save_figure
+from ..records.output import atomic_write
 
 __all__ = ["new_figure", "plot_bode", "plot_coherence", "plot_loop_gains", "plot_responses",
            "plot_validation", "write_bode", "write_responses", "write_validation",
@@ -126,7 +127,7 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
     ``models``: :class:`~heliquad.host.estimate.fit.TfModel`; the one at index ``recommended`` is
     drawn heavier. ``coherence``: a mapping with any of ``coherence``, ``coherence_ry``,
     ``coherence_ru`` (arrays beside ``omega``, NaN where not known; as
-    :func:`~heliquad.host.records.files.read_points_csv` returns them), drawn with the quality
+    :func:`~heliquad.host.records.points.read_points_csv` returns them), drawn with the quality
     ``gate`` by :func:`plot_coherence`.
     """
     ax_mag, ax_ph, *rest = axes

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from ..records.files import write_json
+from ..records.output import write_json
 from ..validate.closed_loop import validation_record
 from .plot import write_validation
 
