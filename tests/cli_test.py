@@ -247,7 +247,7 @@ def test_fsf_of_a_multisine_run_gives_a_point_per_line(named, jitter, tmp_path):
     # Every line, each the model's response to 1e-6; or those named, to 1 % (the lines left
     # out of the FSF's model leak into the others' a little: 0.1 % here); timestamps
     # jittered by 0.3 % of the interval: the base period is still found whole.
-    from heliquad.host.records.files import read_points_csv
+    from heliquad.host.records.points import read_points_csv
 
     base, orders = multisine_run(tmp_path / "ms.csv", jitter=jitter)
     orders = named or orders

@@ -124,7 +124,7 @@ def test_a_manifest_that_does_not_fit_leaves_the_previous_one_whole(tmp_path):
     path = tmp_path / "manifest.json"
     res = run_limited(f"""
 from heliquad.sim.base.errors import DiskFull
-from heliquad.host.records.files import write_json
+from heliquad.host.records.output import write_json
 write_json({str(path)!r}, {{"aborted": None}})
 try:
     write_json({str(path)!r}, {{"aborted": "x" * 1000}})
@@ -250,14 +250,14 @@ def test_a_sweep_that_a_full_disk_stops_keeps_its_manifest_and_stops_the_excitat
 
     out = tmp_path / "full"
     out.mkdir()
-    real = sweep_module.write_json
+    real = sweep_module.write_manifest
 
-    def manifest_fits_only_without_an_abort(path, doc):
-        if doc["aborted"]:
+    def manifest_fits_only_without_an_abort(path, manifest):
+        if manifest.aborted:
             raise DiskFull(path, "No space left on device")
-        real(path, doc)
+        real(path, manifest)
 
-    monkeypatch.setattr(sweep_module, "write_json", manifest_fits_only_without_an_abort)
+    monkeypatch.setattr(sweep_module, "write_manifest", manifest_fits_only_without_an_abort)
     with pytest.raises(DiskFull) as raised:
         run_sweep(Session(), plan, str(out), {"kind": "test"}, progress=lambda *_: None)
     assert "manifest.json could not be updated either; its previous version is kept" \

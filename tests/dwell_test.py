@@ -32,7 +32,7 @@ def test_noise_is_seeded():
 
 
 def test_csv_round_trip(tmp_path):
-    from heliquad.host.records.files import read_run_csv
+    from heliquad.host.records.run_csv import read_run_csv
 
     d = simulate_sine_dwell(*ROLL, 2.0, cycles=2)
     d.to_csv(tmp_path / "run.csv")

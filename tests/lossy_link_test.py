@@ -117,7 +117,7 @@ def sweep_through(board_port, out, **damage):
 
 def points(folder):
     """(freq_hz, complex gain, sigma, lost_share or 0) of points.csv."""
-    from heliquad.host.records.files import read_points_csv
+    from heliquad.host.records.points import read_points_csv
 
     p = read_points_csv(str(folder / "points.csv"))
     lost = p["lost_share"] if p["lost_share"] is not None else np.zeros(p["omega"].size)

@@ -11,7 +11,7 @@ import pytest
 import scipy.io
 
 from heliquad.host.records import paper
-from heliquad.host.records.files import write_models_json, write_models_mat
+from heliquad.host.records.models import write_models_json, write_models_mat
 from heliquad.host.estimate.fit import TfModel
 
 ROLL = paper.MODELS["roll"][(0, 2)]

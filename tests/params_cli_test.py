@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from heliquad.sim.base.errors import InputError
-from heliquad.host.records.files import read_params_file, write_params_file
+from heliquad.host.records.params_file import read_params_file, write_params_file
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.host.acquire.param_protocol import (NoAnswer, Param, ParamClient, ParamRefused,
                                                   decode_value, encode_value, value_text)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware
-from heliquad.host.records.files import read_run_csv
+from heliquad.host.records.run_csv import read_run_csv
 from heliquad.host.estimate.fsf import estimate_fsf
 from heliquad.sim.base.dialect import dialect
 from heliquad.host.records.tlog import read_tlog

@@ -222,7 +222,7 @@ def test_a_figure_name_is_checked_for_its_format_before_any_work(tmp_path, monke
     """heliquad fit --plot: the extension picks the format (any case; PNG without one); one
     matplotlib cannot write, or pgf without the TeX it needs, is refused up front."""
     from heliquad.sim.base.errors import InputError
-    from heliquad.host.records.files import check_figure_output, figure_format
+    from heliquad.host.records.figures import check_figure_output, figure_format
 
     assert [figure_format(n) for n in ("b.PNG", "b.svg", "bode", "a.b/c")] == \
         ["png", "svg", "png", "png"]

@@ -94,7 +94,7 @@ def test_sil_refuses_to_write_over_a_run(tmp_path, existing):
 
 
 def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
-    from heliquad.host.records.files import atomic_write, write_json
+    from heliquad.host.records.output import atomic_write, write_json
 
     path = tmp_path / "models.json"
     write_json(path, {"models": [1, 2, 3]})
@@ -109,7 +109,7 @@ def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
 
 def test_an_unwritable_folder_is_one_line(tmp_path):
     from heliquad.sim.base.errors import InputError
-    from heliquad.host.records.files import write_json
+    from heliquad.host.records.output import write_json
 
     with pytest.raises(InputError, match="cannot write .*no-such-folder"):
         write_json(tmp_path / "no-such-folder" / "x.json", {})

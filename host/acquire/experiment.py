@@ -19,7 +19,7 @@ import time
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import SilConfig
 from ...sim.base.errors import InputError
-from ..records.files import write_run_csv
+from ..records.run_csv import write_run_csv
 from .session import SilSession
 from .sweep import SATURATION, SweepPlan, measure
 

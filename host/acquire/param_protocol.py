@@ -32,11 +32,12 @@ import time
 import numpy as np
 
 from ...sim.base.errors import BoardRefused, InputError, LinkLost
+from ..records.params_file import INTEGER_TYPES, TYPE_NAMES, check_name
 from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
-           "same_value", "check_name", "load_params", "session_params"]
+           "same_value", "load_params", "session_params"]
 
 #: How long one request waits for its answer before it is sent again.
 ANSWER_WAIT_S = 1.0
@@ -48,8 +49,6 @@ QUIET_S = 0.5
 #: come after the PARAM_VALUE).
 REASON_WAIT_S = 0.5
 POLL_S = 0.005
-#: The longest parameter name (PARAM_VALUE.param_id is char[16]).
-MAX_NAME = 16
 #: Whole numbers a single-precision float carries exactly.
 MAX_EXACT_INT = 2**24
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -57,11 +56,6 @@ MESSAGES = ("PARAM_VALUE", "STATUSTEXT", "HEARTBEAT")
 #: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
 #: (firmware/core/flight_controller.cpp's streams), half a second to spare.
 ARMED_WAIT_S = 1.5
-
-#: MAV_PARAM_TYPE: the whole-number types (UINT8 .. INT64) and the real ones.
-INTEGER_TYPES = range(1, 9)
-TYPE_NAMES = {1: "UINT8", 2: "INT8", 3: "UINT16", 4: "INT16", 5: "UINT32", 6: "INT32",
-              7: "UINT64", 8: "INT64", 9: "REAL32", 10: "REAL64"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,15 +120,6 @@ def value_text(value: float, param_type: int | None = None) -> str:
 def same_value(a: float, b: float) -> bool:
     """Equal once rounded to single precision, as the protocol carries them."""
     return bool(np.float32(a) == np.float32(b))
-
-
-def check_name(name: str) -> str:
-    """A parameter name as the protocol carries it (1..16 ASCII letters, digits, ``_``)."""
-    if not 1 <= len(name) <= MAX_NAME or not name.isascii() or \
-            not name.replace("_", "").isalnum():
-        raise InputError(f"{name!r} is not a parameter name (1 to {MAX_NAME} letters, digits "
-                         "or _)")
-    return name
 
 
 def checked_value(param: Param, value: float) -> float:

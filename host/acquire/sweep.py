@@ -35,7 +35,7 @@ from .. import __version__
 from ..records import paper
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ..process.signals import ABORTED_BY, stopped_by
-from ..records.files import write_json
+from ..records.manifest import MANIFEST, SweepManifest, write_manifest
 from .excitation import amplitude_bound, default_amplitude, default_peak
 from .link import INPUT_OUTPUT, reason_text
 from ..records.gains import gains_from_params, single
@@ -47,7 +47,6 @@ __all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_sour
            "Limits", "MANIFEST", "SWEEP_TLOG", "SATURATION", "saturation_summary",
            "saturation_text", "loss_text", "cut_text", "MAX_LOST_SHARE", "MAX_LOST_RUN"]
 
-MANIFEST = "manifest.json"
 SWEEP_TLOG = "sweep.tlog"
 N_FREQUENCIES = 15
 MEASURED_CYCLES = 8
@@ -175,11 +174,11 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     return SweepPlan.of_multisine(axis, inject, ms)
 
 
-def _write_manifest(out_dir, manifest) -> None:
+def _write_manifest(out_dir, manifest: SweepManifest) -> None:
     path = os.path.join(out_dir, MANIFEST)
     existed = os.path.exists(path)
     try:
-        write_json(path, manifest)
+        write_manifest(path, manifest)
     except DiskFull as exc:
         if existed:
             exc.also("its previous version is kept")
@@ -195,35 +194,34 @@ def sil_source(cfg) -> dict:
             "collective": cfg.collective}
 
 
-def _record_params(session, axis: str, manifest: dict, progress) -> None:
+def _record_params(session, axis: str, manifest: SweepManifest, progress) -> None:
     """What the board flies: every parameter it has, read from it, and the axis's gains
     among them (host/records/gains.py)."""
     params = session_params(session, progress)
     if params is None:
         return
-    manifest["params"] = {name: single(v) for name, v in params.items()}   # 2.422, not 2.4219999
+    manifest.params = {name: single(v) for name, v in params.items()}   # 2.422, not 2.4219999
     gains = gains_from_params(axis, params)
-    manifest["gains"] = None if gains is None else dataclasses.asdict(gains)
+    manifest.gains = None if gains is None else dataclasses.asdict(gains)
 
 
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
-    """Run the plan on ``session``; returns the manifest (also written to ``out_dir``).
+    """Run the plan on ``session``; returns the manifest's document (as written to
+    ``out_dir``).
 
     Ctrl-C and SIGTERM end the sweep in order (the manifest says so; the return is normal).
     Any other error that ends it (a full disk, the firmware died, the link lost) stops the
     excitation, records the error in the manifest's ``aborted`` and the frequency that was
     running in ``in_progress_hz``, and is raised again."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
-    manifest = {"axis": plan.axis, "inject": plan.inject, "source": source,
-                "firmware": f"heliquad {__version__}", "gains": None, "params": None,
-                "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "tlog": SWEEP_TLOG, "tlog_start_us": getattr(session, "start_us", None),
-                "cycles": plan.cycles, "fade_cycles": plan.fade_cycles,
-                "design": plan.record(),
-                "limits": {"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
-                "signal": plan.signal, "planned_hz": list(plan.freqs_hz), "frequencies": [],
-                "complete": False, "aborted": None}
+    manifest = SweepManifest(
+        axis=plan.axis, inject=plan.inject, source=source, firmware=f"heliquad {__version__}",
+        started=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        tlog=SWEEP_TLOG, tlog_start_us=getattr(session, "start_us", None),
+        cycles=plan.cycles, fade_cycles=plan.fade_cycles, design=plan.record(),
+        limits={"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
+        signal=plan.signal, planned_hz=list(plan.freqs_hz))
     current = None
     try:
         _write_manifest(out_dir, manifest)
@@ -235,7 +233,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             current = f
             entry, last = _measure_designed(session, plan, f, amp, last, limits, manifest,
                                             progress)
-            manifest["frequencies"].append(entry)
+            manifest.frequencies.append(entry)
             current = None
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
@@ -245,24 +243,24 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                      f"{entry['samples']} samples{loss_text(entry)}{saturation_text(entry)}  "
                      f"{entry['status']}")
             if entry["status"] != "ok":
-                manifest["aborted"] = entry["status"]
+                manifest.aborted = entry["status"]
                 break
         else:
-            manifest["complete"] = True
+            manifest.complete = True
     except BaseException as exc:
         _stop_excitation(session)
-        manifest["in_progress_hz"] = current          # None: during the hover, or between two
+        manifest.in_progress_hz = current             # None: during the hover, or between two
         if isinstance(exc, KeyboardInterrupt):
             how = ABORTED_BY[stopped_by(exc)]            # Ctrl-C, SIGTERM or SIGHUP
-            manifest["aborted"] = how
+            manifest.aborted = how
             _keep_manifest(out_dir, manifest, exc)
             progress(f"{how}: the excitation is stopped; the log and manifest are kept")
-            return manifest
-        manifest["aborted"] = _one_line(exc)
+            return manifest.document()
+        manifest.aborted = _one_line(exc)
         _keep_manifest(out_dir, manifest, exc)
         raise
     _write_manifest(out_dir, manifest)
-    return manifest
+    return manifest.document()
 
 
 def _measure_designed(session, plan, f, amp, last, limits, manifest, progress):
@@ -281,7 +279,7 @@ def _measure_designed(session, plan, f, amp, last, limits, manifest, progress):
                "swung the axis's command past the linear range")
         watch.entry["status"] = (f"superseded: amplitude {amp:.3g} {why}; measured again at "
                                  f"{watch.again:.3g}")
-        manifest["frequencies"].append(watch.entry)
+        manifest.frequencies.append(watch.entry)
         progress(f"  {watch.entry.get('freq_hz', f):.4g} Hz: amplitude {amp:.3g} {why}; "
                  f"measuring again at {watch.again:.3g}")
         amp = watch.again
@@ -315,7 +313,7 @@ def _keep_manifest(out_dir, manifest, exc: BaseException) -> None:
             exc.also(f"{MANIFEST} could not be updated either")
             exc.clauses.extend(failed.clauses)
             return
-        raise failed.also(f"the sweep had stopped: {manifest['aborted']}") from exc
+        raise failed.also(f"the sweep had stopped: {manifest.aborted}") from exc
 
 
 def loss_text(entry) -> str:

@@ -13,13 +13,11 @@ the output, :mod:`.replay`).
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 
 import numpy as np
 
 from ...sim.base.errors import InputError
-from ..records.files import atomic_write
 from ..acquire.link import INPUT_OUTPUT
 from ..estimate.thresholds import LOW_COHERENCE
 
@@ -29,7 +27,7 @@ __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 def _load(dir_path):
     from ...sim.base.dialect import dialect
-    from ..records.files import read_manifest
+    from ..records.manifest import read_manifest
     from ..acquire.sweep import MANIFEST
     from ..records.tlog import TlogDamage, read_tlog_table
 
@@ -136,7 +134,8 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
 
 def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
               estimate) -> dict:
-    from ..records.files import write_models_json, write_points_csv
+    from ..records.models import write_models_json
+    from ..records.points import write_points_csv, write_points_table
     from ..estimate.fit import n_parameters
     from ..estimate.models import default_orders, fit_orders
 
@@ -161,7 +160,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
                          f"a fit needs at least 2{why}{aborted}")
     plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     write_points_csv(os.path.join(dir_path, "points.csv"), points)
-    _write_table(os.path.join(dir_path, "points_table.csv"), points)
+    write_points_table(os.path.join(dir_path, "points_table.csv"), points)
     table = {"omega": np.array([p.omega_rad_s for p in points]),
              "F": np.array([p.gain for p in points]), "sigma": np.array([p.sigma for p in points]),
              "coherence": np.array([p.coherence for p in points])}
@@ -188,7 +187,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         extra["replay"] = _replay_record(result.recommended, replays)
     write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
                       result.reason, source="points.csv", weights=result.weights, axis=axis,
-                      extra=extra, band_rad_s=result.band_rad_s)
+                      extra=extra, band_rad_s=result.band_rad_s, quality=result.quality)
     _write_plots(plots, dir_path, manifest, points, result, replays)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
@@ -385,13 +384,3 @@ def _saturated(manifest) -> list:
 
     return [f"{e['freq_hz']:.4g} Hz{said}" for e in manifest["frequencies"]
             if e.get("status") == "ok" and "freq_hz" in e and (said := saturation_text(e))]
-
-
-def _write_table(path, points) -> None:
-    """The paper's tables 4-6: frequency, omega, magnitude, phase, real and imaginary parts."""
-    with atomic_write(path) as fh:
-        fh.write("freq_hz,omega_rad_s,magnitude,phase_deg,real,imag,coherence\n")
-        for p in sorted(points, key=lambda q: q.omega_rad_s):
-            fh.write(f"{p.freq_hz:.6g},{p.omega_rad_s:.6g},{p.magnitude:.6g},"
-                     f"{math.degrees(p.phase_rad):.4f},{p.gain.real:.6g},{p.gain.imag:.6g},"
-                     f"{p.coherence:.5f}\n")

@@ -52,7 +52,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run_demo(args) -> int:
-    from ..records.files import new_output_folder
+    from ..records.output import new_output_folder
     from ..process.workers import run_children
 
     new_output_folder(args.out, "the demo")
@@ -131,7 +131,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
     # import leaves Python to end by SIGINT after the tool has stopped in order.
     from ...sim.rig.setup import SilConfig
-    from ..records.files import read_models_json
+    from ..records.models import read_models_json
     from ..campaign.identify import identify_dir
     from ..present.plot_process import InlinePlots
     from ..acquire.session import SilSession

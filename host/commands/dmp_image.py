@@ -227,7 +227,7 @@ or pass it at run time:      heliquad sil ... --dmp-image dmp.bin
 
 
 def _cmd(args) -> int:
-    from ..records.files import atomic_write, check_output
+    from ..records.output import atomic_write, check_output
 
     check_output(args.out, "--out")
     fw = read_dmp_firmware(args.source)

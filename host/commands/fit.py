@@ -58,8 +58,10 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..records.files import (check_figure_output, check_output, read_points_csv,
-                                 write_models_json, write_models_mat)
+    from ..records.figures import check_figure_output
+    from ..records.models import write_models_json, write_models_mat
+    from ..records.output import check_output
+    from ..records.points import read_points_csv
 
     for option in ("json", "mat"):                  # all writable, or none is written
         if getattr(args, option):
@@ -82,7 +84,8 @@ def run(args) -> int:
                         stable=not args.allow_unstable)
     print_models(result)
     write_models_json(args.json, result.models, result.recommended, result.reason,
-                      source=args.points, weights=result.weights, band_rad_s=result.band_rad_s)
+                      source=args.points, weights=result.weights, band_rad_s=result.band_rad_s,
+                      quality=result.quality)
     print(f"wrote {args.json}")
     if args.mat:
         write_models_mat(args.mat, result.models, result.recommended)

@@ -67,7 +67,9 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..records.files import check_output, read_run_csv, write_points_csv
+    from ..records.output import check_output
+    from ..records.points import write_points_csv
+    from ..records.run_csv import read_run_csv
 
     check_output(args.out, "--out")
     freqs = _frequencies(args)

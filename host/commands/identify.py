@@ -68,7 +68,7 @@ def run(args) -> int:
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
     if args.mat:
-        from ..records.files import write_models_mat
+        from ..records.models import write_models_mat
 
         write_models_mat(args.mat, r["result"].models, r["result"].recommended)
         print(f"wrote {args.mat}")

@@ -113,7 +113,7 @@ def _copy(pairs, source: str, target: str, replace: bool) -> None:
     """Copy each ``(name, to)`` of ``pairs``, ``source/name`` to ``target/to`` (each written
     whole, its folder made); unless ``replace``, a file there that holds something else
     stops it before anything is written."""
-    from ..records.files import atomic_write
+    from ..records.output import atomic_write
 
     data = {}
     for name, to in pairs:

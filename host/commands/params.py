@@ -69,9 +69,10 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..records.files import check_output, read_params_file
+    from ..records.output import check_output
+    from ..records.params_file import check_name, read_params_file
     from ..acquire.link import TelemetryLink
-    from ..acquire.param_protocol import ParamClient, check_name
+    from ..acquire.param_protocol import ParamClient
 
     entries = None
     if args.action == "save":
@@ -92,7 +93,7 @@ def run(args) -> int:
 
 
 def _list(client, args, entries) -> int:
-    from ..acquire.param_protocol import TYPE_NAMES
+    from ..records.params_file import TYPE_NAMES
 
     params = client.fetch_all()
     width = max([len("NAME")] + [len(p.name) for p in params])
@@ -123,7 +124,7 @@ def _save(client, args, entries) -> int:
     import datetime
 
     from .. import __version__
-    from ..records.files import write_params_file
+    from ..records.params_file import write_params_file
 
     params = client.fetch_all()
     when = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")

@@ -110,7 +110,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..records.files import new_output_folder
+    from ..records.output import new_output_folder
     from ..acquire.sweep import SWEEP_TLOG, run_sweep
 
     # fsf (with scipy) is imported now, not by the first dwell check or amplitude design

@@ -49,7 +49,9 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     import os
 
-    from ..records.files import check_output_folder, read_gains, read_models_json
+    from ..records.gains import read_gains
+    from ..records.models import read_models_json
+    from ..records.output import check_output_folder
 
     doc = read_models_json(args.models)
     models = doc["models"]
@@ -68,10 +70,9 @@ def run(args) -> int:
     check_output_folder(out, "--out")
 
     from ..present.validation import save_validation
-    from ..validate.closed_loop import (Gains, model_gains, sweep_inputs,
-                                        validate_model, validation_record)
+    from ..validate.closed_loop import model_gains, sweep_inputs, validate_model, validation_record
 
-    gains, where = (Gains(*file_gains), args.gains) if file_gains else model_gains(doc, axis)
+    gains, where = (file_gains, args.gains) if file_gains else model_gains(doc, axis)
     print(f"gains: {where}: rate {_gains_text(gains.rate)}"
           + ("" if gains.angle is None else f", angle {_gains_text(gains.angle)}"))
     turbulence = None if args.turbulence == "none" else args.turbulence

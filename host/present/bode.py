@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..records.files import save_figure
+from ..records.figures import save_figure
 from .figure import CURVE_POINTS, fixed_layout, log_ticks, new_figure
 
 
@@ -41,7 +41,7 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
     ``models``: :class:`~heliquad.host.estimate.fit.TfModel`; the one at index ``recommended`` is
     drawn heavier. ``coherence``: a mapping with any of ``coherence``, ``coherence_ry``,
     ``coherence_ru`` (arrays beside ``omega``, NaN where not known; as
-    :func:`~heliquad.host.records.files.read_points_csv` returns them), drawn with the quality
+    :func:`~heliquad.host.records.points.read_points_csv` returns them), drawn with the quality
     ``gate`` by :func:`plot_coherence`.
     """
     ax_mag, ax_ph, *rest = axes

@@ -33,7 +33,7 @@ import numpy as np
 
 from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import MAX_FREQ_FRACTION
-from ..records.files import atomic_write
+from ..records.output import atomic_write
 from ..acquire.sweep import cut_text, saturation_text
 from ..estimate.thresholds import (ACCURACY_DB, ACCURACY_DEG, LOW_COHERENCE, ROUND_OFF_SIGMA,
                                 honest_sigma_bound)
@@ -64,7 +64,7 @@ img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}h2{border-bottom:2px sol
 
 
 def _read(reader, path):
-    """A folder's file through its reader (:mod:`.files`): None when it is not there; a
+    """A folder's file through its reader (host/records): None when it is not there; a
     damaged one is an InputError (a report must not quietly leave out what it cannot read)."""
     return reader(path) if os.path.lexists(path) else None
 
@@ -99,8 +99,10 @@ def _axis_section(folder) -> dict:
     on), "notes" ((what is not validated, the next step) pairs), "summary" (what the page's
     summary shows of it)}``: the sweep, the points, the models, the plots and the
     validation, each as far as the folder holds it."""
-    from ..records.files import (read_manifest, read_models_json, read_points_csv,
-                                 read_points_table, read_validation)
+    from ..records.manifest import read_manifest
+    from ..records.models import read_models_json
+    from ..records.points import read_points_csv, read_points_table
+    from ..records.validation import read_validation
 
     manifest = _read(read_manifest, os.path.join(folder, "manifest.json")) or {}
     models = _read(read_models_json, os.path.join(folder, "models.json"))
@@ -265,13 +267,13 @@ def _lost_cell(entry) -> str:
 
 
 def _points_html(table, points, models, axis, flags):
-    """The paper-style points table (:func:`.files.read_points_table`, written as identify
+    """The paper-style points table (:func:`~heliquad.host.records.points.read_points_table`, written as identify
     writes it), and beside each point what else the folder knows of it: its coherences with
     the excitation (points.csv), the recommended model's replay error and, for a simulated
     sweep, its error against the simulator's truth (models.json). Flags low coherence, and
     points and a recommended model further from the truth than the accuracy
     (:func:`_truth_flags`)."""
-    from ..records.files import TABLE_COLUMNS
+    from ..records.points import TABLE_COLUMNS
 
     freqs = table["freq_hz"]
     columns = _point_columns(freqs, points, models)
@@ -707,7 +709,7 @@ def _flags_html(axes) -> str:
 
 def write_report(dir_path: str, out: str | None = None) -> str:
     """Write DIR/report.html (or ``out``); returns its path."""
-    from ..records.files import check_output
+    from ..records.output import check_output
 
     if not os.path.isdir(dir_path):
         raise InputError(f"{dir_path}: not a folder")

@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-from ..records.files import FIGURE_RC, PNG_COMPRESS_LEVEL, atomic_write
+from ..records.figures import FIGURE_RC, PNG_COMPRESS_LEVEL
+from ..records.output import atomic_write
 from .figure import fixed_layout_params
 
 #: The responses figure's colours: each signal's and its axis's (labels and ticks).

@@ -9,7 +9,8 @@ import os
 
 import numpy as np
 
-from ..records.files import save_figure, write_json
+from ..records.figures import save_figure
+from ..records.output import write_json
 from ..validate.closed_loop import validation_record
 from .figure import new_figure
 

@@ -1,4 +1,5 @@
-"""The cascade's gains: those the firmware flies, and gains files.
+"""The cascade's gains: those the firmware flies, gains files (docs/file-formats.md, "Gains
+file"), and the gains a sweep records (manifest.json's and models.json's ``gains``).
 
 The firmware's ``CascadeGains::paper_defaults()`` (firmware/core/controllers.cpp) is the one
 definition of the gains it flies by default; they are read here through its bindings.
@@ -11,15 +12,18 @@ identify carries them into models.json, and validation uses them unless given a 
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
 from heliquad import _firmware
 
 from ...sim.base import dialect as names
+from . import schema as S
+from .reading import read_json
 
-__all__ = ["Gains", "firmware_gains", "load_gains", "gains_from_params", "recorded_gains",
-           "single", "DERIVATIVE_FILTER_N"]
+__all__ = ["Gains", "firmware_gains", "load_gains", "read_gains", "gains_from_params",
+           "recorded_gains", "recorded_gains_schema", "single", "DERIVATIVE_FILTER_N"]
 
 #: The derivative filter's N (tau_f = tau_D / N) of the firmware's rate loop, which it flies.
 DERIVATIVE_FILTER_N = float(_firmware.CascadeGains.paper_defaults().rate(
@@ -84,10 +88,43 @@ def single(value: float) -> float:
 
 def load_gains(axis: str, path: str | None = None) -> Gains:
     """The gains the firmware flies (:func:`firmware_gains`: the paper's), or a gains file's
-    (:func:`heliquad.host.records.files.read_gains`, checked against its schema):
-    ``{"rate": {"roll": [Kc, tau_I, tau_D], ...}, "angle": {"roll": [Kc, tau_D], ...}}``."""
+    (:func:`read_gains`)."""
     if path is None:
         return firmware_gains(axis)
-    from .files import read_gains
+    return read_gains(path, axis)
 
-    return Gains(*read_gains(path, axis))
+
+def _rate_angle_specs():
+    """A rate loop's ``[Kc, tau_I_s, tau_D_s]`` and an angle loop's ``[Kc, tau_D_s]``."""
+    gain, tau_i, tau_d = S.Num(0, 1e4, lo_open=True), S.Num(0, 1e4), S.Num(0, 1e3)
+    return (S.Seq(("Kc", gain), ("tau_I_s", tau_i), ("tau_D_s", tau_d)),
+            S.Seq(("Kc", gain), ("tau_D_s", tau_d)))
+
+
+@functools.cache
+def _gains_file_schema():
+    rate, angle = _rate_angle_specs()
+    return S.Obj(required={"rate": S.Obj(optional={a: rate for a in names.AXES}, strict=True)},
+                 optional={"angle": S.Obj(optional={a: angle for a in names.AXES if a != "yaw"},
+                                          strict=True)},
+                 strict=True)
+
+
+def read_gains(path, axis: str) -> Gains:
+    """A gains file's gains for ``axis`` (docs/file-formats.md, "Gains file"): ``{"rate":
+    {"roll": [Kc, tau_I_s, tau_D_s], ...}, "angle": {"roll": [Kc, tau_D_s], ...}}``, checked
+    against its schema; the angle gains are None for yaw, which is rate only."""
+    doc = read_json(path, "gains file", _gains_file_schema())
+    if axis not in doc["rate"]:
+        S.fail(path, f"rate.{axis}", "is missing ([Kc, tau_I_s, tau_D_s])")
+    if axis != "yaw" and axis not in doc.get("angle", {}):
+        S.fail(path, f"angle.{axis}", "is missing ([Kc, tau_D_s])")
+    rate = tuple(float(v) for v in doc["rate"][axis])
+    return Gains(rate, None if axis == "yaw" else tuple(float(v) for v in doc["angle"][axis]))
+
+
+def recorded_gains_schema():
+    """The gains a sweep recorded from its board (manifest.json, carried into models.json):
+    rate ``[Kc, tau_I_s, tau_D_s]``, angle ``[Kc, tau_D_s]`` or null (yaw)."""
+    rate, angle = _rate_angle_specs()
+    return S.Obj(required={"rate": rate}, optional={"angle": S.Null(angle)})

@@ -1,4 +1,5 @@
-"""Checks of the JSON documents a user hands the tool (the readers are in :mod:`.files`).
+"""Checks of the JSON documents a user hands the tool (each format's reader is in its own
+module of host/records).
 
 A schema is built from small specs (:class:`Num`, :class:`Int`, :class:`Str`, :class:`Bool`,
 :class:`Null`, :class:`List`, :class:`Obj`); ``spec.check(path, key, value)`` returns the value

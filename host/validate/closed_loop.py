@@ -152,7 +152,7 @@ def _sweep_truth(models_path):
     """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder,
     else None."""
     from ...sim.base.errors import InputError
-    from ..records.files import read_manifest
+    from ..records.manifest import read_manifest
     from ..acquire.sweep import MANIFEST
     from .truth import sil_truth_loops
 

@@ -1,0 +1,194 @@
+"""MODELS.json and MODELS.mat, the transfer functions fitted to a points file
+(docs/file-formats.md, "MODELS.json" and "MODELS.mat"): ``{"models": [...], "recommended":
+INDEX, ...}``, coefficients in descending powers of s, den monic; the .mat a MATLAB struct
+array of the same models.
+
+The models written are :class:`~heliquad.host.estimate.fit.TfModel` objects (the fit's
+record, read here by its attributes), and the recommended model's quality verdict comes from
+the caller (the fit computes it, host/estimate/metrics.py): a writer judges nothing. The
+reader returns the checked document as a dict, which validation, the report and the demo
+read key by key.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from ...sim.base import dialect as names
+from . import schema as S
+from .gains import recorded_gains_schema
+from .manifest import SWEEP_SIGNALS
+from .output import atomic_write, write_json
+from .reading import read_json
+
+__all__ = ["read_models_json", "write_models_json", "model_to_dict", "write_models_mat",
+           "MAT_FIELDS"]
+
+#: A model's pure delay, s.
+MAX_DELAY_S = 10.0
+
+
+@functools.cache
+def _models_schema():
+    pairs = S.List(S.Seq(("real", S.Num()), ("imag", S.Num())), 0, 12)
+    model = S.Obj(
+        required={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13)},
+        optional={"order": S.Seq(("M", S.Int(0, 12)), ("N", S.Int(1, 12))),
+                  "delay_s": S.Num(0, MAX_DELAY_S), "stable": S.Bool(), "degenerate": S.Bool(),
+                  "degenerate_why": S.Str(), "integrator": S.Bool(),
+                  "metrics": S.Obj(values=S.Null(S.Num())), "poles": pairs, "zeros": pairs,
+                  "dc_gain": S.Null(S.Num())})
+    log = S.Obj(optional={"first_regions": S.List(S.List(S.Int(0, 2**63), 2, 2))},
+                values=S.Int(0, 2**63))
+    return S.Obj(
+        required={"models": S.List(model, 1, 1000)},
+        optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(),
+                  "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(),
+                  "log": log,
+                  "skipped_frequencies": S.List(S.Str()),
+                  "saturated_frequencies": S.List(S.Str()),
+                  "estimate": S.Str(("excitation", "input")), "sil_truth": _sil_truth_schema(),
+                  "signal": S.Str(SWEEP_SIGNALS),
+                  "replay": _replay_schema(),
+                  "quality": S.Obj(required={"level": S.Str(("good", "acceptable", "poor")),
+                                             "why": S.Str()}),
+                  "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
+                                      ("high", S.Num(0, 1e7, lo_open=True))),
+                  "broken_loop": S.Obj(), "gains": recorded_gains_schema()})
+
+
+
+def _sil_truth_schema():
+    """models.json's ``sil_truth`` (:func:`heliquad.host.validate.truth.truth_record`), as far as
+    ``heliquad report`` reads it."""
+    num = S.Null(S.Num())
+    point = S.Obj(required={"freq_hz": S.Num(0, lo_open=True)},
+                  optional={k: num for k in ("truth_db", "truth_deg", "error_db", "error_deg",
+                                             "error_over_sigma")})
+    return S.Obj(required={"points": S.List(point), "points_worst_db": S.Num(),
+                           "points_worst_deg": S.Num()},
+                 optional={k: num for k in ("points_rms_error_over_sigma", "model_worst_db",
+                                            "model_worst_deg")})
+
+
+def _replay_schema():
+    """models.json's ``replay``: the recommended model's replay of each frequency's record."""
+    point = S.Obj(required={"freq_hz": S.Num(0, lo_open=True), "periods": S.Int(1, 2**31),
+                            "nrmse": S.Null(S.Num(0))})
+    return S.Obj(required={"model": S.Int(0, 999), "points": S.List(point)},
+                 optional={"discard_periods": S.Int(0, 2**31)})
+
+
+def read_models_json(path) -> dict:
+    """MODELS.json, checked (docs/file-formats.md): each model proper (num no longer than
+    den, and both as long as its ``order`` says), den's leading coefficient not zero,
+    ``recommended`` an index into ``models`` or null. A
+    model without ``order`` gets the one its coefficients have."""
+    doc = read_json(path, "MODELS.json", _models_schema())
+    for i, m in enumerate(doc["models"]):
+        key = f"models[{i}]"
+        deg_num, deg_den = m.setdefault("order", [len(m["num"]) - 1, len(m["den"]) - 1])
+        if deg_num > deg_den:
+            S.fail(path, f"{key}.order", "is improper (numerator degree above the "
+                   "denominator's)", m["order"])
+        for name, want in (("num", deg_num + 1), ("den", deg_den + 1)):
+            if len(m[name]) != want:
+                S.fail(path, f"{key}.{name}", f"must have {want} coefficients (order "
+                       f"{deg_num}/{deg_den})", m[name])
+        if m["den"][0] == 0:
+            S.fail(path, f"{key}.den[0]", "must not be 0 (the leading coefficient)")
+        with np.errstate(all="ignore"):
+            scaled = np.asarray(m["num"] + m["den"], float) / float(m["den"][0])
+        if not np.all(np.isfinite(scaled)):
+            S.fail(path, key, "has coefficients beyond double range once den is monic")
+    band = doc.get("band_rad_s")
+    if band is not None and not band[0] <= band[1]:
+        S.fail(path, "band_rad_s", "must be [low, high] with low <= high", band)
+    rec = doc.get("recommended")
+    if rec is not None and rec >= len(doc["models"]):
+        S.fail(path, "recommended", f"is not an index into models (0..{len(doc['models']) - 1})",
+               rec)
+    return doc
+
+
+
+def _clean(x):
+    """JSON has no NaN or infinity: write them as null."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def model_to_dict(model) -> dict:
+    """A :class:`~heliquad.host.estimate.fit.TfModel` as the MODELS.json entry."""
+    return {
+        "order": list(model.order),
+        "integrator": bool(model.integrator),
+        "num": [float(c) for c in model.num],
+        "den": [float(c) for c in model.den],
+        "delay_s": float(model.delay_s),
+        "stable": bool(model.stable),
+        "degenerate": bool(model.degenerate),
+        **({"degenerate_why": model.degenerate_why} if model.degenerate_why else {}),
+        "metrics": {k: _clean(v) if isinstance(v, float) else v
+                    for k, v in model.metrics.items()},
+        "poles": [[float(p.real), float(p.imag)] for p in model.poles],
+        "zeros": [[float(z.real), float(z.imag)] for z in model.zeros],
+        "dc_gain": _clean(model.dc_gain),
+    }
+
+
+def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None,
+                      extra=None, band_rad_s=None, quality=None):
+    """Write MODELS.json; the file is replaced atomically so a failure never truncates it.
+    ``extra``: more top-level entries (identify adds the log's condition and the frequencies
+    it could not use). ``band_rad_s``: the lowest and highest frequency of the points the
+    models were fitted to (validation trusts a model only there). ``quality``: the
+    recommended model's ``(level, why)`` (host/estimate/metrics.py's verdict), given with
+    the recommendation."""
+    doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
+           "reason": reason, **(extra or {})}
+    if band_rad_s is not None:
+        doc["band_rad_s"] = [float(band_rad_s[0]), float(band_rad_s[1])]
+    if (recommended is None) != (not quality):
+        raise ValueError("a recommended model needs its quality, and only it has one")
+    if quality:
+        level, why = quality
+        doc["quality"] = {"level": level, "why": why}
+    if axis is not None:
+        doc["axis"] = axis
+    if source is not None:
+        doc["points_file"] = str(source)
+    if weights is not None:
+        doc["weights"] = weights
+    write_json(path, doc)
+
+
+#: MODELS.mat's struct fields; each model's metrics (MODELS.json's) come before dc_gain.
+MAT_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate", "dc_gain")
+
+
+def write_models_mat(path, models, recommended):
+    """Write MODELS.mat (docs/file-formats.md), atomically: ``models``, a 1-by-N MATLAB
+    struct array with the fields of :data:`MAT_FIELDS` around every metric of the models
+    (doubles, logical flags, coefficient row vectors), and ``recommended``, a 1-based index
+    (0 when none)."""
+    import scipy.io             # here, not at the top: scipy.io takes about 0.25 s to import
+
+    metrics = list(dict.fromkeys(k for m in models for k in m.metrics))
+    fields = [*MAT_FIELDS[:-1], *metrics, MAT_FIELDS[-1]]
+    array = np.empty((1, len(models)), dtype=[(f, object) for f in fields])
+    for i, m in enumerate(models):
+        entry = {"order": np.array([m.order], float), "num": np.array([m.num], float),
+                 "den": np.array([m.den], float), "delay_s": float(m.delay_s),
+                 "stable": bool(m.stable), "degenerate": bool(m.degenerate),
+                 "dc_gain": float(m.dc_gain),
+                 **{k: float(m.metrics.get(k, math.nan)) for k in metrics}}
+        array[0, i] = tuple(entry[f] for f in fields)
+    with atomic_write(path, "wb") as fh:
+        scipy.io.savemat(fh, {"models": array,
+                              "recommended": float(0 if recommended is None else recommended + 1)})
+
+
