@@ -14,7 +14,7 @@ import tty
 import numpy as np
 import pytest
 
-from tool_runs import running_board
+from tool_runs import excitation_running, running_board
 
 #: A roll sweep short enough for the suite: three of the band's frequencies, six measured
 #: cycles each (about 11 s of excitation in real time).
@@ -194,7 +194,8 @@ def stream(lose=(), status=True):
 
 
 def watch(messages):
-    from heliquad.host.acquire.sweep import ExcitationWatch, Limits, SweepPlan
+    from heliquad.host.acquire.sweep import SweepPlan
+    from heliquad.host.acquire.measure import ExcitationWatch, Limits
 
     plan = SweepPlan("roll", "mixer", [2.0], [0.1], cycles=MEASURED, fade_cycles=FADE)
     w = ExcitationWatch(plan, 2.0, 0.1, Limits(), 0, progress=lambda *_: None)
@@ -253,7 +254,7 @@ def test_a_window_cut_short_without_gaps_is_still_incomplete():
 # --- Messages: a board unplugged, a sweep that was cut --------------------------------------
 
 def test_a_board_unplugged_mid_sweep_exits_1_as_a_silent_one_does(tmp_path):
-    # The relay closes the sweep's pty once the sweep's log holds samples of the excitation:
+    # The relay closes the sweep's pty once the sweep's log says the excitation runs:
     # the port reads EIO. Before: exit 2, "error: telemetry link lost". Now exit 1, the
     # frequency's status says the board went away, the manifest and log are kept.
     import time
@@ -268,8 +269,8 @@ def test_a_board_unplugged_mid_sweep_exits_1_as_a_silent_one_does(tmp_path):
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             tlog, deadline = out / "sweep.tlog", time.monotonic() + 120   # a hang guard
-            while not (tlog.exists() and tlog.stat().st_size > 20_000) and \
-                    time.monotonic() < deadline and sweep.poll() is None:
+            while not excitation_running(tlog) and time.monotonic() < deadline and \
+                    sweep.poll() is None:
                 time.sleep(0.05)
             relay.close()                                     # unplugged
             stdout, stderr = sweep.communicate(timeout=120)

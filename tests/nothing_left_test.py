@@ -16,7 +16,8 @@ import signal
 import pytest
 
 from heliquad.host.acquire.log_session import summarise_tlog
-from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir, size, wait_for
+from tool_runs import (Tool, assert_nothing_left, excitation_running, one_line, private_tmpdir,
+                       size, wait_for)
 
 import teensy_image
 
@@ -226,7 +227,8 @@ def test_a_sweep_over_a_port_whose_board_dies(tmpdir_, tmp_path):
     assert "board running" in board.readline()
     sweep = Tool("sweep", "--axis", "roll", "--port", rig, "--freqs-hz", 0.5, "--cycles", 10,
                  "--out", out, tmpdir=tmpdir_)
-    wait_for(lambda: size(out / "sweep.tlog") > UNDER_WAY, "a log under way", sweep.proc)
+    wait_for(lambda: excitation_running(out / "sweep.tlog"), "the excitation running",
+             sweep.proc)
     os.kill(board.firmware_pid(), signal.SIGKILL)
     code, _, err = sweep.finish()
     assert code == 1 and f"kept in {out}" in one_line(err)

@@ -14,6 +14,7 @@ from heliquad.host.records import paper
 from heliquad.sim.plant.tf_plant import TfPlant
 
 from firmwares import FIRMWARES, image_for
+from tool_runs import excitation_running
 
 
 def heliquad(*args):
@@ -107,8 +108,9 @@ def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
 
 
 def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_path):
-    # The simulated board stopped (SIGSTOP) once the sweep's log holds samples: no sample
-    # comes any more, and the sweep ends with the timeout's status instead of waiting forever.
+    # The simulated board stopped (SIGSTOP) once its answer that the excitation runs is in the
+    # sweep's log: no sample comes any more, and the sweep ends with the timeout's status
+    # instead of waiting forever.
     import os
     import signal
 
@@ -119,7 +121,7 @@ def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_
                                   "--out", str(out)],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         tlog, deadline = out / "sweep.tlog", time.monotonic() + 60
-        while not (tlog.exists() and tlog.stat().st_size > 20_000) and time.monotonic() < deadline:
+        while not excitation_running(tlog) and time.monotonic() < deadline:   # a hang guard
             time.sleep(0.05)
         os.kill(board.pid, signal.SIGSTOP)
         try:

@@ -165,6 +165,21 @@ def size(path) -> int:
         return 0
 
 
+def excitation_running(tlog) -> bool:
+    """Whether a log still being written holds the firmware's answer that an excitation has
+    started (a record cut short at its end is left for the next look): what a test waits
+    for before it breaks a sweep "mid-frequency", whatever the machine's speed."""
+    # Imported here: most tests that use this module never read a log.
+    from heliquad.host.records.tlog import TlogDamage, read_tlog
+    from heliquad.sim.base.dialect import dialect
+
+    if size(tlog) == 0:
+        return False
+    status = read_tlog(str(tlog), dialect(), only=("HQ_EXCITATION_STATUS",), damage=TlogDamage())
+    idle = dialect().HQ_EXCITATION_STATE_IDLE
+    return any(m.accepted and m.state != idle for _, m in status)
+
+
 class Tool:
     """``heliquad ARGS`` as a terminal's foreground job. ``tmpdir``: its TMPDIR (empty when
     the test checks it). ``file_limit``: bytes any file it (or its children) writes may

@@ -21,7 +21,8 @@ from ...sim.rig.setup import SilConfig
 from ...sim.base.errors import InputError
 from ..records.run_csv import write_run_csv
 from .session import SilSession
-from .sweep import SATURATION, SweepPlan, measure
+from .sweep import SweepPlan
+from .measure import SATURATION, measure
 
 __all__ = ["SilResult", "run_sil", "TAIL_FRAMES"]
 

@@ -28,7 +28,7 @@ __all__ = ["identify_dir", "INPUT_OUTPUT"]
 def _load(dir_path):
     from ...sim.base.dialect import dialect
     from ..records.manifest import read_manifest
-    from ..acquire.sweep import MANIFEST
+    from ..records.manifest import MANIFEST
     from ..records.tlog import TlogDamage, read_tlog_table
 
     path = os.path.join(dir_path, MANIFEST)
@@ -299,7 +299,7 @@ def _estimate_points(manifest, samples, estimate, progress) -> tuple:
     multisine, against the excitation or the input (``estimate``). A record that lost
     samples on the link is estimated from those that arrived (each point's
     ``lost_share``); one that lost more than the sweep allows is skipped."""
-    from ..acquire.sweep import MAX_LOST_SHARE
+    from ..acquire.measure import MAX_LOST_SHARE
 
     points, segments, firsts, skipped = [], [], [], []
     for entry, t, r, u, y, present in _segments(manifest, samples):
@@ -380,7 +380,7 @@ def _complete_input(entry, r, u, y, present):
 
 def _saturated(manifest) -> list:
     """The measured frequencies during which something saturated, in words."""
-    from ..acquire.sweep import saturation_text
+    from ..acquire.measure import saturation_text
 
     return [f"{e['freq_hz']:.4g} Hz{said}" for e in manifest["frequencies"]
             if e.get("status") == "ok" and "freq_hz" in e and (said := saturation_text(e))]

@@ -115,7 +115,7 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
-    from ..acquire.sweep import saturation_summary
+    from ..acquire.measure import saturation_summary
 
     said = saturation_summary(r.saturation)
     if said:

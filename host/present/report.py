@@ -34,7 +34,8 @@ import numpy as np
 from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import MAX_FREQ_FRACTION
 from ..records.output import atomic_write
-from ..acquire.sweep import cut_text, saturation_text
+from ..acquire.sweep import cut_text
+from ..acquire.measure import saturation_text
 from ..estimate.thresholds import (ACCURACY_DB, ACCURACY_DEG, LOW_COHERENCE, ROUND_OFF_SIGMA,
                                 honest_sigma_bound)
 

@@ -153,7 +153,7 @@ def _sweep_truth(models_path):
     else None."""
     from ...sim.base.errors import InputError
     from ..records.manifest import read_manifest
-    from ..acquire.sweep import MANIFEST
+    from ..records.manifest import MANIFEST
     from .truth import sil_truth_loops
 
     folder = os.path.dirname(os.path.abspath(models_path))
