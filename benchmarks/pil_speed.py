@@ -43,7 +43,7 @@ def board_alone(elf: str, loops: int):
     own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
     accesses and events)."""
     from heliquad.sim.sensor.mpu6050_packets import raw_packet
-    from heliquad.sim.chip.pil import PilBoard
+    from heliquad.sim.chip.pil.board import PilBoard
 
     board = PilBoard(elf)
     board.boot()

@@ -98,7 +98,7 @@ def test_a_stopped_firmware_times_out_during_a_batch(tmp_path):
 
 def test_engine_checks_its_inputs(tmp_path):
     with SilSession(SilConfig(), str(tmp_path / "c.tlog")) as session:
-        engine = session.engine
+        engine = session.rig.engine
         with pytest.raises(ValueError, match="rc must be n x 8"):
             engine.start(1, 10, 5000, 0, np.zeros((9, 8), dtype=np.uint16), None, None)
         with pytest.raises(ValueError, match="noise must have 10 x 6"):

@@ -487,7 +487,7 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
     changes them (a save, here called directly) they are written back."""
     boot.require_image()
     pytest.importorskip("heliquad._firmware")
-    from heliquad.sim.chip.pil import PilBoard
+    from heliquad.sim.chip.pil.board import PilBoard
 
     path = tmp_path / "params.bin"
     path.write_bytes(_slot(3, b"kept") + b"\xff" * SECTOR_BYTES)

@@ -22,9 +22,9 @@ from typing import Callable, Protocol
 
 from heliquad import _simcore
 
-from ...sim.base.dialect import dialect
-from ...sim.rig.faults import check_faults, imu_fault_codes, link_close_frame
-from ...sim.rig.lockstep import FirmwareError, SimLink, actuators, start_firmware
+from ...sim.rig.driver import Rig
+from ...sim.rig.faults import link_close_frame
+from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
@@ -41,8 +41,6 @@ TELEMETRY_TIMEOUT_S = 2.0
 #: for the pilot to arm it, before it gives up.
 FIRST_SAMPLE_WAIT_S = 5.0
 ARM_WAIT_S = 120.0
-#: While a batch runs, the telemetry link is read this often (the firmware buffers 64 KiB).
-ENGINE_POLL_S = 0.002
 
 
 class Session(Protocol):
@@ -176,38 +174,43 @@ class SilSession:
     for a test that wants two logs byte for byte) plus the simulated time of its loop, so
     tools show when the run happened while the run itself stays the same every time.
 
-    The frames themselves run in C++ (``heliquad._simcore.RigEngine``, in its own thread):
-    the plant, the FIFO packets and the sim link, with the batch's RC inputs and random
-    inputs drawn here beforehand. Meanwhile this thread reads and logs the telemetry. Commands
-    and heartbeats go out between batches only, so a run is the same every time."""
+    The firmware, the plant and the frames between them are the lockstep driver's
+    (:class:`heliquad.sim.rig.driver.Rig`, whose batches run in C++ in their own thread);
+    this session gives each batch the pilot's RC and, while it runs, reads and logs the
+    telemetry. Commands and heartbeats go out between batches only, on exact frames, so a
+    run is the same every time."""
 
     def __init__(self, cfg: SilConfig, tlog_path: str, start_us: int | None = None):
         self.cfg = cfg
         self.start_us = int(time.time() * 1e6) if start_us is None else int(start_us)
-        self.dt_us = int(round(1e6 / cfg.loop_hz))
-        check_faults(cfg.faults, self.dt_us)
-        self.plant = make_plant(cfg, self.dt_us * 1e-6)
         image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
-        self.fw = start_firmware(cfg.firmware, loop_hz=cfg.loop_hz, dmp_image=cfg.dmp_image,
-                                 params_file=cfg.param_store, **image)
+        self.rig = Rig(lambda dt_s: make_plant(cfg, dt_s), cfg.firmware, cfg.loop_hz,
+                       cfg.faults, dmp_image=cfg.dmp_image, params_file=cfg.param_store, **image)
+        #: What flies and what it flies (a manifest records them).
+        self.fw, self.plant, self.dt_us = self.rig.fw, self.rig.plant, self.rig.dt_us
         with contextlib.ExitStack() as undo:       # a failure or Ctrl-C here stops it all
-            undo.callback(self.fw.stop)
-            self.link = SimLink(self.fw)
-            undo.callback(self.link.close)
-            self.tel = _FirmwareTelemetry(self.fw.telemetry_path, self._raise_if_died)
+            undo.callback(self.rig.close)
+            self.tel = _FirmwareTelemetry(self.rig.telemetry_path, self._raise_if_died)
             undo.callback(self.tel.close)
             self.telemetry = _TelemetryLog(self.tel, tlog_path, self.start_us)
-            undo.callback(self.telemetry.close)
-            self.engine = _simcore.RigEngine(self.link.port, self.plant.core)
             undo.pop_all()
         # The tool's heartbeat, on exact frames so that runs repeat.
         self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
-        self.frame, self.kind, self.reply = 0, dialect().HQ_SENSOR_NONE, None
+
+    @property
+    def frame(self) -> int:
+        """The last frame run."""
+        return self.rig.frame
+
+    @property
+    def reply(self):
+        """The firmware's last reply (None before the first frame)."""
+        return self.rig.reply
 
     @property
     def time_us(self) -> int:
-        return self.frame * self.dt_us
+        return self.rig.time_us
 
     def advance(self, handle=None, frames: int = TELEMETRY_BATCH) -> list:
         """Step ``frames`` lockstep frames (a batch by default) and pass each message of
@@ -244,8 +247,7 @@ class SilSession:
     def _raise_if_died(self) -> None:
         """A link that failed because the firmware died (killed, crashed) is that death,
         said as such, whichever end noticed it first; otherwise nothing."""
-        self.fw.wait_exit(0.5)
-        if not self.fw.alive():
+        if self.rig.firmware_died():
             raise FirmwareError(f"the firmware died at frame {self.frame} "
                                 f"({self.fw.stderr_tail()})") from None
 
@@ -258,25 +260,9 @@ class SilSession:
         self.tel = _ClosedLink(self.tel)
 
     def _run(self, first: int, n: int, collect) -> None:
-        """Frames first .. first + n - 1 in the engine; telemetry read while they run."""
-        rc = rc_block(first, n, self.cfg.collective)
-        noise, gust = self.plant.frame_inputs(n)
-        faults = imu_fault_codes(self.cfg.faults, first, n, self.dt_us)
-        self.engine.start(first, n, self.dt_us, self.kind, rc, noise, gust, faults)
-        try:
-            # Read at a fixed pace rather than on every arrival: one wake-up per few frames
-            # leaves the cores to the engine and the firmware.
-            while not self.engine.wait_finished(ENGINE_POLL_S):
-                collect(self.telemetry.read())
-        finally:
-            if not self.engine.finished():           # Ctrl-C or an error here: stop it
-                self.engine.cancel()
-            result = self.engine.wait()
-        self.frame = first + result.frames_done - 1
-        if result.frames_done:
-            self.reply = actuators(result.last)
-            self.kind = self.reply.sensor_kind
-        self.link.check(result.status, result.failed_frame, result.last)
+        """Frames first .. first + n - 1 on the rig; telemetry read while they run."""
+        self.rig.advance(n, rc_block(first, n, self.cfg.collective),
+                         while_running=lambda: collect(self.telemetry.read()))
 
     def hover(self, progress=print) -> None:
         """Boot, arm and hover for the settling time."""
@@ -284,12 +270,12 @@ class SilSession:
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
 
     def close(self) -> None:
-        """Close the links and the log and stop the firmware; each step runs even when one
-        before it fails (the firmware last, so that it is never left running)."""
+        """Close the telemetry link and the log, then the rig (the sim link, the firmware);
+        each step runs even when one before it fails (the firmware last, so that it is never
+        left running)."""
         with contextlib.ExitStack() as stack:
-            stack.callback(self.fw.stop)
+            stack.callback(self.rig.close)
             stack.callback(self.telemetry.close)
-            stack.callback(self.link.close)
             stack.callback(self.tel.close)
 
     def __enter__(self):

@@ -18,10 +18,11 @@ from __future__ import annotations
 import os
 import time
 
-from ..base.dialect import dialect
+import numpy as np
+
 from ..base.firmware_facts import LOOP_RATE_HZ
-from .lockstep import SimLink, start_firmware
-from .setup import rc_disarmed, rig_step
+from .driver import Rig
+from .setup import rc_block, rc_disarmed
 from ..plant.tf_plant import TfPlant
 
 __all__ = ["run_board"]
@@ -60,31 +61,20 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
-    plant = TfPlant(axis, num, den, dt_s)
     run = {"frames": 0, "resyncs": 0, "stopped_by": None, "landed": False}
-    fw = start_firmware(firmware, loop_hz=loop_hz, dmp_image=dmp_image,
-                        telemetry_path=os.path.abspath(telemetry_path), params_file=params_file,
-                        telemetry_backlog_bytes=backlog_bytes)
-    try:
-        link = SimLink(fw)
-        try:
-            kind = _fly(link, plant, run, dt_s, collective, duration_s,
-                        lambda: ready(f"board running: telemetry on {telemetry_path} "
-                                      "(Ctrl-C to stop)"),
-                        rc=None if armed else rc_disarmed())
-            run["landed"] = _land(link, plant, run, dt_s, kind)
-        finally:
-            link.close()
-    finally:
-        fw.stop()                          # its links and temporary folder go with it
-    return run
+    with Rig(lambda plant_dt_s: TfPlant(axis, num, den, plant_dt_s), firmware, loop_hz,
+             dmp_image=dmp_image, telemetry_path=os.path.abspath(telemetry_path),
+             params_file=params_file, telemetry_backlog_bytes=backlog_bytes) as rig:
+        _fly(rig, run, dt_s, collective, duration_s,
+             lambda: ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)"),
+             rc=None if armed else rc_disarmed())
+        run["landed"] = _land(rig, run, dt_s)
+    return run             # the rig closed: the firmware's links and temporary folder gone
 
 
-def _fly(link, plant, run, dt_s, collective, duration_s, say_ready, rc=None):
+def _fly(rig, run, dt_s, collective, duration_s, say_ready, rc=None) -> None:
     """Say ready, then hover in real time until ``duration_s`` or a KeyboardInterrupt (kept
-    in ``run``), the pilot's sticks ``rc`` (default: armed, hovering); returns the sensor
-    kind the firmware last asked for."""
-    kind = dialect().HQ_SENSOR_NONE            # until the firmware says what it set up
+    in ``run``), the pilot's sticks ``rc`` (default: armed, hovering)."""
     try:
         # Said inside: a Ctrl-C from whoever waited for the line stops the board as any
         # later one does.
@@ -99,27 +89,24 @@ def _fly(link, plant, run, dt_s, collective, duration_s, say_ready, rc=None):
             elif now - target > MAX_LAG_S:
                 run["resyncs"] += 1
                 t0 = now - run["frames"] * dt_s     # resynchronise to real time
-            reply = rig_step(link, plant, run["frames"], _us(run["frames"], dt_s), kind,
-                             collective, rc=rc)
-            kind = reply.sensor_kind
+            _step(rig, rc_block(run["frames"], 1, collective) if rc is None else rc)
     except KeyboardInterrupt as exc:             # Ctrl-C; SIGTERM, SIGHUP as its subclasses
         run["stopped_by"] = exc
-    return kind
 
 
-def _land(link, plant, run, dt_s, kind) -> bool:
+def _land(rig, run, dt_s) -> bool:
     """The pilot's switch down and throttle low until the firmware reports disarmed, then
     :data:`SAVE_WAIT_S` more (its pending parameter save); whether it disarmed."""
     rc, armed, after = rc_disarmed(), True, 0
     for _ in range(int(round((DISARM_WAIT_S + SAVE_WAIT_S) / dt_s))):
         run["frames"] += 1
-        reply = rig_step(link, plant, run["frames"], _us(run["frames"], dt_s), kind, 0.0, rc=rc)
-        kind, armed = reply.sensor_kind, reply.armed
+        armed = _step(rig, rc).armed
         after = 0 if armed else after + 1
         if after * dt_s >= SAVE_WAIT_S:
             return True
     return not armed
 
 
-def _us(frame: int, dt_s: float) -> int:
-    return int(round(frame * dt_s * 1e6))
+def _step(rig, rc):
+    """One lockstep frame with the pilot's ``rc`` (one row of channels, us): its reply."""
+    return rig.advance(1, np.asarray(rc, dtype=np.uint16).reshape(1, -1))

@@ -1,11 +1,13 @@
-"""Lockstep driver of the host firmware (docs/link-contract.md).
+"""The firmware processes and the sim link of the lockstep (docs/link-contract.md).
 
 :class:`HostFirmware` starts ``heliquad-fw-host``, which creates the sim-link and telemetry
 ptys (:class:`PilFirmware` starts the Teensy image in the emulated chip instead, the same
-link contract: ``heliquad.sim.chip.pil``; :func:`start_firmware` picks one by name); :class:`SimLink` then exchanges frames on the sim link: one HQ_SENSOR_FRAME out, exactly
-one HQ_ACTUATOR_FRAME back with the same time and counter. A reply that does not come within
+link contract: ``heliquad.sim.chip.pil``; :func:`start_firmware` picks one by name);
+:class:`SimLink` then exchanges frames on the sim link: one HQ_SENSOR_FRAME out, exactly one
+HQ_ACTUATOR_FRAME back with the same time and counter. A reply that does not come within
 the timeout, a wrong counter, or a firmware that died are errors with a clear message, never
-a hang.
+a hang. The lockstep driver that puts them together with a plant is
+:class:`heliquad.sim.rig.driver.Rig`.
 """
 
 from __future__ import annotations
@@ -276,7 +278,8 @@ class SimLink:
 
     pyserial opens the pty and makes it raw; the exchange itself (MAVLink framing, the
     reply's counter check, the timeout) is C++ (``heliquad._simcore.SimLinkPort``,
-    sim/native/sim_link.cpp), shared with the batch engine of :class:`heliquad.sim.rig.setup.SilSession`.
+    sim/native/sim_link.cpp), shared with the batch engine of the lockstep driver
+    (:class:`heliquad.sim.rig.driver.Rig`).
     """
 
     def __init__(self, firmware: HostFirmware):

@@ -23,7 +23,7 @@ import numpy as np
 from ..base.firmware_facts import LOOP_RATE_HZ
 from ..plant.tf_plant import TfPlant
 
-__all__ = ["SilConfig", "Plant", "make_plant", "rig_step", "rc_block", "RC_CENTER_US",
+__all__ = ["SilConfig", "Plant", "make_plant", "rc_block", "RC_CENTER_US",
            "rc_disarmed", "BOOT_FRAMES", "ARM_FRAMES"]
 
 RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
@@ -108,15 +108,3 @@ def rc_block(first: int, n: int, collective: float) -> np.ndarray:
 def rc_disarmed() -> list:
     """The pilot's RC once landed: throttle low, arm switch down (the firmware disarms)."""
     return _rc(0, 0.0)
-
-
-def rig_step(link, plant, frame, time_us, kind, collective, imu_fault=None, rc=None):
-    """One lockstep frame of the simulated rig, driven from Python (the free-running board
-    and tests): the plant's FIFO bytes and the pilot's RC out, the firmware's reply in, the
-    plant stepped with the reply's motors. :class:`heliquad.host.acquire.session.SilSession` runs batches
-    of the same in C++. ``imu_fault``: HQ_IMU_FAULT (default none); ``rc``: the pilot's RC
-    (default: boot, arm, hover as the frame number has it)."""
-    rc = _rc(frame, collective) if rc is None else rc
-    reply = link.step(time_us, plant.fifo(kind), kind, rc, imu_fault=imu_fault)
-    plant.step_motors(reply.motor)
-    return reply

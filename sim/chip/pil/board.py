@@ -1,0 +1,225 @@
+"""The Teensy 3.5 on the simulated rig, one lockstep frame at a time (:class:`PilBoard`):
+the frame's inputs into the emulated chip's pins and peripherals, one pass of the image's
+main loop, the motors and the loop's state read back, the telemetry the UART sent."""
+
+from __future__ import annotations
+
+import struct
+import sys
+
+from ...base.dialect import dialect
+from ...base.firmware_facts import LOOP_RATE_HZ
+from ..machine import ChipReset, EmulationError
+from ..teensy35 import Teensy35
+from .param_file import ParamFile
+
+#: The image's loop rate (firmware/targets/teensy35/main.cpp's kLoopHz: the firmware's).
+IMAGE_LOOP_HZ = LOOP_RATE_HZ
+#: Where a loop ends: the step is done and the image is about to sleep for the next tick.
+WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
+REPORT_SYMBOL = "hq_loop_report"
+#: hq_loop_report: loops, step cycles, overruns (uint32); armed, mode, sensor kind,
+#: excitation state (uint8).
+REPORT = struct.Struct("<IIIBBBB")
+#: The stack is painted with this word before reset; the deepest word overwritten since is
+#: the stack's high-water mark.
+STACK_PAINT = 0xDEADBEEF
+#: The image's ESC calibration (firmware/targets/teensy35/motors.hpp: EscCalibration's
+#: defaults) and FTM0's counts per microsecond: a pulse of min_us is stop, max_us full thrust.
+ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
+#: The RC inputs the board captures (FTM3 channels 0-5).
+RC_CHANNELS = 6
+#: A receiver's frame: 20 ms, four loops.
+RC_FRAME_LOOPS = 4
+#: Emulated-time bounds: reset to the first loop; one loop (a loop that takes longer has hung,
+#: and the 500 ms watchdog has already reset the chip); draining the UART on a sync frame.
+BOOT_LIMIT_S = 5.0
+LOOP_LIMIT_S = 2.0
+DRAIN_LIMIT_S = 0.004
+SYSTICK_EXCEPTION = 15
+
+
+class ImageFault(RuntimeError):
+    """The image stopped in a way a board would not recover from by itself."""
+
+
+class PilBoard:
+    """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
+    keep the parameter flash in that file (:class:`ParamFile`)."""
+
+    def __init__(self, elf: str, params_file: str | None = None):
+        self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
+        self.machine = self.board.machine
+        image = self.machine.image
+        for needed in (WAIT_SYMBOL, REPORT_SYMBOL):
+            if not image.has(needed):
+                raise ImageFault(f"{elf} has no {needed}: not a heliquad Teensy 3.5 image "
+                                 "(or one older than the processor-in-the-loop target)")
+        self.params = ParamFile(self.board, params_file) if params_file else None
+        self.report_address = image.symbol(REPORT_SYMBOL).address
+        self.waits = 0
+        self._wait_target = None
+        self.machine.break_at(WAIT_SYMBOL, self._on_wait)
+        self.resets = 0
+        self._rc_last, self._rc_age = None, 0
+        self._fault = None
+        self.step_cycles = []
+        self.telemetry_out = bytearray()
+
+    def _on_wait(self, machine):
+        self.waits += 1
+        if self._wait_target is not None and self.waits >= self._wait_target:
+            return "loop-done"
+        return None
+
+    def _run_to_wait(self, limit_s: float, what: str):
+        """Run until the main loop next reaches its sleep; a watchdog reset reboots."""
+        self._wait_target = self.waits + 1
+        try:
+            while True:
+                try:
+                    stop = self.machine.run(seconds=limit_s)
+                except ChipReset as e:
+                    self.resets += 1
+                    print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
+                          file=sys.stderr, flush=True)
+                    self.board.reset()
+                    self._rc_last = None            # the image lost its captures
+                    self._fault = None
+                    self.waits = 0
+                    self._wait_target = 1
+                    continue
+                except EmulationError as e:
+                    raise ImageFault(f"{what}: {e}") from None
+                if stop.reason == "loop-done":
+                    return
+                if stop.reason == "fatal":
+                    raise ImageFault(f"{what}: the image stopped in hq_fatal "
+                                     f"(code {stop.detail.get('code')})")
+                raise ImageFault(f"{what}: the main loop did not come round within "
+                                 f"{limit_s:g} s of emulated time ({stop})")
+        finally:
+            self._wait_target = None
+
+    def boot(self) -> None:
+        """Reset to the main loop's first sleep, before the first tick (the stack painted
+        first, for its high-water mark)."""
+        image = self.machine.image
+        if self.params:
+            self.params.restore()
+        self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
+        self._run_to_wait(BOOT_LIMIT_S, "start-up")
+        if self.params:
+            self.params.keep()
+        self.machine.core.keep_records = False
+        self.board.mpu.log.clear()
+        self.board.chip.i2c0.transfers.clear()
+        self.board.chip.ftm3.captures.clear()
+        self._collect_telemetry()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def apply_imu_fault(self, fault: int) -> None:
+        """The frame's IMU fault. The held ones (none, NACK, silent, stuck bus) are set
+        again only when the fault changes; reset and overflow act at every frame that
+        carries them."""
+        mav = dialect()
+        if fault == self._fault and fault not in (mav.HQ_IMU_FAULT_RESET,
+                                                  mav.HQ_IMU_FAULT_OVERFLOW):
+            return
+        self._fault = fault
+        mpu = self.board.mpu
+        self.board.chip.i2c0.hold_scl(fault == mav.HQ_IMU_FAULT_STUCK_BUS)
+        mpu.set_present(fault != mav.HQ_IMU_FAULT_NACK)
+        mpu.emu.set_silent(fault == mav.HQ_IMU_FAULT_SILENT)
+        if fault == mav.HQ_IMU_FAULT_RESET:
+            mpu.emu.power_on_reset()
+        if fault == mav.HQ_IMU_FAULT_OVERFLOW:
+            mpu.emu.force_overflow()
+
+    def rc_pulses(self, rc_us) -> None:
+        """Servo pulses as a 50 Hz receiver sends them (every RC_FRAME_LOOPS frames), and at
+        once when a channel's value changes, so a stick change reaches the image's next loop
+        as it reaches the host build's. One pulse per channel with a signal (0: none). A
+        receiver's pulse is continuous, the frame's value an integer: each pulse is the one
+        the image's capture reads as exactly that integer (Teensy35.rc_capture_pulse)."""
+        rc = tuple(int(v) for v in rc_us[:RC_CHANNELS])
+        self._rc_age += 1
+        if rc == self._rc_last and self._rc_age < RC_FRAME_LOOPS:
+            return
+        self._rc_last, self._rc_age = rc, 0
+        self.board.rc_capture_pulses({ch: us for ch, us in enumerate(rc) if us > 0})
+
+    def feed_telemetry(self, data: bytes) -> None:
+        if data:
+            self.board.receive(data)
+
+    # -- one frame ---------------------------------------------------------------------------
+    def frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int, sync: bool):
+        """Inputs in, one loop, outputs out: (motors, armed, mode, sensor kind)."""
+        self.apply_imu_fault(imu_fault)
+        if fifo:
+            self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
+        self.rc_pulses(rc_us)
+        self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
+        if self.params:
+            self.params.keep()
+        if sync:
+            self._drain_uart()
+        self._collect_telemetry()
+        loops, cycles, _, armed, mode, kind, _ = self.report()
+        self.step_cycles.append(cycles)
+        return self.thrust(), bool(armed), mode, kind
+
+    def report(self) -> tuple:
+        """hq_loop_report as the image last wrote it."""
+        return REPORT.unpack(self.machine.read(self.report_address, REPORT.size))
+
+    def figures(self) -> dict:
+        """What the board would report of its loop: cycles per step (median and maximum over
+        the frames run), overruns since boot, the stack's high-water mark, and the
+        emulated time."""
+        m, image = self.machine, self.machine.image
+        loops, _, overruns, *_ = self.report()
+        cycles = sorted(self.step_cycles) or [0]
+        low = m.painted_high_water(image.ram_end(), image.initial_sp, STACK_PAINT)
+        return {"loops": loops, "step_cycles_median": cycles[len(cycles) // 2],
+                "step_cycles_max": cycles[-1], "overruns": overruns,
+                "stack_bytes": image.initial_sp - low, "emulated_s": m.seconds(),
+                "watchdog_resets": self.resets}
+
+    def _drain_uart(self) -> None:
+        """Let the board run (it sleeps, the TX interrupt feeds the UART) until nothing it
+        queued is left to send: then the loop's telemetry is on the wire. Never into the
+        next loop, whose inputs are not in yet: at most until 20 us before the next SysTick
+        (none at all when that tick is already pending: the loop overran), and at most
+        DRAIN_LIMIT_S. What is still queued then leaves during the next frame, as the bytes
+        of a loop that sent more than its period carries leave a board late."""
+        uart = self.board.chip.uart0
+        m = self.machine
+        systick = self.board.chip.scs.systick
+        if m.pending & (1 << SYSTICK_EXCEPTION) or systick.zero_at is None:
+            return
+        deadline = min(m.now() + int(DRAIN_LIMIT_S * m.core_hz),
+                       systick.zero_at - int(20e-6 * m.core_hz))
+        while m.now() < deadline and not uart.tx_idle():
+            step = min(uart.frame_cycles() * 4, deadline - m.now())
+            m.run(seconds=step / m.core_hz)
+
+    def thrust(self) -> list:
+        """The five thrust fractions the ESCs get from the next PWM period on."""
+        ftm0 = self.board.chip.ftm0
+        lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
+        out = []
+        for ch in range(5):
+            counts = ftm0.commanded_value(ch)
+            out.append(min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None
+                       else 0.0)
+        return out
+
+    def _collect_telemetry(self) -> None:
+        chip = self.board.chip
+        self.telemetry_out += self.board.take_telemetry()
+        # A lockstep run is long: the models' inspection logs must not grow with it (the
+        # native models keep none after the boot, see boot(); the pin model's level log is
+        # Python's).
+        chip.ports.level_log.clear()

@@ -1,0 +1,134 @@
+"""The drop-in's server loop: the emulated board behind the two ptys, sensor frames in,
+replies and telemetry out, as heliquad-fw-host serves them (docs/link-contract.md)."""
+
+from __future__ import annotations
+
+import select
+import sys
+import time
+
+from ...base.dialect import dialect
+from ...base.framing import Codec, Framer
+from .board import IMAGE_LOOP_HZ
+from .pty import Pty
+
+#: Telemetry is written out in chunks as a USB CDC device ships it (the link contract): after
+#: a sync frame's reply, once this many bytes wait, or when the sim link is quiet this long.
+TELEMETRY_CHUNK = 1024
+QUIET_S = 0.001
+#: The drop-in's exit codes: a usage error (an option, the image, the parameter file), no
+#: frame for the idle timeout, a sim link that failed, a fault of the image.
+EXIT_USAGE, EXIT_IDLE, EXIT_LINK, EXIT_IMAGE = 2, 3, 4, 5
+
+
+class Stop:
+    """Set by the signal handler: the loop ends at its next turn."""
+
+    requested = False
+
+
+class DropIn:
+    """The board behind the two ptys: sensor frames in, replies and telemetry out, as
+    heliquad-fw-host does (docs/link-contract.md)."""
+
+    def __init__(self, board, sim, tel, idle_timeout_s: float, backlog_bytes: int = 0):
+        self.backlog_bytes = min(backlog_bytes, Pty.MAX_BACKLOG)
+        self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
+        self.mav = mav = dialect()
+        # The vehicle's ids, as the board's.
+        self.codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
+        self.framer = Framer(self.codec)
+        self.frame_id = mav.MAVLINK_MSG_ID_HQ_SENSOR_FRAME
+        self.reply_id = mav.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME
+        self.last_frame, self.reply = None, b""
+        self.lost = self.repeated = self.frames = self.dropped = 0
+        self.last_input = time.monotonic()
+        self.uplink = b""
+
+    def flush_telemetry(self) -> None:
+        """Put the queued telemetry on the link; before the first frame, nothing: what the
+        boot sent (the parameters' and the IMU's start-up messages) waits for the simulator,
+        which opens the telemetry port before it steps (opening a serial port discards what
+        was already waiting), as the host build does."""
+        out = self.board.telemetry_out
+        if self.backlog_bytes:
+            self.dropped += self.tel.drop_oldest(out, self.backlog_bytes)
+        if out and self.frames:
+            del out[:self.tel.write_some(bytes(out))]
+
+    def serve(self) -> int:
+        """Answer sensor frames until asked to stop, idle, or the link fails: the exit code."""
+        board, sim, tel = self.board, self.sim, self.tel
+        while not Stop.requested:
+            # Telemetry leaves as the link contract says: after a sync frame's reply, and
+            # otherwise once TELEMETRY_CHUNK bytes wait or the sim link is quiet QUIET_S.
+            if len(board.telemetry_out) >= TELEMETRY_CHUNK:
+                self.flush_telemetry()
+            ready, _, _ = select.select([sim.master, tel.master], [], [],
+                                        QUIET_S if board.telemetry_out else 0.1)
+            if tel.master in ready:
+                self.uplink += tel.read()           # fed to the board before its next loop
+            if sim.master in ready:
+                self.last_input = time.monotonic()
+                code = self._feed(sim.read())
+                if code:
+                    return code
+            elif self._idle(ready):
+                return EXIT_IDLE
+        return 0
+
+    def _idle(self, ready) -> bool:
+        """Nothing on the sim link: flush, drop what nobody reads, and say when to give up."""
+        if not ready:
+            self.flush_telemetry()
+            if len(self.board.telemetry_out) > (1 << 20):     # nobody reads the link
+                self.dropped += len(self.board.telemetry_out)
+                self.board.telemetry_out.clear()
+        if time.monotonic() - self.last_input >= self.idle_timeout_s:
+            print(f"heliquad-fw-pil: no sensor frame for {self.idle_timeout_s} s; exiting",
+                  file=sys.stderr)
+            return True
+        return False
+
+    def _feed(self, data: bytes) -> int:
+        for msgid, _, payload in self.framer.feed(data):
+            if msgid != self.frame_id:
+                continue
+            msg = self.codec.decode(msgid, payload)
+            if self.last_frame is not None and msg.frame == self.last_frame:
+                self.repeated += 1                 # the simulator resent it: same reply
+            else:
+                self._step(msg)
+            if msg.sync:
+                self.flush_telemetry()
+            if not self.sim.write_all(self.reply, 5.0):
+                print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
+                return EXIT_LINK
+        return 0
+
+    def _step(self, msg) -> None:
+        """One new sensor frame: the board's loop, and the reply to send."""
+        if self.last_frame is not None and msg.frame > self.last_frame + 1:
+            gap = msg.frame - self.last_frame - 1
+            self.lost += gap
+            print(f"heliquad-fw-pil: {gap} sensor frame(s) lost by frame {msg.frame}",
+                  file=sys.stderr)
+        self.last_frame = msg.frame
+        self.frames += 1
+        self.board.feed_telemetry(self.uplink)
+        self.uplink = b""
+        fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
+        motors, armed, mode, kind = self.board.frame(
+            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault, bool(msg.sync))
+        self.reply = self.codec.encode(self.reply_id, {
+            "time_us": msg.time_us, "frame": msg.frame, "motor": motors, "armed": int(armed),
+            "mode": mode, "sensor_kind": kind})
+
+    def summary(self) -> str:
+        f = self.board.figures()
+        return (f"heliquad-fw-pil: {f['loops']} loops, {self.lost} frames lost, {self.repeated} "
+                f"repeated, {self.dropped} telemetry bytes dropped, {f['watchdog_resets']} "
+                f"watchdog resets, {f['emulated_s']:.3f} s emulated; step cycles median "
+                f"{f['step_cycles_median']} max {f['step_cycles_max']} of "
+                f"{int(self.board.machine.core_hz / IMAGE_LOOP_HZ)}, {f['overruns']} overruns, "
+                f"stack high-water {f['stack_bytes']} bytes")
