@@ -275,7 +275,7 @@ class SimLink:
 
     pyserial opens the pty and makes it raw; the exchange itself (MAVLink framing, the
     reply's counter check, the timeout) is C++ (``heliquad._simcore.SimLinkPort``,
-    sim/native/sim_link.cpp), shared with the batch engine of :class:`heliquad.sim.rig.setup.SilSession`.
+    sim/rig/sim_link.cpp), shared with the batch engine of :class:`heliquad.sim.rig.setup.SilSession`.
     """
 
     def __init__(self, firmware: HostFirmware):
