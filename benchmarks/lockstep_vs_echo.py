@@ -6,7 +6,8 @@ frame of the sim link's size (HQ_SENSOR_FRAME, 210 bytes) with pyserial and read
 This is the transport's round-trip cost with nothing else in it, for a Python simulator.
 
 Floor, for reference: the same echo with a C client (write, poll, read), the round trip the
-C++ engine (sim/native) could reach if the firmware took no time and sent no telemetry.
+C++ engine (heliquad._simcore's sim/rig/rig_engine.cpp) could reach if the firmware took no
+time and sent no telemetry.
 
 Lockstep: ``heliquad sil`` with the transfer-function plant (the paper's roll model) at a
 200 Hz loop, mixer injection: plant step, sensor packet, frame out, firmware step, reply and

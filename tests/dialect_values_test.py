@@ -17,7 +17,7 @@ Python (host/, sim/, benchmarks/, the test helpers that are not test modules):
     ``SENSOR_NONE = 0``);
   * a number whose comment names an entry of that value or an array field of that length
     (``6, 8  # MAV_TYPE_GCS, ...``, ``168  # HQ_SENSOR_FRAME.fifo``).
-C++ (firmware/, sim/native/):
+C++ (firmware/, sim/):
   * an enum with number initialisers of which two or more are a dialect enum's entries
     by name and value (``enum class FifoKind { None = 0, Dmp = 1, Raw = 2 }``);
   * a number whose comment (that line or the one above) names an entry of that value or an
@@ -358,7 +358,7 @@ def cpp_copies(text: str) -> list:
 
 
 def cpp_sources() -> list:
-    files = [p for folder in ("firmware", "sim/native") for ext in ("*.hpp", "*.cpp")
+    files = [p for folder in ("firmware", "sim") for ext in ("*.hpp", "*.cpp")
              for p in (ROOT / folder).rglob(ext)]
     # The MK64F12 register header is generated from NXP's SVD (registers, not the dialect).
     return sorted(p for p in files if p.name != "mk64f12.hpp")

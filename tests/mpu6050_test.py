@@ -1,5 +1,5 @@
 """The MPU6050 driver against the emulated chip (firmware/core/mpu6050.cpp and
-firmware/targets/host/mpu6050_emulator.cpp)."""
+sim/sensor/mpu6050_emulator.cpp)."""
 
 import math
 import struct

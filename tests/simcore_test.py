@@ -1,4 +1,4 @@
-"""The simulator's C++ core (sim/native, ``heliquad._simcore``): FIFO packets the firmware's
+"""The simulator's C++ core (sim/*/*.cpp, ``heliquad._simcore``): FIFO packets the firmware's
 driver reads back, the batch engine against frame-by-frame stepping, and its failures."""
 
 import math

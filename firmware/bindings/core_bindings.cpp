@@ -20,7 +20,7 @@
 #include "core/pid.hpp"
 #include "core/rc.hpp"
 #include "core/supervisor.hpp"
-#include "targets/host/mpu6050_emulator.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 namespace py = pybind11;
 using namespace hq;

@@ -74,7 +74,7 @@ constexpr uint16_t kDmpSettleBytes = 3;   // MotionApps waits for more than 2 FI
 // Scales, the chip's exact figures: gyro at +/-2000 deg/s is 16.4 LSB per deg/s; accel at
 // +/-2 g is 16384 LSB per g; the DMP quaternion is Q30 (2^30 per unit). The DMP packet's gyro
 // and accel high halves use the same scales (docs/mpu6050.md). The one definition: the
-// simulator's packet encoder (sim/native/fifo_packets.*) and its Python names use these.
+// simulator's packet encoder (sim/sensor/fifo_packets.*) and its Python names use these.
 constexpr double kGyroLsbPerDegS = 16.4, kAccelLsbPerG = 16384.0, kQuatScale = 1073741824.0;
 
 // One entry of a MotionApps DMP table (dmpConfig, dmpUpdates): bank, offset, length, then

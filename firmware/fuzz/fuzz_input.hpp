@@ -17,7 +17,7 @@
 #include "../core/mpu6050.hpp"
 #include "../targets/host/clock.hpp"
 #include "../targets/host/motors.hpp"
-#include "../targets/host/mpu6050_emulator.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 namespace hqfuzz {
 

@@ -15,9 +15,9 @@
 
 #include "core/flight_controller.hpp"
 #include "fuzz_input.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 #include "targets/host/clock.hpp"
 #include "targets/host/motors.hpp"
-#include "targets/host/mpu6050_emulator.hpp"
 
 namespace {
 

@@ -36,7 +36,7 @@ cache control (FMC).
   interrupts and erase suspend (FCNFG writes that set them are noted), security, margin
   levels, the FlexNVM block (0x1000_0000) and its FlexRAM.
 
-The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp): a command's
+The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp): a command's
 wait polls FSTAT hundreds of thousands of times a save. This class is its view.
 
 The FMC (:class:`Fmc`, Python) keeps its registers; writes that invalidate the cache ways or

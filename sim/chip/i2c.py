@@ -24,7 +24,7 @@ completes while it does, so S[TCF]/S[IICIF] never set and S[BUSY], once set by a
 stays set; bytes in flight are lost. Releasing it frees the bus (BUSY clears unless the
 master holds it).
 
-The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp), and so is
+The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp), and so is
 the MPU6050 slave's byte protocol on the project's register model: a flight loop moves a
 couple of dozen bytes and the driver touches S, D and C1 for each. These classes are views.
 """

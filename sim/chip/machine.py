@@ -1,5 +1,5 @@
 """The Cortex-M4 core of the emulated chip: unicorn for the instructions, this module and its
-native half (``heliquad._simcore.Mk64Core``, sim/native/mk64_core.cpp) for everything
+native half (``heliquad._simcore.Mk64Core``, sim/chip/mk64_core.cpp) for everything
 unicorn leaves out on an M-profile core.
 
 * Memory map: flash (read/execute), SRAM, and the peripheral spaces as MMIO dispatched to
@@ -53,7 +53,7 @@ PPB_BASE, PPB_SIZE = 0xE000_0000, 0x0010_0000                  # private periphe
 
 N_EXCEPTIONS = 16 + 86
 _INTR_UNDEF = 1
-# Why Mk64Core.run() returned (sim/native/mk64_core.hpp, enum Run).
+# Why Mk64Core.run() returned (sim/chip/mk64_core.hpp, enum Run).
 (_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
  _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
 # Native device numbers (Core::Device).

@@ -39,7 +39,7 @@ class SysTick:
     SysTick exception; the next cycle reloads RVR (a period of RVR + 1 cycles). Reading CSR
     clears COUNTFLAG; any CVR write clears the counter and COUNTFLAG.
 
-    The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp); this
+    The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp); this
     is its view."""
 
     def __init__(self, machine):

@@ -24,7 +24,7 @@ What leaves the transmitter is kept with its time (``sent``: (cycle, byte) per b
 taken (:meth:`Uart.take_sent`), so tests and a host model see the line, not the register
 writes, and a long run need not keep every byte.
 
-The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp): the
+The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp): the
 telemetry handler touches S1, TCFIFO and D hundreds of times a loop. This class is its view.
 """
 

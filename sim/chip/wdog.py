@@ -16,7 +16,7 @@ cycle) so a test can check nothing ran before it, the writes it ignored (``ignor
 every write (``log``: instruction count, cycle, register, value) until taken (none with the
 core's ``keep_records`` off). A reset stops the run and raises ``ChipReset("WDOG", why)``.
 
-The model is native (``heliquad._simcore.Mk64Core``, sim/native/mk64_devices.cpp): the loop
+The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp): the loop
 refreshes it every tick. This class is its view.
 """
 

@@ -1,7 +1,7 @@
 """The MPU6050 as the simulator presents it: noise, residual bias and DMP latency.
 
 Applied between the true body state and the FIFO packets (the chip's quantisation is in the
-packet encoder, sim/native/fifo_packets.cpp). Gyro and accelerometer white noise have the
+packet encoder, sim/sensor/fifo_packets.cpp). Gyro and accelerometer white noise have the
 datasheet's spectral densities over the DLPF's noise bandwidth; the gyro keeps a constant
 residual bias; the DMP's attitude and rates come ``dmp_latency_samples`` loop samples late.
 

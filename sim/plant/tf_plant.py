@@ -81,7 +81,7 @@ class TfPlant:
         self.dt_s = dt_s
         A, B, self._C, self._D = tf2ss(list(map(float, num)), list(map(float, den)))
         self._Ad, self._Bd = zoh(A, B, dt_s)
-        # The per-frame arithmetic runs in C++ (sim/native/tf_axis.cpp), the same code the
+        # The per-frame arithmetic runs in C++ (sim/plant/tf_axis.cpp), the same code the
         # lockstep engine steps.
         self.core = _simcore.TfAxis(self._Ad.ravel().tolist(), self._Bd.ravel().tolist(),
                                     self._C.ravel().tolist(), dt_s, self.index)

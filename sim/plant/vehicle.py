@@ -24,7 +24,7 @@ Physics (docs/vehicle-model.md has the derivation):
 
 Integration: classical Runge-Kutta 4 with ``substeps`` steps per call.
 
-The equations themselves run in C++ (sim/native/vehicle_model.cpp, ``heliquad._simcore``):
+The equations themselves run in C++ (sim/plant/vehicle_model.cpp, ``heliquad._simcore``):
 the lockstep engine steps them every frame, and this class calls the same code, so there is
 one implementation. This module owns the parameters and the geometry derived from them.
 """
@@ -51,7 +51,7 @@ SUBSTEPS = 2
 #: RK4 is stable while an RK4 step times a mode's rate stays below about 2.8 (on the real
 #: and the imaginary axis alike); a vehicle file must keep it below this.
 RK4_LIMIT = 2.5
-#: The hinge's Coulomb friction is smoothed over this rate (sim/native/vehicle_model.cpp).
+#: The hinge's Coulomb friction is smoothed over this rate (sim/plant/vehicle_model.cpp).
 FRICTION_SMOOTH_RAD_S = 0.01
 
 

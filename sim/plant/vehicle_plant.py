@@ -69,7 +69,7 @@ class VehiclePlant:
             t = self.params.turbulence
             self.dryden = Dryden(turbulence, t.altitude_m, t.span_m, dt_s, seed)
         # The per-frame work (gusts as forces and moments, the step, the IMU's bias and delay
-        # line, the specific force) runs in C++ (sim/native/vehicle_model.cpp); this class
+        # line, the specific force) runs in C++ (sim/plant/vehicle_model.cpp); this class
         # draws the random inputs and states the truth.
         imu = self.imu.config() if self.imu else _simcore.ImuConfig()
         self.core = _simcore.VehicleRig(self.vehicle.core, dt_s, imu,

@@ -278,7 +278,7 @@ class SimLink:
 
     pyserial opens the pty and makes it raw; the exchange itself (MAVLink framing, the
     reply's counter check, the timeout) is C++ (``heliquad._simcore.SimLinkPort``,
-    sim/native/sim_link.cpp), shared with the batch engine of the lockstep driver
+    sim/rig/sim_link.cpp), shared with the batch engine of the lockstep driver
     (:class:`heliquad.sim.rig.driver.Rig`).
     """
 

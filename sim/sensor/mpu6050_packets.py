@@ -4,7 +4,7 @@ Formats and scales are those of ``firmware/core/mpu6050.hpp`` (docs/mpu6050.md):
 are 42 bytes (quaternion Q30, gyro and accel as int32 with the value in the high int16, two
 unused bytes), raw samples 12 bytes (accel then gyro, int16); all big-endian. Values come in
 body FRD and are converted to the chip frame (x forward, y left, z up) by the encoder, which is
-C++ (sim/native/fifo_packets.cpp) because the lockstep engine encodes a packet every frame;
+C++ (sim/sensor/fifo_packets.cpp) because the lockstep engine encodes a packet every frame;
 these are its Python entry points.
 """
 

@@ -38,8 +38,8 @@
 #include "i2c.hpp"
 #include "motors.hpp"
 #include "param_storage.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 #include "serial.hpp"
-#include "mpu6050_emulator.hpp"
 #include "sim_link_handler.hpp"
 
 namespace {

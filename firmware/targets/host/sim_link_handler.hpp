@@ -17,7 +17,7 @@
 #include "../../core/flight_controller.hpp"
 #include "clock.hpp"
 #include "motors.hpp"
-#include "mpu6050_emulator.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 namespace hq {
 

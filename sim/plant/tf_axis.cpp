@@ -1,4 +1,4 @@
-#include "tf_axis.hpp"
+#include "plant/tf_axis.hpp"
 
 #include <cmath>
 #include <stdexcept>

@@ -1,10 +1,10 @@
-#include "rig_engine.hpp"
+#include "rig/rig_engine.hpp"
 
 #include <chrono>
 #include <stdexcept>
 #include <string>
 
-#include "fifo_packets.hpp"
+#include "sensor/fifo_packets.hpp"
 
 namespace hqsim {
 

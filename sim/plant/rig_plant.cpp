@@ -1,4 +1,4 @@
-#include "rig_plant.hpp"
+#include "plant/rig_plant.hpp"
 
 namespace hqsim {
 

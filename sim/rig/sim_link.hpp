@@ -9,7 +9,7 @@
 #include <cstdint>
 
 #include "heliquad/mavlink.h"
-#include "rig_plant.hpp"
+#include "plant/rig_plant.hpp"
 
 namespace hqsim {
 

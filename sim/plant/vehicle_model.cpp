@@ -1,4 +1,4 @@
-#include "vehicle_model.hpp"
+#include "plant/vehicle_model.hpp"
 
 #include <algorithm>
 #include <cmath>

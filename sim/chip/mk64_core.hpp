@@ -1,4 +1,4 @@
-// The emulated MK64FX512's hot path (sim/mk64, docs/teensy35-emulator.md): what runs at every
+// The emulated MK64FX512's hot path (sim/chip, docs/teensy35-emulator.md): what runs at every
 // translated block, every access to the busy peripherals and every interrupt, in C++ so that a
 // flight loop costs no Python call per block or register access.
 //

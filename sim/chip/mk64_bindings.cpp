@@ -1,5 +1,5 @@
 // heliquad._simcore.Mk64Core: the emulated MK64FX512's native hot path (mk64_core.hpp) as
-// sim/mk64's Machine and its device views use it. Thin: every rule lives in mk64_core.cpp and
+// sim/chip's Machine and its device views use it. Thin: every rule lives in mk64_core.cpp and
 // mk64_devices.cpp; this file converts arguments.
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "mk64_core.hpp"
-#include "targets/host/mpu6050_emulator.hpp"
+#include "chip/mk64_core.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 namespace py = pybind11;
 using namespace hqsim::mk64;
@@ -86,7 +86,7 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 
 void bind_mk64(py::module_& m) {
     py::class_<Core>(m, "Mk64Core",
-                     "The emulated MK64FX512's hot path (sim/mk64): block accounting, events, "
+                     "The emulated MK64FX512's hot path (sim/chip): block accounting, events, "
                      "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0/FTM0/FTM3/WDOG models.")
         .def(py::init([](const py::dict& uc, const py::dict& regs, const py::dict& callbacks,
                          std::vector<std::string> names) {

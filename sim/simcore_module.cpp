@@ -1,6 +1,8 @@
-// heliquad._simcore: the simulator's per-frame work (plants, FIFO packets, the sim link and
-// the lockstep engine) for the Python simulator in sim/. Python owns configuration, random
-// numbers, truth and logging; see docs/architecture.md.
+// heliquad._simcore, the module itself: the Python binding of the simulator's per-frame work,
+// each part beside the Python of its concept (plant/: the plants; sensor/: FIFO packets;
+// rig/: the sim link, the lockstep engine, the telemetry tap; chip/: the emulated MK64,
+// bound by chip/mk64_bindings.cpp). Python owns configuration, random numbers, truth and
+// logging; see docs/architecture.md.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -10,12 +12,12 @@
 #include <string>
 #include <vector>
 
-#include "fifo_packets.hpp"
-#include "rig_engine.hpp"
-#include "sim_link.hpp"
-#include "telemetry_tap.hpp"
-#include "tf_axis.hpp"
-#include "vehicle_model.hpp"
+#include "plant/tf_axis.hpp"
+#include "plant/vehicle_model.hpp"
+#include "rig/rig_engine.hpp"
+#include "rig/sim_link.hpp"
+#include "rig/telemetry_tap.hpp"
+#include "sensor/fifo_packets.hpp"
 
 namespace py = pybind11;
 using namespace hqsim;

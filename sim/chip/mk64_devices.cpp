@@ -10,9 +10,9 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "chip/mk64_core.hpp"
 #include "core/mpu6050.hpp"
-#include "mk64_core.hpp"
-#include "targets/host/mpu6050_emulator.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 namespace hqsim::mk64 {
 

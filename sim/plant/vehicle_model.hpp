@@ -7,7 +7,7 @@
 #include <array>
 #include <deque>
 
-#include "rig_plant.hpp"
+#include "plant/rig_plant.hpp"
 
 namespace hqsim {
 

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/mixer.hpp"
-#include "rig_plant.hpp"
+#include "plant/rig_plant.hpp"
 
 namespace hqsim {
 

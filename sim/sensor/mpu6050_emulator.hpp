@@ -1,13 +1,15 @@
-// Register-level model of an MPU6050 behind the host build's I2C bus: the unchanged driver
-// talks to it exactly as to the chip. The simulator feeds it the FIFO bytes the real chip
-// would produce each frame (push_fifo); the model keeps the chip's 1024-byte FIFO with its
-// overflow behaviour (oldest bytes lost, INT_STATUS FIFO_OFLOW set, packets misaligned until
-// a FIFO reset), WHO_AM_I, power, rate and filter registers, USER_CTRL (FIFO/DMP enable,
-// self-clearing FIFO and DMP reset), INT_STATUS (cleared by reading), FIFO_COUNT, FIFO_R_W,
-// and the bank/start-address/R_W window onto DMP memory with address auto-increment.
-// Faults for tests (HQ_IMU_FAULT on the sim link): silent (answers, produces no data), absent
-// (every transfer NACKs), a power-on reset (registers, FIFO and DMP memory lost), a FIFO
-// overflow, and a stuck DMP memory byte (it ignores writes).
+// Register-level model of an MPU6050, a part of the simulator's sensor: behind the host build's
+// I2C bus (firmware/targets/host) and behind the emulated MK64's I2C0 (chip/), the unchanged
+// driver talks to it exactly as to the chip. Built for the host only (library hq_host_devices),
+// never into the Teensy image. The simulator feeds it the FIFO bytes the real chip would
+// produce each frame (push_fifo); the model keeps the chip's 1024-byte FIFO with its overflow
+// behaviour (oldest bytes lost, INT_STATUS FIFO_OFLOW set, packets misaligned until a FIFO
+// reset), WHO_AM_I, power, rate and filter registers, USER_CTRL (FIFO/DMP enable, self-clearing
+// FIFO and DMP reset), INT_STATUS (cleared by reading), FIFO_COUNT, FIFO_R_W, and the
+// bank/start-address/R_W window onto DMP memory with address auto-increment. Faults for tests
+// (HQ_IMU_FAULT on the sim link): silent (answers, produces no data), absent (every transfer
+// NACKs), a power-on reset (registers, FIFO and DMP memory lost), a FIFO overflow, and a stuck
+// DMP memory byte (it ignores writes).
 //
 // The DMP: the model runs no DMP code (the simulator computes the packets), but it checks that
 // the driver set the DMP up as MotionApps 2.0 does before it accepts DMP packets. Given the
@@ -26,8 +28,8 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "../../core/mpu6050.hpp"
-#include "../../hal/i2c.hpp"
+#include "core/mpu6050.hpp"
+#include "hal/i2c.hpp"
 
 namespace hq {
 

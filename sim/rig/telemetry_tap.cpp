@@ -1,4 +1,4 @@
-#include "telemetry_tap.hpp"
+#include "rig/telemetry_tap.hpp"
 
 #include <unistd.h>
 

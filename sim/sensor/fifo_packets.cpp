@@ -1,4 +1,4 @@
-#include "fifo_packets.hpp"
+#include "sensor/fifo_packets.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 // return, WFI, and the MMIO dispatch (mk64_core.hpp says what and why). Every rule here is the
 // one sim/chip/machine.py documented when it did this in Python; the order of the checks at a
 // block boundary is kept, so instruction and cycle counts are the same.
-#include "mk64_core.hpp"
+#include "chip/mk64_core.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,7 @@
-// The simulator's per-frame work in C++ (docs/architecture.md, "sim/native"): what a plant
-// offers the lockstep engine. Python (sim/*.py) builds and configures every plant, draws the
-// random numbers and states the truth; this code only steps it, frame after frame.
+// The simulator's per-frame work in C++ (heliquad._simcore; docs/architecture.md): what a
+// plant offers the lockstep engine. Python (sim/plant/*.py) builds and configures every
+// plant, draws the random numbers and states the truth; this code only steps it, frame after
+// frame.
 //
 // Units and frames as in docs/units-and-frames.md: body FRD, NED, quaternion w x y z (body
 // to NED), rates rad/s, specific force m/s^2, motor commands thrust fractions 0..1.

@@ -1,4 +1,4 @@
-#include "mpu6050_emulator.hpp"
+#include "sensor/mpu6050_emulator.hpp"
 
 #include <cstdio>
 #include <cstring>

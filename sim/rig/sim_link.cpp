@@ -1,4 +1,4 @@
-#include "sim_link.hpp"
+#include "rig/sim_link.hpp"
 
 #include <fcntl.h>
 #include <termios.h>

@@ -10,7 +10,7 @@
 
 #include "core/mpu6050.hpp"
 #include "heliquad/mavlink.h"
-#include "rig_plant.hpp"
+#include "plant/rig_plant.hpp"
 
 namespace hqsim {
 

@@ -11,8 +11,8 @@
 #include <thread>
 #include <vector>
 
-#include "rig_plant.hpp"
-#include "sim_link.hpp"
+#include "plant/rig_plant.hpp"
+#include "rig/sim_link.hpp"
 
 namespace hqsim {
 
