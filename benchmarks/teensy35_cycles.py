@@ -1,4 +1,4 @@
-"""Benchmark: the Teensy 3.5 image's main loop in the emulated MK64FX512 (sim/mk64).
+"""Benchmark: the Teensy 3.5 image's main loop in the emulated MK64FX512 (sim/chip).
 
 Runs the image as built (build/teensy35/heliquad-fw-teensy35.elf, the preset's
 optimisation level, read from the build's CMakeCache.txt) from reset through N loops, with

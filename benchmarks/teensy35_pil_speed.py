@@ -1,4 +1,4 @@
-"""Benchmark: how fast the emulated Teensy 3.5 (sim/mk64) runs the image's main loop, as a
+"""Benchmark: how fast the emulated Teensy 3.5 (sim/chip) runs the image's main loop, as a
 processor-in-the-loop target would drive it.
 
 From reset to the first loop, then a warm-up (every block decoded once), then N loops the

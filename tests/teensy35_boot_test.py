@@ -1,4 +1,4 @@
-"""The emulated MK64FX512 (sim/mk64) and the Teensy 3.5 image booting on it.
+"""The emulated MK64FX512 (sim/chip) and the Teensy 3.5 image booting on it.
 
 Two parts:
 

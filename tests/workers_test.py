@@ -58,7 +58,7 @@ except KeyboardInterrupt:
 # does (SIGTERM raises Terminated).
 PARENT = """
 import signal, sys
-from heliquad.sim.base.errors import Terminated
+from heliquad.host.process.signals import Terminated
 from heliquad.host.process.workers import run_children
 def on_sigterm(signum, frame):
     raise Terminated()

@@ -2,7 +2,7 @@
 script: ``heliquad mavlink-dialect`` runs it with the Python whose pymavlink makes the
 module, which may be another virtualenv's, so it imports nothing of heliquad's).
 
-    python mavgen_dialect.py DIALECT.xml OUT_DIR
+    python mavgen_script.py DIALECT.xml OUT_DIR
 
 Copies DIALECT.xml and the message definitions it includes (pymavlink's common.xml,
 standard.xml, minimal.xml) into OUT_DIR, generates OUT_DIR/DIALECT.py (Python 3, MAVLink 2)

@@ -25,7 +25,7 @@ from ...sim.base.errors import InputError
 __all__ = ["dialect_xml", "generate", "add_parser"]
 
 NAME = "heliquad"
-#: The MAVLink 1 module, in the folder and in pymavlink's dialects (``mavgen_dialect.py``).
+#: The MAVLink 1 module, in the folder and in pymavlink's dialects (``mavgen_script.py``).
 V10_MODULE = os.path.join("v10", f"{NAME}.py")
 #: The files a folder gets: the dialect, what it includes, and the generated modules.
 FOLDER_FILES = (f"{NAME}.xml", "common.xml", "standard.xml", "minimal.xml", f"{NAME}.py",
@@ -35,7 +35,8 @@ FOLDER_FILES = (f"{NAME}.xml", "common.xml", "standard.xml", "minimal.xml", f"{N
 INSTALLED_FILES = ((f"{NAME}.py", os.path.join("v20", f"{NAME}.py")),
                    (f"{NAME}.xml", os.path.join("v20", f"{NAME}.xml")),
                    (V10_MODULE, V10_MODULE))
-SCRIPT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "mavgen_dialect.py")
+SCRIPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "cli",
+                      "mavgen_script.py")
 #: Runs SCRIPT without putting its folder (or the working folder) on the other Python's path.
 RUNNER = ("import runpy, sys\n"
           "if sys.path and sys.path[0] == '': del sys.path[0]\n"

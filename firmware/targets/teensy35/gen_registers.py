@@ -41,7 +41,7 @@ import xml.etree.ElementTree as ET
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
 DEFAULT_OUT = HERE / "mk64f12.hpp"
-SUPPLEMENT = ROOT / "sim" / "mk64" / "armv7m_debug.svd"
+SUPPLEMENT = ROOT / "sim" / "chip" / "armv7m_debug.svd"
 
 # The peripherals the Teensy 3.5 backends use (and the flash configuration field's layout).
 PERIPHERALS = (
@@ -56,7 +56,7 @@ C_TYPES = {8: "uint8_t", 16: "uint16_t", 32: "uint32_t"}
 def _svd_module():
     """The project's one SVD reader (sim/chip/svd.py, the emulator's too), loaded by path so
     this script needs nothing installed."""
-    spec = importlib.util.spec_from_file_location("hq_mk64_svd", ROOT / "sim" / "mk64" / "svd.py")
+    spec = importlib.util.spec_from_file_location("hq_mk64_svd", ROOT / "sim" / "chip" / "svd.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
