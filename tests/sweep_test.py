@@ -335,7 +335,7 @@ def test_one_multisine_gives_the_whole_band_on_the_vehicle_s_rig_within_a_minute
     # multisine record, at most 60 s of excitation fades included, gives every line, each
     # within 0.5 dB and 3 deg of the simulator's sampled-data truth (benchmarks/rig_time.py
     # measures it against the dwell's points: within 0.1 dB and 1 deg).
-    from heliquad.host.present.report import signal_text
+    from heliquad.host.present.report_sweep import signal_text
 
     out = tmp_path / axis
     res = heliquad("sweep", "--axis", axis, "--sil", "--signal", "multisine", "--ideal-sensor",
