@@ -85,7 +85,7 @@ struct LoopState {               // what the last loop computed, for telemetry a
 // Something the loop says in words (a STATUSTEXT): a Supervisor event, an IMU or a parameter
 // store message.
 struct Notice {
-    static constexpr int kTextLen = 50;    // STATUSTEXT.text
+    static constexpr int kTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
     uint8_t severity = 0;                  // MAV_SEVERITY
     char text[kTextLen] = {};              // NUL-terminated when shorter
 };

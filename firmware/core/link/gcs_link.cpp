@@ -13,7 +13,6 @@ namespace hq {
 // supervisor.hpp); the arrays the messages carry must match the core's.
 static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
               kMotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
-static_assert(Notice::kTextLen == MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN, "a notice is a STATUSTEXT");
 static_assert(LoopInbox::kCapacity < 128, "Received::request holds a slot");
 
 GcsLink::GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port)
