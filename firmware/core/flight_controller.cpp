@@ -144,13 +144,9 @@ void FlightController::publish(uint64_t now_us) {
     s.params = params_.values();
 }
 
-void FlightController::notice(uint8_t severity, const char* text) {
+void FlightController::notice(uint8_t severity, const char* text, int param_index) {
     if (status_.notice_count >= LoopStatus::kNotices) return;     // never: sized for a step
-    Notice& n = status_.notice[status_.notice_count++];
-    n.severity = severity;
-    size_t i = 0;
-    for (; i < sizeof(n.text) && text[i] != '\0'; ++i) n.text[i] = text[i];
-    for (; i < sizeof(n.text); ++i) n.text[i] = '\0';
+    status_.notice[status_.notice_count++] = Notice{severity, text, param_index};
 }
 
 bool FlightController::read_imu(float dt_s) {

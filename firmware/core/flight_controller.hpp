@@ -71,11 +71,13 @@ private:
     float clamp_dt(uint64_t now_us);
     void publish(uint64_t now_us);
     void publish_events();
-    void notice(uint8_t severity, const char* text);
+    void notice(uint8_t severity, const char* text, int param_index = -1);
     // flight_controller_requests.cpp: the requests and the parameters they change
     void answer(LoopInbox& inbox, const RcInput& rc, uint64_t now_us);
-    LoopAnswer answer_one(const LoopRequest& r, const RcInput& rc, uint64_t now_us);
-    LoopAnswer answer_excitation(const LoopRequest& r, uint64_t now_us);
+    LoopAnswer answer_one(const LoopRequest& r, const ExcitationConfig& start, const RcInput& rc,
+                          uint64_t now_us);
+    LoopAnswer answer_excitation(const LoopRequest& r, const ExcitationConfig& start,
+                                 uint64_t now_us);
     LoopAnswer answer_param_set(const LoopRequest& r, uint64_t now_us);
     Verdict storage_action(uint32_t action, uint64_t now_us);
     ExcitationReport excitation_report() const;

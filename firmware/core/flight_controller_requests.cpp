@@ -16,12 +16,13 @@ constexpr uint64_t kSaveQuietUs = 500000;
 
 void FlightController::answer(LoopInbox& inbox, const RcInput& rc, uint64_t now_us) {
     for (int i = 0; i < inbox.count; ++i) {
-        inbox.answer[i] = answer_one(inbox.request[i], rc, now_us);
+        inbox.answer[i] = answer_one(inbox.request[i], inbox.excitation, rc, now_us);
         inbox.answer[i].notices_end = status_.notice_count;
     }
 }
 
-LoopAnswer FlightController::answer_one(const LoopRequest& r, const RcInput& rc, uint64_t now_us) {
+LoopAnswer FlightController::answer_one(const LoopRequest& r, const ExcitationConfig& start,
+                                        const RcInput& rc, uint64_t now_us) {
     LoopAnswer a;
     switch (r.kind) {
         case RequestKind::Heartbeat:
@@ -42,13 +43,14 @@ LoopAnswer FlightController::answer_one(const LoopRequest& r, const RcInput& rc,
             a.verdict = supervisor_.armed() ? Verdict::Refused : storage_action(r.value, clock_.micros());
             return a;
         default:
-            return answer_excitation(r, now_us);
+            return answer_excitation(r, start, now_us);
     }
     a.verdict = a.reason == Reason::None ? Verdict::Accepted : Verdict::Refused;
     return a;
 }
 
-LoopAnswer FlightController::answer_excitation(const LoopRequest& r, uint64_t now_us) {
+LoopAnswer FlightController::answer_excitation(const LoopRequest& r,
+                                              const ExcitationConfig& start, uint64_t now_us) {
     LoopAnswer a;
     if (r.kind == RequestKind::ExcitationStop) {
         supervisor_.stop_excitation();
@@ -56,7 +58,7 @@ LoopAnswer FlightController::answer_excitation(const LoopRequest& r, uint64_t no
     } else if (r.kind == RequestKind::ExcitationFinish) {
         supervisor_.finish_excitation();             // the answer carries the new length
     } else if (r.kind == RequestKind::ExcitationStart) {
-        a.reason = supervisor_.start_excitation(r.excitation, now_us, r.who);
+        a.reason = supervisor_.start_excitation(start, now_us, r.who);
         if (a.reason != Reason::None) a.verdict = Verdict::Refused;
     } else {
         // An action this firmware does not know: refused, and nothing else changes (a
@@ -73,7 +75,9 @@ ExcitationReport FlightController::excitation_report() const {
     const Excitation& ex = supervisor_.excitation();
     ExcitationReport r;
     r.state = ex.state();
-    r.config = ex.config();
+    r.axis = ex.config().axis;
+    r.injection = ex.config().injection;
+    r.signal = ex.config().signal;
     r.actual_freq_hz = ex.actual_freq_hz();
     r.period_samples = ex.period_samples();
     r.total_samples = ex.total_samples();
@@ -129,9 +133,7 @@ void FlightController::load_params() {
     } else if (r.status == LoadReport::Status::Empty) {
         notice(MAV_SEVERITY_INFO, "params: none stored; defaults");
     } else if (r.out_of_range > 0) {
-        char text[Notice::kTextLen];
-        set_result_text(SetResult::Range, r.first_bad, text, sizeof(text));
-        notice(MAV_SEVERITY_WARNING, text);     // that one stays at its default
+        notice(MAV_SEVERITY_WARNING, nullptr, r.first_bad);    // that one stays at its default
     }
 }
 

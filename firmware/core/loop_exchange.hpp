@@ -22,7 +22,7 @@ enum class RequestKind : uint8_t {
     Arm,
     Disarm,
     SetMode,            // `value` the custom mode (HQ_MODE)
-    ExcitationStart,    // `excitation` the request
+    ExcitationStart,    // LoopInbox::excitation the request
     ExcitationStop,
     ExcitationFinish,
     ExcitationRefuse,   // an HQ_EXCITATION action the firmware does not know (BAD_ACTION)
@@ -38,7 +38,6 @@ struct LoopRequest {
     int param_index = -1;
     float param_value = 0.0f;
     bool param_type_ok = false;
-    ExcitationConfig excitation{};
 };
 
 enum class Verdict : uint8_t { Accepted, Refused, Failed };
@@ -46,7 +45,9 @@ enum class Verdict : uint8_t { Accepted, Refused, Failed };
 // The excitation as a request or its end left it (HQ_EXCITATION_STATUS).
 struct ExcitationReport {
     ExcitationState state = ExcitationState::Idle;
-    ExcitationConfig config{};
+    Axis axis = Axis::Roll;
+    Injection injection = Injection::Mixer;
+    Signal signal = Signal::Sine;
     float actual_freq_hz = 0.0f;
     uint32_t period_samples = 0, total_samples = 0, fade_samples = 0;
 };
@@ -59,12 +60,15 @@ struct LoopAnswer {
     ExcitationReport excitation{};         // the Excitation* kinds
 };
 
-// One loop's requests, filled by the link before the step and answered in the step.
+// One loop's requests, filled by the link before the step and answered in the step. At most
+// one ExcitationStart a loop (its configuration is large); a second waits for the next.
 struct LoopInbox {
     static constexpr int kCapacity = 24;
     LoopRequest request[kCapacity];
     LoopAnswer answer[kCapacity];
     uint8_t count = 0;
+    bool has_excitation = false;
+    ExcitationConfig excitation{};
 };
 
 struct LoopState {               // what the last loop computed, for telemetry and tests
@@ -83,11 +87,12 @@ struct LoopState {               // what the last loop computed, for telemetry a
 };
 
 // Something the loop says in words (a STATUSTEXT): a Supervisor event, an IMU or a parameter
-// store message.
+// store message. `text` is a constant string, or nullptr for a stored value refused as out of
+// range (its words are set_result_text(SetResult::Range, param_index)).
 struct Notice {
-    static constexpr int kTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
     uint8_t severity = 0;                  // MAV_SEVERITY
-    char text[kTextLen] = {};              // NUL-terminated when shorter
+    const char* text = nullptr;
+    int param_index = -1;
 };
 
 // What the loop publishes: after init(), and after every step.

@@ -37,7 +37,12 @@ bool GcsLink::for_us(uint8_t target_system, uint8_t target_component) const {
 
 void GcsLink::receive() {
     inbox_.count = 0;
+    inbox_.has_excitation = false;
     received_count_ = 0;
+    if (have_held_) {
+        have_held_ = false;
+        take(held_);
+    }
     for (;;) {
         if (rx_pos_ == rx_len_) {
             rx_len_ = port_.read(rx_buf_, sizeof(rx_buf_));
@@ -45,44 +50,96 @@ void GcsLink::receive() {
             if (rx_len_ == 0) return;
         }
         while (rx_pos_ < rx_len_) {
-            if (received_count_ == LoopInbox::kCapacity) return;   // the rest next loop
             mavlink_message_t msg;
             mavlink_status_t status;
             if (mavlink_frame_char_buffer(&rx_msg_, &rx_status_, rx_buf_[rx_pos_++], &msg,
-                                          &status) == MAVLINK_FRAMING_OK) {
-                take(msg);
+                                          &status) == MAVLINK_FRAMING_OK && !take(msg)) {
+                held_ = msg;                 // no room this loop: the rest waits
+                have_held_ = true;
+                return;
             }
         }
     }
 }
 
-// Keeps a message that asks the loop something or gets an answer; others are ignored.
-void GcsLink::take(const mavlink_message_t& msg) {
-    LoopRequest r;
-    const bool asks = ask(msg, r);
-    switch (msg.msgid) {
-        case MAVLINK_MSG_ID_COMMAND_LONG:
-        case MAVLINK_MSG_ID_COMMAND_INT:
-        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST:
-        case MAVLINK_MSG_ID_PARAM_REQUEST_READ:
-        case MAVLINK_MSG_ID_PARAM_SET:
-        case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL:
-        case MAVLINK_MSG_ID_HQ_EXCITATION:
-            break;
-        default:
-            if (!asks) return;
+// Keeps a message that asks the loop something or gets an answer (others are ignored);
+// false when this loop has no room left for it.
+bool GcsLink::take(const mavlink_message_t& msg) {
+    if (received_count_ == LoopInbox::kCapacity) return false;
+    if (msg.msgid == MAVLINK_MSG_ID_HQ_EXCITATION && inbox_.has_excitation &&
+        mavlink_msg_hq_excitation_get_action(&msg) == HQ_EXCITATION_START) {
+        return false;                        // one start's configuration a loop
     }
-    Received& in = received_[received_count_++];
-    in.msg = msg;
+    Received& in = received_[received_count_];
+    const bool answered = keep(msg, in);
+    LoopRequest r;
+    const bool asks = ask(msg, in, answered, r);
+    if (!answered && !asks) return true;
     in.request = -1;
     if (asks) {
         in.request = static_cast<int8_t>(inbox_.count);
         inbox_.request[inbox_.count++] = r;
     }
+    ++received_count_;
+    return true;
+}
+
+// What the answer to a message needs, for a message addressed to us that gets one.
+bool GcsLink::keep(const mavlink_message_t& msg, Received& in) const {
+    in.msgid = msg.msgid;
+    in.sysid = msg.sysid;
+    in.compid = msg.compid;
+    switch (msg.msgid) {
+        case MAVLINK_MSG_ID_COMMAND_LONG: {
+            mavlink_command_long_t c;
+            mavlink_msg_command_long_decode(&msg, &c);
+            const float p[7] = {c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7};
+            for (int i = 0; i < 7; ++i) in.p[i] = p[i];
+            in.command = c.command;
+            return for_us(c.target_system, c.target_component);
+        }
+        case MAVLINK_MSG_ID_COMMAND_INT: {
+            mavlink_command_int_t c;
+            mavlink_msg_command_int_decode(&msg, &c);
+            const float p[7] = {c.param1, c.param2, c.param3, c.param4, static_cast<float>(c.x),
+                                static_cast<float>(c.y), c.z};
+            for (int i = 0; i < 7; ++i) in.p[i] = p[i];
+            in.command = c.command;
+            return for_us(c.target_system, c.target_component);
+        }
+        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: {
+            mavlink_param_request_list_t r;
+            mavlink_msg_param_request_list_decode(&msg, &r);
+            return for_us(r.target_system, r.target_component);
+        }
+        case MAVLINK_MSG_ID_PARAM_REQUEST_READ: {
+            mavlink_param_request_read_t r;
+            mavlink_msg_param_request_read_decode(&msg, &r);
+            __builtin_memcpy(in.param_id, r.param_id, kParamNameLen);
+            in.param_index = r.param_index;
+            return for_us(r.target_system, r.target_component);
+        }
+        case MAVLINK_MSG_ID_PARAM_SET: {
+            mavlink_param_set_t ps;
+            mavlink_msg_param_set_decode(&msg, &ps);
+            __builtin_memcpy(in.param_id, ps.param_id, kParamNameLen);
+            in.param_type = ps.param_type;
+            return for_us(ps.target_system, ps.target_component);
+        }
+        case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: {
+            mavlink_file_transfer_protocol_t f;
+            mavlink_msg_file_transfer_protocol_decode(&msg, &f);
+            for (int i = 0; i < 4; ++i) in.ftp[i] = f.payload[i];
+            return for_us(f.target_system, f.target_component);
+        }
+        default:
+            return false;                    // HQ_EXCITATION: answered when it is a request
+    }
 }
 
 // What a message asks of the loop, if anything (false: nothing).
-bool GcsLink::ask(const mavlink_message_t& msg, LoopRequest& r) const {
+bool GcsLink::ask(const mavlink_message_t& msg, const Received& in, bool answered,
+                  LoopRequest& r) {
     r.sysid = msg.sysid;
     r.compid = msg.compid;
     r.who = station_id(msg.sysid, msg.compid);
@@ -93,18 +150,9 @@ bool GcsLink::ask(const mavlink_message_t& msg, LoopRequest& r) const {
             r.kind = RequestKind::Heartbeat;
             r.mav_type = mavlink_msg_heartbeat_get_type(&msg);
             return msg.sysid != config_.system_id;
-        case MAVLINK_MSG_ID_COMMAND_LONG: {
-            mavlink_command_long_t c;
-            mavlink_msg_command_long_decode(&msg, &c);
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7};
-            return for_us(c.target_system, c.target_component) && ask_command(msg, c.command, p, r);
-        }
+        case MAVLINK_MSG_ID_COMMAND_LONG:
         case MAVLINK_MSG_ID_COMMAND_INT: {
-            mavlink_command_int_t c;
-            mavlink_msg_command_int_decode(&msg, &c);
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, static_cast<float>(c.x),
-                                static_cast<float>(c.y), c.z};
-            return for_us(c.target_system, c.target_component) && ask_command(msg, c.command, p, r);
+            return answered && ask_command(in, r);
         }
         case MAVLINK_MSG_ID_SET_MODE: {
             mavlink_set_mode_t sm;
@@ -122,9 +170,9 @@ bool GcsLink::ask(const mavlink_message_t& msg, LoopRequest& r) const {
     }
 }
 
-bool GcsLink::ask_command(const mavlink_message_t&, uint16_t command, const float p[7],
-                          LoopRequest& r) const {
-    switch (command) {
+bool GcsLink::ask_command(const Received& in, LoopRequest& r) {
+    const float* p = in.p;
+    switch (in.command) {
         case MAV_CMD_COMPONENT_ARM_DISARM:
             r.kind = p[0] > 0.5f ? RequestKind::Arm : RequestKind::Disarm;
             return true;
@@ -142,7 +190,7 @@ bool GcsLink::ask_command(const mavlink_message_t&, uint16_t command, const floa
     }
 }
 
-bool GcsLink::ask_excitation(const mavlink_message_t& msg, LoopRequest& r) const {
+bool GcsLink::ask_excitation(const mavlink_message_t& msg, LoopRequest& r) {
     mavlink_hq_excitation_t ex;
     mavlink_msg_hq_excitation_decode(&msg, &ex);
     if (!for_us(ex.target_system, ex.target_component)) return false;
@@ -152,7 +200,9 @@ bool GcsLink::ask_excitation(const mavlink_message_t& msg, LoopRequest& r) const
         r.kind = RequestKind::ExcitationFinish;
     } else if (ex.action == HQ_EXCITATION_START) {
         r.kind = RequestKind::ExcitationStart;
-        ExcitationConfig& cfg = r.excitation;
+        inbox_.has_excitation = true;
+        ExcitationConfig& cfg = inbox_.excitation;
+        cfg = ExcitationConfig{};
         cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
         cfg.injection = static_cast<Injection>(ex.injection);
         cfg.freq_hz = ex.freq_hz;
@@ -195,7 +245,7 @@ void GcsLink::transmit(const LoopStatus& status) {
         const Received& in = received_[i];
         const LoopAnswer* a = in.request < 0 ? nullptr : &inbox_.answer[in.request];
         if (a != nullptr) send_notices_to(status, a->notices_end);
-        reply(in.msg, a);
+        reply(in, a);
     }
     received_count_ = 0;
     inbox_.count = 0;
@@ -212,66 +262,53 @@ void GcsLink::send_notices(const LoopStatus& status) {
 }
 
 void GcsLink::send_notices_to(const LoopStatus& status, int end) {
-    for (; notices_sent_ < end; ++notices_sent_) {
-        const Notice& n = status.notice[notices_sent_];
-        send_statustext(n.severity, n.text);
-    }
+    for (; notices_sent_ < end; ++notices_sent_) send_notice(status.notice[notices_sent_]);
 }
 
-void GcsLink::reply(const mavlink_message_t& msg, const LoopAnswer* a) {
-    switch (msg.msgid) {
-        case MAVLINK_MSG_ID_COMMAND_LONG: {
-            mavlink_command_long_t c;
-            mavlink_msg_command_long_decode(&msg, &c);
-            if (!for_us(c.target_system, c.target_component)) return;
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7};
-            reply_command(msg, c.command, p, a);
+void GcsLink::send_notice(const Notice& n) {
+    if (n.text != nullptr) {
+        send_statustext(n.severity, n.text);
+        return;
+    }
+    char text[kStatusTextLen];
+    set_result_text(SetResult::Range, n.param_index, text, sizeof(text));
+    send_statustext(n.severity, text);
+}
+
+void GcsLink::reply(const Received& in, const LoopAnswer* a) {
+    switch (in.msgid) {
+        case MAVLINK_MSG_ID_COMMAND_LONG:
+        case MAVLINK_MSG_ID_COMMAND_INT:
+            reply_command(in, a);
             return;
-        }
-        case MAVLINK_MSG_ID_COMMAND_INT: {
-            mavlink_command_int_t c;
-            mavlink_msg_command_int_decode(&msg, &c);
-            if (!for_us(c.target_system, c.target_component)) return;
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, static_cast<float>(c.x),
-                                static_cast<float>(c.y), c.z};
-            reply_command(msg, c.command, p, a);
-            return;
-        }
         case MAVLINK_MSG_ID_HQ_EXCITATION:
-            if (a == nullptr) return;                // not for us
             last_exc_accepted_ = a->verdict == Verdict::Accepted;
             send_excitation_status(a->reason, a->excitation);
             return;
-        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: {
-            mavlink_param_request_list_t r;
-            mavlink_msg_param_request_list_decode(&msg, &r);
-            if (for_us(r.target_system, r.target_component)) params_pending_ = kAllParams;
-            return;
-        }
-        case MAVLINK_MSG_ID_PARAM_REQUEST_READ: reply_param_read(msg); return;
-        case MAVLINK_MSG_ID_PARAM_SET: reply_param_set(msg, a); return;
-        case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: refuse_file_transfer(msg); return;
-        default: return;
+        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: params_pending_ = kAllParams; return;
+        case MAVLINK_MSG_ID_PARAM_REQUEST_READ: reply_param_read(in); return;
+        case MAVLINK_MSG_ID_PARAM_SET: reply_param_set(in, a); return;
+        case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: refuse_file_transfer(in); return;
+        default: return;                     // a HEARTBEAT or SET_MODE: no answer
     }
 }
 
 // Every command addressed to us, or broadcast, is answered with COMMAND_ACK; a command this
 // firmware does not know is MAV_RESULT_UNSUPPORTED. result_param2 carries the HQ_REASON of a
 // refusal.
-void GcsLink::reply_command(const mavlink_message_t& msg, uint16_t command, const float p[7],
-                            const LoopAnswer* a) {
+void GcsLink::reply_command(const Received& in, const LoopAnswer* a) {
     Reason why = Reason::None;
-    const uint8_t result = command_result(command, p, a, why);
+    const uint8_t result = command_result(in, a, why);
     mavlink_message_t out;
     mavlink_msg_command_ack_pack_status(config_.system_id, config_.component_id, &tx_status_,
-                                        &out, command, result, 0, static_cast<int32_t>(why),
-                                        msg.sysid, msg.compid);
+                                        &out, in.command, result, 0, static_cast<int32_t>(why),
+                                        in.sysid, in.compid);
     send(out);
 }
 
-uint8_t GcsLink::command_result(uint16_t command, const float p[7], const LoopAnswer* a,
-                                Reason& why) {
-    switch (command) {
+uint8_t GcsLink::command_result(const Received& in, const LoopAnswer* a, Reason& why) {
+    const float* p = in.p;
+    switch (in.command) {
         case MAV_CMD_COMPONENT_ARM_DISARM:
         case MAV_CMD_DO_SET_MODE:
             if (a == nullptr) {                      // a base mode without custom modes
@@ -312,34 +349,30 @@ uint8_t GcsLink::command_result(uint16_t command, const float p[7], const LoopAn
 // that tries it first (MAVProxy fetches parameters over FTP when it can) falls back to the
 // parameter protocol at once instead of after its timeouts. The payload's header: seq (2),
 // session, opcode, size, req_opcode, burst_complete, padding, offset (4), then data.
-void GcsLink::refuse_file_transfer(const mavlink_message_t& msg) {
-    mavlink_file_transfer_protocol_t in;
-    mavlink_msg_file_transfer_protocol_decode(&msg, &in);
-    if (!for_us(in.target_system, in.target_component)) return;
+void GcsLink::refuse_file_transfer(const Received& in) {
     uint8_t payload[MAVLINK_MSG_FILE_TRANSFER_PROTOCOL_FIELD_PAYLOAD_LEN] = {};
-    const uint16_t seq = static_cast<uint16_t>((in.payload[0] | in.payload[1] << 8) + 1);
+    const uint16_t seq = static_cast<uint16_t>((in.ftp[0] | in.ftp[1] << 8) + 1);
     payload[0] = static_cast<uint8_t>(seq);
     payload[1] = static_cast<uint8_t>(seq >> 8);
-    payload[2] = in.payload[2];                          // the session asked for
+    payload[2] = in.ftp[2];                              // the session asked for
     payload[3] = MAV_FTP_OPCODE_NAK;
     payload[4] = 1;                                      // one byte of data: the error
-    payload[5] = in.payload[3];                          // the request's opcode
+    payload[5] = in.ftp[3];                              // the request's opcode
     payload[12] = MAV_FTP_ERR_UNKNOWNCOMMAND;
     mavlink_message_t out;
     mavlink_msg_file_transfer_protocol_pack_status(config_.system_id, config_.component_id,
-                                                   &tx_status_, &out, 0, msg.sysid, msg.compid,
+                                                   &tx_status_, &out, 0, in.sysid, in.compid,
                                                    payload);
     send(out);
 }
 
 void GcsLink::send_excitation_status(Reason reason, const ExcitationReport& ex) {
-    const ExcitationConfig& cfg = ex.config;
     mavlink_message_t msg;
     mavlink_msg_hq_excitation_status_pack_status(
         config_.system_id, config_.component_id, &tx_status_, &msg, clock_.micros(),
         last_exc_accepted_ ? 1 : 0, static_cast<uint8_t>(ex.state), static_cast<uint8_t>(reason),
-        static_cast<uint8_t>(cfg.axis), static_cast<uint8_t>(cfg.injection), ex.actual_freq_hz,
-        ex.period_samples, ex.total_samples, static_cast<uint8_t>(cfg.signal), ex.fade_samples);
+        static_cast<uint8_t>(ex.axis), static_cast<uint8_t>(ex.injection), ex.actual_freq_hz,
+        ex.period_samples, ex.total_samples, static_cast<uint8_t>(ex.signal), ex.fade_samples);
     send(msg);
 }
 

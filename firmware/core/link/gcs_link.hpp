@@ -75,34 +75,42 @@ public:
     static constexpr int kStreams = 9;
 
 private:
-    // A message taken this loop, with its request's slot in inbox_ (-1: the link's alone).
+    // A message taken this loop: what its answer needs, and its request's slot in inbox_
+    // (-1: the link answers it alone).
     struct Received {
-        mavlink_message_t msg;
+        uint32_t msgid;
+        uint8_t sysid, compid;
         int8_t request;
+        uint8_t param_type;              // PARAM_SET
+        uint16_t command;                // COMMAND_LONG, COMMAND_INT
+        int16_t param_index;             // PARAM_REQUEST_READ
+        float p[7];                      // COMMAND_LONG, COMMAND_INT
+        char param_id[kParamNameLen];    // PARAM_REQUEST_READ, PARAM_SET
+        uint8_t ftp[4];                  // FILE_TRANSFER_PROTOCOL: seq (2), session, opcode
     };
     // gcs_link.cpp
     bool for_us(uint8_t target_system, uint8_t target_component) const;
-    void take(const mavlink_message_t& msg);
-    bool ask(const mavlink_message_t& msg, LoopRequest& r) const;
-    bool ask_command(const mavlink_message_t& msg, uint16_t command, const float p[7],
-                     LoopRequest& r) const;
-    bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r) const;
+    bool take(const mavlink_message_t& msg);
+    bool keep(const mavlink_message_t& msg, Received& in) const;
+    bool ask(const mavlink_message_t& msg, const Received& in, bool answered, LoopRequest& r);
+    static bool ask_command(const Received& in, LoopRequest& r);
+    bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);
     static void read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg);
-    void reply(const mavlink_message_t& msg, const LoopAnswer* a);
-    void reply_command(const mavlink_message_t& msg, uint16_t command, const float p[7],
-                       const LoopAnswer* a);
-    uint8_t command_result(uint16_t command, const float p[7], const LoopAnswer* a, Reason& why);
-    void refuse_file_transfer(const mavlink_message_t& msg);
+    void reply(const Received& in, const LoopAnswer* a);
+    void reply_command(const Received& in, const LoopAnswer* a);
+    uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
+    void refuse_file_transfer(const Received& in);
     void send_excitation_status(Reason reason, const ExcitationReport& ex);
     void send_statustext(uint8_t severity, const char* text);
     void send_notices_to(const LoopStatus& status, int end);
+    void send_notice(const Notice& n);
     bool send(const mavlink_message_t& msg);
     // param_protocol.cpp
     bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
-    void reply_param_read(const mavlink_message_t& msg);
-    void reply_param_set(const mavlink_message_t& msg, const LoopAnswer* a);
+    void reply_param_read(const Received& in);
+    void reply_param_set(const Received& in, const LoopAnswer* a);
     void send_unknown_param(const char* name, int index);
-    void send_param_error(const mavlink_message_t& to, const char* name, int index, SetResult why);
+    void send_param_error(const Received& to, const char* name, int index, SetResult why);
     void send_params(const Tunables& values);
     bool send_param_value(const Tunables& values, int index);
     // telemetry.cpp
@@ -133,6 +141,8 @@ private:
     int notices_sent_ = 0;                   // of the loop's current notices
     uint8_t rx_buf_[64] = {};                // bytes read but not yet parsed (inbox full)
     size_t rx_len_ = 0, rx_pos_ = 0;
+    mavlink_message_t held_{};               // parsed, but no room this loop: the next's first
+    bool have_held_ = false;
     LoopLoad load_{};
     LoopLoad::Report last_load_{};           // the last second's (HQ_FW_STATUS, SYS_STATUS)
     Stream streams_[kStreams];

@@ -71,15 +71,12 @@ bool GcsLink::ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const 
     return true;
 }
 
-void GcsLink::reply_param_read(const mavlink_message_t& msg) {
-    mavlink_param_request_read_t r;
-    mavlink_msg_param_request_read_decode(&msg, &r);
-    if (!for_us(r.target_system, r.target_component)) return;
-    const int index = r.param_index >= 0 ? (r.param_index < kParamCount ? r.param_index : -1)
-                                         : param_index(r.param_id);
+void GcsLink::reply_param_read(const Received& in) {
+    const int index = in.param_index >= 0 ? (in.param_index < kParamCount ? in.param_index : -1)
+                                          : param_index(in.param_id);
     if (index < 0) {
-        send_param_error(msg, r.param_id, r.param_index, SetResult::Unknown);
-        send_unknown_param(r.param_id, r.param_index);
+        send_param_error(in, in.param_id, in.param_index, SetResult::Unknown);
+        send_unknown_param(in.param_id, in.param_index);
         return;
     }
     params_pending_ |= 1ull << index;
@@ -94,27 +91,23 @@ void GcsLink::send_unknown_param(const char* name, int index) {
 // PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one, a STATUSTEXT
 // saying why, and PARAM_ERROR to the station that asked (MAVSDK and QGroundControl report
 // that as the refusal; MAVProxy and pymavlink read the unchanged value).
-void GcsLink::reply_param_set(const mavlink_message_t& msg, const LoopAnswer* a) {
-    mavlink_param_set_t ps;
-    mavlink_msg_param_set_decode(&msg, &ps);
-    if (!for_us(ps.target_system, ps.target_component)) return;
-    const int index = param_index(ps.param_id);
+void GcsLink::reply_param_set(const Received& in, const LoopAnswer* a) {
     if (a == nullptr) {                              // no such parameter
-        send_param_error(msg, ps.param_id, -1, SetResult::Unknown);
-        send_unknown_param(ps.param_id, -1);
+        send_param_error(in, in.param_id, -1, SetResult::Unknown);
+        send_unknown_param(in.param_id, -1);
         return;
     }
-    if (ps.param_type == MAV_PARAM_TYPE_REAL32) params_as_float_ |= 1ull << index;  // as it came
+    const int index = inbox_.request[in.request].param_index;
+    if (in.param_type == MAV_PARAM_TYPE_REAL32) params_as_float_ |= 1ull << index;  // as it came
     params_pending_ |= 1ull << index;
     if (a->verdict == Verdict::Accepted) return;     // answered with the value it has
-    send_param_error(msg, ps.param_id, index, a->set);
+    send_param_error(in, in.param_id, index, a->set);
     char text[kStatusTextLen];
     set_result_text(a->set, index, text, sizeof(text));
     send_statustext(MAV_SEVERITY_WARNING, text);
 }
 
-void GcsLink::send_param_error(const mavlink_message_t& to, const char* name, int index,
-                               SetResult why) {
+void GcsLink::send_param_error(const Received& to, const char* name, int index, SetResult why) {
 #ifdef MAVLINK_MSG_ID_PARAM_ERROR
     char id[kParamNameLen];
     copy_name(id, name);
