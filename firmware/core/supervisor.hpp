@@ -173,6 +173,8 @@ struct SupervisorCounters {
 
 class Supervisor {
 public:
+    static constexpr int kEventQueue = 8;   // events waiting for the link (next_event)
+
     Supervisor(const SafetyLimits& limits, float loop_rate_hz);
 
     // --- commands (the telemetry link); each answer is Reason::None when accepted ----------
@@ -268,7 +270,6 @@ private:
     void emit(Reason reason, Severity severity);
 
     enum class SwitchPos : uint8_t { Unknown, Low, High };
-    static constexpr int kEventQueue = 8;
 
     SafetyLimits limits_;
     float loop_rate_hz_;

@@ -14,6 +14,7 @@
 #include <heliquad/mavlink.h>
 
 #include "../core/flight_controller.hpp"
+#include "../core/link/gcs_link.hpp"
 #include "../core/mpu6050.hpp"
 #include "../targets/host/clock.hpp"
 #include "../targets/host/motors.hpp"
@@ -192,11 +193,19 @@ inline bool params_in_range(const hq::Params& p) {
 // The firmware as both targets fly it: the host build's clock and motors, the emulated
 // MPU6050 (given the made-up DMP firmware when the input's first choice is odd), a parameter
 // store holding what the input says, and a FlightController on them, initialised; its
-// telemetry goes to a `Telemetry`.
+// telemetry link (GcsLink) goes to a `Telemetry`.
 template <class Telemetry>
 struct Vehicle {
-    explicit Vehicle(Reader& in) : cfg(config(in, chip, storage)), fc(cfg, chip, clock, telemetry, motors) {
+    explicit Vehicle(Reader& in)
+        : cfg(config(in, chip, storage)), fc(cfg, chip, clock, motors), link(link_cfg, clock, telemetry) {
         fc.init();
+        link.send_notices(fc.status());
+    }
+    // One loop as the targets run it: the link's requests, the step, its telemetry.
+    void step(const hq::RcInput& rc) {
+        link.receive();
+        fc.step(rc, link.inbox());
+        link.transmit(fc.status());
     }
     hq::HostClock clock;
     hq::HostMotors motors;
@@ -205,6 +214,8 @@ struct Vehicle {
     Telemetry telemetry;
     hq::FlightControllerConfig cfg;
     hq::FlightController fc;
+    hq::GcsLinkConfig link_cfg;
+    hq::GcsLink link;
 
 private:
     static hq::FlightControllerConfig config(Reader& in, hq::Mpu6050Emulator& chip,

@@ -81,8 +81,8 @@ constexpr uint64_t kLoopUs = 5000;
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     Reader in(data, size);
     hqfuzz::Vehicle<NoTelemetry> v(in);
-    hq::SimLinkHandler handler(v.fc, v.clock, v.chip, v.motors, v.cfg.system_id,
-                               v.cfg.component_id);
+    hq::SimLinkHandler handler(v.fc, v.link, v.clock, v.chip, v.motors, v.link_cfg.system_id,
+                               v.link_cfg.component_id);
     Replies replies;
     mavlink_status_t tx{};
     uint8_t packet[hqfuzz::kMaxPacket];

@@ -214,7 +214,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                     v.chip.push_fifo(sample, v.chip.dmp_enabled() ? hq::mpu6050::kDmpPacketSize
                                                               : hq::mpu6050::kRawPacketSize,
                                    v.chip.dmp_enabled());
-                    v.fc.step(rc);
+                    v.step(rc);
                     check_rules(v.fc, v.motors);
                 }
                 break;

@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "../../core/flight_controller.hpp"
+#include "../../core/link/gcs_link.hpp"
 #include "../dmp_image.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
@@ -135,9 +136,11 @@ int main(int argc, char** argv) {
     static hq::Mpu6050Emulator chip;
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = opt.loop_hz;
+    hq::GcsLinkConfig link_cfg;
+    link_cfg.loop_rate_hz = opt.loop_hz;
     // The host build has no chip id: a fixed stand-in, "HQ-HOST" and 1, so a ground station
     // that keys on AUTOPILOT_VERSION.uid sees one stable, non-zero vehicle.
-    cfg.uid = 0x4851'2D48'4F53'5401ull;
+    link_cfg.uid = 0x4851'2D48'4F53'5401ull;
     static hq::FileParamStorage storage(opt.params);
     if (!opt.params.empty()) cfg.storage = &storage;
     if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image
@@ -152,15 +155,18 @@ int main(int argc, char** argv) {
                            cfg.imu.dmp_config_size, cfg.imu.dmp_updates, cfg.imu.dmp_updates_size);
     hq::HostI2cBus bus;
     bus.attach(hq::mpu6050::kAddress, chip);
-    hq::FlightController fc(cfg, bus, clock, telemetry, motors);
+    hq::FlightController fc(cfg, bus, clock, motors);
+    static hq::GcsLink link(link_cfg, clock, telemetry);   // its queues: not on the stack
     const hq::InitResult init = fc.init();
+    link.send_notices(fc.status());
     std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),
                 sim.slave_path().c_str(), opt.telemetry.c_str(), telemetry.slave_path().c_str(),
                 init == hq::InitResult::OkDmp ? "dmp" : "raw");
     std::fflush(stdout);
 
     SimLinkPty replies(sim, telemetry);
-    hq::SimLinkHandler handler(fc, clock, chip, motors, cfg.system_id, cfg.component_id);
+    hq::SimLinkHandler handler(fc, link, clock, chip, motors, link_cfg.system_id,
+                              link_cfg.component_id);
     using Wall = std::chrono::steady_clock;   // the idle timeout only; never the core's clock
     Wall::time_point last_input = Wall::now();
     int exit_code = 0;
@@ -206,7 +212,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "heliquad-fw-host: %u loops, %u frames lost, %u repeated, %u telemetry bytes "
                  "dropped, %zu unread telemetry bytes dropped\n",
-                 fc.loops(), handler.lost(), handler.repeated(), fc.telemetry_dropped(),
+                 fc.loops(), handler.lost(), handler.repeated(), link.telemetry_dropped(),
                  telemetry.discarded());
     sim.close();
     telemetry.close();

@@ -4,10 +4,10 @@
 
 namespace hq {
 
-SimLinkHandler::SimLinkHandler(FlightController& fc, HostClock& clock, Mpu6050Emulator& chip,
+SimLinkHandler::SimLinkHandler(FlightController& fc, GcsLink& link, HostClock& clock, Mpu6050Emulator& chip,
                                const HostMotors& motors, uint8_t system_id,
                                uint8_t component_id)
-    : fc_(fc), clock_(clock), chip_(chip), motors_(motors), system_id_(system_id),
+    : fc_(fc), link_(link), clock_(clock), chip_(chip), motors_(motors), system_id_(system_id),
       component_id_(component_id) {}
 
 bool SimLinkHandler::feed(const uint8_t* data, size_t n, SimLinkReplies& out) {
@@ -47,7 +47,9 @@ bool SimLinkHandler::on_frame(const mavlink_message_t& msg, SimLinkReplies& out)
     apply_fault(f.imu_fault);
     const size_t len = f.fifo_len < sizeof(f.fifo) ? f.fifo_len : sizeof(f.fifo);
     if (len > 0) chip_.push_fifo(f.fifo, len, f.fifo_kind == HQ_SENSOR_DMP);
-    fc_.step(rc_from_sim_frame(f.rc_us));
+    link_.receive();
+    fc_.step(rc_from_sim_frame(f.rc_us), link_.inbox());
+    link_.transmit(fc_.status());
     mavlink_message_t reply;
     mavlink_msg_hq_actuator_frame_pack_status(system_id_, component_id_, &tx_status_, &reply,
                                               f.time_us, f.frame, motors_.values(),

@@ -1,5 +1,6 @@
 // The firmware's end of the sim link (docs/link-contract.md), without the pty: bytes in,
-// one FlightController step per new HQ_SENSOR_FRAME, exactly one HQ_ACTUATOR_FRAME out.
+// one FlightController step (with the
+// telemetry link's requests before it and its telemetry after) per new HQ_SENSOR_FRAME, exactly one HQ_ACTUATOR_FRAME out.
 //
 // Per frame: the clock is set to time_us (never backwards: a frame from the past runs at the
 // latest time seen); the frame's imu_fault acts on the emulated MPU6050
@@ -15,6 +16,7 @@
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
+#include "../../core/link/gcs_link.hpp"
 #include "clock.hpp"
 #include "motors.hpp"
 #include "sensor/mpu6050_emulator.hpp"
@@ -34,7 +36,7 @@ protected:
 
 class SimLinkHandler {
 public:
-    SimLinkHandler(FlightController& fc, HostClock& clock, Mpu6050Emulator& chip,
+    SimLinkHandler(FlightController& fc, GcsLink& link, HostClock& clock, Mpu6050Emulator& chip,
                    const HostMotors& motors, uint8_t system_id, uint8_t component_id);
 
     // Feeds bytes from the sim link. Returns false as soon as `out` refuses a reply.
@@ -52,6 +54,7 @@ private:
     void apply_fault(uint8_t fault);
 
     FlightController& fc_;
+    GcsLink& link_;
     HostClock& clock_;
     Mpu6050Emulator& chip_;
     const HostMotors& motors_;

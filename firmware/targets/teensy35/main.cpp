@@ -4,14 +4,17 @@
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
 // the telemetry UART; RC capture; the I2C bus; the FlightController (its parameters in the
 // top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
-// configuration and, with an image built in, the DMP upload); the 200 Hz
+// configuration and, with an image built in, the DMP upload) and its telemetry link
+// (GcsLink, core/link/); the 200 Hz
 // loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the
-// RC input, run one FlightController step, record the cycles it took (HQ_FW_STATUS reports
+// RC input, take the link's requests, run one FlightController step, send the link's answers
+// and telemetry, record the cycles all that took (HQ_FW_STATUS reports
 // their median and maximum each second, and the overruns), update the LED, sleep until the
 // next tick. After each step the loop's state goes to hq_loop_report (below).
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
+#include "../../core/link/gcs_link.hpp"
 #include "../dmp_image.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
@@ -41,7 +44,7 @@ hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResul
 
 // The chip's unique identification (SIM_UIDH..UIDL, 128 bits) as AUTOPILOT_VERSION carries
 // it: uid the low 64 bits (UIDML, UIDL), uid2 all 16 bytes, most significant first.
-void read_uid(hq::FlightControllerConfig& cfg) {
+void read_uid(hq::GcsLinkConfig& cfg) {
     namespace sim = hq::mk64::SIM;
     const uint32_t words[4] = {sim::UIDH::read(), sim::UIDMH::read(), sim::UIDML::read(),
                                sim::UIDL::read()};
@@ -89,13 +92,17 @@ extern "C" [[noreturn]] void hq_teensy_main() {
 
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
-    cfg.cpu_hz = kCoreHz;                             // SYS_STATUS load from the cycle counter
-    cfg.link_bytes_per_s = kTelemetryBaud / 10;       // 8N1: ten bits a byte
     cfg.storage = &storage;
-    read_uid(cfg);
+    hq::GcsLinkConfig link_cfg;
+    link_cfg.loop_rate_hz = cfg.loop_rate_hz;
+    link_cfg.cpu_hz = kCoreHz;                        // SYS_STATUS load from the cycle counter
+    link_cfg.link_bytes_per_s = kTelemetryBaud / 10;  // 8N1: ten bits a byte
+    read_uid(link_cfg);
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
-    static hq::FlightController fc(cfg, i2c, clock, telemetry, motors);
+    static hq::FlightController fc(cfg, i2c, clock, motors);
+    static hq::GcsLink link(link_cfg, clock, telemetry);
     const hq::InitResult init = fc.init();
+    link.send_notices(fc.status());
 
     static LoopTimer timer;
     if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
@@ -104,12 +111,14 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         timer.wait();
         Watchdog::refresh();
         const uint32_t c0 = cycles32();
-        fc.step(rc.read());
+        link.receive();
+        fc.step(rc.read(), link.inbox());
+        link.transmit(fc.status());
 #ifdef HQ_TEST_LOOP_DELAY_US
         clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
 #endif
         const uint32_t step_cycles = cycles32() - c0;
-        fc.record_loop(step_cycles, timer.overruns());
+        link.record_loop(step_cycles, timer.overruns());
         hq_loop_report.loops = fc.loops();
         hq_loop_report.step_cycles = step_cycles;
         hq_loop_report.overruns = timer.overruns();

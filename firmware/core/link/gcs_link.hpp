@@ -1,0 +1,161 @@
+// GcsLink: the firmware's MAVLink side, the ground station's end of the telemetry link
+// (docs/link-contract.md). Before each loop step it reads the link and turns what a ground
+// station asks of the loop into requests (LoopInbox, loop_exchange.hpp); after the step it
+// answers every message in the order it came, from the loop's answers, and sends the
+// telemetry from the loop's published state (LoopStatus). It never touches the loop itself.
+//
+// gcs_link.cpp: messages in, command and excitation answers, sending; param_protocol.cpp: the
+// parameter protocol; telemetry.cpp: the streams.
+//
+// Telemetry: every loop ATTITUDE and HQ_SYSID_SAMPLE (always the loop's last message);
+// HEARTBEAT, HQ_FW_STATUS and SYS_STATUS once a second; SERVO_OUTPUT_RAW, SCALED_IMU,
+// HIGHRES_IMU and RC_CHANNELS at 10, 10, 10 and 5 Hz; each but HEARTBEAT and
+// HQ_SYSID_SAMPLE at the interval SET_MESSAGE_INTERVAL asks for, within what the link
+// carries. HQ_EXCITATION_STATUS in answer to every HQ_EXCITATION and when an excitation
+// ends; STATUSTEXT for every notice of the loop (Supervisor events, the IMU, the parameter
+// store) and parameter refusal; COMMAND_ACK for every COMMAND_LONG and COMMAND_INT addressed
+// to it or broadcast; PARAM_VALUE for the parameter protocol, a few per loop.
+// A message that does not fit the link is dropped whole and counted, never blocking the loop
+// (a PARAM_VALUE is sent again in the next loop instead). At most LoopInbox::kCapacity
+// messages are taken per loop; the rest wait in the port for the next.
+#pragma once
+
+#include <cstdint>
+
+#include "../../hal/clock.hpp"
+#include "../../hal/serial.hpp"
+#include "../loop_exchange.hpp"
+#include "../loop_load.hpp"
+
+#include <heliquad/mavlink.h>
+
+namespace hq {
+
+struct GcsLinkConfig {
+    float loop_rate_hz = 200.0f;
+    uint8_t system_id = 1;
+    uint8_t component_id = MAV_COMP_ID_AUTOPILOT1;
+    // What the telemetry link carries, bytes per second (921600 baud, 10 bits a byte):
+    // SET_MESSAGE_INTERVAL refuses rates that would need more than 80 % of it.
+    uint32_t link_bytes_per_s = 92160;
+    // CPU cycles per second of the target's cycle counter (SYS_STATUS load); 0: none.
+    uint32_t cpu_hz = 0;
+    // The board's unique id (AUTOPILOT_VERSION.uid, and uid2 whole): the chip's own on the
+    // Teensy (SIM_UIDH..UIDL, 128 bits, most significant word first); the host build's
+    // stand-in is targets/host/main.cpp's.
+    uint64_t uid = 0;
+    uint8_t uid2[18] = {};
+};
+
+class GcsLink {
+public:
+    GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port);
+
+    // Before a step: the messages waiting on the link, as requests in inbox().
+    void receive();
+    LoopInbox& inbox() { return inbox_; }
+    // After the step: every answer, the loop's notices and the telemetry (in that order).
+    void transmit(const LoopStatus& status);
+    // After the loop's init(): what it said.
+    void send_notices(const LoopStatus& status);
+    // The target's measurement of the loop just run: CPU cycles of its work and the loop
+    // ticks missed since boot (HQ_FW_STATUS loop_cycles_*, loop_overruns).
+    void record_loop(uint32_t cycles, uint32_t overruns_total) { load_.record(cycles, overruns_total); }
+    uint32_t telemetry_dropped() const { return telemetry_dropped_; }
+
+    // A message the firmware streams or sends on request (SET_MESSAGE_INTERVAL,
+    // MAV_CMD_REQUEST_MESSAGE), with its interval in microseconds (0: off).
+    struct Stream {
+        uint32_t msgid;
+        uint32_t default_us;
+        uint32_t interval_us;
+        uint64_t next_us;
+        bool requested;          // once, in the next loop (MAV_CMD_REQUEST_MESSAGE)
+    };
+    static constexpr int kStreams = 9;
+
+private:
+    // A message taken this loop: what its answer needs, and its request's slot in inbox_
+    // (-1: the link answers it alone).
+    struct Received {
+        uint32_t msgid;
+        uint8_t sysid, compid;
+        int8_t request;
+        uint8_t param_type;              // PARAM_SET
+        uint16_t command;                // COMMAND_LONG, COMMAND_INT
+        int16_t param_index;             // PARAM_REQUEST_READ
+        float p[7];                      // COMMAND_LONG, COMMAND_INT
+        char param_id[kParamNameLen];    // PARAM_REQUEST_READ, PARAM_SET
+        uint8_t ftp[4];                  // FILE_TRANSFER_PROTOCOL: seq (2), session, opcode
+    };
+    // gcs_link.cpp
+    bool for_us(uint8_t target_system, uint8_t target_component) const;
+    bool take(const mavlink_message_t& msg);
+    bool keep(const mavlink_message_t& msg, Received& in) const;
+    bool ask(const mavlink_message_t& msg, const Received& in, bool answered, LoopRequest& r);
+    static bool ask_command(const Received& in, LoopRequest& r);
+    bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);
+    static void read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg);
+    void reply(const Received& in, const LoopAnswer* a);
+    void reply_command(const Received& in, const LoopAnswer* a);
+    uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
+    void refuse_file_transfer(const Received& in);
+    void send_excitation_status(Reason reason, const ExcitationReport& ex);
+    void send_statustext(uint8_t severity, const char* text);
+    void send_notices_to(const LoopStatus& status, int end);
+    void send_notice(const Notice& n);
+    bool send(const mavlink_message_t& msg);
+    // param_protocol.cpp
+    bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
+    void reply_param_read(const Received& in);
+    void reply_param_set(const Received& in, const LoopAnswer* a);
+    void send_unknown_param(const char* name, int index);
+    void send_param_error(const Received& to, const char* name, int index, SetResult why);
+    void send_params(const Tunables& values);
+    bool send_param_value(const Tunables& values, int index);
+    // telemetry.cpp
+    uint8_t interval_command(uint32_t msgid, float interval_us);
+    uint8_t request_message(uint32_t msgid);
+    Stream* stream(uint32_t msgid);
+    bool stream_due(Stream& s, uint32_t loop_index, uint64_t now_us);
+    uint32_t stream_bytes_per_s(uint32_t msgid, uint32_t interval_us) const;
+    void send_telemetry(const LoopStatus& st);
+    void send_stream(uint32_t msgid, const LoopStatus& st, uint64_t now_us);
+    void send_heartbeat(const LoopStatus& st);
+    void send_fw_status(const LoopStatus& st, uint64_t now_us);
+    void send_sys_status(const LoopStatus& st);
+    void send_autopilot_version();
+    void send_servo_output(const LoopStatus& st, uint64_t now_us);
+    void send_rc_channels(const LoopStatus& st, uint64_t now_us);
+    void send_scaled_imu(const LoopStatus& st, uint64_t now_us);
+    void send_highres_imu(const LoopStatus& st, uint64_t now_us);
+    void send_attitude(const LoopStatus& st, uint64_t now_us);
+    void send_sysid_sample(const LoopStatus& st, uint64_t now_us);
+
+    GcsLinkConfig config_;
+    Clock& clock_;
+    SerialPort& port_;
+    LoopInbox inbox_{};
+    Received received_[LoopInbox::kCapacity];
+    int received_count_ = 0;
+    int notices_sent_ = 0;                   // of the loop's current notices
+    uint8_t rx_buf_[64] = {};                // bytes read but not yet parsed (inbox full)
+    size_t rx_len_ = 0, rx_pos_ = 0;
+    mavlink_message_t held_{};               // parsed, but no room this loop: the next's first
+    bool have_held_ = false;
+    LoopLoad load_{};
+    LoopLoad::Report last_load_{};           // the last second's (HQ_FW_STATUS, SYS_STATUS)
+    Stream streams_[kStreams];
+    bool last_exc_accepted_ = false;
+    uint32_t seq_ = 0;
+    uint32_t telemetry_dropped_ = 0;
+    uint32_t bytes_sent_ = 0, bytes_dropped_ = 0;     // this second's, for SYS_STATUS
+    uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
+    uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index
+    uint64_t params_as_float_ = 0;           // of those, answers to a set sent as REAL32
+    mavlink_status_t tx_status_{};
+    mavlink_status_t rx_status_{};
+    mavlink_message_t rx_msg_{};
+};
+
+}  // namespace hq

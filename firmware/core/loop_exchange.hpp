@@ -1,0 +1,129 @@
+// What the loop (FlightController) and the ground-station link (link/gcs_link.hpp) exchange,
+// as plain structs and nothing else: requests in (LoopInbox: what a ground station asked of
+// the loop, in the order it arrived), each answered by the loop (LoopAnswer: accepted or
+// refused, and why), and the loop's state out (LoopStatus: what it publishes every cycle,
+// with the notices it raised for STATUSTEXT). Neither side calls the other.
+#pragma once
+
+#include <cstdint>
+
+#include "excitation.hpp"
+#include "mixer.hpp"
+#include "mpu6050.hpp"
+#include "params.hpp"
+#include "rc.hpp"
+#include "supervisor.hpp"
+#include "types.hpp"
+
+namespace hq {
+
+enum class RequestKind : uint8_t {
+    Heartbeat,          // another system's HEARTBEAT: the Supervisor decides if it counts
+    Arm,
+    Disarm,
+    SetMode,            // `value` the custom mode (HQ_MODE)
+    ExcitationStart,    // LoopInbox::excitation the request
+    ExcitationStop,
+    ExcitationFinish,
+    ExcitationRefuse,   // an HQ_EXCITATION action the firmware does not know (BAD_ACTION)
+    ParamSet,           // `param_index`, `param_value` (decoded; `param_type_ok` false: refused)
+    Storage,            // `value` the MAV_CMD_PREFLIGHT_STORAGE parameter action
+};
+
+struct LoopRequest {
+    RequestKind kind = RequestKind::Heartbeat;
+    StationId who = kAnyStation;           // the station that asked
+    uint8_t sysid = 0, compid = 0, mav_type = 0;   // Heartbeat
+    uint32_t value = 0;
+    int param_index = -1;
+    float param_value = 0.0f;
+    bool param_type_ok = false;
+};
+
+enum class Verdict : uint8_t { Accepted, Refused, Failed };
+
+// The excitation as a request or its end left it (HQ_EXCITATION_STATUS).
+struct ExcitationReport {
+    ExcitationState state = ExcitationState::Idle;
+    Axis axis = Axis::Roll;
+    Injection injection = Injection::Mixer;
+    Signal signal = Signal::Sine;
+    float actual_freq_hz = 0.0f;
+    uint32_t period_samples = 0, total_samples = 0, fade_samples = 0;
+};
+
+struct LoopAnswer {
+    Verdict verdict = Verdict::Accepted;
+    Reason reason = Reason::None;
+    SetResult set = SetResult::Ok;         // ParamSet
+    uint8_t notices_end = 0;               // LoopStatus::notice[] up to here raised by now
+    ExcitationReport excitation{};         // the Excitation* kinds
+};
+
+// One loop's requests, filled by the link before the step and answered in the step. At most
+// one ExcitationStart a loop (its configuration is large); a second waits for the next.
+struct LoopInbox {
+    static constexpr int kCapacity = 24;
+    LoopRequest request[kCapacity];
+    LoopAnswer answer[kCapacity];
+    uint8_t count = 0;
+    bool has_excitation = false;
+    ExcitationConfig excitation{};
+};
+
+struct LoopState {               // what the last loop computed, for telemetry and tests
+    Euler attitude{};
+    Vec3 rate{};
+    Euler angle_sp{};
+    Vec3 rate_sp{};
+    Vec3 torque{};               // normalised mixer torque commands, after injection
+    float collective = 0.0f;
+    float excitation = 0.0f;
+    float motor[kMotors] = {0, 0, 0, 0, 0};
+    Vec3 accel{};                // m/s^2, the last IMU sample's
+    float dt_s = 0.0f;
+    uint8_t sensor_clipped = 0;  // HQ_SATURATION_GYRO / _ACCEL bits of the last IMU sample
+    uint8_t saturation = 0;      // HQ_SATURATION bits of this loop (mixer and sensor)
+};
+
+// Something the loop says in words (a STATUSTEXT): a Supervisor event, an IMU or a parameter
+// store message. `text` is a constant string, or nullptr for a stored value refused as out of
+// range (its words are set_result_text(SetResult::Range, param_index)).
+struct Notice {
+    uint8_t severity = 0;                  // MAV_SEVERITY
+    const char* text = nullptr;
+    int param_index = -1;
+};
+
+// What the loop publishes: after init(), and after every step.
+struct LoopStatus {
+    LoopState state{};
+    uint32_t loop_index = 0;               // the step's number from 0 (HQ_FW_STATUS.loops)
+    bool armed = false;
+    FlightMode mode = FlightMode::Angle;
+    ExcitationState excitation_state = ExcitationState::Idle;   // this loop's sample
+    Axis exc_axis = Axis::Roll;
+    Injection exc_injection = Injection::Mixer;
+    Reason last_reason = Reason::None;
+    bool imu_stale = false;
+    bool imu_ok = false;                   // found, initialised and not stale
+    bool prearm_ok = false;                // an arm command would arm now (or armed)
+    uint8_t sensor_kind = 0;               // HQ_SENSOR_KIND
+    SupervisorCounters supervisor{};
+    Mpu6050Counters imu{};
+    uint32_t dt_clamped = 0;
+    RcInput rc{};                          // this loop's RC input
+    uint32_t rc_timeout_us = 0;
+    Tunables params{};                     // the values the loop flies
+    bool excitation_ended = false;         // this step: HQ_EXCITATION_STATUS with end_reason
+    Reason end_reason = Reason::None;
+    ExcitationReport excitation{};
+    // A request's notices (LoopAnswer::notices_end), then up to notices_before_telemetry
+    // the Supervisor's events, then the ones raised after the telemetry (the store's).
+    static constexpr int kNotices = 2 * LoopInbox::kCapacity + Supervisor::kEventQueue + 2;
+    Notice notice[kNotices];
+    uint8_t notice_count = 0;
+    uint8_t notices_before_telemetry = 0;
+};
+
+}  // namespace hq
