@@ -64,7 +64,7 @@ def pid_tf(kc, tau_i, tau_d):
     python-control transfer function (:func:`heliquad.sim.plant.pid_model.pid_s_coeffs`,
     with the firmware's derivative filter). What the firmware flies is its Tustin form at
     the loop rate, :mod:`.loops`; this is the continuous form it approximates."""
-    # python-control (1 s) only when a loop is analysed: identify's replays and truth import this module
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     return control.tf(*pid_s_coeffs(kc, tau_i, tau_d, DERIVATIVE_FILTER_N))
@@ -232,7 +232,7 @@ def _rms(x):
 def _respond(cascade, t, ref=None, d=None):
     """The discrete closed loop's outputs (rate, and angle with the outer loop) for a
     reference and a disturbance sequence on the loop's time grid ``t``."""
-    # python-control (1 s) only when a loop is analysed: identify's replays and truth import this module
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     zero = np.zeros(t.size)
@@ -243,7 +243,7 @@ def _respond(cascade, t, ref=None, d=None):
 def _step(cascade, t, outer):
     """The closed loop's response to a step of the reference: 10 deg of angle with the
     outer loop, else 30 deg/s of rate (in rad, rad/s)."""
-    # python-control (1 s) only when a loop is analysed: identify's replays and truth import this module
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     size = STEP_ANGLE_RAD if outer else STEP_RATE_RAD_S
