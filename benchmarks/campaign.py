@@ -132,7 +132,7 @@ def sil_section(tmp: str, repeat: int) -> None:
 def rig_section(tmp: str, repeat: int) -> None:
     """Rig time per axis, the paper's dwell against one multisine at equal accuracy:
     benchmarks/rig_time.py (still air, then moderate turbulence over ``repeat`` seeds)."""
-    import rig_time          # beside this script
+    import rig_time  # beside this script
 
     rig_time.main(["--seeds", str(repeat)])
 

@@ -39,8 +39,8 @@ N_POINTS = 15
 def point_set(axis, truth, delay_s, noise, seed):
     """``(omega, F)``: the paper's ``truth`` model of ``axis`` with a delay, a zero-order
     hold and complex noise of RMS ``noise``."""
-    from heliquad.host.records import paper
     from heliquad.host.estimate.fit import model_response
+    from heliquad.host.records import paper
 
     num, den = paper.MODELS[axis][truth]
     lo, hi = paper.BANDS_HZ[axis]
@@ -82,8 +82,8 @@ def exhaustive(omega, F, order):
 def one_set(axis, truth, noise, args):
     """Fit every order of the axis to one point set; print a line per order. Returns the
     total delay-fit time over the orders."""
-    from heliquad.host.records import paper
     from heliquad.host.estimate.fit import fit_levy, fit_tf
+    from heliquad.host.records import paper
 
     omega, F = point_set(axis, truth, args.delay_ms * 1e-3, noise, args.seed)
     levy, _ = best_time(lambda: fit_levy(omega, F, truth), max(args.repeats, 20))

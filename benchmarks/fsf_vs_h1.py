@@ -20,6 +20,7 @@ import scipy.signal
 
 from heliquad.host.estimate.baselines import estimate_h1
 from heliquad.host.estimate.fsf import RecursiveFsf, estimate_fsf
+
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 from dwell_plant import simulate_sine_dwell  # noqa: E402  (the tests' exact sine-dwell plant)
 

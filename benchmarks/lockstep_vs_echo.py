@@ -20,9 +20,9 @@ the ratios and the real-time factors; --profile adds where a vehicle frame's tim
 """
 
 import argparse
-import statistics
 import os
 import pathlib
+import statistics
 import subprocess
 import tempfile
 import time

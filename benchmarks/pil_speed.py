@@ -42,8 +42,8 @@ def board_alone(elf: str, loops: int):
     outputs out), without the ptys, the codec or the simulator: wall time, and the board's
     own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
     accesses and events)."""
-    from heliquad.sim.sensor.mpu6050_packets import raw_packet
     from heliquad.sim.chip.pil.board import PilBoard
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
 
     board = PilBoard(elf)
     board.boot()

@@ -29,10 +29,10 @@ import tempfile
 
 import numpy as np
 
-from heliquad.host.campaign.identify import identify_dir
 from heliquad.host.acquire.session import SilSession
 from heliquad.host.acquire.sweep import (SWEEP_TLOG, default_plan, multisine_plan, run_sweep,
                                          sil_source)
+from heliquad.host.campaign.identify import identify_dir
 from heliquad.sim.base.dialect import AXES
 from heliquad.sim.rig.setup import SilConfig
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from heliquad.host.records import paper
 from dwell_plant import simulate_sine_dwell
+from heliquad.host.records import paper
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 

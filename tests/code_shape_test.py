@@ -1,8 +1,10 @@
 """The code's shape: no Python function in the tool, the simulator, the benchmarks or the
 firmware's scripts is longer than MAX_FUNCTION_LINES (a longer one is split into named
 pieces, each saying what it does), no module longer than MAX_MODULE_LINES (a longer one
-holds more than one concept: each gets a module named after it), and the library changes no process-wide setting that
-belongs to its caller (numpy's error handling, matplotlib's backend).
+holds more than one concept: each gets a module named after it), the library changes no
+process-wide setting that belongs to its caller (numpy's error handling, matplotlib's
+backend), and an import inside a function of the tool or the simulator says why it is not at
+the module's top.
 
 Reads the sources with ``ast``; imports nothing from heliquad.
 """
@@ -10,7 +12,9 @@ Reads the sources with ``ast``; imports nothing from heliquad.
 from __future__ import annotations
 
 import ast
+import io
 import pathlib
+import tokenize
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 #: The folders walked (every .py file below each).
@@ -128,3 +132,102 @@ def test_the_library_sets_nothing_process_wide():
                  for hit in process_wide_calls(path.read_text(), path.relative_to(ROOT).as_posix())]
     assert not offenders, ("process-wide settings in the library (use np.errstate locally; "
                            "make figures with matplotlib.figure.Figure):\n" + "\n".join(offenders))
+
+
+IMPORT_FOLDERS = ("host", "sim")
+
+
+def _comment_lines(source: str):
+    """(lines with a comment, lines that are only a comment), numbered from 1."""
+    with_comment, only_comment = set(), set()
+    for tok in tokenize.generate_tokens(io.StringIO(source).readline):
+        if tok.type == tokenize.COMMENT:
+            with_comment.add(tok.start[0])
+            if not tok.line[:tok.start[1]].strip():
+                only_comment.add(tok.start[0])
+    return with_comment, only_comment
+
+
+def _function_import_blocks(tree):
+    """Each run of consecutive import statements inside a function (nested blocks and
+    functions included), as a list of statements."""
+    blocks = []
+
+    def walk(statements, in_function):
+        run = []
+        for stmt in statements:
+            if in_function and isinstance(stmt, (ast.Import, ast.ImportFrom)):
+                run.append(stmt)
+                continue
+            if run:
+                blocks.append(run)
+                run = []
+            inner = in_function or isinstance(stmt, (ast.FunctionDef, ast.AsyncFunctionDef))
+            for field in ("body", "orelse", "finalbody"):
+                walk(getattr(stmt, field, []), inner)
+            for handler in getattr(stmt, "handlers", []):
+                walk(handler.body, inner)
+            for case in getattr(stmt, "cases", []):
+                walk(case.body, inner)
+        if run:
+            blocks.append(run)
+
+    walk(tree.body, False)
+    return blocks
+
+
+def unexplained_imports(source: str, path: str = "<source>"):
+    """``path:line`` of every import inside a function with no reason beside it: a comment
+    on its own lines, or on the line directly above it (one comment line above a run of
+    consecutive imports explains the run)."""
+    with_comment, only_comment = _comment_lines(source)
+    found = []
+    for block in _function_import_blocks(ast.parse(source, filename=path)):
+        shared = block[0].lineno - 1 in only_comment
+        for stmt in block:
+            own = any(n in with_comment for n in range(stmt.lineno, stmt.end_lineno + 1))
+            if not (shared or own or stmt.lineno - 1 in only_comment):
+                found.append(f"{path}:{stmt.lineno}")
+    return found
+
+
+def test_the_finder_sees_unexplained_imports():
+    source = "\n".join([
+        "import os",                                   # 1: at the top, needs nothing
+        "def explained():",
+        "    # python-control takes a second",           # 3
+        "    import control",
+        "    from scipy import signal",                  # 5: the comment above covers it
+        "",
+        "    import matplotlib  # drawn figures only",   # 7
+        "def bare():",
+        "    x = 1",
+        "    import json",                               # 10
+        "    if x:",
+        "        import csv",                            # 12: nested block
+        "    def inner():",
+        "        from . import (a,",                     # 14: multi-line, comment on its end
+        "                       b)  # a cycle",
+        "        s = '# not a comment'; import re",      # 16: a '#' in a string is none
+        "    y = 2",
+        "    # a reason for z only",
+        "    import z",                                  # 19
+        "    import w",                                  # 20: a run, shared comment
+        "    y = 3",
+        "    # a comment, then code",
+        "    y = 4",
+        "    import v",                                  # 24
+        "class Holder:",
+        "    import typing",                             # 26: a class body is no function
+        ""])
+    assert unexplained_imports(source, "m.py") == ["m.py:10", "m.py:12", "m.py:16", "m.py:24"]
+
+
+def test_every_import_inside_a_function_says_why():
+    offenders = [hit for folder in IMPORT_FOLDERS
+                 for path in sorted((ROOT / folder).rglob("*.py"))
+                 for hit in unexplained_imports(path.read_text(),
+                                                path.relative_to(ROOT).as_posix())]
+    assert not offenders, ("imports inside functions with no reason: move them to the "
+                           "module's top, or say on the line above why they are not (a "
+                           "measured start-up cost, a cycle):\n" + "\n".join(offenders))

@@ -45,9 +45,9 @@ from heliquad import _firmware as fw
 from heliquad.host.acquire import excitation, link
 from heliquad.host.records import paper
 from heliquad.sim.base import dialect as names
-from heliquad.sim.rig import faults
-from heliquad.sim.plant import vehicle
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.plant import vehicle
+from heliquad.sim.rig import faults
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 XML = ROOT / "firmware" / "mavlink" / "heliquad.xml"

@@ -14,11 +14,10 @@ import sys
 
 import pytest
 
-from heliquad.sim.base.errors import DiskFull
-from heliquad.host.acquire.log_session import summarise_tlog
-from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir
-
 import teensy_image
+from heliquad.host.acquire.log_session import summarise_tlog
+from heliquad.sim.base.errors import DiskFull
+from tool_runs import Tool, assert_nothing_left, one_line, private_tmpdir
 
 #: The file-size limit: a few seconds of telemetry.
 LIMIT = 100_000

@@ -16,13 +16,12 @@ import zlib
 
 import pytest
 
+from fake_dmp import FAKE_CONFIG, FAKE_DMP, FAKE_IMAGE, FAKE_UPDATES, write_fake_dmp
 from heliquad import _firmware as fw
 from heliquad.host.commands.dmp_image import (pack_dmp_file, read_dmp_file, read_dmp_firmware,
                                               table_entries, unpack_dmp_file)
 from heliquad.sim.base.errors import InputError
 from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware
-
-from fake_dmp import FAKE_CONFIG, FAKE_DMP, FAKE_IMAGE, FAKE_UPDATES, write_fake_dmp
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 REAL_WHEEL = "/tmp/mpu/mpu6050-0.0.3-py3-none-any.whl"

@@ -67,8 +67,8 @@ def test_imu_model_noise_bias_and_latency():
 
 
 def test_imu_noise_is_the_same_stream_in_blocks_and_frames():
-    from heliquad.sim.plant.vehicle_params import load_params
     from heliquad.sim.plant.imu_model import ImuModel
+    from heliquad.sim.plant.vehicle_params import load_params
 
     a, b = ImuModel(load_params().imu, seed=5), ImuModel(load_params().imu, seed=5)
     np.testing.assert_array_equal(np.vstack([a.noise(1) for _ in range(50)]),

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from heliquad.sim.base.errors import InputError
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.errors import InputError
 from heliquad.sim.rig.faults import Fault, imu_fault_codes, link_close_frame, parse_fault
 
 MAV = dialect()

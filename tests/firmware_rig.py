@@ -15,8 +15,8 @@ import time
 
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.sim.base.dialect import dialect
-from heliquad.sim.rig.lockstep import HostFirmware, SimLink
 from heliquad.sim.plant.tf_plant import TfPlant
+from heliquad.sim.rig.lockstep import HostFirmware, SimLink
 
 MAV = dialect()
 ROLL = ((28.19,), (1.0, 5.13, 22.93))

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import pytest
 
-from heliquad.sim.rig.lockstep import HostFirmware, start_firmware
-
 import teensy_image
+from heliquad.sim.rig.lockstep import HostFirmware, start_firmware
 
 FIRMWARES = ["host", pytest.param("teensy35", marks=pytest.mark.pil)]
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from heliquad.host.estimate import fit as fit_module
+from heliquad.host.estimate.fit import TfModel, fit_levy, fit_tf, model_response, parse_order
+from heliquad.host.estimate.metrics import evaluate_model, recommend
+from heliquad.host.estimate.models import fit_orders
 from heliquad.host.records import paper
 from heliquad.sim.base.errors import InputError
-from heliquad.host.estimate.fit import TfModel, fit_levy, fit_tf, model_response, parse_order
-from heliquad.host.estimate.models import fit_orders
-from heliquad.host.estimate.metrics import evaluate_model, recommend
 
 N_POINTS = 15
 DECADES = 1.5

@@ -5,13 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from heliquad.host.estimate.baselines import estimate_dft, estimate_h1
-from heliquad.sim.base.errors import InputError
-from heliquad.host.estimate.fsf import (RecursiveFsf, estimate_against_excitation,
-                                        estimate_frequency, estimate_multisine,
-                                        estimate_multisine_against_excitation, estimate_fsf,
-                                        period_coherence)
 from dwell_plant import simulate_sine_dwell
+from heliquad.host.estimate.baselines import estimate_dft, estimate_h1
+from heliquad.host.estimate.fsf import (RecursiveFsf, estimate_against_excitation,
+                                        estimate_frequency, estimate_fsf, estimate_multisine,
+                                        estimate_multisine_against_excitation, period_coherence)
+from heliquad.sim.base.errors import InputError
 
 ROLL = ([28.19], [1, 5.13, 22.93])          # the paper's chosen roll model (docs/paper.md)
 FS_HZ = 200.0

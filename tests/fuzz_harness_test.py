@@ -16,6 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent / "fuzz"))
 import framer_fuzz  # noqa: E402
 import fuzz_input  # noqa: E402
 import tlog_fuzz  # noqa: E402
+
 from heliquad.host.records import tlog
 from heliquad.sim.base import framing as mavframe  # noqa: E402
 

@@ -22,7 +22,6 @@ import threading
 import pytest
 
 from heliquad.sim.base.dialect import dialect
-
 from private_pymavlink import private_pymavlink
 from tool_runs import cli
 

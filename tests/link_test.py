@@ -5,8 +5,8 @@ import os
 
 import pytest
 
-from heliquad.sim.base.errors import InputError
 from heliquad.host.acquire.link import TelemetryLink
+from heliquad.sim.base.errors import InputError
 
 
 def test_a_send_on_a_port_that_went_away_is_the_link_lost():
@@ -107,9 +107,10 @@ class Relay:
     ``tcp-out`` (connects to a listening client)."""
 
     def __init__(self, board_port, mode, client_port=None):
-        import serial
         import socket
         import threading
+
+        import serial
 
         self.board = serial.Serial(str(board_port), timeout=0)     # raw mode, as a reader sets
         self.mode, self.peer, self.conn = mode, None, None

@@ -18,18 +18,17 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.host.estimate.fsf import estimate_fsf
-from heliquad.host.records.run_csv import read_run_csv
-from heliquad.sim.base.dialect import dialect
-from heliquad.host.records.tlog import read_tlog
-from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware, SimLink
-from heliquad.host.acquire.experiment import run_sil
-from heliquad.sim.rig.setup import SilConfig
-from heliquad.sim.plant.tf_plant import TfPlant
-
 from fake_dmp import write_fake_dmp
 from firmware_rig import FirmwareRig
 from firmwares import FIRMWARES, image_for, start
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.host.estimate.fsf import estimate_fsf
+from heliquad.host.records.run_csv import read_run_csv
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.plant.tf_plant import TfPlant
+from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware, SimLink
+from heliquad.sim.rig.setup import SilConfig
 
 ROLL = ((28.19,), (1.0, 5.13, 22.93))
 MAV = dialect()

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.host.validate import loops
-from heliquad.host.records import paper
 from heliquad.host.estimate.fit import fit_tf
+from heliquad.host.records import paper
 from heliquad.host.records.gains import firmware_gains
+from heliquad.host.validate import loops
 from heliquad.host.validate.closed_loop import validate_model
 from heliquad.sim.rig.setup import SilConfig, make_plant
 

@@ -194,8 +194,8 @@ def stream(lose=(), status=True):
 
 
 def watch(messages):
-    from heliquad.host.acquire.sweep import SweepPlan
     from heliquad.host.acquire.measure import ExcitationWatch, Limits
+    from heliquad.host.acquire.sweep import SweepPlan
 
     plan = SweepPlan("roll", "mixer", [2.0], [0.1], cycles=MEASURED, fade_cycles=FADE)
     w = ExcitationWatch(plan, 2.0, 0.1, Limits(), 0, progress=lambda *_: None)

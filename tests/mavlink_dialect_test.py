@@ -8,13 +8,11 @@ import subprocess
 import sys
 import time
 
-import pytest
-
 import pymavlink
+import pytest
 
 from heliquad.host.records.tlog import read_tlog
 from heliquad.sim.base.dialect import dialect
-
 from private_pymavlink import private_pymavlink as make_private_pymavlink
 
 REAL_V20 = os.path.join(os.path.dirname(pymavlink.__file__), "dialects", "v20")

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import scipy.io
 
+from heliquad.host.estimate.fit import TfModel
 from heliquad.host.records import paper
 from heliquad.host.records.models import write_models_json, write_models_mat
-from heliquad.host.estimate.fit import TfModel
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 FIXED_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate")

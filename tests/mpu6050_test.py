@@ -6,12 +6,11 @@ import struct
 
 import pytest
 
-from heliquad import _firmware as fw
-from heliquad.host.commands.dmp_image import table_entries
-
 # Made-up DMP firmware of MotionApps 2.0's form (the real one is InvenSense's and is not in
 # this repository); the driver and the emulator treat its bytes as opaque.
 from fake_dmp import FAKE_CONFIG, FAKE_DMP, FAKE_IMAGE, FAKE_UPDATES, chip_and_driver
+from heliquad import _firmware as fw
+from heliquad.host.commands.dmp_image import table_entries
 
 GYRO_LSB = 16.4          # per deg/s at +/-2000 deg/s
 ACCEL_LSB = 16384.0      # per g at +/-2 g

@@ -15,11 +15,10 @@ import signal
 
 import pytest
 
+import teensy_image
 from heliquad.host.acquire.log_session import summarise_tlog
 from tool_runs import (Tool, assert_nothing_left, excitation_running, one_line, private_tmpdir,
                        size, wait_for)
-
-import teensy_image
 
 ENDINGS = ["normal", "ctrl-c", "sigterm", "sighup", "firmware killed"]
 #: How a signal ends every command (host/cli/parser.py): the word said and the exit code, after

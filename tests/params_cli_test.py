@@ -15,12 +15,12 @@ import time
 import numpy as np
 import pytest
 
-from heliquad.sim.base.errors import InputError
-from heliquad.host.records.params_file import read_params_file, write_params_file
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.host.acquire.param_protocol import (NoAnswer, Param, ParamClient, ParamRefused,
                                                   decode_value, encode_value, value_text)
+from heliquad.host.records.params_file import read_params_file, write_params_file
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.errors import InputError
 from heliquad.sim.base.framing import Codec, Framer
 
 MAV = dialect()

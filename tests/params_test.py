@@ -17,14 +17,13 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
+from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
+from firmwares import FIRMWARES, start
 from heliquad import _firmware
 from heliquad.host.acquire.param_protocol import decode_value, encode_value
 from heliquad.sim.base.dialect import dialect
-from heliquad.sim.rig.lockstep import SimLink
 from heliquad.sim.plant.tf_plant import TfPlant
-
-from firmware_rig import ARM_HIGH, DT_US, RC_REST, ROLL, THROTTLE_HOVER
-from firmwares import FIRMWARES, start
+from heliquad.sim.rig.lockstep import SimLink
 
 MAV = dialect()
 # mavutil loads a dialect by module name, MAVLink 2 only with MAVLINK20 set (as MAVProxy

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from heliquad import _firmware as fw
-from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 from heliquad.host.validate.closed_loop import pid_tf
+from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 from heliquad.sim.plant.pid_model import pid_s_coeffs, pid_z, pid_z_coeffs
 
 DT = LOOP_PERIOD_S   # the firmware's loop period (5 ms: 200 Hz)

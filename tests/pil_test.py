@@ -15,17 +15,16 @@ import math
 import numpy as np
 import pytest
 
-from heliquad import _firmware
-from heliquad.host.records.run_csv import read_run_csv
-from heliquad.host.estimate.fsf import estimate_fsf
-from heliquad.sim.base.dialect import dialect
-from heliquad.host.records.tlog import read_tlog
-from heliquad.sim.chip.pil.board import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
-from heliquad.host.acquire.experiment import run_sil
-from heliquad.sim.rig.setup import RC_CENTER_US, SilConfig
-
 from firmware_rig import FirmwareRig
 from firmwares import image_for, start
+from heliquad import _firmware
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.host.estimate.fsf import estimate_fsf
+from heliquad.host.records.run_csv import read_run_csv
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.chip.pil.board import ESC_MAX_US, ESC_MIN_US, FTM0_COUNTS_PER_US
+from heliquad.sim.rig.setup import RC_CENTER_US, SilConfig
 
 pytestmark = pytest.mark.pil
 MAV = dialect()

@@ -11,13 +11,13 @@ import pytest
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 
-from heliquad.host.records import paper
 from heliquad.host.estimate.fit import TfModel
-from heliquad.host.present.figure import new_figure
-from heliquad.host.present.bode import plot_bode, write_bode
-from heliquad.host.present.responses import plot_responses
-from heliquad.host.validate.replay import replay_record
 from heliquad.host.estimate.thresholds import LOW_COHERENCE
+from heliquad.host.present.bode import plot_bode, write_bode
+from heliquad.host.present.figure import new_figure
+from heliquad.host.present.responses import plot_responses
+from heliquad.host.records import paper
+from heliquad.host.validate.replay import replay_record
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
@@ -221,8 +221,8 @@ def test_the_frequency_axis_is_labelled_however_narrow_the_band(band_hz, some):
 def test_a_figure_name_is_checked_for_its_format_before_any_work(tmp_path, monkeypatch):
     """heliquad fit --plot: the extension picks the format (any case; PNG without one); one
     matplotlib cannot write, or pgf without the TeX it needs, is refused up front."""
-    from heliquad.sim.base.errors import InputError
     from heliquad.host.records.figures import check_figure_output, figure_format
+    from heliquad.sim.base.errors import InputError
 
     assert [figure_format(n) for n in ("b.PNG", "b.svg", "bode", "a.b/c")] == \
         ["png", "svg", "png", "png"]

@@ -108,8 +108,8 @@ def test_an_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
 
 
 def test_an_unwritable_folder_is_one_line(tmp_path):
-    from heliquad.sim.base.errors import InputError
     from heliquad.host.records.output import write_json
+    from heliquad.sim.base.errors import InputError
 
     with pytest.raises(InputError, match="cannot write .*no-such-folder"):
         write_json(tmp_path / "no-such-folder" / "x.json", {})
@@ -218,9 +218,9 @@ def test_a_broken_matplotlib_is_one_line_and_the_points_and_models_are_written(s
 def test_a_plotting_process_that_died_loses_identify_nothing(sweep, tmp_path):
     # Killed before anything reached it: identify still writes its points and models, then
     # says the plots were not drawn.
-    from heliquad.sim.base.errors import InputError
     from heliquad.host.campaign.identify import identify_dir
     from heliquad.host.present.plot_process import PlotProcess
+    from heliquad.sim.base.errors import InputError
 
     folder = _copy(sweep, tmp_path / "died")
     with PlotProcess() as plots:

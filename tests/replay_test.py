@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pytest
 
-from heliquad.sim.base.errors import InputError
 from heliquad.host.estimate.fit import TfModel, model_response
 from heliquad.host.validate.replay import replay_points, replay_record
+from heliquad.sim.base.errors import InputError
 
 FS = 200.0
 PERIOD = 80                                   # 2.5 Hz at 200 Hz

@@ -7,11 +7,10 @@ import math
 
 import pytest
 
-from heliquad.sim.rig.lockstep import HostFirmware
-
 from fake_dmp import write_fake_dmp
 from firmware_rig import DT_US, MAV, FirmwareRig
 from firmwares import FIRMWARES, start
+from heliquad.sim.rig.lockstep import HostFirmware
 
 IMU_TIMEOUT_US = 25000          # five samples of the 200 Hz sensor
 HOST_TIMEOUT_US = 1500000

@@ -245,8 +245,8 @@ def test_one_rule_turns_every_ending_into_its_exit_code(exc, code, capsys):
     # 2: the user's input; 1: the board refused, went away or fell silent, a disk filled;
     # 130, 143, 129: SIGINT, SIGTERM, SIGHUP (host/cli/parser.py).
     from heliquad.host.cli import parser as cli
-    from heliquad.sim.base.errors import BoardRefused, DiskFull, InputError, LinkLost
     from heliquad.host.process.signals import HungUp, Terminated
+    from heliquad.sim.base.errors import BoardRefused, DiskFull, InputError, LinkLost
 
     names = dict(errno=errno, LinkLost=LinkLost, BoardRefused=BoardRefused, DiskFull=DiskFull,
                  InputError=InputError, Terminated=Terminated, HungUp=HungUp)

@@ -9,15 +9,13 @@ import struct
 import numpy as np
 import pytest
 
+from fake_dmp import write_fake_dmp
 from heliquad import _firmware as fw
 from heliquad import _simcore
-from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware, SimLink
 from heliquad.host.acquire.session import SilSession
-from heliquad.sim.rig.setup import SilConfig, _rc
 from heliquad.sim.plant.vehicle_plant import VehiclePlant
-
-from fake_dmp import write_fake_dmp
-
+from heliquad.sim.rig.lockstep import FirmwareError, HostFirmware, SimLink
+from heliquad.sim.rig.setup import SilConfig, _rc
 
 
 def test_dmp_packet_reads_back_through_the_firmware_driver():
@@ -125,9 +123,9 @@ def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):
     # Two loops' telemetry (ATTITUDE, then the loop's HQ_SYSID_SAMPLE), line noise in
     # between, and the start of a third loop: each packet is logged stamped with the time of
     # the next HQ_SYSID_SAMPLE, the noise is skipped, the third loop waits for its sample.
-    from heliquad.sim.base.framing import Codec
-    from heliquad.sim.base.dialect import dialect
     from heliquad.host.records.tlog import read_tlog
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Codec
 
     mav = dialect()
     codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
@@ -161,9 +159,9 @@ def test_the_tap_stamps_the_runs_start_plus_each_loops_time(tmp_path):
     # A SIL log carries the wall clock of its run's start plus simulated time (tools show the
     # date the run was made); the tap's own clock stays simulated. The reader takes the
     # shared offset for a simulated log's and still names a record stamped otherwise.
-    from heliquad.sim.base.framing import Codec
-    from heliquad.sim.base.dialect import dialect
     from heliquad.host.records.tlog import TlogDamage, read_tlog
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Codec
 
     mav = dialect()
     codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)
@@ -196,9 +194,9 @@ def test_the_tap_stamps_the_runs_start_plus_each_loops_time(tmp_path):
 def test_the_tap_drained_at_the_end_keeps_a_loop_cut_short(tmp_path):
     # The firmware said why it stopped (STATUSTEXT) and died before the loop's sample: at the
     # session's end the tap logs it with the last loop's time instead of dropping it.
-    from heliquad.sim.base.framing import Codec
-    from heliquad.sim.base.dialect import dialect
     from heliquad.host.records.tlog import read_tlog
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Codec
 
     mav = dialect()
     codec = Codec(mav, system_id=1, component_id=mav.MAV_COMP_ID_AUTOPILOT1)

@@ -10,10 +10,9 @@ import time
 import numpy as np
 import pytest
 
+from firmwares import FIRMWARES, image_for
 from heliquad.host.records import paper
 from heliquad.sim.plant.tf_plant import TfPlant
-
-from firmwares import FIRMWARES, image_for
 from tool_runs import excitation_running
 
 
@@ -154,8 +153,8 @@ def test_the_firmware_stops_a_sweep_at_its_angle_limit_and_the_log_is_kept(tmp_p
 def test_the_hosts_own_limit_stays_as_a_second_line(tmp_path):
     # Below the firmware's limits, the host's check (here tightened to 20 deg) stops the
     # excitation and the sweep, and says so.
-    from heliquad.host.acquire.sweep import default_plan, run_sweep
     from heliquad.host.acquire.session import SilSession
+    from heliquad.host.acquire.sweep import default_plan, run_sweep
     from heliquad.sim.rig.setup import SilConfig
 
     plan = default_plan("roll", "rate", [0.2], math.radians(100))
@@ -171,8 +170,8 @@ def test_a_sweep_the_firmware_refuses_ends_with_its_reason(tmp_path):
     # before anything starts (the firmware's own limits); a session that sends it anyway (a
     # board flashed with tighter limits would) is refused by the firmware, and the manifest
     # says why.
-    from heliquad.host.acquire.sweep import SweepPlan, run_sweep
     from heliquad.host.acquire.session import SilSession
+    from heliquad.host.acquire.sweep import SweepPlan, run_sweep
     from heliquad.sim.rig.setup import SilConfig
 
     res = heliquad("sweep", "--axis", "roll", "--sil", "--freqs-hz", 1.0, "--amplitude", 3,
@@ -213,9 +212,9 @@ def test_identify_says_in_one_line_when_no_frequency_has_a_usable_excitation(tmp
     # running but never reached the plant): every frequency is skipped with its reason.
     import struct
 
-    from heliquad.sim.base.framing import Codec
-    from heliquad.sim.base.dialect import dialect
     from heliquad.host.records.tlog import read_tlog
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.base.framing import Codec
 
     out = tmp_path / "flat"
     res = heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2,
@@ -372,9 +371,9 @@ def test_both_firmwares_play_a_multisine_and_every_line_is_found(name, tmp_path)
     # newlib sinf): a 40 s multisine on the roll transfer-function plant gives all 15 lines
     # within 0.1 dB and 0.5 deg of the sampled-data truth, and the firmware never passed the
     # declared peak (the sweep would have ended with PEAK).
-    from heliquad.host.campaign.identify import identify_dir
     from heliquad.host.acquire.session import SilSession
     from heliquad.host.acquire.sweep import SWEEP_TLOG, multisine_plan, run_sweep, sil_source
+    from heliquad.host.campaign.identify import identify_dir
     from heliquad.sim.rig.setup import SilConfig
 
     num, den = paper.MODELS["roll"][paper.CHOSEN_ORDER["roll"]]

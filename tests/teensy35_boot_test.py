@@ -31,8 +31,7 @@ import sys
 
 import pytest
 
-from heliquad.sim.chip import ChipReset, Fault, Mk64, Teensy35
-from heliquad.sim.chip import registers, svd
+from heliquad.sim.chip import ChipReset, Fault, Mk64, Teensy35, registers, svd
 from heliquad.sim.chip.i2c import SCL_DIVIDER
 from heliquad.sim.chip.machine import Stop
 from heliquad.sim.chip.teensy35 import I2C_PINS, PINS

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
-from heliquad.host.records import paper
 from heliquad.host.present.figure import new_figure
 from heliquad.host.present.validation import plot_validation
+from heliquad.host.records import paper
 from heliquad.host.validate.closed_loop import load_gains, validate_model, validation_record
+from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 
 
 @pytest.mark.parametrize("axis", ["roll", "pitch", "yaw"])

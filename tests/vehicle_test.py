@@ -8,8 +8,8 @@ import pytest
 
 from heliquad import _firmware as fw
 from heliquad.sim.base.errors import InputError
-from heliquad.sim.plant.vehicle_params import load_params
 from heliquad.sim.plant.vehicle import GRAVITY_M_S2, Vehicle
+from heliquad.sim.plant.vehicle_params import load_params
 
 PARAMS = load_params()
 

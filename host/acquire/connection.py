@@ -121,6 +121,7 @@ class NetworkPort:
     def __init__(self, name: str, kind: str, rest: str):
         host, port = _address(name, kind, rest)
         self.name, self.kind, self.lost = name, kind, None
+        # pymavlink's mavutil (0.3 s) only for UDP or TCP: a serial port or pty never pays
         from pymavlink import mavutil
 
         # A TCP connect to a host that never answers would wait minutes: bound it. mavutil

@@ -16,13 +16,13 @@ import math
 import os
 import time
 
+from ...sim.base.errors import InputError
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import SilConfig
-from ...sim.base.errors import InputError
 from ..records.run_csv import write_run_csv
+from .measure import SATURATION, measure
 from .session import SilSession
 from .sweep import SweepPlan
-from .measure import SATURATION, measure
 
 __all__ = ["SilResult", "run_sil", "TAIL_FRAMES"]
 

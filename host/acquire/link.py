@@ -11,13 +11,12 @@ that offset).
 from __future__ import annotations
 
 import struct
-
 import time
 
-from .connection import open_connection
 from ...sim.base import dialect as names
-from ...sim.base.framing import Codec, Framer
 from ...sim.base.dialect import dialect
+from ...sim.base.framing import Codec, Framer
+from .connection import open_connection
 
 # AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
 __all__ = ["TelemetryLink", "INPUT_OUTPUT", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",

@@ -11,8 +11,10 @@ from __future__ import annotations
 import collections
 import time
 
+from ...sim.base.dialect import dialect
 from ...sim.base.errors import DiskFull, InputError
-from .link import DEFAULT_BAUD
+from ..records.tlog import TlogDamage, TlogWriter, read_tlog
+from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, TelemetryLink
 
 __all__ = ["run_log", "summarise_tlog"]
 
@@ -28,9 +30,6 @@ def run_log(port: str, out: str, baud: int = DEFAULT_BAUD, duration_s: float | N
     ``interrupted``: the KeyboardInterrupt (Ctrl-C, or SIGTERM / SIGHUP as
     :class:`~heliquad.sim.base.errors.Terminated`) that ended it, else None: the caller says so
     and exits with its code once the summary is out."""
-    from .link import HEARTBEAT_PERIOD_S, TelemetryLink
-    from ..records.tlog import TlogWriter
-
     link = TelemetryLink(port, baud=baud)          # the port first: a bad one creates nothing
     try:
         tlog = link.tlog = TlogWriter(out)
@@ -85,9 +84,6 @@ def _count(stats, seq):
 
 def summarise_tlog(path: str) -> dict:
     """Message counts, time span and lost samples of a .tlog, and what damage was skipped."""
-    from ...sim.base.dialect import dialect
-    from ..records.tlog import TlogDamage, read_tlog
-
     damage = TlogDamage()
     try:
         msgs = read_tlog(path, dialect(), damage=damage)

@@ -19,8 +19,8 @@ import numpy as np
 from ...sim.base import firmware_facts
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
+from .design import response_per_unit
 from .link import INPUT_OUTPUT, reason_text
-
 
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
 #: millidegree: the firmware holds them in single precision).
@@ -299,8 +299,6 @@ class ExcitationWatch:
         """The measured rate (``of="input"``: input) per unit of excitation at the
         fundamental (NaN if unknown: an excitation that did not end well, or an output
         that is not the rate)."""
-        from .design import response_per_unit
-
         e = self.entry
         if not e.get("period_samples") or self.y_name != "rate" or (
                 require_end and e["status"] != "ok"):

@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from ...sim.base.dialect import dialect
 from ...sim.base.errors import BoardRefused, InputError, LinkLost
 from ..records.params_file import INTEGER_TYPES, TYPE_NAMES, check_name
 from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
@@ -289,8 +290,6 @@ class ParamClient:
     def _heard(self, heartbeat) -> None:
         """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
         on a shared network link says nothing of the board)."""
-        from ...sim.base.dialect import dialect
-
         mav = dialect()
         if heartbeat.type != mav.MAV_TYPE_GCS:
             self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)

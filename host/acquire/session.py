@@ -22,13 +22,13 @@ from typing import Callable, Protocol
 
 from heliquad import _simcore
 
+from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
-from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
-from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 from ..records.tlog import TlogWriter, create_log
+from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 
 __all__ = ["Session", "SilSession", "PortSession", "TELEMETRY_BATCH"]
 

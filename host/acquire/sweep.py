@@ -28,16 +28,16 @@ import os
 
 import numpy as np
 
-from ...sim.base.errors import FirmwareError
+from ...sim.base.errors import DiskFull, FirmwareError, InputError
 from .. import __version__
-from ..records import paper
-from ...sim.base.errors import DiskFull, InputError
 from ..process.signals import ABORTED_BY, stopped_by
-from ..records.manifest import MANIFEST, SweepManifest, write_manifest
-from .excitation import amplitude_bound, default_amplitude, default_peak
-from .measure import (MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure,
-                      saturation_text)
+from ..records import paper
 from ..records.gains import gains_from_params, single
+from ..records.manifest import MANIFEST, SweepManifest, write_manifest
+from .design import AmplitudeDesign, Dwell
+from .excitation import amplitude_bound, default_amplitude, default_peak
+from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
+from .multisine import LINES, RIG_TIME_S, design
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .param_protocol import session_params
@@ -109,8 +109,6 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
     ``amplitude``: one for every frequency; without it a mixer sweep's amplitudes are
     designed for a swing of ``swing_deg`` (:class:`~heliquad.host.acquire.design.AmplitudeDesign`)
     and angle and rate sweeps use :func:`.excitation.default_amplitude`."""
-    from .design import AmplitudeDesign, Dwell
-
     if freqs_hz is None:
         lo, hi = paper.BANDS_HZ[axis]
         freqs_hz = np.logspace(math.log10(lo), math.log10(hi), N_FREQUENCIES)
@@ -139,8 +137,6 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     turbulence, and a multisine shares its power among its lines (on the vehicle's rigs in
     still air the roll rig then swings about 5 deg). ``like``: the same lines as that
     :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
-    from .multisine import LINES, RIG_TIME_S, design
-
     if amplitude is None:
         amplitude = default_peak(inject)
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,

@@ -17,20 +17,33 @@ import os
 
 import numpy as np
 
+from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
 from ..acquire.link import INPUT_OUTPUT
+from ..acquire.measure import MAX_LOST_SHARE, saturation_text
+from ..acquire.sweep import cut_text
+from ..estimate.fit import n_parameters
+from ..estimate.fsf import (DEFAULT_DISCARD_PERIODS, complete_excitation,
+                            estimate_against_excitation, estimate_fsf, estimate_multisine,
+                            estimate_multisine_against_excitation, fill_lost)
+from ..estimate.models import default_orders, fit_orders
 from ..estimate.thresholds import LOW_COHERENCE
+from ..present.bode import COHERENCE_KEYS
+from ..present.plot_process import PlotProcess
+from ..records.manifest import MANIFEST, read_manifest
+from ..records.models import write_models_json
+from ..records.points import write_points_csv, write_points_table
+from ..records.tlog import TlogDamage, read_tlog_table
+from ..validate.closed_loop import margins_record
+from ..validate.loops import broken_loop, measured_loop_name
+from ..validate.replay import replay_points
+from ..validate.truth import sil_truth, truth_record
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 
 
 def _load(dir_path):
-    from ...sim.base.dialect import dialect
-    from ..records.manifest import read_manifest
-    from ..records.manifest import MANIFEST
-    from ..records.tlog import TlogDamage, read_tlog_table
-
     path = os.path.join(dir_path, MANIFEST)
     if not os.path.lexists(path):
         raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
@@ -50,8 +63,6 @@ def _load(dir_path):
 def _check_log_matches(dir_path, manifest, samples) -> None:
     """The log's excitations are the manifest's: same axis and injection (a folder whose
     log comes from another session is refused, not fitted)."""
-    from ...sim.base.dialect import AXES, INJECTIONS, dialect
-
     idle = dialect().HQ_EXCITATION_STATE_IDLE
     want = (AXES.get(manifest.get("axis")), INJECTIONS.get(manifest.get("inject")))
     other = (samples.exc_state != idle) & ((samples.axis != want[0]) |
@@ -69,8 +80,6 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 def _segments(manifest, samples):
     """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
     samples on their places in the sequence (:func:`_gridded`)."""
-    from ...sim.base.dialect import dialect
-
     running = dialect().HQ_EXCITATION_STATE_RUNNING
     u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
     t = samples.time_us.astype(np.int64)
@@ -121,8 +130,6 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     caller has started and will close); by default a
     :class:`~heliquad.host.present.plot_process.PlotProcess` of its own, which draws them in a
     process of its own while the models are fitted."""
-    from ..present.plot_process import PlotProcess
-
     if plots is None:
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
@@ -134,13 +141,6 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
 
 def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
               estimate) -> dict:
-    from ..records.models import write_models_json
-    from ..records.points import write_points_csv, write_points_table
-    from ..estimate.fit import n_parameters
-    from ..estimate.models import default_orders, fit_orders
-
-    from ..acquire.sweep import cut_text
-
     cut = cut_text(manifest)
     if cut:
         progress(f"warning: {cut}; the points are those it measured")
@@ -197,9 +197,6 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
 def _replays(result, points, segments):
     """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
     record's first point), or None when no model is recommended."""
-    from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
-    from ..validate.replay import replay_points
-
     if result.recommended is None:
         return None
     return replay_points(result.models[result.recommended], points, segments,
@@ -209,8 +206,6 @@ def _replays(result, points, segments):
 def _replay_record(recommended, replays) -> dict:
     """models.json's ``replay``: the replayed model's index and, per frequency, the whole
     periods replayed and the replay's error."""
-    from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
-
     return {"model": recommended, "discard_periods": DEFAULT_DISCARD_PERIODS,
             "points": [{"freq_hz": r.freq_hz, "periods": r.periods, "nrmse": r.nrmse}
                        for r in sorted(replays, key=lambda r: r.freq_hz)]}
@@ -219,8 +214,6 @@ def _replay_record(recommended, replays) -> dict:
 def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
     record, with the recommended model's replay), by the plotting process ``plots``."""
-    from ..present.bode import COHERENCE_KEYS
-
     axis, inject = manifest["axis"], manifest["inject"]
     ranked = sorted(points, key=lambda p: p.omega_rad_s)
     bode = {"path": os.path.join(dir_path, "bode.png"),
@@ -240,8 +233,6 @@ def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
 def _truth(dir_path, manifest, points, result, progress) -> dict | None:
     """A simulated sweep: the points' and the recommended model's errors against the
     simulator's truth (:mod:`.truth`), said and returned for models.json."""
-    from ..validate.truth import sil_truth, truth_record
-
     truth, why = sil_truth(manifest, dir_path)
     if truth is None:
         if manifest.get("source", {}).get("kind") == "sil":
@@ -265,9 +256,6 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
     (``L = R/U - 1``), its margins where the points reach its crossovers; said, and
     returned for models.json (None when no loop closes there or the points were not
     estimated against the excitation)."""
-    from ..validate.loops import broken_loop, measured_loop_name
-    from ..validate.closed_loop import margins_record
-
     name = measured_loop_name(manifest["inject"], manifest["axis"])
     pts = sorted(points, key=lambda p: p.omega_rad_s)
     t_u = np.array([p.input_gain for p in pts])
@@ -299,8 +287,6 @@ def _estimate_points(manifest, samples, estimate, progress) -> tuple:
     multisine, against the excitation or the input (``estimate``). A record that lost
     samples on the link is estimated from those that arrived (each point's
     ``lost_share``); one that lost more than the sweep allows is skipped."""
-    from ..acquire.measure import MAX_LOST_SHARE
-
     points, segments, firsts, skipped = [], [], [], []
     for entry, t, r, u, y, present in _segments(manifest, samples):
         what = _entry_name(entry)
@@ -338,9 +324,6 @@ def _estimate_entry(entry, r, u, y, estimate, present=None) -> list:
     """The points of one excitation's full-amplitude record: a sine's one (the first period
     discarded), or every line of a multisine (its first period fills the FSF's filter).
     ``present``: which samples arrived (None: all)."""
-    from ..estimate.fsf import (estimate_against_excitation, estimate_fsf, estimate_multisine,
-                                estimate_multisine_against_excitation)
-
     fs = entry["freq_hz"] * entry["period_samples"]
     if estimate != "excitation" and present is not None:
         u, y = _complete_input(entry, r, u, y, present)
@@ -362,8 +345,6 @@ def _complete_input(entry, r, u, y, present):
     """For the estimate against the input, whose regressors need every sample of ``u``:
     the lost samples of ``u`` from its fit against the (completed) excitation; ``y``'s
     lost rows are left out of the fit."""
-    from ..estimate.fsf import complete_excitation, estimate_fsf, estimate_multisine, fill_lost
-
     period = int(entry["period_samples"])
     r = complete_excitation(r, present, period)
     u0, y0 = np.where(present, u, 0.0), np.where(present, y, 0.0)
@@ -380,7 +361,5 @@ def _complete_input(entry, r, u, y, present):
 
 def _saturated(manifest) -> list:
     """The measured frequencies during which something saturated, in words."""
-    from ..acquire.measure import saturation_text
-
     return [f"{e['freq_hz']:.4g} Hz{said}" for e in manifest["frequencies"]
             if e.get("status") == "ok" and "freq_hz" in e and (said := saturation_text(e))]

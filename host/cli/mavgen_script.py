@@ -23,6 +23,10 @@ import json
 import os
 import shutil
 import sys
+from importlib.metadata import version
+
+import pymavlink
+from pymavlink.generator import mavgen
 
 INCLUDED = ("common.xml", "standard.xml", "minimal.xml")
 #: Each module made: (its path in OUT_DIR, mavgen's wire protocol).
@@ -30,9 +34,6 @@ MODULES = (("{name}.py", "2.0"), (os.path.join("v10", "{name}.py"), "1.0"))
 
 
 def main(xml: str, out: str) -> int:
-    import pymavlink
-    from pymavlink.generator import mavgen
-
     here = os.path.dirname(os.path.abspath(pymavlink.__file__))
     for name in INCLUDED:
         shutil.copy(os.path.join(here, "dialects", "v20", name), out)
@@ -49,7 +50,6 @@ def main(xml: str, out: str) -> int:
             sys.stderr.write(chatter.getvalue())
             return 1
     try:
-        from importlib.metadata import version
         found = version("pymavlink")
     except Exception:                  # an unpackaged checkout: its folder says enough
         found = "unknown"

@@ -17,6 +17,8 @@ Exit codes, one rule for every command (docs/architecture.md, "Exit codes"):
 
 from __future__ import annotations
 
+from ..commands import add_parsers
+
 if __name__ == "__main__":               # python -m heliquad.host.cli.parser: signals first
     from ..process.signals import take_at_start
 
@@ -34,8 +36,8 @@ import sys
 # instead of 3.0, 0.25 s sooner). Whoever sets it keeps their setting.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from .. import __version__
 from ...sim.base.errors import BoardRefused, DiskFull, InputError, LinkLost, no_room
+from .. import __version__
 from ..process.signals import EXIT_CODES, WORDS, settle, stopped_by, take_while_running
 
 __all__ = ["main"]
@@ -69,8 +71,6 @@ class _Parser(argparse.ArgumentParser):
 def _build_parser(argv=None) -> argparse.ArgumentParser:
     """The parser, with the subcommand ``argv`` names only when it names one
     (:func:`~heliquad.host.commands.add_parsers`)."""
-    from ..commands import add_parsers
-
     parser = _Parser(prog="heliquad",
                      description="Firmware-in-the-loop flight-controller emulator and "
                                  "frequency-domain system identification for heterogeneous "

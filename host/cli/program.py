@@ -10,6 +10,7 @@ take_at_start()
 
 def entry() -> None:
     """The console script's entry point: :func:`heliquad.host.cli.parser.entry`."""
+    # after take_at_start: the signals are taken before the command line is imported
     from .parser import entry as run
 
     run()

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import os
 
 from ...sim.base import dialect as names
+from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from .shared_options import (add_firmware_argument, add_param_store_argument, check_plant, finite,
                              int_in, number_in)
-from ...sim.base.errors import InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
@@ -62,8 +63,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
+    # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.board import run_board
     from ...sim.rig.lockstep import FirmwareError
 

@@ -25,10 +25,10 @@ import sys
 import time
 import traceback
 
-from ..records import paper
-from .shared_options import MAX_SEED, add_firmware_argument, int_in
 from ...sim.base.errors import DiskFull, InputError
 from ..process.signals import WORDS, stop_exception, stopped_by
+from ..records import paper
+from .shared_options import MAX_SEED, add_firmware_argument, int_in
 
 #: The demo's exit code when an axis failed (the others' records and the report are kept).
 EXIT_STOPPED = 1
@@ -52,8 +52,9 @@ def add_parser(sub, fmt) -> None:
 
 
 def run_demo(args) -> int:
-    from ..records.output import new_output_folder
+    # the command's work, imported when it runs: --help imports every command module
     from ..process.workers import run_children
+    from ..records.output import new_output_folder
 
     new_output_folder(args.out, "the demo")
     t0 = time.monotonic()
@@ -83,6 +84,7 @@ def run_demo(args) -> int:
 
 def _report(out: str) -> str | None:
     """The HTML report of every axis that got so far, or None (said) when none did."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..present.report import write_report
 
     try:
@@ -107,6 +109,7 @@ def axis_main() -> None:
     and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
     ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C, SIGTERM and SIGHUP stop it in order
     (the sweep keeps its log and manifest)."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..process.workers import send_result
 
     signal.signal(signal.SIGINT, _on_signal)
@@ -131,12 +134,12 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
     # import leaves Python to end by SIGINT after the tool has stopped in order.
     from ...sim.rig.setup import SilConfig
-    from ..records.models import read_models_json
-    from ..campaign.identify import identify_dir
-    from ..present.plot_process import InlinePlots
     from ..acquire.session import SilSession
     from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
+    from ..campaign.identify import identify_dir
+    from ..present.plot_process import InlinePlots
     from ..present.validation import save_validation
+    from ..records.models import read_models_json
     from ..validate.closed_loop import model_gains, sweep_inputs, validate_model
 
     importlib.import_module("..estimate.fsf", __package__)        # a sweep's dwell check uses it
@@ -176,6 +179,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
 def _compare(axis, model, reason, truth):
     """Worst error of the recommended model against the simulator's sampled-data truth
     across the band (identify's record of it, :mod:`.truth`)."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..estimate.fit import format_tf
 
     if model is None or not truth:

@@ -227,6 +227,7 @@ or pass it at run time:      heliquad sil ... --dmp-image dmp.bin
 
 
 def _cmd(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.output import atomic_write, check_output
 
     check_output(args.out, "--out")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from ...sim.base.errors import InputError
 from ..estimate.thresholds import LOW_COHERENCE
 
@@ -58,6 +57,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.figures import check_figure_output
     from ..records.models import write_models_json, write_models_mat
     from ..records.output import check_output
@@ -69,7 +69,8 @@ def run(args) -> int:
     if args.plot:
         check_figure_output(args.plot, "--plot")
     points = read_points_csv(args.points)
-    from ..estimate.fit import n_parameters, parse_order     # after the file is read: scipy is slow
+    # after the file is read, so that a bad file is said at once: the fits' modules are slow
+    from ..estimate.fit import n_parameters, parse_order
     from ..estimate.models import fit_orders
 
     if args.order:
@@ -91,6 +92,7 @@ def run(args) -> int:
         write_models_mat(args.mat, result.models, result.recommended)
         print(f"wrote {args.mat}")
     if args.plot:
+        # the command's work, imported when it runs: --help imports every command module
         from ..present.bode import write_bode
 
         write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
@@ -101,6 +103,7 @@ def run(args) -> int:
 
 
 def print_models(result) -> None:
+    # the command's work, imported when it runs: --help imports every command module
     from ..estimate.fit import format_tf, order_name
 
     print(f"weights: {result.weights}")

@@ -20,6 +20,7 @@ import sys
 from dataclasses import dataclass
 
 from ...sim.base.errors import InputError
+from ..process.signals import EXIT_CODES, WORDS, stopped_by
 
 __all__ = ["ImageInfo", "check_image", "default_hex", "add_parser"]
 
@@ -46,6 +47,7 @@ class ImageInfo:
 
 def check_image(path: str) -> ImageInfo:
     """Read and check a Teensy 3.5 image; InputError with the reason when it is not one."""
+    # intelhex only to read an image: --help imports every command module
     from intelhex import HexRecordError, IntelHex, IntelHexError
 
     if os.path.isdir(path):
@@ -90,6 +92,7 @@ def check_image(path: str) -> ImageInfo:
 def default_hex() -> str:
     """The image to flash when none is given: the finder's .hex (heliquad.sim.base.firmware_image:
     $HQ_TEENSY35_ELF's .hex, the installed image, the teensy35 preset's build)."""
+    # the command's work, imported when it runs: --help imports every command module
     from ...sim.base.firmware_image import ImageNotFound, teensy35_image
 
     try:
@@ -133,7 +136,6 @@ def _cmd(args) -> int:
     try:
         rc = subprocess.run(cmd).returncode
     except KeyboardInterrupt as exc:             # Ctrl-C, SIGTERM, SIGHUP: the signal's code
-        from ..process.signals import EXIT_CODES, WORDS, stopped_by
 
         signum = stopped_by(exc)
         print(f"heliquad flash: {WORDS[signum]}; the board may hold a partial image: flash "

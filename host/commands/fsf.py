@@ -5,9 +5,11 @@ from __future__ import annotations
 import math
 import sys
 
-from .shared_options import int_in, number_in
+import numpy as np
+
 from ...sim.base.errors import InputError
 from ..estimate.thresholds import LOW_COHERENCE
+from .shared_options import int_in, number_in
 
 __all__ = ["add_parser", "run"]
 
@@ -67,6 +69,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.output import check_output
     from ..records.points import write_points_csv
     from ..records.run_csv import read_run_csv
@@ -111,7 +114,9 @@ def _frequencies(args) -> list:
 
 def _estimate(args, u, y, fs_hz, freq) -> list:
     """One run's points: a sine's one, or every line of a multisine its input excites."""
-    from ..estimate.fsf import estimate_fsf, estimate_multisine   # after the file is read
+    # the command's work, imported when it runs (after the file is read): --help imports every
+    # command module
+    from ..estimate.fsf import estimate_fsf, estimate_multisine
 
     if args.orders is None:
         discard = DISCARD_SINE if args.discard_periods is None else args.discard_periods
@@ -144,8 +149,6 @@ def _a_line_stands_out(u, period: int, orders, discard: int) -> bool:
     A wrong base frequency puts nothing special at those bins; what else drives the input
     (noise, a disturbance the loop answers) spreads over all of them. True when it cannot
     tell (fewer than two whole periods)."""
-    import numpy as np
-
     start = discard * period
     n = (len(u) - start) // period
     if n < 2:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 
 from ...sim.base.errors import InputError
@@ -47,15 +48,15 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
+    # the command's work, imported when it runs: --help imports every command module
     from ..present.plot_process import PlotProcess
 
     if not os.path.isdir(args.dir):
         raise InputError(f"{args.dir}: not a folder")
     with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
-        from ..estimate.fit import parse_order
+        # the command's work, imported when it runs: --help imports every command module
         from ..campaign.identify import identify_dir
+        from ..estimate.fit import parse_order
 
         orders = [parse_order(o) for o in args.order] if args.order else None
         r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
@@ -68,6 +69,7 @@ def run(args) -> int:
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
     if args.mat:
+        # the command's work, imported when it runs: --help imports every command module
         from ..records.models import write_models_mat
 
         write_models_mat(args.mat, r["result"].models, r["result"].recommended)

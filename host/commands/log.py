@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import sys
 
-from .shared_options import int_in, number_in
 from ...sim.base.errors import DiskFull, InputError
 from ..acquire.connection import CONNECTION_HELP
 from ..acquire.link import DEFAULT_BAUD
+from .shared_options import int_in, number_in
 
 __all__ = ["add_parser", "run"]
 
@@ -43,6 +43,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.log_session import run_log
 
     if args.duration_s is not None and args.duration_s <= 0:

@@ -20,6 +20,7 @@ import subprocess
 import sys
 import tempfile
 
+from ...sim.base.dialect import dialect
 from ...sim.base.errors import InputError
 
 __all__ = ["dialect_xml", "generate", "add_parser"]
@@ -78,8 +79,6 @@ examples: heliquad mavlink-dialect --install
 
 def dialect_xml() -> str:
     """The installed heliquad.xml (beside the generated module), or a source checkout's."""
-    from ...sim.base.dialect import dialect
-
     for path in (os.path.join(os.path.dirname(dialect().__file__), "mavlink", f"{NAME}.xml"),
                  os.path.join(os.path.dirname(SCRIPT), os.pardir, "firmware", "mavlink",
                               f"{NAME}.xml")):
@@ -114,6 +113,7 @@ def _copy(pairs, source: str, target: str, replace: bool) -> None:
     """Copy each ``(name, to)`` of ``pairs``, ``source/name`` to ``target/to`` (each written
     whole, its folder made); unless ``replace``, a file there that holds something else
     stops it before anything is written."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.output import atomic_write
 
     data = {}

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import datetime
+import os
 import sys
 
-from .shared_options import finite, int_in
-from ..acquire.connection import CONNECTION_HELP
 from ...sim.base.errors import InputError
+from .. import __version__
+from ..acquire.connection import CONNECTION_HELP
 from ..acquire.link import DEFAULT_BAUD
+from .shared_options import finite, int_in
 
 __all__ = ["add_parser", "run"]
 
@@ -67,12 +70,11 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
-    from ..records.output import check_output
-    from ..records.params_file import check_name, read_params_file
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.link import TelemetryLink
     from ..acquire.param_protocol import ParamClient
+    from ..records.output import check_output
+    from ..records.params_file import check_name, read_params_file
 
     entries = None
     if args.action == "save":
@@ -93,6 +95,7 @@ def run(args) -> int:
 
 
 def _list(client, args, entries) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.params_file import TYPE_NAMES
 
     params = client.fetch_all()
@@ -121,9 +124,7 @@ def _set(client, args, entries) -> int:
 
 
 def _save(client, args, entries) -> int:
-    import datetime
-
-    from .. import __version__
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.params_file import write_params_file
 
     params = client.fetch_all()
@@ -136,6 +137,7 @@ def _save(client, args, entries) -> int:
 
 
 def _load(client, args, entries) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.param_protocol import load_params
 
     print(f"loading {len(entries)} parameters from {args.file}", flush=True)

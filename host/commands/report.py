@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-
-
 __all__ = ["add_parser", "run"]
 
 
@@ -23,6 +21,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..present.report import write_report
 
     print(f"wrote {write_report(args.dir, args.out)}")

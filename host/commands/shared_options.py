@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 import numpy as np
 
@@ -72,9 +73,6 @@ def number_in(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = Fa
 
 def _param_store(path: str) -> str:
     """A parameter store's path: a file (or none yet) in a folder that exists."""
-    import argparse
-    import os
-
     if os.path.isdir(path):
         raise argparse.ArgumentTypeError(f"{path} is a folder, not a parameter store file")
     if os.path.exists(path) and not os.path.isfile(path):
@@ -110,6 +108,7 @@ def add_fault_argument(p, prefix="") -> None:
 
 
 def faults(args) -> tuple:
+    # imported only when the option is checked: every command's parser imports this module
     from ...sim.rig.faults import parse_fault
 
     return tuple(parse_fault(text) for text in args.fault)
@@ -181,6 +180,7 @@ def check_plant(args) -> None:
     a run tests. A ``--dmp-image`` file is read here too, so a bad one is refused before
     anything starts."""
     if getattr(args, "dmp_image", None):
+        # imported only when the option is checked: every command's parser imports this module
         from .dmp_image import read_dmp_file
 
         read_dmp_file(args.dmp_image)
@@ -190,8 +190,9 @@ def check_plant(args) -> None:
     if not 0 < loop_hz <= facts.MAX_LOOP_RATE_HZ:
         raise InputError(f"--loop-hz must be in (0, {facts.MAX_LOOP_RATE_HZ:g}]")
     if getattr(args, "plant", "tf") == "vehicle":
-        from ...sim.plant.vehicle_params import load_params
+        # imported only when the option is checked: every command's parser imports this module
         from ...sim.plant.vehicle import check_step
+        from ...sim.plant.vehicle_params import load_params
 
         check_step(load_params(args.params), 1.0 / loop_hz)    # a bad file fails here, in one line
         return

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 from ...sim.base import dialect as names
+from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
+from ...sim.plant.vehicle import RIGS
+from ..acquire.excitation import firmware_amplitude
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
                              finite, int_in, number_in)
-from ..acquire.excitation import firmware_amplitude
-from ...sim.base.errors import DiskFull, InputError, LinkLost
 
 __all__ = ["add_parser", "run"]
 
@@ -32,8 +34,6 @@ example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --
 
 
 def add_parser(sub, fmt) -> None:
-    from ...sim.plant.vehicle import RIGS
-
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--plant", choices=("tf", "vehicle"), default="tf",
@@ -77,8 +77,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
+    # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.lockstep import FirmwareError
     from ...sim.rig.setup import SilConfig
     from ..acquire.experiment import run_sil
@@ -115,6 +114,7 @@ def run(args) -> int:
           f"{args.firmware}; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.measure import saturation_summary
 
     said = saturation_summary(r.saturation)

@@ -9,17 +9,17 @@ import os
 import sys
 
 from ...sim.base import dialect as names
+from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DURATION_S
+from ..acquire import design
+from ..acquire.connection import CONNECTION_HELP
+from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
+from ..acquire.link import DEFAULT_BAUD
+from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
+from ..process.signals import ABORTED_BY, EXIT_CODES
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
                              finite, int_in, number_in)
-from ..acquire import design
-from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
-from ...sim.base.errors import DiskFull, InputError, LinkLost
-from ..acquire.connection import CONNECTION_HELP
-from ..process.signals import ABORTED_BY, EXIT_CODES
-from ..acquire.link import DEFAULT_BAUD
-from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 
 __all__ = ["add_parser", "run"]
 
@@ -110,8 +110,9 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    from ..records.output import new_output_folder
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.sweep import SWEEP_TLOG, run_sweep
+    from ..records.output import new_output_folder
 
     # fsf (with scipy) is imported now, not by the first dwell check or amplitude design
     # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
@@ -119,6 +120,7 @@ def run(args) -> int:
     importlib.import_module("heliquad.host.estimate.fsf")
     plan = _plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
+        # the command's work, imported when it runs: --help imports every command module
         from ...sim.rig.setup import SilConfig
 
         if plan.multisine is not None:       # its lines in the band, its peak in bounds
@@ -165,6 +167,7 @@ def run(args) -> int:
 def _ended(exc, out) -> int:
     """A sweep ended by an error: the board went away (exit 1, as a silent one), or the one
     line the command line gives ``exc``, saying that the records are kept."""
+    # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.lockstep import FirmwareError
 
     kept = f"the log and manifest so far are kept in {out}"
@@ -192,6 +195,7 @@ def _what(plan) -> str:
 def _plan(args):
     """The sweep's plan from the options: fixed or sequential dwell, fixed or designed
     amplitudes."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.sweep import default_plan
 
     if args.cycles is not None and (args.target_sigma or args.max_cycles):
@@ -217,6 +221,7 @@ def _plan(args):
 def _multisine_plan(args, amp):
     """A multisine's plan: over the axis's band, or from the lowest to the highest of
     --freqs-hz; --amplitude is its peak."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.sweep import multisine_plan
 
     given = [o for o, v in (("--cycles", args.cycles), ("--target-sigma", args.target_sigma),
@@ -237,12 +242,14 @@ def _multisine_plan(args, amp):
 def _sweep_session(args, tlog):
     """The session a sweep drives (the firmware in the loop, or a board's port) and the
     manifest's record of its source."""
-    from ..records import paper
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.session import PortSession
+    from ..records import paper
 
     if not args.sil:
         return PortSession(args.port, tlog, args.baud), \
             {"kind": "port", "port": args.port, "baud": args.baud}
+    # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.lockstep import FirmwareError
     from ...sim.rig.setup import SilConfig
     from ..acquire.session import SilSession

@@ -19,6 +19,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
+    # the command's work, imported when it runs: --help imports every command module
     from ..acquire.log_session import summarise_tlog
 
     r = summarise_tlog(args.path)

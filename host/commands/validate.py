@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import os
 
 from ...sim.base import dialect as names
+from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import LOOP_RATE_HZ
 from .shared_options import MAX_SEED, check_model, int_in
-from ...sim.base.errors import InputError
 
 __all__ = ["add_parser", "run"]
 
@@ -47,8 +48,7 @@ def add_parser(sub, fmt) -> None:
 
 
 def run(args) -> int:
-    import os
-
+    # the command's work, imported when it runs: --help imports every command module
     from ..records.gains import read_gains
     from ..records.models import read_models_json
     from ..records.output import check_output_folder
@@ -69,6 +69,7 @@ def run(args) -> int:
     out = args.out or os.path.dirname(os.path.abspath(args.models))
     check_output_folder(out, "--out")
 
+    # the command's work, imported when it runs: --help imports every command module
     from ..present.validation import save_validation
     from ..validate.closed_loop import model_gains, sweep_inputs, validate_model, validation_record
 
@@ -103,6 +104,7 @@ def _margins_text(lp) -> str:
 
 def _print_validation(r) -> None:
     """The validation as validation.json records it (degrees, deg/s and dB)."""
+    # the command's work, imported when it runs: --help imports every command module
     from ..validate.loops import LOOP_DT_S
 
     coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
@@ -126,6 +128,7 @@ def _print_validation(r) -> None:
         if name in r.get("truth_loops", {}):
             print(f"        simulator's truth: {_margins_text(r['truth_loops'][name])}")
     if not r["stable"]:
+        # the command's work, imported when it runs: --help imports every command module
         from ..validate.closed_loop import instability_text
 
         print(f"  {instability_text(r)}; no time responses")

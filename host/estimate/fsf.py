@@ -275,7 +275,8 @@ def estimate_frequency(u, fs_hz: float) -> float:
     maximises the power that a least-squares sine fit at that frequency explains (the
     four-parameter sine fit), which is exact for a noise-free sine.
     """
-    import scipy.optimize          # here: identify, which knows its frequencies, need not wait
+    # scipy.optimize (0.2 s) here: identify, which knows its frequencies, need not wait
+    import scipy.optimize
 
     u = np.asarray(u, dtype=float) - np.mean(u)
     n = u.size

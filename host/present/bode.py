@@ -8,7 +8,6 @@ import numpy as np
 from ..records.figures import save_figure
 from .figure import CURVE_POINTS, fixed_layout, log_ticks, new_figure
 
-
 #: The Bode figure's fixed layout, inches: margins (the y labels, the title, the frequency
 #: axis) and the gap between its panels (constrained layout took 40 % of its drawing).
 BODE_MARGINS_IN = {"left": 0.8, "right": 0.25, "top": 0.4, "bottom": 0.6}

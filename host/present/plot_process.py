@@ -27,6 +27,8 @@ import threading
 from multiprocessing.connection import Connection
 
 from ...sim.base.errors import InputError
+from .bode import write_bode
+from .responses import ResponsesFigure
 
 __all__ = ["PlotProcess", "InlinePlots", "serve"]
 
@@ -132,13 +134,9 @@ class InlinePlots:
         self.figure = None
 
     def records(self, segments, input_name: str, output_name: str) -> None:
-        from .responses import ResponsesFigure
-
         self.figure = ResponsesFigure(segments, input_name, output_name)
 
     def finish(self, bode: dict, responses: dict) -> None:
-        from .bode import write_bode
-
         write_bode(**bode)
         self.figure.save(**responses)
 
@@ -171,8 +169,6 @@ def serve() -> None:
         for name in ("matplotlib.backends.backend_agg", "matplotlib.figure",
                      "heliquad.host.estimate.fit", "heliquad.host.validate.replay"):   # before the records come
             importlib.import_module(name)
-        from .bode import write_bode
-        from .responses import ResponsesFigure
         drawers, broken = (write_bode, ResponsesFigure), None
     except Exception as exc:                    # noqa: BLE001 - said to the other side
         drawers, broken = None, exc

@@ -34,12 +34,12 @@ import html
 import os
 
 from ...sim.base.errors import InputError
+from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG
 from ..records.manifest import read_manifest
 from ..records.models import read_models_json
 from ..records.output import atomic_write, check_output
 from ..records.points import read_points_csv, read_points_table
 from ..records.validation import read_validation
-from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG
 from .report_checks import checks_html
 from .report_html import STYLE, image_html, number_text, table_html
 from .report_models import models_html, order_text, tf_html

@@ -10,8 +10,8 @@ import html
 import numpy as np
 
 from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG, ROUND_OFF_SIGMA, honest_sigma_bound
-from .report_models import order_text
 from .report_html import number_text
+from .report_models import order_text
 from .report_points import beyond_accuracy
 
 #: models.json's ``estimate``, in words.

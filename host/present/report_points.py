@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from ..records.points import TABLE_COLUMNS
 from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG, LOW_COHERENCE
+from ..records.points import TABLE_COLUMNS
 from .report_html import number_text, table_html
 
 #: Two frequencies of one folder's files are the same point within this relative difference

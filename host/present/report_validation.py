@@ -13,7 +13,6 @@ from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG
 from ..validate.closed_loop import instability_text
 from .report_html import number_text, table_html
 
-
 #: The loops of validation.json and where each is broken, for the report.
 LOOPS = {"rate": "rate loop: broken at the plant input, the angle loop open",
          "angle": "angle loop: broken at the rate setpoint, the rate loop closed",

@@ -170,6 +170,7 @@ class ResponsesFigure:
     that ran past the record's range is cut at the panel's edge)."""
 
     def __init__(self, segments, input_name, output_name):
+        # matplotlib (0.3 s) only to draw: identify's main process leaves it to its plot process
         import matplotlib
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -192,6 +193,7 @@ class ResponsesFigure:
     def _style(self, input_name, output_name) -> tuple:
         """The pair of Axes labelled and coloured, their labels and title at fixed places,
         and their two (empty) lines, the input's and the output's."""
+        # matplotlib (0.3 s) only to draw: identify's main process leaves it to its plot process
         from matplotlib.ticker import MaxNLocator
 
         ax, right = self.ax, self.right
@@ -233,6 +235,7 @@ class ResponsesFigure:
         """Add ``replays`` (beside the records, a :class:`~heliquad.host.validate.replay.Replay` or
         None each) and ``title``, and write the picture to ``path`` (PNG). Once: what it
         adds stays on the picture."""
+        # matplotlib (0.3 s) only to draw: identify's main process leaves it to its plot process
         import matplotlib
         from matplotlib.image import imsave
 

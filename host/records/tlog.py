@@ -32,8 +32,16 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import struct
 import warnings
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from ...sim.base.errors import DiskFull, InputError, no_room
+from ...sim.base.framing import (CRC_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN, STX_V2,
+                                 Codec, packet_at)
 
 __all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog", "read_tlog_table"]
 
@@ -43,8 +51,6 @@ _STAMP = struct.Struct(">Q")
 def create_log(path, buffering: int = -1):
     """A new file for a log, opened for binary writing; one that exists is never truncated
     (InputError naming it and how to go on). ``buffering`` as for :func:`open`."""
-    from ...sim.base.errors import InputError
-
     try:
         return open(path, "xb", buffering=buffering)
     except FileExistsError:
@@ -105,8 +111,6 @@ class TlogWriter:
 
     def _stop(self, exc: OSError, size: int, records: list) -> None:
         """A write failed: keep the whole records that reached the file, cut the rest."""
-        from ...sim.base.errors import DiskFull, no_room
-
         fd = self._fh.fileno()
         written, kept = os.fstat(fd).st_size - size, 0
         whole = 0
@@ -194,8 +198,6 @@ _PAD = 8 + 10 + 255 + 2 + 13
 def _chain(data, pos: int, count: int) -> list:
     """Offsets of up to ``count`` records from ``pos``, each where the one before says it ends
     (its header's payload length and signature flag; nothing checked: :func:`_verified`)."""
-    from ...sim.base.framing import CRC_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN
-
     n, out, overhead = len(data), [], _STAMP.size + HEADER_LEN + CRC_LEN
     append = out.append
     for _ in range(count):
@@ -212,8 +214,6 @@ def _chain(data, pos: int, count: int) -> list:
 def _crc_table():
     """CRC-16/MCRF4XX (MAVLink's X.25 checksum) by the byte: the table of its reflected
     polynomial 0x8408."""
-    import numpy as np
-
     table = np.arange(256, dtype=np.uint16)
     for _ in range(8):
         table = np.where(table & 1, (table >> 1) ^ 0x8408, table >> 1).astype(np.uint16)
@@ -222,8 +222,6 @@ def _crc_table():
 
 def _crcs(windows, extra, table):
     """The MAVLink checksum of each row of ``windows`` followed by its CRC extra byte."""
-    import numpy as np
-
     crc = np.full(len(windows), 0xFFFF, dtype=np.uint16)
     for j in range(windows.shape[1]):
         crc = (crc >> 8) ^ table[(crc ^ windows[:, j]) & 0xFF]
@@ -235,8 +233,6 @@ class _Dialect:
     table."""
 
     def __init__(self, codec):
-        import numpy as np
-
         self.ids = np.array(sorted(codec.extras), dtype=np.int64)
         self.extras = np.array([codec.extras[i] for i in self.ids.tolist()], dtype=np.uint16)
         self.table = _crc_table()
@@ -246,11 +242,6 @@ def _verified(buf, n: int, offsets, known: _Dialect) -> tuple:
     """For the records at ``offsets`` of the first ``n`` bytes of ``buf`` (padded): which are
     well formed (the STX after the stamp, the whole packet in the file, a known message, its
     checksum right), and each one's message id, payload length and record length."""
-    import numpy as np
-    from numpy.lib.stride_tricks import sliding_window_view
-
-    from ...sim.base.framing import CRC_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN, STX_V2
-
     start = np.asarray(offsets, dtype=np.int64) + _STAMP.size
     length = buf[start + 1].astype(np.int64)
     size = HEADER_LEN + length + CRC_LEN + np.where(buf[start + 2] & INCOMPAT_SIGNED,
@@ -274,8 +265,6 @@ def _scan(data, codec, report: TlogDamage) -> tuple:
     of ``data`` in order, as :func:`read_tlog` says; ``breaks``: the index of each record that
     follows a skipped region. Records are chained by their headers and checked in bulk;
     where one does not check out, the reader steps byte by byte to the next that does."""
-    import numpy as np
-
     buf = np.frombuffer(bytes(data) + bytes(_PAD), dtype=np.uint8)
     known, n = _Dialect(codec), len(data)
     parts, breaks, count, pos, run = [], [], 0, 0, _FIRST_RUN
@@ -304,9 +293,6 @@ def _scan(data, codec, report: TlogDamage) -> tuple:
 def _words(buf, at, lengths, width: int):
     """The ``width`` bytes at each of ``at``, a row each, the bytes from each one's
     ``lengths`` on taken as zero (a MAVLink 2 payload trimmed of its trailing zeros)."""
-    import numpy as np
-    from numpy.lib.stride_tricks import sliding_window_view
-
     rows = sliding_window_view(buf, width)[at]
     rows[np.arange(width) >= lengths[:, None]] = 0
     return rows
@@ -320,10 +306,6 @@ def _loop_verdict(stamps, offsets, msgids, lengths, breaks, buf, sample_id) -> l
     samples share it, which a log stamped by the host's clock never does. The records before
     a skipped region are not checked (the sample that ended their loop may be what was
     lost), nor those after the last sample."""
-    import numpy as np
-
-    from ...sim.base.framing import HEADER_LEN
-
     samples = np.flatnonzero(msgids == sample_id)
     if sample_id is None or not samples.size:
         return []
@@ -349,8 +331,6 @@ def _loop_verdict(stamps, offsets, msgids, lengths, breaks, buf, sample_id) -> l
 
 def _record_at(data, pos: int, extras: dict):
     """(msgid, packet length, payload length) of a well-formed record at ``pos``, or None."""
-    from ...sim.base.framing import STX_V2, packet_at
-
     start = pos + _STAMP.size
     found = packet_at(data, start, extras) if start < len(data) and data[start] == STX_V2 \
         else None
@@ -360,8 +340,6 @@ def _record_at(data, pos: int, extras: dict):
 def _resync(data, pos: int, extras: dict) -> tuple:
     """(offset, record) of the next well-formed record after the damaged ``pos``, or
     (the file's size, None) when none follows."""
-    from ...sim.base.framing import STX_V2
-
     n, stamp_len, p = len(data), _STAMP.size, pos + 1
     while p + stamp_len < n:
         p = data.find(STX_V2, p + stamp_len) - stamp_len
@@ -376,10 +354,6 @@ def _resync(data, pos: int, extras: dict) -> tuple:
 def _read(path, mav_module, damage: TlogDamage | None) -> tuple:
     """``(codec, buffer, offsets, message ids, payload lengths, stamps)`` of the well-formed
     records of the .tlog at ``path``, the damage found filled in (or warned of)."""
-    import numpy as np
-
-    from ...sim.base.framing import Codec
-
     with open(path, "rb") as fh:
         data = fh.read()
     codec = Codec(mav_module)
@@ -404,10 +378,6 @@ def read_tlog(path, mav_module, only=None, damage: TlogDamage | None = None):
     ``damage``: a :class:`TlogDamage` to fill; without one, damage is reported as a warning
     naming the file and what was skipped.
     """
-    import numpy as np
-
-    from ...sim.base.framing import HEADER_LEN
-
     codec, buf, offsets, msgids, lengths, stamps = _read(path, mav_module, damage)
     if only is not None:
         names = set(only)
@@ -426,10 +396,6 @@ def read_tlog_table(path, mav_module, name: str, damage: TlogDamage | None = Non
     sub-array, a text as bytes). The records and the damage are :func:`read_tlog`'s; the
     payloads are decoded together, which on a long log is many times faster than one message
     at a time."""
-    import numpy as np
-
-    from ...sim.base.framing import HEADER_LEN
-
     codec, buf, offsets, msgids, lengths, _ = _read(path, mav_module, damage)
     cls = next(c for c in codec.classes.values() if c.msgname == name)
     keep = msgids == next(i for i, c in codec.classes.items() if c is cls)
@@ -446,10 +412,6 @@ _NUMPY_TYPES = {"b": "i1", "B": "u1", "h": "<i2", "H": "<u2", "i": "<i4", "I": "
 def _record_dtype(cls):
     """The numpy type of a message class's packed payload: one field per struct code of its
     format (``5f``: five floats, ``8s``: eight bytes of text)."""
-    import re
-
-    import numpy as np
-
     fields = []
     for name, (count, code) in zip(cls.ordered_fieldnames,
                                    re.findall(r"(\d*)([a-zA-Z?])", cls.unpacker.format[1:])):

@@ -31,11 +31,16 @@ import os
 
 import numpy as np
 
-from . import loops as L
-from ..records import paper
 from ...sim.base import dialect as names
-from ..records.gains import DERIVATIVE_FILTER_N, Gains, load_gains
+from ...sim.base.errors import InputError
+from ...sim.plant.dryden import Dryden
 from ...sim.plant.pid_model import pid_s_coeffs
+from ...sim.plant.vehicle_params import load_params
+from ..records import paper
+from ..records.gains import DERIVATIVE_FILTER_N, Gains, load_gains, recorded_gains
+from ..records.manifest import MANIFEST, read_manifest
+from . import loops as L
+from .truth import sil_truth_loops
 
 # Gains and load_gains are host/records/gains.py's, here for the validation's callers.
 __all__ = ["Gains", "load_gains", "model_gains", "pid_tf", "validate_model", "validation_record", "margins_record",
@@ -59,6 +64,7 @@ def pid_tf(kc, tau_i, tau_d):
     python-control transfer function (:func:`heliquad.sim.plant.pid_model.pid_s_coeffs`,
     with the firmware's derivative filter). What the firmware flies is its Tustin form at
     the loop rate, :mod:`.loops`; this is the continuous form it approximates."""
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     return control.tf(*pid_s_coeffs(kc, tau_i, tau_d, DERIVATIVE_FILTER_N))
@@ -130,8 +136,6 @@ def model_gains(doc, axis: str):
     """The gains to validate a MODELS.json ``doc``'s models with, and where they come from:
     those its sweep read from the board it flew (``gains``, recorded by identify), else the
     firmware's defaults."""
-    from ..records.gains import recorded_gains
-
     recorded = recorded_gains(doc)
     if recorded is not None:
         return recorded, "the board's, as its sweep read them"
@@ -151,11 +155,6 @@ def sweep_inputs(models_path, doc) -> dict:
 def _sweep_truth(models_path):
     """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder,
     else None."""
-    from ...sim.base.errors import InputError
-    from ..records.manifest import read_manifest
-    from ..records.manifest import MANIFEST
-    from .truth import sil_truth_loops
-
     folder = os.path.dirname(os.path.abspath(models_path))
     path = os.path.join(folder, MANIFEST)
     if not os.path.exists(path):
@@ -233,6 +232,7 @@ def _rms(x):
 def _respond(cascade, t, ref=None, d=None):
     """The discrete closed loop's outputs (rate, and angle with the outer loop) for a
     reference and a disturbance sequence on the loop's time grid ``t``."""
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     zero = np.zeros(t.size)
@@ -243,6 +243,7 @@ def _respond(cascade, t, ref=None, d=None):
 def _step(cascade, t, outer):
     """The closed loop's response to a step of the reference: 10 deg of angle with the
     outer loop, else 30 deg/s of rate (in rad, rad/s)."""
+    # python-control (1 s) only when a loop is analysed: identify imports this module
     import control
 
     size = STEP_ANGLE_RAD if outer else STEP_RATE_RAD_S
@@ -275,9 +276,6 @@ def _turbulence(cascade, axis, outer, t, level, seed):
     command does: the plant filters it, as the rotors' aerodynamics filter a gust. Added to
     the measured rate instead, the gust's whole spectrum, up to the Dryden filters' 14 rad/s
     corner, would pass unfiltered."""
-    from ...sim.plant.dryden import Dryden
-    from ...sim.plant.vehicle_params import load_params
-
     tp = load_params().turbulence
     d = Dryden(level, tp.altitude_m, tp.span_m, DT_S, seed)
     gust = d.block(t.size)[:, 3 + names.AXES[axis]]             # gust rates p, q, r, rad/s

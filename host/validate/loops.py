@@ -199,6 +199,7 @@ def discrete_model(num, den, delay_s, dt_s=LOOP_DT_S):
     rational part, ``z^-d`` for whole samples of its delay and the allpass
     ``(a z + 1) / (z + a)``, ``a = (1 - e) / (1 + e)``, for the fraction ``e`` (its group
     delay at low frequency is ``e`` samples)."""
+    # python-control (1 s) and scipy.linalg only when a loop is built: identify imports this
     import control
 
     if not np.any(np.asarray(num, dtype=float)):
@@ -221,6 +222,7 @@ def _blocks_closed(blocks, wiring, inputs, outputs, dt_s):
     ``blocks``: ``[(name of its output, SISO state space)]``; ``wiring``: for each block,
     its input as ``{signal: coefficient}`` over block outputs and external ``inputs``.
     Returns the state space from ``inputs`` to the named ``outputs``."""
+    # python-control (1 s) and scipy.linalg only when a loop is built: identify imports this
     import control
     import scipy.linalg
 
@@ -251,6 +253,7 @@ def discrete_cascade(num, den, delay_s, gains, dt_s=LOOP_DT_S, outer=True):
     with the outer loop, ``angle`` (the integral of the rate, Tustin). ``outer=False`` (or
     no angle gains) closes the rate loop alone. Its poles are the loop's, every
     controller state included."""
+    # python-control (1 s) and scipy.linalg only when a loop is built: identify imports this
     import control
 
     (c_pi, d_m), angle = _controller(gains, dt_s)

@@ -17,8 +17,11 @@ import os
 
 import numpy as np
 
-from ..records import schema as S
 from ...sim.base.errors import InputError
+from ...sim.plant.dryden import LEVELS_KT
+from ...sim.rig.setup import SilConfig, make_plant
+from ..estimate.fit import model_response
+from ..records import schema as S
 
 __all__ = ["sil_truth", "sil_truth_loops", "truth_record"]
 
@@ -27,8 +30,6 @@ BAND_GRID = 100
 
 
 def _source_schema():
-    from ...sim.plant.dryden import LEVELS_KT
-
     return S.Obj(required={"kind": S.Str(("sil",)), "plant": S.Str(("tf", "vehicle"))},
                  optional={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13),
                            "params": S.Null(S.Str()), "turbulence": S.Null(S.Str(tuple(LEVELS_KT))),
@@ -80,8 +81,6 @@ def sil_truth(manifest, dir_path: str):
 
 
 def _plant(manifest, source, dir_path, dt_s):
-    from ...sim.rig.setup import SilConfig, make_plant
-
     params = source.get("params")
     if params and not os.path.isabs(params):      # relative: to where the sweep ran, or here
         params = next((p for p in (params, os.path.join(dir_path, params))
@@ -104,8 +103,6 @@ def truth_record(truth, points, model) -> dict:
     """For models.json: the truth at each point's frequency and each point's error against
     it (dB, deg, and in units of its sigma), and the worst errors of the points and of
     ``model`` (the recommended one, or None) across the points' band."""
-    from ..estimate.fit import model_response
-
     omega = np.array([p.omega_rad_s for p in points])
     gain = np.array([p.gain for p in points])
     sigma = np.array([p.sigma for p in points])

@@ -18,6 +18,8 @@ from __future__ import annotations
 import os
 import pathlib
 
+import heliquad
+
 from .errors import FirmwareError
 
 __all__ = ["ENV_VAR", "IMAGE_NAME", "PACKAGE_DIR", "ImageNotFound", "teensy35_image"]
@@ -80,8 +82,6 @@ def _installed(name: str) -> pathlib.Path | None:
 
 
 def _package_portions() -> list[str]:
-    import heliquad
-
     return list(heliquad.__path__)
 
 

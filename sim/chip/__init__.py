@@ -8,10 +8,10 @@ peripherals the image's boot and main loop use. See docs/teensy35-emulator.md.
     stop = board.run_to_loop(1, instructions=50_000_000)
 """
 
-from .mk64 import Mk64
 from .clocks import ClockTree
 from .image import Image, ImageError, Symbol, exception_name
 from .machine import ChipReset, EmulationError, Fault, Machine, Stop
+from .mk64 import Mk64
 from .teensy35 import Teensy35
 
 __all__ = ["Mk64", "ClockTree", "Image", "ImageError", "Symbol", "exception_name", "ChipReset",

@@ -186,6 +186,7 @@ class Image:
     def compare_hex(self, hex_path: os.PathLike | str) -> list:
         """Addresses where an Intel hex file differs from this ELF's loadable bytes (empty:
         the same image)."""
+        # intelhex only to compare with a .hex file: the emulated board's runs never do
         from intelhex import IntelHex
         ih = IntelHex(os.fspath(hex_path))
         mine = {}

@@ -39,10 +39,9 @@ import ctypes
 import struct
 from dataclasses import dataclass, field
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE,
-                     UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
-                     UC_PROT_EXEC, UC_PROT_NONE, UC_PROT_READ, UC_TLB_VIRTUAL, Uc,
-                     UcError)
+from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE, UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS,
+                     UC_MODE_THUMB, UC_PROT_ALL, UC_PROT_EXEC, UC_PROT_NONE, UC_PROT_READ,
+                     UC_TLB_VIRTUAL, Uc, UcError)
 from unicorn import arm_const as A
 
 from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE, Image, exception_name
@@ -708,6 +707,7 @@ class _Native:
 
     def __init__(self, uc, machine):
         try:
+            # a missing binding or native core says so in one line (EmulationError)
             from unicorn.unicorn_py3 import unicorn as binding
             lib, handle = binding.uclib, uc._uch
             code_t = binding.HOOK_CODE_CFUNC
@@ -716,6 +716,7 @@ class _Native:
                 "the emulator needs the unicorn Python binding's internals (unicorn_py3.unicorn."
                 f"uclib, Uc._uch; unicorn>=2.1.4,<3 is pinned): {e}") from None
         try:
+            # a missing binding or native core says so in one line (EmulationError)
             from heliquad._simcore import Mk64Core
         except ImportError as e:
             raise EmulationError(f"the emulator's native core (heliquad._simcore.Mk64Core) is "

@@ -19,6 +19,7 @@ file whenever an SVD is found.
 from __future__ import annotations
 
 import argparse
+import importlib.resources as resources
 import io
 import os
 import pathlib
@@ -74,7 +75,6 @@ def find_svd() -> bytes:
             raise SvdNotFound(f"${ENV_VAR}={env} does not exist")
         return read_svd_bytes(env)
     try:
-        import importlib.resources as resources
         data = resources.files("pyocd.debug.svd").joinpath("svd_data.zip").read_bytes()
         return _svd_from_zip_bytes(data)
     except (ModuleNotFoundError, FileNotFoundError, KeyError):

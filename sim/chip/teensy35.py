@@ -11,9 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .mk64 import Mk64
+from heliquad._firmware import Mpu6050Emulator
+
 from .i2c import Mpu6050Slave
 from .machine import Stop
+from .mk64 import Mk64
 
 # Teensy 3.5 pin number -> (port, bit) for the pins the firmware uses (PJRC's pin table).
 PINS = {0: ("B", 16), 1: ("B", 17), 2: ("D", 0), 6: ("D", 4), 7: ("D", 2), 8: ("D", 3),
@@ -75,7 +77,6 @@ class Teensy35:
         self.mpu = None
         if with_mpu6050:
             if mpu6050 is None:
-                from heliquad._firmware import Mpu6050Emulator
                 mpu6050 = Mpu6050Emulator()
             self.mpu = Mpu6050Slave(mpu6050, self.machine, MPU6050_ADDRESS)
             self.chip.i2c0.slaves.append(self.mpu)

@@ -41,6 +41,7 @@ MIN_CONVECTION_M_S = 1.0
 
 def _discrete(num, den, dt):
     """ZOH discretisation of a continuous filter num/den, as (b, a) for lfilter."""
+    # scipy.signal (0.5 s) only for a turbulent run: every sil and sweep imports this module
     import scipy.signal
 
     b, a, _ = scipy.signal.cont2discrete((num, den), dt, method="zoh")

@@ -51,6 +51,7 @@ def tf2ss(num, den):
 def zoh(A, B, dt_s: float):
     """``(A_d, B_d)``: the state-space system sampled with a zero-order hold over ``dt_s``
     (the exponential of ``[[A, B], [0, 0]] dt``)."""
+    # scipy.linalg (0.2 s) only for the transfer-function plant: every sil run imports this
     import scipy.linalg
 
     n, m = A.shape[0], B.shape[1]

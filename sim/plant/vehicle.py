@@ -39,6 +39,7 @@ import numpy as np
 from heliquad import _simcore
 
 from ..base.dialect import AXES
+from ..base.errors import InputError
 from .vehicle_params import VehicleParams, load_params
 
 __all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2", "fastest_rate_rad_s", "check_step"]
@@ -72,8 +73,6 @@ def fastest_rate_rad_s(p: VehicleParams) -> float:
 def check_step(p: VehicleParams, dt_s: float) -> None:
     """InputError when the integrator cannot follow the vehicle at this loop period (it would
     diverge, whatever the firmware does)."""
-    from ..base.errors import InputError
-
     rate, h = fastest_rate_rad_s(p), dt_s / SUBSTEPS
     if rate * h > RK4_LIMIT:
         raise InputError(f"{p.source}: the vehicle's fastest mode ({rate:.3g} 1/s: rotor lag, "

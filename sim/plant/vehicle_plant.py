@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from heliquad import _firmware as fw
 from heliquad import _simcore
 
 from ..base.dialect import AXES
 from .dryden import Dryden
 from .imu_model import ImuModel
 from .pid_model import pid_z
-from .vehicle_params import VehicleParams, load_params
 from .vehicle import GRAVITY_M_S2, Vehicle
+from .vehicle_params import VehicleParams, load_params
 
 __all__ = ["VehiclePlant", "mixer_geometry", "mixer_for"]
 
@@ -31,8 +32,6 @@ EPS_COMMAND = 1e-3
 def mixer_geometry(params: VehicleParams):
     """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
     the shipped parameter file's: tests/vehicle_test.py)."""
-    from heliquad import _firmware as fw
-
     g = fw.MixerGeometry()
     g.arm_length_m = params.arm_rotors.arm_length_m
     g.cant_deg = params.arm_rotors.cant_deg
@@ -45,8 +44,6 @@ def mixer_geometry(params: VehicleParams):
 
 def mixer_for(params: VehicleParams):
     """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
-    from heliquad import _firmware as fw
-
     return fw.Mixer(mixer_geometry(params))
 
 
@@ -127,7 +124,6 @@ class VehiclePlant:
         normalised torque command, through the firmware's mixer equations.
         """
         mixer = mixer_for(self.params)
-        from heliquad import _firmware as fw
 
         def motors(cmd):
             c = [0.0, 0.0, 0.0]
@@ -163,7 +159,9 @@ class VehiclePlant:
 
     def _sampled(self, z):
         """Logged torque command -> logged [rate, angle] at the points ``z`` (ZOH, latency)."""
-        import scipy.linalg       # here: importing the plant (identify's loops do) need not wait
+        # scipy.linalg (0.2 s) here: importing the plant (identify's loops, every sil run do)
+        # need not wait
+        import scipy.linalg
 
         A, b, C = self.linearise()
         n = A.shape[0]
@@ -188,8 +186,6 @@ class VehiclePlant:
         if inject == "mixer":
             out = h_rate
         else:
-            from heliquad import _firmware as fw
-
             g = gains or fw.CascadeGains.paper_defaults()
             axis = fw.Axis(self.index)
             c_pi, d_m = pid_z(g.rate(axis), self.dt_s, z)

@@ -21,9 +21,9 @@ import time
 import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ
+from ..plant.tf_plant import TfPlant
 from .driver import Rig
 from .setup import rc_block, rc_disarmed
-from ..plant.tf_plant import TfPlant
 
 __all__ = ["run_board"]
 

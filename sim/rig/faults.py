@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from ..base.errors import InputError
 from ..base.dialect import dialect
+from ..base.errors import InputError
 
 __all__ = ["Fault", "parse_fault", "check_faults", "imu_fault_codes", "link_close_frame", "KINDS"]
 

@@ -13,6 +13,7 @@ a hang. The lockstep driver that puts them together with a plant is
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import os
 import selectors
 import shutil
@@ -31,6 +32,7 @@ from heliquad._simcore import LinkStatus
 from ..base.dialect import dialect
 from ..base.errors import FirmwareError
 from ..base.firmware_facts import LOOP_RATE_HZ
+from ..base.firmware_image import teensy35_image
 
 __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
            "find_firmware", "start_firmware", "FIRMWARES"]
@@ -239,14 +241,10 @@ class PilFirmware(HostFirmware):
         super().__init__(*args, **kwargs)
 
     def command(self) -> list:
-        from ..base.firmware_image import teensy35_image
-
         self.image = os.path.abspath(self.image or str(teensy35_image("elf")))
         return [sys.executable, "-m", "heliquad.sim.chip.pil", "--image", self.image]
 
     def record(self) -> dict:
-        import hashlib
-
         with open(self.image, "rb") as fh:
             digest = hashlib.sha256(fh.read()).hexdigest()
         return {"name": self.name, "image": self.image, "image_sha256": digest}

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ
 from ..plant.tf_plant import TfPlant
+from ..plant.vehicle_params import load_params
 
 __all__ = ["SilConfig", "Plant", "make_plant", "rc_block", "RC_CENTER_US",
            "rc_disarmed", "BOOT_FRAMES", "ARM_FRAMES"]
@@ -83,7 +84,7 @@ def make_plant(cfg: SilConfig, dt_s: float) -> Plant:
     """The plant of a run: the per-axis transfer function or the 6-DoF vehicle on its rig."""
     if cfg.plant == "tf":
         return TfPlant(cfg.axis, cfg.num, cfg.den, dt_s)
-    from ..plant.vehicle_params import load_params
+    # the vehicle's plant (8 ms, with its turbulence and IMU models) only for --plant vehicle
     from ..plant.vehicle_plant import VehiclePlant
 
     return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),

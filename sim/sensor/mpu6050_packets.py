@@ -13,8 +13,8 @@ from __future__ import annotations
 # The scales (gyro LSB per deg/s at +/-2000 deg/s, accel LSB per g at +/-2 g, the DMP
 # quaternion's 2^30) and the packet sizes are the firmware driver's constants
 # (firmware/core/mpu6050.hpp), through heliquad._simcore: one definition.
-from heliquad._simcore import (ACCEL_LSB_PER_G, DMP_PACKET_SIZE, GYRO_LSB_PER_DEG_S,
-                               QUAT_SCALE, RAW_PACKET_SIZE, dmp_packet, raw_packet)
+from heliquad._simcore import (ACCEL_LSB_PER_G, DMP_PACKET_SIZE, GYRO_LSB_PER_DEG_S, QUAT_SCALE,
+                               RAW_PACKET_SIZE, dmp_packet, raw_packet)
 
 __all__ = ["GYRO_LSB_PER_DEG_S", "ACCEL_LSB_PER_G", "QUAT_SCALE", "DMP_PACKET_SIZE",
            "RAW_PACKET_SIZE", "dmp_packet", "raw_packet"]

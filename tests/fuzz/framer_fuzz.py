@@ -27,9 +27,10 @@ import sys
 from fuzz_input import (CRC_LEN, CUT_RECIPE_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN,
                         STX_V2, ByteReader, StreamBuilder, reference_frames, same_fields,
                         sample_values, split_at, x25)
+
 from heliquad.sim.base import framing as mavframe
-from heliquad.sim.base.framing import Codec, Framer
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.framing import Codec, Framer
 
 STRUCTURED = 0x01               # mode byte: build the stream from the input
 MAX_PAYLOAD = 255
@@ -123,7 +124,6 @@ def seed_inputs() -> dict:
 
 def main(argv: list) -> None:
     import atheris
-
     from fuzz_input import instrument
     instrument(atheris, (mavframe,))
     atheris.Setup(argv, test_one_input)

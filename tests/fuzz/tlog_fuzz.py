@@ -38,10 +38,11 @@ import warnings
 
 from fuzz_input import (HEADER_LEN, STAMP_LEN, STX_V2, ByteReader, StreamBuilder, packet_end,
                         same_fields, sample_values, verifies)
+
 from heliquad.host.records import tlog
 from heliquad.sim.base import framing as mavframe
-from heliquad.sim.base.framing import Codec
 from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.framing import Codec
 
 STRUCTURED = 0x01               # mode byte: build the file from the input
 DIALECT = dialect()
@@ -233,7 +234,6 @@ def loop_stamped_log(rng, loops: int = 6) -> bytes:
 
 def main(argv: list) -> None:
     import atheris
-
     from fuzz_input import instrument
     instrument(atheris, (tlog, mavframe))
     atheris.Setup(argv, test_one_input)
