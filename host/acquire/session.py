@@ -26,6 +26,7 @@ from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
+from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
 from ..records.tlog import TlogWriter, create_log
@@ -166,7 +167,7 @@ class _FirmwareTelemetry(TelemetryLink):
             raise
 
 
-class SilSession:
+class SilSession(Closing):
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
     code as for a board) and :meth:`advance`. Every telemetry packet is logged to ``tlog``
@@ -278,14 +279,8 @@ class SilSession:
             stack.callback(self.telemetry.close)
             stack.callback(self.tel.close)
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
-
-
-class PortSession:
+class PortSession(Closing):
     """A board (or a ``heliquad board`` pty) as a session: wall-clock time, the link
     logging every packet with the host's clock."""
 

@@ -33,10 +33,11 @@ example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --
 
 def add_parser(sub, fmt) -> None:
     from ...sim.plant.vehicle import RIGS
+    from ...sim.rig.setup import PLANTS
 
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--plant", choices=("tf", "vehicle"), default="tf",
+    p.add_argument("--plant", choices=PLANTS, default="tf",
                    help="tf: a transfer function from the axis's torque command to its body "
                         "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
     p.add_argument("--rig", choices=RIGS, default=None,

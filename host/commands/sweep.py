@@ -55,6 +55,8 @@ example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify 
 
 
 def add_parser(sub, fmt) -> None:
+    from ...sim.rig.setup import PLANTS
+
     p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--axis", choices=tuple(names.AXES), required=True)
@@ -65,7 +67,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
                         "and network links)")
-    p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
+    p.add_argument("--plant", choices=PLANTS, default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=finite, nargs="+", metavar="B",
                    help="--plant tf: numerator (default: the paper's chosen model of the axis)")

@@ -28,8 +28,9 @@ BAND_GRID = 100
 
 def _source_schema():
     from ...sim.plant.dryden import LEVELS_KT
+    from ...sim.rig.setup import PLANTS
 
-    return S.Obj(required={"kind": S.Str(("sil",)), "plant": S.Str(("tf", "vehicle"))},
+    return S.Obj(required={"kind": S.Str(("sil",)), "plant": S.Str(PLANTS)},
                  optional={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13),
                            "params": S.Null(S.Str()), "turbulence": S.Null(S.Str(tuple(LEVELS_KT))),
                            "seed": S.Int(0, 2**63), "ideal_sensor": S.Bool(),
