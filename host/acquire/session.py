@@ -22,6 +22,7 @@ from typing import Callable, Protocol
 
 from heliquad import _simcore
 
+from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
@@ -166,7 +167,7 @@ class _FirmwareTelemetry(TelemetryLink):
             raise
 
 
-class SilSession:
+class SilSession(Closing):
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
     code as for a board) and :meth:`advance`. Every telemetry packet is logged to ``tlog``
@@ -278,14 +279,8 @@ class SilSession:
             stack.callback(self.telemetry.close)
             stack.callback(self.tel.close)
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
-
-
-class PortSession:
+class PortSession(Closing):
     """A board (or a ``heliquad board`` pty) as a session: wall-clock time, the link
     logging every packet with the host's clock."""
 

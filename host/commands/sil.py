@@ -9,6 +9,7 @@ from ...sim.base import dialect as names
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from ...sim.plant.vehicle import RIGS
+from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
@@ -36,7 +37,7 @@ example: heliquad sil --axis roll --inject mixer --freq-hz 1 --amplitude 0.05 --
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("sil", help="one sine experiment with the firmware in the loop",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--plant", choices=("tf", "vehicle"), default="tf",
+    p.add_argument("--plant", choices=PLANTS, default="tf",
                    help="tf: a transfer function from the axis's torque command to its body "
                         "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
     p.add_argument("--rig", choices=RIGS, default=None,

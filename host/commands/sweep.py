@@ -11,6 +11,7 @@ import sys
 from ...sim.base import dialect as names
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DURATION_S
+from ...sim.rig.setup import PLANTS
 from ..acquire import design
 from ..acquire.connection import CONNECTION_HELP
 from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
@@ -65,7 +66,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
                         "and network links)")
-    p.add_argument("--plant", choices=("tf", "vehicle"), default="vehicle",
+    p.add_argument("--plant", choices=PLANTS, default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=finite, nargs="+", metavar="B",
                    help="--plant tf: numerator (default: the paper's chosen model of the axis)")

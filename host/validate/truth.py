@@ -19,7 +19,7 @@ import numpy as np
 
 from ...sim.base.errors import InputError
 from ...sim.plant.dryden import LEVELS_KT
-from ...sim.rig.setup import SilConfig, make_plant
+from ...sim.rig.setup import PLANTS, SilConfig, make_plant
 from ..estimate.fit import model_response
 from ..records import schema as S
 
@@ -30,7 +30,7 @@ BAND_GRID = 100
 
 
 def _source_schema():
-    return S.Obj(required={"kind": S.Str(("sil",)), "plant": S.Str(("tf", "vehicle"))},
+    return S.Obj(required={"kind": S.Str(("sil",)), "plant": S.Str(PLANTS)},
                  optional={"num": S.List(S.Num(), 1, 13), "den": S.List(S.Num(), 2, 13),
                            "params": S.Null(S.Str()), "turbulence": S.Null(S.Str(tuple(LEVELS_KT))),
                            "seed": S.Int(0, 2**63), "ideal_sensor": S.Bool(),

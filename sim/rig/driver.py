@@ -22,7 +22,9 @@ from typing import Callable
 
 from heliquad import _simcore
 
+from ..base.closing import Closing
 from ..base.dialect import dialect
+from ..base.firmware_facts import LOOP_RATE_HZ
 from .faults import check_faults, imu_fault_codes
 from .lockstep import Actuators, SimLink, actuators, start_firmware
 
@@ -38,7 +40,7 @@ def frame_period_us(loop_hz: float) -> int:
     return int(round(1e6 / loop_hz))
 
 
-class Rig:
+class Rig(Closing):
     """A firmware flying a plant in lockstep. Started by the constructor, in this order: the
     faults checked, the plant made (``make_plant(dt_s)``, with the frame period), the
     firmware started, the sim link and the engine (a failure or Ctrl-C on the way stops what
@@ -51,7 +53,7 @@ class Rig:
     ``image`` for the Teensy image)."""
 
     def __init__(self, make_plant: Callable[[float], object], firmware: str = "host",
-                 loop_hz: float = 200.0, faults=(), **firmware_options):
+                 loop_hz: float = LOOP_RATE_HZ, faults=(), **firmware_options):
         self.dt_us = frame_period_us(loop_hz)
         self.faults = tuple(faults)
         check_faults(self.faults, self.dt_us)
@@ -117,9 +119,3 @@ class Rig:
         with contextlib.ExitStack() as stack:
             stack.callback(self.fw.stop)
             stack.callback(self.link.close)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()

@@ -24,7 +24,7 @@ from ..base.firmware_facts import LOOP_RATE_HZ
 from ..plant.tf_plant import TfPlant
 from ..plant.vehicle_params import load_params
 
-__all__ = ["SilConfig", "Plant", "make_plant", "rc_block", "RC_CENTER_US",
+__all__ = ["SilConfig", "Plant", "PLANTS", "make_plant", "rc_block", "RC_CENTER_US",
            "rc_disarmed", "BOOT_FRAMES", "ARM_FRAMES"]
 
 RC_CENTER_US, RC_LOW_US, RC_HIGH_US = 1500, 1000, 2000
@@ -80,8 +80,16 @@ class Plant(Protocol):
         """The sampled-data response identification should find at ``omega_rad_s``."""
 
 
+#: The plants a run can fly (``SilConfig.plant``, the commands' ``--plant``): the per-axis
+#: transfer function and the 6-DoF vehicle. A new plant is a name here and a branch of
+#: :func:`make_plant`.
+PLANTS = ("tf", "vehicle")
+
+
 def make_plant(cfg: SilConfig, dt_s: float) -> Plant:
     """The plant of a run: the per-axis transfer function or the 6-DoF vehicle on its rig."""
+    if cfg.plant not in PLANTS:
+        raise ValueError(f"unknown plant {cfg.plant!r}")
     if cfg.plant == "tf":
         return TfPlant(cfg.axis, cfg.num, cfg.den, dt_s)
     # the vehicle's plant (8 ms, with its turbulence and IMU models) only for --plant vehicle
