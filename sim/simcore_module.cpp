@@ -282,6 +282,8 @@ PYBIND11_MODULE(_simcore, m) {
            py::arg("noise") = py::none(), py::arg("gust") = py::none(),
            py::arg("imu_faults") = py::none())
         .def("finished", &RigEngine::finished)
+        .def("running", &RigEngine::running,
+             "Whether a batch was started and not yet waited for (it may have finished).")
         .def("wait_finished", &RigEngine::wait_finished, py::arg("timeout_s"),
              py::call_guard<py::gil_scoped_release>(),
              "Sleep until the batch is finished or the timeout passes; True if finished.")

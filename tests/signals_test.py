@@ -208,7 +208,8 @@ def test_a_late_reader_of_the_board_gets_at_most_a_few_kib_of_the_past(firmware,
     finally:
         os.kill(board.pid, signal.SIGCONT)
     board.ctrl_c()
-    assert board.finish()[0] == 130
+    code, out, err = board.finish()
+    assert code == 130, out + err
     assert 0 < waited <= BACKLOG_BYTES + IN_FLIGHT_BYTES, waited
     assert_nothing_left(tmpdir_)
 

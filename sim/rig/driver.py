@@ -85,6 +85,10 @@ class Rig(Closing):
         engine runs them (off the lockstep's critical path); if it raises, the batch is
         cancelled and the error goes on. A link that fails (no reply, a wrong one, a dead
         firmware) is a FirmwareError, :attr:`frame` then the last frame answered."""
+        if self.engine.running():
+            # A signal that landed as the last batch ended (between its end and the wait for
+            # it) left it to this call: stop it and count it first.
+            self._end_batch()
         first = self.frame + 1
         noise, gust = self.plant.frame_inputs(n)
         faults = imu_fault_codes(self.faults, first, n, self.dt_us)
@@ -96,17 +100,22 @@ class Rig(Closing):
                 if while_running is not None:
                     while_running()
         finally:
-            if not self.engine.finished():           # Ctrl-C or an error here: stop it
-                self.engine.cancel()
-            result = self.engine.wait()
-            # The frames the firmware answered count even when the batch was stopped: the
-            # next one goes on from them (the firmware takes a repeated counter as a resend).
-            self.frame = first + result.frames_done - 1
-            if result.frames_done:
-                self.reply = actuators(result.last)
-                self.kind = self.reply.sensor_kind
+            result = self._end_batch()               # Ctrl-C or an error here: stopped
         self.link.check(result.status, result.failed_frame, result.last)
         return self.reply
+
+    def _end_batch(self):
+        """Stop the running batch if it has not finished, wait for it and count the frames
+        the firmware answered, even of a batch stopped early: the next one goes on from
+        them (the firmware takes a repeated counter as a resend). Its result."""
+        if not self.engine.finished():
+            self.engine.cancel()
+        result = self.engine.wait()
+        self.frame += result.frames_done
+        if result.frames_done:
+            self.reply = actuators(result.last)
+            self.kind = self.reply.sensor_kind
+        return result
 
     def firmware_died(self) -> bool:
         """Whether the firmware has exited (given a moment to be reaped)."""
