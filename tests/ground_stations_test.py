@@ -21,6 +21,7 @@ import threading
 
 import pytest
 
+from heliquad import _firmware
 from heliquad.sim.base.dialect import dialect
 from private_pymavlink import private_pymavlink
 from tool_runs import cli
@@ -29,6 +30,8 @@ MAV = dialect()
 #: A guard against a hang, never a measure: clients and the board on a loaded machine.
 GUARD_S = 60.0
 #: The integer parameters and their documented defaults (docs/parameters.md).
+#: The firmware's parameters: a ground station fetches and loads this many.
+PARAM_COUNT = len(_firmware.param_table())
 INTEGER_DEFAULTS = {**{f"ESC{i}_MIN": 1000 for i in range(1, 6)},
                     **{f"ESC{i}_MAX": 2000 for i in range(1, 6)},
                     "RC_SW_HIGH": 1700, "RC_SW_LOW": 1300, "RC_THR_LOW": 1100,
@@ -167,7 +170,7 @@ def test_mavsdk_reads_and_sets_integer_and_real_parameters(disarmed_board, sdk_o
     ints = {p.name: p.value for p in everything.int_params}
     floats = {p.name: p.value for p in everything.float_params}
     assert ints == INTEGER_DEFAULTS
-    assert len(floats) == 44 - len(INTEGER_DEFAULTS)
+    assert len(floats) == PARAM_COUNT - len(INTEGER_DEFAULTS)
     assert floats["STK_YAW_MAX"] == 90.0 and floats["EXC_MAX_ANG"] == 45.0
     param.set_param_int("ESC1_MAX", 1900)
     assert param.get_param_int("ESC1_MAX") == 1900
@@ -321,7 +324,7 @@ def test_mavproxy_fetches_sets_and_loads_the_parameters_of_an_armed_board(armed_
     mp = MavProxy(armed_board, tmp_path)
     try:
         mp.expect(r"^ARMED$")
-        mp.expect(r"Received 44 parameters")
+        mp.expect(rf"Received {PARAM_COUNT} parameters")
         mp.type("param show ESC1_MAX")
         assert float(mp.expect(r"\bESC1_MAX\s+(\S+)$").group(1)) == as_mavproxy_shows(2000)
         mp.type("param show STK_YAW_MAX")
@@ -329,7 +332,7 @@ def test_mavproxy_fetches_sets_and_loads_the_parameters_of_an_armed_board(armed_
 
         start = mp.cursor
         mp.type(f"param load {saved}")
-        loaded = mp.expect(r"Loaded 44 parameters from .* \(changed (\d+)\)")
+        loaded = mp.expect(rf"Loaded {PARAM_COUNT} parameters from .* \(changed (\d+)\)")
         sets = [re.search(r"changed (\w+) from (\S+) to (\S+)", line) for line in mp.since(start)]
         sets = {m.group(1): float(m.group(3)) for m in sets if m}
         resent = {name: float(v) for name, v in INTEGER_DEFAULTS.items() if v != 0}

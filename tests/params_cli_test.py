@@ -15,6 +15,7 @@ import time
 import numpy as np
 import pytest
 
+from heliquad import _firmware
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.host.acquire.param_protocol import (NoAnswer, Param, ParamClient, ParamRefused,
                                                   decode_value, encode_value, value_text)
@@ -384,8 +385,6 @@ def _float32_values():
     """Every firmware default, and 300 float32 values spread over each real parameter's
     range with their neighbours one unit in the last place away (fixed seed): the values a
     board can hold."""
-    from heliquad import _firmware
-
     rng = np.random.default_rng(27)
     out = []
     for p in _firmware.param_table():
@@ -410,8 +409,9 @@ def test_every_value_a_file_holds_reads_back_as_its_float32_and_mavproxy_sees_no
 
     values = _float32_values()
     assert len(values) > 3000
-    for start in range(0, len(values), 44):            # a file per board's worth of names
-        chunk = {name: (v, t) for name, v, t in values[start:start + 44]}
+    board = len(_firmware.param_table())
+    for start in range(0, len(values), board):         # a file per board's worth of names
+        chunk = {name: (v, t) for name, v, t in values[start:start + board]}
         path = tmp_path / f"{layout}-{start}.params"
         params = [Param(n, float(v), t, i) for i, (n, (v, t)) in enumerate(chunk.items())]
         write_params_file(path, params, layout=layout)

@@ -35,6 +35,8 @@ sys.modules.setdefault("pymavlink.dialects.v20.heliquad", MAV)
 _v20.heliquad = MAV
 PARAMS = [(p.name, p.minimum, p.maximum, p.default, p.integer) for p in _firmware.param_table()]
 NAMES = [p[0] for p in PARAMS]
+#: The table's size: every other count here is read from it.
+COUNT = len(PARAMS)
 REAL32, INT32 = MAV.MAV_PARAM_TYPE_REAL32, MAV.MAV_PARAM_TYPE_INT32
 
 
@@ -144,7 +146,7 @@ def client(tmp_path):
 # --- the table ----------------------------------------------------------------------------
 
 def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
-    assert len(NAMES) == len(set(NAMES)) == 44
+    assert len(NAMES) == len(set(NAMES)) == COUNT == 44      # the table, pinned
     for name, lo, hi, default, integer in PARAMS:
         assert 0 < len(name) <= 16 and name == name.upper(), name
         assert lo <= default <= hi, name
@@ -178,7 +180,7 @@ def test_fetch_all_set_one_read_it_back_and_find_it_after_a_restart(tmp_path, fi
         c.text("params: none stored; defaults")
         values = c.fetch()
         assert sorted(values) == sorted(NAMES)
-        assert {m.param_index for m in values.values()} == set(range(44))
+        assert {m.param_index for m in values.values()} == set(range(COUNT))
         assert values["RATE_RLL_KC"].param_value == pytest.approx(2.422, rel=1e-6)
         assert values["ESC3_MAX"].param_type == MAV.MAV_PARAM_TYPE_INT32
         m, _ = c.set("RATE_RLL_KC", 3.5)
@@ -264,8 +266,8 @@ def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
 def test_an_unknown_name_is_answered_with_a_statustext(client):
     client.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, MAV.MAV_PARAM_TYPE_REAL32)
     client.text("params: no NO_SUCH_PARAM")
-    client.mav.param_request_read_send(1, 1, b"", 44)
-    client.text("params: no index 44")
+    client.mav.param_request_read_send(1, 1, b"", COUNT)
+    client.text(f"params: no index {COUNT}")
     client.mav.param_request_read_send(1, 1, b"RATE_RLL_KCX", -1)
     client.text("params: no RATE_RLL_KCX")
 
