@@ -258,8 +258,8 @@ def test_fsf_of_a_multisine_run_gives_a_point_per_line(named, jitter, tmp_path):
     got = read_points_csv(tmp_path / "points.csv")
     w = 2 * np.pi * base * np.array(orders)
     truth = np.polyval(ROLL[0], 1j * w) / np.polyval(ROLL[1], 1j * w)
-    np.testing.assert_allclose(got["omega"], w, rtol=1e-4)
-    np.testing.assert_allclose(got["F"], truth, rtol=1e-2 if named else 1e-3 if jitter else 1e-6)
+    np.testing.assert_allclose([p.omega_rad_s for p in got], w, rtol=1e-4)
+    np.testing.assert_allclose([p.gain for p in got], truth, rtol=1e-2 if named else 1e-3 if jitter else 1e-6)
 
 
 def test_fsf_takes_a_multisine_whose_input_is_noisy_and_refuses_a_wrong_base(tmp_path):

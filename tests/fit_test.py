@@ -9,6 +9,7 @@ from heliquad.host.estimate import fit as fit_module
 from heliquad.host.estimate.fit import TfModel, fit_levy, fit_tf, model_response, parse_order
 from heliquad.host.estimate.metrics import evaluate_model, recommend
 from heliquad.host.estimate.models import fit_orders
+from heliquad.host.records.points import frequency_points
 from heliquad.host.records import paper
 from heliquad.sim.base.errors import InputError
 
@@ -113,7 +114,7 @@ def test_unstable_data_gives_a_stable_model_by_default_and_a_flag_when_allowed()
 def test_unstable_models_are_never_recommended():
     num, den = [4.0], [1.0, -0.5, 4.0]
     omega = np.logspace(-0.5, 1.0, N_POINTS)
-    points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
+    points = frequency_points(omega, model_response(num, den, 0.0, omega))
     result = fit_orders(points, [(0, 2)], stable=False)
     assert result.recommended is None and "no stable" in result.reason
 
@@ -124,7 +125,7 @@ def test_recommendation_is_the_lowest_aicc_of_the_acceptable_models():
     num, den = paper.MODELS["roll"][(0, 2)]
     omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), N_POINTS)
     F = model_response(num, den, 0.0, omega)
-    points = {"omega": omega, "F": noisy(F, 4, 0.02), "sigma": 0.02 * np.abs(F)}
+    points = frequency_points(omega, noisy(F, 4, 0.02), sigma=0.02 * np.abs(F))
     result = fit_orders(points, paper.DEFAULT_ORDERS["roll"])
     assert result.models[result.recommended].order == (0, 2)
     assert "lowest AICc" in result.reason and result.quality[0] == "good"
@@ -138,7 +139,7 @@ def test_the_recommendation_is_never_visibly_worse_than_another_candidate():
     # another acceptable model's and 5 more.
     num, den, _, centre = SYNTHETIC["third order with zeros"]
     omega = band(centre)
-    points = {"omega": omega, "F": model_response(num, den, 0.0, omega)}
+    points = frequency_points(omega, model_response(num, den, 0.0, omega))
     result = fit_orders(points, [(0, 1), (0, 2), (2, 3)])
     assert result.models[result.recommended].order == (2, 3)
     pick = result.models[result.recommended].metrics["J"]
@@ -219,7 +220,7 @@ def test_an_integrator_structure_recovers_a_free_rigs_rate_response():
 
 def test_too_few_points_for_the_order():
     omega = np.array([1.0, 2.0, 3.0])
-    points = {"omega": omega, "F": model_response([1.0], [1, 1], 0.0, omega)}
+    points = frequency_points(omega, model_response([1.0], [1, 1], 0.0, omega))
     with pytest.raises(InputError, match="needs at least"):
         fit_orders(points, [(2, 4)])
 
@@ -248,7 +249,7 @@ def test_an_order_the_points_do_not_support_is_flagged_degenerate():
 
 def points_of(num, den, delay_s, omega):
     F = model_response(num, den, delay_s, omega)
-    return {"omega": omega, "F": F, "sigma": 0.01 * np.abs(F)}
+    return frequency_points(omega, F, sigma=0.01 * np.abs(F))
 
 
 def test_a_spare_order_that_matches_noise_free_points_to_rounding_is_not_recommended():

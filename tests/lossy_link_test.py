@@ -117,11 +117,10 @@ def sweep_through(board_port, out, **damage):
 
 def points(folder):
     """(freq_hz, complex gain, sigma, lost_share or 0) of points.csv."""
-    from heliquad.host.records.points import read_points_csv
+    from heliquad.host.records.points import known_column, read_points_csv
 
     p = read_points_csv(str(folder / "points.csv"))
-    lost = p["lost_share"] if p["lost_share"] is not None else np.zeros(p["omega"].size)
-    return p["omega"] / (2 * np.pi), p["F"], p["sigma"], lost
+    return tuple(known_column(p, name) for name in ("freq_hz", "gain", "sigma", "lost_share"))
 
 
 def test_a_sweep_through_a_damaging_link_completes_and_agrees_with_a_clean_one(tmp_path):

@@ -17,6 +17,7 @@ from heliquad.host.present.bode import plot_bode, write_bode
 from heliquad.host.present.figure import new_figure
 from heliquad.host.present.responses import plot_responses
 from heliquad.host.records import paper
+from heliquad.host.records.points import frequency_points
 from heliquad.host.validate.replay import replay_record
 
 ROLL = paper.MODELS["roll"][(0, 2)]
@@ -38,7 +39,8 @@ def test_bode_draws_onto_the_given_axes_and_returns_their_figure():
     outer = fig.subfigures(1, 2)[1]                  # a place inside a larger figure
     axes = outer.subplots(2, 1, sharex=True)
     omega, F = roll_points()
-    got = plot_bode(axes, omega, F, sigma=0.01 * np.abs(F), models=[roll_model()], recommended=0)
+    got = plot_bode(axes, frequency_points(omega, F, sigma=0.01 * np.abs(F)), models=[roll_model()],
+                    recommended=0)
     assert got is axes[0].figure
     ax_mag, ax_ph = axes
     # the points (an errorbar: one line and its caps) and one model curve on each
@@ -105,7 +107,8 @@ def test_a_replay_is_drawn_over_its_analysed_periods_on_the_output_axis():
 def coherence_panel(coherence, n=8):
     fig, axes = new_figure(3, 1, sharex=True)
     omega, F = roll_points(n)
-    plot_bode(axes, omega, F, models=[roll_model()], coherence=coherence, gate=LOW_COHERENCE)
+    plot_bode(axes, frequency_points(omega, F, **coherence), models=[roll_model()],
+              gate=LOW_COHERENCE)
     return axes[2]
 
 
@@ -136,8 +139,8 @@ def test_write_bode_adds_the_coherence_panel_when_the_points_have_coherence(tmp_
     from matplotlib.image import imread
 
     omega, F = roll_points()
-    write_bode(tmp_path / "two.png", omega, F)
-    write_bode(tmp_path / "three.png", omega, F, coherence={"coherence": np.ones(8)})
+    write_bode(tmp_path / "two.png", frequency_points(omega, F))
+    write_bode(tmp_path / "three.png", frequency_points(omega, F, coherence=np.ones(8)))
     assert imread(tmp_path / "three.png").shape[0] > 1.15 * imread(tmp_path / "two.png").shape[0]
 
 
@@ -155,8 +158,9 @@ import matplotlib
 matplotlib.use("pdf")
 import numpy as np
 from heliquad.host.present.bode import write_bode
+from heliquad.host.records.points import frequency_points
 omega = np.array([1.0, 2.0, 4.0])
-write_bode({str(tmp_path / 'bode.png')!r}, omega, 1 / (1 + 1j * omega))
+write_bode({str(tmp_path / 'bode.png')!r}, frequency_points(omega, 1 / (1 + 1j * omega)))
 print(matplotlib.get_backend())
 """
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
@@ -208,7 +212,7 @@ def test_the_frequency_axis_is_labelled_however_narrow_the_band(band_hz, some):
 
     fig, axes = new_figure(2, 1, layout=None, sharex=True)
     f = np.linspace(*band_hz, 6)
-    plot_bode(axes, 2 * np.pi * f, 1 / (2j * np.pi * f + 1))
+    plot_bode(axes, frequency_points(2 * np.pi * f, 1 / (2j * np.pi * f + 1)))
     FigureCanvasAgg(fig).draw()
     ax = axes[1]
     lo, hi = ax.get_xlim()

@@ -1,6 +1,5 @@
 """Sweeps and identification end to end (issue 5): heliquad sweep + heliquad identify."""
 
-import contextlib
 import json
 import math
 import subprocess
@@ -13,7 +12,7 @@ import pytest
 from firmwares import FIRMWARES, image_for
 from heliquad.host.records import paper
 from heliquad.sim.plant.tf_plant import TfPlant
-from tool_runs import excitation_running
+from tool_runs import board_process, excitation_running, running_board
 
 
 def heliquad(*args):
@@ -74,25 +73,14 @@ def test_sil_sweep_and_identify_recover_the_papers_models(axis, tmp_path):
         assert (out / name).stat().st_size > 0
 
 
-@contextlib.contextmanager
-def running_board(port, duration_s):
-    """``heliquad board`` publishing its telemetry at ``port`` (the Popen), stopped at the end."""
-    # All its telemetry kept for the reader (--backlog-bytes 0): no lost sample is asserted,
-    # and a reader a loaded machine stalls would lose some past the default bound.
-    board = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "board", "--telemetry",
-                              str(port), "--duration-s", str(duration_s), "--backlog-bytes", "0"],
-                             stdout=subprocess.PIPE, text=True)
-    try:
-        assert "board running" in board.stdout.readline()
-        yield board
-    finally:
-        board.terminate()
-        board.wait(timeout=20)
+#: All its telemetry kept for the reader (--backlog-bytes 0): no lost sample is asserted, and
+#: a reader a loaded machine stalls would lose some past the default bound.
+KEEP_ALL = ("--backlog-bytes", 0)
 
 
 def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
-    port, out = tmp_path / "rig", tmp_path / "sweep"
-    with running_board(port, 20):
+    out = tmp_path / "sweep"
+    with running_board(tmp_path, "--duration-s", 20, *KEEP_ALL) as port:
         res = heliquad("sweep", "--axis", "roll", "--port", port, "--freqs-hz", 3, 4.5,
                        "--cycles", 3, "--out", out)
     assert res.returncode == 0, res.stdout + res.stderr
@@ -114,7 +102,7 @@ def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_
     import signal
 
     port, out = tmp_path / "rig", tmp_path / "sweep"
-    with running_board(port, 60) as board:
+    with board_process(tmp_path, "--duration-s", 60, *KEEP_ALL) as board:
         sweep = subprocess.Popen([sys.executable, "-m", "heliquad.host.cli.parser", "sweep", "--axis",
                                   "roll", "--port", str(port), "--freqs-hz", "0.5", "--cycles", "10",
                                   "--out", str(out)],

@@ -144,18 +144,24 @@ def cli(*args, **popen_kw) -> subprocess.Popen:
 
 
 @contextlib.contextmanager
-def running_board(folder, *args):
+def board_process(folder, *args):
     """``heliquad board ARGS`` (the roll rig in real time) as a foreground job, its telemetry
-    on the pty ``folder``/rig (the path yielded); stopped with Ctrl-C, however pytest was
-    started."""
-    port = pathlib.Path(folder) / "rig"
-    board = cli("board", "--telemetry", port, *args)
+    on the pty ``folder``/rig; yields its Popen (for a test that signals it), and stops it
+    with Ctrl-C, however pytest was started."""
+    board = cli("board", "--telemetry", pathlib.Path(folder) / "rig", *args)
     try:
         assert "board running" in board.stdout.readline()
-        yield port
+        yield board
     finally:
         board.send_signal(signal.SIGINT)
         board.communicate(timeout=HANG_GUARD_S)
+
+
+@contextlib.contextmanager
+def running_board(folder, *args):
+    """:func:`board_process`, yielding the path of its telemetry pty."""
+    with board_process(folder, *args):
+        yield pathlib.Path(folder) / "rig"
 
 
 def size(path) -> int:

@@ -28,7 +28,6 @@ from ..estimate.fsf import (DEFAULT_DISCARD_PERIODS, complete_excitation,
                             estimate_multisine_against_excitation, fill_lost)
 from ..estimate.models import default_orders, fit_orders
 from ..estimate.thresholds import LOW_COHERENCE
-from ..present.bode import COHERENCE_KEYS
 from ..present.plot_process import PlotProcess
 from ..records.manifest import MANIFEST, read_manifest
 from ..records.models import write_models_json
@@ -161,16 +160,11 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     write_points_csv(os.path.join(dir_path, "points.csv"), points)
     write_points_table(os.path.join(dir_path, "points_table.csv"), points)
-    table = {"omega": np.array([p.omega_rad_s for p in points]),
-             "F": np.array([p.gain for p in points]), "sigma": np.array([p.sigma for p in points]),
-             "coherence": np.array([p.coherence for p in points])}
-    order = np.argsort(table["omega"])
-    table = {k: v[order] for k, v in table.items()}
     wanted = orders or default_orders(axis)
     orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
-    result = fit_orders(table, orders, delay=delay)
+    result = fit_orders(points, orders, delay=delay)
     extra = {"log": damage.record(), "skipped_frequencies": skipped,
              "saturated_frequencies": saturated, "estimate": estimate,
              "signal": manifest.get("signal", "dwell")}
@@ -215,13 +209,9 @@ def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
     record, with the recommended model's replay), by the plotting process ``plots``."""
     axis, inject = manifest["axis"], manifest["inject"]
-    ranked = sorted(points, key=lambda p: p.omega_rad_s)
-    bode = {"path": os.path.join(dir_path, "bode.png"),
-            "omega": np.array([p.omega_rad_s for p in ranked]),
-            "F": np.array([p.gain for p in ranked]), "sigma": np.array([p.sigma for p in ranked]),
+    bode = {"path": os.path.join(dir_path, "bode.png"), "points": points,
             "models": result.models, "recommended": result.recommended,
             "title": f"{axis}, {inject} injection: points, models and coherence",
-            "coherence": {k: np.array([getattr(p, k) for p in ranked]) for k in COHERENCE_KEYS},
             "gate": LOW_COHERENCE}
     said = "dashed: the recommended model's replay" if replays is not None else \
         "no model recommended, so no replay"

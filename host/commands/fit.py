@@ -76,7 +76,7 @@ def run(args) -> int:
     if args.order:
         orders = [parse_order(o) for o in args.order]
     else:
-        n = points["omega"].size
+        n = len(points)
         orders = [o for o in map(parse_order, DEFAULT_FIT_ORDERS)
                   if 2 * n >= n_parameters(o, args.delay) + 1]
         if not orders:
@@ -95,9 +95,8 @@ def run(args) -> int:
         # the command's work, imported when it runs: --help imports every command module
         from ..present.bode import write_bode
 
-        write_bode(args.plot, points["omega"], points["F"], sigma=points["sigma"],
-                   models=result.models, recommended=result.recommended, title=str(args.points),
-                   coherence=points, gate=LOW_COHERENCE)
+        write_bode(args.plot, points, models=result.models, recommended=result.recommended,
+                   title=str(args.points), gate=LOW_COHERENCE)
         print(f"wrote {args.plot}")
     return 0
 

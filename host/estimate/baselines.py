@@ -15,7 +15,8 @@ import numpy as np
 import scipy.signal
 
 from ...sim.base.errors import InputError
-from .fsf import FrequencyPoint, _check_signals
+from ..records.points import FrequencyPoint
+from .fsf import _check_signals
 
 __all__ = ["estimate_dft", "estimate_h1"]
 

@@ -41,12 +41,12 @@ import math
 import numpy as np
 
 from ...sim.base.errors import InputError
+from ..records.points import FrequencyPoint
 
 __all__ = [
     "DEFAULT_HARMONICS",
     "DEFAULT_DISCARD_PERIODS",
     "DEFAULT_P0_RELATIVE",
-    "FrequencyPoint",
     "RecursiveFsf",
     "estimate_fsf",
     "estimate_against_excitation",
@@ -79,86 +79,6 @@ EXCITED_FRACTION = 1e-3
 #: The fundamental's regressor below this fraction of the input's norm: round-off, not an
 #: excitation (an input that is constant or zero), and the normal equations would be singular.
 NO_EXCITATION_RELATIVE = 1e-9
-
-
-@dataclasses.dataclass(frozen=True)
-class FrequencyPoint:
-    """One frequency-response point from one sine experiment.
-
-    Attributes
-    ----------
-    omega_rad_s : float
-        Excitation frequency actually analysed, rad/s.
-    gain : complex
-        ``G(j omega)``, the fundamental's output/input ratio.
-    sigma : float
-        Standard deviation of the complex ``gain`` from the residuals, ``sqrt(E|dG|^2)``.
-    coherence : float
-        Magnitude-squared coherence between input and output at ``omega``, one segment per
-        whole period after the discarded ones (NaN with fewer than two periods).
-    period_samples : float
-        Samples per excitation period (an integer for the ``"fsf"`` method).
-    n_periods : int
-        Whole periods of regression rows (after the discarded periods and, for the FSF, the
-        period that fills the filter).
-    method : str
-        ``"fsf"`` (integer period) or ``"sinefit"`` (non-integer period).
-    harmonics : dict
-        ``{l: G_l}`` for ``l = 1..L``; NaN where the input does not excite ``l``.
-    offset : float
-        Estimated output offset ``c`` (0 when ``offset=False``).
-    estimate : str
-        ``"input"``: ``y`` regressed on the measured input ``u`` (the direct estimate, right
-        for open-loop data); ``"excitation"``: ``G = (Y/R) / (U/R)``, both against the
-        injected excitation ``r`` (:func:`estimate_against_excitation`, for closed-loop data).
-    coherence_ry, coherence_ru : float
-        With ``estimate="excitation"``: the coherence of ``r`` with ``y`` and with ``u``
-        (``coherence`` is the smaller); NaN otherwise.
-    input_gain : complex
-        With ``estimate="excitation"``: ``U/R``, how the input followed the excitation (in a
-        loop broken where ``r`` is injected, ``L = R/U - 1``); NaN otherwise.
-    input_sigma : float
-        Standard deviation of ``input_gain`` (NaN without it).
-    order : int
-        The harmonic of the record's (base) period this point is at: 1 for a sine; a
-        multisine's line (:func:`estimate_multisine`), whose ``period_samples`` is the base
-        period.
-    lost_share : float
-        The share of the record's samples lost on the link (0 when every one arrived;
-        ``heliquad identify`` sets it from the sweep's count).
-    """
-
-    omega_rad_s: float
-    gain: complex
-    sigma: float
-    coherence: float
-    period_samples: float
-    n_periods: int
-    method: str
-    harmonics: dict
-    offset: float = 0.0
-    estimate: str = "input"
-    coherence_ry: float = math.nan
-    coherence_ru: float = math.nan
-    input_gain: complex = complex("nan+nanj")
-    input_sigma: float = math.nan
-    order: int = 1
-    lost_share: float = 0.0
-
-    @property
-    def magnitude(self) -> float:
-        """Linear magnitude ``|G|``."""
-        return float(abs(self.gain))
-
-    @property
-    def phase_rad(self) -> float:
-        """Phase of ``G`` in radians, wrapped to (-pi, pi]."""
-        return float(np.angle(self.gain))
-
-    @property
-    def freq_hz(self) -> float:
-        """Excitation frequency in Hz."""
-        return self.omega_rad_s / (2.0 * math.pi)
 
 
 class RecursiveFsf:

@@ -1,7 +1,8 @@
 """From points to a set of fitted, evaluated models and a recommendation.
 
-The one place that turns a points table into models, shared by ``heliquad fit`` and the
-demo, so both weight, fit and judge the same way.
+The one place that turns frequency points (:class:`~heliquad.host.records.points.FrequencyPoint`,
+as the estimator returns them or points.csv gives them back) into models, shared by ``heliquad
+fit`` and ``identify``, so both weight, fit and judge the same way.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import numpy as np
 
 from ...sim.base.errors import InputError
 from ..records import paper
+from ..records.points import known_column
 from .fit import TfModel, fit_tf, n_parameters, order_name
 from .metrics import cifer_weight, evaluate_model, quality, recommend
 
@@ -47,25 +49,27 @@ class FitResult:
     quality: tuple = ()
 
 
-def point_weights(points: dict, mode: str = "auto"):
-    """Per-point weights on the complex error, and the mode actually used.
+def point_weights(points, mode: str = "auto"):
+    """Per-point weights on the complex error, and the mode actually used, for ``points``
+    (:class:`~heliquad.host.records.points.FrequencyPoint`, in the order given).
 
     ``sigma``: ``1 / sigma``. ``coherence``: ``sqrt(W_gamma) / |F|``, the CIFER coherence
     weight on the relative error. ``none``: ``1 / |F|``, equal weight on every point's
-    relative error. ``auto`` picks sigma, else coherence, else none, by what the table has.
+    relative error. ``auto`` picks sigma, else coherence, else none, by what the points know.
     """
     if mode not in WEIGHT_MODES:
         raise InputError(f"unknown weights {mode!r}; use one of {', '.join(WEIGHT_MODES)}")
+    known = {name: known_column(points, name) for name in ("sigma", "coherence")}
     if mode == "auto":
-        mode = ("sigma" if points.get("sigma") is not None
-                else "coherence" if points.get("coherence") is not None else "none")
-    mag = np.abs(points["F"])
-    if mode in ("sigma", "coherence") and points.get(mode) is None:
+        mode = ("sigma" if known["sigma"] is not None
+                else "coherence" if known["coherence"] is not None else "none")
+    mag = np.abs(known_column(points, "gain"))
+    if mode in ("sigma", "coherence") and known[mode] is None:
         raise InputError(f"--weights {mode}: the points file has no {mode} column")
     if mode == "sigma":
-        return 1.0 / np.maximum(points["sigma"], SIGMA_FLOOR * mag), mode
+        return 1.0 / np.maximum(known["sigma"], SIGMA_FLOOR * mag), mode
     if mode == "coherence":
-        w = np.sqrt(cifer_weight(points["coherence"])) / mag
+        w = np.sqrt(cifer_weight(known["coherence"])) / mag
         if not np.any(w > 0):
             raise InputError("coherence weights: every point has coherence 0, so none would "
                              "count; use --weights none (or sigma)")
@@ -121,10 +125,12 @@ def _flag_unsupported_zeros(model: TfModel, omega) -> None:
         model.degenerate, model.degenerate_why = True, why
 
 
-def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
+def fit_orders(points, orders, weights: str = "auto", delay: bool = False,
                stable: bool = True) -> FitResult:
-    """Fit every order to the points, evaluate each model and recommend one."""
-    n_points = points["omega"].size
+    """Fit every order to ``points`` (:class:`~heliquad.host.records.points.FrequencyPoint`,
+    taken in increasing frequency), evaluate each model and recommend one."""
+    points = sorted(points, key=lambda p: p.omega_rad_s)
+    n_points = len(points)
     for order in orders:
         k = n_parameters(order, delay)
         if 2 * n_points < k + 1:
@@ -132,14 +138,15 @@ def fit_orders(points: dict, orders, weights: str = "auto", delay: bool = False,
                              f"{k} unknowns; it needs at least {(k + 2) // 2} points, "
                              f"the file has {n_points}")
     w, mode = point_weights(points, weights)
+    omega, F = known_column(points, "omega_rad_s"), known_column(points, "gain")
+    coherence = known_column(points, "coherence")
     models = []
     for order in orders:
-        model: TfModel = fit_tf(points["omega"], points["F"], order, weights=w, delay=delay,
-                                stable=stable)
-        evaluate_model(model, points["omega"], points["F"], w, points.get("coherence"))
-        _flag_unsupported_zeros(model, points["omega"])
+        model: TfModel = fit_tf(omega, F, order, weights=w, delay=delay, stable=stable)
+        evaluate_model(model, omega, F, w, coherence)
+        _flag_unsupported_zeros(model, omega)
         models.append(model)
     index, reason = recommend(models)
     return FitResult(models=models, recommended=index, reason=reason, weights=mode,
-                     band_rad_s=(float(np.min(points["omega"])), float(np.max(points["omega"]))),
+                     band_rad_s=(float(np.min(omega)), float(np.max(omega))),
                      quality=() if index is None else quality(models[index]))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..records.figures import save_figure
+from ..records.points import known_column
 from .figure import CURVE_POINTS, fixed_layout, log_ticks, new_figure
 
 #: The Bode figure's fixed layout, inches: margins (the y labels, the title, the frequency
@@ -28,23 +29,23 @@ COHERENCE_KEYS = ("coherence", *(key for key, _, _ in EXCITATION_COHERENCES))
 
 
 
-def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
-              coherence=None, gate=None):
+def plot_bode(axes, points, models=(), recommended=None, title="", gate=None):
     """Bode plot of frequency-response points and fitted models onto ``axes``: a pair of
     Axes (magnitude, phase), or three with the points' coherence in the third; returns
     their figure.
 
-    Magnitude in dB, phase in degrees, frequency in Hz (log scale). ``omega`` in rad/s,
-    ``F`` complex. ``sigma`` is the standard deviation of each complex point; it is drawn as
-    the magnitude band ``20 log10(1 +/- sigma/|F|)`` and the phase band ``asin(sigma/|F|)``.
-    ``models``: :class:`~heliquad.host.estimate.fit.TfModel`; the one at index ``recommended`` is
-    drawn heavier. ``coherence``: a mapping with any of ``coherence``, ``coherence_ry``,
-    ``coherence_ru`` (arrays beside ``omega``, NaN where not known; as
-    :func:`~heliquad.host.records.points.read_points_csv` returns them), drawn with the quality
-    ``gate`` by :func:`plot_coherence`.
+    Magnitude in dB, phase in degrees, frequency in Hz (log scale). ``points``:
+    :class:`~heliquad.host.records.points.FrequencyPoint` (as the estimator returns them or
+    :func:`~heliquad.host.records.points.read_points_csv` reads them); each point's sigma,
+    where known, is drawn as the magnitude band ``20 log10(1 +/- sigma/|F|)`` and the phase
+    band ``asin(sigma/|F|)``. ``models``: :class:`~heliquad.host.estimate.fit.TfModel`; the
+    one at index ``recommended`` is drawn heavier. The coherence panel is drawn with the
+    quality ``gate`` by :func:`plot_coherence`.
     """
+    points = sorted(points, key=lambda p: p.omega_rad_s)
+    omega, F = known_column(points, "omega_rad_s"), known_column(points, "gain")
+    sigma = known_column(points, "sigma")
     ax_mag, ax_ph, *rest = axes
-    omega = np.asarray(omega, float)
     f_hz = omega / (2 * np.pi)
     mag_db = 20 * np.log10(np.abs(F))
     phase_deg = np.degrees(np.unwrap(np.angle(F)))
@@ -61,7 +62,7 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
         ax_mag.semilogx(dense / (2 * np.pi), model_db, lw=width, label=label)
         ax_ph.semilogx(dense / (2 * np.pi), ph, lw=width)
     if rest:
-        plot_coherence(rest[0], omega, coherence, gate)
+        plot_coherence(rest[0], points, gate)
     ax_mag.set_ylabel("magnitude (dB)")
     ax_ph.set_ylabel("phase (deg)")
     for ax in (ax_mag, ax_ph, *rest):
@@ -75,21 +76,21 @@ def plot_bode(axes, omega, F, sigma=None, models=(), recommended=None, title="",
 
 
 
-def plot_coherence(ax, omega, coherence, gate=None):
+def plot_coherence(ax, points, gate=None):
     """Each point's coherence onto ``ax`` against frequency (Hz), and the quality ``gate``
     (the tool's is :data:`heliquad.host.estimate.thresholds.LOW_COHERENCE`) as a line when
     given; returns its figure.
 
-    ``coherence`` as :func:`plot_bode` takes it: with ``coherence_ry`` and ``coherence_ru``
-    (points estimated against the excitation) those two are drawn, else the single
-    ``coherence``; with none the panel says so.
+    With ``coherence_ry`` and ``coherence_ru`` known (points estimated against the
+    excitation) those two are drawn, else the single ``coherence``; with none the panel says
+    so.
     """
-    coherence = coherence or {}
-    f_hz = np.asarray(omega, float) / (2 * np.pi)
-    series = [(coherence[key], label, style) for key, label, style in EXCITATION_COHERENCES
-              if _known(coherence.get(key))]
-    if not series and _known(coherence.get("coherence")):
-        series = [(coherence["coherence"], "coherence", {"marker": "o", "ms": 5})]
+    f_hz = known_column(points, "omega_rad_s") / (2 * np.pi) if points else np.array([])
+    known = {key: known_column(points, key) for key in COHERENCE_KEYS} if points else {}
+    series = [(known[key], label, style) for key, label, style in EXCITATION_COHERENCES
+              if known.get(key) is not None]
+    if not series and known.get("coherence") is not None:
+        series = [(known["coherence"], "coherence", {"marker": "o", "ms": 5})]
     for values, label, style in series:
         ax.plot(f_hz, values, ls="none", label=label, **style)
     if gate is not None:
@@ -101,12 +102,6 @@ def plot_coherence(ax, omega, coherence, gate=None):
     ax.set_ylabel("coherence")
     ax.legend(fontsize=7, loc="lower left", ncol=3)
     return ax.figure
-
-
-
-def _known(values) -> bool:
-    """An array of coherences with at least one that is known (not NaN)."""
-    return values is not None and bool(np.any(np.isfinite(np.asarray(values, float))))
 
 
 
@@ -135,15 +130,14 @@ def _model_label(model, recommended):
 
 
 
-def write_bode(path, omega, F, sigma=None, models=(), recommended=None, title="",
-               coherence=None, gate=None):
+def write_bode(path, points, models=(), recommended=None, title="", gate=None):
     """:func:`plot_bode` in a figure of its own, with the coherence panel under it when
-    ``coherence`` holds any known value, written to ``path`` (format from its extension)."""
-    if any(_known((coherence or {}).get(key)) for key in COHERENCE_KEYS):
+    any point knows a coherence, written to ``path`` (format from its extension)."""
+    if any(known_column(points, key) is not None for key in COHERENCE_KEYS):
         fig, axes = new_figure(3, 1, figsize=(8, 8.5), layout=None, sharex=True,
                                gridspec_kw={"height_ratios": [3, 3, 1.6]})
     else:
         fig, axes = new_figure(2, 1, figsize=(8, 7), layout=None, sharex=True)
     fixed_layout(fig, len(axes), 1, BODE_MARGINS_IN, (0.0, BODE_GAP_IN))
-    plot_bode(axes, omega, F, sigma, models, recommended, title, coherence, gate)
+    plot_bode(axes, points, models, recommended, title, gate)
     save_figure(fig, path, dpi=110)

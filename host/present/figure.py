@@ -6,7 +6,7 @@ Each ``plot_*`` function draws onto the matplotlib Axes it is given and returns 
 figure, so a notebook can place a plot in a figure of its own::
 
     fig, axes = plt.subplots(2, 1, sharex=True)
-    plot_bode(axes, omega, F, models=result.models)
+    plot_bode(axes, points, models=result.models)
 
 The ``write_*`` functions are what the command line uses: each makes a figure of its own
 (:func:`new_figure`, a bare ``matplotlib.figure.Figure``: no pyplot, no backend chosen or

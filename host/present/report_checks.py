@@ -10,6 +10,7 @@ import html
 import numpy as np
 
 from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG, ROUND_OFF_SIGMA, honest_sigma_bound
+from ..records.points import known_column
 from .report_html import number_text
 from .report_models import order_text
 from .report_points import beyond_accuracy
@@ -22,7 +23,7 @@ ESTIMATES = {"excitation": "Points estimated against the logged excitation r: G 
 
 
 def checks_html(models, points=None):
-    """How the points were estimated, the recommended model's replay and, for a simulated
+    """How the points were estimated (``points``: points.csv's, or None), the recommended model's replay and, for a simulated
     sweep, how far the points and the model are from the simulator's truth, with the
     points' error/sigma statistic (:func:`_sigma_text`)."""
     said = []
@@ -63,15 +64,16 @@ def _sigma_text(truth, points) -> str:
     text = (f"RMS error/sigma of the points: {z:.2f}, how many of their own standard errors "
             "(sigma, from the scatter between periods) the points lie from the truth: ")
     relative = None
-    if points is not None and points.get("sigma") is not None:
+    sigma = known_column(points, "sigma") if points else None
+    if sigma is not None:
         with np.errstate(all="ignore"):
-            ratio = points["sigma"] / np.abs(points["F"])
+            ratio = sigma / np.abs(known_column(points, "gain"))
         relative = float(np.median(ratio[np.isfinite(ratio)])) if np.any(np.isfinite(ratio)) \
             else None
     if relative is not None and relative < ROUND_OFF_SIGMA:
         return text + (f"not meaningful here, as the sigmas are round-off ({relative:.1g} of the "
                        "magnitude: a noise-free simulation has no scatter to measure).")
-    n = len(points["sigma"]) if points is not None and points.get("sigma") is not None else 1
+    n = len(sigma) if sigma is not None else 1
     if z <= honest_sigma_bound(n):
         return text + "about 1, as it should be: sigma accounts for each point's error."
     return text + (f"above 1, so the points carry a bias their scatter does not show (at most "

@@ -5,12 +5,11 @@ points and a recommended model further from the truth than the accuracy."""
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
 from ..estimate.thresholds import ACCURACY_DB, ACCURACY_DEG, LOW_COHERENCE
-from ..records.points import TABLE_COLUMNS
+from ..records.points import TABLE_COLUMNS, known_column
 from .report_html import number_text, table_html
 
 #: Two frequencies of one folder's files are the same point within this relative difference
@@ -27,12 +26,12 @@ def points_html(table, points, models, axis, flags):
     sweep, its error against the simulator's truth (models.json). Flags low coherence, and
     points and a recommended model further from the truth than the accuracy
     (:func:`_truth_flags`)."""
-    freqs = table["freq_hz"]
+    freqs = table.freq_hz
     columns = _point_columns(freqs, points, models)
     digits = {"phase_deg": ".4f", "coherence": ".5f"}
-    rows = [[format(table[c][i], digits.get(c, ".6g")) for c in TABLE_COLUMNS]
+    rows = [[format(table.column(c)[i], digits.get(c, ".6g")) for c in TABLE_COLUMNS]
             + [cells[i] for _, cells in columns] for i in range(freqs.size)]
-    for i, (f, coherence) in enumerate(zip(freqs, table["coherence"])):
+    for i, (f, coherence) in enumerate(zip(freqs, table.coherence)):
         if coherence < LOW_COHERENCE:
             each = "".join(f", {name} {cells[i]}" for name, cells in columns
                            if name.startswith("coherence "))
@@ -43,15 +42,16 @@ def points_html(table, points, models, axis, flags):
 
 
 def _point_columns(freqs, points, models):
-    """The columns after the paper's: ``(header, cells)`` for what points.csv and
-    models.json hold of the points at ``freqs`` (Hz)."""
+    """The columns after the paper's: ``(header, cells)`` for what points.csv (``points``,
+    :class:`~heliquad.host.records.points.FrequencyPoint`, or None) and models.json hold of
+    the points at ``freqs`` (Hz)."""
     columns = []
-    if points is not None:
-        rows = [{"freq_hz": w / (2 * math.pi), **{k: points[k][i] for k in POINT_COHERENCES
-                                                  if points.get(k) is not None}}
-                for i, w in enumerate(points["omega"])]
+    if points:
+        rows = [{"freq_hz": p.freq_hz, **{k: getattr(p, k) for k in POINT_COHERENCES}}
+                for p in points]
         columns += [(name, _column(freqs, rows, key, ".4f"))
-                    for key, name in POINT_COHERENCES.items() if points.get(key) is not None]
+                    for key, name in POINT_COHERENCES.items()
+                    if known_column(points, key) is not None]
     replay = models.get("replay")
     if replay and models.get("recommended") is not None:
         columns.append(("replay error %", _column(freqs, replay["points"], "nrmse", ".3g", 100)))

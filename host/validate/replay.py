@@ -98,7 +98,7 @@ def replay_record(response, u, y, fs_hz: float, period_samples,
 def replay_points(model, points, records, discard_periods: int = DEFAULT_DISCARD_PERIODS):
     """The replay through ``model`` (a :class:`~heliquad.host.estimate.fit.TfModel`) of each record
     ``(freq_hz, t_s, u, y)`` that the point beside it (a
-    :class:`~heliquad.host.estimate.fsf.FrequencyPoint`; a multisine's record: any of its lines) was
+    :class:`~heliquad.host.records.points.FrequencyPoint`; a multisine's record: any of its lines) was
     estimated from, at that point's (base) period: every line of the record is replayed."""
     out = []
     for p, (_, _, u, y) in zip(points, records):
