@@ -12,7 +12,8 @@ import scipy.io
 
 from heliquad.host.estimate.fit import TfModel
 from heliquad.host.records import paper
-from heliquad.host.records.models import write_models_json, write_models_mat
+from heliquad.host.records.models import (ModelsFile, StoredModel, write_models_json,
+                                           write_models_mat)
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 FIXED_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate")
@@ -92,8 +93,9 @@ def test_one_model_and_values_json_writes_as_null(tmp_path):
                     stable=False, metrics={"rms": 0.1, "J": 12.0, "aicc": math.inf,
                                            "n_parameters": 3})
     json_path, mat = tmp_path / "m.json", tmp_path / "m.mat"
-    write_models_json(json_path, [model], None, "none stable")
-    write_models_mat(mat, [model], None)
+    stored = ModelsFile(models=[StoredModel.of(model)], recommended=None, reason="none stable")
+    write_models_json(json_path, stored)
+    write_models_mat(mat, stored)
     doc = assert_mat_matches_json(mat, json_path)
     assert doc["models"][0]["dc_gain"] is None and doc["models"][0]["metrics"]["aicc"] is None
     one = scipy.io.loadmat(mat, squeeze_me=True, struct_as_record=False)["models"]

@@ -1,6 +1,8 @@
 """Nothing already recorded is lost: the commands that record (log, sweep, sil) never write
 over a log or into an earlier session's folder, and a bad port creates nothing."""
 
+import dataclasses
+import importlib
 import os
 import subprocess
 import sys
@@ -265,3 +267,18 @@ def test_the_demo_refuses_a_folder_with_an_earlier_demo(tmp_path):
     (out / "roll" / "sweep.tlog").write_bytes(b"an earlier demo")
     one_line_error(heliquad("demo", "--axes", "roll", "--out", out), "not empty", "--out")
     assert (out / "roll" / "sweep.tlog").read_bytes() == b"an earlier demo"
+
+
+@pytest.mark.parametrize("module, record, schema", [
+    ("models", "ModelsFile", "_models_schema"), ("validation", "ValidationFile",
+                                                 "_validation_schema")])
+def test_each_key_the_reader_checks_is_a_field_of_its_record(module, record, schema):
+    # the reader keeps only its record's fields: a key checked but not kept would be lost
+    mod = importlib.import_module(f"heliquad.host.records.{module}")
+    spec = getattr(mod, schema)()
+    fields = {f.name for f in dataclasses.fields(getattr(mod, record))}
+    assert {*spec.required, *spec.optional} <= fields
+    if module == "models":
+        model = spec.required["models"].item
+        stored = {f.name for f in dataclasses.fields(mod.StoredModel)}
+        assert {*model.required, *model.optional} == stored

@@ -12,6 +12,7 @@ import scipy.optimize
 from heliquad.host.present.figure import new_figure
 from heliquad.host.present.validation import plot_validation
 from heliquad.host.records import paper
+from heliquad.host.records.output import document
 from heliquad.host.validate.closed_loop import load_gains, validate_model, validation_record
 from heliquad.sim.base.firmware_facts import LOOP_PERIOD_S
 
@@ -88,7 +89,8 @@ def test_the_report_and_traces_are_in_si_units(roll_validation):
 
 def test_the_record_is_the_report_in_degrees_db_and_hz(roll_validation):
     report, _ = roll_validation
-    doc = validation_record(report)
+    record = validation_record(report)
+    doc = document(record)
     assert set(doc) == {"axis", "num", "den", "delay_s", "gains", "band_rad_s", "loops", "stable",
                         "step", "sine", "turbulence"}
     for name, loop in report["loops"].items():

@@ -30,7 +30,7 @@ from ..estimate.models import default_orders, fit_orders
 from ..estimate.thresholds import LOW_COHERENCE
 from ..present.plot_process import PlotProcess
 from ..records.manifest import MANIFEST, read_manifest
-from ..records.models import write_models_json
+from ..records.models import fitted_models, write_models_json
 from ..records.points import write_points_csv, write_points_table
 from ..records.tlog import TlogDamage, read_tlog_table
 from ..validate.closed_loop import margins_record
@@ -165,23 +165,17 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
     result = fit_orders(points, orders, delay=delay)
-    extra = {"log": damage.record(), "skipped_frequencies": skipped,
-             "saturated_frequencies": saturated, "estimate": estimate,
-             "signal": manifest.get("signal", "dwell")}
-    if manifest.get("gains"):
-        extra["gains"] = manifest["gains"]       # what the board flew, for validate
     loop = _broken_loop(manifest, points, estimate, progress)
-    if loop:
-        extra["broken_loop"] = loop
     truth = _truth(dir_path, manifest, points, result, progress)
-    if truth:
-        extra["sil_truth"] = truth
     replays = _replays(result, firsts, segments)
-    if replays is not None:
-        extra["replay"] = _replay_record(result.recommended, replays)
-    write_models_json(os.path.join(dir_path, "models.json"), result.models, result.recommended,
-                      result.reason, source="points.csv", weights=result.weights, axis=axis,
-                      extra=extra, band_rad_s=result.band_rad_s, quality=result.quality)
+    write_models_json(os.path.join(dir_path, "models.json"), fitted_models(
+        result, log=damage.record(), skipped_frequencies=skipped,
+        saturated_frequencies=saturated, estimate=estimate,
+        signal=manifest.get("signal", "dwell"),
+        gains=manifest.get("gains") or None,        # what the board flew, for validate
+        broken_loop=loop or None, sil_truth=truth or None,
+        replay=None if replays is None else _replay_record(result.recommended, replays),
+        axis=axis, points_file="points.csv"))
     _write_plots(plots, dir_path, manifest, points, result, replays)
     return {"axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,

@@ -138,7 +138,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
     from ..campaign.identify import identify_dir
     from ..present.plot_process import InlinePlots
-    from ..present.validation import save_validation
+    from ..campaign.validation import save_validation
     from ..records.models import read_models_json
     from ..validate.closed_loop import model_gains, sweep_inputs, validate_model
 

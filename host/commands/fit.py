@@ -59,7 +59,7 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..records.figures import check_figure_output
-    from ..records.models import write_models_json, write_models_mat
+    from ..records.models import fitted_models, write_models_json, write_models_mat
     from ..records.output import check_output
     from ..records.points import read_points_csv
 
@@ -84,12 +84,11 @@ def run(args) -> int:
     result = fit_orders(points, orders, weights=args.weights, delay=args.delay,
                         stable=not args.allow_unstable)
     print_models(result)
-    write_models_json(args.json, result.models, result.recommended, result.reason,
-                      source=args.points, weights=result.weights, band_rad_s=result.band_rad_s,
-                      quality=result.quality)
+    fitted = fitted_models(result, points_file=str(args.points))
+    write_models_json(args.json, fitted)
     print(f"wrote {args.json}")
     if args.mat:
-        write_models_mat(args.mat, result.models, result.recommended)
+        write_models_mat(args.mat, fitted)
         print(f"wrote {args.mat}")
     if args.plot:
         # the command's work, imported when it runs: --help imports every command module

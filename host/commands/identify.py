@@ -70,9 +70,9 @@ def run(args) -> int:
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
     if args.mat:
         # the command's work, imported when it runs: --help imports every command module
-        from ..records.models import write_models_mat
+        from ..records.models import fitted_models, write_models_mat
 
-        write_models_mat(args.mat, r["result"].models, r["result"].recommended)
+        write_models_mat(args.mat, fitted_models(r["result"]))
         print(f"wrote {args.mat}")
     if r["skipped"] or r["damage"]:
         n = len(r["points"]) + len(r["skipped"])

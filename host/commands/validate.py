@@ -54,30 +54,30 @@ def run(args) -> int:
     from ..records.output import check_output_folder
 
     doc = read_models_json(args.models)
-    models = doc["models"]
-    index = args.model if args.model is not None else doc.get("recommended")
+    models = doc.models
+    index = args.model if args.model is not None else doc.recommended
     if index is None or not 0 <= index < len(models):
         raise InputError(f"{args.models}: no model {index!r} (the file has {len(models)}; "
                          "give --model INDEX)")
-    axis = args.axis or doc.get("axis")
+    axis = args.axis or doc.axis
     if axis not in names.AXES:
         raise InputError(f"{args.models} does not say which axis: give --axis roll|pitch|yaw")
     m = models[index]
-    num, den, delay = m["num"], m["den"], float(m.get("delay_s", 0.0))
+    num, den, delay = m.num, m.den, float(m.delay_s)
     check_model(f"{args.models}: models[{index}]", num, den)
     file_gains = read_gains(args.gains, axis) if args.gains else None
     out = args.out or os.path.dirname(os.path.abspath(args.models))
     check_output_folder(out, "--out")
 
     # the command's work, imported when it runs: --help imports every command module
-    from ..present.validation import save_validation
+    from ..campaign.validation import save_validation
     from ..validate.closed_loop import model_gains, sweep_inputs, validate_model, validation_record
 
     gains, where = (file_gains, args.gains) if file_gains else model_gains(doc, axis)
     print(f"gains: {where}: rate {_gains_text(gains.rate)}"
           + ("" if gains.angle is None else f", angle {_gains_text(gains.angle)}"))
     turbulence = None if args.turbulence == "none" else args.turbulence
-    if doc.get("band_rad_s") is None:
+    if doc.band_rad_s is None:
         print(f"{args.models} does not give the band its models were identified over; "
               f"the paper's {axis} band is assumed")
     report, traces = validate_model(num, den, delay, axis, gains, turbulence, args.seed,
@@ -108,38 +108,38 @@ def _print_validation(r) -> None:
     from ..validate.loops import LOOP_DT_S
 
     coeffs = lambda c: "[" + ", ".join(f"{v:.5g}" for v in c) + "]"  # noqa: E731
-    print(f"{r['axis']}: G(s) = {coeffs(r['num'])} / {coeffs(r['den'])}"
-          + (f" * exp(-{r['delay_s'] * 1e3:.3g} ms s)" if r["delay_s"] else ""))
-    lo, hi = r["band_rad_s"]
+    print(f"{r.axis}: G(s) = {coeffs(r.num)} / {coeffs(r.den)}"
+          + (f" * exp(-{r.delay_s * 1e3:.3g} ms s)" if r.delay_s else ""))
+    lo, hi = r.band_rad_s
     print(f"  identified over {lo:.3g}-{hi:.3g} rad/s; the firmware's loops at "
           f"{1 / LOOP_DT_S:g} Hz:")
-    for name, lp in r["loops"].items():
+    for name, lp in r.loops.items():
         print(f"  {name:5s} loop: {_margins_text(lp)}; closed loop "
               f"{'stable' if lp['closed_loop_stable'] else 'UNSTABLE'}")
         for why in lp["not_validated"]:
             print(f"        not validated: {why}")
-        measured = r.get("measured_loop")
+        measured = r.measured_loop
         if measured and measured["loop"] == name:
             said = [] if measured["gain_margin_db"] is None and measured["phase_margin_deg"] \
                 is None else [_margins_text(measured)]
             said += [f"no {why}" for why in measured.get("unmeasured", [])]
             print(f"        measured through the excitation ({measured['injection']} injection): "
                   + "; ".join(said))
-        if name in r.get("truth_loops", {}):
-            print(f"        simulator's truth: {_margins_text(r['truth_loops'][name])}")
-    if not r["stable"]:
+        if name in (r.truth_loops or {}):
+            print(f"        simulator's truth: {_margins_text(r.truth_loops[name])}")
+    if not r.stable:
         # the command's work, imported when it runs: --help imports every command module
         from ..validate.closed_loop import instability_text
 
-        print(f"  {instability_text(r)}; no time responses")
+        print(f"  {instability_text(r.instability)}; no time responses")
         return
-    st, sn = r["step"], r["sine"]
+    st, sn = r.step, r.sine
     print(f"  step {st['size']:g} {st['unit']}: rise {st['rise_time_s']:.2f} s, overshoot "
           f"{st['overshoot_pct']:.1f} %, settling {st['settling_time_s']:.2f} s")
     print(f"  sine {sn['freq_hz']:g} Hz: tracking RMS {sn['tracking_rms']:.3g} {st['unit']} "
           f"({sn['tracking_rms_pct']:.1f} % of the reference RMS)")
-    if "turbulence" in r:
-        tb = r["turbulence"]
+    if r.turbulence is not None:
+        tb = r.turbulence
         extra = f", angle RMS {tb['angle_rms_deg']:.2f} deg (max {tb['angle_max_deg']:.2f})" \
             if "angle_rms_deg" in tb else ""
         print(f"  {tb['level']} turbulence: gust rate RMS {tb['gust_rate_rms_deg_s']:.1f} deg/s -> "

@@ -66,13 +66,13 @@ def _axis_section(folder) -> dict:
     validation = _read(read_validation, os.path.join(folder, "validation.json"))
     table = _read(read_points_table, os.path.join(folder, "points_table.csv"))
     points = _read(read_points_csv, os.path.join(folder, "points.csv"))
-    axis = manifest.get("axis") or (models or {}).get("axis") or os.path.basename(folder)
+    axis = manifest.get("axis") or (models and models.axis) or os.path.basename(folder)
     flags, notes = [], []
     parts = [f'<h2 id="axis-{html.escape(str(axis))}">{html.escape(str(axis))}</h2>']
     if manifest:
         parts.append(sweep_html(manifest, axis, flags))
     if table is not None:
-        parts.append(points_html(table, points, models or {}, axis, flags))
+        parts.append(points_html(table, points, models, axis, flags))
     if models:
         parts.append(models_html(models, axis, flags))
         parts.append(checks_html(models, points))
@@ -89,14 +89,14 @@ def _summary(models) -> dict:
     """What the page's summary says of an axis's models: the recommended model (None when
     there is none), its fit to the points, and its worst error against the simulator's
     truth across the band (None on a board)."""
-    rec = (models or {}).get("recommended")
+    rec = None if models is None else models.recommended
     if rec is None:
         return {"model": None, "fit": None, "truth": None}
-    truth = models.get("sil_truth") or {}
+    truth = models.sil_truth or {}
     worst = (truth.get("model_worst_db"), truth.get("model_worst_deg"))
-    quality = models.get("quality") or {}
-    fit = models["models"][rec].get("metrics", {}).get("J")
-    return {"model": models["models"][rec],
+    quality = models.quality or {}
+    fit = models.models[rec].metrics.get("J")
+    return {"model": models.models[rec],
             "fit": f"{quality.get('level', 'fit')}: J = {number_text(fit, '.2g')}",
             "truth": worst if None not in worst else None}
 

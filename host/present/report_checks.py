@@ -27,24 +27,24 @@ def checks_html(models, points=None):
     sweep, how far the points and the model are from the simulator's truth, with the
     points' error/sigma statistic (:func:`_sigma_text`)."""
     said = []
-    if models.get("estimate"):
-        said.append(ESTIMATES[models["estimate"]])
-    replay = models.get("replay")
-    if models.get("recommended") is None:
+    if models.estimate:
+        said.append(ESTIMATES[models.estimate])
+    replay = models.replay
+    if models.recommended is None:
         said.append("No model is recommended, so none is replayed.")
     elif replay:
         errors = [100 * p["nrmse"] for p in replay["points"] if p.get("nrmse") is not None]
         said.append(f"Replay: each frequency's measured input (its mean period after "
                     f"{replay.get('discard_periods', 1)} discarded) through the recommended model "
-                    f"({order_text(models['models'][models['recommended']])}), its periodic steady "
+                    f"({order_text(models.models[models.recommended])}), its periodic steady "
                     f"state against the measured output (dashed in the responses): error "
                     + (f"{min(errors):.2g} to {max(errors):.2g} % of the output's RMS "
                        "(per frequency in the table above)." if errors else "not known."))
-    truth = models.get("sil_truth")
+    truth = models.sil_truth
     if truth:
         text = (f"Against the simulator's truth: the points within {truth['points_worst_db']:.2f} dB "
                 f"and {truth['points_worst_deg']:.1f} deg")
-        if truth.get("model_worst_db") is not None and models.get("recommended") is not None:
+        if truth.get("model_worst_db") is not None and models.recommended is not None:
             text += (f"; the recommended model within {truth['model_worst_db']:.2f} dB and "
                      f"{number_text(truth.get('model_worst_deg'), '.1f')} deg across the band")
         said.append(text + f" (the report's accuracy: {ACCURACY_DB:g} dB and {ACCURACY_DEG:g} "

@@ -13,48 +13,50 @@ from .report_html import number_text, table_html
 def models_html(models, axis, flags):
     """The models with their metrics and the recommendation; flags a damaged log, unused
     frequencies, unstable models and no recommendation."""
-    log = models.get("log") or {}
+    log = models.log or {}
     if log.get("skipped_bytes") or log.get("stamps_out_of_order") or \
             log.get("stamps_not_loop_time"):
         flags.append(f"{axis}: the log is damaged: {log.get('skipped_bytes', 0)} bytes "
                      f"skipped in {log.get('damaged_regions', 0)} places, "
                      f"{log.get('stamps_out_of_order', 0)} timestamps out of order, "
                      f"{log.get('stamps_not_loop_time', 0)} not their control loop's time")
-    for text in models.get("skipped_frequencies") or []:
+    for text in models.skipped_frequencies or []:
         flags.append(f"{axis}: {text} (not used)")
-    rec = models.get("recommended")
+    rec = models.recommended
     rows = []
-    for i, m in enumerate(models["models"]):
-        k = m.get("metrics", {})
-        tf = f"[{', '.join(f'{c:.5g}' for c in m['num'])}] / [{', '.join(f'{c:.5g}' for c in m['den'])}]"
-        if m.get("delay_s"):
-            tf += f" * exp(-{m['delay_s']:.4g} s)"
+    for i, m in enumerate(models.models):
+        k = m.metrics
+        tf = f"[{', '.join(f'{c:.5g}' for c in m.num)}] / [{', '.join(f'{c:.5g}' for c in m.den)}]"
+        if m.delay_s:
+            tf += f" * exp(-{m.delay_s:.4g} s)"
         rows.append(("*" if i == rec else "", order_text(m), number_text(k.get("J"), ".3g"),
                      number_text(100 * k["rms"], ".3g") if k.get("rms") is not None else "-",
                      number_text(k.get("aicc"), ".4g"), number_text(k.get("max_mag_err_db"), ".3f"),
                      number_text(k.get("max_phase_err_deg"), ".2f"),
-                     "yes" if m.get("stable") else "NO",
-                     (m.get("degenerate_why") or "yes") if m.get("degenerate") else "", tf))
-        if not m.get("stable"):
-            flags.append(f"{axis}: model {m['order'][0]}/{m['order'][1]} is unstable")
+                     "yes" if m.stable else "NO",
+                     (m.degenerate_why or "yes") if m.degenerate else "", tf))
+        if not m.stable:
+            flags.append(f"{axis}: model {m.order[0]}/{m.order[1]} is unstable")
     if rec is None:
         flags.append(f"{axis}: no model recommended")
-    elif (models.get("quality") or {}).get("level") == "poor":
+    elif (models.quality or {}).get("level") == "poor":
         flags.append(f"{axis}: the recommended model fits its points poorly "
-                     f"({models['quality'].get('why')}); try other orders, or look at the points")
+                     f"({models.quality.get('why')}); try other orders, or look at the points")
     return ("<h3>Models</h3>" + table_html(
         ["", "order", "J", "rms %", "AICc", "max dB", "max deg", "stable", "degenerate", "G(s)"],
-        rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.get('reason')))}</p>")
+        rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.reason))}</p>")
 
 
 def order_text(model) -> str:
-    """A models.json model's order, ``0/2``, ``0/2i`` (a pole at the origin) or ``0/2 + delay``."""
-    return order_name((*model["order"], int(bool(model.get("integrator"))))) + \
-        (" + delay" if model.get("delay_s") else "")
+    """A models.json model's order (a :class:`~heliquad.host.records.models.StoredModel`),
+    ``0/2``, ``0/2i`` (a pole at the origin) or ``0/2 + delay``."""
+    return order_name((*model.order, int(bool(model.integrator)))) + \
+        (" + delay" if model.delay_s else "")
 
 
 def tf_html(model) -> str:
-    """A models.json model as HTML: ``num / (den)`` in powers of s, its delay as e^(-T s)."""
+    """A models.json model (a :class:`~heliquad.host.records.models.StoredModel`) as HTML:
+    ``num / (den)`` in powers of s, its delay as e^(-T s)."""
     def poly(c):
         n, terms = len(c) - 1, []
         for i, v in enumerate(c):
@@ -63,8 +65,8 @@ def tf_html(model) -> str:
             coef = "" if (v == 1 and p) else f"{abs(v):.4g}"
             terms.append(("- " if v < 0 else "+ ") + " ".join(t for t in (coef, power) if t))
         return " ".join(terms).lstrip("+ ")
-    num, den = poly(model["num"]), poly(model["den"])
-    text = (f"({num})" if len(model["num"]) > 1 else num) + f" / ({den})"
-    if model.get("delay_s"):
-        text += f" e<sup>-{1e3 * model['delay_s']:.3g} ms &middot; s</sup>"
+    num, den = poly(model.num), poly(model.den)
+    text = (f"({num})" if len(model.num) > 1 else num) + f" / ({den})"
+    if model.delay_s:
+        text += f" e<sup>-{1e3 * model.delay_s:.3g} ms &middot; s</sup>"
     return text

@@ -52,10 +52,10 @@ def _point_columns(freqs, points, models):
         columns += [(name, _column(freqs, rows, key, ".4f"))
                     for key, name in POINT_COHERENCES.items()
                     if known_column(points, key) is not None]
-    replay = models.get("replay")
-    if replay and models.get("recommended") is not None:
+    replay = models and models.replay
+    if replay and models.recommended is not None:
         columns.append(("replay error %", _column(freqs, replay["points"], "nrmse", ".3g", 100)))
-    truth = models.get("sil_truth")
+    truth = models and models.sil_truth
     if truth:
         columns += [(name, _column(freqs, truth["points"], key, spec))
                     for key, name, spec in (("error_db", "truth error dB", ".3f"),
@@ -94,7 +94,7 @@ def _truth_flags(models, axis, flags):
     further from the simulator's truth than the accuracy (:data:`ACCURACY_DB`,
     :data:`ACCURACY_DEG`), naming the worst; one when the recommended model is, somewhere in
     the band."""
-    truth = models.get("sil_truth")
+    truth = models and models.sil_truth
     if not truth:
         return
     far = [p for p in truth["points"] if beyond_accuracy(p.get("error_db"), p.get("error_deg"))]
@@ -108,7 +108,7 @@ def _truth_flags(models, axis, flags):
                      "measured wrongly; look at their coherence, saturation and responses, and "
                      "measure them again")
     db, deg = truth.get("model_worst_db"), truth.get("model_worst_deg")
-    if models.get("recommended") is not None and beyond_accuracy(db, deg):
+    if models.recommended is not None and beyond_accuracy(db, deg):
         flags.append(f"{axis}: the recommended model is up to {number_text(db, '.2f')} dB and "
                      f"{number_text(deg, '.1f')} deg from the simulator's truth across the band, "
                      f"beyond the {_accuracy_text()} a controller design can take: do not design "

@@ -35,19 +35,19 @@ def validation_html(validation, axis, flags, notes, loop_hz=None):
     the cascade goes unstable: flagged inside the identified band, a note (not validated)
     outside it. Flags margins in band the truth does not confirm; notes, in one line, the
     margins not validated (:func:`_margin_flags`)."""
-    band = validation.get("band_rad_s")
+    band = validation.band_rad_s
     text = "<h3>Closed-loop validation</h3>"
     if band:
         text += (f"<p>The model was identified over {band[0]:.3g}-{band[1]:.3g} rad/s; a margin "
                  "whose crossover lies outside that band is not validated: the model has no "
                  "data there.</p>")
-    text += "".join(_loop_html(name, lp, validation) for name, lp in validation["loops"].items())
+    text += "".join(_loop_html(name, lp, validation) for name, lp in validation.loops.items())
     _margin_flags(validation, axis, flags, notes, loop_hz)
-    if validation["stable"]:
+    if validation.stable:
         return text + _responses_html(validation)
-    why = instability_text(validation) if "instability" in validation else \
-        "the cascade is unstable with these gains"
-    if (validation.get("instability") or {}).get("outside_band"):
+    why = instability_text(validation.instability) if validation.instability is not None \
+        else "the cascade is unstable with these gains"
+    if (validation.instability or {}).get("outside_band"):
         said, _, step = why.partition("; ")
         notes.append((f"{axis}: {said}", step or "check on the rig"))
     else:
@@ -65,7 +65,7 @@ def _loop_html(name, lp, validation):
         note += f"; {' and '.join(out)} not validated (read outside the band)"
     rows = [("model", *_margin_cells(lp), note)]
     said = []
-    measured = validation.get("measured_loop")
+    measured = validation.measured_loop
     if measured and measured.get("loop") == name:
         points = measured.get("points") or []
         hz = [p["freq_hz"] for p in points]
@@ -75,7 +75,7 @@ def _loop_html(name, lp, validation):
                      *_margin_cells(measured, "not measured", "not measured"),
                      f"{measured.get('injection')} injection{reach}"))
         said += [f"not measured: {why}" for why in measured.get("unmeasured", [])]
-    truth = validation.get("truth_loops", {}).get(name)
+    truth = (validation.truth_loops or {}).get(name)
     if truth:
         rows.append(("simulator's truth", *_margin_cells(truth), ""))
     return (f"<h4>{html.escape(LOOPS.get(name, name))}</h4>"
@@ -109,8 +109,8 @@ def _margin_flags(validation, axis, flags, notes, loop_hz=None):
     :data:`TRUTH_MARGIN_DB` or :data:`TRUTH_MARGIN_DEG` away; one note for all the margins
     of the model not validated, naming them by loop and the sweep that would measure
     them."""
-    out, truths = {}, validation.get("truth_loops", {})
-    for name, lp in validation["loops"].items():
+    out, truths = {}, validation.truth_loops or {}
+    for name, lp in validation.loops.items():
         for margin, key, at_key, _, unit, spec in MARGINS:
             where = _in_band(lp, margin)
             if where is False:
@@ -122,7 +122,7 @@ def _margin_flags(validation, axis, flags, notes, loop_hz=None):
                              f"the model and {truth:{spec}} {unit} on the simulator's truth, "
                              f"more than {limit:g} {unit} apart, inside the identified band")
     if out:
-        notes.append(_margins_note(axis, out, validation["band_rad_s"], loop_hz))
+        notes.append(_margins_note(axis, out, validation.band_rad_s, loop_hz))
 
 
 def _margins_note(axis, out, band, loop_hz=None) -> tuple:
@@ -154,8 +154,8 @@ def _sweep_step(lo, hi, loop_hz) -> str:
 
 def _responses_html(validation):
     """The step, the sine tracking and the turbulence rejection, in a paragraph."""
-    st, sn = validation["step"], validation["sine"]
-    tb = validation.get("turbulence", {})
+    st, sn = validation.step, validation.sine
+    tb = validation.turbulence or {}
     return (f"<p>Step {st['size']:g} {html.escape(st['unit'])}: rise "
             f"{number_text(st.get('rise_time_s'), '.2f')} s, overshoot "
             f"{number_text(st.get('overshoot_pct'), '.1f')} %, settling "

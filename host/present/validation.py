@@ -1,20 +1,18 @@
-"""A closed-loop validation drawn and kept: its figure (the loop gains as magnitude over
-phase with their margins marked, the step, sine tracking and turbulence rejection) and its
-files, ``validation.json`` and ``validation.png``."""
+"""A closed-loop validation drawn: its figure (the loop gains as magnitude over phase with
+their margins marked, the step, sine tracking and turbulence rejection), on given Axes or
+as ``validation.png`` (:func:`write_validation`). validation.json is its record's
+(host/records/validation.py)."""
 
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
 from ..records.figures import save_figure
-from ..records.output import write_json
-from ..validate.closed_loop import validation_record
 from .figure import new_figure
 
-__all__ = ["plot_validation", "plot_loop_gains", "write_validation", "save_validation"]
+__all__ = ["plot_validation", "plot_loop_gains", "write_validation"]
 
 #: The loops of a validation report as the loop-gain panel draws them: (key, label, colour).
 LOOP_STYLES = (("rate", "rate loop L_r", "tab:blue"), ("angle", "angle loop L_a", "tab:orange"),
@@ -25,17 +23,6 @@ NOT_VALIDATED_COLOUR, NOT_VALIDATED_ALPHA = "0.5", 0.6
 #: The loop-gain panel's magnitude axis shows at most this far from 0 dB (a loop with
 #: integrators runs off to +100 dB at low frequency; the margins live near 0 dB).
 LOOP_GAIN_DB_RANGE = 60.0
-
-
-def save_validation(folder, report, traces) -> list:
-    """Write ``validation.json`` (:func:`validation_record`) and, when the cascade is
-    stable, ``validation.png`` into ``folder``; returns the file names written."""
-    os.makedirs(folder, exist_ok=True)
-    write_json(os.path.join(folder, "validation.json"), validation_record(report))
-    if not report["stable"]:
-        return ["validation.json"]
-    write_validation(os.path.join(folder, "validation.png"), report, traces)
-    return ["validation.json", "validation.png"]
 
 
 def plot_validation(axes, report, traces):

@@ -70,10 +70,9 @@ def gains_from_params(axis: str, params: dict) -> Gains | None:
     return Gains(rate, angle)
 
 
-def recorded_gains(doc: dict | None) -> Gains | None:
-    """The gains a manifest or models.json recorded (``{"rate": [...], "angle": [...] or
-    None}``), or None when it recorded none."""
-    g = (doc or {}).get("gains")
+def recorded_gains(g: dict | None) -> Gains | None:
+    """The gains a manifest or models.json recorded (its ``gains``: ``{"rate": [...],
+    "angle": [...] or None}``), or None when it recorded none."""
     if not g or not g.get("rate"):
         return None
     angle = g.get("angle")

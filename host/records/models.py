@@ -3,15 +3,18 @@
 INDEX, ...}``, coefficients in descending powers of s, den monic; the .mat a MATLAB struct
 array of the same models.
 
-The models written are :class:`~heliquad.host.estimate.fit.TfModel` objects (the fit's
-record, read here by its attributes), and the recommended model's quality verdict comes from
-the caller (the fit computes it, host/estimate/metrics.py): a writer judges nothing. The
-reader returns the checked document as a dict, which validation, the report and the demo
-read key by key.
+:class:`ModelsFile` is the document and :class:`StoredModel` each of its models, their
+fields the file's keys in the file's order. The fit and identify build one
+(:func:`fitted_models` from a :class:`~heliquad.host.estimate.models.FitResult`, read by its
+attributes, with identify's sections beside it), :func:`write_models_json` and
+:func:`write_models_mat` write it, and :func:`read_models_json` checks a file and returns
+it, for validation, the report and the demo. The recommended model's quality verdict comes
+from the fit (host/estimate/metrics.py): a writer judges nothing.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -21,11 +24,11 @@ from ...sim.base import dialect as names
 from . import schema as S
 from .gains import recorded_gains_schema
 from .manifest import SWEEP_SIGNALS
-from .output import atomic_write, write_json
-from .reading import read_json
+from .output import NULLABLE, atomic_write, document, write_json
+from .reading import read_json, record_of
 
-__all__ = ["read_models_json", "write_models_json", "model_to_dict", "write_models_mat",
-           "MAT_FIELDS"]
+__all__ = ["StoredModel", "ModelsFile", "fitted_models", "read_models_json",
+           "write_models_json", "write_models_mat", "MAT_FIELDS"]
 
 #: A model's pure delay, s.
 MAX_DELAY_S = 10.0
@@ -82,7 +85,95 @@ def _replay_schema():
                  optional={"discard_periods": S.Int(0, 2**31)})
 
 
-def read_models_json(path) -> dict:
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class StoredModel:
+    """One model of MODELS.json (the meaning of each key: docs/file-formats.md). A key a file
+    leaves out reads as the default here (``order``: the coefficients' own); ``stable``
+    None when the file does not say. ``metrics`` stays the file's dict (its keys are the
+    fit's metrics, host/estimate/metrics.py); ``poles`` and ``zeros`` are ``[real, imag]``
+    pairs. Numbers that are not finite (an infinite ``dc_gain`` or AICc) are kept as they
+    are and written as null."""
+
+    order: list
+    integrator: bool = False
+    num: list
+    den: list
+    delay_s: float = 0.0
+    stable: bool | None = None
+    degenerate: bool = False
+    degenerate_why: str | None = None
+    metrics: dict = dataclasses.field(default_factory=dict)
+    poles: list | None = None
+    zeros: list | None = None
+    dc_gain: float | None = dataclasses.field(default=None, metadata=NULLABLE)
+
+    @classmethod
+    def of(cls, model) -> StoredModel:
+        """A :class:`~heliquad.host.estimate.fit.TfModel` (read by its attributes) as stored."""
+        return cls(order=list(model.order), integrator=bool(model.integrator),
+                   num=[float(c) for c in model.num], den=[float(c) for c in model.den],
+                   delay_s=float(model.delay_s), stable=bool(model.stable),
+                   degenerate=bool(model.degenerate),
+                   degenerate_why=model.degenerate_why or None,
+                   metrics={k: float(v) if isinstance(v, float) else v
+                            for k, v in model.metrics.items()},
+                   poles=[[float(p.real), float(p.imag)] for p in model.poles],
+                   zeros=[[float(z.real), float(z.imag)] for z in model.zeros],
+                   dc_gain=float(model.dc_gain))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ModelsFile:
+    """MODELS.json: its :class:`StoredModel` list, the recommendation (``recommended`` an
+    index into ``models``, or None, written as null) and every optional key, None when the
+    file leaves it out (the meaning of each: docs/file-formats.md). ``band_rad_s`` is
+    ``[low, high]``; ``quality`` ``{"level", "why"}``. The sections identify adds (``log``,
+    ``gains``, ``broken_loop``, ``sil_truth``, ``replay``) stay the checked dicts the schema
+    describes: their readers take them key by key, and a type of their own would only copy
+    the schema."""
+
+    models: list
+    recommended: int | None = dataclasses.field(default=None, metadata=NULLABLE)
+    reason: str | None = None
+    log: dict | None = None
+    skipped_frequencies: list | None = None
+    saturated_frequencies: list | None = None
+    estimate: str | None = None
+    signal: str | None = None
+    gains: dict | None = None
+    broken_loop: dict | None = None
+    sil_truth: dict | None = None
+    replay: dict | None = None
+    band_rad_s: list | None = None
+    quality: dict | None = None
+    axis: str | None = None
+    points_file: str | None = None
+    weights: str | None = None
+
+    def document(self) -> dict:
+        """The file's JSON document: the keys that have a value, in field order."""
+        return {**document(self), "models": [document(m) for m in self.models]}
+
+
+def fitted_models(result, **sections) -> ModelsFile:
+    """A :class:`~heliquad.host.estimate.models.FitResult` (read by its attributes) as
+    MODELS.json: its models, recommendation and reason, weights, band (the lowest and highest
+    frequency of the points fitted: validation trusts a model only there) and the
+    recommended model's quality (given with the recommendation, and only with it);
+    ``sections``: the other :class:`ModelsFile` fields (the axis, the points file, what
+    identify adds)."""
+    if (result.recommended is None) != (not result.quality):
+        raise ValueError("a recommended model needs its quality, and only it has one")
+    low, high = result.band_rad_s
+    quality = {"level": result.quality[0], "why": result.quality[1]} if result.quality \
+        else None
+    return ModelsFile(models=[StoredModel.of(m) for m in result.models],
+                      recommended=result.recommended, reason=result.reason,
+                      band_rad_s=[float(low), float(high)], quality=quality,
+                      weights=result.weights, **sections)
+
+
+def read_models_json(path) -> ModelsFile:
     """MODELS.json, checked (docs/file-formats.md): each model proper (num no longer than
     den, and both as long as its ``order`` says), den's leading coefficient not zero,
     ``recommended`` an index into ``models`` or null. A
@@ -111,66 +202,25 @@ def read_models_json(path) -> dict:
     if rec is not None and rec >= len(doc["models"]):
         S.fail(path, "recommended", f"is not an index into models (0..{len(doc['models']) - 1})",
                rec)
-    return doc
+    return record_of(ModelsFile, doc,
+                     models=[record_of(StoredModel, m) for m in doc["models"]])
 
 
-
-def _clean(x):
-    """JSON has no NaN or infinity: write them as null."""
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def model_to_dict(model) -> dict:
-    """A :class:`~heliquad.host.estimate.fit.TfModel` as the MODELS.json entry."""
-    return {
-        "order": list(model.order),
-        "integrator": bool(model.integrator),
-        "num": [float(c) for c in model.num],
-        "den": [float(c) for c in model.den],
-        "delay_s": float(model.delay_s),
-        "stable": bool(model.stable),
-        "degenerate": bool(model.degenerate),
-        **({"degenerate_why": model.degenerate_why} if model.degenerate_why else {}),
-        "metrics": {k: _clean(v) if isinstance(v, float) else v
-                    for k, v in model.metrics.items()},
-        "poles": [[float(p.real), float(p.imag)] for p in model.poles],
-        "zeros": [[float(z.real), float(z.imag)] for z in model.zeros],
-        "dc_gain": _clean(model.dc_gain),
-    }
-
-
-def write_models_json(path, models, recommended, reason, source=None, weights=None, axis=None,
-                      extra=None, band_rad_s=None, quality=None):
-    """Write MODELS.json; the file is replaced atomically so a failure never truncates it.
-    ``extra``: more top-level entries (identify adds the log's condition and the frequencies
-    it could not use). ``band_rad_s``: the lowest and highest frequency of the points the
-    models were fitted to (validation trusts a model only there). ``quality``: the
-    recommended model's ``(level, why)`` (host/estimate/metrics.py's verdict), given with
-    the recommendation."""
-    doc = {"models": [model_to_dict(m) for m in models], "recommended": recommended,
-           "reason": reason, **(extra or {})}
-    if band_rad_s is not None:
-        doc["band_rad_s"] = [float(band_rad_s[0]), float(band_rad_s[1])]
-    if (recommended is None) != (not quality):
-        raise ValueError("a recommended model needs its quality, and only it has one")
-    if quality:
-        level, why = quality
-        doc["quality"] = {"level": level, "why": why}
-    if axis is not None:
-        doc["axis"] = axis
-    if source is not None:
-        doc["points_file"] = str(source)
-    if weights is not None:
-        doc["weights"] = weights
-    write_json(path, doc)
+def write_models_json(path, models: ModelsFile) -> None:
+    """Write MODELS.json; the file is replaced atomically so a failure never truncates it."""
+    write_json(path, models.document())
 
 
 #: MODELS.mat's struct fields; each model's metrics (MODELS.json's) come before dc_gain.
 MAT_FIELDS = ("order", "num", "den", "delay_s", "stable", "degenerate", "dc_gain")
 
 
-def write_models_mat(path, models, recommended):
+def _double(value) -> float:
+    """A number of MODELS.json for the .mat: null (not finite, or not known) is NaN."""
+    return math.nan if value is None else float(value)
+
+
+def write_models_mat(path, doc: ModelsFile) -> None:
     """Write MODELS.mat (docs/file-formats.md), atomically: ``models``, a 1-by-N MATLAB
     struct array with the fields of :data:`MAT_FIELDS` around every metric of the models
     (doubles, logical flags, coefficient row vectors), and ``recommended``, a 1-based index
@@ -178,18 +228,16 @@ def write_models_mat(path, models, recommended):
     # scipy.io (0.25 s) here: only a command asked for a .mat file pays
     import scipy.io
 
-    metrics = list(dict.fromkeys(k for m in models for k in m.metrics))
+    metrics = list(dict.fromkeys(k for m in doc.models for k in m.metrics))
     fields = [*MAT_FIELDS[:-1], *metrics, MAT_FIELDS[-1]]
-    array = np.empty((1, len(models)), dtype=[(f, object) for f in fields])
-    for i, m in enumerate(models):
+    array = np.empty((1, len(doc.models)), dtype=[(f, object) for f in fields])
+    for i, m in enumerate(doc.models):
         entry = {"order": np.array([m.order], float), "num": np.array([m.num], float),
                  "den": np.array([m.den], float), "delay_s": float(m.delay_s),
                  "stable": bool(m.stable), "degenerate": bool(m.degenerate),
-                 "dc_gain": float(m.dc_gain),
-                 **{k: float(m.metrics.get(k, math.nan)) for k in metrics}}
+                 "dc_gain": _double(m.dc_gain),
+                 **{k: _double(m.metrics.get(k)) for k in metrics}}
         array[0, i] = tuple(entry[f] for f in fields)
+    recommended = 0 if doc.recommended is None else doc.recommended + 1
     with atomic_write(path, "wb") as fh:
-        scipy.io.savemat(fh, {"models": array,
-                              "recommended": float(0 if recommended is None else recommended + 1)})
-
-
+        scipy.io.savemat(fh, {"models": array, "recommended": float(recommended)})

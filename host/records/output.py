@@ -2,12 +2,14 @@
 the sweep folder): atomic writes (a temporary file beside the target, renamed over it once
 whole), JSON documents, new output folders, and the checks, made before any work, that an
 output file or folder can be written. Every writer of host/records (and every other file
-the tool writes) goes through :func:`atomic_write`.
+the tool writes) goes through :func:`atomic_write`; a record kept as a dataclass becomes its
+JSON document through :func:`document`.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -16,7 +18,11 @@ import tempfile
 from ...sim.base.errors import DiskFull, InputError, no_room
 
 __all__ = ["check_output", "check_output_folder", "atomic_write", "write_json",
-           "new_output_folder"]
+           "document", "NULLABLE", "new_output_folder"]
+
+#: A record's field (dataclass metadata) written as null when None; any other field that is
+#: None is left out of the document.
+NULLABLE = {"null": True}
 
 
 def _temporary_beside(path):
@@ -93,6 +99,13 @@ def write_json(path, doc) -> None:
     with atomic_write(path) as fh:
         json.dump(_finite_or_null(doc), fh, indent=2)
         fh.write("\n")
+
+
+def document(record) -> dict:
+    """A record (a dataclass) as its JSON document: its fields in their order, each that is
+    None left out unless its metadata is :data:`NULLABLE`."""
+    return {f.name: getattr(record, f.name) for f in dataclasses.fields(record)
+            if getattr(record, f.name) is not None or f.metadata.get("null")}
 
 
 def _finite_or_null(doc):

@@ -1,13 +1,15 @@
 """What every reader of host/records shares (docs/file-formats.md, its opening paragraphs):
 a headed CSV table of numbers (:func:`read_table`, :func:`first_bad`), a JSON document
 checked against its schema (:func:`read_json`, :mod:`.schema`), the size bounds of both,
-and a user's text cut short for a one-line message (:func:`short`). Each reader raises
+a user's text cut short for a one-line message (:func:`short`), and a checked document
+as its record's dataclass (:func:`record_of`). Each reader raises
 :class:`InputError` with one line naming the file and the key or row at fault.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import warnings
@@ -17,7 +19,8 @@ import numpy as np
 from ...sim.base.errors import InputError
 from ...sim.base.userfiles import read_text
 
-__all__ = ["MAX_CSV_BYTES", "MAX_JSON_BYTES", "read_table", "first_bad", "short", "read_json"]
+__all__ = ["MAX_CSV_BYTES", "MAX_JSON_BYTES", "read_table", "first_bad", "short", "read_json",
+           "record_of"]
 
 #: The largest CSV file read (a long RUN.csv at 200 Hz is a few MB).
 MAX_CSV_BYTES = 256 * 2**20
@@ -101,3 +104,10 @@ def read_json(path, what: str, schema):
     except ValueError:                       # an integer of thousands of digits
         raise InputError(f"{path}: a number too long to read: not a {what}") from None
     return schema.check(path, "", doc)
+
+
+def record_of(cls, doc: dict, **fields):
+    """The record ``cls`` (a dataclass) of a checked document: its keys that are fields of
+    ``cls`` (others a newer or older writer added are left), then ``fields`` over them."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{**{k: v for k, v in doc.items() if k in names}, **fields})

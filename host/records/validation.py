@@ -1,17 +1,50 @@
 """validation.json, what ``heliquad validate`` found of a model in closed loop
-(docs/file-formats.md, "validation.json"): its schema and its reader, checked for what
-``heliquad report`` shows. The document is written by host/present/validation.py; the reader
-returns it as the dict it is (the report reads it key by key, many keys optional).
+(docs/file-formats.md, "validation.json"): :class:`ValidationFile`, its writer and its
+reader, checked for what ``heliquad report`` shows. Validation builds the record
+(:func:`heliquad.host.validate.closed_loop.validation_record`, the verdicts included: a
+writer judges nothing), ``heliquad validate`` and the demo write it, the report reads it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 from . import schema as S
-from .reading import read_json
+from .output import document, write_json
+from .reading import read_json, record_of
 
-__all__ = ["read_validation"]
+__all__ = ["ValidationFile", "write_validation_json", "read_validation"]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ValidationFile:
+    """validation.json: its keys in the file's order (the meaning of each:
+    docs/file-formats.md), each optional one None when the file leaves it out. The sections
+    (each loop's margins and crossovers in ``loops`` and ``truth_loops``, ``measured_loop``,
+    ``instability``, ``step``, ``sine``, ``turbulence``, ``gains``) stay the checked dicts the
+    schema describes: the report and the command read them key by key, and a type of their
+    own would only copy the schema."""
+
+    axis: str | None = None
+    num: list | None = None
+    den: list | None = None
+    delay_s: float | None = None
+    gains: dict | None = None
+    band_rad_s: list | None = None
+    loops: dict
+    measured_loop: dict | None = None
+    truth_loops: dict | None = None
+    stable: bool
+    instability: dict | None = None
+    step: dict | None = None
+    sine: dict | None = None
+    turbulence: dict | None = None
+
+
+def write_validation_json(path, record: ValidationFile) -> None:
+    """Write validation.json, atomically."""
+    write_json(path, document(record))
 
 
 @functools.cache
@@ -43,11 +76,11 @@ def _validation_schema():
                                            "outside_band": S.Bool()})})
 
 
-def read_validation(path) -> dict:
+def read_validation(path) -> ValidationFile:
     """validation.json (``heliquad validate``), checked for what ``heliquad report`` shows."""
     doc = read_json(path, "validation.json", _validation_schema())
     if doc["stable"]:
         for name in ("step", "sine"):
             if name not in doc:
                 S.fail(path, name, "is missing (the cascade is stable)")
-    return doc
+    return record_of(ValidationFile, doc)

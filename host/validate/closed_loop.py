@@ -39,6 +39,7 @@ from ...sim.plant.vehicle_params import load_params
 from ..records import paper
 from ..records.gains import DERIVATIVE_FILTER_N, Gains, load_gains, recorded_gains
 from ..records.manifest import MANIFEST, read_manifest
+from ..records.validation import ValidationFile
 from . import loops as L
 from .truth import sil_truth_loops
 
@@ -117,9 +118,9 @@ def _instability(report, band):
                                  or freq < band[0] / OUT_OF_BAND_FACTOR)}
 
 
-def instability_text(report) -> str:
-    """One line on where an unstable cascade goes unstable and what that means."""
-    inst = report["instability"]
+def instability_text(inst) -> str:
+    """One line on where an unstable cascade goes unstable (``inst``, a report's
+    ``instability``) and what that means."""
     where = (f"closed-loop poles at {inst['pole_rad_s']:.3g} rad/s, "
              f"{inst['pole_rad_s'] / inst['band_top_rad_s']:.2g}x the identified band's top "
              f"({inst['band_top_rad_s']:.3g} rad/s)")
@@ -133,22 +134,23 @@ def instability_text(report) -> str:
 
 
 def model_gains(doc, axis: str):
-    """The gains to validate a MODELS.json ``doc``'s models with, and where they come from:
-    those its sweep read from the board it flew (``gains``, recorded by identify), else the
-    firmware's defaults."""
-    recorded = recorded_gains(doc)
+    """The gains to validate a MODELS.json ``doc``'s models with (a
+    :class:`~heliquad.host.records.models.ModelsFile`), and where they come from: those its
+    sweep read from the board it flew (``gains``, recorded by identify), else the firmware's
+    defaults."""
+    recorded = recorded_gains(doc.gains)
     if recorded is not None:
         return recorded, "the board's, as its sweep read them"
     return load_gains(axis), "the firmware's defaults (the models' file records none)"
 
 
 def sweep_inputs(models_path, doc) -> dict:
-    """:func:`validate_model`'s keywords for a model of the MODELS.json ``doc`` read from
-    ``models_path``: the band its models were identified over (``band_rad_s``, None when
+    """:func:`validate_model`'s keywords for a model of the MODELS.json ``doc`` (a
+    :class:`~heliquad.host.records.models.ModelsFile`) read from ``models_path``: the band its models were identified over (``band_rad_s``, None when
     the file does not say), the loop measured through the excitation (``measured``, its
     ``broken_loop``) and, when the file sits in a simulated sweep's folder (identify writes
     it there), the simulator's loop responses (``truth``)."""
-    return {"band_rad_s": doc.get("band_rad_s"), "measured": doc.get("broken_loop"),
+    return {"band_rad_s": doc.band_rad_s, "measured": doc.broken_loop,
             "truth": _sweep_truth(models_path)}
 
 
@@ -292,8 +294,8 @@ def _turbulence(cascade, axis, outer, t, level, seed):
     return out, trace
 
 
-def validation_record(report) -> dict:
-    """validation.json's content (docs/file-formats.md): the report of :func:`validate_model`
+def validation_record(report) -> ValidationFile:
+    """validation.json's record (docs/file-formats.md): the report of :func:`validate_model`
     in the units people read: gain margins in dB, phase margins, angles and rates in deg
     and deg/s, the sine's frequency in Hz; crossovers and poles stay in rad/s."""
     doc = {key: report[key] for key in ("axis", "num", "den", "delay_s", "gains", "band_rad_s")}
@@ -322,7 +324,7 @@ def validation_record(report) -> dict:
         if "angle_rms_rad" in tb:
             doc["turbulence"]["angle_rms_deg"] = math.degrees(tb["angle_rms_rad"])
             doc["turbulence"]["angle_max_deg"] = math.degrees(tb["angle_max_rad"])
-    return doc
+    return ValidationFile(**doc)
 
 
 def margins_record(lp) -> dict:
