@@ -11,6 +11,8 @@ import scipy.io
 
 from dwell_plant import simulate_sine_dwell
 from heliquad.host.records import paper
+from heliquad.sim.base.firmware_facts import MAX_PTY_BACKLOG_BYTES
+from heliquad.sim.rig.board import TELEMETRY_BACKLOG_BYTES
 
 ROLL = paper.MODELS["roll"][(0, 2)]
 
@@ -295,9 +297,8 @@ def test_fit_of_points_with_extreme_sigmas_is_a_model_or_one_line(order, code, t
 
 
 def test_the_boards_backlog_option_and_the_simulator_agree_on_its_bound():
-    # heliquad board --backlog-bytes: the parser's default and largest value (kept out of the
-    # simulator's import for the command line's start-up) is the simulator's bound.
-    from heliquad.host.commands.board import MAX_BACKLOG_BYTES
-    from heliquad.sim.rig.board import TELEMETRY_BACKLOG_BYTES
-
-    assert MAX_BACKLOG_BYTES == TELEMETRY_BACKLOG_BYTES
+    # heliquad board --backlog-bytes: the simulator's default is the parser's largest value,
+    # the firmware's bound on its pty.
+    assert TELEMETRY_BACKLOG_BYTES == MAX_PTY_BACKLOG_BYTES
+    res = heliquad("board", "--backlog-bytes", MAX_PTY_BACKLOG_BYTES + 1)
+    assert res.returncode == 2 and f"outside 0..{MAX_PTY_BACKLOG_BYTES}" in res.stderr, res.stderr

@@ -1,13 +1,13 @@
 """One definition per firmware fact.
 
-The control loop's rate (and so its period), the host build's largest loop rate and the
-SafetyLimits defaults (abort limits, the excitation's band, length and amplitude bounds) are
+The control loop's rate (and so its period), the host build's largest loop rate, the most its
+ptys' backlog bound can be and the SafetyLimits defaults (abort limits, the excitation's band, length and amplitude bounds) are
 written once, in the firmware's C++; Python reads them through the bindings in
 sim/base/firmware_facts.py. These tests check that module against the bindings and the host
 build, and scan the Python sources (host/, sim/) for a hand copy: a number equal to a fact
 (in its own units or the command line's: Hz, s, us, deg, deg/s) that is assigned to, the
-default of, or given as a keyword for a name that speaks of the loop or of a limit, or that
-appears in the definition of a ``--loop-hz`` option.
+default of, or given as a keyword for a name that speaks of the loop, of a limit or of a
+backlog, or that appears in the definition of a ``--loop-hz`` or ``--backlog-bytes`` option.
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 LOOP = re.compile(r"loop|(^|_)dt(_|$)|period|(^|_)hz$|--loop", re.I)
 TIME = re.compile(r"(^|_)s$|duration|rig_time|--rig-time", re.I)
 MOTION = re.compile(r"angle|rate|amplitude|(^|_)(deg|rad)(_|$)", re.I)
+#: Names that speak of what waits for a reader on a pty.
+BACKLOG = re.compile(r"backlog|(^|_)pty(_|$)", re.I)
 
 
 def test_the_facts_are_the_bindings():
@@ -36,6 +38,8 @@ def test_the_facts_are_the_bindings():
     assert facts.LOOP_RATE_HZ == fw.LOOP_RATE_HZ
     assert facts.LOOP_PERIOD_S == 1 / fw.LOOP_RATE_HZ
     assert facts.MAX_LOOP_RATE_HZ == fw.MAX_LOOP_RATE_HZ > facts.LOOP_RATE_HZ
+    # Linux's N_TTY_BUF_SIZE (4096), less one: the most of a pty's queue TIOCINQ shows.
+    assert facts.MAX_PTY_BACKLOG_BYTES == fw.MAX_PTY_BACKLOG_BYTES == 4096 - 1
     assert (facts.ABORT_ANGLE_RAD, facts.ABORT_RATE_RAD_S) == (lim.abort_angle_rad,
                                                                lim.abort_rate_rad_s)
     assert (facts.MIN_FREQ_HZ, facts.MAX_FREQ_FRACTION, facts.MAX_DURATION_S,
@@ -65,7 +69,8 @@ def fact_values() -> list:
            (facts.LOOP_PERIOD_S, "the loop period", LOOP),
            (1e6 / facts.LOOP_RATE_HZ, "the loop period (us)", LOOP),
            (facts.MAX_LOOP_RATE_HZ, "the host build's largest loop rate", LOOP),
-           (facts.MAX_DURATION_S, "the longest excitation", TIME)]
+           (facts.MAX_DURATION_S, "the longest excitation", TIME),
+           (facts.MAX_PTY_BACKLOG_BYTES, "the pty's backlog bound", BACKLOG)]
     for what, rad in (("the abort angle", facts.ABORT_ANGLE_RAD),
                       ("the abort rate", facts.ABORT_RATE_RAD_S),
                       ("the angle amplitude bound", facts.max_amplitude("angle")),
@@ -137,6 +142,10 @@ def test_no_hand_copy_in_python():
     "LOOP_DT_S = 0.005",
     "MAX_ANGLE_DEG = 80.0",
     "start(abort_rate_rad_s=6.981317)",
+    "TELEMETRY_BACKLOG_BYTES = 4095",
+    "def run_board(backlog_bytes: int = 4095): pass",
+    "p.add_argument('--backlog-bytes', type=int_in(0, 4095))",
+    "class Pty:\n    MAX_BACKLOG = 4095",
 ])
 def test_the_scan_finds_a_copy(source):
     assert copies(source)
@@ -148,6 +157,8 @@ def test_the_scan_finds_a_copy(source):
     "MAX_DWELL_S = 60.0",
     "p.add_argument('--cycles', type=int_in(1, 200))",
     "LOOP_DT_S = LOOP_PERIOD_S",
+    "REGISTER_MASK = 4095",
+    "p.add_argument('--backlog-bytes', type=int_in(0, MAX_PTY_BACKLOG_BYTES))",
 ])
 def test_the_scan_passes_what_is_no_copy(source):
     assert not copies(source)

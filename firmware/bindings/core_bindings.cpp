@@ -21,6 +21,7 @@
 #include "core/rc.hpp"
 #include "core/supervisor.hpp"
 #include "sensor/mpu6050_emulator.hpp"
+#include "targets/host/pty_backlog.hpp"
 
 namespace py = pybind11;
 using namespace hq;
@@ -249,6 +250,8 @@ PYBIND11_MODULE(_firmware, m) {
     // the host build takes, Hz.
     m.attr("LOOP_RATE_HZ") = kLoopRateHz;
     m.attr("MAX_LOOP_RATE_HZ") = kMaxLoopRateHz;
+    // The most a host pty's backlog bound can be (--telemetry-backlog-bytes), bytes.
+    m.attr("MAX_PTY_BACKLOG_BYTES") = kMaxPtyBacklogBytes;
 
     // The parameter table (params.hpp), in param_index order, with each default.
     struct ParamRow {

@@ -6,16 +6,11 @@ import os
 
 from ...sim.base import dialect as names
 from ...sim.base.errors import InputError, LinkLost
-from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
+from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from .shared_options import (add_firmware_argument, add_param_store_argument, check_plant, finite,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
-
-#: The board's default and largest telemetry backlog: sim/rig/board.py's TELEMETRY_BACKLOG_BYTES
-#: (written here too so that the parser does not import the simulator; tests/cli_test.py
-#: holds the two equal).
-MAX_BACKLOG_BYTES = 4095
 
 HELP = """\
 Run the simulated rig in real time as if it were a board on a serial port: the host
@@ -49,10 +44,10 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--disarmed", action="store_true",
                    help="the pilot leaves the arm switch and throttle low (default: armed, "
                         "hovering)")
-    p.add_argument("--backlog-bytes", type=int_in(0, MAX_BACKLOG_BYTES), metavar="N",
+    p.add_argument("--backlog-bytes", type=int_in(0, MAX_PTY_BACKLOG_BYTES), metavar="N",
                    help="the most telemetry that waits for a reader, the oldest dropped past "
                         "it, as a board's USB or UART buffer holds a few KiB (default "
-                        f"{MAX_BACKLOG_BYTES}, the most the pty shows: a tool that opens the "
+                        f"{MAX_PTY_BACKLOG_BYTES}, the most the pty shows: a tool that opens the "
                         "port late reads about 0.2 s of the past, and one that stalls longer "
                         "loses samples); 0 keeps all of it, however late the reader")
     p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ)

@@ -1,11 +1,13 @@
 """The firmware's facts that the simulator and the host tool use: the control loop's rate and
-period, the most the host build runs at, and the defaults of its SafetyLimits (the
-excitation's band, length, fade and amplitude bounds, and the abort limits).
+period, the most the host build runs at, the most its ptys' backlog bound can be, and the
+defaults of its SafetyLimits (the excitation's band, length, fade and amplitude bounds, and
+the abort limits).
 
 Each is defined once, in the firmware's C++ (firmware/core/flight_controller.hpp,
-supervisor.hpp, excitation.hpp, pid.hpp), and read here from its bindings
-(``heliquad._firmware``, the same code the firmware compiles); every Python use takes it from
-this module. tests/firmware_facts_test.py scans the Python sources for a copy.
+supervisor.hpp, excitation.hpp, pid.hpp; firmware/targets/host/pty_backlog.hpp), and read
+here from its bindings (``heliquad._firmware``, the same code the firmware compiles); every
+Python use takes it from this module. tests/firmware_facts_test.py scans the Python sources
+for a copy.
 """
 
 from __future__ import annotations
@@ -14,16 +16,19 @@ from heliquad import _firmware
 
 from . import dialect
 
-__all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "ABORT_ANGLE_RAD",
-           "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION", "MAX_DURATION_S",
-           "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S", "max_amplitude",
-           "safety_limits"]
+__all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "MAX_PTY_BACKLOG_BYTES",
+           "ABORT_ANGLE_RAD", "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION",
+           "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S",
+           "max_amplitude", "safety_limits"]
 
 #: The control loop's rate unless configured otherwise, Hz, and its period, s.
 LOOP_RATE_HZ = float(_firmware.LOOP_RATE_HZ)
 LOOP_PERIOD_S = 1.0 / LOOP_RATE_HZ
 #: The most the host build's loop runs at (its --loop-hz), Hz.
 MAX_LOOP_RATE_HZ = float(_firmware.MAX_LOOP_RATE_HZ)
+#: The most telemetry a pty of the host build keeps waiting for a reader under a backlog bound
+#: (its --telemetry-backlog-bytes): what the line discipline holds in sight of TIOCINQ, bytes.
+MAX_PTY_BACKLOG_BYTES = int(_firmware.MAX_PTY_BACKLOG_BYTES)
 
 
 def safety_limits():

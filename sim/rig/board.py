@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 
-from ..base.firmware_facts import LOOP_RATE_HZ
+from ..base.firmware_facts import LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from ..plant.tf_plant import TfPlant
 from .driver import Rig
 from .setup import rc_block, rc_disarmed
@@ -36,9 +36,9 @@ SAVE_WAIT_S = 0.6
 #: The most telemetry that waits for a reader on the pty, the oldest dropped past it, as a
 #: board's USB or UART buffer holds a few KiB and not seconds: a tool that opens the port late
 #: reads about this much of the past (0.19 s at the firmware's 22 kB/s), then the present.
-#: The largest the pty's line discipline holds in sight (firmware/targets/host/serial.hpp); a
-#: write the kernel has not yet moved there is not seen, so one loop's more may wait.
-TELEMETRY_BACKLOG_BYTES = 4095
+#: The largest the pty's line discipline holds in sight (firmware_facts); a write the kernel
+#: has not yet moved there is not seen, so one loop's more may wait.
+TELEMETRY_BACKLOG_BYTES = MAX_PTY_BACKLOG_BYTES
 #: How long the pilot's switch may take to disarm the board before the stop goes on without
 #: it (the firmware disarms on the frame the switch goes down).
 DISARM_WAIT_S = 1.0

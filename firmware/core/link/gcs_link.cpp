@@ -4,6 +4,7 @@
 #include "gcs_link.hpp"
 
 #include <cmath>
+#include <type_traits>
 
 #include "link_util.hpp"
 
@@ -84,6 +85,33 @@ bool GcsLink::take(const mavlink_message_t& msg) {
     return true;
 }
 
+// A command's number and parameters (COMMAND_INT's x, y, z where COMMAND_LONG has param5 to
+// param7) into `in`; whether it is addressed to us.
+template <typename Command>
+bool GcsLink::keep_command(const Command& c, float p5, float p6, float p7, Received& in) const {
+    const float p[7] = {c.param1, c.param2, c.param3, c.param4, p5, p6, p7};
+    __builtin_memcpy(in.p, p, sizeof(p));
+    in.command = c.command;
+    return for_us(c.target_system, c.target_component);
+}
+
+// A parameter read or set, decoded by `decode`: its name, and its index (a read) or its type
+// (a set), into `in`; whether it is addressed to us.
+template <typename ParamMessage>
+bool GcsLink::keep_param(const mavlink_message_t& msg,
+                         void (*decode)(const mavlink_message_t*, ParamMessage*),
+                         Received& in) const {
+    ParamMessage m;
+    decode(&msg, &m);
+    __builtin_memcpy(in.param_id, m.param_id, kParamNameLen);
+    if constexpr (std::is_same_v<ParamMessage, mavlink_param_set_t>) {
+        in.param_type = m.param_type;
+    } else {
+        in.param_index = m.param_index;
+    }
+    return for_us(m.target_system, m.target_component);
+}
+
 // What the answer to a message needs, for a message addressed to us that gets one.
 bool GcsLink::keep(const mavlink_message_t& msg, Received& in) const {
     in.msgid = msg.msgid;
@@ -93,39 +121,22 @@ bool GcsLink::keep(const mavlink_message_t& msg, Received& in) const {
         case MAVLINK_MSG_ID_COMMAND_LONG: {
             mavlink_command_long_t c;
             mavlink_msg_command_long_decode(&msg, &c);
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7};
-            for (int i = 0; i < 7; ++i) in.p[i] = p[i];
-            in.command = c.command;
-            return for_us(c.target_system, c.target_component);
+            return keep_command(c, c.param5, c.param6, c.param7, in);
         }
         case MAVLINK_MSG_ID_COMMAND_INT: {
             mavlink_command_int_t c;
             mavlink_msg_command_int_decode(&msg, &c);
-            const float p[7] = {c.param1, c.param2, c.param3, c.param4, static_cast<float>(c.x),
-                                static_cast<float>(c.y), c.z};
-            for (int i = 0; i < 7; ++i) in.p[i] = p[i];
-            in.command = c.command;
-            return for_us(c.target_system, c.target_component);
+            return keep_command(c, static_cast<float>(c.x), static_cast<float>(c.y), c.z, in);
         }
         case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: {
             mavlink_param_request_list_t r;
             mavlink_msg_param_request_list_decode(&msg, &r);
             return for_us(r.target_system, r.target_component);
         }
-        case MAVLINK_MSG_ID_PARAM_REQUEST_READ: {
-            mavlink_param_request_read_t r;
-            mavlink_msg_param_request_read_decode(&msg, &r);
-            __builtin_memcpy(in.param_id, r.param_id, kParamNameLen);
-            in.param_index = r.param_index;
-            return for_us(r.target_system, r.target_component);
-        }
-        case MAVLINK_MSG_ID_PARAM_SET: {
-            mavlink_param_set_t ps;
-            mavlink_msg_param_set_decode(&msg, &ps);
-            __builtin_memcpy(in.param_id, ps.param_id, kParamNameLen);
-            in.param_type = ps.param_type;
-            return for_us(ps.target_system, ps.target_component);
-        }
+        case MAVLINK_MSG_ID_PARAM_REQUEST_READ:
+            return keep_param(msg, mavlink_msg_param_request_read_decode, in);
+        case MAVLINK_MSG_ID_PARAM_SET:
+            return keep_param(msg, mavlink_msg_param_set_decode, in);
         case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: {
             mavlink_file_transfer_protocol_t f;
             mavlink_msg_file_transfer_protocol_decode(&msg, &f);

@@ -92,6 +92,11 @@ private:
     bool for_us(uint8_t target_system, uint8_t target_component) const;
     bool take(const mavlink_message_t& msg);
     bool keep(const mavlink_message_t& msg, Received& in) const;
+    template <typename Command>
+    bool keep_command(const Command& c, float p5, float p6, float p7, Received& in) const;
+    template <typename ParamMessage>
+    bool keep_param(const mavlink_message_t& msg,
+                    void (*decode)(const mavlink_message_t*, ParamMessage*), Received& in) const;
     bool ask(const mavlink_message_t& msg, const Received& in, bool answered, LoopRequest& r);
     static bool ask_command(const Received& in, LoopRequest& r);
     bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);

@@ -48,19 +48,22 @@ namespace {
 volatile std::sig_atomic_t g_stop = 0;   // the one global: signal handlers need one
 void on_signal(int) { g_stop = 1; }
 
+// With no sensor frame for this long, the build exits (--idle-timeout-s), s.
+constexpr int kIdleTimeoutS = 10;
+
 struct Options {
     std::string sim_link, telemetry, dmp_image, params;
     float loop_hz = hq::kLoopRateHz;
-    int idle_timeout_s = 10;
+    int idle_timeout_s = kIdleTimeoutS;
     long telemetry_backlog_bytes = 0;
 };
 
 [[noreturn]] void usage(const char* msg) {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
-                 "[--loop-hz 200] [--dmp-image FILE] [--idle-timeout-s 10] [--params FILE] "
+                 "[--loop-hz %g] [--dmp-image FILE] [--idle-timeout-s %d] [--params FILE] "
                  "[--telemetry-backlog-bytes N]\n",
-                 msg);
+                 msg, static_cast<double>(hq::kLoopRateHz), kIdleTimeoutS);
     std::exit(2);
 }
 
@@ -81,7 +84,12 @@ Options parse(int argc, char** argv) {
         else usage(("unknown option " + a).c_str());
     }
     if (o.sim_link.empty() || o.telemetry.empty()) usage("--sim-link and --telemetry are required");
-    if (!(o.loop_hz > 0.0f && o.loop_hz <= hq::kMaxLoopRateHz)) usage("--loop-hz must be in (0, 2000]");
+    if (!(o.loop_hz > 0.0f && o.loop_hz <= hq::kMaxLoopRateHz)) {
+        char msg[48];
+        std::snprintf(msg, sizeof msg, "--loop-hz must be in (0, %g]",
+                      static_cast<double>(hq::kMaxLoopRateHz));
+        usage(msg);
+    }
     if (o.idle_timeout_s <= 0) usage("--idle-timeout-s must be positive");
     if (o.telemetry_backlog_bytes < 0) usage("--telemetry-backlog-bytes must not be negative");
     return o;

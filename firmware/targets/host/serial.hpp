@@ -6,6 +6,7 @@
 #include <string>
 
 #include "../../hal/serial.hpp"
+#include "pty_backlog.hpp"
 
 namespace hq {
 
@@ -33,10 +34,11 @@ public:
     // a board's USB or UART buffer is bounded: when nobody reads, the oldest bytes are
     // dropped, so a reader that opens late gets at most `bytes` of the past, then the
     // present. 0 (the default): unbounded, for the lockstep simulator, which reads every
-    // loop's telemetry however far it runs ahead of real time. At most kMaxBacklog, what the
-    // pty's line discipline holds in sight of TIOCINQ.
-    void bound_backlog(size_t bytes) { backlog_limit_ = bytes < kMaxBacklog ? bytes : kMaxBacklog; }
-    static constexpr size_t kMaxBacklog = 4095;   // Linux N_TTY_BUF_SIZE (4096), less one
+    // loop's telemetry however far it runs ahead of real time. At most kMaxPtyBacklogBytes,
+    // what the pty's line discipline holds in sight of TIOCINQ (pty_backlog.hpp).
+    void bound_backlog(size_t bytes) {
+        backlog_limit_ = bytes < kMaxPtyBacklogBytes ? bytes : kMaxPtyBacklogBytes;
+    }
     // Bytes dropped by the backlog bound so far.
     size_t discarded() const { return discarded_; }
     size_t buffered() const { return count_; }

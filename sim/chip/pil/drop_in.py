@@ -8,9 +8,9 @@ import sys
 import time
 
 from ...base.dialect import dialect
+from ...base.firmware_facts import MAX_PTY_BACKLOG_BYTES
 from ...base.framing import Codec, Framer
 from .board import IMAGE_LOOP_HZ
-from .pty import Pty
 
 #: Telemetry is written out in chunks as a USB CDC device ships it (the link contract): after
 #: a sync frame's reply, once this many bytes wait, or when the sim link is quiet this long.
@@ -32,7 +32,8 @@ class DropIn:
     heliquad-fw-host does (docs/link-contract.md)."""
 
     def __init__(self, board, sim, tel, idle_timeout_s: float, backlog_bytes: int = 0):
-        self.backlog_bytes = min(backlog_bytes, Pty.MAX_BACKLOG)
+        # At most what the pty's line discipline holds in sight, as heliquad-fw-host's bound.
+        self.backlog_bytes = min(backlog_bytes, MAX_PTY_BACKLOG_BYTES)
         self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
         self.mav = mav = dialect()
         # The vehicle's ids, as the board's.

@@ -17,10 +17,6 @@ class Pty:
     """A pseudo-terminal whose slave device is published as ``link_path`` (a symlink), raw,
     with our own slave descriptor kept open so the master never sees EOF between users."""
 
-    #: The most a backlog bound can be: what the line discipline holds in sight of TIOCINQ
-    #: (Linux's N_TTY_BUF_SIZE, 4096, less one), as heliquad-fw-host's.
-    MAX_BACKLOG = 4095
-
     def __init__(self, link_path: str):
         self.master, slave = os.openpty()
         self.slave = slave
