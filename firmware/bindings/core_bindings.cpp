@@ -22,6 +22,7 @@
 #include "core/supervisor.hpp"
 #include "sensor/mpu6050_emulator.hpp"
 #include "targets/host/pty_backlog.hpp"
+#include "targets/teensy35/usb_identity.hpp"
 
 namespace py = pybind11;
 using namespace hq;
@@ -252,6 +253,17 @@ PYBIND11_MODULE(_firmware, m) {
     m.attr("MAX_LOOP_RATE_HZ") = kMaxLoopRateHz;
     // The most a host pty's backlog bound can be (--telemetry-backlog-bytes), bytes.
     m.attr("MAX_PTY_BACKLOG_BYTES") = kMaxPtyBacklogBytes;
+    // The Teensy image's USB identity (usb_identity.hpp): what --port auto matches.
+    m.attr("USB_VID") = kUsbVendorId;
+    m.attr("USB_PID") = kUsbProductId;
+    m.attr("USB_MANUFACTURER") = kUsbManufacturer;
+    m.attr("USB_PRODUCT") = kUsbProduct;
+    m.def("usb_serial_number", [](uint32_t uidh, uint32_t uidmh, uint32_t uidml, uint32_t uidl) {
+        const uint32_t uid[4] = {uidh, uidmh, uidml, uidl};
+        char digits[kUsbSerialDigits] = {};
+        usb_serial_number(uid, digits);
+        return std::string(digits, kUsbSerialDigits);
+    }, "The USB serial number of a chip whose SIM_UIDH..UIDL are these words.");
 
     // The parameter table (params.hpp), in param_index order, with each default.
     struct ParamRow {

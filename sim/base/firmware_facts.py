@@ -1,10 +1,11 @@
 """The firmware's facts that the simulator and the host tool use: the control loop's rate and
-period, the most the host build runs at, the most its ptys' backlog bound can be, and the
+period, the most the host build runs at, the most its ptys' backlog bound can be, the
 defaults of its SafetyLimits (the excitation's band, length, fade and amplitude bounds, and
-the abort limits).
+the abort limits), and the Teensy image's USB identity (what ``--port auto`` matches).
 
 Each is defined once, in the firmware's C++ (firmware/core/flight_controller.hpp,
-supervisor.hpp, excitation.hpp, pid.hpp; firmware/targets/host/pty_backlog.hpp), and read
+supervisor.hpp, excitation.hpp, pid.hpp; firmware/targets/host/pty_backlog.hpp;
+firmware/targets/teensy35/usb_identity.hpp), and read
 here from its bindings (``heliquad._firmware``, the same code the firmware compiles); every
 Python use takes it from this module. tests/firmware_facts_test.py scans the Python sources
 for a copy.
@@ -19,6 +20,7 @@ from . import dialect
 __all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "MAX_PTY_BACKLOG_BYTES",
            "ABORT_ANGLE_RAD", "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION",
            "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S",
+           "USB_VID", "USB_PID", "USB_MANUFACTURER", "USB_PRODUCT", "usb_serial_number",
            "max_amplitude", "safety_limits"]
 
 #: The control loop's rate unless configured otherwise, Hz, and its period, s.
@@ -29,6 +31,19 @@ MAX_LOOP_RATE_HZ = float(_firmware.MAX_LOOP_RATE_HZ)
 #: The most telemetry a pty of the host build keeps waiting for a reader under a backlog bound
 #: (its --telemetry-backlog-bytes): what the line discipline holds in sight of TIOCINQ, bytes.
 MAX_PTY_BACKLOG_BYTES = int(_firmware.MAX_PTY_BACKLOG_BYTES)
+#: The Teensy image's USB identity: Teensyduino's USB Serial vendor and product IDs (a stock
+#: sketch has them too), and the manufacturer and product strings; heliquad's product string
+#: contains "heliquad".
+USB_VID = int(_firmware.USB_VID)
+USB_PID = int(_firmware.USB_PID)
+USB_MANUFACTURER = str(_firmware.USB_MANUFACTURER)
+USB_PRODUCT = str(_firmware.USB_PRODUCT)
+
+
+def usb_serial_number(uid_words) -> str:
+    """The USB serial number of a chip whose unique identification (SIM_UIDH, UIDMH, UIDML,
+    UIDL) is ``uid_words``, as the image's descriptor says it."""
+    return str(_firmware.usb_serial_number(*(int(w) for w in uid_words)))
 
 
 def safety_limits():
