@@ -144,11 +144,11 @@ def cli(*args, **popen_kw) -> subprocess.Popen:
 
 
 @contextlib.contextmanager
-def board_process(folder, *args):
+def board_process(folder, *args, **popen_kw):
     """``heliquad board ARGS`` (the roll rig in real time) as a foreground job, its telemetry
     on the pty ``folder``/rig; yields its Popen (for a test that signals it), and stops it
-    with Ctrl-C, however pytest was started."""
-    board = cli("board", "--telemetry", pathlib.Path(folder) / "rig", *args)
+    with Ctrl-C, however pytest was started. ``popen_kw``: as :func:`cli` takes them."""
+    board = cli("board", "--telemetry", pathlib.Path(folder) / "rig", *args, **popen_kw)
     try:
         assert "board running" in board.stdout.readline()
         yield board
@@ -158,9 +158,9 @@ def board_process(folder, *args):
 
 
 @contextlib.contextmanager
-def running_board(folder, *args):
+def running_board(folder, *args, **popen_kw):
     """:func:`board_process`, yielding the path of its telemetry pty."""
-    with board_process(folder, *args):
+    with board_process(folder, *args, **popen_kw):
         yield pathlib.Path(folder) / "rig"
 
 

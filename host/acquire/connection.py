@@ -3,7 +3,8 @@ pymavlink's tools take it.
 
 * a serial device: ``/dev/ttyACM0`` (Linux), ``/dev/cu.usbmodem1`` (macOS), ``COM3``
   (Windows), or a pty (the SIL's, ``heliquad board``'s), through pyserial and its own
-  non-blocking read (timeout 0), so it works wherever pyserial does;
+  non-blocking read (timeout 0), so it works wherever pyserial does; ``auto`` is the one
+  heliquad board there is (:mod:`.ports` finds it, before a connection opens);
 * ``udpin:HOST:PORT`` (listen; ``udp:`` is the same, as in MAVProxy and mavutil),
   ``udpout:HOST:PORT`` (send to), ``tcp:HOST:PORT`` (connect to) and ``tcpin:HOST:PORT``
   (listen for one connection), through pymavlink's ``mavutil.mavlink_connection`` and its
@@ -47,7 +48,9 @@ CONNECT_TIMEOUT_S = 5.0
 READ_SIZE = 65536
 #: The --port help of every command that opens the telemetry link.
 CONNECTION_HELP = ("the board's telemetry link: a serial device (/dev/ttyACM0, COM3, a "
-                   "heliquad board pty) or a network link as pymavlink's tools write it: "
+                   "heliquad board pty), auto (the one heliquad board attached by USB or "
+                   "running as heliquad board, found by its USB identity) or a network link "
+                   "as pymavlink's tools write it: "
                    "udpin:HOST:PORT (listen; udp: is the same), udpout:HOST:PORT, "
                    "tcp:HOST:PORT (connect), tcpin:HOST:PORT (listen)")
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9]+):")

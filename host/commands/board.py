@@ -16,7 +16,8 @@ HELP = """\
 Run the simulated rig in real time as if it were a board on a serial port: the host
 firmware with a transfer-function plant, armed and hovering, stepping one loop per loop
 period of wall-clock time. Its telemetry port appears at --telemetry; connect any MAVLink
-tool to it as to a board's serial port (any baud rate is accepted and ignored). Nothing reads the
+tool to it as to a board's serial port (any baud rate is accepted and ignored); while it
+runs, --port auto finds it by the USB identity it announces (docs/usb.md). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 Ground stations list and set its parameters (heliquad params, MAVProxy's param commands);
 with --param-store they persist in a file across runs. The firmware saves them only while
@@ -70,7 +71,7 @@ def run(args) -> int:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
-                      armed=not args.disarmed,
+                      armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None
@@ -80,3 +81,18 @@ def run(args) -> int:
     if r["stopped_by"] is not None:              # said, and its code, by the command line
         raise r["stopped_by"]
     return 0
+
+
+def _usb_serial(firmware: str) -> str:
+    """The USB serial number the board announces: the emulated chip's (from its unique
+    identification, as the image's descriptor derives it), or the host build's."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ...sim.base.firmware_facts import usb_serial_number
+    from ...sim.rig.announce import HOST_BUILD_SERIAL
+
+    if firmware == "host":
+        return HOST_BUILD_SERIAL
+    # the emulated chip (and unicorn under it) only for --firmware teensy35
+    from ...sim.chip.clocks import Sim
+
+    return usb_serial_number(Sim.UID[name] for name in ("UIDH", "UIDMH", "UIDML", "UIDL"))

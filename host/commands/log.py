@@ -5,9 +5,8 @@ from __future__ import annotations
 import sys
 
 from ...sim.base.errors import DiskFull, InputError
-from ..acquire.connection import CONNECTION_HELP
 from ..acquire.link import DEFAULT_BAUD
-from .shared_options import int_in, number_in
+from .shared_options import add_port_argument, int_in, number_in
 
 __all__ = ["add_parser", "run"]
 
@@ -19,8 +18,9 @@ with one line and exit 1, the log kept up to its last whole record. Ctrl-C, SIGT
 SIGHUP end it after the summary, with exit 130, 143 and 129. Lost samples are counted from the gaps in
 HQ_SYSID_SAMPLE.seq; a summary is printed at the end, and a status line every 5 s.
 
---port takes a serial device or a network link (udpin:, udpout:, tcp:, tcpin:), as MAVProxy
-and mavutil write them; a listening link (udpin:, tcpin:) sends the host's heartbeat once it
+--port takes a serial device, auto (the one heliquad board attached by USB or running as
+heliquad board, found by its USB identity) or a network link (udpin:, udpout:, tcp:, tcpin:),
+as MAVProxy and mavutil write them; a listening link (udpin:, tcpin:) sends the host's heartbeat once it
 has heard from the board.
 
 examples: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --out flight.tlog
@@ -32,7 +32,7 @@ examples: heliquad board --telemetry /tmp/rig &  heliquad log --port /tmp/rig --
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("log", help="log a board's (or a SIL's) telemetry to a .tlog",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--port", required=True, metavar="CONN", help=CONNECTION_HELP)
+    add_port_argument(p)
     p.add_argument("--out", required=True, metavar="FILE.tlog")
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
@@ -45,11 +45,13 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..acquire.log_session import run_log
+    from ..acquire.ports import resolve_port
 
     if args.duration_s is not None and args.duration_s <= 0:
         raise InputError("--duration-s must be positive")
-    print(f"logging {args.port} to {args.out} (Ctrl-C to stop)", flush=True)
-    r = run_log(args.port, args.out, args.baud, args.duration_s)
+    port = resolve_port(args.port)
+    print(f"logging {port} to {args.out} (Ctrl-C to stop)", flush=True)
+    r = run_log(port, args.out, args.baud, args.duration_s)
     print(f"{r['seconds']:.1f} s: {r['messages']} messages, {r['samples']} samples"
           + (f" (seq {r['first_seq']}..{r['last_seq']})" if r["samples"] else "")
           + f", {r['lost']} lost; wrote {args.out}")

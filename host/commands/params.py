@@ -8,9 +8,8 @@ import sys
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from ..acquire.connection import CONNECTION_HELP
 from ..acquire.link import DEFAULT_BAUD
-from .shared_options import finite, int_in
+from .shared_options import add_port_argument, finite, int_in
 
 __all__ = ["add_parser", "run"]
 
@@ -48,7 +47,7 @@ examples: heliquad params --port /dev/ttyACM0 list
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("params", help="list, get, set, save and load the board's parameters",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--port", required=True, metavar="CONN", help=CONNECTION_HELP)
+    add_port_argument(p)
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, "
                         "ptys and network links)")
@@ -73,6 +72,7 @@ def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..acquire.link import TelemetryLink
     from ..acquire.param_protocol import ParamClient
+    from ..acquire.ports import resolve_port
     from ..records.output import check_output
     from ..records.params_file import check_name, read_params_file
 
@@ -86,7 +86,7 @@ def run(args) -> int:
         entries = [(name, value) for name, value, _ in read_params_file(args.file)]
     elif args.action in ("get", "set"):
         check_name(args.name)
-    link = TelemetryLink(args.port, baud=args.baud)
+    link = TelemetryLink(resolve_port(args.port), baud=args.baud)
     try:
         client = ParamClient(link, progress=lambda text: print(text, flush=True))
         return _ACTIONS[args.action](client, args, entries)

@@ -10,9 +10,10 @@ import numpy as np
 
 from ...sim.base import firmware_facts as facts
 from ...sim.base.errors import InputError
+from ..acquire.connection import CONNECTION_HELP
 from ..acquire.excitation import amplitude_bound, bound_text
 
-__all__ = ["add_firmware_argument", "add_param_store_argument", "add_fault_argument", "faults",
+__all__ = ["add_port_argument", "add_firmware_argument", "add_param_store_argument", "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
@@ -89,6 +90,12 @@ def add_param_store_argument(p) -> None:
                    help="keep the firmware's parameters (docs/parameters.md) in FILE across runs, "
                         "as a board keeps them in its flash: read at start, written at each save "
                         "(default: every run starts with the defaults and nothing is saved)")
+
+
+def add_port_argument(p, required: bool = True) -> None:
+    """--port CONN: the board's telemetry link (host/acquire/connection.py), or auto
+    (host/acquire/ports.py: the command's run resolves it with ``resolve_port``)."""
+    p.add_argument("--port", required=required, metavar="CONN", help=CONNECTION_HELP)
 
 
 def add_firmware_argument(p) -> None:

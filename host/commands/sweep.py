@@ -13,14 +13,13 @@ from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DURATION_S
 from ...sim.rig.setup import PLANTS
 from ..acquire import design
-from ..acquire.connection import CONNECTION_HELP
 from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
 from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
-                             add_param_store_argument, check_excitation, check_plant, faults,
-                             finite, int_in, number_in)
+                             add_param_store_argument, add_port_argument, check_excitation,
+                             check_plant, faults, finite, int_in, number_in)
 
 __all__ = ["add_parser", "run"]
 
@@ -34,8 +33,8 @@ firmware finishes the cycle under way and fades out; --cycles N gives every freq
 exactly N. A mixer sweep's amplitude is designed per frequency for a rig swing of
 --swing-deg (from what the previous frequency measured, within the firmware's bound);
 --amplitude gives one for all. --sil flies the simulated rig in lockstep (the 6-DoF vehicle on the axis's rig by
-default); --port talks to a board in real time: its serial port, a `heliquad board` pty, or
-a network link (udpin:HOST:PORT, udpout:, tcp:, tcpin:, as MAVProxy writes them). Writes
+default); --port talks to a board in real time: its serial port, a `heliquad board` pty, auto
+(the one heliquad board attached or running), or a network link (udpin:HOST:PORT, udpout:, tcp:, tcpin:, as MAVProxy writes them). Writes
 DIR/sweep.tlog (every message) and DIR/manifest.json (axis, frequencies requested and used,
 windows, gains, firmware, start time), kept valid on Ctrl-C. An angle beyond {math.degrees(ABORT_ANGLE_RAD):g} deg or a
 rate beyond {math.degrees(ABORT_RATE_RAD_S):g} deg/s stops the excitation and the sweep (exit 1).
@@ -62,7 +61,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
-    where.add_argument("--port", metavar="CONN", help=CONNECTION_HELP)
+    add_port_argument(where, required=False)
     p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
                    help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
                         "and network links)")
@@ -244,12 +243,13 @@ def _sweep_session(args, tlog):
     """The session a sweep drives (the firmware in the loop, or a board's port) and the
     manifest's record of its source."""
     # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.ports import resolve_port
     from ..acquire.session import PortSession
     from ..records import paper
 
     if not args.sil:
-        return PortSession(args.port, tlog, args.baud), \
-            {"kind": "port", "port": args.port, "baud": args.baud}
+        port = resolve_port(args.port)
+        return PortSession(port, tlog, args.baud), {"kind": "port", "port": port, "baud": args.baud}
     # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.lockstep import FirmwareError
     from ...sim.rig.setup import SilConfig

@@ -4,8 +4,10 @@
 real time (one frame per loop period of wall-clock time), hovering with the arm switch up,
 and publishes the firmware's telemetry link as a pty. Any tool then connects to that path
 as it would to /dev/ttyACM0 (`heliquad log`, a sweep, QGroundControl over a serial link,
-or pymavlink). The simulator does not read the telemetry: if nobody does, the firmware's
-buffer fills and it drops and counts messages, as a UART would.
+or pymavlink). Given a USB serial number, it announces the pty with the board's USB identity
+while it runs, so that ``--port auto`` finds it (:mod:`.announce`). The simulator does not
+read the telemetry: if nobody does, the firmware's buffer fills and it drops and counts
+messages, as a UART would.
 
 An orderly stop (Ctrl-C, SIGTERM, SIGHUP, the end of ``duration_s``) lands first, as a pilot
 does before power-off: throttle low, arm switch down, and the firmware stepped (in lockstep,
@@ -15,6 +17,7 @@ the parameters it saves only while disarmed (``--param-store``) are saved before
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 
@@ -22,6 +25,7 @@ import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from ..plant.tf_plant import TfPlant
+from .announce import announced
 from .driver import Rig
 from .setup import rc_block, rc_disarmed
 
@@ -48,7 +52,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,
-              backlog_bytes: int = TELEMETRY_BACKLOG_BYTES) -> dict:
+              backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
+              usb_serial: str | None = None) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
     (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
@@ -57,14 +62,18 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
     (default: nowhere; every start has the defaults). ``armed=False``: the pilot leaves the
     arm switch and the throttle low (a ground station then sees a disarmed vehicle, whose
     every parameter may change). ``backlog_bytes``: the most telemetry that waits for a
-    reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it)."""
+    reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it).
+    ``usb_serial``: announce the pty, with this USB serial number, from before ``ready`` until
+    the board has landed (default: not announced)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
     run = {"frames": 0, "resyncs": 0, "stopped_by": None, "landed": False}
     with Rig(lambda plant_dt_s: TfPlant(axis, num, den, plant_dt_s), firmware, loop_hz,
              dmp_image=dmp_image, telemetry_path=os.path.abspath(telemetry_path),
-             params_file=params_file, telemetry_backlog_bytes=backlog_bytes) as rig:
+             params_file=params_file, telemetry_backlog_bytes=backlog_bytes) as rig, \
+            (contextlib.nullcontext() if usb_serial is None else
+             announced(telemetry_path, usb_serial, firmware)):
         _fly(rig, run, dt_s, collective, duration_s,
              lambda: ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)"),
              rc=None if armed else rc_disarmed())
