@@ -1,7 +1,7 @@
 """One definition per firmware fact.
 
 The control loop's rate (and so its period), the host build's largest loop rate, the most its
-ptys' backlog bound can be and the SafetyLimits defaults (abort limits, the excitation's band, length and amplitude bounds) are
+ptys' backlog bound can be, the Teensy image's USB IDs and the SafetyLimits defaults (abort limits, the excitation's band, length and amplitude bounds) are
 written once, in the firmware's C++; Python reads them through the bindings in
 sim/base/firmware_facts.py. These tests check that module against the bindings and the host
 build, and scan the Python sources (host/, sim/) for a hand copy: a number equal to a fact
@@ -31,6 +31,8 @@ TIME = re.compile(r"(^|_)s$|duration|rig_time|--rig-time", re.I)
 MOTION = re.compile(r"angle|rate|amplitude|(^|_)(deg|rad)(_|$)", re.I)
 #: Names that speak of what waits for a reader on a pty.
 BACKLOG = re.compile(r"backlog|(^|_)pty(_|$)", re.I)
+#: Names that speak of a USB identity.
+USB = re.compile(r"usb|vid|vendor|(^|_)pid$|product", re.I)
 
 
 def test_the_facts_are_the_bindings():
@@ -50,6 +52,8 @@ def test_the_facts_are_the_bindings():
          lim.max_amplitude[int(fw.Injection.MIXER)]]
     assert facts.MAX_HARMONICS == fw.MAX_HARMONICS
     assert facts.MIN_TIME_CONSTANT_S == fw.MIN_TIME_CONSTANT_S
+    assert (facts.USB_VID, facts.USB_PID, facts.USB_MANUFACTURER, facts.USB_PRODUCT) == \
+        (fw.USB_VID, fw.USB_PID, fw.USB_MANUFACTURER, fw.USB_PRODUCT)
 
 
 @pytest.mark.parametrize("hz", [fw.MAX_LOOP_RATE_HZ * 1.001, 0.0])
@@ -70,7 +74,8 @@ def fact_values() -> list:
            (1e6 / facts.LOOP_RATE_HZ, "the loop period (us)", LOOP),
            (facts.MAX_LOOP_RATE_HZ, "the host build's largest loop rate", LOOP),
            (facts.MAX_DURATION_S, "the longest excitation", TIME),
-           (facts.MAX_PTY_BACKLOG_BYTES, "the pty's backlog bound", BACKLOG)]
+           (facts.MAX_PTY_BACKLOG_BYTES, "the pty's backlog bound", BACKLOG),
+           (facts.USB_VID, "the USB vendor ID", USB), (facts.USB_PID, "the USB product ID", USB)]
     for what, rad in (("the abort angle", facts.ABORT_ANGLE_RAD),
                       ("the abort rate", facts.ABORT_RATE_RAD_S),
                       ("the angle amplitude bound", facts.max_amplitude("angle")),
@@ -146,6 +151,8 @@ def test_no_hand_copy_in_python():
     "def run_board(backlog_bytes: int = 4095): pass",
     "p.add_argument('--backlog-bytes', type=int_in(0, 4095))",
     "class Pty:\n    MAX_BACKLOG = 4095",
+    "TEENSY_VID = 0x16C0",
+    "BoardPort(device, vid=0x16C0, pid=0x0483)",
 ])
 def test_the_scan_finds_a_copy(source):
     assert copies(source)
