@@ -39,6 +39,7 @@ wants. File formats: docs/file-formats.md (.params); ground stations:
 docs/ground-stations.md.
 
 examples: heliquad params --port /dev/ttyACM0 list
+          heliquad params --port auto list          (the one heliquad board: docs/usb.md)
           heliquad params --port udpin:0.0.0.0:14550 set RATE_RLL_KC 2.5
           heliquad params --port /dev/ttyACM0 save rig-2026-11-24.params
 """
