@@ -408,6 +408,10 @@ def test_request_message_for_statustext_sends_the_boot_report_again_with_an_ack(
     assert client.seen.index(again[0]) > ack_at
     assert [m.text for m in again] == [m.text for m in first]
     assert first[1].text == "params: none stored; defaults"
+    # One finding a loop: each loop's telemetry (its HQ_SYSID_SAMPLE) between two findings.
+    at = [client.seen.index(m) for m in again]
+    for a, b in zip(at, at[1:]):
+        assert [m.get_type() for m in client.seen[a:b]].count("HQ_SYSID_SAMPLE") == 1
 
 
 def test_the_boot_report_names_a_corrupt_store_as_a_warning(tmp_path):
