@@ -211,11 +211,17 @@ def _stored(tmp_path, **values):
     return store
 
 
-def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
+def _corrupted(tmp_path):
+    """A stored EXC_MAX_DUR of 120 s with one bit of its value flipped."""
     store = _stored(tmp_path, EXC_MAX_DUR=120)
     data = bytearray(store.read_bytes())
     data[20] ^= 0x40                                   # one bit of one stored value
     store.write_bytes(bytes(data))
+    return store
+
+
+def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
+    store = _corrupted(tmp_path)
     with start("host", params_file=str(store)) as fw:
         c = Client(fw)
         warning = c.text("params: store corrupt; defaults loaded")
@@ -341,6 +347,80 @@ def test_the_firmware_flies_with_a_new_rate_gain_as_the_gain_predicts(client):
     assert abs(t2 / predicted) == pytest.approx(1.0, rel=0.01)
     assert math.degrees(abs(np.angle(t2 / predicted))) < 0.5
     assert abs(t2 - t1) > 0.3 * abs(t1)               # and the change is no small one
+
+
+# --- the boot report ------------------------------------------------------------------------
+
+#: The boot report's findings, in the order it sends them (one a loop): the reset, the
+#: parameter store, the IMU.
+BOOT_FINDINGS = ("boot: ", "params: ", "IMU: ")
+LATE_S = 30.0                       # a ground station that connects this long after boot
+
+
+def _boot_report(c, frames=20):
+    """The boot report's STATUSTEXTs, from the cursor on."""
+    return [c.until(lambda m, p=p: m.get_type() == "STATUSTEXT" and m.text.startswith(p), frames)
+            for p in BOOT_FINDINGS]
+
+
+def _connect_late(c):
+    """LATE_S of firmware time with nobody on the link, then a ground station's first
+    HEARTBEAT; the boot report it gets."""
+    c.step(round(LATE_S * 1e6 / DT_US))
+    assert not [m for m in c.of_type("STATUSTEXT") if m.text.startswith("boot: ")]
+    c.sent()
+    c.heartbeat()
+    return _boot_report(c)
+
+
+@pytest.mark.parametrize("firmware", FIRMWARES)
+def test_a_station_that_connects_late_gets_the_boot_report_once_and_so_does_a_new_one(firmware):
+    with start(firmware) as fw:
+        c = Client(fw)
+        reset, store, imu = report = _connect_late(c)
+        assert reset.text == "boot: reset by power-on"
+        # The host build without --params keeps nothing; the board's flash is blank.
+        assert store.text == {"host": "params: no storage; defaults",
+                              "teensy35": "params: none stored; defaults"}[firmware]
+        assert imu.text.startswith("IMU: MPU6050 found; ")
+        assert {m.severity for m in report} == {MAV.MAV_SEVERITY_INFO}
+        for _ in range(5):                             # the same station again: no repeat
+            c.heartbeat()
+            c.step(20)
+        assert len([m for m in c.of_type("STATUSTEXT") if m.text.startswith("boot: ")]) == 1
+        c.mav.srcSystem = 254                          # another ground station on the link
+        c.sent()
+        c.heartbeat()
+        again = _boot_report(c)
+        c.close()
+    assert [(m.text, m.severity) for m in again] == [(m.text, m.severity) for m in report]
+
+
+def test_request_message_for_statustext_sends_the_boot_report_again_with_an_ack(client):
+    client.step()
+    client.sent()
+    client.heartbeat()
+    first = _boot_report(client)
+    ack = client.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_STATUSTEXT)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    ack_at = client.seen.index(ack)
+    again = _boot_report(client)
+    assert client.seen.index(again[0]) > ack_at
+    assert [m.text for m in again] == [m.text for m in first]
+    assert first[1].text == "params: none stored; defaults"
+    # One finding a loop: each loop's telemetry (its HQ_SYSID_SAMPLE) between two findings.
+    at = [client.seen.index(m) for m in again]
+    for a, b in zip(at, at[1:]):
+        assert [m.get_type() for m in client.seen[a:b]].count("HQ_SYSID_SAMPLE") == 1
+
+
+def test_the_boot_report_names_a_corrupt_store_as_a_warning(tmp_path):
+    with start("host", params_file=str(_corrupted(tmp_path))) as fw:
+        c = Client(fw)
+        _, store, _ = _connect_late(c)
+        c.close()
+    assert store.text == "params: store corrupt; defaults loaded"
+    assert store.severity == MAV.MAV_SEVERITY_WARNING
 
 
 # --- standard telemetry ---------------------------------------------------------------------

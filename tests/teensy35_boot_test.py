@@ -1203,6 +1203,21 @@ def test_ftm_pwm_writes_wait_for_the_wrap_and_captures_copy_the_count():
     assert ftm3.unmodelled == ["combined / dual-edge channel modes"]
 
 
+def test_the_reset_control_module_says_power_on_after_every_reset():
+    """RCM_SRS0/SRS1 hold a power-on reset's flags (POR and LVD), read only, and again after
+    a reset: the emulated chip's every reset is a power-on reset."""
+    chip = Mk64()
+    rcm = chip.rcm
+    srs0, srs1 = rcm.map["SRS0"], rcm.map["SRS1"]
+    assert rcm.read(rcm.base + srs0.offset, 1) == srs0.bit("POR") | srs0.bit("LVD") == 0x82
+    assert rcm.read(rcm.base + srs1.offset, 1) == 0
+    _write(rcm, "SRS0", 0)                       # read only: the flags stay
+    _write(rcm, "RPFW", 0x1F)                    # the pin filter stores what is written
+    assert rcm.read_register("SRS0") == 0x82 and rcm.read_register("RPFW") == 0x1F
+    chip.reset()
+    assert rcm.read_register("SRS0") == 0x82 and rcm.read_register("RPFW") == 0
+
+
 def test_watchdog_resets_with_its_cause():
     """The watchdog model (native; ``Wdog`` is its view): each way it resets the chip
     raises ChipReset("WDOG", why), whether the cause is a write or time passing."""

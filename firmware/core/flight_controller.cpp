@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "attitude.hpp"
+#include "boot_report.hpp"
 
 namespace hq {
 
@@ -13,19 +14,6 @@ namespace {
 constexpr float kDtMin = 0.25f, kDtMax = 4.0f;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
-
-// Why the DMP set-up fell back to the raw path (STATUSTEXT, at most 50 characters).
-const char* dmp_failure_text(DmpStep step) {
-    switch (step) {
-        case DmpStep::Tables: return "IMU: DMP tables missing or bad; raw FIFO path";
-        case DmpStep::Image: return "IMU: DMP image did not verify; raw FIFO path";
-        case DmpStep::Config: return "IMU: DMP config did not verify; raw FIFO path";
-        case DmpStep::Registers: return "IMU: DMP set-up bus error; raw FIFO path";
-        case DmpStep::Updates: return "IMU: DMP updates did not verify; raw FIFO path";
-        case DmpStep::None: break;
-    }
-    return "IMU: DMP set-up failed; raw FIFO path";
-}
 
 bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
 
@@ -40,16 +28,22 @@ FlightController::FlightController(const FlightControllerConfig& config, I2cBus&
 
 InitResult FlightController::init() {
     motors_.disarm();
-    load_params();
+    BootReport& boot = status_.boot;
+    boot.reset = config_.reset_cause;
+    int bad_index = -1;
+    boot.params = load_params(bad_index);
+    boot.param_index = static_cast<int16_t>(bad_index);
     apply_params(kParamEsc, clock_.micros());
     imu_init_ = init_imu();
+    boot.imu = imu_finding(imu_init_, params_.values().imu_path);
+    boot.dmp_step = imu_.dmp_failure();
     publish(clock_.micros());
     return imu_init_;
 }
 
 // Initialises the IMU on the path IMU_PATH names (the DMP only when the build has its
 // firmware) and tells the Supervisor; a STATUSTEXT when the chip is missing or the DMP
-// set-up fell back to the raw path.
+// set-up fell back to the raw path (boot_report.hpp's words).
 InitResult FlightController::init_imu() {
     Mpu6050Config imu = config_.imu;
     if (params_.values().imu_path == ImuPath::Raw) {
@@ -58,11 +52,8 @@ InitResult FlightController::init_imu() {
     }
     imu_.configure(imu);
     const InitResult r = imu_.init(i2c_, clock_);
-    if (r == InitResult::OkRawFallback) {
-        notice(MAV_SEVERITY_WARNING, dmp_failure_text(imu_.dmp_failure()));
-    } else if (r == InitResult::NoDevice || r == InitResult::BusError) {
-        notice(MAV_SEVERITY_CRITICAL, "IMU: MPU6050 not found");
-    }
+    const ImuFinding found = imu_finding(r, params_.values().imu_path);
+    if (announced(found)) notice(imu_notice(found, imu_.dmp_failure()));
     supervisor_.imu_initialised(clock_.micros(), imu_timeout_for(imu_.sample_rate_hz()));
     filter_.reset();
     return r;
@@ -145,8 +136,12 @@ void FlightController::publish(uint64_t now_us) {
 }
 
 void FlightController::notice(uint8_t severity, const char* text, int param_index) {
+    notice(Notice{severity, text, param_index});
+}
+
+void FlightController::notice(const Notice& n) {
     if (status_.notice_count >= LoopStatus::kNotices) return;     // never: sized for a step
-    status_.notice[status_.notice_count++] = Notice{severity, text, param_index};
+    status_.notice[status_.notice_count++] = n;
 }
 
 bool FlightController::read_imu(float dt_s) {

@@ -43,6 +43,9 @@ struct FlightControllerConfig {
     AttitudeFilterConfig attitude_filter{};   // the raw path's ComplementaryFilter
     // Where the parameters persist (nullptr: defaults at every start, nothing saved).
     ParamStorage* storage = nullptr;
+    // Why the chip last reset, for the boot report: the target reads it from the HAL
+    // (hal/reset_cause.hpp) before init().
+    ResetCause reset_cause = ResetCause::PowerOn;
 };
 
 class FlightController {
@@ -50,7 +53,8 @@ public:
     FlightController(const FlightControllerConfig& config, I2cBus& i2c, Clock& clock,
                      MotorOutputs& motors);
 
-    // Loads the parameters and starts the IMU; status() has what it said.
+    // Loads the parameters and starts the IMU; status() has what it said, and what start-up
+    // found (LoopStatus::boot).
     InitResult init();
     // One loop iteration at the clock's current time with the latest RC input, answering
     // `inbox`'s requests in order (their answers in inbox.answer[]); status() has the result.
@@ -77,6 +81,7 @@ private:
     void publish(uint64_t now_us);
     void publish_events();
     void notice(uint8_t severity, const char* text, int param_index = -1);
+    void notice(const Notice& n);
     // flight_controller_requests.cpp: the requests and the parameters they change
     void answer(LoopInbox& inbox, const RcInput& rc, uint64_t now_us);
     LoopAnswer answer_one(const LoopRequest& r, const ExcitationConfig& start, const RcInput& rc,
@@ -86,7 +91,7 @@ private:
     LoopAnswer answer_param_set(const LoopRequest& r, uint64_t now_us);
     Verdict storage_action(uint32_t action, uint64_t now_us);
     ExcitationReport excitation_report() const;
-    void load_params();
+    ParamsFinding load_params(int& bad_index);
     void apply_params(uint8_t changed, uint64_t now_us);
     void save_params_when_due(uint64_t now_us);
     bool save_params();

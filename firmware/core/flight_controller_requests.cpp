@@ -4,6 +4,8 @@
 // decides whether it may.
 #include "flight_controller.hpp"
 
+#include "boot_report.hpp"
+
 namespace hq {
 
 namespace {
@@ -107,7 +109,8 @@ LoopAnswer FlightController::answer_param_set(const LoopRequest& r, uint64_t now
 Verdict FlightController::storage_action(uint32_t action, uint64_t now_us) {
     if (action == PARAM_READ_PERSISTENT) {
         params_.reset();
-        load_params();
+        int bad_index = -1;
+        load_params(bad_index);
     } else if (action == PARAM_WRITE_PERSISTENT) {
         return save_params() ? Verdict::Accepted : Verdict::Failed;
     } else if (action == PARAM_RESET_FACTORY_DEFAULT || action == PARAM_RESET_ALL_DEFAULT) {
@@ -121,20 +124,26 @@ Verdict FlightController::storage_action(uint32_t action, uint64_t now_us) {
     return Verdict::Accepted;
 }
 
-void FlightController::load_params() {
-    if (config_.storage == nullptr) return;              // defaults, nothing to say
+// What the store gave (and, out of range, the first value refused: it keeps its default);
+// a notice for an empty or corrupt store or a refused value (boot_report.hpp's words).
+ParamsFinding FlightController::load_params(int& bad_index) {
+    if (config_.storage == nullptr) return ParamsFinding::NoStorage;    // nothing to say
     uint8_t record[ParamStorage::kMaxBytes];
     size_t n = 0;
     const StoreStatus st = config_.storage->load(record, sizeof(record), n);
     LoadReport r;
     if (st == StoreStatus::Ok) r = params_.decode(record, n);
+    ParamsFinding found = ParamsFinding::Loaded;
     if (st == StoreStatus::Corrupt || r.status == LoadReport::Status::Corrupt) {
-        notice(MAV_SEVERITY_WARNING, "params: store corrupt; defaults loaded");
+        found = ParamsFinding::Corrupt;
     } else if (r.status == LoadReport::Status::Empty) {
-        notice(MAV_SEVERITY_INFO, "params: none stored; defaults");
+        found = ParamsFinding::Empty;
     } else if (r.out_of_range > 0) {
-        notice(MAV_SEVERITY_WARNING, nullptr, r.first_bad);    // that one stays at its default
+        found = ParamsFinding::OutOfRange;
+        bad_index = r.first_bad;
     }
+    if (announced(found)) notice(params_notice(found, bad_index));
+    return found;
 }
 
 // The parameters' values into the parts that fly with them. The gains and bounds take

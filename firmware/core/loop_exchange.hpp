@@ -7,6 +7,7 @@
 
 #include <cstdint>
 
+#include "../hal/reset_cause.hpp"
 #include "excitation.hpp"
 #include "mixer.hpp"
 #include "mpu6050.hpp"
@@ -95,6 +96,31 @@ struct Notice {
     int param_index = -1;
 };
 
+// What start-up found (boot_report.hpp turns it into STATUSTEXTs): why the chip reset, where
+// the parameters came from, and the IMU's path. Set once by init(); a later re-read of the
+// store or re-initialisation of the IMU does not change it.
+enum class ParamsFinding : uint8_t {
+    NoStorage,     // no storage configured: the defaults
+    Loaded,        // every stored value taken
+    Empty,         // nothing stored: the defaults
+    Corrupt,       // the store failed its checks: the defaults
+    OutOfRange,    // loaded, but a stored value was out of range (param_index: the first)
+};
+enum class ImuFinding : uint8_t {
+    Dmp,           // found, on the DMP path
+    RawByParam,    // found, on the raw path because IMU_PATH says so
+    RawNoImage,    // found, on the raw path because the build has no DMP firmware
+    RawFallback,   // found, on the raw path because the DMP set-up failed (dmp_step: where)
+    Missing,       // not found (no answer, a wrong WHO_AM_I, a bus error)
+};
+struct BootReport {
+    ResetCause reset = ResetCause::PowerOn;
+    ParamsFinding params = ParamsFinding::NoStorage;
+    int16_t param_index = -1;
+    ImuFinding imu = ImuFinding::Missing;
+    DmpStep dmp_step = DmpStep::None;
+};
+
 // What the loop publishes: after init(), and after every step.
 struct LoopStatus {
     LoopState state{};
@@ -124,6 +150,7 @@ struct LoopStatus {
     Notice notice[kNotices];
     uint8_t notice_count = 0;
     uint8_t notices_before_telemetry = 0;
+    BootReport boot{};                     // what start-up found (init())
 };
 
 }  // namespace hq

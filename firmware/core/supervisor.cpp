@@ -134,7 +134,7 @@ bool Supervisor::imu_fresh(uint64_t now_us) const {
 }
 
 bool Supervisor::heartbeat(uint8_t sysid, uint8_t compid, uint8_t mav_type, uint64_t now_us) {
-    if (mav_type != MAV_TYPE_GCS || sysid == 0) return false;     // a vehicle, a camera ...
+    if (!is_ground_station(sysid, mav_type)) return false;     // a vehicle, a camera ...
     if (limits_.gcs_sysid != 0 && sysid != limits_.gcs_sysid) return false;
     host_heartbeat(now_us, station_id(sysid, compid));
     return true;

@@ -145,6 +145,11 @@ constexpr StationId kAnyStation = 0;
 constexpr StationId station_id(uint8_t sysid, uint8_t compid) {
     return static_cast<StationId>(sysid << 8 | compid);
 }
+// Whether a HEARTBEAT is a ground station's: MAV_TYPE_GCS, from a real system (not 0). The
+// Supervisor's host and the link's boot report (link/gcs_link.hpp) both go by it.
+constexpr bool is_ground_station(uint8_t sysid, uint8_t mav_type) {
+    return mav_type == MAV_TYPE_GCS && sysid != 0;
+}
 
 // The IMU timeout for a sensor delivering rate_hz samples: five samples, at most 50 ms.
 uint32_t imu_timeout_for(float rate_hz);

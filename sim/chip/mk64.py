@@ -10,6 +10,7 @@ from .i2c import I2c
 from .image import Image
 from .machine import Machine
 from .port import Ports
+from .rcm import Rcm
 from .scs import Dwt, SystemControlSpace
 from .uart import Uart
 from .wdog import Wdog
@@ -37,6 +38,7 @@ class Mk64:
         self.osc = m.attach(Osc(m, self))
         self.mcg = m.attach(Mcg(m, self))
         self.wdog = m.attach(Wdog(m, self))
+        self.rcm = m.attach(Rcm(m))
         self.ports = Ports(m, self.sim)
         self.i2c0 = m.attach(I2c(m, self, 0))
         self.uart0 = m.attach(Uart(m, self, 0))

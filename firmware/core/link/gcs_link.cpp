@@ -6,6 +6,7 @@
 #include <cmath>
 #include <type_traits>
 
+#include "../boot_report.hpp"
 #include "link_util.hpp"
 
 namespace hq {
@@ -160,7 +161,9 @@ bool GcsLink::ask(const mavlink_message_t& msg, const Received& in, bool answere
             // whether it is a ground station that counts as the host.
             r.kind = RequestKind::Heartbeat;
             r.mav_type = mavlink_msg_heartbeat_get_type(&msg);
-            return msg.sysid != config_.system_id;
+            if (msg.sysid == config_.system_id) return false;
+            if (is_ground_station(msg.sysid, r.mav_type)) heard(r.who);
+            return true;
         case MAVLINK_MSG_ID_COMMAND_LONG:
         case MAVLINK_MSG_ID_COMMAND_INT: {
             return answered && ask_command(in, r);
@@ -262,6 +265,7 @@ void GcsLink::transmit(const LoopStatus& status) {
     inbox_.count = 0;
     send_notices_to(status, status.notices_before_telemetry);
     if (status.excitation_ended) send_excitation_status(status.end_reason, status.excitation);
+    send_boot_report(status.boot);
     send_telemetry(status);
     send_notices_to(status, status.notice_count);
     notices_sent_ = 0;
@@ -276,14 +280,34 @@ void GcsLink::send_notices_to(const LoopStatus& status, int end) {
     for (; notices_sent_ < end; ++notices_sent_) send_notice(status.notice[notices_sent_]);
 }
 
-void GcsLink::send_notice(const Notice& n) {
-    if (n.text != nullptr) {
-        send_statustext(n.severity, n.text);
-        return;
-    }
+bool GcsLink::send_notice(const Notice& n) {
+    if (n.text != nullptr) return send_statustext(n.severity, n.text);
     char text[kStatusTextLen];
     set_result_text(SetResult::Range, n.param_index, text, sizeof(text));
-    send_statustext(n.severity, text);
+    return send_statustext(n.severity, text);
+}
+
+// A ground station's HEARTBEAT: the first from one this link has not heard (or has
+// forgotten, kHeardStations later) asks for the whole boot report.
+void GcsLink::heard(StationId who) {
+    for (int i = 0; i < heard_count_; ++i) {
+        if (heard_[i] == who) return;
+    }
+    heard_[heard_next_] = who;
+    heard_next_ = static_cast<uint8_t>((heard_next_ + 1) % kHeardStations);
+    if (heard_count_ < kHeardStations) ++heard_count_;
+    boot_pending_ = kWholeBootReport;
+}
+
+// One finding of the boot report a loop, in order, while any is pending; one the link could
+// not take stays pending for the next loop, so the report is never lost to a full link.
+void GcsLink::send_boot_report(const BootReport& boot) {
+    for (int i = 0; i < kBootFindings; ++i) {
+        const uint8_t bit = static_cast<uint8_t>(1u << i);
+        if (!(boot_pending_ & bit)) continue;
+        if (send_notice(boot_finding(boot, i))) boot_pending_ = static_cast<uint8_t>(boot_pending_ & ~bit);
+        return;
+    }
 }
 
 void GcsLink::reply(const Received& in, const LoopAnswer* a) {
@@ -401,14 +425,14 @@ bool GcsLink::send(const mavlink_message_t& msg) {
     return true;
 }
 
-void GcsLink::send_statustext(uint8_t severity, const char* text) {
+bool GcsLink::send_statustext(uint8_t severity, const char* text) {
     // The packer copies the whole field: give it a zero-padded copy, never the literal itself.
     char padded[kStatusTextLen] = {};
     for (size_t i = 0; i < kStatusTextLen && text[i] != '\0'; ++i) padded[i] = text[i];
     mavlink_message_t msg;
     mavlink_msg_statustext_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
                                        severity, padded, 0, 0);
-    send(msg);
+    return send(msg);
 }
 
 }  // namespace hq

@@ -14,9 +14,12 @@
 // carries. HQ_EXCITATION_STATUS in answer to every HQ_EXCITATION and when an excitation
 // ends; STATUSTEXT for every notice of the loop (Supervisor events, the IMU, the parameter
 // store) and parameter refusal; COMMAND_ACK for every COMMAND_LONG and COMMAND_INT addressed
-// to it or broadcast; PARAM_VALUE for the parameter protocol, a few per loop.
+// to it or broadcast; PARAM_VALUE for the parameter protocol, a few per loop. The boot report
+// (boot_report.hpp: what start-up found, one STATUSTEXT per finding, one finding a loop) on
+// the first HEARTBEAT of every ground station this link has not heard before, and on
+// MAV_CMD_REQUEST_MESSAGE for STATUSTEXT.
 // A message that does not fit the link is dropped whole and counted, never blocking the loop
-// (a PARAM_VALUE is sent again in the next loop instead). At most LoopInbox::kCapacity
+// (a PARAM_VALUE or a finding of the boot report is sent again in the next loop instead). At most LoopInbox::kCapacity
 // messages are taken per loop; the rest wait in the port for the next.
 #pragma once
 
@@ -106,9 +109,11 @@ private:
     uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
     void refuse_file_transfer(const Received& in);
     void send_excitation_status(Reason reason, const ExcitationReport& ex);
-    void send_statustext(uint8_t severity, const char* text);
+    bool send_statustext(uint8_t severity, const char* text);
     void send_notices_to(const LoopStatus& status, int end);
-    void send_notice(const Notice& n);
+    bool send_notice(const Notice& n);
+    void heard(StationId who);
+    void send_boot_report(const BootReport& boot);
     bool send(const mavlink_message_t& msg);
     // param_protocol.cpp
     bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
@@ -158,6 +163,12 @@ private:
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index
     uint64_t params_as_float_ = 0;           // of those, answers to a set sent as REAL32
+    // The ground stations this link has heard (a HEARTBEAT of MAV_TYPE_GCS), for the boot
+    // report: the last kHeardStations, a new one in the place of the one heard first.
+    static constexpr int kHeardStations = 8;
+    StationId heard_[kHeardStations] = {};
+    uint8_t heard_count_ = 0, heard_next_ = 0;
+    uint8_t boot_pending_ = 0;               // the boot report's findings to send, one bit each
     mavlink_status_t tx_status_{};
     mavlink_status_t rx_status_{};
     mavlink_message_t rx_msg_{};

@@ -3,6 +3,7 @@
 // (gcs_link.hpp says what is sent when).
 #include <cmath>
 
+#include "../boot_report.hpp"
 #include "gcs_link.hpp"
 #include "link_util.hpp"
 
@@ -65,7 +66,12 @@ uint32_t GcsLink::stream_bytes_per_s(uint32_t msgid, uint32_t interval_us) const
     return static_cast<uint32_t>(static_cast<float>(packet_bytes(msgid)) * 1e6f / us + 0.5f);
 }
 
+// A message of the stream table once in the next loop; STATUSTEXT: the boot report again.
 uint8_t GcsLink::request_message(uint32_t msgid) {
+    if (msgid == MAVLINK_MSG_ID_STATUSTEXT) {
+        boot_pending_ = kWholeBootReport;
+        return MAV_RESULT_ACCEPTED;
+    }
     Stream* s = stream(msgid);
     if (s == nullptr) return MAV_RESULT_DENIED;
     s->requested = true;

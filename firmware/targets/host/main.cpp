@@ -34,6 +34,7 @@
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
+#include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
@@ -151,6 +152,7 @@ int main(int argc, char** argv) {
     link_cfg.uid = 0x4851'2D48'4F53'5401ull;
     static hq::FileParamStorage storage(opt.params);
     if (!opt.params.empty()) cfg.storage = &storage;
+    cfg.reset_cause = hq::reset_cause();         // power-on: a process starts afresh
     if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image
         if (const char* bad = hq::use_dmp_file(dmp_file.data(), dmp_file.size(), cfg.imu)) {
             usage((opt.dmp_image + ": " + bad).c_str());

@@ -15,6 +15,7 @@
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
+#include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
@@ -93,6 +94,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
     cfg.storage = &storage;
+    cfg.reset_cause = hq::reset_cause();      // RCM_SRS0/SRS1 (reset_cause.cpp)
     hq::GcsLinkConfig link_cfg;
     link_cfg.loop_rate_hz = cfg.loop_rate_hz;
     link_cfg.cpu_hz = kCoreHz;                        // SYS_STATUS load from the cycle counter

@@ -1,0 +1,27 @@
+// The boot report in words: what start-up found (LoopStatus::boot, loop_exchange.hpp) as one
+// STATUSTEXT notice per finding, in order: why the chip reset, where the parameters came
+// from, the IMU and its path. init() raises the notices start-up always raised (a store that
+// is empty, corrupt or holds a value out of range; the DMP's fallback; a missing IMU); the
+// link sends the whole report again to every ground station it hears for the first time and
+// on request (docs/link-contract.md).
+#pragma once
+
+#include "loop_exchange.hpp"
+
+namespace hq {
+
+constexpr int kBootFindings = 3;
+// Every finding, one bit each (the link's findings still to send).
+constexpr uint8_t kWholeBootReport = (1u << kBootFindings) - 1;
+
+// Finding i (0: the reset, 1: the parameters, 2: the IMU) of the report.
+Notice boot_finding(const BootReport& report, int i);
+Notice params_notice(ParamsFinding f, int param_index);
+Notice imu_notice(ImuFinding f, DmpStep step);
+// The IMU's finding from its start-up's result and the path IMU_PATH asked for.
+ImuFinding imu_finding(InitResult r, ImuPath path);
+// Whether start-up announces the finding as it happens (the others wait for the report).
+bool announced(ParamsFinding f);
+bool announced(ImuFinding f);
+
+}  // namespace hq
