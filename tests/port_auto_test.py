@@ -3,15 +3,19 @@
 pyserial's listing is replaced by a list of the test's own (none, one, two heliquad boards, a
 stock Teensy); boards emulated by ``heliquad board`` are found through their announcements,
 in a folder of the test's own (HELIQUAD_BOARDS_DIR), so no board elsewhere on the machine
-counts. The USB identity is the firmware's (usb_identity.hpp, through the bindings).
+counts; an announcement counts while a lock on it is held, as its board holds one. The USB
+identity is the firmware's (usb_identity.hpp, through the bindings).
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import subprocess
 import sys
+import time
+import signal
 import types
 
 import pytest
@@ -21,6 +25,7 @@ import tool_runs
 from heliquad import _firmware as fw
 from heliquad.host.acquire import ports
 from heliquad.host.cli.parser import main
+from heliquad.host.records.manifest import read_manifest
 from heliquad.sim.base import firmware_facts as facts
 from heliquad.sim.base.errors import InputError
 from heliquad.sim.rig import announce
@@ -57,11 +62,12 @@ def test_the_identity_is_the_firmwares():
         "FEDCBA98" "00000000" "00000010" "0000000A"
 
 
-def test_none(listing, capsys):
+def test_none(listing, capsys, tmp_path):
     listing.append(usb("/dev/ttyS0", product=None, vid=None, pid=None))
     assert main(["params", "--port", "auto", "list"]) == 2
     err = tool_runs.one_line(capsys.readouterr().err)
-    assert err == "heliquad params: error: --port auto: no heliquad board found; or give " \
+    assert err == "heliquad params: error: --port auto: no heliquad board found among the " \
+                  f"USB devices and the boards announced in {tmp_path / 'boards'}; or give " \
                   "--port DEVICE"
 
 
@@ -204,3 +210,133 @@ def test_two_running_boards_are_listed_and_refused(tmp_path):
         assert f"{a} (heliquad flight controller, serial {announce.HOST_BUILD_SERIAL}" in err
         assert f"{b} (heliquad flight controller, serial {announce.HOST_BUILD_SERIAL}" in err
     assert not folder.exists()
+
+
+def _held(folder, name, record):
+    """An announcement whose lock the test holds, as its board would: the descriptor."""
+    _announce(folder, name, record)
+    fd = os.open(folder / name, os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    return fd
+
+
+@pytest.fixture
+def pty(listing):
+    """A pty's terminal path, in the listing's empty announcement world."""
+    main_fd, sub_fd = os.openpty()
+    yield os.ttyname(sub_fd)
+    os.close(main_fd)
+    os.close(sub_fd)
+
+
+def test_links_fifos_and_devices_that_are_no_ptys_of_this_user_are_refused(pty, tmp_path):
+    folder = tmp_path / "boards"
+    other_fd, other_sub = os.openpty()
+    held = []
+    try:
+        with announce.announced(pty, "SERIAL1", "host") as path:
+            good = json.loads(open(path).read())
+            (folder / "board-10.json").symlink_to(path)
+            (folder / "board-11.json").symlink_to("/dev/tty")
+            os.mkfifo(folder / "board-12.json")
+            held.append(_held(folder, "board-13.json", dict(good, process=13,
+                                                              device="/dev/null")))
+            other = os.ttyname(other_sub)           # a pty of another user's
+            if os.getuid() == 0:
+                os.chown(other, os.getuid() + 1, -1)
+            else:
+                other = "/dev/ptmx"                 # root's
+            held.append(_held(folder, "board-14.json", dict(good, process=14, device=other)))
+            held.append(_held(folder, "board-15.json\n", dict(good, process=15)))
+            assert [p.device for p in announce.announcements()] == [pty]
+            assert ports.resolve_port("auto") == pty
+    finally:
+        for fd in held + [other_fd, other_sub]:
+            os.close(fd)
+
+
+def test_a_folder_others_may_write_is_not_read(pty, tmp_path, capsys):
+    folder = tmp_path / "boards"
+    with announce.announced(pty, "SERIAL1", "host"):
+        assert len(announce.announcements()) == 1
+        folder.chmod(0o777)
+        assert announce.announcements() == []
+        # A board does not announce into it: it says so in one line and runs on.
+        with announce.announced(pty, "SERIAL2", "host") as second:
+            assert second is None
+        assert capsys.readouterr().err == f"heliquad board: not announced in {folder} (group " \
+            "or other may write it); --port auto will not find this board\n"
+        folder.chmod(0o700)
+    assert not folder.exists()
+
+
+def test_a_stale_announcement_is_removed_and_a_locked_one_used(pty, tmp_path):
+    folder = tmp_path / "boards"
+    folder.mkdir(mode=0o700)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, sys; f = open(sys.argv[1]); "
+         "fcntl.flock(f, fcntl.LOCK_EX); print(flush=True); sys.stdin.read()",
+         str(folder / "board-7.json")], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    try:
+        _announce(folder, "board-7.json", dict(_record(pty), process=7))
+        holder.stdout.readline()                    # it holds the lock, as a board does
+        assert [p.device for p in announce.announcements()] == [pty]
+        assert (folder / "board-7.json").exists()
+    finally:
+        holder.communicate(b"", timeout=tool_runs.HANG_GUARD_S)
+    # Its holder gone (a board killed outright), its number and pty may be anyone's.
+    assert announce.announcements() == []
+    assert not (folder / "board-7.json").exists()
+    assert folder.exists()                         # a folder a board did not make stays
+
+
+def _record(device):
+    return {"format": announce.FORMAT, "version": announce.VERSION, "process": 1,
+            "device": device, "vid": facts.USB_VID, "pid": facts.USB_PID,
+            "manufacturer": facts.USB_MANUFACTURER, "product": facts.USB_PRODUCT,
+            "serial_number": "SERIAL1", "firmware": "host"}
+
+
+def test_the_folder_is_absolute_and_a_failed_write_leaves_nothing(pty, tmp_path, monkeypatch,
+                                                                  capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(announce.FOLDER_ENV, "relative")
+    assert announce.folder() == str(tmp_path / "relative")
+
+    def refuse(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", refuse)
+    with announce.announced(pty, "SERIAL1", "host") as path:
+        assert path is None
+    assert "(No space left on device); --port auto will not find this board" in \
+        capsys.readouterr().err
+    assert list((tmp_path / "relative").iterdir()) == []
+
+
+def test_a_sweep_records_that_auto_found_an_emulated_board(tmp_path):
+    folder = tmp_path / "boards"
+    env = dict(os.environ, **{announce.FOLDER_ENV: str(folder)})
+    (tmp_path / "a").mkdir()
+    out = tmp_path / "sweep"
+    with tool_runs.running_board(tmp_path / "a", env=env):
+        sweep = tool_runs.cli("sweep", "--axis", "roll", "--port", "auto", "--freqs-hz", 0.5,
+                              "--out", out, env=env)
+        try:
+            assert sweep.stdout.readline().startswith("sweep: roll, ")
+            assert sweep.stdout.readline() == (
+                "port auto found: a board emulated by heliquad board (serial "
+                f"{announce.HOST_BUILD_SERIAL}, firmware host), not a real one\n")
+            deadline = time.monotonic() + tool_runs.HANG_GUARD_S
+            while not (out / "manifest.json").exists() and time.monotonic() < deadline:
+                time.sleep(0.05)                    # written before the hover starts
+        finally:
+            sweep.send_signal(signal.SIGINT)
+            sweep.communicate(timeout=tool_runs.HANG_GUARD_S)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["source"] == {"kind": "port", "port": str(tmp_path / "a" / "rig"),
+                                  "baud": 921600}
+    assert manifest["port_found"] == {"source": "heliquad board", "firmware": "host",
+                                      "serial_number": announce.HOST_BUILD_SERIAL}
+    read_manifest(out / "manifest.json")          # its schema holds it
+    assert list(manifest)[:4] == ["axis", "inject", "source", "port_found"]

@@ -22,9 +22,9 @@ import sys
 
 from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import USB_PID, USB_VID
-from ...sim.rig.announce import BoardPort, announcements
+from ...sim.rig.announce import BoardPort, announcements, folder
 
-__all__ = ["AUTO", "resolve_port", "find_board", "usb_ports"]
+__all__ = ["AUTO", "resolve_port", "auto_board", "found_record", "find_board", "usb_ports"]
 
 #: The --port value that asks for the board to be found.
 AUTO = "auto"
@@ -35,12 +35,24 @@ PRODUCT_MARK = "heliquad"
 def resolve_port(name: str) -> str:
     """``name``, or for ``auto`` the device of the one heliquad board (said on stderr); an
     InputError when there is none or more than one."""
-    if name != AUTO:
-        return name
+    return name if name != AUTO else auto_board().device
+
+
+def auto_board() -> BoardPort:
+    """The one heliquad board (said on stderr); an InputError when there is none or more."""
     board = find_board(usb_ports() + announcements())
     sys.stderr.write(f"port auto: {board.device} ({_identity(board)})\n")
     sys.stderr.flush()
-    return board.device
+    return board
+
+
+def found_record(board: BoardPort) -> dict:
+    """What ``--port auto`` found, as a sweep's manifest keeps it (``port_found``): where it
+    was published, its serial number and, for an announced (emulated) board, its firmware."""
+    record = {"source": board.source, "serial_number": board.serial_number}
+    if board.firmware is not None:
+        record["firmware"] = board.firmware
+    return record
 
 
 def usb_ports() -> list[BoardPort]:
@@ -69,7 +81,8 @@ def find_board(ports) -> BoardPort:
 def _none_found(closed, stock):
     """The InputError for no usable board: ``closed`` heliquad boards this user cannot open,
     ``stock`` Teensys whose product is not heliquad's."""
-    text = "--port auto: no heliquad board found"
+    text = ("--port auto: no heliquad board found among the USB devices and the boards "
+            f"announced in {folder()}")
     if closed:
         devices = ", ".join(p.device for p in closed)
         text += (f"; {devices} is a heliquad board this user cannot open (permission denied: "

@@ -33,7 +33,7 @@ from .. import __version__
 from ..process.signals import ABORTED_BY, stopped_by
 from ..records import paper
 from ..records.gains import gains_from_params, single
-from ..records.manifest import MANIFEST, SweepManifest, write_manifest
+from ..records.manifest import MANIFEST, UNSET, SweepManifest, write_manifest
 from .design import AmplitudeDesign, Dwell
 from .excitation import amplitude_bound, default_amplitude, default_peak
 from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
@@ -176,9 +176,10 @@ def _record_params(session, axis: str, manifest: SweepManifest, progress) -> Non
 
 
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
-              max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S) -> dict:
+              max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S,
+              port_found: dict | None = None) -> dict:
     """Run the plan on ``session``; returns the manifest's document (as written to
-    ``out_dir``).
+    ``out_dir``). ``port_found``: what ``--port auto`` found, when it chose the port.
 
     Ctrl-C and SIGTERM end the sweep in order (the manifest says so; the return is normal).
     Any other error that ends it (a full disk, the firmware died, the link lost) stops the
@@ -186,7 +187,9 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     running in ``in_progress_hz``, and is raised again."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
     manifest = SweepManifest(
-        axis=plan.axis, inject=plan.inject, source=source, firmware=f"heliquad {__version__}",
+        axis=plan.axis, inject=plan.inject, source=source,
+        port_found=UNSET if port_found is None else port_found,
+        firmware=f"heliquad {__version__}",
         started=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         tlog=SWEEP_TLOG, tlog_start_us=getattr(session, "start_us", None),
         cycles=plan.cycles, fade_cycles=plan.fade_cycles, design=plan.record(),

@@ -13,7 +13,8 @@ from ...sim.base.errors import InputError
 from ..acquire.connection import CONNECTION_HELP
 from ..acquire.excitation import amplitude_bound, bound_text
 
-__all__ = ["add_port_argument", "add_firmware_argument", "add_param_store_argument", "add_fault_argument", "faults",
+__all__ = ["add_port_argument", "add_firmware_argument", "add_param_store_argument",
+           "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]

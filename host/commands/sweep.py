@@ -139,7 +139,7 @@ def run(args) -> int:
                          "set them with heliquad params)")
     created = new_output_folder(args.out, "a sweep")
     try:
-        session, source = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
+        session, source, found = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
     except BaseException:
         if created and not os.listdir(args.out):     # nothing recorded: leave nothing behind
             os.rmdir(args.out)
@@ -147,7 +147,9 @@ def run(args) -> int:
     try:
         print(f"sweep: {args.axis}, {args.inject} injection, {_what(plan)} -> {args.out}",
               flush=True)
-        manifest = run_sweep(session, plan, args.out, source)
+        if found is not None:             # a simulated board never passes for the rig unseen
+            print(f"port auto found: {_found_text(found)}", flush=True)
+        manifest = run_sweep(session, plan, args.out, source, port_found=found)
     except Exception as exc:          # a full disk, the firmware died, the port went away
         return _ended(exc, args.out)
     finally:
@@ -239,17 +241,29 @@ def _multisine_plan(args, amp):
     return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time, band)
 
 
+def _found_text(found: dict) -> str:
+    """What ``--port auto`` found (the manifest's ``port_found``), for the sweep's first lines."""
+    serial = found["serial_number"] or "none"
+    if found["source"] == "usb":
+        return f"a USB device, serial {serial}"
+    return (f"a board emulated by {found['source']} (serial {serial}, firmware "
+            f"{found.get('firmware', 'not said')}), not a real one")
+
+
 def _sweep_session(args, tlog):
-    """The session a sweep drives (the firmware in the loop, or a board's port) and the
-    manifest's record of its source."""
+    """The session a sweep drives (the firmware in the loop, or a board's port), the
+    manifest's record of its source, and what ``--port auto`` found (None: not auto)."""
     # the command's work, imported when it runs: --help imports every command module
-    from ..acquire.ports import resolve_port
+    from ..acquire.ports import AUTO, auto_board, found_record
     from ..acquire.session import PortSession
     from ..records import paper
 
     if not args.sil:
-        port = resolve_port(args.port)
-        return PortSession(port, tlog, args.baud), {"kind": "port", "port": port, "baud": args.baud}
+        board = auto_board() if args.port == AUTO else None
+        port = args.port if board is None else board.device
+        found = None if board is None else found_record(board)
+        return (PortSession(port, tlog, args.baud),
+                {"kind": "port", "port": port, "baud": args.baud}, found)
     # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.lockstep import FirmwareError
     from ...sim.rig.setup import SilConfig
@@ -276,4 +290,4 @@ def _sweep_session(args, tlog):
         raise
     if args.fault:
         source["faults"] = list(args.fault)
-    return session, source
+    return session, source, None

@@ -23,8 +23,8 @@ from .gains import recorded_gains_schema
 from .output import write_json
 from .reading import read_json
 
-__all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "SweepManifest", "write_manifest",
-           "read_manifest"]
+__all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "PORT_FOUND", "UNSET", "SweepManifest",
+           "write_manifest", "read_manifest"]
 
 #: The manifest's name in a sweep folder.
 MANIFEST = "manifest.json"
@@ -49,6 +49,12 @@ FREQUENCY = S.Obj(
               "dwell_end": S.Str(("target", "cap", "amplitude")),
               "relative_sigma": S.Null(S.Num(0)), "signal": S.Str(tuple(names.SIGNALS)),
               "orders": S.List(S.Int(1, 2**31), 1, 16), "fade_samples": S.Int(0, 2**31)})
+
+#: What ``--port auto`` found (``port_found``, only when it chose the sweep's port): a USB
+#: device or a board ``heliquad board`` emulates (announced, with the firmware it runs).
+PORT_FOUND = S.Obj(required={"source": S.Str(("usb", "heliquad board")),
+                             "serial_number": S.Null(S.Str())},
+                   optional={"firmware": S.Str()}, strict=True)
 
 
 class _Unset:
@@ -75,6 +81,7 @@ class SweepManifest:
     axis: str = _key(S.Str(tuple(names.AXES)), required=True)
     inject: str = _key(S.Str(tuple(names.INJECTIONS)), required=True)
     source: dict = _key(S.Obj())
+    port_found: dict = _key(PORT_FOUND, default=UNSET)
     firmware: str = _key(S.Str())
     gains: dict | None = _key(S.Null(recorded_gains_schema()), default=None)
     params: dict | None = _key(S.Null(S.Obj(values=S.Num())), default=None)
