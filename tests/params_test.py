@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 import sys
+import zlib
 
 import numpy as np
 import pytest
@@ -231,17 +233,19 @@ def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
     assert values["EXC_MAX_DUR"].param_value == 300.0
 
 
-def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
+def _out_of_range(tmp_path):
+    """A store whose RATE_YAW_TD (0..1) holds 7.0, its record's CRC rewritten to match."""
     store = _stored(tmp_path, RATE_YAW_TD=0.05)
-    # Rewrite one entry with a value outside its range, and the record's CRC to match.
-    import struct
-    import zlib
-
     data = bytearray(store.read_bytes())
     index = NAMES.index("RATE_YAW_TD")
     struct.pack_into("<f", data, 8 + 8 * index + 4, 7.0)
     struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
     store.write_bytes(bytes(data))
+    return store
+
+
+def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
+    store = _out_of_range(tmp_path)
     with start("host", params_file=str(store)) as fw:
         c = Client(fw)
         c.text("RATE_YAW_TD out of range 0..1")
@@ -351,23 +355,36 @@ def test_the_firmware_flies_with_a_new_rate_gain_as_the_gain_predicts(client):
 
 # --- the boot report ------------------------------------------------------------------------
 
-#: The boot report's findings, in the order it sends them (one a loop): the reset, the
-#: parameter store, the IMU.
-BOOT_FINDINGS = ("boot: ", "params: ", "IMU: ")
+#: Every finding of the boot report begins so (what start-up found, not what holds now); the
+#: report: the reset, the parameter store, the IMU, one a loop.
+BOOT = "boot: "
+FINDINGS = 3
 LATE_S = 30.0                       # a ground station that connects this long after boot
+LOOPS_A_SECOND = round(1e6 / DT_US)  # the most often a report starts: once a second
+
+
+def _is_finding(m):
+    return m.get_type() == "STATUSTEXT" and m.text.startswith(BOOT)
 
 
 def _boot_report(c, frames=20):
-    """The boot report's STATUSTEXTs, from the cursor on."""
-    return [c.until(lambda m, p=p: m.get_type() == "STATUSTEXT" and m.text.startswith(p), frames)
-            for p in BOOT_FINDINGS]
+    """The boot report's STATUSTEXTs, from the cursor on (each within frames of the last)."""
+    report = [c.until(_is_finding, frames) for _ in range(FINDINGS)]
+    assert report[0].text.startswith("boot: reset by ")
+    assert report[2].text.startswith("boot: IMU: ")
+    return report
+
+
+def _findings(c, since=0):
+    """Every boot report finding seen from index since on."""
+    return [m for m in c.seen[since:] if _is_finding(m)]
 
 
 def _connect_late(c):
     """LATE_S of firmware time with nobody on the link, then a ground station's first
     HEARTBEAT; the boot report it gets."""
     c.step(round(LATE_S * 1e6 / DT_US))
-    assert not [m for m in c.of_type("STATUSTEXT") if m.text.startswith("boot: ")]
+    assert not _findings(c)
     c.sent()
     c.heartbeat()
     return _boot_report(c)
@@ -380,20 +397,26 @@ def test_a_station_that_connects_late_gets_the_boot_report_once_and_so_does_a_ne
         reset, store, imu = report = _connect_late(c)
         assert reset.text == "boot: reset by power-on"
         # The host build without --params keeps nothing; the board's flash is blank.
-        assert store.text == {"host": "params: no storage; defaults",
-                              "teensy35": "params: none stored; defaults"}[firmware]
-        assert imu.text.startswith("IMU: MPU6050 found; ")
+        assert store.text == {"host": "boot: params: no storage; defaults",
+                              "teensy35": "boot: params: none stored; defaults"}[firmware]
+        assert imu.text.startswith("boot: IMU: MPU6050 found; ")
         assert {m.severity for m in report} == {MAV.MAV_SEVERITY_INFO}
         for _ in range(5):                             # the same station again: no repeat
             c.heartbeat()
             c.step(20)
-        assert len([m for m in c.of_type("STATUSTEXT") if m.text.startswith("boot: ")]) == 1
+        assert len(_findings(c)) == FINDINGS
         c.mav.srcSystem = 254                          # another ground station on the link
         c.sent()
         c.heartbeat()
-        again = _boot_report(c)
+        again = _boot_report(c, frames=LOOPS_A_SECOND)  # a second after the last began
         c.close()
     assert [(m.text, m.severity) for m in again] == [(m.text, m.severity) for m in report]
+
+
+def _sysid_samples_between(c, a, b):
+    """Loops from message a to message b (each loop ends with its HQ_SYSID_SAMPLE)."""
+    at = c.seen.index(a), c.seen.index(b)
+    return [m.get_type() for m in c.seen[at[0]:at[1]]].count("HQ_SYSID_SAMPLE")
 
 
 def test_request_message_for_statustext_sends_the_boot_report_again_with_an_ack(client):
@@ -404,23 +427,95 @@ def test_request_message_for_statustext_sends_the_boot_report_again_with_an_ack(
     ack = client.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_STATUSTEXT)
     assert ack.result == MAV.MAV_RESULT_ACCEPTED
     ack_at = client.seen.index(ack)
-    again = _boot_report(client)
+    again = _boot_report(client, frames=LOOPS_A_SECOND)
     assert client.seen.index(again[0]) > ack_at
     assert [m.text for m in again] == [m.text for m in first]
-    assert first[1].text == "params: none stored; defaults"
+    assert first[1].text == "boot: params: none stored; defaults"
     # One finding a loop: each loop's telemetry (its HQ_SYSID_SAMPLE) between two findings.
-    at = [client.seen.index(m) for m in again]
-    for a, b in zip(at, at[1:]):
-        assert [m.get_type() for m in client.seen[a:b]].count("HQ_SYSID_SAMPLE") == 1
+    for a, b in zip(again, again[1:]):
+        assert _sysid_samples_between(client, a, b) == 1
+    # The second began a second (of loops) after the first.
+    assert _sysid_samples_between(client, first[0], again[0]) == LOOPS_A_SECOND
 
 
-def test_the_boot_report_names_a_corrupt_store_as_a_warning(tmp_path):
-    with start("host", params_file=str(_corrupted(tmp_path))) as fw:
+def test_a_request_during_the_boot_report_gets_one_more_whole_report_after_it(client):
+    client.step()
+    client.sent()
+    start_at = client.cursor
+    client.heartbeat()
+    under_way = client.until(_is_finding, 20)          # the report's first finding is out
+    ack = client.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_STATUSTEXT)
+    assert ack.result == MAV.MAV_RESULT_ACCEPTED
+    client.step(3 * LOOPS_A_SECOND)
+    found = _findings(client, start_at)
+    # The request came while the report ran; that report was not restarted but ran to its
+    # end, and exactly one whole report more followed, a second after it began.
+    at = [client.seen.index(m) for m in found]
+    assert at[0] < client.seen.index(ack) < at[FINDINGS - 1]
+    assert found[0] is under_way and len(found) == 2 * FINDINGS
+    assert [m.text for m in found[FINDINGS:]] == [m.text for m in found[:FINDINGS]]
+    assert found[0].text.startswith("boot: reset by ")
+    assert _sysid_samples_between(client, found[0], found[FINDINGS]) == LOOPS_A_SECOND
+
+
+@pytest.mark.parametrize("store, text", [
+    (_corrupted, "boot: params: store corrupt; defaults loaded"),
+    (_out_of_range, "boot: RATE_YAW_TD out of range 0..1"),
+], ids=["corrupt", "out_of_range"])
+def test_the_boot_report_names_a_bad_store_as_a_warning(tmp_path, store, text):
+    """A corrupt store, and a stored value out of range (which keeps its default)."""
+    with start("host", params_file=str(store(tmp_path))) as fw:
         c = Client(fw)
-        _, store, _ = _connect_late(c)
+        _, found, _ = _connect_late(c)
         c.close()
-    assert store.text == "params: store corrupt; defaults loaded"
-    assert store.severity == MAV.MAV_SEVERITY_WARNING
+    assert found.text == text
+    assert found.severity == MAV.MAV_SEVERITY_WARNING
+
+
+def _heartbeat_from(c, sysid, compid):
+    c.mav.srcSystem, c.mav.srcComponent = sysid, compid
+    c.heartbeat()
+    c.mav.srcSystem, c.mav.srcComponent = 255, 190
+
+
+def test_a_ninth_station_does_not_evict_one_still_heard(client):
+    """The heard list keeps the stations heard most recently: the first station heartbeats
+    every second while eight others each send one; it is never forgotten, so its own
+    heartbeats never ask for the report again."""
+    client.step()
+    for k in range(8):
+        client.heartbeat()
+        client.step(LOOPS_A_SECOND // 2)
+        _heartbeat_from(client, 200 + k, 190)          # a new station: its report
+        client.step(LOOPS_A_SECOND // 2 + 10)
+    client.heartbeat()
+    client.step(2 * LOOPS_A_SECOND)
+    reports_before = len(_findings(client))
+    for _ in range(5):                                 # the first station, still heard
+        client.heartbeat()
+        client.step(LOOPS_A_SECOND)
+    assert reports_before == 9 * FINDINGS
+    assert len(_findings(client)) == reports_before
+
+
+def test_a_flood_of_new_stations_costs_one_whole_report_a_second(client):
+    """A new ground station id every loop for 5 s of loop time (spoofed heartbeats): the
+    report still goes out whole, every finding in order, and starts at most once a second."""
+    client.step()
+    since = len(client.seen)
+    loops = 5 * LOOPS_A_SECOND
+    for i in range(loops):
+        _heartbeat_from(client, 10 + i // 100, 100 + i % 100)
+        client.step()
+    found = _findings(client, since)
+    texts = [m.text for m in found]
+    whole = texts[:FINDINGS]
+    assert whole[0].startswith("boot: reset by ") and whole[2].startswith("boot: IMU: ")
+    starts = len(found) // FINDINGS
+    assert texts == whole * starts                     # whole reports, each in order
+    assert 5 <= starts <= 6
+    for a, b in zip(found[::FINDINGS], found[FINDINGS::FINDINGS]):
+        assert _sysid_samples_between(client, a, b) == LOOPS_A_SECOND
 
 
 # --- standard telemetry ---------------------------------------------------------------------

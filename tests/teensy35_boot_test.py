@@ -31,6 +31,7 @@ import sys
 
 import pytest
 
+from heliquad import _firmware
 from heliquad.sim.chip import ChipReset, Fault, Mk64, Teensy35, registers, svd
 from heliquad.sim.chip.i2c import SCL_DIVIDER
 from heliquad.sim.chip.machine import Stop
@@ -185,6 +186,49 @@ def test_register_tables_match_the_firmware_header():
             assert reg.reset == reset, f"{periph}_{name} reset value"
         compared += 1
     assert compared > 200, f"only {compared} registers in common"
+
+
+# ------------------------------------------------------------ reset cause ----------------------
+
+_SRS0, _SRS1 = registers.peripheral("RCM")["SRS0"], registers.peripheral("RCM")["SRS1"]
+_CAUSE = _firmware.ResetCause
+#: (SRS0 flags, SRS1 flags, what the firmware calls the reset): each flag alone, then the
+#: orders that matter when several are set.
+RESET_CAUSES = [
+    (("POR",), (), _CAUSE.POWER_ON),
+    (("POR", "LVD"), (), _CAUSE.POWER_ON),            # a power-on also sets LVD: the SVD's reset
+    (("LVD",), (), _CAUSE.LOW_VOLTAGE),
+    (("WDOG",), (), _CAUSE.WATCHDOG),
+    ((), ("LOCKUP",), _CAUSE.LOCKUP),
+    ((), ("SW",), _CAUSE.SOFTWARE),
+    (("PIN",), (), _CAUSE.PIN),
+    (("LOC",), (), _CAUSE.CLOCK_LOSS),
+    (("LOL",), (), _CAUSE.CLOCK_LOSS),
+    ((), ("JTAG",), _CAUSE.DEBUGGER),
+    ((), ("MDM_AP",), _CAUSE.DEBUGGER),
+    ((), ("EZPT",), _CAUSE.DEBUGGER),
+    ((), (), _CAUSE.OTHER),
+    (("WAKEUP",), (), _CAUSE.OTHER),
+    ((), ("SACKERR",), _CAUSE.OTHER),
+    (("POR", "WDOG", "PIN"), ("LOCKUP", "SW"), _CAUSE.POWER_ON),
+    (("WDOG", "PIN", "LVD"), ("LOCKUP",), _CAUSE.WATCHDOG),
+    (("LVD", "PIN"), ("LOCKUP", "SW"), _CAUSE.LOCKUP),
+    (("LVD", "LOC", "PIN"), ("SW",), _CAUSE.LOW_VOLTAGE),
+    (("LOL", "PIN"), ("SW", "JTAG"), _CAUSE.CLOCK_LOSS),
+    (("PIN",), ("SW", "JTAG"), _CAUSE.SOFTWARE),
+    (("PIN",), ("MDM_AP",), _CAUSE.DEBUGGER),
+]
+
+
+@pytest.mark.parametrize("srs0, srs1, cause", RESET_CAUSES)
+def test_reset_cause_from_the_rcm_flags(srs0, srs1, cause):
+    flags0 = sum(_SRS0.bit(name) for name in srs0)
+    flags1 = sum(_SRS1.bit(name) for name in srs1)
+    assert _firmware.reset_cause_from(flags0, flags1) == cause
+
+
+def test_the_emulated_chips_reset_flags_read_as_a_power_on():
+    assert _firmware.reset_cause_from(_SRS0.reset, _SRS1.reset) == _CAUSE.POWER_ON
 
 
 # ------------------------------------------------------------ exceptions -----------------------

@@ -22,6 +22,7 @@
 #include "core/supervisor.hpp"
 #include "sensor/mpu6050_emulator.hpp"
 #include "targets/host/pty_backlog.hpp"
+#include "targets/teensy35/reset_cause_flags.hpp"
 #include "targets/teensy35/usb_identity.hpp"
 
 namespace py = pybind11;
@@ -264,6 +265,15 @@ PYBIND11_MODULE(_firmware, m) {
         usb_serial_number(uid, digits);
         return std::string(digits, kUsbSerialDigits);
     }, "The USB serial number of a chip whose SIM_UIDH..UIDL are these words.");
+    // The Teensy's reset cause from its RCM_SRS0 and RCM_SRS1 (reset_cause_flags.hpp).
+    py::enum_<ResetCause>(m, "ResetCause")
+        .value("POWER_ON", ResetCause::PowerOn).value("PIN", ResetCause::Pin)
+        .value("WATCHDOG", ResetCause::Watchdog).value("LOCKUP", ResetCause::Lockup)
+        .value("SOFTWARE", ResetCause::Software).value("LOW_VOLTAGE", ResetCause::LowVoltage)
+        .value("CLOCK_LOSS", ResetCause::ClockLoss).value("DEBUGGER", ResetCause::Debugger)
+        .value("OTHER", ResetCause::Other);
+    m.def("reset_cause_from", &reset_cause_from, py::arg("srs0"), py::arg("srs1"),
+          "Why the MK64 last reset, from its RCM_SRS0 and RCM_SRS1.");
 
     // The parameter table (params.hpp), in param_index order, with each default.
     struct ParamRow {

@@ -1,6 +1,7 @@
-// The boot report's words (boot_report.hpp): one STATUSTEXT per finding, each at most 49
-// characters; a finding that needs attention (a corrupt store, a stored value refused, the
-// DMP's fallback, a reset by the watchdog or a fault) is a warning, a missing IMU critical.
+// The boot report's words (boot_report.hpp): one STATUSTEXT per finding, each at most 43
+// characters (49 with the link's "boot: " in front); a finding that needs attention (a
+// corrupt store, a stored value refused, the DMP's fallback, a reset by the watchdog or a
+// fault) is a warning, a missing IMU critical.
 #include "boot_report.hpp"
 
 namespace hq {
@@ -9,30 +10,30 @@ namespace {
 
 Notice reset_notice(ResetCause c) {
     switch (c) {
-        case ResetCause::PowerOn: return {MAV_SEVERITY_INFO, "boot: reset by power-on"};
-        case ResetCause::Pin: return {MAV_SEVERITY_INFO, "boot: reset by the reset pin"};
-        case ResetCause::Watchdog: return {MAV_SEVERITY_WARNING, "boot: reset by the watchdog"};
-        case ResetCause::Lockup: return {MAV_SEVERITY_WARNING, "boot: reset by a CPU lockup"};
-        case ResetCause::Software: return {MAV_SEVERITY_INFO, "boot: reset by software"};
-        case ResetCause::LowVoltage: return {MAV_SEVERITY_WARNING, "boot: reset by low voltage"};
-        case ResetCause::ClockLoss: return {MAV_SEVERITY_WARNING, "boot: reset by a clock loss"};
-        case ResetCause::Debugger: return {MAV_SEVERITY_INFO, "boot: reset by a debugger"};
+        case ResetCause::PowerOn: return {MAV_SEVERITY_INFO, "reset by power-on"};
+        case ResetCause::Pin: return {MAV_SEVERITY_INFO, "reset by the reset pin"};
+        case ResetCause::Watchdog: return {MAV_SEVERITY_WARNING, "reset by the watchdog"};
+        case ResetCause::Lockup: return {MAV_SEVERITY_WARNING, "reset by a CPU lockup"};
+        case ResetCause::Software: return {MAV_SEVERITY_INFO, "reset by software"};
+        case ResetCause::LowVoltage: return {MAV_SEVERITY_WARNING, "reset by low voltage"};
+        case ResetCause::ClockLoss: return {MAV_SEVERITY_WARNING, "reset by a clock loss"};
+        case ResetCause::Debugger: return {MAV_SEVERITY_INFO, "reset by a debugger"};
         case ResetCause::Other: break;
     }
-    return {MAV_SEVERITY_INFO, "boot: reset, cause unknown"};
+    return {MAV_SEVERITY_INFO, "reset, cause unknown"};
 }
 
 // Why the DMP set-up fell back to the raw path.
 const char* dmp_failure_text(DmpStep step) {
     switch (step) {
-        case DmpStep::Tables: return "IMU: DMP tables missing or bad; raw FIFO path";
-        case DmpStep::Image: return "IMU: DMP image did not verify; raw FIFO path";
-        case DmpStep::Config: return "IMU: DMP config did not verify; raw FIFO path";
-        case DmpStep::Registers: return "IMU: DMP set-up bus error; raw FIFO path";
-        case DmpStep::Updates: return "IMU: DMP updates did not verify; raw FIFO path";
+        case DmpStep::Tables: return "IMU: DMP tables missing or bad; raw path";
+        case DmpStep::Image: return "IMU: DMP image did not verify; raw path";
+        case DmpStep::Config: return "IMU: DMP config did not verify; raw path";
+        case DmpStep::Registers: return "IMU: DMP set-up bus error; raw path";
+        case DmpStep::Updates: return "IMU: DMP updates did not verify; raw path";
         case DmpStep::None: break;
     }
-    return "IMU: DMP set-up failed; raw FIFO path";
+    return "IMU: DMP set-up failed; raw path";
 }
 
 }  // namespace
@@ -58,8 +59,10 @@ Notice params_notice(ParamsFinding f, int param_index) {
 Notice imu_notice(ImuFinding f, DmpStep step) {
     switch (f) {
         case ImuFinding::Dmp: return {MAV_SEVERITY_INFO, "IMU: MPU6050 found; DMP path"};
-        case ImuFinding::RawByParam: return {MAV_SEVERITY_INFO, "IMU: MPU6050 found; raw path (IMU_PATH)"};
-        case ImuFinding::RawNoImage: return {MAV_SEVERITY_INFO, "IMU: MPU6050 found; raw path (no DMP)"};
+        case ImuFinding::RawByParam:
+            return {MAV_SEVERITY_INFO, "IMU: MPU6050 found; raw path (IMU_PATH)"};
+        case ImuFinding::RawNoImage:
+            return {MAV_SEVERITY_INFO, "IMU: MPU6050 found; raw path (no DMP)"};
         case ImuFinding::RawFallback: return {MAV_SEVERITY_WARNING, dmp_failure_text(step)};
         case ImuFinding::Missing: break;
     }
@@ -69,7 +72,8 @@ Notice imu_notice(ImuFinding f, DmpStep step) {
 ImuFinding imu_finding(InitResult r, ImuPath path) {
     switch (r) {
         case InitResult::OkDmp: return ImuFinding::Dmp;
-        case InitResult::OkRaw: return path == ImuPath::Raw ? ImuFinding::RawByParam : ImuFinding::RawNoImage;
+        case InitResult::OkRaw:
+            return path == ImuPath::Raw ? ImuFinding::RawByParam : ImuFinding::RawNoImage;
         case InitResult::OkRawFallback: return ImuFinding::RawFallback;
         case InitResult::NoDevice:
         case InitResult::BusError: break;
@@ -77,7 +81,9 @@ ImuFinding imu_finding(InitResult r, ImuPath path) {
     return ImuFinding::Missing;
 }
 
-bool announced(ParamsFinding f) { return f != ParamsFinding::NoStorage && f != ParamsFinding::Loaded; }
+bool announced(ParamsFinding f) {
+    return f != ParamsFinding::NoStorage && f != ParamsFinding::Loaded;
+}
 
 bool announced(ImuFinding f) { return f == ImuFinding::RawFallback || f == ImuFinding::Missing; }
 

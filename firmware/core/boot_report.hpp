@@ -1,9 +1,10 @@
 // The boot report in words: what start-up found (LoopStatus::boot, loop_exchange.hpp) as one
 // STATUSTEXT notice per finding, in order: why the chip reset, where the parameters came
 // from, the IMU and its path. init() raises the notices start-up always raised (a store that
-// is empty, corrupt or holds a value out of range; the DMP's fallback; a missing IMU); the
-// link sends the whole report again to every ground station it hears for the first time and
-// on request (docs/link-contract.md).
+// is empty, corrupt or holds a value out of range; the DMP's fallback; a missing IMU) in
+// these words; the link sends the whole report again, each finding's words after "boot: "
+// (what was found at start-up, not what holds now), to a ground station it hears for the
+// first time and on request (docs/link-contract.md).
 #pragma once
 
 #include "loop_exchange.hpp"
@@ -11,8 +12,6 @@
 namespace hq {
 
 constexpr int kBootFindings = 3;
-// Every finding, one bit each (the link's findings still to send).
-constexpr uint8_t kWholeBootReport = (1u << kBootFindings) - 1;
 
 // Finding i (0: the reset, 1: the parameters, 2: the IMU) of the report.
 Notice boot_finding(const BootReport& report, int i);

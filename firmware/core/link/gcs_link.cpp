@@ -6,7 +6,6 @@
 #include <cmath>
 #include <type_traits>
 
-#include "../boot_report.hpp"
 #include "link_util.hpp"
 
 namespace hq {
@@ -280,33 +279,52 @@ void GcsLink::send_notices_to(const LoopStatus& status, int end) {
     for (; notices_sent_ < end; ++notices_sent_) send_notice(status.notice[notices_sent_]);
 }
 
-bool GcsLink::send_notice(const Notice& n) {
-    if (n.text != nullptr) return send_statustext(n.severity, n.text);
-    char text[kStatusTextLen];
-    set_result_text(SetResult::Range, n.param_index, text, sizeof(text));
+// A notice's words after prefix (the boot report's "boot: "), within a STATUSTEXT.
+bool GcsLink::send_notice(const Notice& n, const char* prefix) {
+    char text[kStatusTextLen] = {};
+    size_t len = 0;
+    for (; prefix[len] != '\0'; ++len) text[len] = prefix[len];
+    if (n.text == nullptr) {
+        set_result_text(SetResult::Range, n.param_index, text + len, sizeof(text) - len);
+    } else {
+        for (size_t i = 0; len < sizeof(text) && n.text[i] != '\0'; ++i) {
+            text[len++] = n.text[i];
+        }
+    }
     return send_statustext(n.severity, text);
 }
 
-// A ground station's HEARTBEAT: the first from one this link has not heard (or has
-// forgotten, kHeardStations later) asks for the whole boot report.
+// A ground station's HEARTBEAT: it is heard now; the first from one this link has not heard
+// (or has forgotten, for kHeardStations others heard since) asks for the boot report.
 void GcsLink::heard(StationId who) {
+    ++heartbeats_heard_;
+    int oldest = 0;
     for (int i = 0; i < heard_count_; ++i) {
-        if (heard_[i] == who) return;
+        if (heard_[i].who == who) {
+            heard_[i].at = heartbeats_heard_;
+            return;
+        }
+        // Ages, not counts, so that the count's wrap-around changes nothing.
+        if (heartbeats_heard_ - heard_[i].at > heartbeats_heard_ - heard_[oldest].at) oldest = i;
     }
-    heard_[heard_next_] = who;
-    heard_next_ = static_cast<uint8_t>((heard_next_ + 1) % kHeardStations);
-    if (heard_count_ < kHeardStations) ++heard_count_;
-    boot_pending_ = kWholeBootReport;
+    const int slot = heard_count_ < kHeardStations ? heard_count_++ : oldest;
+    heard_[slot] = Heard{who, heartbeats_heard_};
+    boot_asked_ = true;
 }
 
-// One finding of the boot report a loop, in order, while any is pending; one the link could
-// not take stays pending for the next loop, so the report is never lost to a full link.
+// The boot report, one finding a loop, in order, from the first to the last; one the link
+// could not take is sent in the next loop, so no finding is lost to a full link. A report
+// asked for starts when none is under way and a second (of loops) has passed since the last
+// began: a flood of new stations or requests costs at most one report a second.
 void GcsLink::send_boot_report(const BootReport& boot) {
-    for (int i = 0; i < kBootFindings; ++i) {
-        const uint8_t bit = static_cast<uint8_t>(1u << i);
-        if (!(boot_pending_ & bit)) continue;
-        if (send_notice(boot_finding(boot, i))) boot_pending_ = static_cast<uint8_t>(boot_pending_ & ~bit);
-        return;
+    if (boot_wait_loops_ > 0) --boot_wait_loops_;
+    if (boot_next_ >= kBootFindings && boot_asked_ && boot_wait_loops_ == 0) {
+        boot_next_ = 0;
+        boot_asked_ = false;
+        boot_wait_loops_ = static_cast<uint32_t>(config_.loop_rate_hz + 0.5f);
+    }
+    if (boot_next_ < kBootFindings && send_notice(boot_finding(boot, boot_next_), "boot: ")) {
+        ++boot_next_;
     }
 }
 

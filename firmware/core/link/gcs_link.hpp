@@ -16,17 +16,20 @@
 // store) and parameter refusal; COMMAND_ACK for every COMMAND_LONG and COMMAND_INT addressed
 // to it or broadcast; PARAM_VALUE for the parameter protocol, a few per loop. The boot report
 // (boot_report.hpp: what start-up found, one STATUSTEXT per finding, one finding a loop) on
-// the first HEARTBEAT of every ground station this link has not heard before, and on
-// MAV_CMD_REQUEST_MESSAGE for STATUSTEXT.
+// the first HEARTBEAT of a ground station this link has not heard (or has forgotten), and on
+// MAV_CMD_REQUEST_MESSAGE for STATUSTEXT: a report under way runs to its end, a request
+// during it asks for one more whole report after it, and at most one report starts a second.
 // A message that does not fit the link is dropped whole and counted, never blocking the loop
-// (a PARAM_VALUE or a finding of the boot report is sent again in the next loop instead). At most LoopInbox::kCapacity
-// messages are taken per loop; the rest wait in the port for the next.
+// (a PARAM_VALUE or a finding of the boot report is sent again in the next loop instead).
+// At most LoopInbox::kCapacity messages are taken per loop; the rest wait in the port for
+// the next.
 #pragma once
 
 #include <cstdint>
 
 #include "../../hal/clock.hpp"
 #include "../../hal/serial.hpp"
+#include "../boot_report.hpp"
 #include "../loop_exchange.hpp"
 #include "../loop_load.hpp"
 
@@ -111,7 +114,7 @@ private:
     void send_excitation_status(Reason reason, const ExcitationReport& ex);
     bool send_statustext(uint8_t severity, const char* text);
     void send_notices_to(const LoopStatus& status, int end);
-    bool send_notice(const Notice& n);
+    bool send_notice(const Notice& n, const char* prefix = "");
     void heard(StationId who);
     void send_boot_report(const BootReport& boot);
     bool send(const mavlink_message_t& msg);
@@ -164,11 +167,21 @@ private:
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index
     uint64_t params_as_float_ = 0;           // of those, answers to a set sent as REAL32
     // The ground stations this link has heard (a HEARTBEAT of MAV_TYPE_GCS), for the boot
-    // report: the last kHeardStations, a new one in the place of the one heard first.
+    // report: kHeardStations of them, each with the count of heartbeats heard at its last; a
+    // new one takes the place of the one heard longest ago.
+    struct Heard {
+        StationId who;
+        uint32_t at;
+    };
     static constexpr int kHeardStations = 8;
-    StationId heard_[kHeardStations] = {};
-    uint8_t heard_count_ = 0, heard_next_ = 0;
-    uint8_t boot_pending_ = 0;               // the boot report's findings to send, one bit each
+    Heard heard_[kHeardStations] = {};
+    uint8_t heard_count_ = 0;
+    uint32_t heartbeats_heard_ = 0;
+    // The boot report: the finding to send next (kBootFindings: no report under way), whether
+    // one more whole report is asked for, and the loops left before another may start.
+    uint8_t boot_next_ = kBootFindings;
+    bool boot_asked_ = false;
+    uint32_t boot_wait_loops_ = 0;
     mavlink_status_t tx_status_{};
     mavlink_status_t rx_status_{};
     mavlink_message_t rx_msg_{};

@@ -3,7 +3,6 @@
 // (gcs_link.hpp says what is sent when).
 #include <cmath>
 
-#include "../boot_report.hpp"
 #include "gcs_link.hpp"
 #include "link_util.hpp"
 
@@ -66,10 +65,11 @@ uint32_t GcsLink::stream_bytes_per_s(uint32_t msgid, uint32_t interval_us) const
     return static_cast<uint32_t>(static_cast<float>(packet_bytes(msgid)) * 1e6f / us + 0.5f);
 }
 
-// A message of the stream table once in the next loop; STATUSTEXT: the boot report again.
+// A message of the stream table once in the next loop; STATUSTEXT: the boot report again
+// (after the one under way, if any: send_boot_report).
 uint8_t GcsLink::request_message(uint32_t msgid) {
     if (msgid == MAVLINK_MSG_ID_STATUSTEXT) {
-        boot_pending_ = kWholeBootReport;
+        boot_asked_ = true;
         return MAV_RESULT_ACCEPTED;
     }
     Stream* s = stream(msgid);
