@@ -52,8 +52,7 @@ def test_the_facts_are_the_bindings():
          lim.max_amplitude[int(fw.Injection.MIXER)]]
     assert facts.MAX_HARMONICS == fw.MAX_HARMONICS
     assert facts.MIN_TIME_CONSTANT_S == fw.MIN_TIME_CONSTANT_S
-    assert (facts.USB_VID, facts.USB_PID, facts.USB_MANUFACTURER, facts.USB_PRODUCT) == \
-        (fw.USB_VID, fw.USB_PID, fw.USB_MANUFACTURER, fw.USB_PRODUCT)
+    assert facts.USB_IDENTITY == (fw.USB_VID, fw.USB_PID, fw.USB_MANUFACTURER, fw.USB_PRODUCT)
 
 
 @pytest.mark.parametrize("hz", [fw.MAX_LOOP_RATE_HZ * 1.001, 0.0])
@@ -75,7 +74,8 @@ def fact_values() -> list:
            (facts.MAX_LOOP_RATE_HZ, "the host build's largest loop rate", LOOP),
            (facts.MAX_DURATION_S, "the longest excitation", TIME),
            (facts.MAX_PTY_BACKLOG_BYTES, "the pty's backlog bound", BACKLOG),
-           (facts.USB_VID, "the USB vendor ID", USB), (facts.USB_PID, "the USB product ID", USB)]
+           (facts.USB_IDENTITY.vid, "the USB vendor ID", USB),
+           (facts.USB_IDENTITY.pid, "the USB product ID", USB)]
     for what, rad in (("the abort angle", facts.ABORT_ANGLE_RAD),
                       ("the abort rate", facts.ABORT_RATE_RAD_S),
                       ("the angle amplitude bound", facts.max_amplitude("angle")),

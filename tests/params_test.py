@@ -213,13 +213,21 @@ def _stored(tmp_path, **values):
     return store
 
 
-def _corrupted(tmp_path):
-    """A stored EXC_MAX_DUR of 120 s with one bit of its value flipped."""
-    store = _stored(tmp_path, EXC_MAX_DUR=120)
+def _changed_store(tmp_path, change, **values):
+    """A store of ``values`` whose bytes ``change`` (given them as a bytearray) then edits."""
+    store = _stored(tmp_path, **values)
     data = bytearray(store.read_bytes())
-    data[20] ^= 0x40                                   # one bit of one stored value
+    change(data)
     store.write_bytes(bytes(data))
     return store
+
+
+def _corrupted(tmp_path):
+    """A stored EXC_MAX_DUR of 120 s with one bit of its value flipped."""
+    def flip(data):
+        data[20] ^= 0x40                               # one bit of one stored value
+
+    return _changed_store(tmp_path, flip, EXC_MAX_DUR=120)
 
 
 def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
@@ -235,13 +243,11 @@ def test_a_corrupt_store_gives_the_defaults_and_says_so(tmp_path):
 
 def _out_of_range(tmp_path):
     """A store whose RATE_YAW_TD (0..1) holds 7.0, its record's CRC rewritten to match."""
-    store = _stored(tmp_path, RATE_YAW_TD=0.05)
-    data = bytearray(store.read_bytes())
-    index = NAMES.index("RATE_YAW_TD")
-    struct.pack_into("<f", data, 8 + 8 * index + 4, 7.0)
-    struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
-    store.write_bytes(bytes(data))
-    return store
+    def seven(data):
+        struct.pack_into("<f", data, 8 + 8 * NAMES.index("RATE_YAW_TD") + 4, 7.0)
+        struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
+
+    return _changed_store(tmp_path, seven, RATE_YAW_TD=0.05)
 
 
 def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):

@@ -51,9 +51,10 @@ def listing(monkeypatch, tmp_path):
 
 
 def test_the_identity_is_the_firmwares():
-    assert (facts.USB_VID, facts.USB_PID) == (fw.USB_VID, fw.USB_PID) == (0x16C0, 0x0483)
-    assert facts.USB_MANUFACTURER == fw.USB_MANUFACTURER
-    assert facts.USB_PRODUCT == fw.USB_PRODUCT and "heliquad" in facts.USB_PRODUCT.lower()
+    usb = facts.USB_IDENTITY
+    assert (usb.vid, usb.pid) == (fw.USB_VID, fw.USB_PID) == (0x16C0, 0x0483)
+    assert usb.manufacturer == fw.USB_MANUFACTURER
+    assert usb.product == fw.USB_PRODUCT and "heliquad" in usb.product.lower()
     # The emulated chip's serial number: its unique identification, as the image derives it.
     from heliquad.host.commands.board import _usb_serial
     assert _usb_serial("teensy35") == EMULATED_SERIAL
@@ -292,8 +293,7 @@ def test_a_stale_announcement_is_removed_and_a_locked_one_used(pty, tmp_path):
 
 def _record(device):
     return {"format": announce.FORMAT, "version": announce.VERSION, "process": 1,
-            "device": device, "vid": facts.USB_VID, "pid": facts.USB_PID,
-            "manufacturer": facts.USB_MANUFACTURER, "product": facts.USB_PRODUCT,
+            "device": device, **facts.USB_IDENTITY._asdict(),
             "serial_number": "SERIAL1", "firmware": "host"}
 
 

@@ -21,14 +21,14 @@ import os
 import sys
 
 from ...sim.base.errors import InputError
-from ...sim.base.firmware_facts import USB_PID, USB_VID
+from ...sim.base.firmware_facts import USB_IDENTITY
 from ...sim.rig.announce import BoardPort, announcements, folder
 
 __all__ = ["AUTO", "resolve_port", "auto_board", "found_record", "find_board", "usb_ports"]
 
 #: The --port value that asks for the board to be found.
 AUTO = "auto"
-#: What a heliquad board's product string contains (the firmware's is USB_PRODUCT).
+#: What a heliquad board's product string contains (the firmware's is USB_IDENTITY.product).
 PRODUCT_MARK = "heliquad"
 
 
@@ -95,7 +95,7 @@ def _none_found(closed, stock):
 
 
 def _teensy_ids(port: BoardPort) -> bool:
-    return port.vid == USB_VID and port.pid == USB_PID
+    return (port.vid, port.pid) == (USB_IDENTITY.vid, USB_IDENTITY.pid)
 
 
 def _says_heliquad(port: BoardPort) -> bool:

@@ -13,6 +13,8 @@ for a copy.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from heliquad import _firmware
 
 from . import dialect
@@ -20,7 +22,7 @@ from . import dialect
 __all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "MAX_PTY_BACKLOG_BYTES",
            "ABORT_ANGLE_RAD", "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION",
            "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S",
-           "USB_VID", "USB_PID", "USB_MANUFACTURER", "USB_PRODUCT", "usb_serial_number",
+           "UsbIdentity", "USB_IDENTITY", "usb_serial_number",
            "max_amplitude", "safety_limits"]
 
 #: The control loop's rate unless configured otherwise, Hz, and its period, s.
@@ -31,13 +33,22 @@ MAX_LOOP_RATE_HZ = float(_firmware.MAX_LOOP_RATE_HZ)
 #: The most telemetry a pty of the host build keeps waiting for a reader under a backlog bound
 #: (its --telemetry-backlog-bytes): what the line discipline holds in sight of TIOCINQ, bytes.
 MAX_PTY_BACKLOG_BYTES = int(_firmware.MAX_PTY_BACKLOG_BYTES)
+
+
+class UsbIdentity(NamedTuple):
+    """A USB device's identity as its descriptors give it."""
+
+    vid: int
+    pid: int
+    manufacturer: str
+    product: str
+
+
 #: The Teensy image's USB identity: Teensyduino's USB Serial vendor and product IDs (a stock
 #: sketch has them too), and the manufacturer and product strings; heliquad's product string
 #: contains "heliquad".
-USB_VID = int(_firmware.USB_VID)
-USB_PID = int(_firmware.USB_PID)
-USB_MANUFACTURER = str(_firmware.USB_MANUFACTURER)
-USB_PRODUCT = str(_firmware.USB_PRODUCT)
+USB_IDENTITY = UsbIdentity(int(_firmware.USB_VID), int(_firmware.USB_PID),
+                           str(_firmware.USB_MANUFACTURER), str(_firmware.USB_PRODUCT))
 
 
 def usb_serial_number(uid_words) -> str:

@@ -37,7 +37,7 @@ try:
 except ImportError:               # Windows: no ptys, so no boards to announce or find
     fcntl = None
 
-from ..base.firmware_facts import USB_MANUFACTURER, USB_PID, USB_PRODUCT, USB_VID
+from ..base.firmware_facts import USB_IDENTITY
 
 __all__ = ["BoardPort", "FOLDER_ENV", "HOST_BUILD_SERIAL", "announced", "announcements",
            "folder"]
@@ -113,8 +113,7 @@ def announced(device: str, serial_number: str, firmware: str):
     on stderr saying why, and the board runs unannounced."""
     where = folder()
     record = {"format": FORMAT, "version": VERSION, "process": os.getpid(),
-              "device": os.path.abspath(device), "vid": USB_VID, "pid": USB_PID,
-              "manufacturer": USB_MANUFACTURER, "product": USB_PRODUCT,
+              "device": os.path.abspath(device), **USB_IDENTITY._asdict(),
               "serial_number": serial_number, "firmware": firmware}
     held = _write(where, f"board-{os.getpid()}.json", json.dumps(record, indent=1) + "\n")
     if isinstance(held, str):
