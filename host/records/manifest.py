@@ -20,7 +20,7 @@ import math
 from ...sim.base import dialect as names
 from . import schema as S
 from .gains import recorded_gains_schema
-from .output import write_json
+from .output import document, write_json
 from .reading import read_json
 
 __all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "PORT_FOUND", "UNSET", "SweepManifest",
@@ -101,9 +101,9 @@ class SweepManifest:
     in_progress_hz: float | None = _key(S.Null(S.Num()), default=UNSET)
 
     def document(self) -> dict:
-        """The manifest as its JSON document: every key that has a value, in field order."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
-                if getattr(self, f.name) is not UNSET}
+        """The manifest as its JSON document: every key that has a value (None included,
+        written as null), in field order."""
+        return document(self, absent=UNSET)
 
 
 def write_manifest(path, manifest: SweepManifest) -> None:

@@ -101,11 +101,12 @@ def write_json(path, doc) -> None:
         fh.write("\n")
 
 
-def document(record) -> dict:
-    """A record (a dataclass) as its JSON document: its fields in their order, each that is
-    None left out unless its metadata is :data:`NULLABLE`."""
+def document(record, absent=None) -> dict:
+    """A record (a dataclass) as its JSON document: its fields in their order, each whose
+    value is ``absent`` (the record's "not in the file": None, or a marker of its own when
+    None is written as null) left out unless its metadata is :data:`NULLABLE`."""
     return {f.name: getattr(record, f.name) for f in dataclasses.fields(record)
-            if getattr(record, f.name) is not None or f.metadata.get("null")}
+            if getattr(record, f.name) is not absent or f.metadata.get("null")}
 
 
 def _finite_or_null(doc):
