@@ -5311,6 +5311,386 @@ struct DATAW3S3L : Reg<uint32_t, 0x4001F27Cu> {
 };
 }  // namespace FMC
 
+namespace USB0 {
+constexpr uint32_t BASE = 0x40072000u;
+struct PERID : Reg<uint8_t, 0x40072000u> {
+    static constexpr uint8_t RESET_VALUE = 0x4u;
+    static constexpr uint32_t ID_SHIFT = 0;
+    static constexpr uint8_t ID_MASK = 0x3Fu;
+    static constexpr uint8_t ID(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0x3Fu); }
+};
+struct IDCOMP : Reg<uint8_t, 0x40072004u> {
+    static constexpr uint8_t RESET_VALUE = 0xFBu;
+    static constexpr uint32_t NID_SHIFT = 0;
+    static constexpr uint8_t NID_MASK = 0x3Fu;
+    static constexpr uint8_t NID(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0x3Fu); }
+};
+struct REV : Reg<uint8_t, 0x40072008u> {
+    static constexpr uint8_t RESET_VALUE = 0x33u;
+    static constexpr uint32_t REV__SHIFT = 0;
+    static constexpr uint8_t REV__MASK = 0xFFu;
+    static constexpr uint8_t REV_(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct ADDINFO : Reg<uint8_t, 0x4007200Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x1u;
+    static constexpr uint8_t IEHOST = 0x1u;
+    static constexpr uint32_t IRQNUM_SHIFT = 3;
+    static constexpr uint8_t IRQNUM_MASK = 0xF8u;
+    static constexpr uint8_t IRQNUM(uint32_t v) { return static_cast<uint8_t>((v << 3) & 0xF8u); }
+};
+struct OTGISTAT : Reg<uint8_t, 0x40072010u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t AVBUSCHG = 0x1u;
+    static constexpr uint8_t B_SESS_CHG = 0x4u;
+    static constexpr uint8_t SESSVLDCHG = 0x8u;
+    static constexpr uint8_t LINE_STATE_CHG = 0x20u;
+    static constexpr uint8_t ONEMSEC = 0x40u;
+    static constexpr uint8_t IDCHG = 0x80u;
+};
+struct OTGICR : Reg<uint8_t, 0x40072014u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t AVBUSEN = 0x1u;
+    static constexpr uint8_t BSESSEN = 0x4u;
+    static constexpr uint8_t SESSVLDEN = 0x8u;
+    static constexpr uint8_t LINESTATEEN = 0x20u;
+    static constexpr uint8_t ONEMSECEN = 0x40u;
+    static constexpr uint8_t IDEN = 0x80u;
+};
+struct OTGSTAT : Reg<uint8_t, 0x40072018u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t AVBUSVLD = 0x1u;
+    static constexpr uint8_t BSESSEND = 0x4u;
+    static constexpr uint8_t SESS_VLD = 0x8u;
+    static constexpr uint8_t LINESTATESTABLE = 0x20u;
+    static constexpr uint8_t ONEMSECEN = 0x40u;
+    static constexpr uint8_t ID = 0x80u;
+};
+struct OTGCTL : Reg<uint8_t, 0x4007201Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t OTGEN = 0x4u;
+    static constexpr uint8_t DMLOW = 0x10u;
+    static constexpr uint8_t DPLOW = 0x20u;
+    static constexpr uint8_t DPHIGH = 0x80u;
+};
+struct ISTAT : Reg<uint8_t, 0x40072080u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t USBRST = 0x1u;
+    static constexpr uint8_t ERROR = 0x2u;
+    static constexpr uint8_t SOFTOK = 0x4u;
+    static constexpr uint8_t TOKDNE = 0x8u;
+    static constexpr uint8_t SLEEP = 0x10u;
+    static constexpr uint8_t RESUME = 0x20u;
+    static constexpr uint8_t ATTACH = 0x40u;
+    static constexpr uint8_t STALL = 0x80u;
+};
+struct INTEN : Reg<uint8_t, 0x40072084u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t USBRSTEN = 0x1u;
+    static constexpr uint8_t ERROREN = 0x2u;
+    static constexpr uint8_t SOFTOKEN = 0x4u;
+    static constexpr uint8_t TOKDNEEN = 0x8u;
+    static constexpr uint8_t SLEEPEN = 0x10u;
+    static constexpr uint8_t RESUMEEN = 0x20u;
+    static constexpr uint8_t ATTACHEN = 0x40u;
+    static constexpr uint8_t STALLEN = 0x80u;
+};
+struct ERRSTAT : Reg<uint8_t, 0x40072088u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t PIDERR = 0x1u;
+    static constexpr uint8_t CRC5EOF = 0x2u;
+    static constexpr uint8_t CRC16 = 0x4u;
+    static constexpr uint8_t DFN8 = 0x8u;
+    static constexpr uint8_t BTOERR = 0x10u;
+    static constexpr uint8_t DMAERR = 0x20u;
+    static constexpr uint8_t BTSERR = 0x80u;
+};
+struct ERREN : Reg<uint8_t, 0x4007208Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t PIDERREN = 0x1u;
+    static constexpr uint8_t CRC5EOFEN = 0x2u;
+    static constexpr uint8_t CRC16EN = 0x4u;
+    static constexpr uint8_t DFN8EN = 0x8u;
+    static constexpr uint8_t BTOERREN = 0x10u;
+    static constexpr uint8_t DMAERREN = 0x20u;
+    static constexpr uint8_t BTSERREN = 0x80u;
+};
+struct STAT : Reg<uint8_t, 0x40072090u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t ODD = 0x4u;
+    static constexpr uint8_t TX = 0x8u;
+    static constexpr uint32_t ENDP_SHIFT = 4;
+    static constexpr uint8_t ENDP_MASK = 0xF0u;
+    static constexpr uint8_t ENDP(uint32_t v) { return static_cast<uint8_t>((v << 4) & 0xF0u); }
+};
+struct CTL : Reg<uint8_t, 0x40072094u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t USBENSOFEN = 0x1u;
+    static constexpr uint8_t ODDRST = 0x2u;
+    static constexpr uint8_t RESUME = 0x4u;
+    static constexpr uint8_t HOSTMODEEN = 0x8u;
+    static constexpr uint8_t RESET = 0x10u;
+    static constexpr uint8_t TXSUSPENDTOKENBUSY = 0x20u;
+    static constexpr uint8_t SE0 = 0x40u;
+    static constexpr uint8_t JSTATE = 0x80u;
+};
+struct ADDR : Reg<uint8_t, 0x40072098u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ADDR__SHIFT = 0;
+    static constexpr uint8_t ADDR__MASK = 0x7Fu;
+    static constexpr uint8_t ADDR_(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0x7Fu); }
+    static constexpr uint8_t LSEN = 0x80u;
+};
+struct BDTPAGE1 : Reg<uint8_t, 0x4007209Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t BDTBA_SHIFT = 1;
+    static constexpr uint8_t BDTBA_MASK = 0xFEu;
+    static constexpr uint8_t BDTBA(uint32_t v) { return static_cast<uint8_t>((v << 1) & 0xFEu); }
+};
+struct FRMNUML : Reg<uint8_t, 0x400720A0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t FRM_SHIFT = 0;
+    static constexpr uint8_t FRM_MASK = 0xFFu;
+    static constexpr uint8_t FRM(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct FRMNUMH : Reg<uint8_t, 0x400720A4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t FRM_SHIFT = 0;
+    static constexpr uint8_t FRM_MASK = 0x7u;
+    static constexpr uint8_t FRM(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0x7u); }
+};
+struct TOKEN : Reg<uint8_t, 0x400720A8u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t TOKENENDPT_SHIFT = 0;
+    static constexpr uint8_t TOKENENDPT_MASK = 0xFu;
+    static constexpr uint8_t TOKENENDPT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFu); }
+    static constexpr uint32_t TOKENPID_SHIFT = 4;
+    static constexpr uint8_t TOKENPID_MASK = 0xF0u;
+    static constexpr uint8_t TOKENPID(uint32_t v) { return static_cast<uint8_t>((v << 4) & 0xF0u); }
+};
+struct SOFTHLD : Reg<uint8_t, 0x400720ACu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CNT_SHIFT = 0;
+    static constexpr uint8_t CNT_MASK = 0xFFu;
+    static constexpr uint8_t CNT(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct BDTPAGE2 : Reg<uint8_t, 0x400720B0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t BDTBA_SHIFT = 0;
+    static constexpr uint8_t BDTBA_MASK = 0xFFu;
+    static constexpr uint8_t BDTBA(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct BDTPAGE3 : Reg<uint8_t, 0x400720B4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t BDTBA_SHIFT = 0;
+    static constexpr uint8_t BDTBA_MASK = 0xFFu;
+    static constexpr uint8_t BDTBA(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct ENDPT0 : Reg<uint8_t, 0x400720C0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT1 : Reg<uint8_t, 0x400720C4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT2 : Reg<uint8_t, 0x400720C8u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT3 : Reg<uint8_t, 0x400720CCu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT4 : Reg<uint8_t, 0x400720D0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT5 : Reg<uint8_t, 0x400720D4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT6 : Reg<uint8_t, 0x400720D8u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT7 : Reg<uint8_t, 0x400720DCu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT8 : Reg<uint8_t, 0x400720E0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT9 : Reg<uint8_t, 0x400720E4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT10 : Reg<uint8_t, 0x400720E8u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT11 : Reg<uint8_t, 0x400720ECu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT12 : Reg<uint8_t, 0x400720F0u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT13 : Reg<uint8_t, 0x400720F4u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT14 : Reg<uint8_t, 0x400720F8u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct ENDPT15 : Reg<uint8_t, 0x400720FCu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t EPHSHK = 0x1u;
+    static constexpr uint8_t EPSTALL = 0x2u;
+    static constexpr uint8_t EPTXEN = 0x4u;
+    static constexpr uint8_t EPRXEN = 0x8u;
+    static constexpr uint8_t EPCTLDIS = 0x10u;
+    static constexpr uint8_t RETRYDIS = 0x40u;
+    static constexpr uint8_t HOSTWOHUB = 0x80u;
+};
+struct USBCTRL : Reg<uint8_t, 0x40072100u> {
+    static constexpr uint8_t RESET_VALUE = 0xC0u;
+    static constexpr uint8_t PDE = 0x40u;
+    static constexpr uint8_t SUSP = 0x80u;
+};
+struct OBSERVE : Reg<uint8_t, 0x40072104u> {
+    static constexpr uint8_t RESET_VALUE = 0x50u;
+    static constexpr uint8_t DMPD = 0x10u;
+    static constexpr uint8_t DPPD = 0x40u;
+    static constexpr uint8_t DPPU = 0x80u;
+};
+struct CONTROL : Reg<uint8_t, 0x40072108u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t DPPULLUPNONOTG = 0x10u;
+};
+struct USBTRC0 : Reg<uint8_t, 0x4007210Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t USB_RESUME_INT = 0x1u;
+    static constexpr uint8_t SYNC_DET = 0x2u;
+    static constexpr uint8_t USB_CLK_RECOVERY_INT = 0x4u;
+    static constexpr uint8_t USBRESMEN = 0x20u;
+    static constexpr uint8_t USBRESET = 0x80u;
+};
+struct USBFRMADJUST : Reg<uint8_t, 0x40072114u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ADJ_SHIFT = 0;
+    static constexpr uint8_t ADJ_MASK = 0xFFu;
+    static constexpr uint8_t ADJ(uint32_t v) { return static_cast<uint8_t>((v << 0) & 0xFFu); }
+};
+struct CLK_RECOVER_CTRL : Reg<uint8_t, 0x40072140u> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t RESTART_IFRTRIM_EN = 0x20u;
+    static constexpr uint8_t RESET_RESUME_ROUGH_EN = 0x40u;
+    static constexpr uint8_t CLOCK_RECOVER_EN = 0x80u;
+};
+struct CLK_RECOVER_IRC_EN : Reg<uint8_t, 0x40072144u> {
+    static constexpr uint8_t RESET_VALUE = 0x1u;
+    static constexpr uint8_t REG_EN = 0x1u;
+    static constexpr uint8_t IRC_EN = 0x2u;
+};
+struct CLK_RECOVER_INT_STATUS : Reg<uint8_t, 0x4007215Cu> {
+    static constexpr uint8_t RESET_VALUE = 0x0u;
+    static constexpr uint8_t OVF_ERROR = 0x10u;
+};
+}  // namespace USB0
+
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
 struct DHCSR : Reg<uint32_t, 0xE000EDF0u> {
