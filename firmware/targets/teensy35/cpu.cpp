@@ -7,4 +7,8 @@ void nvic_enable(int irq, uint8_t priority) {
     reg_at<mk64::NVIC::NVICISER0>(irq / 32) = 1u << (irq % 32);
 }
 
+void nvic_disable(int irq) {
+    reg_at<mk64::NVIC::NVICICER0>(irq / 32) = 1u << (irq % 32);
+}
+
 }  // namespace hq::teensy

@@ -52,5 +52,7 @@ inline uint8_t read_for_effect(volatile uint8_t& reg) {
 
 // Priority 0 (highest) .. 15; the MK64 implements the top four bits of each priority byte.
 void nvic_enable(int irq, uint8_t priority);
+// The interrupt no longer reaches the core (its pending flag and priority are kept).
+void nvic_disable(int irq);
 
 }  // namespace hq::teensy
