@@ -46,7 +46,9 @@ uint16_t string_buffer[1 + hq::kUsbSerialDigits];
 // Writes ASCII text as the descriptor's UTF-16 code units; returns their count.
 size_t put_ascii(const char* text, size_t max_units) {
     size_t n = 0;
-    for (; n < max_units && text[n] != '\0'; ++n) string_buffer[1 + n] = static_cast<uint8_t>(text[n]);
+    for (; n < max_units && text[n] != '\0'; ++n) {
+        string_buffer[1 + n] = static_cast<uint8_t>(text[n]);
+    }
     return n;
 }
 
@@ -55,7 +57,9 @@ size_t put_serial() {
                              sim::UIDL::read()};
     char digits[hq::kUsbSerialDigits];
     hq::usb_serial_number(uid, digits);
-    for (size_t i = 0; i < hq::kUsbSerialDigits; ++i) string_buffer[1 + i] = static_cast<uint8_t>(digits[i]);
+    for (size_t i = 0; i < hq::kUsbSerialDigits; ++i) {
+        string_buffer[1 + i] = static_cast<uint8_t>(digits[i]);
+    }
     return hq::kUsbSerialDigits;
 }
 
