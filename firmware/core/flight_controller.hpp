@@ -86,6 +86,7 @@ private:
     void answer(LoopInbox& inbox, const RcInput& rc, uint64_t now_us);
     LoopAnswer answer_one(const LoopRequest& r, const ExcitationConfig& start, const RcInput& rc,
                           uint64_t now_us);
+    LoopAnswer answer_bootloader();
     LoopAnswer answer_excitation(const LoopRequest& r, const ExcitationConfig& start,
                                  uint64_t now_us);
     LoopAnswer answer_param_set(const LoopRequest& r, uint64_t now_us);

@@ -44,10 +44,26 @@ LoopAnswer FlightController::answer_one(const LoopRequest& r, const ExcitationCo
         case RequestKind::Storage:
             a.verdict = supervisor_.armed() ? Verdict::Refused : storage_action(r.value, clock_.micros());
             return a;
+        case RequestKind::Bootloader:
+            return answer_bootloader();
         default:
             return answer_excitation(r, start, now_us);
     }
     a.verdict = a.reason == Reason::None ? Verdict::Accepted : Verdict::Refused;
+    return a;
+}
+
+// The target's bootloader (the Teensy's USB host set 134 baud): never while armed, which is
+// refused and said; disarmed, the motors are already at their stop pulse and stay there.
+LoopAnswer FlightController::answer_bootloader() {
+    LoopAnswer a;
+    if (supervisor_.armed()) {
+        a.verdict = Verdict::Refused;
+        notice(MAV_SEVERITY_WARNING, "bootloader refused: armed (disarm first)");
+        return a;
+    }
+    status_.bootloader = true;
+    notice(MAV_SEVERITY_NOTICE, "entering the bootloader: disarmed, motors stopped");
     return a;
 }
 

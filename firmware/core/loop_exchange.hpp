@@ -29,6 +29,7 @@ enum class RequestKind : uint8_t {
     ExcitationRefuse,   // an HQ_EXCITATION action the firmware does not know (BAD_ACTION)
     ParamSet,           // `param_index`, `param_value` (decoded; `param_type_ok` false: refused)
     Storage,            // `value` the MAV_CMD_PREFLIGHT_STORAGE parameter action
+    Bootloader,         // the target asks to restart into its bootloader (never while armed)
 };
 
 struct LoopRequest {
@@ -61,8 +62,10 @@ struct LoopAnswer {
     ExcitationReport excitation{};         // the Excitation* kinds
 };
 
-// One loop's requests, filled by the link before the step and answered in the step. At most
-// one ExcitationStart a loop (its configuration is large); a second waits for the next.
+// One loop's requests, filled by the links before the step and answered in the step; whoever
+// runs the loop clears it before the links fill it (one inbox serves every link of the
+// board). At most one ExcitationStart a loop (its configuration is large); a second waits for
+// the next.
 struct LoopInbox {
     static constexpr int kCapacity = 24;
     LoopRequest request[kCapacity];
@@ -70,6 +73,10 @@ struct LoopInbox {
     uint8_t count = 0;
     bool has_excitation = false;
     ExcitationConfig excitation{};
+    void clear() {
+        count = 0;
+        has_excitation = false;
+    }
 };
 
 struct LoopState {               // what the last loop computed, for telemetry and tests
@@ -151,6 +158,9 @@ struct LoopStatus {
     uint8_t notice_count = 0;
     uint8_t notices_before_telemetry = 0;
     BootReport boot{};                     // what start-up found (init())
+    // A Bootloader request was accepted (disarmed): the target enters its bootloader once
+    // this loop's messages are out. Never set while armed.
+    bool bootloader = false;
 };
 
 }  // namespace hq

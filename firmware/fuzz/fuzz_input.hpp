@@ -197,14 +197,15 @@ inline bool params_in_range(const hq::Params& p) {
 template <class Telemetry>
 struct Vehicle {
     explicit Vehicle(Reader& in)
-        : cfg(config(in, chip, storage)), fc(cfg, chip, clock, motors), link(link_cfg, clock, telemetry) {
+        : cfg(config(in, chip, storage)), fc(cfg, chip, clock, motors), link(link_cfg, clock, telemetry, inbox) {
         fc.init();
         link.send_notices(fc.status());
     }
     // One loop as the targets run it: the link's requests, the step, its telemetry.
     void step(const hq::RcInput& rc) {
+        inbox.clear();
         link.receive();
-        fc.step(rc, link.inbox());
+        fc.step(rc, inbox);
         link.transmit(fc.status());
     }
     hq::HostClock clock;
@@ -215,6 +216,7 @@ struct Vehicle {
     hq::FlightControllerConfig cfg;
     hq::FlightController fc;
     hq::GcsLinkConfig link_cfg;
+    hq::LoopInbox inbox;
     hq::GcsLink link;
 
 private:

@@ -16,8 +16,8 @@ static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
               kMotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
 static_assert(LoopInbox::kCapacity < 128, "Received::request holds a slot");
 
-GcsLink::GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port)
-    : config_(config), clock_(clock), port_(port),
+GcsLink::GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port, LoopInbox& inbox)
+    : config_(config), clock_(clock), port_(port), inbox_(inbox),
       streams_{{MAVLINK_MSG_ID_HEARTBEAT, 1000000, 1000000, 0, false},
                {MAVLINK_MSG_ID_HQ_FW_STATUS, 1000000, 1000000, 0, false},
                {MAVLINK_MSG_ID_SYS_STATUS, 1000000, 1000000, 0, false},
@@ -37,8 +37,6 @@ bool GcsLink::for_us(uint8_t target_system, uint8_t target_component) const {
 // --- in ------------------------------------------------------------------------------------
 
 void GcsLink::receive() {
-    inbox_.count = 0;
-    inbox_.has_excitation = false;
     received_count_ = 0;
     if (have_held_) {
         have_held_ = false;
@@ -261,7 +259,6 @@ void GcsLink::transmit(const LoopStatus& status) {
         reply(in, a);
     }
     received_count_ = 0;
-    inbox_.count = 0;
     send_notices_to(status, status.notices_before_telemetry);
     if (status.excitation_ended) send_excitation_status(status.end_reason, status.excitation);
     send_boot_report(status.boot);
@@ -440,6 +437,7 @@ bool GcsLink::send(const mavlink_message_t& msg) {
         return false;
     }
     bytes_sent_ += len;
+    bytes_total_ += len;
     return true;
 }
 

@@ -51,13 +51,18 @@ struct GcsLinkConfig {
     // stand-in is targets/host/main.cpp's.
     uint64_t uid = 0;
     uint8_t uid2[18] = {};
+    // Which of the board's links this is (HQ_LINK: HQ_FW_STATUS.link_id and the index of its
+    // per-link figures).
+    uint8_t link_id = HQ_LINK_USB;
 };
 
 class GcsLink {
 public:
-    GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port);
+    // `inbox` is the loop's (LoopInbox): shared by every link of the board, cleared by whoever
+    // runs the loop before the links' receive().
+    GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port, LoopInbox& inbox);
 
-    // Before a step: the messages waiting on the link, as requests in inbox().
+    // Before a step: the messages waiting on the link, as requests added to inbox().
     void receive();
     LoopInbox& inbox() { return inbox_; }
     // After the step: every answer, the loop's notices and the telemetry (in that order).
@@ -68,6 +73,10 @@ public:
     // ticks missed since boot (HQ_FW_STATUS loop_cycles_*, loop_overruns).
     void record_loop(uint32_t cycles, uint32_t overruns_total) { load_.record(cycles, overruns_total); }
     uint32_t telemetry_dropped() const { return telemetry_dropped_; }
+    uint32_t bytes_sent_total() const { return bytes_total_; }
+    // The board's other link, whose bytes and drops this link's HQ_FW_STATUS reports beside
+    // its own (a board with two links pairs them both ways).
+    void pair_with(const GcsLink& other) { peer_ = &other; }
 
     // A message the firmware streams or sends on request (SET_MESSAGE_INTERVAL,
     // MAV_CMD_REQUEST_MESSAGE), with its interval in microseconds (0: off).
@@ -148,7 +157,7 @@ private:
     GcsLinkConfig config_;
     Clock& clock_;
     SerialPort& port_;
-    LoopInbox inbox_{};
+    LoopInbox& inbox_;
     Received received_[LoopInbox::kCapacity];
     int received_count_ = 0;
     int notices_sent_ = 0;                   // of the loop's current notices
@@ -161,7 +170,9 @@ private:
     Stream streams_[kStreams];
     bool last_exc_accepted_ = false;
     uint32_t seq_ = 0;
-    uint32_t telemetry_dropped_ = 0;
+    uint32_t telemetry_dropped_ = 0;         // bytes, since boot
+    uint32_t bytes_total_ = 0;               // bytes sent, since boot
+    const GcsLink* peer_ = nullptr;
     uint32_t bytes_sent_ = 0, bytes_dropped_ = 0;     // this second's, for SYS_STATUS
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index

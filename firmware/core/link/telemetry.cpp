@@ -119,6 +119,15 @@ void GcsLink::send_fw_status(const LoopStatus& st, uint64_t now_us) {
     const uint32_t total = bytes_sent_ + bytes_dropped_;
     drop_rate_ = static_cast<uint16_t>(total == 0 ? 0 : 10000ull * bytes_dropped_ / total);
     bytes_sent_ = bytes_dropped_ = 0;
+    // Since boot, per link (HQ_LINK): this one's and its pair's.
+    static_assert(MAVLINK_MSG_HQ_FW_STATUS_FIELD_LINK_BYTES_LEN == 2, "two links: USB, UART0");
+    uint32_t link_bytes[2] = {}, link_dropped[2] = {};
+    link_bytes[config_.link_id & 1] = bytes_total_;
+    link_dropped[config_.link_id & 1] = telemetry_dropped_;
+    if (peer_ != nullptr) {
+        link_bytes[peer_->config_.link_id & 1] = peer_->bytes_total_;
+        link_dropped[peer_->config_.link_id & 1] = peer_->telemetry_dropped_;
+    }
     mavlink_message_t msg;
     mavlink_msg_hq_fw_status_pack_status(
         config_.system_id, config_.component_id, &tx_status_, &msg, now_us, st.loop_index, c.packets,
@@ -127,7 +136,8 @@ void GcsLink::send_fw_status(const LoopStatus& st, uint64_t now_us) {
         static_cast<uint8_t>(st.mode), static_cast<uint8_t>(st.excitation_state),
         static_cast<uint8_t>(st.last_reason), f.rc_failsafes, f.host_failsafes, f.imu_stale,
         f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped,
-        last_load_.median, last_load_.max, last_load_.overruns);
+        last_load_.median, last_load_.max, last_load_.overruns, config_.link_id, link_bytes,
+        link_dropped);
     send(msg);
 }
 

@@ -47,6 +47,7 @@ bool SimLinkHandler::on_frame(const mavlink_message_t& msg, SimLinkReplies& out)
     apply_fault(f.imu_fault);
     const size_t len = f.fifo_len < sizeof(f.fifo) ? f.fifo_len : sizeof(f.fifo);
     if (len > 0) chip_.push_fifo(f.fifo, len, f.fifo_kind == HQ_SENSOR_DMP);
+    link_.inbox().clear();
     link_.receive();
     fc_.step(rc_from_sim_frame(f.rc_us), link_.inbox());
     link_.transmit(fc_.status());

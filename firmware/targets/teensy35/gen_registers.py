@@ -47,7 +47,7 @@ SUPPLEMENT = ROOT / "sim" / "chip" / "armv7m_debug.svd"
 PERIPHERALS = (
     "SIM", "WDOG", "MCG", "OSC", "PORTB", "PORTC", "PORTD", "GPIOB", "GPIOC", "GPIOD",
     "I2C0", "UART0", "FTM0", "FTM3", "PIT", "SystemControl", "SysTick", "NVIC",
-    "FTFE_FlashConfig", "RCM", "FTFE", "FMC", "USB0",
+    "FTFE_FlashConfig", "RCM", "FTFE", "FMC", "USB0", "MPU",
 )
 SUPPLEMENT_PERIPHERALS = ("CoreDebug", "DWT")
 C_TYPES = {8: "uint8_t", 16: "uint16_t", 32: "uint32_t"}

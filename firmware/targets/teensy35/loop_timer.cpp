@@ -34,7 +34,7 @@ bool LoopTimer::start(uint32_t rate_hz) {
 
 bool LoopTimer::ticking() { return g_ticking; }
 
-uint32_t LoopTimer::wait() {
+uint32_t LoopTimer::wait(void (*idle)()) {
     // With interrupts masked, WFI still wakes on a pending interrupt; unmasking then lets the
     // handler run. A tick between the check and the WFI therefore cannot be slept through.
     irq_disable();
@@ -42,6 +42,7 @@ uint32_t LoopTimer::wait() {
         wfi();
         irq_enable();
         isb();
+        if (idle != nullptr) idle();
         irq_disable();
     }
     const uint32_t now = g_ticks;

@@ -13,8 +13,10 @@ class LoopTimer {
 public:
     // rate_hz must divide the core clock into at most 2^24 cycles (SysTick's reload).
     bool start(uint32_t rate_hz);
-    // Sleeps until the next tick; returns the ticks missed since the previous wait().
-    uint32_t wait();
+    // Sleeps until the next tick; returns the ticks missed since the previous wait(). `idle`,
+    // if given, runs after every wake-up before the tick (interrupts enabled): work an
+    // interrupt queued that should not wait for the next loop (the USB stack's).
+    uint32_t wait(void (*idle)() = nullptr);
     uint32_t overruns() const { return overruns_; }
     // True once start() has set the tick going: from then on an interrupt comes at least every
     // period, so a WFI anywhere is bounded by it (the I2C waits rely on that).

@@ -2,21 +2,27 @@
 //
 // Start-up, in order: clocks (a failure ends in the fault path, blink code 1-5, the ESCs
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
-// the telemetry UART; RC capture; the I2C bus; the FlightController (its parameters in the
+// the UART0 link; RC capture; the I2C bus; the FlightController (its parameters in the
 // top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
-// configuration and, with an image built in, the DMP upload) and its telemetry link
-// (GcsLink, core/link/); the 200 Hz
-// loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the
-// RC input, take the link's requests, run one FlightController step, send the link's answers
-// and telemetry, record the cycles all that took (HQ_FW_STATUS reports
-// their median and maximum each second, and the overruns), update the LED, sleep until the
-// next tick. After each step the loop's state goes to hq_loop_report (below).
+// configuration and, with an image built in, the DMP upload); the two MAVLink links
+// (GcsLink, core/link/), one on the USB port (usb/usb_serial.hpp) and one on UART0, sharing
+// the loop's inbox; the USB port attached; the 200 Hz loop timer; the watchdog
+// (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC input, the USB stack's
+// work, take both links' requests, run one FlightController step, send each link's answers
+// and telemetry, hand the USB transmit buffer to the controller, record the cycles all that
+// took (HQ_FW_STATUS reports their median and maximum each second, and the overruns), update
+// the LED, sleep until the next tick (servicing the USB stack whenever an interrupt wakes
+// the core). After each step the loop's state goes to hq_loop_report (below). A host that
+// sets 134 baud on the USB port asks for the bootloader: the loop refuses it while armed and
+// otherwise, once its messages are out, stops the motors and enters the bootloader
+// (bootloader.hpp).
 #include <cstdint>
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
+#include "bootloader.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
 #include "led.hpp"
@@ -25,6 +31,7 @@
 #include "param_storage.hpp"
 #include "rc_input.hpp"
 #include "serial.hpp"
+#include "usb/usb_serial.hpp"
 #include "mk64f12.hpp"
 #include "watchdog.hpp"
 
@@ -32,6 +39,10 @@ namespace {
 
 constexpr uint32_t kLoopHz = static_cast<uint32_t>(hq::kLoopRateHz);
 constexpr uint32_t kTelemetryBaud = 921600;
+
+hq::teensy::UsbCdcSerial usb;
+
+void service_usb() { usb.task(); }
 
 hq::teensy::LedPattern led_pattern(const hq::FlightController& fc, hq::InitResult init) {
     using hq::teensy::LedPattern;
@@ -53,6 +64,14 @@ void read_uid(hq::GcsLinkConfig& cfg) {
     for (int w = 0; w < 4; ++w) {
         for (int b = 0; b < 4; ++b) cfg.uid2[4 * w + b] = static_cast<uint8_t>(words[w] >> (24 - 8 * b));
     }
+}
+
+// The USB host's 134 baud, as the loop's request (answered in the step: refused while armed),
+// into the cleared inbox before the links add theirs.
+void ask_bootloader(hq::LoopInbox& inbox) {
+    hq::LoopRequest& r = inbox.request[inbox.count++];
+    r = hq::LoopRequest{};
+    r.kind = hq::RequestKind::Bootloader;
 }
 
 }  // namespace
@@ -95,32 +114,49 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
     cfg.storage = &storage;
     cfg.reset_cause = hq::reset_cause();      // RCM_SRS0/SRS1 (reset_cause.cpp)
-    hq::GcsLinkConfig link_cfg;
-    link_cfg.loop_rate_hz = cfg.loop_rate_hz;
-    link_cfg.cpu_hz = kCoreHz;                        // SYS_STATUS load from the cycle counter
-    link_cfg.link_bytes_per_s = kTelemetryBaud / 10;  // 8N1: ten bits a byte
-    read_uid(link_cfg);
+    hq::GcsLinkConfig uart_cfg;
+    uart_cfg.loop_rate_hz = cfg.loop_rate_hz;
+    uart_cfg.cpu_hz = kCoreHz;                        // SYS_STATUS load from the cycle counter
+    uart_cfg.link_bytes_per_s = kTelemetryBaud / 10;  // 8N1: ten bits a byte
+    uart_cfg.link_id = HQ_LINK_UART0;
+    read_uid(uart_cfg);
+    hq::GcsLinkConfig usb_cfg = uart_cfg;
+    usb_cfg.link_bytes_per_s = kUsbLinkBytesPerS;
+    usb_cfg.link_id = HQ_LINK_USB;
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, motors);
-    static hq::GcsLink link(link_cfg, clock, telemetry);
+    static hq::LoopInbox inbox;
+    static hq::GcsLink usb_link(usb_cfg, clock, usb, inbox);
+    static hq::GcsLink uart_link(uart_cfg, clock, telemetry, inbox);
+    usb_link.pair_with(uart_link);
+    uart_link.pair_with(usb_link);
     const hq::InitResult init = fc.init();
-    link.send_notices(fc.status());
+    usb.begin();
+    usb_link.send_notices(fc.status());
+    uart_link.send_notices(fc.status());
 
     static LoopTimer timer;
     if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     Watchdog::start(Watchdog::kTimeoutMs);
     for (;;) {
-        timer.wait();
+        timer.wait(service_usb);
         Watchdog::refresh();
         const uint32_t c0 = cycles32();
-        link.receive();
-        fc.step(rc.read(), link.inbox());
-        link.transmit(fc.status());
+        usb.task();
+        inbox.clear();
+        if (usb.take_bootloader_request()) ask_bootloader(inbox);   // first: there is room
+        usb_link.receive();
+        uart_link.receive();
+        fc.step(rc.read(), inbox);
+        usb_link.transmit(fc.status());
+        uart_link.transmit(fc.status());
+        usb.flush();
 #ifdef HQ_TEST_LOOP_DELAY_US
         clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
 #endif
         const uint32_t step_cycles = cycles32() - c0;
-        link.record_loop(step_cycles, timer.overruns());
+        usb_link.record_loop(step_cycles, timer.overruns());
+        uart_link.record_loop(step_cycles, timer.overruns());
         hq_loop_report.loops = fc.loops();
         hq_loop_report.step_cycles = step_cycles;
         hq_loop_report.overruns = timer.overruns();
@@ -129,5 +165,6 @@ extern "C" [[noreturn]] void hq_teensy_main() {
         hq_loop_report.sensor_kind = fc.sensor_kind();
         hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
         led_update(clock.micros(), led_pattern(fc, init));
+        if (fc.status().bootloader) enter_bootloader(motors, usb);
     }
 }

@@ -5691,6 +5691,1336 @@ struct CLK_RECOVER_INT_STATUS : Reg<uint8_t, 0x4007215Cu> {
 };
 }  // namespace USB0
 
+namespace MPU {
+constexpr uint32_t BASE = 0x4000D000u;
+struct CESR : Reg<uint32_t, 0x4000D000u> {
+    static constexpr uint32_t RESET_VALUE = 0x815101u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t NRGD_SHIFT = 8;
+    static constexpr uint32_t NRGD_MASK = 0xF00u;
+    static constexpr uint32_t NRGD(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xF00u); }
+    static constexpr uint32_t NSP_SHIFT = 12;
+    static constexpr uint32_t NSP_MASK = 0xF000u;
+    static constexpr uint32_t NSP(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0xF000u); }
+    static constexpr uint32_t HRL_SHIFT = 16;
+    static constexpr uint32_t HRL_MASK = 0xF0000u;
+    static constexpr uint32_t HRL(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t SPERR_SHIFT = 27;
+    static constexpr uint32_t SPERR_MASK = 0xF8000000u;
+    static constexpr uint32_t SPERR(uint32_t v) { return static_cast<uint32_t>((v << 27) & 0xF8000000u); }
+};
+struct EAR0 : Reg<uint32_t, 0x4000D010u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EADDR_SHIFT = 0;
+    static constexpr uint32_t EADDR_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t EADDR(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct EAR1 : Reg<uint32_t, 0x4000D018u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EADDR_SHIFT = 0;
+    static constexpr uint32_t EADDR_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t EADDR(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct EAR2 : Reg<uint32_t, 0x4000D020u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EADDR_SHIFT = 0;
+    static constexpr uint32_t EADDR_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t EADDR(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct EAR3 : Reg<uint32_t, 0x4000D028u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EADDR_SHIFT = 0;
+    static constexpr uint32_t EADDR_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t EADDR(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct EAR4 : Reg<uint32_t, 0x4000D030u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t EADDR_SHIFT = 0;
+    static constexpr uint32_t EADDR_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t EADDR(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct EDR0 : Reg<uint32_t, 0x4000D014u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ERW = 0x1u;
+    static constexpr uint32_t EATTR_SHIFT = 1;
+    static constexpr uint32_t EATTR_MASK = 0xEu;
+    static constexpr uint32_t EATTR(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0xEu); }
+    static constexpr uint32_t EMN_SHIFT = 4;
+    static constexpr uint32_t EMN_MASK = 0xF0u;
+    static constexpr uint32_t EMN(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t EPID_SHIFT = 8;
+    static constexpr uint32_t EPID_MASK = 0xFF00u;
+    static constexpr uint32_t EPID(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t EACD_SHIFT = 16;
+    static constexpr uint32_t EACD_MASK = 0xFFFF0000u;
+    static constexpr uint32_t EACD(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct EDR1 : Reg<uint32_t, 0x4000D01Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ERW = 0x1u;
+    static constexpr uint32_t EATTR_SHIFT = 1;
+    static constexpr uint32_t EATTR_MASK = 0xEu;
+    static constexpr uint32_t EATTR(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0xEu); }
+    static constexpr uint32_t EMN_SHIFT = 4;
+    static constexpr uint32_t EMN_MASK = 0xF0u;
+    static constexpr uint32_t EMN(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t EPID_SHIFT = 8;
+    static constexpr uint32_t EPID_MASK = 0xFF00u;
+    static constexpr uint32_t EPID(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t EACD_SHIFT = 16;
+    static constexpr uint32_t EACD_MASK = 0xFFFF0000u;
+    static constexpr uint32_t EACD(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct EDR2 : Reg<uint32_t, 0x4000D024u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ERW = 0x1u;
+    static constexpr uint32_t EATTR_SHIFT = 1;
+    static constexpr uint32_t EATTR_MASK = 0xEu;
+    static constexpr uint32_t EATTR(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0xEu); }
+    static constexpr uint32_t EMN_SHIFT = 4;
+    static constexpr uint32_t EMN_MASK = 0xF0u;
+    static constexpr uint32_t EMN(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t EPID_SHIFT = 8;
+    static constexpr uint32_t EPID_MASK = 0xFF00u;
+    static constexpr uint32_t EPID(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t EACD_SHIFT = 16;
+    static constexpr uint32_t EACD_MASK = 0xFFFF0000u;
+    static constexpr uint32_t EACD(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct EDR3 : Reg<uint32_t, 0x4000D02Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ERW = 0x1u;
+    static constexpr uint32_t EATTR_SHIFT = 1;
+    static constexpr uint32_t EATTR_MASK = 0xEu;
+    static constexpr uint32_t EATTR(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0xEu); }
+    static constexpr uint32_t EMN_SHIFT = 4;
+    static constexpr uint32_t EMN_MASK = 0xF0u;
+    static constexpr uint32_t EMN(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t EPID_SHIFT = 8;
+    static constexpr uint32_t EPID_MASK = 0xFF00u;
+    static constexpr uint32_t EPID(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t EACD_SHIFT = 16;
+    static constexpr uint32_t EACD_MASK = 0xFFFF0000u;
+    static constexpr uint32_t EACD(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct EDR4 : Reg<uint32_t, 0x4000D034u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ERW = 0x1u;
+    static constexpr uint32_t EATTR_SHIFT = 1;
+    static constexpr uint32_t EATTR_MASK = 0xEu;
+    static constexpr uint32_t EATTR(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0xEu); }
+    static constexpr uint32_t EMN_SHIFT = 4;
+    static constexpr uint32_t EMN_MASK = 0xF0u;
+    static constexpr uint32_t EMN(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t EPID_SHIFT = 8;
+    static constexpr uint32_t EPID_MASK = 0xFF00u;
+    static constexpr uint32_t EPID(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t EACD_SHIFT = 16;
+    static constexpr uint32_t EACD_MASK = 0xFFFF0000u;
+    static constexpr uint32_t EACD(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct RGD0_WORD0 : Reg<uint32_t, 0x4000D400u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD1_WORD0 : Reg<uint32_t, 0x4000D410u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD2_WORD0 : Reg<uint32_t, 0x4000D420u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD3_WORD0 : Reg<uint32_t, 0x4000D430u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD4_WORD0 : Reg<uint32_t, 0x4000D440u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD5_WORD0 : Reg<uint32_t, 0x4000D450u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD6_WORD0 : Reg<uint32_t, 0x4000D460u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD7_WORD0 : Reg<uint32_t, 0x4000D470u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD8_WORD0 : Reg<uint32_t, 0x4000D480u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD9_WORD0 : Reg<uint32_t, 0x4000D490u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD10_WORD0 : Reg<uint32_t, 0x4000D4A0u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD11_WORD0 : Reg<uint32_t, 0x4000D4B0u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t SRTADDR_SHIFT = 5;
+    static constexpr uint32_t SRTADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t SRTADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD0_WORD1 : Reg<uint32_t, 0x4000D404u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD1_WORD1 : Reg<uint32_t, 0x4000D414u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD2_WORD1 : Reg<uint32_t, 0x4000D424u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD3_WORD1 : Reg<uint32_t, 0x4000D434u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD4_WORD1 : Reg<uint32_t, 0x4000D444u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD5_WORD1 : Reg<uint32_t, 0x4000D454u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD6_WORD1 : Reg<uint32_t, 0x4000D464u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD7_WORD1 : Reg<uint32_t, 0x4000D474u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD8_WORD1 : Reg<uint32_t, 0x4000D484u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD9_WORD1 : Reg<uint32_t, 0x4000D494u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD10_WORD1 : Reg<uint32_t, 0x4000D4A4u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD11_WORD1 : Reg<uint32_t, 0x4000D4B4u> {
+    static constexpr uint32_t RESET_VALUE = 0xFFFFFFFFu;
+    static constexpr uint32_t ENDADDR_SHIFT = 5;
+    static constexpr uint32_t ENDADDR_MASK = 0xFFFFFFE0u;
+    static constexpr uint32_t ENDADDR(uint32_t v) { return static_cast<uint32_t>((v << 5) & 0xFFFFFFE0u); }
+};
+struct RGD0_WORD2 : Reg<uint32_t, 0x4000D408u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD1_WORD2 : Reg<uint32_t, 0x4000D418u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD2_WORD2 : Reg<uint32_t, 0x4000D428u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD3_WORD2 : Reg<uint32_t, 0x4000D438u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD4_WORD2 : Reg<uint32_t, 0x4000D448u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD5_WORD2 : Reg<uint32_t, 0x4000D458u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD6_WORD2 : Reg<uint32_t, 0x4000D468u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD7_WORD2 : Reg<uint32_t, 0x4000D478u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD8_WORD2 : Reg<uint32_t, 0x4000D488u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD9_WORD2 : Reg<uint32_t, 0x4000D498u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD10_WORD2 : Reg<uint32_t, 0x4000D4A8u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD11_WORD2 : Reg<uint32_t, 0x4000D4B8u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGD0_WORD3 : Reg<uint32_t, 0x4000D40Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD1_WORD3 : Reg<uint32_t, 0x4000D41Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD2_WORD3 : Reg<uint32_t, 0x4000D42Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD3_WORD3 : Reg<uint32_t, 0x4000D43Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD4_WORD3 : Reg<uint32_t, 0x4000D44Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD5_WORD3 : Reg<uint32_t, 0x4000D45Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD6_WORD3 : Reg<uint32_t, 0x4000D46Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD7_WORD3 : Reg<uint32_t, 0x4000D47Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD8_WORD3 : Reg<uint32_t, 0x4000D48Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD9_WORD3 : Reg<uint32_t, 0x4000D49Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD10_WORD3 : Reg<uint32_t, 0x4000D4ACu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGD11_WORD3 : Reg<uint32_t, 0x4000D4BCu> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t VLD = 0x1u;
+    static constexpr uint32_t PIDMASK_SHIFT = 16;
+    static constexpr uint32_t PIDMASK_MASK = 0xFF0000u;
+    static constexpr uint32_t PIDMASK(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+    static constexpr uint32_t PID_SHIFT = 24;
+    static constexpr uint32_t PID_MASK = 0xFF000000u;
+    static constexpr uint32_t PID(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct RGDAAC0 : Reg<uint32_t, 0x4000D800u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC1 : Reg<uint32_t, 0x4000D804u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC2 : Reg<uint32_t, 0x4000D808u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC3 : Reg<uint32_t, 0x4000D80Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC4 : Reg<uint32_t, 0x4000D810u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC5 : Reg<uint32_t, 0x4000D814u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC6 : Reg<uint32_t, 0x4000D818u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC7 : Reg<uint32_t, 0x4000D81Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC8 : Reg<uint32_t, 0x4000D820u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC9 : Reg<uint32_t, 0x4000D824u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC10 : Reg<uint32_t, 0x4000D828u> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+struct RGDAAC11 : Reg<uint32_t, 0x4000D82Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x61F7DFu;
+    static constexpr uint32_t M0UM_SHIFT = 0;
+    static constexpr uint32_t M0UM_MASK = 0x7u;
+    static constexpr uint32_t M0UM(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x7u); }
+    static constexpr uint32_t M0SM_SHIFT = 3;
+    static constexpr uint32_t M0SM_MASK = 0x18u;
+    static constexpr uint32_t M0SM(uint32_t v) { return static_cast<uint32_t>((v << 3) & 0x18u); }
+    static constexpr uint32_t M0PE = 0x20u;
+    static constexpr uint32_t M1UM_SHIFT = 6;
+    static constexpr uint32_t M1UM_MASK = 0x1C0u;
+    static constexpr uint32_t M1UM(uint32_t v) { return static_cast<uint32_t>((v << 6) & 0x1C0u); }
+    static constexpr uint32_t M1SM_SHIFT = 9;
+    static constexpr uint32_t M1SM_MASK = 0x600u;
+    static constexpr uint32_t M1SM(uint32_t v) { return static_cast<uint32_t>((v << 9) & 0x600u); }
+    static constexpr uint32_t M1PE = 0x800u;
+    static constexpr uint32_t M2UM_SHIFT = 12;
+    static constexpr uint32_t M2UM_MASK = 0x7000u;
+    static constexpr uint32_t M2UM(uint32_t v) { return static_cast<uint32_t>((v << 12) & 0x7000u); }
+    static constexpr uint32_t M2SM_SHIFT = 15;
+    static constexpr uint32_t M2SM_MASK = 0x18000u;
+    static constexpr uint32_t M2SM(uint32_t v) { return static_cast<uint32_t>((v << 15) & 0x18000u); }
+    static constexpr uint32_t M2PE = 0x20000u;
+    static constexpr uint32_t M3UM_SHIFT = 18;
+    static constexpr uint32_t M3UM_MASK = 0x1C0000u;
+    static constexpr uint32_t M3UM(uint32_t v) { return static_cast<uint32_t>((v << 18) & 0x1C0000u); }
+    static constexpr uint32_t M3SM_SHIFT = 21;
+    static constexpr uint32_t M3SM_MASK = 0x600000u;
+    static constexpr uint32_t M3SM(uint32_t v) { return static_cast<uint32_t>((v << 21) & 0x600000u); }
+    static constexpr uint32_t M3PE = 0x800000u;
+    static constexpr uint32_t M4WE = 0x1000000u;
+    static constexpr uint32_t M4RE = 0x2000000u;
+    static constexpr uint32_t M5WE = 0x4000000u;
+    static constexpr uint32_t M5RE = 0x8000000u;
+    static constexpr uint32_t M6WE = 0x10000000u;
+    static constexpr uint32_t M6RE = 0x20000000u;
+    static constexpr uint32_t M7WE = 0x40000000u;
+    static constexpr uint32_t M7RE = 0x80000000u;
+};
+}  // namespace MPU
+
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
 struct DHCSR : Reg<uint32_t, 0xE000EDF0u> {

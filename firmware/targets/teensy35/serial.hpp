@@ -19,7 +19,7 @@ namespace hq::teensy {
 
 class Uart0Serial final : public SerialPort {
 public:
-    static constexpr size_t kTxRing = 4096, kRxRing = 1024;     // powers of two
+    static constexpr size_t kTxRing = 2048, kRxRing = 1024;     // powers of two
 
     // False when the baud rate cannot be made within 2 % from the core clock.
     bool begin(uint32_t baud);

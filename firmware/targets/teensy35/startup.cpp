@@ -38,6 +38,7 @@ void SysTick_Handler();
 void UART0_RX_TX_IRQHandler();
 void FTM3_IRQHandler();
 void I2C0_IRQHandler();
+void USB0_IRQHandler();
 }
 
 namespace {
@@ -71,6 +72,7 @@ constexpr VectorTable make_vectors() {
     v.irqs[hq::mk64::irq::UART0_RX_TX] = UART0_RX_TX_IRQHandler;
     v.irqs[hq::mk64::irq::FTM3] = FTM3_IRQHandler;
     v.irqs[hq::mk64::irq::I2C0] = I2C0_IRQHandler;
+    v.irqs[hq::mk64::irq::USB0] = USB0_IRQHandler;
     return v;
 }
 

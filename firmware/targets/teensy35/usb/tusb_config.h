@@ -31,10 +31,15 @@
 #define CFG_TUD_MIDI 0
 #define CFG_TUD_VENDOR 0
 
-/* 64-byte bulk endpoints (the full-speed maximum, USB 2.0, 5.8.3), FIFOs of one packet. */
+/* 64-byte bulk packets (the full-speed maximum, USB 2.0, 5.8.3). Transmit: a 1 KiB buffer (three loops of telemetry)
+ * (the loop's messages go in whole or not at all, usb_serial.hpp) sent in transfers of up to
+ * 512 bytes, eight packets the driver queues from its interrupt; a message never
+ * overwrites an older one, even while no host has the port open (the port layer lets the
+ * bytes go instead). Receive: 512 bytes, a ground station's burst of parameter writes. */
 #define CFG_TUD_CDC_RX_EPSIZE 64
-#define CFG_TUD_CDC_TX_EPSIZE 64
-#define CFG_TUD_CDC_RX_BUFSIZE 64
-#define CFG_TUD_CDC_TX_BUFSIZE 64
+#define CFG_TUD_CDC_TX_EPSIZE 512
+#define CFG_TUD_CDC_RX_BUFSIZE 512
+#define CFG_TUD_CDC_TX_BUFSIZE 1024
+#define CFG_TUD_CDC_TX_OVERWRITABLE_IF_NOT_CONNECTED 0
 
 #endif

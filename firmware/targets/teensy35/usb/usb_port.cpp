@@ -88,7 +88,7 @@ void __NOP() { __asm volatile("nop"); }
 // The remote wake-up's resume signal counts SystemCoreClock / 1000 loops (1 ms or more).
 const uint32_t SystemCoreClock = hq::teensy::kCoreHz;
 
-// USB0's vector (IRQ 53): everything is the driver's. Not in the vector table yet.
+// USB0's vector (IRQ 53, startup.cpp): everything is the driver's.
 void USB0_IRQHandler() { tud_int_handler(0); }
 
 }  // extern "C"

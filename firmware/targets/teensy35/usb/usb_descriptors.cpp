@@ -1,7 +1,8 @@
-// The USB cost probe (CMake option HQ_USB_PROBE, off by default): TinyUSB's descriptor
-// callbacks with the image's USB identity (usb_identity.hpp) and hq_usb_probe(), one call of
-// each of the stack's entry points, so the link pulls in what a CDC-ACM port costs. Nothing
-// calls hq_usb_probe(): the build keeps it with --undefined, the boot path never runs it.
+// The image's USB descriptors, as TinyUSB's callbacks give them to the host: the device (the
+// identity of usb_identity.hpp: Teensyduino's USB Serial IDs, heliquad's strings, the chip's
+// unique ID as the serial number) and one configuration holding a CDC-ACM function
+// (communication interface with its notification endpoint, data interface with 64-byte bulk
+// endpoints). docs/usb.md lists them byte by byte as the emulated host reads them.
 #include <cstddef>
 #include <cstdint>
 
@@ -88,17 +89,6 @@ const uint16_t* tud_descriptor_string_cb(uint8_t index, uint16_t langid) {
     // Header: bLength (bytes, header included) and bDescriptorType STRING.
     string_buffer[0] = static_cast<uint16_t>((TUSB_DESC_STRING << 8) | (2 * units + 2));
     return string_buffer;
-}
-
-// One call of each entry point a CDC-ACM port needs: start, the loop's task, a write.
-void hq_usb_probe() {
-    const tusb_rhport_init_t device = {TUSB_ROLE_DEVICE, TUSB_SPEED_FULL};
-    static const char kHello[] = "heliquad";
-    if (tusb_init(0, &device)) {
-        tud_task();
-        tud_cdc_write(kHello, sizeof(kHello) - 1);
-        tud_cdc_write_flush();
-    }
 }
 
 }  // extern "C"

@@ -1,0 +1,94 @@
+// UsbCdcSerial (usb_serial.hpp) on TinyUSB's device stack and CDC-ACM class, and the class
+// requests the image watches: the line coding (134 baud: the bootloader) through a thin
+// driver in front of the stack's own CDC driver, which records how many bytes a
+// SET_LINE_CODING's data stage carried.
+#include "usb_serial.hpp"
+
+#include "../mk64f12.hpp"
+#include "tusb.h"
+#include "device/usbd_pvt.h"
+
+namespace hq::teensy {
+
+namespace {
+
+namespace mk64 = hq::mk64;
+
+uint32_t g_closed_bytes = 0;
+uint16_t g_line_coding_length = 0;      // the last SET_LINE_CODING's wLength
+bool g_bootloader_asked = false;
+
+// The stack's CDC driver, with one thing added: a SET_LINE_CODING's length, seen at its
+// SETUP stage, for the line-coding callback at its end. Listed before the built-in drivers,
+// it is the one that opens the CDC interfaces; the built-in one's init and reset run too,
+// and are the same functions.
+void driver_init() {}
+bool driver_deinit() { return true; }
+
+bool driver_control(uint8_t rhport, uint8_t stage, const tusb_control_request_t* request) {
+    if (stage == CONTROL_STAGE_SETUP && request->bmRequestType_bit.type == TUSB_REQ_TYPE_CLASS &&
+        request->bRequest == CDC_REQUEST_SET_LINE_CODING) {
+        g_line_coding_length = request->wLength;
+    }
+    return cdcd_control_xfer_cb(rhport, stage, request);
+}
+
+const usbd_class_driver_t kDrivers[] = {{"hq-cdc", driver_init, driver_deinit, cdcd_reset,
+                                         cdcd_open, driver_control, cdcd_xfer_cb, nullptr,
+                                         nullptr}};
+
+}  // namespace
+
+void UsbCdcSerial::begin() {
+    mk64::SIM::SCGC4::write(mk64::SIM::SCGC4::read() | mk64::SIM::SCGC4::USBOTG);
+    // The USB controller is bus master 4: it reads and writes the buffer descriptors and
+    // buffers in SRAM, which the MPU's region 0 allows only the core and debugger at reset.
+    namespace mpu = mk64::MPU;
+    mpu::RGDAAC0::write(mpu::RGDAAC0::read() | mpu::RGDAAC0::M4RE | mpu::RGDAAC0::M4WE);
+    const tusb_rhport_init_t device = {TUSB_ROLE_DEVICE, TUSB_SPEED_FULL};
+    tusb_init(0, &device);
+}
+
+void UsbCdcSerial::task() { tud_task(); }
+
+size_t UsbCdcSerial::read(uint8_t* data, size_t n) {
+    return tud_cdc_read(data, static_cast<uint32_t>(n));
+}
+
+size_t UsbCdcSerial::write(const uint8_t* data, size_t n) {
+    if (!tud_cdc_connected()) {
+        g_closed_bytes += static_cast<uint32_t>(n);
+        return n;
+    }
+    if (tud_cdc_write_available() < n) return 0;
+    return tud_cdc_write(data, static_cast<uint32_t>(n));
+}
+
+void UsbCdcSerial::flush() { tud_cdc_write_flush(); }
+
+bool UsbCdcSerial::open() const { return tud_cdc_connected(); }
+
+uint32_t UsbCdcSerial::closed_bytes() const { return g_closed_bytes; }
+
+bool UsbCdcSerial::take_bootloader_request() {
+    const bool asked = g_bootloader_asked;
+    g_bootloader_asked = false;
+    return asked;
+}
+
+}  // namespace hq::teensy
+
+extern "C" {
+
+const usbd_class_driver_t* usbd_app_driver_get_cb(uint8_t* driver_count) {
+    *driver_count = static_cast<uint8_t>(sizeof(hq::teensy::kDrivers) / sizeof(hq::teensy::kDrivers[0]));
+    return hq::teensy::kDrivers;
+}
+
+void tud_cdc_line_coding_cb(uint8_t itf, const cdc_line_coding_t* coding) {
+    (void)itf;  // one CDC interface
+    using namespace hq::teensy;
+    if (bootloader_line_coding(g_line_coding_length, coding->bit_rate)) g_bootloader_asked = true;
+}
+
+}  // extern "C"
