@@ -9,10 +9,12 @@ from .ftm import Ftm
 from .i2c import I2c
 from .image import Image
 from .machine import Machine
+from .mpu import SysMpu
 from .port import Ports
 from .rcm import Rcm
 from .scs import Dwt, SystemControlSpace
 from .uart import Uart
+from .usb import Usb
 from .wdog import Wdog
 
 
@@ -46,6 +48,8 @@ class Mk64:
         self.ftm3 = m.attach(Ftm(m, self, 3, ("SCGC3", "FTM3")))
         self.ftfe = m.attach(Ftfe(m, self))
         self.fmc = m.attach(Fmc(m, self))
+        self.mpu = m.attach(SysMpu(m, self))
+        self.usb0 = m.attach(Usb(m, self))
         m.pre_reset_listeners.append(self._before_reset)
         m.reset_listeners.append(self._on_reset)
         self.ready = True

@@ -37,7 +37,7 @@ MODELLED = (
     "SIM", "WDOG", "MCG", "OSC", "PMC", "SMC", "RCM", "MPU",
     "PORTA", "PORTB", "PORTC", "PORTD", "PORTE",
     "GPIOA", "GPIOB", "GPIOC", "GPIOD", "GPIOE",
-    "I2C0", "UART0", "FTM0", "FTM3", "PIT",
+    "I2C0", "UART0", "FTM0", "FTM3", "PIT", "USB0",
     "SystemControl", "SysTick", "NVIC", "MCM", "FTFE", "FMC",
 )
 

@@ -1,0 +1,69 @@
+"""The system memory protection unit (MPU at 0x4000_D000, the reference manual's "Memory
+Protection Unit" chapter), modelled as far as the bus masters other than the core need it.
+
+The core's own accesses are not checked (the image runs privileged with the MPU's reset
+regions, which grant the core everything). What is modelled is the one rule that stops a DMA
+master: the USB controller is bus master 4, and the reset value of every region descriptor's
+access word (RGDn_WORD2 = 0x0061_F7DF) gives master 4 neither read nor write. So while
+CESR.VLD is set (its reset value), the USB controller may reach an address only through a
+valid region (RGD0 always, RGDn with WORD3.VLD) covering it whose WORD2 sets M4RE (reads) or
+M4WE (writes); an image must either grant master 4 (RGDAAC0, the alias of RGD0_WORD2) or
+clear CESR.VLD before the USB controller touches memory, or the emulator stops with a fault.
+
+Registers: CESR (VLD writable, SPERR write-1-to-clear, the rest read only), the region
+descriptors RGD0-11 (WORD0-3; RGD0's start and end are fixed at 0 and 0xFFFF_FFFF as on the
+chip) and their access-control aliases RGDAAC0-11. The error registers (EARn/EDRn) read 0: no
+access violation is recorded in them (a refused access stops the run instead).
+"""
+
+from __future__ import annotations
+
+from .peripheral import RegisterDevice
+
+REGIONS = 12                    # MK64: 12 region descriptors (CESR.NRGD = 0b0001)
+REGION_GRANULE = 32             # start/end addresses are in 32-byte units (WORD0/1 bits 31:5)
+USB_MASTER = 4                  # the USB controller's crossbar master number (chip config.)
+
+
+class SysMpu(RegisterDevice):
+    READ_ONLY = ("RGD0_WORD0", "RGD0_WORD1") + tuple(f"EAR{i}" for i in range(5)) + \
+        tuple(f"EDR{i}" for i in range(5))
+
+    def __init__(self, machine, chip):
+        self.chip = chip
+        super().__init__(machine, "MPU", gate=(chip.sim, "SCGC7", "MPU"))
+
+    def w_CESR(self, value, mask):
+        sperr = self.map["CESR"].field("SPERR").mask
+        keep = self.v["CESR"] & ~self.map["CESR"].bit("VLD") & ~(value & sperr)
+        self.v["CESR"] = keep | (value & self.map["CESR"].bit("VLD"))
+
+    def write(self, address, size, value):
+        super().write(address, size, value)
+        for n in range(REGIONS):                    # RGDAACn is RGDn_WORD2 seen twice
+            alias, word = f"RGDAAC{n}", f"RGD{n}_WORD2"
+            offset = address - self.base
+            if self.map[alias].offset <= offset < self.map[alias].offset + 4:
+                self.v[word] = self.v[alias]
+            elif self.map[word].offset <= offset < self.map[word].offset + 4:
+                self.v[alias] = self.v[word]
+
+    def enabled(self) -> bool:
+        return bool(self.v["CESR"] & self.map["CESR"].bit("VLD"))
+
+    def master_may(self, master: int, address: int, size: int, write: bool) -> bool:
+        """Whether bus master ``master`` may read (or write) ``size`` bytes at ``address``:
+        always while the MPU is off; else some valid region covering all of them grants it
+        (read: MnRE, write: MnWE, for masters 4-7)."""
+        if not self.enabled():
+            return True
+        right = self.map["RGD0_WORD2"].bit(f"M{master}{'WE' if write else 'RE'}")
+        last = address + max(size, 1) - 1
+        for n in range(REGIONS):
+            if n and not self.v[f"RGD{n}_WORD3"] & self.map["RGD0_WORD3"].bit("VLD"):
+                continue
+            start = self.v[f"RGD{n}_WORD0"] & ~(REGION_GRANULE - 1)
+            end = self.v[f"RGD{n}_WORD1"] | (REGION_GRANULE - 1)
+            if start <= address and last <= end and self.v[f"RGD{n}_WORD2"] & right:
+                return True
+        return False

@@ -1,0 +1,361 @@
+"""USB0, the full-speed USB controller in device mode, after the reference manual's "Universal
+Serial Bus OTG Controller (USBOTG)" chapter: its registers, the buffer descriptor table (BDT)
+in RAM, and the serial interface engine (SIE) answering the tokens of the host model
+(``usb_host.py``). docs/teensy35-emulator.md lists what is and is not modelled.
+
+* Registers: PERID/IDCOMP/REV/ADDINFO (read only), ISTAT and ERRSTAT (write 1 to clear),
+  INTEN, ERREN, STAT (the last token done), CTL (USBENSOFEN, ODDRST, RESUME,
+  TXSUSPENDTOKENBUSY, SE0/JSTATE read from the line), ADDR, BDTPAGE1-3, FRMNUML/H (read
+  only), ENDPT0-15, USBCTRL, OBSERVE (read only: the pull-up and pull-downs), CONTROL
+  (DPPULLUPNONOTG: the device attaches), USBTRC0 (USBRESET resets the module and reads 0
+  at once; bit 6 stores what is written, as software must set it; USB_RESUME_INT), and
+  the rest storing what is written. The SIM gate SCGC4.USBOTG; IRQ 53, level-sensitive:
+  (ISTAT & INTEN) != 0, or USBTRC0.USB_RESUME_INT.
+* BDT: at BDTPAGE3:2:1 (512-byte aligned), 8 bytes per descriptor at ENDP x 32 + TX x 16 +
+  ODD x 8. The firmware writes OWN (bit 7), DATA0/1 (6), KEEP (5), NINC (4), DTS (3),
+  BDT_STALL (2), BC (bits 25:16) and the buffer address; on completion the SIE writes back
+  OWN = 0, the DATA bit, TOK_PID (bits 5:2) and BC.
+* A token to this device (ADDR) on an endpoint enabled for its direction (EPRXEN for OUT and
+  SETUP, EPTXEN for IN; SETUP only where EPCTLDIS is clear): NAK while the current BD (the
+  endpoint's ODD pointer) is not owned by the SIE or CTL.TXSUSPENDTOKENBUSY is set (a SETUP
+  is never NAKed: without a BD it gets no handshake), STALL when ENDPT.EPSTALL or the BD's
+  BDT_STALL is set (ISTAT.STALL; the BD stays owned); a SETUP clears EPSTALL as the
+  hardware does. With DTS, an OUT or SETUP whose DATA0/1 differs from the BD's is ACKed
+  and dropped (no write-back, no TOKDNE), as the USB specification has a device do with a
+  retransmission; an IN sends the BD's DATA PID. A completed token flips the ODD pointer,
+  sets STAT (ENDP, TX, ODD) and ISTAT.TOKDNE (and after a SETUP, TXSUSPENDTOKENBUSY). One
+  STAT at a time: the host model sends no token while TOKDNE is set (the chip has a
+  four-entry STAT FIFO; the model never needs it).
+* An OUT or SETUP packet longer than the BD's BC is not handshaken and sets ERRSTAT.DMAERR
+  (ISTAT.ERROR where ERREN enables it).
+* DMA: the SIE reads the BD and the IN data and writes the OUT data through the machine's
+  memory as bus master 4, which the system MPU (``mpu.py``) must grant; an address outside
+  RAM (flash too, for data it writes) or not granted stops the run with a ``Fault``.
+* The SIE leaves ADDR and the ODD pointers alone at a bus reset: the reference manual has the
+  firmware write ADDR = 0 and set CTL.ODDRST on USBRST, and the model holds it to that.
+* It talks only while the module is enabled (CTL.USBENSOFEN), attached (the pull-up), not
+  suspended (USBCTRL.SUSP) and clocked at 48 MHz (the SIM's USB clock within the 0.25 % a
+  full-speed device must hold). SOF: ISTAT.SOFTOK and FRMNUM. SLEEP: 3 ms of idle bus while
+  enabled. With USBCTRL.SUSP and USBTRC0.USBRESMEN, bus activity sets USB_RESUME_INT.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE
+from .machine import Fault
+from .mpu import USB_MASTER
+from .peripheral import RegisterDevice
+from .registers import irq
+
+USB_CLOCK_HZ = 48e6             # the USB module's clock (reference manual, USB clocking)
+USB_CLOCK_TOLERANCE = 0.0025    # full-speed data rate +-0.25 % (USB 2.0, 7.1.11)
+ENDPOINTS = 16
+BD_BYTES = 8
+PID_OUT, PID_IN, PID_SETUP = 0x1, 0x9, 0xD      # token PIDs (USB 2.0, table 8-1)
+# BD bits (the reference manual's "Buffer Descriptor Table" figure)
+BD_OWN, BD_DATA1, BD_KEEP, BD_NINC, BD_DTS, BD_STALL = 0x80, 0x40, 0x20, 0x10, 0x08, 0x04
+BD_BC_SHIFT, BD_BC_MASK = 16, 0x3FF
+USBTRC0_SOFTWARE_BIT = 0x40     # "software must set this bit" (its reset value is 0)
+IDLE_TO_SLEEP_S = 3e-3          # ISTAT.SLEEP after 3 ms of idle bus (USB 2.0, 7.1.7.6)
+
+ACK, NAK, STALL, NONE = "ACK", "NAK", "STALL", None     # a token's handshake (None: silence)
+
+
+@dataclasses.dataclass
+class Token:
+    """One transaction as the SIE saw it: the token, what it answered, and (for IN) the data
+    and its DATA0/1. ``commit`` is what the SIE does when the transaction ends."""
+    pid: int
+    endpoint: int
+    handshake: str | None
+    data: bytes = b""
+    data1: bool = False
+    commit: tuple | None = None     # (bd address, odd, write-back word, OUT data, buffer)
+
+
+class Usb(RegisterDevice):
+    READ_ONLY = ("PERID", "IDCOMP", "REV", "ADDINFO", "STAT", "FRMNUML", "FRMNUMH", "OBSERVE")
+
+    def __init__(self, machine, chip):
+        self.chip = chip
+        self.irq = irq("USB0")
+        self.listeners = []         # host models: attached(bool), tokens_free()
+        self.notes = []             # (instruction count, text): misuse the model saw
+        super().__init__(machine, "USB0", gate=(chip.sim, "SCGC4", "USBOTG"))
+
+    def reset(self):
+        super().reset()
+        self.odd = [[0, 0] for _ in range(ENDPOINTS)]      # [endpoint][tx]
+        self.frame = 0
+        self.in_reset = False           # the host holds SE0
+        self._sleep_event = None
+
+    def _bit(self, reg: str, fld: str) -> int:
+        return self.map[reg].bit(fld)
+
+    # -- registers ------------------------------------------------------------------------
+    def w_ISTAT(self, value, mask):
+        written = value & mask
+        was_busy = self.token_busy()
+        self.v["ISTAT"] &= ~written
+        self._update_irq()
+        if was_busy and not self.token_busy():
+            for listener in self.listeners:
+                listener.tokens_free()
+
+    def w_ERRSTAT(self, value, mask):
+        self.v["ERRSTAT"] &= ~(value & mask)
+
+    def w_INTEN(self, value, mask):
+        self.v["INTEN"] = value
+        self._update_irq()
+
+    def w_CTL(self, value, mask):
+        self.v["CTL"] = value & ~(self._bit("CTL", "SE0") | self._bit("CTL", "JSTATE"))
+        if value & self._bit("CTL", "ODDRST"):
+            self.odd = [[0, 0] for _ in range(ENDPOINTS)]
+        if value & self._bit("CTL", "HOSTMODEEN"):
+            self.note("CTL.HOSTMODEEN set: host mode is not modelled")
+        self._idle_watch()
+
+    def r_CTL(self):
+        line = 0
+        if self.attached():
+            line = self._bit("CTL", "SE0") if self.in_reset else self._bit("CTL", "JSTATE")
+        return self.v["CTL"] | line
+
+    def w_BDTPAGE1(self, value, mask):
+        self.v["BDTPAGE1"] = value & self.map["BDTPAGE1"].field("BDTBA").mask
+
+    def w_CONTROL(self, value, mask):
+        before = self.attached()
+        self.v["CONTROL"] = value
+        self._attach_changed(before)
+
+    def w_USBCTRL(self, value, mask):
+        before = self.attached()
+        self.v["USBCTRL"] = value
+        if not value & self._bit("USBCTRL", "SUSP"):        # leaving suspend clears it
+            self.v["USBTRC0"] &= ~self._bit("USBTRC0", "USB_RESUME_INT")
+            self._update_irq()
+        self._attach_changed(before)
+
+    def r_OBSERVE(self):
+        pde = bool(self.v["USBCTRL"] & self._bit("USBCTRL", "PDE"))
+        pulled_up = bool(self.v["CONTROL"] & self._bit("CONTROL", "DPPULLUPNONOTG"))
+        return (self._bit("OBSERVE", "DPPU") * pulled_up |
+                (self._bit("OBSERVE", "DPPD") | self._bit("OBSERVE", "DMPD")) * pde)
+
+    def w_USBTRC0(self, value, mask):
+        if value & self._bit("USBTRC0", "USBRESET"):
+            before = self.attached()
+            keep = self.listeners, self.notes
+            super().reset()             # the module's registers to their reset values
+            self.listeners, self.notes = keep
+            self.odd = [[0, 0] for _ in range(ENDPOINTS)]
+            self._update_irq()
+            self._attach_changed(before)
+            return
+        writable = USBTRC0_SOFTWARE_BIT | self._bit("USBTRC0", "USBRESMEN")
+        self.v["USBTRC0"] = (self.v["USBTRC0"] & ~writable) | (value & writable)
+
+    def r_FRMNUML(self):
+        return self.frame & 0xFF
+
+    def r_FRMNUMH(self):
+        return (self.frame >> 8) & 0x7
+
+    # -- state ----------------------------------------------------------------------------
+    def note(self, text: str):
+        self.notes.append((self.machine.instructions_now(), text))
+
+    def attached(self) -> bool:
+        """The pull-up on D+ is on (CONTROL.DPPULLUPNONOTG) and the module is clocked."""
+        return self.clocked() and bool(self.v["CONTROL"] & self._bit("CONTROL", "DPPULLUPNONOTG"))
+
+    def enabled(self) -> bool:
+        return bool(self.v["CTL"] & self._bit("CTL", "USBENSOFEN"))
+
+    def suspended(self) -> bool:
+        return bool(self.v["USBCTRL"] & self._bit("USBCTRL", "SUSP"))
+
+    def clock_ok(self) -> bool:
+        usb = self.chip.tree().usb
+        return usb is not None and abs(usb / USB_CLOCK_HZ - 1) <= USB_CLOCK_TOLERANCE
+
+    def token_busy(self) -> bool:
+        """ISTAT.TOKDNE is set: the firmware has not taken the last token's STAT yet."""
+        return bool(self.v["ISTAT"] & self._bit("ISTAT", "TOKDNE"))
+
+    def bdt_base(self) -> int:
+        return self.v["BDTPAGE3"] << 24 | self.v["BDTPAGE2"] << 16 | self.v["BDTPAGE1"] << 8
+
+    def _attach_changed(self, before: bool):
+        now = self.attached()
+        if now != before:
+            for listener in self.listeners:
+                listener.attached(now)
+        self._idle_watch()
+
+    def _flag(self, *bits: str):
+        for b in bits:
+            self.v["ISTAT"] |= self._bit("ISTAT", b)
+        self._update_irq()
+
+    def _update_irq(self):
+        level = bool(self.v["ISTAT"] & self.v["INTEN"]) or \
+            bool(self.v["USBTRC0"] & self._bit("USBTRC0", "USB_RESUME_INT"))
+        self.machine.set_irq(self.irq, level)
+
+    def _bus_activity(self):
+        """Something happened on the bus: the idle timer restarts, and a suspended module
+        armed for it (USBRESMEN) raises the asynchronous resume interrupt."""
+        if self.suspended() and self.v["USBTRC0"] & self._bit("USBTRC0", "USBRESMEN"):
+            self.v["USBTRC0"] |= self._bit("USBTRC0", "USB_RESUME_INT")
+            self._update_irq()
+        self._idle_watch()
+
+    def _idle_watch(self):
+        if self._sleep_event is not None:
+            self._sleep_event.cancel()
+            self._sleep_event = None
+        if self.attached() and self.enabled() and not self.in_reset:
+            self._sleep_event = self.machine.after(IDLE_TO_SLEEP_S, self._idle)
+
+    def _idle(self):
+        self._sleep_event = None
+        self._flag("SLEEP")
+
+    # -- the bus (called by the host model) ---------------------------------------------------
+    def bus_reset(self, active: bool):
+        """The host drives SE0 (``active``) or ends the reset. USBRST is set as the reset
+        is decoded (the SIE changes nothing else: the firmware does, on USBRST)."""
+        self.in_reset = active
+        self._bus_activity()
+        if active and self.attached():
+            self._flag("USBRST")
+
+    def sof(self, frame: int):
+        self.frame = frame & 0x7FF
+        self._bus_activity()
+        if self.attached() and self.enabled() and not self.suspended():
+            self._flag("SOFTOK")
+
+    def token(self, pid: int, address: int, endpoint: int, data: bytes = b"",
+              data1: bool = False) -> Token:
+        """A token (and for OUT/SETUP its data packet) arriving now: the SIE's answer. The
+        BD's write-back, STAT and TOKDNE follow at the end of the transaction, in
+        :meth:`complete`."""
+        self._bus_activity()
+        silent = Token(pid, endpoint, NONE)
+        if not (self.attached() and self.enabled() and not self.suspended() and
+                self.clock_ok() and not self.in_reset):
+            return silent
+        if address != self.v["ADDR"] & 0x7F or endpoint >= ENDPOINTS:
+            return silent
+        ctl = self.v[f"ENDPT{endpoint}"]
+        tx = pid == PID_IN
+        if not ctl & self._bit("ENDPT0", "EPTXEN" if tx else "EPRXEN"):
+            return silent
+        if pid == PID_SETUP:
+            if ctl & self._bit("ENDPT0", "EPCTLDIS"):
+                return silent
+            if ctl & self._bit("ENDPT0", "EPSTALL"):
+                self.v[f"ENDPT{endpoint}"] = ctl & ~self._bit("ENDPT0", "EPSTALL")
+                ctl = self.v[f"ENDPT{endpoint}"]
+        return self._answer(Token(pid, endpoint, NONE, data, data1), ctl, tx)
+
+    def _answer(self, tok: Token, ctl: int, tx: bool) -> Token:
+        ep, setup = tok.endpoint, tok.pid == PID_SETUP
+        if ctl & self._bit("ENDPT0", "EPSTALL"):
+            tok.handshake = STALL
+            self._flag("STALL")
+            return tok
+        odd = self.odd[ep][tx]
+        bd_at = self.bdt_base() | ep << 5 | int(tx) << 4 | odd << 3
+        word, buffer = self._read_bd(bd_at)
+        busy = self.v["CTL"] & self._bit("CTL", "TXSUSPENDTOKENBUSY")
+        if not word & BD_OWN or (busy and not setup):
+            tok.handshake = NONE if setup else NAK
+            return tok
+        if word & BD_STALL:
+            tok.handshake = STALL
+            self._flag("STALL")
+            return tok
+        bc = (word >> BD_BC_SHIFT) & BD_BC_MASK
+        bd_data1 = bool(word & BD_DATA1)
+        if tx:
+            tok.data = self._dma_read(buffer, bc, word & BD_NINC)
+            tok.data1 = bd_data1
+            tok.handshake = ACK
+            tok.commit = (bd_at, odd, word, b"", buffer)
+            return tok
+        if len(tok.data) > bc:
+            self.v["ERRSTAT"] |= self._bit("ERRSTAT", "DMAERR")
+            if self.v["ERREN"] & self._bit("ERREN", "DMAERREN"):
+                self._flag("ERROR")
+            return tok
+        tok.handshake = ACK
+        if word & BD_DTS and tok.data1 != bd_data1:
+            return tok                      # a retransmission: ACKed, dropped
+        tok.commit = (bd_at, odd, word, tok.data, buffer)
+        return tok
+
+    def complete(self, tok: Token):
+        """The transaction ``tok`` ended on the bus: the SIE writes the OUT data and the BD
+        back, flips the ODD pointer and reports the token (STAT, TOKDNE)."""
+        if tok.commit is None:
+            return
+        bd_at, odd, word, data, buffer = tok.commit
+        ep, tx = tok.endpoint, tok.pid == PID_IN
+        n = len(tok.data)
+        if not tx:
+            self._dma_write(buffer, data, word & BD_NINC)
+        if not word & BD_KEEP:
+            back = (word & BD_DATA1) | tok.pid << 2 | n << BD_BC_SHIFT
+            self._dma_write_word(bd_at, back)
+        self.odd[ep][tx] = odd ^ 1
+        self.v["STAT"] = ep << 4 | int(tx) << 3 | odd << 2
+        if tok.pid == PID_SETUP:
+            self.v["CTL"] |= self._bit("CTL", "TXSUSPENDTOKENBUSY")
+        self._flag("TOKDNE")
+
+    # -- DMA ------------------------------------------------------------------------------
+    def _check(self, address: int, n: int, write: bool, what: str):
+        in_ram = SRAM_BASE <= address and address + n <= SRAM_BASE + SRAM_SIZE
+        in_flash = FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE
+        kind = "write" if write else "read"
+        if not (in_ram or (in_flash and not write)):
+            raise Fault("BusFault", f"USB0 DMA {kind} of {what} at 0x{address:08X} "
+                        f"({n} bytes): not {'RAM' if write else 'RAM or flash'}",
+                        self.machine.pc, address)
+        if not self.chip.mpu.master_may(USB_MASTER, address, n, write):
+            raise Fault("BusFault", f"USB0 DMA {kind} of {what} at 0x{address:08X}: the "
+                        f"system MPU grants bus master {USB_MASTER} no {kind} access "
+                        "(set MPU_RGDAAC0.M4RE/M4WE or clear MPU_CESR.VLD)",
+                        self.machine.pc, address)
+
+    def _read_bd(self, bd_at: int) -> tuple:
+        self._check(bd_at, BD_BYTES, False, "a buffer descriptor")
+        raw = self.machine.read(bd_at, BD_BYTES)
+        return int.from_bytes(raw[:4], "little"), int.from_bytes(raw[4:], "little")
+
+    def _dma_read(self, address: int, n: int, ninc: bool) -> bytes:
+        if n == 0:
+            return b""
+        self._check(address, 1 if ninc else n, False, "IN data")
+        if ninc:
+            return self.machine.read(address, 1) * n
+        return self.machine.read(address, n)
+
+    def _dma_write(self, address: int, data: bytes, ninc: bool):
+        if not data:
+            return
+        self._check(address, 1 if ninc else len(data), True, "OUT data")
+        self.machine.write(address, data[-1:] if ninc else data)
+
+    def _dma_write_word(self, address: int, word: int):
+        self._check(address, 4, True, "a buffer descriptor")
+        self.machine.write(address, word.to_bytes(4, "little"))
