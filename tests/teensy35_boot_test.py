@@ -747,13 +747,14 @@ def test_image_has_the_symbols_the_contract_names():
     image = board.machine.image
     for name in ("Reset_Handler", "NMI_Handler", "HardFault_Handler", "SysTick_Handler",
                  "UART0_RX_TX_IRQHandler", "FTM3_IRQHandler", "I2C0_IRQHandler",
-                 "Default_Handler", "hq_fatal",
+                 "USB0_IRQHandler", "Default_Handler", "hq_fatal",
                  "hq::FlightController::step"):
         assert image.has(name), name
     slots = {1: "Reset_Handler", 2: "NMI_Handler", 3: "HardFault_Handler",
              15: "SysTick_Handler", 16 + registers.irq("UART0_RX_TX"): "UART0_RX_TX_IRQHandler",
              16 + registers.irq("FTM3"): "FTM3_IRQHandler",
-             16 + registers.irq("I2C0"): "I2C0_IRQHandler"}
+             16 + registers.irq("I2C0"): "I2C0_IRQHandler",
+             16 + registers.irq("USB0"): "USB0_IRQHandler"}
     for number, name in slots.items():
         assert image.vector_symbol(number) == name, number
     for irq in range(86):

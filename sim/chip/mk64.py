@@ -23,7 +23,7 @@ class Mk64:
     ``crystal_ok`` False models a dead or missing crystal (the oscillator never starts)."""
 
     def __init__(self, image: Image | str | None = None, *, crystal_hz: float = 16e6,
-                 crystal_ok: bool = True):
+                 crystal_ok: bool = True, uid: tuple | None = None):
         if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__"):
             image = Image(image)
         self._tree = None
@@ -37,6 +37,9 @@ class Mk64:
         self.scs = m.attach(SystemControlSpace(m))
         self.dwt = m.dwt = m.attach(Dwt(m, self.scs))
         self.sim = m.attach(Sim(m, self))
+        if uid is not None:                  # this chip's own (UIDH, UIDMH, UIDML, UIDL)
+            self.sim.UID = dict(zip(("UIDH", "UIDMH", "UIDML", "UIDL"), uid))
+            self.sim.reset()
         self.osc = m.attach(Osc(m, self))
         self.mcg = m.attach(Mcg(m, self))
         self.wdog = m.attach(Wdog(m, self))

@@ -71,8 +71,8 @@ class Teensy35:
     its loop boundary itself saves that call into Python at every loop."""
 
     def __init__(self, image, *, crystal_ok: bool = True, mpu6050=None, with_mpu6050=True,
-                 track_loops: bool = True):
-        self.chip = Mk64(image, crystal_hz=CRYSTAL_HZ, crystal_ok=crystal_ok)
+                 track_loops: bool = True, uid: tuple | None = None):
+        self.chip = Mk64(image, crystal_hz=CRYSTAL_HZ, crystal_ok=crystal_ok, uid=uid)
         self.machine = self.chip.machine
         self.mpu = None
         if with_mpu6050:

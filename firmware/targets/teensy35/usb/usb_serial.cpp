@@ -49,7 +49,11 @@ void UsbCdcSerial::begin() {
     tusb_init(0, &device);
 }
 
-void UsbCdcSerial::task() { tud_task(); }
+// Only when the interrupt queued an event: tud_task() masks and unmasks USB0's interrupt each
+// time it runs, and the loop's wait calls this at every wake-up.
+void UsbCdcSerial::task() {
+    if (tud_task_event_ready()) tud_task();
+}
 
 size_t UsbCdcSerial::read(uint8_t* data, size_t n) {
     return tud_cdc_read(data, static_cast<uint32_t>(n));

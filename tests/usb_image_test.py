@@ -1,0 +1,241 @@
+"""The Teensy 3.5 image's own USB port, in the emulated chip with the USB host model
+(sim/chip/usb.py, usb_host.py): what a computer meets when the board is plugged in.
+
+* Enumeration: the image answers the Linux sequence; its descriptors say what
+  teensy_loader_cli and the cdc_acm driver expect (Teensyduino's USB Serial IDs, heliquad's
+  strings, a serial number from the chip's unique ID, a CDC-ACM function), read by the
+  project's parser and by an independent one (usb-protocol, from PyPI).
+* MAVLink over the port: whole messages with good checksums; commands in on USB answered
+  on USB; HQ_FW_STATUS names its link and counts both links' bytes.
+* A host that stops reading: the loop keeps its rate, drops are counted on USB only, and
+  the stream resumes with whole messages.
+* 134 baud, as `stty 134` (7 bytes) and teensy_loader_cli's reboot request (1 byte) send
+  it: disarmed, the image stops the motors and halts on BKPT (the bootloader chip's cue);
+  armed, it refuses and says so, and the motors keep their commands.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import sys
+
+import pytest
+
+from heliquad.sim.base.firmware_facts import USB_IDENTITY, usb_serial_number
+from heliquad.sim.chip import Teensy35
+from heliquad.sim.chip.usb_host import UsbHost, settle
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import teensy35_boot_test as boot  # noqa: E402
+
+pytestmark = pytest.mark.pil
+
+EMULATED_UID = (0x0000_4851, 0x0045_4D55, 0x4D4B_3634, 0x0000_0001)
+LINUX_SEQUENCE = [
+    ("GET_DESCRIPTOR(device)", 64), ("SET_ADDRESS", 0), ("GET_DESCRIPTOR(device)", 18),
+    ("GET_DESCRIPTOR(configuration)", 9), ("GET_DESCRIPTOR(configuration)", 75),
+    ("GET_DESCRIPTOR(string 0)", 255), ("GET_DESCRIPTOR(string 2)", 255),
+    ("GET_DESCRIPTOR(string 1)", 255), ("GET_DESCRIPTOR(string 3)", 255),
+    ("SET_CONFIGURATION", 0)]
+
+
+def _plugged_in(uid=None, *, open_port=True):
+    """The image booted with a host on its USB port, enumerated (and the port opened)."""
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(boot.IMAGE, uid=uid)
+    host = UsbHost(board.chip)
+    assert board.run_to_loop(1, instructions=boot.BOOT_BUDGET).reason == "loop"
+    settle(host, lambda s: board.run(seconds=s), timeout_s=1.0)
+    if open_port:
+        host.open()
+        settle(host, lambda s: board.run(seconds=s), timeout_s=1.0)
+    return board, host
+
+
+def _messages(data: bytes):
+    """Every MAVLink message in data, and the count of bytes the parser could not use."""
+    from heliquad.sim.base.dialect import dialect
+    mav = dialect()
+    parser = mav.MAVLink(None)
+    parser.robust_parsing = True
+    out = []
+    for m in parser.parse_buffer(data) or []:
+        out.append(m)
+    bad = [m for m in out if m.get_type() == "BAD_DATA"]
+    return [m for m in out if m.get_type() != "BAD_DATA"], bad
+
+
+def test_the_image_enumerates_as_linux_does_and_says_who_it_is():
+    board, host = _plugged_in(open_port=False)
+    import struct
+    asked = [(r.request, struct.unpack("<H", r.setup[6:8])[0]) for r in host.transfers]
+    assert asked == LINUX_SEQUENCE
+    assert all(r.status == "ok" for r in host.transfers)
+    ident = host.identity()
+    d = ident.device
+    assert (d.vid, d.pid, d.ep0_max_packet) == (USB_IDENTITY.vid, USB_IDENTITY.pid, 64)
+    assert ident.strings == {1: USB_IDENTITY.manufacturer, 2: USB_IDENTITY.product,
+                             3: usb_serial_number(EMULATED_UID)}
+    comm, data = ident.configuration.interfaces
+    assert (comm.interface_class, comm.interface_subclass) == (2, 2)      # CDC, ACM
+    assert [f.name for f in comm.functional] == ["header", "call management",
+                                                 "abstract control management", "union"]
+    assert data.interface_class == 0x0A                                   # CDC data
+    assert [(e.address, e.transfer_type, e.max_packet)
+            for e in comm.endpoints + data.endpoints] == \
+        [(0x81, "interrupt", 8), (0x02, "bulk", 64), (0x82, "bulk", 64)]
+
+
+def test_the_descriptors_read_the_same_with_an_independent_parser():
+    standard = pytest.importorskip("usb_protocol.types.descriptors.standard")
+    board, host = _plugged_in(open_port=False)
+    dev = standard.DeviceDescriptor.parse(host.device_bytes)
+    assert (dev.idVendor, dev.idProduct, dev.bMaxPacketSize0) == (0x16C0, 0x0483, 64)
+    assert (dev.iManufacturer, dev.iProduct, dev.iSerialNumber) == (1, 2, 3)
+    cfg = standard.ConfigurationDescriptor.parse(host.config_bytes[:9])
+    assert (cfg.wTotalLength, cfg.bNumInterfaces) == (len(host.config_bytes), 2)
+    endpoints, at = [], 0
+    raw = host.config_bytes
+    while at < len(raw):
+        if raw[at + 1] == 5:
+            ep = standard.EndpointDescriptor.parse(raw[at:at + 7])
+            endpoints.append((ep.bEndpointAddress, ep.bmAttributes & 3, ep.wMaxPacketSize))
+        at += raw[at]
+    assert endpoints == [(0x81, 3, 8), (0x02, 2, 64), (0x82, 2, 64)]
+
+
+def test_two_chips_with_different_unique_ids_give_different_serial_numbers():
+    other = (0x0012_3456, 0x789A_BCDE, 0xF012_3456, 0x789A_BCDE)
+    _, a = _plugged_in(open_port=False)
+    _, b = _plugged_in(other, open_port=False)
+    assert a.strings[3] == usb_serial_number(EMULATED_UID)
+    assert b.strings[3] == usb_serial_number(other) == "00123456789ABCDEF0123456789ABCDE"
+
+
+def test_mavlink_over_usb_whole_messages_answers_and_per_link_figures():
+    from heliquad.sim.base.dialect import dialect
+    mav = dialect()
+    board, host = _plugged_in()
+    host.take_received()
+    gcs = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    ask = gcs.command_long_encode(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    host.send(ask.pack(gcs))
+    board.run(seconds=1.5)
+    usb, bad = _messages(host.take_received())
+    assert not bad, bad[:3]
+    kinds = {m.get_type() for m in usb}
+    assert {"HEARTBEAT", "ATTITUDE", "HQ_SYSID_SAMPLE", "HQ_FW_STATUS"} <= kinds, kinds
+    acks = [m for m in usb if m.get_type() == "COMMAND_ACK"]
+    assert [(a.command, a.result) for a in acks] == \
+        [(mav.MAV_CMD_COMPONENT_ARM_DISARM, mav.MAV_RESULT_DENIED)]   # answered on USB
+    uart, _ = _messages(board.take_telemetry())
+    assert not [m for m in uart if m.get_type() == "COMMAND_ACK"], "the ask came on USB"
+    status = [m for m in usb if m.get_type() == "HQ_FW_STATUS"][-1]
+    assert status.link_id == mav.HQ_LINK_USB
+    assert status.link_bytes[mav.HQ_LINK_USB] > 0 and status.link_bytes[mav.HQ_LINK_UART0] > 0
+    assert list(status.link_dropped) == [0, 0]
+    uart_status = [m for m in uart if m.get_type() == "HQ_FW_STATUS"][-1]
+    assert uart_status.link_id == mav.HQ_LINK_UART0
+    seqs = [m.get_seq() for m in usb]
+    assert all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:])), "USB's own sequence"
+
+
+def _stop_reading(seconds):
+    """The port open and read, then not read for `seconds`, then read again for 1.5 s: the
+    board, the loops run while not read, and the messages read after."""
+    board, host = _plugged_in()
+    board.run(seconds=0.2)
+    host.take_received()
+    host.reading = False
+    loops = board.loops
+    board.run(seconds=seconds)
+    loops = board.loops - loops
+    host.reading = True
+    board.run(seconds=1.5)
+    return board, loops, _messages(host.take_received())
+
+
+def test_a_host_that_stops_reading_costs_dropped_messages_on_usb_only():
+    from heliquad.sim.base.dialect import dialect
+    mav = dialect()
+    _, _, (usb, bad) = _stop_reading(2.0)
+    assert not bad, bad[:3]
+    assert {"HEARTBEAT", "ATTITUDE", "HQ_FW_STATUS"} <= {m.get_type() for m in usb}
+    status = [m for m in usb if m.get_type() == "HQ_FW_STATUS"][-1]
+    assert status.link_dropped[mav.HQ_LINK_USB] > 0
+    assert status.link_dropped[mav.HQ_LINK_UART0] == 0
+
+
+@pytest.mark.xfail(strict=True, reason="a defect found, not yet fixed: with the USB host "
+                   "model attached the image misses about one loop tick in ten (179 loops "
+                   "in 1 s, overruns counted by the image itself), reading or not")
+def test_the_loop_keeps_200_hz_while_the_host_does_not_read():
+    board, loops, _ = _stop_reading(5.0)
+    assert loops == pytest.approx(1000, abs=2)
+
+
+@pytest.mark.parametrize("length", [7, 1], ids=["stty-7-bytes", "teensy-loader-1-byte"])
+def test_134_baud_enters_the_bootloader_when_disarmed(length):
+    board, host = _plugged_in()
+    host.take_received()
+    host.set_line_coding(134, length=length)
+    stop = board.run(seconds=0.5)
+    assert stop.reason == "bkpt", stop
+    texts = [m.text for m in _messages(host.take_received())[0] if m.get_type() == "STATUSTEXT"]
+    assert "entering the bootloader: disarmed, motors stopped" in texts
+    assert all(pulse == pytest.approx(1.0e-3, abs=1e-6)
+               for _, _, _, pulse in board.esc_outputs()), "the stop pulse on every ESC"
+
+
+def test_other_line_codings_change_nothing():
+    board, host = _plugged_in()
+    for baud, length in ((115200, 7), (9600, 7), (134 + 256, 7)):
+        host.set_line_coding(baud, length=length)
+        settle(host, lambda s: board.run(seconds=s), timeout_s=1.0)
+    assert board.run(seconds=0.3).reason != "bkpt"
+
+
+def test_134_baud_is_refused_while_armed_and_the_motors_keep_flying():
+    from heliquad.sim.base.dialect import dialect
+    from heliquad.sim.chip.pil.board import PilBoard
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    mav = dialect()
+    pil = PilBoard(str(boot.IMAGE))
+    host = UsbHost(pil.board.chip)
+    pil.boot()
+    sample = raw_packet([0.0, 0.0, 0.0], [0.0, 0.0, -9.80665])
+    gcs = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    heartbeat = gcs.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    rc_low = [1500, 1500, 1000, 1500, 2000, 1000]
+    frames = 0
+
+    def fly(n, rc):
+        nonlocal frames
+        out = []
+        for _ in range(n):
+            if frames % 40 == 0 and host.configured:
+                host.send(heartbeat.pack(gcs))
+            out.append(pil.frame(sample, False, rc, 0, sync=False))
+            frames += 1
+        return out
+
+    fly(200, rc_low)                                   # enumerated, RC and IMU live
+    host.open()
+    fly(40, rc_low)
+    arm = gcs.command_long_encode(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    host.send(arm.pack(gcs))
+    fly(20, rc_low)
+    assert pil.report()[3] == 1, "armed"
+    rc_mid = [1500, 1500, 1500, 1500, 2000, 1000]
+    fly(40, rc_mid)
+    host.take_received()
+    for length in (7, 1):
+        host.set_line_coding(134, length=length)
+        after = fly(60, rc_mid)
+        assert all(armed for _, armed, _, _ in after)
+        assert all(min(motors) > 0.05 for motors, _, _, _ in after), "no motor ever stopped"
+    texts = [m.text for m in _messages(host.take_received())[0] if m.get_type() == "STATUSTEXT"]
+    assert texts.count("bootloader refused: armed (disarm first)") == 2
