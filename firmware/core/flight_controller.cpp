@@ -116,6 +116,7 @@ void FlightController::publish(uint64_t now_us) {
     const Supervisor& sup = supervisor_;
     LoopStatus& s = status_;
     s.loop_index = loops_;
+    s.time_us = now_us;
     s.armed = sup.armed();
     s.mode = sup.mode();
     s.excitation_state = sup.excitation_state();

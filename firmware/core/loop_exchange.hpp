@@ -132,6 +132,9 @@ struct BootReport {
 struct LoopStatus {
     LoopState state{};
     uint32_t loop_index = 0;               // the step's number from 0 (HQ_FW_STATUS.loops)
+    // The step's time, read as it starts (before the IMU read): the stamp of every message
+    // about this loop on every link, however late a link sends it.
+    uint64_t time_us = 0;
     bool armed = false;
     FlightMode mode = FlightMode::Angle;
     ExcitationState excitation_state = ExcitationState::Idle;   // this loop's sample

@@ -275,7 +275,7 @@ void GcsLink::send_stream(uint32_t msgid, const LoopStatus& st, uint64_t now_us)
 void GcsLink::send_telemetry(const LoopStatus& st) {
     // Order matters to the simulator: HQ_SYSID_SAMPLE is the last message of every loop, so
     // a reader that has it has the whole loop's telemetry.
-    const uint64_t now = clock_.micros();
+    const uint64_t now = st.time_us;      // the loop's, not this link's moment of sending
     for (Stream& s : streams_) {
         if (stream_due(s, st.loop_index, now)) send_stream(s.msgid, st, now);
     }
