@@ -185,6 +185,8 @@ class SilSession(Closing):
         self.cfg = cfg
         self.start_us = int(time.time() * 1e6) if start_us is None else int(start_us)
         image = {"image": cfg.firmware_image} if cfg.firmware_image else {}
+        if cfg.firmware == "teensy35":
+            image["link"] = cfg.firmware_link
         self.rig = Rig(lambda dt_s: make_plant(cfg, dt_s), cfg.firmware, cfg.loop_hz,
                        cfg.faults, dmp_image=cfg.dmp_image, params_file=cfg.param_store, **image)
         #: What flies and what it flies (a manifest records them).

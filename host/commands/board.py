@@ -7,7 +7,7 @@ import os
 from ...sim.base import dialect as names
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
-from .shared_options import (add_firmware_argument, add_param_store_argument, check_plant, finite,
+from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument, check_plant, finite,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
@@ -71,6 +71,7 @@ def run(args) -> int:
         r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
+                      link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:

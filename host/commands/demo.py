@@ -28,7 +28,7 @@ import traceback
 from ...sim.base.errors import DiskFull, InputError
 from ..process.signals import WORDS, stop_exception, stopped_by
 from ..records import paper
-from .shared_options import MAX_SEED, add_firmware_argument, int_in
+from .shared_options import MAX_SEED, add_firmware_argument, firmware_link, int_in
 
 #: The demo's exit code when an axis failed (the others' records and the report are kept).
 EXIT_STOPPED = 1
@@ -59,7 +59,8 @@ def run_demo(args) -> int:
     new_output_folder(args.out, "the demo")
     t0 = time.monotonic()
     options = {"out": args.out, "ideal_sensor": args.ideal_sensor, "seed": args.seed,
-               "firmware": args.firmware, "turbulence": args.turbulence}
+               "firmware": args.firmware, "link": firmware_link(args),
+               "turbulence": args.turbulence}
     # Each axis in a process of its own, side by side; Ctrl-C stops them all in order.
     children = run_children([(axis, [sys.executable, "-c", AXIS_COMMAND,
                                      json.dumps({**options, "axis": axis})])
@@ -129,7 +130,7 @@ def axis_main() -> None:
     send_result(result)
 
 
-def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
+def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart") -> dict:
     """One axis of the demo in ``out/AXIS``: ``{"summary": _compare's row, "sim_s": ...}``."""
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
     # import leaves Python to end by SIGINT after the tool has stopped in order.
@@ -148,7 +149,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence) -> dict:
     print(f"== sweep on the {axis} rig, {firmware} firmware in the loop")
     cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
                     ideal_sensor=ideal_sensor, seed=seed, firmware=firmware,
-                    turbulence=turbulence)
+                    firmware_link=link, turbulence=turbulence)
     with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
         run_sweep(session, default_plan(axis), folder,
                   {**sil_source(cfg), "firmware": session.fw.record()})

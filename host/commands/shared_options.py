@@ -13,7 +13,7 @@ from ...sim.base.errors import InputError
 from ..acquire.connection import CONNECTION_HELP
 from ..acquire.excitation import amplitude_bound, bound_text
 
-__all__ = ["add_port_argument", "add_firmware_argument", "add_param_store_argument",
+__all__ = ["add_port_argument", "add_firmware_argument", "firmware_link", "add_param_store_argument",
            "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
@@ -106,6 +106,18 @@ def add_firmware_argument(p) -> None:
                         "image itself, run instruction by instruction in the emulated "
                         "MK64FX512 (processor in the loop: slower; the install builds the "
                         "image when the ARM toolchain is present)")
+    p.add_argument("--link", choices=("uart", "usb"), default="uart",
+                   help="--firmware teensy35: the board's link the tools talk over: uart "
+                        "(UART0, pins 0 and 1; the default) or usb (its own USB port, which "
+                        "an emulated USB host enumerates and holds open; slower to emulate: "
+                        "docs/processor-in-the-loop.md)")
+
+
+def firmware_link(args) -> str:
+    """--link, refused with the host build (whose one link is a pty)."""
+    if args.link != "uart" and args.firmware != "teensy35":
+        raise InputError("--link usb needs --firmware teensy35 (the host build's link is a pty)")
+    return args.link
 
 
 def add_fault_argument(p, prefix="") -> None:

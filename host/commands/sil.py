@@ -11,7 +11,7 @@ from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
-from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
                              add_param_store_argument, check_excitation, check_plant, faults,
                              finite, int_in, number_in)
 
@@ -101,7 +101,8 @@ def run(args) -> int:
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
                     param_store=args.param_store,
-                    ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware)
+                    ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware,
+                    firmware_link=firmware_link(args))
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:

@@ -17,7 +17,7 @@ from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_ampli
 from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from ..process.signals import ABORTED_BY, EXIT_CODES
-from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument,
+from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
                              add_param_store_argument, add_port_argument, check_excitation,
                              check_plant, faults, finite, int_in, number_in)
 
@@ -277,7 +277,8 @@ def _sweep_session(args, tlog):
                     inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                     plant=args.plant, rig=args.axis, params=args.params,
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                    faults=faults(args), firmware=args.firmware, param_store=args.param_store)
+                    faults=faults(args), firmware=args.firmware, param_store=args.param_store,
+                    firmware_link=firmware_link(args))
     source = sil_source(cfg)
     try:
         session = SilSession(cfg, tlog)

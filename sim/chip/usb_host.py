@@ -96,9 +96,12 @@ def setup_packet(request_type, request, value, index, length) -> bytes:
 class UsbHost:
     """The host on ``chip.usb0``'s bus. ``auto_enumerate``: enumerate at attach."""
 
-    def __init__(self, chip, *, auto_enumerate: bool = True):
+    def __init__(self, chip, *, auto_enumerate: bool = True, debounce_s: float = DEBOUNCE_S,
+                 open_port: bool = False):
         self.chip, self.usb, self.machine = chip, chip.usb0, chip.machine
         self.auto_enumerate = auto_enumerate
+        self.debounce_s = debounce_s
+        self.open_port = open_port      # open the port (cdc_acm) once enumerated
         self.usb.listeners.append(self)
         self.machine.reset_listeners.append(self._forget)
         self._forget()
@@ -115,6 +118,8 @@ class UsbHost:
         self.device_bytes = self.config_bytes = b""
         self.strings = {}
         self.reading = True
+        self.in_nak = True          # the last bulk IN poll was NAKed: nothing was waiting
+        self.in_nak_cycle = -1      # when a bulk IN poll was last NAKed
         self.toggle_errors = 0
         self._received = bytearray()
         self._to_send = bytearray()
@@ -133,7 +138,7 @@ class UsbHost:
             self._detach()
         elif self.auto_enumerate:
             self._debouncing = True
-            self._timer = self.machine.after(DEBOUNCE_S, self.enumerate)
+            self._timer = self.machine.after(self.debounce_s, self.enumerate)
 
     def tokens_free(self):
         if self._waiting_tokdne:
@@ -155,9 +160,12 @@ class UsbHost:
 
     # -- requests -------------------------------------------------------------------------
     def enumerate(self):
-        """Enumerate as Linux does (a bus reset first, so it re-enumerates too)."""
+        """Enumerate as Linux does (a bus reset first, so it re-enumerates too); then open
+        the port if ``open_port``."""
         self._timer, self._debouncing = None, False
         self._queue(self._enumeration())
+        if self.open_port:
+            self.open()
 
     def bus_reset(self):
         """A bus reset now, then the enumeration again."""
@@ -399,6 +407,10 @@ class UsbHost:
         self.usb.complete(tok)
         if job not in (self._control, self._bulk_in, self._bulk_out):
             return self._pump()         # dropped meanwhile (a reset, a detach)
+        if job is self._bulk_in:
+            self.in_nak = tok.handshake == NAK
+            if self.in_nak:
+                self.in_nak_cycle = self.machine.now()
         if tok.handshake == NAK:
             job.nak_frame = self.frame
         elif tok.handshake == STALL:

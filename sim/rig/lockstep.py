@@ -226,7 +226,8 @@ class HostFirmware:
 class PilFirmware(HostFirmware):
     """The Teensy 3.5 image in the emulated MK64FX512 (``python -m heliquad.sim.chip.pil``):
     the same ptys and frames as the host build, the image as flashed to the board inside.
-    ``image``: the .elf (default: the installed one). ``params_file``: keep the board's
+    ``image``: the .elf (default: the installed one). ``link``: the board's link the ptys
+    carry, ``uart`` (UART0) or ``usb`` (its USB port). ``params_file``: keep the board's
     parameter flash in that file across runs (``--params``; the file holds the two flash
     sectors, docs/processor-in-the-loop.md). The emulated chip runs slower than the
     host build, and one loop may hold the bus for an IMU re-initialisation, so its start-up
@@ -236,18 +237,21 @@ class PilFirmware(HostFirmware):
     start_timeout_s = 120.0
     reply_timeout_s = 60.0
 
-    def __init__(self, *args, image: str | None = None, **kwargs):
+    def __init__(self, *args, image: str | None = None, link: str = "uart", **kwargs):
         self.image = image
+        self.link = link
         super().__init__(*args, **kwargs)
 
     def command(self) -> list:
         self.image = os.path.abspath(self.image or str(teensy35_image("elf")))
-        return [sys.executable, "-m", "heliquad.sim.chip.pil", "--image", self.image]
+        return [sys.executable, "-m", "heliquad.sim.chip.pil", "--image", self.image,
+                "--link", self.link]
 
     def record(self) -> dict:
         with open(self.image, "rb") as fh:
             digest = hashlib.sha256(fh.read()).hexdigest()
-        return {"name": self.name, "image": self.image, "image_sha256": digest}
+        return {"name": self.name, "image": self.image, "image_sha256": digest,
+                "link": self.link}
 
 
 def start_firmware(firmware: str = "host", **kwargs) -> HostFirmware:

@@ -57,6 +57,7 @@ class SilConfig:
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
     firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
+    firmware_link: str = "uart"    # teensy35: its link the tools talk over, "uart" or "usb"
     param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
 
 

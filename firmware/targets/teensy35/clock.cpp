@@ -88,12 +88,14 @@ ClockFault start_clocks() {
 uint64_t TeensyClock::micros() const { return cycles64() / (g_core_hz / 1000000u); }
 
 void TeensyClock::delay_us(uint32_t us) {
-    // Start-up waits (the IMU's reset, 100 ms) outlast nothing but keep the watchdog fed.
+    // Start-up waits (the IMU's reset, 100 ms) outlast nothing but keep the watchdog fed and
+    // the idle work going.
     const uint64_t end = cycles64() + static_cast<uint64_t>(us) * (g_core_hz / 1000000u);
     uint64_t next_refresh = 0;
     for (uint64_t now = cycles64(); now < end; now = cycles64()) {
         if (now >= next_refresh) {
             Watchdog::refresh();
+            if (idle_ != nullptr) idle_();
             next_refresh = now + g_core_hz / 1000u;        // every millisecond
         }
     }

@@ -51,8 +51,14 @@ uint32_t cycles32();
 class TeensyClock final : public Clock {
 public:
     uint64_t micros() const override;
-    // Busy-waits on the cycle counter: start-up only, never in the loop.
+    // Busy-waits on the cycle counter: start-up only, never in the loop. Every millisecond
+    // it feeds the watchdog and runs the idle work, if set (the USB stack's, so a host
+    // enumerating the board during the IMU's start-up is answered).
     void delay_us(uint32_t us) override;
+    void set_idle(void (*idle)()) { idle_ = idle; }
+
+private:
+    void (*idle_)() = nullptr;
 };
 
 }  // namespace hq::teensy

@@ -2,11 +2,12 @@
 //
 // Start-up, in order: clocks (a failure ends in the fault path, blink code 1-5, the ESCs
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
-// the UART0 link; RC capture; the I2C bus; the FlightController (its parameters in the
-// top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
-// configuration and, with an image built in, the DMP upload); the two MAVLink links
-// (GcsLink, core/link/), one on the USB port (usb/usb_serial.hpp) and one on UART0, sharing
-// the loop's inbox; the USB port attached; the 200 Hz loop timer; the watchdog
+// the UART0 link; RC capture; the I2C bus; the USB port (usb/usb_serial.hpp), attached now
+// so that the start-up's waits answer a host enumerating it; the FlightController (its
+// parameters in the top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050
+// reset, configuration and, with an image built in, the DMP upload); the two MAVLink links
+// (GcsLink, core/link/), one on the USB port and one on UART0, sharing the loop's inbox;
+// the 200 Hz loop timer; the watchdog
 // (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC input, the USB stack's
 // work, take both links' requests, run one FlightController step, send each link's answers
 // and telemetry, hand the USB transmit buffer to the controller, record the cycles all that
@@ -108,6 +109,10 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static I2c0Bus i2c;
     i2c.begin();
     static TeensyClock clock;
+    // The USB port attached before the IMU's start-up, whose waits serve it: a host has
+    // enumerated the board (about 45 ms after its 100 ms debounce) by the first loop.
+    usb.begin();
+    clock.set_idle(service_usb);
     static FlashParamStorage storage;         // the top two flash sectors (param_storage.hpp)
 
     hq::FlightControllerConfig cfg;
@@ -130,8 +135,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static hq::GcsLink uart_link(uart_cfg, clock, telemetry, inbox);
     usb_link.pair_with(uart_link);
     uart_link.pair_with(usb_link);
-    const hq::InitResult init = fc.init();
-    usb.begin();
+    const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
     usb_link.send_notices(fc.status());
     uart_link.send_notices(fc.status());
 

@@ -1,6 +1,7 @@
 """The Teensy 3.5 on the simulated rig, one lockstep frame at a time (:class:`PilBoard`):
 the frame's inputs into the emulated chip's pins and peripherals, one pass of the image's
-main loop, the motors and the loop's state read back, the telemetry the UART sent."""
+main loop, the motors and the loop's state read back, the telemetry its link sent: the USB
+port (a USB host model that enumerated the board and holds its port open) or UART0."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from ...base.dialect import dialect
 from ...base.firmware_facts import LOOP_RATE_HZ
 from ..machine import ChipReset, EmulationError
 from ..teensy35 import Teensy35
+from ..usb_host import UsbHost
 from .param_file import ParamFile
 
 #: The image's loop rate (firmware/targets/teensy35/main.cpp's kLoopHz: the firmware's).
@@ -36,7 +38,15 @@ RC_FRAME_LOOPS = 4
 BOOT_LIMIT_S = 5.0
 LOOP_LIMIT_S = 2.0
 DRAIN_LIMIT_S = 0.004
+#: How often a USB drain looks whether the host's poll found the endpoint empty.
+USB_DRAIN_STEP_S = 0.00025
 SYSTICK_EXCEPTION = 15
+#: The telemetry links a board has: its USB port (CDC-ACM) and UART0 (pins 0 and 1).
+LINKS = ("usb", "uart")
+#: The emulated hub reports the board attached at once: a host's 100 ms debounce
+#: (usb_host.DEBOUNCE_S) would outlast the image's start-up, and the port must be open
+#: before the first loop so that its telemetry is read from the first loop on, as UART0's.
+PIL_DEBOUNCE_S = 0.0
 
 
 class ImageFault(RuntimeError):
@@ -47,8 +57,13 @@ class PilBoard:
     """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
     keep the parameter flash in that file (:class:`ParamFile`)."""
 
-    def __init__(self, elf: str, params_file: str | None = None):
+    def __init__(self, elf: str, params_file: str | None = None, link: str = "usb"):
+        if link not in LINKS:
+            raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")
         self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
+        self.link = link
+        self.usb_host = (UsbHost(self.board.chip, debounce_s=PIL_DEBOUNCE_S, open_port=True)
+                         if link == "usb" else None)
         self.machine = self.board.machine
         image = self.machine.image
         for needed in (WAIT_SYMBOL, REPORT_SYMBOL):
@@ -109,6 +124,8 @@ class PilBoard:
             self.params.restore()
         self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
+        if self.usb_host is not None:
+            self._check_usb_open()
         if self.params:
             self.params.keep()
         self.machine.core.keep_records = False
@@ -116,6 +133,18 @@ class PilBoard:
         self.board.chip.i2c0.transfers.clear()
         self.board.chip.ftm3.captures.clear()
         self._collect_telemetry()
+
+    def _check_usb_open(self) -> None:
+        """The USB host enumerated the board and opened its port during the start-up."""
+        host = self.usb_host
+        if host.error is not None:
+            raise ImageFault(f"start-up: {host.error}")
+        opened = [r for r in host.transfers if r.request == "SET_LINE_CODING" and r.status == "ok"]
+        if not host.configured or not opened:
+            done = host.transfers[-1].request if host.transfers else "nothing"
+            raise ImageFault("start-up: the image's USB port was not enumerated and open by "
+                             f"its first loop (the host's last request: {done}); an image "
+                             "without USB flies with --link uart")
 
     # -- inputs ----------------------------------------------------------------------------
     def apply_imu_fault(self, fault: int) -> None:
@@ -150,7 +179,11 @@ class PilBoard:
         self.board.rc_capture_pulses({ch: us for ch, us in enumerate(rc) if us > 0})
 
     def feed_telemetry(self, data: bytes) -> None:
-        if data:
+        if not data:
+            return
+        if self.usb_host is not None:
+            self.usb_host.send(data)
+        else:
             self.board.receive(data)
 
     # -- one frame ---------------------------------------------------------------------------
@@ -164,7 +197,7 @@ class PilBoard:
         if self.params:
             self.params.keep()
         if sync:
-            self._drain_uart()
+            self._drain_usb() if self.usb_host is not None else self._drain_uart()
         self._collect_telemetry()
         loops, cycles, _, armed, mode, kind, _ = self.report()
         self.step_cycles.append(cycles)
@@ -205,6 +238,20 @@ class PilBoard:
             step = min(uart.frame_cycles() * 4, deadline - m.now())
             m.run(seconds=step / m.core_hz)
 
+    def _drain_usb(self) -> None:
+        """As _drain_uart, for the USB port: until the host's bulk IN poll finds nothing
+        waiting (a NAK after the loop's flush), within the same bounds."""
+        host, m = self.usb_host, self.machine
+        systick = self.board.chip.scs.systick
+        if m.pending & (1 << SYSTICK_EXCEPTION) or systick.zero_at is None:
+            return
+        start = m.now()
+        deadline = min(start + int(DRAIN_LIMIT_S * m.core_hz),
+                       systick.zero_at - int(20e-6 * m.core_hz))
+        step = int(USB_DRAIN_STEP_S * m.core_hz)
+        while m.now() < deadline and host.in_nak_cycle <= start:
+            m.run(seconds=min(step, deadline - m.now()) / m.core_hz)
+
     def thrust(self) -> list:
         """The five thrust fractions the ESCs get from the next PWM period on."""
         ftm0 = self.board.chip.ftm0
@@ -218,7 +265,10 @@ class PilBoard:
 
     def _collect_telemetry(self) -> None:
         chip = self.board.chip
-        self.telemetry_out += self.board.take_telemetry()
+        uart = self.board.take_telemetry()
+        if self.usb_host is not None:     # UART0's bytes leave on pins nothing listens to
+            uart = self.usb_host.take_received()
+        self.telemetry_out += uart
         # A lockstep run is long: the models' inspection logs must not grow with it (the
         # native models keep none after the boot, see boot(); the pin model's level log is
         # Python's).

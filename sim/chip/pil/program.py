@@ -9,7 +9,7 @@ import sys
 
 from ...base.dialect import dialect
 from ...base.firmware_image import ImageNotFound, teensy35_image
-from .board import IMAGE_LOOP_HZ, ImageFault, PilBoard
+from .board import IMAGE_LOOP_HZ, LINKS, ImageFault, PilBoard
 from .drop_in import EXIT_IMAGE, EXIT_USAGE, DropIn, Stop
 from .param_file import ParamFileError
 from .pty import Pty
@@ -28,6 +28,10 @@ def parse(argv):
     p.add_argument("--sim-link", required=True, help="path for the sim link's pty symlink")
     p.add_argument("--telemetry", required=True, help="path for the telemetry pty symlink")
     p.add_argument("--image", help="the .elf (default: the image the install built)")
+    p.add_argument("--link", choices=LINKS, default="uart",
+                   help="the board's telemetry link the ptys carry: uart (UART0, pins 0/1; "
+                        "the default) or usb (its USB port, which an emulated USB host "
+                        "enumerates and holds open; slower to emulate)")
     p.add_argument("--loop-hz", type=float, default=IMAGE_LOOP_HZ,
                    help=f"must be the image's loop rate, {IMAGE_LOOP_HZ:g}")
     p.add_argument("--idle-timeout-s", type=int, default=10,
@@ -63,7 +67,7 @@ def _open(args):
     except ImageNotFound as e:
         _usage(str(e))
     try:
-        board = PilBoard(elf, args.params)
+        board = PilBoard(elf, args.params, link=args.link)
         board.boot()
     except (ImageFault, ParamFileError, OSError) as e:
         _usage(str(e))
@@ -74,7 +78,7 @@ def _open(args):
     report = board.report()
     print(f"sim link: {args.sim_link} -> {sim.slave_path}\ntelemetry: {args.telemetry} -> "
           f"{tel.slave_path}\nimu: {'dmp' if report[5] == dialect().HQ_SENSOR_DMP else 'raw'}\n"
-          f"image: {elf}\nready", flush=True)
+          f"image: {elf}\nlink: {args.link}\nready", flush=True)
     return board, sim, tel
 
 
