@@ -12,7 +12,7 @@ With --out DIR the two descriptors are written as the host read them: device.bin
 device descriptor, 18 bytes) and config.bin (the configuration descriptor and all its
 wTotalLength bytes). DIR must be new or empty, so no earlier file is overwritten.
 
-An image whose USB port does not attach within a few seconds of emulated time after reset
+An image whose USB port does not attach within 2 s of emulated time after reset
 (firmware without USB), one that stops or faults first, or one whose enumeration fails, is
 refused in one line (exit 2).
 """
