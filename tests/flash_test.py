@@ -93,8 +93,29 @@ def test_the_loader_runs_with_the_teensy35_arguments(tmp_path, capsys):
     hexfile = make_image(tmp_path / "ok.hex")
     rc, out, err = run(capsys, hexfile, "--loader", loader)
     assert rc == 0, err
-    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-v", str(hexfile)]
+    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-s", "-v", str(hexfile)]
     assert "flashed" in out
+    assert "reboots into its bootloader by itself" in out and "press the program button" in out
+
+
+def test_no_soft_reboot_leaves_the_button_to_the_user(tmp_path, capsys):
+    """--no-soft-reboot: the loader without -s (it then only waits for the bootloader)."""
+    loader, record = fake_loader(tmp_path)
+    hexfile = make_image(tmp_path / "ok.hex")
+    rc, out, err = run(capsys, hexfile, "--loader", loader, "--no-soft-reboot")
+    assert rc == 0, err
+    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-v", str(hexfile)]
+    assert "reboots into its bootloader" not in out
+    assert "press the program button on the Teensy" in out and "flashed" in out
+
+
+def test_check_only_runs_no_loader_whatever_the_reboot_option(tmp_path, capsys):
+    loader, record = fake_loader(tmp_path)
+    hexfile = make_image(tmp_path / "ok.hex")
+    for extra in ((), ("--no-soft-reboot",)):
+        rc, out, err = run(capsys, hexfile, "--check-only", "--loader", loader, *extra)
+        assert rc == 0 and err == "" and "running:" not in out
+    assert not record.exists(), "the loader must not run"
 
 
 def test_a_failing_loader_fails_the_command(tmp_path, capsys):
@@ -128,5 +149,5 @@ def test_the_default_image_is_the_finders(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("HQ_TEENSY35_ELF", str(tmp_path / "fw.elf"))
     rc, out, err = run(capsys, "--loader", loader)
     assert rc == 0, err
-    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-v", str(hexfile)]
+    assert record.read_text().split() == ["--mcu=TEENSY35", "-w", "-s", "-v", str(hexfile)]
     assert out.startswith(f"{hexfile}: ")

@@ -6,9 +6,13 @@ SRAM, a Thumb reset vector inside the image) and carry a flash configuration fie
 leaves the chip unsecured. A secured chip refuses the bootloader's reprogramming and is
 mass-erased by the next button press, so such an image is refused outright.
 
-Then ``teensy_loader_cli --mcu=TEENSY35 -w -v HEX`` runs (Debian/Ubuntu package
-teensy-loader-cli): it waits for the board, so press the Teensy's program button when it
-says so.
+Then ``teensy_loader_cli --mcu=TEENSY35 -w -s -v HEX`` runs (Debian/Ubuntu package
+teensy-loader-cli). Its ``-s`` (soft reboot) sets 134 baud on the board's USB serial port
+(16C0:0483): a heliquad image that runs and is disarmed enters its bootloader by itself; an
+armed one refuses (its STATUSTEXT says "bootloader refused: armed (disarm first)"). The
+loader then waits for the bootloader: press the Teensy's program button when the board does
+not reboot by itself (firmware without USB Serial, a hung board, an armed one).
+--no-soft-reboot leaves ``-s`` out (``-w -v`` only) and the button is always needed.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from dataclasses import dataclass
 from ...sim.base.errors import InputError
 from ..process.signals import EXIT_CODES, WORDS, stopped_by
 
-__all__ = ["ImageInfo", "check_image", "default_hex", "add_parser"]
+__all__ = ["ImageInfo", "check_image", "default_image", "default_hex", "add_parser"]
 
 FLASH_SIZE = 512 * 1024                      # MK64FX512
 SRAM_LOW, SRAM_HIGH = 0x1FFF0000, 0x20020000  # SRAM_L + SRAM_U, 192 KiB
@@ -89,16 +93,23 @@ def check_image(path: str) -> ImageInfo:
                      reset_vector=reset, fsec=fsec, fopt=fopt)
 
 
-def default_hex() -> str:
-    """The image to flash when none is given: the finder's .hex (heliquad.sim.base.firmware_image:
-    $HQ_TEENSY35_ELF's .hex, the installed image, the teensy35 preset's build)."""
+def default_image(kind: str, instead: str) -> str:
+    """The image a command takes when none is given: the finder's .elf or .hex (``kind``;
+    heliquad.sim.base.firmware_image: $HQ_TEENSY35_ELF, the installed image, the teensy35
+    preset's build); when there is none, an InputError that also names ``instead``, what the
+    user may give in its place."""
     # the command's work, imported when it runs: --help imports every command module
     from ...sim.base.firmware_image import ImageNotFound, teensy35_image
 
     try:
-        return str(teensy35_image("hex"))
+        return str(teensy35_image(kind))
     except ImageNotFound as exc:
-        raise InputError(f"{exc}, or give HEX") from None
+        raise InputError(f"{exc}, or give {instead}") from None
+
+
+def default_hex() -> str:
+    """The image to flash when none is given: the finder's .hex."""
+    return default_image("hex", "HEX")
 
 
 def add_parser(sub, fmt) -> None:
@@ -116,6 +127,9 @@ $HQ_TEENSY35_ELF, when set, names the image instead (its .hex beside it).
                    help="check the image and print what would be flashed; do not flash")
     p.add_argument("--loader", default="teensy_loader_cli", metavar="PROGRAM",
                    help="the loader to run (default: teensy_loader_cli on the PATH)")
+    p.add_argument("--no-soft-reboot", dest="soft_reboot", action="store_false",
+                   help="do not ask a running board to reboot into its bootloader (the "
+                        "loader's -s): press the program button instead")
     p.set_defaults(func=_cmd)
 
 
@@ -130,8 +144,12 @@ def _cmd(args) -> int:
     if loader is None:
         raise InputError(f"{args.loader} not found: install it (Debian/Ubuntu: apt-get install "
                          "teensy-loader-cli) or give --loader")
-    cmd = [loader, "--mcu=TEENSY35", "-w", "-v", info.path]
+    soft_reboot = ["-s"] if args.soft_reboot else []
+    cmd = [loader, "--mcu=TEENSY35", "-w", *soft_reboot, "-v", info.path]
     print("running: " + " ".join(cmd), flush=True)
+    if args.soft_reboot:
+        print("a running heliquad board that is disarmed reboots into its bootloader by itself",
+              flush=True)
     print("press the program button on the Teensy if it does not start by itself", flush=True)
     try:
         rc = subprocess.run(cmd).returncode
