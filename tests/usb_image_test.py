@@ -243,3 +243,76 @@ def test_134_baud_is_refused_while_armed_and_the_motors_keep_flying():
     texts = [m.text for m in _messages(f.host.take_received())[0]
              if m.get_type() == "STATUSTEXT"]
     assert texts.count("bootloader refused: armed (disarm first)") == 2
+
+
+@pytest.mark.parametrize("setup", [(0x00, 0, 2, b"\x01\x02"), (0x00, 8, 1, b"\x01"),
+                                   (0x01, 10, 1, b"\x01"), (0x80, 5, 2, 2)],
+                         ids=["GET_STATUS-out", "GET_CONFIGURATION-out", "GET_INTERFACE-out",
+                              "SET_ADDRESS-in"])
+def test_a_malformed_standard_request_is_stalled_and_the_port_goes_on(setup):
+    """A standard request sent in the wrong direction, or with a data stage it has none of,
+    is a request error (EP0 stalled) and never reaches the stack: TinyUSB would write such a
+    request's OUT bytes into a returned function's stack frame. The next requests and the
+    MAVLink stream are unharmed."""
+    request_type, request, _, data = setup
+    board, host = _plugged_in()
+    host.control(request_type, request, 0, 0, data, name="malformed")
+    settle(host, lambda s: board.run(seconds=s), timeout_s=1.0)
+    assert host.transfers[-1].status == "stall"
+    host.control(0x80, 8, 0, 0, 1, name="GET_CONFIGURATION")
+    settle(host, lambda s: board.run(seconds=s), timeout_s=1.0)
+    assert (host.transfers[-1].status, host.transfers[-1].received) == ("ok", b"\x01")
+    host.take_received()
+    board.run(seconds=1.2)
+    usb, bad = _messages(host.take_received())
+    assert not bad and "HEARTBEAT" in {m.get_type() for m in usb}
+
+
+def test_a_sil_run_over_usb_gives_the_points_of_uart0(tmp_path):
+    """The drop-in's two links (`--link usb|uart`): the same experiment read over the
+    emulated USB port and over UART0 gives every sample (no sequence gap) and the same
+    frequency-response point within 0.01 dB and 0.1 deg."""
+    import math
+    import numpy as np
+    from heliquad.host.acquire.experiment import run_sil
+    from heliquad.host.estimate.fsf import estimate_fsf
+    from heliquad.host.records.run_csv import read_run_csv
+    from heliquad.sim.rig.setup import SilConfig
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    points = {}
+    for link in ("uart", "usb"):
+        cfg = SilConfig(axis="roll", inject="mixer", freq_hz=1.0, amplitude=0.05, cycles=3,
+                        fade_cycles=1, firmware="teensy35", firmware_image=str(boot.IMAGE),
+                        firmware_link=link)
+        r = run_sil(cfg, str(tmp_path / link), progress=lambda *_: None)
+        assert r.seq_gaps == 0 and r.samples == 3 * 200, (link, r.seq_gaps, r.samples)
+        fs, u, y = read_run_csv(r.csv_path)
+        points[link] = estimate_fsf(u, y, fs)
+    uart, usb = points["uart"], points["usb"]
+    assert abs(20 * math.log10(usb.magnitude / uart.magnitude)) < 0.01
+    assert abs(math.degrees(np.angle(usb.gain / uart.gain))) < 0.1
+
+
+def test_parameters_list_and_set_over_the_emulated_usb_port(tmp_path):
+    """`heliquad board --firmware teensy35 --link usb` publishes the board's USB port on its
+    pty, and `heliquad params` lists and sets the image's parameters through it."""
+    import os
+    import subprocess
+    import tool_runs
+    boot.require_image()
+    env = {**os.environ, "HQ_TEENSY35_ELF": str(boot.IMAGE)}
+    with tool_runs.running_board(tmp_path, "--firmware", "teensy35", "--link", "usb",
+                                 "--disarmed", env=env) as port:
+        def params(*args):
+            return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "params",
+                                   "--port", str(port), *args], capture_output=True, text=True,
+                                  timeout=tool_runs.HANG_GUARD_S, env=env)
+        listed = params("list")
+        assert listed.returncode == 0, listed.stderr
+        names = [line.split()[0] for line in listed.stdout.splitlines()[2:]]
+        assert "RATE_RLL_KC" in names and len(names) >= 40, listed.stdout
+        changed = params("set", "EXC_MAX_DUR", "120")
+        assert changed.returncode == 0 and changed.stdout.startswith("EXC_MAX_DUR: "), changed.stderr
+        read = params("get", "EXC_MAX_DUR")
+        assert read.stdout == "EXC_MAX_DUR 120\n", read.stderr

@@ -182,6 +182,16 @@ class UsbHost:
         """SET_LINE_CODING with the first ``length`` bytes of its 7 (1: teensy_loader_cli's)."""
         self._queue(self._requests([self._coding(baud, length)]))
 
+    def control(self, request_type: int, request: int, value: int = 0, index: int = 0,
+                data_or_length=0, name: str = "CONTROL"):
+        """Any control transfer, queued (a test's malformed request): ``data_or_length`` the
+        OUT data stage's bytes or the IN length; its record in ``transfers``, whose status
+        may be ``stall``."""
+        def script():
+            yield from self._request(name, request_type, request, value, index, data_or_length,
+                                     may_stall=True)
+        self._queue(script())
+
     def send(self, data: bytes):
         self._to_send += data
         self._pump_soon()

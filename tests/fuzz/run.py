@@ -2,8 +2,8 @@
 
 Host targets are Python harnesses run under atheris (pip install atheris): tlog
 (host/records/tlog.py) and framer (sim/base/framing.py). Firmware targets are libFuzzer executables built
-with clang from firmware/ with HQ_FUZZ=ON: sim_link (fuzz_sim_link) and telemetry
-(fuzz_telemetry). Every target runs as libFuzzer does, on its corpus folder with
+with clang from firmware/ with HQ_FUZZ=ON: sim_link (fuzz_sim_link), telemetry
+(fuzz_telemetry) and usb_control (fuzz_usb_control, the Teensy 3.5 image's USB port). Every target runs as libFuzzer does, on its corpus folder with
 -max_total_time; the result line gives executions, executions per second, coverage (cov: and
 ft: of the last status line), corpus size, and what was found: crash-/timeout-/oom-/leak-
 artifacts and sanitizer or libFuzzer error reports in the output.
@@ -60,6 +60,8 @@ TARGETS = (
                            "(tests/fuzz/framer_fuzz.py)"),
     Target("sim_link", FIRMWARE, "firmware sim link, executable fuzz_sim_link"),
     Target("telemetry", FIRMWARE, "firmware telemetry link, executable fuzz_telemetry"),
+    Target("usb_control", FIRMWARE, "Teensy 3.5 image's USB port (TinyUSB and its port layer), "
+                                     "executable fuzz_usb_control"),
 )
 BY_NAME = {t.name: t for t in TARGETS}
 
@@ -122,12 +124,21 @@ class Work:
         return self.root / "build"
 
 
-def seed_host_corpus(target: Target, folder: Path) -> int:
-    """Write the harness's seed inputs into ``folder``; how many."""
+def seed_module_name(target: Target) -> str | None:
+    """The module in tests/fuzz whose seed_inputs() seeds the target: a host target's harness
+    (NAME_fuzz), a firmware target's NAME_seeds if it has one; None if it has none."""
+    name = f"{target.name}_fuzz" if target.kind == HOST else f"{target.name}_seeds"
+    return name if (FUZZ_DIR / f"{name}.py").is_file() else None
+
+
+def seed_corpus(target: Target, folder: Path) -> int:
+    """Write the target's seed inputs into ``folder``; how many."""
     if str(FUZZ_DIR) not in sys.path:
         sys.path.insert(0, str(FUZZ_DIR))
-    harness = importlib.import_module(f"{target.name}_fuzz")
-    seeds = harness.seed_inputs()
+    module = seed_module_name(target)
+    if module is None:
+        return 0
+    seeds = importlib.import_module(module).seed_inputs()
     for label, data in seeds.items():
         (folder / f"seed-{label}").write_bytes(data)
     return len(seeds)
@@ -150,8 +161,10 @@ def build_firmware(targets: list, work: Work) -> str | None:
     if shutil.which("clang++") is None:
         return "clang++ is not on PATH (the firmware targets need clang with libFuzzer)"
     log = work.log("build")
+    if shutil.which("clang") is None:
+        return "clang is not on PATH (fuzz_usb_control compiles TinyUSB's C with it)"
     configure = ["cmake", "-S", str(REPO / "firmware"), "-B", str(work.build),
-                 "-DCMAKE_CXX_COMPILER=clang++", "-DHQ_FUZZ=ON",
+                 "-DCMAKE_CXX_COMPILER=clang++", "-DCMAKE_C_COMPILER=clang", "-DHQ_FUZZ=ON",
                  "-DCMAKE_BUILD_TYPE=RelWithDebInfo", f"-DPython3_EXECUTABLE={sys.executable}"]
     build = ["cmake", "--build", str(work.build), "--target",
              *(t.executable for t in targets), "-j2"]
@@ -188,12 +201,10 @@ def prepare(target: Target, work: Work) -> str | None:
     """Folders and seed corpus for one target; None, or why it cannot run."""
     for folder in (work.corpus(target.name), work.artifacts(target.name)):
         folder.mkdir(parents=True, exist_ok=True)
-    if target.kind == FIRMWARE:
-        return None                       # the firmware harnesses build their frames themselves
-    if importlib.util.find_spec("atheris") is None:
+    if target.kind == HOST and importlib.util.find_spec("atheris") is None:
         return f"atheris is not installed for {sys.executable} (pip install atheris)"
     try:
-        seed_host_corpus(target, work.corpus(target.name))
+        seed_corpus(target, work.corpus(target.name))
     except Exception as exc:              # noqa: BLE001 - a broken harness is reported, not raised
         return f"its harness does not import or seed: {type(exc).__name__}: {exc}"
     return None
@@ -313,10 +324,11 @@ example:
   python tests/fuzz/run.py --seconds 60 --target tlog --target framer --work /tmp/hq-fuzz
 
 Seed corpora are generated into WORK/corpus/NAME (host targets: valid packets and .tlog files
-made with the dialect's Codec; firmware targets: empty), artifacts go to WORK/artifacts/NAME,
+made with the dialect's Codec; usb_control: a Linux enumeration and both 134-baud requests,
+tests/fuzz/usb_control_seeds.py; the other firmware targets: empty), artifacts go to WORK/artifacts/NAME,
 libFuzzer's output to WORK/logs/NAME.log. Every target runs with -timeout={TIMEOUT_S}: an
 input taking longer is a hang. The firmware targets are built first, in WORK/build, with
-clang++ and -DHQ_FUZZ=ON; if that fails they are reported as not run.
+clang and clang++ and -DHQ_FUZZ=ON; if that fails they are reported as not run.
 Exit status 0 only if every requested target ran for its time and found nothing, else 1.""")
     parser.add_argument("--seconds", type=int, default=60, metavar="N",
                         help="fuzzing time per target (default 60)")

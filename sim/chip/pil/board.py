@@ -57,7 +57,7 @@ class PilBoard:
     """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
     keep the parameter flash in that file (:class:`ParamFile`)."""
 
-    def __init__(self, elf: str, params_file: str | None = None, link: str = "usb"):
+    def __init__(self, elf: str, params_file: str | None = None, link: str = "uart"):
         if link not in LINKS:
             raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")
         self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop

@@ -1,0 +1,90 @@
+"""The firmware's fuzz_usb_control target (the Teensy 3.5 image's USB port on a fake device
+controller) built with clang as tests/fuzz/run.py builds it and run over its seed inputs: a
+Linux enumeration, both 134-baud bootloader requests and a 135-baud one. Skipped without
+clang; what fuzzing found in the vendored TinyUSB is recorded here."""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "fuzz"))
+
+import run as fuzz_run  # noqa: E402
+import usb_control_seeds as seeds  # noqa: E402
+
+pytestmark = pytest.mark.skipif(
+    not all(shutil.which(tool) for tool in ("clang", "clang++", "cmake")),
+    reason="needs clang, clang++ and cmake (the firmware fuzz build)")
+
+TARGET = fuzz_run.BY_NAME["usb_control"]
+RUN_TIMEOUT_S = 120
+
+
+@pytest.fixture(scope="module")
+def executable(tmp_path_factory):
+    work = fuzz_run.Work(tmp_path_factory.mktemp("usb-fuzz"))
+    (work.root / "logs").mkdir()
+    error = fuzz_run.build_firmware([TARGET], work)
+    assert error is None, error
+    return work.build / TARGET.executable
+
+
+def run_inputs(executable: Path, inputs: dict, folder: Path) -> subprocess.CompletedProcess:
+    """The target over the inputs (libFuzzer runs each file once), with its per-input line."""
+    paths = []
+    for label, data in inputs.items():
+        path = folder / label
+        path.write_bytes(data)
+        paths.append(str(path))
+    return subprocess.run([str(executable), *paths], capture_output=True, text=True,
+                          env={**os.environ, "HQ_FUZZ_USB_LOG": "1"}, timeout=RUN_TIMEOUT_S)
+
+
+def summary(executable: Path, data: bytes, folder: Path) -> str:
+    done = run_inputs(executable, {"input": data}, folder)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return [line for line in done.stdout.splitlines() if line.startswith("usb:")][-1]
+
+
+def test_the_seed_inputs_run_clean(executable, tmp_path):
+    done = run_inputs(executable, seeds.seed_inputs(), tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "ERROR" not in done.stderr and "runtime error" not in done.stderr
+
+
+@pytest.mark.parametrize("label, bootloader", [
+    ("linux-enumeration", 0), ("bootloader-134-baud", 1), ("bootloader-1-byte", 1),
+    ("line-coding-135-baud", 0)])
+def test_the_seeds_enumerate_open_the_port_and_ask_for_the_bootloader_at_134_baud(
+        executable, tmp_path, label, bootloader):
+    line = summary(executable, seeds.seed_inputs()[label], tmp_path)
+    assert line.startswith(f"usb: mounted 1 open 1 bootloader {bootloader} ")
+
+
+def test_a_port_closed_by_the_host_is_seen_closed(executable, tmp_path):
+    data = seeds.linux_enumeration() + bytes((seeds.LINE_STATE, 0, seeds.TASK, seeds.EP0_IN,
+                                              seeds.SUCCESS, seeds.TASK))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 0 ")
+
+
+# Found by fuzzing: TinyUSB 0.21.0's usbd.c answers GET_STATUS, GET_CONFIGURATION and
+# GET_INTERFACE from a local variable of the function handling the SETUP, whatever the
+# request's direction bit says. With the bit clear (host to device) and wLength > 0 the data
+# stage is OUT, and when the host's bytes arrive, in a later tud_task, usbd_control_xfer_cb
+# copied them (up to 2) to that local's address, long out of scope: the host wrote into the
+# loop's stack (ASan: stack-use-after-scope). The port layer's request guard
+# (usb_request_guard.cpp) stalls such requests before the stack sees them.
+@pytest.mark.parametrize("bm_request_type, b_request, w_index", [
+    (0x00, 0, 0), (0x00, 8, 0),           # GET_STATUS, GET_CONFIGURATION of the device
+    (0x01, 10, 0),                        # GET_INTERFACE of the CDC interface
+    (0x02, 0, 0x82)])                     # GET_STATUS of the bulk IN endpoint
+def test_a_get_request_with_an_out_data_stage_is_refused(executable, tmp_path, bm_request_type,
+                                                         b_request, w_index):
+    data = (seeds.linux_enumeration() + seeds.setup(bm_request_type, b_request, 0, w_index, 2)
+            + bytes((seeds.TASK, seeds.EP0_OUT, 2, 0x5A, 0xA5, seeds.SUCCESS, seeds.TASK)))
+    done = run_inputs(executable, {"get-request-out": data}, tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
