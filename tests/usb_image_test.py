@@ -316,3 +316,67 @@ def test_parameters_list_and_set_over_the_emulated_usb_port(tmp_path):
         assert changed.returncode == 0 and changed.stdout.startswith("EXC_MAX_DUR: "), changed.stderr
         read = params("get", "EXC_MAX_DUR")
         assert read.stdout == "EXC_MAX_DUR 120\n", read.stderr
+
+
+def test_closing_reopening_and_re_enumerating_while_armed_keeps_the_vehicle_flying():
+    """The host closes the port (DTR low) for 0.5 s and opens it again, then resets the bus
+    and enumerates the board again, all while the vehicle is armed with its throttle up: it
+    stays armed, no motor stops, the loop misses no tick, and what arrives after each is
+    whole MAVLink."""
+    f = Flying()
+    f.arm()
+    f.fly(40, f.RC_MID)
+    f.host.close()
+    f.fly(100, f.RC_MID)                               # closed: heartbeats still go out
+    f.host.open()
+    f.fly(60, f.RC_MID)
+    f.host.take_received()
+    f.host.bus_reset()                                 # reset, then the Linux enumeration
+    f.host.open()
+    flown = f.fly(200, f.RC_MID)
+    assert all(armed for _, armed, _, _ in flown)
+    assert all(min(motors) > 0.05 for motors, _, _, _ in flown), "no motor ever stopped"
+    assert f.overruns() == 0
+    assert [r.request for r in f.host.transfers[-12:-2]] == [n for n, _ in LINUX_SEQUENCE]
+    usb, bad = _messages(f.host.take_received())
+    assert not bad, bad[:3]
+    assert {"HEARTBEAT", "ATTITUDE", "HQ_SYSID_SAMPLE"} <= {m.get_type() for m in usb}
+
+
+def test_an_excitation_stops_by_the_host_heartbeat_rule_when_the_usb_host_goes_silent():
+    """The ground station on USB starts an excitation, then its port closes and its
+    heartbeats stop: the excitation stops by the host-heartbeat rule (1.5 s), as on any
+    link."""
+    f = Flying()
+    f.arm()
+    f.fly(40, f.RC_MID)
+    start = f.gcs.hq_excitation_encode(1, 1, f.mav.HQ_EXCITATION_START, f.mav.HQ_AXIS_ROLL,
+                                       f.mav.HQ_INJECTION_MIXER, 1.0, 0.05, 10, 1,
+                                       f.mav.HQ_SIGNAL_SINE, [0] * 16, [0.0] * 16, [0.0] * 16)
+    f.host.send(start.pack(f.gcs))
+    f.fly(250, f.RC_MID)                               # past the fade-in's second
+    assert f.pil.report()[6] == f.mav.HQ_EXCITATION_STATE_RUNNING
+    f.host.close()
+    for _ in range(400):                               # 2 s: no heartbeat at all
+        f.pil.frame(f.sample, False, f.RC_MID, 0, sync=False)
+    assert f.pil.report()[6] == f.mav.HQ_EXCITATION_STATE_IDLE
+
+
+def test_a_ground_station_that_connects_30_s_after_boot_gets_the_boot_report_over_usb():
+    from heliquad.sim.base.dialect import dialect
+    mav = dialect()
+    board, host = _plugged_in()
+    host.reading = False                               # nobody reads for 30 s
+    board.run(seconds=30.0)
+    host.reading = True
+    board.run(seconds=0.1)
+    host.take_received()
+    gcs = mav.MAVLink(None, srcSystem=255, srcComponent=190)
+    host.send(gcs.heartbeat_encode(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+              .pack(gcs))
+    board.run(seconds=0.3)
+    texts = [m.text for m in _messages(host.take_received())[0] if m.get_type() == "STATUSTEXT"]
+    boot_lines = [t for t in texts if t.startswith("boot: ")]
+    assert boot_lines[0] == "boot: reset by power-on", texts
+    assert any(t.startswith("boot: params: ") for t in boot_lines)
+    assert any(t.startswith("boot: IMU: ") for t in boot_lines)
