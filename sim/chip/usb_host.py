@@ -184,9 +184,8 @@ class UsbHost:
 
     def control(self, request_type: int, request: int, value: int = 0, index: int = 0,
                 data_or_length=0, name: str = "CONTROL"):
-        """Any control transfer, queued (a test's malformed request): ``data_or_length`` the
-        OUT data stage's bytes or the IN length; its record in ``transfers``, whose status
-        may be ``stall``."""
+        """Any control transfer, queued: ``data_or_length`` the OUT data or the IN length; its
+        record (status ``stall`` allowed) in ``transfers``."""
         def script():
             yield from self._request(name, request_type, request, value, index, data_or_length,
                                      may_stall=True)
