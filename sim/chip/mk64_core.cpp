@@ -347,9 +347,15 @@ void Core::set_irq(int irq, bool level) {
 int Core::pending_exception() const {
     u128 ready = pending_ & (enabled_ | u128{0xFFFF});
     if (!ready) return -1;
+    // The pending numbers low to high (the lowest wins a tie), each found by a bit scan.
     int best = -1;
-    for (int n = 0; ready; ++n, ready >>= 1) {
-        if ((ready & 1) && (best < 0 || priority_[n] < priority_[best])) best = n;
+    for (int half = 0; half < 2; ++half) {
+        uint64_t word = static_cast<uint64_t>(ready >> (64 * half));
+        while (word) {
+            const int n = 64 * half + __builtin_ctzll(word);
+            word &= word - 1;
+            if (best < 0 || priority_[n] < priority_[best]) best = n;
+        }
     }
     return best;
 }

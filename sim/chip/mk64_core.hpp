@@ -21,13 +21,13 @@
 //   GIL) or stops the run with a code saying why.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <memory>
 #include <string>
 #include <unordered_map>
-#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -603,6 +603,23 @@ private:
         }
     };
     struct Route { uint32_t lo, hi; int dev; };
+    // The scheduled events not yet run or cancelled, by sequence number: a handful at any time
+    // (one or two per device), so a flat list searched in place costs less at every boundary
+    // than a hash set's hashing and node allocation.
+    struct LiveSet {
+        std::vector<uint64_t> seqs;
+        size_t count(uint64_t seq) const {
+            return std::find(seqs.begin(), seqs.end(), seq) != seqs.end() ? 1 : 0;
+        }
+        void insert(uint64_t seq) { seqs.push_back(seq); }
+        void erase(uint64_t seq) {
+            auto it = std::find(seqs.begin(), seqs.end(), seq);
+            if (it == seqs.end()) return;
+            *it = seqs.back();
+            seqs.pop_back();
+        }
+        void clear() { seqs.clear(); }
+    };
 
     int group(int prio) const { return prio < 0 ? prio : prio >> (prigroup_ + 1); }
     void on_block(uint64_t address, uint32_t size);
@@ -650,7 +667,7 @@ private:
     const Block* last_ = nullptr;
     std::vector<Route> routes_;
     std::vector<HeapEntry> heap_;
-    std::unordered_set<uint64_t> live_;
+    LiveSet live_;
     uint64_t seq_ = 0;
     uint64_t deadline_ = 0, instr_limit_ = 0;
     uint64_t epoch_cycles_ = 0;
