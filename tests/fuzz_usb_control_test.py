@@ -101,8 +101,22 @@ def test_a_get_request_with_an_out_data_stage_is_refused(executable, tmp_path, b
                                     bytes((seeds.BOOTLOADER_BAUD,))])
 def test_a_bootloader_request_abandoned_by_a_bus_reset_is_not_applied(executable, tmp_path,
                                                                       coding):
-    data = (seeds.linux_enumeration() + seeds.setup(0x21, seeds.SET_LINE_CODING, 0, 0, len(coding))
+    request = seeds.setup(0x21, seeds.SET_LINE_CODING, 0, 0, len(coding))
+    data = (seeds.linux_enumeration() + request
             + bytes((seeds.TASK, seeds.EP0_OUT, len(coding))) + coding
             + bytes((seeds.SUCCESS, seeds.RESET, seeds.TASK, seeds.EP0_IN, seeds.SUCCESS,
                      seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# The same reset, seen from the device's side: a SETUP the host sent before it reset the bus
+# is still queued, and the stack answers it (here when the next SETUP comes). The answer is
+# held to that SETUP's wLength, not to nothing: the reset abandons the transfer for the host,
+# it does not unsend the request.
+def test_a_get_descriptor_answered_after_a_bus_reset_is_held_to_its_own_length(executable,
+                                                                               tmp_path):
+    get_device = seeds.setup(0x80, seeds.GET_DESCRIPTOR, seeds.DEVICE << 8, 0, 18)
+    data = (bytes((seeds.RESET, seeds.TASK)) + get_device + bytes((seeds.RESET,))
+            + seeds.setup(0x00, seeds.SET_ADDRESS, 7, 0, 0)
+            + bytes((seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")

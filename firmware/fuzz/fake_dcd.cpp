@@ -77,7 +77,9 @@ void reset() {
 
 void bus_reset() {
     close_all_but_ep0();
-    g.request = ControlRequest{};          // the host abandons the control transfer in flight
+    // The host abandons the control transfer in flight; the stack may still answer its SETUP
+    // (queued before the reset), and the IN check holds that answer to its wLength.
+    g.request.in_flight = false;
     ++g.queued;
     dcd_event_bus_reset(kRhport, TUSB_SPEED_FULL, true);
 }
