@@ -120,3 +120,21 @@ def test_a_get_descriptor_answered_after_a_bus_reset_is_held_to_its_own_length(e
             + seeds.setup(0x00, seeds.SET_ADDRESS, 7, 0, 0)
             + bytes((seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_CONFIGURATION still queued at a bus
+# reset opens the bulk endpoints after it, and bulk OUT data on one of them reaches a stack
+# that no longer maps it to a driver: tud_task's assertion returns with the rest of its queue
+# (a GET_DESCRIPTOR's SETUP) kept for the next call. The harness took that call for an empty
+# queue, recorded the next SETUP as the request in flight without letting the stack answer
+# the queued one first, and held that answer to the new request's length. The harness now
+# counts the queue as the stack left it.
+def test_a_setup_left_queued_by_an_early_return_of_the_task_is_answered_first(executable,
+                                                                              tmp_path):
+    get_device = seeds.setup(0x80, seeds.GET_DESCRIPTOR, seeds.DEVICE << 8, 0, 18)
+    get_status_out = seeds.setup(0x00, 0, 0, 0, 2)      # the request guard stalls it
+    data = (bytes((seeds.RESET, seeds.TASK)) + seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
+            + bytes((seeds.RESET, seeds.TASK, seeds.BULK_OUT, 8)) + bytes(8)
+            + bytes((seeds.SUCCESS,)) + get_device + bytes((seeds.TASK,)) + get_status_out
+            + bytes((seeds.TASK,)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
