@@ -138,3 +138,15 @@ def test_a_setup_left_queued_by_an_early_return_of_the_task_is_answered_first(ex
             + bytes((seeds.SUCCESS,)) + get_device + bytes((seeds.TASK,)) + get_status_out
             + bytes((seeds.TASK,)))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_LINE_CODING with wLength 3 whose data
+# stage the fake host ended after 1 byte (0x86). The port reads the line coding by wLength,
+# so it took the low byte for a 1-byte request and asked for the bootloader; the harness
+# allowed that only for wLength 1. A host sends exactly wLength bytes (USB 2.0, 9.3.5), so
+# the harness no longer judges the flag after a short OUT data stage.
+def test_a_short_line_coding_data_stage_is_not_judged(executable, tmp_path):
+    data = (seeds.linux_enumeration() + seeds.setup(0x21, seeds.SET_LINE_CODING, 0, 0, 3)
+            + bytes((seeds.TASK, seeds.EP0_OUT, 1, seeds.BOOTLOADER_BAUD, seeds.SUCCESS,
+                     seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 ")

@@ -9,7 +9,8 @@
 // Besides the sanitizers it checks: a control request's IN data is never longer than its
 // wLength (the fake controller checks it as the stack offers the bytes); the bootloader flag
 // is set only by a SET_LINE_CODING whose data stage the host sent as 134 baud (a dwDTERate of
-// 134, or the 1-byte form: wLength 1, the byte 0x86), and always by one of those; write() takes
+// 134, or the 1-byte form: wLength 1, the byte 0x86) or ended short of its wLength, and always
+// by one of the first two; write() takes
 // a message whole or not at all; the stack never leaves USB0's interrupt masked.
 // With HQ_FUZZ_USB_LOG set it prints one line per input (the unit test reads it).
 //
@@ -95,7 +96,11 @@ void status_read(Host& host) {
     const uint32_t rate = d[0] | (d[1] << 8) | (d[2] << 16) | (static_cast<uint32_t>(d[3]) << 24);
     const bool full_rate = r.out_bytes >= 4 && rate == hq::teensy::kBootloaderBaud;
     const bool one_byte = r.w_length == 1 && r.out_bytes == 1 && d[0] == kBootloaderOneByte;
-    host.sent.allowed |= full_rate || one_byte;
+    // A host sends exactly wLength bytes in an OUT data stage (USB 2.0, 9.3.5); the fake one
+    // may end it short, and what the port makes of a line coding the host left partly unsent
+    // (the bytes it keeps from the last one) is not judged.
+    const bool short_stage = r.out_bytes < r.w_length;
+    host.sent.allowed |= full_rate || one_byte || short_stage;
     host.sent.required |= r.w_index == kCdcItf &&
                           ((full_rate && r.out_bytes >= usb::kLineCodingBytes) || one_byte);
 }
