@@ -150,3 +150,14 @@ def test_a_short_line_coding_data_stage_is_not_judged(executable, tmp_path):
             + bytes((seeds.TASK, seeds.EP0_OUT, 1, seeds.BOOTLOADER_BAUD, seeds.SUCCESS,
                      seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 ")
+
+
+# Found by fuzzing, a fault of the port layer: a SET_LINE_CODING of 2 or 3 bytes whose first
+# byte is 0x86 asked for the bootloader, the port judging the low byte alone (0x86 0x01 is
+# 390 baud). Only the full dwDTERate and the 1-byte form count now (usb_serial.hpp).
+@pytest.mark.parametrize("coding", [bytes((seeds.BOOTLOADER_BAUD, 1)),
+                                    bytes((seeds.BOOTLOADER_BAUD, 0, 0))])
+def test_a_two_or_three_byte_line_coding_does_not_ask_for_the_bootloader(executable, tmp_path,
+                                                                         coding):
+    data = seeds.linux_enumeration() + seeds.set_line_coding(coding)
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 0 ")
