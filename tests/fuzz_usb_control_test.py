@@ -88,3 +88,76 @@ def test_a_get_request_with_an_out_data_stage_is_refused(executable, tmp_path, b
             + bytes((seeds.TASK, seeds.EP0_OUT, 2, 0x5A, 0xA5, seeds.SUCCESS, seeds.TASK)))
     done = run_inputs(executable, {"get-request-out": data}, tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
+
+
+# Found by fuzzing, a false alarm of the harness: the host sent a 134-baud SET_LINE_CODING's
+# data stage, then reset the bus before its status stage. The stack handled the queued OUT
+# completion first (and armed the status stage's zero-length IN), then the reset, which
+# clears the control transfer: the ACK that applies the line coding never comes, as on the
+# chip. The fake host then read that IN on EP0 and counted a status stage of a transfer the
+# reset had abandoned; a host sends EP0 tokens only inside a control transfer it began with a
+# SETUP, so the fake controller now lets none through after a reset until the next SETUP.
+@pytest.mark.parametrize("coding", [seeds.line_coding(seeds.BOOTLOADER_BAUD),
+                                    bytes((seeds.BOOTLOADER_BAUD,))])
+def test_a_bootloader_request_abandoned_by_a_bus_reset_is_not_applied(executable, tmp_path,
+                                                                      coding):
+    request = seeds.setup(0x21, seeds.SET_LINE_CODING, 0, 0, len(coding))
+    data = (seeds.linux_enumeration() + request
+            + bytes((seeds.TASK, seeds.EP0_OUT, len(coding))) + coding
+            + bytes((seeds.SUCCESS, seeds.RESET, seeds.TASK, seeds.EP0_IN, seeds.SUCCESS,
+                     seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# The same reset, seen from the device's side: a SETUP the host sent before it reset the bus
+# is still queued, and the stack answers it (here when the next SETUP comes). The answer is
+# held to that SETUP's wLength, not to nothing: the reset abandons the transfer for the host,
+# it does not unsend the request.
+def test_a_get_descriptor_answered_after_a_bus_reset_is_held_to_its_own_length(executable,
+                                                                               tmp_path):
+    get_device = seeds.setup(0x80, seeds.GET_DESCRIPTOR, seeds.DEVICE << 8, 0, 18)
+    data = (bytes((seeds.RESET, seeds.TASK)) + get_device + bytes((seeds.RESET,))
+            + seeds.setup(0x00, seeds.SET_ADDRESS, 7, 0, 0)
+            + bytes((seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_CONFIGURATION still queued at a bus
+# reset opens the bulk endpoints after it, and bulk OUT data on one of them reaches a stack
+# that no longer maps it to a driver: tud_task's assertion returns with the rest of its queue
+# (a GET_DESCRIPTOR's SETUP) kept for the next call. The harness took that call for an empty
+# queue, recorded the next SETUP as the request in flight without letting the stack answer
+# the queued one first, and held that answer to the new request's length. The harness now
+# counts the queue as the stack left it.
+def test_a_setup_left_queued_by_an_early_return_of_the_task_is_answered_first(executable,
+                                                                              tmp_path):
+    get_device = seeds.setup(0x80, seeds.GET_DESCRIPTOR, seeds.DEVICE << 8, 0, 18)
+    get_status_out = seeds.setup(0x00, 0, 0, 0, 2)      # the request guard stalls it
+    data = (bytes((seeds.RESET, seeds.TASK)) + seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
+            + bytes((seeds.RESET, seeds.TASK, seeds.BULK_OUT, 8)) + bytes(8)
+            + bytes((seeds.SUCCESS,)) + get_device + bytes((seeds.TASK,)) + get_status_out
+            + bytes((seeds.TASK,)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_LINE_CODING with wLength 3 whose data
+# stage the fake host ended after 1 byte (0x86). The port reads the line coding by wLength,
+# so it took the low byte for a 1-byte request and asked for the bootloader; the harness
+# allowed that only for wLength 1. A host sends exactly wLength bytes (USB 2.0, 9.3.5), so
+# the harness no longer judges the flag after a short OUT data stage.
+def test_a_short_line_coding_data_stage_is_not_judged(executable, tmp_path):
+    data = (seeds.linux_enumeration() + seeds.setup(0x21, seeds.SET_LINE_CODING, 0, 0, 3)
+            + bytes((seeds.TASK, seeds.EP0_OUT, 1, seeds.BOOTLOADER_BAUD, seeds.SUCCESS,
+                     seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 ")
+
+
+# Found by fuzzing, a fault of the port layer: a SET_LINE_CODING of 2 or 3 bytes whose first
+# byte is 0x86 asked for the bootloader, the port judging the low byte alone (0x86 0x01 is
+# 390 baud). Only the full dwDTERate and the 1-byte form count now (usb_serial.hpp).
+@pytest.mark.parametrize("coding", [bytes((seeds.BOOTLOADER_BAUD, 1)),
+                                    bytes((seeds.BOOTLOADER_BAUD, 0, 0))])
+def test_a_two_or_three_byte_line_coding_does_not_ask_for_the_bootloader(executable, tmp_path,
+                                                                         coding):
+    data = seeds.linux_enumeration() + seeds.set_line_coding(coding)
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 0 ")

@@ -63,6 +63,11 @@ void check_control_in(uint16_t total_bytes) {
     if (g.request.in_bytes > allowed) std::abort();
 }
 
+// A host's token to the endpoint: on EP0 only inside a control transfer in flight.
+bool host_sends_to(uint8_t ep_addr) {
+    return tu_edpt_number(ep_addr) != 0 || g.request.in_flight;
+}
+
 }  // namespace
 
 void reset() {
@@ -72,6 +77,9 @@ void reset() {
 
 void bus_reset() {
     close_all_but_ep0();
+    // The host abandons the control transfer in flight; the stack may still answer its SETUP
+    // (queued before the reset), and the IN check holds that answer to its wLength.
+    g.request.in_flight = false;
     ++g.queued;
     dcd_event_bus_reset(kRhport, TUSB_SPEED_FULL, true);
 }
@@ -83,6 +91,7 @@ void setup(const uint8_t (&packet)[kSetupBytes]) {
         e.stalled = false;
     }
     g.request = ControlRequest{};
+    g.request.in_flight = true;
     g.request.bm_request_type = packet[0];
     g.request.b_request = packet[1];
     g.request.w_value = tu_u16(packet[3], packet[2]);
@@ -94,7 +103,7 @@ void setup(const uint8_t (&packet)[kSetupBytes]) {
 
 int deliver_out(uint8_t ep_addr, const uint8_t* data, size_t n, uint8_t result) {
     Endpoint& e = endpoint(tu_edpt_addr(tu_edpt_number(ep_addr), TUSB_DIR_OUT));
-    if (!e.pending || e.stalled) return kNothingPending;
+    if (!e.pending || e.stalled || !host_sends_to(ep_addr)) return kNothingPending;
     const uint16_t got = static_cast<uint16_t>(n < e.length ? n : e.length);
     if (got) std::memcpy(e.buffer, data, got);
     e.pending = false;
@@ -113,7 +122,7 @@ int deliver_out(uint8_t ep_addr, const uint8_t* data, size_t n, uint8_t result) 
 int read_in(uint8_t ep_addr, uint8_t result) {
     const uint8_t in = tu_edpt_addr(tu_edpt_number(ep_addr), TUSB_DIR_IN);
     Endpoint& e = endpoint(in);
-    if (!e.pending || e.stalled) return kNothingPending;
+    if (!e.pending || e.stalled || !host_sends_to(in)) return kNothingPending;
     static uint8_t wire[UINT16_MAX];
     if (e.length) std::memcpy(wire, e.buffer, e.length);   // the host reads every byte
     e.pending = false;

@@ -3,6 +3,10 @@
 // stalls and the transfers the stack hands it, and completes them when the fuzz target plays
 // the host (a SETUP packet, OUT data, an IN token, a bus reset). Like the controller it
 // mirrors, it cancels EP0's transfers at a SETUP and clears every endpoint at a bus reset.
+// As a host does, it sends EP0 data and status tokens only inside a control transfer it began
+// with a SETUP: a bus reset abandons the transfer in flight, so whatever the stack arms on EP0
+// for that transfer afterwards (it may handle a completion queued before the reset after it)
+// is never read.
 //
 // It also checks the one rule of the control pipe a device must keep whatever the host asks:
 // the IN bytes a control request's data stage offers are never more than its wLength (a
@@ -20,6 +24,7 @@ constexpr size_t kLineCodingBytes = 7;      // CDC PSTN 1.2, 6.3.11: dwDTERate, 
 
 // The SETUP packet the stack is answering and what its data stage carried so far.
 struct ControlRequest {
+    bool in_flight = false;                 // begun with a SETUP, not abandoned by a bus reset
     uint8_t bm_request_type = 0;
     uint8_t b_request = 0;
     uint16_t w_value = 0;

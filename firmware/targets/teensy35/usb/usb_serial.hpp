@@ -48,10 +48,11 @@ constexpr uint32_t kBootloaderBaud = 134;
 
 // Whether a SET_LINE_CODING asks for the bootloader: `length` the bytes its data stage
 // carried, `bit_rate` the line coding's dwDTERate after it (with 1 byte, only the low byte is
-// the host's).
+// the host's). Only the full dwDTERate and the 1-byte form count: with 2 or 3 bytes the
+// host's rate is not 134 by its low byte alone (0x86 0x01 is 390).
 constexpr bool bootloader_line_coding(uint16_t length, uint32_t bit_rate) {
     return length >= 4 ? bit_rate == kBootloaderBaud
-                       : length >= 1 && (bit_rate & 0xFFu) == kBootloaderBaud;
+                       : length == 1 && (bit_rate & 0xFFu) == kBootloaderBaud;
 }
 
 }  // namespace hq::teensy
