@@ -1037,9 +1037,16 @@ def test_image_telemetry_reports_its_loop_cycles_over_uart0():
     pytest.importorskip("heliquad._firmware")
     from heliquad.sim.base.dialect import dialect
 
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
     board = Teensy35(IMAGE)
     assert board.run_to_loop(1, instructions=BOOT_BUDGET).reason == "loop"
-    board.run(seconds=1.2)          # the first HQ_FW_STATUS (first loop) and a second one
+    # 1.2 s of loops (the first HQ_FW_STATUS, at the first loop, and a second one), each with
+    # an IMU sample as the rig gives it: without one the IMU goes stale and its blocking
+    # re-initialisation (disarmed only) would be the loop measured.
+    sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
+    for _ in range(240):
+        board.mpu.emu.push_fifo(sample, False)
+        assert board.run_to_loop(board.loops + 1, instructions=1_000_000).reason == "loop"
     mav = dialect().MAVLink(None)
     mav.robust_parsing = False
     messages = []

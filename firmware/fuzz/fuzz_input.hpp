@@ -169,7 +169,7 @@ inline bool params_in_range(const hq::Params& p) {
 template <class Telemetry>
 struct Vehicle {
     explicit Vehicle(Reader& in)
-        : cfg(config(in, chip, storage)), fc(cfg, chip, clock, motors), link(link_cfg, clock, telemetry, inbox) {
+        : cfg(config(in, chip, storage)), fc(cfg, chip, clock, motors), link(link_cfg, telemetry, inbox) {
         fc.init();
         link.send_notices(fc.status());
     }

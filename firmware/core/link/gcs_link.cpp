@@ -16,8 +16,8 @@ static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
               kMotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
 static_assert(LoopInbox::kCapacity < 128, "Received::request holds a slot");
 
-GcsLink::GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port, LoopInbox& inbox)
-    : config_(config), clock_(clock), port_(port), inbox_(inbox),
+GcsLink::GcsLink(const GcsLinkConfig& config, SerialPort& port, LoopInbox& inbox)
+    : config_(config), port_(port), inbox_(inbox),
       streams_{{MAVLINK_MSG_ID_HEARTBEAT, 1000000, 1000000, 0, false},
                {MAVLINK_MSG_ID_HQ_FW_STATUS, 1000000, 1000000, 0, false},
                {MAVLINK_MSG_ID_SYS_STATUS, 1000000, 1000000, 0, false},
@@ -252,6 +252,7 @@ void GcsLink::read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig
 // --- answers -------------------------------------------------------------------------------
 
 void GcsLink::transmit(const LoopStatus& status) {
+    loop_time_us_ = status.time_us;          // the stamp of every message about this loop
     for (int i = 0; i < received_count_; ++i) {
         const Received& in = received_[i];
         const LoopAnswer* a = in.request < 0 ? nullptr : &inbox_.answer[in.request];
@@ -419,7 +420,7 @@ void GcsLink::refuse_file_transfer(const Received& in) {
 void GcsLink::send_excitation_status(Reason reason, const ExcitationReport& ex) {
     mavlink_message_t msg;
     mavlink_msg_hq_excitation_status_pack_status(
-        config_.system_id, config_.component_id, &tx_status_, &msg, clock_.micros(),
+        config_.system_id, config_.component_id, &tx_status_, &msg, loop_time_us_,
         last_exc_accepted_ ? 1 : 0, static_cast<uint8_t>(ex.state), static_cast<uint8_t>(reason),
         static_cast<uint8_t>(ex.axis), static_cast<uint8_t>(ex.injection), ex.actual_freq_hz,
         ex.period_samples, ex.total_samples, static_cast<uint8_t>(ex.signal), ex.fade_samples);

@@ -27,7 +27,6 @@
 
 #include <cstdint>
 
-#include "../../hal/clock.hpp"
 #include "../../hal/serial.hpp"
 #include "../boot_report.hpp"
 #include "../loop_exchange.hpp"
@@ -60,7 +59,7 @@ class GcsLink {
 public:
     // `inbox` is the loop's (LoopInbox): shared by every link of the board, cleared by whoever
     // runs the loop before the links' receive().
-    GcsLink(const GcsLinkConfig& config, Clock& clock, SerialPort& port, LoopInbox& inbox);
+    GcsLink(const GcsLinkConfig& config, SerialPort& port, LoopInbox& inbox);
 
     // Before a step: the messages waiting on the link, as requests added to inbox().
     void receive();
@@ -155,7 +154,6 @@ private:
     void send_sysid_sample(const LoopStatus& st, uint64_t now_us);
 
     GcsLinkConfig config_;
-    Clock& clock_;
     SerialPort& port_;
     LoopInbox& inbox_;
     Received received_[LoopInbox::kCapacity];
@@ -170,6 +168,7 @@ private:
     Stream streams_[kStreams];
     bool last_exc_accepted_ = false;
     uint32_t seq_ = 0;
+    uint64_t loop_time_us_ = 0;              // the loop being answered (LoopStatus::time_us)
     uint32_t telemetry_dropped_ = 0;         // bytes, since boot
     uint32_t bytes_total_ = 0;               // bytes sent, since boot
     const GcsLink* peer_ = nullptr;

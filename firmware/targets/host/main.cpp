@@ -167,7 +167,7 @@ int main(int argc, char** argv) {
     bus.attach(hq::mpu6050::kAddress, chip);
     hq::FlightController fc(cfg, bus, clock, motors);
     static hq::LoopInbox inbox;                                   // not on the stack
-    static hq::GcsLink link(link_cfg, clock, telemetry, inbox);   // nor its queues
+    static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
     const hq::InitResult init = fc.init();
     link.send_notices(fc.status());
     std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),

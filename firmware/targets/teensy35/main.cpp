@@ -131,8 +131,8 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, motors);
     static hq::LoopInbox inbox;
-    static hq::GcsLink usb_link(usb_cfg, clock, usb, inbox);
-    static hq::GcsLink uart_link(uart_cfg, clock, telemetry, inbox);
+    static hq::GcsLink usb_link(usb_cfg, usb, inbox);
+    static hq::GcsLink uart_link(uart_cfg, telemetry, inbox);
     usb_link.pair_with(uart_link);
     uart_link.pair_with(usb_link);
     const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
