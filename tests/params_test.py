@@ -148,7 +148,7 @@ def client(tmp_path):
 # --- the table ----------------------------------------------------------------------------
 
 def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
-    assert len(NAMES) == len(set(NAMES)) == COUNT == 44      # the table, pinned
+    assert len(NAMES) == len(set(NAMES)) == COUNT == 45      # the table, pinned
     for name, lo, hi, default, integer in PARAMS:
         assert 0 < len(name) <= 16 and name == name.upper(), name
         assert lo <= default <= hi, name
@@ -269,6 +269,11 @@ def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     ("RATE_RLL_IMAX", 1e-40, "RATE_RLL_IMAX out of range 0..1"),         # a denormal
     ("RATE_RLL_TI", 5e-4, "RATE_RLL_TI is 0 (off) or at least 0.001"),
     ("ANG_PIT_TD", 1e-30, "ANG_PIT_TD is 0 (off) or at least 0.001"),
+    ("SER_TEL1_BAUD", 100000, "SER_TEL1_BAUD takes standard baud rates only"),
+    ("SER_TEL1_BAUD", 921601, "SER_TEL1_BAUD takes standard baud rates only"),
+    ("SER_TEL1_BAUD", 57600.5, "SER_TEL1_BAUD takes whole numbers only"),
+    ("SER_TEL1_BAUD", 4800, "SER_TEL1_BAUD out of range 9600..1000000"),
+    ("SER_TEL1_BAUD", 2000000, "SER_TEL1_BAUD out of range 9600..1000000"),
 ])
 def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
     before = client.fetch()[name]
@@ -277,6 +282,60 @@ def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
         decode_value(before.param_value, before.param_type)
     # The STATUSTEXT goes out in the loop that refuses, before the PARAM_VALUE.
     assert why in [x.text for x in during if x.get_type() == "STATUSTEXT"]
+
+
+#: The rates SER_TEL1_BAUD takes (params.hpp's kSerialBauds, docs/parameters.md).
+STANDARD_BAUDS = (9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 921600, 1000000)
+
+
+def test_the_telemetry_baud_rate_takes_exactly_the_standard_rates_and_says_restart():
+    """SER_TEL1_BAUD, the Teensy's UART0: an integer, 921600 by default, disarmed only; the
+    firmware's own reading of each value (the table and the check a PARAM_SET meets) takes
+    the standard rates and nothing between them."""
+    row = next(p for p in _firmware.param_table() if p.name == "SER_TEL1_BAUD")
+    assert (row.default, row.integer, row.armed_ok) == (921600, True, False)
+    assert (row.minimum, row.maximum) == (min(STANDARD_BAUDS), max(STANDARD_BAUDS))
+    index = NAMES.index("SER_TEL1_BAUD")
+    for baud in STANDARD_BAUDS:
+        assert _firmware.decode_param_value(index, encode_value(baud, INT32), INT32) == baud
+
+
+def test_a_new_telemetry_baud_rate_is_answered_restart_to_apply_and_kept_across_a_restart(tmp_path):
+    store = tmp_path / "params.bin"
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        for baud in STANDARD_BAUDS:
+            m, _ = c.set("SER_TEL1_BAUD", baud)
+            assert m.param_value == baud
+            said = c.text("SER_TEL1_BAUD set; restart to apply")
+            assert said.severity == MAV.MAV_SEVERITY_NOTICE
+        c.set("SER_TEL1_BAUD", 115200)
+        c.text("params: saved")
+        c.close()
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        values = c.fetch()
+        c.close()
+    assert decode_value(values["SER_TEL1_BAUD"].param_value, INT32) == 115200
+    record = store.read_bytes()
+    at = record.index(struct.pack("<I", zlib.crc32(b"SER_TEL1_BAUD")))
+    assert struct.unpack_from("<f", record, at + 4)[0] == 115200.0, "stored as its float"
+
+
+def test_a_stored_baud_rate_that_is_no_standard_rate_keeps_the_default(tmp_path):
+    """A record (its CRC rewritten) holding 100000, within the range but no standard rate:
+    the board starts at 921600."""
+    def nonstandard(data):
+        struct.pack_into("<f", data, 8 + 8 * NAMES.index("SER_TEL1_BAUD") + 4, 100000.0)
+        struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
+
+    store = _changed_store(tmp_path, nonstandard, SER_TEL1_BAUD=57600)
+    with start("host", params_file=str(store)) as fw:
+        c = Client(fw)
+        c.text("SER_TEL1_BAUD")
+        values = c.fetch()
+        c.close()
+    assert decode_value(values["SER_TEL1_BAUD"].param_value, INT32) == 921600
 
 
 def test_an_unknown_name_is_answered_with_a_statustext(client):
@@ -293,6 +352,9 @@ def test_while_armed_only_the_gains_change_and_nothing_is_saved_until_disarm(cli
     m, _ = client.set("FS_ABORT_ANG", 60)
     assert m.param_value == pytest.approx(80.0, abs=1e-4)
     client.text("FS_ABORT_ANG changes only while disarmed")
+    m, _ = client.set("SER_TEL1_BAUD", 57600)
+    assert decode_value(m.param_value, m.param_type) == 921600
+    client.text("SER_TEL1_BAUD changes only while disarmed")
     m, _ = client.set("RATE_PIT_KC", 2.0)
     assert m.param_value == pytest.approx(2.0)
     client.step(200)                                   # a second: armed, so no save
@@ -844,7 +906,7 @@ def test_a_sweep_records_the_gains_the_board_flies_and_identify_and_validate_use
     res = _heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2, 4,
                     "--param-store", store, "--out", out)
     assert res.returncode == 0, res.stderr
-    assert "read 44 parameters from the board" in res.stdout
+    assert "read 45 parameters from the board" in res.stdout
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["params"]["RATE_RLL_KC"] == 3.1 and manifest["params"]["ESC1_MIN"] == 1000
     assert manifest["gains"] == {"rate": [3.1, 0.439, 0.051], "angle": [1.488, 0.09]}
@@ -882,10 +944,10 @@ def test_heliquad_params_against_the_simulated_board(tmp_path):
         saved = tmp_path / "rig.parm"
         assert _heliquad("params", "--port", port, "save", "--mavproxy", saved).returncode == 0
         lines = [ln.split() for ln in saved.read_text().splitlines() if not ln.startswith("#")]
-        assert len(lines) == 44 and ["RATE_YAW_KC", "6.5"] in lines
+        assert len(lines) == 45 and ["RATE_YAW_KC", "6.5"] in lines
         assert _heliquad("params", "--port", port, "set", "RATE_YAW_KC", 7).returncode == 0
         res = _heliquad("params", "--port", port, "load", saved)
-        assert res.returncode == 0 and "1 set, 43 already so, 0 refused" in res.stdout, res.stdout
+        assert res.returncode == 0 and "1 set, 44 already so, 0 refused" in res.stdout, res.stdout
     finally:
         board.send_signal(signal.SIGINT)
         board.communicate(timeout=60)

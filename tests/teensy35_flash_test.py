@@ -13,6 +13,8 @@
   alternating slots, blank and corrupted slots, saves cut short between and during commands
   followed by a reset, and a save with the data sheet's maximum times on the running loop
   (watchdog on).
+* A parameter the image reads from that flash at start-up: UART0's baud rate
+  (SER_TEL1_BAUD) and its link's budget.
 
 Every run is bounded by an instruction budget and every time is the emulator's; nothing here
 depends on the machine's speed.
@@ -36,6 +38,7 @@ import teensy35_boot_test as boot  # noqa: E402
 
 CCIF, RDCOLERR, ACCERR, FPVIOL, MGSTAT0 = 0x80, 0x40, 0x20, 0x10, 0x01
 PARAMS = 0x7E000                      # the image's two parameter sectors (linker script)
+PARAMS_MAGIC = 0x31505148             # a parameter record's magic, "HQP1" (params.cpp)
 
 
 # ------------------------------------------------------------------ the model ------------------
@@ -522,3 +525,55 @@ def test_the_drop_in_takes_a_params_file_and_refuses_one_of_the_wrong_size(tmp_p
     bad.write_bytes(b"\x00" * 100)
     with pytest.raises(FirmwareError, match="100 bytes.*8192 bytes"):
         PilFirmware(image=str(boot.IMAGE), params_file=str(bad))
+
+
+# ------------------------------------------------------- UART0's baud rate from the flash ---
+
+def _params_record(**values) -> bytes:
+    """A parameter record (docs/parameters.md) holding only ``values``: the others keep their
+    defaults."""
+    body = struct.pack("<II", PARAMS_MAGIC, len(values)) + b"".join(
+        struct.pack("<If", zlib.crc32(name.encode()), value) for name, value in values.items())
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def _acks(board, mav_mod) -> list:
+    """The COMMAND_ACKs in the telemetry UART0 has sent since the last take."""
+    parser = mav_mod.MAVLink(None)
+    parser.robust_parsing = True                      # the take began inside a frame
+    acks = []
+    for b in board.take_telemetry():
+        m = parser.parse_char(bytes([b]))
+        if m is not None and m.get_type() == "COMMAND_ACK":
+            acks.append(m)
+    return acks
+
+
+def test_uart0_starts_at_the_stored_baud_rate_and_its_link_budget_follows():
+    """SER_TEL1_BAUD = 115200 in the parameter flash: the image begins UART0 at 115200 (SBR
+    and BRFA within 2 %, bytes one frame of that rate apart), and its link's budget is 11.5
+    kB/s: turning ATTITUDE off is taken (it adds nothing), a faster SCALED_IMU (taken at
+    921600) is refused."""
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    from heliquad.sim.base.dialect import dialect
+
+    board = Teensy35(boot.IMAGE)
+    board.write_param_flash(_slot(1, _params_record(SER_TEL1_BAUD=115200.0)) +
+                            b"\xff" * SECTOR_BYTES)
+    assert board.run_to_loop(4, instructions=boot.BOOT_BUDGET).reason == "loop"
+    uart = board.chip.uart0
+    assert abs(uart.baud() / 115200 - 1) < 0.02
+    assert uart.frame_cycles() == round(10 * 120e6 / uart.baud())
+    gaps = [b[0] - a[0] for a, b in zip(uart.sent, uart.sent[1:])]
+    assert gaps and min(gaps) == uart.frame_cycles()
+    mav_mod = dialect()
+    host = mav_mod.MAVLink(None, srcSystem=255, srcComponent=190)
+    board.take_telemetry()
+    for msgid, interval_us in ((mav_mod.MAVLINK_MSG_ID_ATTITUDE, -1),
+                               (mav_mod.MAVLINK_MSG_ID_SCALED_IMU, 20000)):
+        board.receive(host.command_long_encode(1, 1, mav_mod.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                               msgid, interval_us, 0, 0, 0, 0, 0).pack(host))
+        board.run(seconds=0.1)
+    acks = _acks(board, mav_mod)
+    assert [a.result for a in acks] == [mav_mod.MAV_RESULT_ACCEPTED, mav_mod.MAV_RESULT_DENIED]

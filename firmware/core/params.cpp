@@ -71,10 +71,14 @@ void gcs_set(Tunables& t, float v) { t.safety.gcs_sysid = static_cast<uint8_t>(v
 float imu_path_get(const Tunables& t) { return static_cast<float>(t.imu_path); }
 void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(static_cast<uint8_t>(v)); }
 
+float tel1_baud_get(const Tunables& t) { return static_cast<float>(t.tel1_baud); }
+void tel1_baud_set(Tunables& t, float v) { t.tel1_baud = static_cast<uint32_t>(v); }
+
 constexpr uint8_t kGain = kParamArmedOk;
 constexpr uint8_t kTime = kParamArmedOk | kParamTimeConstant;
 constexpr uint8_t kInt = kParamInteger;
 constexpr uint8_t kEsc = kParamInteger | kParamEsc;
+constexpr uint8_t kBaud = kParamInteger | kParamBaud | kParamRestart;
 
 #define HQ_RATE(AX, A)                                                                          \
     {"RATE_" AX "_KC", "1/(rad/s)", 0.01f, 50.0f, kGain, rate_get<A, &PidGains::kc>,           \
@@ -130,6 +134,7 @@ const ParamInfo kParams[kParamCount] = {
      stick_set<&StickLimits::yaw_rate_rad_s>},
     {"IMU_PATH", "", 0.0f, 1.0f, kInt | kParamImu, imu_path_get, imu_path_set},
     {"MAV_GCS_SYSID", "", 0.0f, 255.0f, kInt, gcs_get, gcs_set},
+    {"SER_TEL1_BAUD", "baud", 9600.0f, 1000000.0f, kBaud, tel1_baud_get, tel1_baud_set},
 };
 
 #undef HQ_RATE
@@ -184,9 +189,24 @@ bool below_floor(const ParamInfo& p, float value) {
     return (p.flags & kParamTimeConstant) && value != 0.0f && value < kMinTimeConstantS;
 }
 
+bool standard_baud(float value) {
+    for (uint32_t baud : kSerialBauds) {
+        if (value == static_cast<float>(baud)) return true;
+    }
+    return false;
+}
+
+bool not_baud(const ParamInfo& p, float value) {
+    return (p.flags & kParamBaud) && !standard_baud(value);
+}
+
+bool whole(const ParamInfo& p, float value) {
+    return !(p.flags & kParamInteger) || value == std::floor(value);
+}
+
 bool acceptable(const ParamInfo& p, float value) {
-    return in_range(p, value) && !below_floor(p, value) &&
-           (!(p.flags & kParamInteger) || value == std::floor(value));
+    return in_range(p, value) && !below_floor(p, value) && whole(p, value) &&
+           !not_baud(p, value);
 }
 
 // Appends text, keeping room for the terminating NUL.
@@ -207,14 +227,15 @@ struct Writer {
             put('-');
             v = -v;
         }
-        const auto scaled = static_cast<uint32_t>(std::lround(static_cast<double>(v) * 1e4));
-        char digits[12];
+        // In 64 bits: a baud rate's bound (1e6) is 1e10 in ten-thousandths.
+        const auto scaled = static_cast<uint64_t>(std::llround(static_cast<double>(v) * 1e4));
+        char digits[20];
         int k = 0;
-        for (uint32_t whole = scaled / 10000; k == 0 || whole > 0; whole /= 10) {
+        for (uint64_t whole = scaled / 10000; k == 0 || whole > 0; whole /= 10) {
             digits[k++] = static_cast<char>('0' + whole % 10);
         }
         while (k > 0) put(digits[--k]);
-        uint32_t frac = scaled % 10000;
+        auto frac = static_cast<uint32_t>(scaled % 10000);
         if (frac == 0) return;
         put('.');
         for (uint32_t div = 1000; frac > 0; div /= 10) {
@@ -254,7 +275,8 @@ SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
     if (!in_range(p, value)) return SetResult::Range;
     if (below_floor(p, value)) return SetResult::BelowFloor;
-    if (!acceptable(p, value)) return SetResult::NotInteger;
+    if (!whole(p, value)) return SetResult::NotInteger;
+    if (not_baud(p, value)) return SetResult::NotBaud;
     p.set(values_, value);
     return SetResult::Ok;
 }
@@ -387,13 +409,16 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
         case SetResult::Armed: w.put(" changes only while disarmed"); break;
         case SetResult::Excitation: w.put(": not while exciting"); break;
         case SetResult::Unknown: w.put(": no such parameter"); break;
-        case SetResult::Ok: w.put(" set"); break;
+        case SetResult::Ok:
+            w.put((p.flags & kParamRestart) ? " set; restart to apply" : " set");
+            break;
         case SetResult::Unchanged: w.put(" unchanged"); break;
         case SetResult::BelowFloor:
             w.put(" is 0 (off) or at least ");
             w.number(kMinTimeConstantS);
             break;
         case SetResult::Type: w.put(" sent with the wrong type"); break;
+        case SetResult::NotBaud: w.put(" takes standard baud rates only"); break;
     }
 }
 

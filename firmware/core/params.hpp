@@ -1,15 +1,17 @@
 // Parameters: every value the firmware flies with that a user may change without reflashing
 // (gains, excitation limits, failsafe bounds, ESC endpoints, RC thresholds, stick scaling,
-// the IMU's data path),
+// the IMU's data path, the telemetry radio's baud rate),
 // as the MAVLink parameter protocol names them, with their units and ranges, and their
 // stored form. No I/O: the FlightController answers the protocol and owns the storage.
 //
 // Rules (docs/parameters.md lists every parameter):
 //   - A value outside its range, not a normal float (NaN, infinite, denormal; 0 is taken), not
-//     whole for an integer parameter, or between 0 and kMinTimeConstantS for a time constant
-//     (0: off) is refused and the old value stays; so is a PARAM_SET whose type does not fit.
+//     whole for an integer parameter, between 0 and kMinTimeConstantS for a time constant
+//     (0: off), or not one of kSerialBauds for a baud rate is refused and the old value
+//     stays; so is a PARAM_SET whose type does not fit.
 //   - While an excitation runs nothing may change (a record is of one controller); while
-//     armed only the gains may change; everything else waits for disarm.
+//     armed only the gains may change; everything else waits for disarm. A baud rate takes
+//     effect at the next start-up (the target begins its UART after loading them).
 //   - The stored record is name-keyed (a CRC-32 of each name), so a firmware that adds or
 //     drops a parameter still reads the others; it ends in a CRC-32 of the whole record. A
 //     record that fails its checks gives the defaults, a stored value out of range gives
@@ -30,6 +32,14 @@ namespace hq {
 // Which IMU data path init() sets up (IMU_PATH).
 enum class ImuPath : uint8_t { Dmp = 0, Raw = 1 };
 
+// The baud rates SER_TEL1_BAUD takes: the standard ones from 9600 up (a SiK radio's 57600
+// and 115200 among them) and 1 Mbaud. The core knows no clock: a target with a UART checks
+// at compile time that it makes every one (teensy35: main.cpp, uart_divisor in serial.hpp).
+constexpr uint32_t kSerialBauds[] = {9600,   19200,  38400,  57600,  115200,
+                                     230400, 460800, 500000, 921600, 1000000};
+// SER_TEL1_BAUD's default: a 3.3 V USB-serial cable's rate, fast enough for every stream.
+constexpr uint32_t kDefaultTel1Baud = 921600;
+
 // Everything a parameter sets. The defaults are the flight values of each part.
 struct Tunables {
     CascadeGains gains = CascadeGains::paper_defaults();
@@ -37,6 +47,7 @@ struct Tunables {
     StickLimits sticks{};
     EscEndpoints esc{};
     ImuPath imu_path = ImuPath::Dmp;   // DMP when the build has its firmware, else raw
+    uint32_t tel1_baud = kDefaultTel1Baud;   // the telemetry radio's UART (teensy35: UART0)
 };
 
 enum ParamFlag : uint8_t {
@@ -45,6 +56,8 @@ enum ParamFlag : uint8_t {
     kParamImu = 4,        // takes effect when the IMU is next initialised (done at once, disarmed)
     kParamEsc = 8,        // an ESC endpoint: the motors are told at once (disarmed)
     kParamTimeConstant = 16,  // 0 (off) or at least kMinTimeConstantS (pid.hpp)
+    kParamBaud = 32,      // one of kSerialBauds only
+    kParamRestart = 64,   // takes effect at the next start-up (a set says so)
 };
 
 struct ParamInfo {
@@ -56,7 +69,7 @@ struct ParamInfo {
     void (*set)(Tunables&, float);
 };
 
-constexpr int kParamCount = 44;
+constexpr int kParamCount = 45;
 constexpr size_t kParamNameLen = 16;
 
 const ParamInfo& param_info(int index);
@@ -74,6 +87,7 @@ enum class SetResult : uint8_t {
     Unchanged,       // the value it has (after rounding to its type): taken, nothing changes
     BelowFloor,      // a time constant between 0 (off) and kMinTimeConstantS
     Type,            // a PARAM_SET whose MAV_PARAM_TYPE does not fit the parameter
+    NotBaud,         // a baud rate that is not one of kSerialBauds
 };
 
 // A PARAM_SET's value as the type it names says to read it (docs/parameters.md). False when
@@ -117,7 +131,8 @@ private:
 // parameter this firmware lacks: STATUSTEXT, at most 27 characters.
 void unknown_param_text(const char* name, int index, char* out, size_t capacity);
 
-// "NAME out of range [min, max]" and the like, for STATUSTEXT (at most 49 characters).
+// "NAME out of range [min, max]" and the like, for STATUSTEXT (at most 49 characters); for
+// Ok, "NAME set", and "NAME set; restart to apply" for a parameter read only at start-up.
 void set_result_text(SetResult result, int index, char* out, size_t capacity);
 
 }  // namespace hq

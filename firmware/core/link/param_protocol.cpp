@@ -90,7 +90,8 @@ void GcsLink::send_unknown_param(const char* name, int index) {
 
 // PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one, a STATUSTEXT
 // saying why, and PARAM_ERROR to the station that asked (MAVSDK and QGroundControl report
-// that as the refusal; MAVProxy and pymavlink read the unchanged value).
+// that as the refusal; MAVProxy and pymavlink read the unchanged value). A new value of a
+// parameter read only at start-up also gets a STATUSTEXT: "NAME set; restart to apply".
 void GcsLink::reply_param_set(const Received& in, const LoopAnswer* a) {
     if (a == nullptr) {                              // no such parameter
         send_param_error(in, in.param_id, -1, SetResult::Unknown);
@@ -100,11 +101,14 @@ void GcsLink::reply_param_set(const Received& in, const LoopAnswer* a) {
     const int index = inbox_.request[in.request].param_index;
     if (in.param_type == MAV_PARAM_TYPE_REAL32) params_as_float_ |= 1ull << index;  // as it came
     params_pending_ |= 1ull << index;
-    if (a->verdict == Verdict::Accepted) return;     // answered with the value it has
-    send_param_error(in, in.param_id, index, a->set);
+    const bool refused = a->verdict != Verdict::Accepted;
+    // A change to a parameter read only at start-up says so ("... set; restart to apply").
+    const bool restart = a->set == SetResult::Ok && (param_info(index).flags & kParamRestart);
+    if (!refused && !restart) return;                // answered with the value it has
+    if (refused) send_param_error(in, in.param_id, index, a->set);
     char text[kStatusTextLen];
     set_result_text(a->set, index, text, sizeof(text));
-    send_statustext(MAV_SEVERITY_WARNING, text);
+    send_statustext(refused ? MAV_SEVERITY_WARNING : MAV_SEVERITY_NOTICE, text);
 }
 
 void GcsLink::send_param_error(const Received& to, const char* name, int index, SetResult why) {

@@ -50,7 +50,11 @@ uint8_t GcsLink::interval_command(uint32_t msgid, float interval_us) {
     for (const Stream& o : streams_) {
         total += stream_bytes_per_s(o.msgid, &o == s ? us : o.interval_us);
     }
-    if (static_cast<float>(total) > kLinkShare * static_cast<float>(config_.link_bytes_per_s)) {
+    // A change that adds nothing is always taken: on a slow radio link the contract's streams
+    // alone may need more than the share, and a station must still be able to slow the rest.
+    const bool adds = stream_bytes_per_s(msgid, us) > stream_bytes_per_s(msgid, s->interval_us);
+    const float budget = kLinkShare * static_cast<float>(config_.link_bytes_per_s);
+    if (adds && static_cast<float>(total) > budget) {
         send_statustext(MAV_SEVERITY_WARNING, "interval refused: more than the link carries");
         return MAV_RESULT_DENIED;
     }

@@ -2,12 +2,12 @@
 //
 // Start-up, in order: clocks (a failure ends in the fault path, blink code 1-5, the ESCs
 // never driven); the status LED; the ESC outputs, at their stop pulse from their first edge;
-// the UART0 link; RC capture; the I2C bus; the USB port (usb/usb_serial.hpp), attached now
-// so that the start-up's waits answer a host enumerating it; the FlightController (its
-// parameters in the top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050
-// reset, configuration and, with an image built in, the DMP upload); the two MAVLink links
-// (GcsLink, core/link/), one on the USB port and one on UART0, sharing the loop's inbox;
-// the 200 Hz loop timer; the watchdog
+// RC capture; the I2C bus; the USB port (usb/usb_serial.hpp), attached now so that the
+// start-up's waits answer a host enumerating it; the FlightController (its parameters in the
+// top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
+// configuration and, with an image built in, the DMP upload); UART0 at the baud rate the
+// parameters give (SER_TEL1_BAUD); the two MAVLink links (GcsLink, core/link/), one on the
+// USB port and one on UART0, sharing the loop's inbox; the 200 Hz loop timer; the watchdog
 // (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC input, the USB stack's
 // work, take both links' requests, run one FlightController step, send each link's answers
 // and telemetry, hand the USB transmit buffer to the controller, record the cycles all that
@@ -39,7 +39,18 @@
 namespace {
 
 constexpr uint32_t kLoopHz = static_cast<uint32_t>(hq::kLoopRateHz);
-constexpr uint32_t kTelemetryBaud = 921600;
+
+// UART0 makes every rate SER_TEL1_BAUD takes within 2 % at the core clock, so the core's check
+// of the parameter (one of kSerialBauds) refuses everything this UART cannot make.
+constexpr bool uart0_makes_every_baud() {
+    for (const uint32_t baud : hq::kSerialBauds) {
+        uint16_t sbr = 0;
+        uint8_t brfa = 0;
+        if (!hq::teensy::uart_divisor(hq::teensy::kCoreHz, baud, sbr, brfa)) return false;
+    }
+    return true;
+}
+static_assert(uart0_makes_every_baud(), "UART0 cannot make one of kSerialBauds at kCoreHz");
 
 hq::teensy::UsbCdcSerial usb;
 
@@ -102,8 +113,6 @@ extern "C" [[noreturn]] void hq_teensy_main() {
 
     static Ftm0Motors motors;
     motors.begin(hq::EscEndpoints{});     // the stop pulse until the parameters say otherwise
-    static Uart0Serial telemetry;
-    if (!telemetry.begin(kTelemetryBaud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     static Ftm3RcInput rc;
     rc.begin();
     static I2c0Bus i2c;
@@ -122,7 +131,6 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     hq::GcsLinkConfig uart_cfg;
     uart_cfg.loop_rate_hz = cfg.loop_rate_hz;
     uart_cfg.cpu_hz = kCoreHz;                        // SYS_STATUS load from the cycle counter
-    uart_cfg.link_bytes_per_s = kTelemetryBaud / 10;  // 8N1: ten bits a byte
     uart_cfg.link_id = HQ_LINK_UART0;
     read_uid(uart_cfg);
     hq::GcsLinkConfig usb_cfg = uart_cfg;
@@ -130,12 +138,17 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     usb_cfg.link_id = HQ_LINK_USB;
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, motors);
+    const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
+    // UART0 at the stored rate, fixed until the next start-up (a set says "restart to apply").
+    const uint32_t baud = fc.params().values().tel1_baud;
+    static Uart0Serial telemetry;
+    if (!telemetry.begin(baud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
+    uart_cfg.link_bytes_per_s = baud / 10;            // 8N1: ten bits a byte
     static hq::LoopInbox inbox;
     static hq::GcsLink usb_link(usb_cfg, usb, inbox);
     static hq::GcsLink uart_link(uart_cfg, telemetry, inbox);
     usb_link.pair_with(uart_link);
     uart_link.pair_with(usb_link);
-    const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
     usb_link.send_notices(fc.status());
     uart_link.send_notices(fc.status());
 

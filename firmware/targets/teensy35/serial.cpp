@@ -32,19 +32,6 @@ static_assert((Uart0Serial::kRxRing & (Uart0Serial::kRxRing - 1)) == 0, "power o
 
 }  // namespace
 
-bool uart_divisor(uint32_t clock_hz, uint32_t baud, uint16_t& sbr, uint8_t& brfa) {
-    if (baud == 0) return false;
-    // Divisor in 1/32 steps: 32 f / (16 baud) = 2 f / baud, rounded.
-    const uint64_t div32 = (2ull * clock_hz + baud / 2) / baud;
-    if (div32 < 32 || div32 >= (8192ull << 5)) return false;
-    sbr = static_cast<uint16_t>(div32 >> 5);
-    brfa = static_cast<uint8_t>(div32 & 31u);
-    const uint64_t actual_x32 = 2ull * clock_hz * 32 / div32;     // 32 x actual baud
-    const uint64_t want_x32 = 32ull * baud;
-    const uint64_t err = actual_x32 > want_x32 ? actual_x32 - want_x32 : want_x32 - actual_x32;
-    return err * 50 <= want_x32;                                   // within 2 %
-}
-
 bool Uart0Serial::begin(uint32_t baud) {
     uint16_t sbr = 0;
     uint8_t brfa = 0;
