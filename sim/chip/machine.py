@@ -57,7 +57,7 @@ _INTR_UNDEF = 1
  _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
- GPIO_IN_DEVICE, FTFE_DEVICE) = range(9)
+ GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE) = range(10)
 # Block flags in the native table (Block::kMaskOp ...).
 _MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
 

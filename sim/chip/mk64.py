@@ -100,6 +100,10 @@ class Mk64:
     def bus_hz(self) -> float:
         return self._tree.bus if self._tree else self.tree().bus
 
+    def usb_hz(self) -> float | None:
+        """The USB module's clock (None: no source selected)."""
+        return self._tree.usb if self._tree else self.tree().usb
+
     def fixed_hz(self) -> float:
         return self.mcg.fll_ref_hz()
 

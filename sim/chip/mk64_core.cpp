@@ -777,6 +777,35 @@ void Core::on_intr(uint32_t intno) {
     stop_now();
 }
 
+// -- NVIC writes ----------------------------------------------------------------------------
+// NVIC_ISER0, NVIC_ICER0 and NVIC_IPR0's addresses (ARMv7-M ARM, B3.4.3) and the priority bits
+// the MK64F12 implements (its SVD's nvicPrioBits, 4: the top four of each byte). An interrupt
+// handler that masks its own IRQ around a critical section and sets its priority again (the
+// USB port's dcd_int_disable/enable) then costs no call into Python.
+constexpr uint32_t kNvicIser = 0xE000E100, kNvicIcer = 0xE000E180, kNvicIpr = 0xE000E400;
+constexpr uint64_t kNvicPriorityMask = 0xF0;
+
+bool Core::nvic_write(uint32_t address, unsigned size, uint64_t value) {
+    if (address >= kNvicIpr) {              // a priority byte per exception 16 + n
+        for (unsigned i = 0; i < size; ++i)
+            priority_.at(16 + address - kNvicIpr + i) = static_cast<int>((value >> (8 * i)) &
+                                                                         kNvicPriorityMask);
+        attention();
+        return true;
+    }
+    // Bits past the 128 exceptions the state holds name no interrupt: a write there is lost.
+    const bool clear = address >= kNvicIcer;
+    const uint32_t shift = 16 + 8 * (address - (clear ? kNvicIcer : kNvicIser));
+    const u128 bits = shift < 128 ? static_cast<u128>(value) << shift : 0;
+    if (clear) {
+        enabled_ &= ~bits;
+        return true;
+    }
+    enabled_ |= bits;
+    attention();
+    return true;
+}
+
 // -- MMIO -----------------------------------------------------------------------------------
 int Core::route(uint32_t address, unsigned size) const {
     for (const Route& r : routes_) {
@@ -810,6 +839,7 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kFtm3: return ftm3.write(*this, address, size, value);
         case kWdog: return wdog.write(*this, address, size, value);
         case kFtfe: return ftfe.write(*this, address, size, value);
+        case kNvic: return nvic_write(address, size, value);
         default: return false;
     }
 }

@@ -430,7 +430,7 @@ class Core {
 public:
     enum Device : int {
         kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kFtfe,
-        kDevices
+        kNvic, kDevices
     };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
@@ -489,6 +489,9 @@ public:
     uint64_t advance(uint64_t target);
 
     // -- NVIC -----------------------------------------------------------------------------
+    // Writes to the set-enable and clear-enable words and the priority bytes, where the
+    // core routes them (sim/chip/scs.py: SystemControlSpace): as the Python model does them.
+    bool nvic_write(uint32_t address, unsigned size, uint64_t value);
     void set_irq(int irq, bool level);
     void pend(int number) { pending_ |= bit(number); attention(); }
     void unpend(int number) { pending_ &= ~bit(number); }
@@ -543,7 +546,7 @@ public:
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     GpioInputs gpio_in;
-    bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true};
+    bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
     // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
     // watchdog's write log until taken (for tests and inspection); a long lockstep run turns

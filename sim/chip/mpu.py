@@ -32,6 +32,10 @@ class SysMpu(RegisterDevice):
     def __init__(self, machine, chip):
         self.chip = chip
         super().__init__(machine, "MPU", gate=(chip.sim, "SCGC7", "MPU"))
+        # The masks master_may tests, looked up once (it runs at every USB DMA access).
+        self._vld = self.map["CESR"].bit("VLD")
+        self._region_vld = self.map["RGD0_WORD3"].bit("VLD")
+        self._words = [tuple(f"RGD{n}_WORD{w}" for w in range(4)) for n in range(REGIONS)]
 
     def w_CESR(self, value, mask):
         sperr = self.map["CESR"].field("SPERR").mask
@@ -55,15 +59,16 @@ class SysMpu(RegisterDevice):
         """Whether bus master ``master`` may read (or write) ``size`` bytes at ``address``:
         always while the MPU is off; else some valid region covering all of them grants it
         (read: MnRE, write: MnWE, for masters 4-7)."""
-        if not self.enabled():
+        v = self.v
+        if not v["CESR"] & self._vld:
             return True
         right = self.map["RGD0_WORD2"].bit(f"M{master}{'WE' if write else 'RE'}")
         last = address + max(size, 1) - 1
-        for n in range(REGIONS):
-            if n and not self.v[f"RGD{n}_WORD3"] & self.map["RGD0_WORD3"].bit("VLD"):
+        for n, (word0, word1, word2, word3) in enumerate(self._words):
+            if n and not v[word3] & self._region_vld:
                 continue
-            start = self.v[f"RGD{n}_WORD0"] & ~(REGION_GRANULE - 1)
-            end = self.v[f"RGD{n}_WORD1"] | (REGION_GRANULE - 1)
-            if start <= address and last <= end and self.v[f"RGD{n}_WORD2"] & right:
+            start = v[word0] & ~(REGION_GRANULE - 1)
+            end = v[word1] | (REGION_GRANULE - 1)
+            if start <= address and last <= end and v[word2] & right:
                 return True
         return False

@@ -9,7 +9,7 @@ returns exceptions; these registers are its programmer's view.
 
 from __future__ import annotations
 
-from .machine import DWT_DEVICE, SYSTICK_DEVICE, ChipReset, Device, Fault
+from .machine import DWT_DEVICE, NVIC_DEVICE, SYSTICK_DEVICE, ChipReset, Device, Fault
 from .registers import peripheral
 
 _NVIC = peripheral("NVIC")
@@ -88,6 +88,10 @@ class SystemControlSpace(Device):
     def __init__(self, machine):
         self.m = machine
         self.systick = SysTick(machine)
+        # The set- and clear-enable words and the priority bytes are written natively
+        # (mk64_core.cpp, Core::nvic_write: what _write_nvic does); reads come here.
+        for lo, n in ((ISER, 4 * N_IRQ_WORDS), (ICER, 4 * N_IRQ_WORDS), (IPR, N_IPR)):
+            machine.core.add_route(NVIC_DEVICE, lo, lo + n)
         self.reset()
 
     def reset(self):

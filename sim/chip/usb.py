@@ -47,7 +47,7 @@ from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE
 from .machine import Fault
 from .mpu import USB_MASTER
 from .peripheral import RegisterDevice
-from .registers import irq
+from .registers import irq, peripheral
 
 USB_CLOCK_HZ = 48e6             # the USB module's clock (reference manual, USB clocking)
 USB_CLOCK_TOLERANCE = 0.0025    # full-speed data rate +-0.25 % (USB 2.0, 7.1.11)
@@ -61,6 +61,28 @@ USBTRC0_SOFTWARE_BIT = 0x40     # "software must set this bit" (its reset value 
 IDLE_TO_SLEEP_S = 3e-3          # ISTAT.SLEEP after 3 ms of idle bus (USB 2.0, 7.1.7.6)
 
 ACK, NAK, STALL, NONE = "ACK", "NAK", "STALL", None     # a token's handshake (None: silence)
+
+
+def _mask(reg: str, fld: str) -> int:
+    return peripheral("USB0")[reg].bit(fld)
+
+
+# The one-bit fields the model tests, as masks (looked up once: the SIE answers a token
+# every frame).
+CONTROL_DPPULLUPNONOTG = _mask("CONTROL", "DPPULLUPNONOTG")
+CTL_HOSTMODEEN, CTL_JSTATE, CTL_ODDRST, CTL_SE0, CTL_TXSUSPENDTOKENBUSY, CTL_USBENSOFEN = (
+    _mask("CTL", f) for f in ("HOSTMODEEN", "JSTATE", "ODDRST", "SE0", "TXSUSPENDTOKENBUSY",
+                              "USBENSOFEN"))
+ENDPT0_EPCTLDIS, ENDPT0_EPSTALL, ENDPT0_EPRXEN, ENDPT0_EPTXEN = (
+    _mask("ENDPT0", f) for f in ("EPCTLDIS", "EPSTALL", "EPRXEN", "EPTXEN"))
+ERREN_DMAERREN = _mask("ERREN", "DMAERREN")
+ERRSTAT_DMAERR = _mask("ERRSTAT", "DMAERR")
+ISTAT = {f: _mask("ISTAT", f) for f in peripheral("USB0")["ISTAT"].fields}
+ISTAT_TOKDNE = ISTAT["TOKDNE"]
+OBSERVE_DMPD, OBSERVE_DPPD, OBSERVE_DPPU = (_mask("OBSERVE", f) for f in ("DMPD", "DPPD", "DPPU"))
+USBCTRL_PDE, USBCTRL_SUSP = _mask("USBCTRL", "PDE"), _mask("USBCTRL", "SUSP")
+USBTRC0_USBRESET, USBTRC0_USBRESMEN, USBTRC0_USB_RESUME_INT = (
+    _mask("USBTRC0", f) for f in ("USBRESET", "USBRESMEN", "USB_RESUME_INT"))
 
 
 @dataclasses.dataclass
@@ -92,9 +114,6 @@ class Usb(RegisterDevice):
         self.in_reset = False           # the host holds SE0
         self._sleep_event = None
 
-    def _bit(self, reg: str, fld: str) -> int:
-        return self.map[reg].bit(fld)
-
     # -- registers ------------------------------------------------------------------------
     def w_ISTAT(self, value, mask):
         written = value & mask
@@ -113,17 +132,17 @@ class Usb(RegisterDevice):
         self._update_irq()
 
     def w_CTL(self, value, mask):
-        self.v["CTL"] = value & ~(self._bit("CTL", "SE0") | self._bit("CTL", "JSTATE"))
-        if value & self._bit("CTL", "ODDRST"):
+        self.v["CTL"] = value & ~(CTL_SE0 | CTL_JSTATE)
+        if value & CTL_ODDRST:
             self.odd = [[0, 0] for _ in range(ENDPOINTS)]
-        if value & self._bit("CTL", "HOSTMODEEN"):
+        if value & CTL_HOSTMODEEN:
             self.note("CTL.HOSTMODEEN set: host mode is not modelled")
         self._idle_watch()
 
     def r_CTL(self):
         line = 0
         if self.attached():
-            line = self._bit("CTL", "SE0") if self.in_reset else self._bit("CTL", "JSTATE")
+            line = CTL_SE0 if self.in_reset else CTL_JSTATE
         return self.v["CTL"] | line
 
     def w_BDTPAGE1(self, value, mask):
@@ -137,19 +156,19 @@ class Usb(RegisterDevice):
     def w_USBCTRL(self, value, mask):
         before = self.attached()
         self.v["USBCTRL"] = value
-        if not value & self._bit("USBCTRL", "SUSP"):        # leaving suspend clears it
-            self.v["USBTRC0"] &= ~self._bit("USBTRC0", "USB_RESUME_INT")
+        if not value & USBCTRL_SUSP:        # leaving suspend clears it
+            self.v["USBTRC0"] &= ~USBTRC0_USB_RESUME_INT
             self._update_irq()
         self._attach_changed(before)
 
     def r_OBSERVE(self):
-        pde = bool(self.v["USBCTRL"] & self._bit("USBCTRL", "PDE"))
-        pulled_up = bool(self.v["CONTROL"] & self._bit("CONTROL", "DPPULLUPNONOTG"))
-        return (self._bit("OBSERVE", "DPPU") * pulled_up |
-                (self._bit("OBSERVE", "DPPD") | self._bit("OBSERVE", "DMPD")) * pde)
+        pde = bool(self.v["USBCTRL"] & USBCTRL_PDE)
+        pulled_up = bool(self.v["CONTROL"] & CONTROL_DPPULLUPNONOTG)
+        return (OBSERVE_DPPU * pulled_up |
+                (OBSERVE_DPPD | OBSERVE_DMPD) * pde)
 
     def w_USBTRC0(self, value, mask):
-        if value & self._bit("USBTRC0", "USBRESET"):
+        if value & USBTRC0_USBRESET:
             before = self.attached()
             keep = self.listeners, self.notes
             super().reset()             # the module's registers to their reset values
@@ -158,7 +177,7 @@ class Usb(RegisterDevice):
             self._update_irq()
             self._attach_changed(before)
             return
-        writable = USBTRC0_SOFTWARE_BIT | self._bit("USBTRC0", "USBRESMEN")
+        writable = USBTRC0_SOFTWARE_BIT | USBTRC0_USBRESMEN
         self.v["USBTRC0"] = (self.v["USBTRC0"] & ~writable) | (value & writable)
 
     def r_FRMNUML(self):
@@ -173,21 +192,21 @@ class Usb(RegisterDevice):
 
     def attached(self) -> bool:
         """The pull-up on D+ is on (CONTROL.DPPULLUPNONOTG) and the module is clocked."""
-        return self.clocked() and bool(self.v["CONTROL"] & self._bit("CONTROL", "DPPULLUPNONOTG"))
+        return self.clocked() and bool(self.v["CONTROL"] & CONTROL_DPPULLUPNONOTG)
 
     def enabled(self) -> bool:
-        return bool(self.v["CTL"] & self._bit("CTL", "USBENSOFEN"))
+        return bool(self.v["CTL"] & CTL_USBENSOFEN)
 
     def suspended(self) -> bool:
-        return bool(self.v["USBCTRL"] & self._bit("USBCTRL", "SUSP"))
+        return bool(self.v["USBCTRL"] & USBCTRL_SUSP)
 
     def clock_ok(self) -> bool:
-        usb = self.chip.tree().usb
+        usb = self.chip.usb_hz()
         return usb is not None and abs(usb / USB_CLOCK_HZ - 1) <= USB_CLOCK_TOLERANCE
 
     def token_busy(self) -> bool:
         """ISTAT.TOKDNE is set: the firmware has not taken the last token's STAT yet."""
-        return bool(self.v["ISTAT"] & self._bit("ISTAT", "TOKDNE"))
+        return bool(self.v["ISTAT"] & ISTAT_TOKDNE)
 
     def bdt_base(self) -> int:
         return self.v["BDTPAGE3"] << 24 | self.v["BDTPAGE2"] << 16 | self.v["BDTPAGE1"] << 8
@@ -201,19 +220,19 @@ class Usb(RegisterDevice):
 
     def _flag(self, *bits: str):
         for b in bits:
-            self.v["ISTAT"] |= self._bit("ISTAT", b)
+            self.v["ISTAT"] |= ISTAT[b]
         self._update_irq()
 
     def _update_irq(self):
         level = bool(self.v["ISTAT"] & self.v["INTEN"]) or \
-            bool(self.v["USBTRC0"] & self._bit("USBTRC0", "USB_RESUME_INT"))
+            bool(self.v["USBTRC0"] & USBTRC0_USB_RESUME_INT)
         self.machine.set_irq(self.irq, level)
 
     def _bus_activity(self):
         """Something happened on the bus: the idle timer restarts, and a suspended module
         armed for it (USBRESMEN) raises the asynchronous resume interrupt."""
-        if self.suspended() and self.v["USBTRC0"] & self._bit("USBTRC0", "USBRESMEN"):
-            self.v["USBTRC0"] |= self._bit("USBTRC0", "USB_RESUME_INT")
+        if self.suspended() and self.v["USBTRC0"] & USBTRC0_USBRESMEN:
+            self.v["USBTRC0"] |= USBTRC0_USB_RESUME_INT
             self._update_irq()
         self._idle_watch()
 
@@ -257,26 +276,26 @@ class Usb(RegisterDevice):
             return silent
         ctl = self.v[f"ENDPT{endpoint}"]
         tx = pid == PID_IN
-        if not ctl & self._bit("ENDPT0", "EPTXEN" if tx else "EPRXEN"):
+        if not ctl & (ENDPT0_EPTXEN if tx else ENDPT0_EPRXEN):
             return silent
         if pid == PID_SETUP:
-            if ctl & self._bit("ENDPT0", "EPCTLDIS"):
+            if ctl & ENDPT0_EPCTLDIS:
                 return silent
-            if ctl & self._bit("ENDPT0", "EPSTALL"):
-                self.v[f"ENDPT{endpoint}"] = ctl & ~self._bit("ENDPT0", "EPSTALL")
+            if ctl & ENDPT0_EPSTALL:
+                self.v[f"ENDPT{endpoint}"] = ctl & ~ENDPT0_EPSTALL
                 ctl = self.v[f"ENDPT{endpoint}"]
         return self._answer(Token(pid, endpoint, NONE, data, data1), ctl, tx)
 
     def _answer(self, tok: Token, ctl: int, tx: bool) -> Token:
         ep, setup = tok.endpoint, tok.pid == PID_SETUP
-        if ctl & self._bit("ENDPT0", "EPSTALL"):
+        if ctl & ENDPT0_EPSTALL:
             tok.handshake = STALL
             self._flag("STALL")
             return tok
         odd = self.odd[ep][tx]
         bd_at = self.bdt_base() | ep << 5 | int(tx) << 4 | odd << 3
         word, buffer = self._read_bd(bd_at)
-        busy = self.v["CTL"] & self._bit("CTL", "TXSUSPENDTOKENBUSY")
+        busy = self.v["CTL"] & CTL_TXSUSPENDTOKENBUSY
         if not word & BD_OWN or (busy and not setup):
             tok.handshake = NONE if setup else NAK
             return tok
@@ -293,8 +312,8 @@ class Usb(RegisterDevice):
             tok.commit = (bd_at, odd, word, b"", buffer)
             return tok
         if len(tok.data) > bc:
-            self.v["ERRSTAT"] |= self._bit("ERRSTAT", "DMAERR")
-            if self.v["ERREN"] & self._bit("ERREN", "DMAERREN"):
+            self.v["ERRSTAT"] |= ERRSTAT_DMAERR
+            if self.v["ERREN"] & ERREN_DMAERREN:
                 self._flag("ERROR")
             return tok
         tok.handshake = ACK
@@ -319,7 +338,7 @@ class Usb(RegisterDevice):
         self.odd[ep][tx] = odd ^ 1
         self.v["STAT"] = ep << 4 | int(tx) << 3 | odd << 2
         if tok.pid == PID_SETUP:
-            self.v["CTL"] |= self._bit("CTL", "TXSUSPENDTOKENBUSY")
+            self.v["CTL"] |= CTL_TXSUSPENDTOKENBUSY
         self._flag("TOKDNE")
 
     # -- DMA ------------------------------------------------------------------------------
