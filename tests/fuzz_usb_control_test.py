@@ -161,3 +161,18 @@ def test_a_two_or_three_byte_line_coding_does_not_ask_for_the_bootloader(executa
                                                                          coding):
     data = seeds.linux_enumeration() + seeds.set_line_coding(coding)
     assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_LINE_CODING of 134 baud sent to the
+# device (bmRequestType 0x20) with the CDC interface in wIndex. usbd.c hands a class request to
+# the device to the driver of the interface wIndex names, and the CDC driver applies it as one
+# sent to the interface: the port's line coding is 134 baud and the board asks for its
+# bootloader. The harness knew only 0x21 as SET_LINE_CODING; it now takes both, and requires
+# the request from either.
+def test_a_line_coding_sent_to_the_device_is_the_interfaces(executable, tmp_path):
+    request = seeds.setup(0x20, seeds.SET_LINE_CODING, 0, 0, 7)
+    data = (seeds.linux_enumeration() + request
+            + bytes((seeds.TASK, seeds.EP0_OUT, 7)) + seeds.line_coding(seeds.BOOTLOADER_BAUD)
+            + bytes((seeds.SUCCESS, seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 1 ")
+
