@@ -176,3 +176,23 @@ def test_a_line_coding_sent_to_the_device_is_the_interfaces(executable, tmp_path
             + bytes((seeds.SUCCESS, seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 1 ")
 
+
+# A fault of the port layer, found while triaging the finding above: the CDC driver takes
+# SET_LINE_CODING whatever its direction bit says; sent device to host (0xA1) its data stage
+# gives the host the port's own line coding, and its status stage ran the line-coding check
+# with that request's wLength. After 9606 baud (0x2586), such a request with wLength 1 read
+# the low byte 0x86 as the 1-byte form and asked for the bootloader, which the host never
+# sent. The port now judges only a line coding the host sent (host to device).
+@pytest.mark.parametrize("w_length", [1, 7])
+def test_a_line_coding_request_sent_device_to_host_does_not_ask_for_the_bootloader(
+        executable, tmp_path, w_length):
+    earlier = seeds.BOOTLOADER_BAUD if w_length == 7 else 0x2586
+    read_back = seeds.setup(0xA1, seeds.SET_LINE_CODING, 0, 0, w_length)
+    data = (seeds.linux_enumeration() + seeds.set_line_coding(seeds.line_coding(earlier))
+            + bytes((seeds.TASK,)) + read_back
+            + bytes((seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK, seeds.EP0_OUT, 0,
+                     seeds.SUCCESS, seeds.TASK)))
+    expected = 1 if earlier == seeds.BOOTLOADER_BAUD else 0    # the 134-baud request itself
+    assert summary(executable, data, tmp_path).startswith(
+        f"usb: mounted 1 open 1 bootloader {expected} ")
+
