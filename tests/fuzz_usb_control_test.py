@@ -196,3 +196,19 @@ def test_a_line_coding_request_sent_device_to_host_does_not_ask_for_the_bootload
     assert summary(executable, data, tmp_path).startswith(
         f"usb: mounted 1 open 1 bootloader {expected} ")
 
+
+# Found by fuzzing, a false alarm of the harness: as in the case above, bulk OUT on an
+# endpoint the stack no longer maps makes tud_task return early, here with a GET_STATUS SETUP
+# (wLength 1) still queued. Before the host's next SETUP the harness ran the stack only once,
+# so that SETUP was recorded as the request in flight while the stack had not yet answered the
+# queued one, whose 1-byte answer was then held to the new request's length (0). The loop runs
+# the stack at every wake-up until its queue is empty, long before a host gives up on a
+# transfer and sends its next SETUP; so does the harness now.
+def test_a_setup_queued_behind_an_early_return_is_answered_before_the_next(executable,
+                                                                          tmp_path):
+    get_status = seeds.setup(0x80, 0, 0, 0, 1)
+    get_status_out = seeds.setup(0x00, 0, 0, 0, 0)      # the request guard stalls it
+    data = (seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
+            + bytes((seeds.RESET, seeds.TASK, seeds.BULK_OUT, 0, seeds.SUCCESS)) + get_status
+            + get_status_out + bytes((seeds.TASK,)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")

@@ -145,9 +145,10 @@ void send_setup(Reader& in, Host& host, bool line_state) {
     } else {
         in.bytes(packet, sizeof packet);
     }
-    // An EP0 completion still queued would be handled after this SETUP is recorded as the
-    // request in flight: the loop would have run the stack between the two.
-    if (usb::ep0_event_queued()) run_task(host);
+    // An EP0 event still queued (a SETUP, a completion) would be handled after this SETUP is
+    // recorded as the request in flight: the loop would have run the stack between the two,
+    // at each wake-up until its queue is empty (tud_task may return early with events kept).
+    while (usb::ep0_event_queued()) run_task(host);
     usb::setup(packet);
 }
 
