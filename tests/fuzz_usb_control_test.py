@@ -208,7 +208,23 @@ def test_a_setup_queued_behind_an_early_return_is_answered_before_the_next(execu
                                                                           tmp_path):
     get_status = seeds.setup(0x80, 0, 0, 0, 1)
     get_status_out = seeds.setup(0x00, 0, 0, 0, 0)      # the request guard stalls it
-    data = (seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
+    data = (bytes((seeds.RESET, seeds.TASK)) + seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
             + bytes((seeds.RESET, seeds.TASK, seeds.BULK_OUT, 0, seeds.SUCCESS)) + get_status
             + get_status_out + bytes((seeds.TASK,)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the fake controller: a class SET_LINE_CODING to endpoint 0
+# (bmRequestType 0x22) before any bus reset, its 1-byte data stage 0x86. Until its first bus
+# reset usbd.c's maps from endpoints and interfaces to drivers are all zero, naming the CDC
+# driver, which took the request. The chip never receives it: ci_fs's dcd_init enables only
+# the bus reset interrupt, and EP0 and the first SETUP's buffer are readied at a bus reset
+# (a host resets the port before it talks to a new device). The fake controller now receives
+# no SETUP before the first bus reset; after one, the same request is refused.
+@pytest.mark.parametrize("reset_first", [False, True])
+def test_a_setup_before_the_first_bus_reset_is_not_received(executable, tmp_path, reset_first):
+    request = seeds.setup(0x22, seeds.SET_LINE_CODING, 0, 0, 1)
+    data = (bytes((seeds.RESET, seeds.TASK)) if reset_first else b"") + request + bytes((
+        seeds.TASK, seeds.EP0_OUT, 1, seeds.BOOTLOADER_BAUD, seeds.SUCCESS, seeds.TASK,
+        seeds.EP0_IN, seeds.SUCCESS, seeds.TASK))
     assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
