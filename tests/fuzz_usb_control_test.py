@@ -161,3 +161,70 @@ def test_a_two_or_three_byte_line_coding_does_not_ask_for_the_bootloader(executa
                                                                          coding):
     data = seeds.linux_enumeration() + seeds.set_line_coding(coding)
     assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the harness: a SET_LINE_CODING of 134 baud sent to the
+# device (bmRequestType 0x20) with the CDC interface in wIndex. usbd.c hands a class request to
+# the device to the driver of the interface wIndex names, and the CDC driver applies it as one
+# sent to the interface: the port's line coding is 134 baud and the board asks for its
+# bootloader. The harness knew only 0x21 as SET_LINE_CODING; it now takes both, and requires
+# the request from either.
+def test_a_line_coding_sent_to_the_device_is_the_interfaces(executable, tmp_path):
+    request = seeds.setup(0x20, seeds.SET_LINE_CODING, 0, 0, 7)
+    data = (seeds.linux_enumeration() + request
+            + bytes((seeds.TASK, seeds.EP0_OUT, 7)) + seeds.line_coding(seeds.BOOTLOADER_BAUD)
+            + bytes((seeds.SUCCESS, seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 1 open 1 bootloader 1 ")
+
+
+# A fault of the port layer, found while triaging the finding above: the CDC driver takes
+# SET_LINE_CODING whatever its direction bit says; sent device to host (0xA1) its data stage
+# gives the host the port's own line coding, and its status stage ran the line-coding check
+# with that request's wLength. After 9606 baud (0x2586), such a request with wLength 1 read
+# the low byte 0x86 as the 1-byte form and asked for the bootloader, which the host never
+# sent. The port now judges only a line coding the host sent (host to device).
+@pytest.mark.parametrize("w_length", [1, 7])
+def test_a_line_coding_request_sent_device_to_host_does_not_ask_for_the_bootloader(
+        executable, tmp_path, w_length):
+    earlier = seeds.BOOTLOADER_BAUD if w_length == 7 else 0x2586
+    read_back = seeds.setup(0xA1, seeds.SET_LINE_CODING, 0, 0, w_length)
+    data = (seeds.linux_enumeration() + seeds.set_line_coding(seeds.line_coding(earlier))
+            + bytes((seeds.TASK,)) + read_back
+            + bytes((seeds.TASK, seeds.EP0_IN, seeds.SUCCESS, seeds.TASK, seeds.EP0_OUT, 0,
+                     seeds.SUCCESS, seeds.TASK)))
+    expected = 1 if earlier == seeds.BOOTLOADER_BAUD else 0    # the 134-baud request itself
+    assert summary(executable, data, tmp_path).startswith(
+        f"usb: mounted 1 open 1 bootloader {expected} ")
+
+
+# Found by fuzzing, a false alarm of the harness: as in the case above, bulk OUT on an
+# endpoint the stack no longer maps makes tud_task return early, here with a GET_STATUS SETUP
+# (wLength 1) still queued. Before the host's next SETUP the harness ran the stack only once,
+# so that SETUP was recorded as the request in flight while the stack had not yet answered the
+# queued one, whose 1-byte answer was then held to the new request's length (0). The loop runs
+# the stack at every wake-up until its queue is empty, long before a host gives up on a
+# transfer and sends its next SETUP; so does the harness now.
+def test_a_setup_queued_behind_an_early_return_is_answered_before_the_next(executable,
+                                                                          tmp_path):
+    get_status = seeds.setup(0x80, 0, 0, 0, 1)
+    get_status_out = seeds.setup(0x00, 0, 0, 0, 0)      # the request guard stalls it
+    data = (bytes((seeds.RESET, seeds.TASK)) + seeds.setup(0x00, seeds.SET_CONFIGURATION, 1, 0, 0)
+            + bytes((seeds.RESET, seeds.TASK, seeds.BULK_OUT, 0, seeds.SUCCESS)) + get_status
+            + get_status_out + bytes((seeds.TASK,)))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")
+
+
+# Found by fuzzing, a false alarm of the fake controller: a class SET_LINE_CODING to endpoint 0
+# (bmRequestType 0x22) before any bus reset, its 1-byte data stage 0x86. Until its first bus
+# reset usbd.c's maps from endpoints and interfaces to drivers are all zero, naming the CDC
+# driver, which took the request. The chip never receives it: ci_fs's dcd_init enables only
+# the bus reset interrupt, and EP0 and the first SETUP's buffer are readied at a bus reset
+# (a host resets the port before it talks to a new device). The fake controller now receives
+# no SETUP before the first bus reset; after one, the same request is refused.
+@pytest.mark.parametrize("reset_first", [False, True])
+def test_a_setup_before_the_first_bus_reset_is_not_received(executable, tmp_path, reset_first):
+    request = seeds.setup(0x22, seeds.SET_LINE_CODING, 0, 0, 1)
+    data = (bytes((seeds.RESET, seeds.TASK)) if reset_first else b"") + request + bytes((
+        seeds.TASK, seeds.EP0_OUT, 1, seeds.BOOTLOADER_BAUD, seeds.SUCCESS, seeds.TASK,
+        seeds.EP0_IN, seeds.SUCCESS, seeds.TASK))
+    assert summary(executable, data, tmp_path).startswith("usb: mounted 0 open 0 bootloader 0 ")

@@ -70,10 +70,10 @@ bool host_sends_to(uint8_t ep_addr) {
 
 }  // namespace
 
-void reset() {
-    g = Controller{};
-    close_all_but_ep0();
-}
+// As ci_fs's dcd_init leaves the controller: only the bus reset interrupt enabled, EP0 not
+// (its process_bus_reset enables EP0 and readies the first SETUP's buffer), so no SETUP is
+// received before the host's first bus reset.
+void reset() { g = Controller{}; }
 
 void bus_reset() {
     close_all_but_ep0();
@@ -85,6 +85,7 @@ void bus_reset() {
 }
 
 void setup(const uint8_t (&packet)[kSetupBytes]) {
+    if (!g.ep[0][TUSB_DIR_OUT].open) return;          // before the first bus reset
     // A SETUP token ends whatever EP0 was doing: its transfers and its stall.
     for (auto& e : g.ep[0]) {
         e.pending = false;

@@ -2,7 +2,8 @@
 // ci_fs driver (the dcd_* functions usbd.c calls, in fake_dcd.cpp): it records endpoint opens,
 // stalls and the transfers the stack hands it, and completes them when the fuzz target plays
 // the host (a SETUP packet, OUT data, an IN token, a bus reset). Like the controller it
-// mirrors, it cancels EP0's transfers at a SETUP and clears every endpoint at a bus reset.
+// mirrors, it enables EP0 at the first bus reset (a SETUP before it is never received),
+// cancels EP0's transfers at a SETUP and clears every endpoint at a bus reset.
 // As a host does, it sends EP0 data and status tokens only inside a control transfer it began
 // with a SETUP: a bus reset abandons the transfer in flight, so whatever the stack arms on EP0
 // for that transfer afterwards (it may handle a completion queued before the reset after it)
@@ -38,7 +39,8 @@ struct ControlRequest {
 // What an operation did: nothing was waiting on that endpoint, or the bytes it moved.
 constexpr int kNothingPending = -1;
 
-// The controller's state back to its power-on state (dcd_init does the same).
+// The controller's state back to its power-on state, EP0 not yet enabled (dcd_init does the
+// same).
 void reset();
 // Host actions: each queues the event the controller's interrupt would (tud_task handles it).
 void bus_reset();

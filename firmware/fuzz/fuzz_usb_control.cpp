@@ -8,9 +8,9 @@
 // and reads, and tud_task() (through UsbCdcSerial::task, as the loop runs it).
 // Besides the sanitizers it checks: a control request's IN data is never longer than its
 // wLength (the fake controller checks it as the stack offers the bytes); the bootloader flag
-// is set only by a SET_LINE_CODING whose data stage the host sent as 134 baud (a dwDTERate of
-// 134, or the 1-byte form: wLength 1, the byte 0x86) or ended short of its wLength, and always
-// by one of the first two; write() takes
+// is set only by a SET_LINE_CODING (host to device, to the interface or the device) whose data
+// stage the host sent as 134 baud (a dwDTERate of 134, or the 1-byte form: wLength 1, the
+// byte 0x86) or ended short of its wLength, and always by one of the first two; write() takes
 // a message whole or not at all; the stack never leaves USB0's interrupt masked.
 // With HQ_FUZZ_USB_LOG set it prints one line per input (the unit test reads it).
 //
@@ -38,6 +38,7 @@ constexpr int kMaxOps = 256;               // per input: keeps executions fast
 // loop runs tud_task before the interrupt could fill it, and so does the harness.
 constexpr int kTaskAfterEvents = 12;
 constexpr uint8_t kCdcItf = 0;             // usb_descriptors.cpp: the CDC-ACM control interface
+constexpr uint8_t kClassToInterface = 0x21, kClassToDevice = 0x20;   // bmRequestType, host to device
 constexpr uint8_t kEpDataOut = 0x02, kEpDataIn = 0x82, kEpNotify = 0x81;
 constexpr size_t kMaxWrite = CFG_TUD_CDC_TX_BUFSIZE + 64;   // larger than the buffer too
 constexpr uint8_t kBootloaderOneByte = hq::teensy::kBootloaderBaud;  // 134 = 0x86
@@ -89,7 +90,11 @@ struct Host {
 // SET_LINE_CODING, its line coding takes effect now.
 void status_read(Host& host) {
     const usb::ControlRequest& r = usb::request();
-    const bool set_line_coding = r.bm_request_type == 0x21 &&
+    // Class, host to device, to the interface or to the device: usbd.c hands a class request
+    // to the device to the driver of the interface its wIndex names, and the CDC driver
+    // applies it as it applies one to the interface.
+    const bool set_line_coding = (r.bm_request_type == kClassToInterface ||
+                                  r.bm_request_type == kClassToDevice) &&
                                  r.b_request == CDC_REQUEST_SET_LINE_CODING;
     if (!set_line_coding) return;
     const uint8_t* d = r.out_head;
@@ -140,9 +145,10 @@ void send_setup(Reader& in, Host& host, bool line_state) {
     } else {
         in.bytes(packet, sizeof packet);
     }
-    // An EP0 completion still queued would be handled after this SETUP is recorded as the
-    // request in flight: the loop would have run the stack between the two.
-    if (usb::ep0_event_queued()) run_task(host);
+    // An EP0 event still queued (a SETUP, a completion) would be handled after this SETUP is
+    // recorded as the request in flight: the loop would have run the stack between the two,
+    // at each wake-up until its queue is empty (tud_task may return early with events kept).
+    while (usb::ep0_event_queued()) run_task(host);
     usb::setup(packet);
 }
 

@@ -1,7 +1,6 @@
 // UsbCdcSerial (usb_serial.hpp) on TinyUSB's device stack and CDC-ACM class, and the class
-// requests the image watches: the line coding (134 baud: the bootloader) through a thin
-// driver in front of the stack's own CDC driver, which records how many bytes a
-// SET_LINE_CODING's data stage carried.
+// request the image watches: the line coding (134 baud: the bootloader), judged by a thin
+// driver in front of the stack's own CDC driver when a SET_LINE_CODING the host sent ends.
 #include "usb_serial.hpp"
 
 #include "../mk64f12.hpp"
@@ -15,22 +14,35 @@ namespace {
 namespace mk64 = hq::mk64;
 
 uint32_t g_closed_bytes = 0;
-uint16_t g_line_coding_length = 0;      // the last SET_LINE_CODING's wLength
 bool g_bootloader_asked = false;
 
-// The stack's CDC driver, with one thing added: a SET_LINE_CODING's length, seen at its
-// SETUP stage, for the line-coding callback at its end. Listed before the built-in drivers,
-// it is the one that opens the CDC interfaces; the built-in one's init and reset run too,
-// and are the same functions.
+// A SET_LINE_CODING whose data stage the host sent: class, host to device. To the interface,
+// or to the device with the interface in wIndex, which usbd.c hands to the same driver. The
+// CDC driver takes the bRequest whatever the direction bit says: sent device to host, its
+// data stage gives the host the line coding the port already has, and its end must not be
+// read as the host's line coding (the low byte of 9606 baud, 0x2586, is 0x86).
+bool line_coding_from_host(const tusb_control_request_t& request) {
+    return request.bmRequestType_bit.type == TUSB_REQ_TYPE_CLASS &&
+           request.bmRequestType_bit.direction == TUSB_DIR_OUT &&
+           request.bRequest == CDC_REQUEST_SET_LINE_CODING;
+}
+
+// The stack's CDC driver, with one thing added: at the end (status stage) of a line coding
+// the host sent, the coding it left is judged with that request's own wLength (usbd.c hands
+// every stage the request of the transfer in flight, so nothing is kept between requests).
+// Listed before the built-in drivers, it is the one that opens the CDC interfaces; the
+// built-in one's init and reset run too, and are the same functions.
 void driver_init() {}
 bool driver_deinit() { return true; }
 
 bool driver_control(uint8_t rhport, uint8_t stage, const tusb_control_request_t* request) {
-    if (stage == CONTROL_STAGE_SETUP && request->bmRequestType_bit.type == TUSB_REQ_TYPE_CLASS &&
-        request->bRequest == CDC_REQUEST_SET_LINE_CODING) {
-        g_line_coding_length = request->wLength;
+    if (!cdcd_control_xfer_cb(rhport, stage, request)) return false;
+    if (stage == CONTROL_STAGE_ACK && line_coding_from_host(*request)) {
+        cdc_line_coding_t coding;
+        tud_cdc_get_line_coding(&coding);         // one CDC interface, the one wIndex named
+        if (bootloader_line_coding(request->wLength, coding.bit_rate)) g_bootloader_asked = true;
     }
-    return cdcd_control_xfer_cb(rhport, stage, request);
+    return true;
 }
 
 const usbd_class_driver_t kDrivers[] = {{"hq-cdc", driver_init, driver_deinit, cdcd_reset,
@@ -87,12 +99,6 @@ extern "C" {
 const usbd_class_driver_t* usbd_app_driver_get_cb(uint8_t* driver_count) {
     *driver_count = static_cast<uint8_t>(sizeof(hq::teensy::kDrivers) / sizeof(hq::teensy::kDrivers[0]));
     return hq::teensy::kDrivers;
-}
-
-void tud_cdc_line_coding_cb(uint8_t itf, const cdc_line_coding_t* coding) {
-    (void)itf;  // one CDC interface
-    using namespace hq::teensy;
-    if (bootloader_line_coding(g_line_coding_length, coding->bit_rate)) g_bootloader_asked = true;
 }
 
 }  // extern "C"

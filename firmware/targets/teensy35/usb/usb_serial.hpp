@@ -13,9 +13,9 @@
 //   nobody reads) the bytes are let go as a UART lets them go to an unplugged pin: write()
 //   returns n and closed_bytes() counts them. flush() after the loop's writes hands the
 //   buffer to the controller.
-// * A SET_LINE_CODING at 134 baud (the 7-byte structure, or the 1-byte form whose only byte
-//   is 0x86) is a request for the bootloader; take_bootloader_request() hands it to the loop,
-//   which refuses it while armed.
+// * A SET_LINE_CODING the host sends at 134 baud (the 7-byte structure, or the 1-byte form
+//   whose only byte is 0x86) is a request for the bootloader; take_bootloader_request()
+//   hands it to the loop, which refuses it while armed.
 #pragma once
 
 #include <cstddef>
