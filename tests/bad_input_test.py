@@ -1001,6 +1001,12 @@ CASES = [
     case("flash --check-only points.csv", "not an Intel HEX"),
     case("flash ok.hex --loader no-such-loader", "no-such-loader not found"),
     case("flash ok.hex --loader adir", "not found"),
+    case("usb-descriptors --image binary.dat", "not an ELF file"),
+    case("usb-descriptors --image empty.dat", "not an ELF file"),
+    case("usb-descriptors --image ok.hex", "give the image's .elf, not its .hex"),
+    case("usb-descriptors --image missing.elf", "such file"),
+    case("usb-descriptors --image adir", "is a folder"),
+    case("usb-descriptors --frobnicate", "unrecognized"),
     # every subcommand: an unknown option, no subcommand
     case("fsf run.csv --out p.csv --frobnicate", "unrecognized"),
     case("fit points.csv --json m.json --frobnicate", "unrecognized"),
