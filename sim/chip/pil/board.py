@@ -61,7 +61,6 @@ class PilBoard:
         if link not in LINKS:
             raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")
         self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
-        self.link = link
         self.usb_host = (UsbHost(self.board.chip, debounce_s=PIL_DEBOUNCE_S, open_port=True)
                          if link == "usb" else None)
         self.machine = self.board.machine
@@ -197,7 +196,7 @@ class PilBoard:
         if self.params:
             self.params.keep()
         if sync:
-            self._drain_usb() if self.usb_host is not None else self._drain_uart()
+            self._drain()
         self._collect_telemetry()
         loops, cycles, _, armed, mode, kind, _ = self.report()
         self.step_cycles.append(cycles)
@@ -220,37 +219,29 @@ class PilBoard:
                 "stack_bytes": image.initial_sp - low, "emulated_s": m.seconds(),
                 "watchdog_resets": self.resets}
 
-    def _drain_uart(self) -> None:
-        """Let the board run (it sleeps, the TX interrupt feeds the UART) until nothing it
-        queued is left to send: then the loop's telemetry is on the wire. Never into the
-        next loop, whose inputs are not in yet: at most until 20 us before the next SysTick
-        (none at all when that tick is already pending: the loop overran), and at most
-        DRAIN_LIMIT_S. What is still queued then leaves during the next frame, as the bytes
-        of a loop that sent more than its period carries leave a board late."""
-        uart = self.board.chip.uart0
+    def _drain(self) -> None:
+        """Let the board run (it sleeps; UART0's TX interrupt feeds the UART, or the USB host
+        polls the bulk IN endpoint) until nothing it queued is left to send: UART0 idle, or a
+        bulk IN poll NAKed after the loop's flush. Then the loop's telemetry is on the wire.
+        Never into the next loop, whose inputs are not in yet: at most until 20 us before the
+        next SysTick (none at all when that tick is already pending: the loop overran), and
+        at most DRAIN_LIMIT_S. What is still queued then leaves during the next frame, as the
+        bytes of a loop that sent more than its period carries leave a board late."""
         m = self.machine
-        systick = self.board.chip.scs.systick
-        if m.pending & (1 << SYSTICK_EXCEPTION) or systick.zero_at is None:
-            return
-        deadline = min(m.now() + int(DRAIN_LIMIT_S * m.core_hz),
-                       systick.zero_at - int(20e-6 * m.core_hz))
-        while m.now() < deadline and not uart.tx_idle():
-            step = min(uart.frame_cycles() * 4, deadline - m.now())
-            m.run(seconds=step / m.core_hz)
-
-    def _drain_usb(self) -> None:
-        """As _drain_uart, for the USB port: until the host's bulk IN poll finds nothing
-        waiting (a NAK after the loop's flush), within the same bounds."""
-        host, m = self.usb_host, self.machine
         systick = self.board.chip.scs.systick
         if m.pending & (1 << SYSTICK_EXCEPTION) or systick.zero_at is None:
             return
         start = m.now()
         deadline = min(start + int(DRAIN_LIMIT_S * m.core_hz),
                        systick.zero_at - int(20e-6 * m.core_hz))
-        step = int(USB_DRAIN_STEP_S * m.core_hz)
-        while m.now() < deadline and host.in_nak_cycle <= start:
-            m.run(seconds=min(step, deadline - m.now()) / m.core_hz)
+        if self.usb_host is not None:
+            host, usb_step = self.usb_host, int(USB_DRAIN_STEP_S * m.core_hz)
+            done, step = (lambda: host.in_nak_cycle > start), (lambda: usb_step)
+        else:
+            uart = self.board.chip.uart0
+            done, step = uart.tx_idle, (lambda: uart.frame_cycles() * 4)
+        while m.now() < deadline and not done():
+            m.run(seconds=min(step(), deadline - m.now()) / m.core_hz)
 
     def thrust(self) -> list:
         """The five thrust fractions the ESCs get from the next PWM period on."""
