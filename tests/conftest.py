@@ -1,14 +1,24 @@
-"""The test session's own announcement folder: every ``heliquad board`` a test starts (and
-every subprocess, which inherits the environment) announces there, never in the developer's
-runtime folder, where a real ``--port auto`` would then find test boards."""
+"""The test session's own folders. Every ``heliquad board`` a test starts (and every
+subprocess, which inherits the environment) announces in the session's folder, never in the
+developer's runtime folder, where a real ``--port auto`` would then find test boards. And
+matplotlib keeps its configuration and font cache in a folder of the session's: a run killed
+while matplotlib wrote the user's font cache once left it without fonts for every later run."""
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 
 import pytest
 
 from heliquad.sim.rig import announce
+
+# At import, before any test module imports matplotlib (it reads the variable once).
+if "MPLCONFIGDIR" not in os.environ:
+    os.environ["MPLCONFIGDIR"] = tempfile.mkdtemp(prefix="heliquad-tests-mpl-")
+    atexit.register(shutil.rmtree, os.environ["MPLCONFIGDIR"], True)
 
 
 @pytest.fixture(scope="session", autouse=True)
