@@ -250,6 +250,15 @@ def _out_of_range(tmp_path):
     return _changed_store(tmp_path, seven, RATE_YAW_TD=0.05)
 
 
+def _not_a_baud_rate(tmp_path):
+    """A store whose SER_TEL1_BAUD holds 100000: inside its range, but no standard rate."""
+    def odd_rate(data):
+        struct.pack_into("<f", data, 8 + 8 * NAMES.index("SER_TEL1_BAUD") + 4, 100000.0)
+        struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
+
+    return _changed_store(tmp_path, odd_rate, RATE_YAW_TD=0.05)
+
+
 def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     store = _out_of_range(tmp_path)
     with start("host", params_file=str(store)) as fw:
@@ -269,8 +278,8 @@ def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     ("RATE_RLL_IMAX", 1e-40, "RATE_RLL_IMAX out of range 0..1"),         # a denormal
     ("RATE_RLL_TI", 5e-4, "RATE_RLL_TI is 0 (off) or at least 0.001"),
     ("ANG_PIT_TD", 1e-30, "ANG_PIT_TD is 0 (off) or at least 0.001"),
-    ("SER_TEL1_BAUD", 100000, "SER_TEL1_BAUD takes standard baud rates only"),
-    ("SER_TEL1_BAUD", 921601, "SER_TEL1_BAUD takes standard baud rates only"),
+    ("SER_TEL1_BAUD", 100000, "SER_TEL1_BAUD not a standard baud rate"),
+    ("SER_TEL1_BAUD", 921601, "SER_TEL1_BAUD not a standard baud rate"),
     ("SER_TEL1_BAUD", 57600.5, "SER_TEL1_BAUD takes whole numbers only"),
     ("SER_TEL1_BAUD", 4800, "SER_TEL1_BAUD out of range 9600..1000000"),
     ("SER_TEL1_BAUD", 2000000, "SER_TEL1_BAUD out of range 9600..1000000"),
@@ -529,9 +538,11 @@ def test_a_request_during_the_boot_report_gets_one_more_whole_report_after_it(cl
 @pytest.mark.parametrize("store, text", [
     (_corrupted, "boot: params: store corrupt; defaults loaded"),
     (_out_of_range, "boot: RATE_YAW_TD out of range 0..1"),
-], ids=["corrupt", "out_of_range"])
+    (_not_a_baud_rate, "boot: SER_TEL1_BAUD not a standard baud rate"),
+], ids=["corrupt", "out_of_range", "not_a_baud_rate"])
 def test_the_boot_report_names_a_bad_store_as_a_warning(tmp_path, store, text):
-    """A corrupt store, and a stored value out of range (which keeps its default)."""
+    """A corrupt store, and a stored value a set would refuse (which keeps its default), in
+    the words a set of that value gets."""
     with start("host", params_file=str(store(tmp_path))) as fw:
         c = Client(fw)
         _, found, _ = _connect_late(c)

@@ -40,18 +40,18 @@ const char* dmp_failure_text(DmpStep step) {
 
 Notice boot_finding(const BootReport& report, int i) {
     if (i == 0) return reset_notice(report.reset);
-    if (i == 1) return params_notice(report.params, report.param_index);
+    if (i == 1) return params_notice(report.params, report.param_index, report.param_result);
     return imu_notice(report.imu, report.dmp_step);
 }
 
-Notice params_notice(ParamsFinding f, int param_index) {
+Notice params_notice(ParamsFinding f, int param_index, SetResult param_result) {
     switch (f) {
         case ParamsFinding::NoStorage: return {MAV_SEVERITY_INFO, "params: no storage; defaults"};
         case ParamsFinding::Loaded: return {MAV_SEVERITY_INFO, "params: loaded from the store"};
         case ParamsFinding::Empty: return {MAV_SEVERITY_INFO, "params: none stored; defaults"};
         case ParamsFinding::Corrupt: break;
-        case ParamsFinding::OutOfRange:          // its words: set_result_text(Range, index)
-            return {MAV_SEVERITY_WARNING, nullptr, param_index};
+        case ParamsFinding::OutOfRange:          // its words: set_result_text(result, index)
+            return {MAV_SEVERITY_WARNING, nullptr, param_index, param_result};
     }
     return {MAV_SEVERITY_WARNING, "params: store corrupt; defaults loaded"};
 }

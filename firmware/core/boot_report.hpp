@@ -15,7 +15,7 @@ constexpr int kBootFindings = 3;
 
 // Finding i (0: the reset, 1: the parameters, 2: the IMU) of the report.
 Notice boot_finding(const BootReport& report, int i);
-Notice params_notice(ParamsFinding f, int param_index);
+Notice params_notice(ParamsFinding f, int param_index, SetResult param_result);
 Notice imu_notice(ImuFinding f, DmpStep step);
 // The IMU's finding from its start-up's result and the path IMU_PATH asked for.
 ImuFinding imu_finding(InitResult r, ImuPath path);

@@ -31,7 +31,7 @@ InitResult FlightController::init() {
     BootReport& boot = status_.boot;
     boot.reset = config_.reset_cause;
     int bad_index = -1;
-    boot.params = load_params(bad_index);
+    boot.params = load_params(bad_index, boot.param_result);
     boot.param_index = static_cast<int16_t>(bad_index);
     apply_params(kParamEsc, clock_.micros());
     imu_init_ = init_imu();

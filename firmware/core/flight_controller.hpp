@@ -92,7 +92,7 @@ private:
     LoopAnswer answer_param_set(const LoopRequest& r, uint64_t now_us);
     Verdict storage_action(uint32_t action, uint64_t now_us);
     ExcitationReport excitation_report() const;
-    ParamsFinding load_params(int& bad_index);
+    ParamsFinding load_params(int& bad_index, SetResult& bad_result);
     void apply_params(uint8_t changed, uint64_t now_us);
     void save_params_when_due(uint64_t now_us);
     bool save_params();

@@ -126,7 +126,8 @@ Verdict FlightController::storage_action(uint32_t action, uint64_t now_us) {
     if (action == PARAM_READ_PERSISTENT) {
         params_.reset();
         int bad_index = -1;
-        load_params(bad_index);
+        SetResult bad_result = SetResult::Range;
+        load_params(bad_index, bad_result);
     } else if (action == PARAM_WRITE_PERSISTENT) {
         return save_params() ? Verdict::Accepted : Verdict::Failed;
     } else if (action == PARAM_RESET_FACTORY_DEFAULT || action == PARAM_RESET_ALL_DEFAULT) {
@@ -140,9 +141,10 @@ Verdict FlightController::storage_action(uint32_t action, uint64_t now_us) {
     return Verdict::Accepted;
 }
 
-// What the store gave (and, out of range, the first value refused: it keeps its default);
-// a notice for an empty or corrupt store or a refused value (boot_report.hpp's words).
-ParamsFinding FlightController::load_params(int& bad_index) {
+// What the store gave (and, when a stored value was refused, the first such and why: it keeps
+// its default); a notice for an empty or corrupt store or a refused value (boot_report.hpp's
+// words).
+ParamsFinding FlightController::load_params(int& bad_index, SetResult& bad_result) {
     if (config_.storage == nullptr) return ParamsFinding::NoStorage;    // nothing to say
     uint8_t record[ParamStorage::kMaxBytes];
     size_t n = 0;
@@ -157,8 +159,9 @@ ParamsFinding FlightController::load_params(int& bad_index) {
     } else if (r.out_of_range > 0) {
         found = ParamsFinding::OutOfRange;
         bad_index = r.first_bad;
+        bad_result = r.first_bad_result;
     }
-    if (announced(found)) notice(params_notice(found, bad_index));
+    if (announced(found)) notice(params_notice(found, bad_index, bad_result));
     return found;
 }
 

@@ -95,12 +95,13 @@ struct LoopState {               // what the last loop computed, for telemetry a
 };
 
 // Something the loop says in words (a STATUSTEXT): a Supervisor event, an IMU or a parameter
-// store message. `text` is a constant string, or nullptr for a stored value refused as out of
-// range (its words are set_result_text(SetResult::Range, param_index)).
+// store message. `text` is a constant string, or nullptr for a stored value refused (its words
+// are set_result_text(param_result, param_index): what a set of that value would be told).
 struct Notice {
     uint8_t severity = 0;                  // MAV_SEVERITY
     const char* text = nullptr;
     int param_index = -1;
+    SetResult param_result = SetResult::Range;
 };
 
 // What start-up found (boot_report.hpp turns it into STATUSTEXTs): why the chip reset, where
@@ -111,7 +112,7 @@ enum class ParamsFinding : uint8_t {
     Loaded,        // every stored value taken
     Empty,         // nothing stored: the defaults
     Corrupt,       // the store failed its checks: the defaults
-    OutOfRange,    // loaded, but a stored value was out of range (param_index: the first)
+    OutOfRange,    // loaded, but a stored value was refused (param_index: the first)
 };
 enum class ImuFinding : uint8_t {
     Dmp,           // found, on the DMP path
@@ -124,6 +125,7 @@ struct BootReport {
     ResetCause reset = ResetCause::PowerOn;
     ParamsFinding params = ParamsFinding::NoStorage;
     int16_t param_index = -1;
+    SetResult param_result = SetResult::Range;     // why param_index's value was refused
     ImuFinding imu = ImuFinding::Missing;
     DmpStep dmp_step = DmpStep::None;
 };

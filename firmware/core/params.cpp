@@ -204,9 +204,13 @@ bool whole(const ParamInfo& p, float value) {
     return !(p.flags & kParamInteger) || value == std::floor(value);
 }
 
-bool acceptable(const ParamInfo& p, float value) {
-    return in_range(p, value) && !below_floor(p, value) && whole(p, value) &&
-           !not_baud(p, value);
+// Why a value is not one the parameter takes (SetResult::Ok when it is), whatever the state.
+SetResult value_check(const ParamInfo& p, float value) {
+    if (!in_range(p, value)) return SetResult::Range;
+    if (below_floor(p, value)) return SetResult::BelowFloor;
+    if (!whole(p, value)) return SetResult::NotInteger;
+    if (not_baud(p, value)) return SetResult::NotBaud;
+    return SetResult::Ok;
 }
 
 // Appends text, keeping room for the terminating NUL.
@@ -273,10 +277,8 @@ SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (same_value(p, value, get(index))) return SetResult::Unchanged;
     if (exciting) return SetResult::Excitation;
     if (armed && !(p.flags & kParamArmedOk)) return SetResult::Armed;
-    if (!in_range(p, value)) return SetResult::Range;
-    if (below_floor(p, value)) return SetResult::BelowFloor;
-    if (!whole(p, value)) return SetResult::NotInteger;
-    if (not_baud(p, value)) return SetResult::NotBaud;
+    const SetResult check = value_check(p, value);
+    if (check != SetResult::Ok) return check;
     p.set(values_, value);
     return SetResult::Ok;
 }
@@ -312,11 +314,13 @@ LoadReport Params::decode(const uint8_t* data, size_t n) {
         for (int i = 0; i < kParamCount; ++i) {
             if (hashes[i] != h) continue;        // a parameter this firmware no longer has
             const float v = bits_float(get32(p + 4));
-            if (acceptable(kParams[i], v)) {
+            const SetResult check = value_check(kParams[i], v);
+            if (check == SetResult::Ok) {
                 kParams[i].set(values_, v);
                 ++r.loaded;
             } else if (r.out_of_range++ == 0) {
                 r.first_bad = i;
+                r.first_bad_result = check;
             }
             break;
         }
@@ -418,7 +422,7 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
             w.number(kMinTimeConstantS);
             break;
         case SetResult::Type: w.put(" sent with the wrong type"); break;
-        case SetResult::NotBaud: w.put(" takes standard baud rates only"); break;
+        case SetResult::NotBaud: w.put(" not a standard baud rate"); break;
     }
 }
 

@@ -103,6 +103,7 @@ struct LoadReport {
     int loaded = 0;          // values taken from the record
     int out_of_range = 0;    // stored values refused (their defaults kept)
     int first_bad = -1;      // the first of those
+    SetResult first_bad_result = SetResult::Range;   // why it was refused (set()'s words)
 };
 
 class Params {
