@@ -264,7 +264,8 @@ class SilSession(Closing):
 
     def _run(self, first: int, n: int, collect) -> None:
         """Frames first .. first + n - 1 on the rig; telemetry read while they run."""
-        self.rig.advance(n, rc_block(first, n, self.cfg.collective),
+        self.rig.advance(n, rc_block(first, n, self.cfg.collective, self.cfg.rc_script,
+                                     self.cfg.loop_hz),
                          while_running=lambda: collect(self.telemetry.read()))
 
     def hover(self, progress=print) -> None:

@@ -7,7 +7,8 @@ import os
 from ...sim.base import dialect as names
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
-from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument, check_plant, finite,
+from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
+                             add_rc_script_argument, check_plant, finite,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
@@ -55,6 +56,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
     add_firmware_argument(p)
+    add_rc_script_argument(p)
     p.set_defaults(func=run)
 
 
@@ -64,6 +66,8 @@ def run(args) -> int:
     from ...sim.rig.lockstep import FirmwareError
 
     check_plant(args)
+    if args.rc_script is not None and args.disarmed:
+        raise InputError("--rc-script is the pilot (it arms or not): leave out --disarmed")
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
         raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
                          "another path")
@@ -73,6 +77,7 @@ def run(args) -> int:
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
                       link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
+                      rc_script=args.rc_script,
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None

@@ -12,6 +12,7 @@ from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
+                             add_rc_script_argument,
                              add_param_store_argument, check_excitation, check_plant, faults,
                              finite, int_in, number_in)
 
@@ -74,6 +75,7 @@ def add_parser(sub, fmt) -> None:
     add_firmware_argument(p)
     add_param_store_argument(p)
     add_fault_argument(p)
+    add_rc_script_argument(p)
     p.set_defaults(func=run)
 
 
@@ -102,7 +104,7 @@ def run(args) -> int:
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
                     param_store=args.param_store,
                     ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware,
-                    firmware_link=firmware_link(args))
+                    firmware_link=firmware_link(args), rc_script=args.rc_script)
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:

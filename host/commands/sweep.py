@@ -18,6 +18,7 @@ from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
+                             add_rc_script_argument,
                              add_param_store_argument, add_port_argument, check_excitation,
                              check_plant, faults, finite, int_in, number_in)
 
@@ -106,6 +107,7 @@ def add_parser(sub, fmt) -> None:
     add_firmware_argument(p)
     add_param_store_argument(p)
     add_fault_argument(p, "--sil: ")
+    add_rc_script_argument(p)
     p.set_defaults(func=run)
 
 
@@ -134,6 +136,8 @@ def run(args) -> int:
         raise InputError("--fault needs --sil (a board's faults are real)")
     if not args.sil and args.firmware != "host":
         raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    if not args.sil and args.rc_script is not None:
+        raise InputError("--rc-script needs --sil (a board's pilot is a person with a radio)")
     if not args.sil and args.param_store:
         raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
                          "set them with heliquad params)")
@@ -278,7 +282,7 @@ def _sweep_session(args, tlog):
                     plant=args.plant, rig=args.axis, params=args.params,
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
                     faults=faults(args), firmware=args.firmware, param_store=args.param_store,
-                    firmware_link=firmware_link(args))
+                    firmware_link=firmware_link(args), rc_script=args.rc_script)
     source = sil_source(cfg)
     try:
         session = SilSession(cfg, tlog)
@@ -291,4 +295,7 @@ def _sweep_session(args, tlog):
         raise
     if args.fault:
         source["faults"] = list(args.fault)
+    if args.rc_script is not None:
+        source["rc_script"] = [[t, {str(i + 1): us for i, us in sets}]
+                               for t, sets in args.rc_script.changes]
     return session, source, None

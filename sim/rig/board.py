@@ -53,7 +53,7 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
-              usb_serial: str | None = None, link: str = "uart") -> dict:
+              usb_serial: str | None = None, link: str = "uart", rc_script=None) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
     (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
@@ -65,7 +65,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
     reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it).
     ``usb_serial``: announce the pty, with this USB serial number, from before ``ready`` until
     the board has landed (default: not announced). ``link``: the Teensy image's link the
-    pty carries (``uart`` or ``usb``; teensy35 only)."""
+    pty carries (``uart`` or ``usb``; teensy35 only). ``rc_script``: the pilot, an
+    :class:`~.rc_script.RcScript` (its times from the first frame; ``armed`` then unused)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -76,16 +77,27 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
              **({"link": link} if firmware == "teensy35" else {})) as rig, \
             (contextlib.nullcontext() if usb_serial is None else
              announced(telemetry_path, usb_serial, firmware)):
-        _fly(rig, run, dt_s, collective, duration_s,
+        _fly(rig, run, dt_s, duration_s,
              lambda: ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)"),
-             rc=None if armed else rc_disarmed())
+             _pilot(rc_script, armed, collective, loop_hz))
         run["landed"] = _land(rig, run, dt_s)
     return run             # the rig closed: the firmware's links and temporary folder gone
 
 
-def _fly(rig, run, dt_s, collective, duration_s, say_ready, rc=None) -> None:
-    """Say ready, then hover in real time until ``duration_s`` or a KeyboardInterrupt (kept
-    in ``run``), the pilot's sticks ``rc`` (default: armed, hovering)."""
+def _pilot(rc_script, armed: bool, collective: float, loop_hz: float):
+    """The pilot's channels at a frame: the script's, else armed and hovering at
+    ``collective``, else landed."""
+    if rc_script is not None:
+        return lambda frame: rc_script.row(frame, loop_hz)
+    if armed:
+        return lambda frame: rc_block(frame, 1, collective)[0]
+    landed = rc_disarmed()
+    return lambda frame: landed
+
+
+def _fly(rig, run, dt_s, duration_s, say_ready, pilot) -> None:
+    """Say ready, then fly in real time until ``duration_s`` or a KeyboardInterrupt (kept
+    in ``run``), the pilot's channels ``pilot(frame)``."""
     try:
         # Said inside: a Ctrl-C from whoever waited for the line stops the board as any
         # later one does.
@@ -100,7 +112,7 @@ def _fly(rig, run, dt_s, collective, duration_s, say_ready, rc=None) -> None:
             elif now - target > MAX_LAG_S:
                 run["resyncs"] += 1
                 t0 = now - run["frames"] * dt_s     # resynchronise to real time
-            _step(rig, rc_block(run["frames"], 1, collective) if rc is None else rc)
+            _step(rig, pilot(run["frames"]))
     except KeyboardInterrupt as exc:             # Ctrl-C; SIGTERM, SIGHUP as its subclasses
         run["stopped_by"] = exc
 

@@ -59,6 +59,7 @@ class SilConfig:
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
     firmware_link: str = "uart"    # teensy35: its link the tools talk over, "uart" or "usb"
     param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
+    rc_script: object = None       # rc_script.RcScript: the pilot (default: arm, then hover)
 
 
 class Plant(Protocol):
@@ -110,8 +111,13 @@ def _rc(frame, collective):
     return rc
 
 
-def rc_block(first: int, n: int, collective: float) -> np.ndarray:
-    """The pilot's RC of frames ``first`` .. ``first + n - 1``, one row each (uint16 us)."""
+def rc_block(first: int, n: int, collective: float, script=None,
+             loop_hz: float = LOOP_RATE_HZ) -> np.ndarray:
+    """The pilot's RC of frames ``first`` .. ``first + n - 1``, one row each (uint16 us): the
+    default pilot (arm, then throttle to ``collective``), or the RC script ``script``
+    (sim/rig/rc_script.py) when there is one."""
+    if script is not None:
+        return script.rows(first, n, loop_hz)
     return np.array([_rc(f, collective) for f in range(first, first + n)], dtype=np.uint16)
 
 
