@@ -4,6 +4,10 @@ disarms when the script says, frame for frame, on the simulated rig."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -97,3 +101,27 @@ def test_the_firmware_arms_and_disarms_when_the_script_says(tmp_path):
     # changes, and the host build stamps a loop with its frame's time)
     assert 500_000 <= changes[0][0] <= 510_000
     assert 2_000_000 <= changes[1][0] <= 2_010_000
+
+
+def _sweep(tmp_path, name, script_text):
+    script = tmp_path / f"{name}.rc"
+    script.write_text(script_text)
+    out = tmp_path / name
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "sweep", "--axis", "roll", "--sil",
+                          "--plant", "tf", "--freqs-hz", "2", "--rc-script", str(script),
+                          "--out", str(out)], capture_output=True, text=True, timeout=600)
+    return res, json.loads((out / "manifest.json").read_text())
+
+
+def test_a_sweep_flies_the_scripts_pilot_and_records_the_script(tmp_path):
+    """A script that arms and raises the throttle: the sweep measures its point and its
+    manifest records the script; one that only raises the throttle leaves the vehicle
+    disarmed, and the firmware refuses the excitation, as it would with that pilot."""
+    res, manifest = _sweep(tmp_path, "arms", "0.2 5=2000\n0.3 3=1400\n")
+    assert res.returncode == 0, res.stderr
+    assert manifest["complete"]
+    assert manifest["source"]["rc_script"] == [[0.2, {"5": 2000}], [0.3, {"3": 1400}]]
+    res, manifest = _sweep(tmp_path, "never", "0.2 3=1400\n")
+    assert res.returncode == 1 and "the vehicle is disarmed" in res.stderr
+    assert not manifest["complete"]
+    assert manifest["aborted"].startswith("refused by the firmware: the vehicle is disarmed")
