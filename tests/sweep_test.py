@@ -94,6 +94,32 @@ def test_sweep_over_a_port_works_against_a_free_running_board(tmp_path):
     assert "truth" not in res.stdout
 
 
+def _points(folder):
+    rows = np.loadtxt(folder / "points.csv", delimiter=",", skiprows=1, ndmin=2)
+    return rows[:, 0], rows[:, 1] * np.exp(1j * rows[:, 2])
+
+
+def test_a_board_flies_the_vehicle_as_sil_does(tmp_path):
+    """heliquad board --plant vehicle on the pitch rig, swept over its port, gives the points
+    a sweep --sil on the same rig gives: the same vehicle, its sensor noise apart (each
+    point's sigma is below 1 %; the bounds are some four sigma)."""
+    board_sweep, sil_sweep = tmp_path / "board", tmp_path / "sil"
+    sweep = ("sweep", "--axis", "pitch", "--freqs-hz", 1, 2, 4, "--cycles", 4)
+    with running_board(tmp_path, "--plant", "vehicle", "--axis", "pitch", "--duration-s", 600,
+                       *KEEP_ALL) as port:
+        res = heliquad(*sweep, "--port", port, "--out", board_sweep)
+    assert res.returncode == 0, res.stdout + res.stderr
+    res = heliquad(*sweep, "--sil", "--out", sil_sweep)
+    assert res.returncode == 0, res.stdout + res.stderr
+    for folder in (board_sweep, sil_sweep):
+        res = heliquad("identify", folder)
+        assert res.returncode == 0, res.stderr
+    (w_board, g_board), (w_sil, g_sil) = _points(board_sweep), _points(sil_sweep)
+    assert np.array_equal(w_board, w_sil)
+    assert np.max(np.abs(20 * np.log10(np.abs(g_board / g_sil)))) < 0.2
+    assert np.max(np.abs(np.degrees(np.angle(g_board / g_sil)))) < 1.5
+
+
 def test_a_board_that_freezes_mid_frequency_ends_the_sweep_with_its_records(tmp_path):
     # The simulated board stopped (SIGSTOP) once its answer that the excitation runs is in the
     # sweep's log: no sample comes any more, and the sweep ends with the timeout's status

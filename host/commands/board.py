@@ -5,17 +5,21 @@ from __future__ import annotations
 import os
 
 from ...sim.base import dialect as names
+from ...sim.plant.vehicle import RIGS
+from ...sim.rig.setup import PLANTS
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
-                             add_rc_script_argument, check_plant, finite,
+                             add_rc_script_argument, add_vehicle_arguments, check_plant, finite,
+                             vehicle_rig,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
 
 HELP = """\
-Run the simulated rig in real time as if it were a board on a serial port: the host
-firmware with a transfer-function plant, armed and hovering, stepping one loop per loop
+Run the simulated rig in real time as if it were a board on a serial port: the firmware
+with a plant (a transfer function, or with --plant vehicle the 6-DoF vehicle on a rig, as
+heliquad sil flies it), armed and hovering, stepping one loop per loop
 period of wall-clock time. Its telemetry port appears at --telemetry; connect any MAVLink
 tool to it as to a board's serial port (any baud rate is accepted and ignored); while it
 runs, --port auto finds it by the USB identity it announces (docs/usb.md). Nothing reads the
@@ -34,7 +38,10 @@ example: heliquad board --axis roll --telemetry /tmp/rig &   then open /tmp/rig
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("board", help="run the simulated rig as if it were a board on a serial port",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("--plant", choices=("tf",), default="tf")
+    p.add_argument("--plant", choices=PLANTS, default="tf",
+                   help="tf: a transfer function from the axis's torque command to its body "
+                        "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
+    add_vehicle_arguments(p, RIGS)
     p.add_argument("--axis", choices=tuple(names.AXES), default="roll")
     p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19])
     p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93])
@@ -64,15 +71,23 @@ def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ...sim.rig.board import run_board
     from ...sim.rig.lockstep import FirmwareError
+    from ...sim.rig.setup import SilConfig, make_plant
 
     check_plant(args)
+    rig = vehicle_rig(args)
+    if args.plant != "vehicle" and (args.turbulence or args.params or args.ideal_sensor or args.rig):
+        raise InputError("--rig, --params, --turbulence and --ideal-sensor need --plant vehicle")
+    cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), plant=args.plant,
+                    rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
+                    ideal_sensor=args.ideal_sensor, collective=args.collective,
+                    loop_hz=args.loop_hz)
     if args.rc_script is not None and args.disarmed:
         raise InputError("--rc-script is the pilot (it arms or not): leave out --disarmed")
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
         raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
                          "another path")
     try:
-        r = run_board(args.axis, args.num, args.den, args.telemetry, loop_hz=args.loop_hz,
+        r = run_board(lambda dt_s: make_plant(cfg, dt_s), args.telemetry, loop_hz=args.loop_hz,
                       collective=args.collective, duration_s=args.duration_s,
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
                       link=firmware_link(args),

@@ -93,6 +93,34 @@ def add_param_store_argument(p) -> None:
                         "(default: every run starts with the defaults and nothing is saved)")
 
 
+TURBULENCE_LEVELS = ("light", "moderate", "severe")
+
+
+def add_vehicle_arguments(p, rigs=None) -> None:
+    """The 6-DoF vehicle's options (--plant vehicle): its parameter file, turbulence, the
+    seed and the ideal sensor; with ``rigs``, --rig too (default: the --axis one)."""
+    if rigs is not None:
+        p.add_argument("--rig", choices=rigs, default=None,
+                       help="--plant vehicle: the test rig (default: the --axis one)")
+    p.add_argument("--params", metavar="FILE",
+                   help="--plant vehicle: parameter file (default: the shipped vehicle.toml)")
+    p.add_argument("--turbulence", choices=TURBULENCE_LEVELS,
+                   help="--plant vehicle: Dryden turbulence (MIL-F-8785C) at this level")
+    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0,
+                   help="turbulence and sensor-noise seed (default 0)")
+    p.add_argument("--ideal-sensor", action="store_true",
+                   help="--plant vehicle: no IMU noise, bias or DMP latency")
+
+
+def vehicle_rig(args) -> str:
+    """The rig a run flies on: --rig, else the --axis one. On a rig only its own axis is
+    free (or every axis, on the free rig), so --plant vehicle refuses any other."""
+    rig = args.rig or args.axis
+    if args.plant == "vehicle" and rig not in (args.axis, "free"):
+        raise InputError(f"on the {rig} rig only {rig} is free: use --axis {rig}")
+    return rig
+
+
 def _rc_script(path: str):
     """An RC script file, read and checked (sim/rig/rc_script.py)."""
     # imported only when the option is given: every command's parser imports this module

@@ -11,8 +11,8 @@ from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
-from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
-                             add_rc_script_argument,
+from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
+                             add_rc_script_argument, add_vehicle_arguments, vehicle_rig,
                              add_param_store_argument, check_excitation, check_plant, faults,
                              finite, int_in, number_in)
 
@@ -41,15 +41,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--plant", choices=PLANTS, default="tf",
                    help="tf: a transfer function from the axis's torque command to its body "
                         "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
-    p.add_argument("--rig", choices=RIGS, default=None,
-                   help="vehicle plant: the test rig (default: the --axis one)")
-    p.add_argument("--params", metavar="FILE",
-                   help="vehicle plant: parameter file (default: the shipped vehicle.toml)")
-    p.add_argument("--turbulence", choices=("light", "moderate", "severe"),
-                   help="vehicle plant: Dryden turbulence (MIL-F-8785C) at this level")
-    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0, help="turbulence and sensor-noise seed (default 0)")
-    p.add_argument("--ideal-sensor", action="store_true",
-                   help="vehicle plant: no IMU noise, bias or DMP latency")
+    add_vehicle_arguments(p, RIGS)
     p.add_argument("--axis", choices=tuple(names.AXES), default="roll")
     p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: the paper's roll model)")
@@ -94,9 +86,7 @@ def run(args) -> int:
     folder = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(folder):
         raise InputError(f"--out: folder {folder} does not exist")
-    rig = args.rig or args.axis
-    if args.plant == "vehicle" and rig not in (args.axis, "free"):
-        raise InputError(f"on the {rig} rig only {rig} is free: use --axis {rig}")
+    rig = vehicle_rig(args)
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), inject=args.inject,
                     freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,

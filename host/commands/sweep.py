@@ -17,8 +17,8 @@ from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_ampli
 from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from ..process.signals import ABORTED_BY, EXIT_CODES
-from .shared_options import (MAX_CYCLES, MAX_SEED, add_fault_argument, add_firmware_argument, firmware_link,
-                             add_rc_script_argument,
+from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
+                             add_rc_script_argument, add_vehicle_arguments,
                              add_param_store_argument, add_port_argument, check_excitation,
                              check_plant, faults, finite, int_in, number_in)
 
@@ -71,10 +71,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--num", type=finite, nargs="+", metavar="B",
                    help="--plant tf: numerator (default: the paper's chosen model of the axis)")
     p.add_argument("--den", type=finite, nargs="+", metavar="A", help="--plant tf: denominator")
-    p.add_argument("--params", metavar="FILE", help="--plant vehicle: parameter file")
-    p.add_argument("--turbulence", choices=("light", "moderate", "severe"))
-    p.add_argument("--seed", type=int_in(0, MAX_SEED), default=0)
-    p.add_argument("--ideal-sensor", action="store_true")
+    add_vehicle_arguments(p)
     p.add_argument("--collective", type=number_in(0, 1), default=0.4)
     p.add_argument("--dmp-image", metavar="FILE")
     p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",

@@ -1,7 +1,7 @@
 """Free-running mode: the simulated rig behaves like a board on a serial port.
 
-``heliquad board`` starts the host firmware with a transfer-function plant and steps it in
-real time (one frame per loop period of wall-clock time), hovering with the arm switch up,
+``heliquad board`` starts the firmware with a plant (a transfer function, or the 6-DoF
+vehicle on a rig) and steps it in real time (one frame per loop period of wall-clock time), hovering with the arm switch up,
 and publishes the firmware's telemetry link as a pty. Any tool then connects to that path
 as it would to /dev/ttyACM0 (`heliquad log`, a sweep, QGroundControl over a serial link,
 or pymavlink). Given a USB serial number, it announces the pty with the board's USB identity
@@ -24,7 +24,6 @@ import time
 import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
-from ..plant.tf_plant import TfPlant
 from .announce import announced
 from .driver import Rig
 from .setup import rc_block, rc_disarmed
@@ -48,13 +47,14 @@ TELEMETRY_BACKLOG_BYTES = MAX_PTY_BACKLOG_BYTES
 DISARM_WAIT_S = 1.0
 
 
-def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
+def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
               collective: float = 0.4, duration_s: float | None = None,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
               usb_serial: str | None = None, link: str = "uart", rc_script=None) -> dict:
-    """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
+    """Fly ``plant`` (given the loop period, s, it returns the rig's plant: setup.make_plant)
+    until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
     (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
     when the telemetry port is there (default: a line on stdout, flushed at once, for
@@ -71,7 +71,7 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
     run = {"frames": 0, "resyncs": 0, "stopped_by": None, "landed": False}
-    with Rig(lambda plant_dt_s: TfPlant(axis, num, den, plant_dt_s), firmware, loop_hz,
+    with Rig(plant, firmware, loop_hz,
              dmp_image=dmp_image, telemetry_path=os.path.abspath(telemetry_path),
              params_file=params_file, telemetry_backlog_bytes=backlog_bytes,
              **({"link": link} if firmware == "teensy35" else {})) as rig, \
