@@ -3,12 +3,13 @@ Protection Unit" chapter), modelled as far as the bus masters other than the cor
 
 The core's own accesses are not checked (the image runs privileged with the MPU's reset
 regions, which grant the core everything). What is modelled is the one rule that stops a DMA
-master: the USB controller is bus master 4, and the reset value of every region descriptor's
-access word (RGDn_WORD2 = 0x0061_F7DF) gives master 4 neither read nor write. So while
-CESR.VLD is set (its reset value), the USB controller may reach an address only through a
-valid region (RGD0 always, RGDn with WORD3.VLD) covering it whose WORD2 sets M4RE (reads) or
-M4WE (writes); an image must either grant master 4 (RGDAAC0, the alias of RGD0_WORD2) or
-clear CESR.VLD before the USB controller touches memory, or the emulator stops with a fault.
+master: the USB controller is bus master 4 and the SDHC master 5, and the reset value of
+every region descriptor's access word (RGDn_WORD2 = 0x0061_F7DF) gives masters 4 and 5
+neither read nor write. So while CESR.VLD is set (its reset value), such a master may reach an
+address only through a valid region (RGD0 always, RGDn with WORD3.VLD) covering it whose WORD2
+sets MnRE (reads) or MnWE (writes); an image must either grant the master (RGDAAC0, the alias
+of RGD0_WORD2) or clear CESR.VLD before that controller touches memory, or the emulator stops
+with a fault.
 
 Registers: CESR (VLD writable, SPERR write-1-to-clear, the rest read only), the region
 descriptors RGD0-11 (WORD0-3; RGD0's start and end are fixed at 0 and 0xFFFF_FFFF as on the
