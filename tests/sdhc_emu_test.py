@@ -1,5 +1,5 @@
 """The emulated SDHC controller (sim/chip/sdhc.py) with its card (sd_card.py), and the image's
-SD card driver's register sequence (firmware/targets/teensy35/block_device.cpp).
+SD card driver (firmware/targets/teensy35/block_device.cpp) identifying it.
 
 * Register level, with no program: the test plays the driver's part (the same sequence and
   register values as SdhcCard): identification at 375 kHz, the card's states and responses,
@@ -8,6 +8,8 @@ SD card driver's register sequence (firmware/targets/teensy35/block_device.cpp).
   a corrupt response CRC, a negative CRC status (and the stop that recovers), a response with
   an error bit, a full card, a card that holds busy, and a power cut (the image keeps exactly
   the blocks acknowledged).
+* The image: a card image present -> hq_sd_probe says Ready with the card's size; absent ->
+  NoCard; a write-protected card -> its flag.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import pytest
 
 from heliquad.sim.chip import Fault, Mk64
 from heliquad.sim.chip.sd_card import ERROR, OUT_OF_RANGE, WP_VIOLATION, SdCard
+from heliquad.sim.chip.teensy35 import Teensy35
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import teensy35_boot_test as boot  # noqa: E402
@@ -273,3 +276,136 @@ def test_a_power_cut_leaves_exactly_the_acknowledged_blocks(tmp_path):
     image = path.read_bytes()                               # the run stops here
     assert image[10 * BLOCK:11 * BLOCK] == b"\x11" * BLOCK
     assert image[11 * BLOCK:13 * BLOCK] == bytes(2 * BLOCK)
+# ============================================================ the image's driver ===============
+
+def _probe(board):
+    report = board.machine.image.symbol("hq_sd_probe")
+    raw = board.machine.read(report.address, 8)
+    return int.from_bytes(raw[:4], "little"), raw[4], raw[5], raw[6]
+
+
+@pytest.mark.parametrize("card", ["none", "card", "protected"])
+def test_the_image_identifies_the_card_at_start_up(tmp_path, card):
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    image = tmp_path / "sd.img"
+    if card != "none":
+        image.write_bytes(bytes(8192 * BLOCK))
+    board = Teensy35(boot.IMAGE, sd_image=image)
+    if card == "protected":
+        board.sd_card.write_protect = True
+    stop = board.run_to_loop(1, instructions=boot.BOOT_BUDGET)
+    assert stop.reason == "loop", stop
+    blocks, finding, wp, status = _probe(board)
+    if card == "none":
+        assert (blocks, finding, status) == (0, 1, 2)      # NoCard
+        return
+    assert (blocks, finding, wp, status) == (8192, 5, int(card == "protected"), 0)
+    assert board.sd_card.state == "tran" and not board.chip.notes, board.chip.notes
+
+
+OK, BUSY, NO_CARD, WRITE_PROTECTED, OUT_OF_RANGE_STATUS, FAILED = range(6)   # hq::BlockStatus
+CARD_OBJECT = "_ZZ14hq_teensy_mainE4card"           # main.cpp's static SdhcCard
+CALL_BUDGET = 2_000_000
+
+
+class Driver:
+    """The image's SdhcCard, called directly on the emulated board after its start-up (the
+    file layer does not call it yet): each call enters the method with its arguments in
+    r0-r3 and returns to a BKPT; between polls the board's time moves on as if the caller
+    slept. Scratch memory (the return BKPT, the buffers) is above the static data."""
+
+    def __init__(self, board):
+        self.board, self.m = board, board.machine
+        image = self.m.image
+        self.this = image.symbol(CARD_OBJECT).address
+        self.methods = {name: image.symbol(f"hq::teensy::SdhcCard::{name}").address
+                        for name in ("begin_read", "begin_write", "poll")}
+        self.ret = (image.ram_end() + 63) & ~31
+        self.buffer = self.ret + 32
+
+    def _call(self, method, *args):
+        m = self.m
+        stop = boot.call_in_image(m, self.ret, self.methods[method], (self.this,) + args,
+                                  CALL_BUDGET)
+        assert stop.reason == "bkpt" and stop.pc == self.ret, stop
+        return m.reg("r0") & 0xFF
+
+    def poll(self, limit_s=2.0, step_s=2e-4):
+        for _ in range(int(limit_s / step_s)):
+            status = self._call("poll")
+            if status != BUSY:
+                return status
+            self.m.advance(self.m.cycles_after(step_s) - self.m.now())
+        return BUSY
+
+    def write(self, lba, data, offset=0):
+        self.m.write(self.buffer + offset, data)
+        return self._call("begin_write", lba, self.buffer + offset, len(data) // BLOCK)
+
+    def read(self, lba, n, offset=0):
+        self.m.write(self.buffer + offset, b"\xEE" * n * BLOCK)
+        status = self._call("begin_read", lba, self.buffer + offset, n)
+        if status != OK:
+            return status, None
+        status = self.poll()
+        return status, self.m.read(self.buffer + offset, n * BLOCK)
+
+
+@pytest.fixture
+def driver(tmp_path):
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    image = tmp_path / "sd.img"
+    image.write_bytes(bytes(2048 * BLOCK))
+    board = Teensy35(boot.IMAGE, sd_image=image)
+    stop = board.run_to_loop(1, instructions=boot.BOOT_BUDGET)
+    assert stop.reason == "loop", stop
+    assert _probe(board)[1] == 5, "the card is ready"
+    driver = Driver(board)
+    driver.path = image
+    return driver
+
+
+def test_the_image_driver_writes_and_reads_blocks_through_adma2(driver):
+    data = bytes((7 * i) & 0xFF for i in range(300 * BLOCK))
+    assert driver.write(1000, data) == OK                   # two chunks: 256 + 44 blocks
+    assert driver.write(0, data[:BLOCK]) == BUSY            # the transfer is not finished
+    assert driver.poll() == OK
+    assert driver.path.read_bytes()[1000 * BLOCK:1300 * BLOCK] == data
+    assert driver.read(1100, 3) == (OK, data[100 * BLOCK:103 * BLOCK])
+    assert driver.read(1000, 1) == (OK, data[:BLOCK])
+    # An unaligned buffer goes one block at a time through the bounce buffer.
+    assert driver.write(5, data[:2 * BLOCK], offset=1) == OK and driver.poll() == OK
+    assert driver.path.read_bytes()[5 * BLOCK:7 * BLOCK] == data[:2 * BLOCK]
+    assert driver.read(5, 2, offset=3) == (OK, data[:2 * BLOCK])
+    assert driver.write(2047, data[:2 * BLOCK]) == OUT_OF_RANGE_STATUS
+    assert driver.board.sd_card.state == "tran" and not driver.board.chip.notes
+
+
+def test_the_image_driver_fails_once_and_recovers(driver):
+    card = driver.board.sd_card
+    card.fail_writes = "crc"
+    assert driver.write(20, b"\x55" * BLOCK) == OK
+    assert driver.poll() == FAILED
+    assert card.state == "rcv" and driver.poll() == OK      # failed once, then idle
+    card.fail_writes = None
+    assert driver.write(20, b"\x55" * BLOCK) == BUSY        # the stop (CMD12) goes first
+    assert driver.poll() == OK                              # nothing of the caller's runs
+    driver.m.advance(driver.m.cycles_after(1e-4) - driver.m.now())
+    assert card.state in ("prg", "tran") and card.log[-1][:2] == (12, 0)
+    status = BUSY
+    for _ in range(50):
+        status = driver.write(20, b"\x55" * BLOCK)
+        if status != BUSY:
+            break
+        driver.m.advance(driver.m.cycles_after(2e-4) - driver.m.now())
+    assert status == OK and driver.poll() == OK
+    assert driver.path.read_bytes()[20 * BLOCK:21 * BLOCK] == b"\x55" * BLOCK
+    driver.board.chip.sdhc.corrupt_data_crc = 1
+    assert driver.read(20, 1)[0] == FAILED
+    for _ in range(50):
+        status, data = driver.read(20, 1)
+        if status != BUSY:
+            break
+    assert (status, data) == (OK, b"\x55" * BLOCK)

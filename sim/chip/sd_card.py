@@ -232,6 +232,3 @@ class SdCard:
         """The end of a transfer (auto-CMD12 done, or the programming after it)."""
         if self.state in ("data", "prg"):
             self.state = "tran"
-
-    def text(self) -> str:
-        return f"{self.blocks} blocks, {self.state}, RCA 0x{self.rca:04X}"
