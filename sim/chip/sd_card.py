@@ -17,7 +17,9 @@ TMP_WRITE_PROTECT: writes refused with WP_VIOLATION), ``fail_writes`` ("crc": th
 answers every data block with a negative CRC status and stays in rcv; "status": CMD25/CMD24
 are answered with the ERROR bit and no data is taken), ``busy_hold`` ((hold_s, period_s): the
 first write in each period of emulated time holds busy hold_s longer), ``program_s`` (busy
-per block written, 1 ms).
+per block written, 1 ms), ``busy_tries`` (ACMD41s answered busy before ready, 3; None: never
+ready), ``version1`` (identification answered as a version 1 standard-capacity card: no
+answer to CMD8, CCS clear; only its identification is modelled).
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ class SdCard:
         self.fail_writes = None         # None, "crc" or "status"
         self.busy_hold = None           # (hold_s, period_s)
         self.program_s = PROGRAM_S
+        self.busy_tries = ACMD41_BUSY_TRIES     # ACMD41s answered busy (None: never ready)
+        self.version1 = False           # answer identification as a version 1 (SDSC) card
         self._next_hold_s = 0.0
         self.log = []                   # (command, argument, state before): until cleared
         self.power_on()
@@ -117,7 +121,7 @@ class SdCard:
         return None
 
     def _cmd8(self, arg):
-        if self.state != "idle":
+        if self.state != "idle" or self.version1:          # version 1: CMD8 is illegal
             return None
         return "R7", arg & 0xFFF                    # voltage accepted, pattern echoed
 
@@ -132,10 +136,11 @@ class SdCard:
         if self.state not in ("idle", "ready"):
             return None
         self._acmd41_tries += 1
-        if self._acmd41_tries <= ACMD41_BUSY_TRIES or not arg & OCR_VOLTAGES:
+        if self.busy_tries is None or self._acmd41_tries <= self.busy_tries or \
+                not arg & OCR_VOLTAGES:
             return "R3", OCR_VOLTAGES
         self.state = "ready"
-        return "R3", OCR_READY | OCR_CCS | OCR_VOLTAGES
+        return "R3", OCR_READY | (0 if self.version1 else OCR_CCS) | OCR_VOLTAGES
 
     def _cmd2(self, arg):
         if self.state != "ready":
