@@ -33,13 +33,11 @@ The model notes (``chip.note``) a command while CIHB is set, an identification c
 
 from __future__ import annotations
 
-from .image import SRAM_BASE, SRAM_SIZE
-from .machine import Fault
+from .mpu import SDHC_MASTER
 from .peripheral import RegisterDevice
 from .registers import irq
 from .sd_card import BLOCK
 
-SDHC_MASTER = 5                 # the SDHC's crossbar master number (chip configuration)
 CARD_PORT, CARD_PINS, CARD_MUX = "E", range(6), 4       # PTE0-5, ALT4
 IDENT_MAX_HZ = 400e3            # SD specification: identification at 400 kHz at most
 DEFAULT_SPEED_MAX_HZ = 25e6     # default speed
@@ -351,15 +349,7 @@ class Sdhc(RegisterDevice):
 
     # -- DMA ---------------------------------------------------------------------------------
     def _check(self, address, n, write, what):
-        kind = "write" if write else "read"
-        if not (SRAM_BASE <= address and address + n <= SRAM_BASE + SRAM_SIZE):
-            raise Fault("BusFault", f"SDHC ADMA2 {kind} of {what} at 0x{address:08X} "
-                        f"({n} bytes): not RAM", self.machine.pc, address)
-        if not self.chip.mpu.master_may(SDHC_MASTER, address, n, write):
-            raise Fault("BusFault", f"SDHC ADMA2 {kind} of {what} at 0x{address:08X}: the "
-                        f"system MPU grants bus master {SDHC_MASTER} no {kind} access "
-                        "(set MPU_RGDAAC0.M5RE/M5WE or clear MPU_CESR.VLD)",
-                        self.machine.pc, address)
+        self.chip.mpu.check_dma("SDHC ADMA2", SDHC_MASTER, address, n, write, what)
 
     def _dma_read(self, address, n, what) -> bytes:
         self._check(address, n, False, what)
