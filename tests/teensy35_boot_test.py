@@ -1202,6 +1202,20 @@ def _write(dev, name, value, size=None):
     dev.write(dev.base + reg.offset, size or reg.bits // 8, value)
 
 
+def call_in_image(machine, ret: int, address: int, args, budget: int):
+    """Calls the image's function at ``address`` with ``args`` in r0-r3 as a debug probe
+    would, returning to a BKPT written at ``ret`` (scratch RAM): the run's Stop, reason
+    "bkpt" at ``ret`` once it returned (r0 holds the result)."""
+    from unicorn import arm_const as A   # core registers by name: only these calls set them
+
+    machine.write(ret, b"\x00\xbe\x00\xbe")                      # bkpt #0
+    for i, value in enumerate(args):
+        machine.uc.reg_write(getattr(A, f"UC_ARM_REG_R{i}"), value)
+    machine.uc.reg_write(A.UC_ARM_REG_LR, ret | 1)
+    machine.uc.reg_write(A.UC_ARM_REG_PC, address)
+    return machine.run(instructions=budget)
+
+
 def _wdog_off(chip):
     for name, value in (("UNLOCK", 0xC520), ("UNLOCK", 0xD928), ("STCTRLH", 0x01D2)):
         _write(chip.wdog, name, value)

@@ -289,15 +289,9 @@ class Storage:
         return "cut" if self._cut < 0 else None
 
     def _call(self, method: str, *args):
-        from unicorn import arm_const as A
-
         m = self.m
-        m.write(self.ret, b"\x00\xbe\x00\xbe")                  # bkpt #0
-        for i, value in enumerate((self.this,) + args):
-            m.uc.reg_write(getattr(A, f"UC_ARM_REG_R{i}"), value)
-        m.uc.reg_write(A.UC_ARM_REG_LR, self.ret | 1)
-        m.uc.reg_write(A.UC_ARM_REG_PC, self.methods[method])
-        stop = m.run(instructions=CALL_BUDGET)
+        stop = boot.call_in_image(m, self.ret, self.methods[method], (self.this,) + args,
+                                  CALL_BUDGET)
         if stop.reason == "cut":
             return None
         assert stop.reason == "bkpt" and stop.pc == self.ret, stop

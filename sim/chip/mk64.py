@@ -13,6 +13,7 @@ from .mpu import SysMpu
 from .port import Ports
 from .rcm import Rcm
 from .scs import Dwt, SystemControlSpace
+from .sdhc import Sdhc
 from .uart import Uart
 from .usb import Usb
 from .wdog import Wdog
@@ -53,6 +54,7 @@ class Mk64:
         self.fmc = m.attach(Fmc(m, self))
         self.mpu = m.attach(SysMpu(m, self))
         self.usb0 = m.attach(Usb(m, self))
+        self.sdhc = m.attach(Sdhc(m, self))
         m.pre_reset_listeners.append(self._before_reset)
         m.reset_listeners.append(self._on_reset)
         self.ready = True

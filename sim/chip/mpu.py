@@ -3,12 +3,14 @@ Protection Unit" chapter), modelled as far as the bus masters other than the cor
 
 The core's own accesses are not checked (the image runs privileged with the MPU's reset
 regions, which grant the core everything). What is modelled is the one rule that stops a DMA
-master: the USB controller is bus master 4, and the reset value of every region descriptor's
-access word (RGDn_WORD2 = 0x0061_F7DF) gives master 4 neither read nor write. So while
-CESR.VLD is set (its reset value), the USB controller may reach an address only through a
-valid region (RGD0 always, RGDn with WORD3.VLD) covering it whose WORD2 sets M4RE (reads) or
-M4WE (writes); an image must either grant master 4 (RGDAAC0, the alias of RGD0_WORD2) or
-clear CESR.VLD before the USB controller touches memory, or the emulator stops with a fault.
+master: the USB controller is bus master 4 and the SDHC master 5, and the reset value of
+every region descriptor's access word (RGDn_WORD2 = 0x0061_F7DF) gives masters 4 and 5
+neither read nor write. So while CESR.VLD is set (its reset value), such a master may reach an
+address only through a valid region (RGD0 always, RGDn with WORD3.VLD) covering it whose WORD2
+sets MnRE (reads) or MnWE (writes); an image must either grant the master (RGDAAC0, the alias
+of RGD0_WORD2) or clear CESR.VLD before that controller touches memory, or the emulator stops
+with a fault. :meth:`SysMpu.check_dma` is that check (with the memory map's: DMA reaches RAM,
+and flash for reads), for every DMA model.
 
 Registers: CESR (VLD writable, SPERR write-1-to-clear, the rest read only), the region
 descriptors RGD0-11 (WORD0-3; RGD0's start and end are fixed at 0 and 0xFFFF_FFFF as on the
@@ -18,11 +20,14 @@ access violation is recorded in them (a refused access stops the run instead).
 
 from __future__ import annotations
 
+from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE
+from .machine import Fault
 from .peripheral import RegisterDevice
 
 REGIONS = 12                    # MK64: 12 region descriptors (CESR.NRGD = 0b0001)
 REGION_GRANULE = 32             # start/end addresses are in 32-byte units (WORD0/1 bits 31:5)
 USB_MASTER = 4                  # the USB controller's crossbar master number (chip config.)
+SDHC_MASTER = 5                 # the SDHC's
 
 
 class SysMpu(RegisterDevice):
@@ -72,3 +77,22 @@ class SysMpu(RegisterDevice):
             if start <= address and last <= end and v[word2] & right:
                 return True
         return False
+
+    def check_dma(self, device: str, master: int, address: int, n: int, write: bool,
+                  what: str, flash_reads: bool = False):
+        """A DMA access of ``device`` (bus master ``master``): ``n`` bytes at ``address`` must
+        lie in RAM (or flash, for reads where ``flash_reads``) and the MPU must grant it;
+        otherwise the run stops with a Fault naming the address and the rule."""
+        m = self.machine
+        in_ram = SRAM_BASE <= address and address + n <= SRAM_BASE + SRAM_SIZE
+        in_flash = FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE
+        kind = "write" if write else "read"
+        if not (in_ram or (in_flash and flash_reads and not write)):
+            where = "RAM or flash" if flash_reads and not write else "RAM"
+            raise Fault("BusFault", f"{device} DMA {kind} of {what} at 0x{address:08X} "
+                        f"({n} bytes): not {where}", m.pc, address)
+        if not self.master_may(master, address, n, write):
+            raise Fault("BusFault", f"{device} DMA {kind} of {what} at 0x{address:08X}: the "
+                        f"system MPU grants bus master {master} no {kind} access (set "
+                        f"MPU_RGDAAC0.M{master}RE/M{master}WE or clear MPU_CESR.VLD)",
+                        m.pc, address)

@@ -37,7 +37,7 @@ MODELLED = (
     "SIM", "WDOG", "MCG", "OSC", "PMC", "SMC", "RCM", "MPU",
     "PORTA", "PORTB", "PORTC", "PORTD", "PORTE",
     "GPIOA", "GPIOB", "GPIOC", "GPIOD", "GPIOE",
-    "I2C0", "UART0", "FTM0", "FTM3", "PIT", "USB0",
+    "I2C0", "UART0", "FTM0", "FTM3", "PIT", "USB0", "SDHC",
     "SystemControl", "SysTick", "NVIC", "MCM", "FTFE", "FMC",
 )
 

@@ -1,6 +1,7 @@
 """The Teensy 3.5 board around the chip, as the heliquad firmware uses it: a 16 MHz crystal,
 the MPU6050 on I2C0 (pins 18/19, with the breakout board's pull-ups), five ESC outputs on
-FTM0, six RC inputs on FTM3, telemetry on UART0 (pins 0/1) and the status LED on pin 13.
+FTM0, six RC inputs on FTM3, telemetry on UART0 (pins 0/1), the status LED on pin 13 and the
+microSD socket on the SDHC (PTE0-5), with a card when ``sd_image`` names a card-image file.
 
 :class:`Teensy35` runs a firmware image on it and knows the image's symbol contract: the
 fatal path ``hq_fatal(code)`` stops a run with reason ``fatal`` and the code, and
@@ -9,6 +10,7 @@ fatal path ``hq_fatal(code)`` stops a run with reason ``fatal`` and the code, an
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 from heliquad._firmware import Mpu6050Emulator
@@ -16,6 +18,7 @@ from heliquad._firmware import Mpu6050Emulator
 from .i2c import Mpu6050Slave
 from .machine import Stop
 from .mk64 import Mk64
+from .sd_card import SdCard
 
 # Teensy 3.5 pin number -> (port, bit) for the pins the firmware uses (PJRC's pin table).
 PINS = {0: ("B", 16), 1: ("B", 17), 2: ("D", 0), 6: ("D", 4), 7: ("D", 2), 8: ("D", 3),
@@ -68,12 +71,17 @@ class Teensy35:
     one if None); ``with_mpu6050=False`` leaves the bus empty (every address NACKs).
     ``track_loops=False`` does not stop at each FlightController::step entry to count the
     loops (``loops``, ``loop_starts``, :meth:`run_to_loop`): a long lockstep run that finds
-    its loop boundary itself saves that call into Python at every loop."""
+    its loop boundary itself saves that call into Python at every loop. ``sd_image``: a
+    card-image file for the microSD socket (``sd_card.py``; a missing file: no card)."""
 
     def __init__(self, image, *, crystal_ok: bool = True, mpu6050=None, with_mpu6050=True,
-                 track_loops: bool = True, uid: tuple | None = None):
+                 track_loops: bool = True, uid: tuple | None = None, sd_image=None):
         self.chip = Mk64(image, crystal_hz=CRYSTAL_HZ, crystal_ok=crystal_ok, uid=uid)
         self.machine = self.chip.machine
+        # The microSD socket: a card backed by sd_image if that file exists, else empty.
+        self.sd_card = SdCard(sd_image) if sd_image is not None and \
+            os.path.exists(sd_image) else None
+        self.chip.sdhc.insert(self.sd_card)
         self.mpu = None
         if with_mpu6050:
             if mpu6050 is None:

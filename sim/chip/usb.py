@@ -43,8 +43,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE
-from .machine import Fault
 from .mpu import USB_MASTER
 from .peripheral import RegisterDevice
 from .registers import irq, peripheral
@@ -343,18 +341,7 @@ class Usb(RegisterDevice):
 
     # -- DMA ------------------------------------------------------------------------------
     def _check(self, address: int, n: int, write: bool, what: str):
-        in_ram = SRAM_BASE <= address and address + n <= SRAM_BASE + SRAM_SIZE
-        in_flash = FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE
-        kind = "write" if write else "read"
-        if not (in_ram or (in_flash and not write)):
-            raise Fault("BusFault", f"USB0 DMA {kind} of {what} at 0x{address:08X} "
-                        f"({n} bytes): not {'RAM' if write else 'RAM or flash'}",
-                        self.machine.pc, address)
-        if not self.chip.mpu.master_may(USB_MASTER, address, n, write):
-            raise Fault("BusFault", f"USB0 DMA {kind} of {what} at 0x{address:08X}: the "
-                        f"system MPU grants bus master {USB_MASTER} no {kind} access "
-                        "(set MPU_RGDAAC0.M4RE/M4WE or clear MPU_CESR.VLD)",
-                        self.machine.pc, address)
+        self.chip.mpu.check_dma("USB0", USB_MASTER, address, n, write, what, flash_reads=True)
 
     def _read_bd(self, bd_at: int) -> tuple:
         self._check(bd_at, BD_BYTES, False, "a buffer descriptor")

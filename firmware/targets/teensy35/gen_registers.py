@@ -45,9 +45,9 @@ SUPPLEMENT = ROOT / "sim" / "chip" / "armv7m_debug.svd"
 
 # The peripherals the Teensy 3.5 backends use (and the flash configuration field's layout).
 PERIPHERALS = (
-    "SIM", "WDOG", "MCG", "OSC", "PORTB", "PORTC", "PORTD", "GPIOB", "GPIOC", "GPIOD",
+    "SIM", "WDOG", "MCG", "OSC", "PORTB", "PORTC", "PORTD", "PORTE", "GPIOB", "GPIOC", "GPIOD",
     "I2C0", "UART0", "FTM0", "FTM3", "PIT", "SystemControl", "SysTick", "NVIC",
-    "FTFE_FlashConfig", "RCM", "FTFE", "FMC", "USB0", "MPU",
+    "FTFE_FlashConfig", "RCM", "FTFE", "FMC", "USB0", "MPU", "SDHC",
 )
 SUPPLEMENT_PERIPHERALS = ("CoreDebug", "DWT")
 C_TYPES = {8: "uint8_t", 16: "uint16_t", 32: "uint32_t"}

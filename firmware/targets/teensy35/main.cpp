@@ -5,7 +5,8 @@
 // RC capture; the I2C bus; the USB port (usb/usb_serial.hpp), attached now so that the
 // start-up's waits answer a host enumerating it; the FlightController (its parameters in the
 // top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
-// configuration and, with an image built in, the DMP upload); UART0 at the baud rate the
+// configuration and, with an image built in, the DMP upload); the SD card's identification
+// (block_device.hpp; its finding and size go to hq_sd_probe, below); UART0 at the baud rate the
 // parameters give (SER_TEL1_BAUD); the two MAVLink links (GcsLink, core/link/), one on the
 // USB port and one on UART0, sharing the loop's inbox; the 200 Hz loop timer; the watchdog
 // (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC input, the USB stack's
@@ -23,6 +24,7 @@
 #include "../../core/link/gcs_link.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
+#include "block_device.hpp"
 #include "bootloader.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
@@ -104,6 +106,20 @@ extern "C" {
 volatile LoopReport hq_loop_report;
 }
 
+// What the SD card's identification at start-up found, at a fixed symbol for a debug probe
+// (and the emulated board) to read: SdhcCard::Finding, the card's size in 512-byte blocks
+// (0 without a card) and 1 if the card is write protected. Written once, at start-up.
+struct SdProbe {
+    uint32_t blocks;
+    uint8_t finding;
+    uint8_t write_protected;
+    uint8_t status;         // BlockStatus of start()
+    uint8_t reserved;
+};
+extern "C" {
+volatile SdProbe hq_sd_probe;
+}
+
 extern "C" [[noreturn]] void hq_teensy_main() {
     using namespace hq::teensy;
     const ClockFault clock_fault = start_clocks();
@@ -139,6 +155,12 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, motors);
     const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
+    static SdhcCard card(clock);
+    const hq::BlockStatus sd_status = card.start();
+    hq_sd_probe.blocks = card.block_count();
+    hq_sd_probe.finding = static_cast<uint8_t>(card.finding());
+    hq_sd_probe.write_protected = card.write_protected() ? 1 : 0;
+    hq_sd_probe.status = static_cast<uint8_t>(sd_status);
     // UART0 at the stored rate, fixed until the next start-up (a set says "restart to apply").
     const uint32_t baud = fc.params().values().tel1_baud;
     static Uart0Serial telemetry;

@@ -2246,6 +2246,578 @@ struct DFWR : Reg<uint32_t, 0x4004C0C8u> {
 };
 }  // namespace PORTD
 
+namespace PORTE {
+constexpr uint32_t BASE = 0x4004D000u;
+struct PCR0 : Reg<uint32_t, 0x4004D000u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR1 : Reg<uint32_t, 0x4004D004u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR2 : Reg<uint32_t, 0x4004D008u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR3 : Reg<uint32_t, 0x4004D00Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR4 : Reg<uint32_t, 0x4004D010u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR5 : Reg<uint32_t, 0x4004D014u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR6 : Reg<uint32_t, 0x4004D018u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR7 : Reg<uint32_t, 0x4004D01Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR8 : Reg<uint32_t, 0x4004D020u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR9 : Reg<uint32_t, 0x4004D024u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR10 : Reg<uint32_t, 0x4004D028u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR11 : Reg<uint32_t, 0x4004D02Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR12 : Reg<uint32_t, 0x4004D030u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR13 : Reg<uint32_t, 0x4004D034u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR14 : Reg<uint32_t, 0x4004D038u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR15 : Reg<uint32_t, 0x4004D03Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR16 : Reg<uint32_t, 0x4004D040u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR17 : Reg<uint32_t, 0x4004D044u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR18 : Reg<uint32_t, 0x4004D048u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR19 : Reg<uint32_t, 0x4004D04Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR20 : Reg<uint32_t, 0x4004D050u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR21 : Reg<uint32_t, 0x4004D054u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR22 : Reg<uint32_t, 0x4004D058u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR23 : Reg<uint32_t, 0x4004D05Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR24 : Reg<uint32_t, 0x4004D060u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR25 : Reg<uint32_t, 0x4004D064u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR26 : Reg<uint32_t, 0x4004D068u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR27 : Reg<uint32_t, 0x4004D06Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR28 : Reg<uint32_t, 0x4004D070u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR29 : Reg<uint32_t, 0x4004D074u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR30 : Reg<uint32_t, 0x4004D078u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct PCR31 : Reg<uint32_t, 0x4004D07Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t PS = 0x1u;
+    static constexpr uint32_t PE = 0x2u;
+    static constexpr uint32_t SRE = 0x4u;
+    static constexpr uint32_t PFE = 0x10u;
+    static constexpr uint32_t ODE = 0x20u;
+    static constexpr uint32_t DSE = 0x40u;
+    static constexpr uint32_t MUX_SHIFT = 8;
+    static constexpr uint32_t MUX_MASK = 0x700u;
+    static constexpr uint32_t MUX(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x700u); }
+    static constexpr uint32_t LK = 0x8000u;
+    static constexpr uint32_t IRQC_SHIFT = 16;
+    static constexpr uint32_t IRQC_MASK = 0xF0000u;
+    static constexpr uint32_t IRQC(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t ISF = 0x1000000u;
+};
+struct GPCLR : Reg<uint32_t, 0x4004D080u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t GPWD_SHIFT = 0;
+    static constexpr uint32_t GPWD_MASK = 0xFFFFu;
+    static constexpr uint32_t GPWD(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFu); }
+    static constexpr uint32_t GPWE_SHIFT = 16;
+    static constexpr uint32_t GPWE_MASK = 0xFFFF0000u;
+    static constexpr uint32_t GPWE(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct GPCHR : Reg<uint32_t, 0x4004D084u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t GPWD_SHIFT = 0;
+    static constexpr uint32_t GPWD_MASK = 0xFFFFu;
+    static constexpr uint32_t GPWD(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFu); }
+    static constexpr uint32_t GPWE_SHIFT = 16;
+    static constexpr uint32_t GPWE_MASK = 0xFFFF0000u;
+    static constexpr uint32_t GPWE(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct ISFR : Reg<uint32_t, 0x4004D0A0u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ISF_SHIFT = 0;
+    static constexpr uint32_t ISF_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t ISF(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+}  // namespace PORTE
+
 namespace GPIOB {
 constexpr uint32_t BASE = 0x400FF040u;
 struct PDOR : Reg<uint32_t, 0x400FF040u> {
@@ -7020,6 +7592,299 @@ struct RGDAAC11 : Reg<uint32_t, 0x4000D82Cu> {
     static constexpr uint32_t M7RE = 0x80000000u;
 };
 }  // namespace MPU
+
+namespace SDHC {
+constexpr uint32_t BASE = 0x400B1000u;
+struct DSADDR : Reg<uint32_t, 0x400B1000u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t DSADDR__SHIFT = 2;
+    static constexpr uint32_t DSADDR__MASK = 0xFFFFFFFCu;
+    static constexpr uint32_t DSADDR_(uint32_t v) { return static_cast<uint32_t>((v << 2) & 0xFFFFFFFCu); }
+};
+struct BLKATTR : Reg<uint32_t, 0x400B1004u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t BLKSIZE_SHIFT = 0;
+    static constexpr uint32_t BLKSIZE_MASK = 0x1FFFu;
+    static constexpr uint32_t BLKSIZE(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x1FFFu); }
+    static constexpr uint32_t BLKCNT_SHIFT = 16;
+    static constexpr uint32_t BLKCNT_MASK = 0xFFFF0000u;
+    static constexpr uint32_t BLKCNT(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct CMDARG : Reg<uint32_t, 0x400B1008u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CMDARG__SHIFT = 0;
+    static constexpr uint32_t CMDARG__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CMDARG_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct XFERTYP : Reg<uint32_t, 0x400B100Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t DMAEN = 0x1u;
+    static constexpr uint32_t BCEN = 0x2u;
+    static constexpr uint32_t AC12EN = 0x4u;
+    static constexpr uint32_t DTDSEL = 0x10u;
+    static constexpr uint32_t MSBSEL = 0x20u;
+    static constexpr uint32_t RSPTYP_SHIFT = 16;
+    static constexpr uint32_t RSPTYP_MASK = 0x30000u;
+    static constexpr uint32_t RSPTYP(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0x30000u); }
+    static constexpr uint32_t CCCEN = 0x80000u;
+    static constexpr uint32_t CICEN = 0x100000u;
+    static constexpr uint32_t DPSEL = 0x200000u;
+    static constexpr uint32_t CMDTYP_SHIFT = 22;
+    static constexpr uint32_t CMDTYP_MASK = 0xC00000u;
+    static constexpr uint32_t CMDTYP(uint32_t v) { return static_cast<uint32_t>((v << 22) & 0xC00000u); }
+    static constexpr uint32_t CMDINX_SHIFT = 24;
+    static constexpr uint32_t CMDINX_MASK = 0x3F000000u;
+    static constexpr uint32_t CMDINX(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0x3F000000u); }
+};
+struct CMDRSP0 : Reg<uint32_t, 0x400B1010u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CMDRSP0__SHIFT = 0;
+    static constexpr uint32_t CMDRSP0__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CMDRSP0_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct CMDRSP1 : Reg<uint32_t, 0x400B1014u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CMDRSP1__SHIFT = 0;
+    static constexpr uint32_t CMDRSP1__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CMDRSP1_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct CMDRSP2 : Reg<uint32_t, 0x400B1018u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CMDRSP2__SHIFT = 0;
+    static constexpr uint32_t CMDRSP2__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CMDRSP2_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct CMDRSP3 : Reg<uint32_t, 0x400B101Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CMDRSP3__SHIFT = 0;
+    static constexpr uint32_t CMDRSP3__MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t CMDRSP3_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct DATPORT : Reg<uint32_t, 0x400B1020u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t DATCONT_SHIFT = 0;
+    static constexpr uint32_t DATCONT_MASK = 0xFFFFFFFFu;
+    static constexpr uint32_t DATCONT(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFFFFFFFu); }
+};
+struct PRSSTAT : Reg<uint32_t, 0x400B1024u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CIHB = 0x1u;
+    static constexpr uint32_t CDIHB = 0x2u;
+    static constexpr uint32_t DLA = 0x4u;
+    static constexpr uint32_t SDSTB = 0x8u;
+    static constexpr uint32_t IPGOFF = 0x10u;
+    static constexpr uint32_t HCKOFF = 0x20u;
+    static constexpr uint32_t PEROFF = 0x40u;
+    static constexpr uint32_t SDOFF = 0x80u;
+    static constexpr uint32_t WTA = 0x100u;
+    static constexpr uint32_t RTA = 0x200u;
+    static constexpr uint32_t BWEN = 0x400u;
+    static constexpr uint32_t BREN = 0x800u;
+    static constexpr uint32_t CINS = 0x10000u;
+    static constexpr uint32_t CLSL = 0x800000u;
+    static constexpr uint32_t DLSL_SHIFT = 24;
+    static constexpr uint32_t DLSL_MASK = 0xFF000000u;
+    static constexpr uint32_t DLSL(uint32_t v) { return static_cast<uint32_t>((v << 24) & 0xFF000000u); }
+};
+struct PROCTL : Reg<uint32_t, 0x400B1028u> {
+    static constexpr uint32_t RESET_VALUE = 0x20u;
+    static constexpr uint32_t LCTL = 0x1u;
+    static constexpr uint32_t DTW_SHIFT = 1;
+    static constexpr uint32_t DTW_MASK = 0x6u;
+    static constexpr uint32_t DTW(uint32_t v) { return static_cast<uint32_t>((v << 1) & 0x6u); }
+    static constexpr uint32_t D3CD = 0x8u;
+    static constexpr uint32_t EMODE_SHIFT = 4;
+    static constexpr uint32_t EMODE_MASK = 0x30u;
+    static constexpr uint32_t EMODE(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0x30u); }
+    static constexpr uint32_t CDTL = 0x40u;
+    static constexpr uint32_t CDSS = 0x80u;
+    static constexpr uint32_t DMAS_SHIFT = 8;
+    static constexpr uint32_t DMAS_MASK = 0x300u;
+    static constexpr uint32_t DMAS(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0x300u); }
+    static constexpr uint32_t SABGREQ = 0x10000u;
+    static constexpr uint32_t CREQ = 0x20000u;
+    static constexpr uint32_t RWCTL = 0x40000u;
+    static constexpr uint32_t IABG = 0x80000u;
+    static constexpr uint32_t WECINT = 0x1000000u;
+    static constexpr uint32_t WECINS = 0x2000000u;
+    static constexpr uint32_t WECRM = 0x4000000u;
+};
+struct SYSCTL : Reg<uint32_t, 0x400B102Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x8008u;
+    static constexpr uint32_t IPGEN = 0x1u;
+    static constexpr uint32_t HCKEN = 0x2u;
+    static constexpr uint32_t PEREN = 0x4u;
+    static constexpr uint32_t SDCLKEN = 0x8u;
+    static constexpr uint32_t DVS_SHIFT = 4;
+    static constexpr uint32_t DVS_MASK = 0xF0u;
+    static constexpr uint32_t DVS(uint32_t v) { return static_cast<uint32_t>((v << 4) & 0xF0u); }
+    static constexpr uint32_t SDCLKFS_SHIFT = 8;
+    static constexpr uint32_t SDCLKFS_MASK = 0xFF00u;
+    static constexpr uint32_t SDCLKFS(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+    static constexpr uint32_t DTOCV_SHIFT = 16;
+    static constexpr uint32_t DTOCV_MASK = 0xF0000u;
+    static constexpr uint32_t DTOCV(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xF0000u); }
+    static constexpr uint32_t RSTA = 0x1000000u;
+    static constexpr uint32_t RSTC = 0x2000000u;
+    static constexpr uint32_t RSTD = 0x4000000u;
+    static constexpr uint32_t INITA = 0x8000000u;
+};
+struct IRQSTAT : Reg<uint32_t, 0x400B1030u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CC = 0x1u;
+    static constexpr uint32_t TC = 0x2u;
+    static constexpr uint32_t BGE = 0x4u;
+    static constexpr uint32_t DINT = 0x8u;
+    static constexpr uint32_t BWR = 0x10u;
+    static constexpr uint32_t BRR = 0x20u;
+    static constexpr uint32_t CINS = 0x40u;
+    static constexpr uint32_t CRM = 0x80u;
+    static constexpr uint32_t CINT = 0x100u;
+    static constexpr uint32_t CTOE = 0x10000u;
+    static constexpr uint32_t CCE = 0x20000u;
+    static constexpr uint32_t CEBE = 0x40000u;
+    static constexpr uint32_t CIE = 0x80000u;
+    static constexpr uint32_t DTOE = 0x100000u;
+    static constexpr uint32_t DCE = 0x200000u;
+    static constexpr uint32_t DEBE = 0x400000u;
+    static constexpr uint32_t AC12E = 0x1000000u;
+    static constexpr uint32_t DMAE = 0x10000000u;
+};
+struct IRQSTATEN : Reg<uint32_t, 0x400B1034u> {
+    static constexpr uint32_t RESET_VALUE = 0x117F013Fu;
+    static constexpr uint32_t CCSEN = 0x1u;
+    static constexpr uint32_t TCSEN = 0x2u;
+    static constexpr uint32_t BGESEN = 0x4u;
+    static constexpr uint32_t DINTSEN = 0x8u;
+    static constexpr uint32_t BWRSEN = 0x10u;
+    static constexpr uint32_t BRRSEN = 0x20u;
+    static constexpr uint32_t CINSEN = 0x40u;
+    static constexpr uint32_t CRMSEN = 0x80u;
+    static constexpr uint32_t CINTSEN = 0x100u;
+    static constexpr uint32_t CTOESEN = 0x10000u;
+    static constexpr uint32_t CCESEN = 0x20000u;
+    static constexpr uint32_t CEBESEN = 0x40000u;
+    static constexpr uint32_t CIESEN = 0x80000u;
+    static constexpr uint32_t DTOESEN = 0x100000u;
+    static constexpr uint32_t DCESEN = 0x200000u;
+    static constexpr uint32_t DEBESEN = 0x400000u;
+    static constexpr uint32_t AC12ESEN = 0x1000000u;
+    static constexpr uint32_t DMAESEN = 0x10000000u;
+};
+struct IRQSIGEN : Reg<uint32_t, 0x400B1038u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t CCIEN = 0x1u;
+    static constexpr uint32_t TCIEN = 0x2u;
+    static constexpr uint32_t BGEIEN = 0x4u;
+    static constexpr uint32_t DINTIEN = 0x8u;
+    static constexpr uint32_t BWRIEN = 0x10u;
+    static constexpr uint32_t BRRIEN = 0x20u;
+    static constexpr uint32_t CINSIEN = 0x40u;
+    static constexpr uint32_t CRMIEN = 0x80u;
+    static constexpr uint32_t CINTIEN = 0x100u;
+    static constexpr uint32_t CTOEIEN = 0x10000u;
+    static constexpr uint32_t CCEIEN = 0x20000u;
+    static constexpr uint32_t CEBEIEN = 0x40000u;
+    static constexpr uint32_t CIEIEN = 0x80000u;
+    static constexpr uint32_t DTOEIEN = 0x100000u;
+    static constexpr uint32_t DCEIEN = 0x200000u;
+    static constexpr uint32_t DEBEIEN = 0x400000u;
+    static constexpr uint32_t AC12EIEN = 0x1000000u;
+    static constexpr uint32_t DMAEIEN = 0x10000000u;
+};
+struct AC12ERR : Reg<uint32_t, 0x400B103Cu> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t AC12NE = 0x1u;
+    static constexpr uint32_t AC12TOE = 0x2u;
+    static constexpr uint32_t AC12EBE = 0x4u;
+    static constexpr uint32_t AC12CE = 0x8u;
+    static constexpr uint32_t AC12IE = 0x10u;
+    static constexpr uint32_t CNIBAC12E = 0x80u;
+};
+struct HTCAPBLT : Reg<uint32_t, 0x400B1040u> {
+    static constexpr uint32_t RESET_VALUE = 0x7F30000u;
+    static constexpr uint32_t MBL_SHIFT = 16;
+    static constexpr uint32_t MBL_MASK = 0x70000u;
+    static constexpr uint32_t MBL(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0x70000u); }
+    static constexpr uint32_t ADMAS = 0x100000u;
+    static constexpr uint32_t HSS = 0x200000u;
+    static constexpr uint32_t DMAS = 0x400000u;
+    static constexpr uint32_t SRS = 0x800000u;
+    static constexpr uint32_t VS33 = 0x1000000u;
+};
+struct WML : Reg<uint32_t, 0x400B1044u> {
+    static constexpr uint32_t RESET_VALUE = 0x100010u;
+    static constexpr uint32_t RDWML_SHIFT = 0;
+    static constexpr uint32_t RDWML_MASK = 0xFFu;
+    static constexpr uint32_t RDWML(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFu); }
+    static constexpr uint32_t WRWML_SHIFT = 16;
+    static constexpr uint32_t WRWML_MASK = 0xFF0000u;
+    static constexpr uint32_t WRWML(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+};
+struct FEVT : Reg<uint32_t, 0x400B1050u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t AC12NE = 0x1u;
+    static constexpr uint32_t AC12TOE = 0x2u;
+    static constexpr uint32_t AC12CE = 0x4u;
+    static constexpr uint32_t AC12EBE = 0x8u;
+    static constexpr uint32_t AC12IE = 0x10u;
+    static constexpr uint32_t CNIBAC12E = 0x80u;
+    static constexpr uint32_t CTOE = 0x10000u;
+    static constexpr uint32_t CCE = 0x20000u;
+    static constexpr uint32_t CEBE = 0x40000u;
+    static constexpr uint32_t CIE = 0x80000u;
+    static constexpr uint32_t DTOE = 0x100000u;
+    static constexpr uint32_t DCE = 0x200000u;
+    static constexpr uint32_t DEBE = 0x400000u;
+    static constexpr uint32_t AC12E = 0x1000000u;
+    static constexpr uint32_t DMAE = 0x10000000u;
+    static constexpr uint32_t CINT = 0x80000000u;
+};
+struct ADMAES : Reg<uint32_t, 0x400B1054u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ADMAES__SHIFT = 0;
+    static constexpr uint32_t ADMAES__MASK = 0x3u;
+    static constexpr uint32_t ADMAES_(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0x3u); }
+    static constexpr uint32_t ADMALME = 0x4u;
+    static constexpr uint32_t ADMADCE = 0x8u;
+};
+struct ADSADDR : Reg<uint32_t, 0x400B1058u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t ADSADDR__SHIFT = 2;
+    static constexpr uint32_t ADSADDR__MASK = 0xFFFFFFFCu;
+    static constexpr uint32_t ADSADDR_(uint32_t v) { return static_cast<uint32_t>((v << 2) & 0xFFFFFFFCu); }
+};
+struct VENDOR : Reg<uint32_t, 0x400B10C0u> {
+    static constexpr uint32_t RESET_VALUE = 0x1u;
+    static constexpr uint32_t EXTDMAEN = 0x1u;
+    static constexpr uint32_t EXBLKNU = 0x2u;
+    static constexpr uint32_t INTSTVAL_SHIFT = 16;
+    static constexpr uint32_t INTSTVAL_MASK = 0xFF0000u;
+    static constexpr uint32_t INTSTVAL(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFF0000u); }
+};
+struct MMCBOOT : Reg<uint32_t, 0x400B10C4u> {
+    static constexpr uint32_t RESET_VALUE = 0x0u;
+    static constexpr uint32_t DTOCVACK_SHIFT = 0;
+    static constexpr uint32_t DTOCVACK_MASK = 0xFu;
+    static constexpr uint32_t DTOCVACK(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFu); }
+    static constexpr uint32_t BOOTACK = 0x10u;
+    static constexpr uint32_t BOOTMODE = 0x20u;
+    static constexpr uint32_t BOOTEN = 0x40u;
+    static constexpr uint32_t AUTOSABGEN = 0x80u;
+    static constexpr uint32_t BOOTBLKCNT_SHIFT = 16;
+    static constexpr uint32_t BOOTBLKCNT_MASK = 0xFFFF0000u;
+    static constexpr uint32_t BOOTBLKCNT(uint32_t v) { return static_cast<uint32_t>((v << 16) & 0xFFFF0000u); }
+};
+struct HOSTVER : Reg<uint32_t, 0x400B10FCu> {
+    static constexpr uint32_t RESET_VALUE = 0x1201u;
+    static constexpr uint32_t SVN_SHIFT = 0;
+    static constexpr uint32_t SVN_MASK = 0xFFu;
+    static constexpr uint32_t SVN(uint32_t v) { return static_cast<uint32_t>((v << 0) & 0xFFu); }
+    static constexpr uint32_t VVN_SHIFT = 8;
+    static constexpr uint32_t VVN_MASK = 0xFF00u;
+    static constexpr uint32_t VVN(uint32_t v) { return static_cast<uint32_t>((v << 8) & 0xFF00u); }
+};
+}  // namespace SDHC
 
 namespace CoreDebug {
 constexpr uint32_t BASE = 0xE000EDF0u;
