@@ -12,6 +12,9 @@ import subprocess
 import pytest
 
 from heliquad import _firmware as fw
+from heliquad.host.cli.parser import main
+from heliquad.host.records.card_image import parse_size
+from heliquad.sim.base.errors import InputError
 from fat32_image import Fat32Image
 
 State = fw.CardState
@@ -256,3 +259,30 @@ def test_power_cuts_leave_fsck_content_and_every_log_readable_to_its_last_sync(i
             assert len(got) >= synced and data.startswith(got), (cut, k)
             assert card.read(k, 0, 20_000) == got, (cut, k)
         del card
+
+
+def test_sd_image_makes_a_card_the_file_layer_mounts(tmp_path, capsys):
+    image = tmp_path / "card.img"
+    image.write_bytes(b"old")
+    assert main(["sd-image", "--size", "48M", str(image)]) == 0
+    assert f"wrote {image}: a FAT32 card image of {48 << 20} bytes" in capsys.readouterr().out
+    assert image.stat().st_size == 48 << 20
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["card.img"]   # no temporary left
+    assert Fat32Image(image).listdir() == []
+    card = fw.CardFiles(str(image))
+    assert card.mount() == State.OK and card.count() == 0
+    del card
+    if FSCK:
+        assert fsck(image)[0] == 0
+
+
+def test_sd_image_sizes(tmp_path):
+    assert parse_size("64M") == 64 << 20 and parse_size("1G") == 1 << 30
+    assert parse_size(str(41943040)) == 40 << 20 and parse_size("65536K") == 64 << 20
+    for bad in ("", "12Q", "1.5G", "-1M"):
+        with pytest.raises(InputError, match="not a size"):
+            parse_size(bad)
+    with pytest.raises(InputError, match="512-byte blocks"):
+        parse_size(str((48 << 20) + 100))
+    with pytest.raises(InputError, match="40 MiB to 32 GiB"):
+        parse_size("33G")

@@ -68,7 +68,9 @@ CardState LogFiles::mount() {
     card_disk_attach(&card_, wait_);
     const FRESULT res = f_mount(&fs_, "", 1);
     if (res != FR_OK) {
-        state_ = res == FR_NOT_READY ? CardState::NoCard : state_of(res);
+        // No answer is no card; anything else (no FAT volume, a card too small to hold one,
+        // a read that failed) is a failed card.
+        state_ = res == FR_NOT_READY ? CardState::NoCard : CardState::Failed;
         return state_;
     }
     mounted_ = true;
