@@ -178,12 +178,18 @@ def test_a_full_card_stops_the_log_at_its_last_byte_losing_at_most_a_cluster(ima
     assert card.write(b"more") == 0
     card.end_log()
     assert not card.begin_log()
+    assert card.count() == 1 and card.read(1, 0, 8) == payload(1, 4096)[:8]
     del card
     assert_fsck_accepts(image)
     fat = Fat32Image(image)
     assert fat.listdir("LOGS") == ["00000001.BIN"]
     got = fat.read("LOGS/00000001.BIN")
     assert got == (payload(1, 4096) * 100)[:len(got)]
+    card = fw.CardFiles(str(image))             # an erase makes room: the card is Ok again
+    card.mount()
+    card.set_faults(writable_blocks=Fat32Image(image).data_at // 512 + 200)
+    assert card.begin_log() and card.write(payload(2, 10**6)) < 10**6 and card.state == State.FULL
+    assert card.erase_all() and card.state == State.OK and card.count() == 0
 
 
 def test_failing_writes_fail_the_card(image):

@@ -298,6 +298,7 @@ bool LogFiles::erase_all() {
     const FRESULT res = f_unlink(kLastLog);
     if (res != FR_OK && res != FR_NO_FILE) return false;
     last_ = 0;
+    if (state_ == CardState::Full) state_ = CardState::Ok;   // the room is back
     return true;
 }
 

@@ -11,7 +11,8 @@
 // mount() runs once at start-up (the card's start() may take milliseconds there): the card
 // started, its FAT volume mounted, LOGS/ made, the last number found. Its CardState is what
 // the reports say; a card that is not Ok takes no log (begin_log() false) and stays as it is
-// until the next start-up. A full or write-protected card still lists and reads its logs.
+// until the next start-up, except a full card, which an erase makes Ok again. A full or
+// write-protected card still lists and reads its logs.
 #pragma once
 
 #include <cstdint>
