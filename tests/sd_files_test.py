@@ -192,6 +192,25 @@ def test_a_full_card_stops_the_log_at_its_last_byte_losing_at_most_a_cluster(ima
     assert card.erase_all() and card.state == State.OK and card.count() == 0
 
 
+@needs_fsck
+def test_a_volume_filled_to_its_last_cluster_is_full_and_clean(image):
+    card = fw.CardFiles(str(image))
+    card.mount()
+    assert card.begin_log()
+    chunk = payload(1, 256 * 1024)
+    taken = n = card.write(chunk)
+    while n == len(chunk):
+        n = card.write(chunk)
+        taken += n
+    assert card.state == State.FULL and taken > fw.MIN_CARD_IMAGE_BYTES * 9 // 10
+    card.end_log()
+    assert not card.begin_log() and card.info(0) == (1, taken, 0)
+    del card
+    rc, out = fsck(image)
+    assert rc == 0, out
+    assert re.search(r"(\d+)/\1 clusters", out), out      # every cluster in use
+
+
 def test_failing_writes_fail_the_card(image):
     card = fw.CardFiles(str(image))
     card.mount()
