@@ -11,6 +11,7 @@ import subprocess
 import pytest
 
 from heliquad import _firmware as fw
+from heliquad.sim.base.errors import FirmwareError
 from heliquad.sim.rig.lockstep import HostFirmware
 from fat32_image import Fat32Image
 from firmware_rig import FirmwareRig
@@ -67,6 +68,10 @@ def test_no_sd_image_is_no_card_line_at_all(tmp_path):
         assert not [line for line in firmware.startup_lines if line.startswith("card:")]
 
 
-def test_an_unknown_fault_is_refused_in_one_line(tmp_path):
-    with pytest.raises(Exception, match="unknown --sd-faults fault frobnicate"):
+def test_an_unknown_fault_or_a_folder_is_refused_in_one_line(tmp_path):
+    with pytest.raises(FirmwareError, match="unknown --sd-faults fault frobnicate"):
         CardFirmware(tmp_path / "card.img", "frobnicate")
+    with pytest.raises(FirmwareError, match="is a folder, not a card image"):
+        CardFirmware(tmp_path)
+    with pytest.raises(FirmwareError, match="No such file or directory"):
+        CardFirmware(tmp_path / "missing" / "card.img")

@@ -42,6 +42,7 @@
 #include <string>
 #include <vector>
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../../core/flight_controller.hpp"
@@ -230,6 +231,10 @@ private:
 // Makes the card image when it does not exist, mounts it, prints its state, then sets the
 // faults asked for (in force from the first frame on). A bad file or fault is refused (exit 2).
 void start_card(const Options& opt, hq::FileBlockDevice& card, hq::SpareTime& spare) {
+    struct stat st {};
+    if (::stat(opt.sd_image.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
+        usage(("--sd-image " + opt.sd_image + ": is a folder, not a card image").c_str());
+    }
     if (::access(opt.sd_image.c_str(), F_OK) != 0) {
         const std::string error = hq::make_card_image(opt.sd_image, hq::kDefaultCardImageBytes);
         if (!error.empty()) usage(("--sd-image " + error).c_str());
