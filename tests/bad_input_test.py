@@ -1029,6 +1029,16 @@ CASES = [
     case("usb-descriptors --image missing.elf", "such file"),
     case("usb-descriptors --image adir", "is a folder"),
     case("usb-descriptors --frobnicate", "unrecognized"),
+    # sd-image: sizes a FAT32 card cannot have, a folder or a missing folder for the file
+    case("sd-image --size 12Q card.img", "not a size"),
+    case("sd-image --size 1000 card.img", "512-byte blocks"),
+    case("sd-image --size 1M card.img", "40 MiB to 32 GiB"),
+    case("sd-image --size 64G card.img", "40 MiB to 32 GiB"),
+    case("sd-image --size -5 card.img", "not a size"),
+    case("sd-image adir", "is a folder"),
+    case("sd-image nofolder/card.img", "nofolder"),
+    case("sd-image", "required"),
+    case("sd-image card.img --frobnicate", "unrecognized"),
     # every subcommand: an unknown option, no subcommand
     case("fsf run.csv --out p.csv --frobnicate", "unrecognized"),
     case("fit points.csv --json m.json --frobnicate", "unrecognized"),

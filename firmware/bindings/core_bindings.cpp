@@ -246,10 +246,13 @@ void bind_supervisor(py::module_& m) {
 
 }  // namespace
 
+void bind_card(py::module_& m);   // card_bindings.cpp: the card-image file and the log files
+
 PYBIND11_MODULE(_firmware, m) {
     m.doc() = "heliquad firmware core (host build), for tests and the simulator";
     // The control loop's rate the firmware runs at unless configured otherwise, and the most
     // the host build takes, Hz.
+    bind_card(m);
     m.attr("LOOP_RATE_HZ") = kLoopRateHz;
     m.attr("MAX_LOOP_RATE_HZ") = kMaxLoopRateHz;
     // The most a host pty's backlog bound can be (--telemetry-backlog-bytes), bytes.

@@ -17,7 +17,7 @@ __all__ = ["COMMANDS", "add_parsers", "module_of"]
 #: The subcommands, in the order ``heliquad --help`` lists them.
 COMMANDS = ("fsf", "fit", "sil", "board", "validate", "log", "tlog", "sweep", "identify",
             "report", "params", "demo", "dmp-image", "flash", "usb-descriptors",
-            "mavlink-dialect")
+            "mavlink-dialect", "sd-image")
 
 
 def module_of(command: str) -> str:

@@ -84,6 +84,7 @@ class HostFirmware:
         cmd = self.command()
         self.proc, self._stderr, self._links = None, None, {}
         self.summary = ""
+        self.startup_lines = []           # what it printed up to "ready"
         self._tmp = tempfile.TemporaryDirectory(prefix="heliquad-sil-")
         try:
             self.workdir = self._tmp.name
@@ -136,6 +137,7 @@ class HostFirmware:
                 text += chunk
                 lines = text.splitlines()
                 if "ready" in (line.strip() for line in lines):
+                    self.startup_lines = [line.strip() for line in lines]
                     # Where its links point, to remove them if it dies without doing so.
                     self._links = {path: os.readlink(path)
                                    for path in (self.sim_link_path, self.telemetry_path)

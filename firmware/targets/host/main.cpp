@@ -2,6 +2,7 @@
 //
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
 //                    [--idle-timeout-s 10] [--params FILE] [--telemetry-backlog-bytes N]
+//                    [--sd-image FILE [--sd-faults NAME=VALUE,...]]
 //
 // --telemetry-backlog-bytes N bounds what waits for a reader on the telemetry pty (default
 // 0: unbounded, for the lockstep simulator): when nobody reads, the oldest bytes are dropped,
@@ -9,6 +10,15 @@
 //
 // Parameters (the MAVLink parameter protocol, docs/parameters.md) persist in --params FILE,
 // created at the first save; without it every start has the defaults and nothing is saved.
+//
+// The SD card (docs/sd-card.md): --sd-image FILE is the card, a card-image file; one that does
+// not exist is made first, FAT32 at the default size (card_image.hpp); without it the board
+// has no card. The card's state follows the IMU's start-up line ("card: ok", "card: no card",
+// "card: write-protected", "card: full", "card: failed"). --sd-faults sets the image's faults
+// (block_device.hpp's names, e.g. busy_after_write_us=250000,write_protected=1; a name alone
+// is 1), the busy ones in force from the first sensor frame on, the others from the start. Every card access runs in the spare-time service after a
+// step's reply; while it waits for a busy card, the next sensor frames are served (each with
+// its step and reply) from inside the wait, so the card never holds up the loop.
 //
 // DMP firmware (the MotionApps image and its tables, a file made with `heliquad dmp-image`):
 // --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the raw FIFO
@@ -32,10 +42,16 @@
 #include <string>
 #include <vector>
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
+#include "../../core/log/spare_time.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
+#include "block_device.hpp"
+#include "card_image.hpp"
 #include "clock.hpp"
 #include "i2c.hpp"
 #include "motors.hpp"
@@ -53,7 +69,7 @@ void on_signal(int) { g_stop = 1; }
 constexpr int kIdleTimeoutS = 10;
 
 struct Options {
-    std::string sim_link, telemetry, dmp_image, params;
+    std::string sim_link, telemetry, dmp_image, params, sd_image, sd_faults;
     float loop_hz = hq::kLoopRateHz;
     int idle_timeout_s = kIdleTimeoutS;
     long telemetry_backlog_bytes = 0;
@@ -63,7 +79,7 @@ struct Options {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
                  "[--loop-hz %g] [--dmp-image FILE] [--idle-timeout-s %d] [--params FILE] "
-                 "[--telemetry-backlog-bytes N]\n",
+                 "[--telemetry-backlog-bytes N] [--sd-image FILE [--sd-faults NAME=VALUE,...]]\n",
                  msg, static_cast<double>(hq::kLoopRateHz), kIdleTimeoutS);
     std::exit(2);
 }
@@ -79,6 +95,8 @@ Options parse(int argc, char** argv) {
         else if (a == "--telemetry") o.telemetry = v;
         else if (a == "--dmp-image") o.dmp_image = v;
         else if (a == "--params") o.params = v;
+        else if (a == "--sd-image") o.sd_image = v;
+        else if (a == "--sd-faults") o.sd_faults = v;
         else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
         else if (a == "--idle-timeout-s") o.idle_timeout_s = std::atoi(v);
         else if (a == "--telemetry-backlog-bytes") o.telemetry_backlog_bytes = std::atol(v);
@@ -93,6 +111,7 @@ Options parse(int argc, char** argv) {
     }
     if (o.idle_timeout_s <= 0) usage("--idle-timeout-s must be positive");
     if (o.telemetry_backlog_bytes < 0) usage("--telemetry-backlog-bytes must not be negative");
+    if (!o.sd_faults.empty() && o.sd_image.empty()) usage("--sd-faults needs --sd-image");
     return o;
 }
 
@@ -119,6 +138,128 @@ private:
     hq::PtySerial& sim_;
     hq::PtySerial& telemetry_;
 };
+
+// One turn of the lockstep loop: telemetry shipped as a USB CDC device ships it, then the
+// sim link's bytes (each new sensor frame one step and its reply). The main loop turns it,
+// and so does a FatFs call waiting for a busy card (CardWaitServing).
+class HostLoop {
+public:
+    HostLoop(const Options& opt, hq::PtySerial& sim, hq::PtySerial& telemetry,
+             hq::SimLinkHandler& handler, SimLinkPty& replies)
+        : opt_(opt), sim_(sim), telemetry_(telemetry), handler_(handler), replies_(replies),
+          last_input_(Wall::now()) {}
+
+    // False when the build must exit (exit_code() says why), and from then on.
+    bool turn() {
+        if (!done_) done_ = !serve();
+        return !done_;
+    }
+    // True when the last turn ran at least one step.
+    bool stepped_now() const { return stepped_now_; }
+    int exit_code() const { return exit_code_; }
+
+private:
+    using Wall = std::chrono::steady_clock;   // the idle timeout only; never the core's clock
+
+    const Options& opt_;
+    hq::PtySerial& sim_;
+    hq::PtySerial& telemetry_;
+    hq::SimLinkHandler& handler_;
+    SimLinkPty& replies_;
+    Wall::time_point last_input_;
+    bool serve();
+
+    bool stepped_ = false, stepped_now_ = false, done_ = false;
+    int exit_code_ = 0;
+    uint8_t buf_[512] = {};
+};
+
+bool HostLoop::serve() {
+    stepped_now_ = false;
+    // Telemetry ships as a USB CDC device ships it: in chunks, once a chunk is buffered,
+    // after a frame marked `sync` (the simulator pauses to read it), or when the sim link
+    // has been quiet for a moment. Fewer, larger writes keep the lockstep fast.
+    if (telemetry_.buffered() >= kTelemetryChunk) telemetry_.flush();
+    const long wait_us = telemetry_.buffered() && stepped_ ? kTelemetryQuietUs : kIdlePollUs;
+    // Telemetry input (commands) is polled in the same call unless it is already known
+    // to be waiting for the next step.
+    if (!sim_.wait_readable_us(wait_us, telemetry_.input_pending() ? nullptr : &telemetry_)) {
+        if (stepped_) telemetry_.flush();
+        if (Wall::now() - last_input_ >= std::chrono::seconds(opt_.idle_timeout_s)) {
+            std::fprintf(stderr, "heliquad-fw-host: no sensor frame for %d s; exiting\n",
+                         opt_.idle_timeout_s);
+            exit_code_ = 3;
+            return false;
+        }
+        return !g_stop;
+    }
+    last_input_ = Wall::now();
+    stepped_ = true;
+    const size_t n = sim_.read(buf_, sizeof(buf_));
+    const uint32_t lost_before = handler_.lost();
+    const uint32_t frames_before = handler_.frames();
+    if (!handler_.feed(buf_, n, replies_)) {
+        std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
+        exit_code_ = 4;
+        return false;
+    }
+    stepped_now_ = handler_.frames() != frames_before;
+    if (handler_.lost() != lost_before) {
+        std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost by frame %u\n",
+                     handler_.lost() - lost_before, handler_.last_frame());
+    }
+    return !g_stop;
+}
+
+// While the card is busy the loop goes on: each busy poll is one turn (the next frames'
+// steps and replies; the card's busy time is lockstep time, which only those frames move).
+// When the build must exit, the card is released so the waiting FatFs call ends.
+class CardWaitServing final : public hq::CardWait {
+public:
+    CardWaitServing(HostLoop& loop, hq::FileBlockDevice& card) : loop_(loop), card_(card) {}
+    void card_busy() override {
+        if (!exiting_ && !loop_.turn()) exiting_ = true;
+        if (exiting_) card_.release();
+    }
+
+private:
+    HostLoop& loop_;
+    hq::FileBlockDevice& card_;
+    bool exiting_ = false;
+};
+
+// Makes the card image when it does not exist, mounts it, prints its state, then sets the
+// faults asked for (in force from the first frame on). A bad file or fault is refused (exit 2).
+void start_card(const Options& opt, hq::FileBlockDevice& card, hq::SpareTime& spare) {
+    struct stat st {};
+    if (::stat(opt.sd_image.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
+        usage(("--sd-image " + opt.sd_image + ": is a folder, not a card image").c_str());
+    }
+    if (::access(opt.sd_image.c_str(), F_OK) != 0) {
+        const std::string error = hq::make_card_image(opt.sd_image, hq::kDefaultCardImageBytes);
+        if (!error.empty()) usage(("--sd-image " + error).c_str());
+    }
+    hq::CardFaults faults;
+    size_t at = 0;
+    while (at < opt.sd_faults.size()) {
+        size_t end = opt.sd_faults.find(',', at);
+        if (end == std::string::npos) end = opt.sd_faults.size();
+        const std::string item = opt.sd_faults.substr(at, end - at);
+        const size_t eq = item.find('=');
+        const std::string name = item.substr(0, eq);
+        const uint64_t value = eq == std::string::npos ? 1 : std::strtoull(item.c_str() + eq + 1, nullptr, 10);
+        if (!hq::set_card_fault(faults, name, value)) usage(("unknown --sd-faults fault " + name).c_str());
+        at = end + 1;
+    }
+    // The busy faults act once the loop runs (at start-up no frame moves the lockstep clock
+    // on which a busy card's time passes); the others from the start.
+    hq::CardFaults at_start = faults;
+    at_start.busy_after_write_us = at_start.busy_every_us = at_start.busy_for_us = 0;
+    card.set_faults(at_start);
+    const hq::CardState state = spare.start();
+    card.set_faults(faults);
+    std::printf("card: %s\n", hq::card_state_name(state));
+}
 
 }  // namespace
 
@@ -170,55 +311,31 @@ int main(int argc, char** argv) {
     static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
     const hq::InitResult init = fc.init();
     link.send_notices(fc.status());
-    std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),
+    std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\n", opt.sim_link.c_str(),
                 sim.slave_path().c_str(), opt.telemetry.c_str(), telemetry.slave_path().c_str(),
                 init == hq::InitResult::OkDmp ? "dmp" : "raw");
-    std::fflush(stdout);
 
     SimLinkPty replies(sim, telemetry);
     hq::SimLinkHandler handler(fc, link, clock, chip, motors, link_cfg.system_id,
                               link_cfg.component_id);
-    using Wall = std::chrono::steady_clock;   // the idle timeout only; never the core's clock
-    Wall::time_point last_input = Wall::now();
-    int exit_code = 0;
-    uint8_t buf[512];
+    HostLoop loop(opt, sim, telemetry, handler, replies);
+    static hq::FileBlockDevice card(opt.sd_image, clock);
+    CardWaitServing wait(loop, card);
+    static hq::LogFiles files(card, clock, &wait);
+    hq::SpareTime spare(files);
+    if (!opt.sd_image.empty()) {
+        start_card(opt, card, spare);
+    }
+    std::printf("ready\n");
+    std::fflush(stdout);
 
     // What init() sent (the parameters' and the IMU's start-up messages) waits for the first
     // frame: the simulator opens the telemetry port before it steps, and opening a serial
     // port discards what was already waiting there.
-    bool stepped = false;
-    while (!g_stop) {
-        // Telemetry ships as a USB CDC device ships it: in chunks, once a chunk is buffered,
-        // after a frame marked `sync` (the simulator pauses to read it), or when the sim link
-        // has been quiet for a moment. Fewer, larger writes keep the lockstep fast.
-        if (telemetry.buffered() >= kTelemetryChunk) telemetry.flush();
-        const long wait_us = telemetry.buffered() && stepped ? kTelemetryQuietUs : kIdlePollUs;
-        // Telemetry input (commands) is polled in the same call unless it is already known
-        // to be waiting for the next step.
-        if (!sim.wait_readable_us(wait_us, telemetry.input_pending() ? nullptr : &telemetry)) {
-            if (stepped) telemetry.flush();
-            if (Wall::now() - last_input >= std::chrono::seconds(opt.idle_timeout_s)) {
-                std::fprintf(stderr, "heliquad-fw-host: no sensor frame for %d s; exiting\n",
-                             opt.idle_timeout_s);
-                exit_code = 3;
-                break;
-            }
-            continue;
-        }
-        last_input = Wall::now();
-        stepped = true;
-        const size_t n = sim.read(buf, sizeof(buf));
-        const uint32_t lost_before = handler.lost();
-        if (!handler.feed(buf, n, replies)) {
-            std::fprintf(stderr, "heliquad-fw-host: sim link write failed; exiting\n");
-            exit_code = 4;
-            break;
-        }
-        if (handler.lost() != lost_before) {
-            std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost by frame %u\n",
-                         handler.lost() - lost_before, handler.last_frame());
-        }
+    while (!g_stop && loop.turn()) {
+        if (loop.stepped_now()) spare.run();   // the card's turn: after the reply
     }
+    files.end_log();
     telemetry.flush();
     std::fprintf(stderr,
                  "heliquad-fw-host: %u loops, %u frames lost, %u repeated, %u telemetry bytes "
@@ -227,5 +344,5 @@ int main(int argc, char** argv) {
                  telemetry.discarded());
     sim.close();
     telemetry.close();
-    return exit_code;
+    return loop.exit_code();
 }

@@ -47,6 +47,17 @@ uint32_t LoopTimer::wait(void (*idle)()) {
     }
     const uint32_t now = g_ticks;
     irq_enable();
+    return take(now);
+}
+
+bool LoopTimer::take_tick() {
+    const uint32_t now = g_ticks;     // one aligned word: read whole
+    if (now == seen_) return false;
+    take(now);
+    return true;
+}
+
+uint32_t LoopTimer::take(uint32_t now) {
     const uint32_t missed = now - seen_ - 1;
     overruns_ += missed;
     seen_ = now;

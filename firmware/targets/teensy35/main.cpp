@@ -22,6 +22,7 @@
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
+#include "../../core/log/card_disk.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
 #include "block_device.hpp"
@@ -120,6 +121,74 @@ extern "C" {
 volatile SdProbe hq_sd_probe;
 }
 
+namespace {
+
+// What one loop step works on; step() is the loop's body, run once a tick: by the main loop
+// after LoopTimer::wait(), and by the card's wait hook (StepWhenDue) when a tick comes while
+// FatFs waits for the card.
+struct Loop {
+    hq::teensy::TeensyClock& clock;
+    hq::teensy::Ftm0Motors& motors;
+    hq::teensy::Ftm3RcInput& rc;
+    hq::FlightController& fc;
+    hq::LoopInbox& inbox;
+    hq::GcsLink& usb_link;
+    hq::GcsLink& uart_link;
+    hq::teensy::LoopTimer& timer;
+    hq::InitResult init;
+
+    void step();
+};
+
+void Loop::step() {
+    using namespace hq::teensy;
+    Watchdog::refresh();
+    const uint32_t c0 = cycles32();
+    usb.task();
+    inbox.clear();
+    if (usb.take_bootloader_request()) ask_bootloader(inbox);   // first: there is room
+    usb_link.receive();
+    uart_link.receive();
+    fc.step(rc.read(), inbox);
+    usb_link.transmit(fc.status());
+    uart_link.transmit(fc.status());
+    usb.flush();
+#ifdef HQ_TEST_LOOP_DELAY_US
+    clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
+#endif
+    const uint32_t step_cycles = cycles32() - c0;
+    usb_link.record_loop(step_cycles, timer.overruns());
+    uart_link.record_loop(step_cycles, timer.overruns());
+    hq_loop_report.loops = fc.loops();
+    hq_loop_report.step_cycles = step_cycles;
+    hq_loop_report.overruns = timer.overruns();
+    hq_loop_report.armed = fc.armed() ? 1 : 0;
+    hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
+    hq_loop_report.sensor_kind = fc.sensor_kind();
+    hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
+    led_update(clock.micros(), led_pattern(fc, init));
+    if (fc.status().bootloader) enter_bootloader(motors, usb);
+}
+
+// The card's wait hook (core/log/card_disk.hpp, docs/sd-card.md): while FatFs waits for a
+// busy card, the USB stack is served and the loop's step runs as soon as its tick has come,
+// so the card never makes the loop late. It is the hook of the SD card's file layer once
+// the image has a card (the SDHC driver, targets/teensy35/block_device.hpp); the image has
+// none yet, so nothing waits on a card.
+class StepWhenDue final : public hq::CardWait {
+public:
+    explicit StepWhenDue(Loop& loop) : loop_(loop) {}
+    void card_busy() override {
+        service_usb();
+        if (loop_.timer.take_tick()) loop_.step();
+    }
+
+private:
+    Loop& loop_;
+};
+
+}  // namespace
+
 extern "C" [[noreturn]] void hq_teensy_main() {
     using namespace hq::teensy;
     const ClockFault clock_fault = start_clocks();
@@ -177,33 +246,9 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static LoopTimer timer;
     if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     Watchdog::start(Watchdog::kTimeoutMs);
+    Loop loop{clock, motors, rc, fc, inbox, usb_link, uart_link, timer, init};   // lives as long as the loop
     for (;;) {
         timer.wait(service_usb);
-        Watchdog::refresh();
-        const uint32_t c0 = cycles32();
-        usb.task();
-        inbox.clear();
-        if (usb.take_bootloader_request()) ask_bootloader(inbox);   // first: there is room
-        usb_link.receive();
-        uart_link.receive();
-        fc.step(rc.read(), inbox);
-        usb_link.transmit(fc.status());
-        uart_link.transmit(fc.status());
-        usb.flush();
-#ifdef HQ_TEST_LOOP_DELAY_US
-        clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
-#endif
-        const uint32_t step_cycles = cycles32() - c0;
-        usb_link.record_loop(step_cycles, timer.overruns());
-        uart_link.record_loop(step_cycles, timer.overruns());
-        hq_loop_report.loops = fc.loops();
-        hq_loop_report.step_cycles = step_cycles;
-        hq_loop_report.overruns = timer.overruns();
-        hq_loop_report.armed = fc.armed() ? 1 : 0;
-        hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
-        hq_loop_report.sensor_kind = fc.sensor_kind();
-        hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
-        led_update(clock.micros(), led_pattern(fc, init));
-        if (fc.status().bootloader) enter_bootloader(motors, usb);
+        loop.step();
     }
 }
