@@ -282,13 +282,7 @@ bool GcsLink::send_notice(const Notice& n, const char* prefix) {
     char text[kStatusTextLen] = {};
     size_t len = 0;
     for (; prefix[len] != '\0'; ++len) text[len] = prefix[len];
-    if (n.text == nullptr) {
-        set_result_text(SetResult::Range, n.param_index, text + len, sizeof(text) - len);
-    } else {
-        for (size_t i = 0; len < sizeof(text) && n.text[i] != '\0'; ++i) {
-            text[len++] = n.text[i];
-        }
-    }
+    notice_words(n, text + len, sizeof(text) - len);
     return send_statustext(n.severity, text);
 }
 
