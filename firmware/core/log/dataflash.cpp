@@ -67,33 +67,6 @@ const LogMessage* log_message(LogType type) {
     return nullptr;
 }
 
-DfRecord::DfRecord(uint8_t* buf, size_t capacity, LogType type) : buf_(buf), capacity_(capacity) {
-    put(kDfHead1, 1);
-    put(kDfHead2, 1);
-    put(static_cast<uint8_t>(type), 1);
-}
-
-DfRecord& DfRecord::put(uint64_t v, size_t bytes) {
-    if (!ok_ || n_ + bytes > capacity_) {
-        ok_ = false;
-        return *this;
-    }
-    for (size_t i = 0; i < bytes; ++i) buf_[n_++] = static_cast<uint8_t>(v >> (8 * i));
-    return *this;
-}
-
-DfRecord& DfRecord::f32(float v) {
-    uint32_t bits;
-    std::memcpy(&bits, &v, sizeof bits);
-    return put(bits, 4);
-}
-
-DfRecord& DfRecord::f64(double v) {
-    uint64_t bits;
-    std::memcpy(&bits, &v, sizeof bits);
-    return put(bits, 8);
-}
-
 DfRecord& DfRecord::text(const char* s, size_t width) {
     if (!ok_ || n_ + width > capacity_) {
         ok_ = false;

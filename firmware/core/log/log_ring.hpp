@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 namespace hq {
 
@@ -20,7 +21,10 @@ public:
     // All n bytes, or none when they do not fit (false).
     bool push(const uint8_t* data, size_t n) {
         if (n > kBytes - (head_ - tail_)) return false;
-        for (size_t i = 0; i < n; ++i) buf_[(head_ + i) & (kBytes - 1)] = data[i];
+        const uint32_t at = head_ & (kBytes - 1);
+        const size_t first = n < kBytes - at ? n : kBytes - at;
+        std::memcpy(buf_ + at, data, first);
+        std::memcpy(buf_, data + first, n - first);
         head_ += static_cast<uint32_t>(n);
         return true;
     }
