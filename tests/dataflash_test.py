@@ -80,7 +80,9 @@ def fly(flight):
     flight.steps(20, ARMED_RC, gyro=(0.01, 0.0, 0.0))
     assert flight.fw.armed
     start_excitation(flight)
-    flight.steps(2 * LOOP_HZ, ARMED_RC, gyro=(0.02, -0.01, 0.005))     # 1.2 s of excitation
+    flight.steps(LOOP_HZ // 2, ARMED_RC, gyro=(0.02, -0.01, 0.005))    # 1.2 s of excitation
+    set_param(flight, GAIN, 0.5)             # refused while exciting: the link says why
+    flight.steps(LOOP_HZ + LOOP_HZ // 2, ARMED_RC, gyro=(0.02, -0.01, 0.005))
     set_param(flight, GAIN, 0.25)
     flight.steps(10, ARMED_RC)
     flight.steps(10, RATE_MODE_RC)
@@ -192,7 +194,8 @@ def test_statustext_logged_as_msg(flown):
     _, msgs = records(path)
     start, end = of(msgs, "EV")[0].TimeUS, of(msgs, "EV")[-1].TimeUS
     said = [(t, text) for t, text in flight.texts if start <= t <= end]
-    assert any("disarmed" in text for _, text in said)
+    assert any("disarmed" in text for _, text in said)            # the loop's notice
+    assert any("not while exciting" in text for _, text in said)  # the link's own
     assert [(m.TimeUS, m.Message) for m in of(msgs, "MSG")[1:]] == said
 
 

@@ -93,6 +93,7 @@ struct LoggedFirmware {
         link_cfg.loop_rate_hz = loop_hz;
         bus.attach(mpu6050::kAddress, chip);
         fc = std::make_unique<FlightController>(cfg, bus, clock, motors);
+        link_cfg.log = &fc->logger();
         link = std::make_unique<GcsLink>(link_cfg, serial, inbox);
         handler = std::make_unique<SimLinkHandler>(*fc, *link, clock, chip, motors,
                                                    link_cfg.system_id, link_cfg.component_id);

@@ -76,6 +76,7 @@ public:
     // (never the step) drains them into `sink`.
     void log_service(LogSink& sink) { logger_.service(sink, params_); }
     const Logger& logger() const { return logger_; }
+    Logger& logger() { return logger_; }     // for the links' own STATUSTEXTs (GcsLinkConfig::log)
 
 private:
     // flight_controller.cpp: the loop

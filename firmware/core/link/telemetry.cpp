@@ -55,7 +55,7 @@ uint8_t GcsLink::interval_command(uint32_t msgid, float interval_us) {
     const bool adds = stream_bytes_per_s(msgid, us) > stream_bytes_per_s(msgid, s->interval_us);
     const float budget = kLinkShare * static_cast<float>(config_.link_bytes_per_s);
     if (adds && static_cast<float>(total) > budget) {
-        send_statustext(MAV_SEVERITY_WARNING, "interval refused: more than the link carries");
+        say(MAV_SEVERITY_WARNING, "interval refused: more than the link carries");
         return MAV_RESULT_DENIED;
     }
     s->interval_us = us;

@@ -97,13 +97,23 @@ void Logger::on_disarm(const LoopStatus& st) {
 
 void Logger::log_notices(const LoopStatus& st) {
     for (int i = 0; i < st.notice_count; ++i) {
-        uint8_t buf[kDfHeaderBytes + 8 + kDfTextLen];
-        DfRecord r(buf, sizeof buf, LogType::Msg);
         char words[kDfTextLen] = {};
         notice_words(st.notice[i], words, sizeof words);
-        r.u64(st.time_us).text(words, kDfTextLen);
-        push(buf, r.size(), 1, st.time_us);
+        log_text(words, sizeof words, st.time_us);
     }
+}
+
+void Logger::text(const char* words, size_t len, uint64_t now_us) {
+    if (armed_) log_text(words, len, now_us);
+}
+
+void Logger::log_text(const char* words, size_t len, uint64_t now_us) {
+    char field[kDfTextLen] = {};
+    for (size_t i = 0; i < len && i < kDfTextLen && words[i] != '\0'; ++i) field[i] = words[i];
+    uint8_t buf[kDfHeaderBytes + 8 + kDfTextLen];
+    DfRecord r(buf, sizeof buf, LogType::Msg);
+    r.u64(now_us).text(field, kDfTextLen);
+    push(buf, r.size(), 1, now_us);
 }
 
 void Logger::log_mode(const LoopStatus& st) {

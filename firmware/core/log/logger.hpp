@@ -6,7 +6,8 @@
 //   While armed, every step queues the system identification sample: SIDD (ArduPilot's
 //   SystemID sample) and HQSD with HQMT (every field of HQ_SYSID_SAMPLE, from the same
 //   LoopStatus the telemetry sends), stamped with the step's time; and as they happen: MSG
-//   for every notice the loop says (each STATUSTEXT of the loop), PARM for a parameter
+//   for every STATUSTEXT (the loop's notices from here, once; a link's own through text()
+//   right after the step, see GcsLinkConfig::log), PARM for a parameter
 //   changed, MODE for a mode change, EV at arming and disarming (ArduPilot's event ids
 //   ARMED 10, DISARMED 11), SIDS when an excitation starts. A record that does not fit is
 //   dropped and counted; the first record that fits after drops is preceded by HQGP (how
@@ -55,6 +56,9 @@ public:
     void loop(const LoopStatus& st, const Excitation& exc, float loop_rate_hz);
     // A parameter the step changed (PARM), while a log is being written.
     void param_changed(int index, float value, float default_value, uint64_t now_us);
+    // A STATUSTEXT a link said of its own in the loop at now_us (MSG; at most len
+    // characters of text), while a log is being written.
+    void text(const char* words, size_t len, uint64_t now_us);
 
     // Service side: opens, fills and ends logs in `sink`; `params` gives the header's PARM.
     void service(LogSink& sink, const Params& params);
@@ -68,6 +72,7 @@ private:
     void on_arming(const LoopStatus& st);
     void on_disarm(const LoopStatus& st);
     void log_notices(const LoopStatus& st);
+    void log_text(const char* words, size_t len, uint64_t now_us);
     void log_mode(const LoopStatus& st);
     void log_experiment(const LoopStatus& st, const Excitation& exc, float loop_rate_hz);
     void log_sample(const LoopStatus& st, const Excitation& exc);
