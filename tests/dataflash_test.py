@@ -231,3 +231,21 @@ def test_no_card_flies_and_logs_nothing():
     flight.steps(30, ARMED_RC)
     assert flight.fw.armed and flight.fw.logs == []
     assert flight.fw.log_queued_bytes == 0
+
+
+def test_a_full_card_cuts_the_log_and_the_vehicle_flies_on(tmp_path):
+    flight = Flight()
+    flight.fw.card_room = 6000               # the header and a few loops
+    flight.steps(40, DISARMED_RC)
+    flight.steps(LOOP_HZ, ARMED_RC)
+    assert flight.fw.armed and flight.fw.card_room == 0
+    (log,) = flight.fw.logs
+    assert len(log) == 6000
+    assert flight.fw.log_queued_bytes < 200  # the ring still empties: nothing piles up
+    assert flight.fw.log_counters.dropped == 0
+    flight.steps(5, DISARMED_RC)
+    assert not flight.fw.log_open
+    path = tmp_path / "00000001.BIN"
+    path.write_bytes(log)
+    _, msgs = records(path)                  # what was written reads back
+    assert of(msgs, "EV")[0].Id == EV_ARMED and of(msgs, "HQSD")

@@ -26,24 +26,30 @@ using namespace hq;
 
 namespace {
 
-// A card in RAM: one byte vector per log; `present` false is a missing card.
+// A card in RAM: one byte vector per log; `present` false is a missing card, and the card
+// holds `room` bytes in all (a full card takes what still fits, then nothing).
 class RamSink final : public LogSink {
 public:
     bool begin_log() override {
-        if (!present) return false;
+        if (!present || room == 0) return false;
         logs.emplace_back();
         open = true;
         return true;
     }
     uint32_t write(const uint8_t* data, uint32_t n) override {
         if (!open) return 0;
-        logs.back().insert(logs.back().end(), data, data + n);
-        return n;
+        const uint32_t k = static_cast<uint32_t>(std::min<uint64_t>(n, room));
+        logs.back().insert(logs.back().end(), data, data + k);
+        room -= k;
+        return k;
     }
     void end_log() override { open = false; }
-    CardState state() const override { return present ? CardState::Ok : CardState::NoCard; }
+    CardState state() const override {
+        return !present ? CardState::NoCard : (room == 0 ? CardState::Full : CardState::Ok);
+    }
 
     bool present = true, open = false;
+    uint64_t room = UINT64_MAX;
     std::vector<std::vector<uint8_t>> logs;
 };
 
@@ -136,6 +142,9 @@ void bind_logger(py::module_& m) {
              "The loop's spare time: the log's ring drained into the RAM card.")
         .def_property("card_present", [](const LoggedFirmware& f) { return f.sink.present; },
                       [](LoggedFirmware& f, bool v) { f.sink.present = v; })
+        .def_property("card_room", [](const LoggedFirmware& f) { return f.sink.room; },
+                      [](LoggedFirmware& f, uint64_t v) { f.sink.room = v; },
+                      "Bytes the RAM card still takes (a full card: 0).")
         .def_property_readonly("logs", [](const LoggedFirmware& f) {
             py::list out;
             for (const auto& l : f.sink.logs) out.append(py::bytes(reinterpret_cast<const char*>(l.data()), l.size()));
