@@ -249,3 +249,24 @@ def test_a_full_card_cuts_the_log_and_the_vehicle_flies_on(tmp_path):
     path.write_bytes(log)
     _, msgs = records(path)                  # what was written reads back
     assert of(msgs, "EV")[0].Id == EV_ARMED and of(msgs, "HQSD")
+
+
+def test_one_log_per_arming_and_a_quick_rearm_continues_the_log(tmp_path):
+    flight = Flight()
+    flight.steps(40, DISARMED_RC)
+    for _ in range(2):                       # two flights, the card served between them
+        flight.steps(10, ARMED_RC)
+        flight.steps(5, DISARMED_RC)
+    assert len(flight.fw.logs) == 2 and not flight.fw.log_open
+    flight.service = False                   # disarmed and armed again before the log ended
+    for rc in (ARMED_RC, DISARMED_RC, ARMED_RC, DISARMED_RC):
+        flight.steps(5, rc)
+    flight.fw.service()
+    assert len(flight.fw.logs) == 3 and not flight.fw.log_open
+    assert flight.fw.log_counters.dropped == 0
+    evs = []
+    for k, log in enumerate(flight.fw.logs):
+        path = tmp_path / f"{k + 1:08d}.BIN"
+        path.write_bytes(log)
+        evs.append([m.Id for m in of(records(path)[1], "EV")])
+    assert evs == [[EV_ARMED, EV_DISARMED]] * 2 + [[EV_ARMED, EV_DISARMED] * 2]

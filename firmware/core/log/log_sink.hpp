@@ -32,6 +32,17 @@ enum class CardState : uint8_t {
     Failed = 4,
 };
 
+// The state in the words the reports use: "ok", "no card", "write-protected", "full", "failed".
+constexpr const char* card_state_name(CardState s) {
+    switch (s) {
+        case CardState::Ok: return "ok";
+        case CardState::NoCard: return "no card";
+        case CardState::WriteProtected: return "write-protected";
+        case CardState::Full: return "full";
+        default: return "failed";
+    }
+}
+
 class LogSink {
 public:
     // The longest a taken byte waits before it is synced to the card, us.

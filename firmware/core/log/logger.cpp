@@ -63,13 +63,13 @@ void Logger::loop(const LoopStatus& st, const Excitation& exc, float loop_rate_h
     log_sample(st, exc);
 }
 
-// A new log, or the one still ending continues (the service has not closed it yet).
+// A new log, or the last one continues when the service has not ended it yet (still open,
+// or not even begun).
 void Logger::on_arming(const LoopStatus& st) {
     armed_ = true;
-    if (open_ && end_wanted_) {
-        end_wanted_ = false;
-    } else {
-        end_wanted_ = false;
+    const bool continues = end_wanted_ && (open_ || served_ != arms_);
+    end_wanted_ = false;
+    if (!continues) {
         start_us_ = st.time_us;
         ++arms_;
     }
