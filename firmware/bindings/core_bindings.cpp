@@ -28,6 +28,8 @@
 namespace py = pybind11;
 using namespace hq;
 
+void bind_logger(py::module_& m);    // log_bindings.cpp
+
 namespace {
 
 // Start-up waits are meaningless against the emulator: it is ready at once.
@@ -581,4 +583,5 @@ PYBIND11_MODULE(_firmware, m) {
         });
 
     bind_supervisor(m);
+    bind_logger(m);
 }

@@ -93,6 +93,7 @@ void FlightController::step(const RcInput& rc, LoopInbox& inbox) {
     publish_events();
     publish(now);
     save_params_when_due(now);     // its notice goes out after the telemetry
+    logger_.loop(status_, supervisor_.excitation(), config_.loop_rate_hz);
     ++loops_;
 }
 

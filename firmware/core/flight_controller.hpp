@@ -4,7 +4,8 @@
 // supervisor.hpp and docs/safety.md), runs the cascade with the excitation the Supervisor
 // gives, checks for non-finite values, writes the motors only when the Supervisor says they
 // may spin, re-initialises a stale IMU when the Supervisor asks, keeps the parameters it
-// flies (loaded, applied, saved) and publishes what it did (LoopStatus).
+// flies (loaded, applied, saved), publishes what it did (LoopStatus) and queues it for the
+// on-board log (log/logger.hpp: armed only, into a RAM ring; the card is never touched here).
 //
 // It has no MAVLink of its own: the ground-station link (link/gcs_link.hpp) turns messages
 // into requests before the step and the published state into telemetry after it.
@@ -19,6 +20,7 @@
 #include "../hal/rc_input.hpp"
 #include "controllers.hpp"
 #include "excitation.hpp"
+#include "log/logger.hpp"
 #include "loop_exchange.hpp"
 #include "mixer.hpp"
 #include "mpu6050.hpp"
@@ -70,6 +72,11 @@ public:
     // The FIFO data the MPU6050 is configured for (HQ_SENSOR_KIND).
     uint8_t sensor_kind() const { return static_cast<uint8_t>(imu_.mode()); }
     uint32_t loops() const { return loops_; }
+    // The DataFlash log (log/logger.hpp): the step queues its records; the spare-time service
+    // (never the step) drains them into `sink`.
+    void log_service(LogSink& sink) { logger_.service(sink, params_); }
+    const Logger& logger() const { return logger_; }
+    Logger& logger() { return logger_; }     // for the links' own STATUSTEXTs (GcsLinkConfig::log)
 
 private:
     // flight_controller.cpp: the loop
@@ -107,6 +114,7 @@ private:
     Mixer mixer_;
     Supervisor supervisor_;
     Params params_;
+    Logger logger_;
 
     LoopStatus status_{};
     RcInput rc_{};                           // this loop's RC input

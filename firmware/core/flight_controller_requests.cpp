@@ -114,6 +114,8 @@ LoopAnswer FlightController::answer_param_set(const LoopRequest& r, uint64_t now
         return a;
     }
     apply_params(param_info(r.param_index).flags, now_us);
+    logger_.param_changed(r.param_index, params_.get(r.param_index),
+                          params_.default_value(r.param_index), now_us);
     params_dirty_ = true;
     params_changed_us_ = now_us;
     return a;

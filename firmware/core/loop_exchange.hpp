@@ -5,6 +5,7 @@
 // with the notices it raised for STATUSTEXT). Neither side calls the other.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "../hal/reset_cause.hpp"
@@ -104,6 +105,18 @@ struct Notice {
     SetResult param_result = SetResult::Range;
 };
 
+// A notice's words into out (at most capacity bytes, zero-padded when shorter): its text, or
+// the refusal of its parameter's stored value. The words of its STATUSTEXT and of its log MSG.
+inline void notice_words(const Notice& n, char* out, size_t capacity) {
+    if (n.text == nullptr) {
+        set_result_text(n.param_result, n.param_index, out, capacity);
+        return;
+    }
+    size_t i = 0;
+    for (; i < capacity && n.text[i] != '\0'; ++i) out[i] = n.text[i];
+    for (; i < capacity; ++i) out[i] = '\0';
+}
+
 // What start-up found (boot_report.hpp turns it into STATUSTEXTs): why the chip reset, where
 // the parameters came from, and the IMU's path. Set once by init(); a later re-read of the
 // store or re-initialisation of the IMU does not change it.
@@ -167,5 +180,22 @@ struct LoopStatus {
     // this loop's messages are out. Never set while armed.
     bool bootloader = false;
 };
+
+// HQ_SYSID_SAMPLE's values of the excitation's axis in a loop: the telemetry's sample and the
+// log's HQSD (logger.hpp) are the same numbers. Yaw has no angle loop: its angle_sp is 0.
+struct SysidSample {
+    float angle_sp = 0.0f, rate_sp = 0.0f, rate = 0.0f, angle = 0.0f, axis_cmd = 0.0f;
+};
+inline SysidSample sysid_sample(const LoopStatus& st) {
+    const LoopState& x = st.state;
+    const int a = static_cast<int>(st.exc_axis);
+    SysidSample s;
+    s.angle_sp = a < kAngleAxes ? (a == 0 ? x.angle_sp.roll : x.angle_sp.pitch) : 0.0f;
+    s.rate_sp = x.rate_sp[a];
+    s.rate = x.rate[a];
+    s.angle = x.attitude[a];
+    s.axis_cmd = x.torque[a];
+    return s;
+}
 
 }  // namespace hq

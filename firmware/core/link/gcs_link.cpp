@@ -282,14 +282,10 @@ bool GcsLink::send_notice(const Notice& n, const char* prefix) {
     char text[kStatusTextLen] = {};
     size_t len = 0;
     for (; prefix[len] != '\0'; ++len) text[len] = prefix[len];
-    if (n.text == nullptr) {
-        set_result_text(n.param_result, n.param_index, text + len, sizeof(text) - len);
-    } else {
-        for (size_t i = 0; len < sizeof(text) && n.text[i] != '\0'; ++i) {
-            text[len++] = n.text[i];
-        }
-    }
-    return send_statustext(n.severity, text);
+    notice_words(n, text + len, sizeof(text) - len);
+    // With a prefix it is the boot report, this link's own words: logged here; the loop's
+    // notices the loop logs itself (once, however many links send them).
+    return prefix[0] == '\0' ? send_statustext(n.severity, text) : say(n.severity, text);
 }
 
 // A ground station's HEARTBEAT: it is heard now; the first from one this link has not heard
@@ -440,6 +436,11 @@ bool GcsLink::send(const mavlink_message_t& msg) {
     bytes_sent_ += len;
     bytes_total_ += len;
     return true;
+}
+
+bool GcsLink::say(uint8_t severity, const char* text) {
+    if (config_.log != nullptr) config_.log->text(text, kStatusTextLen, loop_time_us_);
+    return send_statustext(severity, text);
 }
 
 bool GcsLink::send_statustext(uint8_t severity, const char* text) {

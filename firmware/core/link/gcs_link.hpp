@@ -29,6 +29,7 @@
 
 #include "../../hal/serial.hpp"
 #include "../boot_report.hpp"
+#include "../log/logger.hpp"
 #include "../loop_exchange.hpp"
 #include "../loop_load.hpp"
 
@@ -53,6 +54,10 @@ struct GcsLinkConfig {
     // Which of the board's links this is (HQ_LINK: HQ_FW_STATUS.link_id and the index of its
     // per-link figures).
     uint8_t link_id = HQ_LINK_USB;
+    // The on-board log (the FlightController's): the STATUSTEXTs this link says of its own
+    // (a refused parameter or interval, the boot report) go there as MSG; the loop's notices
+    // are logged once by the loop itself. nullptr: not logged.
+    Logger* log = nullptr;
 };
 
 class GcsLink {
@@ -121,6 +126,7 @@ private:
     void refuse_file_transfer(const Received& in);
     void send_excitation_status(Reason reason, const ExcitationReport& ex);
     bool send_statustext(uint8_t severity, const char* text);
+    bool say(uint8_t severity, const char* text);       // sent and logged (GcsLinkConfig::log)
     void send_notices_to(const LoopStatus& status, int end);
     bool send_notice(const Notice& n, const char* prefix = "");
     void heard(StationId who);

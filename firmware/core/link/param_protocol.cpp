@@ -85,7 +85,7 @@ void GcsLink::reply_param_read(const Received& in) {
 void GcsLink::send_unknown_param(const char* name, int index) {
     char text[kStatusTextLen];
     unknown_param_text(name, index, text, sizeof(text));
-    send_statustext(MAV_SEVERITY_WARNING, text);
+    say(MAV_SEVERITY_WARNING, text);
 }
 
 // PARAM_SET is answered with PARAM_VALUE: the new value, or the unchanged one, a STATUSTEXT
@@ -108,7 +108,7 @@ void GcsLink::reply_param_set(const Received& in, const LoopAnswer* a) {
     if (refused) send_param_error(in, in.param_id, index, a->set);
     char text[kStatusTextLen];
     set_result_text(a->set, index, text, sizeof(text));
-    send_statustext(refused ? MAV_SEVERITY_WARNING : MAV_SEVERITY_NOTICE, text);
+    say(refused ? MAV_SEVERITY_WARNING : MAV_SEVERITY_NOTICE, text);
 }
 
 void GcsLink::send_param_error(const Received& to, const char* name, int index, SetResult why) {

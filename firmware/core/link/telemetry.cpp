@@ -55,7 +55,7 @@ uint8_t GcsLink::interval_command(uint32_t msgid, float interval_us) {
     const bool adds = stream_bytes_per_s(msgid, us) > stream_bytes_per_s(msgid, s->interval_us);
     const float budget = kLinkShare * static_cast<float>(config_.link_bytes_per_s);
     if (adds && static_cast<float>(total) > budget) {
-        send_statustext(MAV_SEVERITY_WARNING, "interval refused: more than the link carries");
+        say(MAV_SEVERITY_WARNING, "interval refused: more than the link carries");
         return MAV_RESULT_DENIED;
     }
     s->interval_us = us;
@@ -289,15 +289,14 @@ void GcsLink::send_telemetry(const LoopStatus& st) {
 
 void GcsLink::send_sysid_sample(const LoopStatus& st, uint64_t now_us) {
     const LoopState& x = st.state;
-    const int a = static_cast<int>(st.exc_axis);
-    const float angle_sp = a < kAngleAxes ? (a == 0 ? x.angle_sp.roll : x.angle_sp.pitch) : 0.0f;
+    const SysidSample s = sysid_sample(st);
     mavlink_message_t msg;
     mavlink_msg_hq_sysid_sample_pack_status(
         config_.system_id, config_.component_id, &tx_status_, &msg, now_us, seq_++,
         static_cast<uint8_t>(st.exc_axis), static_cast<uint8_t>(st.exc_injection),
         static_cast<uint8_t>(st.excitation_state), st.armed ? 1 : 0,
-        static_cast<uint8_t>(st.mode), x.excitation, angle_sp, x.rate_sp[a], x.rate[a],
-        x.attitude[a], x.torque[a], x.motor, x.saturation);
+        static_cast<uint8_t>(st.mode), x.excitation, s.angle_sp, s.rate_sp, s.rate, s.angle,
+        s.axis_cmd, x.motor, x.saturation);
     send(msg);
 }
 

@@ -308,6 +308,7 @@ int main(int argc, char** argv) {
     bus.attach(hq::mpu6050::kAddress, chip);
     hq::FlightController fc(cfg, bus, clock, motors);
     static hq::LoopInbox inbox;                                   // not on the stack
+    link_cfg.log = &fc.logger();                 // the link's own STATUSTEXTs, logged
     static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
     const hq::InitResult init = fc.init();
     link.send_notices(fc.status());

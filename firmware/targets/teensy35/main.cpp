@@ -236,6 +236,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     if (!telemetry.begin(baud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     uart_cfg.link_bytes_per_s = baud / 10;            // 8N1: ten bits a byte
     static hq::LoopInbox inbox;
+    usb_cfg.log = uart_cfg.log = &fc.logger();       // the links' own STATUSTEXTs, logged
     static hq::GcsLink usb_link(usb_cfg, usb, inbox);
     static hq::GcsLink uart_link(uart_cfg, telemetry, inbox);
     usb_link.pair_with(uart_link);
