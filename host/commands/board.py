@@ -54,6 +54,9 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
+    p.add_argument("--log-store-ram", metavar="DIR",
+                   help="serve the .BIN files of DIR as the board's on-board logs (the MAVLink "
+                        "log protocol, heliquad logs; host firmware only; default none)")
     add_firmware_argument(p)
     p.set_defaults(func=run)
 
@@ -64,6 +67,11 @@ def run(args) -> int:
     from ...sim.rig.lockstep import FirmwareError
 
     check_plant(args)
+    if args.log_store_ram is not None:
+        if args.firmware != "host":
+            raise InputError("--log-store-ram: only the host firmware serves logs from a folder")
+        if not os.path.isdir(args.log_store_ram):
+            raise InputError(f"--log-store-ram: {args.log_store_ram} is not a folder")
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
         raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
                          "another path")
@@ -73,6 +81,7 @@ def run(args) -> int:
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
                       link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
+                      log_store_dir=args.log_store_ram,
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None

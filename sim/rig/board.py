@@ -53,7 +53,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
-              usb_serial: str | None = None, link: str = "uart") -> dict:
+              usb_serial: str | None = None, link: str = "uart",
+              log_store_dir: str | None = None) -> dict:
     """Run until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
     (None for ``duration_s``): the caller says so, with its exit code. ``ready`` is told
@@ -65,7 +66,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
     reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it).
     ``usb_serial``: announce the pty, with this USB serial number, from before ``ready`` until
     the board has landed (default: not announced). ``link``: the Teensy image's link the
-    pty carries (``uart`` or ``usb``; teensy35 only)."""
+    pty carries (``uart`` or ``usb``; teensy35 only). ``log_store_dir``: the .BIN files the
+    host build serves as its on-board logs (host only; default none)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -73,7 +75,8 @@ def run_board(axis: str, num, den, telemetry_path: str, loop_hz: float = LOOP_RA
     with Rig(lambda plant_dt_s: TfPlant(axis, num, den, plant_dt_s), firmware, loop_hz,
              dmp_image=dmp_image, telemetry_path=os.path.abspath(telemetry_path),
              params_file=params_file, telemetry_backlog_bytes=backlog_bytes,
-             **({"link": link} if firmware == "teensy35" else {})) as rig, \
+             **({"link": link} if firmware == "teensy35" else {}),
+             **({"log_store_dir": log_store_dir} if log_store_dir else {})) as rig, \
             (contextlib.nullcontext() if usb_serial is None else
              announced(telemetry_path, usb_serial, firmware)):
         _fly(rig, run, dt_s, collective, duration_s,

@@ -2,6 +2,7 @@
 //
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
 //                    [--idle-timeout-s 10] [--params FILE] [--telemetry-backlog-bytes N]
+//                    [--log-store-ram DIR]
 //
 // --telemetry-backlog-bytes N bounds what waits for a reader on the telemetry pty (default
 // 0: unbounded, for the lockstep simulator): when nobody reads, the oldest bytes are dropped,
@@ -9,6 +10,10 @@
 //
 // Parameters (the MAVLink parameter protocol, docs/parameters.md) persist in --params FILE,
 // created at the first save; without it every start has the defaults and nothing is saved.
+//
+// On-board logs (the MAVLink log protocol, docs/ground-stations.md): --log-store-ram DIR
+// serves the .BIN files of DIR, read into RAM at start (a test's store: the card-backed one
+// takes its place); without it the protocol's requests are not answered.
 //
 // DMP firmware (the MotionApps image and its tables, a file made with `heliquad dmp-image`):
 // --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the raw FIFO
@@ -40,6 +45,7 @@
 #include "i2c.hpp"
 #include "motors.hpp"
 #include "param_storage.hpp"
+#include "ram_log_store.hpp"
 #include "sensor/mpu6050_emulator.hpp"
 #include "serial.hpp"
 #include "sim_link_handler.hpp"
@@ -53,7 +59,7 @@ void on_signal(int) { g_stop = 1; }
 constexpr int kIdleTimeoutS = 10;
 
 struct Options {
-    std::string sim_link, telemetry, dmp_image, params;
+    std::string sim_link, telemetry, dmp_image, params, log_store;
     float loop_hz = hq::kLoopRateHz;
     int idle_timeout_s = kIdleTimeoutS;
     long telemetry_backlog_bytes = 0;
@@ -63,7 +69,7 @@ struct Options {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
                  "[--loop-hz %g] [--dmp-image FILE] [--idle-timeout-s %d] [--params FILE] "
-                 "[--telemetry-backlog-bytes N]\n",
+                 "[--telemetry-backlog-bytes N] [--log-store-ram DIR]\n",
                  msg, static_cast<double>(hq::kLoopRateHz), kIdleTimeoutS);
     std::exit(2);
 }
@@ -79,6 +85,7 @@ Options parse(int argc, char** argv) {
         else if (a == "--telemetry") o.telemetry = v;
         else if (a == "--dmp-image") o.dmp_image = v;
         else if (a == "--params") o.params = v;
+        else if (a == "--log-store-ram") o.log_store = v;
         else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
         else if (a == "--idle-timeout-s") o.idle_timeout_s = std::atoi(v);
         else if (a == "--telemetry-backlog-bytes") o.telemetry_backlog_bytes = std::atol(v);
@@ -168,6 +175,13 @@ int main(int argc, char** argv) {
     hq::FlightController fc(cfg, bus, clock, motors);
     static hq::LoopInbox inbox;                                   // not on the stack
     static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
+    static hq::RamLogStore logs;
+    static hq::LogTransfer log_transfer(link);
+    if (!opt.log_store.empty()) {
+        std::string error;
+        if (!logs.load(opt.log_store, error)) usage(error.c_str());
+        link.serve_logs(log_transfer);
+    }
     const hq::InitResult init = fc.init();
     link.send_notices(fc.status());
     std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\nready\n", opt.sim_link.c_str(),
@@ -214,6 +228,8 @@ int main(int argc, char** argv) {
             exit_code = 4;
             break;
         }
+        // The loop's spare time: after the step's reply, before the next sensor frame.
+        if (!opt.log_store.empty()) log_transfer.service(logs);
         if (handler.lost() != lost_before) {
             std::fprintf(stderr, "heliquad-fw-host: %u sensor frame(s) lost by frame %u\n",
                          handler.lost() - lost_before, handler.last_frame());
