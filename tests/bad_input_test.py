@@ -656,6 +656,9 @@ CASES = [
     case("board --telemetry t --num 1 --den 1 1 1 1 1 1 1 1 1 1 1 1 1 1", "degree 1 to 12"),
     case("board --telemetry t --loop-hz 1", "Nyquist"),
     case("board --telemetry binary.dat --duration-s 1", "exists"),
+    case("board --telemetry t --log-store-ram missing", "--log-store-ram: missing is not a folder"),
+    case("board --telemetry t --log-store-ram points.csv", "is not a folder"),
+    case("board --telemetry t --log-store-ram adir --firmware teensy35", "only the host firmware"),
     case("board --telemetry adir --duration-s 1", "exists"),
     # validate: damaged MODELS.json (JSON and schema), absurd models, gains files, outputs
     case("validate models.json", "not valid JSON"),
@@ -773,6 +776,20 @@ CASES = [
     case("params --port /dev/null load empty.dat", "empty"),
     case("params list", "--port"),
     case("params --port /dev/null frobnicate", "invalid choice"),
+    # logs: ports, log numbers and output files refused before (or at) the link; a missing
+    # log, an armed board and a silent one: tests/log_protocol_test.py (they need a board)
+    case("logs --port /dev/null list", "/dev/null"),
+    case("logs --port missing erase", "missing"),
+    case("logs --port tcp:127.0.0.1 list", "expected tcp:HOST:PORT"),
+    case("logs --port /dev/null download 0", "N"),
+    case("logs --port /dev/null download 65536", "N"),
+    case("logs --port /dev/null download x", "N"),
+    case("logs --port /dev/null download", "N"),
+    case("logs --port /dev/null download 1 --out points.csv", "points.csv exists: heliquad never writes over"),
+    case("logs --port /dev/null download 1 --out adir", "adir exists"),
+    case("logs --port /dev/null download 1 --out nodir/l.BIN", "nodir"),
+    case("logs list", "--port"),
+    case("logs --port /dev/null frobnicate", "invalid choice"),
     # mavlink-dialect: an output that is not a folder, a Python that is not one
     case("mavlink-dialect --out binary.dat", "exists and is not a folder"),
     case("mavlink-dialect --python missing --out d", "--python missing: cannot run it"),
