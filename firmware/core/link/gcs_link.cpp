@@ -65,7 +65,7 @@ void GcsLink::receive() {
 // false when this loop has no room left for it.
 bool GcsLink::take(const mavlink_message_t& msg) {
     if (received_count_ == LoopInbox::kCapacity) return false;
-    if (logs_ != nullptr && logs_->take(msg)) return true;    // kept for the spare time
+    if (logs_ != nullptr && logs_->take(*this, msg)) return true;    // kept for the spare time
     if (msg.msgid == MAVLINK_MSG_ID_HQ_EXCITATION && inbox_.has_excitation &&
         mavlink_msg_hq_excitation_get_action(&msg) == HQ_EXCITATION_START) {
         return false;                        // one start's configuration a loop

@@ -78,8 +78,8 @@ public:
     // The board's other link, whose bytes and drops this link's HQ_FW_STATUS reports beside
     // its own (a board with two links pairs them both ways).
     void pair_with(const GcsLink& other) { peer_ = &other; }
-    // The log protocol's requests go to `logs` (without one they are ignored); the target
-    // runs logs.service() in the loop's spare time.
+    // The log protocol's requests go to `logs` (without one they are ignored): one per board,
+    // given to each of its links; the target runs logs.service() in the loop's spare time.
     void serve_logs(LogTransfer& logs) { logs_ = &logs; }
 
     // A message the firmware streams or sends on request (SET_MESSAGE_INTERVAL,

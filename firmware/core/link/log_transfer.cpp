@@ -40,7 +40,7 @@ bool find_log(LogStore& store, uint16_t id, LogInfo& out) {
 
 }  // namespace
 
-bool LogTransfer::take(const mavlink_message_t& msg) {
+bool LogTransfer::take(GcsLink& from, const mavlink_message_t& msg) {
     Request r;
     uint8_t system = 0, component = 0;
     switch (msg.msgid) {
@@ -71,13 +71,15 @@ bool LogTransfer::take(const mavlink_message_t& msg) {
         default:
             return false;
     }
-    if (!link_.for_us(system, component)) return true;
+    if (!from.for_us(system, component)) return true;
     if (armed_) {
+        if (!warned_armed_) refuse_link_ = &from;
         refuse_ = refuse_ || !warned_armed_;
         warned_armed_ = true;
         return true;
     }
     pending_ = r;                                // the newest request wins
+    pending_link_ = &from;
     return true;
 }
 
@@ -91,12 +93,16 @@ void LogTransfer::set_armed(bool armed) {
 }
 
 void LogTransfer::service(LogStore& store) {
-    if (refuse_ && send_text(MAV_SEVERITY_ERROR, "logs: disarm to download")) refuse_ = false;
+    if (refuse_) {
+        link_ = refuse_link_;
+        if (send_text(MAV_SEVERITY_ERROR, "logs: disarm to download")) refuse_ = false;
+    }
     if (armed_) return;                          // the card is the logger's while armed
     if (pending_.kind != Job::Idle) {
         // Taken and cleared with no store call between: a step nested in a store call (a
         // card busy) may keep a newer request, which the next call starts.
         const Request r = pending_;
+        link_ = pending_link_;
         pending_ = Request{};
         start(store, r);
     }
@@ -145,9 +151,9 @@ void LogTransfer::start_data(LogStore& store, const Request& r) {
 // The next LOG_ENTRY of a list; false when the budget or the port has no room for it.
 bool LogTransfer::send_entry(LogStore& store) {
     mavlink_message_t msg;
-    GcsLinkConfig& c = link_.config_;
+    GcsLinkConfig& c = link_->config_;
     if (num_logs_ == 0) {                        // no logs (or no card): one empty entry
-        mavlink_msg_log_entry_pack_status(c.system_id, c.component_id, &link_.tx_status_, &msg,
+        mavlink_msg_log_entry_pack_status(c.system_id, c.component_id, &link_->tx_status_, &msg,
                                           0, 0, 0, 0, 0);
         if (!emit(msg)) return false;
         job_ = Job::Idle;
@@ -155,11 +161,11 @@ bool LogTransfer::send_entry(LogStore& store) {
     }
     for (; list_index_ < num_logs_; ++list_index_) {
         LogInfo info;
-        if (!store.info(list_index_, info) || info.id < list_start_ || info.id > list_end_) {
-            continue;
-        }
+        const bool listed = store.info(list_index_, info);
+        if (job_ != Job::List) return false;    // a step nested in the read armed: ended
+        if (!listed || info.id < list_start_ || info.id > list_end_) continue;
         if (!room(packet_bytes(MAVLINK_MSG_ID_LOG_ENTRY))) return false;
-        mavlink_msg_log_entry_pack_status(c.system_id, c.component_id, &link_.tx_status_, &msg,
+        mavlink_msg_log_entry_pack_status(c.system_id, c.component_id, &link_->tx_status_, &msg,
                                           info.id, num_logs_, list_end_, info.time_utc_s,
                                           info.size_bytes);
         if (!emit(msg)) return false;
@@ -179,10 +185,11 @@ bool LogTransfer::send_data(LogStore& store) {
     uint8_t data[kDataBytes] = {};
     const uint32_t n = data_left_ < kDataBytes ? data_left_ : kDataBytes;
     const int32_t read = n == 0 ? 0 : store.read(data_id_, data_ofs_, data, n);
+    if (job_ != Job::Data) return false;        // a step nested in the read armed: ended
     const uint8_t got = static_cast<uint8_t>(read < 0 ? 0 : read);
-    GcsLinkConfig& c = link_.config_;
+    GcsLinkConfig& c = link_->config_;
     mavlink_message_t msg;
-    mavlink_msg_log_data_pack_status(c.system_id, c.component_id, &link_.tx_status_, &msg,
+    mavlink_msg_log_data_pack_status(c.system_id, c.component_id, &link_->tx_status_, &msg,
                                      data_id_, data_ofs_, got, data);
     if (!emit(msg)) return false;
     data_ofs_ += got;
@@ -198,11 +205,11 @@ bool LogTransfer::send_data(LogStore& store) {
 // Whether the log's share of the link has `bytes` left, after adding what the time since the
 // last call earned (at most kBurstPackets packets' worth saved up).
 bool LogTransfer::room(uint32_t bytes) {
-    const uint64_t now = link_.loop_time_us_;
+    const uint64_t now = link_->loop_time_us_;
     const float cap = static_cast<float>(kBurstPackets * packet_bytes(MAVLINK_MSG_ID_LOG_DATA));
     if (now > filled_us_) {
         allowance_bytes_ += static_cast<float>(now - filled_us_) * 1e-6f * kLogLinkShare *
-                            static_cast<float>(link_.config_.link_bytes_per_s);
+                            static_cast<float>(link_->config_.link_bytes_per_s);
         filled_us_ = now;
     }
     if (allowance_bytes_ > cap) allowance_bytes_ = cap;
@@ -213,8 +220,8 @@ bool LogTransfer::room(uint32_t bytes) {
 // and its sequence number is taken back, so the receiver sees no gap.
 bool LogTransfer::emit(const mavlink_message_t& msg) {
     const uint32_t bytes = mavlink_msg_get_send_buffer_length(&msg);
-    if (!room(bytes) || !link_.offer(msg)) {
-        link_.tx_status_.current_tx_seq = msg.seq;
+    if (!room(bytes) || !link_->offer(msg)) {
+        link_->tx_status_.current_tx_seq = msg.seq;
         return false;
     }
     allowance_bytes_ -= static_cast<float>(bytes);
@@ -224,7 +231,7 @@ bool LogTransfer::emit(const mavlink_message_t& msg) {
 bool LogTransfer::send_text(uint8_t severity, const char* text, int32_t number) {
     char out[kStatusTextLen];
     compose(out, text, number);
-    return link_.send_statustext(severity, out);
+    return link_->send_statustext(severity, out);
 }
 
 }  // namespace hq

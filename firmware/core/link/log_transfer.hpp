@@ -2,9 +2,11 @@
 // LOG_DATA, LOG_ERASE, LOG_REQUEST_END) over a GcsLink, against the logs of a LogStore
 // (core/log/log_store.hpp), served as ArduPilot serves it (docs/ground-stations.md).
 //
-// Two halves, because every LogStore call touches the card and the step never may:
-// - take() runs inside the link's receive (the step's side): it only keeps the request, the
-//   newest replacing any older one (one transfer at a time: a new request ends the old).
+// One per board, shared by its links (each GcsLink::serve_logs() it): one transfer at a time,
+// answered on the link that asked. Two halves, because every LogStore call touches the card
+// and the step never may:
+// - take() runs inside a link's receive (the step's side): it only keeps the request, the
+//   newest replacing any older one from either link (a new request ends the old).
 // - service() runs in the loop's spare time (the target's main calls it, never the step): it
 //   reads the store and sends the answers on the link, as far as the log's share of the
 //   link's budget (kLogLinkShare of GcsLinkConfig::link_bytes_per_s, in bursts of at most
@@ -41,10 +43,8 @@ public:
     // while the loop is busy is not spent at once).
     static constexpr uint32_t kBurstPackets = 8;
 
-    explicit LogTransfer(GcsLink& link) : link_(link) {}
-
-    // The link's side (no card): a LOG_* message for us. false for any other message.
-    bool take(const mavlink_message_t& msg);
+    // A link's side (no card): a LOG_* message `from` received; false for any other message.
+    bool take(GcsLink& from, const mavlink_message_t& msg);
     // The link's side: whether the vehicle is armed now (from each loop's status).
     void set_armed(bool armed);
     // Spare time: the answers, from `store`.
@@ -66,8 +66,10 @@ private:
     bool emit(const mavlink_message_t& msg);
     bool send_text(uint8_t severity, const char* text, int32_t number = -1);
 
-    GcsLink& link_;
+    GcsLink* link_ = nullptr;        // the link the transfer under way answers on
     Request pending_{};              // taken in the step, started by the next service()
+    GcsLink* pending_link_ = nullptr;   // the link it came on
+    GcsLink* refuse_link_ = nullptr;    // the link an armed request came on
     bool armed_ = false;
     bool warned_armed_ = false;      // "disarm to download" said since this arming
     bool refuse_ = false;            // a request came while armed: say so once

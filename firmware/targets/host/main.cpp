@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
     static hq::LoopInbox inbox;                                   // not on the stack
     static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
     static hq::RamLogStore logs;
-    static hq::LogTransfer log_transfer(link);
+    static hq::LogTransfer log_transfer;
     if (!opt.log_store.empty()) {
         std::string error;
         if (!logs.load(opt.log_store, error)) usage(error.c_str());
