@@ -3,6 +3,8 @@ the host build serving a folder of .BIN files from RAM (``heliquad board --log-s
 the list, downloads equal to the files byte for byte (through a link that loses packets, and
 one cut off mid-download that resumes), the defined answers to requests for what is not
 there, the refusal while armed, erase; and MAVProxy's log module fetching the same bytes.
+What heliquad logs says of a missing log, an armed board and a silent one: the bad-input
+corpus (tests/bad_input_test.py, LIVE_LOG_CASES).
 Every wait is for a condition, bounded by a guard against a hang."""
 
 from __future__ import annotations
@@ -156,23 +158,6 @@ def test_a_download_cut_off_keeps_its_part_and_resumes(tmp_path, log_folder):
     assert res.returncode == 0, res.stdout + res.stderr
     assert f"resuming log 2 at {len(part)} of {RANDOM_BYTES} bytes" in res.stdout
     assert out.read_bytes() == want and not (tmp_path / "cut.BIN.part").exists()
-
-
-def test_a_missing_log_an_armed_board_and_a_silent_one_are_one_line_each(tmp_path, log_folder):
-    for name in "das":
-        (tmp_path / name).mkdir()
-    with running_board(tmp_path / "d", "--disarmed", "--log-store-ram", log_folder) as board:
-        one_line_error(heliquad("logs", "--port", board, "download", 3, "--out", tmp_path / "x"),
-                       2, "the board has no log 3 (its logs are 1..5)")
-    with running_board(tmp_path / "a", "--log-store-ram", log_folder) as board:
-        wait_armed(board)
-        one_line_error(heliquad("logs", "--port", board, "list"), 1,
-                       "the board is armed: it serves its logs only while disarmed")
-        one_line_error(heliquad("logs", "--port", board, "erase"), 1, "the board is armed")
-    with running_board(tmp_path / "s", "--disarmed") as board:          # serves no logs
-        one_line_error(heliquad("logs", "--port", board, "list"), 1,
-                       "no answer to the log list request (LOG_REQUEST_LIST)")
-    assert not (tmp_path / "x").exists()
 
 
 # --- the firmware's answers, message by message ---------------------------------------------
