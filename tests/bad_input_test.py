@@ -21,6 +21,9 @@ import sys
 
 import pytest
 
+from log_protocol_test import wait_armed
+from tool_runs import running_board
+
 # --- files the cases use -------------------------------------------------------------------
 
 POINTS_HEADER = "omega_rad_s,magnitude,phase_rad"
@@ -678,6 +681,9 @@ CASES = [
     case("board --telemetry t --num 1 --den 1 1 1 1 1 1 1 1 1 1 1 1 1 1", "degree 1 to 12"),
     case("board --telemetry t --loop-hz 1", "Nyquist"),
     case("board --telemetry binary.dat --duration-s 1", "exists"),
+    case("board --telemetry t --log-store-ram missing", "--log-store-ram: missing is not a folder"),
+    case("board --telemetry t --log-store-ram points.csv", "is not a folder"),
+    case("board --telemetry t --log-store-ram adir --firmware teensy35", "only the host firmware"),
     case("board --telemetry adir --duration-s 1", "exists"),
     # validate: damaged MODELS.json (JSON and schema), absurd models, gains files, outputs
     case("validate models.json", "not valid JSON"),
@@ -795,6 +801,20 @@ CASES = [
     case("params --port /dev/null load empty.dat", "empty"),
     case("params list", "--port"),
     case("params --port /dev/null frobnicate", "invalid choice"),
+    # logs: ports, log numbers and output files refused before (or at) the link; a missing
+    # log, an armed board and a silent one: LIVE_LOG_CASES below (they need a board)
+    case("logs --port /dev/null list", "/dev/null"),
+    case("logs --port missing erase", "missing"),
+    case("logs --port tcp:127.0.0.1 list", "expected tcp:HOST:PORT"),
+    case("logs --port /dev/null download 0", "N"),
+    case("logs --port /dev/null download 65536", "N"),
+    case("logs --port /dev/null download x", "N"),
+    case("logs --port /dev/null download", "N"),
+    case("logs --port /dev/null download 1 --out points.csv", "points.csv exists: heliquad never writes over"),
+    case("logs --port /dev/null download 1 --out adir", "adir exists"),
+    case("logs --port /dev/null download 1 --out nodir/l.BIN", "nodir"),
+    case("logs list", "--port"),
+    case("logs --port /dev/null frobnicate", "invalid choice"),
     # mavlink-dialect: an output that is not a folder, a Python that is not one
     case("mavlink-dialect --out binary.dat", "exists and is not a folder"),
     case("mavlink-dialect --python missing --out d", "--python missing: cannot run it"),
@@ -1092,15 +1112,53 @@ def test_bad_input_is_one_line_and_changes_nothing(args, says, code, session, tm
     _materialise(argv, tmp_path, session)
     before = _snapshot(tmp_path)
     res = heliquad(*argv, cwd=tmp_path)
+    _assert_one_line(res, says, code)
+    after = _snapshot(tmp_path)
+    assert {k: v for k, v in after.items() if k in before} == before     # nothing changed
+    if code == 2:
+        assert after == before                                           # nothing created
+
+
+def _assert_one_line(res, says, code) -> None:
     lines = res.stderr.strip().splitlines()
     assert res.returncode == code, (res.returncode, res.stdout[-500:], res.stderr[-2000:])
     assert len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
     assert lines[0].startswith("heliquad"), lines[0]
     assert says.lower() in lines[0].lower(), lines[0]
-    after = _snapshot(tmp_path)
-    assert {k: v for k, v in after.items() if k in before} == before     # nothing changed
-    if code == 2:
-        assert after == before                                           # nothing created
+
+
+# logs against a running board, the cases that need one (heliquad board, the host firmware
+# serving two logs from RAM, or none): a log it does not have, the board armed, a board that
+# serves no logs. The folder the command runs in is left as it was.
+LIVE_LOG_CASES = [
+    pytest.param(("--disarmed", "--log-store-ram"), "download 3", "the board has no log 3", 2,
+                 id="logs download 3, a log the board does not have"),
+    pytest.param(("--log-store-ram",), "list", "the board is armed", 1,
+                 id="logs list, the board armed"),
+    pytest.param(("--log-store-ram",), "erase", "the board is armed", 1,
+                 id="logs erase, the board armed"),
+    pytest.param(("--disarmed",), "list", "no answer to the log list request", 1,
+                 id="logs list, a board that serves no logs"),
+]
+
+
+@pytest.mark.parametrize("board_args, action, says, code", LIVE_LOG_CASES)
+def test_logs_against_a_live_board_is_one_line_and_changes_nothing(board_args, action, says,
+                                                                   code, tmp_path):
+    card, rig, work = (tmp_path / name for name in ("card", "rig", "work"))
+    for folder in (card, rig, work):
+        folder.mkdir()
+    (card / "00000001.BIN").write_bytes(b"log" * 100)
+    (card / "00000002.BIN").write_bytes(b"log" * 200)
+    if board_args[-1] == "--log-store-ram":
+        board_args += (card,)
+    with running_board(rig, *board_args) as board:
+        if "--disarmed" not in board_args:
+            wait_armed(board)
+        before = _snapshot(work)
+        res = heliquad("logs", "--port", board, *shlex.split(action), cwd=work)
+    _assert_one_line(res, says, code)
+    assert _snapshot(work) == before
 
 
 def test_the_corpus_covers_every_subcommand():

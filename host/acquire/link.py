@@ -215,3 +215,24 @@ class TelemetryLink:
         bytes in the float's, :func:`encode_value`)."""
         self.mav.param_set_send(TARGET_SYSTEM, self.target, name.encode("ascii"),
                                 encode_value(value, param_type), int(param_type))
+
+    # --- the MAVLink log protocol (host/acquire/log_protocol.py) -----------------------------------------
+
+    def request_log_list(self, first: int = 0, last: int = 0xFFFF) -> None:
+        """LOG_REQUEST_LIST: the board sends one LOG_ENTRY per log from ``first`` to
+        ``last`` (0xFFFF: its last), or one with num_logs 0 when it has none."""
+        self.mav.log_request_list_send(TARGET_SYSTEM, self.target, int(first), int(last))
+
+    def request_log_data(self, log_id: int, offset: int, count: int) -> None:
+        """LOG_REQUEST_DATA: LOG_DATA packets of up to 90 bytes from ``offset``, ``count``
+        bytes or up to the log's end; a new request replaces the one under way."""
+        self.mav.log_request_data_send(TARGET_SYSTEM, self.target, int(log_id), int(offset),
+                                       int(count))
+
+    def erase_logs(self) -> None:
+        """LOG_ERASE: every log on the board goes."""
+        self.mav.log_erase_send(TARGET_SYSTEM, self.target)
+
+    def end_log_transfer(self) -> None:
+        """LOG_REQUEST_END: the transfer under way stops."""
+        self.mav.log_request_end_send(TARGET_SYSTEM, self.target)

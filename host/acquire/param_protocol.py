@@ -20,7 +20,8 @@ tool still refuses one past 2^24, which a C-cast reader would not get exactly).
 
 Every exchange sends the host's HEARTBEAT while it waits (the firmware wants one at least
 every 1.5 s); a request without an answer is sent again (``retries`` times) before the board
-is given up on, in one line that says what was asked.
+is given up on, in one line that says what was asked
+(:class:`~heliquad.host.acquire.exchange.Exchange`).
 """
 
 from __future__ import annotations
@@ -31,32 +32,24 @@ import time
 
 import numpy as np
 
-from ...sim.base.dialect import dialect
-from ...sim.base.errors import BoardRefused, InputError, LinkLost
+from ...sim.base.errors import BoardRefused, InputError
 from ..records.params_file import INTEGER_TYPES, TYPE_NAMES, check_name
-from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
+from .exchange import ANSWER_WAIT_S, POLL_S, RETRIES, Exchange, NoAnswer
+from .link import decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
            "same_value", "load_params", "session_params"]
 
-#: How long one request waits for its answer before it is sent again.
-ANSWER_WAIT_S = 1.0
-#: How many times a request goes again when its answer does not come.
-RETRIES = 4
 #: A list that stops coming for this long asks again for what is missing.
 QUIET_S = 0.5
 #: After a refused PARAM_SET, how long to wait for the STATUSTEXT that says why (it may
 #: come after the PARAM_VALUE).
 REASON_WAIT_S = 0.5
-POLL_S = 0.005
 #: Whole numbers a single-precision float carries exactly.
 MAX_EXACT_INT = 2**24
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 MESSAGES = ("PARAM_VALUE", "STATUSTEXT", "HEARTBEAT")
-#: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
-#: (firmware/core/flight_controller.cpp's streams), half a second to spare.
-ARMED_WAIT_S = 1.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,10 +76,6 @@ class ParamRefused(BoardRefused):
         self.name, self.reason = name, reason
         why = f'it says "{reason}"' if reason else "it gave no reason"
         super().__init__(f"the board refused {name} = {asked} and kept {kept}: {why}")
-
-
-class NoAnswer(LinkLost):
-    """A request went unanswered after every retry: the board fell silent (exit 1)."""
 
 
 #: How far a written value may lie from the float32 it stands for: half the smallest
@@ -141,20 +130,21 @@ def checked_value(param: Param, value: float) -> float:
     return float(np.float32(value))
 
 
-class ParamClient:
+class ParamClient(Exchange):
     """The host's side of the parameter protocol over a :class:`TelemetryLink`.
 
     ``progress`` is told what a fetch does (one line at a time); ``answer_wait_s``,
     ``retries`` and ``quiet_s`` bound every wait (``ANSWER_WAIT_S``, ``RETRIES``,
     ``QUIET_S``)."""
 
+    messages = MESSAGES
+    silent_hint = "is the board running, with a firmware that has parameters, on this link?"
+
     def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
                  retries: int = RETRIES, quiet_s: float = QUIET_S):
-        self.link = link
+        super().__init__(link, answer_wait_s, retries)
         self.progress = progress or (lambda text: None)
-        self.answer_wait_s, self.retries, self.quiet_s = answer_wait_s, retries, quiet_s
-        self.last_heartbeat = None
-        self.armed = None                         # as the board's last HEARTBEAT said
+        self.quiet_s = quiet_s
         self.by_index: dict[int, Param] = {}      # the list being fetched
         self.count = None                         # its length, once the board said
         self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
@@ -162,55 +152,17 @@ class ParamClient:
 
     # --- the link ------------------------------------------------------------------------
 
-    def _pump(self) -> None:
-        """The heartbeat when due, and what has arrived."""
-        now = time.monotonic()
-        if self.last_heartbeat is None or now - self.last_heartbeat >= HEARTBEAT_PERIOD_S:
-            self.link.heartbeat()
-            self.last_heartbeat = now if self.link.can_send else None
-        for m in self.link.poll(only=MESSAGES):
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-                continue
-            if m.get_type() == "HEARTBEAT":
-                self._heard(m)
-                continue
-            p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
-                      int(m.param_index))
-            self.fresh[p.name] = p
-            if m.param_count:
-                self.count = int(m.param_count)
-            if self.count is not None and 0 <= p.index < self.count:
-                self.by_index[p.index] = p
-
-    def _wait(self, done, seconds: float) -> bool:
-        """Pump until ``done()`` (True) or ``seconds`` pass (False)."""
-        deadline = time.monotonic() + seconds
-        while True:
-            self._pump()
-            if done():
-                return True
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(POLL_S)
-
-    def _ask(self, send, done, what: str) -> None:
-        """``send()`` until ``done()``, at most 1 + retries times; NoAnswer naming ``what``."""
-        self._reach()
-        for _ in range(1 + self.retries):
-            send()
-            if self._wait(done, self.answer_wait_s):
-                return
-        raise NoAnswer(f"no answer to {what} from {self.link.name} after {1 + self.retries} "
-                       f"requests ({self.answer_wait_s:g} s each): is the board running, with "
-                       "a firmware that has parameters, on this link?")
-
-    def _reach(self) -> None:
-        """A listening network link can send only once it has heard the board: wait for it."""
-        patience = self.answer_wait_s * (1 + self.retries)
-        if not self._wait(lambda: self.link.can_send, patience):
-            raise NoAnswer(f"nothing heard from the board on {self.link.name} in {patience:g} s; "
-                           "a listening link learns where the board is from its telemetry")
+    def _handle(self, m) -> None:
+        if m.get_type() == "STATUSTEXT":
+            self.texts.append(m.text)
+            return
+        p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
+                  int(m.param_index))
+        self.fresh[p.name] = p
+        if m.param_count:
+            self.count = int(m.param_count)
+        if self.count is not None and 0 <= p.index < self.count:
+            self.by_index[p.index] = p
 
     def _forget(self) -> None:
         self.fresh.clear()
@@ -286,20 +238,6 @@ class ParamClient:
         self._wait(lambda: self._reason(param.name) is not None, REASON_WAIT_S)
         raise ParamRefused(param.name, value_text(value, param.type), got.text(),
                            self._reason(param.name))
-
-    def _heard(self, heartbeat) -> None:
-        """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
-        on a shared network link says nothing of the board)."""
-        mav = dialect()
-        if heartbeat.type != mav.MAV_TYPE_GCS:
-            self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-
-    def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
-        """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
-        None when none came. An armed board saves a changed parameter only once disarmed."""
-        self.armed = None
-        self._wait(lambda: self.armed is not None, wait_s)
-        return self.armed
 
     def _reason(self, name: str) -> str | None:
         """The STATUSTEXT that says why a set was refused: one naming the parameter, else

@@ -62,6 +62,9 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
+    p.add_argument("--log-store-ram", metavar="DIR",
+                   help="serve the .BIN files of DIR as the board's on-board logs (the MAVLink "
+                        "log protocol, heliquad logs; host firmware only; default none)")
     add_firmware_argument(p)
     add_rc_script_argument(p)
     p.set_defaults(func=run)
@@ -83,6 +86,11 @@ def run(args) -> int:
                     loop_hz=args.loop_hz)
     if args.rc_script is not None and args.disarmed:
         raise InputError("--rc-script is the pilot (it arms or not): leave out --disarmed")
+    if args.log_store_ram is not None:
+        if args.firmware != "host":
+            raise InputError("--log-store-ram: only the host firmware serves logs from a folder")
+        if not os.path.isdir(args.log_store_ram):
+            raise InputError(f"--log-store-ram: {args.log_store_ram} is not a folder")
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
         raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
                          "another path")
@@ -93,6 +101,7 @@ def run(args) -> int:
                       link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
                       rc_script=args.rc_script,
+                      log_store_dir=args.log_store_ram,
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None

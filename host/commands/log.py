@@ -5,8 +5,7 @@ from __future__ import annotations
 import sys
 
 from ...sim.base.errors import DiskFull, InputError
-from ..acquire.link import DEFAULT_BAUD
-from .shared_options import add_port_argument, int_in, number_in
+from .shared_options import add_baud_argument, add_port_argument, number_in
 
 __all__ = ["add_parser", "run"]
 
@@ -34,9 +33,7 @@ def add_parser(sub, fmt) -> None:
                        description=HELP, formatter_class=fmt)
     add_port_argument(p)
     p.add_argument("--out", required=True, metavar="FILE.tlog")
-    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
-                        "and network links)")
+    add_baud_argument(p)
     p.add_argument("--duration-s", type=number_in(0, 1e7, lo_open=True), metavar="S", help="stop after S seconds "
                    "(default: until Ctrl-C)")
     p.set_defaults(func=run)

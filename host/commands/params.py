@@ -8,8 +8,7 @@ import sys
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from ..acquire.link import DEFAULT_BAUD
-from .shared_options import add_port_argument, finite, int_in
+from .shared_options import add_baud_argument, add_port_argument, finite
 
 __all__ = ["add_parser", "run"]
 
@@ -49,9 +48,7 @@ def add_parser(sub, fmt) -> None:
     p = sub.add_parser("params", help="list, get, set, save and load the board's parameters",
                        description=HELP, formatter_class=fmt)
     add_port_argument(p)
-    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, "
-                        "ptys and network links)")
+    add_baud_argument(p)
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
     actions.add_parser("list", help="every parameter: name, value, type")

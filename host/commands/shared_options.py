@@ -11,9 +11,10 @@ import numpy as np
 from ...sim.base import firmware_facts as facts
 from ...sim.base.errors import InputError
 from ..acquire.connection import CONNECTION_HELP
+from ..acquire.link import DEFAULT_BAUD
 from ..acquire.excitation import amplitude_bound, bound_text
 
-__all__ = ["add_port_argument", "add_firmware_argument", "firmware_link", "add_param_store_argument",
+__all__ = ["add_port_argument", "add_baud_argument", "add_firmware_argument", "firmware_link", "add_param_store_argument",
            "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
@@ -148,6 +149,13 @@ def add_port_argument(p, required: bool = True) -> None:
     """--port CONN: the board's telemetry link (host/acquire/connection.py), or auto
     (host/acquire/ports.py: the command's run resolves it with ``resolve_port``)."""
     p.add_argument("--port", required=required, metavar="CONN", help=CONNECTION_HELP)
+
+
+def add_baud_argument(p) -> None:
+    """--baud: a serial device's rate (the Teensy's UART0 by default)."""
+    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
+                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, "
+                        "ptys and network links)")
 
 
 def add_firmware_argument(p) -> None:

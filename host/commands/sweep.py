@@ -14,12 +14,12 @@ from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DU
 from ...sim.rig.setup import PLANTS
 from ..acquire import design
 from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
-from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from ..process.signals import ABORTED_BY, EXIT_CODES
-from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
-                             add_rc_script_argument, add_vehicle_arguments,
-                             add_param_store_argument, add_port_argument, check_excitation,
+from .shared_options import (MAX_CYCLES, add_baud_argument, add_fault_argument,
+                             add_firmware_argument, firmware_link, add_rc_script_argument,
+                             add_vehicle_arguments, add_param_store_argument, add_port_argument,
+                             check_excitation,
                              check_plant, faults, finite, int_in, number_in)
 
 __all__ = ["add_parser", "run"]
@@ -63,9 +63,7 @@ def add_parser(sub, fmt) -> None:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     add_port_argument(where, required=False)
-    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, ptys "
-                        "and network links)")
+    add_baud_argument(p)
     p.add_argument("--plant", choices=PLANTS, default="vehicle",
                    help="--sil: the 6-DoF vehicle (default) or a transfer function")
     p.add_argument("--num", type=finite, nargs="+", metavar="B",

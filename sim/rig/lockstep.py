@@ -73,11 +73,13 @@ class HostFirmware:
     def __init__(self, loop_hz: float = LOOP_RATE_HZ, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
                  reply_timeout_s: float | None = None, params_file: str | None = None,
-                 telemetry_backlog_bytes: int = 0):
+                 telemetry_backlog_bytes: int = 0, log_store_dir: str | None = None):
         """``params_file``: where the firmware keeps its parameters across runs (``--params``;
         the host build's record, the emulated Teensy's two flash sectors); default none.
         ``telemetry_backlog_bytes``: the most telemetry that waits for a reader, the oldest
-        dropped past it (0: unbounded, the lockstep simulator reads all; docs/link-contract.md)."""
+        dropped past it (0: unbounded, the lockstep simulator reads all; docs/link-contract.md).
+        ``log_store_dir``: the host build serves the .BIN files of this folder, read into
+        RAM, as its on-board logs (``--log-store-ram``; docs/ground-stations.md)."""
         self.loop_hz = loop_hz
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
@@ -98,6 +100,8 @@ class HostFirmware:
                 cmd += ["--params", os.path.abspath(params_file)]
             if telemetry_backlog_bytes:
                 cmd += ["--telemetry-backlog-bytes", str(int(telemetry_backlog_bytes))]
+            if log_store_dir:                 # the logs the log protocol serves (host build)
+                cmd += ["--log-store-ram", os.path.abspath(log_store_dir)]
             self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
             self._stderr = open(self.stderr_path, "w+")
             # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and

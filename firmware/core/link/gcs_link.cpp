@@ -65,6 +65,7 @@ void GcsLink::receive() {
 // false when this loop has no room left for it.
 bool GcsLink::take(const mavlink_message_t& msg) {
     if (received_count_ == LoopInbox::kCapacity) return false;
+    if (logs_ != nullptr && logs_->take(*this, msg)) return true;    // kept for the spare time
     if (msg.msgid == MAVLINK_MSG_ID_HQ_EXCITATION && inbox_.has_excitation &&
         mavlink_msg_hq_excitation_get_action(&msg) == HQ_EXCITATION_START) {
         return false;                        // one start's configuration a loop
@@ -253,6 +254,7 @@ void GcsLink::read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig
 
 void GcsLink::transmit(const LoopStatus& status) {
     loop_time_us_ = status.time_us;          // the stamp of every message about this loop
+    if (logs_ != nullptr) logs_->set_armed(status.armed);
     for (int i = 0; i < received_count_; ++i) {
         const Received& in = received_[i];
         const LoopAnswer* a = in.request < 0 ? nullptr : &inbox_.answer[in.request];
@@ -426,13 +428,18 @@ void GcsLink::send_excitation_status(Reason reason, const ExcitationReport& ex) 
 // --- out -----------------------------------------------------------------------------------
 
 bool GcsLink::send(const mavlink_message_t& msg) {
+    if (offer(msg)) return true;
+    const uint16_t len = mavlink_msg_get_send_buffer_length(&msg);
+    telemetry_dropped_ += len;
+    bytes_dropped_ += len;
+    return false;
+}
+
+// The message whole, or nothing (false) when the port has no room; only what went is counted.
+bool GcsLink::offer(const mavlink_message_t& msg) {
     uint8_t buf[MAVLINK_MAX_PACKET_LEN];
     const uint16_t len = mavlink_msg_to_send_buffer(buf, &msg);
-    if (port_.write(buf, len) < len) {
-        telemetry_dropped_ += len;
-        bytes_dropped_ += len;
-        return false;
-    }
+    if (port_.write(buf, len) < len) return false;
     bytes_sent_ += len;
     bytes_total_ += len;
     return true;

@@ -5,7 +5,8 @@
 // telemetry from the loop's published state (LoopStatus). It never touches the loop itself.
 //
 // gcs_link.cpp: messages in, command and excitation answers, sending; param_protocol.cpp: the
-// parameter protocol; telemetry.cpp: the streams.
+// parameter protocol; telemetry.cpp: the streams; log_transfer.cpp: the log protocol
+// (LogTransfer, served in spare time when the target gives the link one: serve_logs()).
 //
 // Telemetry: every loop ATTITUDE and HQ_SYSID_SAMPLE (always the loop's last message);
 // HEARTBEAT, HQ_FW_STATUS and SYS_STATUS once a second; SERVO_OUTPUT_RAW, SCALED_IMU,
@@ -32,6 +33,7 @@
 #include "../log/logger.hpp"
 #include "../loop_exchange.hpp"
 #include "../loop_load.hpp"
+#include "log_transfer.hpp"
 
 #include <heliquad/mavlink.h>
 
@@ -81,6 +83,9 @@ public:
     // The board's other link, whose bytes and drops this link's HQ_FW_STATUS reports beside
     // its own (a board with two links pairs them both ways).
     void pair_with(const GcsLink& other) { peer_ = &other; }
+    // The log protocol's requests go to `logs` (without one they are ignored): one per board,
+    // given to each of its links; the target runs logs.service() in the loop's spare time.
+    void serve_logs(LogTransfer& logs) { logs_ = &logs; }
 
     // A message the firmware streams or sends on request (SET_MESSAGE_INTERVAL,
     // MAV_CMD_REQUEST_MESSAGE), with its interval in microseconds (0: off).
@@ -94,6 +99,7 @@ public:
     static constexpr int kStreams = 9;
 
 private:
+    friend class LogTransfer;                // packs with this link's ids, sends with offer()
     // A message taken this loop: what its answer needs, and its request's slot in inbox_
     // (-1: the link answers it alone).
     struct Received {
@@ -132,6 +138,7 @@ private:
     void heard(StationId who);
     void send_boot_report(const BootReport& boot);
     bool send(const mavlink_message_t& msg);
+    bool offer(const mavlink_message_t& msg);
     // param_protocol.cpp
     bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
     void reply_param_read(const Received& in);
@@ -178,6 +185,7 @@ private:
     uint32_t telemetry_dropped_ = 0;         // bytes, since boot
     uint32_t bytes_total_ = 0;               // bytes sent, since boot
     const GcsLink* peer_ = nullptr;
+    LogTransfer* logs_ = nullptr;
     uint32_t bytes_sent_ = 0, bytes_dropped_ = 0;     // this second's, for SYS_STATUS
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index

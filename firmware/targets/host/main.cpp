@@ -18,7 +18,9 @@
 // (block_device.hpp's names, e.g. busy_after_write_us=250000,write_protected=1; a name alone
 // is 1), the busy ones in force from the first sensor frame on, the others from the start. Every card access runs in the spare-time service after a
 // step's reply; while it waits for a busy card, the next sensor frames are served (each with
-// its step and reply) from inside the wait, so the card never holds up the loop.
+// its step and reply) from inside the wait, so the card never holds up the loop. With a
+// card the board logs each arming to it (core/log/logger.hpp) and serves its logs over the
+// MAVLink log protocol (core/link/log_transfer.hpp, docs/ground-stations.md).
 //
 // DMP firmware (the MotionApps image and its tables, a file made with `heliquad dmp-image`):
 // --dmp-image FILE, else the one compiled in with -DHQ_DMP_IMAGE, else none (the raw FIFO
@@ -47,7 +49,7 @@
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
-#include "../../core/log/spare_time.hpp"
+#include "../../core/log/spare_tasks.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
 #include "block_device.hpp"
@@ -310,6 +312,8 @@ int main(int argc, char** argv) {
     static hq::LoopInbox inbox;                                   // not on the stack
     link_cfg.log = &fc.logger();                 // the link's own STATUSTEXTs, logged
     static hq::GcsLink link(link_cfg, telemetry, inbox);   // nor its queues
+    static hq::LogTransfer log_transfer;          // the log protocol: the card's logs
+    if (!opt.sd_image.empty()) link.serve_logs(log_transfer);
     const hq::InitResult init = fc.init();
     link.send_notices(fc.status());
     std::printf("sim link: %s -> %s\ntelemetry: %s -> %s\nimu: %s\n", opt.sim_link.c_str(),
@@ -324,6 +328,10 @@ int main(int argc, char** argv) {
     CardWaitServing wait(loop, card);
     static hq::LogFiles files(card, clock, &wait);
     hq::SpareTime spare(files);
+    hq::LoggerTask logger_task(fc);
+    hq::LogProtocolTask protocol_task(log_transfer);
+    spare.add(logger_task);
+    spare.add(protocol_task);
     if (!opt.sd_image.empty()) {
         start_card(opt, card, spare);
     }
