@@ -99,6 +99,19 @@ void bind_mk64(py::module_& m) {
         .def_readwrite("in_nak", &Usb::Host::in_nak)
         .def_readwrite("in_nak_cycle", &Usb::Host::in_nak_cycle)
         .def_readonly("job", &Usb::Host::job)
+        .def_readwrite("reading", &Usb::Host::reading)
+        .def_readwrite("toggle", &Usb::Host::toggle)
+        .def_readwrite("max_packet", &Usb::Host::max_packet)
+        .def_readwrite("silences", &Usb::Host::silences)
+        .def_readwrite("toggle_errors", &Usb::Host::toggle_errors)
+        .def("receive", [](Usb::Host& h, const py::bytes& data) {
+            h.received += static_cast<std::string>(data);
+        })
+        .def("take_received", [](Usb::Host& h) {
+            py::bytes out(h.received);
+            h.received.clear();
+            return out;
+        })
         .def("new_job", [](Usb::Host& h) {
             h.job = true;
             ++h.generation;
@@ -111,6 +124,7 @@ void bind_mk64(py::module_& m) {
         .def_readwrite("in_reset", &Usb::in_reset)
         .def_readwrite("clock_ok", &Usb::clock_ok)
         .def_readwrite("dma_reads_ram", &Usb::dma_reads_ram)
+        .def_readwrite("dma_writes_ram", &Usb::dma_writes_ram)
         .def_readonly("host", &Usb::host)
         .def("reg", [](const Usb& u, uint32_t offset) { return u.v.at(offset); })
         .def("set_reg", [](Usb& u, uint32_t offset, uint8_t value) { u.v.at(offset) = value; })

@@ -427,10 +427,10 @@ struct GpioInputs {
 };
 
 // USB0's registers, the SIE's answer to a bulk IN token, and the host's frames and bulk IN
-// polls (sim/chip/usb.py and usb_host.py describe the models). Python keeps the rest of both
-// (the SIE's other tokens and its DMA, control transfers, bulk OUT, attach, bus reset, the
-// enumeration) and is called (Core::py_call_) when the host has work a poll is not: a control
-// transfer or bulk OUT queued, or an IN BD the SIE owns (data to send).
+// transfers (sim/chip/usb.py and usb_host.py describe the models). Python keeps the rest of
+// both (the SIE's other tokens, control transfers, bulk OUT, attach, bus reset, the
+// enumeration) and is called (Core::py_call_) when the host has work a poll is not (a control
+// transfer or bulk OUT queued) or a poll's answer is not plainly a NAK or data from RAM.
 struct Usb {
     Layout L;
     bool ready = false;
@@ -449,6 +449,7 @@ struct Usb {
     bool in_reset = false;                 // the host holds SE0
     bool clock_ok = false;                 // the SIM's USB clock is 48 MHz (Python says)
     bool dma_reads_ram = false;            // the system MPU lets master 4 read all of SRAM
+    bool dma_writes_ram = false;           // ... and write all of it
     uint32_t sram_base = 0, sram_size = 0;
     uint64_t sleep_event = 0;
     // The host (usb_host.py): what its bulk IN polling needs.
@@ -466,6 +467,13 @@ struct Usb {
         int64_t nak_frame = -1;
         bool in_nak = true;
         int64_t in_nak_cycle = -1;
+        bool reading = true, toggle = false;     // the DATA0/1 the next IN packet should carry
+        uint32_t max_packet = 64, silences = 0, toggle_errors = 0;
+        std::string received;              // bulk IN bytes, until taken
+        // the poll in flight made here: NAKed, or data (the BD's word and address, its data)
+        bool flight_data = false;
+        uint32_t flight_bd = 0, flight_word = 0, flight_ep = 0, flight_odd = 0;
+        std::string flight_bytes;
     } host;
 
     void setup();
@@ -482,8 +490,15 @@ struct Usb {
     void sof(Core& c, uint16_t number);
     void host_frame(Core& c);
     bool pump(Core& c);
-    bool nak_certain(Core& c) const;
+    enum Answer { kPython, kNak, kData };
+    Answer in_answer(Core& c, uint32_t& bd_at, uint32_t& word, uint32_t& buffer) const;
+    bool in_ram(uint32_t address, uint32_t n) const {
+        return address >= sram_base && uint64_t{address} + n <= uint64_t{sram_base} + sram_size;
+    }
+    void send_in(Core& c, uint32_t bd_at, uint32_t word, uint32_t buffer);
+    void complete_in(Core& c);
     bool finish(Core& c);
+    void took_packet();
     void pump_soon(Core& c);
     void tokens_free(Core& c);
     bool reg_offset(uint32_t address, unsigned size, uint32_t& o) const;

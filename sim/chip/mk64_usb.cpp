@@ -1,10 +1,11 @@
-// USB0's registers and the host's bulk IN polls, native (mk64_core.hpp's Usb): the image's
+// USB0's registers and the host's bulk IN transfers, native (mk64_core.hpp's Usb): the image's
 // USB interrupt reads and clears ISTAT, STAT and the endpoint registers a few times a loop, and
 // the host (sim/chip/usb_host.py) polls the bulk IN endpoint every 1 ms frame, which the SIE
-// NAKs while the firmware has nothing queued. Both stay here; Python (usb.py, usb_host.py) is
-// called when a poll would move data or the host has other work. The rules are those of the
-// Python models, step for step (the reference, Usb::native off): the same events at the same
-// cycles, scheduled in the same order.
+// NAKs while the firmware has nothing queued and answers with the loop's telemetry otherwise.
+// All of that stays here; Python (usb.py, usb_host.py) is called when the host has other work
+// or a poll's answer is anything else. The rules are those of the Python models, step for step
+// (the reference, Usb::native off): the same events at the same cycles, scheduled in the same
+// order, the same bytes.
 #include <algorithm>
 
 #include "chip/mk64_core.hpp"
@@ -20,7 +21,11 @@ constexpr double kHandshakeBits = 8 + 8 + 3;
 constexpr double kDataOverheadBits = 8 + 8 + 16 + 3;
 constexpr double kMaxPacketBits = 8 * 64;
 constexpr double kIdleToSleepS = 3e-3;          // usb.py's IDLE_TO_SLEEP_S
-constexpr uint32_t kBdOwn = 0x80;               // usb.py's BD_OWN
+// usb.py's BD bits and fields, and the IN token's PID (USB 2.0, table 8-1)
+constexpr uint32_t kBdOwn = 0x80, kBdData1 = 0x40, kBdKeep = 0x20, kBdNinc = 0x10,
+                   kBdStall = 0x04;
+constexpr uint32_t kBdBcShift = 16, kBdBcMask = 0x3FF;
+constexpr uint32_t kPidIn = 0x9;
 constexpr uint32_t kBdBytes = 8;
 constexpr int kEndpoints = 16;
 }  // namespace
@@ -107,28 +112,31 @@ void Usb::host_frame(Core& c) {
     host.sof_end = c.cycles_after(kTokenBits / kBitRateHz, now);
 }
 
-// The SIE would NAK the host's bulk IN token now, and usb.py's token() would change nothing
-// but the idle timer on the way: the device answers, the endpoint sends and is not stalled,
-// and its current BD (in RAM the MPU lets the USB controller read) is not the SIE's, or
-// CTL.TXSUSPENDTOKENBUSY holds every token but SETUP. Anything else is Python's.
-bool Usb::nak_certain(Core& c) const {
-    if (!attached(c) || !enabled() || suspended() || !clock_ok || in_reset) return false;
+// What the SIE would answer the host's bulk IN token now, where usb.py's token() would change
+// nothing but the idle timer on the way and its DMA stays in RAM the MPU grants: the device
+// answers, the endpoint sends and is not stalled, its current BD is readable; then a NAK (the
+// BD is not the SIE's, or CTL.TXSUSPENDTOKENBUSY holds every token but SETUP) or the BD's data
+// (readable, and the BD writable for its write-back unless KEEP). Anything else is Python's.
+Usb::Answer Usb::in_answer(Core& c, uint32_t& bd_at, uint32_t& word, uint32_t& buffer) const {
+    if (!attached(c) || !enabled() || suspended() || !clock_ok || in_reset) return kPython;
     const int ep = host.endpoint;
-    if (host.address != (v[oADDR] & 0x7F) || ep >= kEndpoints) return false;
+    if (host.address != (v[oADDR] & 0x7F) || ep >= kEndpoints) return kPython;
     const uint8_t ctl = v[oENDPT0 + 4 * static_cast<uint32_t>(ep)];
-    if (!(ctl & EPTXEN) || (ctl & EPSTALL)) return false;
-    const uint32_t bd_at = bdt_base() | static_cast<uint32_t>(ep) << 5 | 1u << 4 |
-                           uint32_t{odd[ep][1]} << 3;
-    if (!dma_reads_ram || bd_at < sram_base || bd_at + kBdBytes > sram_base + sram_size) {
-        return false;
-    }
-    uint32_t word = 0;
-    if (!c.read32(bd_at, word)) return false;
-    return !(word & kBdOwn) || (v[oCTL] & CTL_BUSY);
+    if (!(ctl & EPTXEN) || (ctl & EPSTALL)) return kPython;
+    bd_at = bdt_base() | static_cast<uint32_t>(ep) << 5 | 1u << 4 | uint32_t{odd[ep][1]} << 3;
+    if (!dma_reads_ram || !in_ram(bd_at, kBdBytes)) return kPython;
+    if (!c.read32(bd_at, word) || !c.read32(bd_at + 4, buffer)) return kPython;
+    if (!(word & kBdOwn) || (v[oCTL] & CTL_BUSY)) return kNak;
+    if (word & kBdStall) return kPython;
+    const uint32_t bc = (word >> kBdBcShift) & kBdBcMask;
+    const uint32_t span = bc == 0 ? 0 : (word & kBdNinc) ? 1 : bc;
+    if (span && !in_ram(buffer, span)) return kPython;
+    if (!(word & kBdKeep) && !(dma_writes_ram && in_ram(bd_at, 4))) return kPython;
+    return kData;
 }
 
-// usb_host.py's _pump with only the bulk IN poll to make (the gate Python opened): true when
-// done here, false when Python must pump.
+// usb_host.py's _pump with only the bulk IN poll to make (the gate Python opened), and its
+// _transact for it: true when done here, false when Python must pump.
 bool Usb::pump(Core& c) {
     if (!native || !host.gate) return false;
     if (host.in_flight) return true;
@@ -137,26 +145,90 @@ bool Usb::pump(Core& c) {
         return true;
     }
     if (host.nak_frame == host.frame) return true;
-    if (!nak_certain(c)) return false;
+    uint32_t bd_at = 0, word = 0, buffer = 0;
+    const Answer answer = in_answer(c, bd_at, word, buffer);
+    if (answer == kPython) return false;
     const uint64_t now = std::max(c.now(), host.sof_end);
     const double worst = kTokenBits + kDataOverheadBits + kMaxPacketBits + kHandshakeBits;
     if (c.cycles_after(worst / kBitRateHz, now) >= host.next_sof) return true;   // frame full
-    bus_activity(c);                        // the token; the SIE NAKs
+    bus_activity(c);                        // the token
+    double bits = kTokenBits + kHandshakeBits;
+    host.flight_data = answer == kData;
+    if (host.flight_data) {
+        send_in(c, bd_at, word, buffer);
+        bits += kDataOverheadBits + 8.0 * static_cast<double>(host.flight_bytes.size());
+    }
     host.in_flight = true;
     host.flight_generation = host.generation;
-    c.at(c.cycles_after((kTokenBits + kHandshakeBits) / kBitRateHz, now), Ev::UsbFinish);
+    c.at(c.cycles_after(bits / kBitRateHz, now), Ev::UsbFinish);
     return true;
 }
 
-// A NAKed poll made here has crossed the bus (usb_host.py's _finish for it).
+// The SIE's ACK: the BD's bytes (NINC: its first, BC times) with its DATA0/1.
+void Usb::send_in(Core& c, uint32_t bd_at, uint32_t word, uint32_t buffer) {
+    const uint32_t bc = (word >> kBdBcShift) & kBdBcMask;
+    host.flight_bd = bd_at;
+    host.flight_word = word;
+    host.flight_ep = host.endpoint;
+    host.flight_odd = odd[host.endpoint][1];
+    host.flight_bytes.assign(bc, '\0');
+    if (bc && (word & kBdNinc)) {
+        char b = 0;
+        c.mem_read(buffer, &b, 1);
+        host.flight_bytes.assign(bc, b);
+    } else if (bc) {
+        c.mem_read(buffer, host.flight_bytes.data(), bc);
+    }
+}
+
+// usb.py's complete() for it: the BD written back (unless KEEP), the ODD pointer flipped,
+// STAT and TOKDNE.
+void Usb::complete_in(Core& c) {
+    const uint32_t word = host.flight_word;
+    const uint32_t n = static_cast<uint32_t>(host.flight_bytes.size());
+    if (!(word & kBdKeep)) {
+        const uint32_t back = (word & kBdData1) | kPidIn << 2 | n << kBdBcShift;
+        const uint8_t b[4] = {static_cast<uint8_t>(back), static_cast<uint8_t>(back >> 8),
+                              static_cast<uint8_t>(back >> 16), static_cast<uint8_t>(back >> 24)};
+        c.mem_write(host.flight_bd, b, 4);
+    }
+    const uint32_t ep = host.flight_ep, odd_was = host.flight_odd;
+    odd[ep][1] = static_cast<uint8_t>(odd_was ^ 1);
+    v[oSTAT] = static_cast<uint8_t>(ep << 4 | 1u << 3 | odd_was << 2);
+    flag(c, TOKDNE);
+}
+
+// A poll made here has crossed the bus (usb_host.py's _finish for it).
 bool Usb::finish(Core& c) {
     host.in_flight = false;
-    if (host.job && host.generation == host.flight_generation) {
+    if (host.flight_data) complete_in(c);
+    if (!host.job || host.generation != host.flight_generation) return pump(c);
+    if (!host.flight_data) {
         host.in_nak = true;
         host.in_nak_cycle = static_cast<int64_t>(c.now());
         host.nak_frame = host.frame;
+        return pump(c);
     }
+    host.in_nak = false;
+    if (static_cast<bool>(host.flight_word & kBdData1) != host.toggle) {
+        ++host.toggle_errors;               // ACKed and dropped: the device sends it again
+        return pump(c);
+    }
+    host.silences = 0;
+    took_packet();
     return pump(c);
+}
+
+// usb_host.py's bulk IN job takes a packet: the bytes, the next DATA0/1, a short packet ends
+// the frame's polls, and a reader that stopped reading ends the job.
+void Usb::took_packet() {
+    host.received += host.flight_bytes;
+    host.toggle = !host.toggle;
+    if (host.flight_bytes.size() < host.max_packet) host.nak_frame = host.frame;
+    if (!host.reading) {
+        host.job = false;
+        host.gate = false;
+    }
 }
 
 void Usb::pump_soon(Core& c) {

@@ -40,9 +40,10 @@ in RAM, and the serial interface engine (SIE) answering the tokens of the host m
 
 The registers, the ping-pong pointers, the frame number, the SOF and the idle timer live in the
 native core (``heliquad._simcore``, sim/chip/mk64_usb.cpp), which also takes the byte accesses
-the image's interrupt makes (all but CTL, CONTROL, USBCTRL and USBTRC0 writes) and NAKs the
-host's bulk IN polls while it has nothing to send (``usb_host.py``); ``native = False`` leaves
-both to this class, the reference the native path is compared with.
+the image's interrupt makes (all but CTL, CONTROL, USBCTRL and USBTRC0 writes) and answers
+the host's bulk IN polls whose answer is plain: a NAK, or the BD's data from RAM
+(``usb_host.py``); ``native = False`` leaves both to this class, the reference the native
+path is compared with.
 """
 
 from __future__ import annotations
@@ -170,10 +171,11 @@ class Usb(RegisterDevice):
         self.native_state.clock_ok = self.clock_ok()
 
     def mpu_changed(self):
-        """The system MPU changed: the native path reads BDs only where all of SRAM is
-        granted to the USB controller."""
-        self.native_state.dma_reads_ram = self.chip.mpu.master_may(USB_MASTER, SRAM_BASE,
-                                                                  SRAM_SIZE, False)
+        """The system MPU changed: the native path moves data only where all of SRAM is
+        granted to the USB controller (reads; writes for the BD write-back)."""
+        n, mpu = self.native_state, self.chip.mpu
+        n.dma_reads_ram = mpu.master_may(USB_MASTER, SRAM_BASE, SRAM_SIZE, False)
+        n.dma_writes_ram = mpu.master_may(USB_MASTER, SRAM_BASE, SRAM_SIZE, True)
 
     # -- registers ------------------------------------------------------------------------
     def w_ISTAT(self, value, mask):

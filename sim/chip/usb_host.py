@@ -27,10 +27,11 @@ the emulator's clock. docs/teensy35-emulator.md lists what is and is not modelle
 
 The frames (SOF, the next one's time) are native events, and while the host has nothing to do
 but poll the bulk IN endpoint (the gate its pump opens: no control transfer, no bulk OUT) the
-native core makes the polls the SIE NAKs itself (sim/chip/mk64_usb.cpp); a frame, a finished
-poll or a freed STAT calls :meth:`UsbHost._pump` here only when the gate is shut or a poll
-would move data. The state they share (the frame, the poll in flight, the last NAK) is the
-core's (``_link``).
+native core makes the polls whose answer is plain, a NAK or data from RAM
+(sim/chip/mk64_usb.cpp); a frame, a finished poll or a freed STAT calls :meth:`UsbHost._pump`
+here only when the gate is shut or a poll's answer is anything else. The state they share (the
+frame, the poll in flight, the last NAK, the bulk IN job's DATA0/1 and bytes) is the core's
+(``_link``, ``usb_host_native.py``).
 """
 
 from __future__ import annotations
@@ -111,11 +112,12 @@ class UsbHost(NativeLink):
         self.error = None
         self.device_bytes = self.config_bytes = b""
         self.strings = {}
-        self._reading = True
+        self.reading = True
         self.in_nak = True
         self.in_nak_cycle = -1
         self.toggle_errors = 0
-        self._received = bytearray()
+        self._link.take_received()
+        self._link.toggle = False
         self._to_send = bytearray()
         self._toggles = {}
         self._scripts = collections.deque()
@@ -185,11 +187,6 @@ class UsbHost(NativeLink):
     def send(self, data: bytes):
         self._to_send += data
         self._pump_soon()
-
-    def take_received(self) -> bytes:
-        data = bytes(self._received)
-        self._received.clear()
-        return data
 
     def idle(self) -> bool:
         """Nothing queued: no enumeration waiting for its debounce, no script and no control
@@ -294,7 +291,7 @@ class UsbHost(NativeLink):
                     self.strings[i] = desc.parse_string(s.received)
         value = desc.parse_configuration(self.config_bytes).value
         yield from self._request("SET_CONFIGURATION", 0x00, 9, value, 0, b"")
-        self._toggles.clear()
+        self._clear_toggles()
         self.configured = True
         self._pump_soon()
 
@@ -303,7 +300,7 @@ class UsbHost(NativeLink):
         self._shut_gate()
         self._stop_frames()
         self.port_enabled, self.address, self.ep0_packet = False, 0, FIRST_EP0_PACKET
-        self._toggles.clear()
+        self._clear_toggles()
         self._bulk_in = self._bulk_out = None
         self.usb.bus_reset(True)
         self._timer = self.machine.after(RESET_S, self._end_reset)
@@ -448,12 +445,14 @@ class UsbHost(NativeLink):
         raise UsbError(f"USB host: the configuration has no bulk {direction} endpoint")
 
     def _bulk_in_packets(self):
-        ep = self._bulk_endpoint("in")
-        toggle = self._toggles.get(ep.address, False)
+        """The bulk IN job's steps (the core takes the same steps for the packets it polls:
+        mk64_usb.cpp's took_packet); its DATA0/1 and the bytes are the core's."""
+        ep, link = self._bulk_endpoint("in"), self._link
+        link.max_packet = ep.max_packet
         while True:
-            got = yield Tx(PID_IN, ep.address, b"", toggle)
-            self._received += got
-            toggle = self._toggles[ep.address] = not toggle
+            got = yield Tx(PID_IN, ep.address, b"", link.toggle)
+            link.receive(got)
+            link.toggle = not link.toggle
             if len(got) < ep.max_packet:
                 self._bulk_in.nak_frame = self.frame     # a short packet: next frame
             if not self.reading:

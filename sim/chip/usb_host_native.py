@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from .usb import native_field
+from .usb import PID_IN, native_field
 
 
 @dataclasses.dataclass
@@ -30,8 +30,8 @@ class Job:
 
 
 class BulkIn(Job):
-    """The bulk IN polling job: the frame its last poll was NAKed in is the core's, which
-    makes the NAKed polls while the gate is open."""
+    """The bulk IN job: its state is the core's (which makes its polls while the gate is
+    open), and its next transaction is an IN with the DATA0/1 the core expects next."""
 
     def __init__(self, gen, link):
         self._link = link
@@ -39,6 +39,15 @@ class BulkIn(Job):
         super().__init__(gen)
 
     nak_frame = native_field("_link", "nak_frame", "the frame its last poll was NAKed in")
+    silences = native_field("_link", "silences", "polls in a row with no answer")
+
+    @property
+    def tx(self) -> Tx:
+        return Tx(PID_IN, self._endpoint, b"", self._link.toggle)
+
+    @tx.setter
+    def tx(self, tx: Tx):
+        self._endpoint = tx.endpoint
 
 
 class NativeLink:
@@ -54,20 +63,22 @@ class NativeLink:
     _waiting_tokdne = native_field("_link", "waiting", "a pump found ISTAT.TOKDNE set")
     _next_sof = native_field("_link", "next_sof", "the next SOF's cycle")
     _sof_end = native_field("_link", "sof_end", "when this frame's SOF has crossed the bus")
+    toggle_errors = native_field("_link", "toggle_errors",
+                                 "IN packets with the wrong DATA0/1 (ACKed and dropped)")
 
     @property
     def reading(self) -> bool:
         """The port is read: the bulk IN endpoint is polled."""
-        return self._reading
+        return self._link.reading
 
     @reading.setter
     def reading(self, on: bool):
-        self._reading = on
+        self._link.reading = bool(on)
         self._shut_gate()
 
     @property
     def _bulk_in(self):
-        return self._bulk_in_job
+        return self._bulk_in_job if self._link.job else None
 
     @_bulk_in.setter
     def _bulk_in(self, job):
@@ -87,6 +98,14 @@ class NativeLink:
                          not self._to_send and self._bulk_in is not None)
         if link.gate:
             link.address, link.endpoint = self.address, self._bulk_in.tx.endpoint & 0xF
+
+    def take_received(self) -> bytes:
+        return self._link.take_received()
+
+    def _clear_toggles(self):
+        """Every endpoint's DATA0/1 back to DATA0 (a reset, a new configuration)."""
+        self._toggles.clear()
+        self._link.toggle = False
 
     def tokens_free(self):
         self.machine.core.usb_tokens_free()
