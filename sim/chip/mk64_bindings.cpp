@@ -99,6 +99,8 @@ void bind_mk64(py::module_& m) {
         .def_readwrite("in_nak", &Usb::Host::in_nak)
         .def_readwrite("in_nak_cycle", &Usb::Host::in_nak_cycle)
         .def_readonly("job", &Usb::Host::job)
+        .def_readonly("flight_bd", &Usb::Host::flight_bd)
+        .def_readonly("flight_data", &Usb::Host::flight_data)
         .def_readwrite("reading", &Usb::Host::reading)
         .def_readwrite("toggle", &Usb::Host::toggle)
         .def_readwrite("max_packet", &Usb::Host::max_packet)
@@ -587,6 +589,7 @@ void bind_mk64(py::module_& m) {
         })
         .def("usb_pump_soon", [](Core& c) { c.usb0.pump_soon(c); })
         .def("usb_tokens_free", [](Core& c) { c.usb0.tokens_free(c); })
+        .def("usb_end_data", [](Core& c) { return c.usb0.end_data(c) == Core::kNoCall; })
         .def("take_py_call", [](Core& c) {
             const int call = c.py_call_;
             c.py_call_ = Core::kNoCall;

@@ -333,9 +333,7 @@ void Core::dispatch(const HeapEntry& e) {
         case Ev::UsbPump:
             if (!usb0.pump(*this)) py_call_ = kUsbPump;
             break;
-        case Ev::UsbFinish:
-            if (!usb0.finish(*this)) py_call_ = kUsbPump;
-            break;
+        case Ev::UsbFinish: py_call_ = usb0.finish(*this); break;
         case Ev::UsbSleep:
             usb0.sleep_event = 0;
             usb0.flag(*this, usb0.SLEEP);

@@ -497,7 +497,8 @@ struct Usb {
     }
     void send_in(Core& c, uint32_t bd_at, uint32_t word, uint32_t buffer);
     void complete_in(Core& c);
-    bool finish(Core& c);
+    int finish(Core& c);
+    int end_data(Core& c);
     void took_packet();
     void pump_soon(Core& c);
     void tokens_free(Core& c);
@@ -512,7 +513,9 @@ public:
         kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kFtfe,
         kNvic, kUsb0, kDevices
     };
-    enum PyCall : int { kNoCall = 0, kUsbPump = 1 };
+    // What a native event asks of Python: the USB host's pump; the check of a bulk IN BD's
+    // write-back when the MPU changed while its packet was on the bus (then end_data).
+    enum PyCall : int { kNoCall = 0, kUsbPump = 1, kUsbWriteBack = 2 };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
          std::vector<std::string> exception_names);

@@ -198,25 +198,38 @@ void Usb::complete_in(Core& c) {
     flag(c, TOKDNE);
 }
 
-// A poll made here has crossed the bus (usb_host.py's _finish for it).
-bool Usb::finish(Core& c) {
+// A poll made here has crossed the bus (usb_host.py's _finish for it): what Python must do
+// then (Core::PyCall), if anything. A data packet whose BD the MPU no longer lets the USB
+// controller write back (it changed meanwhile) has Python check the write-back (usb.py's
+// fault, or the rest here: end_data).
+int Usb::finish(Core& c) {
     host.in_flight = false;
-    if (host.flight_data) complete_in(c);
-    if (!host.job || host.generation != host.flight_generation) return pump(c);
-    if (!host.flight_data) {
+    if (host.flight_data) {
+        if (!(host.flight_word & kBdKeep) && !(dma_writes_ram && in_ram(host.flight_bd, 4))) {
+            return Core::kUsbWriteBack;
+        }
+        return end_data(c);
+    }
+    if (host.job && host.generation == host.flight_generation) {
         host.in_nak = true;
         host.in_nak_cycle = static_cast<int64_t>(c.now());
         host.nak_frame = host.frame;
-        return pump(c);
     }
-    host.in_nak = false;
-    if (static_cast<bool>(host.flight_word & kBdData1) != host.toggle) {
-        ++host.toggle_errors;               // ACKed and dropped: the device sends it again
-        return pump(c);
+    return pump(c) ? Core::kNoCall : Core::kUsbPump;
+}
+
+int Usb::end_data(Core& c) {
+    complete_in(c);
+    if (host.job && host.generation == host.flight_generation) {
+        host.in_nak = false;
+        if (static_cast<bool>(host.flight_word & kBdData1) != host.toggle) {
+            ++host.toggle_errors;           // ACKed and dropped: the device sends it again
+        } else {
+            host.silences = 0;
+            took_packet();
+        }
     }
-    host.silences = 0;
-    took_packet();
-    return pump(c);
+    return pump(c) ? Core::kNoCall : Core::kUsbPump;
 }
 
 // usb_host.py's bulk IN job takes a packet: the bytes, the next DATA0/1, a short packet ends

@@ -411,6 +411,10 @@ class Usb(RegisterDevice):
                         "(set MPU_RGDAAC0.M4RE/M4WE or clear MPU_CESR.VLD)",
                         self.machine.pc, address)
 
+    def check_write_back(self, bd_at: int):
+        """The DMA rule for a BD's write-back (a Fault if it is broken)."""
+        self._check(bd_at, 4, True, "a buffer descriptor")
+
     def _read_bd(self, bd_at: int) -> tuple:
         self._check(bd_at, BD_BYTES, False, "a buffer descriptor")
         raw = self.machine.read(bd_at, BD_BYTES)

@@ -42,7 +42,7 @@ import struct
 
 from ..base.errors import InputError
 from . import usb_descriptors as desc
-from .machine import PY_CALL_USB_PUMP, EmulationError
+from .machine import PY_CALL_USB_PUMP, PY_CALL_USB_WRITE_BACK, EmulationError
 from .usb import ACK, NAK, PID_IN, PID_OUT, PID_SETUP, STALL
 from .usb_host_native import BulkIn, Job, NativeLink, Tx
 
@@ -97,6 +97,7 @@ class UsbHost(NativeLink):
         self.usb.listeners.append(self)
         self.machine.reset_listeners.append(self._forget)
         self.machine.native_calls[PY_CALL_USB_PUMP] = self._pump
+        self.machine.native_calls[PY_CALL_USB_WRITE_BACK] = self._write_back
         self._forget()
 
     def _forget(self):

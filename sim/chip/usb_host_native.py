@@ -123,5 +123,12 @@ class NativeLink:
         self.machine.core.usb_host_frame()
         self._pump()
 
+    def _write_back(self):
+        """A bulk IN packet the core sent ended after the MPU changed: its BD's write-back
+        is checked here (the fault usb.py raises), then the core ends the packet."""
+        self.usb.check_write_back(self._link.flight_bd)
+        if not self.machine.core.usb_end_data():
+            self._pump()
+
     def _pump_soon(self):
         self.machine.core.usb_pump_soon()       # shuts the gate; the pump is an event now
