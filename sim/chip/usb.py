@@ -43,7 +43,7 @@ native core (``heliquad._simcore``, sim/chip/mk64_usb.cpp), which also takes the
 the image's interrupt makes (all but CTL, CONTROL, USBCTRL and USBTRC0 writes) and answers
 the host's bulk IN polls whose answer is plain: a NAK, or the BD's data from RAM
 (``usb_host.py``); ``native = False`` leaves both to this class, the reference the native
-path is compared with.
+path is compared with. ``writes`` lists the writes this class took.
 """
 
 from __future__ import annotations
