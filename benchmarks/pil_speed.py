@@ -7,7 +7,9 @@ lockstep loop (wall time of the loop alone, start-up excluded) as a multiple of 
 200 Hz; then each PIL run's rate as a ratio to the host build's measured in the same run (the
 baseline) and USB's to UART0's, and where the PIL's time goes: the emulated board driven
 alone for as many loops as the drop-in drives it (its share of a frame; the rest is the
-lockstep around it), over each link, with the board's own counts per loop.
+lockstep around it), over each link, with the board's own counts per loop; last, the boards
+over both links driven in turns with a sync every loop, so that the two links' rates are
+compared under the same load.
 
     python benchmarks/pil_speed.py [--cycles 30] [--elf PATH] [--board-loops 1000]
 
@@ -26,6 +28,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 LOOP_HZ = 200.0
 LINKS = ("uart", "usb")
 RUNS = [("host", "uart")] + [("teensy35", link) for link in LINKS]
+TURNS = 4                   # turns of the boards driven in turns (boards_in_turns)
 
 
 def run(firmware: str, link: str, cycles: int, elf: str | None, out: str):
@@ -41,18 +44,25 @@ def run(firmware: str, link: str, cycles: int, elf: str | None, out: str):
     return r, time.perf_counter() - t0
 
 
+def _board_inputs():
+    """A loop's inputs for a board driven alone: a level, still IMU sample; RC sticks
+    centred, throttle low, disarmed."""
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
+
+    return (raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665]),
+            [1500, 1500, 1000, 1500, 2000, 1000, 0, 0])
+
+
 def board_alone(elf: str, link: str, loops: int):
     """The emulated board driven loop by loop as the drop-in drives it (inputs in, one loop,
     outputs out), without the ptys, the codec or the simulator: wall time, and the board's
     own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
     accesses and events)."""
     from heliquad.sim.chip.pil.board import PilBoard
-    from heliquad.sim.sensor.mpu6050_packets import raw_packet
 
     board = PilBoard(elf, link=link)
     board.boot()
-    sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
-    rc = [1500, 1500, 1000, 1500, 2000, 1000, 0, 0]
+    sample, rc = _board_inputs()
     m = board.machine
     before = m.counts()
     t0 = time.perf_counter()
@@ -62,6 +72,28 @@ def board_alone(elf: str, link: str, loops: int):
     wall = time.perf_counter() - t0
     after = m.counts()
     return wall, {k: (after[k] - before[k]) / loops for k in after}
+
+
+def boards_in_turns(elf: str, loops: int, turns: int = TURNS) -> dict:
+    """The board over each link, booted once each and driven in turns (``turns`` turns of
+    ``loops`` loops, a sync every loop as the lockstep asks for its telemetry): each link's
+    wall time a loop. Turns taken in the same minutes see the same load on a shared
+    machine, which the runs one after the other above do not."""
+    from heliquad.sim.chip.pil.board import PilBoard
+
+    sample, rc = _board_inputs()
+    boards = {link: PilBoard(elf, link=link) for link in LINKS}
+    wall = dict.fromkeys(LINKS, 0.0)
+    for board in boards.values():
+        board.boot()
+    for _ in range(turns):
+        for link, board in boards.items():
+            t0 = time.perf_counter()
+            for _ in range(loops):
+                board.frame(sample, False, rc, 0, sync=True)
+                board.telemetry_out.clear()
+            wall[link] += time.perf_counter() - t0
+    return {link: wall[link] / (turns * loops) for link in LINKS}
 
 
 def board_report(elf: str, link: str, n: int, pil_rate: float):
@@ -109,6 +141,11 @@ def main() -> int:
     print(f"PIL over usb / over uart: {rates['teensy35 usb'] / rates['teensy35 uart']:.4f}")
     for link in LINKS:
         board_report(elf, link, args.board_loops, rates[f"teensy35 {link}"])
+    per_loop = boards_in_turns(elf, max(1, args.board_loops // TURNS))
+    print(f"\nthe boards over both links driven in turns ({TURNS} turns of "
+          f"{max(1, args.board_loops // TURNS)} loops each, a sync every loop): "
+          + ", ".join(f"{link} {1e6 * per_loop[link]:.0f} us a loop" for link in LINKS)
+          + f"; usb / uart rate {per_loop['uart'] / per_loop['usb']:.4f}")
     print("  (benchmarks/teensy35_pil_speed.py --profile breaks the board's own time down)")
     return 0
 

@@ -404,3 +404,36 @@ def test_a_bus_reset_re_enumerates_and_a_silent_device_times_out():
     host.open()
     with pytest.raises(UsbError, match="no response"):
         settle(host, run_for, timeout_s=1.0)
+
+
+def _grant_revoked_during_an_in_packet(native: bool):
+    """A bulk IN packet on the bus (the core's, or Python's with ``native`` off) while the
+    image takes master 4's write grant away: what the BD's write-back at its end raises."""
+    chip, host, device, run_for = _enumerated()
+    chip.usb0.native = native
+    m, mpu = chip.machine, chip.mpu
+    word2 = mpu.v["RGD0_WORD2"]
+    granted = word2 | mpu.bit("RGDAAC0", "M4RE") | mpu.bit("RGDAAC0", "M4WE")
+    boot._write(mpu, "RGDAAC0", granted)
+    boot._write(mpu, "CESR", mpu.bit("CESR", "VLD"))
+    run_for(0.002)
+    device.send(b"telemetry")
+    step = m.cycles_after(1e-6) - m.now()
+    while host._in_flight:                  # a NAKed poll still on the bus
+        m.advance(step)
+    while not host._in_flight:              # the next poll: the packet
+        m.advance(step)
+    assert m.core.usb0.host.flight_data == native, "the core sent it (native path)"
+    boot._write(mpu, "RGDAAC0", granted & ~mpu.bit("RGDAAC0", "M4WE"))
+    with pytest.raises(Fault) as fault:
+        m.advance(m.cycles_after(100e-6) - m.now())
+    return str(fault.value), host.take_received()
+
+
+def test_a_write_grant_taken_away_during_an_in_packet_faults_on_both_paths():
+    # The core sends a bulk IN packet only with all of SRAM granted to master 4; if the
+    # image revokes the write grant while the packet is on the bus, the BD's write-back at
+    # its end is Python's to check, and faults as the Python model does.
+    native = _grant_revoked_during_an_in_packet(True)
+    assert native == _grant_revoked_during_an_in_packet(False)
+    assert "USB0 DMA write of a buffer descriptor" in native[0] and native[1] == b""

@@ -384,32 +384,45 @@ def test_a_ground_station_that_connects_30_s_after_boot_gets_the_boot_report_ove
 
 def _usb_flight(reference: bool, loops: int):
     """The image booted with a host that enumerates it and opens its port, then ``loops``
-    loops flown with the port read: what a run must reproduce exactly. ``reference``: every
-    boundary attended outside unicorn and every peripheral access through Python."""
+    loops flown with the port read: what a run must reproduce exactly, with each loop's bytes
+    received, when the last bulk IN poll was NAKed and the frame number, the USB0 registers
+    the interrupt reads, all at the loop's cycle. ``reference``: every boundary attended
+    outside unicorn, every peripheral access through Python, and the USB host's every poll
+    made by its Python pump (``usb0.native`` off); and the Python events a loop made."""
     from heliquad.sim.sensor.mpu6050_packets import raw_packet
     boot.require_image()
     pytest.importorskip("heliquad._firmware")
     board = Teensy35(boot.IMAGE)
-    m = board.machine
+    m, usb = board.machine, board.chip.usb0
     if reference:
         m.core.inline_boundaries = False
         m.trace_enabled = True
+        usb.native = False
     host = UsbHost(board.chip, debounce_s=0.0, open_port=True)
     sample = raw_packet([0.01, -0.02, 0.005], [0.0, 0.0, -9.80665])
     assert board.run_to_loop(1, instructions=boot.BOOT_BUDGET).reason == "loop"
+    stamped, before = [], m.counts()["python_events"]
     for _ in range(loops):
         board.mpu.emu.push_fifo(sample, False)
         assert board.run_to_loop(board.loops + 1, instructions=1_000_000).reason == "loop"
+        stamped.append((m.now(), host.take_received(), host.in_nak_cycle, host.frame,
+                        [usb.peek(r) for r in ("ISTAT", "STAT", "ERRSTAT", "CTL", "ENDPT2")],
+                        usb.odd))
     transfers = [(t.request, t.setup, t.received, t.status, t.start_s, t.end_s)
                  for t in host.transfers]
-    return (m.instructions, m.cycles, m.sleep_cycles, list(m.exception_log),
-            sorted(m.exception_counts.items()), host.take_received(), host.in_nak_cycle,
-            host.frame, transfers, board.loop_starts)
+    run = (m.instructions, m.cycles, m.sleep_cycles, list(m.exception_log),
+           sorted(m.exception_counts.items()), b"".join(s[1] for s in stamped), stamped,
+           host.frame, transfers, board.loop_starts)
+    return run, (m.counts()["python_events"] - before) / loops
 
 
 def test_usb_runs_are_deterministic_and_the_native_paths_agree_with_the_reference():
-    # The USB interrupt's NVIC writes (its IRQ masked and its priority set around the
-    # stack's critical sections) are native on the fast path, Python's on the reference.
-    first = _usb_flight(False, 40)
-    assert _usb_flight(True, 40) == first
+    # The USB interrupt's register accesses, its NVIC writes (its IRQ masked and its
+    # priority set around the stack's critical sections) and the host's NAKed bulk IN polls
+    # are native on the fast path, Python's on the reference.
+    first, python_events = _usb_flight(False, 40)
+    assert _usb_flight(False, 40)[0] == first
+    reference, reference_events = _usb_flight(True, 40)
+    assert reference == first
+    assert python_events < reference_events / 2, "the NAKed polls made natively"
     assert first[8][-1][0] == "SET_LINE_CODING" and len(first[5]) > 40 * 20

@@ -57,7 +57,10 @@ _INTR_UNDEF = 1
  _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
- GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE) = range(10)
+ GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE) = range(11)
+# What a native event asks Python to do (Core::PyCall): the USB host's pump; the check of a
+# bulk IN BD's write-back after the MPU changed.
+PY_CALL_USB_PUMP, PY_CALL_USB_WRITE_BACK = 1, 2
 # Block flags in the native table (Block::kMaskOp ...).
 _MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
 
@@ -193,6 +196,7 @@ class Machine:
         self._breakpoints = {}                         # address -> [callback]
         self._bp_hooks = {}
         self._py_events = {}                           # native event number -> Event
+        self.native_calls = {}                         # Core::PyCall -> its Python part
         self._reset_core_hz = core_hz
         self.reset_listeners = []           # called after the devices reset
         self.pre_reset_listeners = []       # called before
@@ -471,9 +475,7 @@ class Machine:
                 raise ChipReset(*self.core.take_reset())
             if not seq:
                 return
-            ev = self._py_events.pop(seq, None)
-            if ev is not None:
-                ev.fn()
+            self._python_event(seq)
 
     # ------------------------------------------------------------------ decoding -------
     def _decode(self, address: int, size: int):
@@ -563,9 +565,7 @@ class Machine:
             while True:
                 code = core.run(instr_limit)
                 if code == _RUN_PY_EVENT:
-                    ev = self._py_events.pop(core.py_event, None)
-                    if ev is not None:
-                        ev.fn()
+                    self._python_event(core.py_event)
                     continue
                 if code == _RUN_STOP:
                     self._bp_resume = self._stop.pc
@@ -585,6 +585,16 @@ class Machine:
             if limit is not None:
                 core.cancel(limit)
             core.time_up = False
+
+    def _python_event(self, seq: int):
+        """A Python event is due (its callback runs), or a native event needs its Python
+        part (``native_calls``)."""
+        ev = self._py_events.pop(seq, None)
+        if ev is not None:
+            ev.fn()
+        call = self.core.take_py_call()
+        if call:
+            self.native_calls[call]()
 
     def _run_error(self, code: int) -> EmulationError:
         """The error a run stopped with (native codes, deferred Python errors)."""

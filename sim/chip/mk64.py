@@ -73,6 +73,7 @@ class Mk64:
     def _on_reset(self):
         self._notes = []
         self.gates_changed()
+        self.usb0.mpu_changed()
         self.clock_history = []
         self.clock_violations = []
         self._tree = None
@@ -122,6 +123,7 @@ class Mk64:
         for text in check_tree(tree, self.sim):
             self.clock_violations.append(at + (f"{text} (after {cause})",))
         m.core.fixed_hz = self.fixed_hz()           # MCGFFCLK, for the FTMs
+        self.usb0.clocks_changed()
         m.set_clocks(tree.core, tree.bus)
 
     def gates_changed(self):
@@ -130,7 +132,7 @@ class Mk64:
         if not self.ready:
             return
         core = self.machine.core
-        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog, self.ftfe):
+        for dev in (self.uart0, self.i2c0, self.ftm0, self.ftm3, self.wdog, self.ftfe, self.usb0):
             core.set_clocked(dev.device, dev.clocked())
 
     @property

@@ -85,6 +85,57 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 }  // namespace
 
 void bind_mk64(py::module_& m) {
+    py::class_<Usb::Host>(m, "Mk64UsbHost",
+                          "The USB host's state its native bulk IN polls share with usb_host.py.")
+        .def_readwrite("frame", &Usb::Host::frame)
+        .def_readwrite("next_sof", &Usb::Host::next_sof)
+        .def_readwrite("sof_end", &Usb::Host::sof_end)
+        .def_readwrite("in_flight", &Usb::Host::in_flight)
+        .def_readwrite("waiting", &Usb::Host::waiting)
+        .def_readwrite("gate", &Usb::Host::gate)
+        .def_readwrite("address", &Usb::Host::address)
+        .def_readwrite("endpoint", &Usb::Host::endpoint)
+        .def_readwrite("nak_frame", &Usb::Host::nak_frame)
+        .def_readwrite("in_nak", &Usb::Host::in_nak)
+        .def_readwrite("in_nak_cycle", &Usb::Host::in_nak_cycle)
+        .def_readonly("job", &Usb::Host::job)
+        .def_readonly("flight_bd", &Usb::Host::flight_bd)
+        .def_readonly("flight_data", &Usb::Host::flight_data)
+        .def_readwrite("reading", &Usb::Host::reading)
+        .def_readwrite("toggle", &Usb::Host::toggle)
+        .def_readwrite("max_packet", &Usb::Host::max_packet)
+        .def_readwrite("silences", &Usb::Host::silences)
+        .def_readwrite("toggle_errors", &Usb::Host::toggle_errors)
+        .def("receive", [](Usb::Host& h, const py::bytes& data) {
+            h.received += static_cast<std::string>(data);
+        })
+        .def("take_received", [](Usb::Host& h) {
+            py::bytes out(h.received);
+            h.received.clear();
+            return out;
+        })
+        .def("new_job", [](Usb::Host& h) {
+            h.job = true;
+            ++h.generation;
+            h.nak_frame = -1;
+        })
+        .def("drop_job", [](Usb::Host& h) { h.job = false; });
+    py::class_<Usb>(m, "Mk64Usb", "USB0's registers and SIE state the native path keeps.")
+        .def_readwrite("native", &Usb::native)
+        .def_readwrite("frame", &Usb::frame)
+        .def_readwrite("in_reset", &Usb::in_reset)
+        .def_readwrite("clock_ok", &Usb::clock_ok)
+        .def_readwrite("dma_reads_ram", &Usb::dma_reads_ram)
+        .def_readwrite("dma_writes_ram", &Usb::dma_writes_ram)
+        .def_readonly("host", &Usb::host)
+        .def("reg", [](const Usb& u, uint32_t offset) { return u.v.at(offset); })
+        .def("set_reg", [](Usb& u, uint32_t offset, uint8_t value) { u.v.at(offset) = value; })
+        .def("reset_registers", &Usb::reset_registers)
+        .def("odd", [](const Usb& u, int ep, int tx) { return u.odd[ep & 15][tx & 1]; })
+        .def("set_odd", [](Usb& u, int ep, int tx, int value) {
+            u.odd[ep & 15][tx & 1] = static_cast<uint8_t>(value & 1);
+        })
+        .def("reset_odd", [](Usb& u) { for (auto& e : u.odd) e[0] = e[1] = 0; });
     py::class_<Core>(m, "Mk64Core",
                      "The emulated MK64FX512's hot path (sim/chip): block accounting, events, "
                      "NVIC, exceptions, WFI and the DWT/SysTick/UART0/I2C0/FTM0/FTM3/WDOG models.")
@@ -517,6 +568,33 @@ void bind_mk64(py::module_& m) {
             c.owned_slaves.push_back(std::move(s));
             return c.owned_slaves.size() - 1;
         }, py::arg("emu"), py::arg("address"), py::keep_alive<1, 2>())
+        // USB0 and its host's bulk IN polls (mk64_usb.cpp)
+        .def("usb_setup", [](Core& c, const py::dict& d) {
+            Usb& u = c.usb0;
+            u.L = layout(d);
+            u.irq = d["irq"].cast<int>();
+            u.sram_base = d["sram_base"].cast<uint32_t>();
+            u.sram_size = d["sram_size"].cast<uint32_t>();
+            u.setup();
+            u.reset(c);
+        })
+        .def_property_readonly("usb0", [](Core& c) -> Usb& { return c.usb0; },
+                               py::return_value_policy::reference_internal)
+        .def("usb_sof", [](Core& c, int frame) { c.usb0.sof(c, static_cast<uint16_t>(frame)); })
+        .def("usb_idle_watch", [](Core& c) { c.usb0.idle_watch(c); })
+        .def("usb_host_frame", [](Core& c) { c.usb0.host_frame(c); })
+        .def("usb_host_stop_frames", [](Core& c) {
+            if (c.usb0.host.frame_event) c.cancel(c.usb0.host.frame_event);
+            c.usb0.host.frame_event = 0;
+        })
+        .def("usb_pump_soon", [](Core& c) { c.usb0.pump_soon(c); })
+        .def("usb_tokens_free", [](Core& c) { c.usb0.tokens_free(c); })
+        .def("usb_end_data", [](Core& c) { return c.usb0.end_data(c) == Core::kNoCall; })
+        .def("take_py_call", [](Core& c) {
+            const int call = c.py_call_;
+            c.py_call_ = Core::kNoCall;
+            return call;
+        })
         .def("mpu_attach", [](Core& c, size_t k) { c.i2c0.slaves.push_back(c.owned_slaves.at(k).get()); })
         .def("mpu_set_present", [](Core& c, size_t k, bool p) { c.owned_slaves.at(k)->present = p; })
         .def("mpu_present", [](const Core& c, size_t k) { return c.owned_slaves.at(k)->present; })

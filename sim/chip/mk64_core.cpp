@@ -130,6 +130,8 @@ void Core::reset(double core_hz) {
     if (ftm3.ready) ftm3.reset();
     if (wdog.ready) wdog.reset();
     if (ftfe.ready) ftfe.reset(*this);
+    if (usb0.ready) usb0.reset(*this);
+    py_call_ = kNoCall;
 }
 
 void Core::add_block(Block b) {
@@ -300,6 +302,7 @@ uint64_t Core::advance(uint64_t target) {
         if (e.kind == Ev::Python) return e.seq;
         dispatch(e);
         if (reset_pending_) return 0;
+        if (py_call_) return e.seq;
     }
 }
 
@@ -323,6 +326,18 @@ void Core::dispatch(const HeapEntry& e) {
         case Ev::WdogTimeout: wdog.expired(*this); break;
         case Ev::WdogWindow: wdog.window(*this); break;
         case Ev::FtfeDone: ftfe.complete(*this); break;
+        case Ev::UsbFrame:
+            usb0.host_frame(*this);
+            if (!usb0.pump(*this)) py_call_ = kUsbPump;
+            break;
+        case Ev::UsbPump:
+            if (!usb0.pump(*this)) py_call_ = kUsbPump;
+            break;
+        case Ev::UsbFinish: py_call_ = usb0.finish(*this); break;
+        case Ev::UsbSleep:
+            usb0.sleep_event = 0;
+            usb0.flag(*this, usb0.SLEEP);
+            break;
         case Ev::Python: break;
     }
 }
@@ -549,6 +564,11 @@ int Core::run(uint64_t instr_limit) {
 // At a boundary: due events in order, then the exception the NVIC presents, if it preempts.
 int Core::service() {
     for (;;) {
+        if (py_call_) {             // a native event dispatched here or inline needs Python
+            ++counts.python_events;
+            py_event_ = 0;
+            return kPyEvent;
+        }
         const HeapEntry* h = head();
         if (!h || h->due > cycles_) break;
         const HeapEntry e = *h;
@@ -587,7 +607,7 @@ bool Core::continue_inline() {
         pop();
         live_.erase(e.seq);
         dispatch(e);
-        if (reset_pending_) return false;
+        if (reset_pending_ || py_call_) return false;
     }
     const int number = pending_exception();
     if (number >= 0 && preempts(number)) {
@@ -825,6 +845,7 @@ bool Core::dev_read(int dev, uint32_t address, unsigned size, uint64_t& out) {
         case kWdog: return wdog.read(*this, address, size, out);
         case kGpioIn: return gpio_in.read(address, size, out);
         case kFtfe: return ftfe.read(*this, address, size, out);
+        case kUsb0: return usb0.read(*this, address, size, out);
         default: return false;
     }
 }
@@ -839,6 +860,7 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kFtm3: return ftm3.write(*this, address, size, value);
         case kWdog: return wdog.write(*this, address, size, value);
         case kFtfe: return ftfe.write(*this, address, size, value);
+        case kUsb0: return usb0.write(*this, address, size, value);
         case kNvic: return nvic_write(address, size, value);
         default: return false;
     }

@@ -89,7 +89,7 @@ struct Block {
 
 enum class Ev : uint8_t {
     Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof,
-    WdogTimeout, WdogWindow, FtfeDone
+    WdogTimeout, WdogWindow, FtfeDone, UsbFrame, UsbPump, UsbFinish, UsbSleep
 };
 
 // Why run() returned.
@@ -426,12 +426,96 @@ struct GpioInputs {
     void set(uint32_t address, uint32_t value);
 };
 
+// USB0's registers, the SIE's answer to a bulk IN token, and the host's frames and bulk IN
+// transfers (sim/chip/usb.py and usb_host.py describe the models). Python keeps the rest of
+// both (the SIE's other tokens, control transfers, bulk OUT, attach, bus reset, the
+// enumeration) and is called (Core::py_call_) when the host has work a poll is not (a control
+// transfer or bulk OUT queued) or a poll's answer is not plainly a NAK or data from RAM.
+struct Usb {
+    Layout L;
+    bool ready = false;
+    int irq = 0;
+    // The native path: the hot register accesses and the host's NAKed bulk IN polls here.
+    // Off: Python makes them (the reference the native path is compared with).
+    bool native = true;
+    uint32_t oISTAT, oINTEN, oERRSTAT, oERREN, oSTAT, oCTL, oADDR, oBDTPAGE1, oBDTPAGE2,
+        oBDTPAGE3, oFRMNUML, oFRMNUMH, oENDPT0, oUSBCTRL, oOBSERVE, oCONTROL, oUSBTRC0, oPERID,
+        oIDCOMP, oREV, oADDINFO;
+    uint32_t TOKDNE, SOFTOK, SLEEP, CTL_SE0, CTL_JSTATE, CTL_USBENSOFEN, CTL_BUSY, DPPULLUP,
+        SUSP, PDE, DPPU, DPPD, DMPD, RESUME_INT, USBRESMEN, EPTXEN, EPSTALL, BDTBA;
+    std::vector<uint8_t> v;                // by register offset
+    uint8_t odd[16][2] = {};               // the ping-pong pointers, [endpoint][tx]
+    uint16_t frame = 0;                    // FRMNUM
+    bool in_reset = false;                 // the host holds SE0
+    bool clock_ok = false;                 // the SIM's USB clock is 48 MHz (Python says)
+    bool dma_reads_ram = false;            // the system MPU lets master 4 read all of SRAM
+    bool dma_writes_ram = false;           // ... and write all of it
+    uint32_t sram_base = 0, sram_size = 0;
+    uint64_t sleep_event = 0;
+    // The host (usb_host.py): what its bulk IN polling needs.
+    struct Host {
+        bool frames = false;               // a SOF every frame (the port is enabled)
+        uint64_t frame_event = 0, next_sof = 0, sof_end = 0;
+        uint16_t frame = 0;
+        bool in_flight = false, waiting = false;
+        // Python's last pump found nothing to do but the bulk IN poll, and nothing changed
+        // that since (Python closes it whenever it queues work).
+        bool gate = false;
+        uint8_t address = 0, endpoint = 0;
+        bool job = false;                  // a bulk IN job exists
+        uint64_t generation = 0, flight_generation = 0;
+        int64_t nak_frame = -1;
+        bool in_nak = true;
+        int64_t in_nak_cycle = -1;
+        bool reading = true, toggle = false;     // the DATA0/1 the next IN packet should carry
+        uint32_t max_packet = 64, silences = 0, toggle_errors = 0;
+        std::string received;              // bulk IN bytes, until taken
+        // the poll in flight made here: NAKed, or data (the BD's word and address, its data)
+        bool flight_data = false;
+        uint32_t flight_bd = 0, flight_word = 0, flight_ep = 0, flight_odd = 0;
+        std::string flight_bytes;
+    } host;
+
+    void setup();
+    void reset_registers();
+    void reset(Core& c);
+    bool attached(const Core& c) const;
+    uint32_t bdt_base() const;
+    bool enabled() const { return v[oCTL] & CTL_USBENSOFEN; }
+    bool suspended() const { return v[oUSBCTRL] & SUSP; }
+    void update_irq(Core& c);
+    void flag(Core& c, uint32_t bits) { v[oISTAT] |= bits; update_irq(c); }
+    void idle_watch(Core& c);
+    void bus_activity(Core& c);
+    void sof(Core& c, uint16_t number);
+    void host_frame(Core& c);
+    bool pump(Core& c);
+    enum Answer { kPython, kNak, kData };
+    Answer in_answer(Core& c, uint32_t& bd_at, uint32_t& word, uint32_t& buffer) const;
+    bool in_ram(uint32_t address, uint32_t n) const {
+        return address >= sram_base && uint64_t{address} + n <= uint64_t{sram_base} + sram_size;
+    }
+    void send_in(Core& c, uint32_t bd_at, uint32_t word, uint32_t buffer);
+    void complete_in(Core& c);
+    int finish(Core& c);
+    int end_data(Core& c);
+    void took_packet();
+    void pump_soon(Core& c);
+    void tokens_free(Core& c);
+    bool reg_offset(uint32_t address, unsigned size, uint32_t& o) const;
+    bool read(Core& c, uint32_t address, unsigned size, uint64_t& out);
+    bool write(Core& c, uint32_t address, unsigned size, uint64_t value);
+};
+
 class Core {
 public:
     enum Device : int {
         kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kFtfe,
-        kNvic, kDevices
+        kNvic, kUsb0, kDevices
     };
+    // What a native event asks of Python: the USB host's pump; the check of a bulk IN BD's
+    // write-back when the MPU changed while its packet was on the bus (then end_data).
+    enum PyCall : int { kNoCall = 0, kUsbPump = 1, kUsbWriteBack = 2 };
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
          std::vector<std::string> exception_names);
@@ -543,10 +627,12 @@ public:
     Ftm ftm0, ftm3;
     Wdog wdog;
     Ftfe ftfe;
+    Usb usb0;
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     GpioInputs gpio_in;
-    bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true, true};
+    bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true, true,
+                              false};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
     // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
     // watchdog's write log until taken (for tests and inspection); a long lockstep run turns
@@ -570,6 +656,7 @@ public:
     std::vector<uint64_t> exception_counts_;
     bool sleeping_ = false, fpu_watch_ = true, time_up_ = false;
     uint64_t py_event_ = 0;
+    int py_call_ = kNoCall;     // a native event needs Python (a Python event with no callback)
     int uc_error_ = 0;
     uint32_t intr_number_ = 0, intr_pc_ = 0, bkpt_pc_ = 0;
     FaultInfo fault_;

@@ -56,6 +56,7 @@ class SysMpu(RegisterDevice):
                 self.v[word] = self.v[alias]
             elif self.map[word].offset <= offset < self.map[word].offset + 4:
                 self.v[alias] = self.v[word]
+        self.chip.usb0.mpu_changed()
 
     def enabled(self) -> bool:
         return bool(self.v["CESR"] & self.map["CESR"].bit("VLD"))

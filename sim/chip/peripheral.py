@@ -57,6 +57,27 @@ class _RegisterMap(Device):
         """A register's stored value, without a read's side effects."""
         return self.v[name]
 
+    def layout(self) -> dict:
+        """The register map for the native model, from the SVD: the register each byte
+        belongs to (``reg_at``, by byte offset), each register's width in bytes and reset
+        value (by its offset), and every register's offset ("REG") and field's mask
+        ("REG.FIELD")."""
+        reg_at, width, reset, k = [-1] * self.size, [0] * self.size, [0] * self.size, {}
+        for reg in self.map.registers.values():
+            if reg.bits not in (8, 16, 32):
+                raise ValueError(f"{self.name}_{reg.name}: native models take 8-, 16- and "
+                                 "32-bit registers")
+            if reg.offset + reg.bits // 8 <= self.size:
+                for i in range(reg.bits // 8):
+                    reg_at[reg.offset + i] = reg.offset
+                width[reg.offset] = reg.bits // 8
+                reset[reg.offset] = reg.reset & ((1 << reg.bits) - 1)
+            k[reg.name] = reg.offset
+            for fld in reg.fields:
+                k[f"{reg.name}.{fld}"] = reg.field(fld).mask
+        return {"base": self.base, "span": self.size, "reg_at": reg_at, "width": width,
+                "reset": reset, "k": k}
+
     def _reg_for(self, offset, size, write):
         reg = self._at.get(offset)
         if reg is None:
@@ -165,27 +186,6 @@ class NativeRegisters(_RegisterMap):
         self._stored = stored
         self.v = _NativeValues(self)
         machine.core.add_route(device, self.base, self.base + self.size)
-
-    def layout(self) -> dict:
-        """The register map for the native model, from the SVD: the register each byte
-        belongs to (``reg_at``, by byte offset), each register's width in bytes and reset
-        value (by its offset), and every register's offset ("REG") and field's mask
-        ("REG.FIELD")."""
-        reg_at, width, reset, k = [-1] * self.size, [0] * self.size, [0] * self.size, {}
-        for reg in self.map.registers.values():
-            if reg.bits not in (8, 16, 32):
-                raise ValueError(f"{self.name}_{reg.name}: native models take 8-, 16- and "
-                                 "32-bit registers")
-            if reg.offset + reg.bits // 8 <= self.size:
-                for i in range(reg.bits // 8):
-                    reg_at[reg.offset + i] = reg.offset
-                width[reg.offset] = reg.bits // 8
-                reset[reg.offset] = reg.reset & ((1 << reg.bits) - 1)
-            k[reg.name] = reg.offset
-            for fld in reg.fields:
-                k[f"{reg.name}.{fld}"] = reg.field(fld).mask
-        return {"base": self.base, "span": self.size, "reg_at": reg_at, "width": width,
-                "reset": reset, "k": k}
 
     def read_register(self, name: str) -> int:
         """A register's value as the program would read it (side effects included)."""

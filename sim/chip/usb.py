@@ -37,12 +37,21 @@ in RAM, and the serial interface engine (SIE) answering the tokens of the host m
   suspended (USBCTRL.SUSP) and clocked at 48 MHz (the SIM's USB clock within the 0.25 % a
   full-speed device must hold). SOF: ISTAT.SOFTOK and FRMNUM. SLEEP: 3 ms of idle bus while
   enabled. With USBCTRL.SUSP and USBTRC0.USBRESMEN, bus activity sets USB_RESUME_INT.
+
+The registers, the ping-pong pointers, the frame number, the SOF and the idle timer live in the
+native core (``heliquad._simcore``, sim/chip/mk64_usb.cpp), which also takes the byte accesses
+the image's interrupt makes (all but CTL, CONTROL, USBCTRL and USBTRC0 writes) and answers
+the host's bulk IN polls whose answer is plain: a NAK, or the BD's data from RAM
+(``usb_host.py``); ``native = False`` leaves both to this class, the reference the native
+path is compared with. ``writes`` lists the writes this class took.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+from .image import SRAM_BASE, SRAM_SIZE
+from .machine import USB0_DEVICE
 from .mpu import USB_MASTER
 from .peripheral import RegisterDevice
 from .registers import irq, peripheral
@@ -95,6 +104,32 @@ class Token:
     commit: tuple | None = None     # (bd address, odd, write-back word, OUT data, buffer)
 
 
+def native_field(holder: str, name: str, doc: str) -> property:
+    """An attribute kept in a native object (the attribute ``holder`` names) as ``name``."""
+    return property(lambda self: getattr(getattr(self, holder), name),
+                    lambda self, value: setattr(getattr(self, holder), name, value), doc=doc)
+
+
+class _Store:
+    """``v``: the registers by name, kept in the native core."""
+
+    def __init__(self, device):
+        self._native, self._offset = device.native_state, \
+            {r.name: r.offset for r in device.map.registers.values()}
+
+    def __getitem__(self, name: str) -> int:
+        return self._native.reg(self._offset[name])
+
+    def __setitem__(self, name: str, value: int):
+        self._native.set_reg(self._offset[name], value & 0xFF)
+
+    def __contains__(self, name):
+        return name in self._offset
+
+    def keys(self):
+        return self._offset.keys()
+
+
 class Usb(RegisterDevice):
     READ_ONLY = ("PERID", "IDCOMP", "REV", "ADDINFO", "STAT", "FRMNUML", "FRMNUMH", "OBSERVE")
 
@@ -103,14 +138,44 @@ class Usb(RegisterDevice):
         self.irq = irq("USB0")
         self.listeners = []         # host models: attached(bool), tokens_free()
         self.notes = []             # (instruction count, text): misuse the model saw
+        self.device = USB0_DEVICE
+        self.native_state = machine.core.usb0
+        self._map(machine, "USB0", (chip.sim, "SCGC4", "USBOTG"), None, None)
+        machine.core.usb_setup(dict(self.layout(), irq=self.irq,
+                                    sram_base=SRAM_BASE, sram_size=SRAM_SIZE))
         super().__init__(machine, "USB0", gate=(chip.sim, "SCGC4", "USBOTG"))
+        machine.core.add_route(USB0_DEVICE, self.base, self.base + self.size)
 
     def reset(self):
-        super().reset()
-        self.odd = [[0, 0] for _ in range(ENDPOINTS)]      # [endpoint][tx]
+        self.v = _Store(self)
+        self.writes = []
+        self.native_state.reset_registers()
+        self.native_state.reset_odd()
         self.frame = 0
         self.in_reset = False           # the host holds SE0
-        self._sleep_event = None
+
+    native = native_field("native_state", "native", "the native path on (the default); False: "
+                          "this class makes every access and the host's pump every poll "
+                          "(the reference)")
+    frame = native_field("native_state", "frame", "FRMNUM: the last SOF's frame number")
+    in_reset = native_field("native_state", "in_reset", "the host holds SE0")
+
+    @property
+    def odd(self) -> list:
+        """The ping-pong pointers, [endpoint][tx] (a copy)."""
+        n = self.native_state
+        return [[n.odd(ep, 0), n.odd(ep, 1)] for ep in range(ENDPOINTS)]
+
+    def clocks_changed(self):
+        """The clock tree changed: the native path answers only at 48 MHz."""
+        self.native_state.clock_ok = self.clock_ok()
+
+    def mpu_changed(self):
+        """The system MPU changed: the native path moves data only where all of SRAM is
+        granted to the USB controller (reads; writes for the BD write-back)."""
+        n, mpu = self.native_state, self.chip.mpu
+        n.dma_reads_ram = mpu.master_may(USB_MASTER, SRAM_BASE, SRAM_SIZE, False)
+        n.dma_writes_ram = mpu.master_may(USB_MASTER, SRAM_BASE, SRAM_SIZE, True)
 
     # -- registers ------------------------------------------------------------------------
     def w_ISTAT(self, value, mask):
@@ -132,7 +197,7 @@ class Usb(RegisterDevice):
     def w_CTL(self, value, mask):
         self.v["CTL"] = value & ~(CTL_SE0 | CTL_JSTATE)
         if value & CTL_ODDRST:
-            self.odd = [[0, 0] for _ in range(ENDPOINTS)]
+            self.native_state.reset_odd()
         if value & CTL_HOSTMODEEN:
             self.note("CTL.HOSTMODEEN set: host mode is not modelled")
         self._idle_watch()
@@ -168,10 +233,9 @@ class Usb(RegisterDevice):
     def w_USBTRC0(self, value, mask):
         if value & USBTRC0_USBRESET:
             before = self.attached()
-            keep = self.listeners, self.notes
-            super().reset()             # the module's registers to their reset values
-            self.listeners, self.notes = keep
-            self.odd = [[0, 0] for _ in range(ENDPOINTS)]
+            self.native_state.reset_registers()     # the module's registers: reset values
+            self.writes = []
+            self.native_state.reset_odd()
             self._update_irq()
             self._attach_changed(before)
             return
@@ -235,15 +299,9 @@ class Usb(RegisterDevice):
         self._idle_watch()
 
     def _idle_watch(self):
-        if self._sleep_event is not None:
-            self._sleep_event.cancel()
-            self._sleep_event = None
-        if self.attached() and self.enabled() and not self.in_reset:
-            self._sleep_event = self.machine.after(IDLE_TO_SLEEP_S, self._idle)
-
-    def _idle(self):
-        self._sleep_event = None
-        self._flag("SLEEP")
+        """ISTAT.SLEEP IDLE_TO_SLEEP_S after now while attached, enabled and not in reset (the
+        timer is native)."""
+        self.machine.core.usb_idle_watch()
 
     # -- the bus (called by the host model) ---------------------------------------------------
     def bus_reset(self, active: bool):
@@ -255,10 +313,9 @@ class Usb(RegisterDevice):
             self._flag("USBRST")
 
     def sof(self, frame: int):
-        self.frame = frame & 0x7FF
-        self._bus_activity()
-        if self.attached() and self.enabled() and not self.suspended():
-            self._flag("SOFTOK")
+        """A SOF: FRMNUM, bus activity, ISTAT.SOFTOK while attached, enabled, awake (native:
+        the host's frames make it there)."""
+        self.machine.core.usb_sof(frame)
 
     def token(self, pid: int, address: int, endpoint: int, data: bytes = b"",
               data1: bool = False) -> Token:
@@ -290,7 +347,7 @@ class Usb(RegisterDevice):
             tok.handshake = STALL
             self._flag("STALL")
             return tok
-        odd = self.odd[ep][tx]
+        odd = self.native_state.odd(ep, int(tx))
         bd_at = self.bdt_base() | ep << 5 | int(tx) << 4 | odd << 3
         word, buffer = self._read_bd(bd_at)
         busy = self.v["CTL"] & CTL_TXSUSPENDTOKENBUSY
@@ -333,7 +390,7 @@ class Usb(RegisterDevice):
         if not word & BD_KEEP:
             back = (word & BD_DATA1) | tok.pid << 2 | n << BD_BC_SHIFT
             self._dma_write_word(bd_at, back)
-        self.odd[ep][tx] = odd ^ 1
+        self.native_state.set_odd(ep, int(tx), odd ^ 1)
         self.v["STAT"] = ep << 4 | int(tx) << 3 | odd << 2
         if tok.pid == PID_SETUP:
             self.v["CTL"] |= CTL_TXSUSPENDTOKENBUSY
@@ -342,6 +399,10 @@ class Usb(RegisterDevice):
     # -- DMA ------------------------------------------------------------------------------
     def _check(self, address: int, n: int, write: bool, what: str):
         self.chip.mpu.check_dma("USB0", USB_MASTER, address, n, write, what, flash_reads=True)
+
+    def check_write_back(self, bd_at: int):
+        """The DMA rule for a BD's write-back (a Fault if it is broken)."""
+        self._check(bd_at, 4, True, "a buffer descriptor")
 
     def _read_bd(self, bd_at: int) -> tuple:
         self._check(bd_at, BD_BYTES, False, "a buffer descriptor")

@@ -24,6 +24,14 @@ the emulator's clock. docs/teensy35-emulator.md lists what is and is not modelle
   again at once after a full packet; a reader that stops reading stops polling, so the
   device's IN endpoint backs up. :meth:`UsbHost.send` queues bytes for bulk OUT in packets of
   the endpoint's size. Bytes in wait in :meth:`UsbHost.take_received`.
+
+The frames (SOF, the next one's time) are native events, and while the host has nothing to do
+but poll the bulk IN endpoint (the gate its pump opens: no control transfer, no bulk OUT) the
+native core makes the polls whose answer is plain, a NAK or data from RAM
+(sim/chip/mk64_usb.cpp); a frame, a finished poll or a freed STAT calls :meth:`UsbHost._pump`
+here only when the gate is shut or a poll's answer is anything else. The state they share (the
+frame, the poll in flight, the last NAK, the bulk IN job's DATA0/1 and bytes) is the core's
+(``_link``, ``usb_host_native.py``).
 """
 
 from __future__ import annotations
@@ -34,8 +42,9 @@ import struct
 
 from ..base.errors import InputError
 from . import usb_descriptors as desc
-from .machine import EmulationError
+from .machine import PY_CALL_USB_PUMP, PY_CALL_USB_WRITE_BACK, EmulationError
 from .usb import ACK, NAK, PID_IN, PID_OUT, PID_SETUP, STALL
+from .usb_host_native import BulkIn, Job, NativeLink, Tx
 
 BIT_RATE_HZ = 12e6                  # full speed (USB 2.0, 7.1.11)
 FRAME_S = 1e-3
@@ -71,42 +80,29 @@ class ControlRecord:
     end_s: float = 0.0
 
 
-@dataclasses.dataclass
-class _Tx:
-    pid: int
-    endpoint: int
-    data: bytes = b""
-    data1: bool = False
-
-
-class _Job:
-    """A transfer in progress: its transactions come from ``gen``."""
-
-    def __init__(self, gen, deadline_s=None, record=None):
-        self.gen, self.deadline_s, self.record = gen, deadline_s, record
-        self.tx = next(gen)
-        self.nak_frame = -1
-        self.silences = 0
-
-
 def setup_packet(request_type, request, value, index, length) -> bytes:
     return struct.pack("<BBHHH", request_type, request, value, index, length)
 
 
-class UsbHost:
+class UsbHost(NativeLink):
     """The host on ``chip.usb0``'s bus. ``auto_enumerate``: enumerate at attach."""
 
     def __init__(self, chip, *, auto_enumerate: bool = True, debounce_s: float = DEBOUNCE_S,
                  open_port: bool = False):
         self.chip, self.usb, self.machine = chip, chip.usb0, chip.machine
+        self._link = self.machine.core.usb0.host
         self.auto_enumerate = auto_enumerate
         self.debounce_s = debounce_s
         self.open_port = open_port      # open the port (cdc_acm) once enumerated
         self.usb.listeners.append(self)
         self.machine.reset_listeners.append(self._forget)
+        self.machine.native_calls[PY_CALL_USB_PUMP] = self._pump
+        self.machine.native_calls[PY_CALL_USB_WRITE_BACK] = self._write_back
         self._forget()
 
     def _forget(self):
+        self._bulk_in = None
+        self._shut_gate()
         self.device_attached = False
         self.port_enabled = False
         self.address = 0
@@ -118,10 +114,11 @@ class UsbHost:
         self.device_bytes = self.config_bytes = b""
         self.strings = {}
         self.reading = True
-        self.in_nak = True          # the last bulk IN poll was NAKed: nothing was waiting
-        self.in_nak_cycle = -1      # when a bulk IN poll was last NAKed
+        self.in_nak = True
+        self.in_nak_cycle = -1
         self.toggle_errors = 0
-        self._received = bytearray()
+        self._link.take_received()
+        self._link.toggle = False
         self._to_send = bytearray()
         self._toggles = {}
         self._scripts = collections.deque()
@@ -129,7 +126,8 @@ class UsbHost:
         self._control = self._bulk_in = self._bulk_out = None
         self._in_flight = self._waiting_tokdne = self._debouncing = False
         self._next_sof = self._sof_end = 0
-        self._frame_event = self._timer = None
+        self._frames = False
+        self._timer = None
 
     # -- what the device does -------------------------------------------------------------
     def attached(self, now_attached: bool):
@@ -140,16 +138,12 @@ class UsbHost:
             self._debouncing = True
             self._timer = self.machine.after(self.debounce_s, self.enumerate)
 
-    def tokens_free(self):
-        if self._waiting_tokdne:
-            self._waiting_tokdne = False
-            self.machine.at(self.machine.now(), self._pump)
-
     def _detach(self):
-        for event in (self._frame_event, self._timer):
-            if event is not None:
-                event.cancel()
-        self._frame_event = self._timer = None
+        self._shut_gate()
+        self._stop_frames()
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer = None
         self.port_enabled = self.configured = self._debouncing = False
         if self._control is not None and self._control.record is not None:
             self._control.record.status = "detached"
@@ -195,11 +189,6 @@ class UsbHost:
         self._to_send += data
         self._pump_soon()
 
-    def take_received(self) -> bytes:
-        data = bytes(self._received)
-        self._received.clear()
-        return data
-
     def idle(self) -> bool:
         """Nothing queued: no enumeration waiting for its debounce, no script and no control
         transfer (bulk may go on)."""
@@ -225,6 +214,7 @@ class UsbHost:
 
     # -- scripts --------------------------------------------------------------------------
     def _queue(self, script):
+        self._shut_gate()
         self._scripts.append(script)
         if self._script is None:
             self._next_script()
@@ -302,17 +292,16 @@ class UsbHost:
                     self.strings[i] = desc.parse_string(s.received)
         value = desc.parse_configuration(self.config_bytes).value
         yield from self._request("SET_CONFIGURATION", 0x00, 9, value, 0, b"")
-        self._toggles.clear()
+        self._clear_toggles()
         self.configured = True
         self._pump_soon()
 
     # -- bus reset and frames -------------------------------------------------------------
     def _start_reset(self):
-        if self._frame_event is not None:
-            self._frame_event.cancel()
-            self._frame_event = None
+        self._shut_gate()
+        self._stop_frames()
         self.port_enabled, self.address, self.ep0_packet = False, 0, FIRST_EP0_PACKET
-        self._toggles.clear()
+        self._clear_toggles()
         self._bulk_in = self._bulk_out = None
         self.usb.bus_reset(True)
         self._timer = self.machine.after(RESET_S, self._end_reset)
@@ -323,56 +312,48 @@ class UsbHost:
         self._frame()
         self._timer = self.machine.after(RESET_RECOVERY_S, lambda: self._step(None))
 
-    def _frame(self):
-        now = self.machine.now()
-        self._frame_event = self.machine.at(self.machine.cycles_after(FRAME_S, now), self._frame)
-        self.frame = (self.frame + 1) & 0x7FF
-        self.usb.sof(self.frame)
-        self._next_sof = self._frame_event.due
-        self._sof_end = self.machine.cycles_after(TOKEN_BITS / BIT_RATE_HZ, now)
-        self._pump()
-
     # -- transactions ---------------------------------------------------------------------
     def _start_control(self, record, data_or_length):
         record.start_s = self.machine.seconds()
-        self._control = _Job(self._control_stages(record, data_or_length),
+        self._control = Job(self._control_stages(record, data_or_length),
                              record.start_s + CONTROL_TIMEOUT_S, record)
         self.transfers.append(record)
         self._pump_soon()
 
     def _control_stages(self, record, data_or_length):
-        yield _Tx(PID_SETUP, 0, record.setup, False)
+        yield Tx(PID_SETUP, 0, record.setup, False)
         toggle = True
         if record.setup[0] & 0x80:
             length = data_or_length
             while len(record.received) < length:
-                got = yield _Tx(PID_IN, 0, b"", toggle)
+                got = yield Tx(PID_IN, 0, b"", toggle)
                 record.received += got
                 toggle = not toggle
                 if len(got) < self.ep0_packet:
                     break
             record.received = record.received[:length]
-            yield _Tx(PID_OUT, 0, b"", True)
+            yield Tx(PID_OUT, 0, b"", True)
             return
         data = data_or_length
         for at in range(0, len(data), self.ep0_packet):
-            yield _Tx(PID_OUT, 0, data[at:at + self.ep0_packet], toggle)
+            yield Tx(PID_OUT, 0, data[at:at + self.ep0_packet], toggle)
             record.sent += data[at:at + self.ep0_packet]
             toggle = not toggle
-        yield _Tx(PID_IN, 0, b"", True)
-
-    def _pump_soon(self):
-        self.machine.at(self.machine.now(), self._pump)
+        yield Tx(PID_IN, 0, b"", True)
 
     def _jobs(self):
         if self.configured and self.port_enabled:
             if self._bulk_out is None and self._to_send:
-                self._bulk_out = _Job(self._bulk_out_packets())
+                self._bulk_out = Job(self._bulk_out_packets())
             if self._bulk_in is None and self.reading:
-                self._bulk_in = _Job(self._bulk_in_packets())
+                self._bulk_in = BulkIn(self._bulk_in_packets(), self._link)
         return [j for j in (self._control, self._bulk_out, self._bulk_in) if j is not None]
 
     def _pump(self):
+        self._pump_once()
+        self._update_gate()
+
+    def _pump_once(self):
         if self._in_flight or not self.port_enabled:
             return
         if self.usb.token_busy():
@@ -382,7 +363,7 @@ class UsbHost:
         for job in self._jobs():
             if job.deadline_s is not None and self.machine.seconds(now) > job.deadline_s:
                 self._done(job, "timeout")
-                return self._pump()
+                return self._pump_once()
             if job.nak_frame == self.frame:
                 continue
             if job is self._bulk_in and not self.reading:
@@ -443,6 +424,7 @@ class UsbHost:
             self._done(job, "ok")
 
     def _done(self, job, status):
+        self._shut_gate()
         if job is self._control:
             self._control = None
             job.record.status = status
@@ -464,12 +446,14 @@ class UsbHost:
         raise UsbError(f"USB host: the configuration has no bulk {direction} endpoint")
 
     def _bulk_in_packets(self):
-        ep = self._bulk_endpoint("in")
-        toggle = self._toggles.get(ep.address, False)
+        """The bulk IN job's steps (the core takes the same steps for the packets it polls:
+        mk64_usb.cpp's took_packet); its DATA0/1 and the bytes are the core's."""
+        ep, link = self._bulk_endpoint("in"), self._link
+        link.max_packet = ep.max_packet
         while True:
-            got = yield _Tx(PID_IN, ep.address, b"", toggle)
-            self._received += got
-            toggle = self._toggles[ep.address] = not toggle
+            got = yield Tx(PID_IN, ep.address, b"", link.toggle)
+            link.receive(got)
+            link.toggle = not link.toggle
             if len(got) < ep.max_packet:
                 self._bulk_in.nak_frame = self.frame     # a short packet: next frame
             if not self.reading:
@@ -479,7 +463,7 @@ class UsbHost:
         ep = self._bulk_endpoint("out")
         while self._to_send:
             toggle = self._toggles.get(ep.address, False)
-            yield _Tx(PID_OUT, ep.address, bytes(self._to_send[:ep.max_packet]), toggle)
+            yield Tx(PID_OUT, ep.address, bytes(self._to_send[:ep.max_packet]), toggle)
             del self._to_send[:ep.max_packet]
             self._toggles[ep.address] = not toggle
 
