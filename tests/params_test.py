@@ -433,9 +433,9 @@ def test_the_firmware_flies_with_a_new_rate_gain_as_the_gain_predicts(client):
 # --- the boot report ------------------------------------------------------------------------
 
 #: Every finding of the boot report begins so (what start-up found, not what holds now); the
-#: report: the reset, the parameter store, the IMU, one a loop.
+#: report: the reset, the parameter store, the IMU, the SD card, one a loop.
 BOOT = "boot: "
-FINDINGS = 3
+FINDINGS = 4
 LATE_S = 30.0                       # a ground station that connects this long after boot
 LOOPS_A_SECOND = round(1e6 / DT_US)  # the most often a report starts: once a second
 
@@ -449,6 +449,7 @@ def _boot_report(c, frames=20):
     report = [c.until(_is_finding, frames) for _ in range(FINDINGS)]
     assert report[0].text.startswith("boot: reset by ")
     assert report[2].text.startswith("boot: IMU: ")
+    assert report[3].text.startswith("boot: SD: ")
     return report
 
 
@@ -471,13 +472,16 @@ def _connect_late(c):
 def test_a_station_that_connects_late_gets_the_boot_report_once_and_so_does_a_new_one(firmware):
     with start(firmware) as fw:
         c = Client(fw)
-        reset, store, imu = report = _connect_late(c)
+        reset, store, imu, card = report = _connect_late(c)
         assert reset.text == "boot: reset by power-on"
         # The host build without --params keeps nothing; the board's flash is blank.
         assert store.text == {"host": "boot: params: no storage; defaults",
                               "teensy35": "boot: params: none stored; defaults"}[firmware]
         assert imu.text.startswith("boot: IMU: MPU6050 found; ")
-        assert {m.severity for m in report} == {MAV.MAV_SEVERITY_INFO}
+        # Neither the host build nor the emulated board has a card unless given one: said as
+        # a notice (logging is no flight safety item), the rest as information.
+        assert card.text == "boot: SD: no card; no on-board log"
+        assert [m.severity for m in report] == [MAV.MAV_SEVERITY_INFO] * 3 + [MAV.MAV_SEVERITY_NOTICE]
         for _ in range(5):                             # the same station again: no repeat
             c.heartbeat()
             c.step(20)
@@ -545,7 +549,7 @@ def test_the_boot_report_names_a_bad_store_as_a_warning(tmp_path, store, text):
     the words a set of that value gets."""
     with start("host", params_file=str(store(tmp_path))) as fw:
         c = Client(fw)
-        _, found, _ = _connect_late(c)
+        _, found, _, _ = _connect_late(c)
         c.close()
     assert found.text == text
     assert found.severity == MAV.MAV_SEVERITY_WARNING

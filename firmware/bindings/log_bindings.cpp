@@ -104,6 +104,7 @@ struct LoggedFirmware {
         handler = std::make_unique<SimLinkHandler>(*fc, *link, clock, chip, motors,
                                                    link_cfg.system_id, link_cfg.component_id);
         fc->init();
+        fc->set_card_state(sink.state());     // as the targets do once their card has started
         link->send_notices(fc->status());
     }
 };

@@ -41,7 +41,21 @@ const char* dmp_failure_text(DmpStep step) {
 Notice boot_finding(const BootReport& report, int i) {
     if (i == 0) return reset_notice(report.reset);
     if (i == 1) return params_notice(report.params, report.param_index, report.param_result);
-    return imu_notice(report.imu, report.dmp_step);
+    if (i == 2) return imu_notice(report.imu, report.dmp_step);
+    return card_notice(report.card);
+}
+
+// Logging is no flight safety item: a card that cannot log is a warning, never more.
+Notice card_notice(CardState s) {
+    switch (s) {
+        case CardState::Ok: return {MAV_SEVERITY_INFO, "SD: card ok; logging each arming"};
+        case CardState::NoCard: return {MAV_SEVERITY_NOTICE, "SD: no card; no on-board log"};
+        case CardState::WriteProtected:
+            return {MAV_SEVERITY_WARNING, "SD: card write-protected; no log"};
+        case CardState::Full: return {MAV_SEVERITY_WARNING, "SD: card full; no log"};
+        case CardState::Failed: break;
+    }
+    return {MAV_SEVERITY_WARNING, "SD: card failed; no log"};
 }
 
 Notice params_notice(ParamsFinding f, int param_index, SetResult param_result) {

@@ -79,6 +79,10 @@ void FlightController::step(const RcInput& rc, LoopInbox& inbox) {
     status_.state.dt_s = dt;
     status_.notice_count = 0;
     status_.excitation_ended = false;
+    if (logger_.counters().card != card_said_) {     // logging stopped, or came back
+        card_said_ = logger_.counters().card;
+        notice(card_notice(card_said_));
+    }
     rc_ = rc;
     SupervisorInputs in;
     in.now_us = now;
@@ -135,6 +139,14 @@ void FlightController::publish(uint64_t now_us) {
     s.rc = rc_;
     s.rc_timeout_us = sup.limits().rc_timeout_us;
     s.params = params_.values();
+    const LogCounters& log = logger_.counters();
+    s.log = LogStatus{log.card, log.records, log.dropped, log.bytes_written};
+}
+
+void FlightController::set_card_state(CardState s) {
+    status_.boot.card = s;
+    status_.log.card = s;
+    logger_.set_card(s);
 }
 
 void FlightController::notice(uint8_t severity, const char* text, int param_index) {

@@ -75,6 +75,10 @@ public:
     // The DataFlash log (log/logger.hpp): the step queues its records; the spare-time service
     // (never the step) drains them into `sink`.
     void log_service(LogSink& sink) { logger_.service(sink, params_); }
+    // The SD card's state at start-up (after init(), before the first step): the boot
+    // report's finding; a card that cannot log is said in the first step, and every later
+    // change of the card's state once, in the step after the spare-time service saw it.
+    void set_card_state(CardState s);
     const Logger& logger() const { return logger_; }
     Logger& logger() { return logger_; }     // for the links' own STATUSTEXTs (GcsLinkConfig::log)
 
@@ -122,6 +126,7 @@ private:
     uint64_t last_us_ = 0;
     uint32_t loops_ = 0;
     uint32_t dt_clamped_ = 0;
+    CardState card_said_ = CardState::Ok;      // the card's state the last notice said
     InitResult imu_init_ = InitResult::NoDevice;
     bool params_dirty_ = false;              // changed since the last save
     uint64_t params_changed_us_ = 0;

@@ -10,6 +10,7 @@
 
 #include "../hal/reset_cause.hpp"
 #include "excitation.hpp"
+#include "log/log_sink.hpp"
 #include "mixer.hpp"
 #include "mpu6050.hpp"
 #include "params.hpp"
@@ -141,6 +142,16 @@ struct BootReport {
     SetResult param_result = SetResult::Range;     // why param_index's value was refused
     ImuFinding imu = ImuFinding::Missing;
     DmpStep dmp_step = DmpStep::None;
+    CardState card = CardState::NoCard;      // the SD card at start-up (set_card_state())
+};
+
+// The on-board log as HQ_FW_STATUS reports it: the card's state now and the logger's counts
+// since boot (core/log/logger.hpp).
+struct LogStatus {
+    CardState card = CardState::NoCard;
+    uint32_t records = 0;        // records queued in the RAM ring
+    uint32_t dropped = 0;        // records dropped: the ring was full (a slow or busy card)
+    uint32_t bytes = 0;          // bytes the card took
 };
 
 // What the loop publishes: after init(), and after every step.
@@ -176,6 +187,7 @@ struct LoopStatus {
     uint8_t notice_count = 0;
     uint8_t notices_before_telemetry = 0;
     BootReport boot{};                     // what start-up found (init())
+    LogStatus log{};                       // the on-board log and its card
     // A Bootloader request was accepted (disarmed): the target enters its bootloader once
     // this loop's messages are out. Never set while armed.
     bool bootloader = false;

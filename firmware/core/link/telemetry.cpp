@@ -115,6 +115,13 @@ void GcsLink::send_heartbeat(const LoopStatus& st) {
     send(msg);
 }
 
+static_assert(static_cast<int>(CardState::Ok) == HQ_CARD_OK &&
+                  static_cast<int>(CardState::NoCard) == HQ_CARD_NO_CARD &&
+                  static_cast<int>(CardState::WriteProtected) == HQ_CARD_WRITE_PROTECTED &&
+                  static_cast<int>(CardState::Full) == HQ_CARD_FULL &&
+                  static_cast<int>(CardState::Failed) == HQ_CARD_FAILED,
+              "HQ_CARD_STATE is CardState's numbering");
+
 void GcsLink::send_fw_status(const LoopStatus& st, uint64_t now_us) {
     const Mpu6050Counters& c = st.imu;
     const SupervisorCounters& f = st.supervisor;
@@ -141,7 +148,8 @@ void GcsLink::send_fw_status(const LoopStatus& st, uint64_t now_us) {
         static_cast<uint8_t>(st.last_reason), f.rc_failsafes, f.host_failsafes, f.imu_stale,
         f.imu_resets, f.imu_reinits, f.arm_refused, f.exc_refused, f.exc_stopped,
         last_load_.median, last_load_.max, last_load_.overruns, config_.link_id, link_bytes,
-        link_dropped);
+        link_dropped, static_cast<uint8_t>(st.log.card), st.log.records, st.log.dropped,
+        st.log.bytes);
     send(msg);
 }
 

@@ -251,6 +251,7 @@ void Logger::service(LogSink& sink, const Params& params) {
     } else {
         ring_.consume(ring_.used());    // nothing is logged between logs
     }
+    counters_.card = sink.state();
 }
 
 }  // namespace hq

@@ -19,9 +19,10 @@
 //   the disarm's record, it ends the log. An arming before the previous log has ended
 //   continues that log.
 //
-// Why 4 KiB: the image has about 5 KiB of RAM for the whole logger and FatFs keeps about
-// 600 B (its sector window and one file); 4 KiB holds about 33 loops of samples (123 B a
-// loop), 0.17 s at 200 Hz, beyond which a busy card costs dropped records, never a late loop.
+// Why 2 KiB: the image keeps its static RAM within 24 KiB, and with the USB stack, both
+// links, the card's driver and FatFs (its sector window and one file) that leaves the ring
+// 2 KiB: about 16 loops of samples (123 B a loop), 83 ms at 200 Hz, beyond which a busy card
+// costs dropped records (counted, and a gap record), never a late loop.
 // The header (about 4 KiB) is never queued: the service writes it from the tables.
 #pragma once
 
@@ -45,11 +46,12 @@ struct LogCounters {
     uint32_t dropped = 0;        // records dropped: the ring was full
     uint32_t bytes_written = 0;  // bytes the sink took (header and ring)
     uint32_t logs = 0;           // logs begun
+    CardState card = CardState::NoCard;   // the sink's state when it was last served
 };
 
 class Logger {
 public:
-    static constexpr uint32_t kRingBytes = 4096;
+    static constexpr uint32_t kRingBytes = 2048;
 
     // Step side. After the step's work: the arming state, notices, mode, experiment and
     // sample of `st`; `exc` is the Supervisor's excitation (SIDS, SIDD's time and frequency).
@@ -63,6 +65,8 @@ public:
     // Service side: opens, fills and ends logs in `sink`; `params` gives the header's PARM.
     void service(LogSink& sink, const Params& params);
 
+    // The card's state at start-up, before the first service() (which then keeps it).
+    void set_card(CardState s) { counters_.card = s; }
     const LogCounters& counters() const { return counters_; }
     bool logging() const { return armed_; }
     uint32_t queued_bytes() const { return ring_.used(); }

@@ -231,8 +231,9 @@ private:
 };
 
 // Makes the card image when it does not exist, mounts it, prints its state, then sets the
-// faults asked for (in force from the first frame on). A bad file or fault is refused (exit 2).
-void start_card(const Options& opt, hq::FileBlockDevice& card, hq::SpareTime& spare) {
+// faults asked for (in force from the first frame on); the card's state. A bad file or fault
+// is refused (exit 2).
+hq::CardState start_card(const Options& opt, hq::FileBlockDevice& card, hq::SpareTime& spare) {
     struct stat st {};
     if (::stat(opt.sd_image.c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {
         usage(("--sd-image " + opt.sd_image + ": is a folder, not a card image").c_str());
@@ -261,6 +262,7 @@ void start_card(const Options& opt, hq::FileBlockDevice& card, hq::SpareTime& sp
     const hq::CardState state = spare.start();
     card.set_faults(faults);
     std::printf("card: %s\n", hq::card_state_name(state));
+    return state;
 }
 
 }  // namespace
@@ -332,9 +334,8 @@ int main(int argc, char** argv) {
     hq::LogProtocolTask protocol_task(log_transfer);
     spare.add(logger_task);
     spare.add(protocol_task);
-    if (!opt.sd_image.empty()) {
-        start_card(opt, card, spare);
-    }
+    // The card's state for the boot report (and said in the first step when it cannot log).
+    fc.set_card_state(opt.sd_image.empty() ? hq::CardState::NoCard : start_card(opt, card, spare));
     std::printf("ready\n");
     std::fflush(stdout);
 

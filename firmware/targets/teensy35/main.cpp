@@ -5,16 +5,19 @@
 // RC capture; the I2C bus; the USB port (usb/usb_serial.hpp), attached now so that the
 // start-up's waits answer a host enumerating it; the FlightController (its parameters in the
 // top two flash sectors, param_storage.hpp) and its IMU start-up (MPU6050 reset,
-// configuration and, with an image built in, the DMP upload); the SD card's identification
-// (block_device.hpp; its finding and size go to hq_sd_probe, below); UART0 at the baud rate the
+// configuration and, with an image built in, the DMP upload); UART0 at the baud rate the
 // parameters give (SER_TEL1_BAUD); the two MAVLink links (GcsLink, core/link/), one on the
-// USB port and one on UART0, sharing the loop's inbox; the 200 Hz loop timer; the watchdog
-// (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC input, the USB stack's
-// work, take both links' requests, run one FlightController step, send each link's answers
-// and telemetry, hand the USB transmit buffer to the controller, record the cycles all that
-// took (HQ_FW_STATUS reports their median and maximum each second, and the overruns), update
-// the LED, sleep until the next tick (servicing the USB stack whenever an interrupt wakes
-// the core). After each step the loop's state goes to hq_loop_report (below). A host that
+// USB port and one on UART0, sharing the loop's inbox and the log protocol; the SD card
+// (block_device.hpp: its identification, its finding and size in hq_sd_probe, below) and
+// its FAT file system (core/log/log_files.hpp), whose state the boot report names; the 200 Hz
+// loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC
+// input, the USB stack's work, take both links' requests, run one FlightController step, send
+// each link's answers and telemetry, hand the USB transmit buffer to the controller, record
+// the cycles all that took (HQ_FW_STATUS reports their median and maximum each second, and
+// the overruns), update the LED; then the spare time's work on the card (the on-board log's
+// ring drained into its file, the log protocol's answers: core/log/spare_tasks.hpp), during
+// which a tick that comes while the card is busy runs its step at once (StepWhenDue); then
+// sleep until the next tick (servicing the USB stack whenever an interrupt wakes the core). After each step the loop's state goes to hq_loop_report (below). A host that
 // sets 134 baud on the USB port asks for the bootloader: the loop refuses it while armed and
 // otherwise, once its messages are out, stops the motors and enters the bootloader
 // (bootloader.hpp).
@@ -23,11 +26,13 @@
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
 #include "../../core/log/card_disk.hpp"
+#include "../../core/log/spare_tasks.hpp"
 #include "../../hal/reset_cause.hpp"
 #include "../dmp_image.hpp"
 #include "block_device.hpp"
 #include "bootloader.hpp"
 #include "clock.hpp"
+#include "forever.hpp"
 #include "i2c.hpp"
 #include "led.hpp"
 #include "loop_timer.hpp"
@@ -172,9 +177,7 @@ void Loop::step() {
 
 // The card's wait hook (core/log/card_disk.hpp, docs/sd-card.md): while FatFs waits for a
 // busy card, the USB stack is served and the loop's step runs as soon as its tick has come,
-// so the card never makes the loop late. It is the hook of the SD card's file layer once
-// the image has a card (the SDHC driver, targets/teensy35/block_device.hpp); the image has
-// none yet, so nothing waits on a card.
+// so the card never makes the loop late.
 class StepWhenDue final : public hq::CardWait {
 public:
     explicit StepWhenDue(Loop& loop) : loop_(loop) {}
@@ -224,12 +227,6 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     hq::use_built_in_dmp(cfg.imu);       // the DMP firmware if the build has one, else raw
     static hq::FlightController fc(cfg, i2c, clock, motors);
     const hq::InitResult init = fc.init();      // the USB host is answered meanwhile
-    static SdhcCard card(clock);
-    const hq::BlockStatus sd_status = card.start();
-    hq_sd_probe.blocks = card.block_count();
-    hq_sd_probe.finding = static_cast<uint8_t>(card.finding());
-    hq_sd_probe.write_protected = card.write_protected() ? 1 : 0;
-    hq_sd_probe.status = static_cast<uint8_t>(sd_status);
     // UART0 at the stored rate, fixed until the next start-up (a set says "restart to apply").
     const uint32_t baud = fc.params().values().tel1_baud;
     static Uart0Serial telemetry;
@@ -241,15 +238,38 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static hq::GcsLink uart_link(uart_cfg, telemetry, inbox);
     usb_link.pair_with(uart_link);
     uart_link.pair_with(usb_link);
+    static hq::LogTransfer log_transfer;          // the log protocol, one for both links
+    usb_link.serve_logs(log_transfer);
+    uart_link.serve_logs(log_transfer);
+    static LoopTimer timer;
+    static Loop loop{clock, motors, rc, fc, inbox, usb_link, uart_link, timer, init};
+
+    // The SD card and its file system, owned by the spare-time service: the logger's and the
+    // log protocol's work on it runs after each step, never inside one.
+    static SdhcCard card(clock);
+    static StepWhenDue card_wait(loop);
+    static Forever<hq::LogFiles> files(card, clock, &card_wait);   // never destroyed
+    static hq::SpareTime spare(files.get());
+    static hq::LoggerTask logger_task(fc);
+    static hq::LogProtocolTask protocol_task(log_transfer);
+    spare.add(logger_task);
+    spare.add(protocol_task);
+    fc.set_card_state(spare.start());        // the card's identification and FAT mount
+    hq_sd_probe.blocks = card.block_count();
+    hq_sd_probe.finding = static_cast<uint8_t>(card.finding());
+    hq_sd_probe.write_protected = card.write_protected() ? 1 : 0;
+    hq_sd_probe.status = static_cast<uint8_t>(
+        card.finding() == SdhcCard::Finding::Ready    ? hq::BlockStatus::Ok
+        : card.finding() == SdhcCard::Finding::NoCard ? hq::BlockStatus::NoCard
+                                                      : hq::BlockStatus::Failed);
     usb_link.send_notices(fc.status());
     uart_link.send_notices(fc.status());
 
-    static LoopTimer timer;
     if (!timer.start(kLoopHz)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     Watchdog::start(Watchdog::kTimeoutMs);
-    Loop loop{clock, motors, rc, fc, inbox, usb_link, uart_link, timer, init};   // lives as long as the loop
     for (;;) {
         timer.wait(service_usb);
         loop.step();
+        spare.run();                         // the loop's spare time: the card's turn
     }
 }
