@@ -12,6 +12,13 @@ namespace {
 // dt outside [kDtMin, kDtMax] x nominal is clamped (a late or early loop must not make the
 // derivative or integral jump).
 constexpr float kDtMin = 0.25f, kDtMax = 4.0f;
+// Within kDtJitter x nominal of the loop's period, the interval between two steps is the
+// period itself: on the board a tick's step starts a few microseconds late when another
+// interrupt (USB, UART, RC capture) is being served as the tick comes, and that latency is
+// no change of the loop's period; the control law then does not depend on which interrupt
+// delayed which tick (nor on the microsecond rounding of a period that is no whole number of
+// them). A missed tick (twice the period) is taken as measured.
+constexpr float kDtJitter = 0.05f;
 
 float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
@@ -68,6 +75,7 @@ float FlightController::clamp_dt(uint64_t now_us) {
     }
     const float dt = static_cast<float>(now_us - last_us_) * 1e-6f;
     last_us_ = now_us;
+    if (std::fabs(dt - nominal) <= kDtJitter * nominal) return nominal;
     const float clamped = clampf(dt, kDtMin * nominal, kDtMax * nominal);
     if (clamped != dt) ++dt_clamped_;
     return clamped;

@@ -37,12 +37,15 @@ bool LoopTimer::ticking() { return g_ticking; }
 uint32_t LoopTimer::wait(void (*idle)()) {
     // With interrupts masked, WFI still wakes on a pending interrupt; unmasking then lets the
     // handler run. A tick between the check and the WFI therefore cannot be slept through.
+    // The idle work runs only while no tick has come: the one that woke the core with the
+    // tick starts the loop at once (its work waits for the loop's own turn at it), so the
+    // loop's time does not depend on what else woke it.
     irq_disable();
     while (g_ticks == seen_) {
         wfi();
         irq_enable();
         isb();
-        if (idle != nullptr) idle();
+        if (idle != nullptr && g_ticks == seen_) idle();
         irq_disable();
     }
     const uint32_t now = g_ticks;

@@ -15,7 +15,8 @@ public:
     bool start(uint32_t rate_hz);
     // Sleeps until the next tick; returns the ticks missed since the previous wait(). `idle`,
     // if given, runs after every wake-up before the tick (interrupts enabled): work an
-    // interrupt queued that should not wait for the next loop (the USB stack's).
+    // interrupt queued that should not wait for the next loop (the USB stack's); not after
+    // the wake-up the tick itself brings, so the loop starts on its tick.
     uint32_t wait(void (*idle)() = nullptr);
     // Without sleeping: true when a tick has come since the last wait() or take_tick(), which
     // it then takes (missed ticks counted as in wait()). The card's wait hook runs the loop's

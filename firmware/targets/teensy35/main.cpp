@@ -11,8 +11,8 @@
 // (block_device.hpp: its identification, its finding and size in hq_sd_probe, below) and
 // its FAT file system (core/log/log_files.hpp), whose state the boot report names; the 200 Hz
 // loop timer; the watchdog (watchdog.hpp). Then, every tick: refresh the watchdog, read the RC
-// input, the USB stack's work, take both links' requests, run one FlightController step, send
-// each link's answers and telemetry, hand the USB transmit buffer to the controller, record
+// input, take both links' requests, run one FlightController step, send each link's answers
+// and telemetry, the USB stack's work, hand the USB transmit buffer to the controller, record
 // the cycles all that took (HQ_FW_STATUS reports their median and maximum each second, and
 // the overruns), update the LED; then the spare time's work on the card (the on-board log's
 // ring drained into its file, the log protocol's answers: core/log/spare_tasks.hpp), during
@@ -149,7 +149,6 @@ void Loop::step() {
     using namespace hq::teensy;
     Watchdog::refresh();
     const uint32_t c0 = cycles32();
-    usb.task();
     inbox.clear();
     if (usb.take_bootloader_request()) ask_bootloader(inbox);   // first: there is room
     usb_link.receive();
@@ -157,6 +156,9 @@ void Loop::step() {
     fc.step(rc.read(), inbox);
     usb_link.transmit(fc.status());
     uart_link.transmit(fc.status());
+    // The USB stack's work after the step, not before it: the step's time is its tick's,
+    // whatever the host did meanwhile (what arrived is read by the next step).
+    usb.task();
     usb.flush();
 #ifdef HQ_TEST_LOOP_DELAY_US
     clock.delay_us(HQ_TEST_LOOP_DELAY_US);   // a test build's deliberately slow loop
