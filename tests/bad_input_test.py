@@ -693,6 +693,11 @@ CASES = [
     case(f"{SIL} --sd-faults write_protected --out o", "--sd-faults needs --sd-image"),
     case("sweep --axis roll --port /dev/null --sd-image c.img --out s", "need --sil"),
     case("sweep --axis roll --port /dev/null --sd-faults no_card --out s", "need --sil"),
+    case("sweep --sil --axis roll --firmware teensy35 --sd-image c.img --sd-faults no_card "
+         "--out s", "only the host firmware"),
+    case("sweep --sil --axis roll --sd-faults no_card --out s", "--sd-faults needs --sd-image"),
+    case("board --telemetry t --sd-image c.img --sd-faults busy_for_us=18446744073709551616",
+         "at most 18446744073709551615"),
     case("board --telemetry adir --duration-s 1", "exists"),
     # validate: damaged MODELS.json (JSON and schema), absurd models, gains files, outputs
     case("validate models.json", "not valid JSON"),

@@ -115,11 +115,14 @@ def _sd_faults(text: str) -> str:
     card = _firmware.CardFiles(os.devnull)       # never mounted: its faults' names only
     for item in text.split(","):
         name, eq, value = item.partition("=")
-        if not name or (eq and not value.isdigit()) or len(value) > 19:
+        if not name or (eq and not value.isdigit()):
             raise argparse.ArgumentTypeError(f"{item!r} is not NAME or NAME=N (N a whole "
                                              "number)")
+        number = int(value) if eq else 1
+        if number >= 1 << 64:
+            raise argparse.ArgumentTypeError(f"{item!r}: {name} is at most {(1 << 64) - 1}")
         try:
-            card.set_faults(**{name: int(value) if eq else 1})
+            card.set_faults(**{name: number})
         except ValueError:
             raise argparse.ArgumentTypeError(f"no card fault {name!r} (docs/sd-card.md)") \
                 from None

@@ -138,8 +138,10 @@ def run(args) -> int:
         raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
                          "set them with heliquad params)")
     if not args.sil and (args.sd_image is not None or args.sd_faults):
-        raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its socket; read its "
-                         "logs with heliquad logs)")
+        raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
+                         "socket; read its logs with heliquad logs)")
+    if args.sil:
+        sd_card(args)                    # its combinations, before the folder is made
     created = new_output_folder(args.out, "a sweep")
     try:
         session, source, found = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
