@@ -128,20 +128,7 @@ def run(args) -> int:
             for f, a in zip(plan.freqs_hz, plan.amplitudes):
                 check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz,
                                  a, args.inject)
-    if not args.sil and args.fault:
-        raise InputError("--fault needs --sil (a board's faults are real)")
-    if not args.sil and args.firmware != "host":
-        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
-    if not args.sil and args.rc_script is not None:
-        raise InputError("--rc-script needs --sil (a board's pilot is a person with a radio)")
-    if not args.sil and args.param_store:
-        raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
-                         "set them with heliquad params)")
-    if not args.sil and (args.sd_image is not None or args.sd_faults):
-        raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
-                         "socket; read its logs with heliquad logs)")
-    if args.sil:
-        sd_card(args)                    # its combinations, before the folder is made
+    _check_rig_options(args)
     created = new_output_folder(args.out, "a sweep")
     try:
         session, source, found = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
@@ -169,6 +156,25 @@ def run(args) -> int:
                      f"in {args.out})\n")
     # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
     return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
+
+
+def _check_rig_options(args) -> None:
+    """The simulated rig's options: refused without --sil, their combinations checked with it
+    (before the sweep's folder is made)."""
+    if not args.sil and args.fault:
+        raise InputError("--fault needs --sil (a board's faults are real)")
+    if not args.sil and args.firmware != "host":
+        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    if not args.sil and args.rc_script is not None:
+        raise InputError("--rc-script needs --sil (a board's pilot is a person with a radio)")
+    if not args.sil and args.param_store:
+        raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
+                         "set them with heliquad params)")
+    if not args.sil and (args.sd_image is not None or args.sd_faults):
+        raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
+                         "socket; read its logs with heliquad logs)")
+    if args.sil:
+        sd_card(args)
 
 
 def _ended(exc, out) -> int:
