@@ -21,7 +21,7 @@ import sys
 
 import pytest
 
-from log_protocol_test import wait_armed
+from log_protocol_test import card_with_logs, wait_armed
 from tool_runs import running_board
 
 # --- files the cases use -------------------------------------------------------------------
@@ -681,9 +681,23 @@ CASES = [
     case("board --telemetry t --num 1 --den 1 1 1 1 1 1 1 1 1 1 1 1 1 1", "degree 1 to 12"),
     case("board --telemetry t --loop-hz 1", "Nyquist"),
     case("board --telemetry binary.dat --duration-s 1", "exists"),
-    case("board --telemetry t --log-store-ram missing", "--log-store-ram: missing is not a folder"),
-    case("board --telemetry t --log-store-ram points.csv", "is not a folder"),
-    case("board --telemetry t --log-store-ram adir --firmware teensy35", "only the host firmware"),
+    case("board --telemetry t --sd-image adir", "--sd-image: adir is a folder, not a card image"),
+    case("board --telemetry t --sd-image nowhere/card.img", "does not exist"),
+    case("board --telemetry t --sd-faults no_card", "--sd-faults needs --sd-image"),
+    case("board --telemetry t --sd-image c.img --sd-faults frobnicate", "no card fault 'frobnicate'"),
+    case("board --telemetry t --sd-image c.img --sd-faults busy_for_us=x", "not NAME or NAME=N"),
+    case("board --telemetry t --sd-image c.img --sd-faults ,no_card", "not NAME or NAME=N"),
+    case("board --telemetry t --sd-image c.img --sd-faults no_card --firmware teensy35",
+         "only the host firmware"),
+    case(f"{SIL} --sd-image adir --out o", "is a folder, not a card image"),
+    case(f"{SIL} --sd-faults write_protected --out o", "--sd-faults needs --sd-image"),
+    case("sweep --axis roll --port /dev/null --sd-image c.img --out s", "need --sil"),
+    case("sweep --axis roll --port /dev/null --sd-faults no_card --out s", "need --sil"),
+    case("sweep --sil --axis roll --firmware teensy35 --sd-image c.img --sd-faults no_card "
+         "--out s", "only the host firmware"),
+    case("sweep --sil --axis roll --sd-faults no_card --out s", "--sd-faults needs --sd-image"),
+    case("board --telemetry t --sd-image c.img --sd-faults busy_for_us=18446744073709551616",
+         "at most 18446744073709551615"),
     case("board --telemetry adir --duration-s 1", "exists"),
     # validate: damaged MODELS.json (JSON and schema), absurd models, gains files, outputs
     case("validate models.json", "not valid JSON"),
@@ -1128,14 +1142,14 @@ def _assert_one_line(res, says, code) -> None:
 
 
 # logs against a running board, the cases that need one (heliquad board, the host firmware
-# serving two logs from RAM, or none): a log it does not have, the board armed, a board that
-# serves no logs. The folder the command runs in is left as it was.
+# serving the two logs of its card, or no card): a log it does not have, the board armed, a
+# board that serves no logs. The folder the command runs in is left as it was.
 LIVE_LOG_CASES = [
-    pytest.param(("--disarmed", "--log-store-ram"), "download 3", "the board has no log 3", 2,
+    pytest.param(("--disarmed", "--sd-image"), "download 3", "the board has no log 3", 2,
                  id="logs download 3, a log the board does not have"),
-    pytest.param(("--log-store-ram",), "list", "the board is armed", 1,
+    pytest.param(("--sd-image",), "list", "the board is armed", 1,
                  id="logs list, the board armed"),
-    pytest.param(("--log-store-ram",), "erase", "the board is armed", 1,
+    pytest.param(("--sd-image",), "erase", "the board is armed", 1,
                  id="logs erase, the board armed"),
     pytest.param(("--disarmed",), "list", "no answer to the log list request", 1,
                  id="logs list, a board that serves no logs"),
@@ -1145,12 +1159,12 @@ LIVE_LOG_CASES = [
 @pytest.mark.parametrize("board_args, action, says, code", LIVE_LOG_CASES)
 def test_logs_against_a_live_board_is_one_line_and_changes_nothing(board_args, action, says,
                                                                    code, tmp_path):
-    card, rig, work = (tmp_path / name for name in ("card", "rig", "work"))
-    for folder in (card, rig, work):
+    rig, work = (tmp_path / name for name in ("rig", "work"))
+    for folder in (rig, work):
         folder.mkdir()
-    (card / "00000001.BIN").write_bytes(b"log" * 100)
-    (card / "00000002.BIN").write_bytes(b"log" * 200)
-    if board_args[-1] == "--log-store-ram":
+    card = tmp_path / "card.img"
+    card_with_logs(card, {1: b"log" * 100, 2: b"log" * 200})
+    if board_args[-1] == "--sd-image":
         board_args += (card,)
     with running_board(rig, *board_args) as board:
         if "--disarmed" not in board_args:

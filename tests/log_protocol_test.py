@@ -1,6 +1,6 @@
 """The MAVLink log protocol (firmware/core/link/log_transfer.hpp) and ``heliquad logs``, over
-the host build serving a folder of .BIN files from RAM (``heliquad board --log-store-ram``):
-the list, downloads equal to the files byte for byte (through a link that loses packets, and
+the host build serving the logs of its SD card (``heliquad board --sd-image``), a card image
+whose .BIN files the file layer wrote (the bindings' CardFiles), with log 3 lost: the list, downloads equal to the files byte for byte (through a link that loses packets, and
 one cut off mid-download that resumes), the defined answers to requests for what is not
 there, the refusal while armed, erase; and MAVProxy's log module fetching the same bytes.
 What heliquad logs says of a missing log, an armed board and a silent one: the bad-input
@@ -18,7 +18,9 @@ import time
 import numpy as np
 import pytest
 
+from fat32_image import Fat32Image
 from ground_stations_test import MavProxy
+from heliquad import _firmware as fw
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.sim.base.dialect import dialect
 from lossy_link_test import DamagingRelay
@@ -29,8 +31,8 @@ GUARD_S = 60.0
 #: LOG_DATA carries up to this many bytes.
 CHUNK = 90
 #: The board's logs: a DataFlash log (a format record, then samples), a log of random bytes
-#: that ends in a short packet, one whose size is a whole number of packets, and one named
-#: otherwise (numbered after the highest).
+#: that ends in a short packet, one whose size is a whole number of packets (log 3 before it
+#: lost), and a short one.
 SAMPLES = 1500
 RANDOM_BYTES = 20_011
 WHOLE_PACKETS_BYTES = 100 * CHUNK
@@ -47,19 +49,59 @@ def dataflash_log(samples: int) -> bytes:
     return b"".join(out)
 
 
+#: What the file layer's write() takes at once, and how often the tests' writes sync.
+WRITE_BYTES = 4096
+
+
+def card_with_logs(path, logs: dict) -> None:
+    """A fresh card image at ``path`` holding ``logs`` ({number: bytes}), each written through
+    the file layer as the logger writes it (begun, appended and synced, ended). A number
+    skipped is a log lost: LASTLOG.TXT, rewritten in place between logs, says it was begun."""
+    assert fw.make_card_image(str(path), fw.MIN_CARD_IMAGE_BYTES) == ""
+    last = 0
+    for number, data in sorted(logs.items()):
+        if number > last + 1:
+            _lose_logs_up_to(path, last, number - 1)
+        card = fw.CardFiles(str(path))
+        assert card.mount() == fw.CardState.OK
+        assert card.begin_log() and card.last_log == number
+        for at in range(0, len(data), WRITE_BYTES):
+            assert card.write(data[at:at + WRITE_BYTES]) == len(data[at:at + WRITE_BYTES])
+            card.advance_us(fw.LOG_SYNC_PERIOD_US)
+            card.service()
+        card.end_log()
+        del card                                   # the card let go before the next opens it
+        last = number
+
+
+def _lose_logs_up_to(path, last: int, lost: int) -> None:
+    """LASTLOG.TXT says ``lost`` instead of ``last`` (the same number of digits): the logs in
+    between were begun and are gone."""
+    old, new = f"{last}\r\n".encode(), f"{lost}\r\n".encode()
+    assert len(old) == len(new)
+    data = bytearray(path.read_bytes())
+    at = Fat32Image(path).offset("LASTLOG.TXT")
+    assert data[at:at + len(old)] == old
+    data[at:at + len(new)] = new
+    path.write_bytes(bytes(data))
+
+
 @pytest.fixture
-def log_folder(tmp_path):
-    folder = tmp_path / "card"
-    folder.mkdir()
+def log_files():
+    """The logs the board's card holds, by number."""
     rng = np.random.default_rng(7)
-    files = {"00000001.BIN": dataflash_log(SAMPLES),
-             "00000002.BIN": rng.integers(0, 256, RANDOM_BYTES, dtype=np.uint8).tobytes(),
-             "00000004.BIN": rng.integers(0, 256, WHOLE_PACKETS_BYTES, dtype=np.uint8).tobytes(),
-             "flight.bin": b"not numbered" * 10}
-    for name, data in files.items():
-        (folder / name).write_bytes(data)
-    os.utime(folder / "00000001.BIN", (1_764_000_000, 1_764_000_000))
-    return folder
+    return {1: dataflash_log(SAMPLES),
+            2: rng.integers(0, 256, RANDOM_BYTES, dtype=np.uint8).tobytes(),
+            4: rng.integers(0, 256, WHOLE_PACKETS_BYTES, dtype=np.uint8).tobytes(),
+            5: b"a short log" * 10 + b"0123456789"}
+
+
+@pytest.fixture
+def card(tmp_path, log_files):
+    """The card image of the board, holding :func:`log_files`."""
+    path = tmp_path / "card.img"
+    card_with_logs(path, log_files)
+    return path
 
 
 def heliquad(*args, cwd=None):
@@ -75,21 +117,21 @@ def one_line_error(res, code: int, says: str) -> None:
 
 # --- heliquad logs ---------------------------------------------------------------------------
 
-def test_list_download_and_erase_through_heliquad_logs(tmp_path, log_folder):
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder) as board:
+def test_list_download_and_erase_through_heliquad_logs(tmp_path, card, log_files):
+    with running_board(tmp_path, "--disarmed", "--sd-image", card) as board:
         res = heliquad("logs", "--port", board, "list")
         assert res.returncode == 0, res.stderr
         rows = [line.split() for line in res.stdout.splitlines()[1:-1]]
         sizes = {int(r[0]): int(r[1]) for r in rows}
         assert sizes == {1: len(dataflash_log(SAMPLES)), 2: RANDOM_BYTES,
                          4: WHOLE_PACKETS_BYTES, 5: 120}
-        assert rows[0][2:] == ["2025-11-24", "16:00:00"]      # the file's time, UTC
-        for log_id, name in ((1, "00000001.BIN"), (2, "00000002.BIN"), (4, "00000004.BIN")):
+        assert rows[0][2:] == ["-"]          # no board clock: the time is unknown
+        for log_id in (1, 2, 4):
             out = tmp_path / f"got{log_id}.BIN"
             res = heliquad("logs", "--port", board, "download", log_id, "--out", out)
             assert res.returncode == 0, res.stdout + res.stderr
             assert "[##########] 100 %" in res.stdout
-            assert out.read_bytes() == (log_folder / name).read_bytes(), name
+            assert out.read_bytes() == log_files[log_id], log_id
             assert not os.path.exists(f"{out}.part")
         res = heliquad("logs", "--port", board, "download", 1, cwd=tmp_path)  # the card's name
         assert res.returncode == 0 and (tmp_path / "00000001.BIN").exists(), res.stderr
@@ -107,8 +149,8 @@ def test_list_download_and_erase_through_heliquad_logs(tmp_path, log_folder):
     assert vals == [0.5 * k for k in range(SAMPLES)]
 
 
-def test_a_download_through_a_link_that_loses_packets_is_whole(tmp_path, log_folder):
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder,
+def test_a_download_through_a_link_that_loses_packets_is_whole(tmp_path, card, log_files):
+    with running_board(tmp_path, "--disarmed", "--sd-image", card,
                        "--backlog-bytes", 0) as board:
         relay = DamagingRelay(board, drop=0.05, seed=3)
         os.set_blocking(relay.main, False)
@@ -119,7 +161,7 @@ def test_a_download_through_a_link_that_loses_packets_is_whole(tmp_path, log_fol
             relay.close()
     assert res.returncode == 0, res.stdout + res.stderr
     assert relay.dropped > 0
-    assert out.read_bytes() == (log_folder / "00000002.BIN").read_bytes()
+    assert out.read_bytes() == log_files[2]
 
 
 class CuttingRelay(DamagingRelay):
@@ -140,10 +182,10 @@ class CuttingRelay(DamagingRelay):
         return b"".join(kept)
 
 
-def test_a_download_cut_off_keeps_its_part_and_resumes(tmp_path, log_folder):
+def test_a_download_cut_off_keeps_its_part_and_resumes(tmp_path, card, log_files):
     out = tmp_path / "cut.BIN"
-    want = (log_folder / "00000002.BIN").read_bytes()
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder,
+    want = log_files[2]
+    with running_board(tmp_path, "--disarmed", "--sd-image", card,
                        "--backlog-bytes", 0) as board:
         relay = CuttingRelay(board, keep=60)
         os.set_blocking(relay.main, False)
@@ -202,8 +244,8 @@ def texts(msgs):
     return [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
 
 
-def test_the_firmware_answers_what_is_not_there_in_a_defined_way(tmp_path, log_folder):
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder) as board:
+def test_the_firmware_answers_what_is_not_there_in_a_defined_way(tmp_path, card, log_files):
+    with running_board(tmp_path, "--disarmed", "--sd-image", card) as board:
         raw = Raw(board)
         try:
             # The list: every log, last_log_num the last; a range with none says so.
@@ -226,7 +268,7 @@ def test_the_firmware_answers_what_is_not_there_in_a_defined_way(tmp_path, log_f
                           lambda g: any(m.get_type() == "LOG_DATA" for m in g))
             assert [(m.ofs, m.count) for m in got] == [(100, 0)]
             # A count that ends mid-packet: whole packets, then the rest, then nothing more.
-            want = (log_folder / "00000002.BIN").read_bytes()
+            want = log_files[2]
             got = raw.ask(lambda: raw.link.request_log_data(2, 10, 200),
                           lambda g: sum(m.count for m in g if m.get_type() == "LOG_DATA") >= 200)
             got += raw.quiet(0.5)
@@ -239,8 +281,8 @@ def test_the_firmware_answers_what_is_not_there_in_a_defined_way(tmp_path, log_f
             raw.link.close()
 
 
-def test_a_new_request_replaces_the_old_and_end_stops_it(tmp_path, log_folder):
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder) as board:
+def test_a_new_request_replaces_the_old_and_end_stops_it(tmp_path, card):
+    with running_board(tmp_path, "--disarmed", "--sd-image", card) as board:
         raw = Raw(board)
         try:
             raw.link.request_log_data(2, 0, 0xFFFFFFFF)
@@ -261,8 +303,8 @@ def test_a_new_request_replaces_the_old_and_end_stops_it(tmp_path, log_folder):
             raw.link.close()
 
 
-def test_an_armed_board_says_so_once_and_sends_no_log(tmp_path, log_folder):
-    with running_board(tmp_path, "--log-store-ram", log_folder) as board:
+def test_an_armed_board_says_so_once_and_sends_no_log(tmp_path, card):
+    with running_board(tmp_path, "--sd-image", card) as board:
         wait_armed(board)
         raw = Raw(board)
         try:
@@ -277,8 +319,8 @@ def test_an_armed_board_says_so_once_and_sends_no_log(tmp_path, log_folder):
 
 # --- a third-party client -------------------------------------------------------------------
 
-def test_mavproxy_lists_and_downloads_the_same_bytes(tmp_path, log_folder):
-    with running_board(tmp_path, "--disarmed", "--log-store-ram", log_folder) as board:
+def test_mavproxy_lists_and_downloads_the_same_bytes(tmp_path, card, log_files):
+    with running_board(tmp_path, "--disarmed", "--sd-image", card) as board:
         class Port:                                # what MavProxy reads of a board
             device = os.path.realpath(board)
         mp = MavProxy(Port, tmp_path)
@@ -287,10 +329,10 @@ def test_mavproxy_lists_and_downloads_the_same_bytes(tmp_path, log_folder):
             mp.type("log list")
             mp.expect(rf"Log 1\s+numLogs 4 lastLog 5 size {len(dataflash_log(SAMPLES))}")
             mp.expect(r"Log 5\s+numLogs 4 lastLog 5 size 120")
-            for log_id, name in ((2, "00000002.BIN"), (4, "00000004.BIN")):
+            for log_id in (2, 4):
                 out = tmp_path / f"mavproxy{log_id}.bin"
                 mp.type(f"log download {log_id} {out}")
                 mp.expect(rf"Finished downloading {out}")
-                assert out.read_bytes() == (log_folder / name).read_bytes(), name
+                assert out.read_bytes() == log_files[log_id], log_id
         finally:
             mp.close()

@@ -39,13 +39,14 @@ def fly(image, faults: str = "") -> list:
         return firmware.startup_lines
 
 
-def test_a_missing_image_becomes_a_fresh_fat32_card_that_logs_the_flight(tmp_path):
+def test_a_missing_image_becomes_a_fresh_fat32_card_with_logs_folder(tmp_path):
     image = tmp_path / "card.img"
     lines = fly(image)
     assert "card: ok" in lines and lines[-1] == "ready"
     assert image.stat().st_size == fw.DEFAULT_CARD_IMAGE_BYTES
-    fat = Fat32Image(image)
+    fat = Fat32Image(image)                   # the hover armed: its log is the first
     assert fat.listdir() == ["LASTLOG.TXT", "LOGS"] and fat.listdir("LOGS") == ["00000001.BIN"]
+    assert fat.read("LASTLOG.TXT") == b"1\r\n"
     if shutil.which("fsck.fat"):
         run = subprocess.run(["fsck.fat", "-n", str(image)], capture_output=True, text=True)
         assert run.returncode == 0, run.stdout

@@ -10,8 +10,8 @@ from ...sim.rig.setup import PLANTS
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
-                             add_rc_script_argument, add_vehicle_arguments, check_plant, finite,
-                             vehicle_rig,
+                             add_rc_script_argument, add_sd_card_arguments, add_vehicle_arguments,
+                             check_plant, finite, sd_card, vehicle_rig,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
@@ -25,7 +25,9 @@ tool to it as to a board's serial port (any baud rate is accepted and ignored); 
 runs, --port auto finds it by the USB identity it announces (docs/usb.md). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 Ground stations list and set its parameters (heliquad params, MAVProxy's param commands);
-with --param-store they persist in a file across runs. The firmware saves them only while
+with --param-store they persist in a file across runs. With --sd-image it has an SD card:
+it logs each arming there and serves the card's logs (heliquad logs, MAVProxy's log
+commands) while disarmed. The firmware saves parameters only while
 disarmed: on an orderly stop (Ctrl-C, SIGTERM, SIGHUP, the end of --duration-s) the
 simulated pilot disarms first, as before a power-off, and the save completes before the
 board stops; then it exits with 130, 143, 129 (or 0 for --duration-s).
@@ -62,9 +64,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--loop-hz", type=number_in(1, MAX_LOOP_RATE_HZ), default=LOOP_RATE_HZ)
     p.add_argument("--dmp-image", metavar="FILE")
     add_param_store_argument(p)
-    p.add_argument("--log-store-ram", metavar="DIR",
-                   help="serve the .BIN files of DIR as the board's on-board logs (the MAVLink "
-                        "log protocol, heliquad logs; host firmware only; default none)")
+    add_sd_card_arguments(p)
     add_firmware_argument(p)
     add_rc_script_argument(p)
     p.set_defaults(func=run)
@@ -86,11 +86,7 @@ def run(args) -> int:
                     loop_hz=args.loop_hz)
     if args.rc_script is not None and args.disarmed:
         raise InputError("--rc-script is the pilot (it arms or not): leave out --disarmed")
-    if args.log_store_ram is not None:
-        if args.firmware != "host":
-            raise InputError("--log-store-ram: only the host firmware serves logs from a folder")
-        if not os.path.isdir(args.log_store_ram):
-            raise InputError(f"--log-store-ram: {args.log_store_ram} is not a folder")
+    card = sd_card(args)
     if os.path.exists(args.telemetry) and not os.path.islink(args.telemetry):
         raise InputError(f"--telemetry: {args.telemetry} exists and is not a link; choose "
                          "another path")
@@ -101,7 +97,7 @@ def run(args) -> int:
                       link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
                       rc_script=args.rc_script,
-                      log_store_dir=args.log_store_ram,
+                      **card,
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
         raise LinkLost(str(exc)) from None

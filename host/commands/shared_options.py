@@ -15,6 +15,7 @@ from ..acquire.link import DEFAULT_BAUD
 from ..acquire.excitation import amplitude_bound, bound_text
 
 __all__ = ["add_port_argument", "add_baud_argument", "add_firmware_argument", "firmware_link", "add_param_store_argument",
+           "add_sd_card_arguments", "sd_card",
            "add_fault_argument", "faults",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
@@ -92,6 +93,64 @@ def add_param_store_argument(p) -> None:
                    help="keep the firmware's parameters (docs/parameters.md) in FILE across runs, "
                         "as a board keeps them in its flash: read at start, written at each save "
                         "(default: every run starts with the defaults and nothing is saved)")
+
+
+def _sd_image(path: str) -> str:
+    """A card image's path: a file (or none yet: the firmware makes it) in a folder that
+    exists."""
+    if os.path.isdir(path):
+        raise argparse.ArgumentTypeError(f"{path} is a folder, not a card image")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise argparse.ArgumentTypeError(f"folder {folder} does not exist")
+    return path
+
+
+def _sd_faults(text: str) -> str:
+    """The host build's card faults, ``NAME=VALUE,...`` (a name alone is 1), each name
+    checked by the firmware's own reading of them (its bindings)."""
+    # the firmware's bindings, imported only when a fault is given
+    from heliquad import _firmware
+
+    card = _firmware.CardFiles(os.devnull)       # never mounted: its faults' names only
+    for item in text.split(","):
+        name, eq, value = item.partition("=")
+        if not name or (eq and not value.isdigit()):
+            raise argparse.ArgumentTypeError(f"{item!r} is not NAME or NAME=N (N a whole "
+                                             "number)")
+        number = int(value) if eq else 1
+        if number >= 1 << 64:
+            raise argparse.ArgumentTypeError(f"{item!r}: {name} is at most {(1 << 64) - 1}")
+        try:
+            card.set_faults(**{name: number})
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"no card fault {name!r} (docs/sd-card.md)") \
+                from None
+    return text
+
+
+def add_sd_card_arguments(p, prefix: str = "") -> None:
+    """--sd-image FILE and --sd-faults: the simulated board's SD card."""
+    p.add_argument("--sd-image", metavar="FILE", type=_sd_image,
+                   help=prefix + "the board's SD card, a card-image file (heliquad sd-image; "
+                        "a missing FILE is made at the default size): it logs each arming "
+                        "there (LOGS/00000001.BIN ...) and serves those logs (heliquad logs; "
+                        "docs/sd-card.md); default: no card")
+    p.add_argument("--sd-faults", metavar="NAME=VALUE,...", type=_sd_faults,
+                   help=prefix + "the card's faults, host firmware only: no_card, "
+                        "write_protected, writable_blocks=N, failing_writes, "
+                        "busy_after_write_us=T, busy_every_us=P with busy_for_us=T, "
+                        "power_cut_after_writes=N (docs/sd-card.md)")
+
+
+def sd_card(args) -> dict:
+    """The SD card's options for the rig (``sd_image``, ``sd_faults``), their combinations
+    checked."""
+    if args.sd_faults and args.sd_image is None:
+        raise InputError("--sd-faults needs --sd-image")
+    if args.sd_faults and args.firmware != "host":
+        raise InputError("--sd-faults: only the host firmware's card takes faults")
+    return {"sd_image": args.sd_image, "sd_faults": args.sd_faults}
 
 
 TURBULENCE_LEVELS = ("light", "moderate", "severe")

@@ -13,8 +13,8 @@ from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
 from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
                              add_rc_script_argument, add_vehicle_arguments, vehicle_rig,
-                             add_param_store_argument, check_excitation, check_plant, faults,
-                             finite, int_in, number_in)
+                             add_param_store_argument, add_sd_card_arguments, check_excitation,
+                             check_plant, faults, finite, int_in, number_in, sd_card)
 
 __all__ = ["add_parser", "run"]
 
@@ -66,6 +66,7 @@ def add_parser(sub, fmt) -> None:
                    help="writes RUN.tlog (all telemetry) and RUN.csv (t_s,u,y)")
     add_firmware_argument(p)
     add_param_store_argument(p)
+    add_sd_card_arguments(p)
     add_fault_argument(p)
     add_rc_script_argument(p)
     p.set_defaults(func=run)
@@ -94,7 +95,8 @@ def run(args) -> int:
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
                     param_store=args.param_store,
                     ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware,
-                    firmware_link=firmware_link(args), rc_script=args.rc_script)
+                    firmware_link=firmware_link(args), rc_script=args.rc_script,
+                    **sd_card(args))
     if args.turbulence and args.plant != "vehicle":
         raise InputError("--turbulence needs --plant vehicle")
     try:

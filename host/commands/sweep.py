@@ -19,8 +19,8 @@ from ..process.signals import ABORTED_BY, EXIT_CODES
 from .shared_options import (MAX_CYCLES, add_baud_argument, add_fault_argument,
                              add_firmware_argument, firmware_link, add_rc_script_argument,
                              add_vehicle_arguments, add_param_store_argument, add_port_argument,
-                             check_excitation,
-                             check_plant, faults, finite, int_in, number_in)
+                             add_sd_card_arguments, check_excitation,
+                             check_plant, faults, finite, int_in, number_in, sd_card)
 
 __all__ = ["add_parser", "run"]
 
@@ -101,6 +101,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
     add_param_store_argument(p)
+    add_sd_card_arguments(p, "--sil: ")
     add_fault_argument(p, "--sil: ")
     add_rc_script_argument(p)
     p.set_defaults(func=run)
@@ -127,15 +128,7 @@ def run(args) -> int:
             for f, a in zip(plan.freqs_hz, plan.amplitudes):
                 check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz,
                                  a, args.inject)
-    if not args.sil and args.fault:
-        raise InputError("--fault needs --sil (a board's faults are real)")
-    if not args.sil and args.firmware != "host":
-        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
-    if not args.sil and args.rc_script is not None:
-        raise InputError("--rc-script needs --sil (a board's pilot is a person with a radio)")
-    if not args.sil and args.param_store:
-        raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
-                         "set them with heliquad params)")
+    _check_rig_options(args)
     created = new_output_folder(args.out, "a sweep")
     try:
         session, source, found = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
@@ -163,6 +156,25 @@ def run(args) -> int:
                      f"in {args.out})\n")
     # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
     return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
+
+
+def _check_rig_options(args) -> None:
+    """The simulated rig's options: refused without --sil, their combinations checked with it
+    (before the sweep's folder is made)."""
+    if not args.sil and args.fault:
+        raise InputError("--fault needs --sil (a board's faults are real)")
+    if not args.sil and args.firmware != "host":
+        raise InputError("--firmware needs --sil (a board runs what is flashed on it)")
+    if not args.sil and args.rc_script is not None:
+        raise InputError("--rc-script needs --sil (a board's pilot is a person with a radio)")
+    if not args.sil and args.param_store:
+        raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
+                         "set them with heliquad params)")
+    if not args.sil and (args.sd_image is not None or args.sd_faults):
+        raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
+                         "socket; read its logs with heliquad logs)")
+    if args.sil:
+        sd_card(args)
 
 
 def _ended(exc, out) -> int:
@@ -277,7 +289,8 @@ def _sweep_session(args, tlog):
                     plant=args.plant, rig=args.axis, params=args.params,
                     turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
                     faults=faults(args), firmware=args.firmware, param_store=args.param_store,
-                    firmware_link=firmware_link(args), rc_script=args.rc_script)
+                    firmware_link=firmware_link(args), rc_script=args.rc_script,
+                    **sd_card(args))
     source = sil_source(cfg)
     try:
         session = SilSession(cfg, tlog)

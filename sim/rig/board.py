@@ -53,7 +53,7 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
               usb_serial: str | None = None, link: str = "uart", rc_script=None,
-              log_store_dir: str | None = None) -> dict:
+              sd_image: str | None = None, sd_faults: str | None = None) -> dict:
     """Fly ``plant`` (given the loop period, s, it returns the rig's plant: setup.make_plant)
     until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
@@ -68,8 +68,8 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
     the board has landed (default: not announced). ``link``: the Teensy image's link the
     pty carries (``uart`` or ``usb``; teensy35 only). ``rc_script``: the pilot, an
     :class:`~.rc_script.RcScript` (its times from the first frame; ``armed`` then unused).
-    ``log_store_dir``: the .BIN files the host build serves as its on-board logs (host only;
-    default none)."""
+    ``sd_image``, ``sd_faults``: the board's SD card, a card-image file, and the host build's
+    faults of it (:class:`~.lockstep.HostFirmware`; default no card)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -78,7 +78,7 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
              dmp_image=dmp_image, telemetry_path=os.path.abspath(telemetry_path),
              params_file=params_file, telemetry_backlog_bytes=backlog_bytes,
              **({"link": link} if firmware == "teensy35" else {}),
-             **({"log_store_dir": log_store_dir} if log_store_dir else {})) as rig, \
+             sd_image=sd_image, sd_faults=sd_faults) as rig, \
             (contextlib.nullcontext() if usb_serial is None else
              announced(telemetry_path, usb_serial, firmware)):
         _fly(rig, run, dt_s, duration_s,

@@ -50,7 +50,7 @@ class Rig(Closing):
     the firmware starts; the IMU ones reach the firmware with their frames. The other
     keywords are the firmware's (:class:`~heliquad.sim.rig.lockstep.HostFirmware`:
     ``dmp_image``, ``params_file``, ``telemetry_path``, ``telemetry_backlog_bytes``,
-    ``image`` for the Teensy image)."""
+    ``sd_image``, ``sd_faults``, ``image`` for the Teensy image)."""
 
     def __init__(self, make_plant: Callable[[float], object], firmware: str = "host",
                  loop_hz: float = LOOP_RATE_HZ, faults=(), **firmware_options):

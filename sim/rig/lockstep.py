@@ -73,13 +73,16 @@ class HostFirmware:
     def __init__(self, loop_hz: float = LOOP_RATE_HZ, dmp_image: str | None = None,
                  idle_timeout_s: int = 10, telemetry_path: str | None = None,
                  reply_timeout_s: float | None = None, params_file: str | None = None,
-                 telemetry_backlog_bytes: int = 0, log_store_dir: str | None = None):
+                 telemetry_backlog_bytes: int = 0, sd_image: str | None = None,
+                 sd_faults: str | None = None):
         """``params_file``: where the firmware keeps its parameters across runs (``--params``;
         the host build's record, the emulated Teensy's two flash sectors); default none.
         ``telemetry_backlog_bytes``: the most telemetry that waits for a reader, the oldest
         dropped past it (0: unbounded, the lockstep simulator reads all; docs/link-contract.md).
-        ``log_store_dir``: the host build serves the .BIN files of this folder, read into
-        RAM, as its on-board logs (``--log-store-ram``; docs/ground-stations.md)."""
+        ``sd_image``: the card-image file in the board's SD socket, where it logs each arming
+        and whose logs it serves (``--sd-image``; a missing file is made at the default size
+        first; docs/sd-card.md); default no card. ``sd_faults``: the host build's card faults,
+        ``NAME=VALUE,...`` (``--sd-faults``; the host build only)."""
         self.loop_hz = loop_hz
         if reply_timeout_s is not None:
             self.reply_timeout_s = reply_timeout_s
@@ -100,8 +103,10 @@ class HostFirmware:
                 cmd += ["--params", os.path.abspath(params_file)]
             if telemetry_backlog_bytes:
                 cmd += ["--telemetry-backlog-bytes", str(int(telemetry_backlog_bytes))]
-            if log_store_dir:                 # the logs the log protocol serves (host build)
-                cmd += ["--log-store-ram", os.path.abspath(log_store_dir)]
+            if sd_image:                      # the card: its logs written and served
+                cmd += ["--sd-image", os.path.abspath(sd_image)]
+            if sd_faults:
+                cmd += self.card_fault_options(sd_faults)
             self.stderr_path = os.path.join(self.workdir, "firmware.stderr")
             self._stderr = open(self.stderr_path, "w+")
             # Its own session: a terminal's Ctrl-C goes to the tool's process group only, and
@@ -120,6 +125,10 @@ class HostFirmware:
         """The firmware's command line, before the link options."""
         self.executable = find_firmware()
         return [self.executable]
+
+    def card_fault_options(self, sd_faults: str) -> list:
+        """The command line's options for the card's faults."""
+        return ["--sd-faults", sd_faults]
 
     def record(self) -> dict:
         """What flew, for a manifest."""
@@ -252,6 +261,10 @@ class PilFirmware(HostFirmware):
         self.image = os.path.abspath(self.image or str(teensy35_image("elf")))
         return [sys.executable, "-m", "heliquad.sim.chip.pil", "--image", self.image,
                 "--link", self.link]
+
+    def card_fault_options(self, sd_faults: str) -> list:
+        raise FirmwareError("--sd-faults: only the host build's card takes faults (the "
+                            "emulated card's are set on sim/chip/sd_card.py's SdCard)")
 
     def record(self) -> dict:
         with open(self.image, "rb") as fh:

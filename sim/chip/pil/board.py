@@ -55,12 +55,15 @@ class ImageFault(RuntimeError):
 
 class PilBoard:
     """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
-    keep the parameter flash in that file (:class:`ParamFile`)."""
+    keep the parameter flash in that file (:class:`ParamFile`). ``sd_image``: the card-image
+    file in its microSD socket (default: the socket empty)."""
 
-    def __init__(self, elf: str, params_file: str | None = None, link: str = "uart"):
+    def __init__(self, elf: str, params_file: str | None = None, link: str = "uart",
+                 sd_image: str | None = None):
         if link not in LINKS:
             raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")
-        self.board = Teensy35(elf, track_loops=False)      # the wait breakpoint ends a loop
+        # the wait breakpoint ends a loop
+        self.board = Teensy35(elf, track_loops=False, sd_image=sd_image)
         self.usb_host = (UsbHost(self.board.chip, debounce_s=PIL_DEBOUNCE_S, open_port=True)
                          if link == "usb" else None)
         self.machine = self.board.machine

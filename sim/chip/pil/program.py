@@ -4,8 +4,11 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
+
+from heliquad import _firmware
 
 from ...base.dialect import dialect
 from ...base.firmware_image import ImageNotFound, teensy35_image
@@ -46,6 +49,10 @@ def parse(argv):
                    help="keep the board's parameter flash (two 4 KiB sectors, 8 KiB) in FILE "
                         "across runs: restored before the boot, written when the image "
                         "changes it; a missing FILE is a new board")
+    p.add_argument("--sd-image", metavar="FILE",
+                   help="the card-image file in the board's microSD socket (docs/sd-card.md); "
+                        "a missing FILE is made first, a FAT32 card of the default size, as "
+                        "heliquad-fw-host makes it (default: the socket empty)")
     args = p.parse_args(argv)
     if args.loop_hz != IMAGE_LOOP_HZ:
         _usage(f"--loop-hz {args.loop_hz:g}: the Teensy image runs its loop at "
@@ -57,7 +64,19 @@ def parse(argv):
     if args.dmp_image:
         _usage("--dmp-image: the Teensy image carries its DMP firmware from its build "
                "(-DHQ_DMP_IMAGE=FILE); the emulated board runs what the image has")
+    if args.sd_image:
+        _make_card(args.sd_image)
     return args
+
+
+def _make_card(path: str) -> None:
+    """A missing card image made as the host build makes it; a folder refused."""
+    if os.path.isdir(path):
+        _usage(f"--sd-image {path}: is a folder, not a card image")
+    if not os.path.exists(path):
+        error = _firmware.make_card_image(path, _firmware.DEFAULT_CARD_IMAGE_BYTES)
+        if error:
+            _usage(f"--sd-image {error}")
 
 
 def _open(args):
@@ -67,9 +86,9 @@ def _open(args):
     except ImageNotFound as e:
         _usage(str(e))
     try:
-        board = PilBoard(elf, args.params, link=args.link)
+        board = PilBoard(elf, args.params, link=args.link, sd_image=args.sd_image)
         board.boot()
-    except (ImageFault, ParamFileError, OSError) as e:
+    except (ImageFault, ParamFileError, OSError, ValueError) as e:
         _usage(str(e))
     try:
         sim, tel = Pty(args.sim_link), Pty(args.telemetry)
