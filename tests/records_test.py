@@ -148,8 +148,11 @@ def test_identify_reads_past_a_damaged_byte_and_the_report_flags_it(sweep, tmp_p
     folder = _copy(sweep, tmp_path / "damaged")
     log = folder / "sweep.tlog"
     data = bytearray(log.read_bytes())
-    data[1000] ^= 0x10                     # the flip that used to lose every frequency
-    log.write_bytes(bytes(data))
+    pos = 0                                # the first record from byte 1000 on: stamp, packet
+    while pos < 1000:
+        pos += 8 + 12 + data[pos + 9]                           # stamp, header + CRC, payload
+    data[pos + 8 + 10 + 1] ^= 0x10         # a payload bit (its CRC fails): the flip that used
+    log.write_bytes(bytes(data))           # to lose every frequency
     res = heliquad("identify", folder)
     assert res.returncode == 0, res.stderr
     assert "15 points" in res.stdout                      # every frequency still measured

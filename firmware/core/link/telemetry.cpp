@@ -115,13 +115,6 @@ void GcsLink::send_heartbeat(const LoopStatus& st) {
     send(msg);
 }
 
-static_assert(static_cast<int>(CardState::Ok) == HQ_CARD_OK &&
-                  static_cast<int>(CardState::NoCard) == HQ_CARD_NO_CARD &&
-                  static_cast<int>(CardState::WriteProtected) == HQ_CARD_WRITE_PROTECTED &&
-                  static_cast<int>(CardState::Full) == HQ_CARD_FULL &&
-                  static_cast<int>(CardState::Failed) == HQ_CARD_FAILED,
-              "HQ_CARD_STATE is CardState's numbering");
-
 void GcsLink::send_fw_status(const LoopStatus& st, uint64_t now_us) {
     const Mpu6050Counters& c = st.imu;
     const SupervisorCounters& f = st.supervisor;

@@ -18,6 +18,8 @@
 
 #include <cstdint>
 
+#include <heliquad/mavlink.h>      // HQ_CARD_STATE: the numbers HQ_FW_STATUS reports
+
 namespace hq {
 
 // The card as the reports name it. Ok: logs can be written. NoCard: no card answered at
@@ -25,11 +27,11 @@ namespace hq {
 // another byte (a log may still be open and readable). Failed: the card or its file system
 // failed (not FAT, a transfer error); logging stops until the next start-up.
 enum class CardState : uint8_t {
-    Ok = 0,
-    NoCard = 1,
-    WriteProtected = 2,
-    Full = 3,
-    Failed = 4,
+    Ok = HQ_CARD_OK,
+    NoCard = HQ_CARD_NO_CARD,
+    WriteProtected = HQ_CARD_WRITE_PROTECTED,
+    Full = HQ_CARD_FULL,
+    Failed = HQ_CARD_FAILED,
 };
 
 // The state in the words the reports use: "ok", "no card", "write-protected", "full", "failed".
