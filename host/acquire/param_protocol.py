@@ -36,7 +36,7 @@ from ...sim.base.errors import BoardRefused, InputError, LinkLost
 from ..records.params_file import INTEGER_TYPES, TYPE_NAMES, check_name
 from .link import HEARTBEAT_PERIOD_S, decode_value, encode_value
 
-__all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
+__all__ = ["Param", "BoardClient", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
            "same_value", "load_params", "session_params"]
 
@@ -141,12 +141,19 @@ def checked_value(param: Param, value: float) -> float:
     return float(np.float32(value))
 
 
-class ParamClient:
-    """The host's side of the parameter protocol over a :class:`TelemetryLink`.
+class BoardClient:
+    """Requests to the board over a :class:`TelemetryLink` and their answers: the host's
+    HEARTBEAT while it waits, every request sent again until answered (``retries`` times),
+    the board's STATUSTEXTs and whether it is armed. A protocol names the messages it reads
+    (``messages``) and takes each of its own (``_take``).
 
     ``progress`` is told what a fetch does (one line at a time); ``answer_wait_s``,
     ``retries`` and ``quiet_s`` bound every wait (``ANSWER_WAIT_S``, ``RETRIES``,
     ``QUIET_S``)."""
+
+    messages = MESSAGES
+    #: What the board must run to answer, for the line that gives it up.
+    answers = "a firmware that has parameters"
 
     def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
                  retries: int = RETRIES, quiet_s: float = QUIET_S):
@@ -155,9 +162,6 @@ class ParamClient:
         self.answer_wait_s, self.retries, self.quiet_s = answer_wait_s, retries, quiet_s
         self.last_heartbeat = None
         self.armed = None                         # as the board's last HEARTBEAT said
-        self.by_index: dict[int, Param] = {}      # the list being fetched
-        self.count = None                         # its length, once the board said
-        self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
         self.texts: list[str] = []                # STATUSTEXTs since the last request
 
     # --- the link ------------------------------------------------------------------------
@@ -168,20 +172,17 @@ class ParamClient:
         if self.last_heartbeat is None or now - self.last_heartbeat >= HEARTBEAT_PERIOD_S:
             self.link.heartbeat()
             self.last_heartbeat = now if self.link.can_send else None
-        for m in self.link.poll(only=MESSAGES):
+        for m in self.link.poll(only=self.messages):
             if m.get_type() == "STATUSTEXT":
                 self.texts.append(m.text)
-                continue
-            if m.get_type() == "HEARTBEAT":
+            elif m.get_type() == "HEARTBEAT":
                 self._heard(m)
-                continue
-            p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
-                      int(m.param_index))
-            self.fresh[p.name] = p
-            if m.param_count:
-                self.count = int(m.param_count)
-            if self.count is not None and 0 <= p.index < self.count:
-                self.by_index[p.index] = p
+            else:
+                self._take(m)
+
+    def _take(self, m) -> None:
+        """One of the protocol's own messages."""
+        raise NotImplementedError
 
     def _wait(self, done, seconds: float) -> bool:
         """Pump until ``done()`` (True) or ``seconds`` pass (False)."""
@@ -203,7 +204,7 @@ class ParamClient:
                 return
         raise NoAnswer(f"no answer to {what} from {self.link.name} after {1 + self.retries} "
                        f"requests ({self.answer_wait_s:g} s each): is the board running, with "
-                       "a firmware that has parameters, on this link?")
+                       f"{self.answers}, on this link?")
 
     def _reach(self) -> None:
         """A listening network link can send only once it has heard the board: wait for it."""
@@ -211,6 +212,41 @@ class ParamClient:
         if not self._wait(lambda: self.link.can_send, patience):
             raise NoAnswer(f"nothing heard from the board on {self.link.name} in {patience:g} s; "
                            "a listening link learns where the board is from its telemetry")
+
+    def _heard(self, heartbeat) -> None:
+        """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
+        on a shared network link says nothing of the board)."""
+        mav = dialect()
+        if heartbeat.type != mav.MAV_TYPE_GCS:
+            self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
+        """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
+        None when none came. An armed board saves a changed parameter only once disarmed."""
+        self.armed = None
+        self._wait(lambda: self.armed is not None, wait_s)
+        return self.armed
+
+
+class ParamClient(BoardClient):
+    """The host's side of the parameter protocol over a :class:`TelemetryLink`
+    (:class:`BoardClient`'s waits and retries)."""
+
+    def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
+                 retries: int = RETRIES, quiet_s: float = QUIET_S):
+        super().__init__(link, progress, answer_wait_s, retries, quiet_s)
+        self.by_index: dict[int, Param] = {}      # the list being fetched
+        self.count = None                         # its length, once the board said
+        self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
+
+    def _take(self, m) -> None:
+        p = Param(m.param_id, decode_value(m.param_value, m.param_type), int(m.param_type),
+                  int(m.param_index))
+        self.fresh[p.name] = p
+        if m.param_count:
+            self.count = int(m.param_count)
+        if self.count is not None and 0 <= p.index < self.count:
+            self.by_index[p.index] = p
 
     def _forget(self) -> None:
         self.fresh.clear()
@@ -286,20 +322,6 @@ class ParamClient:
         self._wait(lambda: self._reason(param.name) is not None, REASON_WAIT_S)
         raise ParamRefused(param.name, value_text(value, param.type), got.text(),
                            self._reason(param.name))
-
-    def _heard(self, heartbeat) -> None:
-        """The board's HEARTBEAT says whether it is armed (a ground station's, MAV_TYPE_GCS,
-        on a shared network link says nothing of the board)."""
-        mav = dialect()
-        if heartbeat.type != mav.MAV_TYPE_GCS:
-            self.armed = bool(heartbeat.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
-
-    def is_armed(self, wait_s: float = ARMED_WAIT_S) -> bool | None:
-        """Whether the board is armed, from its next HEARTBEAT (waited for up to ``wait_s``);
-        None when none came. An armed board saves a changed parameter only once disarmed."""
-        self.armed = None
-        self._wait(lambda: self.armed is not None, wait_s)
-        return self.armed
 
     def _reason(self, name: str) -> str | None:
         """The STATUSTEXT that says why a set was refused: one naming the parameter, else

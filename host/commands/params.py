@@ -8,8 +8,7 @@ import sys
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from ..acquire.link import DEFAULT_BAUD
-from .shared_options import add_port_argument, finite, int_in
+from .shared_options import add_board_actions, finite
 
 __all__ = ["add_parser", "run"]
 
@@ -46,14 +45,8 @@ examples: heliquad params --port /dev/ttyACM0 list
 
 
 def add_parser(sub, fmt) -> None:
-    p = sub.add_parser("params", help="list, get, set, save and load the board's parameters",
-                       description=HELP, formatter_class=fmt)
-    add_port_argument(p)
-    p.add_argument("--baud", type=int_in(50, 12_000_000), default=DEFAULT_BAUD,
-                   help=f"serial rate (default {DEFAULT_BAUD}, the Teensy's UART0; ignored by USB, "
-                        "ptys and network links)")
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
-    actions.required = True
+    p, actions = add_board_actions(sub, "params", "list, get, set, save and load the board's "
+                                   "parameters", HELP, fmt)
     actions.add_parser("list", help="every parameter: name, value, type")
     actions.add_parser("get", help="one parameter").add_argument("name", metavar="NAME")
     setter = actions.add_parser("set", help="set one parameter and check the board took it")
