@@ -7,40 +7,38 @@ namespace hq {
 
 namespace {
 
-// The program's record: its header and CRC, and every step's fields with a multisine's
-// harmonics; far less than the storage's kMaxBytes for a dwell sweep.
-constexpr size_t kProgramRecordBytes = ParamStorage::kMaxBytes;
+static_assert(kProgramRecordBytes <= ParamStorage::kMaxBytes, "a program's record fits its store");
 
 }  // namespace
 
 // The stored program, each step checked against the bounds the loaded parameters set. A
 // record that fails its checks, or a step out of bounds, is no program, and says so.
 void FlightController::load_program() {
-    program_.steps = 0;
+    program_.clear();
     if (config_.program_storage == nullptr) return;
     uint8_t record[kProgramRecordBytes];
     size_t n = 0;
     const StoreStatus st = config_.program_storage->load(record, sizeof(record), n);
     if (st == StoreStatus::Empty) return;
-    Program loaded;
-    if (st != StoreStatus::Ok || !decode_program(record, n, loaded)) {
+    if (st != StoreStatus::Ok || !program_.decode(record, n)) {
         notice(MAV_SEVERITY_WARNING, "program: stored record damaged; none loaded");
         return;
     }
-    for (int i = 0; i < loaded.steps; ++i) {
-        if (supervisor_.check_excitation_bounds(loaded.step[i]) != Reason::None) {
+    ExcitationConfig step;
+    for (int i = 0; i < program_.steps(); ++i) {
+        if (!program_.step(i, step) || supervisor_.check_excitation_bounds(step) != Reason::None) {
+            program_.clear();
             notice(MAV_SEVERITY_WARNING, "program: a stored step out of bounds; none loaded");
             return;
         }
     }
-    program_ = loaded;
 }
 
 ProgramReport FlightController::program_report() const {
     ProgramReport r;
-    r.count = program_.steps;
+    r.count = program_.steps();
     r.state = program_runner_.running() ? ProgramState::Running
-              : program_.steps > 0      ? ProgramState::Stored
+              : program_.steps() > 0    ? ProgramState::Stored
                                         : ProgramState::None;
     r.step = program_runner_.step();
     return r;
@@ -105,7 +103,7 @@ bool FlightController::save_program(const Program& program) {
         return true;
     }
     uint8_t record[kProgramRecordBytes];
-    const size_t n = encode_program(program, record, sizeof(record));
+    const size_t n = program.encode(record, sizeof(record));
     const bool ok = n > 0 && config_.program_storage->save(record, n);
     notice(ok ? MAV_SEVERITY_INFO : MAV_SEVERITY_CRITICAL,
            ok ? "program: saved" : "program: save failed; the old one kept");

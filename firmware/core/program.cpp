@@ -9,7 +9,6 @@ namespace {
 
 constexpr uint32_t kMagic = 0x31475148u;          // "HQG1" in memory order
 constexpr size_t kHeaderBytes = 5;                // magic, step count
-constexpr size_t kStepBytes = 16;                 // axis .. fade_cycles
 constexpr size_t kHarmonicBytes = 10;             // order, amplitude, phase
 constexpr size_t kCrcBytes = 4;
 
@@ -92,48 +91,84 @@ bool read_step(Reader& r, ExcitationConfig& c) {
 
 }  // namespace
 
-size_t encode_program(const Program& program, uint8_t* out, size_t capacity) {
-    Writer w{out, capacity};
+void Program::clear() {
+    Writer w{bytes_, sizeof(bytes_)};
     w.bytes(kMagic, 4);
-    w.bytes(program.steps, 1);
-    for (int i = 0; i < program.steps && i < kMaxProgramSteps; ++i) write_step(w, program.step[i]);
-    if (!w.ok) return 0;
-    w.bytes(crc32(out, w.n), 4);
-    return w.ok ? w.n : 0;
+    w.bytes(0, 1);
+    n_ = w.n;
 }
 
-bool decode_program(const uint8_t* data, size_t n, Program& program) {
-    program.steps = 0;
-    if (n < kHeaderBytes + kCrcBytes) return false;
+void Program::cut(size_t n, uint8_t count) {
+    if (n < kHeaderBytes || n > n_) return;
+    n_ = n;
+    bytes_[kCountAt] = count;
+}
+
+bool Program::append(const ExcitationConfig& step) {
+    if (steps() >= kMaxProgramSteps) return false;
+    Writer w{bytes_ + n_, sizeof(bytes_) - n_};
+    write_step(w, step);
+    if (!w.ok) return false;
+    n_ += w.n;
+    ++bytes_[kCountAt];
+    return true;
+}
+
+bool Program::step(int i, ExcitationConfig& out) const {
+    Reader r{bytes_, n_, kHeaderBytes};
+    for (int k = 0; k <= i && k < steps(); ++k) {
+        if (!read_step(r, out)) return false;
+        if (k == i) return true;
+    }
+    return false;
+}
+
+size_t Program::encode(uint8_t* out, size_t capacity) const {
+    if (n_ + kCrcBytes > capacity) return 0;
+    __builtin_memcpy(out, bytes_, n_);
+    Writer w{out + n_, kCrcBytes};
+    w.bytes(crc32(out, n_), 4);
+    return n_ + kCrcBytes;
+}
+
+bool Program::decode(const uint8_t* data, size_t n) {
+    clear();
+    if (n < kHeaderBytes + kCrcBytes || n - kCrcBytes > sizeof(bytes_)) return false;
     Reader crc{data + n - kCrcBytes, kCrcBytes};
     if (crc.bytes(4) != crc32(data, n - kCrcBytes)) return false;
     Reader r{data, n - kCrcBytes};
     const uint32_t magic = r.bytes(4);
-    const uint32_t steps = r.bytes(1);
-    // No steps: a cleared program, stored as such.
-    if (magic != kMagic || steps > static_cast<uint32_t>(kMaxProgramSteps)) return false;
-    for (uint32_t i = 0; i < steps; ++i) {
-        if (!read_step(r, program.step[i])) return false;
+    const uint32_t count = r.bytes(1);            // none: a cleared program, stored as such
+    if (magic != kMagic || count > static_cast<uint32_t>(kMaxProgramSteps)) return false;
+    ExcitationConfig c;
+    for (uint32_t i = 0; i < count; ++i) {
+        if (!read_step(r, c)) return false;
     }
     if (r.at != r.n) return false;                 // bytes left over: not a record of ours
-    program.steps = static_cast<uint8_t>(steps);
+    __builtin_memcpy(bytes_, data, r.n);
+    n_ = r.n;
     return true;
 }
 
 Reason ProgramBuilder::add(uint8_t index, uint8_t count, const ExcitationConfig& step) {
-    if (index > 0 && index + 1 == next_ && count == program_.steps) {
-        program_.step[index] = step;           // sent again (its answer lost): the same step
-        return Reason::None;
+    const uint8_t taken = program_.steps();
+    if (index > 0 && index + 1 == taken && count == count_) {
+        program_.cut(last_at_, index);             // sent again (its answer lost): replaced
+    } else if (index == 0) {
+        reset();
     }
-    if (index == 0) reset();
-    if (count == 0 || count > kMaxProgramSteps || index != next_ ||
-        (index > 0 && count != program_.steps)) {
+    if (count == 0 || count > kMaxProgramSteps || index != program_.steps() ||
+        (index > 0 && count != count_)) {
         reset();
         return Reason::ProgramOrder;
     }
-    program_.steps = count;
-    program_.step[index] = step;
-    ++next_;
+    const size_t at = program_.size();
+    if (!program_.append(step)) {
+        reset();
+        return Reason::ProgramOrder;
+    }
+    last_at_ = at;
+    count_ = count;
     return Reason::None;
 }
 
@@ -158,7 +193,7 @@ ProgramEvent ProgramRunner::update(const RcInput& rc, const Program& program, Su
     if (!edge) return ProgramEvent{};
     Reason refused = Reason::None;
     if (!sup.armed()) refused = Reason::Disarmed;
-    else if (program.steps == 0) refused = Reason::NoProgram;
+    else if (program.steps() == 0) refused = Reason::NoProgram;
     else if (sup.excitation().active()) refused = Reason::Busy;
     if (refused != Reason::None) {
         sup.refuse_excitation(refused);
@@ -174,7 +209,9 @@ ProgramEvent ProgramRunner::update(const RcInput& rc, const Program& program, Su
 
 ProgramEvent ProgramRunner::start_step(const Program& program, Supervisor& sup, uint64_t now_us) {
     next_due_ = false;
-    const Reason r = sup.start_program_step(program.step[step_], now_us);
+    ExcitationConfig c;
+    const Reason r = program.step(step_, c) ? sup.start_program_step(c, now_us)
+                                            : Reason::NoProgram;
     if (r != Reason::None) return end(r, false);             // the refusal is announced
     ProgramEvent e;
     e.happened = true;
@@ -185,7 +222,7 @@ ProgramEvent ProgramRunner::start_step(const Program& program, Supervisor& sup, 
 ProgramEvent ProgramRunner::step_ended(Reason why, const Program& program) {
     if (!running_) return ProgramEvent{};
     if (why != Reason::Finished) return end(why, false);     // the Supervisor said why
-    if (step_ + 1 < program.steps) {
+    if (step_ + 1 < program.steps()) {
         ++step_;
         next_due_ = true;
         return ProgramEvent{};

@@ -2,13 +2,14 @@
 // docs/link-contract.md), run with no host attached, started and held by the pilot's
 // program switch (channel 7).
 //
-// - A Program is up to kMaxProgramSteps excitations (ExcitationConfig, the HQ_EXCITATION
+// - A program is up to kMaxProgramSteps excitations (ExcitationConfig, the HQ_EXCITATION
 //   layout), run one after another. It is set whole or not at all (ProgramBuilder: the steps
 //   come in order; the last one completes it), each step checked against the excitation's
 //   own bounds (Supervisor::check_excitation_bounds) as it arrives.
-// - Its record (encode_program / decode_program) is kept in its own storage, the HAL's
-//   ParamStorage interface: magic, step count, each step's fields (a multisine's harmonics
-//   only as many as it has), CRC-32 of all that; a record that fails any check is no program.
+// - A Program is kept as its record (RAM holds bytes, not decoded steps), the same bytes its
+//   own storage holds (the HAL's ParamStorage interface): magic, step count, each step's
+//   fields (a multisine's harmonics only as many as it has), CRC-32 of all that; a record
+//   that fails any check is no program.
 // - ProgramRunner runs it: the switch's low-to-high move while armed starts step 0 (a switch
 //   found high does not start: the arm switch's edge rule); each step is an excitation the
 //   Supervisor starts and watches with every rule of a host's, except that the held switch
@@ -28,17 +29,16 @@ namespace hq {
 
 // The most steps a program has: the host's dwell sweeps have 15 frequencies by default.
 constexpr int kMaxProgramSteps = 24;
+// The most bytes a program's record has, CRC included: 24 sine steps take 397, a multisine
+// of 16 harmonics 185 (its steps are kept as the record, so RAM holds the bytes, not the
+// decoded steps).
+constexpr size_t kProgramRecordBytes = 512;
 
 // Where the program is (HQ_PROGRAM_STATE).
 enum class ProgramState : uint8_t {
     None = HQ_PROGRAM_STATE_NONE,
     Stored = HQ_PROGRAM_STATE_STORED,
     Running = HQ_PROGRAM_STATE_RUNNING,
-};
-
-struct Program {
-    uint8_t steps = 0;
-    ExcitationConfig step[kMaxProgramSteps] = {};
 };
 
 // The program as the link reports it (HQ_PROGRAM_STATUS).
@@ -49,27 +49,50 @@ struct ProgramReport {
     Reason reason = Reason::None;
 };
 
-// The record's bytes for `program` into out (at most capacity); 0 when it does not fit.
-size_t encode_program(const Program& program, uint8_t* out, size_t capacity);
-// The program a record holds (no steps: cleared); false (and `program` empty) for a record
-// that fails its checks.
-bool decode_program(const uint8_t* data, size_t n, Program& program);
+// A program, kept as its record's bytes (no steps: none, or cleared).
+class Program {
+public:
+    Program() { clear(); }
+    void clear();
+    uint8_t steps() const { return bytes_[kCountAt]; }
+    // Step i decoded into out; false when there is no such step.
+    bool step(int i, ExcitationConfig& out) const;
+    // One more step at the end; false (nothing added) when it would not fit.
+    bool append(const ExcitationConfig& step);
+    // The record (with its CRC) into out, at most capacity: its length, 0 when it does not fit.
+    size_t encode(uint8_t* out, size_t capacity) const;
+    // A stored record: false (and no program) when it fails its checks.
+    bool decode(const uint8_t* data, size_t n);
+    // Its bytes so far, and back to that length with that many steps (the builder's repeat).
+    size_t size() const { return n_; }
+    void cut(size_t n, uint8_t count);
+
+private:
+    static constexpr size_t kCountAt = 4;
+    static constexpr size_t kCrcBytes = 4;
+    uint8_t bytes_[kProgramRecordBytes - kCrcBytes];   // magic, count, steps (not the CRC)
+    size_t n_ = 0;
+};
 
 // A program arriving step by step: whole or not at all.
 class ProgramBuilder {
 public:
     // Step `index` of `count`; Reason::None when taken (the last one taken, sent again, takes
-    // its place). A step out of order (or a count that changed, none, or more than
-    // kMaxProgramSteps) is ProgramOrder and drops what came.
+    // its place). A step out of order (or a count that changed, none, more than
+    // kMaxProgramSteps, or steps that do not fit a record) is ProgramOrder and drops what came.
     Reason add(uint8_t index, uint8_t count, const ExcitationConfig& step);
     // The program is complete (its last step taken).
-    bool complete() const { return program_.steps > 0 && next_ == program_.steps; }
+    bool complete() const { return count_ > 0 && program_.steps() == count_; }
     const Program& program() const { return program_; }
-    void reset() { next_ = 0; program_.steps = 0; }
+    void reset() {
+        program_.clear();
+        count_ = 0;
+    }
 
 private:
     Program program_{};
-    uint8_t next_ = 0;
+    size_t last_at_ = 0;            // where the last step taken begins (a repeat replaces it)
+    uint8_t count_ = 0;
 };
 
 // What the runner did in a loop, for the link (HQ_PROGRAM_STATUS) and the notices.

@@ -41,8 +41,8 @@ bool GcsLink::ask_program(const mavlink_message_t& msg, LoopRequest& r) {
 // A READ's step (when the board has it) before the status; every action's status.
 void GcsLink::reply_program(const Received& in, const LoopAnswer& a) {
     const uint8_t action = in.program[0];
-    if (action == HQ_PROGRAM_READ && program_ != nullptr && in.program[1] < program_->steps) {
-        const ExcitationConfig& c = program_->step[in.program[1]];
+    ExcitationConfig c;
+    if (action == HQ_PROGRAM_READ && program_ != nullptr && program_->step(in.program[1], c)) {
         uint16_t order[kMaxHarmonics] = {};
         float amp[kMaxHarmonics] = {}, phase[kMaxHarmonics] = {};
         for (int i = 0; c.signal == Signal::Multisine && i < c.harmonics; ++i) {
@@ -53,7 +53,7 @@ void GcsLink::reply_program(const Received& in, const LoopAnswer& a) {
         mavlink_message_t out;
         mavlink_msg_hq_program_pack_status(
             config_.system_id, config_.component_id, &tx_status_, &out, in.sysid, in.compid,
-            HQ_PROGRAM_STEP, in.program[1], program_->steps, static_cast<uint8_t>(c.axis),
+            HQ_PROGRAM_STEP, in.program[1], program_->steps(), static_cast<uint8_t>(c.axis),
             static_cast<uint8_t>(c.injection), c.freq_hz, c.amplitude, c.cycles, c.fade_cycles,
             static_cast<uint8_t>(c.signal), order, amp, phase);
         send(out);
