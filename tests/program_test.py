@@ -242,3 +242,16 @@ def test_a_hosts_start_is_refused_while_the_program_runs_and_a_stop_ends_it(tmp_
         since = rig.last_loop_us()
         rig.step(20)
         assert not any(m.exc_state for _, m in rig.of_type("HQ_SYSID_SAMPLE", since + 1))
+
+
+def test_a_program_too_large_for_its_record_is_refused_and_the_old_one_kept(tmp_path):
+    """Three multisines of 16 lines need 537 bytes: the third is refused (PROGRAM_ORDER),
+    and the board keeps the program it had."""
+    lines = tuple((h, 0.01, 0.0) for h in range(1, 17))
+    big = [ProgramStep("roll", "mixer", 0.5, 0.2, 2, 1, lines)] * 3
+    with _board(tmp_path / "params") as (rig, client):
+        client.set(STEPS)
+        with pytest.raises(BoardRefused, match="step 3 of 3") as refused:
+            client.set(big)
+        assert reason_text(MAV.HQ_REASON_PROGRAM_ORDER) in str(refused.value)
+        assert [s.freq_hz for s in client.show()] == [2.0, 4.0, 8.0]
