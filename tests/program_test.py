@@ -223,15 +223,19 @@ def test_a_damaged_store_is_no_program_and_is_said_at_boot(tmp_path):
         assert client.show() == []
 
 
+def _flip_channel_7(rig):
+    """Channel 7 low, then high; the HQ_PROGRAM_STATUS that answers the move."""
+    rig.rc[6] = 1000
+    rig.step(5)
+    rig.rc[6] = 2000
+    return rig.until(lambda m: m.get_type() == "HQ_PROGRAM_STATUS")[1]
+
+
 def test_a_hosts_start_is_refused_while_the_program_runs_and_a_stop_ends_it(tmp_path):
     with _board(tmp_path / "params") as (rig, client):
         client.set(STEPS)
         rig.hover()
-        rig.rc[6] = 1000
-        rig.step(5)
-        rig.rc[6] = 2000
-        rig.until(lambda m: m.get_type() == "HQ_PROGRAM_STATUS"
-                  and m.state == MAV.HQ_PROGRAM_STATE_RUNNING)
+        assert _flip_channel_7(rig).state == MAV.HQ_PROGRAM_STATE_RUNNING
         _, answer = rig.excitation_answer()
         assert (answer.accepted, answer.reason) == (0, MAV.HQ_REASON_PROGRAM_RUNNING)
         assert "refused: the on-board program runs" in _program_texts(rig)
@@ -255,3 +259,16 @@ def test_a_program_too_large_for_its_record_is_refused_and_the_old_one_kept(tmp_
             client.set(big)
         assert reason_text(MAV.HQ_REASON_PROGRAM_ORDER) in str(refused.value)
         assert [s.freq_hz for s in client.show()] == [2.0, 4.0, 8.0]
+
+
+def test_channel_7_with_no_program_or_while_disarmed_is_refused_and_said(tmp_path):
+    with _board(tmp_path / "params") as (rig, client):
+        rig.step(10)
+        disarmed = _flip_channel_7(rig)
+        assert (disarmed.reason, disarmed.state) == (MAV.HQ_REASON_DISARMED,
+                                                     MAV.HQ_PROGRAM_STATE_NONE)
+        rig.hover()
+        none = _flip_channel_7(rig)
+        assert (none.reason, none.accepted) == (MAV.HQ_REASON_NO_PROGRAM, 0)
+        assert "program refused: none stored" in _program_texts(rig)
+        assert "excitation refused: disarmed" in _program_texts(rig)
