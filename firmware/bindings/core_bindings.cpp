@@ -440,6 +440,7 @@ PYBIND11_MODULE(_firmware, m) {
     py::enum_<Signal>(m, "Signal").value("SINE", Signal::Sine)
         .value("MULTISINE", Signal::Multisine);
     m.attr("MAX_HARMONICS") = kMaxHarmonics;
+    m.attr("MAX_PROGRAM_STEPS") = kMaxProgramSteps;
     py::enum_<ExcitationState>(m, "ExcitationState").value("IDLE", ExcitationState::Idle)
         .value("FADING", ExcitationState::Fading).value("RUNNING", ExcitationState::Running);
     py::class_<ExcitationConfig>(m, "ExcitationConfig")

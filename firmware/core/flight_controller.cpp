@@ -41,6 +41,7 @@ InitResult FlightController::init() {
     boot.params = load_params(bad_index, boot.param_result);
     boot.param_index = static_cast<int16_t>(bad_index);
     apply_params(kParamEsc, clock_.micros());
+    load_program();                  // after the parameters: their bounds check its steps
     imu_init_ = init_imu();
     boot.imu = imu_finding(imu_init_, params_.values().imu_path);
     boot.dmp_step = imu_.dmp_failure();
@@ -87,6 +88,7 @@ void FlightController::step(const RcInput& rc, LoopInbox& inbox) {
     status_.state.dt_s = dt;
     status_.notice_count = 0;
     status_.excitation_ended = false;
+    status_.program_changed = false;
     if (logger_.counters().card != card_said_) {     // logging stopped, or came back
         card_said_ = logger_.counters().card;
         notice(card_notice(card_said_));
@@ -99,6 +101,7 @@ void FlightController::step(const RcInput& rc, LoopInbox& inbox) {
     in.attitude = status_.state.attitude;
     in.rate = status_.state.rate;
     answer(inbox, rc, now);
+    run_program(rc, now);
     const float excitation = supervisor_.update(in);
     recover_imu(now);
     run_control(rc, excitation, dt);
@@ -121,6 +124,7 @@ void FlightController::publish_events() {
         status_.excitation_ended = true;
         status_.end_reason = why;
         status_.excitation = excitation_report();
+        program_event(program_runner_.step_ended(why, program_));
     }
 }
 
@@ -147,6 +151,7 @@ void FlightController::publish(uint64_t now_us) {
     s.rc = rc_;
     s.rc_timeout_us = sup.limits().rc_timeout_us;
     s.params = params_.values();
+    s.program = &program_;
     const LogCounters& log = logger_.counters();
     s.log = LogStatus{log.card, log.records, log.dropped, log.bytes_written};
 }

@@ -25,6 +25,7 @@
 #include "mixer.hpp"
 #include "mpu6050.hpp"
 #include "params.hpp"
+#include "program.hpp"
 #include "rc.hpp"
 #include "supervisor.hpp"
 
@@ -45,6 +46,8 @@ struct FlightControllerConfig {
     AttitudeFilterConfig attitude_filter{};   // the raw path's ComplementaryFilter
     // Where the parameters persist (nullptr: defaults at every start, nothing saved).
     ParamStorage* storage = nullptr;
+    // Where the on-board program persists (program.hpp; nullptr: kept until restart).
+    ParamStorage* program_storage = nullptr;
     // Why the chip last reset, for the boot report: the target reads it from the HAL
     // (hal/reset_cause.hpp) before init().
     ResetCause reset_cause = ResetCause::PowerOn;
@@ -107,6 +110,14 @@ private:
     void apply_params(uint8_t changed, uint64_t now_us);
     void save_params_when_due(uint64_t now_us);
     bool save_params();
+    // flight_controller_program.cpp: the on-board program
+    void load_program();
+    LoopAnswer answer_program(const LoopRequest& r, const ExcitationConfig& step);
+    LoopAnswer set_program_step(const LoopRequest& r, const ExcitationConfig& step);
+    bool save_program(const Program& program);
+    void run_program(const RcInput& rc, uint64_t now_us);
+    void program_event(const ProgramEvent& e);
+    ProgramReport program_report() const;
 
     FlightControllerConfig config_;
     I2cBus& i2c_;
@@ -130,6 +141,9 @@ private:
     InitResult imu_init_ = InitResult::NoDevice;
     bool params_dirty_ = false;              // changed since the last save
     uint64_t params_changed_us_ = 0;
+    Program program_{};                      // the stored program
+    ProgramBuilder program_in_{};            // a new one, arriving step by step
+    ProgramRunner program_runner_{};
 };
 
 }  // namespace hq

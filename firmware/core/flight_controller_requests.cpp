@@ -46,6 +46,10 @@ LoopAnswer FlightController::answer_one(const LoopRequest& r, const ExcitationCo
             return a;
         case RequestKind::Bootloader:
             return answer_bootloader();
+        case RequestKind::ProgramStep:
+        case RequestKind::ProgramClear:
+        case RequestKind::ProgramRead:
+            return answer_program(r, start);
         default:
             return answer_excitation(r, start, now_us);
     }
@@ -70,8 +74,15 @@ LoopAnswer FlightController::answer_bootloader() {
 LoopAnswer FlightController::answer_excitation(const LoopRequest& r,
                                               const ExcitationConfig& start, uint64_t now_us) {
     LoopAnswer a;
-    if (r.kind == RequestKind::ExcitationStop) {
+    if (program_runner_.running() && r.kind != RequestKind::ExcitationStop) {
+        // The pilot's switch holds the program: a host's start or finish is refused (a STOP
+        // still stops it, below).
+        a.reason = Reason::ProgramRunning;
+        supervisor_.refuse_excitation(a.reason);
+        a.verdict = Verdict::Refused;
+    } else if (r.kind == RequestKind::ExcitationStop) {
         supervisor_.stop_excitation();
+        program_event(program_runner_.stop(Reason::StopCommand));
         a.reason = Reason::StopCommand;
     } else if (r.kind == RequestKind::ExcitationFinish) {
         supervisor_.finish_excitation();             // the answer carries the new length

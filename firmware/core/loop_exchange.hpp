@@ -14,6 +14,7 @@
 #include "mixer.hpp"
 #include "mpu6050.hpp"
 #include "params.hpp"
+#include "program.hpp"
 #include "rc.hpp"
 #include "supervisor.hpp"
 #include "types.hpp"
@@ -32,6 +33,9 @@ enum class RequestKind : uint8_t {
     ParamSet,           // `param_index`, `param_value` (decoded; `param_type_ok` false: refused)
     Storage,            // `value` the MAV_CMD_PREFLIGHT_STORAGE parameter action
     Bootloader,         // the target asks to restart into its bootloader (never while armed)
+    ProgramStep,        // LoopInbox::excitation the step; `value` its index, `param_index` the count
+    ProgramClear,
+    ProgramRead,        // `value` the step asked for
 };
 
 struct LoopRequest {
@@ -62,6 +66,7 @@ struct LoopAnswer {
     SetResult set = SetResult::Ok;         // ParamSet
     uint8_t notices_end = 0;               // LoopStatus::notice[] up to here raised by now
     ExcitationReport excitation{};         // the Excitation* kinds
+    ProgramReport program{};               // the Program* kinds
 };
 
 // One loop's requests, filled by the links before the step and answered in the step; whoever
@@ -180,9 +185,14 @@ struct LoopStatus {
     bool excitation_ended = false;         // this step: HQ_EXCITATION_STATUS with end_reason
     Reason end_reason = Reason::None;
     ExcitationReport excitation{};
+    // The on-board program: the one stored (HQ_PROGRAM READ's answers), and whether this step
+    // started or ended a step of it (HQ_PROGRAM_STATUS with program_report).
+    const Program* program = nullptr;
+    bool program_changed = false;
+    ProgramReport program_report{};
     // A request's notices (LoopAnswer::notices_end), then up to notices_before_telemetry
     // the Supervisor's events, then the ones raised after the telemetry (the store's).
-    static constexpr int kNotices = 2 * LoopInbox::kCapacity + Supervisor::kEventQueue + 2;
+    static constexpr int kNotices = 2 * LoopInbox::kCapacity + Supervisor::kEventQueue + 4;
     Notice notice[kNotices];
     uint8_t notice_count = 0;
     uint8_t notices_before_telemetry = 0;

@@ -2,7 +2,8 @@
 // RcInput (hal/rc_input.hpp: pulse widths in us, 0 = no signal on that channel).
 //
 // Channels (FrSky V8FR-II PWM outputs, Mode 2 transmitter):
-//   1 roll stick, 2 pitch stick, 3 throttle, 4 yaw stick, 5 arm switch, 6 mode switch.
+//   1 roll stick, 2 pitch stick, 3 throttle, 4 yaw stick, 5 arm switch, 6 mode switch,
+//   7 the on-board program's switch (program.hpp).
 // Sticks are centred at 1500 us with +/-500 us of travel; the throttle runs 1000..2000 us.
 #pragma once
 
@@ -14,7 +15,7 @@
 namespace hq {
 
 namespace rc {
-constexpr int kRoll = 0, kPitch = 1, kThrottle = 2, kYaw = 3, kArm = 4, kMode = 5;
+constexpr int kRoll = 0, kPitch = 1, kThrottle = 2, kYaw = 3, kArm = 4, kMode = 5, kProgram = 6;
 constexpr uint16_t kCenterUs = 1500, kMinUs = 1000, kHalfSpanUs = 500;
 }  // namespace rc
 

@@ -56,6 +56,11 @@ const char* reason_text(Reason reason) {
         case Reason::BadAction: return "excitation refused: unknown action";
         case Reason::Harmonics: return "excitation refused: bad signal or harmonics";
         case Reason::Peak: return "excitation stopped: signal passed its peak";
+        case Reason::Armed: return "refused: armed (disarm first)";
+        case Reason::ProgramRunning: return "refused: the on-board program runs";
+        case Reason::ProgramSwitch: return "program stopped: channel 7 released";
+        case Reason::ProgramOrder: return "program refused: steps out of order";
+        case Reason::NoProgram: return "program refused: none stored";
     }
     return "unknown reason";
 }
@@ -320,18 +325,25 @@ float Supervisor::update(const SupervisorInputs& in) {
 // --- the excitation -------------------------------------------------------------------------
 
 Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us,
-                                    StationId who) const {
+                                    StationId who, bool program) const {
+    if (!armed_) return Reason::Disarmed;
+    if (!program && !station_alive(who, now_us)) return Reason::NoHost;     // its own heartbeat
+    if (excitation_.active()) return Reason::Busy;
+    // A bad axis or injection first, then the mode, then the numbers (as they always were).
+    const Reason bounds = check_excitation_bounds(c);
+    if (bounds == Reason::AxisInjection) return bounds;
+    if (c.injection == Injection::Angle && mode_ != FlightMode::Angle) {
+        return Reason::InjectionMode;
+    }
+    return bounds;
+}
+
+Reason Supervisor::check_excitation_bounds(const ExcitationConfig& c) const {
     const auto axis = static_cast<uint8_t>(c.axis);
     const auto injection = static_cast<uint8_t>(c.injection);
-    if (!armed_) return Reason::Disarmed;
-    if (!station_alive(who, now_us)) return Reason::NoHost;     // its own heartbeat
-    if (excitation_.active()) return Reason::Busy;
     if (axis >= kAxes || injection >= kInjections ||
         (c.axis == Axis::Yaw && c.injection == Injection::Angle)) {
         return Reason::AxisInjection;
-    }
-    if (c.injection == Injection::Angle && mode_ != FlightMode::Angle) {
-        return Reason::InjectionMode;
     }
     if (!(std::isfinite(c.amplitude) && c.amplitude > 0.0f &&
           c.amplitude <= limits_.max_amplitude[injection])) {
@@ -362,11 +374,27 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us,
 
 Reason Supervisor::start_excitation(const ExcitationConfig& config, uint64_t now_us,
                                     StationId who) {
-    Reason r = check_excitation(config, now_us, who);
+    return begin_excitation(config, now_us, who, false);
+}
+
+Reason Supervisor::start_program_step(const ExcitationConfig& config, uint64_t now_us) {
+    return begin_excitation(config, now_us, kAnyStation, true);
+}
+
+Reason Supervisor::begin_excitation(const ExcitationConfig& config, uint64_t now_us,
+                                    StationId who, bool program) {
+    Reason r = check_excitation(config, now_us, who, program);
     if (r == Reason::None && !excitation_.start(config, loop_rate_hz_)) r = Reason::Frequency;
-    if (r == Reason::None) exc_owner_ = who;
+    if (r == Reason::None) {
+        exc_owner_ = who;
+        exc_by_program_ = program;
+    }
     if (r != Reason::None) refuse_excitation(r);
     return r;
+}
+
+void Supervisor::end_program_step(Reason why) {
+    if (program_owns_excitation()) end_excitation(why);
 }
 
 void Supervisor::refuse_excitation(Reason why) {
@@ -391,7 +419,8 @@ void Supervisor::end_excitation(Reason why, bool announce) {
 Reason Supervisor::excitation_limit(const SupervisorInputs& in) const {
     const ExcitationConfig& c = excitation_.config();
     const int a = static_cast<int>(c.axis);
-    if (!station_alive(exc_owner_, in.now_us)) return Reason::HostLost;   // its owner's
+    // A host's excitation lives by its owner's heartbeat; a program's by its switch.
+    if (!exc_by_program_ && !station_alive(exc_owner_, in.now_us)) return Reason::HostLost;
     // The yaw rig's heading is free: only roll and pitch have an angle limit. A measurement
     // that is not a number is beyond every limit (the comparisons are written so).
     if (a < kAngleAxes && !(std::fabs(in.attitude[a]) <= limits_.abort_angle_rad)) {

@@ -23,6 +23,9 @@
 //     heartbeat must be fresh to start it and keeps it alive: another station's does not.
 //     It stops at once on disarm, when its station goes quiet, or when its axis's angle or
 //     rate passes the abort limits (the same limits the host tool checks as a second line).
+//   - An excitation of the on-board program (program.hpp) belongs to no station: the held
+//     program switch (channel 7, watched by the program) keeps it alive instead of a
+//     heartbeat; every other rule is the same.
 //   - The flight mode does not change while an excitation runs: SET_MODE is refused, and an
 //     RC mode switch change takes effect when the excitation ends.
 //   - A stale IMU is probed and re-initialised while disarmed (imu_recovery_due()).
@@ -79,6 +82,11 @@ enum class Reason : uint8_t {
     BadAction = HQ_REASON_BAD_ACTION,
     Harmonics = HQ_REASON_HARMONICS,
     Peak = HQ_REASON_PEAK,
+    Armed = HQ_REASON_ARMED,
+    ProgramRunning = HQ_REASON_PROGRAM_RUNNING,
+    ProgramSwitch = HQ_REASON_PROGRAM_SWITCH,
+    ProgramOrder = HQ_REASON_PROGRAM_ORDER,
+    NoProgram = HQ_REASON_NO_PROGRAM,
 };
 constexpr uint8_t kReasonCount = HQ_REASON_ENUM_END;
 
@@ -196,6 +204,15 @@ public:
     // The excitation belongs to `who`: its heartbeat keeps it alive.
     Reason start_excitation(const ExcitationConfig& config, uint64_t now_us,
                             StationId who = kAnyStation);
+    // An on-board program's step (program.hpp): the same checks as start_excitation() but
+    // no station's heartbeat; the held program switch keeps it alive (end_program_step()).
+    Reason start_program_step(const ExcitationConfig& config, uint64_t now_us);
+    // Ends a running program step with `why` (announced, reported as an excitation end).
+    void end_program_step(Reason why);
+    bool program_owns_excitation() const { return excitation_.active() && exc_by_program_; }
+    // The checks of a request's own numbers, whatever the state (armed, host, mode): axis and
+    // injection, amplitude, band, harmonics, cycles, fade and duration within the limits.
+    Reason check_excitation_bounds(const ExcitationConfig& config) const;
     // Counts and announces a refused excitation request (for a refusal decided outside the
     // Supervisor's checks, such as an unknown HQ_EXCITATION action).
     void refuse_excitation(Reason why);
@@ -265,7 +282,9 @@ private:
     float run_excitation(const SupervisorInputs& in);
     Reason excitation_limit(const SupervisorInputs& in) const;
     Reason check_excitation(const ExcitationConfig& config, uint64_t now_us,
-                            StationId who) const;
+                            StationId who, bool program) const;
+    Reason begin_excitation(const ExcitationConfig& config, uint64_t now_us, StationId who,
+                            bool program);
     void end_excitation(Reason why, bool announce = true);
     bool host_alive(uint64_t now_us) const;
     bool station_alive(StationId who, uint64_t now_us) const;
@@ -297,6 +316,7 @@ private:
     };
     Station stations_[kStations];
     StationId exc_owner_ = kAnyStation;
+    bool exc_by_program_ = false;            // the running excitation is a program's step
     bool imu_seen_ = false, imu_stale_ = false;
     uint64_t last_imu_us_ = 0, last_imu_attempt_us_ = 0;
     Reason last_imu_finding_ = Reason::None;

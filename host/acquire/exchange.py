@@ -1,6 +1,7 @@
 """A request-and-answer exchange with the board over a telemetry link: what the parameter
-protocol (:mod:`heliquad.host.acquire.param_protocol`) and the log protocol
-(:mod:`heliquad.host.acquire.log_protocol`) share. While it waits it sends the host's
+protocol (:mod:`heliquad.host.acquire.param_protocol`), the log protocol
+(:mod:`heliquad.host.acquire.log_protocol`) and the on-board program's
+(:mod:`heliquad.host.acquire.program`) share. While it waits it sends the host's
 HEARTBEAT every :data:`~heliquad.host.acquire.link.HEARTBEAT_PERIOD_S` (as a ground station
 does), hands what arrives to the protocol, and notes from the board's HEARTBEAT whether it is
 armed; a request without an answer goes again (``retries`` times) before the board is given

@@ -169,16 +169,39 @@ class TelemetryLink:
                          cycles: int, fade_cycles: int, harmonics=None) -> None:
         """Start a sine, or with ``harmonics`` (``[(order, amplitude, phase_rad), ...]``) a
         multisine of base frequency ``freq_hz`` whose declared peak is ``amplitude``."""
+        signal, orders, amps, phases = self._signal(harmonics)
+        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, self.mav_module.HQ_EXCITATION_START,
+                                    names.AXES[axis], names.INJECTIONS[injection], float(freq_hz),
+                                    float(amplitude), int(cycles), int(fade_cycles), signal,
+                                    orders, amps, phases)
+
+    def _signal(self, harmonics):
+        """HQ_EXCITATION's (and HQ_PROGRAM's) signal and harmonic arrays: a sine without
+        ``harmonics``."""
         m = self.mav_module
         signal, orders, amps, phases = m.HQ_SIGNAL_SINE, [0] * 16, [0.0] * 16, [0.0] * 16
         if harmonics is not None:
             signal = m.HQ_SIGNAL_MULTISINE
             for i, (order, amp, phase) in enumerate(harmonics):
                 orders[i], amps[i], phases[i] = int(order), float(amp), float(phase)
-        self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, m.HQ_EXCITATION_START,
-                                    names.AXES[axis], names.INJECTIONS[injection], float(freq_hz),
-                                    float(amplitude), int(cycles), int(fade_cycles), signal,
-                                    orders, amps, phases)
+        return signal, orders, amps, phases
+
+    def program_step(self, index: int, count: int, axis: str, injection: str, freq_hz: float,
+                     amplitude: float, cycles: int, fade_cycles: int, harmonics=None) -> None:
+        """Step ``index`` of a new on-board program of ``count`` steps (HQ_PROGRAM STEP), the
+        excitation as :meth:`start_excitation` gives it."""
+        signal, orders, amps, phases = self._signal(harmonics)
+        self.mav.hq_program_send(TARGET_SYSTEM, self.target, self.mav_module.HQ_PROGRAM_STEP,
+                                 int(index), int(count), names.AXES[axis],
+                                 names.INJECTIONS[injection], float(freq_hz), float(amplitude),
+                                 int(cycles), int(fade_cycles), signal, orders, amps, phases)
+
+    def program_request(self, action: str, index: int = 0) -> None:
+        """HQ_PROGRAM ``"read"`` (step ``index`` of the stored program) or ``"clear"``."""
+        m = self.mav_module
+        code = m.HQ_PROGRAM_READ if action == "read" else m.HQ_PROGRAM_CLEAR
+        self.mav.hq_program_send(TARGET_SYSTEM, self.target, code, int(index), 0, 0, 0, 0.0,
+                                 0.0, 0, 0, m.HQ_SIGNAL_SINE, [0] * 16, [0.0] * 16, [0.0] * 16)
 
     def stop_excitation(self) -> None:
         """Stop any excitation (axis and injection are not read with STOP)."""

@@ -16,8 +16,8 @@ __all__ = ["COMMANDS", "add_parsers", "module_of"]
 
 #: The subcommands, in the order ``heliquad --help`` lists them.
 COMMANDS = ("fsf", "fit", "sil", "board", "validate", "log", "tlog", "sweep", "identify",
-            "report", "params", "logs", "demo", "dmp-image", "flash", "usb-descriptors",
-            "mavlink-dialect", "sd-image")
+            "report", "params", "logs", "program", "demo", "dmp-image", "flash",
+            "usb-descriptors", "mavlink-dialect", "sd-image")
 
 
 def module_of(command: str) -> str:

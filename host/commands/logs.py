@@ -6,7 +6,7 @@ import datetime
 import os
 
 from ...sim.base.errors import InputError
-from .shared_options import add_baud_argument, add_port_argument, int_in
+from .shared_options import add_board_actions, int_in
 
 __all__ = ["add_parser", "run"]
 
@@ -39,12 +39,8 @@ MAX_LOG_ID = 0xFFFF
 
 
 def add_parser(sub, fmt) -> None:
-    p = sub.add_parser("logs", help="list, download and erase the board's on-board logs",
-                       description=HELP, formatter_class=fmt)
-    add_port_argument(p)
-    add_baud_argument(p)
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
-    actions.required = True
+    p, actions = add_board_actions(sub, "logs", "list, download and erase the board's "
+                                   "on-board logs", HELP, fmt)
     actions.add_parser("list", help="every log: number, size, time")
     getter = actions.add_parser("download", help="one log into a file, resumable")
     getter.add_argument("log_id", metavar="N", type=int_in(1, MAX_LOG_ID))

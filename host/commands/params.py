@@ -8,7 +8,7 @@ import sys
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from .shared_options import add_baud_argument, add_port_argument, finite
+from .shared_options import add_board_actions, finite
 
 __all__ = ["add_parser", "run"]
 
@@ -45,12 +45,8 @@ examples: heliquad params --port /dev/ttyACM0 list
 
 
 def add_parser(sub, fmt) -> None:
-    p = sub.add_parser("params", help="list, get, set, save and load the board's parameters",
-                       description=HELP, formatter_class=fmt)
-    add_port_argument(p)
-    add_baud_argument(p)
-    actions = p.add_subparsers(dest="action", metavar="ACTION")
-    actions.required = True
+    p, actions = add_board_actions(sub, "params", "list, get, set, save and load the board's "
+                                   "parameters", HELP, fmt)
     actions.add_parser("list", help="every parameter: name, value, type")
     actions.add_parser("get", help="one parameter").add_argument("name", metavar="NAME")
     setter = actions.add_parser("set", help="set one parameter and check the board took it")

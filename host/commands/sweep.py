@@ -10,17 +10,16 @@ import sys
 
 from ...sim.base import dialect as names
 from ...sim.base.errors import DiskFull, InputError, LinkLost
-from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_DURATION_S
+from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S
 from ...sim.rig.setup import PLANTS
-from ..acquire import design
-from ..acquire.excitation import DEFAULT_SETPOINT, defaults_text, firmware_amplitude, units_text
-from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
+from ..acquire.excitation import DEFAULT_SETPOINT
 from ..process.signals import ABORTED_BY, EXIT_CODES
-from .shared_options import (MAX_CYCLES, add_baud_argument, add_fault_argument,
-                             add_firmware_argument, firmware_link, add_rc_script_argument,
-                             add_vehicle_arguments, add_param_store_argument, add_port_argument,
-                             add_sd_card_arguments, check_excitation,
-                             check_plant, faults, finite, int_in, number_in, sd_card)
+from .shared_options import (add_baud_argument, add_design_arguments,
+                             add_fault_argument, add_firmware_argument, firmware_link,
+                             add_rc_script_argument, add_vehicle_arguments,
+                             add_param_store_argument, add_port_argument, add_sd_card_arguments,
+                             check_excitation, check_plant, faults, finite, number_in,
+                             sd_card, sweep_plan)
 
 __all__ = ["add_parser", "run"]
 
@@ -72,32 +71,7 @@ def add_parser(sub, fmt) -> None:
     add_vehicle_arguments(p)
     p.add_argument("--collective", type=number_in(0, 1), default=0.4)
     p.add_argument("--dmp-image", metavar="FILE")
-    p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
-                   help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
-    p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
-                   f"frequencies: {units_text()}; default: "
-                   f"designed per frequency (mixer), {defaults_text()}")
-    p.add_argument("--swing-deg", type=number_in(0, 45, lo_open=True), metavar="D",
-                   help=f"mixer: the rig swing each designed amplitude aims at (default "
-                        f"{design.TARGET_SWING_DEG:g} deg)")
-    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), metavar="N",
-                   help="a fixed dwell: N measured cycles per frequency (the paper's: 8); "
-                        "default: the sequential dwell")
-    p.add_argument("--target-sigma", type=number_in(0, 1, lo_open=True), metavar="S",
-                   help=f"sequential dwell: end a frequency once its point's standard deviation "
-                        f"is S of its magnitude (default {design.TARGET_SIGMA:g})")
-    p.add_argument("--max-cycles", type=int_in(design.MIN_CYCLES, MAX_CYCLES), metavar="N",
-                   help=f"sequential dwell: the most measured cycles of a frequency (default "
-                        f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
-    p.add_argument("--signal", choices=("dwell", "multisine"), default="dwell",
-                   help="dwell (default, the paper's): one sine per frequency; multisine: "
-                        "every line of the band at once, in one periodic record")
-    p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
-                   help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
-                        "the nearest harmonic of the base period")
-    p.add_argument("--rig-time", type=number_in(10, MAX_DURATION_S), metavar="S",
-                   help=f"multisine: the seconds it may last, fades included (default "
-                        f"{RIG_TIME_S:g}); as many whole base periods as fit")
+    add_design_arguments(p)
     p.add_argument("--out", required=True, metavar="DIR")
     add_firmware_argument(p)
     add_param_store_argument(p)
@@ -116,7 +90,7 @@ def run(args) -> int:
     # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
     # SIGINT after the tool has stopped in order.
     importlib.import_module("heliquad.host.estimate.fsf")
-    plan = _plan(args)
+    plan = sweep_plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         # the command's work, imported when it runs: --help imports every command module
         from ...sim.rig.setup import SilConfig
@@ -203,53 +177,6 @@ def _what(plan) -> str:
     return (f"multisine: {len(ms.orders)} lines {ms.freqs_hz[0]:.3g}-{ms.freqs_hz[-1]:.3g} Hz "
             f"on a {ms.period_samples / ms.fs_hz:.3g} s period, {ms.periods} periods, "
             f"{ms.duration_s:.0f} s, peak {ms.peak:.3g} (crest factor {ms.crest_factor:.2f})")
-
-
-def _plan(args):
-    """The sweep's plan from the options: fixed or sequential dwell, fixed or designed
-    amplitudes."""
-    # the command's work, imported when it runs: --help imports every command module
-    from ..acquire.sweep import default_plan
-
-    if args.cycles is not None and (args.target_sigma or args.max_cycles):
-        raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
-                         "the sequential dwell: give one or the other")
-    if args.swing_deg is not None and (args.amplitude is not None or args.inject != "mixer"):
-        raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
-                         "--amplitude or angle or rate injection")
-    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
-    if args.signal == "multisine":
-        return _multisine_plan(args, amp)
-    if args.lines is not None or args.rig_time is not None:
-        raise InputError("--lines and --rig-time shape a multisine: add --signal multisine")
-    dwell = None
-    if args.cycles is None:
-        dwell = design.Dwell()
-        dwell.target_sigma = args.target_sigma or dwell.target_sigma
-        dwell.max_cycles = args.max_cycles or dwell.max_cycles
-    return default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles, dwell,
-                        args.swing_deg)
-
-
-def _multisine_plan(args, amp):
-    """A multisine's plan: over the axis's band, or from the lowest to the highest of
-    --freqs-hz; --amplitude is its peak."""
-    # the command's work, imported when it runs: --help imports every command module
-    from ..acquire.sweep import multisine_plan
-
-    given = [o for o, v in (("--cycles", args.cycles), ("--target-sigma", args.target_sigma),
-                            ("--max-cycles", args.max_cycles), ("--swing-deg", args.swing_deg))
-             if v is not None]
-    if given:
-        raise InputError(f"{' and '.join(given)} shape a dwell; a multisine's length is "
-                         "--rig-time")
-    band = None
-    if args.freqs_hz is not None:
-        if len(args.freqs_hz) < 2 or min(args.freqs_hz) == max(args.freqs_hz):
-            raise InputError("--freqs-hz with --signal multisine: the band's two edges "
-                             "(lowest and highest)")
-        band = (min(args.freqs_hz), max(args.freqs_hz))
-    return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time, band)
 
 
 def _found_text(found: dict) -> str:

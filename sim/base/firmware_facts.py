@@ -21,7 +21,8 @@ from . import dialect
 
 __all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "MAX_PTY_BACKLOG_BYTES",
            "ABORT_ANGLE_RAD", "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION",
-           "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MIN_TIME_CONSTANT_S",
+           "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MAX_PROGRAM_STEPS",
+           "MIN_TIME_CONSTANT_S",
            "UsbIdentity", "USB_IDENTITY", "usb_serial_number",
            "max_amplitude", "safety_limits"]
 
@@ -74,6 +75,8 @@ MAX_DURATION_S = float(_LIMITS.max_duration_s)
 MIN_FADE_CYCLES = int(_LIMITS.min_fade_cycles)
 #: The most lines a multisine excitation carries.
 MAX_HARMONICS = int(_firmware.MAX_HARMONICS)
+#: The most steps an on-board program has.
+MAX_PROGRAM_STEPS = int(_firmware.MAX_PROGRAM_STEPS)
 #: The shortest integral or derivative time the PID takes, s (below it: no integral).
 MIN_TIME_CONSTANT_S = float(_firmware.MIN_TIME_CONSTANT_S)
 

@@ -66,9 +66,12 @@ void GcsLink::receive() {
 bool GcsLink::take(const mavlink_message_t& msg) {
     if (received_count_ == LoopInbox::kCapacity) return false;
     if (logs_ != nullptr && logs_->take(*this, msg)) return true;    // kept for the spare time
-    if (msg.msgid == MAVLINK_MSG_ID_HQ_EXCITATION && inbox_.has_excitation &&
-        mavlink_msg_hq_excitation_get_action(&msg) == HQ_EXCITATION_START) {
-        return false;                        // one start's configuration a loop
+    if (inbox_.has_excitation &&
+        ((msg.msgid == MAVLINK_MSG_ID_HQ_EXCITATION &&
+          mavlink_msg_hq_excitation_get_action(&msg) == HQ_EXCITATION_START) ||
+         (msg.msgid == MAVLINK_MSG_ID_HQ_PROGRAM &&
+          mavlink_msg_hq_program_get_action(&msg) == HQ_PROGRAM_STEP))) {
+        return false;                        // one start's (or step's) configuration a loop
     }
     Received& in = received_[received_count_];
     const bool answered = keep(msg, in);
@@ -142,6 +145,8 @@ bool GcsLink::keep(const mavlink_message_t& msg, Received& in) const {
             for (int i = 0; i < 4; ++i) in.ftp[i] = f.payload[i];
             return for_us(f.target_system, f.target_component);
         }
+        case MAVLINK_MSG_ID_HQ_PROGRAM:
+            return keep_program(msg, in);
         default:
             return false;                    // HQ_EXCITATION: answered when it is a request
     }
@@ -175,6 +180,8 @@ bool GcsLink::ask(const mavlink_message_t& msg, const Received& in, bool answere
         }
         case MAVLINK_MSG_ID_HQ_EXCITATION:
             return ask_excitation(msg, r);
+        case MAVLINK_MSG_ID_HQ_PROGRAM:
+            return answered && ask_program(msg, r);
         case MAVLINK_MSG_ID_PARAM_SET:
             return ask_param_set(msg, r);
         default:
@@ -213,26 +220,27 @@ bool GcsLink::ask_excitation(const mavlink_message_t& msg, LoopRequest& r) {
     } else if (ex.action == HQ_EXCITATION_START) {
         r.kind = RequestKind::ExcitationStart;
         inbox_.has_excitation = true;
-        ExcitationConfig& cfg = inbox_.excitation;
-        cfg = ExcitationConfig{};
-        cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
-        cfg.injection = static_cast<Injection>(ex.injection);
-        cfg.freq_hz = ex.freq_hz;
-        cfg.amplitude = ex.amplitude;
-        cfg.cycles = ex.cycles;
-        cfg.fade_cycles = ex.fade_cycles;
-        read_harmonics(ex, cfg);
+        read_excitation(ex, inbox_.excitation);
     } else {
         r.kind = RequestKind::ExcitationRefuse;
     }
     return true;
 }
 
-// A multisine's harmonics: the entries before the first zero order. A non-zero order after
+// The excitation as sent (the Supervisor checks it), and a multisine's harmonics: the
+// entries before the first zero order. A non-zero order after
 // it leaves none, so the request is refused (HQ_REASON_HARMONICS) rather than cut short.
 static_assert(sizeof(mavlink_hq_excitation_t::harmonic) / sizeof(uint16_t) == kMaxHarmonics,
               "HQ_EXCITATION carries kMaxHarmonics harmonics");
-void GcsLink::read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg) {
+template <typename Message>
+void GcsLink::read_excitation(const Message& ex, ExcitationConfig& cfg) {
+    cfg = ExcitationConfig{};
+    cfg.axis = static_cast<Axis>(ex.axis);              // checked by the Supervisor
+    cfg.injection = static_cast<Injection>(ex.injection);
+    cfg.freq_hz = ex.freq_hz;
+    cfg.amplitude = ex.amplitude;
+    cfg.cycles = ex.cycles;
+    cfg.fade_cycles = ex.fade_cycles;
     cfg.signal = static_cast<Signal>(ex.signal);        // checked by the Supervisor
     if (cfg.signal != Signal::Multisine) return;
     uint8_t count = 0;
@@ -249,12 +257,14 @@ void GcsLink::read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig
     }
     cfg.harmonics = count;
 }
+template void GcsLink::read_excitation(const mavlink_hq_program_t&, ExcitationConfig&);
 
 // --- answers -------------------------------------------------------------------------------
 
 void GcsLink::transmit(const LoopStatus& status) {
     loop_time_us_ = status.time_us;          // the stamp of every message about this loop
     if (logs_ != nullptr) logs_->set_armed(status.armed);
+    program_ = status.program;
     for (int i = 0; i < received_count_; ++i) {
         const Received& in = received_[i];
         const LoopAnswer* a = in.request < 0 ? nullptr : &inbox_.answer[in.request];
@@ -264,6 +274,7 @@ void GcsLink::transmit(const LoopStatus& status) {
     received_count_ = 0;
     send_notices_to(status, status.notices_before_telemetry);
     if (status.excitation_ended) send_excitation_status(status.end_reason, status.excitation);
+    if (status.program_changed) send_program_status(HQ_PROGRAM_STEP, status.program_report.reason == Reason::None, status.program_report);
     send_boot_report(status.boot);
     send_telemetry(status);
     send_notices_to(status, status.notice_count);
@@ -338,6 +349,7 @@ void GcsLink::reply(const Received& in, const LoopAnswer* a) {
         case MAVLINK_MSG_ID_PARAM_REQUEST_READ: reply_param_read(in); return;
         case MAVLINK_MSG_ID_PARAM_SET: reply_param_set(in, a); return;
         case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: refuse_file_transfer(in); return;
+        case MAVLINK_MSG_ID_HQ_PROGRAM: reply_program(in, *a); return;
         default: return;                     // a HEARTBEAT or SET_MODE: no answer
     }
 }

@@ -6,7 +6,8 @@
 //
 // gcs_link.cpp: messages in, command and excitation answers, sending; param_protocol.cpp: the
 // parameter protocol; telemetry.cpp: the streams; log_transfer.cpp: the log protocol
-// (LogTransfer, served in spare time when the target gives the link one: serve_logs()).
+// (LogTransfer, served in spare time when the target gives the link one: serve_logs());
+// program_link.cpp: the on-board program's messages (HQ_PROGRAM, HQ_PROGRAM_STATUS).
 //
 // Telemetry: every loop ATTITUDE and HQ_SYSID_SAMPLE (always the loop's last message);
 // HEARTBEAT, HQ_FW_STATUS and SYS_STATUS once a second; SERVO_OUTPUT_RAW, SCALED_IMU,
@@ -112,6 +113,7 @@ private:
         float p[7];                      // COMMAND_LONG, COMMAND_INT
         char param_id[kParamNameLen];    // PARAM_REQUEST_READ, PARAM_SET
         uint8_t ftp[4];                  // FILE_TRANSFER_PROTOCOL: seq (2), session, opcode
+        uint8_t program[2];              // HQ_PROGRAM: action, index
     };
     // gcs_link.cpp
     bool for_us(uint8_t target_system, uint8_t target_component) const;
@@ -125,7 +127,10 @@ private:
     bool ask(const mavlink_message_t& msg, const Received& in, bool answered, LoopRequest& r);
     static bool ask_command(const Received& in, LoopRequest& r);
     bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);
-    static void read_harmonics(const mavlink_hq_excitation_t& ex, ExcitationConfig& cfg);
+    // HQ_EXCITATION's (or HQ_PROGRAM's: Message) excitation into cfg: its numbers, signal
+    // and harmonics.
+    template <typename Message>
+    static void read_excitation(const Message& ex, ExcitationConfig& cfg);
     void reply(const Received& in, const LoopAnswer* a);
     void reply_command(const Received& in, const LoopAnswer* a);
     uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
@@ -147,6 +152,11 @@ private:
     void send_param_error(const Received& to, const char* name, int index, SetResult why);
     void send_params(const Tunables& values);
     bool send_param_value(const Tunables& values, int index);
+    // program_link.cpp
+    bool keep_program(const mavlink_message_t& msg, Received& in) const;
+    bool ask_program(const mavlink_message_t& msg, LoopRequest& r);
+    void reply_program(const Received& in, const LoopAnswer& a);
+    void send_program_status(uint8_t action, bool accepted, const ProgramReport& report);
     // telemetry.cpp
     uint8_t interval_command(uint32_t msgid, float interval_us);
     uint8_t request_message(uint32_t msgid);
@@ -186,6 +196,7 @@ private:
     uint32_t bytes_total_ = 0;               // bytes sent, since boot
     const GcsLink* peer_ = nullptr;
     LogTransfer* logs_ = nullptr;
+    const Program* program_ = nullptr;       // the loop's stored program (READ's answers)
     uint32_t bytes_sent_ = 0, bytes_dropped_ = 0;     // this second's, for SYS_STATUS
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
     uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index

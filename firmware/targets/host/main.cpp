@@ -1,8 +1,8 @@
 // heliquad-fw-host: the firmware's host build, driven in lockstep by the simulator.
 //
 //   heliquad-fw-host --sim-link PATH --telemetry PATH [--loop-hz 200] [--dmp-image FILE]
-//                    [--idle-timeout-s 10] [--params FILE] [--telemetry-backlog-bytes N]
-//                    [--sd-image FILE [--sd-faults NAME=VALUE,...]]
+//                    [--idle-timeout-s 10] [--params FILE] [--program FILE]
+//                    [--telemetry-backlog-bytes N] [--sd-image FILE [--sd-faults NAME=VALUE,...]]
 //
 // --telemetry-backlog-bytes N bounds what waits for a reader on the telemetry pty (default
 // 0: unbounded, for the lockstep simulator): when nobody reads, the oldest bytes are dropped,
@@ -10,6 +10,9 @@
 //
 // Parameters (the MAVLink parameter protocol, docs/parameters.md) persist in --params FILE,
 // created at the first save; without it every start has the defaults and nothing is saved.
+// The on-board program (core/program.hpp) persists in --program FILE the same way (its own
+// record in its own file: a program and the parameters are saved at different times, and
+// either survives the other's damage); without it a program is kept until the process ends.
 //
 // The SD card (docs/sd-card.md): --sd-image FILE is the card, a card-image file; one that does
 // not exist is made first, FAT32 at the default size (card_image.hpp); without it the board
@@ -71,7 +74,7 @@ void on_signal(int) { g_stop = 1; }
 constexpr int kIdleTimeoutS = 10;
 
 struct Options {
-    std::string sim_link, telemetry, dmp_image, params, sd_image, sd_faults;
+    std::string sim_link, telemetry, dmp_image, params, program, sd_image, sd_faults;
     float loop_hz = hq::kLoopRateHz;
     int idle_timeout_s = kIdleTimeoutS;
     long telemetry_backlog_bytes = 0;
@@ -81,7 +84,8 @@ struct Options {
     std::fprintf(stderr,
                  "heliquad-fw-host: %s\nusage: heliquad-fw-host --sim-link PATH --telemetry PATH "
                  "[--loop-hz %g] [--dmp-image FILE] [--idle-timeout-s %d] [--params FILE] "
-                 "[--telemetry-backlog-bytes N] [--sd-image FILE [--sd-faults NAME=VALUE,...]]\n",
+                 "[--program FILE] [--telemetry-backlog-bytes N] "
+                 "[--sd-image FILE [--sd-faults NAME=VALUE,...]]\n",
                  msg, static_cast<double>(hq::kLoopRateHz), kIdleTimeoutS);
     std::exit(2);
 }
@@ -97,6 +101,7 @@ Options parse(int argc, char** argv) {
         else if (a == "--telemetry") o.telemetry = v;
         else if (a == "--dmp-image") o.dmp_image = v;
         else if (a == "--params") o.params = v;
+        else if (a == "--program") o.program = v;
         else if (a == "--sd-image") o.sd_image = v;
         else if (a == "--sd-faults") o.sd_faults = v;
         else if (a == "--loop-hz") o.loop_hz = std::strtof(v, nullptr);
@@ -297,6 +302,8 @@ int main(int argc, char** argv) {
     link_cfg.uid = 0x4851'2D48'4F53'5401ull;
     static hq::FileParamStorage storage(opt.params);
     if (!opt.params.empty()) cfg.storage = &storage;
+    static hq::FileParamStorage program_storage(opt.program);
+    if (!opt.program.empty()) cfg.program_storage = &program_storage;
     cfg.reset_cause = hq::reset_cause();         // power-on: a process starts afresh
     if (!opt.dmp_image.empty()) {              // --dmp-image wins over a built-in image
         if (const char* bad = hq::use_dmp_file(dmp_file.data(), dmp_file.size(), cfg.imu)) {
