@@ -16,13 +16,16 @@ from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
 from .link import HEARTBEAT_PERIOD_S
 
-__all__ = ["Exchange", "NoAnswer", "ANSWER_WAIT_S", "RETRIES", "ARMED_WAIT_S", "POLL_S"]
+__all__ = ["Exchange", "NoAnswer", "ANSWER_WAIT_S", "RETRIES", "ARMED_WAIT_S", "POLL_S",
+           "QUIET_S"]
 
 #: How long one request waits for its answer before it is sent again.
 ANSWER_WAIT_S = 1.0
 #: How many times a request goes again when its answer does not come.
 RETRIES = 4
 POLL_S = 0.005
+#: A list or a download that stops coming for this long asks again for what is missing.
+QUIET_S = 0.5
 #: How long to wait for the board's HEARTBEAT (whether it is armed): it sends one a second
 #: (firmware/core/flight_controller.cpp's streams), half a second to spare.
 ARMED_WAIT_S = 1.5
@@ -42,11 +45,25 @@ class Exchange:
     messages: tuple = ("HEARTBEAT",)
     silent_hint = "is the board running on this link?"
 
-    def __init__(self, link, answer_wait_s: float = ANSWER_WAIT_S, retries: int = RETRIES):
+    def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
+                 retries: int = RETRIES, quiet_s: float = QUIET_S):
         self.link = link
-        self.answer_wait_s, self.retries = answer_wait_s, retries
+        self.progress = progress or (lambda text: None)
+        self.answer_wait_s, self.retries, self.quiet_s = answer_wait_s, retries, quiet_s
         self.last_heartbeat = None
         self.armed = None                         # as the board's last HEARTBEAT said
+
+    def _pump_while(self, pending, received) -> None:
+        """Pump while ``pending()``, until ``received()`` (a count of what came) has not
+        grown for ``quiet_s``: a stream that stopped, whose missing part is asked again."""
+        seen, last_new = received(), time.monotonic()
+        while pending():
+            self._pump()
+            if received() != seen:
+                seen, last_new = received(), time.monotonic()
+            elif time.monotonic() - last_new >= self.quiet_s:
+                return
+            time.sleep(POLL_S)
 
     def _handle(self, message) -> None:
         """One message of ``messages`` but HEARTBEAT, as it arrives."""

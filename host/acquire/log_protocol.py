@@ -28,15 +28,13 @@ import time
 
 from ...sim.base.errors import BoardRefused, InputError
 from ..records.output import atomic_write
-from .exchange import ANSWER_WAIT_S, POLL_S, RETRIES, Exchange, NoAnswer
+from .exchange import ANSWER_WAIT_S, POLL_S, QUIET_S, RETRIES, Exchange, NoAnswer
 
 __all__ = ["LogEntry", "LogClient", "LogsRefused", "NoAnswer", "part_path"]
 
 MESSAGES = ("LOG_ENTRY", "LOG_DATA", "STATUSTEXT", "HEARTBEAT")
 #: LOG_DATA.data: the most bytes one packet carries.
 LOG_DATA_BYTES = 90
-#: A list or a download that stops coming for this long asks again for what is missing.
-QUIET_S = 0.5
 #: A gap in the data (a packet lost) waits this long before the rest is asked for again
 #: from it: packets come in order, so a gap is a loss, but the request goes out once, not
 #: once a packet that follows it.
@@ -77,9 +75,7 @@ class LogClient(Exchange):
 
     def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
                  retries: int = RETRIES, quiet_s: float = QUIET_S):
-        super().__init__(link, answer_wait_s, retries)
-        self.progress = progress or (lambda text: None)
-        self.quiet_s = quiet_s
+        super().__init__(link, progress, answer_wait_s, retries, quiet_s)
         self.entries: dict[int, LogEntry] = {}
         self.num_logs = None                      # as the last LOG_ENTRY said
         self.texts: list[str] = []                # STATUSTEXTs since the last request
@@ -130,7 +126,8 @@ class LogClient(Exchange):
         self._request(self.link.request_log_list, lambda: self.num_logs is not None,
                       "the log list request (LOG_REQUEST_LIST)")
         for _ in range(1 + self.retries):
-            self._quiet_until(lambda: len(self.entries) >= self.num_logs)
+            self._pump_while(lambda: len(self.entries) < self.num_logs,
+                             lambda: len(self.entries))
             if len(self.entries) >= self.num_logs:
                 break
             self.link.request_log_list()
@@ -138,17 +135,6 @@ class LogClient(Exchange):
             raise NoAnswer(f"the board listed {len(self.entries)} of its {self.num_logs} logs "
                            f"after {1 + self.retries} requests on {self.link.name}")
         return [self.entries[i] for i in sorted(self.entries)]
-
-    def _quiet_until(self, done) -> None:
-        """Pump until ``done()`` or nothing new has come for ``quiet_s``."""
-        seen, last_new = len(self.entries), time.monotonic()
-        while not done():
-            self._pump()
-            if len(self.entries) != seen:
-                seen, last_new = len(self.entries), time.monotonic()
-            elif time.monotonic() - last_new >= self.quiet_s:
-                return
-            time.sleep(POLL_S)
 
     def entry(self, log_id: int) -> LogEntry:
         """Log ``log_id`` as the board lists it; InputError when it has none of that number."""

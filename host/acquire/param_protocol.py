@@ -28,21 +28,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 
 import numpy as np
 
 from ...sim.base.errors import BoardRefused, InputError
 from ..records.params_file import INTEGER_TYPES, TYPE_NAMES, check_name
-from .exchange import ANSWER_WAIT_S, POLL_S, RETRIES, Exchange, NoAnswer
+from .exchange import ANSWER_WAIT_S, QUIET_S, RETRIES, Exchange, NoAnswer
 from .link import decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
            "same_value", "load_params", "session_params"]
 
-#: A list that stops coming for this long asks again for what is missing.
-QUIET_S = 0.5
 #: After a refused PARAM_SET, how long to wait for the STATUSTEXT that says why (it may
 #: come after the PARAM_VALUE).
 REASON_WAIT_S = 0.5
@@ -142,9 +139,7 @@ class ParamClient(Exchange):
 
     def __init__(self, link, progress=None, answer_wait_s: float = ANSWER_WAIT_S,
                  retries: int = RETRIES, quiet_s: float = QUIET_S):
-        super().__init__(link, answer_wait_s, retries)
-        self.progress = progress or (lambda text: None)
-        self.quiet_s = quiet_s
+        super().__init__(link, progress, answer_wait_s, retries, quiet_s)
         self.by_index: dict[int, Param] = {}      # the list being fetched
         self.count = None                         # its length, once the board said
         self.fresh: dict[str, Param] = {}         # PARAM_VALUEs since the last request
@@ -201,14 +196,7 @@ class ParamClient(Exchange):
 
     def _collect(self) -> None:
         """Pump until the list is whole or nothing new has come for ``quiet_s``."""
-        seen, last_new = len(self.by_index), time.monotonic()
-        while self._missing():
-            self._pump()
-            if len(self.by_index) != seen:
-                seen, last_new = len(self.by_index), time.monotonic()
-            elif time.monotonic() - last_new >= self.quiet_s:
-                return
-            time.sleep(POLL_S)
+        self._pump_while(self._missing, lambda: len(self.by_index))
 
     def get(self, name: str) -> Param:
         """One parameter by name (InputError if the board has none of that name)."""
