@@ -77,8 +77,7 @@ class ProgramClient(Exchange):
                    "this link?")
 
     def __init__(self, link, progress=None, **waits):
-        super().__init__(link, **waits)
-        self.progress = progress or (lambda text: None)
+        super().__init__(link, progress, **waits)
         self.statuses: list = []                 # HQ_PROGRAM_STATUS since the last request
         self.steps: dict[int, ProgramStep] = {}  # the board's steps read back
 
