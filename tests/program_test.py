@@ -1,7 +1,7 @@
 """The on-board identification program (firmware/core/program.hpp, ``heliquad program``, the
 rules in docs/safety.md): set, read back and cleared over HQ_PROGRAM while disarmed, whole or
-not at all, kept in its own store across a restart, and run by the pilot's channel 7 on the
-host build with no host heartbeat at all."""
+not at all, kept in its own store across a restart, and run by the pilot's channel 7 with no
+host heartbeat at all, on the host build and on the Teensy image in the emulated chip."""
 
 import contextlib
 
@@ -16,7 +16,7 @@ from heliquad.host.records.tlog import read_tlog
 from heliquad.sim.base.errors import BoardRefused
 from heliquad.sim.base.dialect import dialect
 from heliquad.sim.rig.faults import parse_fault
-from heliquad.sim.rig.lockstep import HostFirmware
+from heliquad.sim.rig.lockstep import HostFirmware, PilFirmware
 from heliquad.sim.rig.rc_script import parse_rc_script
 from heliquad.sim.rig.setup import LOOP_RATE_HZ, SilConfig
 
@@ -55,10 +55,11 @@ def _program_texts(rig):
 
 
 @contextlib.contextmanager
-def _board(store):
-    """The host build keeping its parameters in ``store`` (its program beside them), on the
-    rig: the rig and a ProgramClient on its link."""
-    with HostFirmware(params_file=str(store)) as fw:
+def _board(store, firmware=HostFirmware):
+    """The host build (or ``firmware``: PilFirmware for the Teensy image) keeping its
+    parameters in ``store`` (its program beside them), on the rig: the rig and a
+    ProgramClient on its link."""
+    with firmware(params_file=str(store)) as fw:
         rig = FirmwareRig(fw)
         try:
             yield rig, _client(rig)
@@ -117,16 +118,16 @@ def test_set_and_clear_are_refused_while_armed(tmp_path):
         assert len(client.show()) == 3
 
 
-def _set_program(store, steps):
-    with _board(store) as (_, client):
+def _set_program(store, steps, firmware=HostFirmware):
+    with _board(store, firmware) as (_, client):
         client.set(steps)
 
 
-def _fly(tmp_path, store, script, seconds):
+def _fly(tmp_path, store, script, seconds, firmware="host"):
     """A SilSession with the pilot's ``script``, the host's link closed before its first
     heartbeat (so no host is ever heard): every message of the run's telemetry, as its log
     (the rig's tap) has it."""
-    cfg = SilConfig(rc_script=parse_rc_script(script), param_store=store,
+    cfg = SilConfig(rc_script=parse_rc_script(script), param_store=store, firmware=firmware,
                     faults=(parse_fault("link@0.05"),))
     tlog = str(tmp_path / "run.tlog")
     session = SilSession(cfg, tlog)
@@ -159,15 +160,17 @@ def _frequency_hz(samples):
     return crossings / 2 / (len(x) / LOOP_RATE_HZ)
 
 
-def test_channel_7_runs_the_stored_program_after_a_restart_with_no_host(tmp_path):
-    """The program set in one run of the firmware is loaded by the next (its store); there,
-    with the host's link closed before any heartbeat, the pilot arms, raises the throttle and
-    moves channel 7 low then high: the three steps run one after another, each at its
-    frequency, and the program says it finished."""
+@pytest.mark.parametrize("firmware", ["host", "teensy35"])
+def test_channel_7_runs_the_stored_program_after_a_restart_with_no_host(tmp_path, firmware):
+    """The program set in one run of the firmware is loaded by the next (its store: the host
+    build's file, the Teensy image's flash sectors kept in theirs); there, with the host's
+    link closed before any heartbeat, the pilot arms, raises the throttle and moves channel 7
+    (on the Teensy its capture pin) low then high: the three steps run one after another,
+    each at its frequency, and the program says it finished."""
     store = str(tmp_path / "params")
-    _set_program(store, STEPS)
+    _set_program(store, STEPS, HostFirmware if firmware == "host" else PilFirmware)
     script = "0.2 5=2000 7=1000\n0.4 3=1400\n0.8 7=2000\n"
-    messages = _fly(tmp_path, store, script, 6.5)
+    messages = _fly(tmp_path, store, script, 6.5, firmware)
     assert not any(m.get_type() == "HEARTBEAT" and m.type == MAV.MAV_TYPE_GCS for m in messages)
     ends = [m for m in messages if m.get_type() == "HQ_EXCITATION_STATUS"]
     assert [m.reason for m in ends] == [MAV.HQ_REASON_FINISHED] * 3

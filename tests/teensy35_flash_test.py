@@ -260,6 +260,8 @@ HEADER = 16
 MAX_RECORD = 1024                     # hq::ParamStorage::kMaxBytes
 OK, EMPTY, CORRUPT = 0, 1, 2          # hq::StoreStatus
 STORAGE_OBJECT = "_ZZ14hq_teensy_mainE7storage"     # main.cpp's static FlashParamStorage
+PROGRAM_STORAGE_OBJECT = "_ZZ14hq_teensy_mainE15program_storage"   # the on-board program's
+PROGRAM_MAGIC = 0x31475148            # "HQG1": the program's slots
 CALL_BUDGET = 20_000_000              # instructions; a 1 KiB save polls some 10^6
 
 
@@ -269,10 +271,10 @@ class Storage:
     a BKPT, as a call from the loop would. Scratch memory (the return BKPT, the record
     buffer) is at the bottom of the stack region, which the stack never reaches."""
 
-    def __init__(self, board):
+    def __init__(self, board, obj: str = STORAGE_OBJECT):
         self.board, self.m = board, board.machine
         image = self.m.image
-        self.this = image.symbol(STORAGE_OBJECT).address
+        self.this = image.symbol(obj).address
         self.methods = {name: image.symbol(f"hq::teensy::FlashParamStorage::{name}").address
                         for name in ("save", "load")}
         base = (image.ram_end() + 63) & ~31
@@ -503,6 +505,39 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
     new_board.boot()
     assert new_board.board.read_param_flash() == b"\xff" * 2 * SECTOR_BYTES
     assert not (tmp_path / "none.bin").exists(), "created only when the image writes"
+
+
+def test_the_program_has_its_own_two_sectors_and_its_own_file(tmp_path):
+    """The on-board program's storage: the two sectors below the parameters', slots with
+    their own magic (so neither pair loads as the other's record), kept in --program's file
+    as --params keeps the parameters'; a program save leaves the parameter file alone."""
+    boot.require_image()
+    pytest.importorskip("heliquad._firmware")
+    from heliquad.sim.chip.pil.board import PilBoard
+
+    params, program = tmp_path / "p.bin", tmp_path / "p.bin.program"
+    params.write_bytes(_slot(2, b"parameters") + b"\xff" * SECTOR_BYTES)
+    pil = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program))
+    pil.boot()
+    board_params, board_program = Storage(pil.board), Storage(pil.board, PROGRAM_STORAGE_OBJECT)
+    assert pil.board.stored_range("program") == (0x7C000, 0x7E000)
+    assert board_program.load() == (EMPTY, None)
+    assert board_params.load() == (OK, b"parameters")
+    assert board_program.save(b"steps") is True
+    for kept in pil.stored:
+        kept.keep()
+    assert params.read_bytes() == _slot(2, b"parameters") + b"\xff" * SECTOR_BYTES
+    flash = program.read_bytes()
+    assert len(flash) == 2 * SECTOR_BYTES and flash == pil.board.read_stored("program")
+    assert int.from_bytes(flash[:4], "little") == PROGRAM_MAGIC
+    assert board_params.load() == (OK, b"parameters")
+    # a parameter slot copied into the program's sectors is no program
+    pil.board.write_stored(_slot(9, b"parameters") + b"\xff" * SECTOR_BYTES, "program")
+    assert board_program.load() == (CORRUPT, None)
+
+    again = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program))
+    again.boot()
+    assert Storage(again.board, PROGRAM_STORAGE_OBJECT).load() == (OK, b"steps")
 
 
 def test_the_drop_in_takes_a_params_file_and_refuses_one_of_the_wrong_size(tmp_path):

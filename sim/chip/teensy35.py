@@ -1,6 +1,6 @@
 """The Teensy 3.5 board around the chip, as the heliquad firmware uses it: a 16 MHz crystal,
 the MPU6050 on I2C0 (pins 18/19, with the breakout board's pull-ups), five ESC outputs on
-FTM0, six RC inputs on FTM3, telemetry on UART0 (pins 0/1), the status LED on pin 13 and the
+FTM0, seven RC inputs on FTM3, telemetry on UART0 (pins 0/1), the status LED on pin 13 and the
 microSD socket on the SDHC (PTE0-5), with a card when ``sd_image`` names a card-image file.
 
 :class:`Teensy35` runs a firmware image on it and knows the image's symbol contract: the
@@ -23,7 +23,8 @@ from .sd_card import SdCard
 # Teensy 3.5 pin number -> (port, bit) for the pins the firmware uses (PJRC's pin table).
 PINS = {0: ("B", 16), 1: ("B", 17), 2: ("D", 0), 6: ("D", 4), 7: ("D", 2), 8: ("D", 3),
         9: ("C", 3), 10: ("C", 4), 13: ("C", 5), 14: ("D", 1), 18: ("B", 3), 19: ("B", 2),
-        22: ("C", 1), 23: ("C", 2), 35: ("C", 8), 36: ("C", 9)}
+        22: ("C", 1), 23: ("C", 2), 35: ("C", 8), 36: ("C", 9),
+        37: ("C", 10)}
 # K64 signal multiplexing (data sheet, "K64 Signal Multiplexing and Pin Assignments"):
 # (port, bit, MUX) -> signal, for those pins.
 SIGNALS = {
@@ -33,11 +34,12 @@ SIGNALS = {
     ("C", 4, 4): "FTM0_CH3", ("D", 4, 4): "FTM0_CH4",
     ("D", 0, 4): "FTM3_CH0", ("D", 1, 4): "FTM3_CH1", ("D", 2, 4): "FTM3_CH2",
     ("D", 3, 4): "FTM3_CH3", ("C", 8, 3): "FTM3_CH4", ("C", 9, 3): "FTM3_CH5",
+    ("C", 10, 3): "FTM3_CH6",
 }
 I2C_PINS = {"SDA": 18, "SCL": 19}
 UART_PINS = {"RX": 0, "TX": 1}
 ESC_PINS = (22, 23, 9, 10, 6)           # FTM0 channels 0..4
-RC_PINS = (2, 14, 7, 8, 35, 36)         # FTM3 channels 0..5
+RC_PINS = (2, 14, 7, 8, 35, 36, 37)     # FTM3 channels 0..6
 LED_PIN = 13
 CRYSTAL_HZ = 16e6
 MPU6050_ADDRESS = 0x68
@@ -46,6 +48,10 @@ FATAL_SYMBOL = "hq_fatal"
 STEP_SYMBOL = "hq::FlightController::step"
 #: The parameter storage's flash sectors, [start, end) (the linker script's symbols).
 PARAM_FLASH_SYMBOLS = ("hq_param_flash_start", "hq_param_flash_end")
+#: The on-board program's two sectors, below the parameters' (mk64fx512.ld).
+PROGRAM_FLASH_SYMBOLS = ("hq_program_flash_start", "hq_program_flash_end")
+#: The image's stored records in flash: which sectors (their symbols) keep what.
+STORED_SECTORS = {"parameters": PARAM_FLASH_SYMBOLS, "program": PROGRAM_FLASH_SYMBOLS}
 
 
 def signal(letter: str, bit: int, mux: int):
@@ -136,26 +142,36 @@ class Teensy35:
     def run(self, instructions=None, seconds=None) -> Stop:
         return self.machine.run(instructions=instructions, seconds=seconds)
 
-    # -- the parameter flash -----------------------------------------------------------------
-    def param_flash_range(self) -> tuple:
-        """[start, end) of the image's parameter sectors; KeyError for an image without them
-        (one older than the parameter storage)."""
+    # -- the stored records' flash --------------------------------------------------------------
+    def stored_range(self, what: str = "parameters") -> tuple:
+        """[start, end) of the image's sectors keeping ``what`` (STORED_SECTORS: "parameters"
+        or "program"); KeyError for an image without them (one older than that storage)."""
         image = self.machine.image
-        start, end = (image.symbol(name).address for name in PARAM_FLASH_SYMBOLS)
+        start, end = (image.symbol(name).address for name in STORED_SECTORS[what])
         return start, end
 
-    def read_param_flash(self) -> bytes:
-        """The parameter sectors' bytes as the flash holds them now."""
-        start, end = self.param_flash_range()
+    def read_stored(self, what: str = "parameters") -> bytes:
+        """Those sectors' bytes as the flash holds them now."""
+        start, end = self.stored_range(what)
         return self.machine.read(start, end - start)
 
-    def write_param_flash(self, data: bytes):
-        """Set the parameter sectors' bytes (all of them) as a debug probe would; the program
-        itself can change them only through the flash module."""
-        start, end = self.param_flash_range()
+    def write_stored(self, data: bytes, what: str = "parameters"):
+        """Set those sectors' bytes (all of them) as a debug probe would; the program itself
+        can change them only through the flash module."""
+        start, end = self.stored_range(what)
         if len(data) != end - start:
-            raise ValueError(f"{len(data)} bytes for {end - start} bytes of parameter flash")
+            raise ValueError(f"{len(data)} bytes for {end - start} bytes of {what} flash")
         self.machine.write(start, bytes(data))
+
+    def param_flash_range(self) -> tuple:
+        """[start, end) of the parameter sectors (:meth:`stored_range`)."""
+        return self.stored_range("parameters")
+
+    def read_param_flash(self) -> bytes:
+        return self.read_stored("parameters")
+
+    def write_param_flash(self, data: bytes):
+        self.write_stored(data, "parameters")
 
     # -- board wiring ---------------------------------------------------------------------------
     def _i2c_pins_connected(self) -> bool:
@@ -207,14 +223,14 @@ class Teensy35:
         return out
 
     def rc_pulse(self, channel: int, width_s: float):
-        """A PWM pulse of ``width_s`` on RC input ``channel`` (0..5), starting now."""
+        """A PWM pulse of ``width_s`` on RC input ``channel`` (0..6), starting now."""
         letter, bit = PINS[RC_PINS[channel]]
         ports, m = self.chip.ports, self.machine
         ports.drive(letter, bit, 1)
         m.after(width_s, lambda: ports.drive(letter, bit, 0))
 
     def rc_capture_pulse(self, channel: int, us: int):
-        """A servo pulse on RC input ``channel`` (0..5) that FTM3 captures as ``us`` whole
+        """A servo pulse on RC input ``channel`` (0..6) that FTM3 captures as ``us`` whole
         microseconds: it rises on the next count of the running counter and lasts
         ceil(us x counts per microsecond) counts, so a capture that truncates counts to
         microseconds reads exactly ``us``. Nothing happens while FTM3 does not count."""

@@ -100,8 +100,9 @@ class HostFirmware:
             if dmp_image:
                 cmd += ["--dmp-image", dmp_image]
             if params_file:                   # where the parameters persist (default: nowhere)
-                # and, beside them in its own file, the on-board program (the host build's)
-                cmd += ["--params", os.path.abspath(params_file)] + self.program_store(params_file)
+                # and, beside them in its own file, the on-board program (PARAMS.program)
+                cmd += ["--params", os.path.abspath(params_file),
+                        "--program", os.path.abspath(params_file) + ".program"]
             if telemetry_backlog_bytes:
                 cmd += ["--telemetry-backlog-bytes", str(int(telemetry_backlog_bytes))]
             if sd_image:                      # the card: its logs written and served
@@ -134,12 +135,6 @@ class HostFirmware:
     def record(self) -> dict:
         """What flew, for a manifest."""
         return {"name": self.name, "executable": self.executable}
-
-    @staticmethod
-    def program_store(params_file: str) -> list:
-        """The host build keeps its on-board program beside the parameters, in
-        ``PARAMS_FILE.program`` (its own record, ``--program``)."""
-        return ["--program", os.path.abspath(params_file) + ".program"]
 
     def _wait_ready(self) -> str:
         """Read the firmware's start-up lines (raw reads: a buffered reader would hide data
@@ -263,11 +258,6 @@ class PilFirmware(HostFirmware):
         self.image = image
         self.link = link
         super().__init__(*args, **kwargs)
-
-    @staticmethod
-    def program_store(params_file: str) -> list:
-        """The image keeps its program in RAM only (docs/teensy35.md): no file."""
-        return []
 
     def command(self) -> list:
         self.image = os.path.abspath(self.image or str(teensy35_image("elf")))

@@ -212,11 +212,14 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     // enumerated the board (about 45 ms after its 100 ms debounce) by the first loop.
     usb.begin();
     clock.set_idle(service_usb);
-    static FlashParamStorage storage;         // the top two flash sectors (param_storage.hpp)
+    // Constant-initialised (constexpr, param_storage.hpp): in .data before any code runs.
+    static FlashParamStorage storage = FlashParamStorage::parameters();
+    static FlashParamStorage program_storage = FlashParamStorage::program();
 
     hq::FlightControllerConfig cfg;
     cfg.loop_rate_hz = static_cast<float>(kLoopHz);
     cfg.storage = &storage;
+    cfg.program_storage = &program_storage;
     cfg.reset_cause = hq::reset_cause();      // RCM_SRS0/SRS1 (reset_cause.cpp)
     hq::GcsLinkConfig uart_cfg;
     uart_cfg.loop_rate_hz = cfg.loop_rate_hz;

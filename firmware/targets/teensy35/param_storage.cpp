@@ -6,9 +6,6 @@
 #include "watchdog.hpp"
 
 extern "C" {
-// The two parameter sectors, from the linker script (mk64fx512.ld).
-extern const uint8_t hq_param_flash_start[];
-
 // Launches the flash command loaded in FCCOB and waits for it; returns FSTAT at the end.
 // It runs from RAM (section .ramfunc, placed in .data and copied there at start-up) and
 // touches nothing in flash: its constants are in its own literal pool, in RAM with it, and
@@ -40,11 +37,12 @@ constexpr uint8_t kEraseFlashSector = 0x09;
 // The flash as the core reads it: volatile, since commands change it under the compiler.
 using FlashBytes = const volatile uint8_t*;
 
-FlashBytes slot_bytes(uint32_t slot) { return hq_param_flash_start + slot * Storage::kSectorBytes; }
+FlashBytes slot_bytes(const uint8_t* first, uint32_t slot) {
+    return first + slot * Storage::kSectorBytes;
+}
 
-uint32_t slot_address(uint32_t slot) {
-    return static_cast<uint32_t>(reinterpret_cast<uintptr_t>(hq_param_flash_start)) +
-           slot * Storage::kSectorBytes;
+uint32_t slot_address(const uint8_t* first, uint32_t slot) {
+    return static_cast<uint32_t>(reinterpret_cast<uintptr_t>(first)) + slot * Storage::kSectorBytes;
 }
 
 uint32_t get_le32(FlashBytes p) {
@@ -78,10 +76,10 @@ bool blank(FlashBytes p, size_t n) {
     return true;
 }
 
-Slot inspect(uint32_t slot) {
-    const FlashBytes p = slot_bytes(slot);
+Slot inspect(const uint8_t* first, uint32_t expected_magic, uint32_t slot) {
+    const FlashBytes p = slot_bytes(first, slot);
     const uint32_t magic = get_le32(p), sequence = get_le32(p + 4), length = get_le32(p + 8);
-    if (magic == Storage::kMagic && length <= Storage::kMaxBytes &&
+    if (magic == expected_magic && length <= Storage::kMaxBytes &&
         record_crc(sequence, length, p + Storage::kHeaderBytes) == get_le32(p + 12)) {
         return {SlotState::Valid, sequence, length};
     }
@@ -137,7 +135,8 @@ bool run_command(uint8_t command, uint32_t address, const uint8_t* phrase) {
 
 // The record's phrases (the last padded with 0xFF), then the header's second phrase (length,
 // CRC), then its first (magic, sequence): the magic is the last thing written.
-bool program_slot(uint32_t base, uint32_t sequence, const uint8_t* data, size_t n) {
+bool program_slot(uint32_t base, uint32_t magic, uint32_t sequence, const uint8_t* data,
+                  size_t n) {
     uint8_t phrase[Storage::kPhraseBytes];
     for (size_t at = 0; at < n; at += Storage::kPhraseBytes) {
         for (size_t k = 0; k < Storage::kPhraseBytes; ++k) {
@@ -148,7 +147,7 @@ bool program_slot(uint32_t base, uint32_t sequence, const uint8_t* data, size_t 
     put_le32(phrase, static_cast<uint32_t>(n));
     put_le32(phrase + 4, record_crc(sequence, static_cast<uint32_t>(n), data));
     if (!run_command(kProgramPhrase, base + Storage::kPhraseBytes, phrase)) return false;
-    put_le32(phrase, Storage::kMagic);
+    put_le32(phrase, magic);
     put_le32(phrase + 4, sequence);
     return run_command(kProgramPhrase, base, phrase);
 }
@@ -157,7 +156,7 @@ bool program_slot(uint32_t base, uint32_t sequence, const uint8_t* data, size_t 
 
 StoreStatus FlashParamStorage::load(uint8_t* data, size_t capacity, size_t& n) {
     n = 0;
-    const Slot slots[kSlots] = {inspect(0), inspect(1)};
+    const Slot slots[kSlots] = {inspect(first_, magic_, 0), inspect(first_, magic_, 1)};
     const int best = newest(slots);
     if (best < 0) {
         return slots[0].state == SlotState::Blank && slots[1].state == SlotState::Blank
@@ -166,7 +165,7 @@ StoreStatus FlashParamStorage::load(uint8_t* data, size_t capacity, size_t& n) {
     }
     const uint32_t length = slots[best].length;
     if (length > capacity || (length > 0 && data == nullptr)) return StoreStatus::Corrupt;
-    const FlashBytes record = slot_bytes(static_cast<uint32_t>(best)) + kHeaderBytes;
+    const FlashBytes record = slot_bytes(first_, static_cast<uint32_t>(best)) + kHeaderBytes;
     for (uint32_t i = 0; i < length; ++i) data[i] = record[i];
     n = length;
     return StoreStatus::Ok;
@@ -174,22 +173,22 @@ StoreStatus FlashParamStorage::load(uint8_t* data, size_t capacity, size_t& n) {
 
 bool FlashParamStorage::save(const uint8_t* data, size_t n) {
     if (n > kMaxBytes || (n > 0 && data == nullptr)) return false;
-    const Slot slots[kSlots] = {inspect(0), inspect(1)};
+    const Slot slots[kSlots] = {inspect(first_, magic_, 0), inspect(first_, magic_, 1)};
     const int best = newest(slots);
     const uint32_t target = best == 0 ? 1 : 0;
     const uint32_t sequence = best < 0 ? 1 : slots[best].sequence + 1;
-    const uint32_t base = slot_address(target);
+    const uint32_t base = slot_address(first_, target);
     if (!run_command(kEraseFlashSector, base, nullptr)) return false;
     invalidate_flash_cache();
-    if (!blank(slot_bytes(target), kSectorBytes)) return false;
-    const bool programmed = program_slot(base, sequence, data, n);
+    if (!blank(slot_bytes(first_, target), kSectorBytes)) return false;
+    const bool programmed = program_slot(base, magic_, sequence, data, n);
     invalidate_flash_cache();
     if (!programmed) return false;
-    const Slot written = inspect(target);
+    const Slot written = inspect(first_, magic_, target);
     if (written.state != SlotState::Valid || written.sequence != sequence || written.length != n) {
         return false;
     }
-    const FlashBytes record = slot_bytes(target) + kHeaderBytes;
+    const FlashBytes record = slot_bytes(first_, target) + kHeaderBytes;
     for (size_t i = 0; i < n; ++i) {
         if (record[i] != data[i]) return false;
     }

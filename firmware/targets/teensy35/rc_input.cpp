@@ -26,7 +26,7 @@ Captures g_cap;
 // Pin level per channel, to tell a rising from a falling edge.
 bool pin_high(int ch) {
     if (ch < 4) return (GPIOD::PDIR::read() >> ch) & 1u;      // PTD0-3
-    return (GPIOC::PDIR::read() >> (ch + 4)) & 1u;            // PTC8-9
+    return (GPIOC::PDIR::read() >> (ch + 4)) & 1u;            // PTC8-10
 }
 
 // CnSC and CnV interleave (C0SC, C0V, C1SC, ...): two registers between channels.
@@ -49,7 +49,7 @@ void Ftm3RcInput::begin() {
         channel_control(i) = FTM3::C0SC::ELSA | FTM3::C0SC::ELSB | FTM3::C0SC::CHIE;
     }
     FTM3::SC::write(FTM3::SC::CLKS(1) | FTM3::SC::PS(5));          // bus / 32
-    // ALT4 = FTM3 on PTD0-3, ALT3 = FTM3 on PTC8-9; inputs with a pull-down, so a missing or
+    // ALT4 = FTM3 on PTD0-3, ALT3 = FTM3 on PTC8-10; inputs with a pull-down, so a missing or
     // broken receiver lead reads a steady low (no pulses: no signal) instead of floating
     // into noise on the highest-priority interrupt.
     const uint32_t d = PORTD::PCR0::MUX(4) | PORTD::PCR0::PE;     // PS = 0: pull-down
@@ -59,6 +59,7 @@ void Ftm3RcInput::begin() {
     PORTD::PCR3::write(d);
     PORTC::PCR8::write(PORTC::PCR8::MUX(3) | PORTC::PCR8::PE);
     PORTC::PCR9::write(PORTC::PCR9::MUX(3) | PORTC::PCR9::PE);
+    PORTC::PCR10::write(PORTC::PCR10::MUX(3) | PORTC::PCR10::PE);
     nvic_enable(irq::FTM3, 4);
 }
 

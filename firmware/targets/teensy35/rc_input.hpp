@@ -1,9 +1,9 @@
-// Six RC channels from a PWM receiver (FrSky V8FR-II: one servo pulse per channel, every
-// 18-20 ms), captured on FTM3 channels 0-5, both edges, in the FTM3 interrupt.
+// Seven RC channels from a PWM receiver (FrSky V8FR-II: one servo pulse per channel, every
+// 18-20 ms), captured on FTM3 channels 0-6, both edges, in the FTM3 interrupt.
 //
-//   RC channel  1 roll   2 pitch  3 throttle  4 yaw   5 arm    6 mode
-//   FTM3        CH0      CH1      CH2         CH3     CH4      CH5
-//   pin         2 (PTD0) 14 (PTD1) 7 (PTD2)   8 (PTD3) 35 (PTC8) 36 (PTC9)
+//   RC channel  1 roll   2 pitch  3 throttle  4 yaw   5 arm    6 mode    7 program
+//   FTM3        CH0      CH1      CH2         CH3     CH4      CH5       CH6
+//   pin         2 (PTD0) 14 (PTD1) 7 (PTD2)   8 (PTD3) 35 (PTC8) 36 (PTC9) 37 (PTC10)
 //
 // FTM3 runs free at bus / 32 = 1.875 MHz (0.533 us per count, wrapping every 35 ms); a pulse
 // is the falling edge's count minus the rising edge's, modulo 2^16. Only pulses of
@@ -20,7 +20,7 @@ namespace hq::teensy {
 
 class Ftm3RcInput {
 public:
-    static constexpr int kChannels = 6;
+    static constexpr int kChannels = 7;
     static constexpr uint32_t kChannelTimeoutUs = 100000;   // 5 receiver frames
     static constexpr uint16_t kMinPulseUs = 800, kMaxPulseUs = 2200;
 

@@ -15,7 +15,7 @@ output goes through the chip's pins and peripherals, as on the rig:
 * the frame's MPU6050 FIFO bytes go into the MPU6050 on I2C0, and its fault (NACK, silent,
   reset, overflow) into that chip, or (stuck bus) into the bus itself, whose clock a device
   then holds low; the image reads the chip over the bus byte by byte;
-* the frame's RC channels become servo pulses on the six RC pins (as a 50 Hz receiver
+* the frame's RC channels become servo pulses on the seven RC pins (as a 50 Hz receiver
   sends them, and at once on a change), captured by FTM3;
 * one frame is one pass of the image's main loop: the board runs until the loop has done
   its step and is about to sleep for the next tick (``hq::teensy::LoopTimer::wait``);

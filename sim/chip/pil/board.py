@@ -11,7 +11,7 @@ import sys
 from ...base.dialect import dialect
 from ...base.firmware_facts import LOOP_RATE_HZ
 from ..machine import ChipReset, EmulationError
-from ..teensy35 import Teensy35
+from ..teensy35 import RC_PINS, Teensy35
 from ..usb_host import UsbHost
 from .param_file import ParamFile
 
@@ -29,8 +29,8 @@ STACK_PAINT = 0xDEADBEEF
 #: The image's ESC calibration (firmware/targets/teensy35/motors.hpp: EscCalibration's
 #: defaults) and FTM0's counts per microsecond: a pulse of min_us is stop, max_us full thrust.
 ESC_MIN_US, ESC_MAX_US, FTM0_COUNTS_PER_US = 1000, 2000, 15
-#: The RC inputs the board captures (FTM3 channels 0-5).
-RC_CHANNELS = 6
+#: The RC inputs the board captures (FTM3 channels 0-6: the pilot's channels 1-7).
+RC_CHANNELS = len(RC_PINS)
 #: A receiver's frame: 20 ms, four loops.
 RC_FRAME_LOOPS = 4
 #: Emulated-time bounds: reset to the first loop; one loop (a loop that takes longer has hung,
@@ -55,11 +55,12 @@ class ImageFault(RuntimeError):
 
 class PilBoard:
     """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
-    keep the parameter flash in that file (:class:`ParamFile`). ``sd_image``: the card-image
-    file in its microSD socket (default: the socket empty)."""
+    keep the parameter flash in that file, ``program_file`` the on-board program's
+    (:class:`ParamFile`). ``sd_image``: the card-image file in its microSD socket (default:
+    the socket empty)."""
 
     def __init__(self, elf: str, params_file: str | None = None, link: str = "uart",
-                 sd_image: str | None = None):
+                 sd_image: str | None = None, program_file: str | None = None):
         if link not in LINKS:
             raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")
         # the wait breakpoint ends a loop
@@ -73,6 +74,9 @@ class PilBoard:
                 raise ImageFault(f"{elf} has no {needed}: not a heliquad Teensy 3.5 image "
                                  "(or one older than the processor-in-the-loop target)")
         self.params = ParamFile(self.board, params_file) if params_file else None
+        self.program = (ParamFile(self.board, program_file, "program") if program_file
+                        else None)
+        self.stored = [kept for kept in (self.params, self.program) if kept]
         self.report_address = image.symbol(REPORT_SYMBOL).address
         self.waits = 0
         self._wait_target = None
@@ -122,14 +126,14 @@ class PilBoard:
         """Reset to the main loop's first sleep, before the first tick (the stack painted
         first, for its high-water mark)."""
         image = self.machine.image
-        if self.params:
-            self.params.restore()
+        for kept in self.stored:
+            kept.restore()
         self.machine.paint(image.ram_end(), image.initial_sp, STACK_PAINT)
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
         if self.usb_host is not None:
             self._check_usb_open()
-        if self.params:
-            self.params.keep()
+        for kept in self.stored:
+            kept.keep()
         self.machine.core.keep_records = False
         self.board.mpu.log.clear()
         self.board.chip.i2c0.transfers.clear()
@@ -196,8 +200,8 @@ class PilBoard:
             self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
         self.rc_pulses(rc_us)
         self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
-        if self.params:
-            self.params.keep()
+        for kept in self.stored:
+            kept.keep()
         if sync:
             self._drain()
         self._collect_telemetry()

@@ -49,6 +49,10 @@ def parse(argv):
                    help="keep the board's parameter flash (two 4 KiB sectors, 8 KiB) in FILE "
                         "across runs: restored before the boot, written when the image "
                         "changes it; a missing FILE is a new board")
+    p.add_argument("--program", metavar="FILE",
+                   help="keep the board's on-board program flash (the two 4 KiB sectors below "
+                        "the parameters', 8 KiB) in FILE across runs, as --params keeps the "
+                        "parameters")
     p.add_argument("--sd-image", metavar="FILE",
                    help="the card-image file in the board's microSD socket (docs/sd-card.md); "
                         "a missing FILE is made first, a FAT32 card of the default size, as "
@@ -86,7 +90,8 @@ def _open(args):
     except ImageNotFound as e:
         _usage(str(e))
     try:
-        board = PilBoard(elf, args.params, link=args.link, sd_image=args.sd_image)
+        board = PilBoard(elf, args.params, link=args.link, sd_image=args.sd_image,
+                         program_file=args.program)
         board.boot()
     except (ImageFault, ParamFileError, OSError, ValueError) as e:
         _usage(str(e))
