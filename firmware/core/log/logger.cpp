@@ -127,11 +127,14 @@ void Logger::log_mode(const LoopStatus& st) {
 
 // SIDS at an excitation's start: ArduPilot's set-up fields (the fades and the full-amplitude
 // part in s, the band in Hz: one frequency for a sine, the lowest and highest harmonic of a
-// multisine).
+// multisine). A start is a loop excited after one that was not, or after one that ended an
+// excitation (an on-board program starts its next step in the loop after the last ended,
+// with no idle loop between).
 void Logger::log_experiment(const LoopStatus& st, const Excitation& exc, float loop_rate_hz) {
     const bool now = st.excitation_state != ExcitationState::Idle;
-    const bool started = now && !exciting_;
+    const bool started = now && (!exciting_ || ended_);
     exciting_ = now;
+    ended_ = st.excitation_ended;
     if (!started) return;
     exc_start_us_ = st.time_us;
     const ExcitationConfig& c = exc.config();

@@ -96,6 +96,7 @@ private:
     uint64_t start_us_ = 0;             // the arming's time (the header's stamp)
     FlightMode mode_ = FlightMode::Angle;
     bool exciting_ = false;
+    bool ended_ = false;             // the last loop ended an excitation
     uint64_t exc_start_us_ = 0;
     uint32_t gap_dropped_ = 0;          // dropped since the last HQGP
     uint64_t gap_since_us_ = 0;

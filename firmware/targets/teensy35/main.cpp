@@ -124,6 +124,11 @@ struct SdProbe {
 };
 extern "C" {
 volatile SdProbe hq_sd_probe;
+
+// Runs the step of a tick that came while FatFs waits for the card (StepWhenDue, below):
+// `loop` is the Loop. Its own symbol, never inlined: the emulated board ends a lockstep frame
+// here as at LoopTimer::wait, so that this step too gets its frame's sensor data.
+__attribute__((noinline)) void hq_card_wait_step(void* loop);
 }
 
 namespace {
@@ -185,7 +190,7 @@ public:
     explicit StepWhenDue(Loop& loop) : loop_(loop) {}
     void card_busy() override {
         service_usb();
-        if (loop_.timer.take_tick()) loop_.step();
+        if (loop_.timer.take_tick()) hq_card_wait_step(&loop_);
     }
 
 private:
@@ -193,6 +198,8 @@ private:
 };
 
 }  // namespace
+
+void hq_card_wait_step(void* loop) { static_cast<Loop*>(loop)->step(); }
 
 extern "C" [[noreturn]] void hq_teensy_main() {
     using namespace hq::teensy;

@@ -19,6 +19,9 @@ from .param_file import ParamFile
 IMAGE_LOOP_HZ = LOOP_RATE_HZ
 #: Where a loop ends: the step is done and the image is about to sleep for the next tick.
 WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
+#: Where a loop ends too: a tick came while the card is busy, and its step is about to run
+#: inside the card's wait (main.cpp's StepWhenDue). Its frame's inputs go in there.
+CARD_WAIT_STEP_SYMBOL = "hq_card_wait_step"
 REPORT_SYMBOL = "hq_loop_report"
 #: hq_loop_report: loops, step cycles, overruns (uint32); armed, mode, sensor kind,
 #: excitation state (uint8).
@@ -81,13 +84,22 @@ class PilBoard:
         self.waits = 0
         self._wait_target = None
         self.machine.break_at(WAIT_SYMBOL, self._on_wait)
+        self.in_card_wait = False          # the last loop ended with a step due in the card's wait
+        if image.has(CARD_WAIT_STEP_SYMBOL):
+            self.machine.break_at(CARD_WAIT_STEP_SYMBOL, self._on_card_wait_step)
         self.resets = 0
         self._rc_last, self._rc_age = None, 0
         self._fault = None
         self.step_cycles = []
         self.telemetry_out = bytearray()
 
+    def _on_card_wait_step(self, machine):
+        stop = self._on_wait(machine)
+        self.in_card_wait = True
+        return stop
+
     def _on_wait(self, machine):
+        self.in_card_wait = False
         self.waits += 1
         if self._wait_target is not None and self.waits >= self._wait_target:
             return "loop-done"
@@ -202,7 +214,7 @@ class PilBoard:
         self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
         for kept in self.stored:
             kept.keep()
-        if sync:
+        if sync and not self.in_card_wait:     # a step is due now: no time to drain
             self._drain()
         self._collect_telemetry()
         loops, cycles, _, armed, mode, kind, _ = self.report()
