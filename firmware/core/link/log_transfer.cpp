@@ -92,6 +92,11 @@ void LogTransfer::set_armed(bool armed) {
     armed_ = armed;
 }
 
+void LogTransfer::set_link_rate(const GcsLink& link, uint32_t bytes_per_s) {
+    rated_link_ = &link;
+    rated_bytes_per_s_ = bytes_per_s;
+}
+
 void LogTransfer::service(LogStore& store) {
     if (refuse_) {
         link_ = refuse_link_;
@@ -202,14 +207,21 @@ bool LogTransfer::send_data(LogStore& store) {
     return true;
 }
 
+// The log's bytes per second on the link answered: its own rate, or the share of the link.
+float LogTransfer::rate_bytes_per_s() const {
+    if (link_ == rated_link_ && rated_bytes_per_s_ != 0) {
+        return static_cast<float>(rated_bytes_per_s_);
+    }
+    return kLogLinkShare * static_cast<float>(link_->config_.link_bytes_per_s);
+}
+
 // Whether the log's share of the link has `bytes` left, after adding what the time since the
 // last call earned (at most kBurstPackets packets' worth saved up).
 bool LogTransfer::room(uint32_t bytes) {
     const uint64_t now = link_->loop_time_us_;
     const float cap = static_cast<float>(kBurstPackets * packet_bytes(MAVLINK_MSG_ID_LOG_DATA));
     if (now > filled_us_) {
-        allowance_bytes_ += static_cast<float>(now - filled_us_) * 1e-6f * kLogLinkShare *
-                            static_cast<float>(link_->config_.link_bytes_per_s);
+        allowance_bytes_ += static_cast<float>(now - filled_us_) * 1e-6f * rate_bytes_per_s();
         filled_us_ = now;
     }
     if (allowance_bytes_ > cap) allowance_bytes_ = cap;

@@ -9,9 +9,9 @@
 //   newest replacing any older one from either link (a new request ends the old).
 // - service() runs in the loop's spare time (the target's main calls it, never the step): it
 //   reads the store and sends the answers on the link, as far as the log's share of the
-//   link's budget (kLogLinkShare of GcsLinkConfig::link_bytes_per_s, in bursts of at most
-//   kBurstPackets) and the port's room allow; a packet the port cannot take waits for the
-//   next call, never dropped.
+//   link's budget (kLogLinkShare of GcsLinkConfig::link_bytes_per_s, or the rate
+//   set_link_rate() gave that link; in bursts of at most kBurstPackets) and the port's room
+//   allow; a packet the port cannot take waits for the next call, never dropped.
 // Answers: a list is one LOG_ENTRY per log in [start, end] (end 0xffff: the last), or one
 // LOG_ENTRY with num_logs 0 when there are none; data is LOG_DATA packets of up to 90 bytes
 // until the count asked for or the log's end, and one LOG_DATA with count 0 for a request at
@@ -45,6 +45,10 @@ public:
 
     // A link's side (no card): a LOG_* message `from` received; false for any other message.
     bool take(GcsLink& from, const mavlink_message_t& msg);
+    // The target's: the log's bytes per second on `link` (one link; 0: the default share),
+    // for a link that moves more than its link_bytes_per_s while the loop waits (a USB port,
+    // whose transmit buffer empties between the loop's ticks).
+    void set_link_rate(const GcsLink& link, uint32_t bytes_per_s);
     // The link's side: whether the vehicle is armed now (from each loop's status).
     void set_armed(bool armed);
     // Spare time: the answers, from `store`.
@@ -63,6 +67,7 @@ private:
     bool send_entry(LogStore& store);
     bool send_data(LogStore& store);
     bool room(uint32_t bytes);
+    float rate_bytes_per_s() const;
     bool emit(const mavlink_message_t& msg);
     bool send_text(uint8_t severity, const char* text, int32_t number = -1);
 
@@ -83,6 +88,9 @@ private:
     // The budget: bytes the log may still send, and the loop time it was last filled up to.
     float allowance_bytes_ = 0.0f;
     uint64_t filled_us_ = 0;
+    // The link with a rate of its own (set_link_rate), and that rate.
+    const GcsLink* rated_link_ = nullptr;
+    uint32_t rated_bytes_per_s_ = 0;
 };
 
 }  // namespace hq

@@ -253,6 +253,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static hq::LogTransfer log_transfer;          // the log protocol, one for both links
     usb_link.serve_logs(log_transfer);
     uart_link.serve_logs(log_transfer);
+    log_transfer.set_link_rate(usb_link, kUsbLogBytesPerS);   // the port empties between ticks
     static LoopTimer timer;
     static Loop loop{clock, motors, rc, fc, inbox, usb_link, uart_link, timer, init};
 

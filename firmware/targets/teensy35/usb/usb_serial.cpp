@@ -13,6 +13,9 @@ namespace {
 
 namespace mk64 = hq::mk64;
 
+static_assert(kUsbLogBytesPerS / 200u == CFG_TUD_CDC_TX_BUFSIZE * 3u / 4u,
+              "kUsbLogBytesPerS: three quarters of the transmit buffer each 200 Hz loop");
+
 uint32_t g_closed_bytes = 0;
 bool g_bootloader_asked = false;
 

@@ -29,6 +29,11 @@ namespace hq::teensy {
 // kTxTransferBytes (usb/tusb_config.h) per 200 Hz loop; servicing the stack while the loop
 // waits moves more.
 constexpr uint32_t kUsbLinkBytesPerS = 512u * 200u;
+// What the log protocol may send on the port, bytes a second (LogTransfer::set_link_rate):
+// the host empties the transmit buffer (CFG_TUD_CDC_TX_BUFSIZE, 1 KiB) while the loop waits
+// for its next tick, so each 200 Hz loop's spare time may fill it again, less a quarter
+// kept for the next step's telemetry: 768 bytes a loop, seven LOG_DATA (126 kB/s of data).
+constexpr uint32_t kUsbLogBytesPerS = (1024u - 256u) * 200u;
 
 class UsbCdcSerial final : public SerialPort {
 public:
