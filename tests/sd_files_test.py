@@ -30,7 +30,7 @@ FSCK_AFTER_POWER_CUT = (
     r"fsck\.fat \d.*", r".*: \d+ files, \d+/\d+ clusters", r"Free cluster summary wrong.*",
     r"\s*Auto-correcting\.", r"\s*Leaving it unchanged\.",
     r"\d+ unused clusters?.*", r"Reclaimed \d+ unused clusters?.*",
-    r".*File size is \d+ bytes, cluster chain length is (> )?\d+ bytes\.",
+    r".*File size is \d+ bytes, cluster chain length is > \d+ bytes\.",
     r"\s*Truncating file to \d+ bytes\.", r"FATs differ but appear to be intact\..*",
     r"\s*Using first FAT\.", r"/LOGS/\d{8}\.BIN",
     r"\s*Leaving filesystem unchanged\.", r"\s*",

@@ -35,8 +35,9 @@ import hashlib
 import pathlib
 import random
 import shutil
+import struct
 import sys
-import tempfile
+from types import SimpleNamespace
 
 import pytest
 from pymavlink import DFReader
@@ -57,7 +58,7 @@ FLIGHT = ((SWITCH_LOW, 40), (SWITCH_HIGH, 500), (SWITCH_LOW, 40), (SWITCH_HIGH, 
           (SWITCH_LOW, 40))
 #: The cuts: how many, their seed, and how many of them are checked against a fresh flight
 #: stopped at the same instruction (each costs a flight up to its cut).
-CUTS, SEED, FRESH_CUTS = 100, 35, 2
+CUTS, SEED, FRESH_CUTS = 100, 35, 3
 #: The most a cut may lose of the log being written (the sync period).
 MAX_LOSS_US = fw.LOG_SYNC_PERIOD_US
 #: A still IMU, level.
@@ -244,7 +245,7 @@ def flights(tmp_path_factory):
             raise CutReached
         with pytest.raises(CutReached):
             Flight(blank_card(tmp / "fresh.img"), [n], reached).fly()
-    return {"whole": whole, "results": results, "stopped": stopped,
+    return {"whole": whole, "results": results, "stopped": stopped, "uncut_card": uncut.card,
             "cards": (sha256(uncut.card), sha256(cut.card))}
 
 
@@ -286,3 +287,39 @@ def test_a_stop_for_a_cut_changes_nothing_the_flight_does(flights):
         results[n]["card"] == card for n, card in flights["stopped"].items())
     uncut, cut = flights["cards"]
     assert uncut == cut
+
+
+def cross_link(card: pathlib.Path) -> None:
+    """Log 1's first cluster made to lead into log 2's chain, in the first FAT."""
+    image = Fat32Image(card)
+    logs = image.entries(image.root_cluster)[LOGS][1]
+    first = {name: cluster for name, (_, cluster, _) in image.entries(logs).items()}
+    with open(card, "r+b") as f:
+        f.seek(image.fat_at + 4 * first["00000001.BIN"])
+        f.write(struct.pack("<I", first["00000002.BIN"]))
+
+
+@needs_fsck
+def test_the_checks_find_a_damaged_card_altered_bytes_and_a_log_a_second_short(flights,
+                                                                             tmp_path):
+    whole, scratch = flights["whole"], tmp_path / "log.BIN"
+    data, times = whole["00000002.BIN"]
+    card = tmp_path / "card.img"
+    shutil.copyfile(flights["uncut_card"], card)
+
+    def problems(at_us, logs=whole):
+        at = SimpleNamespace(card=card, firmware_us=lambda: at_us)
+        return check_cut(at, logs, scratch)["problems"]
+    assert problems(times[-1]) == []
+    # The flight logged past the card's end of log 2, and the cut came 1.5 s after its last
+    # record there.
+    longer = dict(whole, **{"00000002.BIN": (data + bytes(8), times)})
+    assert problems(times[-1] + 1_500_000, longer) == [
+        "00000002.BIN: its last record 1500000 us before the cut"]
+    with open(card, "r+b") as f:
+        f.seek(Fat32Image(card).offset("LOGS/00000001.BIN") + 100)
+        f.write(b"\xff")
+    assert [p[:13] for p in problems(times[-1])] == ["00000001.BIN:"]
+    shutil.copyfile(flights["uncut_card"], card)
+    cross_link(card)
+    assert problems(times[-1])[0].startswith("fsck.fat: ")
