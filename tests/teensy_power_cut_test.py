@@ -5,7 +5,8 @@ The image flies on the emulated chip with a card in its socket (the card image `
 sd-image` makes by default): armed 2.5 s (log 1), disarmed 0.2 s, armed 1.5 s (log 2),
 disarmed. A power cut at instruction N leaves the card image with exactly the blocks the card
 acknowledged before N (sim/chip/sd_card.py). After each cut, drawn at random (seeded) from the
-first arming to the end of the flight: `fsck.fat -n` finds the card clean or says only what a
+first arming to the end of the flight, and a few more in the first frames after each switch
+change (a log's beginning and end): `fsck.fat -n` finds the card clean or says only what a
 cut may leave (sd_files_test.FSCK_AFTER_POWER_CUT); every log on it reads through this
 project's FAT reader and FatFs alike, is a prefix of the same log of the flight without cuts,
 opens in DFReader, and is either whole or has its last record within LOG_SYNC_PERIOD_US (1 s)
@@ -59,6 +60,9 @@ FLIGHT = ((SWITCH_LOW, 40), (SWITCH_HIGH, 500), (SWITCH_LOW, 40), (SWITCH_HIGH, 
 #: The cuts: how many, their seed, and how many of them are checked against a fresh flight
 #: stopped at the same instruction (each costs a flight up to its cut).
 CUTS, SEED, FRESH_CUTS = 100, 35, 3
+#: More cuts, drawn from the first EDGE_FRAMES frames after each switch change (the log's
+#: beginning, its first drain, and its end), EDGE_CUTS at each of the four.
+EDGE_CUTS, EDGE_FRAMES = 5, 2
 #: The most a cut may lose of the log being written (the sync period).
 MAX_LOSS_US = fw.LOG_SYNC_PERIOD_US
 #: A still IMU, level.
@@ -77,8 +81,8 @@ def rc(switch_us: int) -> list:
 
 class Flight:
     """The image flying FLIGHT on a card image, paused at each of ``cuts`` (instruction
-    counts) to call ``on_cut(flight)``. ``armed_from``: the instruction count at the first
-    arming frame's start."""
+    counts) to call ``on_cut(flight)``. ``edges``: the instructions (from, to) of the first
+    EDGE_FRAMES frames of each of FLIGHT's stretches."""
 
     def __init__(self, card: pathlib.Path, cuts=(), on_cut=None):
         self.card = card
@@ -89,7 +93,7 @@ class Flight:
         self.clock_zero = m.now() - self.board.board.chip.dwt.cyccnt()
         self.cuts = sorted(cuts, reverse=True)
         self.on_cut = on_cut
-        self.armed_from = None
+        self.edges = []
         self._run = m.run
         m.run = self._run_with_cuts
         period = int(m.core_hz / IMAGE_LOOP_HZ)
@@ -108,11 +112,12 @@ class Flight:
 
     def fly(self) -> None:
         for switch_us, frames in FLIGHT:
-            if switch_us == SWITCH_HIGH and self.armed_from is None:
-                self.armed_from = self.machine.instructions_now()
-            for _ in range(frames):
+            self.edges.append([self.machine.instructions_now(), None])
+            for k in range(frames):
                 self.board.frame(b"", False, rc(switch_us), 0, sync=False)
                 self.board.telemetry_out.clear()
+                if k + 1 == EDGE_FRAMES:
+                    self.edges[-1][1] = self.machine.instructions_now()
 
     def _run_with_cuts(self, instructions=None, seconds=None):
         """Machine.run for the board's frames (a time limit only), paused at each cut."""
@@ -173,10 +178,10 @@ def sha256(path: pathlib.Path) -> str:
 
 def check_cut(flight: Flight, whole: dict, scratch: pathlib.Path) -> dict:
     """The checks on the card at a cut, against the flight's logs without cuts (``whole``:
-    name -> (bytes, TimeUS list)): what the cut lost of each log not whole (us), and what is
-    wrong (nothing, we expect)."""
+    name -> (bytes, TimeUS list)): what the cut lost of each log begun and not whole (us),
+    how many of those have no record on the card, and what is wrong (nothing, we expect)."""
     card, cut_us = flight.card, flight.firmware_us()
-    problems, losses, said = [], {}, None
+    problems, losses, said, begun = [], {}, None, 0
     try:
         said = assert_fsck_accepts(card)
     except AssertionError as e:
@@ -192,20 +197,19 @@ def check_cut(flight: Flight, whole: dict, scratch: pathlib.Path) -> dict:
     for k, name in enumerate(names, start=1):
         data, times = whole[name]
         got = on_card.get(name)
-        if got is None:
-            if times[0] < cut_us - MAX_LOSS_US:
-                problems.append(f"{name} missing, begun {cut_us - times[0]} us before the cut")
-            continue
-        if not data.startswith(got) or files.read(k, 0, len(data) + 1) != got:
+        if got is not None and (not data.startswith(got) or
+                                files.read(k, 0, len(data) + 1) != got):
             problems.append(f"{name}: {len(got)} bytes not a prefix of the flight's log, or "
                             "FatFs reads other bytes")
-        elif got != data:
+        elif got != data and times[0] <= cut_us:        # begun before the cut, not whole
             read = time_us_of(got, scratch) if got else []
+            begun += not read
             losses[name] = cut_us - (read[-1] if read else times[0])
             if not 0 <= losses[name] <= MAX_LOSS_US:
                 problems.append(f"{name}: its last record {losses[name]} us before the cut")
     del files
-    return {"cut_us": cut_us, "losses": losses, "problems": problems, "fsck": said}
+    return {"cut_us": cut_us, "losses": losses, "problems": problems, "fsck": said,
+            "begun": begun}
 
 
 class CutReached(Exception):
@@ -214,8 +218,9 @@ class CutReached(Exception):
 
 @pytest.fixture(scope="module")
 def flights(tmp_path_factory):
-    """The flight without cuts, then the same flight with CUTS cuts and the checks at each,
-    then FRESH_CUTS fresh flights each stopped at one of the cuts."""
+    """The flight without cuts, then the same flight with CUTS cuts from the first arming to
+    the end and EDGE_CUTS at each later switch change, the checks at each; then FRESH_CUTS
+    fresh flights each stopped at one of the cuts."""
     boot.require_image()
     tmp = tmp_path_factory.mktemp("cuts")
     scratch = tmp / "log.BIN"
@@ -223,9 +228,12 @@ def flights(tmp_path_factory):
     uncut.fly()
     whole = {name: (data, time_us_of(data, scratch))
              for name, data in logs_on(Fat32Image(uncut.card)).items()}
-    cuts = sorted(random.Random(SEED).sample(
-        range(uncut.armed_from, uncut.machine.instructions_now()), CUTS))
-    fresh = sorted(random.Random(SEED).sample(cuts, FRESH_CUTS))
+    draw = random.Random(SEED)
+    cuts = draw.sample(range(uncut.edges[1][0], uncut.machine.instructions_now()), CUTS)
+    for start, end in uncut.edges[1:]:
+        cuts += draw.sample(range(start, end), EDGE_CUTS)
+    cuts = sorted(set(cuts))
+    fresh = sorted(draw.sample(cuts, FRESH_CUTS))
     results = {}
 
     def on_cut(flight):
@@ -260,7 +268,7 @@ def test_the_flight_logs_both_armings(flights):
 @needs_fsck
 def test_every_cut_leaves_a_clean_card_and_each_log_readable_to_within_a_second(flights):
     results = flights["results"]
-    assert len(results) == CUTS
+    assert len(results) == CUTS + EDGE_CUTS * (len(FLIGHT) - 1)
     wrong = {n: r["problems"] for n, r in results.items() if r["problems"]}
     assert not wrong, wrong
     losses = [us for r in results.values() for us in r["losses"].values()]
@@ -271,7 +279,9 @@ def test_every_cut_leaves_a_clean_card_and_each_log_readable_to_within_a_second(
     writing = [r["transfer"] for r in results.values() if r["transfer"] and r["transfer"][0]]
     said = [r["fsck"] for r in results.values()]
     fsck_counts = ", ".join(f"{sum(words in s for s in said)} {words!r}" for words in FSCK_SAYS)
-    print(f"\n{CUTS} cuts: {len(losses)} in an open log; fsck.fat clean after "
+    print(f"\n{len(results)} cuts: {len(losses)} in an open log "
+          f"({sum(r['begun'] for r in results.values())} of them one with no record yet); "
+          f"fsck.fat clean after "
           f"{said.count('')}, said {fsck_counts}; "
           f"{sum(r['busy'] for r in results.values())} with the data lines in use, "
           f"{len(writing)} during a written block's transfer, "
