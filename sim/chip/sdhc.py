@@ -25,7 +25,8 @@ table shorter than the transfer is DMAE with ADMAES. A read block's CRC16 is che
 (negative: DCE). After a write the card holds DAT0 low (PRSSTAT.DLSL bit 0) while it
 programs; TC is set when the last block is in and, for a write, the busy after it (with
 AC12EN the auto-CMD12, its response in CMDRSP3) is over. ``log`` keeps each command
-(cycle, index, argument, response kind or None), until cleared.
+(cycle, index, argument, response kind or None), until cleared; ``transfer()`` says which data
+transfer is under way and how far it got.
 
 The model notes (``chip.note``) a command while CIHB is set, an identification clock over
 400 kHz, a clock over 25 MHz, a block size other than 512 and a non-ADMA2 data transfer.
@@ -226,9 +227,15 @@ class Sdhc(RegisterDevice):
         segments = self._adma_table(blocks * BLOCK)
         if segments is None:
             return
-        self._data = {"write": write, "lba": arg, "left": blocks, "segments": segments,
+        self._data = {"write": write, "lba": arg, "blocks": blocks, "left": blocks,
+                      "segments": segments,
                       "ac12": bool(xfertyp & XFERTYP_AC12EN) and blocks > 1}
         self._event = self.machine.after(self._block_s(write), self._block)
+
+    def transfer(self) -> tuple | None:
+        """The data transfer under way: (write, blocks done, blocks left), or None."""
+        d = self._data
+        return None if d is None else (d["write"], d["blocks"] - d["left"], d["left"])
 
     def _block_s(self, write) -> float:
         lines = 4 if self.v["PROCTL"] >> 1 & 3 == 1 else 1
