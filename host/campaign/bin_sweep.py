@@ -5,16 +5,16 @@ measures a sweep folder's.
 
 An excitation is a run of loops whose SIDD gives one start (the loop's time less SIDD's time
 into the excitation) and one frequency; a loop missing from the log (an HQGP gap) leaves it
-whole, the loop a hole. Each loop's place in it is its loop number less the start's. Its
-set-up is the SIDS logged at that start: the fades (TFin) and the planned full-amplitude part
-(TC), in loops on the log's loop period; the period in loops is the loop rate over SIDD's F,
-the frequency the firmware used. The full-amplitude window runs from the fade-in's end to the
-loop before the first fade-out loop; its loops the log misses are lost, as on a link. An
-excitation is measured when its fade-out is in the log (the firmware ended it in order, a
-finished dwell too) or its logged window reaches the planned end; one stopped at once (the
-abort limits, the host's heartbeat lost) or cut off by the log's end or damage is not
-measured, and the manifest says so as it says a sweep that was cut (``complete`` false,
-``aborted`` naming each such excitation). An excitation of the same frequency later in the log supersedes an earlier one (a
+whole, the loop a hole. Each loop's place in it is its loop number less the start's. Its set-up
+is the SIDS logged at that start: the fades (TFin) and the planned full-amplitude part (TC), in
+loops on the log's loop period; the period in loops is the loop rate over SIDD's F, the
+frequency the firmware used. The full-amplitude window runs from the fade-in's end to the loop
+before the first fade-out loop; its loops the log misses are lost, as on a link. An excitation
+is measured when its fade-out is in the log (the firmware ended it in order, a finished dwell
+too) or its logged window reaches the planned end; one stopped at once (the abort limits, the
+host's heartbeat lost) or cut off by the log's end or damage is not measured, and the manifest
+says so as it says a sweep that was cut (``complete`` false, ``aborted`` naming each such
+excitation). An excitation of the same frequency later in the log supersedes an earlier one (a
 sweep measures a frequency again at another amplitude).
 
 A multisine's lines are read from its logged excitation: the full-amplitude periods the log
@@ -110,11 +110,10 @@ def _excitations(log, active, loop_us) -> list:
     starts = s.time_us[active].astype(float) - log.exc_time_s[active] * 1e6
     freqs = log.exc_freq_hz[active]
     cut = np.flatnonzero((np.abs(np.diff(starts)) > loop_us / 2) | (np.diff(freqs) != 0)) + 1
-    found = []
+    found, seq = [], s.seq.astype(np.int64)
     for rows in np.split(active, cut):
         first = rows[0]
         lead = int(round(log.exc_time_s[first] * 1e6 / loop_us))   # its place in it
-        seq = s.seq.astype(np.int64)
         start_us = int(s.time_us[first]) - log.exc_time_s[first] * 1e6
         setup = next((u for u in log.setups if abs(u["TimeUS"] - start_us) < loop_us / 2),
                      None)
@@ -133,7 +132,8 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
     if not running.any():
         return {**entry, "status": "never at full amplitude in the log"}
     rows, places = e.rows[running], e.places[running]
-    fade = int(round(e.setup["TFin"] * 1e6 / loop_us)) if e.setup else int(places[0])
+    fade = int(min(round(e.setup["TFin"] * 1e6 / loop_us) if e.setup else places[0],
+                   places[0]))
     planned = fade + int(round(e.setup["TC"] * 1e6 / loop_us)) - 1 if e.setup else None
     after = e.places[~running & (e.places > places[-1])]
     if after.size:
@@ -163,9 +163,9 @@ def _lines(r, places, length: int, period: int) -> list | None:
     grid[places[inside]] = r[inside]
     periods = grid.reshape(-1, period)
     whole = periods[~np.isnan(periods).any(axis=1)]
-    if not whole.size:
+    amplitude = np.abs(np.fft.rfft(whole.mean(axis=0)))[1:] if whole.size else np.zeros(1)
+    if not amplitude.max() > 0:
         return None
-    amplitude = np.abs(np.fft.rfft(whole.mean(axis=0)))[1:]
     return (np.flatnonzero(amplitude > LINE_FLOOR * amplitude.max()) + 1).tolist()
 
 

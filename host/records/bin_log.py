@@ -6,15 +6,15 @@ excitation, its frequency), the excitations' set-ups (SIDS), the parameters (PAR
 gap records (HQGP).
 
 pymavlink's DFReader parses the records. A DataFlash log has no checksum, so the reader checks
-what the format and the firmware's logger promise: the records follow one another with no
-byte between them (DFReader skips bytes it cannot parse), a loop's SIDD, HQSD and HQMT come
-together with one time, the loops' numbers rise and a loop missing from the log follows a
-gap record, times never go back, and a sample's axis, injection point and state are the
-dialect's. The log is read up to the first place that breaks one of these (a log cut
-mid-record, a flipped byte in a record's header or its numbers, garbage after a point);
+what the format and the firmware's logger promise: the records follow one another with no byte
+between them (DFReader skips bytes it cannot parse), a loop's SIDD, HQSD and HQMT come together
+with one time, the loops' numbers rise and a loop missing from the log follows a gap record (or
+an arming that continues the log), times never go back, and a sample's axis, injection point
+and state are the dialect's. The log is read up to the first place that breaks one of these (a
+log cut mid-record, a flipped byte in a record's header or its numbers, garbage after a point);
 what follows it is not used, and what was left out is a :class:`BinDamage` (the tlog's
-:class:`~.tlog.TlogDamage` with one region, from there to the file's end, and why). A
-flipped bit in a float that keeps it a number is not seen.
+:class:`~.tlog.TlogDamage` with one region, from there to the file's end, and why). A flipped
+bit in a float that keeps it a number is not seen.
 """
 
 from __future__ import annotations
@@ -121,6 +121,8 @@ class _Collector:
         elif kind == "HQGP":
             self.gaps.append((m.TimeUS, m.Dropped, m.SinceUS))
             self.gap_since = True
+        elif kind == "EV":          # an arming that continues the log: the disarmed loops
+            self.gap_since = True   # are not in it
         return None
 
     def _sample(self, m) -> str | None:
