@@ -19,10 +19,14 @@ import sys
 import numpy as np
 import pytest
 
-from heliquad.host.campaign.bin_sweep import bin_sweep
+from heliquad.host.campaign.bin_sweep import bin_sweep, log_sweep
+from heliquad.host.records.bin_log import BinDamage, BinLog
 from heliquad.host.records.manifest import read_manifest
 from heliquad.host.records.models import read_models_json
 from heliquad.host.records.points import read_points_csv
+from heliquad.host.records.tlog import message_dtype
+from heliquad.sim.base.dialect import AXES, INJECTIONS, dialect
+from heliquad.sim.base.errors import InputError
 from fat32_image import Fat32Image
 
 #: A guard against a hang, never a measure.
@@ -141,3 +145,82 @@ def test_loops_missing_from_the_log_are_lost_samples(runs):
         assert abs(20 * math.log10(abs(q.gain) / abs(p.gain))) < 0.5
         assert abs(math.degrees(np.angle(q.gain / p.gain))) < 3.0
     assert_models_agree(sweep, board)
+
+
+# --- the excitations found in a log, on logs made here -------------------------------------
+
+#: A made log's loop period, us, and the first loop's number.
+LOOP_US, FIRST_SEQ = 5000, 100
+
+
+def made_log(*excitations, idle=20, drop=(), axes=None):
+    """A log of ``excitations``, each ``(base Hz, {harmonic: amplitude}, fade loops, full
+    loops, end)`` with ``end`` "fade" (faded out) or "stop" (idle at once, half-way), idle
+    loops before and after each; the loops at the indexes ``drop`` are missing (a gap)."""
+    mav = dialect()
+    state = {"idle": mav.HQ_EXCITATION_STATE_IDLE, "fade": mav.HQ_EXCITATION_STATE_FADING,
+             "run": mav.HQ_EXCITATION_STATE_RUNNING}
+    loops, setups = [], []                  # (state, excitation, time into it s, F)
+    for i, (f, lines, fade, full, end) in enumerate(excitations):
+        loops += [("idle", 0.0, 0.0, 0.0)] * idle
+        period = round(1e6 / LOOP_US / f)
+        setups.append({"TimeUS": (FIRST_SEQ + len(loops)) * LOOP_US, "Ax": 10, "Mag": 0.1,
+                       "FSt": f * min(lines), "FSp": f * max(lines), "TFin": fade * 5e-3,
+                       "TC": full * 5e-3, "TR": (2 * fade + full) * 5e-3,
+                       "TFout": fade * 5e-3})
+        parts = ["fade"] * fade + ["run"] * (full if end == "fade" else full // 2) + \
+            (["fade"] * fade if end == "fade" else [])
+        loops += [(p, sum(a * math.sin(2 * math.pi * h * k / period + h)
+                          for h, a in lines.items()), k * LOOP_US * 1e-6, f)
+                  for k, p in enumerate(parts)]
+    loops += [("idle", 0.0, 0.0, 0.0)] * idle
+    keep = [k for k in range(len(loops)) if k not in set(drop)]
+    rows = np.zeros(len(keep), dtype=message_dtype(mav, "HQ_SYSID_SAMPLE")).view(np.recarray)
+    rows.seq = FIRST_SEQ + np.array(keep)
+    rows.time_us = rows.seq * LOOP_US
+    rows.axis = AXES["roll"] if axes is None else [axes[k % len(axes)] for k in keep]
+    rows.injection, rows.armed = INJECTIONS["mixer"], 1
+    rows.exc_state = [state[loops[k][0]] for k in keep]
+    rows.excitation = [loops[k][1] for k in keep]
+    return BinLog(rows, np.array([loops[k][2] for k in keep]),
+                  np.array([loops[k][3] for k in keep], dtype=np.float32).astype(float),
+                  setups, {}, [], BinDamage(size=1))
+
+
+def test_an_excitation_stopped_or_measured_again_is_not_used():
+    sine = {1: 0.1}
+    manifest, _, _ = log_sweep(made_log((4, sine, 100, 200, "fade"), (8, sine, 50, 200, "stop"),
+                                        (4, sine, 100, 300, "fade")), "made.BIN")
+    first, stopped, again = manifest["frequencies"]
+    assert first["status"].startswith("superseded: measured again later")
+    assert stopped["status"] == "not whole in the log: it was stopped before its fade-out"
+    assert again["status"] == "ok" and again["samples"] == 300 and again["lost"] == 0
+    assert (again["freq_hz"], again["period_samples"]) == (4.0, 50) and "orders" not in again
+    assert manifest["complete"] is False and manifest["aborted"].startswith("8 Hz not whole")
+
+
+def test_a_multisines_lines_are_read_from_its_excitation():
+    lines = {2: 0.05, 3: 0.04, 5: 0.03, 9: 0.002}
+    manifest, _, _ = log_sweep(made_log((1, lines, 200, 800, "fade")), "made.BIN")
+    (entry,) = manifest["frequencies"]
+    assert entry["signal"] == manifest["signal"] == "multisine"
+    assert entry["orders"] == [2, 3, 5, 9] and entry["period_samples"] == 200
+    assert entry["fade_samples"] == 200 and entry["samples"] == 800
+
+
+def test_loops_missing_are_lost_inside_and_at_the_edges_of_the_window():
+    """Idle 20 loops, fade-in 100: the window's first loop is loop 120."""
+    log = made_log((4, {1: 0.1}, 100, 200, "fade"), drop=(120, 121, 200, 201, 202))
+    (entry,) = log_sweep(log, "made.BIN")[0]["frequencies"]
+    assert entry["status"] == "ok" and (entry["samples"], entry["lost"]) == (195, 5)
+    assert entry["start_us"] == (FIRST_SEQ + 122) * LOOP_US
+
+
+@pytest.mark.parametrize("log, says", [
+    (made_log(), "no excitation in the log"),
+    (made_log((4, {1: 0.1}, 100, 200, "fade"), axes=(AXES["roll"], AXES["pitch"])),
+     "identify takes one axis"),
+])
+def test_a_log_with_no_or_more_than_one_axis_excited_is_refused(log, says):
+    with pytest.raises(InputError, match=says):
+        log_sweep(log, "made.BIN")

@@ -39,7 +39,7 @@ from ..acquire.measure import saturation_masks
 from ..records.bin_log import read_bin
 from ..records.gains import gains_from_params
 
-__all__ = ["bin_sweep", "LINE_FLOOR"]
+__all__ = ["bin_sweep", "log_sweep", "LINE_FLOOR"]
 
 #: A multisine's line is a harmonic above this share of the largest line's amplitude.
 LINE_FLOOR = 1e-4
@@ -59,7 +59,12 @@ def bin_sweep(path) -> tuple:
     log's excitations as its frequencies (module docstring), the logged loops as
     HQ_SYSID_SAMPLE rows and what the reading left out. InputError when the log holds no
     excitation, or excites more than one axis or injection point."""
-    log = read_bin(path)
+    return log_sweep(read_bin(path), path)
+
+
+def log_sweep(log, path) -> tuple:
+    """:func:`bin_sweep` of a log already read (a :class:`~heliquad.host.records.bin_log.BinLog`
+    of the file ``path``)."""
     s = log.samples
     mav = dialect()
     active = np.flatnonzero(s.exc_state != mav.HQ_EXCITATION_STATE_IDLE)
