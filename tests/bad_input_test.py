@@ -20,7 +20,9 @@ import subprocess
 import sys
 
 import pytest
+from pymavlink import DFReader
 
+from fat32_image import Fat32Image
 from log_protocol_test import card_with_logs, wait_armed
 from tool_runs import running_board
 
@@ -153,6 +155,57 @@ def flip(data, at=1000):
     data = bytearray(data)
     data[at] ^= 0x10
     return bytes(data)
+
+
+# The session sweep's on-board log (board.BIN beside its folder, read from its card), cut,
+# flipped or with garbage put in, before its second excitation (so one frequency is left) or
+# after its last (both left).
+
+def _records(session) -> list:
+    """(offset, type, HQSD's excitation state or None) of each record of the session's log."""
+    log = DFReader.DFReader_binary(str(session.parent / "board.BIN"))
+    out = []
+    while (m := log.recv_msg()) is not None:
+        out.append((log.offset - m.fmt.len, m.get_type(), getattr(m, "ESt", None)))
+    return out
+
+
+def _at(records, where) -> int:
+    """The offset of an HQSD record: 50 loops into the second excitation (``mid``), or
+    10 loops after the last one's last (``tail``); of the first SIDS (``sids``)."""
+    if where == "sids":
+        return next(o for o, kind, _ in records if kind == "SIDS")
+    if where == "mid":
+        second = [i for i, (_, kind, _) in enumerate(records) if kind == "SIDS"][1]
+        return [o for o, kind, _ in records[second:] if kind == "HQSD"][50]
+    last = max(i for i, (_, kind, state) in enumerate(records) if kind == "HQSD" and state)
+    return [o for o, kind, _ in records[last:] if kind == "HQSD"][10]
+
+
+def board_log(where=None, damage=None):
+    """The session's .BIN with ``damage`` (``cut``: mid-record, ``flip``: a record's first
+    byte, ``garbage``: bytes put in; ``boundary``: cut at a record's start) at ``where``."""
+    def make(dest, session):
+        data = (session.parent / "board.BIN").read_bytes()
+        at = _at(_records(session), where) if where else 0
+        if damage == "cut":
+            data = data[:at + 9]
+        elif damage == "boundary":
+            data = data[:at]
+        elif damage == "flip":
+            data = flip(data, at)
+        elif damage == "garbage":
+            data = data[:at] + bytes(range(256)) * 4 + data[at:]
+        dest.write_bytes(data)
+    return make
+
+
+def board_folder(*names):
+    def make(dest, session):
+        dest.mkdir()
+        for name in names:
+            board_log("tail", "flip")(dest / name, session)
+    return make
 
 
 def session_copy(name):
@@ -432,6 +485,20 @@ FILES = {
     "flipped.tlog": lambda dest, session: dest.write_bytes(flip((session / "sweep.tlog").read_bytes())),
     "old.tlog": b"an earlier flight \x00\x01\x02" * 50,
     "old": old_run,
+    # on-board logs
+    "b_cut_tail.BIN": board_log("tail", "cut"),
+    "b_flip_tail.BIN": board_log("tail", "flip"),
+    "b_garbage_tail.BIN": board_log("tail", "garbage"),
+    "b_cut_mid.BIN": board_log("mid", "cut"),
+    "b_flip_mid.BIN": board_log("mid", "flip"),
+    "b_garbage_mid.BIN": board_log("mid", "garbage"),
+    "b_no_excitation.BIN": board_log("sids", "boundary"),
+    "b_header.BIN": lambda dest, session: dest.write_bytes(
+        (session.parent / "board.BIN").read_bytes()[:300]),
+    "text.BIN": "this is not an on-board log\n",
+    "empty.BIN": b"",
+    "b_folder": board_folder("00000001.BIN"),
+    "b_two": board_folder("00000001.BIN", "00000002.BIN"),
     # DMP firmware sources and files
     "syntax.py": "dmpMemory = [1, 2,\n",
     "call.py": "dmpMemory = bytes(1929)\ndmpConfig = [0] * 192\ndmpUpdates = [0] * 47\n",
@@ -985,8 +1052,22 @@ CASES = [
     case("identify s_no_manifest --order 0/2", "no manifest.json"),
     case("identify s_tlog_empty --order 2-4", "form M/N"),
     case("identify", "DIR"),
+    # identify on a board's log: the part before the damage, or nothing usable left
+    case("identify b_cut_mid.BIN", "1 frequency(ies)"),
+    case("identify b_flip_mid.BIN", "1 frequency(ies)"),
+    case("identify b_garbage_mid.BIN", "1 frequency(ies)"),
+    case("identify b_no_excitation.BIN", "no excitation in the log"),
+    case("identify b_header.BIN", "no excitation in the log"),
+    case("identify text.BIN", "not a DataFlash log"),
+    case("identify empty.BIN", "empty file"),
+    case("identify missing.BIN", "no such file"),
+    case("identify b_two", "give one of them"),
     # identify that runs (the log's damage is skipped with a one-line warning, exit 0)
     case("identify s_tlog_flipped", "the log is damaged", code=0),
+    case("identify b_cut_tail.BIN", "the log is damaged", code=0),
+    case("identify b_flip_tail.BIN", "the log is damaged", code=0),
+    case("identify b_garbage_tail.BIN", "the log is damaged", code=0),
+    case("identify b_folder", "the log is damaged", code=0),
     # report: damaged folders, models, validation, tables; unwritable or folder outputs
     case("report missing", "not a folder"),
     case("report binary.dat", "not a folder"),
@@ -1107,13 +1188,16 @@ CASES = [
 
 @pytest.fixture(scope="session")
 def session(tmp_path_factory):
-    """One small SIL sweep of the tf plant (2 frequencies), identified and validated."""
+    """One small SIL sweep of the tf plant (2 frequencies), identified and validated; its
+    on-board log beside it (board.BIN, read from its card)."""
     out = tmp_path_factory.mktemp("bad_input") / "roll"
+    card = out.parent / "card.img"
     for args in (["sweep", "--sil", "--axis", "roll", "--plant", "tf", "--freqs-hz", "2", "4",
-                  "--cycles", "3", "--out", out], ["identify", out],
+                  "--cycles", "3", "--sd-image", card, "--out", out], ["identify", out],
                  ["validate", out / "models.json"]):
         res = heliquad(*args)
         assert res.returncode == 0, (args, res.stderr)
+    (out.parent / "board.BIN").write_bytes(Fat32Image(card).read("LOGS/00000001.BIN"))
     return out
 
 

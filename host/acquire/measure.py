@@ -71,6 +71,13 @@ def loss_text(entry) -> str:
 
 
 
+def saturation_masks() -> dict:
+    """Each saturation count's HQ_SATURATION bits as one mask, ``{manifest key: mask}``."""
+    mav = dialect()
+    return {key: sum(getattr(mav, f"HQ_SATURATION_{bit}") for bit in bits)
+            for key, (bits, _) in SATURATION.items()}
+
+
 def saturation_summary(counts) -> str:
     """``N saturated the mixer, ...`` for the saturation counts of a frequency's window (a
     manifest entry, or any mapping with its keys), or "" when nothing saturated."""
@@ -126,8 +133,7 @@ class ExcitationWatch:
         mav = dialect()
         self.idle, self.running = mav.HQ_EXCITATION_STATE_IDLE, mav.HQ_EXCITATION_STATE_RUNNING
         self.normal_end = (mav.HQ_REASON_NONE, mav.HQ_REASON_FINISHED)
-        self.flags = {key: sum(getattr(mav, f"HQ_SATURATION_{bit}") for bit in bits)
-                      for key, (bits, _) in SATURATION.items()}
+        self.flags = saturation_masks()
         self.warning = mav.MAV_SEVERITY_WARNING
         self.plan, self.limits, self.progress = plan, limits, progress
         self.entry = {"requested_hz": f, "amplitude": amp, "samples": 0, "seq_gaps": 0,

@@ -1,8 +1,10 @@
 """``heliquad identify DIR``: from a sweep's log to points, models and plots.
 
-Reads ``DIR/manifest.json`` and ``DIR/sweep.tlog``; for each frequency the manifest marks
-as measured, takes the full-amplitude samples (HQ_EXCITATION_STATE_RUNNING) in its window, and runs
-the FSF with the exact frequency the firmware reported. Writes, inside DIR:
+Reads ``DIR/manifest.json`` and ``DIR/sweep.tlog`` (or a board's log, a .BIN or a folder
+holding one and no manifest: :mod:`.bin_sweep` finds the sweep it flew); for each frequency
+the manifest marks as measured, takes the full-amplitude samples (HQ_EXCITATION_STATE_RUNNING) in its window, and runs
+the FSF with the exact frequency the firmware reported. Writes, inside DIR (for a .BIN, the
+folder that holds it):
 ``points.csv`` (the POINTS format), ``points_table.csv`` (the paper's tables 4-6: frequency,
 omega, magnitude, phase, R, I), ``models.json`` (the axis's default orders, or those given),
 ``bode.png`` (points, models and the points' coherence) and ``responses.png`` (per
@@ -32,19 +34,32 @@ from ..present.plot_process import PlotProcess
 from ..records.manifest import MANIFEST, read_manifest
 from ..records.models import fitted_models, write_models_json
 from ..records.points import write_points_csv, write_points_table
+from ..records.bin_log import is_bin_name
 from ..records.tlog import TlogDamage, read_tlog_table
 from ..validate.closed_loop import margins_record
 from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
+from .bin_sweep import bin_sweep
 
 __all__ = ["identify_dir", "INPUT_OUTPUT"]
 
 
 
 def _load(dir_path):
+    """``(the folder for the outputs, manifest, samples, damage)`` of a sweep folder, a .BIN
+    or a folder holding one .BIN and no manifest."""
+    if not os.path.isdir(dir_path):
+        return (os.path.dirname(dir_path) or ".", *bin_sweep(dir_path))
     path = os.path.join(dir_path, MANIFEST)
     if not os.path.lexists(path):
+        logs = sorted(n for n in os.listdir(dir_path) if is_bin_name(n))
+        if len(logs) > 1:
+            raise InputError(f"{dir_path}: no {MANIFEST} and {len(logs)} .BIN logs "
+                             f"({', '.join(logs[:3])}{', ...' if len(logs) > 3 else ''}): "
+                             "give one of them")
+        if logs:
+            return (dir_path, *bin_sweep(os.path.join(dir_path, logs[0])))
         raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
     manifest = read_manifest(path)
     tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
@@ -56,7 +71,7 @@ def _load(dir_path):
     except OSError as exc:
         raise InputError(f"{tlog}: {exc.strerror or exc}") from None
     _check_log_matches(dir_path, manifest, samples)
-    return manifest, samples, damage
+    return dir_path, manifest, samples, damage
 
 
 def _check_log_matches(dir_path, manifest, samples) -> None:
@@ -133,19 +148,19 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
             return identify_dir(dir_path, orders, progress, delay, estimate, plots)
-    manifest, samples, damage = _load(dir_path)
-    return _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
-                     estimate)
+    out_dir, manifest, samples, damage = _load(dir_path)
+    return _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress,
+                     delay, estimate)
 
 
-def _identify(dir_path, manifest, samples, damage, plots, orders, progress, delay,
+def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress, delay,
               estimate) -> dict:
     cut = cut_text(manifest)
     if cut:
         progress(f"warning: {cut}; the points are those it measured")
     if damage:
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
-                 "every well-formed record was read")
+                 f"{damage.KEPT}")
     axis = manifest["axis"]
     points, segments, firsts, skipped = _estimate_points(manifest, samples, estimate, progress)
     saturated = _saturated(manifest)
@@ -158,8 +173,8 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
                          f"a fit needs at least 2{why}{aborted}")
     plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
-    write_points_csv(os.path.join(dir_path, "points.csv"), points)
-    write_points_table(os.path.join(dir_path, "points_table.csv"), points)
+    write_points_csv(os.path.join(out_dir, "points.csv"), points)
+    write_points_table(os.path.join(out_dir, "points_table.csv"), points)
     wanted = orders or default_orders(axis)
     orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
     if not orders:
@@ -168,7 +183,7 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
     loop = _broken_loop(manifest, points, estimate, progress)
     truth = _truth(dir_path, manifest, points, result, progress)
     replays = _replays(result, firsts, segments)
-    write_models_json(os.path.join(dir_path, "models.json"), fitted_models(
+    write_models_json(os.path.join(out_dir, "models.json"), fitted_models(
         result, log=damage.record(), skipped_frequencies=skipped,
         saturated_frequencies=saturated, estimate=estimate,
         signal=manifest.get("signal", "dwell"),
@@ -176,8 +191,8 @@ def _identify(dir_path, manifest, samples, damage, plots, orders, progress, dela
         broken_loop=loop or None, sil_truth=truth or None,
         replay=None if replays is None else _replay_record(result.recommended, replays),
         axis=axis, points_file="points.csv"))
-    _write_plots(plots, dir_path, manifest, points, result, replays)
-    return {"axis": axis, "points": points, "result": result, "manifest": manifest,
+    _write_plots(plots, out_dir, manifest, points, result, replays)
+    return {"out_dir": out_dir, "axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
             "records": segments, "record_points": firsts, "replays": replays}
 

@@ -1,4 +1,4 @@
-"""Points, models and plots from a sweep folder (``heliquad identify``)."""
+"""Points, models and plots from a sweep folder or a board's log (``heliquad identify``)."""
 
 from __future__ import annotations
 
@@ -22,14 +22,19 @@ lowest AICc among the stable models of acceptable fit, unless another fits visib
 its quality (good, acceptable, poor) is said and recorded.
 When the loop closes around the excitation (mixer injection), the loop broken there is
 measured too, L = R/U - 1, with its margins where the sweep reaches its crossovers.
+DIR may also be a board's on-board log, a .BIN (heliquad logs download, or LOGS/ on its SD
+card), or a folder holding one and no manifest: the sweep is read from the log itself (each
+excitation's set-up from SIDS, its samples from HQSD; a multisine's lines from its logged
+excitation), and the outputs go into the folder that holds the .BIN.
 """
 
 
 
 def add_parser(sub, fmt) -> None:
-    p = sub.add_parser("identify", help="points, models and plots from a sweep folder",
+    p = sub.add_parser("identify", help="points, models and plots from a sweep folder or a .BIN",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("dir", metavar="DIR")
+    p.add_argument("dir", metavar="DIR", help="a sweep folder, a board's .BIN log, or a folder "
+                                              "holding one")
     p.add_argument("--order", action="append", metavar="M/N",
                    help="an order to fit, again for more (M/Ni: one pole at the origin); "
                         "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i")
@@ -50,8 +55,9 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..present.plot_process import PlotProcess
+    from ..records.bin_log import is_bin_name
 
-    if not os.path.isdir(args.dir):
+    if not os.path.isdir(args.dir) and not is_bin_name(args.dir):
         raise InputError(f"{args.dir}: not a folder")
     with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
         # the command's work, imported when it runs: --help imports every command module
@@ -67,7 +73,8 @@ def run(args) -> int:
         print(f"{p.freq_hz:8.4g} {p.omega_rad_s:8.4g} {p.magnitude:9.4g} "
               f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
     print_models(r["result"])
-    print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in {args.dir}")
+    print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in "
+          f"{r['out_dir']}")
     if args.mat:
         # the command's work, imported when it runs: --help imports every command module
         from ..records.models import fitted_models, write_models_mat

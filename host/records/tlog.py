@@ -43,7 +43,8 @@ from ...sim.base.errors import DiskFull, InputError, no_room
 from ...sim.base.framing import (CRC_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE_LEN, STX_V2,
                                  Codec, packet_at)
 
-__all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog", "read_tlog_table"]
+__all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog", "read_tlog_table",
+           "message_dtype"]
 
 _STAMP = struct.Struct(">Q")
 
@@ -149,6 +150,8 @@ class TlogWriter:
 @dataclasses.dataclass
 class TlogDamage:
     """What a read found wrong with a .tlog."""
+    #: What the reader kept, in words.
+    KEPT = "every well-formed record was read"
     size: int = 0                       # bytes in the file
     regions: list = dataclasses.field(default_factory=list)   # (offset, bytes) skipped
     out_of_order: list = dataclasses.field(default_factory=list)  # offsets of such records
@@ -397,11 +400,21 @@ def read_tlog_table(path, mav_module, name: str, damage: TlogDamage | None = Non
     payloads are decoded together, which on a long log is many times faster than one message
     at a time."""
     codec, buf, offsets, msgids, lengths, _ = _read(path, mav_module, damage)
-    cls = next(c for c in codec.classes.values() if c.msgname == name)
-    keep = msgids == next(i for i, c in codec.classes.items() if c is cls)
+    msgid, cls = _message_class(codec, name)
+    keep = msgids == msgid
     size = cls.unpacker.size
     rows = _words(buf, offsets[keep] + _STAMP.size + HEADER_LEN, lengths[keep], size)
     return np.ascontiguousarray(rows).view(_record_dtype(cls))[:, 0].view(np.recarray)
+
+
+def message_dtype(mav_module, name: str):
+    """The numpy type of :func:`read_tlog_table`'s rows of the message type ``name``."""
+    return _record_dtype(_message_class(Codec(mav_module), name)[1])
+
+
+def _message_class(codec, name: str) -> tuple:
+    """(message id, class) of the message type ``name``."""
+    return next((i, c) for i, c in codec.classes.items() if c.msgname == name)
 
 
 #: struct's codes as numpy's little-endian types.
