@@ -69,17 +69,29 @@ py::list tapped_list(const std::vector<TappedMessage>& got) {
     return out;
 }
 
-py::array_t<double> to_array(const State& s) {
-    py::array_t<double> a(kStates);
-    std::memcpy(a.mutable_data(), s.data(), sizeof(double) * kStates);
+// The model's state values in use (the body's and one per rotor) as an array, and back.
+py::array_t<double> to_array(const VehicleModel& v, const State& s) {
+    py::array_t<double> a(v.states());
+    std::memcpy(a.mutable_data(), s.data(), sizeof(double) * v.states());
     return a;
 }
 
-State to_state(const DArray& a) {
-    if (a.size() != kStates) throw std::invalid_argument("the state has 18 values");
-    State s;
-    std::memcpy(s.data(), a.data(), sizeof(double) * kStates);
+State to_state(const VehicleModel& v, const DArray& a) {
+    if (a.size() != v.states()) {
+        throw std::invalid_argument("the state has " + std::to_string(v.states()) +
+                                    " values: 13 and one per rotor");
+    }
+    State s{};
+    std::memcpy(s.data(), a.data(), sizeof(double) * v.states());
     return s;
+}
+
+// The model's thrust fractions, one per rotor.
+void check_rotor_commands(const VehicleModel& v, const std::vector<double>& u) {
+    if (u.size() != static_cast<size_t>(v.config().rotors)) {
+        throw std::invalid_argument(std::to_string(v.config().rotors) +
+                                    " rotor commands expected");
+    }
 }
 
 }  // namespace
@@ -90,6 +102,8 @@ PYBIND11_MODULE(_simcore, m) {
     // The chip's scales and packet sizes (the firmware driver's) and the sensor frame's FIFO
     // capacity and RC channels (the dialect's), for Python.
     m.attr("GRAVITY_M_S2") = kGravity;
+    m.attr("MAX_ROTORS") = kMaxRotors;          // the vehicle model's room
+    m.attr("FIRMWARE_MOTORS") = kMotors;        // what the firmware's mixer drives
     m.attr("GYRO_LSB_PER_DEG_S") = kGyroLsbPerDegS;
     m.attr("ACCEL_LSB_PER_G") = kAccelLsbPerG;
     m.attr("QUAT_SCALE") = kQuatScale;
@@ -143,6 +157,7 @@ PYBIND11_MODULE(_simcore, m) {
         .def_readwrite("hinge_friction_n_m", &VehicleConfig::hinge_friction_n_m)
         .def_readwrite("free_axis", &VehicleConfig::free_axis)
         .def_readwrite("substeps", &VehicleConfig::substeps)
+        .def_readwrite("rotors", &VehicleConfig::rotors)
         .def_readwrite("thrust_dir", &VehicleConfig::thrust_dir)
         .def_readwrite("thrust_moment", &VehicleConfig::thrust_moment)
         .def_readwrite("spin_axis", &VehicleConfig::spin_axis)
@@ -157,19 +172,19 @@ PYBIND11_MODULE(_simcore, m) {
         // A view of the state: writing into it (x[10:13] = ...) sets the model's state.
         .def_property("x", [](py::object self) {
             VehicleModel& v = self.cast<VehicleModel&>();
-            return py::array_t<double>(kStates, v.x.data(), self);
-        }, [](VehicleModel& v, const DArray& a) { v.x = to_state(a); })
+            return py::array_t<double>(v.states(), v.x.data(), self);
+        }, [](VehicleModel& v, const DArray& a) { v.x = to_state(v, a); })
         .def("derivative", [](const VehicleModel& v, const DArray& x, const std::vector<double>& u,
                               py::object force, py::object moment) {
-            if (u.size() != kMotors) throw std::invalid_argument("five motor commands expected");
+            check_rotor_commands(v, u);
             const auto f = rows_of(force, 1, 3, "force_ned");
             const auto mo = rows_of(moment, 1, 3, "moment_body");
-            return to_array(v.derivative(to_state(x), u.data(), optional(f), optional(mo)));
+            return to_array(v, v.derivative(to_state(v, x), u.data(), optional(f), optional(mo)));
         }, py::arg("x"), py::arg("u"), py::arg("force_ned") = py::none(),
            py::arg("moment_body") = py::none())
         .def("step", [](VehicleModel& v, const std::vector<double>& u, double dt_s,
                         py::object force, py::object moment) {
-            if (u.size() != kMotors) throw std::invalid_argument("five motor commands expected");
+            check_rotor_commands(v, u);
             const auto f = rows_of(force, 1, 3, "force_ned");
             const auto mo = rows_of(moment, 1, 3, "moment_body");
             v.step(u.data(), dt_s, optional(f), optional(mo));

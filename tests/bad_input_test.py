@@ -84,6 +84,27 @@ def vehicle(old, new):
     return "\n".join(lines) + "\n"
 
 
+def rotor(n, old, new):
+    """The shipped vehicle file with, in its ``n``-th [[rotors]] table, the line starting
+    ``old`` replaced by ``new``."""
+    lines = VEHICLE.splitlines()
+    starts = [i for i, line in enumerate(lines) if line == "[[rotors]]"] + [len(lines)]
+    hits = [i for i in range(starts[n - 1], starts[n]) if lines[i].startswith(old)]
+    assert len(hits) == 1, (n, old)
+    lines[hits[0]] = new
+    return "\n".join(lines) + "\n"
+
+
+def rotors(count):
+    """The shipped vehicle file with ``count`` upright rotors on a 0.3 m circle instead of its own."""
+    tables = "".join(
+        f"[[rotors]]\nposition_m = [{0.3 * math.cos(k):.6f}, {0.3 * math.sin(k):.6f}, 0.0]\n"
+        "thrust_axis = [0.0, 0.0, -1.0]\nspin = 1\nmax_thrust_n = 9.0\nmax_speed_rad_s = 2930.0\n"
+        "torque_per_thrust_m = 0.0076\nrotor_inertia_kg_m2 = 1.2e-5\ntime_constant_s = 0.03\n\n"
+        for k in range(count))
+    return VEHICLE[:VEHICLE.index("\n[[rotors]]") + 1] + tables + VEHICLE[VEHICLE.index("[rig]"):]
+
+
 def hex_image(fsec=0xFE, sp=0x2002_0000, reset=0x411, beyond=False):
     """A small Intel HEX image that passes (or, as asked, fails) flash's checks."""
     import io
@@ -372,7 +393,7 @@ FILES = {
     "t_nul.toml": "[body]\nmass_kg = \x00\n",
     "t_latin1.toml": VEHICLE.replace("# heliquad", "# h\xe9liquad").encode("latin-1"),
     "t_no_section.toml": VEHICLE.replace("[rig]", "[rig_]"),
-    "t_section_value.toml": "body = 5\n" + VEHICLE[VEHICLE.index("[central_rotor]"):],
+    "t_section_value.toml": "body = 5\n" + VEHICLE[VEHICLE.index("\n[[rotors]]") + 1:],
     "t_missing_key.toml": vehicle("mass_kg", ""),
     "t_unit_key.toml": vehicle("mass_kg", "mass_g = 930"),
     "t_newline_key.toml": vehicle("mass_kg", 'mass_kg = 0.93\n"a\\nb" = 1'),
@@ -386,13 +407,27 @@ FILES = {
     "t_bool.toml": vehicle("mass_kg", "mass_kg = true"),
     "t_inertia_zero.toml": vehicle("inertia_kg_m2", "inertia_kg_m2 = [0.0118, 0, 0.0226]"),
     "t_inertia_short.toml": vehicle("inertia_kg_m2", "inertia_kg_m2 = [0.0118, 0.0118]"),
-    "t_spin.toml": vehicle("spin = 1 ", "spin = 2"),
-    "t_spin4.toml": vehicle("spin = [1, -1, 1, -1]", "spin = [1, -1, 1, 0]"),
-    "t_cant.toml": vehicle("cant_deg", "cant_deg = 90"),
+    "t_spin.toml": rotor(1, "spin", "spin = 2"),
+    "t_spin0.toml": rotor(5, "spin", "spin = 0"),
+    "t_rotor_missing.toml": rotor(3, "max_speed_rad_s", ""),
+    "t_rotor_unknown.toml": rotor(2, "max_thrust_n", "max_thrust_n = 9.0\nmax_thrust_kg = 0.9"),
+    "t_rotor_same_place.toml": rotor(4, "position_m", "position_m = [0.3048, 0.0, 0.0]"),
+    "t_rotor_zero_thrust.toml": rotor(3, "max_thrust_n", "max_thrust_n = 0"),
+    "t_rotor_negative_thrust.toml": rotor(5, "max_thrust_n", "max_thrust_n = -9.0"),
+    "t_axis_long.toml": rotor(1, "thrust_axis", "thrust_axis = [0.0, 0.0, -2.0]"),
+    "t_axis_zero.toml": rotor(2, "thrust_axis", "thrust_axis = [0.0, 0.0, 0.0]"),
+    "t_axis_short.toml": rotor(2, "thrust_axis", "thrust_axis = [0.0, 0.34, 0.90]"),
+    "t_axis_text.toml": rotor(2, "thrust_axis", 'thrust_axis = "up"'),
+    "t_rotors_9.toml": rotors(9),
+    "t_rotors_1.toml": rotors(1),
+    "t_rotors_0.toml": rotors(0),
+    "t_rotors_table.toml": rotors(1).replace("[[rotors]]", "[rotors]"),
+    "t_rotors_six.toml": (pathlib.Path(__file__).resolve().parent / "data" / "six_rotors.toml").read_text(),
+    "t_rotors_moved.toml": rotor(3, "position_m", "position_m = [0.0, 0.4, 0.0]"),
     "t_latency_float.toml": vehicle("dmp_latency_samples", "dmp_latency_samples = 1.5"),
     "t_latency_huge.toml": vehicle("dmp_latency_samples", "dmp_latency_samples = 9000000000000"),
     "t_bias.toml": vehicle("gyro_bias_deg_s", "gyro_bias_deg_s = [0.2, -1e9, 0.1]"),
-    "t_fast_rotor.toml": vehicle("time_constant_s = 0.03", "time_constant_s = 0.0005"),
+    "t_fast_rotor.toml": rotor(2, "time_constant_s", "time_constant_s = 0.0005"),
     "t_friction.toml": vehicle("hinge_friction_n_m", "hinge_friction_n_m = 1.0"),
     "t_rotor_momentum.toml": vehicle("rotor_inertia_kg_m2 = 4.6e-4", "rotor_inertia_kg_m2 = 90.0"),
     # sweep folders (identify reads manifest.json and sweep.tlog; report everything)
@@ -697,6 +732,32 @@ CASES = [
     case(f"{SIL} --params t_bigint.toml --plant vehicle --out o", "body.mass_kg"),
     case(f"{SIL} --params t_fast_rotor.toml --plant vehicle --out o", "fastest mode"),
     case(f"{SIL} --params t_friction.toml --plant vehicle --out o", "fastest mode"),
+    case(f"{SIL} --params t_spin0.toml --plant vehicle --out o", "rotors[5].spin must be 1 or -1"),
+    case(f"{SIL} --params t_rotor_missing.toml --plant vehicle --out o",
+         "missing key rotors[3].max_speed_rad_s"),
+    case(f"{SIL} --params t_rotor_unknown.toml --plant vehicle --out o",
+         "unknown key rotors[2].max_thrust_kg (expected rotors[2].max_thrust_n"),
+    case(f"{SIL} --params t_rotor_same_place.toml --plant vehicle --out o",
+         "rotors[4].position_m is rotors[2]'s"),
+    case(f"{SIL} --params t_rotor_zero_thrust.toml --plant vehicle --out o",
+         "rotors[3].max_thrust_n must be positive"),
+    case(f"{SIL} --params t_rotor_negative_thrust.toml --plant vehicle --out o",
+         "rotors[5].max_thrust_n must be positive"),
+    case(f"{SIL} --params t_axis_long.toml --plant vehicle --out o",
+         "rotors[1].thrust_axis must be a unit vector"),
+    case(f"{SIL} --params t_axis_zero.toml --plant vehicle --out o",
+         "rotors[2].thrust_axis must be a unit vector"),
+    case(f"{SIL} --params t_axis_short.toml --plant vehicle --out o", "got length 0.962"),
+    case(f"{SIL} --params t_axis_text.toml --plant vehicle --out o", "rotors[2].thrust_axis"),
+    case(f"{SIL} --params t_rotors_9.toml --plant vehicle --out o", "2 to 8 rotors"),
+    case(f"{SIL} --params t_rotors_1.toml --plant vehicle --out o", "2 to 8 rotors"),
+    case(f"{SIL} --params t_rotors_0.toml --plant vehicle --out o", "missing the rotors"),
+    case(f"{SIL} --params t_rotors_table.toml --plant vehicle --out o",
+         "rotors must be [[rotors]] tables"),
+    case(f"{SIL} --params t_rotors_six.toml --plant vehicle --out o",
+         "6 rotors, but the firmware's mixer drives 5"),
+    case(f"{SIL} --params t_rotors_moved.toml --plant vehicle --out o",
+         "rotors[3] is not the firmware mixer's right rotor"),
     case(f"{SIL} --plant vehicle --loop-hz 1 --out o", "fastest mode"),
     case(f"{SIL} --plant vehicle --rig pitch --out o", "only pitch is free"),
     case(f"{SIL} --turbulence light --out o", "--plant vehicle"),
@@ -989,9 +1050,11 @@ CASES = [
     case("sweep --sil --axis roll --params t_bool.toml --out s", "body.mass_kg"),
     case("sweep --sil --axis roll --params t_inertia_zero.toml --out s", "body.inertia_kg_m2"),
     case("sweep --sil --axis roll --params t_inertia_short.toml --out s", "body.inertia_kg_m2"),
-    case("sweep --sil --axis roll --params t_spin.toml --out s", "central_rotor.spin"),
-    case("sweep --sil --axis roll --params t_spin4.toml --out s", "arm_rotors.spin"),
-    case("sweep --sil --axis roll --params t_cant.toml --out s", "arm_rotors.cant_deg"),
+    case("sweep --sil --axis roll --params t_spin.toml --out s", "rotors[1].spin"),
+    case("sweep --sil --axis roll --params t_spin0.toml --out s", "rotors[5].spin"),
+    case("sweep --sil --axis roll --params t_axis_zero.toml --out s", "rotors[2].thrust_axis"),
+    case("sweep --sil --axis roll --params t_rotors_9.toml --out s", "2 to 8 rotors"),
+    case("sweep --sil --axis roll --params t_rotors_six.toml --out s", "6 rotors"),
     case("sweep --sil --axis roll --params t_latency_float.toml --out s", "imu.dmp_latency_samples"),
     case("sweep --sil --axis roll --params t_latency_huge.toml --out s", "imu.dmp_latency_samples"),
     case("sweep --sil --axis roll --params t_bias.toml --out s", "imu.gyro_bias_deg_s"),

@@ -523,7 +523,7 @@ def test_closed_loop_injection_matches_the_cascade_truth(axis, inject, freq_hz, 
 @pytest.mark.parametrize("old, new, match", [
     ("mass_kg = 0.930", "mass_kg = -0.93", "body.mass_kg must be positive"),
     ("mass_kg = 0.930", "mass_g = 930", "unknown key body.mass_g"),
-    ("cant_deg = 20.0", "", "missing key arm_rotors.cant_deg"),
+    ("time_constant_s = 0.15", "", "missing key rotors[1].time_constant_s"),
 ])
 def test_sil_with_a_bad_parameter_file_is_one_line_naming_the_key(old, new, match, tmp_path):
     import importlib.resources

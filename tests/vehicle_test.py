@@ -17,6 +17,12 @@ PARAMS = load_params()
 from heliquad.sim.plant.vehicle_plant import mixer_for, mixer_geometry
 
 
+def without_central_drag(params):
+    """``params`` with the central rotor's drag torque off."""
+    central = dataclasses.replace(params.rotors[0], torque_per_thrust_m=0.0)
+    return dataclasses.replace(params, rotors=(central, *params.rotors[1:]))
+
+
 def settled(vehicle, u):
     """Put the rotors at the speeds the commands settle to (no spin-up transient)."""
     vehicle.set_rotor_speeds(vehicle.w_max * np.sqrt(np.asarray(u)))
@@ -39,14 +45,16 @@ def _default_path():
 
 def test_default_file_loads_with_the_papers_figures():
     assert PARAMS.body.mass_kg == 0.930
-    assert PARAMS.arm_rotors.arm_length_m == 0.3048 and PARAMS.arm_rotors.cant_deg == 20.0
+    front = PARAMS.rotors[1]
+    assert front.position_m == (0.3048, 0.0, 0.0)
+    assert math.degrees(math.acos(-front.thrust_axis[2])) == pytest.approx(20.0, abs=1e-12)
 
 
 @pytest.mark.parametrize("old, new, match", [
     ("mass_kg = 0.930", "mass_kg = -0.930", "body.mass_kg must be positive"),
     ("mass_kg = 0.930", "mass_g = 930", "unknown key body.mass_g .*expected body.mass_kg"),
-    ("cant_deg = 20.0", "", "missing key arm_rotors.cant_deg"),
-    ("spin = 1 ", "spin = 2 ", "central_rotor.spin must be 1 or -1"),
+    ("time_constant_s = 0.15", "", "missing key rotors\\[1\\].time_constant_s"),
+    ("spin = 1 ", "spin = 2 ", "rotors\\[1\\].spin must be 1 or -1"),
     ("inertia_kg_m2 = [0.0118, 0.0118, 0.0226]", "inertia_kg_m2 = [0.0118, 0.0118]",
      "body.inertia_kg_m2 must be a list of 3"),
     ("[rig]", "[rigg]", "missing section \\[rig\\]"),
@@ -117,8 +125,7 @@ def test_torque_free_gyrostat_conserves_momentum_and_energy():
     # Gravity off, no prop drag torque, central rotor held at 400 rad/s, body tumbling:
     # no external moment, so the total angular momentum (in NED) and the body's rotational
     # energy are constants of motion, while the rates precess.
-    params = dataclasses.replace(PARAMS, central_rotor=dataclasses.replace(
-        PARAMS.central_rotor, torque_per_thrust_m=0.0))
+    params = without_central_drag(PARAMS)
     v = Vehicle(params, rig="free", gravity_m_s2=0.0, substeps=4)
     speed = 400.0
     u = np.array([(speed / v.w_max[0]) ** 2, 0, 0, 0, 0])
@@ -135,15 +142,14 @@ def test_torque_free_gyrostat_conserves_momentum_and_energy():
 def test_gyroscopic_coupling_of_the_central_rotor():
     # A pitch rate with the central rotor spinning gives a roll moment -(w x h):
     # w = (0, q, 0), h = (0, 0, -J W) for a counter-clockwise rotor -> M_x = J W q.
-    params = dataclasses.replace(PARAMS, central_rotor=dataclasses.replace(
-        PARAMS.central_rotor, torque_per_thrust_m=0.0))
+    params = without_central_drag(PARAMS)
     v = Vehicle(params, rig="free", gravity_m_s2=0.0)
     speed = 400.0
     v.set_rotor_speeds([speed, 0, 0, 0, 0])
     v.x[11] = 0.5
     u = np.array([(speed / v.w_max[0]) ** 2, 0, 0, 0, 0])
     p_dot = v.derivative(v.x, u)[10]
-    J = params.central_rotor.rotor_inertia_kg_m2
+    J = params.rotors[0].rotor_inertia_kg_m2
     assert p_dot == pytest.approx(J * speed * 0.5 / params.body.inertia_kg_m2[0], rel=1e-9)
 
 
@@ -172,13 +178,13 @@ def test_roll_rig_acceleration_is_the_roll_moment_over_inertia():
     u = np.array(mixer.mix(fw.MixerCommand(0.35, 0.03, 0, 0)).motor)
     settled(v, u)
     t = v.thrusts()
-    a = params.arm_rotors
-    l, d, cq = a.arm_length_m, math.radians(a.cant_deg), a.torque_per_thrust_m
-    sigma = params.central_rotor.spin
+    right, left = params.rotors[2], params.rotors[4]
+    l, d, cq = right.position_m[1], math.acos(-right.thrust_axis[2]), right.torque_per_thrust_m
+    sigma = params.rotors[0].spin
     thrust_moment = -l * math.cos(d) * (t[2] - t[4])
     # The canted right and left props' spin axes lean along -/+x (by sin(delta)), so their
     # drag torques -Q a have a roll part too (~1 % here; the mixer does not model it).
-    drag_moment = -cq * (t[2] * a.spin[1] * sigma * math.sin(d) - t[4] * a.spin[3] * sigma * math.sin(d))
+    drag_moment = -cq * (t[2] * right.spin * sigma * math.sin(d) - t[4] * left.spin * sigma * math.sin(d))
     expected = (thrust_moment + drag_moment) / params.body.inertia_kg_m2[0]
     assert v.derivative(v.x, u)[10] == pytest.approx(expected, rel=1e-6)
     assert abs(drag_moment) < 0.02 * abs(thrust_moment)

@@ -327,9 +327,9 @@ def check_plant(args) -> None:
     """The simulated rig can fly this plant: a transfer function (:func:`transfer_function`,
     leading zeros refused) whose poles are no faster than the loop's Nyquist rate and whose
     gain is within PLANT_GAIN_RANGE, or a vehicle file whose fastest mode the integrator can
-    follow at this loop rate. An unstable plant is allowed: the firmware's abort is what such
-    a run tests. A ``--dmp-image`` file is read here too, so a bad one is refused before
-    anything starts."""
+    follow at this loop rate and whose rotors the firmware's mixer drives. An unstable plant
+    is allowed: the firmware's abort is what such a run tests. A ``--dmp-image`` file is read
+    here too, so a bad one is refused before anything starts."""
     if getattr(args, "dmp_image", None):
         # imported only when the option is checked: every command's parser imports this module
         from .dmp_image import read_dmp_file
@@ -342,10 +342,10 @@ def check_plant(args) -> None:
         raise InputError(f"--loop-hz must be in (0, {facts.MAX_LOOP_RATE_HZ:g}]")
     if getattr(args, "plant", "tf") == "vehicle":
         # imported only when the option is checked: every command's parser imports this module
-        from ...sim.plant.vehicle import check_step
         from ...sim.plant.vehicle_params import load_params
+        from ...sim.plant.vehicle_plant import check_loop_vehicle
 
-        check_step(load_params(args.params), 1.0 / loop_hz)    # a bad file fails here, in one line
+        check_loop_vehicle(load_params(args.params), 1.0 / loop_hz)   # a bad file fails here
         return
     num, den = transfer_function("--num/--den", args.num, args.den)
     nyquist = math.pi * loop_hz

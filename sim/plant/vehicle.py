@@ -1,18 +1,18 @@
 """6-DoF model of the heterogeneous multirotor, free or on a one-axis test rig.
 
 State: position and velocity in NED (m, m/s), attitude quaternion (body FRD -> NED,
-w x y z), body rates (rad/s), and the five rotor speeds (rad/s; central first, then arms
-front, right, back, left). Inputs: the five thrust fractions the firmware sends (0..1).
+w x y z), body rates (rad/s), and the speeds of the vehicle file's rotors (rad/s; rotor 1, the
+central rotor, first; 2 to 8 of them). Inputs: one thrust fraction per rotor (0..1); in the
+loop, the five the firmware sends.
 
 Physics (docs/vehicle-model.md has the derivation):
 
 * Rotors: first-order speed lag ``dW/dt = (W_cmd - W) / tau``, ``W_cmd = W_max sqrt(u)`` (the
   ESC maps a thrust fraction to speed; thrust is ``k_T W^2``, so ``u`` is the fraction of
   maximum thrust at steady state). Aerodynamic drag torque on each prop ``Q = c_Q T``.
-* Thrust directions: central along -z; arm rotor i along
-  ``d_i = -cos(delta) z - spin_c sin(delta) t_i`` with ``t_i`` the tangential unit vector at
-  its azimuth, so the lateral thrust's yaw moment opposes the central rotor's reaction torque.
-  Each rotor's spin axis is ``a_r = spin_r d_r`` (counter-clockwise seen from the thrust side).
+* Geometry, per rotor from the vehicle file: hub position ``r_r`` and thrust axis ``d_r``
+  (unit, body). Each rotor's spin axis is ``a_r = spin_r d_r`` (+1: counter-clockwise seen
+  from the side the thrust points to).
 * Rotation: total angular momentum ``H = I w + sum J_r W_r a_r`` obeys
   ``I dw/dt = M_thrust - sum Q_r a_r - sum J_r dW_r/dt a_r - w x H + M_dist``: reaction
   torques, spin-up reaction and gyroscopic precession of the big central rotor all follow.
@@ -32,7 +32,6 @@ one implementation. This module owns the parameters and the geometry derived fro
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
@@ -42,7 +41,7 @@ from ..base.dialect import AXES
 from ..base.errors import InputError
 from .vehicle_params import VehicleParams, load_params
 
-__all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2", "fastest_rate_rad_s", "check_step"]
+__all__ = ["Vehicle", "RIGS", "GRAVITY_M_S2", "BODY_STATES", "fastest_rate_rad_s", "check_step"]
 
 GRAVITY_M_S2 = _simcore.GRAVITY_M_S2       # standard gravity, the simulator core's
 #: One rig per axis (the dialect's HQ_AXIS names), or free flight.
@@ -54,6 +53,8 @@ SUBSTEPS = 2
 RK4_LIMIT = 2.5
 #: The hinge's Coulomb friction is smoothed over this rate (sim/plant/vehicle_model.cpp).
 FRICTION_SMOOTH_RAD_S = 0.01
+#: The state's values before the rotor speeds: position, velocity, quaternion, rates.
+BODY_STATES = 13
 
 
 def fastest_rate_rad_s(p: VehicleParams) -> float:
@@ -61,12 +62,10 @@ def fastest_rate_rad_s(p: VehicleParams) -> float:
     gusts) and the smoothed hinge friction over the smallest inertia, the drag over the mass,
     and the rotors' momentum at full speed over the smallest inertia (gyroscopic precession)."""
     inertia = min(p.body.inertia_kg_m2)
-    c, a = p.central_rotor, p.arm_rotors
-    momentum = (c.rotor_inertia_kg_m2 * c.max_speed_rad_s
-                + 4 * a.rotor_inertia_kg_m2 * a.max_speed_rad_s)
+    momentum = sum(r.rotor_inertia_kg_m2 * r.max_speed_rad_s for r in p.rotors)
     damping = (p.rig.hinge_damping_n_m_s_rad + p.turbulence.rotational_damping_n_m_s_rad
                + p.rig.hinge_friction_n_m / FRICTION_SMOOTH_RAD_S)
-    return max(1 / c.time_constant_s, 1 / a.time_constant_s, damping / inertia,
+    return max(*(1 / r.time_constant_s for r in p.rotors), damping / inertia,
                p.body.drag_n_s_m / p.body.mass_kg, momentum / inertia)
 
 
@@ -79,6 +78,14 @@ def check_step(p: VehicleParams, dt_s: float) -> None:
                          f"damping, friction or rotor momentum against the inertia) is too fast "
                          f"for the simulator's {SUBSTEPS} steps per {1e3 * dt_s:g} ms loop "
                          f"(at most {RK4_LIMIT / h:.3g} 1/s)")
+
+
+def _padded(values) -> list:
+    """Per-rotor values (a row per rotor) as the simulator core's config holds them: padded
+    with zeros to its MAX_ROTORS rows (it uses the first ``rotors``)."""
+    rows = np.asarray(values, dtype=float)
+    pad = np.zeros((_simcore.MAX_ROTORS - len(rows), *rows.shape[1:]))
+    return np.concatenate([rows, pad]).tolist()
 
 
 def rotation_matrix(q):
@@ -129,23 +136,17 @@ class Vehicle:
 
     # --- geometry ---------------------------------------------------------------------
     def _geometry(self):
-        c, a = self.p.central_rotor, self.p.arm_rotors
-        delta = math.radians(a.cant_deg)
-        dirs, pos = [np.array([0.0, 0.0, -1.0])], [np.zeros(3)]
-        for i in range(4):
-            psi = math.radians(90.0 * i)
-            tangent = np.array([-math.sin(psi), math.cos(psi), 0.0])
-            dirs.append(-math.cos(delta) * np.array([0.0, 0.0, 1.0]) - c.spin * math.sin(delta) * tangent)
-            pos.append(a.arm_length_m * np.array([math.cos(psi), math.sin(psi), 0.0]))
-        self.thrust_dir = np.array(dirs)                              # (5, 3), body
-        self.rotor_pos = np.array(pos)
-        spins = np.array([c.spin] + list(a.spin), dtype=float)
-        self.spin_axis = spins[:, None] * self.thrust_dir             # (5, 3)
-        self.k_thrust = np.array([c.thrust_coeff] + [a.thrust_coeff] * 4)
-        self.c_torque = np.array([c.torque_per_thrust_m] + [a.torque_per_thrust_m] * 4)
-        self.j_rotor = np.array([c.rotor_inertia_kg_m2] + [a.rotor_inertia_kg_m2] * 4)
-        self.tau = np.array([c.time_constant_s] + [a.time_constant_s] * 4)
-        self.w_max = np.array([c.max_speed_rad_s] + [a.max_speed_rad_s] * 4)
+        rotors = self.p.rotors
+        self.rotors = len(rotors)
+        self.thrust_dir = np.array([r.thrust_axis for r in rotors])          # (n, 3), body
+        self.rotor_pos = np.array([r.position_m for r in rotors])
+        spins = np.array([r.spin for r in rotors], dtype=float)
+        self.spin_axis = spins[:, None] * self.thrust_dir                    # (n, 3)
+        self.k_thrust = np.array([r.thrust_coeff for r in rotors])
+        self.c_torque = np.array([r.torque_per_thrust_m for r in rotors])
+        self.j_rotor = np.array([r.rotor_inertia_kg_m2 for r in rotors])
+        self.tau = np.array([r.time_constant_s for r in rotors])
+        self.w_max = np.array([r.max_speed_rad_s for r in rotors])
         # moment arm of each thrust: r x d (per newton of thrust)
         self.thrust_moment = np.cross(self.rotor_pos, self.thrust_dir)
 
@@ -157,38 +158,41 @@ class Vehicle:
         c.gravity_m_s2, c.substeps = self.g, self.substeps
         c.hinge_damping_n_m_s_rad, c.hinge_friction_n_m = rig.hinge_damping_n_m_s_rad, rig.hinge_friction_n_m
         c.free_axis = -1 if self.free_axis is None else self.free_axis
-        c.thrust_dir, c.thrust_moment = self.thrust_dir.tolist(), self.thrust_moment.tolist()
-        c.spin_axis = self.spin_axis.tolist()
-        c.k_thrust, c.c_torque, c.j_rotor = self.k_thrust.tolist(), self.c_torque.tolist(), self.j_rotor.tolist()
-        c.tau_s, c.w_max_rad_s = self.tau.tolist(), self.w_max.tolist()
+        c.rotors = self.rotors
+        c.thrust_dir, c.thrust_moment = _padded(self.thrust_dir), _padded(self.thrust_moment)
+        c.spin_axis = _padded(self.spin_axis)
+        c.k_thrust, c.c_torque = _padded(self.k_thrust), _padded(self.c_torque)
+        c.j_rotor = _padded(self.j_rotor)
+        c.tau_s, c.w_max_rad_s = _padded(self.tau), _padded(self.w_max)
         return c
 
     # --- state ------------------------------------------------------------------------
     @property
     def x(self) -> np.ndarray:
-        """The state (18 values, see the module's docstring); a view: writing into it sets it."""
+        """The state (13 values and one per rotor, see the module's docstring); a view: writing
+        into it sets it."""
         return self.core.x
 
     @x.setter
     def x(self, value) -> None:
         self.core.x = np.asarray(value, dtype=float)
 
-    @staticmethod
-    def initial_state():
-        x = np.zeros(18)
+    def initial_state(self):
+        """At rest at the origin, level, rotors stopped (13 + one value per rotor)."""
+        x = np.zeros(BODY_STATES + self.rotors)
         x[6] = 1.0                                                  # identity attitude
         return x
 
     def state(self) -> VehicleState:
         x = self.x
         return VehicleState(x[0:3].copy(), x[3:6].copy(), x[6:10].copy(), x[10:13].copy(),
-                            x[13:18].copy())
+                            x[BODY_STATES:].copy())
 
     def set_rotor_speeds(self, speeds_rad_s) -> None:
-        self.x[13:18] = speeds_rad_s
+        self.x[BODY_STATES:] = speeds_rad_s
 
     def thrusts(self, rotor_speed=None):
-        w = self.x[13:18] if rotor_speed is None else rotor_speed
+        w = self.x[BODY_STATES:] if rotor_speed is None else rotor_speed
         return self.k_thrust * w * w
 
     # --- dynamics -----------------------------------------------------------------------
@@ -207,7 +211,7 @@ class Vehicle:
     def angular_momentum_ned(self, x=None):
         """Total angular momentum (body and rotors) in NED, kg m^2/s."""
         x = self.x if x is None else x
-        h_body = self.inertia @ x[10:13] + (self.j_rotor * x[13:18]) @ self.spin_axis
+        h_body = self.inertia @ x[10:13] + (self.j_rotor * x[BODY_STATES:]) @ self.spin_axis
         return rotation_matrix(x[6:10]) @ h_body
 
     def rotational_energy(self, x=None):

@@ -19,29 +19,34 @@ V3 cross(const V3& a, const V3& b) {
 }  // namespace
 
 VehicleModel::VehicleModel(const VehicleConfig& cfg) : cfg_(cfg) {
-    if (cfg.mass_kg <= 0 || cfg.substeps < 1 || cfg.free_axis < -1 || cfg.free_axis > 2) {
-        throw std::invalid_argument("VehicleModel: mass > 0, substeps >= 1, free_axis -1..2");
+    if (cfg.mass_kg <= 0 || cfg.substeps < 1 || cfg.free_axis < -1 || cfg.free_axis > 2 ||
+        cfg.rotors < 1 || cfg.rotors > kMaxRotors) {
+        throw std::invalid_argument(
+            "VehicleModel: mass > 0, substeps >= 1, free_axis -1..2, rotors 1..8");
     }
     for (double i : cfg.inertia_kg_m2) {
         if (i <= 0) throw std::invalid_argument("VehicleModel: inertia must be positive");
+    }
+    for (int r = 0; r < cfg.rotors; ++r) {
+        if (cfg.tau_s[r] <= 0) throw std::invalid_argument("VehicleModel: tau_s must be positive");
     }
     x.fill(0.0);
     x[6] = 1.0;
 }
 
-State VehicleModel::derivative(const State& s, const double u[kMotors], const double* force_ned,
+State VehicleModel::derivative(const State& s, const double* u, const double* force_ned,
                                const double* moment_body) const {
     const VehicleConfig& c = cfg_;
     const double* q = &s[6];
     const V3 w{s[10], s[11], s[12]};
     State dx{};
     V3 h_rotor{0, 0, 0}, moment{0, 0, 0}, f_body{0, 0, 0};
-    for (int r = 0; r < kMotors; ++r) {
-        const double speed = s[13 + r];
+    for (int r = 0; r < c.rotors; ++r) {
+        const double speed = s[kBodyStates + r];
         const double w_cmd = c.w_max_rad_s[r] * std::sqrt(std::clamp(u[r], 0.0, 1.0));
         const double speed_dot = (w_cmd - speed) / c.tau_s[r];
         const double thrust = c.k_thrust[r] * speed * speed;
-        dx[13 + r] = speed_dot;
+        dx[kBodyStates + r] = speed_dot;
         for (int k = 0; k < 3; ++k) {
             h_rotor[k] += c.j_rotor[r] * speed * c.spin_axis[r][k];
             moment[k] += thrust * c.thrust_moment[r][k]                       // thrust's arm
@@ -80,19 +85,20 @@ State VehicleModel::derivative(const State& s, const double u[kMotors], const do
     return dx;
 }
 
-void VehicleModel::step(const double u[kMotors], double dt_s, const double* force_ned,
+void VehicleModel::step(const double* u, double dt_s, const double* force_ned,
                         const double* moment_body) {
     const double h = dt_s / cfg_.substeps;
-    State s = x, tmp;
+    const int n_states = states();
+    State s = x, tmp = x;
     for (int n = 0; n < cfg_.substeps; ++n) {
         const State k1 = derivative(s, u, force_ned, moment_body);
-        for (int i = 0; i < kStates; ++i) tmp[i] = s[i] + 0.5 * h * k1[i];
+        for (int i = 0; i < n_states; ++i) tmp[i] = s[i] + 0.5 * h * k1[i];
         const State k2 = derivative(tmp, u, force_ned, moment_body);
-        for (int i = 0; i < kStates; ++i) tmp[i] = s[i] + 0.5 * h * k2[i];
+        for (int i = 0; i < n_states; ++i) tmp[i] = s[i] + 0.5 * h * k2[i];
         const State k3 = derivative(tmp, u, force_ned, moment_body);
-        for (int i = 0; i < kStates; ++i) tmp[i] = s[i] + h * k3[i];
+        for (int i = 0; i < n_states; ++i) tmp[i] = s[i] + h * k3[i];
         const State k4 = derivative(tmp, u, force_ned, moment_body);
-        for (int i = 0; i < kStates; ++i) s[i] += (h / 6.0) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
+        for (int i = 0; i < n_states; ++i) s[i] += (h / 6.0) * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
         const double norm = std::sqrt(s[6] * s[6] + s[7] * s[7] + s[8] * s[8] + s[9] * s[9]);
         for (int i = 6; i < 10; ++i) s[i] /= norm;
     }
@@ -103,6 +109,9 @@ VehicleRig::VehicleRig(VehicleModel& model, double dt_s, const ImuConfig& imu,
                        double rotational_damping_n_m_s_rad)
     : model_(model), dt_s_(dt_s), imu_(imu), rot_damping_(rotational_damping_n_m_s_rad) {
     if (imu.latency_samples < 0) throw std::invalid_argument("VehicleRig: latency >= 0");
+    if (model.config().rotors != kMotors) {
+        throw std::invalid_argument("VehicleRig: the vehicle must have the firmware's five rotors");
+    }
 }
 
 std::array<double, 3> VehicleRig::specific_force() const {

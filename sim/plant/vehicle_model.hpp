@@ -11,8 +11,10 @@
 
 namespace hqsim {
 
-constexpr int kStates = 18;   // position NED (3), velocity NED (3), quaternion (4), rates (3),
-                              // rotor speeds (5)
+constexpr int kBodyStates = 13;   // position NED (3), velocity NED (3), quaternion (4), rates (3)
+constexpr int kMaxRotors = 8;     // a central rotor and up to seven more
+// The body's states, then one speed per rotor (the vehicle's first `rotors` of kMaxRotors).
+constexpr int kStates = kBodyStates + kMaxRotors;
 using State = std::array<double, kStates>;
 
 // Everything the equations need, already in SI units and body axes (Python derives it from
@@ -26,22 +28,25 @@ struct VehicleConfig {
     double hinge_friction_n_m = 0.0;
     int free_axis = -1;                                     // -1: free flight; 0/1/2: rig
     int substeps = 2;                                       // RK4 steps per step()
-    std::array<std::array<double, 3>, kMotors> thrust_dir{};     // unit vectors, body
-    std::array<std::array<double, 3>, kMotors> thrust_moment{};  // r x d, m
-    std::array<std::array<double, 3>, kMotors> spin_axis{};      // spin sign x thrust_dir
-    std::array<double, kMotors> k_thrust{}, c_torque{}, j_rotor{}, tau_s{}, w_max_rad_s{};
+    int rotors = kMotors;                                   // 1..kMaxRotors; the rows used below
+    std::array<std::array<double, 3>, kMaxRotors> thrust_dir{};     // unit vectors, body
+    std::array<std::array<double, 3>, kMaxRotors> thrust_moment{};  // r x d, m
+    std::array<std::array<double, 3>, kMaxRotors> spin_axis{};      // spin sign x thrust_dir
+    std::array<double, kMaxRotors> k_thrust{}, c_torque{}, j_rotor{}, tau_s{}, w_max_rad_s{};
 };
 
 class VehicleModel {
 public:
     explicit VehicleModel(const VehicleConfig& cfg);
 
-    // d/dt of `x` for thrust fractions `u`; force_ned (N) and moment_body (N m) may be null.
-    State derivative(const State& x, const double u[kMotors], const double* force_ned,
+    // d/dt of `x` for thrust fractions `u` (one per rotor); force_ned (N) and moment_body
+    // (N m) may be null. The states past the rotors' stay zero.
+    State derivative(const State& x, const double* u, const double* force_ned,
                      const double* moment_body) const;
     // Advance the held state by dt_s with u held (zero-order hold).
-    void step(const double u[kMotors], double dt_s, const double* force_ned,
-              const double* moment_body);
+    void step(const double* u, double dt_s, const double* force_ned, const double* moment_body);
+    // The state's values in use: the body's and one per rotor.
+    int states() const { return kBodyStates + cfg_.rotors; }
 
     State x{};
     const VehicleConfig& config() const { return cfg_; }
@@ -51,7 +56,8 @@ private:
 };
 
 // The vehicle on its rig (or free) as a plant: motor lags, gusts as disturbances, and the
-// MPU6050 the firmware reads (residual gyro bias, noise given per frame, DMP latency).
+// MPU6050 the firmware reads (residual gyro bias, noise given per frame, DMP latency). The
+// firmware drives kMotors motors: the vehicle must have that many rotors.
 struct ImuConfig {
     bool enabled = false;                        // false: ideal sensor, no latency
     std::array<double, 3> gyro_bias_rad_s{0.0, 0.0, 0.0};
@@ -74,7 +80,7 @@ private:
     double dt_s_;
     ImuConfig imu_;
     double rot_damping_;
-    std::array<double, kMotors> last_u_{};
+    std::array<double, kMaxRotors> last_u_{};
     std::deque<SensorSample> delay_;
 };
 

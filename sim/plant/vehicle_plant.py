@@ -10,6 +10,8 @@ rate; sampled with the zero-order hold of the loop period as the logged data are
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from heliquad import _firmware as fw
@@ -19,27 +21,78 @@ from ..base.dialect import AXES
 from .dryden import Dryden
 from .imu_model import ImuModel
 from .pid_model import pid_z
-from .vehicle import GRAVITY_M_S2, Vehicle
+from ..base.errors import InputError
+from .vehicle import BODY_STATES, GRAVITY_M_S2, Vehicle, check_step
 from .vehicle_params import VehicleParams, load_params
 
-__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "mixer_layout", "check_loop_vehicle"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
 EPS_COMMAND = 1e-3
+#: How far (m, and unit vector) a rotor may be from the firmware mixer's layout.
+LAYOUT_TOLERANCE = 1e-6
+#: The firmware mixer's rotors, in its motor order.
+MIXER_ROTORS = ("central", "front", "right", "back", "left")
+
+
+def mixer_layout(arm_length_m: float, cant_deg: float, central_spin: int):
+    """(positions, thrust axes), 5 x 3 each in body FRD, of the vehicle the firmware's mixer is
+    written for (firmware/core/mixer.hpp): the central rotor at the origin along -z, then the
+    front, right, back and left arm rotors at ``arm_length_m``, each tilted by ``cant_deg``
+    about its arm so that the lateral thrust's yaw moment opposes the central rotor's reaction
+    torque: ``d_i = -cos(cant) z - central_spin sin(cant) t_i``, ``t_i`` the tangent at the
+    arm's azimuth."""
+    cant = math.radians(cant_deg)
+    positions, axes = [np.zeros(3)], [np.array([0.0, 0.0, -1.0])]
+    for i in range(4):
+        psi = math.radians(90.0 * i)
+        tangent = np.array([-math.sin(psi), math.cos(psi), 0.0])
+        positions.append(arm_length_m * np.array([math.cos(psi), math.sin(psi), 0.0]))
+        axes.append(-math.cos(cant) * np.array([0.0, 0.0, 1.0])
+                    - central_spin * math.sin(cant) * tangent)
+    return np.array(positions), np.array(axes)
 
 
 def mixer_geometry(params: VehicleParams):
     """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
-    the shipped parameter file's: tests/vehicle_test.py)."""
+    the shipped parameter file's: tests/vehicle_test.py). InputError for a vehicle the
+    firmware's mixer cannot fly: another number of rotors than its motors, or rotors not in
+    :func:`mixer_layout`'s places (heights aside) with rotor 2's arm length and cant, or arm
+    rotors of unlike largest thrust."""
+    rotors, motors = params.rotors, _simcore.FIRMWARE_MOTORS
+    if len(rotors) != motors:
+        raise InputError(f"{params.source}: {len(rotors)} rotors, but the firmware's mixer drives "
+                         f"{motors}: this vehicle flies in the model (sim/plant/vehicle.py), not "
+                         f"with the firmware in the loop")
+    central, front = rotors[0], rotors[1]
+    arm_length = math.hypot(*front.position_m[:2])
+    cant_deg = math.degrees(math.atan2(math.hypot(*front.thrust_axis[:2]), -front.thrust_axis[2]))
+    positions, axes = mixer_layout(arm_length, cant_deg, central.spin)
+    for i, rotor in enumerate(rotors):
+        off = max(np.max(np.abs(np.array(rotor.position_m[:2]) - positions[i][:2])),
+                  np.max(np.abs(np.array(rotor.thrust_axis) - axes[i])))
+        if off > LAYOUT_TOLERANCE or (i > 1 and rotor.max_thrust_n != front.max_thrust_n):
+            raise InputError(f"{params.source}: rotors[{i + 1}] is not the firmware mixer's "
+                             f"{MIXER_ROTORS[i]} rotor (a central rotor along -z, then front, "
+                             f"right, back and left arm rotors alike, as rotors[2] at "
+                             f"{arm_length:.4g} m and {cant_deg:.4g} deg cant): this vehicle "
+                             f"flies in the model (sim/plant/vehicle.py), not with the firmware "
+                             f"in the loop")
     g = fw.MixerGeometry()
-    g.arm_length_m = params.arm_rotors.arm_length_m
-    g.cant_deg = params.arm_rotors.cant_deg
-    g.central_max_thrust_n = params.central_rotor.max_thrust_n
-    g.arm_max_thrust_n = params.arm_rotors.max_thrust_n
-    g.central_torque_per_thrust_m = params.central_rotor.spin * params.central_rotor.torque_per_thrust_m
+    g.arm_length_m, g.cant_deg = arm_length, cant_deg
+    g.central_max_thrust_n = central.max_thrust_n
+    g.arm_max_thrust_n = front.max_thrust_n
+    g.central_torque_per_thrust_m = central.spin * central.torque_per_thrust_m
     g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
     return g
+
+
+def check_loop_vehicle(params: VehicleParams, dt_s: float) -> None:
+    """InputError unless the firmware in the loop can fly this vehicle at this loop period: the
+    integrator follows it (:func:`check_step`) and the firmware's mixer has its rotors."""
+    check_step(params, dt_s)
+    mixer_geometry(params)
 
 
 def mixer_for(params: VehicleParams):
@@ -56,6 +109,7 @@ class VehiclePlant:
         if axis not in AXES:
             raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.params = params or load_params()
+        mixer_geometry(self.params)                    # InputError: the firmware cannot fly it
         self.axis, self.index = axis, AXES[axis]
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
@@ -118,7 +172,7 @@ class VehiclePlant:
     def linearise(self):
         """(A, b, C): the model at trim, from the axis's torque command to [rate, angle].
 
-        States: the free axis's angle and rate and the five rotor speeds (on a rig the other
+        States: the free axis's angle and rate and the rotor speeds (on a rig the other
         states do not move; in free flight this is the rotational part at hover with the other
         axes held, which is what a one-axis experiment sees to first order). Input: the axis's
         normalised torque command, through the firmware's mixer equations.
@@ -133,22 +187,23 @@ class VehiclePlant:
         u0 = motors(0.0)
         v = Vehicle(self.params, rig=self.rig if self.rig != "free" else self.axis)
         x0 = v.initial_state()
-        x0[13:18] = v.w_max * np.sqrt(u0)
-        idx = [10 + self.index] + list(range(13, 18))
+        x0[BODY_STATES:] = v.w_max * np.sqrt(u0)
+        idx = [10 + self.index] + list(range(BODY_STATES, BODY_STATES + v.rotors))
+        n = len(idx)                           # [rate, rotors..., angle]
         f0 = v.derivative(x0, u0)[idx]
-        A = np.zeros((7, 7))                   # [rate, rotors x5, angle]
+        A = np.zeros((n + 1, n + 1))
         for j, k in enumerate(idx):
             x1 = x0.copy()
             x1[k] += EPS_STATE * max(1.0, abs(x0[k]))
-            A[:6, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
-        A[6, 0] = 1.0                          # d(angle)/dt = rate, small angles at trim
+            A[:n, j] = (v.derivative(x1, u0)[idx] - f0) / (x1[k] - x0[k])
+        A[n, 0] = 1.0                          # d(angle)/dt = rate, small angles at trim
         du = (motors(EPS_COMMAND) - motors(-EPS_COMMAND)) / (2 * EPS_COMMAND)
-        b = np.zeros(7)
-        b[:6] = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
+        b = np.zeros(n + 1)
+        b[:n] = (v.derivative(x0, u0 + EPS_COMMAND * du)[idx]
                  - v.derivative(x0, u0 - EPS_COMMAND * du)[idx]) / (2 * EPS_COMMAND)
-        C = np.zeros((2, 7))
+        C = np.zeros((2, n + 1))
         C[0, 0] = 1.0
-        C[1, 6] = 1.0
+        C[1, n] = 1.0
         return A, b, C
 
     def sampled(self, omega_rad_s):
