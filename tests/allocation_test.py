@@ -1,9 +1,10 @@
 """The control allocation from a rotor geometry (firmware/core/allocation.cpp, docs/mixer.md):
 with the default geometry it is the mixer (same flags, thrust fractions to float precision)
-on the mixer tests' commands, across a saturation grid and on random commands; on a six- and an eight-rotor
-vehicle its effectiveness times its allocation is the identity and achievable commands are
-met exactly; its flags say which command gave way, in the mixer's order; geometries without
-roll, pitch or yaw authority are refused with a reason the link can send."""
+on the mixer tests' commands, across a saturation grid and on random commands; on a six-
+and an eight-rotor vehicle its effectiveness times its allocation is the identity and
+achievable commands are met exactly; its flags say which command gave way, in the mixer's
+order; geometries without roll, pitch or yaw authority are refused with a reason the link
+can send."""
 
 import itertools
 import math
