@@ -31,12 +31,29 @@ def requested(cmd):
                      cmd.yaw * MIXER.yaw_torque_unit_nm])
 
 
+# The commands of the tests below, (collective, roll, pitch, yaw); tests/allocation_test.py
+# mixes them with the allocation from the rotor geometry too.
 # Feasible without saturation: yaw balance ties the mean arm thrust to the central rotor's
 # torque (0.32 N per arm at hover, 0.42 N at collective 0.2), and each arm must stay within
 # 0..max; commands are in units of hover authority (docs/mixer.md). Collective above ~0.49
 # would need more than the central rotor's maximum.
-@pytest.mark.parametrize("c, r, p, y", list(itertools.product([0.2, 0.35], [-0.5, 0.0, 0.6],
-                                                              [-0.5, 0.3], [-0.3, 0.0, 0.2])))
+UNSATURATED = list(itertools.product([0.2, 0.35], [-0.5, 0.0, 0.6], [-0.5, 0.3],
+                                     [-0.3, 0.0, 0.2]))
+HOVER = (0.3, 0.0, 0.0, 0.0)
+SMALL_ROLL, SMALL_PITCH = (0.3, 0.05, 0.0, 0.0), (0.3, 0.0, 0.05, 0.0)
+# Large roll and pitch at these collectives: the collective gives way.
+SATURATING_COLLECTIVES = [0.0, 0.02, 0.98, 1.0]
+ROLL_PITCH_BEYOND_HOVER = (0.8, -0.6)
+ROLL_BEYOND_FULL = (0.3, 20.0, 0.0, 0.0)
+# (collective, yaw, whether the collective gives way)
+YAW_CASES = [
+    (0.05, -0.9, False),     # within the authority: both met, nothing flagged
+    (0.05, 2.0, True),       # large yaw at low collective: the central rotor must push more
+    (0.3, 3.0, True),
+]
+
+
+@pytest.mark.parametrize("c, r, p, y", UNSATURATED)
 def test_unsaturated_commands_are_reproduced(c, r, p, y):
     cmd = fw.MixerCommand(c, r, p, y)
     out = MIXER.mix(cmd)
@@ -46,7 +63,7 @@ def test_unsaturated_commands_are_reproduced(c, r, p, y):
 
 
 def test_hover_puts_the_collective_on_the_central_rotor():
-    out = MIXER.mix(fw.MixerCommand(0.3, 0, 0, 0))
+    out = MIXER.mix(fw.MixerCommand(*HOVER))
     g = fw.MixerGeometry()
     central = out.motor[0] * g.central_max_thrust_n
     arms = 4 * out.motor[1] * g.arm_max_thrust_n * math.cos(math.radians(g.cant_deg))
@@ -57,22 +74,23 @@ def test_hover_puts_the_collective_on_the_central_rotor():
 
 
 def test_roll_right_speeds_up_the_left_rotor():
-    out = MIXER.mix(fw.MixerCommand(0.3, 0.05, 0, 0))
+    out = MIXER.mix(fw.MixerCommand(*SMALL_ROLL))
     assert out.motor[4] > out.motor[2]          # left > right
-    out = MIXER.mix(fw.MixerCommand(0.3, 0, 0.05, 0))
+    out = MIXER.mix(fw.MixerCommand(*SMALL_PITCH))
     assert out.motor[1] > out.motor[3]          # pitch up: front > back
 
 
-@pytest.mark.parametrize("collective", [0.0, 0.02, 0.98, 1.0])
+@pytest.mark.parametrize("collective", SATURATING_COLLECTIVES)
 def test_saturation_keeps_roll_and_pitch_before_collective(collective):
-    cmd = fw.MixerCommand(collective, 0.8, -0.6, 0.0)
+    roll, pitch = ROLL_PITCH_BEYOND_HOVER
+    cmd = fw.MixerCommand(collective, roll, pitch, 0.0)
     out = MIXER.mix(cmd)
     got = MIXER.achieved(out.motor)
     assert out.saturated and out.collective_limited
     # roll and pitch are kept; a torque is flagged only when yaw had to give way as well
     assert out.torque_limited == (abs(got.yaw) > 1e-4)
-    assert got.roll == pytest.approx(0.8, abs=1e-5)
-    assert got.pitch == pytest.approx(-0.6, abs=1e-5)
+    assert got.roll == pytest.approx(roll, abs=1e-5)
+    assert got.pitch == pytest.approx(pitch, abs=1e-5)
     assert all(0.0 <= m <= 1.0 for m in out.motor)
 
 
@@ -87,17 +105,13 @@ def test_one_unit_of_roll_is_the_hover_arm_thrust_moved_across():
 
 
 def test_roll_beyond_the_full_differential_is_clipped_and_flagged():
-    out = MIXER.mix(fw.MixerCommand(0.3, 20.0, 0.0, 0.0))
+    out = MIXER.mix(fw.MixerCommand(*ROLL_BEYOND_FULL))
     assert out.saturated and out.torque_limited
     full = fw.MixerGeometry().arm_max_thrust_n / (2 * MIXER.hover_arm_thrust_n)
     assert MIXER.achieved(out.motor).roll == pytest.approx(full, rel=1e-5)
 
 
-@pytest.mark.parametrize("collective, yaw, gives_way", [
-    (0.05, -0.9, False),     # within the authority: both met, nothing flagged
-    (0.05, 2.0, True),       # large yaw at low collective: the central rotor must push more
-    (0.3, 3.0, True),
-])
+@pytest.mark.parametrize("collective, yaw, gives_way", YAW_CASES)
 def test_yaw_is_kept_before_collective(collective, yaw, gives_way):
     # The yaw moment is always met here; the collective gives way when both cannot be, and
     # the mixer flags exactly that.

@@ -249,6 +249,7 @@ void bind_supervisor(py::module_& m) {
 }  // namespace
 
 void bind_card(py::module_& m);   // card_bindings.cpp: the card-image file and the log files
+void bind_allocation(py::module_& m);   // allocation_bindings.cpp: allocation from rotors
 
 PYBIND11_MODULE(_firmware, m) {
     m.doc() = "heliquad firmware core (host build), for tests and the simulator";
@@ -436,6 +437,7 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("roll_pitch_torque_unit_nm", &Mixer::roll_pitch_torque_unit_nm)
         .def_property_readonly("yaw_torque_unit_nm", &Mixer::yaw_torque_unit_nm)
         .def_property_readonly("hover_arm_thrust_n", &Mixer::hover_arm_thrust_n);
+    bind_allocation(m);
 
     py::enum_<Signal>(m, "Signal").value("SINE", Signal::Sine)
         .value("MULTISINE", Signal::Multisine);
