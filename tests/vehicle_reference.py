@@ -11,6 +11,7 @@ precision.
 
 import math
 
+from heliquad.sim.base.dialect import AXES
 from heliquad.sim.plant.vehicle import RIGS, Vehicle
 from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
@@ -54,7 +55,7 @@ def flights(params=None) -> dict:
         if k % EVERY == EVERY - 1:
             samples.append([float(s) for s in (*q, *gyro, *accel)])
     out["plant_samples"] = samples
-    for axis in ("roll", "pitch", "yaw"):
+    for axis in AXES:
         h = VehiclePlant(axis, axis, DT_S, params, ideal_sensor=True).truth(TRUTH_RAD_S)
         out[f"truth_{axis}"] = [[float(z.real), float(z.imag)] for z in h]
     return out
