@@ -9,8 +9,13 @@ namespace {
 
 constexpr uint32_t kMagic = 0x31475148u;          // "HQG1" in memory order
 constexpr size_t kHeaderBytes = 5;                // magic, step count
+constexpr size_t kStepBytes = 16;                 // axis, injection, signal, harmonic count,
+                                                  // frequency, amplitude, cycles, fade cycles
 constexpr size_t kHarmonicBytes = 10;             // order, amplitude, phase
 constexpr size_t kCrcBytes = 4;
+static_assert(kHeaderBytes + kStepBytes + kMaxHarmonics * kHarmonicBytes + kCrcBytes <=
+                  kProgramRecordBytes,
+              "a multisine step with every harmonic fits a record");
 
 // Little-endian fields, written and read at a cursor that stops at the end.
 struct Writer {
