@@ -18,7 +18,6 @@ import sys
 
 import numpy as np
 import pytest
-from pymavlink import DFReader
 
 from fat32_image import Fat32Image
 from ground_stations_test import MavProxy
@@ -27,6 +26,7 @@ from heliquad.sim.rig.driver import Rig
 from heliquad.sim.rig.rc_script import parse_rc_script
 from heliquad.sim.rig.setup import LOOP_RATE_HZ, SilConfig, make_plant
 from identify_bin_test import assert_models_agree
+from onboard_log_test import log_records
 from tool_runs import running_board
 
 #: A guard against a hang, never a measure.
@@ -48,14 +48,6 @@ AFTER_DISARM_S = 1.5
 def heliquad(*args):
     return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
                           capture_output=True, text=True, timeout=GUARD_S)
-
-
-def _records(path) -> list:
-    log = DFReader.DFReader_binary(str(path))
-    out = []
-    while (m := log.recv_msg()) is not None:
-        out.append(m)
-    return out
 
 
 def _program_duration_s(show: str) -> float:
@@ -133,7 +125,7 @@ def test_the_program_ran_from_channel_7_with_no_host_and_the_card_logged_it(rig_
     steps = [line.split() for line in show.splitlines() if "sine" in line.split()]
     assert [w[w.index("sine") + 1] for w in steps] == [f"{f:g}" for f in FREQS_HZ]
     assert Fat32Image(card).listdir("LOGS") == ["00000001.BIN"]
-    records = _records(tmp / "got.BIN")
+    records = log_records(tmp / "got.BIN")
     texts = [m.Message for m in records if m.get_type() == "MSG"]
     assert "program started by channel 7" in texts
     assert "program finished: every step ran" in texts
