@@ -130,4 +130,12 @@ void Default_Handler() { hq_fatal(static_cast<uint32_t>(hq::teensy::FaultCode::U
 // A pure virtual call (an object used before or after its lifetime) is a fault.
 void __cxa_pure_virtual() { hq_fatal(static_cast<uint32_t>(hq::teensy::FaultCode::CpuFault)); }
 
+// errno, for the C library's math wrappers (acosf, asinf, sqrtf set it on a domain error;
+// nothing in the image reads it). Defined here, newlib's own __errno is not linked, nor its
+// reentrancy structure (impure_data) that holds errno there: about 100 B of RAM.
+int* __errno() {
+    static int errno_value = 0;
+    return &errno_value;
+}
+
 }  // extern "C"
