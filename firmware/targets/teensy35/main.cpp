@@ -22,6 +22,7 @@
 // otherwise, once its messages are out, stops the motors and enters the bootloader
 // (bootloader.hpp).
 #include <cstdint>
+#include <new>
 
 #include "../../core/flight_controller.hpp"
 #include "../../core/link/gcs_link.hpp"
@@ -244,7 +245,10 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static Uart0Serial telemetry;
     if (!telemetry.begin(baud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     uart_cfg.link_bytes_per_s = baud / 10;            // 8N1: ten bits a byte
-    static hq::LoopInbox inbox;
+    // Built here in zeroed (.bss) storage: as a constant-initialised static its 1.4 KB
+    // initial image (each request's param_index is -1) would be stored in flash as .data.
+    alignas(hq::LoopInbox) static unsigned char inbox_storage[sizeof(hq::LoopInbox)];
+    hq::LoopInbox& inbox = *new (inbox_storage) hq::LoopInbox;
     usb_cfg.log = uart_cfg.log = &fc.logger();       // the links' own STATUSTEXTs, logged
     static hq::GcsLink usb_link(usb_cfg, usb, inbox);
     static hq::GcsLink uart_link(uart_cfg, telemetry, inbox);
