@@ -18,16 +18,16 @@ static_assert(LoopInbox::kCapacity < 128, "Received::request holds a slot");
 
 GcsLink::GcsLink(const GcsLinkConfig& config, SerialPort& port, LoopInbox& inbox)
     : config_(config), port_(port), inbox_(inbox),
-      streams_{{MAVLINK_MSG_ID_HEARTBEAT, 1000000, 1000000, 0, false},
-               {MAVLINK_MSG_ID_HQ_FW_STATUS, 1000000, 1000000, 0, false},
-               {MAVLINK_MSG_ID_SYS_STATUS, 1000000, 1000000, 0, false},
-               {MAVLINK_MSG_ID_ATTITUDE, 1, 1, 0, false},          // every loop
-               {MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, 100000, 100000, 0, false},
-               {MAVLINK_MSG_ID_SCALED_IMU, 100000, 100000, 0, false},
+      streams_{{MAVLINK_MSG_ID_HEARTBEAT, 1000000, 1000000, false, 0},
+               {MAVLINK_MSG_ID_HQ_FW_STATUS, 1000000, 1000000, false, 0},
+               {MAVLINK_MSG_ID_SYS_STATUS, 1000000, 1000000, false, 0},
+               {MAVLINK_MSG_ID_ATTITUDE, 1, 1, false, 0},          // every loop
+               {MAVLINK_MSG_ID_SERVO_OUTPUT_RAW, 100000, 100000, false, 0},
+               {MAVLINK_MSG_ID_SCALED_IMU, 100000, 100000, false, 0},
                // SI units: what MAVSDK's imu() and other clients wait for
-               {MAVLINK_MSG_ID_HIGHRES_IMU, 100000, 100000, 0, false},
-               {MAVLINK_MSG_ID_RC_CHANNELS, 200000, 200000, 0, false},
-               {MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, false}} {}   // on request only
+               {MAVLINK_MSG_ID_HIGHRES_IMU, 100000, 100000, false, 0},
+               {MAVLINK_MSG_ID_RC_CHANNELS, 200000, 200000, false, 0},
+               {MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, false, 0}} {}   // on request only
 
 bool GcsLink::for_us(uint8_t target_system, uint8_t target_component) const {
     return (target_system == 0 || target_system == config_.system_id) &&

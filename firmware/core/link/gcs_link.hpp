@@ -94,8 +94,8 @@ public:
         uint32_t msgid;
         uint32_t default_us;
         uint32_t interval_us;
-        uint64_t next_us;
         bool requested;          // once, in the next loop (MAV_CMD_REQUEST_MESSAGE)
+        uint64_t next_us;        // last: before it the flag fills the gap to its alignment
     };
     static constexpr int kStreams = 9;
 
