@@ -186,10 +186,12 @@ private:
     size_t rx_len_ = 0, rx_pos_ = 0;
     mavlink_message_t held_{};               // parsed, but no room this loop: the next's first
     bool have_held_ = false;
+    // Two one-byte members beside the flag above, in the gap before load_'s alignment.
+    bool last_exc_accepted_ = false;
+    uint8_t heard_count_ = 0;                // of heard_[] (below)
     LoopLoad load_{};
     LoopLoad::Report last_load_{};           // the last second's (HQ_FW_STATUS, SYS_STATUS)
     Stream streams_[kStreams];
-    bool last_exc_accepted_ = false;
     uint32_t seq_ = 0;
     uint64_t loop_time_us_ = 0;              // the loop being answered (LoopStatus::time_us)
     uint32_t telemetry_dropped_ = 0;         // bytes, since boot
@@ -210,7 +212,6 @@ private:
     };
     static constexpr int kHeardStations = 8;
     Heard heard_[kHeardStations] = {};
-    uint8_t heard_count_ = 0;
     uint32_t heartbeats_heard_ = 0;
     // The boot report: the finding to send next (kBootFindings: no report under way), whether
     // one more whole report is asked for, and the loops left before another may start.
