@@ -38,14 +38,14 @@ enum class RequestKind : uint8_t {
     ProgramRead,        // `value` the step asked for
 };
 
-struct LoopRequest {
+struct LoopRequest {             // the one-byte members together: 20 bytes, not 24
     RequestKind kind = RequestKind::Heartbeat;
+    bool param_type_ok = false;            // ParamSet
     StationId who = kAnyStation;           // the station that asked
     uint8_t sysid = 0, compid = 0, mav_type = 0;   // Heartbeat
     uint32_t value = 0;
     int param_index = -1;
     float param_value = 0.0f;
-    bool param_type_ok = false;
 };
 
 enum class Verdict : uint8_t { Accepted, Refused, Failed };

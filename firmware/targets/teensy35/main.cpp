@@ -245,7 +245,7 @@ extern "C" [[noreturn]] void hq_teensy_main() {
     static Uart0Serial telemetry;
     if (!telemetry.begin(baud)) hq_fatal(static_cast<uint32_t>(FaultCode::StartUp));
     uart_cfg.link_bytes_per_s = baud / 10;            // 8N1: ten bits a byte
-    // Built here in zeroed (.bss) storage: as a constant-initialised static its 1.4 KB
+    // Built here in zeroed (.bss) storage: as a constant-initialised static its 1.3 KB
     // initial image (each request's param_index is -1) would be stored in flash as .data.
     alignas(hq::LoopInbox) static unsigned char inbox_storage[sizeof(hq::LoopInbox)];
     hq::LoopInbox& inbox = *new (inbox_storage) hq::LoopInbox;
