@@ -1,5 +1,5 @@
 """The control allocation from a rotor geometry (firmware/core/allocation.cpp, docs/mixer.md):
-with the default geometry it is the mixer (same flags, thrust fractions to float precision)
+with the default geometry parameters it is the mixer (same flags, thrust fractions to float precision)
 on the mixer tests' commands, across a saturation grid and on random commands; on a six-
 and an eight-rotor vehicle its effectiveness times its allocation is the identity and
 achievable commands are met exactly; its flags say which command gave way, in the mixer's
@@ -17,7 +17,8 @@ from mixer_test import (HOVER, ROLL_BEYOND_FULL, ROLL_PITCH_BEYOND_HOVER, SATURA
                         SMALL_PITCH, SMALL_ROLL, UNSATURATED, YAW_CASES, wrench)
 
 MIXER = fw.Mixer()
-DEFAULT = fw.Allocation()
+#: The firmware's default geometry parameters (CA_*), as it flies them.
+DEFAULT = fw.Allocation(fw.params_geometry())
 
 #: Thrust fractions of the default allocation against the mixer's: the two compute the same
 #: exact values by different float roundings (the mixer by its closed form, the allocation

@@ -235,12 +235,12 @@ def test_no_card_flies_and_logs_nothing():
 
 def test_a_full_card_cuts_the_log_and_the_vehicle_flies_on(tmp_path):
     flight = Flight()
-    flight.fw.card_room = 6000               # the header and a few loops
+    flight.fw.card_room = 9000               # the header (a PARM per parameter) and a few loops
     flight.steps(40, DISARMED_RC)
     flight.steps(LOOP_HZ, ARMED_RC)
     assert flight.fw.armed and flight.fw.card_room == 0
     (log,) = flight.fw.logs
-    assert len(log) == 6000
+    assert len(log) == 9000
     assert flight.fw.log_queued_bytes < 200  # the ring still empties: nothing piles up
     assert flight.fw.log_counters.dropped == 0
     flight.steps(5, DISARMED_RC)

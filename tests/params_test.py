@@ -148,7 +148,7 @@ def client(tmp_path):
 # --- the table ----------------------------------------------------------------------------
 
 def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
-    assert len(NAMES) == len(set(NAMES)) == COUNT == 45      # the table, pinned
+    assert len(NAMES) == len(set(NAMES)) == COUNT == 111     # the table, pinned
     for name, lo, hi, default, integer in PARAMS:
         assert 0 < len(name) <= 16 and name == name.upper(), name
         assert lo <= default <= hi, name
@@ -283,6 +283,14 @@ def test_a_stored_value_out_of_range_keeps_its_default_and_is_named(tmp_path):
     ("SER_TEL1_BAUD", 57600.5, "SER_TEL1_BAUD takes whole numbers only"),
     ("SER_TEL1_BAUD", 4800, "SER_TEL1_BAUD out of range 9600..1000000"),
     ("SER_TEL1_BAUD", 2000000, "SER_TEL1_BAUD out of range 9600..1000000"),
+    ("CA_ROTOR_COUNT", 3, "CA_ROTOR_COUNT out of range 4..8"),
+    ("CA_ROTOR_COUNT", 9, "CA_ROTOR_COUNT out of range 4..8"),
+    ("CA_ROTOR_COUNT", 5.5, "CA_ROTOR_COUNT takes whole numbers only"),
+    ("CA_ROTOR1_AX", 1.5, "CA_ROTOR1_AX out of range -1..1"),
+    ("CA_ROTOR2_PX", math.nan, "CA_ROTOR2_PX out of range -2..2"),
+    ("CA_ROTOR7_CT", math.inf, "CA_ROTOR7_CT out of range 0..200"),
+    ("CA_ROTOR0_KM", -0.6, "CA_ROTOR0_KM out of range -0.5..0.5"),
+    ("CA_HOVER_THRUST", 0, "CA_HOVER_THRUST out of range 0.5..500"),
 ])
 def test_a_refused_set_keeps_the_value_and_says_why(client, name, value, why):
     before = client.fetch()[name]
@@ -921,7 +929,7 @@ def test_a_sweep_records_the_gains_the_board_flies_and_identify_and_validate_use
     res = _heliquad("sweep", "--axis", "roll", "--sil", "--plant", "tf", "--freqs-hz", 1, 2, 4,
                     "--param-store", store, "--out", out)
     assert res.returncode == 0, res.stderr
-    assert "read 45 parameters from the board" in res.stdout
+    assert f"read {COUNT} parameters from the board" in res.stdout
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["params"]["RATE_RLL_KC"] == 3.1 and manifest["params"]["ESC1_MIN"] == 1000
     assert manifest["gains"] == {"rate": [3.1, 0.439, 0.051], "angle": [1.488, 0.09]}
@@ -959,10 +967,10 @@ def test_heliquad_params_against_the_simulated_board(tmp_path):
         saved = tmp_path / "rig.parm"
         assert _heliquad("params", "--port", port, "save", "--mavproxy", saved).returncode == 0
         lines = [ln.split() for ln in saved.read_text().splitlines() if not ln.startswith("#")]
-        assert len(lines) == 45 and ["RATE_YAW_KC", "6.5"] in lines
+        assert len(lines) == COUNT and ["RATE_YAW_KC", "6.5"] in lines
         assert _heliquad("params", "--port", port, "set", "RATE_YAW_KC", 7).returncode == 0
         res = _heliquad("params", "--port", port, "load", saved)
-        assert res.returncode == 0 and "1 set, 44 already so, 0 refused" in res.stdout, res.stdout
+        assert res.returncode == 0 and f"1 set, {COUNT - 1} already so, 0 refused" in res.stdout, res.stdout
     finally:
         board.send_signal(signal.SIGINT)
         board.communicate(timeout=60)

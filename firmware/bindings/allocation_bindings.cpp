@@ -4,10 +4,12 @@
 #include <pybind11/stl.h>
 
 #include <array>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "core/allocation.hpp"
+#include "core/params.hpp"
 
 namespace py = pybind11;
 using namespace hq;
@@ -65,6 +67,22 @@ void bind_allocation(py::module_& m) {
     m.def("canted_arms_geometry", &canted_arms_geometry, py::arg("geometry") = MixerGeometry(),
           py::arg("arms") = 4,
           "The mixer's vehicle as rotors: the central one and `arms` canted arm rotors.");
+    m.def("params_geometry", [](const std::map<std::string, float>& values) {
+        Params params;
+        for (const auto& [name, value] : values) {
+            const int index = param_index(name.c_str(), name.size());
+            if (index < 0) throw py::key_error("no parameter " + name);
+            const SetResult r = params.set(index, value, false, false);
+            if (r != SetResult::Ok && r != SetResult::Unchanged) {
+                char text[64];
+                set_result_text(r, index, text, sizeof text);
+                throw py::value_error(text);
+            }
+        }
+        return allocation_geometry(params.values().geometry);
+    }, py::arg("values") = std::map<std::string, float>{},
+       "The geometry the firmware's CA_* parameters give: the defaults, with `values` (name to "
+       "value) set as a ground station would set them (refused values raise ValueError).");
     py::class_<AllocationOutput>(m, "AllocationOutput")
         .def_property_readonly("motor", [](const AllocationOutput& o) {
             return std::vector<float>(o.motor, o.motor + kMaxRotors);

@@ -2,33 +2,6 @@
 
 namespace hq {
 
-CascadeGains CascadeGains::paper_defaults() {
-    CascadeGains g;
-    // Inner loop: Kc, tau_I, tau_D (the paper's rate-loop gains, docs/paper.md).
-    const float rate[kAxes][3] = {{2.422f, 0.439f, 0.051f},
-                                  {2.386f, 0.439f, 0.048f},
-                                  {7.393f, 0.397f, 0.043f}};
-    for (int a = 0; a < kAxes; ++a) {
-        g.rate[a].kc = rate[a][0];
-        g.rate[a].tau_i_s = rate[a][1];
-        g.rate[a].tau_d_s = rate[a][2];
-        g.rate[a].output_min = -1.0f;
-        g.rate[a].output_max = 1.0f;
-        g.rate[a].integral_limit = 0.5f;
-    }
-    // Outer loop: Kc, tau_D (the paper's angle-loop gains, docs/paper.md); PD, no integral.
-    const float angle[kAngleAxes][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
-    for (int a = 0; a < kAngleAxes; ++a) {
-        g.angle[a].kc = angle[a][0];
-        g.angle[a].tau_i_s = 0.0f;
-        g.angle[a].tau_d_s = angle[a][1];
-        g.angle[a].output_min = -kMaxRateSetpoint;
-        g.angle[a].output_max = kMaxRateSetpoint;
-        g.angle[a].integral_limit = 0.0f;
-    }
-    return g;
-}
-
 AttitudeController::AttitudeController(const CascadeGains& gains)
     : pid_{Pid(gains.angle[0]), Pid(gains.angle[1])} {}
 

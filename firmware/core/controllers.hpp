@@ -11,14 +11,41 @@
 
 namespace hq {
 
+// Largest rate setpoint the angle loop may ask for, rad/s (400 deg/s).
+constexpr float kMaxRateSetpoint = 6.9813f;
+
 struct CascadeGains {
     PidGains rate[kAxes];           // inner loop, rad/s in, normalised torque out
     PidGains angle[kAngleAxes];     // outer loop (roll, pitch), rad in, rad/s out
-    static CascadeGains paper_defaults();
+    // The paper's gains (docs/paper.md); constexpr, so the parameters' defaults are constants.
+    static constexpr CascadeGains paper_defaults() {
+        CascadeGains g;
+        // Inner loop: Kc, tau_I, tau_D (the paper's rate-loop gains).
+        const float rate[kAxes][3] = {{2.422f, 0.439f, 0.051f},
+                                      {2.386f, 0.439f, 0.048f},
+                                      {7.393f, 0.397f, 0.043f}};
+        for (int a = 0; a < kAxes; ++a) {
+            g.rate[a].kc = rate[a][0];
+            g.rate[a].tau_i_s = rate[a][1];
+            g.rate[a].tau_d_s = rate[a][2];
+            g.rate[a].output_min = -1.0f;
+            g.rate[a].output_max = 1.0f;
+            g.rate[a].integral_limit = 0.5f;
+        }
+        // Outer loop: Kc, tau_D (the paper's angle-loop gains); PD, no integral.
+        const float angle[kAngleAxes][2] = {{1.488f, 0.107f}, {1.501f, 0.106f}};
+        for (int a = 0; a < kAngleAxes; ++a) {
+            g.angle[a].kc = angle[a][0];
+            g.angle[a].tau_i_s = 0.0f;
+            g.angle[a].tau_d_s = angle[a][1];
+            g.angle[a].output_min = -kMaxRateSetpoint;
+            g.angle[a].output_max = kMaxRateSetpoint;
+            g.angle[a].integral_limit = 0.0f;
+        }
+        return g;
+    }
 };
 
-// Largest rate setpoint the angle loop may ask for, rad/s (400 deg/s).
-constexpr float kMaxRateSetpoint = 6.9813f;
 // Angle setpoints (sticks plus an angle-injection excitation) are clamped here: 80 deg.
 constexpr float kMaxAngleSetpointRad = 1.3962634f;
 

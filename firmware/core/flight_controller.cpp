@@ -29,9 +29,9 @@ bool finite3(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) &&
 FlightController::FlightController(const FlightControllerConfig& config, I2cBus& i2c,
                                    Clock& clock, MotorOutputs& motors)
     : config_(config), i2c_(i2c), clock_(clock), motors_(motors),
-      imu_(config.imu), filter_(config.attitude_filter), cascade_(config.tunables.gains),
-      mixer_(config.geometry), supervisor_(config.tunables.safety, config.loop_rate_hz),
-      params_(config.tunables) {}
+      imu_(config.imu), filter_(config.attitude_filter), cascade_(Params::defaults().gains),
+      allocation_(allocation_geometry(Params::defaults().geometry)),
+      supervisor_(Params::defaults().safety, config.loop_rate_hz) {}
 
 InitResult FlightController::init() {
     motors_.disarm();
@@ -40,7 +40,7 @@ InitResult FlightController::init() {
     int bad_index = -1;
     boot.params = load_params(bad_index, boot.param_result);
     boot.param_index = static_cast<int16_t>(bad_index);
-    apply_params(kParamEsc, clock_.micros());
+    apply_params(kParamEsc | kParamGeometry, clock_.micros());
     load_program();                  // after the parameters: their bounds check its steps
     imu_init_ = init_imu();
     boot.imu = imu_finding(imu_init_, params_.values().imu_path);
@@ -224,7 +224,8 @@ void FlightController::run_control(const RcInput& rc, float excitation, float dt
     status_.state.angle_sp = c.angle_sp;
     status_.state.rate_sp = c.rate_sp;
     status_.state.torque = c.torque;
-    const MixerOutput out = mixer_.mix(MixerCommand{s.throttle, c.torque.x, c.torque.y, c.torque.z});
+    const AllocationOutput out =
+        allocation_.allocate(MixerCommand{s.throttle, c.torque.x, c.torque.y, c.torque.z});
     status_.state.saturation = static_cast<uint8_t>(
         status_.state.sensor_clipped | (out.torque_limited ? HQ_SATURATION_TORQUE : 0) |
         (out.collective_limited ? HQ_SATURATION_COLLECTIVE : 0));

@@ -22,7 +22,7 @@
 #include "excitation.hpp"
 #include "log/logger.hpp"
 #include "loop_exchange.hpp"
-#include "mixer.hpp"
+#include "allocation.hpp"
 #include "mpu6050.hpp"
 #include "params.hpp"
 #include "program.hpp"
@@ -38,10 +38,6 @@ constexpr float kMaxLoopRateHz = 2000.0f;
 
 struct FlightControllerConfig {
     float loop_rate_hz = kLoopRateHz;
-    // The parameters' defaults (gains, limits, endpoints, thresholds, the IMU's path); the
-    // values stored in `storage` replace them at init().
-    Tunables tunables{};
-    MixerGeometry geometry{};
     Mpu6050Config imu{};
     AttitudeFilterConfig attitude_filter{};   // the raw path's ComplementaryFilter
     // Where the parameters persist (nullptr: defaults at every start, nothing saved).
@@ -107,6 +103,7 @@ private:
     Verdict storage_action(uint32_t action, uint64_t now_us);
     ExcitationReport excitation_report() const;
     ParamsFinding load_params(int& bad_index, SetResult& bad_result);
+    void configure_allocation();
     void apply_params(uint8_t changed, uint64_t now_us);
     void save_params_when_due(uint64_t now_us);
     bool save_params();
@@ -126,7 +123,7 @@ private:
     Mpu6050 imu_;
     ComplementaryFilter filter_;
     Cascade cascade_;
-    Mixer mixer_;
+    Allocation allocation_;   // from the geometry parameters (configure_allocation())
     Supervisor supervisor_;
     Params params_;
     Logger logger_;

@@ -150,7 +150,7 @@ Verdict FlightController::storage_action(uint32_t action, uint64_t now_us) {
     } else {
         return Verdict::Refused;
     }
-    apply_params(kParamEsc | kParamImu, now_us);
+    apply_params(kParamEsc | kParamImu | kParamGeometry, now_us);
     return Verdict::Accepted;
 }
 
@@ -188,10 +188,19 @@ void FlightController::apply_params(uint8_t changed, uint64_t now_us) {
     supervisor_.set_limits(t.safety);
     if (supervisor_.armed()) return;
     if (changed & kParamEsc) motors_.set_endpoints(t.esc);
+    if (changed & kParamGeometry) configure_allocation();
     if (changed & kParamImu) {
         imu_init_ = init_imu();
         supervisor_.imu_initialised(now_us, imu_timeout_for(imu_.sample_rate_hz()));
     }
+}
+
+// The allocation from the geometry parameters (disarmed: the protocol refuses them while
+// armed). A geometry it refuses leaves it refusing (zero thrust) and arming refused, said.
+void FlightController::configure_allocation() {
+    const bool ok = allocation_.configure(allocation_geometry(params_.values().geometry));
+    supervisor_.set_geometry_ok(ok);
+    if (!ok) notice(MAV_SEVERITY_WARNING, allocation_.reason());
 }
 
 void FlightController::save_params_when_due(uint64_t now_us) {

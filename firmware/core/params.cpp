@@ -13,6 +13,16 @@ constexpr double kDegPerRad = 57.29577951308232;
 float to_deg(float rad) { return static_cast<float>(static_cast<double>(rad) * kDegPerRad); }
 float to_rad(float deg) { return static_cast<float>(static_cast<double>(deg) / kDegPerRad); }
 
+// A parameter with an entry of its own in the table (the CA_ROTORn_* are built from kRotor).
+struct ParamEntry {
+    const char* name;
+    const char* units;
+    float min, max;
+    uint8_t flags;
+    float (*get)(const Tunables&);
+    void (*set)(Tunables&, float);
+};
+
 // --- accessors, one template per kind of field ---------------------------------------------
 template <int A, float PidGains::*F>
 float rate_get(const Tunables& t) { return t.gains.rate[A].*F; }
@@ -74,11 +84,17 @@ void imu_path_set(Tunables& t, float v) { t.imu_path = static_cast<ImuPath>(stat
 float tel1_baud_get(const Tunables& t) { return static_cast<float>(t.tel1_baud); }
 void tel1_baud_set(Tunables& t, float v) { t.tel1_baud = static_cast<uint32_t>(v); }
 
+float rotors_get(const Tunables& t) { return t.geometry.count; }
+void rotors_set(Tunables& t, float v) { t.geometry.count = static_cast<uint8_t>(v); }
+float hover_get(const Tunables& t) { return t.geometry.hover_thrust_n; }
+void hover_set(Tunables& t, float v) { t.geometry.hover_thrust_n = v; }
+
 constexpr uint8_t kGain = kParamArmedOk;
 constexpr uint8_t kTime = kParamArmedOk | kParamTimeConstant;
 constexpr uint8_t kInt = kParamInteger;
 constexpr uint8_t kEsc = kParamInteger | kParamEsc;
 constexpr uint8_t kBaud = kParamInteger | kParamBaud | kParamRestart;
+constexpr uint8_t kGeometry = kParamGeometry;
 
 #define HQ_RATE(AX, A)                                                                          \
     {"RATE_" AX "_KC", "1/(rad/s)", 0.01f, 50.0f, kGain, rate_get<A, &PidGains::kc>,           \
@@ -100,7 +116,7 @@ constexpr uint8_t kBaud = kParamInteger | kParamBaud | kParamRestart;
 
 // The order is the protocol's param_index: append, never reorder (a ground station may
 // cache by index within a session; the stored record is keyed by name).
-const ParamInfo kParams[kParamCount] = {
+const ParamEntry kParams[kTableParams] = {
     HQ_RATE("RLL", 0), HQ_RATE("PIT", 1), HQ_RATE("YAW", 2),
     HQ_ANGLE("RLL", 0), HQ_ANGLE("PIT", 1),
     {"EXC_MAX_ANG", "deg", 1.0f, 60.0f, 0, amp_deg_get<0>, amp_deg_set<0>},
@@ -135,7 +151,26 @@ const ParamInfo kParams[kParamCount] = {
     {"IMU_PATH", "", 0.0f, 1.0f, kInt | kParamImu, imu_path_get, imu_path_set},
     {"MAV_GCS_SYSID", "", 0.0f, 255.0f, kInt, gcs_get, gcs_set},
     {"SER_TEL1_BAUD", "baud", 9600.0f, 1000000.0f, kBaud, tel1_baud_get, tel1_baud_set},
+    {"CA_ROTOR_COUNT", "", static_cast<float>(kMinRotors), static_cast<float>(kMaxRotors),
+     kGeometry | kParamInteger, rotors_get, rotors_set},
+    {"CA_HOVER_THRUST", "N", 0.5f, 500.0f, kGeometry, hover_get, hover_set},
 };
+
+// CA_ROTORn_<suffix>, in RotorField's order: each rotor's position, thrust axis, largest
+// thrust and signed moment ratio (PX4's names, units and frame).
+struct RotorEntry {
+    char suffix[3];
+    const char* units;
+    float min, max;
+};
+const RotorEntry kRotor[kRotorFields] = {
+    {"PX", "m", -2.0f, 2.0f},    {"PY", "m", -2.0f, 2.0f},    {"PZ", "m", -2.0f, 2.0f},
+    {"AX", "", -1.0f, 1.0f},     {"AY", "", -1.0f, 1.0f},     {"AZ", "", -1.0f, 1.0f},
+    {"CT", "N", 0.0f, 200.0f},   {"KM", "m", -0.5f, 0.5f},
+};
+constexpr char kRotorPrefix[] = "CA_ROTOR";
+
+constexpr Tunables kDefaults{};
 
 #undef HQ_RATE
 #undef HQ_ANGLE
@@ -251,26 +286,74 @@ struct Writer {
 
 }  // namespace
 
-const ParamInfo& param_info(int index) { return kParams[index]; }
+ParamInfo param_info(int index) {
+    ParamInfo p{};
+    p.index = static_cast<int16_t>(index);
+    Writer w{p.name, sizeof p.name};
+    if (index < kTableParams) {
+        const ParamEntry& e = kParams[index];
+        w.put(e.name);
+        p.units = e.units, p.min = e.min, p.max = e.max, p.flags = e.flags;
+        return p;
+    }
+    const int k = index - kTableParams;
+    const RotorEntry& e = kRotor[k % kRotorFields];
+    w.put(kRotorPrefix);
+    w.put(static_cast<char>('0' + k / kRotorFields));
+    w.put('_');
+    w.put(e.suffix);
+    p.units = e.units, p.min = e.min, p.max = e.max, p.flags = kGeometry;
+    return p;
+}
+
+float ParamInfo::get(const Tunables& t) const {
+    if (index < kTableParams) return kParams[index].get(t);
+    const int k = index - kTableParams;
+    return t.geometry.rotor[k / kRotorFields][k % kRotorFields];
+}
+
+void ParamInfo::set(Tunables& t, float value) const {
+    if (index < kTableParams) return kParams[index].set(t, value);
+    const int k = index - kTableParams;
+    t.geometry.rotor[k / kRotorFields][k % kRotorFields] = value;
+}
 
 int param_index(const char* name, size_t len) {
     const size_t n = name_length(name, len);
     for (int i = 0; i < kParamCount; ++i) {
-        const char* p = kParams[i].name;
+        const ParamInfo p = param_info(i);
         size_t k = 0;
-        while (k < n && p[k] == name[k]) ++k;
-        if (k == n && p[k] == '\0') return i;
+        while (k < n && p.name[k] == name[k]) ++k;
+        if (k == n && p.name[k] == '\0') return i;
     }
     return -1;
 }
 
-float Params::get(int index) const { return kParams[index].get(values_); }
+AllocationGeometry allocation_geometry(const GeometryParams& g) {
+    AllocationGeometry a;
+    a.count = g.count;
+    a.hover_thrust_n = g.hover_thrust_n;
+    for (int i = 0; i < kMaxRotors; ++i) {
+        const float* f = g.rotor[i];
+        RotorGeometry& r = a.rotor[i];
+        r.position_m = Vec3{f[kPx], f[kPy], f[kPz]};
+        r.axis = Vec3{f[kAx], f[kAy], f[kAz]};
+        r.max_thrust_n = f[kCt];
+        r.moment_ratio_m = std::fabs(f[kKm]);
+        r.spin = f[kKm] < 0.0f ? -1 : 1;
+    }
+    return a;
+}
 
-float Params::default_value(int index) const { return kParams[index].get(defaults_); }
+const Tunables& Params::defaults() { return kDefaults; }
+
+float Params::get(int index) const { return param_info(index).get(values_); }
+
+float Params::default_value(int index) const { return param_info(index).get(kDefaults); }
 
 SetResult Params::set(int index, float value, bool armed, bool exciting) {
     if (index < 0 || index >= kParamCount) return SetResult::Unknown;
-    const ParamInfo& p = kParams[index];
+    const ParamInfo p = param_info(index);
     // A set to the value it has changes nothing, so no rule about changes applies (armed,
     // exciting): a ground station re-sending a value it read (MAVProxy's `param load` of an
     // unchanged file, where it misreads an integer) is answered with that value, not refused.
@@ -289,7 +372,7 @@ size_t Params::encode(uint8_t* out, size_t capacity) const {
     put32(out + 4, kParamCount);                 // count (16 bits), reserved (16 bits, 0)
     uint8_t* p = out + 8;
     for (int i = 0; i < kParamCount; ++i, p += 8) {
-        put32(p, name_hash(kParams[i].name));
+        put32(p, name_hash(param_info(i).name));
         put32(p + 4, float_bits(get(i)));
     }
     put32(p, crc32(out, static_cast<size_t>(p - out)));
@@ -307,16 +390,17 @@ LoadReport Params::decode(const uint8_t* data, size_t n) {
     }
     r.status = LoadReport::Status::Ok;
     uint32_t hashes[kParamCount];
-    for (int i = 0; i < kParamCount; ++i) hashes[i] = name_hash(kParams[i].name);
+    for (int i = 0; i < kParamCount; ++i) hashes[i] = name_hash(param_info(i).name);
     for (uint32_t e = 0; e < count; ++e) {
         const uint8_t* p = data + 8 + 8 * e;
         const uint32_t h = get32(p);
         for (int i = 0; i < kParamCount; ++i) {
             if (hashes[i] != h) continue;        // a parameter this firmware no longer has
             const float v = bits_float(get32(p + 4));
-            const SetResult check = value_check(kParams[i], v);
+            const ParamInfo info = param_info(i);
+            const SetResult check = value_check(info, v);
             if (check == SetResult::Ok) {
-                kParams[i].set(values_, v);
+                info.set(values_, v);
                 ++r.loaded;
             } else if (r.out_of_range++ == 0) {
                 r.first_bad = i;
@@ -400,7 +484,7 @@ void set_result_text(SetResult result, int index, char* out, size_t capacity) {
         w.put("params: no such parameter");
         return;
     }
-    const ParamInfo& p = kParams[index];
+    const ParamInfo p = param_info(index);
     w.put(p.name);
     switch (result) {
         case SetResult::Range:

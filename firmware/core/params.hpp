@@ -22,6 +22,7 @@
 #include <cstdint>
 
 #include "../hal/motors.hpp"
+#include "allocation.hpp"
 #include "crc32.hpp"
 #include "controllers.hpp"
 #include "rc.hpp"
@@ -40,6 +41,34 @@ constexpr uint32_t kSerialBauds[] = {9600,   19200,  38400,  57600,  115200,
 // SER_TEL1_BAUD's default: a 3.3 V USB-serial cable's rate, fast enough for every stream.
 constexpr uint32_t kDefaultTel1Baud = 921600;
 
+// The vehicle's rotors as parameters, named as PX4's control allocation names them
+// (CA_ROTOR_COUNT, CA_ROTORn_PX/PY/PZ/AX/AY/AZ/CT/KM; docs/parameters.md): rotor 0 is the
+// central one, rotors at and beyond `count` are not used. Body FRD, origin at the centre of
+// mass. The defaults are the paper's vehicle as the mixer flew it: the central rotor and four
+// arm rotors at 0.3048 m on azimuths 0, 90, 180 and 270 deg (front, right, back, left), each
+// canted 20 deg about its arm against the central rotor's reaction torque, the arms' own
+// reaction torques not used (KM 0).
+enum RotorField : uint8_t { kPx, kPy, kPz, kAx, kAy, kAz, kCt, kKm, kRotorFields };
+struct GeometryParams {
+    static constexpr float kSin20 = 0.342020143f, kCos20 = 0.939692621f;   // the 20 deg cant
+    uint8_t count = 5;                   // CA_ROTOR_COUNT, kMinRotors..kMaxRotors
+    float hover_thrust_n = 9.1202f;      // CA_HOVER_THRUST: the weight, 0.930 kg x g
+    // Per rotor: position m, thrust axis (unit), largest thrust N, moment ratio m signed by
+    // spin (positive: counter-clockwise seen from where the thrust points).
+    float rotor[kMaxRotors][kRotorFields] = {
+        {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, -1.0f, 25.0f, 0.017f},
+        {0.3048f, 0.0f, 0.0f, 0.0f, -kSin20, -kCos20, 9.0f, 0.0f},
+        {0.0f, 0.3048f, 0.0f, kSin20, 0.0f, -kCos20, 9.0f, 0.0f},
+        {-0.3048f, 0.0f, 0.0f, 0.0f, kSin20, -kCos20, 9.0f, 0.0f},
+        {0.0f, -0.3048f, 0.0f, -kSin20, 0.0f, -kCos20, 9.0f, 0.0f},
+        {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, -1.0f, 0.0f, 0.0f},
+        {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, -1.0f, 0.0f, 0.0f},
+        {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, -1.0f, 0.0f, 0.0f},
+    };
+};
+// The allocation's geometry from the parameters (KM's sign is the spin).
+AllocationGeometry allocation_geometry(const GeometryParams& g);
+
 // Everything a parameter sets. The defaults are the flight values of each part.
 struct Tunables {
     CascadeGains gains = CascadeGains::paper_defaults();
@@ -48,6 +77,7 @@ struct Tunables {
     EscEndpoints esc{};
     ImuPath imu_path = ImuPath::Dmp;   // DMP when the build has its firmware, else raw
     uint32_t tel1_baud = kDefaultTel1Baud;   // the telemetry radio's UART (teensy35: UART0)
+    GeometryParams geometry{};
 };
 
 enum ParamFlag : uint8_t {
@@ -58,21 +88,27 @@ enum ParamFlag : uint8_t {
     kParamTimeConstant = 16,  // 0 (off) or at least kMinTimeConstantS (pid.hpp)
     kParamBaud = 32,      // one of kSerialBauds only
     kParamRestart = 64,   // takes effect at the next start-up (a set says so)
+    kParamGeometry = 128, // the vehicle's geometry: the allocation is computed again (disarmed)
 };
 
+constexpr size_t kParamNameLen = 16;
+
+// One parameter, as param_info() gives it (by value: the CA_ROTORn_* names are built).
 struct ParamInfo {
-    const char* name;     // at most 16 characters (PARAM_VALUE.param_id)
+    char name[kParamNameLen + 1];   // at most 16 characters (PARAM_VALUE.param_id)
     const char* units;    // as the docs print them
     float min, max;       // inclusive
     uint8_t flags;
-    float (*get)(const Tunables&);
-    void (*set)(Tunables&, float);
+    int16_t index;        // its param_index
+    float get(const Tunables& t) const;
+    void set(Tunables& t, float value) const;
 };
 
-constexpr int kParamCount = 45;
-constexpr size_t kParamNameLen = 16;
+// The parameters with a table entry each, then CA_ROTORn_* by rotor, in RotorField's order.
+constexpr int kTableParams = 47;
+constexpr int kParamCount = kTableParams + kMaxRotors * kRotorFields;
 
-const ParamInfo& param_info(int index);
+ParamInfo param_info(int index);
 // The index of a name given as a PARAM_* message's 16-character field (NUL-terminated when
 // shorter); -1 when there is no such parameter.
 int param_index(const char* name, size_t len = kParamNameLen);
@@ -108,14 +144,15 @@ struct LoadReport {
 
 class Params {
 public:
-    explicit Params(const Tunables& defaults = Tunables{}) : defaults_(defaults), values_(defaults) {}
+    Params() : values_(defaults()) {}
 
     const Tunables& values() const { return values_; }
-    const Tunables& defaults() const { return defaults_; }
+    // The values a parameter has until it is set (constant: in flash on the target).
+    static const Tunables& defaults();
     float get(int index) const;
     float default_value(int index) const;
     SetResult set(int index, float value, bool armed, bool exciting);
-    void reset() { values_ = defaults_; }
+    void reset() { values_ = defaults(); }
 
     // The record saved to ParamStorage: its length, 0 if capacity is too small.
     size_t encode(uint8_t* out, size_t capacity) const;
@@ -124,7 +161,6 @@ public:
     static constexpr size_t kRecordBytes = 8 + 8 * kParamCount + 4;
 
 private:
-    Tunables defaults_;
     Tunables values_;
 };
 

@@ -61,6 +61,7 @@ const char* reason_text(Reason reason) {
         case Reason::ProgramSwitch: return "program stopped: channel 7 released";
         case Reason::ProgramOrder: return "program refused: steps out of order";
         case Reason::NoProgram: return "program refused: none stored";
+        case Reason::Geometry: return "arming refused: vehicle geometry refused";
     }
     return "unknown reason";
 }
@@ -171,6 +172,7 @@ Reason Supervisor::check_arm(const RcInput& rc, uint64_t now_us) const {
     if (!has_signal(rc, rc::kThrottle)) return Reason::NoThrottle;
     if (rc.channel_us[rc::kThrottle] >= limits_.rc.throttle_low_us) return Reason::ThrottleHigh;
     if (!imu_fresh(now_us)) return Reason::ImuNotReady;
+    if (!geometry_ok_) return Reason::Geometry;
     return Reason::None;
 }
 

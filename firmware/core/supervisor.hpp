@@ -86,6 +86,7 @@ enum class Reason : uint8_t {
     ProgramRunning = HQ_REASON_PROGRAM_RUNNING,
     ProgramSwitch = HQ_REASON_PROGRAM_SWITCH,
     ProgramOrder = HQ_REASON_PROGRAM_ORDER,
+    Geometry = HQ_REASON_GEOMETRY,
     NoProgram = HQ_REASON_NO_PROGRAM,
 };
 constexpr uint8_t kReasonCount = HQ_REASON_ENUM_END;
@@ -262,6 +263,8 @@ public:
     // New bounds (the parameters changed); the IMU timeout stays the one the chip's rate set.
     // A station a new gcs_sysid excludes is forgotten.
     void set_limits(const SafetyLimits& limits);
+    // Whether the geometry parameters gave an allocation (arming is refused while not).
+    void set_geometry_ok(bool ok) { geometry_ok_ = ok; }
 
     // --- what the loop reports -------------------------------------------------------------
     // The oldest event not yet taken (STATUSTEXT); false when there is none.
@@ -321,6 +324,7 @@ private:
     uint64_t last_imu_us_ = 0, last_imu_attempt_us_ = 0;
     Reason last_imu_finding_ = Reason::None;
     Reason last_reason_ = Reason::None;
+    bool geometry_ok_ = true;
     bool exc_end_pending_ = false;
     Reason exc_end_reason_ = Reason::None;
     SupervisorCounters counters_{};

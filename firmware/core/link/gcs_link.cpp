@@ -345,7 +345,7 @@ void GcsLink::reply(const Received& in, const LoopAnswer* a) {
             last_exc_accepted_ = a->verdict == Verdict::Accepted;
             send_excitation_status(a->reason, a->excitation);
             return;
-        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: params_pending_ = kAllParams; return;
+        case MAVLINK_MSG_ID_PARAM_REQUEST_LIST: params_pending_.set_all(); return;
         case MAVLINK_MSG_ID_PARAM_REQUEST_READ: reply_param_read(in); return;
         case MAVLINK_MSG_ID_PARAM_SET: reply_param_set(in, a); return;
         case MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: refuse_file_transfer(in); return;
@@ -380,7 +380,7 @@ uint8_t GcsLink::command_result(const Received& in, const LoopAnswer* a, Reason&
             return a->verdict == Verdict::Accepted ? MAV_RESULT_ACCEPTED : MAV_RESULT_DENIED;
         case MAV_CMD_PREFLIGHT_STORAGE:
             if (a->verdict == Verdict::Accepted && whole(p[0]) != PARAM_WRITE_PERSISTENT) {
-                params_pending_ = kAllParams;        // every value again, as it now is
+                params_pending_.set_all();           // every value again, as it now is
             }
             return a->verdict == Verdict::Accepted  ? MAV_RESULT_ACCEPTED
                    : a->verdict == Verdict::Failed ? MAV_RESULT_FAILED

@@ -34,6 +34,7 @@
 #include "../log/logger.hpp"
 #include "../loop_exchange.hpp"
 #include "../loop_load.hpp"
+#include "link_util.hpp"
 #include "log_transfer.hpp"
 
 #include <heliquad/mavlink.h>
@@ -201,8 +202,8 @@ private:
     const Program* program_ = nullptr;       // the loop's stored program (READ's answers)
     uint32_t bytes_sent_ = 0, bytes_dropped_ = 0;     // this second's, for SYS_STATUS
     uint16_t drop_rate_ = 0;                          // the last second's, 1/100 %
-    uint64_t params_pending_ = 0;            // PARAM_VALUEs to send, one bit per index
-    uint64_t params_as_float_ = 0;           // of those, answers to a set sent as REAL32
+    ParamBits params_pending_;               // PARAM_VALUEs to send
+    ParamBits params_as_float_;              // of those, answers to a set sent as REAL32
     // The ground stations this link has heard (a HEARTBEAT of MAV_TYPE_GCS), for the boot
     // report: kHeardStations of them, each with the count of heartbeats heard at its last; a
     // new one takes the place of the one heard longest ago.

@@ -13,8 +13,28 @@ namespace hq {
 
 // STATUSTEXT.text, NUL-terminated when shorter.
 constexpr size_t kStatusTextLen = MAVLINK_MSG_STATUSTEXT_FIELD_TEXT_LEN;
-// Every parameter, one bit per index (PARAM_VALUEs to send).
-constexpr uint64_t kAllParams = (1ull << kParamCount) - 1;
+// A set of parameters, one bit per index (PARAM_VALUEs to send).
+class ParamBits {
+public:
+    void set_all() {
+        for (uint32_t& w : w_) w = ~0u;
+        w_[kWords - 1] = kParamCount % 32 == 0 ? ~0u : (1u << (kParamCount % 32)) - 1;
+    }
+    void set(int i) { w_[i >> 5] |= 1u << (i & 31); }
+    void clear(int i) { w_[i >> 5] &= ~(1u << (i & 31)); }
+    bool test(int i) const { return (w_[i >> 5] >> (i & 31)) & 1u; }
+    // The lowest index in the set, -1 when empty.
+    int first() const {
+        for (int k = 0; k < kWords; ++k) {
+            if (w_[k] != 0) return 32 * k + __builtin_ctz(w_[k]);
+        }
+        return -1;
+    }
+
+private:
+    static constexpr int kWords = (kParamCount + 31) / 32;
+    uint32_t w_[kWords] = {};
+};
 
 // A command parameter that carries a whole number (a mode, a message id, an action): the
 // number, or kNotWhole for anything else (a fraction, a negative, a NaN, a value past 2^24,

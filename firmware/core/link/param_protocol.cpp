@@ -79,7 +79,7 @@ void GcsLink::reply_param_read(const Received& in) {
         send_unknown_param(in.param_id, in.param_index);
         return;
     }
-    params_pending_ |= 1ull << index;
+    params_pending_.set(index);
 }
 
 void GcsLink::send_unknown_param(const char* name, int index) {
@@ -99,8 +99,8 @@ void GcsLink::reply_param_set(const Received& in, const LoopAnswer* a) {
         return;
     }
     const int index = inbox_.request[in.request].param_index;
-    if (in.param_type == MAV_PARAM_TYPE_REAL32) params_as_float_ |= 1ull << index;  // as it came
-    params_pending_ |= 1ull << index;
+    if (in.param_type == MAV_PARAM_TYPE_REAL32) params_as_float_.set(index);  // as it came
+    params_pending_.set(index);
     const bool refused = a->verdict != Verdict::Accepted;
     // A change to a parameter read only at start-up says so ("... set; restart to apply").
     const bool restart = a->set == SetResult::Ok && (param_info(index).flags & kParamRestart);
@@ -130,7 +130,7 @@ bool GcsLink::send_param_value(const Tunables& values, int index) {
     char name[kParamNameLen];
     copy_name(name, info.name);
     const bool integer = (info.flags & kParamInteger) != 0;
-    const bool as_float = !integer || (params_as_float_ & (1ull << index)) != 0;
+    const bool as_float = !integer || params_as_float_.test(index);
     const float v = info.get(values);
     mavlink_message_t msg;
     mavlink_msg_param_value_pack_status(
@@ -141,11 +141,11 @@ bool GcsLink::send_param_value(const Tunables& values, int index) {
 }
 
 void GcsLink::send_params(const Tunables& values) {
-    for (int sent = 0; sent < kParamsPerLoop && params_pending_ != 0; ++sent) {
-        const int index = __builtin_ctzll(params_pending_);
+    for (int sent = 0, index; sent < kParamsPerLoop && (index = params_pending_.first()) >= 0;
+         ++sent) {
         if (!send_param_value(values, index)) return;   // the link is full: next loop
-        params_pending_ &= ~(1ull << index);
-        params_as_float_ &= ~(1ull << index);
+        params_pending_.clear(index);
+        params_as_float_.clear(index);
     }
 }
 

@@ -35,10 +35,12 @@
  * (the loop's messages go in whole or not at all, usb_serial.hpp) sent in transfers of up to
  * 512 bytes, eight packets the driver queues from its interrupt; a message never
  * overwrites an older one, even while no host has the port open (the port layer lets the
- * bytes go instead). Receive: 512 bytes, a ground station's burst of parameter writes. */
+ * bytes go instead). Receive: 256 bytes, four packets; while fewer than a packet's 64 bytes
+ * are free the stack queues no OUT transfer, so the controller NAKs the host's next packet
+ * (USB's own flow control): a ground station's burst of parameter writes waits, never lost. */
 #define CFG_TUD_CDC_RX_EPSIZE 64
 #define CFG_TUD_CDC_TX_EPSIZE 512
-#define CFG_TUD_CDC_RX_BUFSIZE 512
+#define CFG_TUD_CDC_RX_BUFSIZE 256
 #define CFG_TUD_CDC_TX_BUFSIZE 1024
 #define CFG_TUD_CDC_TX_OVERWRITABLE_IF_NOT_CONNECTED 0
 
