@@ -129,9 +129,13 @@ def test_data_keyed_by_the_names_names_every_entry():
     for table in (paper.BANDS_HZ, paper.MODELS, paper.CHOSEN_ORDER, paper.RATE_GAINS):
         assert set(table) == axes
     assert set(paper.ANGLE_GAINS) == axes - {"yaw"}           # yaw has no angle loop
-    assert set(link.INPUT_OUTPUT) == injections
-    assert set(excitation.UNITS) == injections
-    assert set(excitation.DEFAULT_SETPOINT) == injections - {"mixer"}   # designed at the mixer
+    # The axis sweeps' injection points; the per-rotor ones (motor1..8, motors) are driven
+    # through the link directly (motor_injection_test).
+    per_rotor = {i for i in injections if i.startswith("motor")}
+    assert per_rotor == {f"motor{n}" for n in range(1, 9)} | {"motors"}
+    assert set(link.INPUT_OUTPUT) == injections - per_rotor
+    assert set(excitation.UNITS) == injections - per_rotor
+    assert set(excitation.DEFAULT_SETPOINT) == injections - per_rotor - {"mixer"}   # at the mixer
     assert vehicle.RIGS == (*names.AXES, "free")
     imu = {k.replace("-", "_") for k in faults.KINDS} - {"link"}     # link: the host's own
     assert imu == set(names.enum_values("HQ_IMU_FAULT")) - {"none"}

@@ -151,6 +151,36 @@ def test_a_multisine_is_the_sum_of_its_harmonics_with_exact_phases_and_its_fades
     assert not ex.peak_exceeded
 
 
+def test_a_multisine_split_into_groups_gives_each_group_its_own_harmonics():
+    """Injection.MOTORS: harmonic i to group i mod groups; the parts add up to the value."""
+    lines = [(2, 0.1, 0.0), (3, 0.1, 0.5), (5, 0.1, 1.0), (7, 0.1, 1.5), (11, 0.1, 2.0)]
+    ex = fw.Excitation()
+    assert ex.start(multisine(lines, base=0.5, cycles=2, peak=0.2), LOOP_HZ)
+    n, fade = ex.period_samples, ex.fade_samples
+    values, parts = [], []
+    while ex.active:
+        value, part = ex.next_groups(3)
+        values.append(value)
+        parts.append(part)
+    parts = np.array(parts)
+    np.testing.assert_allclose(parts.sum(axis=1), values, atol=1e-6)
+    k = np.arange(len(values))[fade:fade + 2 * n]
+    for g in range(3):
+        own = [(h, a, p) for i, (h, a, p) in enumerate(lines) if i % 3 == g]
+        full = sum(a * np.sin(2 * np.pi * h * k / n + p) for h, a, p in own)
+        np.testing.assert_allclose(parts[fade:fade + 2 * n, g], full, atol=2e-6)
+    assert not ex.peak_exceeded          # each group's sum within 0.2; the whole is not
+
+
+def test_a_group_beyond_the_declared_peak_stops_the_split_multisine():
+    lines = [(2, 0.15, 0.0), (3, 0.01, 0.0), (5, 0.15, 0.0)]      # group 0: lines 2 and 5
+    ex = fw.Excitation()
+    assert ex.start(multisine(lines, base=0.5, cycles=2, peak=0.16), LOOP_HZ)
+    while ex.active:
+        ex.next_groups(2)
+    assert ex.peak_exceeded
+
+
 @pytest.mark.parametrize("lines, why", [
     ([(5, 0.1, 0.0), (5, 0.1, 0.0)], "repeated order"),
     ([(7, 0.1, 0.0), (5, 0.1, 0.0)], "not increasing"),

@@ -145,10 +145,12 @@ class FirmwareRig:
         return self.step(frames)
 
     def excitation_answer(self, **kwargs):
-        """Send HQ_EXCITATION START and step until its HQ_EXCITATION_STATUS answer."""
+        """Send HQ_EXCITATION START (a multisine with ``harmonics=[(order, amplitude,
+        phase_rad), ...]``) and step until its HQ_EXCITATION_STATUS answer."""
         args = dict(axis="roll", injection="mixer", freq_hz=1.0, amplitude=0.05, cycles=20,
                     fade_cycles=1)
         args.update(kwargs)
         self.tel.start_excitation(args["axis"], args["injection"], args["freq_hz"],
-                                  args["amplitude"], args["cycles"], args["fade_cycles"])
+                                  args["amplitude"], args["cycles"], args["fade_cycles"],
+                                  args.get("harmonics"))
         return self.until(lambda m: m.get_type() == "HQ_EXCITATION_STATUS")

@@ -14,6 +14,7 @@
 #include "core/excitation.hpp"
 #include "core/flight_controller.hpp"
 #include "core/loop_load.hpp"
+#include "core/allocation.hpp"
 #include "core/mixer.hpp"
 #include "core/mpu6050.hpp"
 #include "core/params.hpp"
@@ -157,11 +158,12 @@ void bind_supervisor(py::module_& m) {
         .def_readwrite("abort_angle_rad", &SafetyLimits::abort_angle_rad)
         .def_readwrite("abort_rate_rad_s", &SafetyLimits::abort_rate_rad_s)
         .def_property("max_amplitude", [](const SafetyLimits& l) {
-            return std::array<float, kInjections>{l.max_amplitude[0], l.max_amplitude[1],
-                                                  l.max_amplitude[2]};
-        }, [](SafetyLimits& l, const std::array<float, kInjections>& a) {
-            for (int i = 0; i < kInjections; ++i) l.max_amplitude[i] = a[i];
-        }, "Largest amplitude per injection point: angle (rad), rate (rad/s), mixer.")
+            return std::array<float, kInjectionBounds>{l.max_amplitude[0], l.max_amplitude[1],
+                                                       l.max_amplitude[2], l.max_amplitude[3]};
+        }, [](SafetyLimits& l, const std::array<float, kInjectionBounds>& a) {
+            for (int i = 0; i < kInjectionBounds; ++i) l.max_amplitude[i] = a[i];
+        }, "Largest amplitude per injection point: angle (rad), rate (rad/s), mixer, and one "
+           "for every motor injection (thrust fraction).")
         .def_readwrite("min_freq_hz", &SafetyLimits::min_freq_hz)
         .def_readwrite("max_freq_fraction", &SafetyLimits::max_freq_fraction)
         .def_readwrite("max_duration_s", &SafetyLimits::max_duration_s)
@@ -321,8 +323,15 @@ PYBIND11_MODULE(_firmware, m) {
 
     py::enum_<Axis>(m, "Axis").value("ROLL", Axis::Roll).value("PITCH", Axis::Pitch)
         .value("YAW", Axis::Yaw);
-    py::enum_<Injection>(m, "Injection").value("ANGLE", Injection::Angle)
-        .value("RATE", Injection::Rate).value("MIXER", Injection::Mixer);
+    {
+        auto injection = py::enum_<Injection>(m, "Injection").value("ANGLE", Injection::Angle)
+            .value("RATE", Injection::Rate).value("MIXER", Injection::Mixer)
+            .value("MOTORS", Injection::Motors);
+        for (int i = 0; i < kMaxRotors; ++i) {
+            const std::string name = "MOTOR" + std::to_string(i + 1);
+            injection.value(name.c_str(), static_cast<Injection>(static_cast<int>(Injection::Motor1) + i));
+        }
+    }
 
     py::class_<Vec3>(m, "Vec3")
         .def(py::init([](float x, float y, float z) { return Vec3{x, y, z}; }),
@@ -479,7 +488,14 @@ PYBIND11_MODULE(_firmware, m) {
         .def("stop", &Excitation::stop)
         .def("finish", &Excitation::finish)
         .def_property_readonly("config", [](const Excitation& e) { return e.config(); })
-        .def("next", &Excitation::next)
+        .def("next", [](Excitation& e) { return e.next(); })
+        .def("next_groups", [](Excitation& e, int groups) {
+            if (groups < 1 || groups > kMaxRotors) throw py::value_error("1 to 8 groups");
+            std::array<float, kMaxRotors> part{};
+            const float sum = e.next(part.data(), groups);
+            return std::make_pair(sum, std::vector<float>(part.begin(), part.begin() + groups));
+        }, py::arg("groups"),
+           "The value and each group's part (harmonic i to group i mod groups), then advance.")
         .def_property_readonly("active", &Excitation::active)
         .def_property_readonly("measuring", &Excitation::measuring)
         .def_property_readonly("period_samples", &Excitation::period_samples)

@@ -101,7 +101,7 @@ ExcitationState Excitation::state() const {
     return measuring() ? ExcitationState::Running : ExcitationState::Fading;
 }
 
-float Excitation::next() {
+float Excitation::next(float* per_group, int groups) {
     if (!active_) return 0.0f;
     float envelope = 1.0f;
     if (k_ < fade_) {
@@ -115,13 +115,26 @@ float Excitation::next() {
         value = config_.amplitude * envelope * std::sin(kTwoPi * static_cast<float>(index_[0]) / n);
     } else {
         float sum = 0.0f;
+        for (int g = 0; g < groups; ++g) per_group[g] = 0.0f;
         for (int i = 0; i < config_.harmonics; ++i) {
             const Harmonic& h = config_.harmonic[i];
-            sum += h.amplitude * std::sin(kTwoPi * static_cast<float>(index_[i]) / n + h.phase_rad);
+            const float part =
+                h.amplitude * std::sin(kTwoPi * static_cast<float>(index_[i]) / n + h.phase_rad);
+            sum += part;
+            if (groups > 0) per_group[i % groups] += part;
         }
-        if (!(std::fabs(sum) <= config_.amplitude * (1.0f + kPeakMargin))) {
+        bool over = !(std::fabs(sum) <= config_.amplitude * (1.0f + kPeakMargin));
+        if (groups > 0) {
+            over = false;
+            for (int g = 0; g < groups; ++g) {
+                over = over || !(std::fabs(per_group[g]) <= config_.amplitude * (1.0f + kPeakMargin));
+                per_group[g] *= envelope;
+            }
+        }
+        if (over) {
             peak_exceeded_ = true;                // not output: stop at once
             active_ = false;
+            for (int g = 0; g < groups; ++g) per_group[g] = 0.0f;
             return 0.0f;
         }
         value = envelope * sum;

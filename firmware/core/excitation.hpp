@@ -29,8 +29,24 @@ enum class Injection : uint8_t {
     Angle = HQ_INJECTION_ANGLE,
     Rate = HQ_INJECTION_RATE,
     Mixer = HQ_INJECTION_MIXER,
+    Motor1 = HQ_INJECTION_MOTOR1,   // to Motor1 + 7: one rotor's thrust command, rotor 0 first
+    Motors = HQ_INJECTION_MOTORS,   // every rotor, a multisine's harmonics interleaved
 };
 constexpr int kInjections = HQ_INJECTION_ENUM_END;
+// The amplitude bounds (SafetyLimits::max_amplitude): angle, rate, mixer, and one for every
+// motor injection (a thrust fraction).
+constexpr int kInjectionBounds = 4;
+inline int amplitude_bound(Injection i) {
+    return i < Injection::Motor1 ? static_cast<int>(i) : kInjectionBounds - 1;
+}
+// The rotor a motor injection adds to (0 the central one), kAllRotors for Motors, kNoRotor
+// for the injections before the allocation.
+constexpr int kNoRotor = -1, kAllRotors = -2;
+inline int injected_rotor(Injection i) {
+    if (i == Injection::Motors) return kAllRotors;
+    return i >= Injection::Motor1 ? static_cast<int>(i) - static_cast<int>(Injection::Motor1)
+                                  : kNoRotor;
+}
 
 // Where an excitation is in its life (HQ_EXCITATION_STATE).
 enum class ExcitationState : uint8_t {
@@ -59,8 +75,8 @@ struct ExcitationConfig {
     Injection injection = Injection::Mixer;
     // Requested (base) frequency; the nearest integer-period frequency is used.
     float freq_hz = 1.0f;
-    // Injection units: rad (angle), rad/s (rate), normalised (mixer). A sine's amplitude; a
-    // multisine's declared peak.
+    // Injection units: rad (angle), rad/s (rate), normalised (mixer), thrust fraction (motor).
+    // A sine's amplitude; a multisine's declared peak (for Motors: of each rotor's own sum).
     float amplitude = 0.0f;
     uint16_t cycles = 10;          // full-amplitude (base) periods
     uint16_t fade_cycles = 1;      // cycles of the lowest harmonic of fade in, and again out
@@ -99,8 +115,10 @@ public:
     bool finish();
 
     // The value for this loop sample, then advance; idle after the last one. 0 when idle,
-    // and 0 (and idle, peak_exceeded()) for a sample beyond the declared peak.
-    float next();
+    // and 0 (and idle, peak_exceeded()) for a sample beyond the declared peak. With `groups`
+    // > 0 (a multisine), harmonic i's part also goes to per_group[i % groups], and the declared
+    // peak bounds each group's sum instead of the whole (Injection::Motors).
+    float next(float* per_group = nullptr, int groups = 0);
 
     bool active() const { return active_; }
     const ExcitationConfig& config() const { return config_; }

@@ -100,11 +100,13 @@ void FlightController::step(const RcInput& rc, LoopInbox& inbox) {
     in.imu_sample = read_imu(dt);
     in.attitude = status_.state.attitude;
     in.rate = status_.state.rate;
+    float rotor_excitation[kMaxRotors] = {};
+    in.rotor_excitation = rotor_excitation;
     answer(inbox, rc, now);
     run_program(rc, now);
     const float excitation = supervisor_.update(in);
     recover_imu(now);
-    run_control(rc, excitation, dt);
+    run_control(rc, excitation, rotor_excitation, dt);
     publish_events();
     publish(now);
     save_params_when_due(now);     // its notice goes out after the telemetry
@@ -205,7 +207,22 @@ void FlightController::recover_imu(uint64_t now_us) {
     filter_.reset();
 }
 
-void FlightController::run_control(const RcInput& rc, float excitation, float dt_s) {
+// A motor injection's excitation added to the allocation's thrust fractions, each kept within
+// 0..1 (a clipped one flags the torque as limited: the rotor did not get all it was asked).
+void FlightController::inject_motors(AllocationOutput& out, float excitation,
+                                     const float rotor_excitation[]) const {
+    const int rotor = injected_rotor(supervisor_.excitation_config().injection);
+    if (rotor == kNoRotor) return;
+    for (int i = 0; i < allocation_.count(); ++i) {
+        const float add = rotor == kAllRotors ? rotor_excitation[i] : (i == rotor ? excitation : 0.0f);
+        const float m = out.motor[i] + add;
+        out.motor[i] = clampf(m, 0.0f, 1.0f);
+        if (out.motor[i] != m) out.torque_limited = out.saturated = true;
+    }
+}
+
+void FlightController::run_control(const RcInput& rc, float excitation,
+                                   const float rotor_excitation[], float dt_s) {
     const Sticks s = sticks(rc, params_.values().sticks);
     const ExcitationConfig& exc = supervisor_.excitation_config();
     CascadeInput in;
@@ -224,8 +241,9 @@ void FlightController::run_control(const RcInput& rc, float excitation, float dt
     status_.state.angle_sp = c.angle_sp;
     status_.state.rate_sp = c.rate_sp;
     status_.state.torque = c.torque;
-    const AllocationOutput out =
+    AllocationOutput out =
         allocation_.allocate(MixerCommand{s.throttle, c.torque.x, c.torque.y, c.torque.z});
+    inject_motors(out, excitation, rotor_excitation);
     status_.state.saturation = static_cast<uint8_t>(
         status_.state.sensor_clipped | (out.torque_limited ? HQ_SATURATION_TORQUE : 0) |
         (out.collective_limited ? HQ_SATURATION_COLLECTIVE : 0));

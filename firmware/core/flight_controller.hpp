@@ -86,7 +86,10 @@ private:
     bool read_imu(float dt_s);
     void recover_imu(uint64_t now_us);
     InitResult init_imu();
-    void run_control(const RcInput& rc, float excitation, float dt_s);
+    void run_control(const RcInput& rc, float excitation, const float rotor_excitation[],
+                     float dt_s);
+    void inject_motors(AllocationOutput& out, float excitation,
+                       const float rotor_excitation[]) const;
     float clamp_dt(uint64_t now_us);
     void publish(uint64_t now_us);
     void publish_events();

@@ -199,7 +199,7 @@ void FlightController::apply_params(uint8_t changed, uint64_t now_us) {
 // armed). A geometry it refuses leaves it refusing (zero thrust) and arming refused, said.
 void FlightController::configure_allocation() {
     const bool ok = allocation_.configure(allocation_geometry(params_.values().geometry));
-    supervisor_.set_geometry_ok(ok);
+    supervisor_.set_geometry(ok, allocation_.count());
     if (!ok) notice(MAV_SEVERITY_WARNING, allocation_.reason());
 }
 

@@ -343,12 +343,17 @@ Reason Supervisor::check_excitation(const ExcitationConfig& c, uint64_t now_us,
 Reason Supervisor::check_excitation_bounds(const ExcitationConfig& c) const {
     const auto axis = static_cast<uint8_t>(c.axis);
     const auto injection = static_cast<uint8_t>(c.injection);
+    const int rotor = injected_rotor(c.injection);
     if (axis >= kAxes || injection >= kInjections ||
-        (c.axis == Axis::Yaw && c.injection == Injection::Angle)) {
+        (c.axis == Axis::Yaw && c.injection == Injection::Angle) || rotor >= rotors_) {
         return Reason::AxisInjection;
     }
+    // Every rotor its own lines: a multisine with at least one harmonic per rotor.
+    if (rotor == kAllRotors && !(c.signal == Signal::Multisine && c.harmonics >= rotors_)) {
+        return Reason::Harmonics;
+    }
     if (!(std::isfinite(c.amplitude) && c.amplitude > 0.0f &&
-          c.amplitude <= limits_.max_amplitude[injection])) {
+          c.amplitude <= limits_.max_amplitude[amplitude_bound(c.injection)])) {
         return Reason::Amplitude;
     }
     if (!(std::isfinite(c.freq_hz) && c.freq_hz > 0.0f)) return Reason::Frequency;
@@ -439,7 +444,9 @@ float Supervisor::run_excitation(const SupervisorInputs& in) {
     }
     exc_state_ = excitation_.state();
     if (!excitation_.active()) return 0.0f;
-    const float value = excitation_.next();
+    const bool split = injected_rotor(excitation_.config().injection) == kAllRotors &&
+                       in.rotor_excitation != nullptr;
+    const float value = excitation_.next(in.rotor_excitation, split ? rotors_ : 0);
     if (!excitation_.active()) {
         end_excitation(excitation_.peak_exceeded() ? Reason::Peak : Reason::Finished);
     }

@@ -130,7 +130,7 @@ struct SafetyLimits {
     // 45 deg of angle setpoint, with margin to the 80 deg abort limit for overshoot;
     // 200 deg/s of rate setpoint, half the abort rate (a resonant response may double it);
     // 1.0 of normalised torque, the axis's whole authority (beyond it the mixer clips).
-    float max_amplitude[kInjections] = {0.78539816f, 3.4906585f, 1.0f};
+    float max_amplitude[kInjectionBounds] = {0.78539816f, 3.4906585f, 1.0f, 0.2f};
     // Lowest frequency: a 20 s period, a third of the lowest band edge identified (yaw,
     // 0.15 Hz). Highest: a quarter of the loop rate (at least four samples per period).
     float min_freq_hz = 0.05f;
@@ -170,6 +170,9 @@ struct SupervisorInputs {
     bool imu_sample = false;   // a fresh IMU sample arrived in this loop
     Euler attitude{};          // measured, rad
     Vec3 rate{};               // measured, rad/s
+    // Where an Injection::Motors excitation puts each rotor's part (kMaxRotors values; the
+    // rotor count's are written, the rest left): nullptr, the sum only.
+    float* rotor_excitation = nullptr;
 };
 
 struct SupervisorCounters {
@@ -263,8 +266,12 @@ public:
     // New bounds (the parameters changed); the IMU timeout stays the one the chip's rate set.
     // A station a new gcs_sysid excludes is forgotten.
     void set_limits(const SafetyLimits& limits);
-    // Whether the geometry parameters gave an allocation (arming is refused while not).
-    void set_geometry_ok(bool ok) { geometry_ok_ = ok; }
+    // Whether the geometry parameters gave an allocation (arming is refused while not), and
+    // its rotor count (a motor injection names one of them).
+    void set_geometry(bool ok, int rotors) {
+        geometry_ok_ = ok;
+        rotors_ = rotors;
+    }
 
     // --- what the loop reports -------------------------------------------------------------
     // The oldest event not yet taken (STATUSTEXT); false when there is none.
@@ -325,6 +332,7 @@ private:
     Reason last_imu_finding_ = Reason::None;
     Reason last_reason_ = Reason::None;
     bool geometry_ok_ = true;
+    int rotors_ = 5;
     bool exc_end_pending_ = false;
     Reason exc_end_reason_ = Reason::None;
     SupervisorCounters counters_{};

@@ -22,7 +22,9 @@ from .connection import open_connection
 __all__ = ["TelemetryLink", "INPUT_OUTPUT", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
            "reason_text"]
 
-#: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point.
+#: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point
+#: the axis sweeps use (the commands' --inject choices). The firmware's per-rotor injections
+#: (motor1..8, motors) are driven through :meth:`TelemetryLink.start_excitation` directly.
 INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
 #: The messages a session driver (SIL or board) reads while an excitation runs, and the

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ...sim.base import dialect as names
+from ..acquire.link import INPUT_OUTPUT
 from .shared_options import add_board_actions, add_design_arguments, sweep_plan
 
 __all__ = ["add_parser", "run"]
@@ -37,7 +38,7 @@ def add_parser(sub, fmt) -> None:
                                    "sweep", HELP, fmt)
     setter = actions.add_parser("set", help="store a sweep as the board's program")
     setter.add_argument("--axis", choices=tuple(names.AXES), required=True)
-    setter.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
+    setter.add_argument("--inject", choices=tuple(INPUT_OUTPUT), default="mixer")
     add_design_arguments(setter, on_board=True)
     actions.add_parser("show", help="the board's program, one step a line")
     actions.add_parser("clear", help="forget the board's program")

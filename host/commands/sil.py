@@ -6,6 +6,7 @@ import os
 import sys
 
 from ...sim.base import dialect as names
+from ..acquire.link import INPUT_OUTPUT
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from ...sim.plant.vehicle import RIGS
@@ -47,7 +48,7 @@ def add_parser(sub, fmt) -> None:
                    help="numerator, descending powers of s (default: the paper's roll model)")
     p.add_argument("--den", type=finite, nargs="+", metavar="A", default=[1.0, 5.13, 22.93],
                    help="denominator, descending powers of s")
-    p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
+    p.add_argument("--inject", choices=tuple(INPUT_OUTPUT), default="mixer")
     p.add_argument("--freq-hz", type=number_in(0, 1e6, lo_open=True), required=True, metavar="F")
     p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), required=True, metavar="A",
                    help="deg for angle, deg/s for rate, normalised torque (-1..1) for mixer")

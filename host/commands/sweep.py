@@ -9,6 +9,7 @@ import os
 import sys
 
 from ...sim.base import dialect as names
+from ..acquire.link import INPUT_OUTPUT
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S
 from ...sim.rig.setup import PLANTS
@@ -58,7 +59,7 @@ def add_parser(sub, fmt) -> None:
     p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--axis", choices=tuple(names.AXES), required=True)
-    p.add_argument("--inject", choices=tuple(names.INJECTIONS), default="mixer")
+    p.add_argument("--inject", choices=tuple(INPUT_OUTPUT), default="mixer")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     add_port_argument(where, required=False)

@@ -83,5 +83,7 @@ MIN_TIME_CONSTANT_S = float(_firmware.MIN_TIME_CONSTANT_S)
 
 def max_amplitude(inject: str) -> float:
     """The firmware's largest amplitude (a multisine's peak) at an injection point, in its
-    units: rad (angle), rad/s (rate), normalised torque command (mixer)."""
-    return float(_LIMITS.max_amplitude[dialect.INJECTIONS[inject]])
+    units: rad (angle), rad/s (rate), normalised torque command (mixer), thrust fraction
+    (motor1..8 and motors, which share the last bound, EXC_MAX_MOT)."""
+    bounds = _LIMITS.max_amplitude
+    return float(bounds[min(dialect.INJECTIONS[inject], len(bounds) - 1)])

@@ -17,8 +17,10 @@ constexpr const char* kVersionText = "heliquad " HQ_LOG_STR(HQ_FW_VERSION_MAJOR)
 constexpr float kDegPerRad = 57.29577951308232f;
 
 // ArduPilot's SID_AXIS numbers for the same experiments: 1-3 input angle, 7-9 rate, 10-12
-// mixer (roll, pitch, yaw).
+// mixer (roll, pitch, yaw); 0 (none of ArduPilot's) for a motor injection, which HQSD's
+// injection names.
 uint8_t systemid_axis(Injection injection, Axis axis) {
+    if (injected_rotor(injection) != kNoRotor) return 0;
     const uint8_t base = injection == Injection::Angle ? 1 : (injection == Injection::Rate ? 7 : 10);
     return static_cast<uint8_t>(base + static_cast<uint8_t>(axis));
 }
