@@ -25,6 +25,8 @@ from heliquad.sim.plant.rotor_geometry import (RANGES, UNUSED_ROTOR, effectivene
 from heliquad.sim.plant.vehicle import GRAVITY_M_S2
 from heliquad.sim.plant.vehicle_params import load_params
 
+from params_cli_test import ParamBoard
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SHIPPED = ROOT / "sim" / "plant" / "vehicle.toml"
 DATA = ROOT / "tests" / "data"
@@ -130,6 +132,39 @@ def test_every_value_is_the_float_the_board_keeps(vehicle, tmp_path):
         assert abs(lines[name].value - value) <= FILE_VALUE_TOLERANCE, name
     assert "heliquad params from-vehicle" in text.splitlines()[2]
     assert re.search(r"^1\t1\tCA_ROTOR0_AZ\t-1\t9$", text, re.M)
+
+
+class GeometryBoard(ParamBoard):
+    """The parameter protocol's fake board (tests/params_cli_test.py) holding the geometry
+    parameters in their ranges, each at an unused rotor's value, four rotors, 1 N."""
+
+    def __init__(self):
+        super().__init__()
+        names = ["CA_ROTOR_COUNT", "CA_HOVER_THRUST"]
+        names += [name for n in range(fw.MAX_ROTORS) for name in rotor_names(n)]
+        self.names = names
+        self.types = {name: INT32 if name == "CA_ROTOR_COUNT" else REAL32 for name in names}
+        self.ranges = {name: RANGES[name if name in RANGES else re.sub(r"\d", "n", name, 1)]
+                       for name in names}
+        self.values = {name: UNUSED_ROTOR[name[-2:]] for name in names[2:]}
+        self.values.update(CA_ROTOR_COUNT=4.0, CA_HOVER_THRUST=1.0)
+
+
+def test_params_load_sets_the_file_on_a_board(tmp_path):
+    params = from_vehicle(made_up_six(tmp_path), tmp_path)
+    board = GeometryBoard()
+    try:
+        res = heliquad("params", "--port", board.port, "load", tmp_path / "vehicle.params")
+        values = dict(board.values)
+    finally:
+        board.close()
+    assert res.returncode == 0, res.stderr
+    # the count, the weight and the six rotors' 48 parameters less the 9 they share with an
+    # unused rotor (the central rotor's and the sixth's axes straight up, 3 each; the central
+    # rotor's hub at x = y = 0, the fifth's at z = 0); so are the unused slots' 16
+    assert "loading 66 parameters" in res.stdout and "41 set, 25 already so, 0 refused" in \
+        res.stdout, res.stdout
+    assert values == {name: value for name, (value, _) in params.items()}
 
 
 def test_the_ranges_are_the_firmwares_when_its_table_has_them():
