@@ -21,7 +21,8 @@ from heliquad.host.acquire.param_protocol import FILE_VALUE_TOLERANCE, value_tex
 from heliquad.host.records.params_file import read_params_file
 from heliquad.sim.base.errors import InputError
 from heliquad.sim.plant.rotor_geometry import (RANGES, UNUSED_ROTOR, effectiveness,
-                                               geometry_params, rotor_names)
+                                               firmware_geometry, geometry_params, range_of,
+                                               rotor_names)
 from heliquad.sim.plant.vehicle import GRAVITY_M_S2
 from heliquad.sim.plant.vehicle_params import load_params
 
@@ -144,8 +145,7 @@ class GeometryBoard(ParamBoard):
         names += [name for n in range(fw.MAX_ROTORS) for name in rotor_names(n)]
         self.names = names
         self.types = {name: INT32 if name == "CA_ROTOR_COUNT" else REAL32 for name in names}
-        self.ranges = {name: RANGES[name if name in RANGES else re.sub(r"\d", "n", name, 1)]
-                       for name in names}
+        self.ranges = {name: range_of(name) for name in names}
         self.values = {name: UNUSED_ROTOR[name[-2:]] for name in names[2:]}
         self.values.update(CA_ROTOR_COUNT=4.0, CA_HOVER_THRUST=1.0)
 
@@ -190,15 +190,9 @@ def test_a_figure_below_single_precision_is_written_as_zero(tmp_path):
 
 # --- the firmware's allocation from those values ------------------------------------------
 
-def firmware_geometry(params) -> fw.AllocationGeometry:
-    """The firmware's geometry from the parameters, as it reads them: |KM| the moment ratio,
-    its sign the spin (0 spins +1), rotors up to the count."""
-    rotors = []
-    for index in range(int(params["CA_ROTOR_COUNT"][0])):
-        px, py, pz, ax, ay, az, ct, km = (params[n][0] for n in rotor_names(index))
-        rotors.append(fw.RotorGeometry((px, py, pz), (ax, ay, az), ct, abs(km),
-                                       -1 if km < 0 else 1))
-    return fw.AllocationGeometry(rotors, hover_thrust_n=params["CA_HOVER_THRUST"][0])
+def allocation_of(params) -> fw.Allocation:
+    """The firmware's allocation from the parameters {name: (value, type)}."""
+    return fw.Allocation(firmware_geometry({name: value for name, (value, _) in params.items()}))
 
 
 def made_up_six(tmp_path) -> pathlib.Path:
@@ -210,7 +204,7 @@ def test_the_firmwares_effectiveness_is_the_references(which, tmp_path):
     vehicle = {"shipped": SHIPPED, "six": DATA / "six_rotors.toml",
                "eight": DATA / "eight_rotors.toml"}.get(which) or made_up_six(tmp_path)
     params = from_vehicle(vehicle, tmp_path)
-    allocation = fw.Allocation(firmware_geometry(params))
+    allocation = allocation_of(params)
     assert allocation.ok, allocation.reason
     got = np.array(allocation.effectiveness)
     want = effectiveness(load_params(str(vehicle)).rotors)
@@ -240,7 +234,7 @@ def test_the_hover_the_firmware_computes_holds_the_weight(tmp_path):
     # give the reference's vertical force equal to the weight and no moment.
     vehicle = load_params(str(made_up_six(tmp_path)))
     params = from_vehicle(made_up_six(tmp_path), tmp_path)
-    allocation = fw.Allocation(firmware_geometry(params))
+    allocation = allocation_of(params)
     wrench = effectiveness(vehicle.rotors) @ np.array(allocation.hover_fractions)
     assert wrench[0] == pytest.approx(2.1 * GRAVITY_M_S2, rel=1e-5)
     np.testing.assert_allclose(wrench[1:], 0.0, atol=1e-5)
@@ -274,10 +268,15 @@ def not_toml(path):
     return path
 
 
-def mass(kg: float):
+def mass(kg: float, rotors=MADE_UP_SIX):
     def make(path):
-        return with_rotors(path, rotors_toml(MADE_UP_SIX), mass_kg=kg)
+        return with_rotors(path, rotors_toml(rotors), mass_kg=kg)
     return make
+
+
+#: The shipped vehicle's rotors as rows of rotors_toml.
+SHIPPED_ROTORS = [(r.position_m, r.thrust_axis, r.spin, r.max_thrust_n, r.torque_per_thrust_m)
+                  for r in load_params(str(SHIPPED)).rotors]
 
 
 REFUSED = {
@@ -308,6 +307,11 @@ REFUSED = {
                               "the firmware's CA_HOVER_THRUST (0.5 to 500 N)"),
     "too light": (mass(0.05), "CA_HOVER_THRUST (0.5 to 500 N)"),
     "not TOML": (not_toml, "not valid TOML"),
+    # what the firmware's allocation refuses, in its words
+    "rotors in a line": (rotor_count(5), "the firmware cannot fly this geometry (allocation: "
+                                         "pitch depends on thrust and roll)"),
+    "heavier than its rotors lift": (mass(9.0, SHIPPED_ROTORS), "the firmware cannot fly this "
+                                     "geometry (allocation: hover needs rotor 0 beyond 0..1)"),
 }
 
 

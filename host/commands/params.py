@@ -34,7 +34,8 @@ floats; whole-number parameters (INT32) take whole numbers only.
                   no board: the vehicle file's geometry (its rotors and weight) as the
                   firmware's CA_* parameters, into a new .params file that load then sets
                   (docs/vehicle-geometry.md); a vehicle the firmware cannot fly (not 4 to 8
-                  rotors, a figure beyond a parameter's range) is one line (exit 2)
+                  rotors, a figure beyond a parameter's range, a geometry its allocation
+                  refuses) is one line (exit 2)
 
 A list lost on the way is asked for again by index; every request goes again a few times
 before the board is given up on (exit 1, as for a refusal; exit 2 is for wrong arguments

@@ -4,21 +4,26 @@ parameters (``CA_ROTOR_COUNT``, ``CA_HOVER_THRUST`` and per rotor ``CA_ROTORn_PX
 ``CA_ROTORn_KM``, named as PX4's control allocation names them), checked against the ranges
 the firmware takes; and the effectiveness matrix B the firmware's allocation
 (firmware/core/allocation.cpp) builds from that geometry, in numpy: the reference its tests
-compare it with, from the same rotors the simulator's vehicle (vehicle.py) flies.
+compare it with, from the same rotors the simulator's vehicle (vehicle.py) flies. A geometry
+the firmware's allocation would refuse is refused here by the same code, through its bindings.
 """
 
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 import numpy as np
+
+from heliquad import _firmware
 
 from ..base import firmware_facts as facts
 from ..base.errors import InputError
 from .vehicle import GRAVITY_M_S2
 
 __all__ = ["GeometryParam", "RANGES", "UNUSED_ROTOR", "ROWS", "geometry_params",
-           "effectiveness", "rotor_names"]
+           "effectiveness", "rotor_names", "range_of", "firmware_geometry",
+           "check_with_firmware"]
 
 #: The ranges the firmware's geometry parameters take (its parameter table), by name, ``n``
 #: standing for a rotor's index: m for positions, N for the weight and the largest thrust, m
@@ -55,13 +60,22 @@ def rotor_names(n: int) -> list[str]:
     return [f"CA_ROTOR{n}_{key}" for key in UNUSED_ROTOR]
 
 
+def range_of(name: str) -> tuple:
+    """A geometry parameter's range, ``CA_ROTOR3_PX`` say, from :data:`RANGES`."""
+    if name in RANGES:
+        return RANGES[name]
+    return RANGES[re.sub(r"^CA_ROTOR\d_", "CA_ROTORn_", name)]
+
+
 def geometry_params(vehicle) -> list[GeometryParam]:
     """The firmware's geometry parameters of ``vehicle`` (a
     :class:`~heliquad.sim.plant.vehicle_params.VehicleParams`): the rotor count, the weight,
     then every rotor's slot from 0 to the firmware's last (the file's rotors[1], the central
     rotor, is rotor 0; slots past the count as :data:`UNUSED_ROTOR`, so the file sets the
     board's whole geometry). Each value as single precision carries it. A vehicle the
-    firmware cannot take is one InputError naming the file, the rotor and the key."""
+    firmware cannot take is one InputError naming the file, the rotor and the key (a figure
+    beyond its parameter's range) or quoting the firmware's allocation (a geometry it cannot
+    fly: :func:`check_with_firmware`)."""
     source, n = vehicle.source, len(vehicle.rotors)
     lo, hi = RANGES["CA_ROTOR_COUNT"]
     if not lo <= n <= hi:
@@ -76,6 +90,7 @@ def geometry_params(vehicle) -> list[GeometryParam]:
             else UNUSED_ROTOR
         out += [GeometryParam(name, values[key], False)
                 for name, key in zip(rotor_names(index), UNUSED_ROTOR)]
+    check_with_firmware(source, out)
     return out
 
 
@@ -101,7 +116,7 @@ def _checked(source, key: str, name: str, value: float, unit: str) -> float:
     kept = float(np.float32(value))
     if abs(kept) < _FLOAT32_TINY:
         kept = 0.0
-    lo, hi = RANGES[name if name in RANGES else "CA_ROTORn_" + name.rsplit("_", 1)[1]]
+    lo, hi = range_of(name)
     if not lo <= kept <= hi:
         unit = f" {unit}" if unit else ""
         raise InputError(f"{source}: {key}: {value:.6g}{unit} is beyond the firmware's "
@@ -122,3 +137,25 @@ def effectiveness(rotors) -> np.ndarray:
         b[1:, i] = np.cross(r, a) - rotor.spin * rotor.torque_per_thrust_m * a
         b[:, i] *= rotor.max_thrust_n
     return b
+
+
+def firmware_geometry(values: dict) -> _firmware.AllocationGeometry:
+    """The firmware's allocation geometry (its bindings) from the geometry parameters'
+    ``values`` ({name: value}), as the firmware reads them: the rotors up to the count, each
+    with ``|KM|`` its moment ratio and the sign of ``KM`` its spin (a ``KM`` of 0 spins +1)."""
+    rotors = []
+    for index in range(int(values["CA_ROTOR_COUNT"])):
+        px, py, pz, ax, ay, az, ct, km = (values[name] for name in rotor_names(index))
+        rotors.append(_firmware.RotorGeometry((px, py, pz), (ax, ay, az), ct, abs(km),
+                                              -1 if km < 0 else 1))
+    return _firmware.AllocationGeometry(rotors, hover_thrust_n=values["CA_HOVER_THRUST"])
+
+
+def check_with_firmware(source, params: list[GeometryParam]) -> None:
+    """Refuse, as the board would, a geometry the firmware's allocation cannot fly (its own
+    code, through its bindings: no four independent commands, hover beyond a rotor's range):
+    one InputError naming the file and quoting the allocation's reason."""
+    allocation = _firmware.Allocation(firmware_geometry({p.name: p.value for p in params}))
+    if not allocation.ok:
+        raise InputError(f"{source}: the firmware cannot fly this geometry "
+                         f"({allocation.reason})")
