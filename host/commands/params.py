@@ -54,7 +54,8 @@ examples: heliquad params --port /dev/ttyACM0 list
 
 def add_parser(sub, fmt) -> None:
     p, actions = add_board_actions(sub, "params", "list, get, set, save and load the board's "
-                                   "parameters", HELP, fmt, port_required=False)
+                                   "parameters; a vehicle file's geometry as parameters",
+                                   HELP, fmt, port_required=False)
     actions.add_parser("list", help="every parameter: name, value, type")
     actions.add_parser("get", help="one parameter").add_argument("name", metavar="NAME")
     setter = actions.add_parser("set", help="set one parameter and check the board took it")
@@ -113,6 +114,7 @@ def _check_new_file(path, action: str) -> None:
 
 
 def _from_vehicle(args) -> int:
+    """The vehicle file's geometry parameters into a new .params file (no board)."""
     # the command's work, imported when it runs: --help imports every command module
     from ...sim.base.dialect import dialect
     from ...sim.plant.rotor_geometry import geometry_params
