@@ -52,6 +52,7 @@ def test_the_facts_are_the_bindings():
          lim.max_amplitude[int(fw.Injection.MIXER)]]
     assert facts.MAX_HARMONICS == fw.MAX_HARMONICS
     assert facts.MIN_TIME_CONSTANT_S == fw.MIN_TIME_CONSTANT_S
+    assert (facts.MIN_ROTORS, facts.MAX_ROTORS) == (fw.MIN_ROTORS, fw.MAX_ROTORS) == (4, 8)
     assert facts.USB_IDENTITY == (fw.USB_VID, fw.USB_PID, fw.USB_MANUFACTURER, fw.USB_PRODUCT)
 
 

@@ -36,6 +36,7 @@ std::vector<RotorGeometry> rotors_of(const AllocationGeometry& g) {
 }  // namespace
 
 void bind_allocation(py::module_& m) {
+    m.attr("MIN_ROTORS") = kMinRotors;
     m.attr("MAX_ROTORS") = kMaxRotors;
     py::class_<RotorGeometry>(m, "RotorGeometry")
         .def(py::init([](std::array<float, 3> position_m, std::array<float, 3> axis,

@@ -8,7 +8,7 @@ import sys
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from .shared_options import add_board_actions, finite
+from .shared_options import add_board_actions, finite, require_port
 
 __all__ = ["add_parser", "run"]
 
@@ -30,6 +30,12 @@ floats; whole-number parameters (INT32) take whole numbers only.
   load FILE       set every parameter of FILE (QGroundControl's or MAVProxy's format) that
                   differs from the board, checking each; the ones refused are listed, the
                   rest still set (exit 1 when any was refused)
+  from-vehicle VEHICLE.toml --out FILE
+                  no board: the vehicle file's geometry (its rotors and weight) as the
+                  firmware's CA_* parameters, into a new .params file that load then sets
+                  (docs/vehicle-geometry.md); a vehicle the firmware cannot fly (not 4 to 8
+                  rotors, a figure beyond a parameter's range, a geometry its allocation
+                  refuses) is one line (exit 2)
 
 A list lost on the way is asked for again by index; every request goes again a few times
 before the board is given up on (exit 1, as for a refusal; exit 2 is for wrong arguments
@@ -41,12 +47,15 @@ examples: heliquad params --port /dev/ttyACM0 list
           heliquad params --port auto list          (the one heliquad board: docs/usb.md)
           heliquad params --port udpin:0.0.0.0:14550 set RATE_RLL_KC 2.5
           heliquad params --port /dev/ttyACM0 save rig-2026-11-24.params
+          heliquad params from-vehicle my-vehicle.toml --out my-vehicle.params
+          heliquad params --port auto load my-vehicle.params
 """
 
 
 def add_parser(sub, fmt) -> None:
     p, actions = add_board_actions(sub, "params", "list, get, set, save and load the board's "
-                                   "parameters", HELP, fmt)
+                                   "parameters; a vehicle file's geometry as parameters",
+                                   HELP, fmt, port_required=False)
     actions.add_parser("list", help="every parameter: name, value, type")
     actions.add_parser("get", help="one parameter").add_argument("name", metavar="NAME")
     setter = actions.add_parser("set", help="set one parameter and check the board took it")
@@ -59,6 +68,12 @@ def add_parser(sub, fmt) -> None:
                             "of QGroundControl's")
     actions.add_parser("load", help="set the parameters of a .params file").add_argument(
         "file", metavar="FILE")
+    vehicle = actions.add_parser("from-vehicle", help="a vehicle file's geometry as a new "
+                                 ".params file (no board)")
+    vehicle.add_argument("vehicle", metavar="VEHICLE.toml",
+                         help="the vehicle file (sim/plant/vehicle.toml is the reference)")
+    vehicle.add_argument("--out", required=True, metavar="FILE",
+                         help="the .params file to write (never over one that exists)")
     p.set_defaults(func=run)
 
 
@@ -67,15 +82,14 @@ def run(args) -> int:
     from ..acquire.link import TelemetryLink
     from ..acquire.param_protocol import ParamClient
     from ..acquire.ports import resolve_port
-    from ..records.output import check_output
     from ..records.params_file import check_name, read_params_file
 
+    if args.action == "from-vehicle":
+        return _from_vehicle(args)
+    require_port(args)
     entries = None
     if args.action == "save":
-        if os.path.lexists(args.file):
-            raise InputError(f"{args.file} exists: heliquad never writes over a parameter "
-                             "file; give another name")
-        check_output(args.file, "save")
+        _check_new_file(args.file, "save")
     elif args.action == "load":
         entries = [(name, value) for name, value, _ in read_params_file(args.file)]
     elif args.action in ("get", "set"):
@@ -86,6 +100,40 @@ def run(args) -> int:
         return _ACTIONS[args.action](client, args, entries)
     finally:
         link.close()
+
+
+def _check_new_file(path, action: str) -> None:
+    """``path`` may become a new parameter file: heliquad never writes over one."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..records.output import check_output
+
+    if os.path.lexists(path):
+        raise InputError(f"{path} exists: heliquad never writes over a parameter file; give "
+                         "another name")
+    check_output(path, action)
+
+
+def _from_vehicle(args) -> int:
+    """The vehicle file's geometry parameters into a new .params file (no board)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ...sim.base.dialect import dialect
+    from ...sim.plant.rotor_geometry import geometry_params
+    from ...sim.plant.vehicle_params import load_params
+    from ..acquire.param_protocol import Param
+    from ..records.params_file import write_params_file
+
+    vehicle = load_params(args.vehicle)
+    geometry = geometry_params(vehicle)
+    _check_new_file(args.out, "--out")
+    mav = dialect()
+    params = [Param(g.name, g.value, mav.MAV_PARAM_TYPE_INT32 if g.integer
+                    else mav.MAV_PARAM_TYPE_REAL32, index)
+              for index, g in enumerate(geometry)]
+    write_params_file(args.out, params, header=f"heliquad {__version__}, the geometry of the "
+                      f"vehicle file {args.vehicle} (heliquad params from-vehicle)")
+    print(f"wrote {len(params)} parameters to {args.out}: {len(vehicle.rotors)} rotors, "
+          f"weight {geometry[1].value:.4g} N")
+    return 0
 
 
 def _list(client, args, entries) -> int:

@@ -16,7 +16,7 @@ from ..acquire.excitation import amplitude_bound, bound_text, defaults_text, fir
 from ..acquire.link import DEFAULT_BAUD
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 
-__all__ = ["add_port_argument", "add_baud_argument", "add_board_actions", "add_firmware_argument", "firmware_link", "add_param_store_argument",
+__all__ = ["add_port_argument", "add_baud_argument", "add_board_actions", "require_port", "add_firmware_argument", "firmware_link", "add_param_store_argument",
            "add_sd_card_arguments", "sd_card",
            "add_fault_argument", "faults", "add_design_arguments", "sweep_plan",
            "check_plant", "check_model",
@@ -219,15 +219,26 @@ def add_baud_argument(p) -> None:
                         "ptys and network links)")
 
 
-def add_board_actions(sub, name: str, help_text: str, description: str, fmt):
+def add_board_actions(sub, name: str, help_text: str, description: str, fmt,
+                      port_required: bool = True):
     """A command that talks to a board over its link and does one of its ACTIONs: its
-    parser with --port (required) and --baud, and the ACTION subparsers (one required)."""
+    parser with --port (required, unless some ACTION needs no board: then the command's run
+    checks it with :func:`require_port`) and --baud, and the ACTION subparsers (one
+    required)."""
     p = sub.add_parser(name, help=help_text, description=description, formatter_class=fmt)
-    add_port_argument(p)
+    add_port_argument(p, required=port_required)
     add_baud_argument(p)
     actions = p.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
     return p, actions
+
+
+def require_port(args) -> None:
+    """The check argparse makes of a required --port, for a command whose --port is required
+    by some of its ACTIONs only (:func:`add_board_actions`): the same words, exit 2."""
+    if args.port is None:
+        raise InputError(f"the following arguments are required: --port (see heliquad "
+                         f"{args.command} --help)")
 
 
 def add_firmware_argument(p) -> None:

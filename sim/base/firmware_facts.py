@@ -1,10 +1,11 @@
 """The firmware's facts that the simulator and the host tool use: the control loop's rate and
 period, the most the host build runs at, the most its ptys' backlog bound can be, the
 defaults of its SafetyLimits (the excitation's band, length, fade and amplitude bounds, and
-the abort limits), and the Teensy image's USB identity (what ``--port auto`` matches).
+the abort limits), how many rotors its control allocation flies, and the Teensy image's USB
+identity (what ``--port auto`` matches).
 
 Each is defined once, in the firmware's C++ (firmware/core/flight_controller.hpp,
-supervisor.hpp, excitation.hpp, pid.hpp; firmware/targets/host/pty_backlog.hpp;
+supervisor.hpp, excitation.hpp, pid.hpp, allocation.hpp; firmware/targets/host/pty_backlog.hpp;
 firmware/targets/teensy35/usb_identity.hpp), and read
 here from its bindings (``heliquad._firmware``, the same code the firmware compiles); every
 Python use takes it from this module. tests/firmware_facts_test.py scans the Python sources
@@ -22,7 +23,7 @@ from . import dialect
 __all__ = ["LOOP_RATE_HZ", "LOOP_PERIOD_S", "MAX_LOOP_RATE_HZ", "MAX_PTY_BACKLOG_BYTES",
            "ABORT_ANGLE_RAD", "ABORT_RATE_RAD_S", "MIN_FREQ_HZ", "MAX_FREQ_FRACTION",
            "MAX_DURATION_S", "MIN_FADE_CYCLES", "MAX_HARMONICS", "MAX_PROGRAM_STEPS",
-           "MIN_TIME_CONSTANT_S",
+           "MIN_TIME_CONSTANT_S", "MIN_ROTORS", "MAX_ROTORS",
            "UsbIdentity", "USB_IDENTITY", "usb_serial_number",
            "max_amplitude", "safety_limits"]
 
@@ -79,6 +80,8 @@ MAX_HARMONICS = int(_firmware.MAX_HARMONICS)
 MAX_PROGRAM_STEPS = int(_firmware.MAX_PROGRAM_STEPS)
 #: The shortest integral or derivative time the PID takes, s (below it: no integral).
 MIN_TIME_CONSTANT_S = float(_firmware.MIN_TIME_CONSTANT_S)
+#: The fewest and the most rotors the control allocation flies (rotor 0 the central one).
+MIN_ROTORS, MAX_ROTORS = int(_firmware.MIN_ROTORS), int(_firmware.MAX_ROTORS)
 
 
 def max_amplitude(inject: str) -> float:
