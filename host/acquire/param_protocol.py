@@ -38,7 +38,7 @@ from .link import decode_value, encode_value
 
 __all__ = ["Param", "ParamClient", "ParamRefused", "NoAnswer", "value_text", "checked_value",
            "encode_value", "decode_value",
-           "same_value", "load_params", "session_params"]
+           "same_value", "load_params", "session_params", "SessionLink"]
 
 #: After a refused PARAM_SET, how long to wait for the STATUSTEXT that says why (it may
 #: come after the PARAM_VALUE).
@@ -265,7 +265,7 @@ def load_params(client: ParamClient, entries, progress=print) -> dict:
     return out
 
 
-class _SessionLink:
+class SessionLink:
     """A session (:mod:`heliquad.host.acquire.session`) as :class:`ParamClient`'s link: requests go
     out on its telemetry link, answers come from :meth:`advance` (which lets its time pass:
     simulated frames on the SIL, a poll period on a board), and the session sends the host's
@@ -297,7 +297,7 @@ def session_params(session, progress=print) -> dict | None:
     (the values as carried); None, said once, when the board sends none (a firmware without
     parameters)."""
     try:
-        params = ParamClient(_SessionLink(session)).fetch_all()
+        params = ParamClient(SessionLink(session)).fetch_all()
     except NoAnswer as exc:
         progress(f"warning: no parameters from the board, so the sweep records no gains: {exc}")
         return None

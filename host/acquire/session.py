@@ -24,12 +24,15 @@ from heliquad import _simcore
 
 from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
+from ...sim.plant.rotor_geometry import geometry_params
+from ...sim.plant.vehicle_params import load_params as load_vehicle
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
 from ..records.tlog import TlogWriter, create_log
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
+from .param_protocol import ParamClient, SessionLink, load_params
 
 __all__ = ["Session", "SilSession", "PortSession", "TELEMETRY_BATCH"]
 
@@ -201,6 +204,9 @@ class SilSession(Closing):
         # The tool's heartbeat, on exact frames so that runs repeat.
         self.heartbeat_frames = max(1, int(round(HEARTBEAT_PERIOD_S * cfg.loop_hz)))
         self.link_close_frame = link_close_frame(cfg.faults, self.dt_us)
+        # The default pilot (or the RC script) counts its frames from here: a session that
+        # sets the vehicle's geometry first holds the board disarmed while it does.
+        self.pilot_from = 0
 
     @property
     def frame(self) -> int:
@@ -265,14 +271,33 @@ class SilSession(Closing):
 
     def _run(self, first: int, n: int, collect) -> None:
         """Frames first .. first + n - 1 on the rig; telemetry read while they run."""
-        self.rig.advance(n, rc_block(first, n, self.cfg.collective, self.cfg.rc_script,
-                                     self.cfg.loop_hz),
+        self.rig.advance(n, rc_block(first - self.pilot_from, n, self.cfg.collective,
+                                     self.cfg.rc_script, self.cfg.loop_hz),
                          while_running=lambda: collect(self.telemetry.read()))
 
     def hover(self, progress=print) -> None:
-        """Boot, arm and hover for the settling time."""
+        """Boot, arm and hover for the settling time. With a vehicle file of its own
+        (``--params``), the board is first given that vehicle's geometry parameters (the
+        CA_* that ``heliquad params from-vehicle`` writes), disarmed, so that the firmware's
+        allocation flies the vehicle the simulator flies."""
         settle = int(round(self.cfg.settle_s * self.cfg.loop_hz))
+        if self.cfg.plant == "vehicle" and self.cfg.params:
+            self.advance(frames=BOOT_FRAMES)
+            self.set_geometry(progress)
+            self.pilot_from = self.frame
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
+
+    def set_geometry(self, progress=print) -> None:
+        """The vehicle file's geometry parameters onto the board (those that differ); a
+        refused one ends the session (the board would fly another vehicle)."""
+        entries = [(g.name, g.value) for g in geometry_params(load_vehicle(self.cfg.params))]
+        done = load_params(ParamClient(SessionLink(self)), entries, progress=lambda _: None)
+        if done["refused"]:
+            name, why = done["refused"][0]
+            raise InputError(f"the board refused the vehicle's {name}: {why}")
+        if done["changed"]:
+            progress(f"set {len(done['changed'])} geometry parameters of "
+                     f"{os.path.basename(self.cfg.params)} on the board")
 
     def close(self) -> None:
         """Close the telemetry link and the log, then the rig (the sim link, the firmware);
