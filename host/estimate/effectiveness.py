@@ -1,0 +1,337 @@
+"""Each rotor's control effectiveness from per-rotor injections on the one-axis rigs.
+
+docs/effectiveness.md derives the method. On the rig about axis ``k`` the cascade flies and
+rotor ``i``'s injection ``u_i`` is added to its thrust command after the allocation. Two
+responses are measured against ``u_i`` on each of its lines: the rate, ``T_p = p / u_i``,
+and the axis's torque command, ``T_c = c_k / u_i`` (:func:`rotor_points`). With every
+rotor's path to the rate
+
+    P_j(s) = (E_kj + s M_kj) exp(-s tau_j) / (T_j s + 1) R_k(s),
+
+(``E`` the effectiveness, rad/s^2 per unit of thrust command; ``M`` the rotor's spin-up
+reaction; ``R_k`` the rig's rate per angular acceleration) and the torque command's path
+``P_c = sum_j a_kj P_j`` (``a_kj``: rotor ``j``'s command per unit of the axis's torque
+command, the allocation's column), the measured rate response is
+
+    T_p = P_i / (1 + K P_c),    K = -T_c / T_p,
+
+where ``K`` (the controller, the one thing between the measured rate and the command) comes
+from the same record without noise to first order. :func:`estimate_effectiveness` fits
+``E``, ``M``, ``T`` and ``tau`` (``T`` and ``tau`` shared by the rigs) to every rotor's
+points at once by weighted least squares, each point weighted by its sigma, and gives the
+parameters' standard deviations from the fit's covariance.
+
+No I/O: a command feeds it from run folders (each rotor's excitation, the rate and the
+torque command logged per sample, the multisine's period and lines from the manifest, the
+allocation from the flown parameters).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.optimize
+
+from ...sim.base.dialect import AXES
+from ...sim.base.errors import InputError
+from .fsf import estimate_multisine_against_excitation, period_dfts, period_segments
+
+__all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rotor_points",
+           "estimate_effectiveness", "rig_from_poles"]
+
+#: A rotor's time constant and delay are reported only when one of its rows' effectiveness
+#: is this many sigmas from zero (else no rig moved it enough to see its lag).
+IDENTIFIED_SIGMAS = 3.0
+#: The fit's starting point: a small rotor's time constant and the sample-and-hold's
+#: delay, s (the fit moves them; they only need to be of the right order).
+START_TIME_CONSTANT_S = 0.05
+START_DELAY_S = 0.005
+#: Bounds of the fit: time constant (s) and delay (s), beyond any rotor and loop.
+TIME_CONSTANT_BOUNDS_S = (1e-3, 5.0)
+DELAY_BOUNDS_S = (-0.05, 0.2)
+
+
+@dataclasses.dataclass(frozen=True)
+class RotorPoints:
+    """What one rig measured of one rotor: on each line of the rotor's excitation, the rate
+    (``rate``) and the axis's torque command (``command``) against the injection, as
+    :class:`~heliquad.host.records.points.FrequencyPoint` lists of the same lines, and the
+    correlation of their errors ``E[dT_p conj(dT_c)] / (sigma_p sigma_c)``."""
+
+    axis: str
+    rotor: int                # 0-based, the firmware's motor order
+    rate: tuple
+    command: tuple
+    correlation: tuple        # per line, of the two points' errors (complex, |.| <= 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class Rig:
+    """One rig: its axis, the allocation's column for that axis (each rotor's thrust command
+    per unit of the axis's torque command, at the trim flown) and the rig's rate per angular
+    acceleration ``R(s) = s / (s^2 + damping s + stiffness)`` (rad/s, rad/s^2: its hinge's
+    damping and stiffness over its inertia)."""
+
+    axis: str
+    allocation: tuple
+    damping_rad_s: float = 0.0
+    stiffness_rad2_s2: float = 0.0
+
+    def response(self, omega_rad_s) -> np.ndarray:
+        s = 1j * np.asarray(omega_rad_s, dtype=float)
+        return s / (s * s + self.damping_rad_s * s + self.stiffness_rad2_s2)
+
+
+@dataclasses.dataclass(frozen=True)
+class EffectivenessEstimate:
+    """The fit. Rows roll, pitch, yaw (NaN for an axis no rig measured), columns the rotors.
+
+    ``effectiveness_rad_s2``: angular acceleration per unit of thrust command at steady state;
+    ``spin_up_rad_s``: the spin-up reaction's part, rad/s per unit of command (the
+    acceleration's term in ``s``); ``time_constant_s`` and ``delay_s`` per rotor (NaN when no
+    rig moved the rotor's row, ``IDENTIFIED_SIGMAS``); each with its sigma. ``chi2_dof``: the
+    weighted residuals' sum of squares over the degrees of freedom (about 1 when the model and
+    the points' sigmas hold)."""
+
+    effectiveness_rad_s2: np.ndarray
+    effectiveness_sigma_rad_s2: np.ndarray
+    spin_up_rad_s: np.ndarray
+    time_constant_s: np.ndarray
+    time_constant_sigma_s: np.ndarray
+    delay_s: np.ndarray
+    delay_sigma_s: np.ndarray
+    chi2_dof: float
+
+
+def rotor_points(excitation, rate, command, fs_hz: float, period: int, orders, axis: str,
+                 rotor: int, present=None) -> RotorPoints:
+    """One rotor's record on one rig as :class:`RotorPoints`: the rate and the torque command
+    each against the rotor's own excitation on its lines ``orders`` of the multisine's base
+    period (``period`` samples). The input of each estimate is the excitation itself, so a
+    point is ``Y / R`` with the sigma of its per-period scatter, which the other rotors' lines
+    (other harmonics of the same period) do not reach; the two scatters' correlation per line
+    comes with them (the command answers the rate's noise)."""
+    r = np.asarray(excitation, dtype=float)
+    args = (fs_hz, period, orders)
+    to_rate = estimate_multisine_against_excitation(r, r, rate, *args, present=present)
+    to_command = estimate_multisine_against_excitation(r, r, command, *args, present=present)
+    if [p.order for p in to_rate] != [p.order for p in to_command]:
+        raise InputError("the rate and the torque command follow the excitation on different "
+                         "lines")
+    starts, length = period_segments(r.size, period, 1)
+    correlation = []
+    for point in to_rate:
+        w = 2 * np.pi * point.order / period
+        ref = period_dfts(r, w, starts, length)
+        a, b = (period_dfts(np.asarray(x, dtype=float), w, starts, length) / ref
+                for x in (rate, command))
+        a, b = a - a.mean(), b - b.mean()
+        norm = math.sqrt(float(np.sum(np.abs(a) ** 2) * np.sum(np.abs(b) ** 2)))
+        correlation.append(complex(np.sum(a * np.conj(b)) / norm) if norm > 0 else 0j)
+    return RotorPoints(axis, rotor, tuple(to_rate), tuple(to_command), tuple(correlation))
+
+
+def rig_from_poles(axis: str, allocation, poles) -> Rig:
+    """The :class:`Rig` whose rate per angular acceleration has these poles: the axis
+    model's slowest one (damping only) or two (damping and stiffness), which are the hinge's
+    (docs/effectiveness.md)."""
+    poles = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if poles.size not in (1, 2) or np.any(poles.real > 0):
+        raise InputError("a rig has one or two stable poles: its hinge's damping and stiffness")
+    den = np.real(np.poly(poles)) if poles.size == 2 else np.array([1.0, -poles[0].real, 0.0])
+    return Rig(axis, tuple(allocation), float(den[1]), float(den[2]))
+
+
+class _Problem:
+    """Every record's lines stacked, and the model of what they measured: per line, the
+    residual ``T_p - P_c T_c - P_i`` is linear in ``E`` and ``M`` once the lags are held."""
+
+    def __init__(self, records, rigs: dict, rotors: int):
+        self.rotors, self.axes = rotors, sorted({r.axis for r in records}, key=AXES.get)
+        lines = []
+        for rec in records:
+            if rec.axis not in rigs:
+                raise InputError(f"no rig given for the {rec.axis} records")
+            if not 0 <= rec.rotor < rotors:
+                raise InputError(f"rotor {rec.rotor + 1} is not one of the {rotors}")
+            for p, c, rho in zip(rec.rate, rec.command, rec.correlation):
+                if not (p.sigma > 0 and c.sigma >= 0):
+                    raise InputError(f"rotor {rec.rotor + 1} on {rec.axis}: a point without "
+                                     f"a positive sigma at {p.omega_rad_s:.4g} rad/s")
+                lines.append((self.axes.index(rec.axis), rec.rotor, p.omega_rad_s, p.gain,
+                              c.gain, p.sigma, c.sigma, rho * p.sigma * c.sigma,
+                              rigs[rec.axis].response(p.omega_rad_s)))
+        cols = list(zip(*lines))
+        self.row, self.rotor = (np.array(c, dtype=int) for c in cols[:2])
+        self.omega, self.t_p, self.t_c, self.sigma_p, self.sigma_c, self.cov_pc, self.rig = (
+            np.array(c) for c in cols[2:])
+        self.alloc = np.array([rigs[a].allocation for a in self.axes], dtype=float)
+        if self.alloc.shape[1] != rotors:
+            raise InputError(f"an allocation column needs one entry per rotor ({rotors})")
+        self.weight = 1.0 / self.sigma_p
+
+    @property
+    def linear(self) -> int:
+        """How many of the parameters are linear: ``E`` and ``M`` of every row and rotor."""
+        return 2 * len(self.axes) * self.rotors
+
+    def design(self, t, tau) -> np.ndarray:
+        """Per line, the complex coefficient of each ``E`` (then each ``M``) in
+        ``P_i + P_c T_c``, the lags held at ``t`` and ``tau``."""
+        m, n = len(self.axes), self.rotors
+        s = 1j * self.omega[:, None]
+        lag = np.exp(-s * tau) / (t * s + 1) * self.rig[:, None]     # lines x rotors
+        own = np.zeros_like(lag)
+        own[np.arange(self.omega.size), self.rotor] = 1.0
+        per_rotor = (own + self.t_c[:, None] * self.alloc[self.row]) * lag
+        design = np.zeros((self.omega.size, 2 * m * n), dtype=complex)
+        for r in range(m):
+            on = self.row == r
+            design[on, r * n:(r + 1) * n] = per_rotor[on]
+            design[on, (m + r) * n:(m + r + 1) * n] = (s * per_rotor)[on]
+        return design
+
+    def reweigh(self, x) -> None:
+        """Each line's weight, ``1 / sigma`` of ``T_p - P_c T_c`` at the parameters ``x``."""
+        n = self.rotors
+        t, tau = np.exp(x[self.linear:self.linear + n]), x[self.linear + n:]
+        s = 1j * self.omega[:, None]
+        lag = np.exp(-s * tau) / (t * s + 1) * self.rig[:, None]
+        e, spin = (x[:self.linear // 2].reshape(-1, n), x[self.linear // 2:self.linear]
+                   .reshape(-1, n))
+        p_c = np.sum(self.alloc[self.row] * (e[self.row] + s * spin[self.row]) * lag, axis=1)
+        var = (self.sigma_p ** 2 + np.abs(p_c) ** 2 * self.sigma_c ** 2
+               - 2 * np.real(np.conj(p_c) * self.cov_pc))
+        self.weight = 1.0 / np.sqrt(np.maximum(var, 1e-6 * self.sigma_p ** 2))
+
+    def _stacked(self, z) -> np.ndarray:
+        z = z * (math.sqrt(2.0) * self.weight.reshape((-1,) + (1,) * (z.ndim - 1)))
+        return np.concatenate([z.real, z.imag])
+
+    def solve_linear(self, t, tau):
+        """The best ``E`` and ``M`` for these lags and the weighted residuals."""
+        a, b = self._stacked(self.design(t, tau)), self._stacked(self.t_p)
+        coef, *_ = np.linalg.lstsq(a, b, rcond=None)
+        return coef, b - a @ coef
+
+    def residuals(self, x) -> np.ndarray:
+        """The weighted residuals at the full parameter vector ``x`` (``E``, ``M``, log ``T``,
+        ``tau``)."""
+        n = self.rotors
+        t, tau = np.exp(x[self.linear:self.linear + n]), x[self.linear + n:]
+        return self._stacked(self.t_p) - self._stacked(self.design(t, tau)) @ x[:self.linear]
+
+
+def _fit_lags(problem: _Problem, t0, tau0, free) -> np.ndarray:
+    """The full parameter vector that fits best with the lags of the rotors ``free`` (a
+    mask) free and the others held at ``t0``, ``tau0``: the lags by nonlinear least squares,
+    ``E`` and ``M`` solved for at each step (variable projection)."""
+    count = int(np.count_nonzero(free))
+
+    def lags(phi):
+        t, tau = t0.copy(), tau0.copy()
+        t[free], tau[free] = np.exp(phi[:count]), phi[count:]
+        return t, tau
+
+    if count:
+        phi0 = np.concatenate([np.log(t0[free]), tau0[free]])
+        lower = np.concatenate([np.full(count, math.log(TIME_CONSTANT_BOUNDS_S[0])),
+                                np.full(count, DELAY_BOUNDS_S[0])])
+        upper = np.concatenate([np.full(count, math.log(TIME_CONSTANT_BOUNDS_S[1])),
+                                np.full(count, DELAY_BOUNDS_S[1])])
+        sol = scipy.optimize.least_squares(
+            lambda phi: problem.solve_linear(*lags(phi))[1], np.clip(phi0, lower, upper),
+            bounds=(lower, upper), x_scale=np.concatenate([np.ones(count),
+                                                           np.full(count, 0.01)]))
+        t, tau = lags(sol.x)
+    else:
+        t, tau = t0, tau0
+    return np.concatenate([problem.solve_linear(t, tau)[0], np.log(t), tau])
+
+
+def _jacobian(problem: _Problem, x) -> np.ndarray:
+    """d(weighted residuals)/dx: the linear parameters' columns exactly, the lags' by
+    central differences."""
+    n, k = problem.rotors, problem.linear
+    t, tau = np.exp(x[k:k + n]), x[k + n:]
+    jac = np.zeros((2 * problem.omega.size, x.size))
+    jac[:, :k] = -problem._stacked(problem.design(t, tau))
+    for j in range(k, x.size):
+        step = 1e-6 * max(1.0, abs(x[j]))
+        hi, lo = x.copy(), x.copy()
+        hi[j] += step
+        lo[j] -= step
+        jac[:, j] = (problem.residuals(hi) - problem.residuals(lo)) / (2 * step)
+    return jac
+
+
+def _covariance(jac, keep) -> np.ndarray:
+    """The parameters' covariance from the weighted residuals' Jacobian, over the columns
+    ``keep`` (the others: NaN)."""
+    cov = np.full((jac.shape[1],) * 2, np.nan)
+    sub = jac[:, keep]
+    cov[np.ix_(keep, keep)] = np.linalg.pinv(sub.T @ sub)
+    return cov
+
+
+def _seen(problem: _Problem, t, tau) -> np.ndarray:
+    """Which rotors moved some rig enough to show their lag (``IDENTIFIED_SIGMAS``), judged
+    with every lag held at ``t``, ``tau`` (a free lag would fit the noise of a rotor that
+    moves nothing)."""
+    n, half = problem.rotors, problem.linear // 2
+    x = np.concatenate([problem.solve_linear(t, tau)[0], np.log(t), tau])
+    problem.reweigh(x)
+    x[:problem.linear] = problem.solve_linear(t, tau)[0]
+    keep = np.arange(x.size) < problem.linear
+    sd = np.sqrt(np.diag(_covariance(_jacobian(problem, x), keep)))
+    e = np.abs(x[:half].reshape(-1, n)) / sd[:half].reshape(-1, n)
+    return np.any(e > IDENTIFIED_SIGMAS, axis=0)
+
+
+def estimate_effectiveness(records, rigs: dict, rotors: int) -> EffectivenessEstimate:
+    """Fit every rotor's effectiveness, spin-up reaction, time constant and delay to the
+    records (:class:`RotorPoints`) of the rigs (``axis -> Rig``), ``rotors`` rotors in all
+    (module docstring, docs/effectiveness.md)."""
+    records = [r for r in records if r.rate]
+    if not records:
+        raise InputError("no rotor's points to fit")
+    problem = _Problem(records, rigs, rotors)
+    n, k = rotors, problem.linear
+    if 2 * problem.omega.size <= k + 2 * n:
+        raise InputError(f"{problem.omega.size} lines cannot fit the {k + 2 * n} parameters "
+                         f"of {len(problem.axes)} rigs and {n} rotors")
+    tau0 = np.full(n, START_DELAY_S)
+    t0 = min((np.full(n, f * START_TIME_CONSTANT_S) for f in (0.5, 1.0, 4.0)),
+             key=lambda t: float(np.sum(problem.solve_linear(t, tau0)[1] ** 2)))
+    seen = _seen(problem, t0, tau0)
+    x = _fit_lags(problem, t0, tau0, seen)
+    problem.reweigh(x)
+    x = _fit_lags(problem, np.exp(x[k:k + n]), x[k + n:], seen)
+    keep = np.concatenate([np.ones(k, dtype=bool), seen, seen])
+    jac = _jacobian(problem, x)
+    sd = np.sqrt(np.diag(_covariance(jac, keep)))
+    return _estimate(problem, x, sd, seen, float(np.sum(problem.residuals(x) ** 2))
+                     / max(jac.shape[0] - int(np.count_nonzero(keep)), 1))
+
+
+def _estimate(problem: _Problem, x, sd, seen, chi2_dof: float) -> EffectivenessEstimate:
+    """The fitted vector ``x`` and its standard deviations ``sd`` as the estimate, rows in
+    roll, pitch, yaw order (NaN for a rig not flown)."""
+    n, k, half = problem.rotors, problem.linear, problem.linear // 2
+    rows = [AXES[a] for a in problem.axes]
+
+    def full(values):
+        out = np.full((len(AXES), n), np.nan)
+        out[rows] = np.reshape(values, (-1, n))
+        return out
+
+    t = np.exp(x[k:k + n])
+    return EffectivenessEstimate(
+        effectiveness_rad_s2=full(x[:half]), effectiveness_sigma_rad_s2=full(sd[:half]),
+        spin_up_rad_s=full(x[half:k]),
+        time_constant_s=np.where(seen, t, np.nan),
+        time_constant_sigma_s=np.where(seen, t * sd[k:k + n], np.nan),
+        delay_s=np.where(seen, x[k + n:], np.nan),
+        delay_sigma_s=np.where(seen, sd[k + n:], np.nan), chi2_dof=chi2_dof)

@@ -1,0 +1,152 @@
+"""Each rotor's control effectiveness from per-rotor injections (host/estimate/effectiveness.py,
+docs/effectiveness.md): exact on exact points; on the simulator's rigs flown in closed loop
+(tests/effectiveness_rig.py: the C++ vehicle, pid_model.py's cascade, the firmware's
+allocation, a multisine on every rotor's command) it finds the vehicle's effectiveness, its
+rotors' time constants and honest sigmas, for the default vehicle and for one unlike the
+firmware's; a rotor no rig moves gets no lag; bad input is refused in one line."""
+
+import math
+
+import numpy as np
+import pytest
+
+from effectiveness_rig import allocation_column, fly_rig, other_vehicle, truth
+from heliquad.host.estimate.effectiveness import (Rig, RotorPoints, estimate_effectiveness,
+                                                  rig_from_poles, rotor_points)
+from heliquad.host.records.points import FrequencyPoint
+from heliquad.sim.base.dialect import AXES
+from heliquad.sim.base.errors import InputError
+from heliquad.sim.base.firmware_facts import LOOP_RATE_HZ
+from heliquad.sim.plant.vehicle import Vehicle
+from heliquad.sim.plant.vehicle_params import load_params
+
+#: The runs: a multisine of 1000 samples (5 s) on every rotor's own odd lines, 9 periods
+#: (the first fills the filter), peak 0.01 of thrust command on each rotor (at 0.03 the
+#: rotors' quadratic thrust already bends the points by 2 %), gyro noise 0.002 rad/s per
+#: sample (the MPU6050's 7e-4 rad/s at the vehicle file's noise density, and as much again
+#: for the motors' vibration).
+PERIOD, PERIODS, AMPLITUDE, GYRO_NOISE_RAD_S, SEED = 1000, 9, 0.01, 0.002, 3
+#: The acceptance: every entry within 5 % of the largest of its row, every time constant
+#: within 10 %, and the errors over their sigmas of RMS 0.5 to 2.
+ENTRY_TOLERANCE, TIME_CONSTANT_TOLERANCE, RMS_Z = 0.05, 0.10, (0.5, 2.0)
+
+
+def rig_records(params, axes=("roll", "pitch", "yaw")):
+    """Every rotor's points from the rigs ``axes`` flown, and the rigs."""
+    records, rigs = [], {}
+    for axis in axes:
+        run = fly_rig(params, axis, PERIOD, PERIODS, AMPLITUDE, GYRO_NOISE_RAD_S, SEED)
+        inertia = params.body.inertia_kg_m2[AXES[axis]]
+        rigs[axis] = Rig(axis, tuple(allocation_column(axis)),
+                         params.rig.hinge_damping_n_m_s_rad / inertia)
+        records += [rotor_points(run.excitation[:, i], run.rate, run.command, LOOP_RATE_HZ,
+                                 PERIOD, lines, axis, i) for i, lines in enumerate(run.orders)]
+    return records, rigs
+
+
+@pytest.fixture(scope="module")
+def default_vehicle():
+    params = load_params()
+    return params, rig_records(params)
+
+
+def figures(est, params):
+    """(largest error over its row's largest entry, largest relative time-constant error,
+    RMS of the errors over their sigmas) of the estimate against the vehicle's truth."""
+    true_e = truth(Vehicle(params, rig="roll"))
+    true_t = np.array([r.time_constant_s for r in params.rotors])
+    err = est.effectiveness_rad_s2 - true_e
+    entry = np.max(np.abs(err) / np.max(np.abs(true_e), axis=1, keepdims=True))
+    t_err = np.max(np.abs(est.time_constant_s - true_t) / true_t)
+    z = np.concatenate([(err / est.effectiveness_sigma_rad_s2).ravel(),
+                        (est.time_constant_s - true_t) / est.time_constant_sigma_s])
+    return entry, t_err, math.sqrt(float(np.mean(z ** 2)))
+
+
+def assert_accepted(est, params):
+    entry, t_err, rms_z = figures(est, params)
+    assert entry < ENTRY_TOLERANCE, entry
+    assert t_err < TIME_CONSTANT_TOLERANCE, t_err
+    assert RMS_Z[0] < rms_z < RMS_Z[1], rms_z
+    assert 0.3 < est.chi2_dof < 3.0, est.chi2_dof
+    # the delay is the loop's: the sample's hold (half a period) and the gyro's one sample
+    np.testing.assert_allclose(est.delay_s, 1.5 / LOOP_RATE_HZ, atol=1.5e-3)
+
+
+def test_the_three_rigs_find_the_default_vehicle(default_vehicle):
+    params, (records, rigs) = default_vehicle
+    assert_accepted(estimate_effectiveness(records, rigs, 5), params)
+
+
+def test_the_three_rigs_find_a_vehicle_unlike_the_firmwares():
+    params = other_vehicle(load_params())
+    records, rigs = rig_records(params)
+    assert_accepted(estimate_effectiveness(records, rigs, 5), params)
+
+
+def test_a_rotor_no_rig_moves_has_no_lag(default_vehicle):
+    # On the roll rig alone the central, front and back rotors move nothing: their roll
+    # entries are zero within their sigmas and their lags are not reported.
+    params, (records, rigs) = default_vehicle
+    roll = [r for r in records if r.axis == "roll"]
+    est = estimate_effectiveness(roll, {"roll": rigs["roll"]}, 5)
+    still = [0, 1, 3]
+    assert np.all(np.isnan(est.time_constant_s[still]))
+    assert np.all(np.isfinite(est.time_constant_s[[2, 4]]))
+    row = est.effectiveness_rad_s2[0]
+    assert np.all(np.abs(row[still]) < 3 * est.effectiveness_sigma_rad_s2[0][still])
+    assert np.all(np.isnan(est.effectiveness_rad_s2[1:]))
+
+
+def synthetic_records(e, t, tau, alloc, rig, omega):
+    """Exact points of rotors with effectiveness ``e`` (one row), lags ``t``, ``tau``, in a
+    loop closed by a PI on the rate, on one rig."""
+    s = 1j * omega
+    paths = [e[j] * np.exp(-s * tau[j]) / (t[j] * s + 1) * rig.response(omega)
+             for j in range(len(e))]
+    p_c = sum(a * p for a, p in zip(alloc, paths))
+    k = 0.3 * (1 + 2.0 / s)
+    records = []
+    for i, p_i in enumerate(paths):
+        t_p = p_i / (1 + k * p_c)
+        pts = [tuple(FrequencyPoint(omega_rad_s=w, gain=complex(g), sigma=1e-9,
+                                    coherence=1.0) for w, g in zip(omega, gains))
+               for gains in (t_p, -k * t_p)]
+        records.append(RotorPoints(rig.axis, i, *pts, (0j,) * omega.size))
+    return records
+
+
+def test_exact_points_give_the_exact_rotors():
+    e, t, tau = np.array([0.0, 150.0, -120.0]), np.array([0.1, 0.03, 0.05]), np.array(
+        [0.004, 0.007, 0.01])
+    rig = Rig("roll", (0.0, 0.004, -0.005), damping_rad_s=0.3)
+    records = synthetic_records(e, t, tau, rig.allocation, rig, np.geomspace(1, 100, 9))
+    est = estimate_effectiveness(records, {"roll": rig}, 3)
+    np.testing.assert_allclose(est.effectiveness_rad_s2[0], e, atol=1e-6)
+    np.testing.assert_allclose(est.time_constant_s[1:], t[1:], rtol=1e-6)
+    np.testing.assert_allclose(est.delay_s[1:], tau[1:], atol=1e-6)
+    assert np.isnan(est.time_constant_s[0])
+
+
+def test_the_rig_comes_from_the_axis_models_slowest_poles():
+    assert rig_from_poles("roll", (0.0, 1.0), -0.2) == Rig("roll", (0.0, 1.0), 0.2, 0.0)
+    rig = rig_from_poles("pitch", (1.0,), [-0.5 + 3j, -0.5 - 3j])
+    assert rig.damping_rad_s == pytest.approx(1.0) and rig.stiffness_rad2_s2 == pytest.approx(9.25)
+    # its gain is 1: rate per angular acceleration is 1/s far above the hinge
+    assert abs(rig.response(1e4) * 1e4j) == pytest.approx(1.0, rel=1e-6)
+    with pytest.raises(InputError, match="stable poles"):
+        rig_from_poles("roll", (1.0,), 0.3)
+
+
+def test_bad_input_is_refused_in_one_line(default_vehicle):
+    _, (records, rigs) = default_vehicle
+    with pytest.raises(InputError, match="no rotor's points"):
+        estimate_effectiveness([], rigs, 5)
+    with pytest.raises(InputError, match="no rig given for the pitch"):
+        estimate_effectiveness(records, {"roll": rigs["roll"]}, 5)
+    with pytest.raises(InputError, match="not one of the 4"):
+        estimate_effectiveness(records, rigs, 4)
+    few = [RotorPoints(r.axis, r.rotor, r.rate[:1], r.command[:1], r.correlation[:1])
+           for r in records if r.axis == "roll"]
+    with pytest.raises(InputError, match="cannot fit"):
+        estimate_effectiveness(few, {"roll": rigs["roll"]}, 5)
