@@ -11,15 +11,17 @@ rotor's path to the rate
 (``E`` the effectiveness, rad/s^2 per unit of thrust command; ``M`` the rotor's spin-up
 reaction; ``R_k`` the rig's rate per angular acceleration) and the torque command's path
 ``P_c = sum_j a_kj P_j`` (``a_kj``: rotor ``j``'s command per unit of the axis's torque
-command, the allocation's column), the measured rate response is
+command, the allocation's column), on rotor ``i``'s lines
 
-    T_p = P_i / (1 + K P_c),    K = -T_c / T_p,
+    T_p = P_c T_c + P_i,
 
-where ``K`` (the controller, the one thing between the measured rate and the command) comes
-from the same record without noise to first order. :func:`estimate_effectiveness` fits
-``E``, ``M``, ``T`` and ``tau`` (``T`` and ``tau`` shared by the rigs) to every rotor's
-points at once by weighted least squares, each point weighted by its sigma, and gives the
-parameters' standard deviations from the fit's covariance.
+whatever the controller is (its answer to the injection is measured in ``T_c``).
+:func:`estimate_effectiveness` fits ``E``, ``M``, ``T`` and ``tau`` (``T`` and ``tau``
+shared by the rigs) to every rotor's points at once by weighted least squares, each line's
+residual ``T_p - P_c T_c - P_i`` weighted by its sigma (the two points' errors are
+correlated: the command answers the rate's noise), and gives the parameters' standard
+deviations from the fit's covariance. :func:`rotor_paths` gives the fitted paths, and the
+axis's ``P_c`` to compare with the axis sweep's model.
 
 No I/O: a command feeds it from run folders (each rotor's excitation, the rate and the
 torque command logged per sample, the multisine's period and lines from the manifest, the
@@ -39,7 +41,7 @@ from ...sim.base.errors import InputError
 from .fsf import estimate_multisine_against_excitation, period_dfts, period_segments
 
 __all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rotor_points",
-           "estimate_effectiveness", "rig_from_poles"]
+           "estimate_effectiveness", "rig_from_poles", "rotor_paths"]
 
 #: A rotor's time constant and delay are reported only when one of its rows' effectiveness
 #: is this many sigmas from zero (else no rig moved it enough to see its lag).
@@ -335,3 +337,16 @@ def _estimate(problem: _Problem, x, sd, seen, chi2_dof: float) -> EffectivenessE
         time_constant_sigma_s=np.where(seen, t * sd[k:k + n], np.nan),
         delay_s=np.where(seen, x[k + n:], np.nan),
         delay_sigma_s=np.where(seen, sd[k + n:], np.nan), chi2_dof=chi2_dof)
+
+
+def rotor_paths(est: EffectivenessEstimate, rig: Rig, omega_rad_s) -> tuple:
+    """The fitted paths on ``rig``'s axis at ``omega_rad_s``: ``(P_j per rotor (rotors x
+    frequencies), P_c = sum_j a_kj P_j)``, the second to compare with the axis sweep's model
+    of the same rig. A rotor with no reported lag (it moved no rig) enters with its entry
+    alone, which is zero within its sigma."""
+    row = AXES[rig.axis]
+    s = 1j * np.atleast_1d(np.asarray(omega_rad_s, dtype=float))[None, :]
+    t, tau = (np.nan_to_num(v)[:, None] for v in (est.time_constant_s, est.delay_s))
+    e, spin = (v[row][:, None] for v in (est.effectiveness_rad_s2, est.spin_up_rad_s))
+    paths = (e + s * spin) * np.exp(-s * tau) / (t * s + 1) * rig.response(s.imag)
+    return paths, np.asarray(rig.allocation, dtype=float) @ paths
