@@ -3,7 +3,7 @@
 docs/effectiveness.md derives the method. On the rig about axis ``k`` the cascade flies and
 rotor ``i``'s injection ``u_i`` is added to its thrust command after the allocation. Two
 responses are measured against ``u_i`` on each of its lines: the rate, ``T_p = p / u_i``,
-and the axis's torque command, ``T_c = c_k / u_i`` (:func:`rotor_points`). With every
+and the axis's torque command, ``T_c = c_k / u_i`` (:func:`rig_points`). With every
 rotor's path to the rate
 
     P_j(s) = (E_kj + s M_kj) exp(-s tau_j) / (T_j s + 1) R_k(s),
@@ -38,9 +38,10 @@ import scipy.optimize
 
 from ...sim.base.dialect import AXES
 from ...sim.base.errors import InputError
-from .fsf import estimate_multisine_against_excitation, period_dfts, period_segments
+from .fsf import (complete_excitation, estimate_multisine_against_excitation, fill_lost,
+                  period_dfts, period_segments)
 
-__all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rotor_points",
+__all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rig_points",
            "estimate_effectiveness", "rig_from_poles", "rotor_paths"]
 
 #: A rotor's time constant and delay are reported only when one of its rows' effectiveness
@@ -107,32 +108,59 @@ class EffectivenessEstimate:
     chi2_dof: float
 
 
-def rotor_points(excitation, rate, command, fs_hz: float, period: int, orders, axis: str,
-                 rotor: int, present=None) -> RotorPoints:
-    """One rotor's record on one rig as :class:`RotorPoints`: the rate and the torque command
-    each against the rotor's own excitation on its lines ``orders`` of the multisine's base
-    period (``period`` samples). The input of each estimate is the excitation itself, so a
-    point is ``Y / R`` with the sigma of its per-period scatter, which the other rotors' lines
-    (other harmonics of the same period) do not reach; the two scatters' correlation per line
-    comes with them (the command answers the rate's noise)."""
-    r = np.asarray(excitation, dtype=float)
-    args = (fs_hz, period, orders)
+def rig_points(excitation, rate, command, fs_hz: float, period: int, orders, axis: str,
+               present=None) -> list:
+    """One rig's record as :class:`RotorPoints`, one per rotor excited: the rate and the
+    torque command each against the injections, on every rotor's lines (``orders[i]``:
+    rotor ``i``'s harmonics of the multisine's base period of ``period`` samples, none for a
+    rotor not excited; ``excitation``: samples x rotors, each rotor's injection).
+
+    Every line of every rotor is fitted at once against the sum of the injections (on a
+    rotor's line the others' are zero), so the other rotors' responses are modelled, not
+    left in the residual: that matters when samples were lost (``present``, as for
+    :func:`~heliquad.host.estimate.fsf.estimate_multisine_against_excitation`), where the
+    periods are no longer orthogonal. A point is ``Y / R`` with the sigma of its per-period
+    scatter; the correlation of the two points' errors per line comes with them (the command
+    answers the rate's noise)."""
+    x = np.asarray(excitation, dtype=float)
+    owner = {int(l): i for i, lines in enumerate(orders) for l in lines}
+    if x.ndim != 2 or x.shape[1] != len(orders) or len(owner) != sum(map(len, orders)):
+        raise InputError("one column of excitation and one set of lines per rotor, no line "
+                         "shared by two rotors")
+    r = x.sum(axis=1)
+    args = (fs_hz, period, sorted(owner))
     to_rate = estimate_multisine_against_excitation(r, r, rate, *args, present=present)
     to_command = estimate_multisine_against_excitation(r, r, command, *args, present=present)
     if [p.order for p in to_rate] != [p.order for p in to_command]:
         raise InputError("the rate and the torque command follow the excitation on different "
                          "lines")
+    rate, command = (np.asarray(v, dtype=float) for v in (rate, command))
+    if present is not None and not np.all(present):     # the holes filled by the fits
+        present = np.asarray(present, dtype=bool)
+        r = complete_excitation(r, present, period)
+        rate, command = (fill_lost(np.where(present, v, 0.0), present, r, period,
+                                   {p.order: p.gain for p in pts}, pts[0].offset if pts else 0.0)
+                         for v, pts in ((rate, to_rate), (command, to_command)))
+    correlation = _correlations(r, rate, command, period, [p.order for p in to_rate])
+    return [RotorPoints(axis, i, *(tuple(p for p in pts if owner[p.order] == i)
+                                   for pts in (to_rate, to_command)),
+                        tuple(c for p, c in zip(to_rate, correlation) if owner[p.order] == i))
+            for i in sorted(set(owner.values()))]
+
+
+def _correlations(r, rate, command, period: int, orders) -> list:
+    """Per line ``orders``, the correlation of the per-period estimates of the rate and of
+    the command against ``r`` (whole periods after the first)."""
     starts, length = period_segments(r.size, period, 1)
-    correlation = []
-    for point in to_rate:
-        w = 2 * np.pi * point.order / period
+    out = []
+    for order in orders:
+        w = 2 * np.pi * order / period
         ref = period_dfts(r, w, starts, length)
-        a, b = (period_dfts(np.asarray(x, dtype=float), w, starts, length) / ref
-                for x in (rate, command))
+        a, b = (period_dfts(v, w, starts, length) / ref for v in (rate, command))
         a, b = a - a.mean(), b - b.mean()
         norm = math.sqrt(float(np.sum(np.abs(a) ** 2) * np.sum(np.abs(b) ** 2)))
-        correlation.append(complex(np.sum(a * np.conj(b)) / norm) if norm > 0 else 0j)
-    return RotorPoints(axis, rotor, tuple(to_rate), tuple(to_command), tuple(correlation))
+        out.append(complex(np.sum(a * np.conj(b)) / norm) if norm > 0 else 0j)
+    return out
 
 
 def rig_from_poles(axis: str, allocation, poles) -> Rig:
