@@ -114,7 +114,7 @@ def test_the_geometry_that_explains_the_effectiveness_is_the_vehicles(unlike_fir
     # cancel at equal thrust).
     params, est = unlike_firmwares
     rotors = params.rotors
-    fit = fit_rotor_geometry(est.effectiveness_rad_s2, est.effectiveness_sigma_rad_s2,
+    fit = fit_rotor_geometry(est.effectiveness_rad_s2, est.effectiveness_covariance,
                              [r.position_m for r in rotors], [r.spin for r in rotors],
                              params.body.inertia_kg_m2, rotors[0].max_thrust_n,
                              (20.0, 0.0076, 0.017, 9.0))
@@ -127,10 +127,12 @@ def test_the_geometry_that_explains_the_effectiveness_is_the_vehicles(unlike_fir
     for value, sigma, true in found:
         assert abs(value - true) < 3 * sigma < 0.18 * abs(true), (value, sigma, true)
     np.testing.assert_allclose(fit.thrust_axes, [r.thrust_axis for r in rotors], atol=2e-3)
-    assert 0.05 < fit.chi2_dof < 3.0      # low: the entries' correlations are ignored
+    # 15 entries, 7 parameters: chi-square over 8 degrees of freedom spreads widely (seeds
+    # 0 to 5 gave 0.19 to 1.67)
+    assert 0.1 < fit.chi2_dof < 3.0, fit.chi2_dof
     with pytest.raises(InputError, match="cannot fit"):
         fit_rotor_geometry(est.effectiveness_rad_s2[:1].repeat(3, 0) * np.nan,
-                           est.effectiveness_sigma_rad_s2, [r.position_m for r in rotors],
+                           est.effectiveness_covariance, [r.position_m for r in rotors],
                            [r.spin for r in rotors], params.body.inertia_kg_m2,
                            rotors[0].max_thrust_n, (20.0, 0.0076, 0.017, 9.0))
 

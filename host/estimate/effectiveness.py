@@ -94,9 +94,12 @@ class EffectivenessEstimate:
     ``effectiveness_rad_s2``: angular acceleration per unit of thrust command at steady state;
     ``spin_up_rad_s``: the spin-up reaction's part, rad/s per unit of command (the
     acceleration's term in ``s``); ``time_constant_s`` and ``delay_s`` per rotor (NaN when no
-    rig moved the rotor's row, ``IDENTIFIED_SIGMAS``); each with its sigma. ``chi2_dof``: the
-    weighted residuals' sum of squares over the degrees of freedom (about 1 when the model and
-    the points' sigmas hold)."""
+    rig moved the rotor's row, ``IDENTIFIED_SIGMAS``); each with its sigma.
+    ``effectiveness_covariance``: the entries' covariance, ``3 rotors`` square in the order of
+    ``effectiveness_rad_s2.ravel()`` (NaN for rows not measured): the entries share ``P_c``
+    and the lags, so their errors are correlated. ``chi2_dof``: the weighted residuals' sum of
+    squares over the degrees of freedom (about 1 when the model and the points' sigmas
+    hold)."""
 
     effectiveness_rad_s2: np.ndarray
     effectiveness_sigma_rad_s2: np.ndarray
@@ -105,6 +108,7 @@ class EffectivenessEstimate:
     time_constant_sigma_s: np.ndarray
     delay_s: np.ndarray
     delay_sigma_s: np.ndarray
+    effectiveness_covariance: np.ndarray
     chi2_dof: float
 
 
@@ -341,16 +345,20 @@ def estimate_effectiveness(records, rigs: dict, rotors: int) -> EffectivenessEst
     x = _fit_lags(problem, np.exp(x[k:k + n]), x[k + n:], seen)
     keep = np.concatenate([np.ones(k, dtype=bool), seen, seen])
     jac = _jacobian(problem, x)
-    sd = np.sqrt(np.diag(_covariance(jac, keep)))
-    return _estimate(problem, x, sd, seen, float(np.sum(problem.residuals(x) ** 2))
+    return _estimate(problem, x, _covariance(jac, keep), seen,
+                     float(np.sum(problem.residuals(x) ** 2))
                      / max(jac.shape[0] - int(np.count_nonzero(keep)), 1))
 
 
-def _estimate(problem: _Problem, x, sd, seen, chi2_dof: float) -> EffectivenessEstimate:
-    """The fitted vector ``x`` and its standard deviations ``sd`` as the estimate, rows in
-    roll, pitch, yaw order (NaN for a rig not flown)."""
+def _estimate(problem: _Problem, x, cov, seen, chi2_dof: float) -> EffectivenessEstimate:
+    """The fitted vector ``x`` and its covariance ``cov`` as the estimate, rows in roll,
+    pitch, yaw order (NaN for a rig not flown)."""
     n, k, half = problem.rotors, problem.linear, problem.linear // 2
     rows = [AXES[a] for a in problem.axes]
+    sd = np.sqrt(np.diag(cov))
+    entries = (np.array(rows)[:, None] * n + np.arange(n)).ravel()
+    e_cov = np.full((len(AXES) * n,) * 2, np.nan)
+    e_cov[np.ix_(entries, entries)] = cov[:half, :half]
 
     def full(values):
         out = np.full((len(AXES), n), np.nan)
@@ -364,7 +372,8 @@ def _estimate(problem: _Problem, x, sd, seen, chi2_dof: float) -> EffectivenessE
         time_constant_s=np.where(seen, t, np.nan),
         time_constant_sigma_s=np.where(seen, t * sd[k:k + n], np.nan),
         delay_s=np.where(seen, x[k + n:], np.nan),
-        delay_sigma_s=np.where(seen, sd[k + n:], np.nan), chi2_dof=chi2_dof)
+        delay_sigma_s=np.where(seen, sd[k + n:], np.nan), effectiveness_covariance=e_cov,
+        chi2_dof=chi2_dof)
 
 
 def rotor_paths(est: EffectivenessEstimate, rig: Rig, omega_rad_s) -> tuple:

@@ -10,8 +10,9 @@ vehicle file know them), the arm rotors canted by one angle about their arms (th
 layout: ``d_i = -cos(delta) z - spin_0 sin(delta) t_i``, ``t_i`` the tangent at the arm's
 azimuth), one torque ratio for the arm rotors and one for the central rotor, whose largest
 thrust the moments cannot show (it sits on the axis; no rig measures the vertical force) and
-is taken as given; and each arm rotor's largest thrust. Weighted by the effectiveness's sigmas,
-with the parameters' sigmas from the fit's covariance.
+is taken as given; and each arm rotor's largest thrust. Weighted by the effectiveness's
+covariance (its entries' errors are correlated), with the parameters' sigmas from the fit's
+covariance.
 """
 
 from __future__ import annotations
@@ -70,29 +71,42 @@ def _effectiveness(x, pos, spins, inertia, central_max_thrust_n):
     return moment.T / inertia[:, None], axes
 
 
-def fit_rotor_geometry(effectiveness, sigma, positions_m, spins, inertia_kg_m2,
+def _whitener(covariance, used) -> np.ndarray:
+    """``W`` with ``W^T W`` the inverse of the used entries' covariance (its eigenvalues
+    floored at 1e-12 of the largest)."""
+    cov = np.asarray(covariance, dtype=float)[np.ix_(used.ravel(), used.ravel())]
+    values, vectors = np.linalg.eigh(cov)
+    values = np.maximum(values, 1e-12 * values.max())
+    return (vectors / np.sqrt(values)).T
+
+
+def fit_rotor_geometry(effectiveness, covariance, positions_m, spins, inertia_kg_m2,
                        central_max_thrust_n: float, start) -> RotorGeometryFit:
     """The geometry (module docstring) that best explains ``effectiveness`` (3 x rotors,
-    rad/s^2; NaN rows: not measured) with its ``sigma``, for rotors at ``positions_m``
-    spinning ``spins`` (rotor 1 the central one) on a body of ``inertia_kg_m2`` (the rig's
-    about each axis). ``start``: (cant deg, arm torque ratio m, central torque ratio m, arm
-    rotors' largest thrust N), where the fit begins."""
-    e, sd = np.asarray(effectiveness, dtype=float), np.asarray(sigma, dtype=float)
+    rad/s^2; NaN rows: not measured) with its ``covariance`` (of ``effectiveness.ravel()``,
+    as :class:`~heliquad.host.estimate.effectiveness.EffectivenessEstimate` has it), for
+    rotors at ``positions_m`` spinning ``spins`` (rotor 1 the central one) on a body of
+    ``inertia_kg_m2`` (the rig's about each axis). ``start``: (cant deg, arm torque ratio m,
+    central torque ratio m, arm rotors' largest thrust N), where the fit begins."""
+    e = np.asarray(effectiveness, dtype=float)
+    cov = np.asarray(covariance, dtype=float)
     pos, spins = np.asarray(positions_m, dtype=float), np.asarray(spins, dtype=float)
     inertia = np.asarray(inertia_kg_m2, dtype=float)
-    if e.shape != (3, len(spins)) or sd.shape != e.shape or pos.shape != (len(spins), 3):
-        raise InputError("the effectiveness, its sigma and the rotors' places disagree on "
-                         "how many rotors there are")
-    used = np.isfinite(e) & (sd > 0)
+    if e.shape != (3, len(spins)) or cov.shape != (e.size,) * 2 or pos.shape != (len(spins), 3):
+        raise InputError("the effectiveness, its covariance and the rotors' places disagree "
+                         "on how many rotors there are")
+    used = np.isfinite(e) & np.isfinite(np.diag(cov)).reshape(e.shape)
     x0 = np.concatenate([[math.radians(start[0]), start[1], start[2]],
                          np.full(len(spins) - 1, float(start[3]))])
     if np.count_nonzero(used) <= x0.size:
         raise InputError(f"{np.count_nonzero(used)} measured entries cannot fit the "
                          f"geometry's {x0.size} parameters")
 
+    whiten = _whitener(cov, used)
+
     def residuals(x):
-        return ((_effectiveness(x, pos, spins, inertia, central_max_thrust_n)[0] - e)
-                / np.where(used, sd, 1.0))[used]
+        return whiten @ (_effectiveness(x, pos, spins, inertia, central_max_thrust_n)[0]
+                         - e)[used]
 
     sol = scipy.optimize.least_squares(residuals, x0, x_scale=np.abs(x0) + 1e-3)
     cov = np.linalg.pinv(sol.jac.T @ sol.jac)
