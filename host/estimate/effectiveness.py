@@ -54,6 +54,12 @@ START_DELAY_S = 0.005
 #: Bounds of the fit: time constant (s) and delay (s), beyond any rotor and loop.
 TIME_CONSTANT_BOUNDS_S = (1e-3, 5.0)
 DELAY_BOUNDS_S = (-0.05, 0.2)
+#: A line's residual variance is floored at this fraction of its rate point's own (a
+#: correlation of the two points' errors near 1 can make the difference vanish by round-off).
+VARIANCE_FLOOR = 1e-6
+#: The lags' central-difference step for the covariance, relative (log T) and in s (tau):
+#: a millionth, far above round-off and far below the sigmas.
+JACOBIAN_STEP = 1e-6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,6 +89,7 @@ class Rig:
     stiffness_rad2_s2: float = 0.0
 
     def response(self, omega_rad_s) -> np.ndarray:
+        """``R(j omega)``, rad/s per rad/s^2."""
         s = 1j * np.asarray(omega_rad_s, dtype=float)
         return s / (s * s + self.damping_rad_s * s + self.stiffness_rad2_s2)
 
@@ -190,6 +197,9 @@ class _Problem:
                 raise InputError(f"no rig given for the {rec.axis} records")
             if not 0 <= rec.rotor < rotors:
                 raise InputError(f"rotor {rec.rotor + 1} is not one of the {rotors}")
+            if not len(rec.rate) == len(rec.command) == len(rec.correlation):
+                raise InputError(f"rotor {rec.rotor + 1} on {rec.axis}: its rate and command "
+                                 f"points and their correlations are not of the same lines")
             for p, c, rho in zip(rec.rate, rec.command, rec.correlation):
                 if not (p.sigma > 0 and c.sigma >= 0):
                     raise InputError(f"rotor {rec.rotor + 1} on {rec.axis}: a point without "
@@ -199,8 +209,8 @@ class _Problem:
                               rigs[rec.axis].response(p.omega_rad_s)))
         cols = list(zip(*lines))
         self.row, self.rotor = (np.array(c, dtype=int) for c in cols[:2])
-        self.omega, self.t_p, self.t_c, self.sigma_p, self.sigma_c, self.cov_pc, self.rig = (
-            np.array(c) for c in cols[2:])
+        (self.omega, self.t_p, self.t_c, self.sigma_p, self.sigma_c, self.cov_pc,
+         self.rig_response) = (np.array(c) for c in cols[2:])
         self.alloc = np.array([rigs[a].allocation for a in self.axes], dtype=float)
         if self.alloc.shape[1] != rotors:
             raise InputError(f"an allocation column needs one entry per rotor ({rotors})")
@@ -211,15 +221,25 @@ class _Problem:
         """How many of the parameters are linear: ``E`` and ``M`` of every row and rotor."""
         return 2 * len(self.axes) * self.rotors
 
+    def lags(self, x) -> tuple:
+        """``(T, tau)`` of the full parameter vector ``x`` (``E``, ``M``, log ``T``, ``tau``)."""
+        n, k = self.rotors, self.linear
+        return np.exp(x[k:k + n]), x[k + n:]
+
+    def paths(self, t, tau) -> np.ndarray:
+        """Per line and rotor, ``exp(-s tau) / (T s + 1) R(s)``: a rotor's path per unit of
+        its ``E`` (times ``s`` per unit of its ``M``)."""
+        s = 1j * self.omega[:, None]
+        return np.exp(-s * tau) / (t * s + 1) * self.rig_response[:, None]
+
     def design(self, t, tau) -> np.ndarray:
         """Per line, the complex coefficient of each ``E`` (then each ``M``) in
         ``P_i + P_c T_c``, the lags held at ``t`` and ``tau``."""
         m, n = len(self.axes), self.rotors
         s = 1j * self.omega[:, None]
-        lag = np.exp(-s * tau) / (t * s + 1) * self.rig[:, None]     # lines x rotors
-        own = np.zeros_like(lag)
+        own = np.zeros((self.omega.size, n))
         own[np.arange(self.omega.size), self.rotor] = 1.0
-        per_rotor = (own + self.t_c[:, None] * self.alloc[self.row]) * lag
+        per_rotor = (own + self.t_c[:, None] * self.alloc[self.row]) * self.paths(t, tau)
         design = np.zeros((self.omega.size, 2 * m * n), dtype=complex)
         for r in range(m):
             on = self.row == r
@@ -229,33 +249,31 @@ class _Problem:
 
     def reweigh(self, x) -> None:
         """Each line's weight, ``1 / sigma`` of ``T_p - P_c T_c`` at the parameters ``x``."""
-        n = self.rotors
-        t, tau = np.exp(x[self.linear:self.linear + n]), x[self.linear + n:]
+        n, half = self.rotors, self.linear // 2
+        e, spin = x[:half].reshape(-1, n), x[half:self.linear].reshape(-1, n)
         s = 1j * self.omega[:, None]
-        lag = np.exp(-s * tau) / (t * s + 1) * self.rig[:, None]
-        e, spin = (x[:self.linear // 2].reshape(-1, n), x[self.linear // 2:self.linear]
-                   .reshape(-1, n))
-        p_c = np.sum(self.alloc[self.row] * (e[self.row] + s * spin[self.row]) * lag, axis=1)
+        p_c = np.sum(self.alloc[self.row] * (e[self.row] + s * spin[self.row])
+                     * self.paths(*self.lags(x)), axis=1)
         var = (self.sigma_p ** 2 + np.abs(p_c) ** 2 * self.sigma_c ** 2
                - 2 * np.real(np.conj(p_c) * self.cov_pc))
-        self.weight = 1.0 / np.sqrt(np.maximum(var, 1e-6 * self.sigma_p ** 2))
+        self.weight = 1.0 / np.sqrt(np.maximum(var, VARIANCE_FLOOR * self.sigma_p ** 2))
 
-    def _stacked(self, z) -> np.ndarray:
+    def stacked(self, z) -> np.ndarray:
+        """Complex per-line values (or rows of them) weighted, as real then imaginary parts:
+        the weighted residuals' space."""
         z = z * (math.sqrt(2.0) * self.weight.reshape((-1,) + (1,) * (z.ndim - 1)))
         return np.concatenate([z.real, z.imag])
 
     def solve_linear(self, t, tau):
         """The best ``E`` and ``M`` for these lags and the weighted residuals."""
-        a, b = self._stacked(self.design(t, tau)), self._stacked(self.t_p)
+        a, b = self.stacked(self.design(t, tau)), self.stacked(self.t_p)
         coef, *_ = np.linalg.lstsq(a, b, rcond=None)
         return coef, b - a @ coef
 
     def residuals(self, x) -> np.ndarray:
         """The weighted residuals at the full parameter vector ``x`` (``E``, ``M``, log ``T``,
         ``tau``)."""
-        n = self.rotors
-        t, tau = np.exp(x[self.linear:self.linear + n]), x[self.linear + n:]
-        return self._stacked(self.t_p) - self._stacked(self.design(t, tau)) @ x[:self.linear]
+        return self.stacked(self.t_p) - self.stacked(self.design(*self.lags(x))) @ x[:self.linear]
 
 
 def _fit_lags(problem: _Problem, t0, tau0, free) -> np.ndarray:
@@ -288,12 +306,11 @@ def _fit_lags(problem: _Problem, t0, tau0, free) -> np.ndarray:
 def _jacobian(problem: _Problem, x) -> np.ndarray:
     """d(weighted residuals)/dx: the linear parameters' columns exactly, the lags' by
     central differences."""
-    n, k = problem.rotors, problem.linear
-    t, tau = np.exp(x[k:k + n]), x[k + n:]
+    k = problem.linear
     jac = np.zeros((2 * problem.omega.size, x.size))
-    jac[:, :k] = -problem._stacked(problem.design(t, tau))
+    jac[:, :k] = -problem.stacked(problem.design(*problem.lags(x)))
     for j in range(k, x.size):
-        step = 1e-6 * max(1.0, abs(x[j]))
+        step = JACOBIAN_STEP * max(1.0, abs(x[j]))
         hi, lo = x.copy(), x.copy()
         hi[j] += step
         lo[j] -= step
@@ -318,8 +335,8 @@ def _seen(problem: _Problem, t, tau) -> np.ndarray:
     x = np.concatenate([problem.solve_linear(t, tau)[0], np.log(t), tau])
     problem.reweigh(x)
     x[:problem.linear] = problem.solve_linear(t, tau)[0]
-    keep = np.arange(x.size) < problem.linear
-    sd = np.sqrt(np.diag(_covariance(_jacobian(problem, x), keep)))
+    design = problem.stacked(problem.design(t, tau))
+    sd = np.sqrt(np.diag(_covariance(design, np.ones(problem.linear, dtype=bool))))
     e = np.abs(x[:half].reshape(-1, n)) / sd[:half].reshape(-1, n)
     return np.any(e > IDENTIFIED_SIGMAS, axis=0)
 

@@ -27,6 +27,10 @@ from ...sim.base.errors import InputError
 
 __all__ = ["RotorGeometryFit", "fit_rotor_geometry", "canted_axes"]
 
+#: The covariance's eigenvalues are floored at this fraction of the largest before it is
+#: inverted (entries fitted to round-off, such as a rotor's zero on a rig, make it singular).
+EIGENVALUE_FLOOR = 1e-12
+
 
 @dataclasses.dataclass(frozen=True)
 class RotorGeometryFit:
@@ -73,10 +77,10 @@ def _effectiveness(x, pos, spins, inertia, central_max_thrust_n):
 
 def _whitener(covariance, used) -> np.ndarray:
     """``W`` with ``W^T W`` the inverse of the used entries' covariance (its eigenvalues
-    floored at 1e-12 of the largest)."""
+    floored, ``EIGENVALUE_FLOOR``)."""
     cov = np.asarray(covariance, dtype=float)[np.ix_(used.ravel(), used.ravel())]
     values, vectors = np.linalg.eigh(cov)
-    values = np.maximum(values, 1e-12 * values.max())
+    values = np.maximum(values, EIGENVALUE_FLOOR * values.max())
     return (vectors / np.sqrt(values)).T
 
 
