@@ -219,6 +219,13 @@ def test_bad_input_is_refused_in_one_line(default_vehicle):
         estimate_effectiveness(records, {"roll": rigs["roll"]}, 5)
     with pytest.raises(InputError, match="not one of the 4"):
         estimate_effectiveness(records, rigs, 4)
+    run = fly_rig(load_params(), "roll", PERIOD, 2, AMPLITUDE, GYRO_NOISE_RAD_S, SEED)
+    with pytest.raises(InputError, match="one set of lines per rotor"):
+        rig_points(run.excitation, run.rate, run.command, LOOP_RATE_HZ, PERIOD,
+                   run.orders[:4], "roll")
+    with pytest.raises(InputError, match="no line shared"):
+        rig_points(run.excitation, run.rate, run.command, LOOP_RATE_HZ, PERIOD,
+                   (run.orders[0],) * 5, "roll")
     few = [RotorPoints(r.axis, r.rotor, r.rate[:1], r.command[:1], r.correlation[:1])
            for r in records if r.axis == "roll"]
     with pytest.raises(InputError, match="cannot fit"):
