@@ -160,7 +160,7 @@ def test_samples_lost_on_the_link_cost_only_their_share(default_vehicle):
     present = np.random.default_rng(5).uniform(size=run.rate.size) > 0.03
     rig = {"roll": Rig("roll", tuple(allocation_column("roll")))}
     full, lost = (estimate_effectiveness(
-        rig_points(run.excitation, np.where(mask, run.rate, np.nan),
+        rig_points(run.excitation.sum(axis=1), np.where(mask, run.rate, np.nan),
                    np.where(mask, run.command, np.nan), LOOP_RATE_HZ, PERIOD, run.orders,
                    "roll", present=mask), rig, 5)
         for mask in (np.ones(run.rate.size, dtype=bool), present))
@@ -220,7 +220,7 @@ def test_bad_input_is_refused_in_one_line(default_vehicle):
     with pytest.raises(InputError, match="not one of the 4"):
         estimate_effectiveness(records, rigs, 4)
     run = fly_rig(load_params(), "roll", PERIOD, 2, AMPLITUDE, GYRO_NOISE_RAD_S, SEED)
-    with pytest.raises(InputError, match="one set of lines per rotor"):
+    with pytest.raises(InputError, match="one column per rotor"):
         rig_points(run.excitation, run.rate, run.command, LOOP_RATE_HZ, PERIOD,
                    run.orders[:4], "roll")
     with pytest.raises(InputError, match="no line shared"):

@@ -124,7 +124,8 @@ def rig_points(excitation, rate, command, fs_hz: float, period: int, orders, axi
     """One rig's record as :class:`RotorPoints`, one per rotor excited: the rate and the
     torque command each against the injections, on every rotor's lines (``orders[i]``:
     rotor ``i``'s harmonics of the multisine's base period of ``period`` samples, none for a
-    rotor not excited; ``excitation``: samples x rotors, each rotor's injection).
+    rotor not excited; ``excitation``: the injections' sum per sample, or samples x rotors,
+    each rotor's own).
 
     Every line of every rotor is fitted at once against the sum of the injections (on a
     rotor's line the others' are zero), so the other rotors' responses are modelled, not
@@ -135,10 +136,11 @@ def rig_points(excitation, rate, command, fs_hz: float, period: int, orders, axi
     answers the rate's noise)."""
     x = np.asarray(excitation, dtype=float)
     owner = {int(l): i for i, lines in enumerate(orders) for l in lines}
-    if x.ndim != 2 or x.shape[1] != len(orders) or len(owner) != sum(map(len, orders)):
-        raise InputError("one column of excitation and one set of lines per rotor, no line "
-                         "shared by two rotors")
-    r = x.sum(axis=1)
+    if (x.ndim == 2 and x.shape[1] != len(orders)) or x.ndim not in (1, 2) or \
+            len(owner) != sum(map(len, orders)):
+        raise InputError("the injections (their sum, or one column per rotor) and one set of "
+                         "lines per rotor, no line shared by two rotors")
+    r = x.sum(axis=1) if x.ndim == 2 else x
     args = (fs_hz, period, sorted(owner))
     to_rate = estimate_multisine_against_excitation(r, r, rate, *args, present=present)
     to_command = estimate_multisine_against_excitation(r, r, command, *args, present=present)
