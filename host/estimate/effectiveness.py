@@ -42,7 +42,7 @@ from .fsf import (complete_excitation, estimate_multisine_against_excitation, fi
                   period_dfts, period_segments)
 
 __all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rig_points",
-           "estimate_effectiveness", "rig_from_poles", "rotor_paths"]
+           "estimate_effectiveness", "rig_from_poles", "rotor_paths", "held_paths"]
 
 #: A rotor's time constant and delay are reported only when one of its rows' effectiveness
 #: is this many sigmas from zero (else no rig moved it enough to see its lag).
@@ -51,6 +51,10 @@ IDENTIFIED_SIGMAS = 3.0
 #: delay, s (the fit moves them; they only need to be of the right order).
 START_TIME_CONSTANT_S = 0.05
 START_DELAY_S = 0.005
+#: The lags' fit runs from this many of the common starting lags (a grid of time constants
+#: and delays about the above), the best by their linear fit first; the best end is kept (a
+#: delay far from its start can end in a local minimum).
+FIT_STARTS = 3
 #: Bounds of the fit: time constant (s) and delay (s), beyond any rotor and loop.
 TIME_CONSTANT_BOUNDS_S = (1e-3, 5.0)
 DELAY_BOUNDS_S = (-0.05, 0.2)
@@ -60,6 +64,12 @@ VARIANCE_FLOOR = 1e-6
 #: The lags' central-difference step for the covariance, relative (log T) and in s (tau):
 #: a millionth, far above round-off and far below the sigmas.
 JACOBIAN_STEP = 1e-6
+#: The lags' fit stops when a step or the cost changes by less than this, relative: well below
+#: any sigma, so exact points give exact rotors.
+LAG_TOLERANCE = 1e-12
+#: A critically damped hinge's double pole is split by this much (1/s, relative to its
+#: damping) so that the hold's partial fractions stay distinct: far below any line.
+REPEATED_POLE_SPLIT = 1e-7
 
 
 @dataclasses.dataclass(frozen=True)
@@ -187,12 +197,53 @@ def rig_from_poles(axis: str, allocation, poles) -> Rig:
     return Rig(axis, tuple(allocation), float(den[1]), float(den[2]))
 
 
+def held_paths(omega_rad_s, hold_s: float, t, tau, damping, stiffness) -> tuple:
+    """``(A, B)``: the zero-order hold's exact equivalents, sampled every ``hold_s`` at
+    ``omega_rad_s``, of a rotor's path per unit of ``E``, ``exp(-s tau) / (T s + 1) R(s)``
+    with ``R(s) = s / (s^2 + damping s + stiffness)``, and per unit of ``M`` (``s`` times
+    it). Arguments broadcast together.
+
+    The hold's equivalent of ``H`` is ``(1 - 1/z) Z{y(k h)}``, ``y`` the delayed step
+    response of ``H``. ``H / s = N(s) / (T (s - q1) (s - q2) (s - q3))`` (``N`` = 1 or ``s``;
+    ``q1``, ``q2`` the hinge's poles, ``q3 = -1/T``) in partial fractions, each term
+    ``c e^{p t}`` sampled in closed form with the delay split into whole samples and a
+    fraction; a rig with neither damping nor stiffness has a double pole at the origin, whose
+    ``c t`` term is sampled the same way."""
+    z = np.exp(1j * np.asarray(omega_rad_s, dtype=float) * hold_s)
+    t, tau = np.asarray(t, dtype=float), np.asarray(tau, dtype=float)
+    damping, stiffness = np.asarray(damping, dtype=float), np.asarray(stiffness, dtype=float)
+    whole = np.floor(tau / hold_s)
+    frac = tau - whole * hold_s
+    double = (damping == 0) & (stiffness == 0)
+    root = np.sqrt(damping ** 2 - 4 * stiffness + 0j)
+    root = np.where(root == 0, REPEATED_POLE_SPLIT * np.maximum(damping, 1.0), root)
+    q1, q2, q3 = (-damping + root) / 2, np.where(double, -1.0, (-damping - root) / 2), -1.0 / t
+    q1 = np.where(double, 1.0, q1)
+    back = 1 / z
+
+    def sampled(p, c):                       # sum_{j >= 1} c e^{p (j h - frac)} z^-j
+        step = np.exp(p * hold_s) * back
+        return c * np.exp(-p * frac) * step / (1 - step)
+
+    out = []
+    for num in (np.ones_like, lambda s: s):
+        distinct = sum(sampled(p, num(p) / (t * (p - a) * (p - b)))
+                       for p, a, b in ((q1, q2, q3), (q2, q1, q3), (q3, q1, q2)))
+        c3 = num(q3) / (t * q3 ** 2)
+        c2 = num(np.zeros_like(q3)) / (-t * q3)
+        ramp = c2 * (hold_s * back / (1 - back) ** 2 - frac * back / (1 - back))
+        at_origin = ramp + sampled(np.zeros_like(q3), -c3) + sampled(q3, c3)
+        out.append(z ** -whole * (1 - back) * np.where(double, at_origin, distinct))
+    return tuple(out)
+
+
 class _Problem:
     """Every record's lines stacked, and the model of what they measured: per line, the
     residual ``T_p - P_c T_c - P_i`` is linear in ``E`` and ``M`` once the lags are held."""
 
-    def __init__(self, records, rigs: dict, rotors: int):
+    def __init__(self, records, rigs: dict, rotors: int, hold_s: float | None):
         self.rotors, self.axes = rotors, sorted({r.axis for r in records}, key=AXES.get)
+        self.hold_s = hold_s
         lines = []
         for rec in records:
             if rec.axis not in rigs:
@@ -206,13 +257,15 @@ class _Problem:
                 if not (p.sigma > 0 and c.sigma >= 0):
                     raise InputError(f"rotor {rec.rotor + 1} on {rec.axis}: a point without "
                                      f"a positive sigma at {p.omega_rad_s:.4g} rad/s")
+                rig = rigs[rec.axis]
                 lines.append((self.axes.index(rec.axis), rec.rotor, p.omega_rad_s, p.gain,
                               c.gain, p.sigma, c.sigma, rho * p.sigma * c.sigma,
-                              rigs[rec.axis].response(p.omega_rad_s)))
+                              rig.response(p.omega_rad_s), rig.damping_rad_s,
+                              rig.stiffness_rad2_s2))
         cols = list(zip(*lines))
         self.row, self.rotor = (np.array(c, dtype=int) for c in cols[:2])
         (self.omega, self.t_p, self.t_c, self.sigma_p, self.sigma_c, self.cov_pc,
-         self.rig_response) = (np.array(c) for c in cols[2:])
+         self.rig_response, self.damping, self.stiffness) = (np.array(c) for c in cols[2:])
         self.alloc = np.array([rigs[a].allocation for a in self.axes], dtype=float)
         if self.alloc.shape[1] != rotors:
             raise InputError(f"an allocation column needs one entry per rotor ({rotors})")
@@ -228,34 +281,39 @@ class _Problem:
         n, k = self.rotors, self.linear
         return np.exp(x[k:k + n]), x[k + n:]
 
-    def paths(self, t, tau) -> np.ndarray:
-        """Per line and rotor, ``exp(-s tau) / (T s + 1) R(s)``: a rotor's path per unit of
-        its ``E`` (times ``s`` per unit of its ``M``)."""
+    def paths(self, t, tau) -> tuple:
+        """Per line and rotor, its path per unit of its ``E`` and per unit of its ``M``:
+        ``exp(-s tau) / (T s + 1) R(s)`` and ``s`` times it, or their hold's equivalents
+        (:func:`held_paths`) when the points were sampled with a hold."""
+        if self.hold_s is not None:
+            return held_paths(self.omega[:, None], self.hold_s, t, tau,
+                              self.damping[:, None], self.stiffness[:, None])
         s = 1j * self.omega[:, None]
-        return np.exp(-s * tau) / (t * s + 1) * self.rig_response[:, None]
+        per_e = np.exp(-s * tau) / (t * s + 1) * self.rig_response[:, None]
+        return per_e, s * per_e
 
     def design(self, t, tau) -> np.ndarray:
         """Per line, the complex coefficient of each ``E`` (then each ``M``) in
         ``P_i + P_c T_c``, the lags held at ``t`` and ``tau``."""
         m, n = len(self.axes), self.rotors
-        s = 1j * self.omega[:, None]
         own = np.zeros((self.omega.size, n))
         own[np.arange(self.omega.size), self.rotor] = 1.0
-        per_rotor = (own + self.t_c[:, None] * self.alloc[self.row]) * self.paths(t, tau)
+        gain = own + self.t_c[:, None] * self.alloc[self.row]
+        per_e, per_m = self.paths(t, tau)
         design = np.zeros((self.omega.size, 2 * m * n), dtype=complex)
         for r in range(m):
             on = self.row == r
-            design[on, r * n:(r + 1) * n] = per_rotor[on]
-            design[on, (m + r) * n:(m + r + 1) * n] = (s * per_rotor)[on]
+            design[on, r * n:(r + 1) * n] = (gain * per_e)[on]
+            design[on, (m + r) * n:(m + r + 1) * n] = (gain * per_m)[on]
         return design
 
     def reweigh(self, x) -> None:
         """Each line's weight, ``1 / sigma`` of ``T_p - P_c T_c`` at the parameters ``x``."""
         n, half = self.rotors, self.linear // 2
         e, spin = x[:half].reshape(-1, n), x[half:self.linear].reshape(-1, n)
-        s = 1j * self.omega[:, None]
-        p_c = np.sum(self.alloc[self.row] * (e[self.row] + s * spin[self.row])
-                     * self.paths(*self.lags(x)), axis=1)
+        per_e, per_m = self.paths(*self.lags(x))
+        p_c = np.sum(self.alloc[self.row] * (e[self.row] * per_e + spin[self.row] * per_m),
+                     axis=1)
         var = (self.sigma_p ** 2 + np.abs(p_c) ** 2 * self.sigma_c ** 2
                - 2 * np.real(np.conj(p_c) * self.cov_pc))
         self.weight = 1.0 / np.sqrt(np.maximum(var, VARIANCE_FLOOR * self.sigma_p ** 2))
@@ -297,8 +355,8 @@ def _fit_lags(problem: _Problem, t0, tau0, free) -> np.ndarray:
                                 np.full(count, DELAY_BOUNDS_S[1])])
         sol = scipy.optimize.least_squares(
             lambda phi: problem.solve_linear(*lags(phi))[1], np.clip(phi0, lower, upper),
-            bounds=(lower, upper), x_scale=np.concatenate([np.ones(count),
-                                                           np.full(count, 0.01)]))
+            bounds=(lower, upper), x_scale=np.concatenate([np.ones(count), np.full(count, 0.01)]),
+            xtol=LAG_TOLERANCE, ftol=LAG_TOLERANCE, gtol=LAG_TOLERANCE)
         t, tau = lags(sol.x)
     else:
         t, tau = t0, tau0
@@ -329,6 +387,12 @@ def _covariance(jac, keep) -> np.ndarray:
     return cov
 
 
+def _sigmas(cov) -> np.ndarray:
+    """Standard deviations from a covariance's diagonal (a variance that round-off took
+    below zero, for a parameter fitted exactly, as 0; NaN kept)."""
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+
 def _seen(problem: _Problem, t, tau) -> np.ndarray:
     """Which rotors moved some rig enough to show their lag (``IDENTIFIED_SIGMAS``), judged
     with every lag held at ``t``, ``tau`` (a free lag would fit the noise of a rotor that
@@ -338,28 +402,33 @@ def _seen(problem: _Problem, t, tau) -> np.ndarray:
     problem.reweigh(x)
     x[:problem.linear] = problem.solve_linear(t, tau)[0]
     design = problem.stacked(problem.design(t, tau))
-    sd = np.sqrt(np.diag(_covariance(design, np.ones(problem.linear, dtype=bool))))
+    sd = _sigmas(_covariance(design, np.ones(problem.linear, dtype=bool)))
     e = np.abs(x[:half].reshape(-1, n)) / sd[:half].reshape(-1, n)
     return np.any(e > IDENTIFIED_SIGMAS, axis=0)
 
 
-def estimate_effectiveness(records, rigs: dict, rotors: int) -> EffectivenessEstimate:
+def estimate_effectiveness(records, rigs: dict, rotors: int,
+                           hold_s: float | None = None) -> EffectivenessEstimate:
     """Fit every rotor's effectiveness, spin-up reaction, time constant and delay to the
     records (:class:`RotorPoints`) of the rigs (``axis -> Rig``), ``rotors`` rotors in all
-    (module docstring, docs/effectiveness.md)."""
+    (module docstring, docs/effectiveness.md). ``hold_s``: the loop period, when the logged
+    commands were held for it (the firmware's): the paths are then the hold's exact
+    equivalents and ``tau`` leaves the hold out; None: continuous paths, ``tau`` with the
+    hold's half period in it."""
     records = [r for r in records if r.rate]
     if not records:
         raise InputError("no rotor's points to fit")
-    problem = _Problem(records, rigs, rotors)
+    problem = _Problem(records, rigs, rotors, hold_s)
     n, k = rotors, problem.linear
     if 2 * problem.omega.size <= k + 2 * n:
         raise InputError(f"{problem.omega.size} lines cannot fit the {k + 2 * n} parameters "
                          f"of {len(problem.axes)} rigs and {n} rotors")
-    tau0 = np.full(n, START_DELAY_S)
-    t0 = min((np.full(n, f * START_TIME_CONSTANT_S) for f in (0.5, 1.0, 4.0)),
-             key=lambda t: float(np.sum(problem.solve_linear(t, tau0)[1] ** 2)))
-    seen = _seen(problem, t0, tau0)
-    x = _fit_lags(problem, t0, tau0, seen)
+    starts = sorted(((np.full(n, f * START_TIME_CONSTANT_S), np.full(n, g * START_DELAY_S))
+                     for f in (0.5, 1.0, 4.0) for g in (1.0, 2.0, 4.0)),
+                    key=lambda lags: float(np.sum(problem.solve_linear(*lags)[1] ** 2)))
+    seen = _seen(problem, *starts[0])
+    x = min((_fit_lags(problem, t0, tau0, seen) for t0, tau0 in starts[:FIT_STARTS]),
+            key=lambda x: float(np.sum(problem.residuals(x) ** 2)))
     problem.reweigh(x)
     x = _fit_lags(problem, np.exp(x[k:k + n]), x[k + n:], seen)
     keep = np.concatenate([np.ones(k, dtype=bool), seen, seen])
@@ -374,7 +443,7 @@ def _estimate(problem: _Problem, x, cov, seen, chi2_dof: float) -> Effectiveness
     pitch, yaw order (NaN for a rig not flown)."""
     n, k, half = problem.rotors, problem.linear, problem.linear // 2
     rows = [AXES[a] for a in problem.axes]
-    sd = np.sqrt(np.diag(cov))
+    sd = _sigmas(cov)
     entries = (np.array(rows)[:, None] * n + np.arange(n)).ravel()
     e_cov = np.full((len(AXES) * n,) * 2, np.nan)
     e_cov[np.ix_(entries, entries)] = cov[:half, :half]
@@ -395,14 +464,22 @@ def _estimate(problem: _Problem, x, cov, seen, chi2_dof: float) -> Effectiveness
         chi2_dof=chi2_dof)
 
 
-def rotor_paths(est: EffectivenessEstimate, rig: Rig, omega_rad_s) -> tuple:
+def rotor_paths(est: EffectivenessEstimate, rig: Rig, omega_rad_s,
+                hold_s: float | None = None) -> tuple:
     """The fitted paths on ``rig``'s axis at ``omega_rad_s``: ``(P_j per rotor (rotors x
     frequencies), P_c = sum_j a_kj P_j)``, the second to compare with the axis sweep's model
-    of the same rig. A rotor with no reported lag (it moved no rig) enters with its entry
-    alone, which is zero within its sigma."""
+    of the same rig; ``hold_s`` as the estimate was fitted. A rotor with no reported lag (it
+    moved no rig) enters with its entry alone, which is zero within its sigma."""
     row = AXES[rig.axis]
-    s = 1j * np.atleast_1d(np.asarray(omega_rad_s, dtype=float))[None, :]
+    omega = np.atleast_1d(np.asarray(omega_rad_s, dtype=float))[None, :]
     t, tau = (np.nan_to_num(v)[:, None] for v in (est.time_constant_s, est.delay_s))
+    t = np.where(t > 0, t, TIME_CONSTANT_BOUNDS_S[0])
     e, spin = (v[row][:, None] for v in (est.effectiveness_rad_s2, est.spin_up_rad_s))
-    paths = (e + s * spin) * np.exp(-s * tau) / (t * s + 1) * rig.response(s.imag)
+    if hold_s is not None:
+        per_e, per_m = held_paths(omega, hold_s, t, tau, rig.damping_rad_s,
+                                  rig.stiffness_rad2_s2)
+    else:
+        per_e = np.exp(-1j * omega * tau) / (t * 1j * omega + 1) * rig.response(omega)
+        per_m = 1j * omega * per_e
+    paths = e * per_e + spin * per_m
     return paths, np.asarray(rig.allocation, dtype=float) @ paths
