@@ -29,7 +29,7 @@ __all__ = ["GeometryParam", "RANGES", "UNUSED_ROTOR", "ROWS", "geometry_params",
 #: ``n`` standing for a rotor's index (every rotor's are rotor 0's): m for positions, N for the
 #: weight and the largest thrust, m (N m per N) for the moment ratio; the axis is a unit vector.
 _TABLE = {p.name: (float(p.minimum), float(p.maximum)) for p in _firmware.param_table()}
-RANGES = {"CA_ROTOR_COUNT": _TABLE["CA_ROTOR_COUNT"],
+RANGES = {"CA_ROTOR_COUNT": tuple(int(v) for v in _TABLE["CA_ROTOR_COUNT"]),
           "CA_HOVER_THRUST": _TABLE["CA_HOVER_THRUST"],
           **{f"CA_ROTORn_{f}": _TABLE[f"CA_ROTOR0_{f}"]
              for f in ("PX", "PY", "PZ", "AX", "AY", "AZ", "CT", "KM")}}
