@@ -52,10 +52,14 @@ py::bytes packet(FifoKind kind, const SensorSample& s) {
     return py::bytes(reinterpret_cast<const char*>(out), n);
 }
 
-std::array<float, kMotors> motors(const std::vector<double>& m) {
-    if (m.size() != kMotors) throw std::invalid_argument("five motor commands expected");
-    std::array<float, kMotors> f{};
-    for (int r = 0; r < kMotors; ++r) f[r] = static_cast<float>(m[r]);
+// One thrust fraction per rotor of the plant, as the firmware's kMaxRotors-wide array.
+std::array<float, kMaxRotors> motors(const RigPlant& p, const std::vector<double>& m) {
+    if (m.size() != static_cast<size_t>(p.rotors())) {
+        throw std::invalid_argument(std::to_string(p.rotors()) +
+                                    " motor commands expected, one per rotor");
+    }
+    std::array<float, kMaxRotors> f{};
+    for (size_t r = 0; r < m.size(); ++r) f[r] = static_cast<float>(m[r]);
     return f;
 }
 
@@ -102,8 +106,8 @@ PYBIND11_MODULE(_simcore, m) {
     // The chip's scales and packet sizes (the firmware driver's) and the sensor frame's FIFO
     // capacity and RC channels (the dialect's), for Python.
     m.attr("GRAVITY_M_S2") = kGravity;
-    m.attr("MAX_ROTORS") = kMaxRotors;          // the vehicle model's room
-    m.attr("FIRMWARE_MOTORS") = kMotors;        // what the firmware's mixer drives
+    m.attr("MAX_ROTORS") = kMaxRotors;          // the vehicle model's room: the firmware's
+    m.attr("FIRMWARE_MOTORS") = kMotors;        // the rotors the firmware flies by default
     m.attr("GYRO_LSB_PER_DEG_S") = kGyroLsbPerDegS;
     m.attr("ACCEL_LSB_PER_G") = kAccelLsbPerG;
     m.attr("QUAT_SCALE") = kQuatScale;
@@ -134,9 +138,10 @@ PYBIND11_MODULE(_simcore, m) {
            "This frame's FIFO bytes of the given HQ_SENSOR_KIND")
         .def("step_motors", [](RigPlant& p, const std::vector<double>& motor, py::object gust) {
             const auto g = rows_of(gust, 1, 6, "gust");
-            const auto f = motors(motor);
+            const auto f = motors(p, motor);
             p.step(f.data(), optional(g));
-        }, py::arg("motor"), py::arg("gust") = py::none());
+        }, py::arg("motor"), py::arg("gust") = py::none())
+        .def_property_readonly("rotors", &RigPlant::rotors, "the thrust fractions step takes");
 
     py::class_<TfAxis, RigPlant>(m, "TfAxis")
         .def(py::init<std::vector<double>, std::vector<double>, std::vector<double>, double, int>(),
@@ -209,14 +214,17 @@ PYBIND11_MODULE(_simcore, m) {
         .value("CLOSED", LinkStatus::Closed)
         .value("TIMEOUT", LinkStatus::Timeout)
         .value("WRONG_FRAME", LinkStatus::WrongFrame)
-        .value("CANCELLED", LinkStatus::Cancelled);
+        .value("CANCELLED", LinkStatus::Cancelled)
+        .value("ROTOR_COUNT", LinkStatus::RotorCount);
 
     py::class_<Reply>(m, "Reply")
         .def_readonly("time_us", &Reply::time_us)
         .def_readonly("frame", &Reply::frame)
-        .def_property_readonly("motor", [](const Reply& r) {
-            return std::vector<double>(r.motor.begin(), r.motor.end());
+        .def_property_readonly("motor", [](const Reply& r) {      // the rotors flown
+            const int n = r.motor_count < kMaxRotors ? r.motor_count : kMaxRotors;
+            return std::vector<double>(r.motor.begin(), r.motor.begin() + n);
         })
+        .def_readonly("motor_count", &Reply::motor_count)
         .def_property_readonly("armed", [](const Reply& r) { return r.armed != 0; })
         .def_readonly("mode", &Reply::mode)
         .def_readonly("sensor_kind", &Reply::sensor_kind);

@@ -755,7 +755,7 @@ CASES = [
     case(f"{SIL} --params t_rotors_table.toml --plant vehicle --out o",
          "rotors must be [[rotors]] tables"),
     case(f"{SIL} --params t_rotors_six.toml --plant vehicle --out o",
-         "6 rotors, but the firmware's mixer drives 5"),
+         "6 rotors, but the firmware flies 5"),
     case(f"{SIL} --params t_rotors_moved.toml --plant vehicle --out o",
          "rotors[3] is not the firmware mixer's right rotor"),
     case(f"{SIL} --plant vehicle --loop-hz 1 --out o", "fastest mode"),

@@ -641,6 +641,8 @@ def test_standard_messages_describe_the_vehicle(any_client):
     servo = client.of_type("SERVO_OUTPUT_RAW")[-1]
     assert servo.servo1_raw == pytest.approx(1000 + 1000 * sample.motor[0], abs=15)
     assert 1000 < servo.servo2_raw < 2000
+    # Past the five rotors flown, the ESC outputs carry their stop pulse (ESCn_MIN).
+    assert [servo.servo6_raw, servo.servo7_raw, servo.servo8_raw] == [1000] * 3
     imu = client.of_type("SCALED_IMU")[-1]
     assert math.hypot(imu.xacc, imu.yacc, imu.zacc) == pytest.approx(1000, rel=0.05)
     hr = client.of_type("HIGHRES_IMU")[-1]            # SI units: MAVSDK's imu()

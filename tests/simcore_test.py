@@ -116,7 +116,7 @@ def _sysid(codec, mav, time_us, seq):
         "time_us": time_us, "seq": seq, "axis": 0, "injection": 2,
         "exc_state": mav.HQ_EXCITATION_STATE_RUNNING, "armed": 1, "mode": mav.HQ_MODE_ANGLE,
         "excitation": 0.1, "angle_sp": 0.0, "rate_sp": 0.0, "rate": 0.2, "angle": 0.0,
-        "axis_cmd": 0.1, "motor": [0.4] * 5, "saturation": 0})
+        "axis_cmd": 0.1, "motor": [0.4] * 5 + [0.0] * 3, "motor_count": 5, "saturation": 0})
 
 
 def test_telemetry_tap_logs_every_packet_with_its_loops_time(tmp_path):

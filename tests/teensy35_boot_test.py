@@ -899,7 +899,7 @@ def test_ftm0_esc_outputs_at_the_stop_pulse_from_their_first_edge(booted):
     for pin, sig, period, pulse in booted.esc_outputs():
         assert period == pytest.approx(2.5e-3, abs=1e-9), pin
         assert pulse == pytest.approx(1.0e-3, abs=1e-9), pin
-    assert set(booted.esc_first_edges) == {22, 23, 9, 10, 6}
+    assert set(booted.esc_first_edges) == {22, 23, 9, 10, 6, 20, 21, 5}
     for pin, (t, period, pulse) in booted.esc_first_edges.items():
         assert period == pytest.approx(2.5e-3, abs=1e-9) and pulse == pytest.approx(1e-3, abs=1e-9), \
             f"pin {pin} was switched to FTM0 before its stop pulse was set"

@@ -318,6 +318,26 @@ def test_parameters_list_and_set_over_the_emulated_usb_port(tmp_path):
         assert read.stdout == "EXC_MAX_DUR 120\n", read.stderr
 
 
+def test_armed_the_image_drives_eight_esc_outputs_those_past_its_rotors_at_the_stop_pulse():
+    # FTM0's eight channels, pins 22, 23, 9, 10, 6, 20, 21, 5: the five rotors the image
+    # flies get their thrust, the three past its rotor count the stop pulse (ESCn_MIN, 1 ms
+    # by default), armed and flying as when disarmed.
+    f = Flying()
+    f.arm()
+    flown = f.fly(40, f.RC_MID)
+    assert f.pil.report()[7] == 5, "the rotor count the loop flies"
+    assert all(len(motors) == 5 and min(motors) > 0.05 for motors, _, _, _ in flown)
+    board = f.pil.board
+    outputs = board.esc_outputs()
+    assert [pin for pin, _, _, _ in outputs] == [22, 23, 9, 10, 6, 20, 21, 5]
+    assert [sig for _, sig, _, _ in outputs] == [f"FTM0_CH{ch}" for ch in range(8)]
+    assert all(period == pytest.approx(2.5e-3, abs=1e-9) for _, _, period, _ in outputs)
+    pulses = [pulse for _, _, _, pulse in outputs]
+    assert all(p > 1.05e-3 for p in pulses[:5]), pulses
+    assert pulses[5:] == [pytest.approx(1.0e-3, abs=1e-9)] * 3, pulses
+    assert f.pil.thrust()[5:] == [0.0, 0.0, 0.0]
+
+
 def test_closing_reopening_and_re_enumerating_while_armed_keeps_the_vehicle_flying():
     """The host closes the port (DTR low) for 0.5 s and opens it again, then resets the bus
     and enumerates the board again, all while the vehicle is armed with its throttle up: it

@@ -3,8 +3,9 @@
 The shipped file flies as it did when it described one central rotor and four like arm rotors
 (tests/data/vehicle_reference.json, recorded from that description: tests/vehicle_reference.py);
 the test vehicles of six and eight rotors (tests/data/) get their forces and moments from their
-geometry and hover open loop at a trim computed from it; the in-the-loop plant refuses what the
-firmware's five-motor mixer cannot fly.
+geometry and hover open loop at a trim computed from it; the in-the-loop plant flies them,
+one motor per rotor, and the firmware in the loop refuses a vehicle whose rotor count it does
+not fly.
 """
 
 import dataclasses
@@ -20,6 +21,7 @@ from heliquad.sim.base.errors import InputError
 from heliquad.sim.plant.vehicle import BODY_STATES, GRAVITY_M_S2, Vehicle
 from heliquad.sim.plant.vehicle_params import load_params
 from heliquad.sim.plant.vehicle_plant import VehiclePlant, check_loop_vehicle, mixer_layout
+from heliquad.sim.rig.driver import Rig
 
 from vehicle_reference import flights
 
@@ -148,19 +150,54 @@ def test_a_rotor_spins_its_own_way():
         -(-1) * 8.0e-6 * vehicle.w_max[5] * math.sqrt(0.5), rel=1e-12)
 
 
-@pytest.mark.parametrize("path, says", [
-    (SIX, "6 rotors, but the firmware's mixer drives 5"),
-    (EIGHT, "8 rotors, but the firmware's mixer drives 5"),
-])
-def test_the_loop_refuses_what_the_firmwares_mixer_cannot_fly(path, says):
+@pytest.mark.parametrize("path, rotors", [(SIX, 6), (EIGHT, 8)])
+def test_the_loop_refuses_a_vehicle_without_the_firmwares_rotor_count(path, rotors):
     params = load_params(path)
+    says = f"{rotors} rotors, but the firmware flies {_simcore.FIRMWARE_MOTORS}: "
     with pytest.raises(InputError, match=says):
         check_loop_vehicle(params, 0.005)
-    with pytest.raises(InputError, match=says):
-        VehiclePlant("roll", "roll", 0.005, params)
-    # and the core's in-the-loop plant, which takes the firmware's five commands, refuses too
-    with pytest.raises(ValueError, match="five rotors"):
-        _simcore.VehicleRig(Vehicle(params).core, 0.005, _simcore.ImuConfig(), 0.0)
+
+
+def _hold(plant, u, frames):
+    """Hold the thrust fractions ``u`` for ``frames`` frames: the plant's rates and specific
+    force then."""
+    for _ in range(frames):
+        plant.step_motors(u)
+    _, gyro, accel = plant.sensor_sample()
+    return np.concatenate([gyro, accel])
+
+
+@pytest.mark.parametrize("path, rotors", [(SIX, 6), (EIGHT, 8)])
+def test_a_plant_of_six_or_eight_rotors_responds_to_each_motor(path, rotors):
+    # The in-the-loop plant takes the vehicle file's rotor count: one command per rotor, and
+    # each rotor's command moves the body (its thrust's force and moment) by itself.
+    params = load_params(path)
+    plant = VehiclePlant("roll", "free", 0.005, params, ideal_sensor=True)
+    assert plant.core.rotors == rotors
+    trim = [0.3] * rotors
+    rest = _hold(VehiclePlant("roll", "free", 0.005, params, ideal_sensor=True), trim, 20)
+    moved = []
+    for r in range(rotors):
+        u = list(trim)
+        u[r] += 0.2
+        got = _hold(VehiclePlant("roll", "free", 0.005, params, ideal_sensor=True), u, 20)
+        assert np.max(np.abs(got - rest)) > 1e-3, f"rotor {r} moved nothing"
+        moved.append(got)
+    # Not one response repeated: each motor drives its own rotor.
+    assert len({tuple(np.round(m, 9)) for m in moved}) == rotors
+    with pytest.raises(ValueError, match=f"{rotors} motor commands expected"):
+        plant.step_motors([0.3] * 5)
+
+
+def test_the_lockstep_engine_says_when_the_firmware_flies_another_rotor_count():
+    # Past the command line's check (a plant made directly): the host firmware flies its five
+    # rotors, the plant has six; the first reply's count stops the run with one line.
+    params = load_params(SIX)
+    rc = np.array([[1500, 1500, 1000, 1500, 1000, 1000, 0, 0]], dtype=np.uint16)
+    with Rig(lambda dt_s: VehiclePlant("roll", "roll", dt_s, params)) as rig:
+        with pytest.raises(InputError, match=f"the firmware flies {_simcore.FIRMWARE_MOTORS} "
+                                             "rotors but the vehicle has 6"):
+            rig.advance(1, rc)
 
 
 def test_a_five_rotor_vehicle_off_the_mixers_layout_is_refused_in_the_loop():

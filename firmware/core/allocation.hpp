@@ -12,7 +12,7 @@
 // kept whole, then yaw, the collective gives way) and its flags. With the default geometry
 // (MixerGeometry's vehicle as 5 rotors) it gives the Mixer's outputs to float precision.
 //
-// No heap, no exceptions: fixed arrays of at most kMaxRotors rotors, float throughout.
+// No heap, no exceptions: fixed arrays of at most kMaxRotors (types.hpp) rotors, float throughout.
 #pragma once
 
 #include <cstdint>
@@ -22,7 +22,6 @@
 
 namespace hq {
 
-constexpr int kMaxRotors = 8;       // rotor 0 is the central one
 constexpr int kMinRotors = 4;       // four independent commands need four rotors at least
 constexpr int kAllocationRows = 4;  // vertical force, roll, pitch, yaw: MixerCommand's order
 

@@ -253,7 +253,7 @@ void FlightController::run_control(const RcInput& rc, float excitation,
     if (!finite) supervisor_.fault(Reason::NonFinite);
     if (finite && supervisor_.armed()) {
         for (int i = 0; i < kMotors; ++i) status_.state.motor[i] = out.motor[i];
-        motors_.set(status_.state.motor);
+        motors_.set(status_.state.motor, status_.state.rotor_count);
         return;
     }
     for (float& m : status_.state.motor) m = 0.0f;

@@ -94,11 +94,12 @@ struct LoopState {               // what the last loop computed, for telemetry a
     Vec3 torque{};               // normalised mixer torque commands, after injection
     float collective = 0.0f;
     float excitation = 0.0f;
-    float motor[kMotors] = {0, 0, 0, 0, 0};
+    float motor[kMaxRotors] = {};  // thrust fractions, rotor order; 0 past rotor_count
     Vec3 accel{};                // m/s^2, the last IMU sample's
     float dt_s = 0.0f;
     uint8_t sensor_clipped = 0;  // HQ_SATURATION_GYRO / _ACCEL bits of the last IMU sample
     uint8_t saturation = 0;      // HQ_SATURATION bits of this loop (mixer and sensor)
+    uint8_t rotor_count = kMotors;  // the rotors the loop flies: motor[0..rotor_count)
 };
 
 // Something the loop says in words (a STATUSTEXT): a Supervisor event, an IMU or a parameter

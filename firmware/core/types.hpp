@@ -17,6 +17,11 @@ enum class Axis : uint8_t { Roll = HQ_AXIS_ROLL, Pitch = HQ_AXIS_PITCH, Yaw = HQ
 constexpr int kAxes = HQ_AXIS_ENUM_END;
 constexpr int kAngleAxes = 2;          // roll and pitch: yaw has no angle loop
 
+// The most rotors the firmware drives: rotor 0 the central one, up to seven more. The loop's
+// motor arrays, the ESC outputs and the links' motor fields are this wide; the entries past
+// the rotor count the loop flies are 0 (docs/link-contract.md).
+constexpr int kMaxRotors = 8;
+
 // Standard gravity, m/s^2: the accelerometer's g and the attitude filter's 1 g.
 constexpr float kGravity = 9.80665f;
 

@@ -53,8 +53,11 @@ public:
         if (check == Check::New && (a.frame != expect_frame || a.time_us != expect_time)) {
             std::abort();
         }
-        for (float m : a.motor) {
+        if (a.motor_count < 1 || a.motor_count > hq::kMaxRotors) std::abort();
+        for (int i = 0; i < hq::kMaxRotors; ++i) {
+            const float m = a.motor[i];
             if (!std::isfinite(m) || m < 0.0f || m > 1.0f || (!a.armed && m != 0.0f)) std::abort();
+            if (i >= a.motor_count && m != 0.0f) std::abort();     // past the count: stopped
         }
         std::memcpy(last_, packet, n);
         last_len_ = n;

@@ -52,7 +52,7 @@ constexpr int kMaxLoops = 48;              // per input: keeps executions fast
 
 void check_rules(const hq::FlightController& fc, const hq::HostMotors& motors) {
     const float* m = motors.values();
-    for (int i = 0; i < hq::kMotors; ++i) {
+    for (int i = 0; i < hq::kMaxRotors; ++i) {
         if (!std::isfinite(m[i]) || m[i] < 0.0f || m[i] > 1.0f) std::abort();
         if (!fc.armed() && m[i] != 0.0f) std::abort();
     }

@@ -41,7 +41,7 @@ _HQSD_FIELDS = {"TimeUS": "time_us", "Seq": "seq", "Axis": "axis", "Inj": "injec
                 "ESt": "exc_state", "Arm": "armed", "Mode": "mode", "Exc": "excitation",
                 "ASP": "angle_sp", "RSP": "rate_sp", "Rate": "rate", "Ang": "angle",
                 "Cmd": "axis_cmd", "Sat": "saturation"}
-_MOTORS = ("M1", "M2", "M3", "M4", "M5")
+_MOTORS = tuple(f"M{i}" for i in range(1, 9))        # HQMT's M1..M8: motor[8]
 #: SIDS's set-up fields (ArduPilot's names).
 _SIDS_FIELDS = ("TimeUS", "Ax", "Mag", "FSt", "FSp", "TFin", "TC", "TR", "TFout")
 
@@ -146,14 +146,14 @@ class _Collector:
         if m.TimeUS != hqsd.TimeUS:
             return "a loop's records are not of one time"
         self.rows.append(tuple(getattr(hqsd, k) for k in _HQSD_FIELDS)
-                         + (tuple(getattr(m, k) for k in _MOTORS),))
+                         + (tuple(getattr(m, k) for k in _MOTORS), m.MCnt))
         self.sidd.append((sidd.Time, sidd.F))
         self.pending, self.last_seq, self.gap_since = [], hqsd.Seq, False
         return None
 
     def log(self, damage: BinDamage) -> BinLog:
         dtype = message_dtype(dialect(), "HQ_SYSID_SAMPLE")
-        by_name = [*_HQSD_FIELDS.values(), "motor"]
+        by_name = [*_HQSD_FIELDS.values(), "motor", "motor_count"]
         rows = np.zeros(len(self.rows), dtype=dtype)
         for i, name in enumerate(by_name if self.rows else ()):
             rows[name] = [r[i] for r in self.rows]

@@ -22,7 +22,7 @@ caller clears the list; with the core's ``keep_records`` off (a long lockstep ru
 kept.
 
 The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp): the flight
-loop writes FTM0's five CnV registers every loop and FTM3's capture handler touches its
+loop writes FTM0's eight CnV registers every loop and FTM3's capture handler touches its
 registers a dozen times an edge. This class is its view.
 """
 

@@ -1,5 +1,5 @@
 """The Teensy 3.5 board around the chip, as the heliquad firmware uses it: a 16 MHz crystal,
-the MPU6050 on I2C0 (pins 18/19, with the breakout board's pull-ups), five ESC outputs on
+the MPU6050 on I2C0 (pins 18/19, with the breakout board's pull-ups), eight ESC outputs on
 FTM0, seven RC inputs on FTM3, telemetry on UART0 (pins 0/1), the status LED on pin 13 and the
 microSD socket on the SDHC (PTE0-5), with a card when ``sd_image`` names a card-image file.
 
@@ -21,24 +21,25 @@ from .mk64 import Mk64
 from .sd_card import SdCard
 
 # Teensy 3.5 pin number -> (port, bit) for the pins the firmware uses (PJRC's pin table).
-PINS = {0: ("B", 16), 1: ("B", 17), 2: ("D", 0), 6: ("D", 4), 7: ("D", 2), 8: ("D", 3),
-        9: ("C", 3), 10: ("C", 4), 13: ("C", 5), 14: ("D", 1), 18: ("B", 3), 19: ("B", 2),
-        22: ("C", 1), 23: ("C", 2), 35: ("C", 8), 36: ("C", 9),
-        37: ("C", 10)}
+PINS = {0: ("B", 16), 1: ("B", 17), 2: ("D", 0), 5: ("D", 7), 6: ("D", 4), 7: ("D", 2),
+        8: ("D", 3), 9: ("C", 3), 10: ("C", 4), 13: ("C", 5), 14: ("D", 1), 18: ("B", 3),
+        19: ("B", 2), 20: ("D", 5), 21: ("D", 6), 22: ("C", 1), 23: ("C", 2), 35: ("C", 8),
+        36: ("C", 9), 37: ("C", 10)}
 # K64 signal multiplexing (data sheet, "K64 Signal Multiplexing and Pin Assignments"):
 # (port, bit, MUX) -> signal, for those pins.
 SIGNALS = {
     ("B", 2, 2): "I2C0_SCL", ("B", 3, 2): "I2C0_SDA",
     ("B", 16, 3): "UART0_RX", ("B", 17, 3): "UART0_TX",
     ("C", 1, 4): "FTM0_CH0", ("C", 2, 4): "FTM0_CH1", ("C", 3, 4): "FTM0_CH2",
-    ("C", 4, 4): "FTM0_CH3", ("D", 4, 4): "FTM0_CH4",
+    ("C", 4, 4): "FTM0_CH3", ("D", 4, 4): "FTM0_CH4", ("D", 5, 4): "FTM0_CH5",
+    ("D", 6, 4): "FTM0_CH6", ("D", 7, 4): "FTM0_CH7",
     ("D", 0, 4): "FTM3_CH0", ("D", 1, 4): "FTM3_CH1", ("D", 2, 4): "FTM3_CH2",
     ("D", 3, 4): "FTM3_CH3", ("C", 8, 3): "FTM3_CH4", ("C", 9, 3): "FTM3_CH5",
     ("C", 10, 3): "FTM3_CH6",
 }
 I2C_PINS = {"SDA": 18, "SCL": 19}
 UART_PINS = {"RX": 0, "TX": 1}
-ESC_PINS = (22, 23, 9, 10, 6)           # FTM0 channels 0..4
+ESC_PINS = (22, 23, 9, 10, 6, 20, 21, 5)     # FTM0 channels 0..7, rotor i on channel i
 RC_PINS = (2, 14, 7, 8, 35, 36, 37)     # FTM3 channels 0..6
 LED_PIN = 13
 CRYSTAL_HZ = 16e6

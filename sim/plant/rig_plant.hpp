@@ -11,9 +11,11 @@
 #include <cstdint>
 
 #include "core/mixer.hpp"
+#include "core/types.hpp"
 
 namespace hqsim {
 
+using hq::kMaxRotors;               // the firmware's motor arrays: central rotor first
 using hq::kMotors;                  // the firmware mixer's: central, then front, right, back, left
 constexpr double kGravity = 9.80665;
 
@@ -26,13 +28,16 @@ struct SensorSample {
 
 // A plant the engine can drive. Per frame, in this order: sensor(noise) gives the sample the
 // firmware reads at the start of the period, then step(motor, gust) holds the firmware's
-// reply for one period. `noise` (6 values: gyro rad/s, accel m/s^2, already scaled) and
-// `gust` (6 values: gust velocity m/s and gust rates rad/s, body axes) may be null.
+// reply for one period: its first rotors() thrust fractions (the reply's array is kMaxRotors
+// wide; the firmware must fly rotors() rotors). `noise` (6 values: gyro rad/s, accel m/s^2,
+// already scaled) and `gust` (6 values: gust velocity m/s and gust rates rad/s, body axes)
+// may be null.
 class RigPlant {
 public:
     virtual ~RigPlant() = default;
     virtual SensorSample sensor(const double* noise) = 0;
-    virtual void step(const float motor[kMotors], const double* gust) = 0;
+    virtual void step(const float motor[kMaxRotors], const double* gust) = 0;
+    virtual int rotors() const = 0;
 };
 
 using Vec3 = std::array<double, 3>;

@@ -32,7 +32,7 @@ double TfAxis::step_command(double u) {
     return rate;
 }
 
-void TfAxis::step(const float motor[kMotors], const double*) {
+void TfAxis::step(const float motor[kMaxRotors], const double*) {
     const hq::MixerCommand got = mixer_.achieved(motor);
     const float cmd[3] = {got.roll, got.pitch, got.yaw};
     step_command(static_cast<double>(cmd[axis_]));

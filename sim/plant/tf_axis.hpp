@@ -18,7 +18,8 @@ public:
            int axis);
 
     SensorSample sensor(const double* noise) override;
-    void step(const float motor[kMotors], const double* gust) override;
+    void step(const float motor[kMaxRotors], const double* gust) override;
+    int rotors() const override { return kMotors; }     // the mixer's, whose achieved() it uses
 
     double step_command(double u);     // holds u for one period; the rate at its end
     double rate_rad_s() const { return rate_; }

@@ -109,9 +109,6 @@ VehicleRig::VehicleRig(VehicleModel& model, double dt_s, const ImuConfig& imu,
                        double rotational_damping_n_m_s_rad)
     : model_(model), dt_s_(dt_s), imu_(imu), rot_damping_(rotational_damping_n_m_s_rad) {
     if (imu.latency_samples < 0) throw std::invalid_argument("VehicleRig: latency >= 0");
-    if (model.config().rotors != kMotors) {
-        throw std::invalid_argument("VehicleRig: the vehicle must have the firmware's five rotors");
-    }
 }
 
 std::array<double, 3> VehicleRig::specific_force() const {
@@ -142,8 +139,8 @@ SensorSample VehicleRig::sensor(const double* noise) {
     return delay_.front();
 }
 
-void VehicleRig::step(const float motor[kMotors], const double* gust) {
-    for (int r = 0; r < kMotors; ++r) last_u_[r] = static_cast<double>(motor[r]);
+void VehicleRig::step(const float motor[kMaxRotors], const double* gust) {
+    for (int r = 0; r < rotors(); ++r) last_u_[r] = static_cast<double>(motor[r]);
     if (!gust) {
         model_.step(last_u_.data(), dt_s_, nullptr, nullptr);
         return;

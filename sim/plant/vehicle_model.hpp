@@ -12,7 +12,6 @@
 namespace hqsim {
 
 constexpr int kBodyStates = 13;   // position NED (3), velocity NED (3), quaternion (4), rates (3)
-constexpr int kMaxRotors = 8;     // a central rotor and up to seven more
 // The body's states, then one speed per rotor (the vehicle's first `rotors` of kMaxRotors).
 constexpr int kStates = kBodyStates + kMaxRotors;
 using State = std::array<double, kStates>;
@@ -56,8 +55,8 @@ private:
 };
 
 // The vehicle on its rig (or free) as a plant: motor lags, gusts as disturbances, and the
-// MPU6050 the firmware reads (residual gyro bias, noise given per frame, DMP latency). The
-// firmware drives kMotors motors: the vehicle must have that many rotors.
+// MPU6050 the firmware reads (residual gyro bias, noise given per frame, DMP latency). It
+// takes one thrust fraction per rotor of the vehicle, whatever their number.
 struct ImuConfig {
     bool enabled = false;                        // false: ideal sensor, no latency
     std::array<double, 3> gyro_bias_rad_s{0.0, 0.0, 0.0};
@@ -70,7 +69,8 @@ public:
                double rotational_damping_n_m_s_rad);
 
     SensorSample sensor(const double* noise) override;
-    void step(const float motor[kMotors], const double* gust) override;
+    void step(const float motor[kMaxRotors], const double* gust) override;
+    int rotors() const override { return model_.config().rotors; }
 
     // What an accelerometer at the centre of mass reads now (body FRD, m/s^2).
     std::array<double, 3> specific_force() const;

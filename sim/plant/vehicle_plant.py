@@ -25,7 +25,8 @@ from ..base.errors import InputError
 from .vehicle import BODY_STATES, GRAVITY_M_S2, Vehicle, check_step
 from .vehicle_params import VehicleParams, load_params
 
-__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "mixer_layout", "check_loop_vehicle"]
+__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "mixer_layout", "check_loop_vehicle",
+           "check_rotor_count"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
@@ -54,17 +55,26 @@ def mixer_layout(arm_length_m: float, cant_deg: float, central_spin: int):
     return np.array(positions), np.array(axes)
 
 
+def check_rotor_count(params: VehicleParams) -> None:
+    """InputError, in one line, unless the vehicle has the rotor count the firmware flies (by
+    default: ``_simcore.FIRMWARE_MOTORS``): the firmware in the loop drives one motor per rotor
+    of the vehicle file. (The lockstep engine checks each reply's count against the plant's
+    too.)"""
+    rotors, flown = len(params.rotors), _simcore.FIRMWARE_MOTORS
+    if rotors != flown:
+        raise InputError(f"{params.source}: {rotors} rotors, but the firmware flies {flown}: "
+                         f"the firmware in the loop needs a vehicle file with its rotor count "
+                         f"(this vehicle flies in the model, sim/plant/vehicle.py)")
+
+
 def mixer_geometry(params: VehicleParams):
     """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
     the shipped parameter file's: tests/vehicle_test.py). InputError for a vehicle the
-    firmware's mixer cannot fly: another number of rotors than its motors, or rotors not in
-    :func:`mixer_layout`'s places (heights aside) with rotor 2's arm length and cant, or arm
-    rotors of unlike largest thrust."""
-    rotors, motors = params.rotors, _simcore.FIRMWARE_MOTORS
-    if len(rotors) != motors:
-        raise InputError(f"{params.source}: {len(rotors)} rotors, but the firmware's mixer drives "
-                         f"{motors}: this vehicle flies in the model (sim/plant/vehicle.py), not "
-                         f"with the firmware in the loop")
+    firmware's mixer cannot fly: another number of rotors than it flies
+    (:func:`check_rotor_count`), or rotors not in :func:`mixer_layout`'s places (heights aside)
+    with rotor 2's arm length and cant, or arm rotors of unlike largest thrust."""
+    check_rotor_count(params)
+    rotors = params.rotors
     central, front = rotors[0], rotors[1]
     arm_length = math.hypot(*front.position_m[:2])
     cant_deg = math.degrees(math.atan2(math.hypot(*front.thrust_axis[:2]), -front.thrust_axis[2]))
@@ -90,7 +100,8 @@ def mixer_geometry(params: VehicleParams):
 
 def check_loop_vehicle(params: VehicleParams, dt_s: float) -> None:
     """InputError unless the firmware in the loop can fly this vehicle at this loop period: the
-    integrator follows it (:func:`check_step`) and the firmware's mixer has its rotors."""
+    integrator follows it (:func:`check_step`), the firmware flies its number of rotors and its
+    mixer has them in their places."""
     check_step(params, dt_s)
     mixer_geometry(params)
 
@@ -101,7 +112,9 @@ def mixer_for(params: VehicleParams):
 
 
 class VehiclePlant:
-    """The vehicle on a rig (or free), stepped by the motors' thrust fractions."""
+    """The vehicle on a rig (or free), stepped by the motors' thrust fractions: one per rotor
+    of the vehicle file, whatever their number (2 to MAX_ROTORS). Its truth goes through the
+    firmware's mixer, so it needs a vehicle the mixer flies (:func:`mixer_geometry`)."""
 
     def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
                  trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0,
@@ -109,7 +122,6 @@ class VehiclePlant:
         if axis not in AXES:
             raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.params = params or load_params()
-        mixer_geometry(self.params)                    # InputError: the firmware cannot fly it
         self.axis, self.index = axis, AXES[axis]
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)

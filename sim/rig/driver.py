@@ -101,7 +101,8 @@ class Rig(Closing):
                     while_running()
         finally:
             result = self._end_batch()               # Ctrl-C or an error here: stopped
-        self.link.check(result.status, result.failed_frame, result.last)
+        self.link.check(result.status, result.failed_frame, result.last,
+                        rotors=self.plant.core.rotors)
         return self.reply
 
     def _end_batch(self):

@@ -30,7 +30,7 @@ from heliquad import _simcore
 from heliquad._simcore import LinkStatus
 
 from ..base.dialect import dialect
-from ..base.errors import FirmwareError
+from ..base.errors import FirmwareError, InputError
 from ..base.firmware_facts import LOOP_RATE_HZ
 from ..base.firmware_image import teensy35_image
 
@@ -286,7 +286,8 @@ def start_firmware(firmware: str = "host", **kwargs) -> HostFirmware:
 
 @dataclasses.dataclass
 class Actuators:
-    """One HQ_ACTUATOR_FRAME."""
+    """One HQ_ACTUATOR_FRAME: ``motor`` the thrust fractions of the rotors the firmware flies
+    (its ``motor[:motor_count]``)."""
 
     time_us: int
     frame: int
@@ -333,10 +334,15 @@ class SimLink:
         self.frame = frame
         return actuators(reply)
 
-    def check(self, status, frame: int, reply=None, errno: int = 0) -> None:
-        """Raise the FirmwareError that a link status other than OK means."""
+    def check(self, status, frame: int, reply=None, errno: int = 0, rotors: int = 0) -> None:
+        """Raise the FirmwareError that a link status other than OK means (an InputError for
+        a firmware that flies another number of rotors than the plant's ``rotors``)."""
         if status == LinkStatus.OK:
             return
+        if status == LinkStatus.ROTOR_COUNT:
+            raise InputError(f"the firmware flies {reply.motor_count} rotors but the vehicle has "
+                             f"{rotors}: the firmware in the loop needs a vehicle file with its "
+                             f"rotor count")
         if status == LinkStatus.WRONG_FRAME:
             raise FirmwareError(f"reply to frame {frame} carries frame {reply.frame}")
         if status == LinkStatus.CANCELLED:

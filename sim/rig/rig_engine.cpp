@@ -62,6 +62,12 @@ void RigEngine::run() {
             if (st == LinkStatus::WrongFrame) result_.last = reply;
             break;
         }
+        if (reply.motor_count != plant_.rotors()) {
+            result_.status = LinkStatus::RotorCount;
+            result_.failed_frame = frame;
+            result_.last = reply;
+            break;
+        }
         plant_.step(reply.motor.data(), gust_.empty() ? nullptr : &gust_[6 * i]);
         kind_ = reply.sensor_kind;
         result_.last = reply;

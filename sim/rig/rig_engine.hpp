@@ -20,7 +20,8 @@ struct BatchResult {
     LinkStatus status = LinkStatus::Ok;
     uint32_t frames_done = 0;     // frames whose reply came back (and stepped the plant)
     uint32_t failed_frame = 0;    // the frame that failed, if status != Ok
-    Reply last;                   // the last good reply (or, for WrongFrame, the bad one)
+    Reply last;                   // the last good reply (or, for WrongFrame and RotorCount,
+                                  // the bad one)
 };
 
 class RigEngine {

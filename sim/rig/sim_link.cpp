@@ -94,8 +94,9 @@ LinkStatus SimLinkPort::wait_reply(uint32_t frame, Reply* reply) {
             mavlink_msg_hq_actuator_frame_decode(&m, &a);
             reply->time_us = a.time_us;
             reply->frame = a.frame;
-            static_assert(sizeof a.motor == sizeof reply->motor, "HQ_ACTUATOR_FRAME.motor: kMotors");
+            static_assert(sizeof a.motor == sizeof reply->motor, "HQ_ACTUATOR_FRAME.motor: kMaxRotors");
             std::memcpy(reply->motor.data(), a.motor, sizeof a.motor);
+            reply->motor_count = a.motor_count;
             reply->armed = a.armed;
             reply->mode = a.mode;
             reply->sensor_kind = a.sensor_kind;

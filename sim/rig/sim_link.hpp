@@ -24,13 +24,14 @@ enum class LinkStatus : int {
     Timeout = 3,          // no reply within the timeout
     WrongFrame = 4,       // a reply with another frame counter (in `reply.frame`)
     Cancelled = 5,        // the engine was asked to stop
+    RotorCount = 6,       // the firmware flies another number of rotors than the plant has
 };
 
 struct Reply {
     uint64_t time_us = 0;
     uint32_t frame = 0;
-    std::array<float, kMotors> motor{};
-    uint8_t armed = 0, mode = 0, sensor_kind = 0;
+    std::array<float, kMaxRotors> motor{};   // 0 past motor_count
+    uint8_t motor_count = 0, armed = 0, mode = 0, sensor_kind = 0;
 };
 
 class SimLinkPort {

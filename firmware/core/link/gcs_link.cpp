@@ -12,8 +12,8 @@ namespace hq {
 
 // The core's enums take their values from the dialect (types.hpp, excitation.hpp,
 // supervisor.hpp); the arrays the messages carry must match the core's.
-static_assert(kMotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
-              kMotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
+static_assert(kMaxRotors == MAVLINK_MSG_HQ_SYSID_SAMPLE_FIELD_MOTOR_LEN &&
+              kMaxRotors == MAVLINK_MSG_HQ_ACTUATOR_FRAME_FIELD_MOTOR_LEN, "one motor value per rotor");
 static_assert(LoopInbox::kCapacity < 128, "Received::request holds a slot");
 
 GcsLink::GcsLink(const GcsLinkConfig& config, SerialPort& port, LoopInbox& inbox)

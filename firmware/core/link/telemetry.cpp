@@ -197,17 +197,19 @@ void GcsLink::send_autopilot_version() {
 }
 
 void GcsLink::send_servo_output(const LoopStatus& st, uint64_t now_us) {
-    // The ESC pulses the motors get: min + f (max - min) armed, the stop pulse disarmed.
+    // The ESC pulses the motors get: min + f (max - min) armed, the stop pulse disarmed and
+    // past the rotor count (whose thrust fractions are 0).
     const EscEndpoints& e = st.params.esc;
-    uint16_t us[kMotors];
-    for (int i = 0; i < kMotors; ++i) {
+    uint16_t us[kMaxRotors];
+    for (int i = 0; i < kMaxRotors; ++i) {
         const float span = static_cast<float>(e.max_us[i] - e.min_us[i]);
         us[i] = static_cast<uint16_t>(static_cast<float>(e.min_us[i]) + st.state.motor[i] * span + 0.5f);
     }
     mavlink_message_t msg;
     mavlink_msg_servo_output_raw_pack_status(config_.system_id, config_.component_id, &tx_status_,
                                              &msg, static_cast<uint32_t>(now_us), 0, us[0], us[1],
-                                             us[2], us[3], us[4], 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0);
+                                             us[2], us[3], us[4], us[5], us[6], us[7], 0, 0, 0, 0,
+                                             0, 0, 0, 0);
     send(msg);
 }
 
@@ -297,7 +299,7 @@ void GcsLink::send_sysid_sample(const LoopStatus& st, uint64_t now_us) {
         static_cast<uint8_t>(st.exc_axis), static_cast<uint8_t>(st.exc_injection),
         static_cast<uint8_t>(st.excitation_state), st.armed ? 1 : 0,
         static_cast<uint8_t>(st.mode), x.excitation, s.angle_sp, s.rate_sp, s.rate, s.angle,
-        s.axis_cmd, x.motor, x.saturation);
+        s.axis_cmd, x.motor, x.rotor_count, x.saturation);
     send(msg);
 }
 

@@ -8,7 +8,8 @@ namespace hq {
 // MULT, FMTU, PARM, MSG, MODE and EV; ArduCopter's system identification mode for SIDD and
 // SIDS, SIDD's fields and units exactly as it logs them); HQSD, HQMT and HQGP are
 // heliquad's. A format string holds at most 16 characters, so HQ_SYSID_SAMPLE's fields
-// take two records written together: HQSD (the sample) and HQMT (its five motor outputs).
+// take two records written together: HQSD (the sample) and HQMT (its
+// rotor count and kMaxRotors motor outputs).
 const LogMessage kLogMessages[] = {
     {LogType::Fmt, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", "-b---", "-----"},
     {LogType::Unit, "UNIT", "QbZ", "TimeUS,Id,Label", "s--", "F--"},
@@ -24,7 +25,8 @@ const LogMessage kLogMessages[] = {
      "F--------"},
     {LogType::Hqsd, "HQSD", "QIBBBBBffffffB", "TimeUS,Seq,Axis,Inj,ESt,Arm,Mode,Exc,ASP,RSP,Rate,Ang,Cmd,Sat",
      "s-------rEEr--", "F-------------"},
-    {LogType::Hqmt, "HQMT", "Qfffff", "TimeUS,M1,M2,M3,M4,M5", "s-----", "F-----"},
+    {LogType::Hqmt, "HQMT", "QBffffffff", "TimeUS,MCnt,M1,M2,M3,M4,M5,M6,M7,M8", "s---------",
+     "F---------"},
     {LogType::Hqgp, "HQGP", "QIQ", "TimeUS,Dropped,SinceUS", "s-s", "F-F"},
 };
 const size_t kLogMessageCount = sizeof(kLogMessages) / sizeof(kLogMessages[0]);

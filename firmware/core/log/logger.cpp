@@ -157,7 +157,7 @@ void Logger::log_experiment(const LoopStatus& st, const Excitation& exc, float l
 void Logger::log_sample(const LoopStatus& st, const Excitation& exc) {
     const LoopState& x = st.state;
     const uint64_t t = st.time_us;
-    uint8_t buf[3 * kDfHeaderBytes + 3 * 8 + 9 * 4 + 4 + 5 + 6 * 4 + 1 + 5 * 4];
+    uint8_t buf[3 * kDfHeaderBytes + 3 * 8 + 9 * 4 + 4 + 5 + 6 * 4 + 1 + 1 + kMaxRotors * 4];
     DfRecord d(buf, sizeof buf, LogType::Sidd);
     const bool on = st.excitation_state != ExcitationState::Idle;
     d.u64(t).f32(on ? static_cast<float>(t - exc_start_us_) * 1e-6f : 0.0f).f32(x.excitation);
@@ -172,7 +172,7 @@ void Logger::log_sample(const LoopStatus& st, const Excitation& exc) {
     h.f32(s.angle_sp).f32(s.rate_sp).f32(s.rate).f32(s.angle).f32(s.axis_cmd).u8(x.saturation);
     const size_t n = d.size() + h.size();
     DfRecord m(buf + n, sizeof buf - n, LogType::Hqmt);
-    m.u64(t);
+    m.u64(t).u8(x.rotor_count);
     for (float f : x.motor) m.f32(f);
     push(buf, n + m.size(), 3, t);
 }

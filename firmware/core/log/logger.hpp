@@ -21,7 +21,7 @@
 //
 // Why 2 KiB: the image keeps its static RAM within 24 KiB, and with the USB stack, both
 // links, the card's driver and FatFs (its sector window and one file) that leaves the ring
-// 2 KiB: about 16 loops of samples (123 B a loop), 83 ms at 200 Hz, beyond which a busy card
+// 2 KiB: about 15 loops of samples (136 B a loop), 75 ms at 200 Hz, beyond which a busy card
 // costs dropped records (counted, and a gap record), never a late loop.
 // The header (about 4 KiB) is never queued: the service writes it from the tables.
 #pragma once

@@ -31,7 +31,8 @@
 //
 // Creates two pseudo-terminals and publishes their slave devices as PATH symlinks:
 //   sim link:  HQ_SENSOR_FRAME in (time, frame counter, MPU6050 FIFO bytes, RC), exactly one
-//              HQ_ACTUATOR_FRAME out per frame (same time and counter, five motor outputs);
+//              HQ_ACTUATOR_FRAME out per frame (same time and counter, the motor outputs
+//              and their count);
 //   telemetry: what the Teensy sends over USB serial (telemetry out, commands in).
 // Prints "ready" on stdout when both exist. Each sensor frame sets the clock, the frame's FIFO
 // bytes go into the emulated MPU6050, and one FlightController step runs. A repeated frame

@@ -7,12 +7,14 @@
 
 namespace hq {
 
-// Motor outputs: the last thrust fractions set, sent back to the simulator.
+// Motor outputs: the last thrust fractions set (kMaxRotors of them), sent back to the
+// simulator.
 class HostMotors final : public MotorOutputs {
 public:
-    void set(const float thrust_fraction[5]) override {
-        for (int i = 0; i < 5; ++i) {
-            const float f = thrust_fraction[i];
+    // The rotors past `count` are stopped: 0.
+    void set(const float thrust_fraction[kMaxRotors], int count) override {
+        for (int i = 0; i < kMaxRotors; ++i) {
+            const float f = i < count ? thrust_fraction[i] : 0.0f;
             value_[i] = std::isfinite(f) && f > 0.0f ? (f < 1.0f ? f : 1.0f) : 0.0f;  // NaN, inf: 0
         }
     }
@@ -25,7 +27,7 @@ public:
     const float* values() const { return value_; }
 
 private:
-    float value_[5] = {0, 0, 0, 0, 0};
+    float value_[kMaxRotors] = {};
     EscEndpoints endpoints_{};
 };
 

@@ -54,7 +54,7 @@ bool SimLinkHandler::on_frame(const mavlink_message_t& msg, SimLinkReplies& out)
     mavlink_message_t reply;
     mavlink_msg_hq_actuator_frame_pack_status(system_id_, component_id_, &tx_status_, &reply,
                                               f.time_us, f.frame, motors_.values(),
-                                              fc_.armed() ? 1 : 0,
+                                              fc_.status().state.rotor_count, fc_.armed() ? 1 : 0,
                                               static_cast<uint8_t>(fc_.mode()), fc_.sensor_kind());
     out_len_ = mavlink_msg_to_send_buffer(out_, &reply);
     return out.reply(out_, out_len_, f.sync != 0);

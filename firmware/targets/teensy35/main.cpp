@@ -108,6 +108,7 @@ struct LoopReport {
     uint8_t mode;           // HQ_MODE
     uint8_t sensor_kind;    // HQ_SENSOR_KIND the MPU6050 is configured for
     uint8_t exc_state;      // HQ_EXCITATION_STATE
+    uint8_t rotor_count;    // the rotors the loop flies: FTM0 channels 0..rotor_count - 1
 };
 extern "C" {
 volatile LoopReport hq_loop_report;
@@ -179,6 +180,7 @@ void Loop::step() {
     hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
     hq_loop_report.sensor_kind = fc.sensor_kind();
     hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
+    hq_loop_report.rotor_count = fc.status().state.rotor_count;
     led_update(clock.micros(), led_pattern(fc, init));
     if (fc.status().bootloader) enter_bootloader(motors, usb);
 }

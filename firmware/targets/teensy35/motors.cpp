@@ -10,8 +10,8 @@ namespace hq::teensy {
 using namespace hq::mk64;
 
 namespace {
-// The stop pulse of each channel in FTM counts, for the fault path (which has no object).
-uint32_t g_stop_counts[5] = {0, 0, 0, 0, 0};
+// The stop pulse of each channel in microseconds, for the fault path (which has no object).
+uint16_t g_stop_us[kMaxRotors] = {};
 
 // CnSC and CnV interleave (C0SC, C0V, C1SC, ...): two registers between channels.
 inline volatile uint32_t& channel_value(int i) { return reg_at<FTM0::C0V>(i, 2); }
@@ -19,7 +19,7 @@ inline volatile uint32_t& channel_control(int i) { return reg_at<FTM0::C0SC>(i, 
 }  // namespace
 
 void Ftm0Motors::begin(const EscEndpoints& cal) {
-    for (int i = 0; i < 5; ++i) {
+    for (int i = 0; i < kMaxRotors; ++i) {
         const bool ok = plausible_endpoints(cal.min_us[i], cal.max_us[i]);
         cal_.min_us[i] = ok ? cal.min_us[i] : 1000;
         cal_.max_us[i] = ok ? cal.max_us[i] : 2000;
@@ -30,10 +30,10 @@ void Ftm0Motors::begin(const EscEndpoints& cal) {
     FTM0::CNT::write(0);
     FTM0::CNTIN::write(0);
     FTM0::MOD::write(kPeriodCounts - 1);
-    for (int i = 0; i < 5; ++i) {
+    for (int i = 0; i < kMaxRotors; ++i) {
         channel_control(i) = FTM0::C0SC::MSB | FTM0::C0SC::ELSB;   // edge-aligned, high-true
         write(i, cal_.min_us[i]);
-        g_stop_counts[i] = cal_.min_us[i] * kCountsPerUs;
+        g_stop_us[i] = cal_.min_us[i];
     }
     FTM0::SC::write(FTM0::SC::CLKS(1) | FTM0::SC::PS(2));         // bus clock / 4
     // Only now the pins: ALT4 = FTM0, high drive strength.
@@ -43,14 +43,17 @@ void Ftm0Motors::begin(const EscEndpoints& cal) {
     PORTC::PCR3::write(pcr);
     PORTC::PCR4::write(pcr);
     PORTD::PCR4::write(pcr);
+    PORTD::PCR5::write(pcr);
+    PORTD::PCR6::write(pcr);
+    PORTD::PCR7::write(pcr);
 }
 
 void Ftm0Motors::set_endpoints(const EscEndpoints& endpoints) {
-    for (int i = 0; i < 5; ++i) {
+    for (int i = 0; i < kMaxRotors; ++i) {
         if (!plausible_endpoints(endpoints.min_us[i], endpoints.max_us[i])) continue;
         cal_.min_us[i] = endpoints.min_us[i];
         cal_.max_us[i] = endpoints.max_us[i];
-        g_stop_counts[i] = cal_.min_us[i] * kCountsPerUs;
+        g_stop_us[i] = cal_.min_us[i];
     }
     disarm();
 }
@@ -61,10 +64,10 @@ void Ftm0Motors::write(int i, uint16_t us) {
 
 // The pulse is set to the FTM0 count, not the microsecond: 15 steps per microsecond, so a
 // 1000 us span has 15 000 thrust steps instead of 1 000 (a rounding to whole microseconds
-// would add a 1e-3 staircase to every small excitation).
-void Ftm0Motors::set(const float thrust_fraction[5]) {
-    for (int i = 0; i < 5; ++i) {
-        float f = thrust_fraction[i];
+// would add a 1e-3 staircase to every small excitation). Past `count`: the stop pulse.
+void Ftm0Motors::set(const float thrust_fraction[kMaxRotors], int count) {
+    for (int i = 0; i < kMaxRotors; ++i) {
+        float f = i < count ? thrust_fraction[i] : 0.0f;
         if (!std::isfinite(f) || !(f > 0.0f)) f = 0.0f;     // NaN and infinities: stop
         if (f > 1.0f) f = 1.0f;
         const uint32_t min_counts = cal_.min_us[i] * kCountsPerUs;
@@ -74,18 +77,19 @@ void Ftm0Motors::set(const float thrust_fraction[5]) {
 }
 
 void Ftm0Motors::disarm() {
-    for (int i = 0; i < 5; ++i) write(i, cal_.min_us[i]);
+    for (int i = 0; i < kMaxRotors; ++i) write(i, cal_.min_us[i]);
 }
 
 void motors_emergency_stop() {
     if (!(SIM::SCGC6::read() & SIM::SCGC6::FTM0)) return;     // never started: pins undriven
     // The stop pulses come from RAM, which a fault may have corrupted: never more than a
     // plausible stop pulse (1100 us), never nothing.
-    constexpr uint32_t kMaxStop = 1100 * Ftm0Motors::kCountsPerUs;
-    constexpr uint32_t kDefaultStop = 1000 * Ftm0Motors::kCountsPerUs;
-    for (int i = 0; i < 5; ++i) {
-        const uint32_t c = g_stop_counts[i];
-        channel_value(i) = (c != 0 && c <= kMaxStop) ? c : kDefaultStop;
+    constexpr uint32_t kMaxStopUs = 1100;
+    constexpr uint32_t kDefaultStopUs = 1000;
+    for (int i = 0; i < kMaxRotors; ++i) {
+        const uint32_t us = g_stop_us[i];
+        channel_value(i) = ((us != 0 && us <= kMaxStopUs) ? us : kDefaultStopUs) *
+                           Ftm0Motors::kCountsPerUs;
     }
 }
 

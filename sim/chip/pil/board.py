@@ -11,7 +11,7 @@ import sys
 from ...base.dialect import dialect
 from ...base.firmware_facts import LOOP_RATE_HZ
 from ..machine import ChipReset, EmulationError
-from ..teensy35 import RC_PINS, Teensy35
+from ..teensy35 import ESC_PINS, RC_PINS, Teensy35
 from ..usb_host import UsbHost
 from .param_file import ParamFile
 
@@ -24,8 +24,8 @@ WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
 CARD_WAIT_STEP_SYMBOL = "hq_card_wait_step"
 REPORT_SYMBOL = "hq_loop_report"
 #: hq_loop_report: loops, step cycles, overruns (uint32); armed, mode, sensor kind,
-#: excitation state (uint8).
-REPORT = struct.Struct("<IIIBBBB")
+#: excitation state, rotor count (uint8).
+REPORT = struct.Struct("<IIIBBBBB")
 #: The stack is painted with this word before reset; the deepest word overwritten since is
 #: the stack's high-water mark.
 STACK_PAINT = 0xDEADBEEF
@@ -206,7 +206,8 @@ class PilBoard:
 
     # -- one frame ---------------------------------------------------------------------------
     def frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int, sync: bool):
-        """Inputs in, one loop, outputs out: (motors, armed, mode, sensor kind)."""
+        """Inputs in, one loop, outputs out: (motors, armed, mode, sensor kind); the motors
+        are the thrust fractions of the rotors the loop flies (its rotor count's channels)."""
         self.apply_imu_fault(imu_fault)
         if fifo:
             self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
@@ -217,9 +218,9 @@ class PilBoard:
         if sync and not self.in_card_wait:     # a step is due now: no time to drain
             self._drain()
         self._collect_telemetry()
-        loops, cycles, _, armed, mode, kind, _ = self.report()
+        loops, cycles, _, armed, mode, kind, _, rotors = self.report()
         self.step_cycles.append(cycles)
-        return self.thrust(), bool(armed), mode, kind
+        return self.thrust()[:rotors], bool(armed), mode, kind
 
     def report(self) -> tuple:
         """hq_loop_report as the image last wrote it."""
@@ -263,11 +264,12 @@ class PilBoard:
             m.run(seconds=min(step(), deadline - m.now()) / m.core_hz)
 
     def thrust(self) -> list:
-        """The five thrust fractions the ESCs get from the next PWM period on."""
+        """The thrust fractions all eight ESCs (FTM0 channels 0-7) get from the next PWM
+        period on."""
         ftm0 = self.board.chip.ftm0
         lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
         out = []
-        for ch in range(5):
+        for ch in range(len(ESC_PINS)):
             counts = ftm0.commanded_value(ch)
             out.append(min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None
                        else 0.0)

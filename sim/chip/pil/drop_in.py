@@ -10,6 +10,7 @@ import time
 from ...base.dialect import dialect
 from ...base.firmware_facts import MAX_PTY_BACKLOG_BYTES
 from ...base.framing import Codec, Framer
+from ..teensy35 import ESC_PINS
 from .board import IMAGE_LOOP_HZ
 
 #: Telemetry is written out in chunks as a USB CDC device ships it (the link contract): after
@@ -122,8 +123,9 @@ class DropIn:
         motors, armed, mode, kind = self.board.frame(
             fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault, bool(msg.sync))
         self.reply = self.codec.encode(self.reply_id, {
-            "time_us": msg.time_us, "frame": msg.frame, "motor": motors, "armed": int(armed),
-            "mode": mode, "sensor_kind": kind})
+            "time_us": msg.time_us, "frame": msg.frame,
+            "motor": motors + [0.0] * (len(ESC_PINS) - len(motors)), "motor_count": len(motors),
+            "armed": int(armed), "mode": mode, "sensor_kind": kind})
 
     def summary(self) -> str:
         f = self.board.figures()
