@@ -82,12 +82,11 @@ def _arm(client):
 
 
 def test_a_geometry_the_allocation_refuses_is_said_and_keeps_the_motors_off(client):
-    client.set("CA_ROTOR_COUNT", 6)                    # a sixth rotor of no thrust
-    client.text("allocation: rotor 5 max thrust not positive")
+    client.set("CA_ROTOR2_CT", 0.0)                    # the right arm rotor gives no thrust
+    client.text("allocation: rotor 2 max thrust not positive")
     assert _arm(client) != MAV.MAV_RESULT_ACCEPTED
     client.text("arming refused: vehicle geometry refused")
-    for name, value in _six_rotors().items():
-        client.set(name, value)
+    client.set("CA_ROTOR2_CT", 9.0)
     assert _arm(client) == MAV.MAV_RESULT_ACCEPTED
 
 
@@ -103,9 +102,9 @@ def test_a_vehicle_without_yaw_authority_is_refused(client):
 
 
 def test_a_stored_geometry_the_allocation_refuses_keeps_the_motors_off_after_a_restart(tmp_path):
-    store = _stored(tmp_path, CA_ROTOR_COUNT=7)
+    store = _stored(tmp_path, CA_ROTOR3_AZ=0.5)         # an axis no longer of unit length
     with start("host", params_file=str(store)) as board:
         c = Client(board)
-        c.text("allocation: rotor 5 max thrust not positive", frames=20)
+        c.text("allocation: rotor 3 axis not a unit vector", frames=20)
         assert _arm(c) != MAV.MAV_RESULT_ACCEPTED
         c.close()

@@ -32,11 +32,11 @@ GUARD_S = 60.0
 #: The integer parameters and their documented defaults (docs/parameters.md).
 #: The firmware's parameters: a ground station fetches and loads this many.
 PARAM_COUNT = len(_firmware.param_table())
-INTEGER_DEFAULTS = {**{f"ESC{i}_MIN": 1000 for i in range(1, 6)},
-                    **{f"ESC{i}_MAX": 2000 for i in range(1, 6)},
+INTEGER_DEFAULTS = {**{f"ESC{i}_MIN": 1000 for i in range(1, 9)},
+                    **{f"ESC{i}_MAX": 2000 for i in range(1, 9)},
                     "RC_SW_HIGH": 1700, "RC_SW_LOW": 1300, "RC_THR_LOW": 1100,
                     "EXC_MIN_FADE": 1, "IMU_PATH": 0, "MAV_GCS_SYSID": 0,
-                    "SER_TEL1_BAUD": 921600}
+                    "SER_TEL1_BAUD": 921600, "CA_ROTOR_COUNT": 5}
 
 
 #: How each client is installed (pyproject's ``gcs`` extra; MAVProxy without its declared
@@ -161,7 +161,7 @@ def first(subscribe, predicate=lambda v: True):
 
 
 def test_mavsdk_reads_and_sets_integer_and_real_parameters(disarmed_board, sdk_on):
-    """The 15 non-zero integer parameters read as their values (they read as raw float bits
+    """The non-zero integer parameters read as their values (they read as raw float bits
     while the board encoded them C-cast); set_param_int and set_param_float are taken and read
     back."""
     from mavsdk.plugins.param import Param
@@ -302,7 +302,7 @@ class MavProxy:
 
 def test_mavproxy_fetches_sets_and_loads_the_parameters_of_an_armed_board(armed_board, tmp_path):
     """MAVProxy 1.8.75 as a user types at it, the board armed by its pilot. It fetches the
-    45 parameters; a REAL32 set is taken and read back; an out-of-range set and a bound
+    board's parameters; a REAL32 set is taken and read back; an out-of-range set and a bound
     changed while armed are refused, said why ("AP: ..."), and MAVProxy says it failed.
 
     Integer parameters: MAVProxy shows each non-zero one as a tiny number (ESC1_MAX as
@@ -312,7 +312,7 @@ def test_mavproxy_fetches_sets_and_loads_the_parameters_of_an_armed_board(armed_
     works (every value as REAL32, which the firmware reads as the number).
 
     `param load` of the unchanged file `heliquad params save --mavproxy` wrote: no set for a
-    REAL32 parameter (the file's digits are within MAVProxy's 1e-6 of each float32); the 15
+    REAL32 parameter (the file's digits are within MAVProxy's 1e-6 of each float32); the
     non-zero integers it misreads are re-sent, each the value the board has, and the
     firmware answers a set to the current value with it even while armed, never "changes
     only while disarmed"."""

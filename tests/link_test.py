@@ -5,6 +5,7 @@ import os
 
 import pytest
 
+from heliquad import _firmware
 from heliquad.host.acquire.link import TelemetryLink
 from heliquad.sim.base.errors import InputError
 
@@ -446,7 +447,8 @@ def test_parameters_over_the_network_with_mavutil_and_heliquad_params(running_bo
     finally:
         relay.close()
     assert res.returncode == 0, res.stderr
-    assert res.stdout.split() == ["45", "45", "2.9", "2.422"]
+    count = str(len(_firmware.param_table()))
+    assert res.stdout.split() == [count, count, "2.9", "2.422"]
     assert listed.returncode == 0, listed.stderr
     rows = [line.split() for line in listed.stdout.splitlines() if line.startswith("RATE_")]
     assert len(rows) == 12 and ["RATE_RLL_KC", "2.422", "REAL32"] in rows

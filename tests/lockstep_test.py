@@ -392,11 +392,10 @@ def fly_free(dmp_image, frames, step_at=None, roll_stick_us=None):
     """The vehicle in free flight at hover throttle, armed, angle mode, ideal IMU (the
     control behaviour itself); roll and pitch angles (deg)."""
     from heliquad.sim.plant.vehicle import GRAVITY_M_S2
-    from heliquad.sim.plant.vehicle_plant import VehiclePlant, mixer_for
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     plant = VehiclePlant("roll", "free", 0.005, ideal_sensor=True)
-    mixer = mixer_for(plant.params)
-    hover = plant.params.body.mass_kg * GRAVITY_M_S2 / mixer.max_vertical_thrust_n
+    hover = plant.params.body.mass_kg * GRAVITY_M_S2 / plant.allocation.units[0]
     throttle = int(round(1000 + 1000 * hover))
     roll, pitch = [], []
     with HostFirmware(dmp_image=dmp_image) as fw:
@@ -452,13 +451,12 @@ def test_free_flight_hover_in_moderate_turbulence_stays_within_a_degree(tmp_path
     # through the centre of mass and gust rates through rotational damping; rotor blowback
     # (gust-velocity moments) is not modelled yet, which is why the bound is this tight.
     from heliquad.sim.plant.vehicle import GRAVITY_M_S2
-    from heliquad.sim.plant.vehicle_plant import VehiclePlant, mixer_for
+    from heliquad.sim.plant.vehicle_plant import VehiclePlant
 
     image = write_fake_dmp(tmp_path / "dmp.bin")
     plant = VehiclePlant("roll", "free", 0.005, turbulence="moderate", seed=1)
-    mixer = mixer_for(plant.params)
     throttle = int(round(1000 + 1000 * plant.params.body.mass_kg * GRAVITY_M_S2
-                         / mixer.max_vertical_thrust_n))
+                         / plant.allocation.units[0]))
     worst = 0.0
     with HostFirmware(dmp_image=str(image)) as fw:
         link = SimLink(fw)

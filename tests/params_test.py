@@ -148,7 +148,7 @@ def client(tmp_path):
 # --- the table ----------------------------------------------------------------------------
 
 def test_every_name_fits_the_protocol_and_every_default_lies_in_its_range():
-    assert len(NAMES) == len(set(NAMES)) == COUNT == 112     # the table, pinned
+    assert len(NAMES) == len(set(NAMES)) == COUNT == 118     # the table, pinned
     for name, lo, hi, default, integer in PARAMS:
         assert 0 < len(name) <= 16 and name == name.upper(), name
         assert lo <= default <= hi, name

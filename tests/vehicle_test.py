@@ -14,7 +14,7 @@ from heliquad.sim.plant.vehicle_params import load_params
 PARAMS = load_params()
 
 
-from heliquad.sim.plant.vehicle_plant import mixer_for, mixer_geometry
+from heliquad.sim.plant.rotor_geometry import firmware_geometry, geometry_params
 
 
 def without_central_drag(params):
@@ -66,14 +66,22 @@ def test_parameter_errors_name_the_key(tmp_path, old, new, match):
         load_params(edited(tmp_path, old, new))
 
 
-def test_the_firmware_mixer_is_built_for_the_shipped_vehicle():
-    # The firmware flies MixerGeometry's defaults (firmware/core/mixer.hpp); the simulator's
-    # vehicle is sim/plant/vehicle.toml. They are the same vehicle: the paper's arm length, cant
-    # and weight, and the same rotor estimates (the weight to the 5 digits the firmware writes).
-    flown, shipped = fw.MixerGeometry(), mixer_geometry(PARAMS)
-    for name in ("arm_length_m", "cant_deg", "central_max_thrust_n", "arm_max_thrust_n",
-                 "central_torque_per_thrust_m"):
-        assert getattr(flown, name) == getattr(shipped, name), name
+def test_the_firmwares_default_geometry_is_the_shipped_vehicle():
+    # The firmware flies its CA_* parameters' defaults (params.hpp, GeometryParams); the
+    # simulator's vehicle is sim/plant/vehicle.toml. They are the same vehicle: the rotors'
+    # places, thrust axes and largest thrusts and the central rotor's torque ratio to float
+    # precision, the weight to the 5 digits the firmware writes. The arm rotors' own torque
+    # ratios are in the file but not in the defaults (KM 0: the mixer did not use them; they
+    # cancel in pairs at equal thrust).
+    flown = fw.params_geometry()
+    shipped = firmware_geometry({g.name: g.value for g in geometry_params(PARAMS)})
+    assert flown.count == shipped.count == 5
+    for i, (f, s) in enumerate(zip(flown.rotors, shipped.rotors)):
+        np.testing.assert_allclose(f.position_m, s.position_m, rtol=0, atol=1e-7)
+        np.testing.assert_allclose(f.axis, s.axis, rtol=0, atol=1e-7)
+        assert f.max_thrust_n == s.max_thrust_n
+        assert f.moment_ratio_m == (s.moment_ratio_m if i == 0 else 0.0)
+    assert flown.rotors[0].spin == shipped.rotors[0].spin
     assert flown.hover_thrust_n == pytest.approx(shipped.hover_thrust_n, rel=1e-5)
 
 
@@ -99,7 +107,7 @@ def test_the_firmware_mixers_rotor_layout_is_the_vehicles(axis):
 
 def test_hover_trim_from_the_firmware_mixer_holds_still():
     v = Vehicle(PARAMS, rig="free")
-    mixer = mixer_for(PARAMS)
+    mixer = fw.Mixer()
     collective = PARAMS.body.mass_kg * GRAVITY_M_S2 / mixer.max_vertical_thrust_n
     u = mixer.mix(fw.MixerCommand(collective, 0, 0, 0)).motor
     settled(v, u)
@@ -112,7 +120,7 @@ def test_hover_trim_from_the_firmware_mixer_holds_still():
 
 def test_thrust_above_hover_accelerates_up_by_the_excess():
     v = Vehicle(PARAMS, rig="free")
-    mixer = mixer_for(PARAMS)
+    mixer = fw.Mixer()                    # the shipped vehicle's (test above)
     m = PARAMS.body.mass_kg
     collective = 1.2 * m * GRAVITY_M_S2 / mixer.max_vertical_thrust_n
     u = mixer.mix(fw.MixerCommand(collective, 0, 0, 0)).motor
@@ -156,7 +164,7 @@ def test_gyroscopic_coupling_of_the_central_rotor():
 @pytest.mark.parametrize("rig, axis", [("roll", 0), ("pitch", 1), ("yaw", 2)])
 def test_each_rig_frees_exactly_one_axis(rig, axis):
     v = Vehicle(PARAMS, rig=rig)
-    mixer = mixer_for(PARAMS)
+    mixer = fw.Mixer()                    # the shipped vehicle's (test above)
     u = mixer.mix(fw.MixerCommand(0.35, 0.02, -0.02, 0.05)).motor     # moments on all axes
     settled(v, u)
     for _ in range(200):
@@ -174,7 +182,7 @@ def test_roll_rig_acceleration_is_the_roll_moment_over_inertia():
     params = dataclasses.replace(PARAMS, rig=dataclasses.replace(
         PARAMS.rig, hinge_damping_n_m_s_rad=0.0, hinge_friction_n_m=0.0))
     v = Vehicle(params, rig="roll")
-    mixer = mixer_for(params)
+    mixer = fw.Mixer()
     u = np.array(mixer.mix(fw.MixerCommand(0.35, 0.03, 0, 0)).motor)
     settled(v, u)
     t = v.thrusts()

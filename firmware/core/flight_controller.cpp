@@ -252,7 +252,7 @@ void FlightController::run_control(const RcInput& rc, float excitation,
     for (float m : out.motor) finite = finite && std::isfinite(m);
     if (!finite) supervisor_.fault(Reason::NonFinite);
     if (finite && supervisor_.armed()) {
-        for (int i = 0; i < kMotors; ++i) status_.state.motor[i] = out.motor[i];
+        for (int i = 0; i < kMaxRotors; ++i) status_.state.motor[i] = out.motor[i];
         motors_.set(status_.state.motor, status_.state.rotor_count);
         return;
     }

@@ -200,6 +200,9 @@ void FlightController::apply_params(uint8_t changed, uint64_t now_us) {
 void FlightController::configure_allocation() {
     const bool ok = allocation_.configure(allocation_geometry(params_.values().geometry));
     supervisor_.set_geometry(ok, allocation_.count());
+    // The rotors the vehicle has (the motors past them get their stop pulse); a refused
+    // geometry flies none, so its count is only what the parameters say.
+    status_.state.rotor_count = params_.values().geometry.count;
     if (!ok) notice(MAV_SEVERITY_WARNING, allocation_.reason());
 }
 

@@ -152,6 +152,7 @@ const ParamEntry kParams[kTableParams] = {
     {"MAV_GCS_SYSID", "", 0.0f, 255.0f, kInt, gcs_get, gcs_set},
     {"SER_TEL1_BAUD", "baud", 9600.0f, 1000000.0f, kBaud, tel1_baud_get, tel1_baud_set},
     {"EXC_MAX_MOT", "", 0.01f, 0.5f, 0, amp_get<3>, amp_set<3>},
+    HQ_ESC("6", 5), HQ_ESC("7", 6), HQ_ESC("8", 7),
     {"CA_ROTOR_COUNT", "", static_cast<float>(kMinRotors), static_cast<float>(kMaxRotors),
      kGeometry | kParamInteger, rotors_get, rotors_set},
     {"CA_HOVER_THRUST", "N", 0.5f, 500.0f, kGeometry, hover_get, hover_set},

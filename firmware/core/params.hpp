@@ -105,7 +105,7 @@ struct ParamInfo {
 };
 
 // The parameters with a table entry each, then CA_ROTORn_* by rotor, in RotorField's order.
-constexpr int kTableParams = 48;
+constexpr int kTableParams = 54;
 constexpr int kParamCount = kTableParams + kMaxRotors * kRotorFields;
 
 ParamInfo param_info(int index);

@@ -291,6 +291,9 @@ class SessionLink:
     def request_param(self, name: str = "", index: int = -1) -> None:
         self.session.tel.request_param(name=name, index=index)
 
+    def set_param(self, name: str, value: float, param_type: int) -> None:
+        self.session.tel.set_param(name, value, param_type)
+
 
 def session_params(session, progress=print) -> dict | None:
     """Every parameter of the board a session flies, ``{name: value}`` in the board's order

@@ -170,6 +170,10 @@ class _FirmwareTelemetry(TelemetryLink):
             raise
 
 
+#: A pilot_from that no run reaches: the pilot stays landed (its frames count from there).
+_PILOT_WAITS = 1 << 40
+
+
 class SilSession(Closing):
     """The firmware in the loop as a session: it boots, arms and hovers the simulated rig,
     and steps it in batches; a tool drives it through ``tel`` (the telemetry link, the same
@@ -282,6 +286,7 @@ class SilSession(Closing):
         allocation flies the vehicle the simulator flies."""
         settle = int(round(self.cfg.settle_s * self.cfg.loop_hz))
         if self.cfg.plant == "vehicle" and self.cfg.params:
+            self.pilot_from = _PILOT_WAITS             # landed until the geometry is set
             self.advance(frames=BOOT_FRAMES)
             self.set_geometry(progress)
             self.pilot_from = self.frame

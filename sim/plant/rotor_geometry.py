@@ -139,15 +139,11 @@ def effectiveness(rotors) -> np.ndarray:
 
 
 def firmware_geometry(values: dict) -> _firmware.AllocationGeometry:
-    """The firmware's allocation geometry (its bindings) from the geometry parameters'
-    ``values`` ({name: value}), as the firmware reads them: the rotors up to the count, each
-    with ``|KM|`` its moment ratio and the sign of ``KM`` its spin (a ``KM`` of 0 spins +1)."""
-    rotors = []
-    for index in range(int(values["CA_ROTOR_COUNT"])):
-        px, py, pz, ax, ay, az, ct, km = (values[name] for name in rotor_names(index))
-        rotors.append(_firmware.RotorGeometry((px, py, pz), (ax, ay, az), ct, abs(km),
-                                              -1 if km < 0 else 1))
-    return _firmware.AllocationGeometry(rotors, hover_thrust_n=values["CA_HOVER_THRUST"])
+    """The firmware's allocation geometry from the geometry parameters' ``values`` ({name:
+    value}), read by the firmware's own code (its parameter table and
+    ``allocation_geometry``, through the bindings): the rotors up to the count, each with
+    ``|KM|`` its moment ratio and the sign of ``KM`` its spin."""
+    return _firmware.params_geometry({name: float(v) for name, v in values.items()})
 
 
 def check_with_firmware(source, params: list[GeometryParam]) -> None:

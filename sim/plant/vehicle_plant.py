@@ -4,8 +4,8 @@
 lockstep runner uses (``fifo``, ``step_motors``, ``frame_inputs``). Its
 :meth:`VehiclePlant.truth` states what identification should find for mixer injection: the
 model linearised at the rig's trim (rotor speeds at the trim command, body at rest), from the
-axis's normalised torque command, through the firmware's own mixer equations, to the body
-rate; sampled with the zero-order hold of the loop period as the logged data are.
+axis's normalised torque command, through the allocation the firmware flies (its own code),
+to the body rate; sampled with the zero-order hold of the loop period as the logged data are.
 """
 
 from __future__ import annotations
@@ -21,20 +21,15 @@ from ..base.dialect import AXES
 from .dryden import Dryden
 from .imu_model import ImuModel
 from .pid_model import pid_z
-from ..base.errors import InputError
-from .vehicle import BODY_STATES, GRAVITY_M_S2, Vehicle, check_step
+from .vehicle import BODY_STATES, Vehicle, check_step
+from .rotor_geometry import firmware_geometry, geometry_params
 from .vehicle_params import VehicleParams, load_params
 
-__all__ = ["VehiclePlant", "mixer_geometry", "mixer_for", "mixer_layout", "check_loop_vehicle",
-           "check_rotor_count"]
+__all__ = ["VehiclePlant", "mixer_layout", "flown_allocation", "check_loop_vehicle"]
 
 #: Finite-difference steps for the linearisation (state and normalised command).
 EPS_STATE = 1e-6
 EPS_COMMAND = 1e-3
-#: How far (m, and unit vector) a rotor may be from the firmware mixer's layout.
-LAYOUT_TOLERANCE = 1e-6
-#: The firmware mixer's rotors, in its motor order.
-MIXER_ROTORS = ("central", "front", "right", "back", "left")
 
 
 def mixer_layout(arm_length_m: float, cant_deg: float, central_spin: int):
@@ -55,70 +50,37 @@ def mixer_layout(arm_length_m: float, cant_deg: float, central_spin: int):
     return np.array(positions), np.array(axes)
 
 
-def check_rotor_count(params: VehicleParams) -> None:
-    """InputError, in one line, unless the vehicle has the rotor count the firmware flies (by
-    default: ``_simcore.FIRMWARE_MOTORS``): the firmware in the loop drives one motor per rotor
-    of the vehicle file. (The lockstep engine checks each reply's count against the plant's
-    too.)"""
-    rotors, flown = len(params.rotors), _simcore.FIRMWARE_MOTORS
-    if rotors != flown:
-        raise InputError(f"{params.source}: {rotors} rotors, but the firmware flies {flown}: "
-                         f"the firmware in the loop needs a vehicle file with its rotor count "
-                         f"(this vehicle flies in the model, sim/plant/vehicle.py)")
-
-
-def mixer_geometry(params: VehicleParams):
-    """The firmware's MixerGeometry of this vehicle (the firmware flies its defaults, which are
-    the shipped parameter file's: tests/vehicle_test.py). InputError for a vehicle the
-    firmware's mixer cannot fly: another number of rotors than it flies
-    (:func:`check_rotor_count`), or rotors not in :func:`mixer_layout`'s places (heights aside)
-    with rotor 2's arm length and cant, or arm rotors of unlike largest thrust."""
-    check_rotor_count(params)
-    rotors = params.rotors
-    central, front = rotors[0], rotors[1]
-    arm_length = math.hypot(*front.position_m[:2])
-    cant_deg = math.degrees(math.atan2(math.hypot(*front.thrust_axis[:2]), -front.thrust_axis[2]))
-    positions, axes = mixer_layout(arm_length, cant_deg, central.spin)
-    for i, rotor in enumerate(rotors):
-        off = max(np.max(np.abs(np.array(rotor.position_m[:2]) - positions[i][:2])),
-                  np.max(np.abs(np.array(rotor.thrust_axis) - axes[i])))
-        if off > LAYOUT_TOLERANCE or (i > 1 and rotor.max_thrust_n != front.max_thrust_n):
-            raise InputError(f"{params.source}: rotors[{i + 1}] is not the firmware mixer's "
-                             f"{MIXER_ROTORS[i]} rotor (a central rotor along -z, then front, "
-                             f"right, back and left arm rotors alike, as rotors[2] at "
-                             f"{arm_length:.4g} m and {cant_deg:.4g} deg cant): this vehicle "
-                             f"flies in the model (sim/plant/vehicle.py), not with the firmware "
-                             f"in the loop")
-    g = fw.MixerGeometry()
-    g.arm_length_m, g.cant_deg = arm_length, cant_deg
-    g.central_max_thrust_n = central.max_thrust_n
-    g.arm_max_thrust_n = front.max_thrust_n
-    g.central_torque_per_thrust_m = central.spin * central.torque_per_thrust_m
-    g.hover_thrust_n = params.body.mass_kg * GRAVITY_M_S2
-    return g
+def flown_allocation(params: VehicleParams | None = None):
+    """The allocation the firmware in the loop flies this vehicle with (the firmware's own
+    code, through its bindings): the geometry parameters of ``params`` (a vehicle file given
+    to the run, whose CA_* the session sets on the board: host/acquire/session.py), or with
+    None the firmware's default parameters (what flies when no file is given: the shipped
+    vehicle, as the mixer flew it). InputError for a vehicle the firmware cannot fly (a
+    rotor count outside its range, a figure beyond a parameter's, a geometry its allocation
+    refuses), naming the file."""
+    if params is None:
+        return fw.Allocation(fw.params_geometry())
+    values = {g.name: g.value for g in geometry_params(params)}
+    return fw.Allocation(firmware_geometry(values))
 
 
 def check_loop_vehicle(params: VehicleParams, dt_s: float) -> None:
     """InputError unless the firmware in the loop can fly this vehicle at this loop period: the
-    integrator follows it (:func:`check_step`), the firmware flies its number of rotors and its
-    mixer has them in their places."""
+    integrator follows it (:func:`check_step`) and the firmware's allocation takes its
+    geometry (:func:`flown_allocation`)."""
     check_step(params, dt_s)
-    mixer_geometry(params)
-
-
-def mixer_for(params: VehicleParams):
-    """The firmware's mixer with this vehicle's geometry (what the firmware should fly with)."""
-    return fw.Mixer(mixer_geometry(params))
+    flown_allocation(params)
 
 
 class VehiclePlant:
     """The vehicle on a rig (or free), stepped by the motors' thrust fractions: one per rotor
     of the vehicle file, whatever their number (2 to MAX_ROTORS). Its truth goes through the
-    firmware's mixer, so it needs a vehicle the mixer flies (:func:`mixer_geometry`)."""
+    allocation the firmware flies (``flown``: :func:`flown_allocation`, by default the
+    firmware's default geometry)."""
 
     def __init__(self, axis: str, rig: str, dt_s: float, params: VehicleParams | None = None,
                  trim_collective: float = 0.4, turbulence: str | None = None, seed: int = 0,
-                 ideal_sensor: bool = False):
+                 ideal_sensor: bool = False, flown=None):
         if axis not in AXES:
             raise ValueError(f"axis must be one of {', '.join(AXES)}")
         self.params = params or load_params()
@@ -126,6 +88,7 @@ class VehiclePlant:
         self.rig, self.dt_s = rig, dt_s
         self.vehicle = Vehicle(self.params, rig=rig)
         self.trim_collective = trim_collective
+        self.allocation = flown or flown_allocation()
         self.imu = None if ideal_sensor else ImuModel(self.params.imu, seed)
         self.dryden = None
         if turbulence:
@@ -187,14 +150,15 @@ class VehiclePlant:
         States: the free axis's angle and rate and the rotor speeds (on a rig the other
         states do not move; in free flight this is the rotational part at hover with the other
         axes held, which is what a one-axis experiment sees to first order). Input: the axis's
-        normalised torque command, through the firmware's mixer equations.
+        normalised torque command, through the allocation the firmware flies.
         """
-        mixer = mixer_for(self.params)
+        rotors = self.allocation.count
 
         def motors(cmd):
             c = [0.0, 0.0, 0.0]
             c[self.index] = cmd
-            return np.array(mixer.mix(fw.MixerCommand(self.trim_collective, *c)).motor)
+            command = fw.MixerCommand(self.trim_collective, *c)
+            return np.array(self.allocation.allocate(command).motor[:rotors])
 
         u0 = motors(0.0)
         v = Vehicle(self.params, rig=self.rig if self.rig != "free" else self.axis)

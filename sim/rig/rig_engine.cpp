@@ -62,7 +62,9 @@ void RigEngine::run() {
             if (st == LinkStatus::WrongFrame) result_.last = reply;
             break;
         }
-        if (reply.motor_count != plant_.rotors()) {
+        // Disarmed, every motor is stopped whatever the count: a session sets a vehicle's
+        // geometry (its rotor count among it) on the board before the pilot arms.
+        if (reply.armed && reply.motor_count != plant_.rotors()) {
             result_.status = LinkStatus::RotorCount;
             result_.failed_frame = frame;
             result_.last = reply;

@@ -97,11 +97,15 @@ def make_plant(cfg: SilConfig, dt_s: float) -> Plant:
     if cfg.plant == "tf":
         return TfPlant(cfg.axis, cfg.num, cfg.den, dt_s)
     # the vehicle's plant (8 ms, with its turbulence and IMU models) only for --plant vehicle
-    from ..plant.vehicle_plant import VehiclePlant
+    from ..plant.vehicle_plant import VehiclePlant, flown_allocation
 
-    return VehiclePlant(cfg.axis, cfg.rig, dt_s, load_params(cfg.params),
+    # A vehicle file given to the run has its geometry set on the board (the session does
+    # it); without one the firmware flies its defaults.
+    params = load_params(cfg.params)
+    return VehiclePlant(cfg.axis, cfg.rig, dt_s, params,
                         trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed,
-                        ideal_sensor=cfg.ideal_sensor)
+                        ideal_sensor=cfg.ideal_sensor,
+                        flown=flown_allocation(params) if cfg.params else None)
 
 
 def _rc(frame, collective):
