@@ -9,8 +9,9 @@ from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
+from .run_options import add_rc_script_argument
 from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
-                             add_rc_script_argument, add_sd_card_arguments, add_vehicle_arguments,
+                             add_sd_card_arguments, add_vehicle_arguments,
                              check_plant, finite, sd_card, vehicle_rig,
                              int_in, number_in)
 

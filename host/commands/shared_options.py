@@ -183,29 +183,6 @@ def vehicle_rig(args) -> str:
     return rig
 
 
-def _rc_script(path: str):
-    """An RC script file, read and checked (sim/rig/rc_script.py)."""
-    # imported only when the option is given: every command's parser imports this module
-    from ...sim.rig.rc_script import read_rc_script
-
-    try:
-        return read_rc_script(path)
-    except InputError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_rc_script_argument(p) -> None:
-    """--rc-script FILE: the simulated pilot as a script of channel changes."""
-    p.add_argument("--rc-script", metavar="FILE", type=_rc_script,
-                   help="the pilot as a script: lines of 'TIME_S CH=US ...' (CH the radio's "
-                        "channel 1-8: 3 throttle, 5 arm switch, 7 the program switch; US a "
-                        "pulse of 800-2200 us, or 0 for none), each setting its channels from "
-                        "TIME_S seconds of simulated time on, e.g. '2.5 5=2000 3=1000'; '#' "
-                        "starts a comment; before the first line the pilot is landed (arm "
-                        "switch and throttle low). With a script nothing arms unless it says "
-                        "so (docs/simulated-pilot.md). Default: the pilot arms, then hovers")
-
-
 def add_port_argument(p, required: bool = True) -> None:
     """--port CONN: the board's telemetry link (host/acquire/connection.py), or auto
     (host/acquire/ports.py: the command's run resolves it with ``resolve_port``)."""

@@ -12,8 +12,9 @@ from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ
 from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
+from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
-                             add_rc_script_argument, add_vehicle_arguments, vehicle_rig,
+                             add_vehicle_arguments, vehicle_rig,
                              add_param_store_argument, add_sd_card_arguments, check_excitation,
                              check_plant, faults, finite, int_in, number_in, sd_card)
 
@@ -43,6 +44,7 @@ def add_parser(sub, fmt) -> None:
                    help="tf: a transfer function from the axis's torque command to its body "
                         "rate (default); vehicle: the 6-DoF heterogeneous multirotor on a rig")
     add_vehicle_arguments(p, RIGS)
+    add_load_params_argument(p)
     p.add_argument("--axis", choices=tuple(names.AXES), default="roll")
     p.add_argument("--num", type=finite, nargs="+", metavar="B", default=[28.19],
                    help="numerator, descending powers of s (default: the paper's roll model)")
@@ -94,7 +96,7 @@ def run(args) -> int:
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
                     rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
-                    param_store=args.param_store,
+                    param_store=args.param_store, load_params=args.load_params,
                     ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware,
                     firmware_link=firmware_link(args), rc_script=args.rc_script,
                     **sd_card(args))

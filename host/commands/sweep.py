@@ -15,9 +15,10 @@ from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import DEFAULT_SETPOINT
 from ..process.signals import ABORTED_BY, EXIT_CODES
+from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_baud_argument, add_design_arguments,
                              add_fault_argument, add_firmware_argument, firmware_link,
-                             add_rc_script_argument, add_vehicle_arguments,
+                             add_vehicle_arguments,
                              add_param_store_argument, add_port_argument, add_sd_card_arguments,
                              check_excitation, check_plant, faults, finite, number_in,
                              sd_card, sweep_plan)
@@ -70,6 +71,7 @@ def add_parser(sub, fmt) -> None:
                    help="--plant tf: numerator (default: the paper's chosen model of the axis)")
     p.add_argument("--den", type=finite, nargs="+", metavar="A", help="--plant tf: denominator")
     add_vehicle_arguments(p)
+    add_load_params_argument(p)
     p.add_argument("--collective", type=number_in(0, 1), default=0.4)
     p.add_argument("--dmp-image", metavar="FILE")
     add_design_arguments(p)
@@ -145,6 +147,9 @@ def _check_rig_options(args) -> None:
     if not args.sil and args.param_store:
         raise InputError("--param-store needs --sil (a board keeps its parameters in its flash; "
                          "set them with heliquad params)")
+    if not args.sil and args.load_params:
+        raise InputError("--load-params needs --sil (on a board: heliquad params load, then "
+                         "the sweep)")
     if not args.sil and (args.sd_image is not None or args.sd_faults):
         raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
                          "socket; read its logs with heliquad logs)")
@@ -215,7 +220,7 @@ def _sweep_session(args, tlog):
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
                     inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
                     plant=args.plant, rig=args.axis, params=args.params,
-                    turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
+                    load_params=args.load_params, turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
                     faults=faults(args), firmware=args.firmware, param_store=args.param_store,
                     firmware_link=firmware_link(args), rc_script=args.rc_script,
                     **sd_card(args))

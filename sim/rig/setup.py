@@ -51,6 +51,7 @@ class SilConfig:
     plant: str = "tf"              # "tf" (num/den) or "vehicle" (the 6-DoF model)
     rig: str = "roll"              # vehicle plant: roll, pitch, yaw or free
     params: str | None = None      # vehicle parameter file (default: the shipped one)
+    load_params: str | None = None  # a .params file the board is given before it arms
     turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
     seed: int = 0                  # turbulence and sensor-noise seed
     ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
