@@ -43,8 +43,8 @@ class FakeBoard:
         for _ in range(n):
             self.seq += 1
             msg = self.mav.hq_sysid_sample_encode(self.seq * 5000, self.seq, 0, 0, 0, int(armed),
-                                                  0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, [0.4] * 5 + [0.0] * 3,
-                                                  5, 0)
+                                                  0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0,
+                                                  5, [0.4] * 5 + [0.0] * 3)
             os.write(self.main, msg.pack(self.mav))
 
     def close(self):

@@ -44,7 +44,7 @@ NETWORK_KINDS = {"udpin": "listen for UDP", "udp": "listen for UDP (as udpin:)",
 LISTENING = ("udpin", "udp", "tcpin")
 #: How long a TCP connect may take before it is refused as unreachable.
 CONNECT_TIMEOUT_S = 5.0
-#: The most bytes one read takes in (a board sends about 27 kB/s).
+#: The most bytes one read takes in (a board sends about 25 kB/s).
 READ_SIZE = 65536
 #: The --port help of every command that opens the telemetry link.
 CONNECTION_HELP = ("the board's telemetry link: a serial device (/dev/ttyACM0, COM3, a "

@@ -56,7 +56,7 @@ def reason_text(code: int) -> str:
 
 
 #: The firmware's telemetry runs at 921600 baud on the Teensy's UART0 (pins 0/1, through a
-#: 3.3 V USB-serial cable): about 27 kB/s of telemetry needs more than 115200 baud carries
+#: 3.3 V USB-serial cable): about 25 kB/s of telemetry needs more than 115200 baud carries
 #: (11.5 kB/s). USB CDC and the SIL's ptys ignore the rate.
 DEFAULT_BAUD = 921600
 

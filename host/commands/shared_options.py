@@ -315,7 +315,8 @@ def check_plant(args) -> None:
     """The simulated rig can fly this plant: a transfer function (:func:`transfer_function`,
     leading zeros refused) whose poles are no faster than the loop's Nyquist rate and whose
     gain is within PLANT_GAIN_RANGE, or a vehicle file whose fastest mode the integrator can
-    follow at this loop rate and whose rotors the firmware's mixer drives. An unstable plant
+    follow at this loop rate and whose rotors the firmware flies, in its mixer's places
+    (:func:`~heliquad.sim.plant.vehicle_plant.check_loop_vehicle`). An unstable plant
     is allowed: the firmware's abort is what such a run tests. A ``--dmp-image`` file is read
     here too, so a bad one is refused before anything starts."""
     if getattr(args, "dmp_image", None):

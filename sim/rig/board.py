@@ -38,7 +38,7 @@ MAX_LAG_S = 0.1
 SAVE_WAIT_S = 0.6
 #: The most telemetry that waits for a reader on the pty, the oldest dropped past it, as a
 #: board's USB or UART buffer holds a few KiB and not seconds: a tool that opens the port late
-#: reads about this much of the past (0.15 s at the firmware's 27 kB/s), then the present.
+#: reads about this much of the past (0.17 s at the firmware's 25 kB/s), then the present.
 #: The largest the pty's line discipline holds in sight (firmware_facts); a write the kernel
 #: has not yet moved there is not seen, so one loop's more may wait.
 TELEMETRY_BACKLOG_BYTES = MAX_PTY_BACKLOG_BYTES

@@ -36,7 +36,7 @@ class GcsLink;
 class LogTransfer {
 public:
     // Of the link's bytes per second, the share log answers may take: telemetry's default
-    // streams take under a third of UART0 at 921600 baud (27 kB/s of 92 kB/s), so half
+    // streams take about a quarter of UART0 at 921600 baud (25 kB/s of 92 kB/s), so half
     // leaves the HEARTBEAT and every stream their room.
     static constexpr float kLogLinkShare = 0.5f;
     // The most LOG_DATA packets one service() call sends (what a USB link's budget saves up

@@ -299,7 +299,7 @@ void GcsLink::send_sysid_sample(const LoopStatus& st, uint64_t now_us) {
         static_cast<uint8_t>(st.exc_axis), static_cast<uint8_t>(st.exc_injection),
         static_cast<uint8_t>(st.excitation_state), st.armed ? 1 : 0,
         static_cast<uint8_t>(st.mode), x.excitation, s.angle_sp, s.rate_sp, s.rate, s.angle,
-        s.axis_cmd, x.motor, x.rotor_count, x.saturation);
+        s.axis_cmd, x.saturation, x.rotor_count, x.motor);
     send(msg);
 }
 

@@ -3,7 +3,7 @@
 //
 // Interrupt driven both ways: write() copies into a TX ring and enables the transmit
 // interrupt, which keeps the UART's 8-byte FIFO fed; the receive interrupt moves bytes into
-// an RX ring that read() drains. Telemetry is about 27 kB/s; 921600 baud carries 92 kB/s,
+// an RX ring that read() drains. Telemetry is about 25 kB/s; 921600 baud carries 92 kB/s,
 // so the ring absorbs a loop's burst and drains before the next one; a slower radio fills
 // the ring, and per the HAL contract write() never blocks: a message that does not fit the
 // ring is refused whole (returns 0; the link counts it dropped).
