@@ -75,8 +75,8 @@ def assert_samples_are_the_telemetry(records, samples: dict) -> list:
             s.axis, s.injection, s.exc_state, s.armed, s.mode, s.saturation)
         assert (h.Exc, h.ASP, h.RSP, h.Rate, h.Ang, h.Cmd) == (
             s.excitation, s.angle_sp, s.rate_sp, s.rate, s.angle, s.axis_cmd)
-        assert [getattr(m, f"M{i}") for i in range(1, 9)] == list(s.motor)
-        assert m.MCnt == s.motor_count == 5 and not any(s.motor[5:])
+        assert [getattr(m, f"M{i}") for i in range(1, 6)] == list(s.motor[:5])
+        assert s.motor_count == 5 and not any(s.motor[5:])      # five rotors: no HQMX
         assert d.Targ == s.excitation
         assert d.Gx == pytest.approx(math.degrees(s.rate), rel=1e-6, abs=1e-9)
     return [h.Seq for h in hqsd]

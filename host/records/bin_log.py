@@ -41,7 +41,10 @@ _HQSD_FIELDS = {"TimeUS": "time_us", "Seq": "seq", "Axis": "axis", "Inj": "injec
                 "ESt": "exc_state", "Arm": "armed", "Mode": "mode", "Exc": "excitation",
                 "ASP": "angle_sp", "RSP": "rate_sp", "Rate": "rate", "Ang": "angle",
                 "Cmd": "axis_cmd", "Sat": "saturation"}
-_MOTORS = tuple(f"M{i}" for i in range(1, 9))        # HQMT's M1..M8: motor[8]
+_MOTORS = tuple(f"M{i}" for i in range(1, 6))        # HQMT's M1..M5: motor[0..4]
+_MORE_MOTORS = ("M6", "M7", "M8")                     # HQMX's: motor[5..7], with MCnt
+#: The rotor count of a loop with no HQMX: the paper's vehicle's.
+_HQMT_ROTORS = 5
 #: SIDS's set-up fields (ArduPilot's names).
 _SIDS_FIELDS = ("TimeUS", "Ax", "Mag", "FSt", "FSp", "TFin", "TC", "TR", "TFout")
 
@@ -98,6 +101,7 @@ class _Collector:
         self.rows, self.sidd, self.setups, self.params, self.gaps = [], [], [], {}, []
         self.pending: list = []          # the loop's SIDD (and HQSD) waiting for the rest
         self.last_time_us, self.last_seq, self.gap_since = 0, None, False
+        self.last_loop_us = None         # the time of the last whole loop (its HQMX's)
 
     def take(self, m) -> str | None:
         kind = m.get_type()
@@ -114,6 +118,8 @@ class _Collector:
             return self._sample(m)
         elif kind == "HQMT":
             return self._motors(m)
+        elif kind == "HQMX":
+            return self._more_motors(m)
         elif kind == "SIDS":
             self.setups.append({k: getattr(m, k) for k in _SIDS_FIELDS})
         elif kind == "PARM":
@@ -146,9 +152,19 @@ class _Collector:
         if m.TimeUS != hqsd.TimeUS:
             return "a loop's records are not of one time"
         self.rows.append(tuple(getattr(hqsd, k) for k in _HQSD_FIELDS)
-                         + (tuple(getattr(m, k) for k in _MOTORS), m.MCnt))
+                         + (tuple(getattr(m, k) for k in _MOTORS) + (0.0,) * 3, _HQMT_ROTORS))
+        self.last_loop_us = m.TimeUS
         self.sidd.append((sidd.Time, sidd.F))
         self.pending, self.last_seq, self.gap_since = [], hqsd.Seq, False
+        return None
+
+    def _more_motors(self, m) -> str | None:
+        """HQMX: the loop just read has another rotor count than five, and motors 6 to 8."""
+        if not self.rows or m.TimeUS != self.last_loop_us:
+            return "an HQMX record without its loop's HQMT"
+        *fields, motors, _ = self.rows[-1]
+        self.rows[-1] = (*fields, motors[:5] + tuple(getattr(m, k) for k in _MORE_MOTORS),
+                         m.MCnt)
         return None
 
     def log(self, damage: BinDamage) -> BinLog:

@@ -8,8 +8,9 @@ namespace hq {
 // MULT, FMTU, PARM, MSG, MODE and EV; ArduCopter's system identification mode for SIDD and
 // SIDS, SIDD's fields and units exactly as it logs them); HQSD, HQMT and HQGP are
 // heliquad's. A format string holds at most 16 characters, so HQ_SYSID_SAMPLE's fields
-// take two records written together: HQSD (the sample) and HQMT (its
-// rotor count and kMaxRotors motor outputs).
+// take records written together: HQSD (the sample) and HQMT (its first five motor outputs),
+// and for a vehicle of another rotor count than five HQMX (the count and motors 6 to 8), so
+// that the paper's vehicle logs no more than five motors a loop.
 const LogMessage kLogMessages[] = {
     {LogType::Fmt, "FMT", "BBnNZ", "Type,Length,Name,Format,Columns", "-b---", "-----"},
     {LogType::Unit, "UNIT", "QbZ", "TimeUS,Id,Label", "s--", "F--"},
@@ -25,9 +26,9 @@ const LogMessage kLogMessages[] = {
      "F--------"},
     {LogType::Hqsd, "HQSD", "QIBBBBBffffffB", "TimeUS,Seq,Axis,Inj,ESt,Arm,Mode,Exc,ASP,RSP,Rate,Ang,Cmd,Sat",
      "s-------rEEr--", "F-------------"},
-    {LogType::Hqmt, "HQMT", "QBffffffff", "TimeUS,MCnt,M1,M2,M3,M4,M5,M6,M7,M8", "s---------",
-     "F---------"},
+    {LogType::Hqmt, "HQMT", "Qfffff", "TimeUS,M1,M2,M3,M4,M5", "s-----", "F-----"},
     {LogType::Hqgp, "HQGP", "QIQ", "TimeUS,Dropped,SinceUS", "s-s", "F-F"},
+    {LogType::Hqmx, "HQMX", "QBfff", "TimeUS,MCnt,M6,M7,M8", "s----", "F----"},
 };
 const size_t kLogMessageCount = sizeof(kLogMessages) / sizeof(kLogMessages[0]);
 

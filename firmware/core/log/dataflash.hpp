@@ -27,7 +27,7 @@ constexpr size_t kDfShortTextLen = 16;        // N
 // described by its FMT record).
 enum class LogType : uint8_t {
     Fmt = 128, Unit = 129, Mult = 130, Fmtu = 131, Parm = 132, Msg = 133, Mode = 134,
-    Ev = 135, Sidd = 136, Sids = 137, Hqsd = 138, Hqmt = 139, Hqgp = 140,
+    Ev = 135, Sidd = 136, Sids = 137, Hqsd = 138, Hqmt = 139, Hqgp = 140, Hqmx = 141,
 };
 
 // One message: its FMT and FMTU contents. units and mults have one character per field

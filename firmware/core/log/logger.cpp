@@ -15,6 +15,8 @@ constexpr const char* kVersionText = "heliquad " HQ_LOG_STR(HQ_FW_VERSION_MAJOR)
     HQ_FW_VERSION_MINOR) "." HQ_LOG_STR(HQ_FW_VERSION_PATCH);
 
 constexpr float kDegPerRad = 57.29577951308232f;
+// HQMT's motors: the paper's vehicle's five; HQMX has the count and the rest when it differs.
+constexpr int kHqmtMotors = 5;
 
 // ArduPilot's SID_AXIS numbers for the same experiments: 1-3 input angle, 7-9 rate, 10-12
 // mixer (roll, pitch, yaw); 0 (none of ArduPilot's) for a motor injection, which HQSD's
@@ -153,11 +155,11 @@ void Logger::log_experiment(const LoopStatus& st, const Excitation& exc, float l
     push(buf, r.size(), 1, st.time_us);
 }
 
-// One loop's sample: SIDD, HQSD and HQMT in one piece (all three or none).
+// One loop's sample: SIDD, HQSD, HQMT (and HQMX) in one piece (all or none).
 void Logger::log_sample(const LoopStatus& st, const Excitation& exc) {
     const LoopState& x = st.state;
     const uint64_t t = st.time_us;
-    uint8_t buf[3 * kDfHeaderBytes + 3 * 8 + 9 * 4 + 4 + 5 + 6 * 4 + 1 + 1 + kMaxRotors * 4];
+    uint8_t buf[4 * kDfHeaderBytes + 4 * 8 + 9 * 4 + 4 + 5 + 6 * 4 + 1 + 1 + kMaxRotors * 4];
     DfRecord d(buf, sizeof buf, LogType::Sidd);
     const bool on = st.excitation_state != ExcitationState::Idle;
     d.u64(t).f32(on ? static_cast<float>(t - exc_start_us_) * 1e-6f : 0.0f).f32(x.excitation);
@@ -172,9 +174,17 @@ void Logger::log_sample(const LoopStatus& st, const Excitation& exc) {
     h.f32(s.angle_sp).f32(s.rate_sp).f32(s.rate).f32(s.angle).f32(s.axis_cmd).u8(x.saturation);
     const size_t n = d.size() + h.size();
     DfRecord m(buf + n, sizeof buf - n, LogType::Hqmt);
-    m.u64(t).u8(x.rotor_count);
-    for (float f : x.motor) m.f32(f);
-    push(buf, n + m.size(), 3, t);
+    m.u64(t);
+    for (int i = 0; i < kHqmtMotors; ++i) m.f32(x.motor[i]);
+    if (x.rotor_count == kHqmtMotors) {
+        push(buf, n + m.size(), 3, t);
+        return;
+    }
+    const size_t k = n + m.size();
+    DfRecord e(buf + k, sizeof buf - k, LogType::Hqmx);
+    e.u64(t).u8(x.rotor_count);
+    for (int i = kHqmtMotors; i < kMaxRotors; ++i) e.f32(x.motor[i]);
+    push(buf, k + e.size(), 4, t);
 }
 
 void Logger::param_changed(int index, float value, float default_value, uint64_t now_us) {
