@@ -1,6 +1,7 @@
 """``heliquad effectiveness`` end to end on the simulated rigs (host/campaign/effectiveness.py):
 per-rotor runs (``heliquad sweep --inject motors``) on the roll, pitch and yaw rigs of the
-default vehicle, the axis sweeps' models for the rigs' hinges, then the estimate: every
+default vehicle, the axis sweeps' models to start the rigs' hinges from, then the estimate
+(the hinges fitted with it, the same without the models): every
 entry within 5 % of its row's largest of the simulator's truth, every time constant within
 10 %, the errors over their sigmas of RMS 0.5 to 2; the fitted geometry is the vehicle's and
 its geometry.params is one the firmware takes; too few runs and a folder that is not a
@@ -101,6 +102,24 @@ def test_the_fitted_geometry_is_the_vehicles_and_the_firmware_takes_it(estimate)
     assert spins == [r.spin for r in params.rotors]
     assert (out / "effectiveness.png").stat().st_size > 10_000
     assert "geometry: cant" in stdout
+
+
+def test_the_hinges_come_from_the_runs_themselves_the_axis_models_only_start_them(
+        runs, estimate, tmp_path):
+    out, doc, _ = estimate
+    r = _ok(heliquad("effectiveness", *(runs[a][0] for a in AXES), "--out", tmp_path / "e"))
+    free = json.loads((tmp_path / "e" / "effectiveness.json").read_text())
+    assert free["axis_models"] == [] and all(
+        rig["given_damping_rad_s"] == 0.0 for rig in free["rigs"].values())
+    params = load_params()
+    for axis, row in zip(AXES, range(3)):
+        true = params.rig.hinge_damping_n_m_s_rad / params.body.inertia_kg_m2[row]
+        assert doc["rigs"][axis]["damping_rad_s"] == pytest.approx(true, rel=0.3)
+        assert free["rigs"][axis]["damping_rad_s"] == pytest.approx(
+            doc["rigs"][axis]["damping_rad_s"], abs=1e-4)
+    np.testing.assert_allclose(free["effectiveness_rad_s2"], doc["effectiveness_rad_s2"],
+                               rtol=0, atol=1e-3)
+    assert "geometry: cant" in r.stdout
 
 
 def test_too_few_runs_or_a_folder_that_is_not_a_per_rotor_run_is_refused(runs, tmp_path):

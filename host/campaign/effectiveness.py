@@ -8,8 +8,8 @@ axis's torque command per sample with the samples that arrived (:func:`rig_point
 rotor's lines (the manifest's ``design.rotor_orders``), the allocation's column from the
 geometry parameters (``CA_*``) the board flew (the firmware's own allocation, through its
 bindings: linear in the torque command, so the column is the allocation matrix's), the rig's
-hinge from the axis sweep's model (``--axis-models``; without one, a free hinge) and the
-loop period the commands were held for. Then fits the rotor geometry that explains the
+hinge from the axis sweep's model (``--axis-models``; without one, a free hinge) as the start
+of its damping, which the estimate fits, and the loop period the commands were held for. Then fits the rotor geometry that explains the
 estimate (host/estimate/rotor_geometry.py) from the flown one, with the rig's inertia from a
 vehicle file.
 
@@ -116,7 +116,8 @@ def allocation_of(geometry: dict):
 def hinge_rigs(models_paths, allocation) -> dict:
     """Each rig (``axis -> Rig``) with its allocation's column and its hinge: the slowest
     pole of the recommended model of the axis sweep's models.json (a complex one with its
-    pair: damping and stiffness), else a free hinge (``R(s) = 1/s``)."""
+    pair: damping and stiffness), else a free hinge (``R(s) = 1/s``); the estimate fits the
+    damping from there."""
     columns = np.asarray(allocation.allocation, dtype=float)
     rigs = {axis: Rig(axis, tuple(columns[:, 1 + row])) for axis, row in AXES.items()}
     for path in models_paths or ():
@@ -176,7 +177,7 @@ def estimate_from_runs(folders, models_paths=None, vehicle=None, progress=print)
     rigs = hinge_rigs(models_paths, allocation)
     rotors = runs[0].rotors
     est = estimate_effectiveness([r for run in runs for r in run.records], rigs, rotors,
-                                 runs[0].hold_s)
+                                 runs[0].hold_s, fit_hinges=True)
     built, built_from = _built(vehicle, runs)
     inertia = np.array(built.body.inertia_kg_m2, dtype=float)
     flown = np.asarray(allocation.effectiveness, dtype=float)[1:] / inertia[:, None]
@@ -249,7 +250,9 @@ def _document(runs, rigs, est, flown, fit, built, models_paths) -> dict:
         "time_constant_sigma_s": _rows(est.time_constant_sigma_s),
         "delay_s": _rows(est.delay_s), "delay_sigma_s": _rows(est.delay_sigma_s),
         "chi2_dof": est.chi2_dof,
-        "rigs": {a: {"allocation": list(r.allocation), "damping_rad_s": r.damping_rad_s,
+        "rigs": {a: {"allocation": list(r.allocation),
+                     "damping_rad_s": est.hinge_damping_rad_s[a],
+                     "given_damping_rad_s": r.damping_rad_s,
                      "stiffness_rad2_s2": r.stiffness_rad2_s2} for a, r in rigs.items()},
         "axis_models": [os.path.abspath(p) for p in models_paths or ()],
         "inertia_kg_m2": _rows(built[0]), "vehicle": built[1],

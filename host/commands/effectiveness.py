@@ -13,8 +13,8 @@ pitch and yaw), its time constant and delay from per-rotor run folders (heliquad
 --inject motors) of the roll, pitch and yaw rigs, one or more each, flown with one geometry
 (docs/effectiveness.md); then fit the rotor geometry that explains it (one cant of the arm
 rotors, the torque ratios, each arm rotor's largest thrust) from the one flown. The rig's
-hinge comes from the axis sweep's models (--axis-models, the recommended model's slowest
-pole; without them, a free hinge); the rotors' places and spins and the rigs' inertia from
+hinge's damping is fitted with the estimate, from the axis sweep's models (--axis-models,
+the recommended model's slowest pole; without them, from a free hinge); the rotors' places and spins and the rigs' inertia from
 --vehicle (default: the simulated runs' vehicle file). Writes into --out: effectiveness.json (the estimate and its sigmas, beside what
 the geometry flown and the fitted geometry predict), effectiveness.png and geometry.params
 (the fitted geometry as CA_* parameters, for heliquad params load).
@@ -32,7 +32,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--axis-models", nargs="+", metavar="MODELS.json",
                    help="the axis sweeps' models.json (heliquad identify), one per rig: its "
-                        "hinge (default: a free hinge)")
+                        "hinge, where the fit of its damping starts (default: a free hinge)")
     p.add_argument("--vehicle", metavar="FILE",
                    help="the vehicle file of what the builder knows: the rotors' places and "
                         "spins, the body's inertia, taken as the rigs' (default: the simulated "
