@@ -4,7 +4,8 @@ default vehicle, the axis sweeps' models to start the rigs' hinges from, then th
 (the hinges fitted with it, the same without the models): every
 entry within 5 % of its row's largest of the simulator's truth, every time constant within
 10 %, the errors over their sigmas of RMS 0.5 to 2; the fitted geometry is the vehicle's and
-its geometry.params is one the firmware takes; too few runs and a folder that is not a
+its geometry.params is one the firmware takes (a board loads it with heliquad params load);
+too few runs and a folder that is not a
 per-rotor run are refused in one line.
 
 Runtime (2-core machine, niced): the six SIL runs and three identifies about 25 s, the
@@ -23,6 +24,7 @@ from heliquad import _firmware
 from heliquad.host.records.params_file import read_params_file
 from heliquad.sim.plant.vehicle import Vehicle
 from heliquad.sim.plant.vehicle_params import load_params
+from tool_runs import running_board
 
 AXES = ("roll", "pitch", "yaw")
 #: The acceptance: every entry within 5 % of its row's largest, every time constant within
@@ -102,6 +104,16 @@ def test_the_fitted_geometry_is_the_vehicles_and_the_firmware_takes_it(estimate)
     assert spins == [r.spin for r in params.rotors]
     assert (out / "effectiveness.png").stat().st_size > 10_000
     assert "geometry: cant" in stdout
+
+
+def test_a_board_takes_the_fitted_geometry_with_heliquad_params_load(estimate, tmp_path):
+    out, _, _ = estimate
+    with running_board(tmp_path, "--disarmed") as port:
+        r = _ok(heliquad("params", "--port", port, "load", out / "geometry.params"))
+        assert "0 refused" in r.stdout
+        got = _ok(heliquad("params", "--port", port, "get", "CA_ROTOR2_KM"))
+    want = {p.name: p.value for p in read_params_file(out / "geometry.params")}
+    assert float(got.stdout.split()[-1]) == pytest.approx(want["CA_ROTOR2_KM"], rel=1e-6)
 
 
 def test_the_hinges_come_from_the_runs_themselves_the_axis_models_only_start_them(
