@@ -1,6 +1,7 @@
 """The per-rotor run (``heliquad sweep --inject motors``, host/acquire/rotor_multisine.py):
 each rotor on odd harmonics of its own, in the message's order rotor j mod the count, every
-rotor's own sum at its peak, the declared peak one the firmware takes; on the simulated rig
+rotor's own sum at its peak, the declared peak one the firmware takes (or one rotor alone,
+MOTORn, on every line); on the simulated rig
 the run is one MOTORS excitation logged as a sweep folder whose manifest says each rotor's
 lines and the geometry flown; a board that flies another rotor count, dwell options and
 identify on such a folder are refused in one line."""
@@ -49,6 +50,13 @@ def test_each_rotor_has_odd_lines_of_its_own_in_the_firmwares_order(axis, rotors
     assert ms.duration_s <= 120.0
 
 
+def test_one_rotors_run_gives_it_every_line_odd():
+    ms = rotor_design(paper.BANDS_HZ["roll"][1], 5, only=2)
+    assert [len(o) for o in ms.rotor_orders] == [0, 0, MAX_LINES, 0, 0]
+    assert all(o % 2 == 1 for o in ms.orders) and ms.peak == ROTOR_PEAK
+    assert ms.record()["rotor_orders"][2] == list(ms.orders)
+
+
 def test_a_band_too_low_for_the_rig_time_takes_fewer_lines_then_is_refused():
     yaw = rotor_design(paper.BANDS_HZ["yaw"][1], 5)      # 60 s: two lines each, not three
     assert [len(o) for o in yaw.rotor_orders] == [2] * 5
@@ -88,10 +96,11 @@ def test_a_per_rotor_run_on_the_simulated_rig_is_one_motors_excitation(tmp_path)
     (("--rotors", "4"), "give --rotors 5"),
     (("--cycles", "8"), "--cycles shape"),
     (("--amplitude", "0.3"), "EXC_MAX_MOT"),
+    (("--inject", "motor6"), "flies 5 rotors"),
 ])
 def test_what_a_per_rotor_run_cannot_do_is_refused_in_one_line(tmp_path, extra, why):
     r = heliquad("sweep", "--axis", "pitch", "--sil", "--inject", "motors", *extra,
-                 "--out", tmp_path / "run")
+                 "--out", tmp_path / "run")       # a later --inject replaces the first
     assert r.returncode == 2, r.stderr
     assert why in r.stderr and len(r.stderr.strip().splitlines()) == 1
 

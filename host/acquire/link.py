@@ -15,6 +15,7 @@ import time
 
 from ...sim.base import dialect as names
 from ...sim.base.dialect import dialect
+from ...sim.base.firmware_facts import MAX_ROTORS
 from ...sim.base.framing import Codec, Framer
 from .connection import open_connection
 
@@ -24,13 +25,15 @@ __all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output"
 
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point
 #: the axis sweeps use (the commands' --inject choices). The firmware's per-rotor injections
-#: (motor1..8) are driven through :meth:`TelemetryLink.start_excitation` directly; ``heliquad
-#: sweep --inject motors`` runs the per-rotor multisine (:data:`ROTOR_INPUT_OUTPUT`).
+#: are the per-rotor runs of ``heliquad sweep --inject motors`` (or ``motorN``,
+#: :data:`ROTOR_INPUT_OUTPUT`).
 INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
-#: The per-rotor run's injection (every rotor on its own lines, docs/effectiveness.md) and
-#: what it records beside the injections: the axis's torque command and the rate.
-ROTOR_INPUT_OUTPUT = {"motors": ("axis_cmd", "rate")}
+#: The per-rotor runs' injections (every rotor on its own lines, or one rotor's alone:
+#: motor1 the central rotor; docs/effectiveness.md) and what they record beside the
+#: injections: the axis's torque command and the rate.
+ROTOR_INPUT_OUTPUT = {name: ("axis_cmd", "rate") for name in
+                      ("motors", *(f"motor{n}" for n in range(1, MAX_ROTORS + 1)))}
 #: The messages a session driver (SIL or board) reads while an excitation runs, and the
 #: parameters' answers (a sweep reads the board's parameters through its session).
 SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT", "PARAM_VALUE")

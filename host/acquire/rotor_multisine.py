@@ -2,7 +2,8 @@
 each on lines of its own, as one HQ_EXCITATION with injection MOTORS.
 
 The firmware gives harmonic ``j`` of the message (in its order) to rotor ``j mod R`` and
-holds each rotor's own sum to the declared peak (docs/effectiveness.md, "The experiment").
+holds each rotor's own sum to the declared peak (or, with MOTORn, every harmonic to rotor
+``n - 1``: one run per rotor, each with all the message's lines) (docs/effectiveness.md, "The experiment").
 The lines are odd harmonics only, rotor ``i`` on ``2 (i + R m) + 1``: the rotors' thrust is
 quadratic in their speed, so two lines of one rotor make sums and differences, which are even
 and land on no rotor's line (docs/effectiveness.md: on the simulated roll rig this kept the
@@ -59,10 +60,14 @@ class RotorMultisine(Multisine):
 
     rotors: int = 1
     rotor_peak: float = 0.0
+    only: int | None = None        # the one rotor excited (0-based; MOTORn), or None: all
 
     @property
     def rotor_orders(self) -> tuple:
-        """Per rotor (the central one first), its harmonics."""
+        """Per rotor (the central one first), its harmonics (none for a rotor not excited)."""
+        if self.only is not None:
+            return tuple(tuple(self.orders) if i == self.only else () for i in
+                         range(self.rotors))
         return tuple(tuple(self.orders[i::self.rotors]) for i in range(self.rotors))
 
     def record(self) -> dict:
@@ -96,12 +101,15 @@ def _grid(top_hz: float, rotors: int, per_rotor: int, fs_hz: float) -> tuple:
 
 
 def rotor_design(top_hz: float, rotors: int, peak: float = ROTOR_PEAK, lines: int = MAX_LINES,
-                 rig_time_s: float = RIG_TIME_S, fs_hz: float | None = None) -> RotorMultisine:
+                 rig_time_s: float = RIG_TIME_S, fs_hz: float | None = None,
+                 only: int | None = None) -> RotorMultisine:
     """The per-rotor multisine (module docstring) for ``rotors`` rotors whose lines reach up
     to ``top_hz``, ``lines`` in all (shared out, ``lines // rotors`` each), in
-    ``rig_time_s``; ``peak``: each rotor's, thrust fraction."""
+    ``rig_time_s``; ``peak``: each rotor's, thrust fraction. ``only``: every line to that
+    rotor alone (0-based, injection MOTORn: still odd harmonics)."""
     fs_hz = float(fs_hz or firmware_facts.LOOP_RATE_HZ)
-    per_rotor = min(lines, MAX_LINES) // rotors
+    sharing = rotors if only is None else 1
+    per_rotor = min(lines, MAX_LINES) // sharing
     if per_rotor < MIN_ROTOR_LINES:
         raise InputError(f"{rotors} rotors need {MIN_ROTOR_LINES * rotors} lines, "
                          f"{MIN_ROTOR_LINES} each; HQ_EXCITATION carries {MAX_LINES}"
@@ -111,26 +119,26 @@ def rotor_design(top_hz: float, rotors: int, peak: float = ROTOR_PEAK, lines: in
         raise InputError(f"the band's top, {hi:g} Hz, must be above 0 and at most "
                          f"{fs_hz / 4:g} Hz")
     for lines_each in range(per_rotor, MIN_ROTOR_LINES - 1, -1):
-        n, steps = _grid(hi, rotors, lines_each, fs_hz)
+        n, steps = _grid(hi, sharing, lines_each, fs_hz)
         periods = int((rig_time_s * fs_hz - 2 * n) // n)      # fades: a cycle of harmonic 1
         if periods >= MIN_PERIODS:
             break
     else:
-        raise InputError(f"{MIN_ROTOR_LINES} lines for each of {rotors} rotors up to {hi:g} Hz "
+        raise InputError(f"{MIN_ROTOR_LINES} lines for each of {sharing} rotors up to {hi:g} Hz "
                          f"need a {n / fs_hz:.3g} s period: {MIN_PERIODS} of them and the fades "
                          f"take {(MIN_PERIODS + 2) * n / fs_hz:.0f} s, more than "
                          f"{rig_time_s:g} s (a longer rig time or a higher band)")
-    orders = sorted(o for rotor in rotor_orders(rotors, steps) for o in rotor)
+    orders = sorted(o for rotor in rotor_orders(sharing, steps) for o in rotor)
     amplitudes, phases = np.zeros(len(orders)), np.zeros(len(orders))
-    for i in range(rotors):
-        own = orders[i::rotors]
+    for i in range(sharing):
+        own = orders[i::sharing]
         ph = low_crest_phases(own, np.ones(len(own)), n)
         alone = Multisine(fs_hz, n, tuple(own), (1.0,) * len(own), tuple(ph), 1.0, periods)
         scale = peak / float(np.max(np.abs(alone.period())))
-        amplitudes[i::rotors], phases[i::rotors] = scale, ph
+        amplitudes[i::sharing], phases[i::sharing] = scale, ph
     # The firmware also refuses a declared peak below the whole sum's RMS (a peak is at
     # least the RMS), which with many rotors exceeds each rotor's own peak.
     declared = max(float(peak), RMS_MARGIN * math.sqrt(float(np.sum(amplitudes ** 2)) / 2))
     return RotorMultisine(fs_hz, n, tuple(orders), tuple(float(a) for a in amplitudes),
                           tuple(float(p) for p in phases), declared, periods,
-                          rotors=rotors, rotor_peak=float(peak))
+                          rotors=rotors, rotor_peak=float(peak), only=only)

@@ -57,6 +57,7 @@ to rotor j mod --rotors), added to each rotor's thrust after the allocation whil
 flies the axis; {MAX_LINES} lines shared out (--lines fewer), the highest at the band's top (Table 1,
 or the highest of --freqs-hz), the shortest base period that holds them and as many as fit
 --rig-time; --amplitude is each rotor's peak, thrust fraction (default {ROTOR_PEAK:g}).
+--inject motorN (motor1 the central rotor) is one rotor's run alone: every line its own.
 
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
          heliquad sweep --axis roll --sil --signal multisine --out roll_ms
@@ -71,9 +72,9 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--axis", choices=tuple(names.AXES), required=True)
     p.add_argument("--inject", choices=(*INPUT_OUTPUT, *ROTOR_INPUT_OUTPUT), default="mixer",
                    help="the axis's injection point (default mixer), or motors: the per-rotor "
-                        "run (below)")
+                        "run, motorN: rotor N's alone (below)")
     p.add_argument("--rotors", type=int_in(MIN_ROTORS, MAX_ROTORS), metavar="N",
-                   help="--inject motors: the rotors the board flies (its CA_ROTOR_COUNT; "
+                   help="--inject motors or motorN: the rotors the board flies (its CA_ROTOR_COUNT; "
                         "default: the --params vehicle's with --sil, else the firmware's "
                         "default geometry's)")
     where = p.add_mutually_exclusive_group(required=True)
@@ -170,9 +171,14 @@ def rotor_plan(args):
         raise InputError(f"--amplitude {peak:g} is above the firmware's bound for a rotor's "
                          f"injection ({amplitude_bound('motors'):g}, EXC_MAX_MOT)")
     top = max(args.freqs_hz) if args.freqs_hz else paper.BANDS_HZ[args.axis][1]
-    ms = rotor_design(top, _rotors(args), peak, args.lines or MAX_LINES,
-                      *([args.rig_time] if args.rig_time else []))
-    return SweepPlan.of_multisine(args.axis, "motors", ms)
+    rotors = _rotors(args)
+    only = None if args.inject == "motors" else int(args.inject[len("motor"):]) - 1
+    if only is not None and only >= rotors:
+        raise InputError(f"--inject {args.inject}: the board flies {rotors} rotors "
+                         f"(motor1 to motor{rotors})")
+    ms = rotor_design(top, rotors, peak, args.lines or MAX_LINES,
+                      *([args.rig_time] if args.rig_time else []), only=only)
+    return SweepPlan.of_multisine(args.axis, args.inject, ms)
 
 
 def _rotors(args) -> int:
