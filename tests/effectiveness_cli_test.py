@@ -164,3 +164,8 @@ def test_too_few_runs_or_a_folder_that_is_not_a_per_rotor_run_is_refused(runs, t
         assert r.returncode == 2, r.stdout + r.stderr
         assert why in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
         assert not (tmp_path / "x").exists()
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept" / "earlier.txt").write_text("an earlier record\n")
+    r = heliquad("effectiveness", *(runs[a][0] for a in AXES), "--out", tmp_path / "kept")
+    assert r.returncode == 2 and "is not empty" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1

@@ -44,8 +44,9 @@ def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..campaign.effectiveness import FIGURE, estimate_from_runs, write_outputs
     from ..present.effectiveness import write_effectiveness
-    from ..records.output import new_output_folder
+    from ..records.output import check_output_folder, new_output_folder
 
+    check_output_folder(args.out, "--out")          # before the estimate's seconds
     doc, params = estimate_from_runs(args.dirs, args.axis_models, args.vehicle)
     new_output_folder(args.out, "the effectiveness estimate")
     written = write_outputs(args.out, doc, params)
