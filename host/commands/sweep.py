@@ -55,7 +55,7 @@ firmware's bound at the mixer). identify estimates every line from the one recor
 multisine in which every rotor has odd harmonics of its own (HQ_INJECTION_MOTORS: harmonic j
 to rotor j mod --rotors), added to each rotor's thrust after the allocation while the cascade
 flies the axis; {MAX_LINES} lines shared out (--lines fewer), the highest at the band's top (Table 1,
-or the highest of --freqs-hz), the shortest base period that holds them and as many as fit
+or the highest of --freqs-hz), the shortest base period that holds them, as many periods as fit
 --rig-time; --amplitude is each rotor's peak, thrust fraction (default {ROTOR_PEAK:g}).
 --inject motorN (motor1 the central rotor) is one rotor's run alone: every line its own.
 
