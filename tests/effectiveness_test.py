@@ -254,6 +254,24 @@ def test_exact_held_points_give_the_exact_rotors():
     np.testing.assert_allclose(est.delay_s, tau, atol=1e-7)
 
 
+def test_exact_held_points_give_the_rigs_hinge_when_it_is_fitted():
+    e, t, tau = np.array([10.0, 150.0, -120.0]), np.array([0.1, 0.03, 0.05]), np.array(
+        [0.004, 0.007, 0.012])
+    omega = np.geomspace(0.5, 100, 9)
+    per_e, per_m = held_paths(omega[None, :], LOOP_PERIOD_S, t[:, None], tau[:, None], 0.3, 0.0)
+    records = synthetic_records(e[:, None] * per_e, Rig("yaw", (0.3, 0.004, -0.005), 0.3), omega)
+    for start in (0.0, 1.0):                 # a free hinge, and one too damped
+        est = estimate_effectiveness(records, {"yaw": Rig("yaw", (0.3, 0.004, -0.005), start)},
+                                     3, LOOP_PERIOD_S, fit_hinges=True)
+        assert est.hinge_damping_rad_s["yaw"] == pytest.approx(0.3, rel=1e-5)
+        np.testing.assert_allclose(est.effectiveness_rad_s2[2], e, rtol=1e-5)
+        np.testing.assert_allclose(est.time_constant_s, t, rtol=1e-5)
+    held = estimate_effectiveness(records, {"yaw": Rig("yaw", (0.3, 0.004, -0.005), 0.0)}, 3,
+                                  LOOP_PERIOD_S)
+    assert held.hinge_damping_rad_s is None
+    assert np.max(np.abs(held.effectiveness_rad_s2[2] - e)) > 1e-3 * np.max(np.abs(e))
+
+
 def test_the_rig_comes_from_the_axis_models_slowest_poles():
     assert rig_from_poles("roll", (0.0, 1.0), -0.2) == Rig("roll", (0.0, 1.0), 0.2, 0.0)
     rig = rig_from_poles("pitch", (1.0,), [-0.5 + 3j, -0.5 - 3j])

@@ -15,18 +15,25 @@ import time
 
 from ...sim.base import dialect as names
 from ...sim.base.dialect import dialect
+from ...sim.base.firmware_facts import MAX_ROTORS
 from ...sim.base.framing import Codec, Framer
 from .connection import open_connection
 
 # AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
-__all__ = ["TelemetryLink", "INPUT_OUTPUT", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
+__all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
            "reason_text"]
 
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point
 #: the axis sweeps use (the commands' --inject choices). The firmware's per-rotor injections
-#: (motor1..8, motors) are driven through :meth:`TelemetryLink.start_excitation` directly.
+#: are the per-rotor runs of ``heliquad sweep --inject motors`` (or ``motorN``,
+#: :data:`ROTOR_INPUT_OUTPUT`).
 INPUT_OUTPUT = {"mixer": ("axis_cmd", "rate"), "rate": ("rate_sp", "rate"),
                 "angle": ("angle_sp", "angle")}
+#: The per-rotor runs' injections (every rotor on its own lines, or one rotor's alone:
+#: motor1 the central rotor; docs/effectiveness.md) and what they record beside the
+#: injections: the axis's torque command and the rate.
+ROTOR_INPUT_OUTPUT = {name: ("axis_cmd", "rate") for name in
+                      ("motors", *(f"motor{n}" for n in range(1, MAX_ROTORS + 1)))}
 #: The messages a session driver (SIL or board) reads while an excitation runs, and the
 #: parameters' answers (a sweep reads the board's parameters through its session).
 SESSION_MESSAGES = ("HQ_SYSID_SAMPLE", "HQ_EXCITATION_STATUS", "STATUSTEXT", "PARAM_VALUE")
@@ -46,6 +53,12 @@ def __getattr__(name: str):
     if name in names.NAMED_ENUMS:
         return getattr(names, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def input_output(inject: str) -> tuple:
+    """The logged fields (input, output) of an injection point a sweep runs (an axis's or the
+    per-rotor run's)."""
+    return {**INPUT_OUTPUT, **ROTOR_INPUT_OUTPUT}[inject]
 
 
 def reason_text(code: int) -> str:

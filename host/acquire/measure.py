@@ -20,7 +20,7 @@ from ...sim.base import firmware_facts
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
 from .design import response_per_unit
-from .link import INPUT_OUTPUT, reason_text
+from .link import input_output, reason_text
 
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
 #: millidegree: the firmware holds them in single precision).
@@ -141,7 +141,7 @@ class ExcitationWatch:
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
         if plan.multisine is not None:
             self.entry.update(signal="multisine", orders=list(plan.multisine.orders))
-        self.u_name, self.y_name = INPUT_OUTPUT[plan.inject]
+        self.u_name, self.y_name = input_output(plan.inject)
         self.keep_rows = keep_rows
         self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
         self.present = []                       # False where a sample of it was lost

@@ -175,6 +175,16 @@ def _record_params(session, axis: str, manifest: SweepManifest, progress) -> Non
     manifest.gains = None if gains is None else dataclasses.asdict(gains)
 
 
+def _check_rotors(plan: SweepPlan, params: dict | None) -> None:
+    """A per-rotor run's lines go to rotor ``j mod count`` on the board: refused unless the
+    board flies the rotors they were shared out among (its CA_ROTOR_COUNT, when read)."""
+    rotors = getattr(plan.multisine, "rotors", None)
+    flies = (params or {}).get("CA_ROTOR_COUNT")
+    if rotors is not None and flies is not None and int(flies) != rotors:
+        raise InputError(f"the board flies {int(flies)} rotors (CA_ROTOR_COUNT) and the run's "
+                         f"lines are shared out among {rotors}: give --rotors {int(flies)}")
+
+
 def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=print,
               max_angle_deg=MAX_ANGLE_DEG, max_rate_deg_s=MAX_RATE_DEG_S,
               port_found: dict | None = None) -> dict:
@@ -201,6 +211,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         session.hover(progress)
         _record_params(session, plan.axis, manifest, progress)
         _write_manifest(out_dir, manifest)
+        _check_rotors(plan, manifest.params)
         last = None                              # (amplitude, rate per unit) just measured
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
             current = f

@@ -21,7 +21,7 @@ import numpy as np
 
 from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
-from ..acquire.link import INPUT_OUTPUT
+from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, input_output
 from ..acquire.measure import MAX_LOST_SHARE, saturation_text
 from ..acquire.sweep import cut_text
 from ..estimate.fit import n_parameters
@@ -42,11 +42,11 @@ from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .bin_sweep import bin_sweep
 
-__all__ = ["identify_dir", "INPUT_OUTPUT"]
+__all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments"]
 
 
 
-def _load(dir_path):
+def load_sweep(dir_path):
     """``(the folder for the outputs, manifest, samples, damage)`` of a sweep folder, a .BIN
     or a folder holding one .BIN and no manifest."""
     if not os.path.isdir(dir_path):
@@ -91,11 +91,11 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
                          "log and the manifest are not of one session")
 
 
-def _segments(manifest, samples):
+def sweep_segments(manifest, samples):
     """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
     samples on their places in the sequence (:func:`_gridded`)."""
     running = dialect().HQ_EXCITATION_STATE_RUNNING
-    u_name, y_name = INPUT_OUTPUT[manifest["inject"]]
+    u_name, y_name = input_output(manifest["inject"])
     t = samples.time_us.astype(np.int64)
     state = samples.exc_state
     u, y = samples[u_name].astype(float), samples[y_name].astype(float)
@@ -148,7 +148,10 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
             return identify_dir(dir_path, orders, progress, delay, estimate, plots)
-    out_dir, manifest, samples, damage = _load(dir_path)
+    out_dir, manifest, samples, damage = load_sweep(dir_path)
+    if manifest["inject"] in ROTOR_INPUT_OUTPUT:
+        raise InputError(f"{dir_path}: a per-rotor run (motors injection): heliquad "
+                         "effectiveness reads it")
     return _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress,
                      delay, estimate)
 
@@ -287,7 +290,7 @@ def _estimate_points(manifest, samples, estimate, progress) -> tuple:
     samples on the link is estimated from those that arrived (each point's
     ``lost_share``); one that lost more than the sweep allows is skipped."""
     points, segments, firsts, skipped = [], [], [], []
-    for entry, t, r, u, y, present in _segments(manifest, samples):
+    for entry, t, r, u, y, present in sweep_segments(manifest, samples):
         what = _entry_name(entry)
         lost = _lost_share(entry, present)
         try:

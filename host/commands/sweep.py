@@ -9,18 +9,20 @@ import os
 import sys
 
 from ...sim.base import dialect as names
-from ..acquire.link import INPUT_OUTPUT
+from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT
 from ...sim.base.errors import DiskFull, InputError, LinkLost
-from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S
+from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_ROTORS, MIN_ROTORS
 from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import DEFAULT_SETPOINT
+from ..acquire.multisine import MAX_LINES
+from ..acquire.rotor_multisine import ROTOR_PEAK
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_baud_argument, add_design_arguments,
                              add_fault_argument, add_firmware_argument, firmware_link,
                              add_vehicle_arguments,
                              add_param_store_argument, add_port_argument, add_sd_card_arguments,
-                             check_excitation, check_plant, faults, finite, number_in,
+                             check_excitation, check_plant, faults, finite, int_in, number_in,
                              sd_card, sweep_plan)
 
 __all__ = ["add_parser", "run"]
@@ -50,8 +52,17 @@ cycle of the lowest line, as many whole base periods as fit --rig-time (default 
 least 3 periods); --amplitude is its peak (default: {DEFAULT_SETPOINT['angle']:g} deg angle, {DEFAULT_SETPOINT['rate']:g} deg/s rate, the
 firmware's bound at the mixer). identify estimates every line from the one record.
 
+--inject motors is the per-rotor run of `heliquad effectiveness` (docs/effectiveness.md): one
+multisine in which every rotor has odd harmonics of its own (HQ_INJECTION_MOTORS: harmonic j
+to rotor j mod --rotors), added to each rotor's thrust after the allocation while the cascade
+flies the axis; {MAX_LINES} lines shared out (--lines fewer), the highest at the band's top (Table 1,
+or the highest of --freqs-hz), the shortest base period that holds them, as many periods as fit
+--rig-time; --amplitude is each rotor's peak, thrust fraction (default {ROTOR_PEAK:g}).
+--inject motorN (motor1 the central rotor) is one rotor's run alone: every line its own.
+
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
          heliquad sweep --axis roll --sil --signal multisine --out roll_ms
+         heliquad sweep --axis yaw --sil --inject motors --out yaw_rotors
 """
 
 
@@ -60,7 +71,13 @@ def add_parser(sub, fmt) -> None:
     p = sub.add_parser("sweep", help="run an axis's sine sweep (SIL or a board) and log it",
                        description=HELP, formatter_class=fmt)
     p.add_argument("--axis", choices=tuple(names.AXES), required=True)
-    p.add_argument("--inject", choices=tuple(INPUT_OUTPUT), default="mixer")
+    p.add_argument("--inject", choices=(*INPUT_OUTPUT, *ROTOR_INPUT_OUTPUT), default="mixer",
+                   help="the axis's injection point (default mixer), or motors: the per-rotor "
+                        "run, motorN: rotor N's alone (below)")
+    p.add_argument("--rotors", type=int_in(MIN_ROTORS, MAX_ROTORS), metavar="N",
+                   help="--inject motors or motorN: the rotors the board flies (its CA_ROTOR_COUNT; "
+                        "default: the --params vehicle's with --sil, else the firmware's "
+                        "default geometry's)")
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--sil", action="store_true", help="the simulated rig, in lockstep")
     add_port_argument(where, required=False)
@@ -93,7 +110,7 @@ def run(args) -> int:
     # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
     # SIGINT after the tool has stopped in order.
     importlib.import_module("heliquad.host.estimate.fsf")
-    plan = sweep_plan(args)
+    plan = rotor_plan(args) if args.inject in ROTOR_INPUT_OUTPUT else sweep_plan(args)
     if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
         # the command's work, imported when it runs: --help imports every command module
         from ...sim.rig.setup import SilConfig
@@ -125,14 +142,59 @@ def run(args) -> int:
         session.close()
     done = sum(1 for f in manifest["frequencies"] if f["status"] == "ok")
     if manifest["complete"]:
+        then = "effectiveness" if args.inject in ROTOR_INPUT_OUTPUT else "identify"
         print(f"{done} of {len(plan.freqs_hz)} frequencies measured; complete; "
-              f"next: heliquad identify {args.out}")
+              f"next: heliquad {then} {args.out}")
         return 0
     sys.stderr.write(f"heliquad sweep: {manifest['aborted']} ({done} of "
                      f"{len(plan.freqs_hz)} frequencies measured; the log and manifest are kept "
                      f"in {args.out})\n")
     # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
     return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
+
+
+def rotor_plan(args):
+    """The per-rotor run's plan (``--inject motors``): one multisine whose lines are shared
+    out among the rotors (:func:`~heliquad.host.acquire.rotor_multisine.rotor_design`)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.excitation import amplitude_bound
+    from ..acquire.rotor_multisine import rotor_design
+    from ..acquire.sweep import SweepPlan
+    from ..records import paper
+
+    given = [o for o, v in (("--cycles", args.cycles), ("--target-sigma", args.target_sigma),
+                            ("--max-cycles", args.max_cycles), ("--swing-deg", args.swing_deg))
+             if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} shape a dwell; the per-rotor run is one "
+                         "multisine, its length --rig-time")
+    peak = ROTOR_PEAK if args.amplitude is None else args.amplitude
+    if peak > amplitude_bound("motors"):
+        raise InputError(f"--amplitude {peak:g} is above the firmware's bound for a rotor's "
+                         f"injection ({amplitude_bound('motors'):g}, EXC_MAX_MOT)")
+    top = max(args.freqs_hz) if args.freqs_hz else paper.BANDS_HZ[args.axis][1]
+    rotors = _rotors(args)
+    only = None if args.inject == "motors" else int(args.inject[len("motor"):]) - 1
+    if only is not None and only >= rotors:
+        raise InputError(f"--inject {args.inject}: the board flies {rotors} rotors "
+                         f"(motor1 to motor{rotors})")
+    ms = rotor_design(top, rotors, peak, args.lines or MAX_LINES,
+                      *([args.rig_time] if args.rig_time else []), only=only)
+    return SweepPlan.of_multisine(args.axis, args.inject, ms)
+
+
+def _rotors(args) -> int:
+    """The rotors a per-rotor run shares its lines among: --rotors, else the simulated
+    vehicle's, else the firmware's default geometry's."""
+    if args.rotors is not None:
+        return args.rotors
+    if args.sil:
+        # the vehicle file's reader, imported when it runs: --help imports every command module
+        from ...sim.plant.vehicle_params import load_params
+        return len(load_params(args.params).rotors)
+    # the firmware's bindings, imported when it runs: --help imports every command module
+    from heliquad import _firmware
+    return int(_firmware.params_geometry().count)
 
 
 def _check_rig_options(args) -> None:
@@ -153,6 +215,8 @@ def _check_rig_options(args) -> None:
     if not args.sil and (args.sd_image is not None or args.sd_faults):
         raise InputError("--sd-image and --sd-faults need --sil (a board's card is in its "
                          "socket; read its logs with heliquad logs)")
+    if args.rotors is not None and args.inject not in ROTOR_INPUT_OUTPUT:
+        raise InputError("--rotors is for --inject motors (the per-rotor run)")
     if args.sil:
         sd_card(args)
 

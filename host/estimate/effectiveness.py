@@ -20,8 +20,9 @@ whatever the controller is (its answer to the injection is measured in ``T_c``).
 shared by the rigs) to every rotor's points at once by weighted least squares, each line's
 residual ``T_p - P_c T_c - P_i`` weighted by its sigma (the two points' errors are
 correlated: the command answers the rate's noise), and gives the parameters' standard
-deviations from the fit's covariance. :func:`rotor_paths` gives the fitted paths, and the
-axis's ``P_c`` to compare with the axis sweep's model.
+deviations from the fit's covariance; asked (``fit_hinges``), it fits each rig's hinge
+damping too. :func:`rotor_paths` gives the fitted paths, and the axis's ``P_c`` to compare
+with the axis sweep's model.
 
 No I/O: a command feeds it from run folders (each rotor's excitation, the rate and the
 torque command logged per sample, the multisine's period and lines from the manifest, the
@@ -40,6 +41,7 @@ from ...sim.base.dialect import AXES
 from ...sim.base.errors import InputError
 from .fsf import (complete_excitation, estimate_multisine_against_excitation, fill_lost,
                   period_dfts, period_segments)
+from .held_paths import held_paths
 
 __all__ = ["RotorPoints", "Rig", "EffectivenessEstimate", "rig_points",
            "estimate_effectiveness", "rig_from_poles", "rotor_paths", "held_paths"]
@@ -58,6 +60,9 @@ FIT_STARTS = 3
 #: Bounds of the fit: time constant (s) and delay (s), beyond any rotor and loop.
 TIME_CONSTANT_BOUNDS_S = (1e-3, 5.0)
 DELAY_BOUNDS_S = (-0.05, 0.2)
+#: With ``fit_hinges``: a hinge's damping over its inertia is fitted from 0 to this (1/s,
+#: far above any rig's: the simulated rigs' are 0.09 to 0.17) on this scale.
+HINGE_BOUND_RAD_S, HINGE_SCALE_RAD_S = 10.0, 0.1
 #: A line's residual variance is floored at this fraction of its rate point's own (a
 #: correlation of the two points' errors near 1 can make the difference vanish by round-off).
 VARIANCE_FLOOR = 1e-6
@@ -67,9 +72,6 @@ JACOBIAN_STEP = 1e-6
 #: The lags' fit stops when a step or the cost changes by less than this, relative: well below
 #: any sigma, so exact points give exact rotors.
 LAG_TOLERANCE = 1e-12
-#: A critically damped hinge's double pole is split by this much (1/s, relative to its
-#: damping) so that the hold's partial fractions stay distinct: far below any line.
-REPEATED_POLE_SPLIT = 1e-7
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,7 +118,8 @@ class EffectivenessEstimate:
     ``effectiveness_rad_s2.ravel()`` (NaN for rows not measured): the entries share ``P_c``
     and the lags, so their errors are correlated. ``chi2_dof``: the weighted residuals' sum of
     squares over the degrees of freedom (about 1 when the model and the points' sigmas
-    hold)."""
+    hold). ``hinge_damping_rad_s``: with ``fit_hinges``, each rig's hinge damping as fitted
+    (None: the rigs' as given)."""
 
     effectiveness_rad_s2: np.ndarray
     effectiveness_sigma_rad_s2: np.ndarray
@@ -127,6 +130,7 @@ class EffectivenessEstimate:
     delay_sigma_s: np.ndarray
     effectiveness_covariance: np.ndarray
     chi2_dof: float
+    hinge_damping_rad_s: dict | None = None    # axis -> the damping fitted (fit_hinges)
 
 
 def rig_points(excitation, rate, command, fs_hz: float, period: int, orders, axis: str,
@@ -197,46 +201,6 @@ def rig_from_poles(axis: str, allocation, poles) -> Rig:
     return Rig(axis, tuple(allocation), float(den[1]), float(den[2]))
 
 
-def held_paths(omega_rad_s, hold_s: float, t, tau, damping, stiffness) -> tuple:
-    """``(A, B)``: the zero-order hold's exact equivalents, sampled every ``hold_s`` at
-    ``omega_rad_s``, of a rotor's path per unit of ``E``, ``exp(-s tau) / (T s + 1) R(s)``
-    with ``R(s) = s / (s^2 + damping s + stiffness)``, and per unit of ``M`` (``s`` times
-    it). Arguments broadcast together.
-
-    The hold's equivalent of ``H`` is ``(1 - 1/z) Z{y(k h)}``, ``y`` the delayed step
-    response of ``H``. ``H / s = N(s) / (T (s - q1) (s - q2) (s - q3))`` (``N`` = 1 or ``s``;
-    ``q1``, ``q2`` the hinge's poles, ``q3 = -1/T``) in partial fractions, each term
-    ``c e^{p t}`` sampled in closed form with the delay split into whole samples and a
-    fraction; a rig with neither damping nor stiffness has a double pole at the origin, whose
-    ``c t`` term is sampled the same way."""
-    z = np.exp(1j * np.asarray(omega_rad_s, dtype=float) * hold_s)
-    t, tau = np.asarray(t, dtype=float), np.asarray(tau, dtype=float)
-    damping, stiffness = np.asarray(damping, dtype=float), np.asarray(stiffness, dtype=float)
-    whole = np.floor(tau / hold_s)
-    frac = tau - whole * hold_s
-    double = (damping == 0) & (stiffness == 0)
-    root = np.sqrt(damping ** 2 - 4 * stiffness + 0j)
-    root = np.where(root == 0, REPEATED_POLE_SPLIT * np.maximum(damping, 1.0), root)
-    q1, q2, q3 = (-damping + root) / 2, np.where(double, -1.0, (-damping - root) / 2), -1.0 / t
-    q1 = np.where(double, 1.0, q1)
-    back = 1 / z
-
-    def sampled(p, c):                       # sum_{j >= 1} c e^{p (j h - frac)} z^-j
-        step = np.exp(p * hold_s) * back
-        return c * np.exp(-p * frac) * step / (1 - step)
-
-    out = []
-    for num in (np.ones_like, lambda s: s):
-        distinct = sum(sampled(p, num(p) / (t * (p - a) * (p - b)))
-                       for p, a, b in ((q1, q2, q3), (q2, q1, q3), (q3, q1, q2)))
-        c3 = num(q3) / (t * q3 ** 2)
-        c2 = num(np.zeros_like(q3)) / (-t * q3)
-        ramp = c2 * (hold_s * back / (1 - back) ** 2 - frac * back / (1 - back))
-        at_origin = ramp + sampled(np.zeros_like(q3), -c3) + sampled(q3, c3)
-        out.append(z ** -whole * (1 - back) * np.where(double, at_origin, distinct))
-    return tuple(out)
-
-
 class _Problem:
     """Every record's lines stacked, and the model of what they measured: per line, the
     residual ``T_p - P_c T_c - P_i`` is linear in ``E`` and ``M`` once the lags are held."""
@@ -270,6 +234,17 @@ class _Problem:
         if self.alloc.shape[1] != rotors:
             raise InputError(f"an allocation column needs one entry per rotor ({rotors})")
         self.weight = 1.0 / self.sigma_p
+        self.fit_hinges = False
+
+    def hinges(self) -> np.ndarray:
+        """Each rig's hinge damping (in ``axes`` order), rad/s."""
+        return np.array([self.damping[self.row == r][0] for r in range(len(self.axes))])
+
+    def set_hinges(self, damping) -> None:
+        """Fly every line's rig with these hinge dampings (in ``axes`` order), rad/s."""
+        self.damping = np.asarray(damping, dtype=float)[self.row]
+        s = 1j * self.omega
+        self.rig_response = s / (s * s + self.damping * s + self.stiffness)
 
     @property
     def linear(self) -> int:
@@ -338,24 +313,31 @@ class _Problem:
 
 def _fit_lags(problem: _Problem, t0, tau0, free) -> np.ndarray:
     """The full parameter vector that fits best with the lags of the rotors ``free`` (a
-    mask) free and the others held at ``t0``, ``tau0``: the lags by nonlinear least squares,
-    ``E`` and ``M`` solved for at each step (variable projection)."""
+    mask) free and the others held at ``t0``, ``tau0``: the lags (and with ``fit_hinges``
+    the rigs' hinge dampings, from the problem's, left in it as fitted) by nonlinear least
+    squares, ``E`` and ``M`` solved for at each step (variable projection)."""
     count = int(np.count_nonzero(free))
+    hinges = len(problem.axes) if problem.fit_hinges else 0
+    start = problem.hinges()
 
     def lags(phi):
         t, tau = t0.copy(), tau0.copy()
-        t[free], tau[free] = np.exp(phi[:count]), phi[count:]
+        t[free], tau[free] = np.exp(phi[:count]), phi[count:2 * count]
+        if hinges:
+            problem.set_hinges(phi[2 * count:])
         return t, tau
 
-    if count:
-        phi0 = np.concatenate([np.log(t0[free]), tau0[free]])
+    if count or hinges:
+        phi0 = np.concatenate([np.log(t0[free]), tau0[free], start[:hinges]])
         lower = np.concatenate([np.full(count, math.log(TIME_CONSTANT_BOUNDS_S[0])),
-                                np.full(count, DELAY_BOUNDS_S[0])])
+                                np.full(count, DELAY_BOUNDS_S[0]), np.zeros(hinges)])
         upper = np.concatenate([np.full(count, math.log(TIME_CONSTANT_BOUNDS_S[1])),
-                                np.full(count, DELAY_BOUNDS_S[1])])
+                                np.full(count, DELAY_BOUNDS_S[1]),
+                                np.full(hinges, HINGE_BOUND_RAD_S)])
         sol = scipy.optimize.least_squares(
             lambda phi: problem.solve_linear(*lags(phi))[1], np.clip(phi0, lower, upper),
-            bounds=(lower, upper), x_scale=np.concatenate([np.ones(count), np.full(count, 0.01)]),
+            bounds=(lower, upper), x_scale=np.concatenate([np.ones(count), np.full(count, 0.01),
+                                                           np.full(hinges, HINGE_SCALE_RAD_S)]),
             xtol=LAG_TOLERANCE, ftol=LAG_TOLERANCE, gtol=LAG_TOLERANCE)
         t, tau = lags(sol.x)
     else:
@@ -407,14 +389,16 @@ def _seen(problem: _Problem, t, tau) -> np.ndarray:
     return np.any(e > IDENTIFIED_SIGMAS, axis=0)
 
 
-def estimate_effectiveness(records, rigs: dict, rotors: int,
-                           hold_s: float | None = None) -> EffectivenessEstimate:
+def estimate_effectiveness(records, rigs: dict, rotors: int, hold_s: float | None = None,
+                           fit_hinges: bool = False) -> EffectivenessEstimate:
     """Fit every rotor's effectiveness, spin-up reaction, time constant and delay to the
     records (:class:`RotorPoints`) of the rigs (``axis -> Rig``), ``rotors`` rotors in all
     (module docstring, docs/effectiveness.md). ``hold_s``: the loop period, when the logged
     commands were held for it (the firmware's): the paths are then the hold's exact
     equivalents and ``tau`` leaves the hold out; None: continuous paths, ``tau`` with the
-    hold's half period in it."""
+    hold's half period in it. ``fit_hinges``: fit each rig's hinge damping too, from the
+    rig's as given (its stiffness held); the sigmas are then those with the hinges held at
+    the fitted ones."""
     records = [r for r in records if r.rate]
     if not records:
         raise InputError("no rotor's points to fit")
@@ -427,15 +411,25 @@ def estimate_effectiveness(records, rigs: dict, rotors: int,
                      for f in (0.5, 1.0, 4.0) for g in (1.0, 2.0, 4.0)),
                     key=lambda lags: float(np.sum(problem.solve_linear(*lags)[1] ** 2)))
     seen = _seen(problem, *starts[0])
-    x = min((_fit_lags(problem, t0, tau0, seen) for t0, tau0 in starts[:FIT_STARTS]),
-            key=lambda x: float(np.sum(problem.residuals(x) ** 2)))
+    given, fits = problem.hinges(), []
+    problem.fit_hinges = fit_hinges
+    for t0, tau0 in starts[:FIT_STARTS]:
+        if fit_hinges:                   # each start from the rigs' hinges as given
+            problem.set_hinges(given)
+        x = _fit_lags(problem, t0, tau0, seen)
+        fits.append((float(np.sum(problem.residuals(x) ** 2)), len(fits), x, problem.hinges()))
+    _, _, x, hinges = min(fits)
+    if fit_hinges:
+        problem.set_hinges(hinges)
     problem.reweigh(x)
     x = _fit_lags(problem, np.exp(x[k:k + n]), x[k + n:], seen)
     keep = np.concatenate([np.ones(k, dtype=bool), seen, seen])
     jac = _jacobian(problem, x)
-    return _estimate(problem, x, _covariance(jac, keep), seen,
-                     float(np.sum(problem.residuals(x) ** 2))
-                     / max(jac.shape[0] - int(np.count_nonzero(keep)), 1))
+    est = _estimate(problem, x, _covariance(jac, keep), seen,
+                    float(np.sum(problem.residuals(x) ** 2))
+                    / max(jac.shape[0] - int(np.count_nonzero(keep)), 1))
+    return dataclasses.replace(est, hinge_damping_rad_s=dict(zip(
+        problem.axes, problem.hinges().tolist()))) if fit_hinges else est
 
 
 def _estimate(problem: _Problem, x, cov, seen, chi2_dof: float) -> EffectivenessEstimate:
