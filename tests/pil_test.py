@@ -55,21 +55,22 @@ def test_both_fly_the_same_loops_in_the_same_states(runs):
         assert [getattr(m, field) for m in hs] == [getattr(m, field) for m in ps], field
 
 
-def test_the_images_mixer_is_the_host_builds_bit_for_bit(runs):
+def test_the_images_allocation_is_the_host_builds_bit_for_bit(runs):
     # While the excitation runs the sticks are still (throttle 1400 us) and only roll moves
     # (pitch and yaw see exact zeros: their commands are exactly 0), so each loop's motors
-    # are mix(throttle, axis_cmd, 0, 0): computed here by the host build's mixer from the
-    # image's own telemetry, they must be the image's motors to the last bit.
+    # are allocate(throttle, axis_cmd, 0, 0): computed here by the host build's allocation
+    # (from the same default geometry parameters) from the image's own telemetry, they must
+    # be the image's motors to the last bit.
     cfg, _, ps = runs["teensy35"]
     rc = [RC_CENTER_US] * 8
     rc[2] = int(round(1000 + cfg.collective * 1000))
     throttle = _firmware.sticks(_firmware.RcInput(rc)).throttle
-    mixer = _firmware.Mixer()
+    allocation = _firmware.Allocation(_firmware.params_geometry())
     running = [m for m in ps if m.exc_state != MAV.HQ_EXCITATION_STATE_IDLE]
     assert len(running) > 4 * 200
     for m in running:
-        want = np.array(mixer.mix(_firmware.MixerCommand(throttle, m.axis_cmd, 0.0, 0.0)).motor,
-                        dtype=np.float32)
+        command = _firmware.MixerCommand(throttle, m.axis_cmd, 0.0, 0.0)
+        want = np.array(allocation.allocate(command).motor[:5], dtype=np.float32)
         assert m.motor_count == 5 and not any(m.motor[5:])
         assert np.array_equal(want, np.array(m.motor[:5], dtype=np.float32)), (m.seq, m.axis_cmd)
 
