@@ -111,3 +111,10 @@ def test_the_identified_geometry_decouples_a_roll_step_that_the_default_one_does
     assert roll == pytest.approx(6.0, abs=0.5)             # the step is flown
     assert pitch < pitch_d / 3 and yaw < yaw_d / 3
     assert pitch < 0.5 and yaw < 2.0                        # and the loops hold the rest
+
+
+def test_the_report_shows_each_rotor_against_the_geometry(identified):
+    heliquad("report", identified / "eff")
+    page = (identified / "eff" / "report.html").read_text()
+    assert "Control effectiveness" in page and "rotor 5" in page and "flown" in page
+    assert "Quality flags" not in page                  # no axis sweep here: no axis summary

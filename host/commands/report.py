@@ -14,7 +14,9 @@ def add_parser(sub, fmt) -> None:
                                    "aborted frequencies, errors beyond 1 dB or 5 deg of the "
                                    "truth) and what is not validated, then every table, "
                                    "model, metric and plot of a sweep folder (or of a folder "
-                                   "of them, one per axis).", formatter_class=fmt)
+                                   "of them, one per axis); a heliquad effectiveness folder "
+                                   "there adds each rotor's effectiveness against the "
+                                   "geometry's.", formatter_class=fmt)
     p.add_argument("dir", metavar="DIR")
     p.add_argument("--out", metavar="FILE.html")
     p.set_defaults(func=run)

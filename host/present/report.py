@@ -23,8 +23,10 @@ those measured through the excitation and the simulator's truth's), and every pl
 The sections live beside this module: the HTML primitives and style (:mod:`.report_html`),
 the sweep (:mod:`.report_sweep`), the points (:mod:`.report_points`), the models
 (:mod:`.report_models`), their checks (:mod:`.report_checks`) and the closed-loop
-validation (:mod:`.report_validation`). This module reads a folder, assembles the page and
-gives each axis its summary and verdict.
+validation (:mod:`.report_validation`); a folder of ``heliquad effectiveness`` (here or among
+the sub-folders) adds each rotor's identified effectiveness against the geometry's
+(:mod:`.report_effectiveness`). This module reads a folder, assembles the page and gives each
+axis its summary and verdict.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from ..records.output import atomic_write, check_output
 from ..records.points import read_points_csv, read_points_table
 from ..records.validation import read_validation
 from .report_checks import checks_html
+from .report_effectiveness import effectiveness_html, read_effectiveness
 from .report_html import STYLE, image_html, number_text, table_html
 from .report_models import models_html, order_text, tf_html
 from .report_points import points_html
@@ -168,24 +171,37 @@ def _flags_html(axes) -> str:
     return out
 
 
+#: What ``heliquad effectiveness`` writes: a folder holding it gets the effectiveness section.
+EFFECTIVENESS = "effectiveness.json"
+
+
+def _holding(dir_path: str, name: str) -> list:
+    """DIR itself when it holds ``name``, else its sub-folders that do."""
+    if os.path.exists(os.path.join(dir_path, name)):
+        return [dir_path]
+    return sorted(os.path.join(dir_path, d) for d in os.listdir(dir_path)
+                  if os.path.exists(os.path.join(dir_path, d, name)))
+
+
 def write_report(dir_path: str, out: str | None = None) -> str:
     """Write DIR/report.html (or ``out``); returns its path."""
     if not os.path.isdir(dir_path):
         raise InputError(f"{dir_path}: not a folder")
     out = out or os.path.join(dir_path, "report.html")
     check_output(out, "--out")
-    folders = [dir_path] if os.path.exists(os.path.join(dir_path, "models.json")) else sorted(
-        os.path.join(dir_path, d) for d in os.listdir(dir_path)
-        if os.path.exists(os.path.join(dir_path, d, "models.json")))
-    if not folders:
-        raise InputError(f"{dir_path}: no models.json here or in its sub-folders (run heliquad identify first)")
+    folders, effectiveness = _holding(dir_path, "models.json"), _holding(dir_path, EFFECTIVENESS)
+    if not folders and not effectiveness:
+        raise InputError(f"{dir_path}: no models.json or {EFFECTIVENESS} here or in its "
+                         "sub-folders (run heliquad identify or heliquad effectiveness first)")
     axes = [_axis_section(folder) for folder in folders]
+    rotors = "".join(effectiveness_html(f, read_effectiveness(os.path.join(f, EFFECTIVENESS)))
+                     for f in effectiveness)
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>heliquad report</title>"
             f"<style>{STYLE}</style></head><body><h1>heliquad identification report</h1>"
             f"<p>{html.escape(os.path.abspath(dir_path))}, written {stamp}.</p>"
-            + _summary_html(axes) + _flags_html(axes)
-            + "".join(ax["body"] for ax in axes) + "</body></html>")
+            + (_summary_html(axes) + _flags_html(axes) if axes else "")
+            + "".join(ax["body"] for ax in axes) + rotors + "</body></html>")
     with atomic_write(out) as fh:
         fh.write(page)
     return out
