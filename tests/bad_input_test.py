@@ -257,6 +257,7 @@ def full_folder(dest, session):
 
 
 FILES = {
+    "ok.params": b"RATE_RLL_KC 2.5\n",
     # plain damage, any command
     "binary.dat": b"\x00\x01\x02\xff" * 16,
     "empty.dat": b"",
@@ -943,6 +944,11 @@ CASES = [
     case("params --port /dev/null load missing.params", "no such file"),
     case("params --port /dev/null load empty.dat", "empty"),
     case("params list", "--port"),
+    case("effectiveness --out e", "required: DIR"),
+    case("effectiveness missing --out e", "needs a per-rotor run on every rig"),
+    case("effectiveness missing missing missing --out e", "missing: no such file"),
+    case("effectiveness points.csv points.csv points.csv --out e", "not a DataFlash log"),
+    case("effectiveness missing missing missing", "required: --out"),
     case("params from-vehicle missing.toml --out out.params", "missing.toml: no such file"),
     case("params from-vehicle t_bad.toml --out out.params", "not valid TOML"),
     case("params from-vehicle t_rotor_missing.toml --out out.params",
@@ -1072,7 +1078,7 @@ CASES = [
     case("sweep --sil --axis roll --params t_axis_zero.toml --out s", "rotors[2].thrust_axis"),
     case("sweep --sil --axis roll --params t_rotors_9.toml --out s", "2 to 8 rotors"),
     case("sweep --sil --axis roll --params t_rotors_3.toml --out s", "4 to 8 rotors"),
-    case("sweep --port udpin:0.0.0.0:14550 --axis roll --load-params p.params --out s",
+    case("sweep --port udpin:0.0.0.0:14550 --axis roll --load-params ok.params --out s",
          "--load-params needs --sil"),
     case("sweep --sil --axis roll --load-params missing.params --out s", "missing.params"),
     case("sweep --sil --axis roll --params t_latency_float.toml --out s", "imu.dmp_latency_samples"),
