@@ -24,16 +24,14 @@ from heliquad import _simcore
 
 from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
-from ...sim.plant.rotor_geometry import geometry_params
-from ...sim.plant.vehicle_params import load_params as load_vehicle
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
 from ...sim.rig.setup import ARM_FRAMES, BOOT_FRAMES, SilConfig, make_plant, rc_block
-from ..records.params_file import read_params_file
 from ..records.tlog import TlogWriter, create_log
 from .link import DEFAULT_BAUD, HEARTBEAT_PERIOD_S, SESSION_MESSAGES, TelemetryLink
-from .param_protocol import ParamClient, SessionLink, load_params
+from .param_protocol import SessionLink
+from .preflight import preflight_sets, set_on_board
 
 __all__ = ["Session", "SilSession", "PortSession", "TELEMETRY_BATCH"]
 
@@ -290,34 +288,10 @@ class SilSession(Closing):
         if geometry or self.cfg.load_params:
             self.pilot_from = _PILOT_WAITS             # landed until the parameters are set
             self.advance(frames=BOOT_FRAMES)
-            if geometry:
-                self.set_geometry(progress)
-            if self.cfg.load_params:
-                self.load_params_file(self.cfg.load_params, progress)
+            set_on_board(SessionLink(self), preflight_sets(geometry and self.cfg.params,
+                                                           self.cfg.load_params), progress)
             self.pilot_from = self.frame
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
-
-    def set_geometry(self, progress=print) -> None:
-        """The vehicle file's geometry parameters onto the board (those that differ); a
-        refused one ends the session (the board would fly another vehicle)."""
-        entries = [(g.name, g.value) for g in geometry_params(load_vehicle(self.cfg.params))]
-        self._set_params(entries, f"geometry parameters of {os.path.basename(self.cfg.params)}",
-                         "the vehicle's", progress)
-
-    def load_params_file(self, path: str, progress=print) -> None:
-        """A .params file's values onto the board (``--load-params``, as ``heliquad params
-        load`` would); a refused one ends the session (the run would fly other values)."""
-        entries = [(p.name, p.value) for p in read_params_file(path)]
-        self._set_params(entries, f"parameters of {os.path.basename(path)}", path + "'s",
-                         progress)
-
-    def _set_params(self, entries, what: str, whose: str, progress) -> None:
-        done = load_params(ParamClient(SessionLink(self)), entries, progress=lambda _: None)
-        if done["refused"]:
-            name, why = done["refused"][0]
-            raise InputError(f"the board refused {whose} {name}: {why}")
-        if done["changed"]:
-            progress(f"set {len(done['changed'])} {what} on the board")
 
     def close(self) -> None:
         """Close the telemetry link and the log, then the rig (the sim link, the firmware);

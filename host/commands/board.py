@@ -9,7 +9,7 @@ from ...sim.plant.vehicle import RIGS
 from ...sim.rig.setup import PLANTS
 from ...sim.base.errors import InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
-from .run_options import add_rc_script_argument
+from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
                              add_sd_card_arguments, add_vehicle_arguments,
                              check_plant, finite, sd_card, vehicle_rig,
@@ -26,7 +26,10 @@ tool to it as to a board's serial port (any baud rate is accepted and ignored); 
 runs, --port auto finds it by the USB identity it announces (docs/usb.md). Nothing reads the
 telemetry for you: with no reader, the firmware drops and counts messages as a UART would.
 Ground stations list and set its parameters (heliquad params, MAVProxy's param commands);
-with --param-store they persist in a file across runs. With --sd-image it has an SD card:
+with --param-store they persist in a file across runs. Before it flies, the board is
+given the geometry of a --params vehicle file (its CA_* parameters, as heliquad params
+from-vehicle writes them) and the values of --load-params, in lockstep with the pilot
+landed, as heliquad params load would set them; a value it refuses ends the run. With --sd-image it has an SD card:
 it logs each arming there and serves the card's logs (heliquad logs, MAVProxy's log
 commands) while disarmed. The firmware saves parameters only while
 disarmed: on an orderly stop (Ctrl-C, SIGTERM, SIGHUP, the end of --duration-s) the
@@ -68,6 +71,7 @@ def add_parser(sub, fmt) -> None:
     add_sd_card_arguments(p)
     add_firmware_argument(p)
     add_rc_script_argument(p)
+    add_load_params_argument(p)
     p.set_defaults(func=run)
 
 
@@ -97,7 +101,7 @@ def run(args) -> int:
                       dmp_image=args.dmp_image, firmware=args.firmware, params_file=args.param_store,
                       link=firmware_link(args),
                       armed=not args.disarmed, usb_serial=_usb_serial(args.firmware),
-                      rc_script=args.rc_script,
+                      rc_script=args.rc_script, configure=_preflight(args),
                       **card,
                       **({} if args.backlog_bytes is None else {"backlog_bytes": args.backlog_bytes}))
     except FirmwareError as exc:
@@ -108,6 +112,26 @@ def run(args) -> int:
     if r["stopped_by"] is not None:              # said, and its code, by the command line
         raise r["stopped_by"]
     return 0
+
+
+def _preflight(args):
+    """What sets the board's parameters before it flies (a vehicle file's geometry,
+    --load-params), or None when there is nothing to set."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.preflight import LandedRigLink, preflight_sets, set_on_board
+
+    sets = preflight_sets(args.params if args.plant == "vehicle" else None, args.load_params)
+    if not sets:
+        return None
+
+    def configure(rig) -> None:
+        link = LandedRigLink(rig)
+        try:
+            set_on_board(link, sets)
+        finally:
+            link.close()
+
+    return configure
 
 
 def _usb_serial(firmware: str) -> str:

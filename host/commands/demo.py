@@ -28,6 +28,7 @@ import traceback
 from ...sim.base.errors import DiskFull, InputError
 from ..process.signals import WORDS, stop_exception, stopped_by
 from ..records import paper
+from .run_options import add_load_params_argument
 from .shared_options import MAX_SEED, add_firmware_argument, firmware_link, int_in
 
 #: The demo's exit code when an axis failed (the others' records and the report are kept).
@@ -48,6 +49,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--seed", type=int_in(0, MAX_SEED), default=1,
                    help="sensor-noise and turbulence seed (default 1)")
     add_firmware_argument(p)
+    add_load_params_argument(p)
     p.set_defaults(func=run_demo)
 
 
@@ -60,7 +62,9 @@ def run_demo(args) -> int:
     t0 = time.monotonic()
     options = {"out": args.out, "ideal_sensor": args.ideal_sensor, "seed": args.seed,
                "firmware": args.firmware, "link": firmware_link(args),
-               "turbulence": args.turbulence}
+               "turbulence": args.turbulence,
+               "load_params": None if args.load_params is None
+               else os.path.abspath(args.load_params)}
     # Each axis in a process of its own, side by side; Ctrl-C stops them all in order.
     children = run_children([(axis, [sys.executable, "-c", AXIS_COMMAND,
                                      json.dumps({**options, "axis": axis})])
@@ -130,7 +134,8 @@ def axis_main() -> None:
     send_result(result)
 
 
-def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart") -> dict:
+def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
+              load_params=None) -> dict:
     """One axis of the demo in ``out/AXIS``: ``{"summary": _compare's row, "sim_s": ...}``."""
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
     # import leaves Python to end by SIGINT after the tool has stopped in order.
@@ -149,7 +154,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart") 
     print(f"== sweep on the {axis} rig, {firmware} firmware in the loop")
     cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
                     ideal_sensor=ideal_sensor, seed=seed, firmware=firmware,
-                    firmware_link=link, turbulence=turbulence)
+                    firmware_link=link, turbulence=turbulence, load_params=load_params)
     with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
         run_sweep(session, default_plan(axis), folder,
                   {**sil_source(cfg), "firmware": session.fw.record()})

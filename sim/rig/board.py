@@ -53,7 +53,8 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
               usb_serial: str | None = None, link: str = "uart", rc_script=None,
-              sd_image: str | None = None, sd_faults: str | None = None) -> dict:
+              sd_image: str | None = None, sd_faults: str | None = None,
+              configure=None) -> dict:
     """Fly ``plant`` (given the loop period, s, it returns the rig's plant: setup.make_plant)
     until ``duration_s`` of wall time (or Ctrl-C), then land (disarm) and stop.
     Returns counters, whether it ``landed`` and what KeyboardInterrupt ``stopped_by`` it
@@ -69,7 +70,9 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
     pty carries (``uart`` or ``usb``; teensy35 only). ``rc_script``: the pilot, an
     :class:`~.rc_script.RcScript` (its times from the first frame; ``armed`` then unused).
     ``sd_image``, ``sd_faults``: the board's SD card, a card-image file, and the host build's
-    faults of it (:class:`~.lockstep.HostFirmware`; default no card)."""
+    faults of it (:class:`~.lockstep.HostFirmware`; default no card). ``configure``: called
+    with the rig once the firmware runs and before the board flies in real time (the host
+    tool's parameter settings, stepping the rig in lockstep with the pilot landed)."""
 
     ready = ready or (lambda text: print(text, flush=True))
     dt_s = 1.0 / loop_hz
@@ -81,6 +84,8 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
              sd_image=sd_image, sd_faults=sd_faults) as rig, \
             (contextlib.nullcontext() if usb_serial is None else
              announced(telemetry_path, usb_serial, firmware)):
+        if configure is not None:
+            configure(rig)
         _fly(rig, run, dt_s, duration_s,
              lambda: ready(f"board running: telemetry on {telemetry_path} (Ctrl-C to stop)"),
              _pilot(rc_script, armed, collective, loop_hz))
