@@ -295,8 +295,10 @@ def _limit_sentence(inp, design) -> str:
     return text
 
 
-def write_outputs(out, spec: Spec, results) -> list:
-    """tune.json and tuned.params (the tuned axes' gains only) into ``out``; the names."""
+def write_outputs(out, spec: Spec, results, layout="qgc") -> list:
+    """tune.json and tuned.params (the tuned axes' gains only, in ``layout``:
+    :func:`~heliquad.host.records.params_file.write_params_file`'s) into ``out``; the
+    names."""
     axes = {r.inp.axis: r.entry for r in results}
     write_tune_json(os.path.join(out, TUNE_JSON), TuneFile(spec=spec_record(spec), axes=axes))
     mav = dialect()
@@ -305,5 +307,5 @@ def write_outputs(out, spec: Spec, results) -> list:
                   (n, v) for r in results for n, v in r.entry["params"].items())]
     write_params_file(os.path.join(out, TUNED_PARAMS), params,
                       header=f"heliquad {__version__}, gains designed by heliquad tune for "
-                             f"{', '.join(axes)} (tune.json beside it)")
+                             f"{', '.join(axes)} (tune.json beside it)", layout=layout)
     return [TUNE_JSON, TUNED_PARAMS]

@@ -24,7 +24,8 @@ rate loop's gain crossovers inside the identified band (its margins measured, no
 extrapolated), the gains in the firmware's parameter ranges, and the predicted step's peak
 axis command within the limit (the firmware clamps the axis command to
 {AXIS_COMMAND_MAX:g}); then the angle loop below it. Writes tune.json, tuned.params
-(QGroundControl's format, as params save writes it: heliquad params load, MAVProxy, QGC)
+(QGroundControl's format, as params save writes it, for heliquad params load and
+QGroundControl; --mavproxy for MAVProxy's param load)
 and tune.png into --out, and prints current against tuned per axis. Exit code 1 when a
 band forbids the spec (nothing written; the sweep band that would allow it is said), 2 for
 bad input or a spec no gains meet.
@@ -56,6 +57,9 @@ def add_parser(sub, fmt) -> None:
                    f"ask for (default {AXIS_COMMAND_MAX:g}, the firmware's clamp)")
     p.add_argument("--min-crossover", type=number_in(0, 1e4), default=0.0, metavar="RAD_S",
                    help="the slowest rate-loop crossover acceptable (default 0: any)")
+    p.add_argument("--mavproxy", action="store_true",
+                   help="write tuned.params in MAVProxy's layout (NAME VALUE), which its param "
+                        "load reads, instead of QGroundControl's (as params save --mavproxy)")
     p.set_defaults(func=run)
 
 
@@ -96,7 +100,8 @@ def run(args) -> int:
     os.makedirs(args.out, exist_ok=True)
     figure = os.path.join(args.out, TUNE_FIGURE)
     check_figure_output(figure, "--out")
-    written = write_outputs(args.out, spec, results)
+    written = write_outputs(args.out, spec, results,
+                            layout="mavproxy" if args.mavproxy else "qgc")
     write_tune_figure(figure, [(r.inp.axis, r.inp.band, r.traces) for r in results])
     print(f"wrote {', '.join(os.path.join(args.out, n) for n in written + [TUNE_FIGURE])}")
     return 0
