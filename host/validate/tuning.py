@@ -251,6 +251,8 @@ def _highest_rate(problem, in_band):
     and the one above it."""
     lo = max(problem.band[0] / GRID_BELOW_BAND, problem.spec.min_crossover_rad_s or 0.0)
     above, what_above = None, "the Nyquist frequency"
+    if lo >= problem.grid[-1] / 2:
+        return None, None, f"no crossover from {lo:.3g} rad/s is below half the Nyquist frequency"
     for wc in _candidates(problem, lo):
         s, what, gains = problem.best_rate(wc, in_band)
         if s >= 0:
