@@ -279,11 +279,18 @@ def tune_axis(inp: AxisInput, spec: Spec) -> AxisResult:
              "band_rad_s": list(inp.band), "current": current, "tuned": tuned,
              "params": gains_params(inp.axis, design.gains), "meets_spec": not failures,
              "said": said, "current_from": inp.current_from,
-             "current_meets_spec": not _failures(inp.plants[0], inp.axis, inp.current, inp.band,
-                                                 spec, unc),
+             "current_meets_spec": _current_meets(inp, current, spec, unc),
              "crossover_limit": design.limit, "design_models": [p.name for p in plants]}
     return AxisResult(inp, "met" if not failures else "spec",
                       "; ".join(failures), entry, {"current": current_fig, "tuned": tuned_fig})
+
+
+def _current_meets(inp, current, spec, unc) -> bool:
+    """The current gains meet the spec on the recommended model: stable, every margin, the
+    rate loop in the band, the step's command within its limit."""
+    if not current["stable"] or current["step"]["peak_command"] > spec.command_max:
+        return False
+    return not _failures(inp.plants[0], inp.axis, inp.current, inp.band, spec, unc)
 
 
 def _limit_sentence(inp, design) -> str:

@@ -112,15 +112,15 @@ class Plant:
 @dataclasses.dataclass
 class Design:
     """A design's outcome: ``gains`` (None when none holds), the rate crossover designed
-    for, ``limit`` (what stopped a faster one), ``free_crossover_rad_s`` (the highest rate
-    crossover the spec allows with the band ignored; None when none), ``said``."""
+    for, ``limit`` (what stopped a faster one), ``free_crossover_rad_s`` and ``free_gains``
+    (the highest rate crossover the spec allows with the band ignored, and its rate gains;
+    None when none)."""
 
     gains: Gains | None
     crossover_rad_s: float | None
     limit: str = ""
     free_crossover_rad_s: float | None = None
     free_gains: Gains | None = None
-    said: list = dataclasses.field(default_factory=list)
 
 
 def _crossings(values):
