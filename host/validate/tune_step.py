@@ -12,10 +12,14 @@ from ...sim.plant.pid_model import pid_z_coeffs
 from ..records.gains import DERIVATIVE_FILTER_N
 from . import loops as L
 
-__all__ = ["step_traces", "step_command_peak", "STEP_DURATION_S"]
+__all__ = ["step_traces", "step_command_peak", "STEP_DURATION_S", "SEARCH_STEP_S"]
 
 #: How long a step is followed, s (the integral's slow tail included).
 STEP_DURATION_S = 30.0
+#: How long the design's search follows a step for its peak command, s: the command peaks
+#: in the first moments (the proportional terms' kick); the design's result is followed
+#: for STEP_DURATION_S.
+SEARCH_STEP_S = 5.0
 
 
 def _filtered(coeffs, x):
@@ -50,6 +54,8 @@ def step_traces(num, den, delay_s, gains, axis, size, duration_s=STEP_DURATION_S
     return t, out[1] if outer else rate, command
 
 
-def step_command_peak(num, den, delay_s, gains, axis, size) -> float:
+def step_command_peak(num, den, delay_s, gains, axis, size,
+                      duration_s=STEP_DURATION_S) -> float:
     """The peak |axis command| of :func:`step_traces`."""
-    return float(np.max(np.abs(step_traces(num, den, delay_s, gains, axis, size)[2])))
+    return float(np.max(np.abs(step_traces(num, den, delay_s, gains, axis, size,
+                                           duration_s)[2])))

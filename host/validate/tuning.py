@@ -29,7 +29,7 @@ import numpy as np
 
 from ..records.gains import Gains, gains_params, param_range
 from . import loops as L
-from .tune_step import step_command_peak
+from .tune_step import SEARCH_STEP_S, step_command_peak
 
 __all__ = ["Spec", "Uncertainty", "Plant", "Design", "design_axis", "loop_slack",
            "RATE_SHAPES", "ANGLE_SHAPES"]
@@ -230,8 +230,8 @@ class _Problem:
 
     def command_ok(self, gains) -> bool:
         p = self.plants[0]
-        return step_command_peak(p.num, p.den, p.delay_s, gains, self.axis,
-                                 self._step_size()) <= self.spec.command_max
+        return step_command_peak(p.num, p.den, p.delay_s, gains, self.axis, self._step_size(),
+                                 SEARCH_STEP_S) <= self.spec.command_max
 
     def _step_size(self):
         return math.radians(self.spec.step_rate_deg_s if self.axis == "yaw"
