@@ -192,6 +192,7 @@ class _Problem:
         crossovers (on the recommended model) lie inside the band."""
         worst, what, inside = math.inf, "", True
         for n, ((h, _), (hg, _)) in enumerate(zip(self.h, self.hg)):
+            # the model's response precomputed on the grid, where alone the loop is evaluated
             values = L.loop_functions(lambda w, hg=hg: hg, None, gains)["rate"](self.grid)
             s, w, wcs = loop_slack(values, self.grid, self.spec, self.unc)
             if s < worst:
@@ -217,7 +218,7 @@ class _Problem:
 
     def angle_slack(self, gains):
         worst, what = math.inf, ""
-        for hg, ha in self.hg:
+        for hg, ha in self.hg:              # as rate_slack: the responses on the grid
             loops = L.loop_functions(lambda w, hg=hg: hg, lambda w, ha=ha: ha, gains)
             rate = loops["rate"](self.grid)
             sens = 1.0 / (1.0 + rate)
