@@ -47,13 +47,14 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--coverage", type=number_in(0, 5), default=2.0, metavar="K",
                    help="the model's uncertainty at a crossover is K times the points' relative "
                         "sigma there (default 2; 0: none)")
-    p.add_argument("--step-deg", type=number_in(0, 80, lo_open=True), default=10.0,
+    p.add_argument("--step-deg", type=number_in(0, 80, lo_open=True), metavar="DEG",
                    help="roll and pitch: the angle step whose peak command is limited "
-                        "(default 10)")
-    p.add_argument("--step-deg-s", type=number_in(0, 400, lo_open=True), default=30.0,
-                   help="yaw: the rate step whose peak command is limited (default 30)")
+                        "(default 10, validate's step)")
+    p.add_argument("--step-deg-s", type=number_in(0, 400, lo_open=True), metavar="DEG_S",
+                   help="yaw: the rate step whose peak command is limited (default 30, "
+                        "validate's step)")
     p.add_argument("--max-command", type=number_in(0, AXIS_COMMAND_MAX, lo_open=True),
-                   default=AXIS_COMMAND_MAX, help="the largest |axis command| the step may "
+                   default=AXIS_COMMAND_MAX, metavar="C", help="the largest |axis command| the step may "
                    f"ask for (default {AXIS_COMMAND_MAX:g}, the firmware's clamp)")
     p.add_argument("--min-crossover", type=number_in(0, 1e4), default=0.0, metavar="RAD_S",
                    help="the slowest rate-loop crossover acceptable (default 0: any)")
@@ -72,8 +73,11 @@ def run(args) -> int:
     from ..validate.tuning import Spec
     from .shared_options import check_model
 
-    spec = Spec(args.phase_margin, args.gain_margin, args.coverage, args.step_deg,
-                args.step_deg_s, args.max_command, args.min_crossover)
+    steps = {k: v for k, v in (("step_angle_deg", args.step_deg),
+                               ("step_rate_deg_s", args.step_deg_s)) if v is not None}
+    spec = Spec(phase_margin_deg=args.phase_margin, gain_margin_db=args.gain_margin,
+                coverage_k=args.coverage, command_max=args.max_command,
+                min_crossover_rad_s=args.min_crossover, **steps)
     inputs = [axis_input(path) for path in args.models]
     seen = {}
     for inp in inputs:

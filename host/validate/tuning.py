@@ -27,8 +27,9 @@ import math
 
 import numpy as np
 
-from ..records.gains import Gains, gains_params, param_range
+from ..records.gains import AXIS_COMMAND_MAX, Gains, gains_params, param_range
 from . import loops as L
+from .closed_loop import STEP_ANGLE_RAD, STEP_RATE_RAD_S
 from .tune_step import SEARCH_STEP_S, step_command_peak
 
 __all__ = ["Spec", "Uncertainty", "Plant", "Design", "design_axis", "loop_slack",
@@ -57,14 +58,15 @@ class Spec:
     """What the design must keep: margins (deg, dB) at every crossover after the
     uncertainty, the coverage factor ``k`` on the points' sigma, the step (deg for roll and
     pitch, deg/s for yaw) whose peak axis command must stay within ``command_max``, and the
-    lowest rate crossover asked for (rad/s)."""
+    lowest rate crossover asked for (rad/s). The step's sizes default to validate's, the
+    command's limit to the firmware's clamp."""
 
     phase_margin_deg: float = 45.0
     gain_margin_db: float = 6.0
     coverage_k: float = 2.0
-    step_angle_deg: float = 10.0
-    step_rate_deg_s: float = 30.0
-    command_max: float = 1.0
+    step_angle_deg: float = round(math.degrees(STEP_ANGLE_RAD), 9)
+    step_rate_deg_s: float = round(math.degrees(STEP_RATE_RAD_S), 9)
+    command_max: float = AXIS_COMMAND_MAX
     min_crossover_rad_s: float = 0.0
 
 
