@@ -270,8 +270,11 @@ def tune_axis(inp: AxisInput, spec: Spec) -> AxisResult:
     tuned, tuned_fig = _prediction(inp, design.gains, spec, unc)
     failures = [f"{p.name}: {f}" for p in plants
                 for f in _failures(p, inp.axis, design.gains, inp.band, spec, unc, p is plants[0])]
-    if tuned.get("step", {}).get("peak_command", math.inf) > spec.command_max:
-        failures.append("the step's peak command exceeds the limit")
+    if not tuned["stable"]:
+        failures.append("the tuned cascade is unstable")
+    elif tuned["step"]["peak_command"] > spec.command_max:
+        failures.append(f"the step's peak command {tuned['step']['peak_command']:.2f} exceeds "
+                        f"{spec.command_max:g}")
     said += failures
     for name, lp in tuned["loops"].items():
         said += [f"{name} loop: {why} (the model is extrapolated there)" for why in lp["not_validated"]]
@@ -282,7 +285,8 @@ def tune_axis(inp: AxisInput, spec: Spec) -> AxisResult:
              "current_meets_spec": _current_meets(inp, current, spec, unc),
              "crossover_limit": design.limit, "design_models": [p.name for p in plants]}
     return AxisResult(inp, "met" if not failures else "spec",
-                      "; ".join(failures), entry, {"current": current_fig, "tuned": tuned_fig})
+                      f"{inp.axis}: the designed gains fail the exact check: "
+                      + "; ".join(failures), entry, {"current": current_fig, "tuned": tuned_fig})
 
 
 def _current_meets(inp, current, spec, unc) -> bool:
