@@ -365,6 +365,11 @@ FILES = {
     "m_tiny_gain.json": models({"num": [1e-20]}),
     "m_wide_coef.json": models({"order": [0, 12], "num": [1.0],
                                 "den": [1.0] + [10.0 ** (4 * k) for k in range(1, 13)]}),
+    # tune's MODELS.json: with a band, none recommended, the recommended one unstable
+    "t_good.json": models(band_rad_s=[1.0, 20.0]),
+    "t_no_rec.json": models(band_rad_s=[1.0, 20.0], recommended=None),
+    "t_unstable.json": models({"den": [1.0, -5.13, 22.93], "stable": False,
+                               "poles": [[2.565, 3.99], [2.565, -3.99]]}, band_rad_s=[1.0, 20.0]),
     # gains files (with a good MODELS.json)
     "good_models.json": models(),
     "g_list.json": "[2.4, 0.44, 0.05]",
@@ -880,6 +885,20 @@ CASES = [
     case("validate m_huge_gain.json --axis roll", "gain"),
     case("validate m_tiny_gain.json --axis roll", "gain"),
     case("validate m_wide_coef.json --axis roll", "beyond"),
+    # tune: models it cannot design on, options out of range or not finite, a spec no
+    # gains meet, two files of one axis
+    case("tune t_no_rec.json --out o", "no recommended model"),
+    case("tune t_unstable.json --out o", "is unstable"),
+    case("tune good_models.json --out o", "band_rad_s"),
+    case("tune m_nan.json --out o", "must be a finite number"),
+    case("tune missing.json --out o", "no such file"),
+    case("tune t_good.json", "--out"),
+    case("tune t_good.json --out o --phase-margin nan", "--phase-margin"),
+    case("tune t_good.json --out o --gain-margin inf", "--gain-margin"),
+    case("tune t_good.json --out o --phase-margin 90", "--phase-margin"),
+    case("tune t_good.json --out o --max-command 2", "--max-command"),
+    case("tune t_good.json --out o --phase-margin 89 --min-crossover 500", "cannot be met"),
+    case("tune t_good.json t_good.json --out o", "both of roll"),
     case("validate good_models.json --model 3", "no model 3"),
     case("validate good_models.json --model -1", "--model"),
     case("validate good_models.json --axis up", "--axis"),

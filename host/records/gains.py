@@ -23,11 +23,19 @@ from . import schema as S
 from .reading import read_json
 
 __all__ = ["Gains", "firmware_gains", "load_gains", "read_gains", "gains_from_params",
-           "recorded_gains", "recorded_gains_schema", "single", "DERIVATIVE_FILTER_N"]
+           "gains_params", "param_range", "recorded_gains", "recorded_gains_schema", "single",
+           "DERIVATIVE_FILTER_N", "AXIS_COMMAND_MAX"]
 
 #: The derivative filter's N (tau_f = tau_D / N) of the firmware's rate loop, which it flies.
 DERIVATIVE_FILTER_N = float(_firmware.CascadeGains.paper_defaults().rate(
     _firmware.Axis.ROLL).derivative_filter_n)
+#: The largest |axis command| the firmware's rate PID puts out (its output clamp, normalised
+#: torque; the same on every axis).
+AXIS_COMMAND_MAX = float(_firmware.CascadeGains.paper_defaults().rate(
+    _firmware.Axis.ROLL).output_max)
+#: Each parameter's (minimum, maximum, floor of a time constant that is not 0).
+_RANGES = {p.name: (float(p.minimum), float(p.maximum), float(p.floor))
+           for p in _firmware.param_table()}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,6 +76,22 @@ def gains_from_params(axis: str, params: dict) -> Gains | None:
     except KeyError:
         return None
     return Gains(rate, angle)
+
+
+def gains_params(axis: str, gains: Gains) -> dict:
+    """The parameters that set ``gains`` on ``axis`` (the inverse of
+    :func:`gains_from_params`), each the single-precision value the firmware holds."""
+    ax = PARAM_AXIS[axis]
+    out = {f"RATE_{ax}_{k}": single(v) for k, v in zip(("KC", "TI", "TD"), gains.rate)}
+    if gains.angle is not None:
+        out.update({f"ANG_{ax}_{k}": single(v) for k, v in zip(("KC", "TD"), gains.angle)})
+    return out
+
+
+def param_range(name: str) -> tuple:
+    """A parameter's ``(minimum, maximum, floor)`` as the firmware's table has them (the
+    floor: the least a time constant other than 0 may be)."""
+    return _RANGES[name]
 
 
 def recorded_gains(g: dict | None) -> Gains | None:
