@@ -26,6 +26,7 @@ from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
 from ...sim.plant.rotor_geometry import geometry_params
 from ...sim.plant.vehicle_params import load_params as load_vehicle
+from ...sim.rig.board import DISARM_WAIT_S, SAVE_WAIT_S
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
@@ -212,6 +213,7 @@ class SilSession(Closing):
         # The default pilot (or the RC script) counts its frames from here: a session that
         # sets the vehicle's geometry first holds the board disarmed while it does.
         self.pilot_from = 0
+        self.hovering = False
 
     @property
     def frame(self) -> int:
@@ -284,8 +286,13 @@ class SilSession(Closing):
         """Boot, arm and hover for the settling time. With a vehicle file of its own
         (``--params``), the board is first given that vehicle's geometry parameters (the
         CA_* that ``heliquad params from-vehicle`` writes), disarmed, so that the firmware's
-        allocation flies the vehicle the simulator flies."""
+        allocation flies the vehicle the simulator flies. Called again once it hovers (a
+        session that flies several sweeps), it hovers for the settling time only."""
         settle = int(round(self.cfg.settle_s * self.cfg.loop_hz))
+        if self.hovering:
+            self.advance(frames=settle)
+            return
+        self.hovering = True
         geometry = self.cfg.plant == "vehicle" and self.cfg.params
         if geometry or self.cfg.load_params:
             self.pilot_from = _PILOT_WAITS             # landed until the parameters are set
@@ -296,6 +303,18 @@ class SilSession(Closing):
                 self.load_params_file(self.cfg.load_params, progress)
             self.pilot_from = self.frame
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
+
+    def land(self) -> bool:
+        """The pilot lands: arm switch and throttle down until the firmware disarms, then
+        the time it takes to save the parameters changed while armed (as ``heliquad board``
+        lands, :data:`~heliquad.sim.rig.board.SAVE_WAIT_S`); whether it disarmed."""
+        self.pilot_from = _PILOT_WAITS
+        for _ in range(int(round(DISARM_WAIT_S * self.cfg.loop_hz))):
+            self.advance(frames=1)
+            if not self.reply.armed:
+                self.advance(frames=int(round(SAVE_WAIT_S * self.cfg.loop_hz)))
+                return True
+        return False
 
     def set_geometry(self, progress=print) -> None:
         """The vehicle file's geometry parameters onto the board (those that differ); a
