@@ -1,0 +1,139 @@
+"""``heliquad verify`` as a user runs it: on the simulated rig, wrong predictions rejected
+with one line per failed loop and the previous gains left in the board's parameter store
+(read back by ``heliquad params`` from a ``heliquad board`` on that store); a real-time
+board over its port accepting predictions that hold; Ctrl-C restoring the previous gains;
+bad input refused in one line."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from heliquad.host.records.gains import firmware_gains
+from heliquad.host.records.verify import read_verify
+
+from tool_runs import HANG_GUARD_S, Tool, one_line, running_board, wait_for
+from tune_fixture import reduced_gains, write_tune_dir
+
+SPEC = {"phase_margin_deg": 30.0, "gain_margin_db": 3.0}
+
+
+def heliquad(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=HANG_GUARD_S)
+
+
+def test_wrong_predictions_are_rejected_and_the_board_keeps_its_previous_gains(tmp_path):
+    folder = write_tune_dir(tmp_path / "tuned", {"roll": reduced_gains("roll", 0.6)},
+                            wrong_gain=2.0, spec=SPEC)
+    store = tmp_path / "params.bin"
+    res = heliquad("verify", "--sil", folder, "--rig-time", "3", "--param-store", store)
+    assert res.returncode == 1, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert [line.split(": ")[1] for line in lines] == ["roll rate loop", "roll angle loop",
+                                                       "rejected"], lines
+    assert lines[-1].endswith("the board holds its previous gains")
+    entry = read_verify(folder / "verify.json").axes["roll"]
+    assert (entry["verdict"], entry["board_holds"]) == ("rejected", "previous")
+    assert (folder / "previous.params").read_text().count("RATE_RLL_KC\t2.422\t") == 1
+    with running_board(tmp_path, "--plant", "vehicle", "--param-store", store) as port:
+        got = heliquad("params", "--port", port, "get", "RATE_RLL_KC")
+    assert got.returncode == 0, got.stderr
+    assert got.stdout.split()[-1] == f"{firmware_gains('roll').rate[0]:g}"
+
+
+def test_a_board_on_its_port_accepts_predictions_that_hold(tmp_path):
+    folder = _copy(("yaw",), tmp_path / "tuned")
+    with running_board(tmp_path, "--plant", "vehicle", "--axis", "yaw") as port:
+        res = heliquad("verify", "--port", port, folder, "--rig-time", "3")
+        got = heliquad("params", "--port", port, "get", "RATE_YAW_KC")
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip().splitlines()[-1].startswith("accepted: the tuned yaw gains")
+    entry = read_verify(folder / "verify.json").axes["yaw"]
+    assert entry["board"] == f"port {port}" and "truth" not in entry["loops"]["rate"]
+    assert float(got.stdout.split()[-1]) == pytest.approx(reduced_gains("yaw", 0.6).rate[0],
+                                                          rel=1e-6)
+
+
+def test_ctrl_c_during_a_sweep_restores_the_previous_gains(tmp_path):
+    folder = _copy(("roll",), tmp_path / "tuned")
+    tool = Tool("verify", "--sil", folder, "--rig-time", "600", tmpdir=tmp_path)
+    try:
+        wait_for(lambda: "setpoint sweep" in tool.readline(), "the first sweep", tool.proc)
+        wait_for(lambda: (folder / "verify/roll/rate/manifest.json").exists(), "its manifest",
+                 tool.proc)
+        tool.ctrl_c()
+        code, _, err = tool.finish()
+    finally:
+        tool.kill()
+    assert code == 130, err
+    assert one_line(err) == ("heliquad verify: the sweep stopped: interrupted (Ctrl-C); the "
+                             "board holds its previous gains")
+    entry = read_verify(folder / "verify.json").axes["roll"]
+    assert (entry["verdict"], entry["board_holds"]) == ("unfinished", "previous")
+    assert entry["restored"]["RATE_RLL_KC"] == pytest.approx(firmware_gains("roll").rate[0])
+
+
+#: Tune folders written once for the module (their predictions take seconds), by axes.
+_WRITTEN: dict = {}
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _fixtures_folder(tmp_path_factory):
+    _WRITTEN["base"] = tmp_path_factory.mktemp("tuned")
+    yield
+    _WRITTEN.clear()
+
+
+def _copy(axes: tuple, folder) -> pathlib.Path:
+    """A copy of the tune folder for ``axes`` (tuned gains: the paper's rate Kc times 0.6)."""
+    if axes not in _WRITTEN:
+        _WRITTEN[axes] = write_tune_dir(_WRITTEN["base"] / "-".join(axes),
+                                        {a: reduced_gains(a, 0.6) for a in axes}, spec=SPEC)
+    shutil.copytree(_WRITTEN[axes], folder)
+    return folder
+
+
+def _two_axes(folder):
+    return _copy(("roll", "yaw"), folder)
+
+
+def _broken_tune(folder):
+    folder = _copy(("yaw",), folder)
+    doc = json.loads((folder / "tune.json").read_text())
+    del doc["axes"]["yaw"]["tuned"]["loops"]["rate"]
+    (folder / "tune.json").write_text(json.dumps(doc))
+    return folder
+
+
+def _disagreeing(folder):
+    folder = _copy(("yaw",), folder)
+    path = folder / "tuned.params"
+    path.write_text(path.read_text().replace("RATE_YAW_KC\t4.4358", "RATE_YAW_KC\t5"))
+    return folder
+
+
+@pytest.mark.parametrize("make, args, says", [
+    (lambda f: f, [], "is not a folder"),
+    (lambda f: (f.mkdir(), f)[1], [], "has no tune.json"),
+    (_broken_tune, [], "tune.json"),
+    (_disagreeing, [], "RATE_YAW_KC is 5.0, tune.json says 4.4358"),
+    (_two_axes, [], "tunes roll, yaw: give --axis"),
+    (_two_axes, ["--axis", "pitch"], "--axis pitch"),
+    (_two_axes, ["--axis", "roll", "--port", "/dev/null"], None),
+])
+def test_bad_input_is_refused_in_one_line(tmp_path, make, args, says):
+    folder = make(tmp_path / "tuned")
+    where = [] if "--port" in args else ["--sil"]
+    if says is None:               # --port and --sil's --param-store together
+        args, says = [*args, "--param-store", tmp_path / "p"], "need --sil"
+    res = heliquad("verify", *where, folder, *args)
+    assert res.returncode == 2, res.stderr
+    line = one_line(res.stderr)
+    assert line.startswith("heliquad verify: error: ") and says in line, line
+    assert not (tmp_path / "tuned" / "verify").exists()
