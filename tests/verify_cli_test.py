@@ -7,8 +7,10 @@ bad input refused in one line."""
 from __future__ import annotations
 
 import json
+import os
 import pathlib
 import shutil
+import signal
 import subprocess
 import sys
 
@@ -17,7 +19,7 @@ import pytest
 from heliquad.host.records.gains import firmware_gains
 from heliquad.host.records.verify import read_verify
 
-from tool_runs import HANG_GUARD_S, Tool, one_line, running_board, wait_for
+from tool_runs import HANG_GUARD_S, Tool, board_process, children, one_line, running_board, wait_for
 from tune_fixture import reduced_gains, write_tune_dir
 
 SPEC = {"phase_margin_deg": 30.0, "gain_margin_db": 3.0}
@@ -111,6 +113,14 @@ def _broken_tune(folder):
     return folder
 
 
+def _no_angle_prediction(folder):
+    folder = _copy(("roll",), folder)
+    doc = json.loads((folder / "tune.json").read_text())
+    del doc["axes"]["roll"]["tuned"]["loops"]["angle"]
+    (folder / "tune.json").write_text(json.dumps(doc))
+    return folder
+
+
 def _disagreeing(folder):
     folder = _copy(("yaw",), folder)
     path = folder / "tuned.params"
@@ -123,6 +133,7 @@ def _disagreeing(folder):
     (lambda f: (f.mkdir(), f)[1], [], "has no tune.json"),
     (_broken_tune, [], "tune.json"),
     (_disagreeing, [], "RATE_YAW_KC is 5.0, tune.json says 4.4358"),
+    (_no_angle_prediction, [], "tune.json has no prediction of the tuned roll angle loop"),
     (_two_axes, [], "tunes roll, yaw: give --axis"),
     (_two_axes, ["--axis", "pitch"], "--axis pitch"),
     (_two_axes, ["--axis", "roll", "--port", "/dev/null"], None),
@@ -137,3 +148,38 @@ def test_bad_input_is_refused_in_one_line(tmp_path, make, args, says):
     line = one_line(res.stderr)
     assert line.startswith("heliquad verify: error: ") and says in line, line
     assert not (tmp_path / "tuned" / "verify").exists()
+
+
+def test_a_board_that_goes_away_mid_sweep_is_said_with_the_gains_it_holds(tmp_path):
+    """The board's process killed (a cable pulled): nothing can be restored, and the line
+    says the board holds the tuned gains, read back before the sweep."""
+    folder = _copy(("yaw",), tmp_path / "tuned")
+    with board_process(tmp_path, "--plant", "vehicle", "--axis", "yaw") as board:
+        tool = Tool("verify", "--port", tmp_path / "rig", folder, "--rig-time", "600",
+                    tmpdir=tmp_path)
+        try:
+            wait_for(lambda: "setpoint sweep" in tool.readline(), "the sweep", tool.proc)
+            for pid in [board.pid, *children(board.pid)]:   # gone at once, its port too
+                os.kill(pid, signal.SIGKILL)
+            code, _, err = tool.finish()
+        finally:
+            tool.kill()
+    assert code == 1, err
+    line = one_line(err)
+    assert line.startswith("heliquad verify: ") and line.endswith(
+        "; the board holds the tuned gains"), line
+    entry = read_verify(folder / "verify.json").axes["yaw"]
+    assert (entry["verdict"], entry["board_holds"], entry["restored"]) == \
+        ("unfinished", "tuned", None)
+
+
+def test_a_parameter_the_board_refuses_ends_the_run_with_the_previous_gains_back(tmp_path):
+    folder = write_tune_dir(tmp_path / "tuned", {"yaw": reduced_gains("yaw", 8.0)}, spec=SPEC)
+    res = heliquad("verify", "--sil", folder)           # RATE_YAW_KC 59: its range ends at 50
+    assert res.returncode == 1, res.stderr
+    line = one_line(res.stderr)
+    assert line.startswith("heliquad verify: error: the board refused RATE_YAW_KC = 59.1") and \
+        line.endswith("; the board holds its previous gains"), line
+    entry = read_verify(folder / "verify.json").axes["yaw"]
+    assert (entry["verdict"], entry["board_holds"]) == ("unfinished", "previous")
+    assert entry["restored"]["RATE_YAW_KC"] == pytest.approx(firmware_gains("yaw").rate[0])

@@ -21,10 +21,12 @@ import os
 import numpy as np
 
 from ...sim.base.dialect import dialect
-from ...sim.base.errors import BoardRefused, InputError, LinkLost
+from ...sim.base.errors import BoardRefused, FirmwareError, InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_FREQ_FRACTION, MIN_FREQ_HZ
+from ..acquire.design import INPUT_FRACTION
+from ..acquire.excitation import amplitude_bound, firmware_amplitude
 from ..acquire.multisine import FADE_CYCLES, MAX_LINES, MIN_PERIODS
-from ..acquire.param_protocol import (NoAnswer, Param, ParamClient, ParamRefused,
+from ..acquire.param_protocol import (Param, ParamClient, ParamRefused,
                                       SessionLink, same_value, value_text)
 from ..acquire.sweep import SWEEP_TLOG, default_plan, multisine_plan, run_sweep
 from ..process.signals import ABORTED_BY, EXIT_CODES, WORDS, stopped_by
@@ -32,7 +34,7 @@ from ..records.gains import recorded_gains
 from ..records.params_file import TYPE_NAMES, read_params_file, write_params_file
 from ..records.tlog import TlogDamage, read_tlog_table
 from ..records.verify import VerifyFile, read_verify, write_verify_json
-from ..validate.verification import (FLOOR, SWEEP_OF_LOOP, judge, margins_only,
+from ..validate.verification import (CROSSOVERS, FLOOR, SWEEP_OF_LOOP, judge, margins_only,
                                      measured_margins, sorted_points, sweep_band,
                                      truth_margins)
 from ..validate.truth import sil_truth_loops
@@ -43,13 +45,21 @@ __all__ = ["VerifyPlan", "verify_axis", "PREVIOUS_PARAMS", "VERIFY_JSON", "SESSI
 PREVIOUS_PARAMS = "previous.params"
 VERIFY_JSON = "verify.json"
 SESSION_TLOG = "session.tlog"
-#: The lowest line a sweep may have (the firmware's band's bottom, with room for the
-#: multisine's base period), and its top: the firmware's band, and a multisine's quarter of
-#: the loop rate.
+#: The lowest line a sweep may have: twice the firmware's band's bottom (a multisine's base
+#: frequency lies below its lowest line); and its top: the firmware's band or a multisine's
+#: quarter of the loop rate, 2 % below (a line moves to the nearest harmonic of the base).
 BOTTOM_RAD_S = 2 * math.pi * MIN_FREQ_HZ * 2
 TOP_RAD_S = 2 * math.pi * min(MAX_FREQ_FRACTION, 0.25) * LOOP_RATE_HZ * 0.98
 #: MAV_PARAM_TYPE of a real parameter (a line of previous.params without its type).
 REAL32 = next(k for k, v in TYPE_NAMES.items() if v == "REAL32")
+#: The rate setpoint sweep's peak unless given, firmware units: 20 deg/s (a tenth of the
+#: firmware's bound; at 10 deg/s moderate turbulence hides the roll rate loop near its
+#: crossover, docs/verification.md), and no more than lets the axis's command swing by the
+#: sweep design's linear share of its bound (design.INPUT_FRACTION): at the sweep's top
+#: lines the plant no longer follows, so the command swings by about Kc times the peak (the
+#: yaw rate loop, Kc 4.4, measures a gain margin 2 dB too high at 20 deg/s). The angle
+#: setpoint's peak is the sweep's default (5 deg).
+RATE_PEAK = firmware_amplitude("rate", 20.0)
 #: A multisine sweep's rig time unless given, s; a loop whose lowest line needs longer gets
 #: the least that holds its periods and fades (times LEAST_SLACK: the base period lies a
 #: little below the lowest line).
@@ -82,7 +92,13 @@ class VerifyPlan:
         return ("rate",) if self.axis == "yaw" else ("rate", "angle")
 
     def predicted(self, loop: str) -> dict:
-        return self.tune.axes[self.axis]["tuned"]["loops"][loop]
+        """tune.json's prediction of the tuned ``loop`` (InputError when it has none)."""
+        found = self.tune.axes[self.axis]["tuned"]["loops"].get(loop)
+        if found is None or not any(found.get(k) for k in CROSSOVERS):
+            what = "has no prediction" if found is None else "predicts no crossover"
+            raise InputError(f"tune.json {what} of the tuned {self.axis} {loop} loop: verify "
+                             "has nothing to measure it against")
+        return found
 
     def sweep_plan(self, loop: str):
         """The sweep that measures ``loop``, its band from the loop's predicted crossovers,
@@ -91,6 +107,9 @@ class VerifyPlan:
         low, high = sweep_band(self.predicted(loop), TOP_RAD_S, BOTTOM_RAD_S)
         band_hz = (low / (2 * math.pi), high / (2 * math.pi))
         amplitude = self.amplitudes.get(inject)
+        if amplitude is None and inject == "rate":
+            kc = self.tune.axes[self.axis]["tuned"]["gains"]["rate"][0]
+            amplitude = min(RATE_PEAK, INPUT_FRACTION * amplitude_bound("mixer") / kc)
         if self.signal == "multisine":
             # the least that holds the design's whole periods and fades of its lowest line
             least = (MIN_PERIODS + 2 * FADE_CYCLES) / band_hz[0] * LEAST_SLACK
@@ -182,15 +201,17 @@ def verify_axis(session, source: dict, plan: VerifyPlan, progress=print) -> tupl
             _judge(plan, axis_dir, manifests, entry, progress)
         if entry["verdict"] != "accepted":
             entry["restored"] = board.restore()
-    except (InputError, OSError) as exc:        # the link lost, a refusal, a disk error
-        if board.holds != "previous" and not isinstance(exc, LinkLost):
+    except (InputError, OSError, FirmwareError) as exc:   # the link lost, a refusal, a disk
+        lost = isinstance(exc, (LinkLost, FirmwareError))   # the firmware died: gone as well
+        if board.holds != "previous" and not lost:
             entry["restored"] = board.restore()
-        entry["said"].append(f"ended: {exc}")
+        said = f"the board went away: {exc}" if isinstance(exc, FirmwareError) else str(exc)
+        entry["said"].append(f"ended: {said}")
         _write(plan, entry, board)
-        if isinstance(exc, InputError):
-            kind = next(k for k in (LinkLost, BoardRefused, InputError) if isinstance(exc, k))
-            raise kind(f"{exc}; {_holds_text(board)}") from None
-        raise
+        if isinstance(exc, OSError):
+            raise
+        kind = LinkLost if lost else BoardRefused if isinstance(exc, BoardRefused) else InputError
+        raise kind(f"{said}; {_holds_text(board)}") from None
     except KeyboardInterrupt as exc:
         how = stopped_by(exc)
         entry["restored"] = board.restore()

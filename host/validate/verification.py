@@ -18,7 +18,7 @@ import numpy as np
 from .closed_loop import margins_record
 from .loops import LOOP_DT_S, loop_from_closed, loop_functions, margins, measured_loop
 
-__all__ = ["FLOOR", "MARGINS", "SWEEP_OF_LOOP", "sweep_band", "measured_margins",
+__all__ = ["FLOOR", "MARGINS", "CROSSOVERS", "SWEEP_OF_LOOP", "sweep_band", "measured_margins",
            "truth_margins", "judge", "margins_only", "sorted_points"]
 
 #: The least a measured margin may differ from its prediction by: a sweep's points carry
