@@ -105,20 +105,15 @@ def _two_axes(folder):
     return _copy(("roll", "yaw"), folder)
 
 
-def _broken_tune(folder):
-    folder = _copy(("yaw",), folder)
-    doc = json.loads((folder / "tune.json").read_text())
-    del doc["axes"]["yaw"]["tuned"]["loops"]["rate"]
-    (folder / "tune.json").write_text(json.dumps(doc))
-    return folder
-
-
-def _no_angle_prediction(folder):
-    folder = _copy(("roll",), folder)
-    doc = json.loads((folder / "tune.json").read_text())
-    del doc["axes"]["roll"]["tuned"]["loops"]["angle"]
-    (folder / "tune.json").write_text(json.dumps(doc))
-    return folder
+def _without(axis: str, loop: str):
+    """A tune folder whose tune.json lacks the tuned ``loop``'s prediction of ``axis``."""
+    def make(folder):
+        folder = _copy((axis,), folder)
+        doc = json.loads((folder / "tune.json").read_text())
+        del doc["axes"][axis]["tuned"]["loops"][loop]
+        (folder / "tune.json").write_text(json.dumps(doc))
+        return folder
+    return make
 
 
 def _disagreeing(folder):
@@ -131,9 +126,9 @@ def _disagreeing(folder):
 @pytest.mark.parametrize("make, args, says", [
     (lambda f: f, [], "is not a folder"),
     (lambda f: (f.mkdir(), f)[1], [], "has no tune.json"),
-    (_broken_tune, [], "tune.json"),
+    (_without("yaw", "rate"), [], "tune.json"),
     (_disagreeing, [], "RATE_YAW_KC is 5.0, tune.json says 4.4358"),
-    (_no_angle_prediction, [], "tune.json has no prediction of the tuned roll angle loop"),
+    (_without("roll", "angle"), [], "tune.json has no prediction of the tuned roll angle loop"),
     (_two_axes, [], "tunes roll, yaw: give --axis"),
     (_two_axes, ["--axis", "pitch"], "--axis pitch"),
     (_two_axes, ["--axis", "roll", "--port", "/dev/null"], None),
