@@ -178,3 +178,17 @@ def test_a_parameter_the_board_refuses_ends_the_run_with_the_previous_gains_back
     entry = read_verify(folder / "verify.json").axes["yaw"]
     assert (entry["verdict"], entry["board_holds"]) == ("unfinished", "previous")
     assert entry["restored"]["RATE_YAW_KC"] == pytest.approx(firmware_gains("yaw").rate[0])
+
+
+def test_sine_dwells_measure_the_loop_as_well(tmp_path):
+    folder = _copy(("yaw",), tmp_path / "tuned")
+    res = heliquad("verify", "--sil", folder, "--signal", "dwell", "--lines", "6",
+                   "--cycles", "6")
+    assert res.returncode == 0, res.stderr
+    entry = read_verify(folder / "verify.json").axes["yaw"]
+    manifest = json.loads((folder / "verify/yaw/rate/manifest.json").read_text())
+    assert manifest["signal"] == "dwell" and len(manifest["frequencies"]) == 6
+    low, high = entry["band_rad_s"]["rate"]
+    predicted = entry["loops"]["rate"]["predicted"]
+    assert low == pytest.approx(0.5 * predicted["gain_crossover_rad_s"])
+    assert high > predicted["phase_crossover_rad_s"]
