@@ -24,6 +24,7 @@ from heliquad import _simcore
 
 from ...sim.base.closing import Closing
 from ...sim.base.errors import NO_ROOM, DiskFull, InputError, LinkLost
+from ...sim.rig.board import DISARM_WAIT_S, SAVE_WAIT_S
 from ...sim.rig.driver import Rig
 from ...sim.rig.faults import link_close_frame
 from ...sim.rig.lockstep import FirmwareError
@@ -210,6 +211,7 @@ class SilSession(Closing):
         # The default pilot (or the RC script) counts its frames from here: a session that
         # sets the vehicle's geometry first holds the board disarmed while it does.
         self.pilot_from = 0
+        self.hovering = False
 
     @property
     def frame(self) -> int:
@@ -282,8 +284,13 @@ class SilSession(Closing):
         """Boot, arm and hover for the settling time. With a vehicle file of its own
         (``--params``), the board is first given that vehicle's geometry parameters (the
         CA_* that ``heliquad params from-vehicle`` writes), disarmed, so that the firmware's
-        allocation flies the vehicle the simulator flies."""
+        allocation flies the vehicle the simulator flies. Called again once it hovers (a
+        session that flies several sweeps), it hovers for the settling time only."""
         settle = int(round(self.cfg.settle_s * self.cfg.loop_hz))
+        if self.hovering:
+            self.advance(frames=settle)
+            return
+        self.hovering = True
         geometry = self.cfg.plant == "vehicle" and self.cfg.params
         if geometry or self.cfg.load_params:
             self.pilot_from = _PILOT_WAITS             # landed until the parameters are set
@@ -292,6 +299,18 @@ class SilSession(Closing):
                                                            self.cfg.load_params), progress)
             self.pilot_from = self.frame
         self.advance(frames=BOOT_FRAMES + ARM_FRAMES + settle)
+
+    def land(self) -> bool:
+        """The pilot lands: arm switch and throttle down until the firmware disarms, then
+        the time it takes to save the parameters changed while armed (as ``heliquad board``
+        lands, :data:`~heliquad.sim.rig.board.SAVE_WAIT_S`); whether it disarmed."""
+        self.pilot_from = _PILOT_WAITS
+        for _ in range(int(round(DISARM_WAIT_S * self.cfg.loop_hz))):
+            self.advance(frames=1)
+            if not self.reply.armed:
+                self.advance(frames=int(round(SAVE_WAIT_S * self.cfg.loop_hz)))
+                return True
+        return False
 
     def close(self) -> None:
         """Close the telemetry link and the log, then the rig (the sim link, the firmware);

@@ -42,7 +42,7 @@ from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .bin_sweep import bin_sweep
 
-__all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments"]
+__all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments", "estimate_points"]
 
 
 
@@ -165,7 +165,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  f"{damage.KEPT}")
     axis = manifest["axis"]
-    points, segments, firsts, skipped = _estimate_points(manifest, samples, estimate, progress)
+    points, segments, firsts, skipped = estimate_points(manifest, samples, estimate, progress)
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -283,7 +283,7 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
     return record
 
 
-def _estimate_points(manifest, samples, estimate, progress) -> tuple:
+def estimate_points(manifest, samples, estimate, progress) -> tuple:
     """(points, the records they came from, each record's first point, the frequencies
     skipped and why): one point per measured frequency of a dwell, one per line of a
     multisine, against the excitation or the input (``estimate``). A record that lost

@@ -15,7 +15,7 @@ import importlib
 __all__ = ["COMMANDS", "add_parsers", "module_of"]
 
 #: The subcommands, in the order ``heliquad --help`` lists them.
-COMMANDS = ("fsf", "fit", "sil", "board", "validate", "tune", "log", "tlog", "sweep", "identify",
+COMMANDS = ("fsf", "fit", "sil", "board", "validate", "tune", "verify", "log", "tlog", "sweep", "identify",
             "effectiveness", "report", "params", "logs", "program", "demo", "dmp-image", "flash",
             "usb-descriptors", "mavlink-dialect", "sd-image")
 

@@ -39,7 +39,7 @@ from ...sim.plant.pid_model import pid_z_coeffs
 from ..records.gains import DERIVATIVE_FILTER_N
 
 __all__ = ["LOOP_DT_S", "loop_functions", "model_responses", "margins", "discrete_cascade",
-           "LOOP_NAMES"]
+           "LOOP_NAMES", "broken_loop", "measured_loop", "loop_from_closed"]
 
 #: The firmware's control loop period, s (its one definition: the firmware's loop rate).
 LOOP_DT_S = LOOP_PERIOD_S
@@ -304,8 +304,33 @@ def broken_loop(omega, input_gain, dt_s=LOOP_DT_S) -> dict:
     """Margins of the loop measured through the excitation: ``L = R/U - 1`` at each point
     (``input_gain`` = U/R), between the points (:func:`interpolated`). A margin whose
     crossover the points do not reach is left out, with ``unmeasured`` saying so."""
+    return measured_loop(omega, 1.0 / np.asarray(input_gain, dtype=complex) - 1.0, dt_s)
+
+
+def loop_from_closed(omega, closed, gains, loop: str, dt_s=LOOP_DT_S):
+    """The loop gain at ``omega`` of the ``rate`` loop (broken at the plant input, the angle
+    loop open) or the ``angle`` loop (broken at the rate setpoint, the rate loop closed),
+    from its measured closed-loop response ``closed`` (rate over rate setpoint, or angle over
+    angle setpoint) and the firmware's controller of that loop, known exactly: with ``P`` on
+    the error and ``D`` on the measurement (``u = P (sp - y) + D y``), ``T = P G / (1 +
+    (P - D) G)``, so ``G = T / (P - T (P - D))`` and ``L = (P - D) G``."""
     omega = np.asarray(omega, dtype=float)
-    L = 1.0 / np.asarray(input_gain, dtype=complex) - 1.0
+    rate, angle = _controller(gains, dt_s)
+    if loop == "angle" and angle is None:
+        raise ValueError("yaw flies no angle loop")
+    p, d = rate if loop == "rate" else angle
+    z = np.exp(1j * omega * dt_s)
+    pz, dz = _at(p, z), _at(d, z)
+    t = np.asarray(closed, dtype=complex)
+    return (pz - dz) * t / (pz - t * (pz - dz))
+
+
+def measured_loop(omega, L, dt_s=LOOP_DT_S) -> dict:
+    """Margins of a loop gain ``L`` measured at the points ``omega`` (increasing), between
+    them as :func:`interpolated` has it. A margin whose crossover the points do not reach is
+    left out, with ``unmeasured`` saying so."""
+    omega = np.asarray(omega, dtype=float)
+    L = np.asarray(L, dtype=complex)
     out = margins(interpolated(omega, L), (omega[0], omega[-1]), dt_s)
     out["not_validated"] = []
     lo, hi = omega[0], omega[-1]
