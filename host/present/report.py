@@ -25,7 +25,8 @@ the sweep (:mod:`.report_sweep`), the points (:mod:`.report_points`), the models
 (:mod:`.report_models`), their checks (:mod:`.report_checks`) and the closed-loop
 validation (:mod:`.report_validation`); a folder of ``heliquad effectiveness`` (here or among
 the sub-folders) adds each rotor's identified effectiveness against the geometry's
-(:mod:`.report_effectiveness`). This module reads a folder, assembles the page and gives each
+(:mod:`.report_effectiveness`), and a folder of ``heliquad tune`` its gains before and after,
+predicted and, once ``heliquad verify`` flew them, measured (:mod:`.report_tune`). This module reads a folder, assembles the page and gives each
 axis its summary and verdict.
 """
 
@@ -47,6 +48,7 @@ from .report_effectiveness import effectiveness_html, read_effectiveness
 from .report_html import STYLE, image_html, number_text, table_html
 from .report_models import models_html, order_text, tf_html
 from .report_points import points_html
+from .report_tune import TUNE, tune_html
 from .report_sweep import loop_rate_hz, sweep_html
 from .report_validation import validation_html
 
@@ -190,9 +192,11 @@ def write_report(dir_path: str, out: str | None = None) -> str:
     out = out or os.path.join(dir_path, "report.html")
     check_output(out, "--out")
     folders, effectiveness = _holding(dir_path, "models.json"), _holding(dir_path, EFFECTIVENESS)
-    if not folders and not effectiveness:
-        raise InputError(f"{dir_path}: no models.json or {EFFECTIVENESS} here or in its "
-                         "sub-folders (run heliquad identify or heliquad effectiveness first)")
+    tuned = _holding(dir_path, TUNE)
+    if not folders and not effectiveness and not tuned:
+        raise InputError(f"{dir_path}: no models.json, {EFFECTIVENESS} or {TUNE} here or in "
+                         "its sub-folders (run heliquad identify, heliquad effectiveness or "
+                         "heliquad tune first)")
     axes = [_axis_section(folder) for folder in folders]
     rotors = "".join(effectiveness_html(f, read_effectiveness(os.path.join(f, EFFECTIVENESS)))
                      for f in effectiveness)
@@ -201,7 +205,8 @@ def write_report(dir_path: str, out: str | None = None) -> str:
             f"<style>{STYLE}</style></head><body><h1>heliquad identification report</h1>"
             f"<p>{html.escape(os.path.abspath(dir_path))}, written {stamp}.</p>"
             + (_summary_html(axes) + _flags_html(axes) if axes else "")
-            + "".join(ax["body"] for ax in axes) + rotors + "</body></html>")
+            + "".join(ax["body"] for ax in axes) + "".join(tune_html(f) for f in tuned)
+            + rotors + "</body></html>")
     with atomic_write(out) as fh:
         fh.write(page)
     return out
