@@ -53,6 +53,14 @@ def test_the_demos_models_get_gains_that_meet_the_spec_on_both_models(tmp_path, 
     assert result.entry["tuned"]["disturbance"]["rate_rms_deg_s"] > 0
     for lp in result.entry["tuned"]["loops"].values():
         assert lp["uncertainty"]["phase_margin_deg"] > 0
+        # a margin is extrapolated exactly when its crossover lies outside the band
+        for key, at in (("phase_margin_deg", "gain_crossover_rad_s"),
+                        ("gain_margin_db", "phase_crossover_rad_s")):
+            w = lp[at]
+            outside = w is not None and not band[0] * 0.98 <= w <= band[1] * 1.02
+            assert (key in lp["extrapolated"]) == outside, (key, w, band)
+    # the rate loop's gain margin is read well above the band on both models
+    assert result.entry["tuned"]["loops"]["rate"]["extrapolated"] == ["gain_margin_db"]
 
 
 def test_the_paper_gains_on_the_demo_roll_model_do_not_meet_the_spec_and_tuned_ones_are_no_slower_to_step(tmp_path):

@@ -94,12 +94,25 @@ def test_a_margin_the_sweep_did_not_reach_fails_and_one_predicted_absent_passes_
         "gain margin 3.0 dB measured, none predicted"]
 
 
+def test_an_extrapolated_margin_is_held_to_the_spec_alone():
+    predicted = {**PREDICTED, "extrapolated": ["gain_margin_db"]}
+    # 5 dB from its prediction, but above the spec: the measurement is the evidence
+    assert judge(predicted, {"phase_margin_deg": 50.0, "gain_margin_db": 13.0}, SPEC)[1] == []
+    assert judge(predicted, {"phase_margin_deg": 50.0, "gain_margin_db": 5.0}, SPEC)[1] == [
+        "gain margin 5.0 dB below the specification's 6 dB by 1.0 dB"]
+    # the phase margin, read in band, is still held to its prediction
+    assert judge(predicted, {"phase_margin_deg": 60.0, "gain_margin_db": 13.0}, SPEC)[1] == [
+        "phase margin 60.0 deg measured, 50.0 +/- 7.0 predicted (3.0 deg outside)"]
+
+
 def test_the_sweep_band_reaches_past_every_crossover_within_the_limits():
     loop = {"gain_crossover_rad_s": 10.0, "phase_crossover_rad_s": 40.0}
     assert sweep_band(loop, 300.0, 0.1) == (5.0, 60.0)
     assert sweep_band(loop, 50.0, 6.0) == (6.0, 50.0)
     assert sweep_band({"gain_crossover_rad_s": 10.0, "phase_crossover_rad_s": None},
                       300.0, 0.1) == (5.0, 15.0)
+    # an extrapolated margin's crossover may lie anywhere above: up to the limit
+    assert sweep_band({**loop, "extrapolated": ["gain_margin_db"]}, 300.0, 0.1) == (5.0, 300.0)
 
 
 def test_verify_json_refuses_what_is_not_its_schema(tmp_path):

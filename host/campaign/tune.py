@@ -164,8 +164,25 @@ def _loop_records(plant, axis, gains, band, unc):
             gain = float(unc.half_widths(w, _sensitivity(loops, name, w))[1][0])
             if math.isfinite(gain):
                 u["gain_margin_db"] = gain
-        out[name] = {**rec, "uncertainty": u}
+        out[name] = {**rec, "uncertainty": u, "extrapolated": _extrapolated(lp)}
     return out, raw, loops
+
+
+#: Each reported margin, the key of its crossover and the list it is among.
+_READ_AT = {"phase_margin_deg": ("gain_crossover_rad_s", "gain_crossovers"),
+            "gain_margin_db": ("phase_crossover_rad_s", "phase_crossovers")}
+
+
+def _extrapolated(lp) -> list:
+    """The reported margins of a loop (:func:`heliquad.host.validate.loops.margins`) read at
+    a crossover outside the identified band: the model has no data there, so their
+    prediction bounds nothing (tune.json's ``extrapolated``)."""
+    out = []
+    for key, (at, among) in _READ_AT.items():
+        w = lp[at]
+        if w is not None and not next(c["in_band"] for c in lp[among] if c["omega_rad_s"] == w):
+            out.append(key)
+    return out
 
 
 def _failures(plant, axis, gains, band, spec, unc, rate_band=True) -> list:

@@ -298,8 +298,11 @@ def _compare(record) -> str:
 
     out = []
     for key, unit in (("phase_margin_deg", "deg"), ("gain_margin_db", "dB")):
+        held = (" (extrapolated: held to the specification only)"
+                if key in record["predicted"].get("extrapolated", ()) else
+                f" +/- {record['allowed'][key]:.1f}")
         said = (f"{key.split('_margin')[0]} margin predicted {text(record['predicted'], key, unit)}"
-                f" +/- {record['allowed'][key]:.1f}, measured {text(record['measured'], key, unit)}")
+                f"{held}, measured {text(record['measured'], key, unit)}")
         if "truth" in record:
             said += f", truth {text(record['truth'], key, unit)}"
         out.append(said)

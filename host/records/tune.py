@@ -10,7 +10,8 @@ Per axis (``axes.roll`` ...): the models it was designed on, the identified band
 predicted margins (the records of :func:`heliquad.host.validate.closed_loop.margins_record`:
 ``gain_margin_db``, ``phase_margin_deg``, their crossovers, every crossover), the tuned
 loops' margins with their ``uncertainty`` (the half-width the model's uncertainty gives each
-margin), and the predicted step and disturbance rejection.
+margin) and the margins read outside the identified band (``extrapolated``: no bound), and
+the predicted step and disturbance rejection.
 """
 
 from __future__ import annotations
@@ -62,7 +63,9 @@ def _tune_schema():
                  optional={"gain_crossovers": S.List(crossing),
                            "phase_crossovers": S.List(crossing),
                            "gain_crossover_rad_s": num, "phase_crossover_rad_s": num,
-                           "not_validated": S.List(S.Str()), "uncertainty": uncertainty})
+                           "not_validated": S.List(S.Str()), "uncertainty": uncertainty,
+                           "extrapolated": S.List(S.Str(("phase_margin_deg",
+                                                         "gain_margin_db")))})
     loops = S.Obj(required={"rate": loop}, optional={"angle": loop, "input": loop})
     design = S.Obj(required={"gains": recorded_gains_schema(), "loops": loops})
     axis = S.Obj(required={"band_rad_s": S.Seq(("low", S.Num(0, lo_open=True)),

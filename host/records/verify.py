@@ -57,7 +57,9 @@ def write_verify_json(path, record: VerifyFile) -> None:
 @functools.cache
 def _verify_schema():
     num = S.Null(S.Num())
-    margins = S.Obj(optional={"unmeasured": S.List(S.Str())}, values=num)
+    margins = S.Obj(optional={"unmeasured": S.List(S.Str()),
+                              "extrapolated": S.List(S.Str(("phase_margin_deg",
+                                                            "gain_margin_db")))}, values=num)
     allowed = S.Obj(required={"phase_margin_deg": S.Num(0), "gain_margin_db": S.Num(0)})
     loop = S.Obj(required={"sweep": S.Str(), "predicted": margins, "allowed": allowed,
                            "measured": S.Null(margins), "passed": S.Bool(),

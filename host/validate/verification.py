@@ -8,7 +8,9 @@ sweep, the angle loop (broken at the rate setpoint, the rate loop closed) from t
 setpoint's, each from its closed-loop response and the firmware's controller of that loop,
 known exactly (:func:`heliquad.host.validate.loops.loop_from_closed`). A measured margin is
 accepted when it lies within the predicted one's uncertainty (never tighter than
-:data:`FLOOR`) and is not below the specification.
+:data:`FLOOR`) and is not below the specification; one predicted by extrapolation (its
+crossover outside the band the model was identified over) when it is not below the
+specification.
 """
 
 from __future__ import annotations
@@ -38,17 +40,25 @@ CROSSOVERS = ("gain_crossover_rad_s", "phase_crossover_rad_s")
 def sweep_band(predicted: dict, top_rad_s: float, bottom_rad_s: float) -> tuple:
     """``(low, high)`` rad/s of the sweep that measures a loop: from :data:`BELOW` of its
     lowest predicted crossover to :data:`ABOVE` of its highest, within
-    ``[bottom_rad_s, top_rad_s]`` (the firmware's and the signal's limits)."""
+    ``[bottom_rad_s, top_rad_s]`` (the firmware's and the signal's limits); up to
+    ``top_rad_s`` when a margin's prediction is extrapolated (its crossover may lie anywhere
+    above the identified band)."""
     found = [predicted[k] for k in CROSSOVERS if predicted.get(k)]
     if not found:
         raise ValueError("a loop with no predicted crossover")
     low = max(bottom_rad_s, BELOW * min(found))
+    if predicted.get("extrapolated"):
+        return low, top_rad_s
     return low, min(top_rad_s, max(ABOVE * max(found), 2 * low))
 
 
 def margins_only(record: dict) -> dict:
-    """A loop's margins and the crossovers they are at (what verify.json keeps)."""
-    return {k: record.get(k) for k in (*MARGINS, *CROSSOVERS)}
+    """A loop's margins and the crossovers they are at (what verify.json keeps), and the
+    margins predicted by extrapolation when there are any."""
+    out = {k: record.get(k) for k in (*MARGINS, *CROSSOVERS)}
+    if record.get("extrapolated"):
+        out["extrapolated"] = list(record["extrapolated"])
+    return out
 
 
 def measured_margins(omega, closed, gains, loop: str) -> dict:
@@ -74,7 +84,9 @@ def _allowed(predicted: dict) -> dict:
 
 def judge(predicted: dict, measured: dict, spec: dict) -> tuple:
     """``(allowed, failures)``: the band each margin may lie in, and one phrase per margin
-    that failed (not measured, outside the band, below the specification); none: accepted."""
+    that failed (not measured, outside the band, below the specification); none: accepted.
+    A margin predicted by extrapolation (``predicted["extrapolated"]``: read where the model
+    has no data) is held to the specification only: the measurement is its only evidence."""
     allowed, failures = _allowed(predicted), []
     for key, unit in MARGINS.items():
         name = key.split("_margin")[0] + " margin"
@@ -90,7 +102,7 @@ def judge(predicted: dict, measured: dict, spec: dict) -> tuple:
             failures.append(f"{name} {got:.1f} {unit} measured, none predicted")
             continue
         off = got - want
-        if abs(off) > allowed[key]:
+        if abs(off) > allowed[key] and key not in predicted.get("extrapolated", ()):
             failures.append(f"{name} {got:.1f} {unit} measured, {want:.1f} +/- "
                             f"{allowed[key]:.1f} predicted ({abs(off) - allowed[key]:.1f} "
                             f"{unit} outside)")
