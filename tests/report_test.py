@@ -327,6 +327,14 @@ def test_demo_identifies_the_vehicle_within_a_dB_and_5_degrees(tmp_path):
     _, error, verdict, _ = summary_rows(page)["roll"]
     assert error == f"{db:.2f} dB, {deg:.1f} deg" and verdict.startswith("usable for design")
     assert "real time" in res.stdout
+    # It ends with the roll gains tuned and proven on the simulated rig, before and after
+    # in the report: the in-band margins measured within the verification's bounds.
+    assert "roll: accepted" in res.stdout
+    verified = json.loads((out / "tune" / "verify.json").read_text())["axes"]["roll"]
+    assert verified["verdict"] == "accepted" and verified["board_holds"] == "tuned"
+    for loop in verified["loops"].values():
+        assert loop["passed"] and loop["measured"]["phase_margin_deg"] >= 45.0
+    assert "Tuning: tune" in page and "then flown on the rig" in page
 
 
 def test_a_cascade_unstable_only_outside_the_band_is_not_validated_not_flagged(session, tmp_path):

@@ -26,7 +26,7 @@ from ..validate.closed_loop import (margins_record, model_gains, validate_model,
 from ..validate.tune_step import step_traces
 from ..validate.tuning import Plant, Spec, Uncertainty, design_axis
 
-__all__ = ["AxisInput", "axis_input", "tune_axis", "spec_record", "write_outputs",
+__all__ = ["AxisInput", "axis_input", "tune_axis", "tune_models", "spec_record", "write_outputs",
            "TUNE_JSON", "TUNED_PARAMS", "TUNE_FIGURE"]
 
 TUNE_JSON, TUNED_PARAMS, TUNE_FIGURE = "tune.json", "tuned.params", "tune.png"
@@ -337,3 +337,77 @@ def write_outputs(out, spec: Spec, results, layout="qgc") -> list:
                       header=f"heliquad {__version__}, gains designed by heliquad tune for "
                              f"{', '.join(axes)} (tune.json beside it)", layout=layout)
     return [TUNE_JSON, TUNED_PARAMS]
+
+
+def tune_models(inputs, spec: Spec, out: str, layout: str = "qgc", progress=print) -> int:
+    """``heliquad tune``'s work: each axis of ``inputs`` (:func:`axis_input`, one per axis) tuned to
+    ``spec``, current against tuned said per axis, and, when every axis met it, tune.json,
+    tuned.params (in ``layout``) and tune.png written into ``out``. Returns 0, or 1 when a
+    band forbids the spec (said, with the sweep that would allow it; nothing written);
+    InputError when the spec cannot be met or the input is bad."""
+    # the figure's drawing (matplotlib) only when a tune runs
+    from ..present.tune import write_tune_figure
+    from ..records.figures import check_figure_output
+    from ..records.output import check_output_folder
+
+    seen = {}
+    for inp in inputs:
+        if inp.axis in seen:
+            raise InputError(f"{inp.path} and {seen[inp.axis]} are both of {inp.axis}: give one "
+                             "MODELS.json per axis")
+        seen[inp.axis] = inp.path
+    check_output_folder(out, "--out")
+    results = [tune_axis(inp, spec) for inp in inputs]
+    for r in results:
+        if r.entry is not None:
+            _print_axis(r.entry, r.inp.axis, progress)
+    failed = [r.message for r in results if r.outcome == "spec"]
+    if failed:
+        raise InputError("; ".join(failed))
+    forbidden = [r.message for r in results if r.outcome == "band"]
+    if forbidden:
+        for message in forbidden:
+            progress(message)
+        progress("nothing written")
+        return 1
+    os.makedirs(out, exist_ok=True)
+    figure = os.path.join(out, TUNE_FIGURE)
+    check_figure_output(figure, "--out")
+    written = write_outputs(out, spec, results, layout=layout)
+    write_tune_figure(figure, [(r.inp.axis, r.inp.band, r.traces) for r in results])
+    progress(f"wrote {', '.join(os.path.join(out, n) for n in written + [TUNE_FIGURE])}")
+    return 0
+
+
+def _cell(design) -> dict:
+    """The figures a design's column shows."""
+    rate = design["loops"]["rate"]
+    step = design.get("step")
+    fmt = lambda v, f: "-" if v is None else format(v, f)             # noqa: E731
+    return {"rate crossover (rad/s)": fmt(rate["gain_crossover_rad_s"], ".3g"),
+            "rate PM (deg)": fmt(rate["phase_margin_deg"], ".1f"),
+            "rate GM (dB)": fmt(rate["gain_margin_db"], ".1f"),
+            **{f"{n} PM/GM": f"{fmt(lp['phase_margin_deg'], '.1f')} / "
+                             f"{fmt(lp['gain_margin_db'], '.1f')}"
+               for n, lp in design["loops"].items() if n != "rate"},
+            "step rise 10-90 % (s)": fmt(step and step["rise_time_s"], ".3f"),
+            "step overshoot (%)": fmt(step and step["overshoot_pct"], ".1f"),
+            "step peak command": fmt(step and step["peak_command"], ".2f"),
+            "turbulence rate RMS (deg/s)": fmt(design.get("disturbance", {}).get(
+                "rate_rms_deg_s"), ".2f")}
+
+
+def _print_axis(entry, axis, progress) -> None:
+    """Current against tuned, side by side, and what limited the design."""
+    cur, tun = _cell(entry["current"]), _cell(entry["tuned"])
+    gains = lambda d: ", ".join(f"[{', '.join(f'{v:.4g}' for v in d['gains'][k])}]"  # noqa: E731
+                                for k in ("rate", "angle") if d["gains"][k] is not None)
+    progress(f"{axis}: current gains {gains(entry['current'])} ({entry['current_from']}; "
+          f"{'meets' if entry['current_meets_spec'] else 'does not meet'} the spec); tuned "
+          f"{gains(entry['tuned'])} ({'meets' if entry['meets_spec'] else 'DOES NOT MEET'} it)")
+    width = max(map(len, cur))
+    progress(f"  {'':{width}}  {'current':>12}  {'tuned':>12}")
+    for key in cur:
+        progress(f"  {key:{width}}  {cur[key]:>12}  {tun[key]:>12}")
+    for line in entry["said"]:
+        progress(f"  {line}")

@@ -23,16 +23,19 @@ import numpy as np
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import BoardRefused, FirmwareError, InputError, LinkLost
 from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_FREQ_FRACTION, MIN_FREQ_HZ
+from ...sim.rig.setup import SilConfig
 from ..acquire.design import INPUT_FRACTION
 from ..acquire.excitation import amplitude_bound, firmware_amplitude
 from ..acquire.multisine import FADE_CYCLES, MAX_LINES, MIN_PERIODS
 from ..acquire.param_protocol import (Param, ParamClient, ParamRefused,
                                       SessionLink, same_value, value_text)
-from ..acquire.sweep import SWEEP_TLOG, default_plan, multisine_plan, run_sweep
+from ..acquire.session import SilSession
+from ..acquire.sweep import SWEEP_TLOG, default_plan, multisine_plan, run_sweep, sil_source
 from ..process.signals import ABORTED_BY, EXIT_CODES, WORDS, stopped_by
 from ..records.gains import recorded_gains
 from ..records.params_file import TYPE_NAMES, read_params_file, write_params_file
 from ..records.tlog import TlogDamage, read_tlog_table
+from ..records.tune import read_tune
 from ..records.verify import VerifyFile, read_verify, write_verify_json
 from ..validate.verification import (CROSSOVERS, FLOOR, SWEEP_OF_LOOP, judge, margins_only,
                                      measured_margins, sorted_points, sweep_band,
@@ -40,7 +43,9 @@ from ..validate.verification import (CROSSOVERS, FLOOR, SWEEP_OF_LOOP, judge, ma
 from ..validate.truth import sil_truth_loops
 from .identify import estimate_points
 
-__all__ = ["VerifyPlan", "verify_axis", "PREVIOUS_PARAMS", "VERIFY_JSON", "SESSION_TLOG"]
+__all__ = ["VerifyPlan", "verify_axis", "read_tune_dir", "prepare_verification",
+           "run_verification", "sil_session", "PREVIOUS_PARAMS", "VERIFY_JSON",
+           "SESSION_TLOG"]
 
 PREVIOUS_PARAMS = "previous.params"
 VERIFY_JSON = "verify.json"
@@ -177,6 +182,86 @@ def _keep_previous(plan: VerifyPlan, board: _Board) -> None:
         kept[name] = Param(name, value, board.params[name].type, -1)
     write_params_file(path, kept.values(), header="heliquad verify: the gains the board held "
                       "before the tuned ones were set")
+
+
+def read_tune_dir(dir_path: str, axis: str | None = None) -> tuple:
+    """``(tune.json's TuneFile, the axis, the tuned values it loads)`` of a tune folder:
+    tune.json and tuned.params there, the axis tuned (``None``: the file's only one),
+    tuned.params holding tune.json's values. InputError in one line otherwise."""
+    if not os.path.isdir(dir_path):
+        raise InputError(f"{dir_path} is not a folder (heliquad tune --out DIR writes one)")
+    paths = [os.path.join(dir_path, n) for n in ("tune.json", "tuned.params")]
+    for path in paths:
+        if not os.path.isfile(path):
+            raise InputError(f"{dir_path} has no {os.path.basename(path)} (heliquad tune "
+                             "--out DIR writes tune.json and tuned.params)")
+    tune = read_tune(paths[0])
+    tuned = {p.name: p.value for p in read_params_file(paths[1])}
+    if axis is None:
+        if len(tune.axes) > 1:
+            raise InputError(f"{paths[0]} tunes {', '.join(tune.axes)}: give --axis (the rig "
+                             "frees one axis; verify one per run)")
+        axis = next(iter(tune.axes))
+    if axis not in tune.axes:
+        raise InputError(f"--axis {axis}: {paths[0]} tunes {', '.join(tune.axes)} only")
+    entries = []
+    for name, value in tune.axes[axis]["params"].items():
+        if name not in tuned or not same_value(tuned[name], value):
+            raise InputError(f"{paths[1]}: {name} is "
+                             f"{'missing' if name not in tuned else tuned[name]}, tune.json "
+                             f"says {value:g} (tuned.params and tune.json are not of one run)")
+        entries.append((name, tuned[name]))
+    return tune, axis, entries
+
+
+def prepare_verification(dir_path: str, axis: str | None, **options) -> VerifyPlan:
+    """The plan of a verification of ``axis`` from a tune folder (``options``: VerifyPlan's
+    sweep settings and ``board``), every sweep it will fly checked now (a band or amplitude
+    the firmware refuses is said before the board is touched); InputError when the folder
+    holds an earlier verification of the axis."""
+    tune, axis, entries = read_tune_dir(dir_path, axis)
+    plan = VerifyPlan(axis=axis, dir=dir_path, tune=tune, entries=entries, **options)
+    for loop in plan.loops:
+        plan.sweep_plan(loop)
+    axis_dir = os.path.join(dir_path, "verify", axis)
+    if os.path.lexists(axis_dir):
+        raise InputError(f"{axis_dir} holds an earlier verification of {axis}: move it away "
+                         "first (verify.json keeps what it found)")
+    return plan
+
+
+def sil_session(axis: str, tlog: str, **cfg) -> tuple:
+    """``(session, manifest source)``: the simulated board on the axis's rig, the 6-DoF
+    vehicle (``cfg``: SilConfig's ``params``, ``turbulence``, ``seed``, ``ideal_sensor``,
+    ``collective``, ``param_store``)."""
+    config = SilConfig(axis=axis, rig=axis, inject="rate", plant="vehicle",
+                       **{k: v for k, v in cfg.items() if v is not None})
+    source = sil_source(config)
+    try:
+        session = SilSession(config, tlog)
+    except FirmwareError as exc:
+        raise InputError(str(exc)) from None
+    source["firmware"] = session.fw.record()
+    return session, source
+
+
+def run_verification(plan: VerifyPlan, open_session, progress=print) -> tuple:
+    """:func:`verify_axis` of ``plan`` on the session ``open_session(axis, tlog path)`` opens
+    (a ``(session, manifest source)``), in ``DIR/verify/AXIS``; the session closed after,
+    a simulated board landed first so that its firmware saves the parameters changed while
+    it flew (its parameter store). Returns verify_axis's ``(exit code, lines)``."""
+    axis_dir = os.path.join(plan.dir, "verify", plan.axis)
+    os.makedirs(axis_dir)
+    session, source = open_session(plan.axis, os.path.join(axis_dir, SESSION_TLOG))
+    try:
+        progress(f"verify: {plan.axis} on {plan.board} -> {axis_dir}")
+        return verify_axis(session, source, plan, progress)
+    finally:
+        try:
+            if isinstance(session, SilSession):
+                session.land()
+        finally:
+            session.close()
 
 
 def verify_axis(session, source: dict, plan: VerifyPlan, progress=print) -> tuple:

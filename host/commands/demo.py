@@ -5,9 +5,12 @@ For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's t
 over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
 with the paper's orders and two integrator structures, each with a fitted delay (the loop's
 hold and the DMP's latency are real delays); closed-loop validation with the paper's gains
-in the firmware's discrete loops; and one HTML report for all three axes. It prints each
-axis's recommended model against the simulator's own truth, with the worst error across
-the band.
+in the firmware's discrete loops; then the identified models tuned together (heliquad
+tune's specification, into DIR/tune) and each axis's tuned gains proven on its simulated rig
+(heliquad verify: loaded, measured through setpoint sweeps, kept or the previous ones
+restored); and one HTML report for all three axes, the gains before and after in it. It
+prints each axis's recommended model against the simulator's own truth, with the worst
+error across the band, and each axis's verification verdict.
 
 The axes run side by side, each in a process of its own (:mod:`.workers`), its progress
 lines shown with its name in front. Ctrl-C, SIGTERM or SIGHUP stops every axis in order (each sweep
@@ -82,9 +85,68 @@ def run_demo(args) -> int:
             print(f"== {child.name}: failed: {result['error']}")
             summary.append((child.name, None, f"failed: {result['error']}", float("nan"),
                             float("nan")))
+    verdicts = _tune_and_verify(args.out, [c.name for c in children if c.name not in failed],
+                                options)
     report_path = _report(args.out)
     _print_summary(summary, report_path, time.monotonic() - t0, sim_s)
-    return EXIT_STOPPED if failed else 0
+    _print_verdicts(verdicts)
+    stopped = any(v == "stopped" for v in verdicts.values())
+    return EXIT_STOPPED if failed or stopped else 0
+
+
+#: Where the demo's tuning goes (tune.json, tuned.params, tune.png, and the verification's
+#: verify.json and verify/AXIS/).
+TUNE_FOLDER = "tune"
+
+
+def _tune_and_verify(out: str, axes: list, options: dict) -> dict:
+    """The demo's last step: the identified axes' models tuned together into out/tune
+    (heliquad tune's defaults), then each tuned axis verified on its simulated rig in the
+    same air as its sweep, one after the other (verify.json gathers them). Returns
+    ``{axis: verdict}`` (``accepted``, ``rejected``, ``not tuned: why``, ``stopped``)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..campaign.tune import axis_input, tune_models
+    from ..campaign.verify import prepare_verification, run_verification, sil_session
+    from ..validate.tuning import Spec
+
+    inputs, verdicts = [], {}
+    for axis in axes:
+        try:
+            inputs.append(axis_input(os.path.join(out, axis, "models.json")))
+        except InputError as exc:
+            verdicts[axis] = f"not tuned: {exc}"
+    if not inputs:
+        return verdicts
+    folder = os.path.join(out, TUNE_FOLDER)
+    print(f"== tune {', '.join(i.axis for i in inputs)} -> {folder}")
+    try:
+        code = tune_models(inputs, Spec(), folder)
+    except InputError as exc:
+        code = str(exc)
+    if code != 0:
+        why = code if isinstance(code, str) else "a band forbids the specification (above)"
+        return {**verdicts, **{i.axis: f"not tuned: {why}" for i in inputs}}
+    session = lambda axis, tlog: sil_session(                          # noqa: E731
+        axis, tlog, turbulence=options["turbulence"], seed=options["seed"],
+        ideal_sensor=options["ideal_sensor"], load_params=options["load_params"])
+    for inp in inputs:
+        print(f"== verify {inp.axis} on the simulated rig")
+        plan = prepare_verification(folder, inp.axis, board="sil")
+        code, lines = run_verification(plan, session)
+        for line in lines:
+            print(f"verify: {line}")
+        verdicts[inp.axis] = {0: "accepted", 1: "rejected"}.get(code, "stopped")
+        if verdicts[inp.axis] == "stopped":
+            break
+    return verdicts
+
+
+def _print_verdicts(verdicts: dict) -> None:
+    """Each axis's tuned gains as the verification judged them."""
+    if verdicts:
+        print("\n== tuned gains, verified on the simulated rig (tune/verify.json)")
+        for axis, verdict in verdicts.items():
+            print(f"{axis:>6}: {verdict}")
 
 
 def _report(out: str) -> str | None:

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
-from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import LOOP_RATE_HZ
 from ..records.gains import AXIS_COMMAND_MAX, DERIVATIVE_FILTER_N
 from .shared_options import number_in
@@ -66,10 +63,7 @@ def add_parser(sub, fmt) -> None:
 
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
-    from ..campaign.tune import TUNE_FIGURE, axis_input, tune_axis, write_outputs
-    from ..present.tune import write_tune_figure
-    from ..records.figures import check_figure_output
-    from ..records.output import check_output_folder
+    from ..campaign.tune import axis_input, tune_models
     from ..validate.tuning import Spec
     from .shared_options import check_model
 
@@ -79,67 +73,6 @@ def run(args) -> int:
                 coverage_k=args.coverage, command_max=args.max_command,
                 min_crossover_rad_s=args.min_crossover, **steps)
     inputs = [axis_input(path) for path in args.models]
-    seen = {}
     for inp in inputs:
-        if inp.axis in seen:
-            raise InputError(f"{inp.path} and {seen[inp.axis]} are both of {inp.axis}: give one "
-                             "MODELS.json per axis")
-        seen[inp.axis] = inp.path
-        for plant in inp.plants[:1]:
-            check_model(f"{inp.path}: {plant.name}", plant.num, plant.den)
-    check_output_folder(args.out, "--out")
-    results = [tune_axis(inp, spec) for inp in inputs]
-    for r in results:
-        if r.entry is not None:
-            _print_axis(r.entry, r.inp.axis)
-    failed = [r.message for r in results if r.outcome == "spec"]
-    if failed:
-        raise InputError("; ".join(failed))
-    forbidden = [r.message for r in results if r.outcome == "band"]
-    if forbidden:
-        for message in forbidden:
-            print(message)
-        print("nothing written")
-        return 1
-    os.makedirs(args.out, exist_ok=True)
-    figure = os.path.join(args.out, TUNE_FIGURE)
-    check_figure_output(figure, "--out")
-    written = write_outputs(args.out, spec, results,
-                            layout="mavproxy" if args.mavproxy else "qgc")
-    write_tune_figure(figure, [(r.inp.axis, r.inp.band, r.traces) for r in results])
-    print(f"wrote {', '.join(os.path.join(args.out, n) for n in written + [TUNE_FIGURE])}")
-    return 0
-
-
-def _cell(design) -> dict:
-    """The figures a design's column shows."""
-    rate = design["loops"]["rate"]
-    step = design.get("step")
-    fmt = lambda v, f: "-" if v is None else format(v, f)             # noqa: E731
-    return {"rate crossover (rad/s)": fmt(rate["gain_crossover_rad_s"], ".3g"),
-            "rate PM (deg)": fmt(rate["phase_margin_deg"], ".1f"),
-            "rate GM (dB)": fmt(rate["gain_margin_db"], ".1f"),
-            **{f"{n} PM/GM": f"{fmt(lp['phase_margin_deg'], '.1f')} / "
-                             f"{fmt(lp['gain_margin_db'], '.1f')}"
-               for n, lp in design["loops"].items() if n != "rate"},
-            "step rise 10-90 % (s)": fmt(step and step["rise_time_s"], ".3f"),
-            "step overshoot (%)": fmt(step and step["overshoot_pct"], ".1f"),
-            "step peak command": fmt(step and step["peak_command"], ".2f"),
-            "turbulence rate RMS (deg/s)": fmt(design.get("disturbance", {}).get(
-                "rate_rms_deg_s"), ".2f")}
-
-
-def _print_axis(entry, axis) -> None:
-    """Current against tuned, side by side, and what limited the design."""
-    cur, tun = _cell(entry["current"]), _cell(entry["tuned"])
-    gains = lambda d: ", ".join(f"[{', '.join(f'{v:.4g}' for v in d['gains'][k])}]"  # noqa: E731
-                                for k in ("rate", "angle") if d["gains"][k] is not None)
-    print(f"{axis}: current gains {gains(entry['current'])} ({entry['current_from']}; "
-          f"{'meets' if entry['current_meets_spec'] else 'does not meet'} the spec); tuned "
-          f"{gains(entry['tuned'])} ({'meets' if entry['meets_spec'] else 'DOES NOT MEET'} it)")
-    width = max(map(len, cur))
-    print(f"  {'':{width}}  {'current':>12}  {'tuned':>12}")
-    for key in cur:
-        print(f"  {key:{width}}  {cur[key]:>12}  {tun[key]:>12}")
-    for line in entry["said"]:
-        print(f"  {line}")
+        check_model(f"{inp.path}: {inp.plants[0].name}", inp.plants[0].num, inp.plants[0].den)
+    return tune_models(inputs, spec, args.out, layout="mavproxy" if args.mavproxy else "qgc")

@@ -4,7 +4,6 @@ ones restored otherwise (docs/verification.md)."""
 from __future__ import annotations
 
 import importlib
-import os
 import sys
 
 from ...sim.base import dialect as names
@@ -72,112 +71,52 @@ def add_parser(sub, fmt) -> None:
 
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
-    from ..campaign.verify import SESSION_TLOG, VerifyPlan, verify_axis
     from ..acquire.excitation import firmware_amplitude
+    from ..campaign.verify import prepare_verification, run_verification
 
     # fsf (with scipy) and python-control now, not while the board flies: a Ctrl-C that
     # lands inside an import leaves Python to end by SIGINT after the tool has stopped.
     importlib.import_module("heliquad.host.estimate.fsf")
     importlib.import_module("control")
-    tune, axis, entries = _read_dir(args)
     if not args.sil and (args.param_store or args.turbulence or args.params):
         raise InputError("--param-store, --turbulence and --params need --sil (a board keeps "
                          "its parameters in its flash and flies in the air it has)")
     amplitudes = {k: firmware_amplitude(k, v) for k, v in
                   (("rate", args.rate_amplitude), ("angle", args.angle_amplitude))
                   if v is not None}
-    plan = VerifyPlan(axis=axis, dir=args.dir, tune=tune, entries=entries, signal=args.signal,
-                      lines=args.lines, rig_time_s=args.rig_time, cycles=args.cycles,
-                      amplitudes=amplitudes, board="sil" if args.sil else f"port {args.port}")
-    for loop in plan.loops:             # a band or amplitude the firmware refuses: said now
-        plan.sweep_plan(loop)
-    axis_dir = os.path.join(args.dir, "verify", axis)
-    if os.path.lexists(axis_dir):
-        raise InputError(f"{axis_dir} holds an earlier verification of {axis}: move it away "
-                         "first (verify.json keeps what it found)")
-    os.makedirs(axis_dir)
-    session, source = _session(args, axis, os.path.join(axis_dir, SESSION_TLOG))
-    try:
-        print(f"verify: {axis} on {plan.board} -> {axis_dir}", flush=True)
-        code, lines = verify_axis(session, source, plan)
-    finally:
-        _close(session, args.sil)
+    plan = prepare_verification(args.dir, args.axis, signal=args.signal, lines=args.lines,
+                                rig_time_s=args.rig_time, cycles=args.cycles,
+                                amplitudes=amplitudes,
+                                board="sil" if args.sil else f"port {args.port}")
+    if args.sil:
+        args.plant, args.num, args.den = "vehicle", None, None
+        check_plant(args)
+    code, lines = run_verification(plan, _opener(args))
     if code == 0:
-        print(f"accepted: the tuned {axis} gains are on the board ({args.dir}/verify.json)")
+        print(f"accepted: the tuned {plan.axis} gains are on the board ({args.dir}/verify.json)")
     for line in lines:
         sys.stderr.write(f"heliquad verify: {line}\n")
     return code
 
 
-def _read_dir(args) -> tuple:
-    """``(tune.json's TuneFile, the axis, the tuned values it loads)`` of DIR: tune.json
-    and tuned.params there, the axis tuned, tuned.params holding tune.json's values."""
-    # the command's work, imported when it runs: --help imports every command module
-    from ..acquire.param_protocol import same_value
-    from ..records.params_file import read_params_file
-    from ..records.tune import read_tune
-
-    if not os.path.isdir(args.dir):
-        raise InputError(f"{args.dir} is not a folder (heliquad tune --out DIR writes one)")
-    paths = [os.path.join(args.dir, n) for n in ("tune.json", "tuned.params")]
-    for path in paths:
-        if not os.path.isfile(path):
-            raise InputError(f"{args.dir} has no {os.path.basename(path)} (heliquad tune "
-                             "--out DIR writes tune.json and tuned.params)")
-    tune = read_tune(paths[0])
-    tuned = {p.name: p.value for p in read_params_file(paths[1])}
-    axis = args.axis
-    if axis is None:
-        if len(tune.axes) > 1:
-            raise InputError(f"{paths[0]} tunes {', '.join(tune.axes)}: give --axis (the rig "
-                             "frees one axis; verify one per run)")
-        axis = next(iter(tune.axes))
-    if axis not in tune.axes:
-        raise InputError(f"--axis {axis}: {paths[0]} tunes {', '.join(tune.axes)} only")
-    entries = []
-    for name, value in tune.axes[axis]["params"].items():
-        if name not in tuned or not same_value(tuned[name], value):
-            raise InputError(f"{paths[1]}: {name} is "
-                             f"{'missing' if name not in tuned else tuned[name]}, tune.json "
-                             f"says {value:g} (tuned.params and tune.json are not of one run)")
-        entries.append((name, tuned[name]))
-    return tune, axis, entries
-
-
-def _session(args, axis: str, tlog: str) -> tuple:
-    """The session verify flies (the simulated board on the axis's rig, or a board's port)
-    and the sweeps' manifest source."""
+def _opener(args):
+    """What opens the session verify flies: the simulated board on the axis's rig, or a
+    board's port (a ``(session, manifest source)`` for the tlog path it is given)."""
     # the command's work, imported when it runs: --help imports every command module
     from ..acquire.ports import AUTO, auto_board
-    from ..acquire.session import PortSession, SilSession
-    from ..acquire.sweep import sil_source
-    from ...sim.rig.lockstep import FirmwareError
-    from ...sim.rig.setup import SilConfig
+    from ..acquire.session import PortSession
+    from ..campaign.verify import sil_session
 
-    if not args.sil:
+    if args.sil:
+        return lambda axis, tlog: sil_session(
+            axis, tlog, params=args.params, turbulence=args.turbulence, seed=args.seed,
+            ideal_sensor=args.ideal_sensor, collective=args.collective,
+            param_store=args.param_store)
+
+    def port_session(axis, tlog):
         board = auto_board() if args.port == AUTO else None
         port = args.port if board is None else board.device
         return PortSession(port, tlog, args.baud), {"kind": "port", "port": port,
                                                     "baud": args.baud}
-    args.plant, args.num, args.den = "vehicle", None, None
-    check_plant(args)
-    cfg = SilConfig(axis=axis, rig=axis, inject="rate", plant="vehicle", params=args.params,
-                    turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                    collective=args.collective, param_store=args.param_store)
-    source = sil_source(cfg)
-    try:
-        session = SilSession(cfg, tlog)
-    except FirmwareError as exc:
-        raise InputError(str(exc)) from None
-    source["firmware"] = session.fw.record()
-    return session, source
 
-
-def _close(session, sil: bool) -> None:
-    """The session closed; the simulated board lands first, so that the firmware saves the
-    parameters changed while it flew (--param-store)."""
-    try:
-        if sil:
-            session.land()
-    finally:
-        session.close()
+    return port_session
