@@ -27,8 +27,8 @@ def _holds(report, spec, band, axis):
         assert lp["gain_crossovers"], name
         for c in lp["gain_crossovers"]:
             assert math.degrees(c["phase_margin_rad"]) >= spec.phase_margin_deg, (name, c)
-            if name == "rate":
-                assert band[0] <= c["omega_rad_s"] <= band[1] * 1.02, c
+            if name != "input":         # every phase margin the design rests on, in band
+                assert band[0] * 0.98 <= c["omega_rad_s"] <= band[1] * 1.02, (name, c)
         for c in lp["phase_crossovers"]:
             assert abs(20 * math.log10(c["gain_margin"])) >= spec.gain_margin_db, (name, c)
 
@@ -109,9 +109,12 @@ def test_a_band_below_what_the_spec_needs_forbids_it_and_names_a_sweep(tmp_path)
 
 
 def test_a_phase_margin_no_loop_that_fast_can_have_is_the_specs_fault(tmp_path):
-    # 89 deg alone is met on these models (a PID with its lead at a low crossover); at
-    # 30 rad/s the delay and the fast pole leave no PID that much phase.
+    # 89 deg needs a loop so slow that the angle loop would cross over below the band,
+    # where its phase margin would be an extrapolation; at 30 rad/s the delay and the fast
+    # pole leave no PID that much phase at all.
     inp = axis_input(write_models(tmp_path, "roll", ROLL, ROLL_SECOND))
-    assert tune_axis(inp, Spec(phase_margin_deg=89.0)).outcome == "met"
+    result = tune_axis(inp, Spec(phase_margin_deg=89.0))
+    assert result.outcome == "spec" and "inside the identified band" in result.message
     result = tune_axis(inp, Spec(phase_margin_deg=89.0, min_crossover_rad_s=30.0))
     assert result.outcome == "spec" and "cannot be met" in result.message
+    assert tune_axis(inp, Spec(phase_margin_deg=60.0)).outcome == "met"

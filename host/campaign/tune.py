@@ -198,9 +198,9 @@ def _failures(plant, axis, gains, band, spec, unc, rate_band=True) -> list:
             if pm - unc_pm < spec.phase_margin_deg - 1e-6:
                 out.append(f"{name} loop: phase margin {pm:.1f} deg less {unc_pm:.1f} deg of "
                            f"uncertainty at {w:.3g} rad/s, below {spec.phase_margin_deg:g}")
-            if name == "rate" and rate_band and not c["in_band"]:
-                out.append(f"rate loop: gain crossover at {w:.3g} rad/s outside the identified "
-                           f"band ({band[0]:.3g}-{band[1]:.3g} rad/s)")
+            if rate_band and not c["in_band"]:
+                out.append(f"{name} loop: gain crossover at {w:.3g} rad/s outside the "
+                           f"identified band ({band[0]:.3g}-{band[1]:.3g} rad/s)")
         for c in lp["phase_crossovers"]:
             w = c["omega_rad_s"]
             gm = 20 * math.log10(c["gain_margin"])

@@ -298,8 +298,12 @@ def _angle_loop(problem, rate: Gains, wc):
     loops and the step's command within its limit: ``(gains, what limited it)``, gains None
     when none does."""
     hi, lo = wc * ANGLE_SEPARATION[0], wc * ANGLE_SEPARATION[1]
-    n = int(math.ceil(math.log10(hi / lo) * GRID_PER_DECADE)) + 1
+    # its phase margin read where the model was measured: the crossover inside the band
+    lo = max(lo, problem.band[0])
     limit = f"the separation from the rate loop (at most {ANGLE_SEPARATION[0]:.2g} of its crossover)"
+    if hi < lo:
+        return None, "its crossover held inside the identified band"
+    n = int(math.ceil(math.log10(hi / lo) * GRID_PER_DECADE)) + 1
     for wa in np.geomspace(hi, lo, n):
         s, what, gains = _best_angle(problem, rate, wa)
         if s < 0:
