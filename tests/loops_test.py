@@ -40,6 +40,25 @@ def test_the_discrete_closed_loop_is_the_loop_algebra(outer):
     assert np.allclose(got, h(w) / (1 + L), rtol=1e-9)
 
 
+def test_on_the_raw_path_the_cascade_sums_the_rate_as_the_firmware_does():
+    # The firmware's raw-path attitude filter adds T times each rate sample as it arrives:
+    # T z / (z - 1), half a loop period ahead of the integral (the DMP path's, and Tustin's).
+    num, den = ROLL
+    gains = firmware_gains("roll")
+    w = np.array([0.7, 5.0, 40.0, 300.0])
+    z = np.exp(1j * w * DT)
+    raw = loops.angle_over_rate(loops.RAW_PATH)(w)
+    assert np.allclose(raw, DT * z / (z - 1), rtol=1e-12)
+    lead = np.angle(raw / loops.angle_over_rate(None)(w))
+    assert np.allclose(lead, w * DT / 2, rtol=1e-9)
+    Gd = loops.discrete_model(num, den, 0.0123, DT)
+    sys = loops.discrete_cascade(num, den, 0.0123, gains, DT, outer=True, imu_path="raw")
+    h = lambda x: Gd(np.exp(1j * np.asarray(x) * DT))                  # noqa: E731
+    f = loops.loop_functions(h, lambda x: h(x) * loops.angle_over_rate("raw")(x), gains, DT)
+    got = np.array([sys(np.exp(1j * x * DT))[0, 1] for x in w])
+    assert np.allclose(got, h(w) / (1 + f["input"](w)), rtol=1e-9)
+
+
 def _truth(axis):
     plant = make_plant(SilConfig(axis=axis, rig=axis, inject="mixer", plant="vehicle"), DT)
     return (lambda w: plant.sampled(w)[0]), (lambda w: plant.sampled(w)[1])

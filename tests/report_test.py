@@ -330,6 +330,8 @@ def test_demo_identifies_the_vehicle_within_a_dB_and_5_degrees(tmp_path):
     # It ends with the roll gains tuned and proven on the simulated rig, before and after
     # in the report: the in-band margins measured within the verification's bounds.
     assert "roll: accepted" in res.stdout
+    # the simulated board flies the raw IMU path, which identify read from the sweep's log
+    assert json.loads((out / "roll" / "models.json").read_text())["imu_path"] == "raw"
     verified = json.loads((out / "tune" / "verify.json").read_text())["axes"]["roll"]
     assert verified["verdict"] == "accepted" and verified["board_holds"] == "tuned"
     for loop in verified["loops"].values():

@@ -19,7 +19,8 @@ from heliquad.host.records.gains import PARAM_AXIS, Gains, firmware_gains
 from heliquad.host.records.params_file import write_params_file
 from heliquad.host.records.tune import TuneFile, write_tune_json
 from heliquad.host.validate.closed_loop import margins_record
-from heliquad.host.validate.loops import LOOP_DT_S, loop_functions, margins
+from heliquad.host.validate.loops import (LOOP_DT_S, RAW_PATH, angle_over_rate,
+                                         loop_functions, margins)
 from heliquad.sim.rig.setup import SilConfig, make_plant
 
 #: The band the "models" were identified over (tune.json's band_rad_s), rad/s.
@@ -37,18 +38,12 @@ def _plant(axis: str):
 
 
 def vehicle_truth(axis: str):
-    """``(h, h_a)``: the simulated vehicle on the axis's rig, as the loops see it (the two
-    share each evaluation: the loops ask for both at the same frequencies)."""
-    plant, last = _plant(axis), {}
-
-    def both(w):
-        key = np.asarray(w, dtype=float).tobytes()
-        if key not in last:
-            last.clear()
-            last[key] = plant.sampled(w)
-        return last[key]
-
-    return (lambda w: both(w)[0]), (lambda w: both(w)[1])
+    """``(h, h_a)``: the simulated vehicle on the axis's rig, as the loops see it: the
+    sampled rate, and the logged angle as the firmware flies it on the simulated board's raw
+    IMU path (the sum of the logged rates, as verify's truth takes it)."""
+    plant = _plant(axis)
+    integral = angle_over_rate(RAW_PATH, LOOP_DT_S)
+    return (lambda w: plant.sampled(w)[0]), (lambda w: plant.sampled(w)[0] * integral(w))
 
 
 def reduced_gains(axis: str, factor: float) -> Gains:

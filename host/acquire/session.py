@@ -196,6 +196,7 @@ class SilSession(Closing):
             image["link"] = cfg.firmware_link
         self.rig = Rig(lambda dt_s: make_plant(cfg, dt_s), cfg.firmware, cfg.loop_hz,
                        cfg.faults, dmp_image=cfg.dmp_image, params_file=cfg.param_store,
+                       idle_timeout_s=cfg.idle_timeout_s,
                        sd_image=cfg.sd_image, sd_faults=cfg.sd_faults, **image)
         #: What flies and what it flies (a manifest records them).
         self.fw, self.plant, self.dt_us = self.rig.fw, self.rig.plant, self.rig.dt_us

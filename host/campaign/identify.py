@@ -35,7 +35,7 @@ from ..records.manifest import MANIFEST, read_manifest
 from ..records.models import fitted_models, write_models_json
 from ..records.points import write_points_csv, write_points_table
 from ..records.bin_log import is_bin_name
-from ..records.tlog import TlogDamage, read_tlog_table
+from ..records.tlog import TlogDamage, imu_path_of, read_tlog_table
 from ..validate.closed_loop import margins_record
 from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
@@ -71,7 +71,9 @@ def load_sweep(dir_path):
     except OSError as exc:
         raise InputError(f"{tlog}: {exc.strerror or exc}") from None
     _check_log_matches(dir_path, manifest, samples)
-    return dir_path, manifest, samples, damage
+    # the IMU path the firmware flew, from its status in the same log (how its logged angle
+    # follows its rate: host/validate/loops.py); kept with the manifest, not written to it
+    return dir_path, {**manifest, "imu_path": imu_path_of(tlog, dialect())}, samples, damage
 
 
 def _check_log_matches(dir_path, manifest, samples) -> None:
@@ -193,7 +195,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         gains=manifest.get("gains") or None,        # what the board flew, for validate
         broken_loop=loop or None, sil_truth=truth or None,
         replay=None if replays is None else _replay_record(result.recommended, replays),
-        axis=axis, points_file="points.csv"))
+        axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path")))
     _write_plots(plots, out_dir, manifest, points, result, replays)
     return {"out_dir": out_dir, "axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,

@@ -99,7 +99,8 @@ def axis_input(path) -> AxisInput:
     if doc.band_rad_s is None:
         raise InputError(f"{path} does not give the band its models were identified over "
                          "(band_rad_s): the margins could not be measured")
-    plants = [Plant(_name(index, m), tuple(m.num), tuple(m.den), float(m.delay_s))]
+    plants = [Plant(_name(index, m), tuple(m.num), tuple(m.den), float(m.delay_s),
+                    doc.imu_path)]
     said = []
     second = _second(doc, index)
     if second is None:
@@ -107,7 +108,7 @@ def axis_input(path) -> AxisInput:
                     "one alone")
     else:
         plants.append(Plant(_name(*second), tuple(second[1].num), tuple(second[1].den),
-                            float(second[1].delay_s)))
+                            float(second[1].delay_s), doc.imu_path))
     rel = _relative_sigma(path, doc)
     if not rel[0]:
         said.append("no points with sigma beside the models: the margins carry no "
@@ -224,7 +225,8 @@ def _prediction(inp, gains, spec, unc):
     plant = inp.plants[0]
     loops, _, _ = _loop_records(plant, inp.axis, gains, inp.band, unc)
     report, traces = validate_model(plant.num, plant.den, plant.delay_s, inp.axis, gains,
-                                    "moderate", 0, band_rad_s=inp.band)
+                                    "moderate", 0, band_rad_s=inp.band,
+                                    imu_path=plant.imu_path)
     out = {"gains": {"rate": list(gains.rate),
                      "angle": None if gains.angle is None else list(gains.angle)},
            "loops": loops, "stable": report["stable"]}
@@ -232,7 +234,7 @@ def _prediction(inp, gains, spec, unc):
     if report["stable"]:
         size, said, unit = _step_size(inp.axis, spec)
         t, response, command = step_traces(plant.num, plant.den, plant.delay_s, gains,
-                                           inp.axis, size)
+                                           inp.axis, size, imu_path=plant.imu_path)
         rec = validation_record(report)
         out["step"] = {**rec.step, "size": said, "unit": unit,
                        "peak_command": float(np.max(np.abs(command)))}

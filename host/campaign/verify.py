@@ -34,7 +34,7 @@ from ..acquire.sweep import SWEEP_TLOG, default_plan, multisine_plan, run_sweep,
 from ..process.signals import ABORTED_BY, EXIT_CODES, WORDS, stopped_by
 from ..records.gains import recorded_gains
 from ..records.params_file import TYPE_NAMES, read_params_file, write_params_file
-from ..records.tlog import TlogDamage, read_tlog_table
+from ..records.tlog import TlogDamage, imu_path_of, read_tlog_table
 from ..records.tune import read_tune
 from ..records.verify import VerifyFile, read_verify, write_verify_json
 from ..validate.verification import (CROSSOVERS, FLOOR, SWEEP_OF_LOOP, judge, margins_only,
@@ -72,6 +72,11 @@ RIG_TIME_S = 20.0
 LEAST_SLACK = 1.1
 #: A dwell's frequencies per loop.
 DWELL_FREQUENCIES = 8
+#: How long the simulated board waits between frames before it takes its simulator for
+#: gone, s of wall time: verify measures the loops (and the truth) with the board held
+#: between two frames, which on a loaded machine takes longer than a firmware's default
+#: 10 s, and it must then still be there to land, or to take its previous gains back.
+SIL_IDLE_TIMEOUT_S = 600
 
 
 @dataclasses.dataclass
@@ -235,6 +240,7 @@ def sil_session(axis: str, tlog: str, **cfg) -> tuple:
     vehicle (``cfg``: SilConfig's ``params``, ``turbulence``, ``seed``, ``ideal_sensor``,
     ``collective``, ``param_store``)."""
     config = SilConfig(axis=axis, rig=axis, inject="rate", plant="vehicle",
+                       idle_timeout_s=SIL_IDLE_TIMEOUT_S,
                        **{k: v for k, v in cfg.items() if v is not None})
     source = sil_source(config)
     try:
@@ -259,9 +265,19 @@ def run_verification(plan: VerifyPlan, open_session, progress=print) -> tuple:
     finally:
         try:
             if isinstance(session, SilSession):
-                session.land()
+                _land(session)
         finally:
             session.close()
+
+
+def _land(session) -> None:
+    """The simulated board lands (its firmware saves what changed while it flew); one that
+    went away first is said in one line (verify.json already says what it held)."""
+    try:
+        session.land()
+    except FirmwareError as exc:
+        raise LinkLost(f"the simulated board went away before it landed ({exc}): parameters "
+                       "changed while it flew are not saved in its parameter store") from None
 
 
 def verify_axis(session, source: dict, plan: VerifyPlan, progress=print) -> tuple:
@@ -339,8 +355,9 @@ def _judge(plan: VerifyPlan, axis_dir: str, manifests: dict, entry: dict, progre
     """Each loop measured from its sweep, against the truth on the simulated rig, judged;
     the axis's verdict."""
     damage = TlogDamage()
-    samples = read_tlog_table(os.path.join(axis_dir, SESSION_TLOG), dialect(),
-                              "HQ_SYSID_SAMPLE", damage=damage)
+    tlog = os.path.join(axis_dir, SESSION_TLOG)
+    samples = read_tlog_table(tlog, dialect(), "HQ_SYSID_SAMPLE", damage=damage)
+    imu_path = imu_path_of(tlog, dialect())
     gains = recorded_gains(plan.tune.axes[plan.axis]["tuned"]["gains"])
     spec = plan.tune.spec
     for loop, manifest in manifests.items():
@@ -358,7 +375,7 @@ def _judge(plan: VerifyPlan, axis_dir: str, manifests: dict, entry: dict, progre
                   "allowed": allowed, "measured": measured, "passed": not failures,
                   "failures": failures}
         truth = _truth(manifest, os.path.join(plan.dir, entry["sweeps"][loop]), gains, loop,
-                       entry["band_rad_s"][loop])
+                       entry["band_rad_s"][loop], imu_path)
         if truth is not None:
             record["truth"] = truth
         entry["loops"][loop] = record
@@ -367,9 +384,10 @@ def _judge(plan: VerifyPlan, axis_dir: str, manifests: dict, entry: dict, progre
         else "rejected"
 
 
-def _truth(manifest, sweep_dir, gains, loop, band):
-    """The loop's margins around the simulator's truth (a simulated sweep's), or None."""
-    found, _ = sil_truth_loops(manifest, sweep_dir)
+def _truth(manifest, sweep_dir, gains, loop, band, imu_path):
+    """The loop's margins around the simulator's truth (a simulated sweep's, its logged
+    angle as the firmware on ``imu_path`` makes it), or None."""
+    found, _ = sil_truth_loops(manifest, sweep_dir, imu_path)
     if found is None or (loop == "angle" and found[1] is None):
         return None
     return truth_margins(*found, gains, loop, band)

@@ -60,7 +60,8 @@ def _models_schema():
                                              "why": S.Str()}),
                   "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
                                       ("high", S.Num(0, 1e7, lo_open=True))),
-                  "broken_loop": S.Obj(), "gains": recorded_gains_schema()})
+                  "broken_loop": S.Obj(), "gains": recorded_gains_schema(),
+                  "imu_path": S.Str(("raw", "dmp"))})
 
 
 
@@ -149,6 +150,7 @@ class ModelsFile:
     axis: str | None = None
     points_file: str | None = None
     weights: str | None = None
+    imu_path: str | None = None
 
     def document(self) -> dict:
         """The file's JSON document: the keys that have a value, in field order."""

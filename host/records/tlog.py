@@ -44,7 +44,7 @@ from ...sim.base.framing import (CRC_LEN, HEADER_LEN, INCOMPAT_SIGNED, SIGNATURE
                                  Codec, packet_at)
 
 __all__ = ["TlogWriter", "TlogDamage", "create_log", "read_tlog", "read_tlog_table",
-           "message_dtype"]
+           "message_dtype", "imu_path_of", "IMU_PATHS"]
 
 _STAMP = struct.Struct(">Q")
 
@@ -438,3 +438,18 @@ def _record_dtype(cls):
     if dtype.itemsize != cls.unpacker.size:
         raise ValueError(f"{cls.msgname}: {cls.unpacker.format} is not {dtype}")
     return dtype
+
+
+#: The IMU paths by HQ_SENSOR_KIND (HQ_FW_STATUS.sensor_kind): what the firmware reads.
+IMU_PATHS = {"HQ_SENSOR_RAW": "raw", "HQ_SENSOR_DMP": "dmp"}
+
+
+def imu_path_of(path, mav_module) -> str | None:
+    """The IMU path a .tlog's firmware flew (``raw`` or ``dmp``): the last HQ_FW_STATUS's
+    ``sensor_kind``; None when the log has none or names neither."""
+    # its damage is said by whoever reads the log's samples: not again here
+    rows = read_tlog_table(path, mav_module, "HQ_FW_STATUS", damage=TlogDamage())
+    if not len(rows):
+        return None
+    kinds = {int(getattr(mav_module, name)): path for name, path in IMU_PATHS.items()}
+    return kinds.get(int(rows.sensor_kind[-1]))

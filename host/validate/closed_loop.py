@@ -151,10 +151,10 @@ def sweep_inputs(models_path, doc) -> dict:
     ``broken_loop``) and, when the file sits in a simulated sweep's folder (identify writes
     it there), the simulator's loop responses (``truth``)."""
     return {"band_rad_s": doc.band_rad_s, "measured": doc.broken_loop,
-            "truth": _sweep_truth(models_path)}
+            "truth": _sweep_truth(models_path, doc.imu_path), "imu_path": doc.imu_path}
 
 
-def _sweep_truth(models_path):
+def _sweep_truth(models_path, imu_path):
     """The simulator's loop responses when MODELS.json sits in a simulated sweep's folder,
     else None."""
     folder = os.path.dirname(os.path.abspath(models_path))
@@ -162,21 +162,22 @@ def _sweep_truth(models_path):
     if not os.path.exists(path):
         return None
     try:
-        truth, _ = sil_truth_loops(read_manifest(path), folder)
+        truth, _ = sil_truth_loops(read_manifest(path), folder, imu_path)
     except InputError:                  # a damaged manifest beside: no truth, not an error
         return None
     return truth
 
 
 def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate", seed=0,
-                   band_rad_s=None, truth=None, measured=None):
+                   band_rad_s=None, truth=None, measured=None, imu_path=None):
     """Margins, step, sine tracking and turbulence rejection, in SI units.
 
     ``band_rad_s``: the band the model was identified over (default the paper's for the
     axis). ``truth``: ``(h, h_a)``, the simulator's sampled responses, for
     :func:`truth_functions`. ``measured``: models.json's ``broken_loop`` (the loop measured
     through the excitation), carried into the report as ``measured_loop`` for a second
-    opinion. Returns ``(report, traces)``. ``report``: ``axis``, the model
+    opinion. ``imu_path``: the IMU path the sweep flew, how the logged angle follows the
+    rate (:func:`heliquad.host.validate.loops.angle_over_rate`). Returns ``(report, traces)``. ``report``: ``axis``, the model
     (``num``, ``den``, ``delay_s``), ``gains``, ``band_rad_s``; ``loops``: per loop
     (``rate``; ``angle`` and ``input`` for roll and pitch) the margins of
     :func:`heliquad.host.validate.loops.margins` (``gain_margin`` a ratio, ``phase_margin_rad``,
@@ -194,10 +195,10 @@ def validate_model(num, den, delay_s, axis, gains: Gains, turbulence="moderate",
     rad/s. :func:`validation_record` turns the report into validation.json.
     """
     band = tuple(band_rad_s) if band_rad_s is not None else paper_band(axis)
-    h, h_a = L.model_responses(num, den, delay_s)
+    h, h_a = L.model_responses(num, den, delay_s, imu_path)
     outer = axis != "yaw" and gains.angle is not None
     functions = L.loop_functions(h, h_a if outer else None, gains, DT_S)
-    cascade = L.discrete_cascade(num, den, delay_s, gains, DT_S, outer=outer)
+    cascade = L.discrete_cascade(num, den, delay_s, gains, DT_S, outer=outer, imu_path=imu_path)
     closed = {"rate": L.discrete_cascade(num, den, delay_s, gains, DT_S, outer=False).poles(),
               "cascade": cascade.poles()}
     report = {"axis": axis, "num": list(map(float, num)), "den": list(map(float, den)),

@@ -9,8 +9,9 @@ model's own response, delay exact, and no hold added (a second hold would count 
 sample twice).
 
 Three loops, each broken at one point with the others closed (``h`` the rate response,
-``h_a`` the angle response, ``h / (j w)`` for a model: the logged angle is the integral of
-the logged rate; ``C_PI``, ``D_m`` the rate PID on the error and on the measurement,
+``h_a`` the angle response, for a model ``h`` times the way the firmware's logged angle
+follows its logged rate on the IMU path it flew (:func:`angle_over_rate`: its sum of the
+rate samples on the raw path, the integral on the DMP path); ``C_PI``, ``D_m`` the rate PID on the error and on the measurement,
 ``K_o``, ``D_o`` the angle PD's):
 
 * ``rate``: at the plant input, angle loop open: ``L_r = (C_PI - D_m) h``;
@@ -38,7 +39,8 @@ from ...sim.base.firmware_facts import LOOP_PERIOD_S
 from ...sim.plant.pid_model import pid_z_coeffs
 from ..records.gains import DERIVATIVE_FILTER_N
 
-__all__ = ["LOOP_DT_S", "loop_functions", "model_responses", "margins", "discrete_cascade",
+__all__ = ["LOOP_DT_S", "RAW_PATH", "angle_over_rate", "loop_functions", "model_responses",
+           "margins", "discrete_cascade",
            "LOOP_NAMES", "broken_loop", "measured_loop", "loop_from_closed"]
 
 #: The firmware's control loop period, s (its one definition: the firmware's loop rate).
@@ -70,14 +72,33 @@ def _at(coeffs, z):
     return np.polyval(num, z) / np.polyval(den, z)
 
 
-def model_responses(num, den, delay_s):
-    """``(h, h_a)``: a model's rate response and the angle response it implies, each a
-    function of ``omega`` (rad/s) returning complex arrays."""
+#: The IMU path on which the firmware's logged angle is the sum of its logged rates: its
+#: attitude filter (firmware/core/attitude.cpp) integrates each gyro sample as it arrives,
+#: ``angle_k = angle_(k-1) + T rate_k``, which is ``T z / (z - 1)``, half a loop period
+#: ahead of the continuous integral. On the DMP path the logged angle is the chip's own
+#: attitude, which the continuous integral of the rate describes.
+RAW_PATH = "raw"
+
+
+def angle_over_rate(imu_path=None, dt_s=LOOP_DT_S):
+    """The logged angle over the logged rate as a function of ``omega`` (rad/s): the
+    firmware's sum ``T z / (z - 1)`` on the raw path (:data:`RAW_PATH`), else (the DMP
+    path, or a path not known) the continuous integral ``1 / (j omega)``."""
+    if imu_path == RAW_PATH:
+        return lambda omega: dt_s / (1.0 - np.exp(-1j * np.asarray(omega, dtype=float) * dt_s))
+    return lambda omega: 1.0 / (1j * np.asarray(omega, dtype=float))
+
+
+def model_responses(num, den, delay_s, imu_path=None):
+    """``(h, h_a)``: a model's rate response and the angle response it implies on the IMU
+    path the firmware flew (:func:`angle_over_rate`), each a function of ``omega`` (rad/s)
+    returning complex arrays."""
     def h(omega):
         s = 1j * np.asarray(omega, dtype=float)
         return np.polyval(num, s) / np.polyval(den, s) * np.exp(-s * delay_s)
 
-    return h, (lambda omega: h(omega) / (1j * np.asarray(omega, dtype=float)))
+    integral = angle_over_rate(imu_path)
+    return h, (lambda omega: h(omega) * integral(omega))
 
 
 def loop_functions(h, h_a, gains, dt_s=LOOP_DT_S) -> dict:
@@ -246,11 +267,12 @@ def _blocks_closed(blocks, wiring, inputs, outputs, dt_s):
     return control.ss(A_cl, B_cl, S @ M @ C, S @ M @ D @ E, dt_s)
 
 
-def discrete_cascade(num, den, delay_s, gains, dt_s=LOOP_DT_S, outer=True):
+def discrete_cascade(num, den, delay_s, gains, dt_s=LOOP_DT_S, outer=True, imu_path=None):
     """The closed loop as the firmware flies it, as one discrete state-space system with
     inputs ``ref`` (the angle setpoint with the outer loop, else the rate setpoint) and
     ``d`` (a disturbance added to the command at the plant input), outputs ``rate`` and,
-    with the outer loop, ``angle`` (the integral of the rate, Tustin). ``outer=False`` (or
+    with the outer loop, ``angle`` (the logged angle from the rate on ``imu_path``:
+    :func:`angle_over_rate`, Tustin's integral for the continuous one). ``outer=False`` (or
     no angle gains) closes the rate loop alone. Its poles are the loop's, every
     controller state included."""
     # python-control (1 s) and scipy.linalg only when a loop is built: identify imports this
@@ -266,7 +288,11 @@ def discrete_cascade(num, den, delay_s, gains, dt_s=LOOP_DT_S, outer=True):
     outputs = ["rate"]
     if outer:
         k_o, d_o = angle
-        blocks += [("angle", ss(([dt_s / 2, dt_s / 2], [1.0, -1.0]))), ("a1", ss(k_o)),
+        # the logged angle from the logged rate (angle_over_rate): the firmware's sum on the
+        # raw path, else Tustin's integral (the continuous one's phase)
+        integral = ([dt_s, 0.0], [1.0, -1.0]) if imu_path == RAW_PATH else \
+            ([dt_s / 2, dt_s / 2], [1.0, -1.0])
+        blocks += [("angle", ss(integral)), ("a1", ss(k_o)),
                    ("a2", ss(d_o))]
         wiring += [{"rate": 1.0}, {"ref": 1.0, "angle": -1.0}, {"angle": 1.0}]
         outputs.append("angle")

@@ -21,6 +21,7 @@ from ...sim.base.errors import InputError
 from ...sim.plant.dryden import LEVELS_KT
 from ...sim.rig.setup import PLANTS, SilConfig, make_plant
 from ..estimate.fit import model_response
+from .loops import RAW_PATH, angle_over_rate
 from ..records import schema as S
 
 __all__ = ["sil_truth", "sil_truth_loops", "truth_record"]
@@ -53,17 +54,24 @@ def _sweep_plant(manifest, dir_path):
         return None, str(exc)
 
 
-def sil_truth_loops(manifest, dir_path: str):
+def sil_truth_loops(manifest, dir_path: str, imu_path=None):
     """``((h, h_a), None)``: a simulated sweep's plant as the loops see it, the sampled
     responses from the torque command to the logged rate and to the logged angle (functions
     of rad/s; ``h_a`` None for a transfer-function plant, which has no angle of its own);
-    or ``(None, why not)``."""
+    or ``(None, why not)``. On the raw IMU path (``imu_path``, else the manifest's) the
+    logged angle is the firmware's sum of the logged rates, not the plant's attitude
+    (:func:`heliquad.host.validate.loops.angle_over_rate`)."""
     plant, why = _sweep_plant(manifest, dir_path)
     if plant is None:
         return None, why
     if manifest["source"]["plant"] == "tf":
         return ((lambda omega: np.asarray(plant.truth(np.asarray(omega, float), "mixer"))),
                 None), None
+    if (imu_path or manifest.get("imu_path")) == RAW_PATH:
+        # the firmware's logged angle on the raw path is its sum of the logged rates
+        integral = angle_over_rate(RAW_PATH, plant.dt_s)
+        return ((lambda omega: plant.sampled(omega)[0]),
+                (lambda omega: plant.sampled(omega)[0] * integral(omega))), None
     return ((lambda omega: plant.sampled(omega)[0]), (lambda omega: plant.sampled(omega)[1])), None
 
 

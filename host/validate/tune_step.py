@@ -30,17 +30,19 @@ def _filtered(coeffs, x):
     return lfilter(num, den, x)
 
 
-def step_traces(num, den, delay_s, gains, axis, size, duration_s=STEP_DURATION_S):
+def step_traces(num, den, delay_s, gains, axis, size, duration_s=STEP_DURATION_S,
+                imu_path=None):
     """A step of ``size`` (rad of angle for roll and pitch with an angle loop, else rad/s of
     rate) through the firmware's loops around the model: ``(t, response, command)``, the
     response in the step's quantity and the axis command (the rate PID's output,
-    ``C_PI (r - y) + D_m y``) before the firmware's clamp."""
+    ``C_PI (r - y) + D_m y``) before the firmware's clamp. ``imu_path``: how the logged
+    angle follows the rate (:func:`heliquad.host.validate.loops.angle_over_rate`)."""
     # python-control (1 s) only when a loop is simulated: the commands import this module
     import control
 
     outer = axis != "yaw" and gains.angle is not None
     dt = L.LOOP_DT_S
-    cascade = L.discrete_cascade(num, den, delay_s, gains, dt, outer=outer)
+    cascade = L.discrete_cascade(num, den, delay_s, gains, dt, outer=outer, imu_path=imu_path)
     t = np.arange(0.0, duration_s, dt)
     ref = np.full(t.size, float(size))
     out = np.atleast_2d(control.forced_response(cascade, t, np.vstack([ref, 0 * ref])).outputs)
@@ -55,7 +57,7 @@ def step_traces(num, den, delay_s, gains, axis, size, duration_s=STEP_DURATION_S
 
 
 def step_command_peak(num, den, delay_s, gains, axis, size,
-                      duration_s=STEP_DURATION_S) -> float:
+                      duration_s=STEP_DURATION_S, imu_path=None) -> float:
     """The peak |axis command| of :func:`step_traces`."""
     return float(np.max(np.abs(step_traces(num, den, delay_s, gains, axis, size,
-                                           duration_s)[2])))
+                                           duration_s, imu_path)[2])))

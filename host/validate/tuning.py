@@ -100,15 +100,18 @@ class Uncertainty:
 
 @dataclasses.dataclass(frozen=True)
 class Plant:
-    """A model the design must hold on: its name (as said), its coefficients and delay."""
+    """A model the design must hold on: its name (as said), its coefficients and delay, and
+    the IMU path its sweep flew (how the logged angle follows the rate:
+    :func:`heliquad.host.validate.loops.angle_over_rate`)."""
 
     name: str
     num: tuple
     den: tuple
     delay_s: float
+    imu_path: str | None = None
 
     def responses(self):
-        return L.model_responses(self.num, self.den, self.delay_s)
+        return L.model_responses(self.num, self.den, self.delay_s, self.imu_path)
 
 
 @dataclasses.dataclass
@@ -234,7 +237,7 @@ class _Problem:
     def command_ok(self, gains) -> bool:
         p = self.plants[0]
         return step_command_peak(p.num, p.den, p.delay_s, gains, self.axis, self._step_size(),
-                                 SEARCH_STEP_S) <= self.spec.command_max
+                                 SEARCH_STEP_S, p.imu_path) <= self.spec.command_max
 
     def _step_size(self):
         return math.radians(self.spec.step_rate_deg_s if self.axis == "yaw"

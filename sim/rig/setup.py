@@ -60,6 +60,9 @@ class SilConfig:
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
     firmware_link: str = "uart"    # teensy35: its link the tools talk over, "uart" or "usb"
     param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
+    # how long the firmware waits for its next frame before it takes its simulator for gone,
+    # s of wall time (its own default; longer for a tool that computes between frames)
+    idle_timeout_s: int = 10
     sd_image: str | None = None    # the board's SD card, a card-image file (default: no card)
     sd_faults: str | None = None   # host build: its card's faults, NAME=VALUE,... (docs/sd-card.md)
     rc_script: object = None       # rc_script.RcScript: the pilot (default: arm, then hover)
