@@ -749,6 +749,33 @@ def test_every_command_is_acknowledged_and_broadcast_targets_are_ours(client):
     assert not [m for m in client.seen[first:] if m.get_type() == "COMMAND_ACK"]
 
 
+def test_more_requests_than_a_loop_takes_are_each_answered_from_their_own_fields(any_client):
+    """A loop takes 24 messages (LoopInbox::kCapacity). A burst of 39 sent between two
+    frames (the host build's pty gives the loop all of it at once, so the 25th waits whole
+    in the link's framer for the next loop and the rest in the port), a parameter read by
+    name and two REQUEST_MESSAGE commands (one streamed message, one not) in turn, is
+    answered every one: each command's ACK in the order sent with the result its own
+    parameter gives, and each name read once."""
+    client = any_client
+    client.step(5)
+    names = [p[0] for p in PARAMS[:13]]
+    asked = [(MAV.MAVLINK_MSG_ID_SYS_STATUS, MAV.MAV_RESULT_ACCEPTED),
+             (MAV.MAVLINK_MSG_ID_GPS_RAW_INT, MAV.MAV_RESULT_DENIED)]
+    client.sent()
+    start = client.cursor
+    for name in names:
+        client.mav.param_request_read_send(1, 1, name.encode(), -1)
+        for msgid, _ in asked:
+            client.mav.command_long_send(1, 1, MAV.MAV_CMD_REQUEST_MESSAGE, 0, msgid,
+                                         0, 0, 0, 0, 0, 0)
+    client.step(20)
+    answers = client.seen[start:]
+    acks = [(m.command, m.result) for m in answers if m.get_type() == "COMMAND_ACK"]
+    assert acks == [(MAV.MAV_CMD_REQUEST_MESSAGE, result) for _ in names for _, result in asked]
+    values = [m.param_id for m in answers if m.get_type() == "PARAM_VALUE"]
+    assert sorted(values) == sorted(names)
+
+
 def test_modes_by_their_usual_names(client):
     """mavutil names a multirotor's custom modes as ArduCopter's: STABILIZE for angle mode,
     ACRO for rate mode; arming and an excitation leave the mode as it is."""

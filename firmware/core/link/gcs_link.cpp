@@ -40,7 +40,7 @@ void GcsLink::receive() {
     received_count_ = 0;
     if (have_held_) {
         have_held_ = false;
-        take(held_);
+        take(rx_msg_);
     }
     for (;;) {
         if (rx_pos_ == rx_len_) {
@@ -49,12 +49,11 @@ void GcsLink::receive() {
             if (rx_len_ == 0) return;
         }
         while (rx_pos_ < rx_len_) {
-            mavlink_message_t msg;
-            mavlink_status_t status;
-            if (mavlink_frame_char_buffer(&rx_msg_, &rx_status_, rx_buf_[rx_pos_++], &msg,
-                                          &status) == MAVLINK_FRAMING_OK && !take(msg)) {
-                held_ = msg;                 // no room this loop: the rest waits
-                have_held_ = true;
+            // A whole message is taken where the framer built it (rx_msg_), not copied out:
+            // the framer writes rx_msg_ again only when it is given the next byte.
+            if (mavlink_frame_char_buffer(&rx_msg_, &rx_status_, rx_buf_[rx_pos_++], nullptr,
+                                          nullptr) == MAVLINK_FRAMING_OK && !take(rx_msg_)) {
+                have_held_ = true;           // no room this loop: it and the rest wait
                 return;
             }
         }

@@ -103,7 +103,9 @@ public:
 private:
     friend class LogTransfer;                // packs with this link's ids, sends with offer()
     // A message taken this loop: what its answer needs, and its request's slot in inbox_
-    // (-1: the link answers it alone).
+    // (-1: the link answers it alone). What only one kind of message carries shares one
+    // place (keep() writes it and only the reply to that msgid reads it): 40 bytes, not 64,
+    // so each link's LoopInbox::kCapacity (24) of them take 960 B instead of 1 536 B.
     struct Received {
         uint32_t msgid;
         uint8_t sysid, compid;
@@ -111,31 +113,39 @@ private:
         uint8_t param_type;              // PARAM_SET
         uint16_t command;                // COMMAND_LONG, COMMAND_INT
         int16_t param_index;             // PARAM_REQUEST_READ
-        float p[7];                      // COMMAND_LONG, COMMAND_INT
-        char param_id[kParamNameLen];    // PARAM_REQUEST_READ, PARAM_SET
-        uint8_t ftp[4];                  // FILE_TRANSFER_PROTOCOL: seq (2), session, opcode
-        uint8_t program[2];              // HQ_PROGRAM: action, index
+        union {
+            float p[7];                      // COMMAND_LONG, COMMAND_INT
+            char param_id[kParamNameLen];    // PARAM_REQUEST_READ, PARAM_SET
+            uint8_t ftp[4];                  // FILE_TRANSFER_PROTOCOL: seq (2), session, opcode
+            uint8_t program[2];              // HQ_PROGRAM: action, index
+        };
     };
+    static_assert(sizeof(Received) == 40, "Received: the fields and one message's own");
+    // [[gnu::cold]]: what runs only when a ground station asks something, never in a loop
+    // of its own, is compiled for size and kept off the per-loop paths (the unit keeps -O2
+    // on the Teensy for its streams and framer; docs/teensy35.md, "Size").
     // gcs_link.cpp
     bool for_us(uint8_t target_system, uint8_t target_component) const;
     bool take(const mavlink_message_t& msg);
-    bool keep(const mavlink_message_t& msg, Received& in) const;
+    [[gnu::cold]] bool keep(const mavlink_message_t& msg, Received& in) const;
     template <typename Command>
-    bool keep_command(const Command& c, float p5, float p6, float p7, Received& in) const;
+    [[gnu::cold]] bool keep_command(const Command& c, float p5, float p6, float p7,
+                                    Received& in) const;
     template <typename ParamMessage>
-    bool keep_param(const mavlink_message_t& msg,
-                    void (*decode)(const mavlink_message_t*, ParamMessage*), Received& in) const;
+    [[gnu::cold]] bool keep_param(const mavlink_message_t& msg,
+                                  void (*decode)(const mavlink_message_t*, ParamMessage*),
+                                  Received& in) const;
     bool ask(const mavlink_message_t& msg, const Received& in, bool answered, LoopRequest& r);
-    static bool ask_command(const Received& in, LoopRequest& r);
-    bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);
+    [[gnu::cold]] static bool ask_command(const Received& in, LoopRequest& r);
+    [[gnu::cold]] bool ask_excitation(const mavlink_message_t& msg, LoopRequest& r);
     // HQ_EXCITATION's (or HQ_PROGRAM's: Message) excitation into cfg: its numbers, signal
     // and harmonics.
     template <typename Message>
-    static void read_excitation(const Message& ex, ExcitationConfig& cfg);
+    [[gnu::cold]] static void read_excitation(const Message& ex, ExcitationConfig& cfg);
     void reply(const Received& in, const LoopAnswer* a);
-    void reply_command(const Received& in, const LoopAnswer* a);
-    uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
-    void refuse_file_transfer(const Received& in);
+    [[gnu::cold]] void reply_command(const Received& in, const LoopAnswer* a);
+    [[gnu::cold]] uint8_t command_result(const Received& in, const LoopAnswer* a, Reason& why);
+    [[gnu::cold]] void refuse_file_transfer(const Received& in);
     void send_excitation_status(Reason reason, const ExcitationReport& ex);
     bool send_statustext(uint8_t severity, const char* text);
     bool say(uint8_t severity, const char* text);       // sent and logged (GcsLinkConfig::log)
@@ -146,21 +156,23 @@ private:
     bool send(const mavlink_message_t& msg);
     bool offer(const mavlink_message_t& msg);
     // param_protocol.cpp
-    bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
-    void reply_param_read(const Received& in);
-    void reply_param_set(const Received& in, const LoopAnswer* a);
-    void send_unknown_param(const char* name, int index);
-    void send_param_error(const Received& to, const char* name, int index, SetResult why);
+    [[gnu::cold]] bool ask_param_set(const mavlink_message_t& msg, LoopRequest& r) const;
+    [[gnu::cold]] void reply_param_read(const Received& in);
+    [[gnu::cold]] void reply_param_set(const Received& in, const LoopAnswer* a);
+    [[gnu::cold]] void send_unknown_param(const char* name, int index);
+    [[gnu::cold]] void send_param_error(const Received& to, const char* name, int index,
+                                        SetResult why);
     void send_params(const Tunables& values);
     bool send_param_value(const Tunables& values, int index);
     // program_link.cpp
-    bool keep_program(const mavlink_message_t& msg, Received& in) const;
-    bool ask_program(const mavlink_message_t& msg, LoopRequest& r);
-    void reply_program(const Received& in, const LoopAnswer& a);
-    void send_program_status(uint8_t action, bool accepted, const ProgramReport& report);
+    [[gnu::cold]] bool keep_program(const mavlink_message_t& msg, Received& in) const;
+    [[gnu::cold]] bool ask_program(const mavlink_message_t& msg, LoopRequest& r);
+    [[gnu::cold]] void reply_program(const Received& in, const LoopAnswer& a);
+    [[gnu::cold]] void send_program_status(uint8_t action, bool accepted,
+                                           const ProgramReport& report);
     // telemetry.cpp
-    uint8_t interval_command(uint32_t msgid, float interval_us);
-    uint8_t request_message(uint32_t msgid);
+    [[gnu::cold]] uint8_t interval_command(uint32_t msgid, float interval_us);
+    [[gnu::cold]] uint8_t request_message(uint32_t msgid);
     Stream* stream(uint32_t msgid);
     bool stream_due(Stream& s, uint32_t loop_index, uint64_t now_us);
     uint32_t stream_bytes_per_s(uint32_t msgid, uint32_t interval_us) const;
@@ -169,7 +181,7 @@ private:
     void send_heartbeat(const LoopStatus& st);
     void send_fw_status(const LoopStatus& st, uint64_t now_us);
     void send_sys_status(const LoopStatus& st);
-    void send_autopilot_version();
+    [[gnu::cold]] void send_autopilot_version();
     void send_servo_output(const LoopStatus& st, uint64_t now_us);
     void send_rc_channels(const LoopStatus& st, uint64_t now_us);
     void send_scaled_imu(const LoopStatus& st, uint64_t now_us);
@@ -185,8 +197,7 @@ private:
     int notices_sent_ = 0;                   // of the loop's current notices
     uint8_t rx_buf_[64] = {};                // bytes read but not yet parsed (inbox full)
     size_t rx_len_ = 0, rx_pos_ = 0;
-    mavlink_message_t held_{};               // parsed, but no room this loop: the next's first
-    bool have_held_ = false;
+    bool have_held_ = false;                 // rx_msg_ is whole, but this loop had no room
     // Two one-byte members beside the flag above, in the gap before load_'s alignment.
     bool last_exc_accepted_ = false;
     uint8_t heard_count_ = 0;                // of heard_[] (below)
@@ -221,7 +232,7 @@ private:
     uint32_t boot_wait_loops_ = 0;
     mavlink_status_t tx_status_{};
     mavlink_status_t rx_status_{};
-    mavlink_message_t rx_msg_{};
+    mavlink_message_t rx_msg_{};             // the framer's: in the making, or held (above)
 };
 
 }  // namespace hq
