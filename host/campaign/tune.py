@@ -402,8 +402,8 @@ def _cell(design) -> dict:
 def _print_axis(entry, axis, progress) -> None:
     """Current against tuned, side by side, and what limited the design."""
     cur, tun = _cell(entry["current"]), _cell(entry["tuned"])
-    gains = lambda d: ", ".join(f"[{', '.join(f'{v:.4g}' for v in d['gains'][k])}]"  # noqa: E731
-                                for k in ("rate", "angle") if d["gains"][k] is not None)
+    gains = lambda d: ", ".join(f"[{', '.join(f'{v:.4g}' for v in loop)}]"  # noqa: E731
+                                for loop in d["gains"].values() if loop is not None)
     progress(f"{axis}: current gains {gains(entry['current'])} ({entry['current_from']}; "
           f"{'meets' if entry['current_meets_spec'] else 'does not meet'} the spec); tuned "
           f"{gains(entry['tuned'])} ({'meets' if entry['meets_spec'] else 'DOES NOT MEET'} it)")

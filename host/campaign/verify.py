@@ -99,7 +99,8 @@ class VerifyPlan:
 
     @property
     def loops(self) -> tuple:
-        return ("rate",) if self.axis == "yaw" else ("rate", "angle")
+        # every loop a sweep measures; yaw flies its rate loop alone
+        return tuple(k for k in SWEEP_OF_LOOP if self.axis != "yaw" or k == "rate")
 
     def predicted(self, loop: str) -> dict:
         """tune.json's prediction of the tuned ``loop`` (InputError when it has none)."""
