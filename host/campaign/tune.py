@@ -178,12 +178,8 @@ def _extrapolated(lp) -> list:
     """The reported margins of a loop (:func:`heliquad.host.validate.loops.margins`) read at
     a crossover outside the identified band: the model has no data there, so their
     prediction bounds nothing (tune.json's ``extrapolated``)."""
-    out = []
-    for key, (at, among) in _READ_AT.items():
-        w = lp[at]
-        if w is not None and not next(c["in_band"] for c in lp[among] if c["omega_rad_s"] == w):
-            out.append(key)
-    return out
+    return [key for key, (at, among) in _READ_AT.items()
+            if lp[at] is not None and not L.crossover_in_band(lp[among], lp[at])]
 
 
 def _failures(plant, axis, gains, band, spec, unc, rate_band=True) -> list:

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from ..records.figures import save_figure
+from ..validate.loops import crossover_in_band
 from .figure import new_figure
 
 __all__ = ["plot_validation", "plot_loop_gains", "write_validation"]
@@ -157,13 +158,13 @@ def _mark_margins(ax_mag, ax_ph, w, phase, lp, colour, n):
     if lp.get("gain_crossover_rad_s") is not None:
         wc, pm = lp["gain_crossover_rad_s"], math.degrees(lp["phase_margin_rad"])
         marks.append((ax_ph, wc, -180 + pm, -180.0, f"PM {pm:.0f} deg",
-                      _crossover_in_band(lp["gain_crossovers"], wc)))
+                      crossover_in_band(lp["gain_crossovers"], wc)))
     if lp.get("phase_crossover_rad_s") is not None:
         wp, gm = lp["phase_crossover_rad_s"], 20 * math.log10(lp["gain_margin"])
         level = -180 + 360 * round((np.interp(math.log(wp), np.log(w), phase) + 180) / 360)
         levels.add(float(level))
         marks.append((ax_mag, wp, -gm, 0.0, f"GM {gm:.1f} dB",
-                      _crossover_in_band(lp["phase_crossovers"], wp)))
+                      crossover_in_band(lp["phase_crossovers"], wp)))
     for ax, at, value, reference, text, in_band in marks:
         ax.plot([at, at], [reference, value], color=colour if in_band else NOT_VALIDATED_COLOUR,
                 lw=1, ls=":")
@@ -176,13 +177,6 @@ def _mark_margins(ax_mag, ax_ph, w, phase, lp, colour, n):
                     alpha=1 if in_band else NOT_VALIDATED_ALPHA, clip_on=True, in_layout=False,
                     bbox={"fc": "white", "ec": "none", "alpha": 0.7, "pad": 0.5})
     return levels
-
-
-
-def _crossover_in_band(crossovers, at) -> bool:
-    """Whether the crossover at ``at`` rad/s (one of ``crossovers``) lies in the band."""
-    return next((c["in_band"] for c in crossovers if c["omega_rad_s"] == at), True)
-
 
 
 def _measured_points(ax_mag, ax_ph, w, phase, measured, key, colour):

@@ -40,7 +40,7 @@ from ...sim.plant.pid_model import pid_z_coeffs
 from ..records.gains import DERIVATIVE_FILTER_N
 
 __all__ = ["LOOP_DT_S", "RAW_PATH", "angle_over_rate", "loop_functions", "model_responses",
-           "margins", "discrete_cascade",
+           "margins", "crossover_in_band", "discrete_cascade",
            "LOOP_NAMES", "broken_loop", "measured_loop", "loop_from_closed"]
 
 #: The firmware's control loop period, s (its one definition: the firmware's loop rate).
@@ -168,6 +168,12 @@ def _bisect(f, lo: float, hi: float, f_lo: float):
     mid = 0.5 * (lo + hi)
     f_mid = f(mid)
     return mid if math.isfinite(f_mid) and abs(f_mid) <= bound else None
+
+
+def crossover_in_band(crossovers, at) -> bool:
+    """Whether the crossover at ``at`` rad/s, one of ``crossovers`` (:func:`margins`' lists,
+    each with its ``in_band``), lies inside the band; True when it is not among them."""
+    return next((c["in_band"] for c in crossovers if c["omega_rad_s"] == at), True)
 
 
 def _in_band(omega, band) -> bool:
