@@ -120,11 +120,11 @@ def _tune_and_verify(out: str, axes: list, options: dict) -> dict:
     folder = os.path.join(out, TUNE_FOLDER)
     print(f"== tune {', '.join(i.axis for i in inputs)} -> {folder}")
     try:
-        code = tune_models(inputs, Spec(), folder)
+        why = None if tune_models(inputs, Spec(), folder) == 0 else \
+            "a band forbids the specification (above)"
     except InputError as exc:
-        code = str(exc)
-    if code != 0:
-        why = code if isinstance(code, str) else "a band forbids the specification (above)"
+        why = str(exc)
+    if why is not None:
         return {**verdicts, **{i.axis: f"not tuned: {why}" for i in inputs}}
     session = lambda axis, tlog: sil_session(                          # noqa: E731
         axis, tlog, turbulence=options["turbulence"], seed=options["seed"],
