@@ -45,14 +45,34 @@ def test_a_session_from_a_board_loses_no_samples(session):
     assert s["types"]["ATTITUDE"] >= s["samples"] - 1 and s["types"]["HEARTBEAT"] >= 3
 
 
+def _record_size(data, pos):
+    """Bytes of the .tlog record at ``pos``: stamp, MAVLink 2 header and CRC, payload."""
+    return 8 + 12 + data[pos + 9]
+
+
+def _record_after(data, at):
+    """Where the first record at or after byte ``at`` of a well-formed .tlog starts."""
+    pos = 0
+    while pos < at:
+        pos += _record_size(data, pos)
+    return pos
+
+
 def test_truncated_log_is_read_up_to_the_damage(session, tmp_path):
     _, out = session
     data = out.read_bytes()
+    # Cut in the middle of the record that starts after half the file: a cut at a fixed byte
+    # count would, now and then, fall exactly on a record's end and leave a whole log behind.
+    pos = _record_after(data, len(data) // 2)
     cut = tmp_path / "cut.tlog"
-    cut.write_bytes(data[:len(data) // 2 + 7])
-    s = summarise_tlog(str(cut))
+    cut.write_bytes(data[:pos + _record_size(data, pos) // 2])
+    whole_records = tmp_path / "whole.tlog"
+    whole_records.write_bytes(data[:pos])
+    s, before = summarise_tlog(str(cut)), summarise_tlog(str(whole_records))
     assert "damaged" in s["damage"] and "skipped in 1 damaged place" in s["damage"]
-    assert s["samples"] > 100
+    # every record before the damaged one is read
+    assert before["damage"] is None and before["samples"] > 0
+    assert (s["messages"], s["samples"]) == (before["messages"], before["samples"])
     res = heliquad("tlog", cut)
     assert res.returncode == 0 and "Traceback" not in res.stderr
     assert res.stderr.count("\n") == 1 and "is damaged" in res.stderr
@@ -63,9 +83,7 @@ def test_a_corrupted_byte_costs_one_message_and_is_reported(session, tmp_path):
     data = bytearray(out.read_bytes())
     # One flipped byte inside the payload of the record that starts after a third of the file
     # (a flip in a timestamp is not detectable: no checksum covers it).
-    pos = 0
-    while pos < len(data) // 3:
-        pos += 8 + 12 + data[pos + 9]                           # stamp, header + CRC, payload
+    pos = _record_after(data, len(data) // 3)
     data[pos + 8 + 10] ^= 0xFF
     bad = tmp_path / "bad.tlog"
     bad.write_bytes(bytes(data))
