@@ -35,9 +35,12 @@ from .tune_step import SEARCH_STEP_S, step_command_peak
 __all__ = ["Spec", "Uncertainty", "Plant", "Design", "design_axis", "loop_slack",
            "RATE_SHAPES", "ANGLE_SHAPES"]
 
-#: Rate PID shapes: (tau_I wc, tau_D wc). tau_I wc = 3..10 costs the integral 19..6 deg of
-#: phase at the crossover; tau_D wc up to 0.6 adds the derivative's lead.
-RATE_SHAPES = tuple((ti, td) for ti in (3.0, 5.0, 10.0) for td in (0.0, 0.1, 0.2, 0.35, 0.6))
+#: Rate PID shapes: (tau_I wc, tau_D wc). tau_I wc = 3..30 costs the integral 19..2 deg of
+#: phase at the crossover; tau_D wc up to 0.6 adds the derivative's lead, and from 1 to 3
+#: the derivative carries the crossover (the paper's own rate loops are such, tau_D wc near
+#: 3): less proportional gain for the same crossover, so a smaller kick on a step.
+RATE_SHAPES = tuple((ti, td) for ti in (3.0, 5.0, 10.0, 30.0)
+                    for td in (0.0, 0.1, 0.2, 0.35, 0.6, 1.0, 2.0, 3.0))
 #: Angle PD shapes: tau_D wa.
 ANGLE_SHAPES = (0.0, 0.1, 0.25, 0.5)
 #: Candidate crossovers per decade, and the search's lowest crossover below the band.
@@ -46,9 +49,11 @@ GRID_BELOW_BAND = 30.0
 #: Bisection steps refining the highest crossover between two grid points (0.05 %).
 REFINE_STEPS = 8
 #: The angle loop's crossover is at most this fraction of the rate loop's (a cascade's
-#: inner loop several times faster than its outer one), and at least this fraction: an
-#: angle loop slower than that is no design; the rate loop is slowed to leave it room.
-ANGLE_SEPARATION = (1 / 2.5, 1 / 10)
+#: inner loop several times faster than its outer one). Below it, the angle loop is as fast
+#: as the spec and the step's command allow, down to the identified band's bottom: the rate
+#: loop is not slowed to make room for a faster angle loop (its crossover is what rejects
+#: disturbances; on the step, the command's peak is mostly the product of the two gains).
+ANGLE_SEPARATION = 1 / 2.5
 #: Points on which a candidate's loops are searched for crossovers (then interpolated).
 SEARCH_POINTS = 3000
 
@@ -300,10 +305,9 @@ def _angle_loop(problem, rate: Gains, wc):
     """The highest angle crossover below ``wc`` that keeps the spec on the angle and input
     loops and the step's command within its limit: ``(gains, what limited it)``, gains None
     when none does."""
-    hi, lo = wc * ANGLE_SEPARATION[0], wc * ANGLE_SEPARATION[1]
     # its phase margin read where the model was measured: the crossover inside the band
-    lo = max(lo, problem.band[0])
-    limit = f"the separation from the rate loop (at most {ANGLE_SEPARATION[0]:.2g} of its crossover)"
+    hi, lo = wc * ANGLE_SEPARATION, problem.band[0]
+    limit = f"the separation from the rate loop (at most {ANGLE_SEPARATION:.2g} of its crossover)"
     if hi < lo:
         return None, "its crossover held inside the identified band"
     n = int(math.ceil(math.log10(hi / lo) * GRID_PER_DECADE)) + 1
