@@ -52,7 +52,7 @@ def test_wrong_predictions_are_rejected_and_the_board_keeps_its_previous_gains(t
 def test_a_board_on_its_port_accepts_predictions_that_hold(tmp_path):
     folder = _copy(("yaw",), tmp_path / "tuned")
     with running_board(tmp_path, "--plant", "vehicle", "--axis", "yaw") as port:
-        res = heliquad("verify", "--port", port, folder, "--rig-time", "3")
+        res = heliquad("verify", "--port", port, folder, "--rig-time", "10")
         got = heliquad("params", "--port", port, "get", "RATE_YAW_KC")
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().splitlines()[-1].startswith("accepted: the tuned yaw gains")
