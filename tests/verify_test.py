@@ -21,7 +21,7 @@ from heliquad.host.records.tune import read_tune
 from heliquad.host.records.verify import read_verify
 from heliquad.host.validate.loops import LOOP_DT_S, _at, _controller, loop_functions
 from heliquad.host.validate.loops import loop_from_closed
-from heliquad.host.validate.verification import FLOOR, judge, sweep_band
+from heliquad.host.validate.verification import FLOOR, judge, measured_margins, sweep_band
 from heliquad.sim.base.errors import InputError
 from heliquad.sim.rig.setup import SilConfig
 
@@ -71,6 +71,31 @@ def test_a_margin_within_its_uncertainty_and_above_the_spec_passes():
     assert failures == []
     # the uncertainty where it is wider than the floor, the floor where it is tighter
     assert allowed == {"phase_margin_deg": 7.0, "gain_margin_db": FLOOR["gain_margin_db"]}
+
+
+def test_a_noisy_measurement_widens_the_band_by_its_own_uncertainty():
+    # 2.4 dB from its prediction: outside the prediction's band (the floor, 1 dB), inside the
+    # band of a measurement good to +/- 2.5 dB (combined: hypot(0.2, 2.5) = 2.51 dB)
+    measured = {"phase_margin_deg": 50.0, "gain_margin_db": 10.4}
+    assert judge(PREDICTED, measured, SPEC)[1] == [
+        "gain margin 10.4 dB measured, 8.0 +/- 1.0 predicted (1.4 dB outside)"]
+    noisy = {**measured, "uncertainty": {"phase_margin_deg": 0.0, "gain_margin_db": 2.5}}
+    allowed, failures = judge(PREDICTED, noisy, SPEC)
+    assert failures == [] and allowed["gain_margin_db"] == pytest.approx(np.hypot(0.2, 2.5))
+    assert allowed["phase_margin_deg"] == 7.0
+
+
+def test_a_measured_margins_uncertainty_follows_its_points_sigma():
+    gains = reduced_gains("roll", 0.7)
+    t_r, _ = _closed("roll", gains)
+    exact = measured_margins(OMEGA, t_r, gains, "rate", np.zeros(OMEGA.size))
+    assert exact["uncertainty"] == {"phase_margin_deg": 0.0, "gain_margin_db": 0.0}
+    u = [measured_margins(OMEGA, t_r, gains, "rate", rel * abs(t_r))["uncertainty"]
+         for rel in (0.01, 0.04)]
+    # a margin's spread grows with its points' noise, about in proportion; repeatable
+    for key in ("phase_margin_deg", "gain_margin_db"):
+        assert 0 < u[0][key] < u[1][key] and 2.5 < u[1][key] / u[0][key] < 6
+    assert measured_margins(OMEGA, t_r, gains, "rate", 0.01 * abs(t_r))["uncertainty"] == u[0]
 
 
 def test_the_acceptance_rule_says_each_failure_and_by_how_much():

@@ -363,11 +363,11 @@ def _judge(plan: VerifyPlan, axis_dir: str, manifests: dict, entry: dict, progre
     spec = plan.tune.spec
     for loop, manifest in manifests.items():
         points = estimate_points(manifest, samples, "excitation", progress)[0]
-        omega, closed = sorted_points(points)
+        omega, closed, sigma = sorted_points(points)
         if len(omega) < 2:
             raise InputError(f"the {loop} loop's sweep gave {len(omega)} usable points")
         predicted = plan.predicted(loop)
-        measured = measured_margins(omega, closed, gains, loop)
+        measured = measured_margins(omega, closed, gains, loop, sigma)
         allowed, failures = judge(predicted, measured, spec)
         record = {"sweep": entry["sweeps"][loop],
                   "predicted": {**margins_only(predicted),
@@ -405,8 +405,10 @@ def _compare(record) -> str:
         held = (" (extrapolated: held to the specification only)"
                 if key in record["predicted"].get("extrapolated", ()) else
                 f" +/- {record['allowed'][key]:.1f}")
+        own = (record["measured"].get("uncertainty") or {}).get(key)
         said = (f"{key.split('_margin')[0]} margin predicted {text(record['predicted'], key, unit)}"
-                f"{held}, measured {text(record['measured'], key, unit)}")
+                f"{held}, measured {text(record['measured'], key, unit)}"
+                + (f" +/- {own:.1f}" if own and record["measured"].get(key) is not None else ""))
         if "truth" in record:
             said += f", truth {text(record['truth'], key, unit)}"
         out.append(said)

@@ -57,10 +57,11 @@ def write_verify_json(path, record: VerifyFile) -> None:
 @functools.cache
 def _verify_schema():
     num = S.Null(S.Num())
+    allowed = S.Obj(required={"phase_margin_deg": S.Num(0), "gain_margin_db": S.Num(0)})
     margins = S.Obj(optional={"unmeasured": S.List(S.Str()),
                               "extrapolated": S.List(S.Str(("phase_margin_deg",
-                                                            "gain_margin_db")))}, values=num)
-    allowed = S.Obj(required={"phase_margin_deg": S.Num(0), "gain_margin_db": S.Num(0)})
+                                                            "gain_margin_db"))),
+                              "uncertainty": allowed}, values=num)
     loop = S.Obj(required={"sweep": S.Str(), "predicted": margins, "allowed": allowed,
                            "measured": S.Null(margins), "passed": S.Bool(),
                            "failures": S.List(S.Str())},

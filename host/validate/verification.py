@@ -6,9 +6,11 @@ Each loop is measured from a sweep injected at its own setpoint, against the exc
 the rate loop (broken at the plant input, the angle loop open) from the rate setpoint's
 sweep, the angle loop (broken at the rate setpoint, the rate loop closed) from the angle
 setpoint's, each from its closed-loop response and the firmware's controller of that loop,
-known exactly (:func:`heliquad.host.validate.loops.loop_from_closed`). A measured margin is
-accepted when it lies within the predicted one's uncertainty (never tighter than
-:data:`FLOOR`) and is not below the specification; one predicted by extrapolation (its
+known exactly (:func:`heliquad.host.validate.loops.loop_from_closed`). Each measured margin
+carries its own uncertainty: its spread over draws of the points within their sigma,
+times :data:`COVERAGE`. A measured margin is accepted when it lies within the predicted
+one's uncertainty and the measurement's, combined (root sum of squares, never tighter than
+:data:`FLOOR`), and is not below the specification; one predicted by extrapolation (its
 crossover outside the band the model was identified over) when it is not below the
 specification.
 """
@@ -20,12 +22,17 @@ import numpy as np
 from .closed_loop import margins_record
 from .loops import LOOP_DT_S, loop_from_closed, loop_functions, margins, measured_loop
 
-__all__ = ["FLOOR", "MARGINS", "CROSSOVERS", "SWEEP_OF_LOOP", "sweep_band", "measured_margins",
+__all__ = ["FLOOR", "COVERAGE", "MARGINS", "CROSSOVERS", "SWEEP_OF_LOOP", "sweep_band", "measured_margins",
            "truth_margins", "judge", "margins_only", "sorted_points"]
 
 #: The least a measured margin may differ from its prediction by: a sweep's points carry
 #: their own noise, and the interpolation between them moves a crossover a little.
 FLOOR = {"gain_margin_db": 1.0, "phase_margin_deg": 5.0}
+#: A measured margin's uncertainty is this many standard deviations of its spread over
+#: :data:`DRAWS` draws of the points (each point's complex response with its sigma, normal,
+#: independent; a fixed seed, so a verdict is repeatable). Tune's coverage is the same.
+COVERAGE = 2.0
+DRAWS = 200
 #: The margins judged, each with its unit as said.
 MARGINS = {"phase_margin_deg": "deg", "gain_margin_db": "dB"}
 #: The injection whose sweep measures each loop.
@@ -61,11 +68,31 @@ def margins_only(record: dict) -> dict:
     return out
 
 
-def measured_margins(omega, closed, gains, loop: str) -> dict:
+def measured_margins(omega, closed, gains, loop: str, sigma=None) -> dict:
     """A loop's margins measured from its sweep's points: ``closed`` the closed-loop
-    response at ``omega`` (rad/s, increasing), ``gains`` (a Gains) flown."""
+    response at ``omega`` (rad/s, increasing), ``gains`` (a Gains) flown; with the points'
+    ``sigma``, each margin's ``uncertainty`` (:data:`COVERAGE` standard deviations of its
+    spread over :data:`DRAWS` draws of the points)."""
     m = measured_loop(omega, loop_from_closed(omega, closed, gains, loop))
-    return {**margins_only(margins_record(m)), "unmeasured": list(m["unmeasured"])}
+    out = {**margins_only(margins_record(m)), "unmeasured": list(m["unmeasured"])}
+    if sigma is not None:
+        out["uncertainty"] = _spread(omega, closed, np.asarray(sigma, dtype=float), gains, loop)
+    return out
+
+
+def _spread(omega, closed, sigma, gains, loop: str) -> dict:
+    """Each margin's :data:`COVERAGE` standard deviations over :data:`DRAWS` draws of the
+    points, the draws in which the margin was found (0 when fewer than two were)."""
+    rng = np.random.default_rng(0)
+    found = {k: [] for k in MARGINS}
+    for _ in range(DRAWS):
+        noise = rng.standard_normal((2, len(omega))) * sigma / np.sqrt(2.0)
+        m = margins_record(measured_loop(omega, loop_from_closed(
+            omega, closed + noise[0] + 1j * noise[1], gains, loop)))
+        for key in MARGINS:
+            if m.get(key) is not None and np.isfinite(m[key]):
+                found[key].append(m[key])
+    return {k: COVERAGE * float(np.std(v)) if len(v) > 1 else 0.0 for k, v in found.items()}
 
 
 def truth_margins(h, h_a, gains, loop: str, band_rad_s) -> dict:
@@ -75,11 +102,13 @@ def truth_margins(h, h_a, gains, loop: str, band_rad_s) -> dict:
     return margins_only(margins_record(margins(L, band_rad_s)))
 
 
-def _allowed(predicted: dict) -> dict:
-    """The band each margin may lie in around its prediction: the prediction's uncertainty,
-    never tighter than :data:`FLOOR`."""
+def _allowed(predicted: dict, measured: dict) -> dict:
+    """The band each margin may lie in around its prediction: the prediction's uncertainty
+    and the measurement's, root sum of squares, never tighter than :data:`FLOOR`."""
     spread = predicted.get("uncertainty") or {}
-    return {k: max(float(spread.get(k) or 0.0), FLOOR[k]) for k in MARGINS}
+    own = measured.get("uncertainty") or {}
+    return {k: max(float(np.hypot(spread.get(k) or 0.0, own.get(k) or 0.0)), FLOOR[k])
+            for k in MARGINS}
 
 
 def judge(predicted: dict, measured: dict, spec: dict) -> tuple:
@@ -87,7 +116,7 @@ def judge(predicted: dict, measured: dict, spec: dict) -> tuple:
     that failed (not measured, outside the band, below the specification); none: accepted.
     A margin predicted by extrapolation (``predicted["extrapolated"]``: read where the model
     has no data) is held to the specification only: the measurement is its only evidence."""
-    allowed, failures = _allowed(predicted), []
+    allowed, failures = _allowed(predicted, measured), []
     for key, unit in MARGINS.items():
         name = key.split("_margin")[0] + " margin"
         want, got, least = predicted.get(key), measured.get(key), spec.get(key)
@@ -113,8 +142,10 @@ def judge(predicted: dict, measured: dict, spec: dict) -> tuple:
 
 
 def sorted_points(points):
-    """``(omega, closed-loop response)`` of a sweep's points, by frequency, the points whose
-    response is not finite left out."""
+    """``(omega, closed-loop response, sigma)`` of a sweep's points, by frequency, the points
+    whose response is not finite left out (a sigma that is not finite taken as 0)."""
     pts = sorted((p for p in points if np.isfinite(p.gain)), key=lambda p: p.omega_rad_s)
     return (np.array([p.omega_rad_s for p in pts]),
-            np.array([p.gain for p in pts], dtype=complex))
+            np.array([p.gain for p in pts], dtype=complex),
+            np.nan_to_num(np.array([p.sigma for p in pts], dtype=float), nan=0.0,
+                          posinf=0.0))
