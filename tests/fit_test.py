@@ -499,3 +499,21 @@ def test_the_solver_stops_where_the_residuals_or_the_jacobian_are_not_finite():
         with np.errstate(over="ignore", invalid="ignore"):
             got, r, done = fit_module._least_squares(fun, jac, np.array([3.0, 2.0]), -inf, inf, 50)
         assert done and got.shape == (2,)
+
+
+def test_a_wide_band_gets_the_orders_its_rotors_and_sensor_need():
+    from heliquad.host.acquire.sweep import TUNING_TOP_HZ, tuning_freqs_hz
+    from heliquad.host.estimate.models import WIDE_BAND_ORDERS, default_orders
+
+    # the paper's band: the paper's orders and the integrator structures only
+    for axis in ("roll", "pitch", "yaw"):
+        narrow = default_orders(axis, paper.BANDS_HZ[axis][1])
+        assert narrow == default_orders(axis)
+        assert set(WIDE_BAND_ORDERS) - set(narrow)
+        # the tuning band: every wide-band order, each once, the paper's first
+        freqs = tuning_freqs_hz(axis)
+        assert freqs[0] == pytest.approx(paper.BANDS_HZ[axis][0])
+        assert freqs[-1] == pytest.approx(TUNING_TOP_HZ)
+        wide = default_orders(axis, freqs[-1])
+        assert wide[:len(narrow)] == narrow and set(WIDE_BAND_ORDERS) <= set(wide)
+        assert len(set(wide)) == len(wide)

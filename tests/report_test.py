@@ -2,6 +2,8 @@
 
 import html
 import json
+import math
+import os
 import re
 import shutil
 import subprocess
@@ -336,6 +338,16 @@ def test_demo_identifies_the_vehicle_within_a_dB_and_5_degrees(tmp_path):
     assert verified["verdict"] == "accepted" and verified["board_holds"] == "tuned"
     for loop in verified["loops"].values():
         assert loop["passed"] and loop["measured"]["phase_margin_deg"] >= 45.0
+        # every margin predicted inside the band and measured within the floor of it
+        assert not loop["predicted"].get("extrapolated")
+        for key, floor in loop["allowed"].items():
+            assert abs(loop["measured"][key] - loop["predicted"][key]) <= floor
+    # tuned on the tuning sweep's models, identified up to 45 Hz (a dwell's top frequency
+    # is what whole loop steps make of it): every crossover of the tuned loops inside it
+    tuned = json.loads((out / "tune" / "tune.json").read_text())["axes"]["roll"]
+    assert tuned["models"].endswith(os.path.join("roll", "tuning", "models.json"))
+    assert tuned["band_rad_s"][1] > 2 * math.pi * 44
+    assert not any(loop["extrapolated"] for loop in tuned["tuned"]["loops"].values())
     assert "Tuning: tune" in page and "then flown on the rig" in page
 
 

@@ -43,10 +43,29 @@ from .multisine import LINES, RIG_TIME_S, design
 from .param_protocol import session_params
 
 __all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_source", "SWEEP_TLOG",
-           "cut_text"]
+           "cut_text", "tuning_freqs_hz"]
 
 SWEEP_TLOG = "sweep.tlog"
 N_FREQUENCIES = 15
+#: The tuning band, Hz: from the bottom of the axis's Table 1 band up to this top, above the
+#: phase crossovers of the vehicle's rate loops (where tune reads their gain margins, up to
+#: about 48 Hz), as far as the firmware's excitation reaches at 200 Hz (a quarter of the
+#: loop rate; a dwell's frequency is what whole loop steps make of it); the paper's 15
+#: frequencies and one. Not lower at the bottom: tune holds the angle loop's crossover
+#: inside the band, and from 0.2 Hz it put the rate loops at their gain margin's limit
+#: (the simulator's truth 0.4 dB under the spec) and the angle loops' crossovers where the
+#: gusts are strongest, which a verification in moderate turbulence measured 6 deg off.
+TUNING_TOP_HZ = 45.0
+TUNING_FREQUENCIES = 16
+
+
+def tuning_freqs_hz(axis: str) -> np.ndarray:
+    """The tuning band's frequencies (``heliquad sweep --tuning-band``; the demo's tuning
+    sweep): log-spaced from the bottom of the axis's Table 1 band up to
+    :data:`TUNING_TOP_HZ`, so that a model fitted to them holds where ``heliquad tune``
+    reads every margin of the rate and angle loops (docs/tuning.md)."""
+    lo = paper.BANDS_HZ[axis][0]
+    return np.logspace(math.log10(lo), math.log10(TUNING_TOP_HZ), TUNING_FREQUENCIES)
 MEASURED_CYCLES = 8
 FADE_CYCLES = 2
 

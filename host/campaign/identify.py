@@ -15,6 +15,7 @@ the output, :mod:`.replay`).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 
 import numpy as np
@@ -180,7 +181,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
     plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
     write_points_csv(os.path.join(out_dir, "points.csv"), points)
     write_points_table(os.path.join(out_dir, "points_table.csv"), points)
-    wanted = orders or default_orders(axis)
+    wanted = orders or default_orders(axis, max(p.omega_rad_s for p in points) / (2 * math.pi))
     orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
     if not orders:
         raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")

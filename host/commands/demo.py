@@ -5,7 +5,9 @@ For each axis: the firmware in the loop flies the 6-DoF vehicle on that axis's t
 over the axis's Table 1 band (15 frequencies, mixer injection: the plant); identification
 with the paper's orders and two integrator structures, each with a fitted delay (the loop's
 hold and the DMP's latency are real delays); closed-loop validation with the paper's gains
-in the firmware's discrete loops; then the identified models tuned together (heliquad
+in the firmware's discrete loops; a tuning sweep (the same dwell from the band's bottom up to
+45 Hz, into DIR/AXIS/tuning, identified there: a model that holds where every margin of
+the loops is read); then the tuning sweeps' models tuned together (heliquad
 tune's specification, into DIR/tune) and each axis's tuned gains proven on its simulated rig
 (heliquad verify: loaded, measured through setpoint sweeps, kept or the previous ones
 restored); and one HTML report for all three axes, the gains before and after in it. It
@@ -99,10 +101,17 @@ def run_demo(args) -> int:
 TUNE_FOLDER = "tune"
 
 
+#: A verification sweep's length in turbulence, s (verify's default, 20 s, in still air):
+#: the gusts are noise on every line, and the angle loop's gain margin, read where the loop
+#: gain is a few hundredths, comes out to +/- 2 dB from 20 s of moderate turbulence.
+TURBULENT_VERIFY_S = 60.0
+
+
 def _tune_and_verify(out: str, axes: list, options: dict) -> dict:
-    """The demo's last step: the identified axes' models tuned together into out/tune
+    """The demo's last step: the axes' tuning sweeps' models tuned together into out/tune
     (heliquad tune's defaults), then each tuned axis verified on its simulated rig in the
-    same air as its sweep, one after the other (verify.json gathers them). Returns
+    same air as its sweep (its sweeps 60 s long in turbulence), one after the other
+    (verify.json gathers them). Returns
     ``{axis: verdict}`` (``accepted``, ``rejected``, ``not tuned: why``, ``stopped``)."""
     # the command's work, imported when it runs: --help imports every command module
     from ..campaign.tune import axis_input, tune_models
@@ -112,7 +121,7 @@ def _tune_and_verify(out: str, axes: list, options: dict) -> dict:
     inputs, verdicts = [], {}
     for axis in axes:
         try:
-            inputs.append(axis_input(os.path.join(out, axis, "models.json")))
+            inputs.append(axis_input(os.path.join(out, axis, TUNING_SWEEP, "models.json")))
         except InputError as exc:
             verdicts[axis] = f"not tuned: {exc}"
     if not inputs:
@@ -131,7 +140,9 @@ def _tune_and_verify(out: str, axes: list, options: dict) -> dict:
         ideal_sensor=options["ideal_sensor"], load_params=options["load_params"])
     for inp in inputs:
         print(f"== verify {inp.axis} on the simulated rig")
-        plan = prepare_verification(folder, inp.axis, board="sil")
+        plan = prepare_verification(folder, inp.axis, board="sil",
+                                    rig_time_s=TURBULENT_VERIFY_S if options["turbulence"]
+                                    else None)
         code, lines = run_verification(plan, session)
         for line in lines:
             print(f"verify: {line}")
@@ -172,7 +183,8 @@ def _on_signal(signum, frame):
 
 
 def axis_main() -> None:
-    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis,
+    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis, then its
+    tuning sweep,
     and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
     ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C, SIGTERM and SIGHUP stop it in order
     (the sweep keeps its log and manifest)."""
@@ -240,8 +252,42 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
             model.num, model.den, model.delay_s, axis, model_gains(doc, axis)[0], "moderate",
             seed, **sweep_inputs(models_path, doc))
         save_validation(folder, report, traces)
+    sim_s += _tuning_sweep(cfg, axis, folder)
     return {"summary": _compare(axis, model, result.reason, identified["truth"]),
             "sim_s": sim_s}
+
+
+#: Where each axis's tuning sweep goes, inside the axis's folder (sweep.tlog, manifest.json
+#: and identify's files: the models heliquad tune designs on).
+TUNING_SWEEP = "tuning"
+
+
+def _tuning_sweep(cfg, axis: str, folder: str) -> float:
+    """The axis's tuning sweep (the same rig, air and seed as its sweep; the dwell over the
+    tuning band, from the Table 1 band's bottom to 45 Hz) into ``folder/tuning``, identified
+    there: a model that holds where tune reads every margin, the phase crossovers included,
+    which lie far above the paper's bands. Returns the seconds simulated."""
+    from ..acquire.session import SilSession
+    from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source, tuning_freqs_hz
+    from ..campaign.identify import identify_dir
+    from ..present.plot_process import InlinePlots
+
+    tuning = os.path.join(folder, TUNING_SWEEP)
+    os.makedirs(tuning, exist_ok=True)
+    freqs = tuning_freqs_hz(axis)
+    print(f"== tuning sweep: {freqs[0]:.3g}-{freqs[-1]:.3g} Hz, for heliquad tune")
+    with SilSession(cfg, os.path.join(tuning, SWEEP_TLOG)) as session:
+        run_sweep(session, default_plan(axis, freqs_hz=freqs), tuning,
+                  {**sil_source(cfg), "firmware": session.fw.record()})
+        sim_s = session.time_us * 1e-6
+    if _STOPPED_BY:
+        raise stop_exception(_STOPPED_BY[0])
+    print("== identify the tuning sweep")
+    try:
+        identify_dir(tuning, progress=print, plots=InlinePlots())
+    except InputError as exc:              # said; tune then says the axis is not tuned
+        print(f"== tuning sweep not identified: {exc}")
+    return sim_s
 
 
 def _compare(axis, model, reason, truth):

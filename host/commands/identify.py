@@ -15,7 +15,9 @@ __all__ = ["add_parser", "run"]
 HELP = """\
 Turn a sweep folder (manifest.json + sweep.tlog) into frequency-response points (FSF), the
 paper's table (points_table.csv), fitted models (models.json: the paper's orders for the axis
-and the integrator structures 0/2i and 1/3i, unless --order; each with a fitted delay
+and the integrator structures 0/2i and 1/3i, and on a band reaching over 3 times the top of
+the paper's (as sweep --tuning-band does) 1/2 1/3 2/3 1/4 too, unless --order; each with a
+fitted delay
 unless --no-delay) and plots (bode.png; responses.png: each record's input and output,
 with the recommended model's replay of the output dashed). The recommended model is the
 lowest AICc among the stable models of acceptable fit, unless another fits visibly better;
@@ -37,7 +39,8 @@ def add_parser(sub, fmt) -> None:
                                               "holding one")
     p.add_argument("--order", action="append", metavar="M/N",
                    help="an order to fit, again for more (M/Ni: one pole at the origin); "
-                        "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i")
+                        "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i "
+                        "(and 1/2 1/3 2/3 1/4 on a band reaching over 3 times the paper's top)")
     p.add_argument("--delay", action=argparse.BooleanOptionalAction, default=True,
                    help="fit a pure time delay with each model (default: the loop's hold "
                         "and the sensor's latency are real delays); --no-delay fits none")

@@ -18,7 +18,7 @@ from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 
 __all__ = ["add_port_argument", "add_baud_argument", "add_board_actions", "require_port", "add_firmware_argument", "firmware_link", "add_param_store_argument",
            "add_sd_card_arguments", "sd_card",
-           "add_fault_argument", "faults", "add_design_arguments", "sweep_plan",
+           "add_fault_argument", "faults", "add_design_arguments", "sweep_plan", "apply_tuning_band",
            "check_plant", "check_model",
            "transfer_function", "check_excitation",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
@@ -378,6 +378,10 @@ def add_design_arguments(p, on_board: bool = False) -> None:
     amplitude from what it measured, so it has a fixed dwell and fixed amplitudes)."""
     p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
                    help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
+    p.add_argument("--tuning-band", action="store_true",
+                   help="instead of the paper's band: 16 frequencies log-spaced from its "
+                        "bottom up to 45 Hz, so that the model holds where heliquad tune reads "
+                        "every margin (docs/tuning.md)")
     mixer = ("a quarter of the firmware's bound (mixer, the design's first)" if on_board else
              "designed per frequency (mixer)")
     p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
@@ -408,6 +412,17 @@ def add_design_arguments(p, on_board: bool = False) -> None:
                         f"{RIG_TIME_S:g}); as many whole base periods as fit")
 
 
+def apply_tuning_band(args) -> None:
+    """--tuning-band: its frequencies as --freqs-hz (the two together refused)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import tuning_freqs_hz
+
+    if args.tuning_band:
+        if args.freqs_hz:
+            raise InputError("--tuning-band and --freqs-hz both give the frequencies: give one")
+        args.freqs_hz = tuning_freqs_hz(args.axis).tolist()
+
+
 def sweep_plan(args, on_board: bool = False):
     """The sweep's plan from the options of :func:`add_design_arguments`: fixed or
     sequential dwell, fixed or designed amplitudes (``on_board``: a fixed dwell, 8 cycles
@@ -417,6 +432,7 @@ def sweep_plan(args, on_board: bool = False):
 
     target_sigma, max_cycles, swing_deg = (getattr(args, name, None) for name in
                                            ("target_sigma", "max_cycles", "swing_deg"))
+    apply_tuning_band(args)
     if args.cycles is not None and (target_sigma or max_cycles):
         raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
                          "the sequential dwell: give one or the other")

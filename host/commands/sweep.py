@@ -18,7 +18,7 @@ from ..acquire.multisine import MAX_LINES
 from ..acquire.rotor_multisine import ROTOR_PEAK
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .run_options import add_load_params_argument, add_rc_script_argument
-from .shared_options import (add_baud_argument, add_design_arguments,
+from .shared_options import (add_baud_argument, add_design_arguments, apply_tuning_band,
                              add_fault_argument, add_firmware_argument, firmware_link,
                              add_vehicle_arguments,
                              add_param_store_argument, add_port_argument, add_sd_card_arguments,
@@ -172,6 +172,7 @@ def rotor_plan(args):
     if peak > amplitude_bound("motors"):
         raise InputError(f"--amplitude {peak:g} is above the firmware's bound for a rotor's "
                          f"injection ({amplitude_bound('motors'):g}, EXC_MAX_MOT)")
+    apply_tuning_band(args)
     top = max(args.freqs_hz) if args.freqs_hz else paper.BANDS_HZ[args.axis][1]
     rotors = _rotors(args)
     only = None if args.inject == "motors" else int(args.inject[len("motor"):]) - 1

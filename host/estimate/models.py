@@ -18,7 +18,7 @@ from .fit import TfModel, fit_tf, n_parameters, order_name
 from .metrics import cifer_weight, evaluate_model, quality, recommend
 
 __all__ = ["WEIGHT_MODES", "FitResult", "point_weights", "fit_orders", "default_orders",
-           "INTEGRATOR_ORDERS"]
+           "INTEGRATOR_ORDERS", "WIDE_BAND_ORDERS"]
 
 #: Integrator structures tried beside the paper's orders: K / (s (s + a)), the rate of a
 #: free rig driven through one lag, and with one more pole and a zero for the rotors and the
@@ -26,10 +26,23 @@ __all__ = ["WEIGHT_MODES", "FitResult", "point_weights", "fit_orders", "default_
 INTEGRATOR_ORDERS = ((0, 2, 1), (1, 3, 1))
 
 
-def default_orders(axis: str) -> tuple:
+#: Orders added on a wide band (:data:`WIDE_BAND_FACTOR` above the paper's top for the axis,
+#: as the tuning band is): there the rotors' lag, the sensor's filter and the loop's hold
+#: add a pole, and the rotors' reaction torque a zero, that the paper's bands do not see.
+#: Without them the fits that hold the shape drive a spare pole to the allowed range's edge
+#: (degenerate), and the model left over misses the margins by several dB.
+WIDE_BAND_ORDERS = ((1, 2), (1, 3), (2, 3), (1, 4))
+WIDE_BAND_FACTOR = 3.0
+
+
+def default_orders(axis: str, top_hz: float | None = None) -> tuple:
     """The orders identify fits unless told: the paper's for the axis and the integrator
-    structures."""
-    return tuple(paper.DEFAULT_ORDERS[axis]) + INTEGRATOR_ORDERS
+    structures, and on a band whose top ``top_hz`` is a wide band's the
+    :data:`WIDE_BAND_ORDERS` not among them."""
+    orders = tuple(paper.DEFAULT_ORDERS[axis]) + INTEGRATOR_ORDERS
+    if top_hz is not None and top_hz > WIDE_BAND_FACTOR * paper.BANDS_HZ[axis][1]:
+        orders += tuple(o for o in WIDE_BAND_ORDERS if o not in orders)
+    return orders
 
 WEIGHT_MODES = ("auto", "sigma", "coherence", "none")
 #: Sigmas below this fraction of |F| are raised to it (noise-free simulations give sigma ~ 0,

@@ -9,6 +9,7 @@ verification said; the figure. Reads the two documents; computes nothing it does
 from __future__ import annotations
 
 import html
+import math
 import os
 
 from ..records.tune import LOOP_KEYS, read_tune
@@ -81,8 +82,9 @@ def _step_rows(axis_tune) -> list:
     return rows
 
 
-def _axis_html(axis, entry, checked) -> str:
-    """One axis: gains and predicted loops, current against tuned, and the verification."""
+def _axis_html(axis, entry, checked, folder) -> str:
+    """One axis: the models it was designed on, gains and predicted loops, current against
+    tuned, and the verification."""
     loops = [k for k in LOOP_KEYS if k in entry["tuned"]["loops"]]
     rows = [["gains", _gains_text(entry["current"]["gains"]), _gains_text(entry["tuned"]["gains"])]]
     rows += [[f"{name} loop (crossover: phase / gain margin)",
@@ -90,7 +92,7 @@ def _axis_html(axis, entry, checked) -> str:
               _margins(entry["tuned"]["loops"].get(name))] for name in loops]
     rows += _step_rows(entry)
     meets = entry.get("meets_spec")
-    text = (f"<h3>{html.escape(axis)}</h3>"
+    text = (f"<h3>{html.escape(axis)}</h3>" + _models_html(entry, folder)
             + table_html(["predicted by the model", "current", "tuned"], rows, left=(0,))
             + ("" if meets is None else
                f"<p class='{'ok' if meets else 'flag'}'>The tuned gains "
@@ -101,6 +103,17 @@ def _axis_html(axis, entry, checked) -> str:
     if said:
         text += "<ul>" + "".join(f"<li class='note'>{html.escape(s)}</li>" for s in said) + "</ul>"
     return text
+
+
+def _models_html(entry, folder) -> str:
+    """Which models the axis was designed on and the band they were identified over."""
+    path, band = entry.get("models"), entry.get("band_rad_s")
+    if not path or not band:
+        return ""
+    where = os.path.relpath(os.path.join(folder, path), os.path.dirname(os.path.abspath(folder)))
+    lo, hi = band
+    return (f"<p>Designed on {html.escape(where)}, identified over {lo:.3g}-{hi:.3g} rad/s "
+            f"({lo / (2 * math.pi):.3g}-{hi / (2 * math.pi):.3g} Hz).</p>")
 
 
 def _verification_html(v, loops) -> str:
@@ -145,6 +158,6 @@ def tune_html(folder: str) -> str:
             + (", then flown on the rig and measured through the excitation (heliquad verify)"
                if verified else "; not yet flown (heliquad verify proves them on the rig)")
             + ".</p>")
-    body = "".join(_axis_html(axis, entry, verified.get(axis))
+    body = "".join(_axis_html(axis, entry, verified.get(axis), folder)
                    for axis, entry in tune.axes.items())
     return head + body + image_html(os.path.join(folder, "tune.png"), "current and tuned loops")
