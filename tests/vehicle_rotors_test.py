@@ -37,6 +37,12 @@ REFERENCE_RTOL = 1e-12
 #: parameters), which rounds in float otherwise than the mixer the reference was recorded
 #: with (thrust fractions within 6e-7, tests/allocation_test.py): measured at most 9.6e-9.
 TRUTH_RTOL = 1e-7
+#: The in-the-loop plant's samples go through the turbulence filter and the IMU model, whose
+#: numpy functions (vectorised sin, cos, exp) differ in their last bits between numpy
+#: releases and with the CPU's vector width, and 400 steps of feedback through the vehicle
+#: carry that along: measured 2.4e-12 with numpy 2.4.6 (OpenBLAS 0.3.31) against the
+#: recording. Still float precision, three orders under anything a sweep could see.
+PLANT_RTOL = 1e-9
 
 
 def test_the_shipped_file_flies_as_the_recorded_reference():
@@ -47,7 +53,8 @@ def test_the_shipped_file_flies_as_the_recorded_reference():
         rows = np.array(rows)
         scale = np.abs(rows).max(axis=0)                         # each quantity's size
         off = np.abs(np.array(got[name]) - rows)
-        rtol = TRUTH_RTOL if name.startswith("truth") else REFERENCE_RTOL
+        rtol = TRUTH_RTOL if name.startswith("truth") else \
+            PLANT_RTOL if name == "plant_samples" else REFERENCE_RTOL
         assert np.all(off <= rtol * scale), (name, float(np.max(off / np.maximum(scale, 1e-300))))
 
 
