@@ -15,6 +15,7 @@ from ...sim.base.dialect import dialect
 from ...sim.base.errors import InputError
 from .. import __version__
 from ..acquire.param_protocol import Param
+from ..acquire.sweep import TUNING_TOP_HZ
 from ..records.gains import DERIVATIVE_FILTER_N, Gains, gains_params
 from ..records.models import read_models_json
 from ..records.params_file import write_params_file
@@ -291,8 +292,12 @@ def tune_axis(inp: AxisInput, spec: Spec) -> AxisResult:
         failures.append(f"the step's peak command {tuned['step']['peak_command']:.2f} exceeds "
                         f"{spec.command_max:g}")
     said += failures
-    for name, lp in tuned["loops"].items():
-        said += [f"{name} loop: {why} (the model is extrapolated there)" for why in lp["not_validated"]]
+    extrapolated = [f"{name} loop: {why} (the model is extrapolated there)"
+                    for name, lp in tuned["loops"].items() for why in lp["not_validated"]]
+    if extrapolated:
+        extrapolated.append(f"a tuning sweep (heliquad sweep --axis {inp.axis} --tuning-band, "
+                            f"up to {TUNING_TOP_HZ:g} Hz) measures the model where these are read")
+    said += extrapolated
     entry = {"models": os.path.abspath(inp.path), "model_index": inp.index,
              "band_rad_s": list(inp.band), "current": current, "tuned": tuned,
              "params": gains_params(inp.axis, design.gains), "meets_spec": not failures,

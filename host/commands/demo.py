@@ -267,6 +267,8 @@ def _tuning_sweep(cfg, axis: str, folder: str) -> float:
     tuning band, from the Table 1 band's bottom to 45 Hz) into ``folder/tuning``, identified
     there: a model that holds where tune reads every margin, the phase crossovers included,
     which lie far above the paper's bands. Returns the seconds simulated."""
+    # the command's work, imported when it runs (already, by _run_axis): --help imports
+    # every command module
     from ..acquire.session import SilSession
     from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source, tuning_freqs_hz
     from ..campaign.identify import identify_dir
