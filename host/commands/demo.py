@@ -183,9 +183,9 @@ def _on_signal(signum, frame):
 
 
 def axis_main() -> None:
-    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis, then its
-    tuning sweep,
-    and report to the demo ``{"status": "done", "summary": [...], "sim_s": ...}``, or
+    """A child of the demo (:data:`AXIS_COMMAND`): sweep, identify and validate one axis, fly
+    and identify its tuning sweep, and report to the demo ``{"status": "done", "summary":
+    [...], "sim_s": ...}``, or
     ``{"status": "stopped" | "failed", "error": ...}``. Ctrl-C, SIGTERM and SIGHUP stop it in order
     (the sweep keeps its log and manifest)."""
     # the command's work, imported when it runs: --help imports every command module
