@@ -214,8 +214,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an
     # import leaves Python to end by SIGINT after the tool has stopped in order.
     from ...sim.rig.setup import SilConfig
-    from ..acquire.session import SilSession
-    from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source
+    from ..acquire.sweep import default_plan
     from ..campaign.identify import identify_dir
     from ..present.plot_process import InlinePlots
     from ..campaign.validation import save_validation
@@ -229,12 +228,7 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
     cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis,
                     ideal_sensor=ideal_sensor, seed=seed, firmware=firmware,
                     firmware_link=link, turbulence=turbulence, load_params=load_params)
-    with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
-        run_sweep(session, default_plan(axis), folder,
-                  {**sil_source(cfg), "firmware": session.fw.record()})
-        sim_s = session.time_us * 1e-6
-    if _STOPPED_BY:                  # the sweep ended in order on a signal: stop
-        raise stop_exception(_STOPPED_BY[0])
+    sim_s = _fly(cfg, default_plan(axis), folder)
     print("== identify")
     try:
         # The plots here, not beside: the axes keep every core busy already.
@@ -257,6 +251,22 @@ def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
             "sim_s": sim_s}
 
 
+def _fly(cfg, plan, folder: str) -> float:
+    """One sweep of ``plan`` on the simulated rig ``cfg``, its log and manifest into
+    ``folder``: the seconds simulated. A sweep ended in order by a signal stops the axis."""
+    # the command's work, imported when it runs (before the sweep starts, as _run_axis's):
+    # --help imports every command module
+    from ..acquire.session import SilSession
+    from ..acquire.sweep import SWEEP_TLOG, run_sweep, sil_source
+
+    with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
+        run_sweep(session, plan, folder, {**sil_source(cfg), "firmware": session.fw.record()})
+        sim_s = session.time_us * 1e-6
+    if _STOPPED_BY:                  # the sweep ended in order on a signal: stop
+        raise stop_exception(_STOPPED_BY[0])
+    return sim_s
+
+
 #: Where each axis's tuning sweep goes, inside the axis's folder (sweep.tlog, manifest.json
 #: and identify's files: the models heliquad tune designs on).
 TUNING_SWEEP = "tuning"
@@ -269,8 +279,7 @@ def _tuning_sweep(cfg, axis: str, folder: str) -> float:
     which lie far above the paper's bands. Returns the seconds simulated."""
     # the command's work, imported when it runs (already, by _run_axis): --help imports
     # every command module
-    from ..acquire.session import SilSession
-    from ..acquire.sweep import SWEEP_TLOG, default_plan, run_sweep, sil_source, tuning_freqs_hz
+    from ..acquire.sweep import default_plan, tuning_freqs_hz
     from ..campaign.identify import identify_dir
     from ..present.plot_process import InlinePlots
 
@@ -278,12 +287,7 @@ def _tuning_sweep(cfg, axis: str, folder: str) -> float:
     os.makedirs(tuning, exist_ok=True)
     freqs = tuning_freqs_hz(axis)
     print(f"== tuning sweep: {freqs[0]:.3g}-{freqs[-1]:.3g} Hz, for heliquad tune")
-    with SilSession(cfg, os.path.join(tuning, SWEEP_TLOG)) as session:
-        run_sweep(session, default_plan(axis, freqs_hz=freqs), tuning,
-                  {**sil_source(cfg), "firmware": session.fw.record()})
-        sim_s = session.time_us * 1e-6
-    if _STOPPED_BY:
-        raise stop_exception(_STOPPED_BY[0])
+    sim_s = _fly(cfg, default_plan(axis, freqs_hz=freqs), tuning)
     print("== identify the tuning sweep")
     try:
         identify_dir(tuning, progress=print, plots=InlinePlots())
