@@ -57,6 +57,8 @@ N_FREQUENCIES = 15
 #: gusts are strongest, which a verification in moderate turbulence measured 6 deg off.
 TUNING_TOP_HZ = 45.0
 TUNING_FREQUENCIES = 16
+MEASURED_CYCLES = 8
+FADE_CYCLES = 2
 
 
 def tuning_freqs_hz(axis: str) -> np.ndarray:
@@ -66,8 +68,7 @@ def tuning_freqs_hz(axis: str) -> np.ndarray:
     reads every margin of the rate and angle loops (docs/tuning.md)."""
     lo = paper.BANDS_HZ[axis][0]
     return np.logspace(math.log10(lo), math.log10(TUNING_TOP_HZ), TUNING_FREQUENCIES)
-MEASURED_CYCLES = 8
-FADE_CYCLES = 2
+
 
 class SweepPlan:
     """What a sweep does: axis, injection point, frequencies and amplitudes (firmware units).

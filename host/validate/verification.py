@@ -21,6 +21,7 @@ import numpy as np
 
 from .closed_loop import margins_record
 from .loops import LOOP_DT_S, loop_from_closed, loop_functions, margins, measured_loop
+from .tuning import Spec
 
 __all__ = ["FLOOR", "COVERAGE", "MARGINS", "CROSSOVERS", "SWEEP_OF_LOOP", "sweep_band", "measured_margins",
            "truth_margins", "judge", "margins_only", "sorted_points"]
@@ -30,8 +31,9 @@ __all__ = ["FLOOR", "COVERAGE", "MARGINS", "CROSSOVERS", "SWEEP_OF_LOOP", "sweep
 FLOOR = {"gain_margin_db": 1.0, "phase_margin_deg": 5.0}
 #: A measured margin's uncertainty is this many standard deviations of its spread over
 #: :data:`DRAWS` draws of the points (each point's complex response with its sigma, normal,
-#: independent; a fixed seed, so a verdict is repeatable). Tune's coverage is the same.
-COVERAGE = 2.0
+#: independent; a fixed seed, so a verdict is repeatable): tune's default coverage of the
+#: points' sigma, so that both uncertainties are read alike.
+COVERAGE = Spec.coverage_k
 DRAWS = 200
 #: The margins judged, each with its unit as said.
 MARGINS = {"phase_margin_deg": "deg", "gain_margin_db": "dB"}
