@@ -76,6 +76,34 @@ def test_fit_with_delay_writes_the_delay(runs, tmp_path):
     assert json.loads(models.read_text())["models"][0]["delay_s"] == pytest.approx(0.02, rel=1e-4)
 
 
+def test_fit_says_and_records_what_it_minimised(tmp_path):
+    # Noisy points, where the two costs' minima differ: J by default, lower than the J of the
+    # relative error's fit (--cost relative, with the file's weights).
+    omega = 2 * np.pi * np.logspace(math.log10(0.5), math.log10(4.5), 15)
+    rng = np.random.default_rng(2)
+    F = np.polyval(ROLL[0], 1j * omega) / np.polyval(ROLL[1], 1j * omega) * \
+        (1 + 0.1 * (rng.normal(size=15) + 1j * rng.normal(size=15)))
+    points = tmp_path / "p.csv"
+    np.savetxt(points, np.column_stack([omega, np.abs(F), np.unwrap(np.angle(F))]),
+               delimiter=",", header="omega_rad_s,magnitude,phase_rad", comments="")
+    found = {}
+    for name, options in (("j", ()), ("relative", ("--cost", "relative"))):
+        models = tmp_path / f"{name}.json"
+        res = heliquad("fit", points, "--order", "0/2", "--json", models, *options)
+        assert res.returncode == 0, res.stderr
+        found[name] = (res.stdout, json.loads(models.read_text()))
+    assert "minimised: CIFER's J" in found["j"][0]
+    assert "minimised: the weighted relative complex error" in found["relative"][0]
+    assert [found[name][1]["cost"] for name in ("j", "relative")] == ["j", "relative"]
+    J = {name: found[name][1]["models"][0]["metrics"]["J"] for name in found}
+    assert J["j"] < 0.99 * J["relative"]
+
+
+def test_fit_refuses_an_unknown_cost(tmp_path):
+    res = heliquad("fit", tmp_path / "p.csv", "--cost", "dB", "--json", tmp_path / "m.json")
+    assert res.returncode == 2 and "invalid choice: 'dB'" in res.stderr
+    assert not (tmp_path / "m.json").exists()
+
 def test_fsf_finds_the_frequency_or_takes_it(runs, tmp_path):
     out = tmp_path / "one.csv"
     assert heliquad("fsf", runs[0], "--out", out).returncode == 0

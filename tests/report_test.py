@@ -279,7 +279,8 @@ def test_report_shows_each_loops_margins_with_what_is_not_validated_or_measured(
 def test_a_margin_in_band_the_simulators_truth_does_not_confirm_is_flagged(session, tmp_path):
     # The rate loop's phase margin is read in band (8.8 rad/s) and matches the truth: no flag.
     # Told 8 deg more than the truth (beyond the 5 deg accuracy), it is flagged; with every
-    # crossover in band, nothing is left not validated.
+    # crossover in band, nothing is left not validated. (The gain margins, read far above
+    # the band, are set to the truth's: their extrapolation is not what this checks.)
     v = json.loads((session / "validation.json").read_text())
     rate, truth = v["loops"]["rate"], v["truth_loops"]["rate"]
     assert [c["in_band"] for c in rate["gain_crossovers"]] == [True]
@@ -287,7 +288,9 @@ def test_a_margin_in_band_the_simulators_truth_does_not_confirm_is_flagged(sessi
 
     def off(doc):
         doc["loops"]["rate"]["phase_margin_deg"] = truth["phase_margin_deg"] + 8
-        for lp in doc["loops"].values():
+        for name, lp in doc["loops"].items():
+            if name in v["truth_loops"]:
+                lp["gain_margin_db"] = v["truth_loops"][name]["gain_margin_db"]
             lp["not_validated"] = []
             for c in lp["gain_crossovers"] + lp["phase_crossovers"]:
                 c["in_band"] = True
@@ -387,11 +390,13 @@ def test_a_folder_of_axes_gives_a_summary_row_per_axis(session, tmp_path):
 def test_a_model_of_too_low_an_order_is_flagged_off_the_truth(session, tmp_path):
     # The tf plant is second order; identified as first order without delay, the recommended
     # model is about 10 dB and 80 deg off the simulator's truth and fits its points poorly:
-    # both are flags, and the summary says to check first.
+    # both are flags, and the summary says to check first. (Fitted to the relative error:
+    # CIFER's J puts a first order's pole at the edge of its range, flagged degenerate, and
+    # none is recommended.)
     copy = tmp_path / "low"
     shutil.copytree(session, copy)
     (copy / "validation.json").unlink()
-    res = heliquad("identify", copy, "--order", "0/1", "--no-delay")
+    res = heliquad("identify", copy, "--order", "0/1", "--no-delay", "--cost", "relative")
     assert res.returncode == 0, res.stderr
     assert heliquad("report", copy).returncode == 0
     flags = quality_flags((copy / "report.html").read_text())

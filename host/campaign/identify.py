@@ -42,6 +42,7 @@ from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .bin_sweep import bin_sweep
+from .record import read_record, record_points
 
 __all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments", "estimate_points"]
 
@@ -142,25 +143,33 @@ def _lost_share(entry, present) -> float:
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
-                 estimate: str = "excitation", plots=None) -> dict:
-    """``plots``: what draws the plots (a :mod:`~heliquad.host.present.plot_process` object the
+                 estimate: str = "excitation", plots=None, cost: str = "j",
+                 from_record: dict | None = None) -> dict:
+    """``cost``: what the fits minimise (CIFER's J by default, or ``relative``,
+    host/estimate/fit.py). ``from_record``: read the log as one record
+    (:mod:`.record`; a dict of :func:`~.record.record_points`'s options, ``axis``,
+    ``fields``, ``band_hz``) instead of its designed excitations. ``plots``: what draws the plots (a :mod:`~heliquad.host.present.plot_process` object the
     caller has started and will close); by default a
     :class:`~heliquad.host.present.plot_process.PlotProcess` of its own, which draws them in a
     process of its own while the models are fitted."""
     if plots is None:
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
-            return identify_dir(dir_path, orders, progress, delay, estimate, plots)
+            return identify_dir(dir_path, orders, progress, delay, estimate, plots, cost,
+                                from_record)
+    if from_record is not None:
+        return _identify_record(dir_path, plots, orders, progress, delay, estimate, cost,
+                                from_record)
     out_dir, manifest, samples, damage = load_sweep(dir_path)
     if manifest["inject"] in ROTOR_INPUT_OUTPUT:
         raise InputError(f"{dir_path}: a per-rotor run (motors injection): heliquad "
                          "effectiveness reads it")
     return _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress,
-                     delay, estimate)
+                     delay, estimate, cost)
 
 
 def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress, delay,
-              estimate) -> dict:
+              estimate, cost) -> dict:
     cut = cut_text(manifest)
     if cut:
         progress(f"warning: {cut}; the points are those it measured")
@@ -179,13 +188,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
                          f"a fit needs at least 2{why}{aborted}")
     plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
-    write_points_csv(os.path.join(out_dir, "points.csv"), points)
-    write_points_table(os.path.join(out_dir, "points_table.csv"), points)
-    wanted = orders or default_orders(axis, max(p.omega_rad_s for p in points) / (2 * math.pi))
-    orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
-    if not orders:
-        raise InputError(f"{dir_path}: {len(points)} points are too few for orders {wanted}")
-    result = fit_orders(points, orders, delay=delay)
+    result = _points_and_fits(dir_path, out_dir, axis, points, orders, delay, cost)
     loop = _broken_loop(manifest, points, estimate, progress)
     truth = _truth(dir_path, manifest, points, result, progress)
     replays = _replays(result, firsts, segments)
@@ -202,6 +205,52 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
             "records": segments, "record_points": firsts, "replays": replays}
 
+
+def _points_and_fits(path, out_dir, axis, points, orders, delay, cost):
+    """points.csv and points_table.csv written, and the fits of the orders asked for (by
+    default the axis's, :func:`~..estimate.models.default_orders`) that the points support."""
+    write_points_csv(os.path.join(out_dir, "points.csv"), points)
+    write_points_table(os.path.join(out_dir, "points_table.csv"), points)
+    wanted = orders or default_orders(axis, max(p.omega_rad_s for p in points) / (2 * math.pi))
+    orders = [o for o in wanted if 2 * len(points) >= n_parameters(o, delay) + 1]
+    if not orders:
+        raise InputError(f"{path}: {len(points)} points are too few for orders {wanted}")
+    return fit_orders(points, orders, delay=delay, cost=cost)
+
+def _identify_record(path, plots, orders, progress, delay, estimate, cost, options) -> dict:
+    """identify's work on a record read as one (:mod:`.record`): the composite's points, the
+    fits, the broken loop and the simulator's truth where they apply; no replay (a record
+    has no periods to replay)."""
+    manifest, samples, damage, out_dir = read_record(path)
+    if damage:
+        progress(f"warning: the log is damaged: {damage.summary()}; {damage.KEPT}")
+    found = record_points(manifest, samples, estimate, progress, **options)
+    points, skipped, axis = found["points"], found["skipped"], found["axis"]
+    for text in skipped:
+        progress(f"  {text}: left out")
+    if len(points) < 2:
+        raise InputError(f"{path}: {len(points)} point(s) with coherence enough for a fit, "
+                         "at least 2 are needed (a longer record, or more excitation)")
+    inject = found["inject"]
+    u_name, y_name = found["record"]["input"], found["record"]["output"]
+    plots.records([found["segment"]], u_name, y_name)
+    result = _points_and_fits(path, out_dir, axis, points, orders, delay, cost)
+    said = {"axis": axis, "inject": inject}
+    loop = _broken_loop(said, points, found["record"]["estimate"], progress) \
+        if (u_name, y_name) == input_output(inject) else None
+    truth = _truth(out_dir, manifest, points, result, progress) if manifest else None
+    write_models_json(os.path.join(out_dir, "models.json"), fitted_models(
+        result, log=damage.record(), skipped_frequencies=skipped,
+        estimate=found["record"]["estimate"], record=found["record"],
+        gains=(manifest or {}).get("gains") or None, broken_loop=loop or None,
+        sil_truth=truth or None, axis=axis, points_file="points.csv",
+        imu_path=(manifest or {}).get("imu_path")))
+    _write_plots(plots, out_dir, said, points, result, None,
+                 "a record read as one: no periods to replay")
+    return {"out_dir": out_dir, "axis": axis, "points": points, "result": result,
+            "manifest": manifest, "damage": damage, "skipped": skipped, "saturated": [],
+            "truth": truth, "records": [found["segment"]], "record_points": [],
+            "replays": None, "record": found["record"]}
 
 def _replays(result, points, segments):
     """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
@@ -220,7 +269,7 @@ def _replay_record(recommended, replays) -> dict:
                        for r in sorted(replays, key=lambda r: r.freq_hz)]}
 
 
-def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
+def _write_plots(plots, dir_path, manifest, points, result, replays, no_replay=None) -> None:
     """bode.png (the points with their coherence, and the models) and responses.png (each
     record, with the recommended model's replay), by the plotting process ``plots``."""
     axis, inject = manifest["axis"], manifest["inject"]
@@ -229,7 +278,7 @@ def _write_plots(plots, dir_path, manifest, points, result, replays) -> None:
             "title": f"{axis}, {inject} injection: points, models and coherence",
             "gate": LOW_COHERENCE}
     said = "dashed: the recommended model's replay" if replays is not None else \
-        "no model recommended, so no replay"
+        no_replay or "no model recommended, so no replay"
     plots.finish(bode, {"path": os.path.join(dir_path, "responses.png"), "replays": replays,
                         "title": f"{axis}: measured cycles, input (left axis) and output "
                                  f"(right axis); {said}"})

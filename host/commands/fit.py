@@ -4,15 +4,17 @@ from __future__ import annotations
 
 from ...sim.base.errors import InputError
 from ..estimate.thresholds import LOW_COHERENCE
+from ..records.choices import COSTS
 
-__all__ = ["add_parser", "run", "print_models"]
+__all__ = ["add_parser", "run", "print_models", "add_cost_option"]
 
 DEFAULT_FIT_ORDERS = ("0/1", "0/2", "0/3", "2/2", "2/3", "2/4")
 
 HELP = """\
 Fit transfer functions of the given orders to frequency-response points: Levy's method,
-Sanathanan-Koerner iterations, then an output-error refinement with stable poles
-(docs/paper.md, step 3). Prints each model's metrics and the recommended one.
+Sanathanan-Koerner iterations, an output-error refinement with stable poles (docs/paper.md,
+step 3), then, by default, a last stage that minimises CIFER's J itself (--cost). Prints
+each model's metrics, what was minimised, and the recommended model.
 
 POINTS.csv: a header row, columns omega_rad_s,magnitude,phase_rad (rad/s, linear, rad;
 omega strictly increasing) and optionally sigma,coherence (and coherence_ry,coherence_ru,
@@ -41,6 +43,7 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--weights", choices=("auto", "sigma", "coherence", "none"), default="auto",
                    help="point weights: 1/sigma, CIFER coherence weight, or equal relative "
                         "weight (default auto: sigma, else coherence, else none)")
+    add_cost_option(p)
     p.add_argument("--allow-unstable", action="store_true",
                    help="do not constrain poles to the left half plane (unstable results "
                         "are flagged)")
@@ -54,6 +57,14 @@ def add_parser(sub, fmt) -> None:
     p.set_defaults(func=run)
 
 
+def add_cost_option(p) -> None:
+    """``--cost``, on fit and identify."""
+    p.add_argument("--cost", choices=COSTS, default="j",
+                   help="what the fits minimise: j (default), CIFER's J itself (the dB and "
+                        "degree errors of every point, weighted by its coherence: the number "
+                        "the table compares models by), started from the relative fit; "
+                        "relative: the weighted relative complex error alone, the fit "
+                        "before J's stage")
 
 
 def run(args) -> int:
@@ -82,7 +93,7 @@ def run(args) -> int:
         if not orders:
             raise InputError(f"{args.points}: {n} point(s) are too few for any default order")
     result = fit_orders(points, orders, weights=args.weights, delay=args.delay,
-                        stable=not args.allow_unstable)
+                        stable=not args.allow_unstable, cost=args.cost)
     print_models(result)
     fitted = fitted_models(result, points_file=str(args.points))
     write_models_json(args.json, fitted)
@@ -104,7 +115,9 @@ def print_models(result) -> None:
     # the command's work, imported when it runs: --help imports every command module
     from ..estimate.fit import format_tf, order_name
 
-    print(f"weights: {result.weights}")
+    minimised = ("CIFER's J (coherence-weighted dB and deg errors)" if result.cost == "j"
+                 else "the weighted relative complex error")
+    print(f"weights: {result.weights}; minimised: {minimised}")
     print(f"{'order':>8} {'J':>9} {'rms %':>8} {'AICc':>10} {'max dB':>7} {'max deg':>8} "
           f"{'stable':>6}  model")
     for i, m in enumerate(result.models):

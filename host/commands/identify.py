@@ -7,8 +7,10 @@ import math
 import os
 import sys
 
+from ...sim.base.dialect import AXES
 from ...sim.base.errors import InputError
-from .fit import print_models
+from ..records.choices import RECORD_FIELDS
+from .fit import add_cost_option, print_models
 
 __all__ = ["add_parser", "run"]
 
@@ -28,6 +30,15 @@ DIR may also be a board's on-board log, a .BIN (heliquad logs download, or LOGS/
 card), or a folder holding one and no manifest: the sweep is read from the log itself (each
 excitation's set-up from SIDS, its samples from HQSD; a multisine's lines from its logged
 excitation), and the outputs go into the folder that holds the .BIN.
+--from-record reads the log (a sweep folder's, or a .tlog such as heliquad log writes) as one
+record without a designed periodic excitation: a chirp, a pilot's inputs, turbulence. Its
+longest armed stretch is cut into overlapped, tapered windows of five lengths, whose
+estimates are combined into one composite response at 20 frequencies over the band
+(--band, else the sweep's, else the paper's for the axis), each point with its coherence and
+random error; points of coherence below 0.6 are left out. Against the record's excitation
+when it carries one; otherwise the direct estimate of --output over --input, right only
+where the input is not fed back from the output's noise (a pilot's inputs that outweigh the
+turbulence: under a closed loop, turbulence alone gives the controller, not the plant).
 """
 
 
@@ -44,6 +55,23 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--delay", action=argparse.BooleanOptionalAction, default=True,
                    help="fit a pure time delay with each model (default: the loop's hold "
                         "and the sensor's latency are real delays); --no-delay fits none")
+    add_cost_option(p)
+    p.add_argument("--from-record", action="store_true",
+                   help="read the log as one record (windows of several lengths combined), "
+                        "not as its designed excitations")
+    p.add_argument("--input", choices=RECORD_FIELDS, metavar="FIELD",
+                   help="with --from-record: the record's input, a field of HQ_SYSID_SAMPLE "
+                        f"({', '.join(RECORD_FIELDS)}; default: the sweep's injection's, "
+                        "else axis_cmd)")
+    p.add_argument("--output", choices=RECORD_FIELDS, metavar="FIELD",
+                   help="with --from-record: the record's output (default: the sweep's "
+                        "injection's, else rate)")
+    p.add_argument("--axis", choices=tuple(AXES),
+                   help="with --from-record on a .tlog: the axis (default: the one its "
+                        "samples name most)")
+    p.add_argument("--band", nargs=2, type=float, metavar=("LO_HZ", "HI_HZ"),
+                   help="with --from-record: the band of the points (default: the sweep's "
+                        "frequencies, else the paper's band for the axis)")
     p.add_argument("--estimate", choices=("excitation", "input"), default="excitation",
                    help="excitation (default): each point as (Y/R)/(U/R), output and input "
                         "against the logged excitation R, unbiased when the loop is closed "
@@ -55,13 +83,33 @@ def add_parser(sub, fmt) -> None:
     p.set_defaults(func=run)
 
 
+def _record_options(args) -> dict | None:
+    """--from-record's options for identify_dir, None without it; its options without it
+    are refused."""
+    given = [name for name in ("input", "output", "axis", "band") if getattr(args, name)]
+    if not args.from_record:
+        if given:
+            raise InputError(f"--{given[0]} is an option of --from-record")
+        return None
+    if bool(args.input) != bool(args.output):
+        raise InputError("--input and --output go together (or neither: the injection's)")
+    if args.band and not 0 < args.band[0] < args.band[1]:
+        raise InputError(f"--band {args.band[0]:g} {args.band[1]:g}: give LO_HZ < HI_HZ, "
+                         "both positive")
+    return {"axis": args.axis, "fields": (args.input, args.output) if args.input else None,
+            "band_hz": tuple(args.band) if args.band else None}
+
+
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..present.plot_process import PlotProcess
     from ..records.bin_log import is_bin_name
 
-    if not os.path.isdir(args.dir) and not is_bin_name(args.dir):
-        raise InputError(f"{args.dir}: not a folder")
+    record = _record_options(args)
+    if not os.path.isdir(args.dir) and not is_bin_name(args.dir) and \
+            not (record is not None and args.dir.endswith(".tlog")):
+        raise InputError(f"{args.dir}: not a folder" + (" or a .tlog" if record is not None
+                                                         else ""))
     with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
         # the command's work, imported when it runs: --help imports every command module
         from ..campaign.identify import identify_dir
@@ -69,7 +117,7 @@ def run(args) -> int:
 
         orders = [parse_order(o) for o in args.order] if args.order else None
         r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
-                         plots=plots)
+                         plots=plots, cost=args.cost, from_record=record)
     print(f"{r['axis']}: {len(r['points'])} points")
     print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
     for p in sorted(r["points"], key=lambda q: q.omega_rad_s):

@@ -27,6 +27,17 @@ in three stages (docs/method.md has the derivations):
    they converge, and the best of all is kept. Tests hold this to the best of refining every
    start fully, with a delay and without.
 
+4. **CIFER's J** (``cost="j"``, the default; :mod:`heliquad.host.estimate.cifer`): from the
+   J_STARTS output-error results of lowest cost, Levenberg-Marquardt on J itself, the
+   magnitude error in dB and the phase error in degrees (weighted 0.01745) at each point,
+   each point weighted by its coherence (CIFER's ``W_gamma``), over the pole parameters (the
+   same stable parametrisation), the numerator's coefficients and the delay. The residuals
+   are ``sqrt(20 W_gamma / n)`` times the real and imaginary parts of ``log(G / F)`` in
+   those units, whose derivatives are analytic (``d log G = dN / N - dD / D - s dtau``).
+   The model of lowest J is kept; J is never above the output-error fit's own. The
+   weights ``w_k`` of stages 1-3 shape its starts only. ``cost="relative"`` stops after
+   stage 3.
+
 With ``stable=False`` the refinement works on the free denominator coefficients instead, and
 the model's ``stable`` flag reports what came out.
 
@@ -43,9 +54,11 @@ import re
 import numpy as np
 
 from ...sim.base.errors import InputError
+from ..records.choices import COSTS
+from .cifer import J_PHASE_WEIGHT, J_SCALE, cifer_weight
 
 __all__ = ["TfModel", "fit_tf", "fit_levy", "parse_order", "model_response", "format_tf",
-           "order_name"]
+           "order_name", "COSTS"]
 
 #: Sanathanan-Koerner iterations at most, and the relative change that stops them early.
 SK_MAX_ITER = 30
@@ -59,6 +72,13 @@ DELAY_GRID = np.linspace(0.0, 1.0, 13)
 STARTS_PER_KIND = 5
 #: A refinement stops after this many residual evaluations per parameter (plus one).
 REFINE_EVALUATIONS = 400
+#: The J stage's refinements stop after this many (J is flat along a valley where an order
+#: has a parameter to spare: past this, a fifth of a per cent of a J that is a thousandth
+#: of the acceptable one).
+J_EVALUATIONS = 100
+#: The J stage starts from this many of the output-error refinement's results, those of
+#: lowest output error (distinct minima can swap places under J's other weighting).
+J_STARTS = 3
 #: The chosen starts are first refined for this many evaluations per parameter
 #: (plus one); the CONTINUED lowest-cost of them then go on to REFINE_EVALUATIONS.
 SCREEN_EVALUATIONS = 10
@@ -107,6 +127,9 @@ class TfModel:
     integrator : bool
         One of the ``n`` poles is fixed at the origin (order ``M/Ni``): a rate that
         integrates the command, as a free rig's does; ``stable`` then speaks of the others.
+    cost : str
+        What the fit minimised: ``"j"`` (CIFER's J) or ``"relative"`` (the weighted
+        output error), :data:`COSTS`.
     metrics : dict
         Filled by :func:`heliquad.host.estimate.metrics.evaluate_model`.
     """
@@ -120,6 +143,7 @@ class TfModel:
     degenerate: bool = False
     integrator: bool = False
     degenerate_why: str = ""
+    cost: str = "relative"
     metrics: dict = dataclasses.field(default_factory=dict)
 
     @property
@@ -474,7 +498,7 @@ def _refine(problem, x0, tau_max, evaluations):
     return x, float(r @ r), done
 
 
-def _least_squares(fun, jac, x0, lower, upper, max_nfev):
+def _least_squares(fun, jac, x0, lower, upper, max_nfev, tol=LSQ_TOL):
     """Minimise ``|fun(x)|^2`` for ``lower <= x <= upper`` from ``x0`` (clipped into the box),
     ``jac`` its Jacobian: ``(x, fun(x), done)``, ``done`` when it stopped by its tolerances
     (or where the residuals or the Jacobian are not finite) rather than after ``max_nfev``
@@ -499,14 +523,14 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev):
         g = J.T @ r
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         if cost == 0.0 or not free.any() or \
-                np.max(np.abs(g[free]) / scale[free]) <= LSQ_TOL * max(cost, 1e-300) ** 0.5:
+                np.max(np.abs(g[free]) / scale[free]) <= tol * max(cost, 1e-300) ** 0.5:
             return x, r, True
         step = _damped_step(J, r, g, x, lower, upper, scale, free, damping)
         if step is None:
             return x, r, True
         trial = np.clip(x + step, lower, upper)
         step = trial - x
-        if np.linalg.norm(step) <= LSQ_TOL * (LSQ_TOL + np.linalg.norm(x)):
+        if np.linalg.norm(step) <= tol * (tol + np.linalg.norm(x)):
             return x, r, True
         r_trial = fun(trial)
         nfev += 1
@@ -515,7 +539,7 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev):
         predicted = -(2.0 * (g @ step) + Js @ Js)         # the linear model's decrease
         ratio = (cost - cost_trial) / predicted if predicted > 0 else -1.0
         if ratio > 0 and np.isfinite(cost_trial):
-            converged = cost - cost_trial <= LSQ_TOL * cost
+            converged = cost - cost_trial <= tol * cost
             x, r, cost, J = trial, r_trial, cost_trial, jac(trial)
             if not np.all(np.isfinite(J)):
                 return x, r, True
@@ -605,8 +629,125 @@ def _refined(problem, starts, tau_max):
     return [result[:2] for result in screened] + continued
 
 
+# --- CIFER's J (stage 4) --------------------------------------------------------------------
+
+#: dB per neper and degrees per radian: ``log(G / F)``'s real and imaginary parts in J's units.
+_DB_PER_NEPER = 20.0 / np.log(10.0)
+_DEG_PER_RAD = 180.0 / np.pi
+
+
+class _JCost:
+    """Residuals of CIFER's J for ``theta = (pole parameters, numerator, delay)``, J their
+    sum of squares, and their Jacobian. The denominator's terms are the output-error
+    problem's (:class:`_OutputError`), so the poles mean the same in both stages."""
+
+    def __init__(self, problem: _OutputError, w_gamma):
+        self.p = problem
+        self.n, self.m, self.delay = problem.n, problem.m, problem.delay
+        k = np.sqrt(J_SCALE * np.asarray(w_gamma, dtype=float) / problem.x.size)
+        self.k_mag = k * _DB_PER_NEPER
+        self.k_phase = k * _DEG_PER_RAD * np.sqrt(J_PHASE_WEIGHT)
+        self.size = problem.n + problem.m + 1 + int(problem.delay)
+
+    def theta(self, params):
+        """The J stage's parameters from the output-error stage's: its numerator solved."""
+        num = self.p.num(params)
+        tau = params[self.n:self.n + 1] if self.delay else np.empty(0)
+        return np.concatenate([params[:self.n], num, tau])
+
+    def params(self, theta):
+        """The output-error stage's parameters (poles, delay) within ``theta``."""
+        tau = theta[-1:] if self.delay else np.empty(0)
+        return np.concatenate([theta[:self.n], tau])
+
+    def num(self, theta):
+        return theta[self.n:self.n + self.m + 1]
+
+    def _terms(self, theta):
+        """``log(G / F)`` at the points, and ``dD/dtheta / D`` and ``N``; None where the
+        model is not finite or is 0 at a point."""
+        p, tau = self.p, (theta[-1] if self.delay else 0.0)
+        with np.errstate(all="ignore"):
+            D, dlog = p._den_terms(theta[:self.n])
+            N = p.vander @ self.num(theta)
+            log_ratio = np.log(N / (D * p.F)) - p.s * tau
+            if not (np.all(np.isfinite(log_ratio)) and np.all(np.isfinite(dlog))):
+                return None
+        # the principal phase, as the metric reads it
+        log_ratio = log_ratio.real + 1j * np.angle(np.exp(1j * log_ratio.imag))
+        return log_ratio, dlog, N
+
+    def residuals(self, theta):
+        terms = self._terms(theta)
+        if terms is None:                       # a trial step off the map: a large cost
+            return np.full(2 * self.p.x.size, 1e6)
+        e = terms[0]
+        return np.concatenate([self.k_mag * e.real, self.k_phase * e.imag])
+
+    def jacobian(self, theta):
+        terms = self._terms(theta)
+        if terms is None:
+            return np.zeros((2 * self.p.x.size, self.size))
+        _, dlog, N = terms
+        d = np.empty((self.p.x.size, self.size), dtype=complex)   # d log G / d theta
+        d[:, :self.n] = -dlog
+        d[:, self.n:self.n + self.m + 1] = self.p.vander / N[:, None]
+        if self.delay:
+            d[:, -1] = -self.p.s
+        return np.vstack([self.k_mag[:, None] * d.real, self.k_phase[:, None] * d.imag])
+
+    def bounds(self, tau_max):
+        lo, hi = self.p.bounds()
+        free = np.full(self.m + 1, np.inf)
+        lower, upper = np.concatenate([lo, -free]), np.concatenate([hi, free])
+        if self.delay:
+            lower, upper = np.append(lower, 0.0), np.append(upper, tau_max)
+        return lower, upper
+
+
+def _j_stage(problem, refined, w_gamma, tau_max):
+    """Stage 4 from the J_STARTS lowest-cost ``(params, cost)`` of stage 3: ``(theta, J)``
+    of the lowest J reached (a start's own J when no refinement lowers it), and the
+    :class:`_JCost` that reads ``theta``."""
+    cost = _JCost(problem, w_gamma)
+    lower, upper = cost.bounds(tau_max)
+    best_theta, best_j = None, np.inf
+    for params, _ in sorted(refined, key=lambda result: result[1])[:J_STARTS]:
+        start = cost.theta(params)
+        if not np.all(np.isfinite(start)):
+            continue
+        r0 = cost.residuals(start)
+        theta, r, _ = _least_squares(cost.residuals, cost.jacobian, start, lower, upper,
+                                     J_EVALUATIONS * (start.size + 1))
+        for candidate, res in ((start, r0), (theta, r)):
+            j = float(res @ res)
+            if np.isfinite(j) and j < best_j:
+                best_theta, best_j = candidate, j
+    return best_theta, best_j, cost
+
+
+def _minimised(problem, starts, tau_max, w_gamma):
+    """The fit's stages 3 and 4: ``(params, num)`` (scaled frequency) of the output-error
+    refinement's best result, or, with J's weights ``w_gamma`` (None: stage 3 alone), of
+    J's stage started from its best results."""
+    # Weights that span hundreds of decades (sigma from 1e-8 to 1e238 is a valid file) make
+    # infinite costs, which lose to every finite one, and numpy need not warn about them.
+    with np.errstate(over="ignore", invalid="ignore"):
+        refined = _refined(problem, starts, tau_max)
+        finite = [(params, error) for params, error in refined if error < np.inf]
+        if not finite:
+            raise InputError(f"order {problem.m}/{problem.n}: no fit could be started "
+                             "(degenerate points)")
+        best = min(finite, key=lambda result: result[1])[0]
+        if w_gamma is not None:
+            theta, _, j_cost = _j_stage(problem, finite, w_gamma, tau_max)
+            if theta is not None:
+                return j_cost.params(theta), j_cost.num(theta)
+    return best, problem.num(best)
+
+
 def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
-           stable: bool = True) -> TfModel:
+           stable: bool = True, cost: str = "j", coherence=None) -> TfModel:
     """Fit a transfer function of the given order to frequency-response points.
 
     Parameters
@@ -624,36 +765,39 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
         Fit a pure time delay ``exp(-s tau)`` with the model, ``0 <= tau <= pi/omega_max``.
     stable : bool
         Constrain the poles to the left half plane (default).
+    cost : str
+        ``"j"`` (default): end with the stage that minimises CIFER's J; ``"relative"``:
+        the output-error fit alone, weighted by ``weights`` (see the module's stages).
+    coherence : array_like, optional
+        Each point's coherence ``gamma^2``, J's weight (CIFER's ``W_gamma``); unknown (NaN
+        or not given) counts as 1.
 
     Returns
     -------
     TfModel
         Without metrics; see :func:`heliquad.host.estimate.metrics.evaluate_model`.
     """
+    if cost not in COSTS:
+        raise InputError(f"unknown cost {cost!r}; use one of {', '.join(COSTS)}")
     if len(order) > 2 and order[2]:
-        return _fit_integrator(omega_rad_s, F, order, weights, delay, stable)
+        return _fit_integrator(omega_rad_s, F, order, weights, delay, stable, cost, coherence)
     m, n = order
     x, w0, F, g0, w = _normalised(omega_rad_s, F, weights)
+    w_gamma = cifer_weight(np.full(x.size, np.nan) if coherence is None else coherence)
+    if w_gamma.shape != x.shape:
+        raise InputError("coherences must be a list as long as the points")
     tau_max = np.pi / x.max()                   # scaled: 180 degrees at the top frequency
     problem = _OutputError(x, F, m, n, w, stable, delay)
-    best_cost, best_params = np.inf, None
-    # Weights that span hundreds of decades (sigma from 1e-8 to 1e238 is a valid file) make
-    # infinite costs, which lose to every finite one, and numpy need not warn about them.
-    with np.errstate(over="ignore", invalid="ignore"):
-        refined = _refined(problem, _starts(x, F, m, n, w, delay, tau_max), tau_max)
-    for params, cost in refined:
-        if cost < best_cost:
-            best_cost, best_params = cost, params
-    if best_params is None:
-        raise InputError(f"order {m}/{n}: no fit could be started (degenerate points)")
+    with np.errstate(over="ignore", invalid="ignore"):      # as in _minimised
+        starts = _starts(x, F, m, n, w, delay, tau_max)
+    best_params, num = _minimised(problem, starts, tau_max, w_gamma if cost == "j" else None)
     den = problem.den(best_params)
-    num = problem.num(best_params)
     tau = best_params[n] / w0 if delay else 0.0
     num_s, den_s = _unscale(num * g0, den, w0)
     _check_unscaled(order, num_s, den_s, g0 * model_response(num, den, 0.0, x), x * w0)
     poles = np.roots(den_s)
     model = TfModel(order=(m, n), num=num_s, den=den_s, delay_s=float(tau),
-                    stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay))
+                    stable=bool(np.all(poles.real < 0)), delay_fitted=bool(delay), cost=cost)
     if stable:
         lo, hi = problem.bounds()
         at_bound = np.isclose(best_params[:n], lo, atol=1e-3) | np.isclose(best_params[:n], hi, atol=1e-3)
@@ -662,9 +806,11 @@ def fit_tf(omega_rad_s, F, order, weights=None, delay: bool = False,
     return model
 
 
-def _fit_integrator(omega_rad_s, F, order, weights, delay, stable) -> TfModel:
+def _fit_integrator(omega_rad_s, F, order, weights, delay, stable, cost,
+                    coherence) -> TfModel:
     """``M/Ni``: ``G = N / (s D)``. Since ``|F - N/(s D)| = |s F - N/D| / w``, this is the
-    ``M/(N-1)`` fit of ``s F`` with each weight over its frequency, the same problem."""
+    ``M/(N-1)`` fit of ``s F`` with each weight over its frequency, the same problem; and
+    ``G / F = (N/D) / (s F)``, so J is the same too."""
     omega = np.asarray(omega_rad_s, dtype=float)
     F = np.asarray(F, dtype=complex)
     w = (1.0 / np.abs(F)) if weights is None else np.asarray(weights, dtype=float)
@@ -673,11 +819,11 @@ def _fit_integrator(omega_rad_s, F, order, weights, delay, stable) -> TfModel:
                          "the frequencies positive")
     m, n = order[:2]
     inner = fit_tf(omega, F * 1j * omega, (m, n - 1), weights=w / omega, delay=delay,
-                   stable=stable)
+                   stable=stable, cost=cost, coherence=coherence)
     return TfModel(order=(m, n), num=inner.num, den=np.polymul(inner.den, [1.0, 0.0]),
                    delay_s=inner.delay_s, stable=inner.stable, delay_fitted=inner.delay_fitted,
                    degenerate=inner.degenerate, degenerate_why=inner.degenerate_why,
-                   integrator=True)
+                   integrator=True, cost=inner.cost)
 
 
 def format_tf(model) -> str:

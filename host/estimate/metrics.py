@@ -3,10 +3,9 @@
 Every metric compares the model's response ``G_k`` with the points ``F_k``:
 
 * ``rms``: relative complex RMS error, ``sqrt(mean |F_k - G_k|^2 / |F_k|^2)`` (unitless).
-* ``J``: the CIFER-style cost (Tischler and Remple, *Aircraft and Rotorcraft System
-  Identification*, 2nd ed., 2012, ch. 11): ``J = 20/n sum W_gamma [(dB error)^2 +
-  0.01745 (deg error)^2]`` with ``W_gamma = [1.58 (1 - exp(-gamma^2))]^2`` from each point's
-  coherence ``gamma^2`` (1 where unknown). ``J <= 100`` is acceptable; ``J <= 50`` is a match
+* ``J``: CIFER's cost (:mod:`heliquad.host.estimate.cifer`): ``J = 20/n sum W_gamma
+  [(dB error)^2 + 0.01745 (deg error)^2]`` with ``W_gamma = [1.58 (1 - exp(-gamma^2))]^2``
+  from each point's coherence ``gamma^2`` (1 where unknown). ``J <= 100`` is acceptable; ``J <= 50`` is a match
   that can hardly be told from the data (CIFER's guideline).
 * ``aicc``: corrected Akaike information criterion of the weighted residuals, with ``2n`` real
   observations and ``m + 1 + n (+1)`` parameters.
@@ -19,25 +18,19 @@ import math
 
 import numpy as np
 
+from .cifer import J_PHASE_WEIGHT, J_SCALE, cifer_weight, j_errors
 from .fit import TfModel, n_parameters, order_name
 
-__all__ = ["evaluate_model", "recommend", "quality", "cifer_weight", "J_ACCEPTABLE", "J_EXCELLENT"]
+__all__ = ["evaluate_model", "recommend", "quality", "cifer_weight", "J_ACCEPTABLE", "J_EXCELLENT",
+           "J_PHASE_WEIGHT"]
 
 #: CIFER guideline: J at or below this is an acceptable model.
 J_ACCEPTABLE = 100.0
 #: CIFER guideline: J at or below this can hardly be told from the data.
 J_EXCELLENT = 50.0
-#: Phase weight in J: 0.01745 dB^2 per deg^2 (1 dB of magnitude ~ 7.57 deg of phase).
-J_PHASE_WEIGHT = 0.01745
 #: A model is visibly worse than another when its J is above twice the other's and higher by
 #: more than this (J = 5 is about 0.5 dB of RMS magnitude error: a gap a Bode plot shows).
 J_VISIBLE = 5.0
-
-
-def cifer_weight(coherence) -> np.ndarray:
-    """CIFER coherence weight ``[1.58 (1 - exp(-gamma^2))]^2``; NaN coherence counts as 1."""
-    gamma2 = np.nan_to_num(np.asarray(coherence, dtype=float), nan=1.0)
-    return (1.58 * (1.0 - np.exp(-gamma2))) ** 2
 
 
 def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> dict:
@@ -48,13 +41,10 @@ def evaluate_model(model: TfModel, omega_rad_s, F, weights, coherence=None) -> d
     omega = np.asarray(omega_rad_s, dtype=float)
     F = np.asarray(F, dtype=complex)
     G = model.response(omega)
-    ratio = G / F
-    with np.errstate(divide="ignore"):          # G = 0 at a point: an infinite error in dB
-        mag_err_db = 20.0 * np.log10(np.abs(ratio))
-    phase_err_deg = np.degrees(np.angle(ratio))
+    mag_err_db, phase_err_deg = j_errors(G, F)
     w_gamma = cifer_weight(np.ones(omega.size) if coherence is None else coherence)
     counted = w_gamma > 0                       # a point of weight 0 adds nothing, even inf
-    J = 20.0 / omega.size * float(np.sum(w_gamma[counted] * (
+    J = J_SCALE / omega.size * float(np.sum(w_gamma[counted] * (
         mag_err_db[counted] ** 2 + J_PHASE_WEIGHT * phase_err_deg[counted] ** 2)))
     resid = np.asarray(weights, dtype=float) * (F - G)
     rss = max(float(np.sum(np.abs(resid) ** 2)), np.finfo(float).tiny)

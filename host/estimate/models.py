@@ -59,6 +59,7 @@ class FitResult:
     reason: str
     weights: str
     band_rad_s: tuple = ()
+    cost: str = "j"
     quality: tuple = ()
 
 
@@ -139,9 +140,11 @@ def _flag_unsupported_zeros(model: TfModel, omega) -> None:
 
 
 def fit_orders(points, orders, weights: str = "auto", delay: bool = False,
-               stable: bool = True) -> FitResult:
+               stable: bool = True, cost: str = "j") -> FitResult:
     """Fit every order to ``points`` (:class:`~heliquad.host.records.points.FrequencyPoint`,
-    taken in increasing frequency), evaluate each model and recommend one."""
+    taken in increasing frequency), evaluate each model and recommend one. ``cost``: what
+    the fits minimise (:data:`~heliquad.host.estimate.fit.COSTS`; J by default, with the
+    points' coherence as its weight, the ``weights`` shaping its starts)."""
     points = sorted(points, key=lambda p: p.omega_rad_s)
     n_points = len(points)
     for order in orders:
@@ -155,11 +158,12 @@ def fit_orders(points, orders, weights: str = "auto", delay: bool = False,
     coherence = known_column(points, "coherence")
     models = []
     for order in orders:
-        model: TfModel = fit_tf(omega, F, order, weights=w, delay=delay, stable=stable)
+        model: TfModel = fit_tf(omega, F, order, weights=w, delay=delay, stable=stable,
+                                cost=cost, coherence=coherence)
         evaluate_model(model, omega, F, w, coherence)
         _flag_unsupported_zeros(model, omega)
         models.append(model)
     index, reason = recommend(models)
-    return FitResult(models=models, recommended=index, reason=reason, weights=mode,
+    return FitResult(models=models, recommended=index, reason=reason, weights=mode, cost=cost,
                      band_rad_s=(float(np.min(omega)), float(np.max(omega))),
                      quality=() if index is None else quality(models[index]))

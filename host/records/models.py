@@ -22,6 +22,7 @@ import numpy as np
 
 from ...sim.base import dialect as names
 from . import schema as S
+from .choices import COSTS
 from .gains import recorded_gains_schema
 from .manifest import SWEEP_SIGNALS
 from .output import NULLABLE, atomic_write, document, write_json
@@ -50,6 +51,7 @@ def _models_schema():
         required={"models": S.List(model, 1, 1000)},
         optional={"recommended": S.Null(S.Int(0, 999)), "reason": S.Str(),
                   "axis": S.Str(tuple(names.AXES)), "points_file": S.Str(), "weights": S.Str(),
+                  "cost": S.Str(COSTS),
                   "log": log,
                   "skipped_frequencies": S.List(S.Str()),
                   "saturated_frequencies": S.List(S.Str()),
@@ -61,6 +63,7 @@ def _models_schema():
                   "band_rad_s": S.Seq(("low", S.Num(0, 1e7, lo_open=True)),
                                       ("high", S.Num(0, 1e7, lo_open=True))),
                   "broken_loop": S.Obj(), "gains": recorded_gains_schema(),
+                  "record": S.Obj(),
                   "imu_path": S.Str(("raw", "dmp"))})
 
 
@@ -150,6 +153,8 @@ class ModelsFile:
     axis: str | None = None
     points_file: str | None = None
     weights: str | None = None
+    cost: str | None = None
+    record: dict | None = None
     imu_path: str | None = None
 
     def document(self) -> dict:
@@ -172,7 +177,7 @@ def fitted_models(result, **sections) -> ModelsFile:
     return ModelsFile(models=[StoredModel.of(m) for m in result.models],
                       recommended=result.recommended, reason=result.reason,
                       band_rad_s=[float(low), float(high)], quality=quality,
-                      weights=result.weights, **sections)
+                      weights=result.weights, cost=result.cost, **sections)
 
 
 def read_models_json(path) -> ModelsFile:
