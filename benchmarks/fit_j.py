@@ -49,8 +49,8 @@ from heliquad.host.estimate.metrics import evaluate_model
 from heliquad.host.estimate.models import point_weights
 from heliquad.host.records import paper
 from heliquad.host.records.points import frequency_points, known_column, read_points_csv
+from heliquad.sim.base.dialect import AXES
 
-AXES = ("roll", "pitch", "yaw")
 RESTARTS = 20
 NOISE, SEED, DELAY_S, SAMPLE_HZ, N_POINTS = 0.1, 2, 0.015, 200.0, 15
 
@@ -150,7 +150,8 @@ def main(argv=None):
     for item in args.points:
         axis, _, path = item.partition("=")
         if axis not in AXES or not path:
-            parser.error(f"--points {item}: give AXIS=POINTS.csv, AXIS one of {AXES}")
+            parser.error(f"--points {item}: give AXIS=POINTS.csv, AXIS one of "
+                         f"{', '.join(AXES)}")
         given[axis] = read_points_csv(path)
     if "sil" in args.sets:
         with tempfile.TemporaryDirectory(prefix="heliquad-fit-j-") as folder:

@@ -233,3 +233,77 @@ def test_the_host_design_s_declared_peak_holds_in_the_firmware_s_float_arithmeti
         values = play(ex)
         assert not ex.peak_exceeded and values.size == ex.total_samples
         assert np.max(np.abs(values)) == pytest.approx(ms.peak, rel=1e-3)
+
+
+# --- chirp ----------------------------------------------------------------------------------
+
+def chirp(start=0.5, stop=4.5, sweep_s=20.0, amp=0.3, fade=2, law=fw.Signal.CHIRP):
+    c = config(start, amp=amp, cycles=1, fade=fade)
+    c.signal, c.freq_stop_hz, c.sweep_s = law, stop, sweep_s
+    return c
+
+
+def frequencies(ex):
+    """Each sample's frequency, then its value, to the excitation's end."""
+    f, values = [], []
+    while ex.active:
+        f.append(ex.frequency_hz)
+        values.append(ex.next())
+    return np.array(f), np.array(values)
+
+
+@pytest.mark.parametrize("law", [fw.Signal.CHIRP, fw.Signal.CHIRP_LINEAR])
+def test_a_chirp_sweeps_its_band_at_full_amplitude_between_fades_held_at_its_ends(law):
+    ex = fw.Excitation()
+    assert ex.start(chirp(law=law), LOOP_HZ)
+    fade = 2 * math.ceil(LOOP_HZ / 0.5)                  # two cycles of the lower end
+    sweep = int(20.0 * LOOP_HZ)
+    assert (ex.fade_samples, ex.total_samples) == (fade, sweep + 2 * fade)
+    assert ex.actual_freq_hz == 0.5                      # as given: a chirp has no period
+    measuring = []
+    f, values = [], []
+    while ex.active:
+        measuring.append(ex.measuring)
+        f.append(ex.frequency_hz)
+        values.append(ex.next())
+    f, values = np.array(f), np.array(values)
+    assert sum(measuring) == sweep and measuring.index(True) == fade
+    np.testing.assert_allclose(f[:fade], 0.5, rtol=1e-6)
+    np.testing.assert_allclose(f[-fade:], 4.5, rtol=1e-6)           # the stop frequency
+    tau = np.arange(sweep) / LOOP_HZ / 20.0
+    law_f = 0.5 * 9.0 ** tau if law == fw.Signal.CHIRP else 0.5 + 4.0 * tau
+    np.testing.assert_allclose(f[fade:fade + sweep], law_f, rtol=1e-5)
+    # phase continuous: the value is the sine of the integrated frequency
+    phase = np.concatenate([[0.0], np.cumsum(f.astype(float) / LOOP_HZ)[:-1]])
+    np.testing.assert_allclose(values[fade:fade + sweep],
+                               0.3 * np.sin(2 * np.pi * phase[fade:fade + sweep]), atol=2e-5)
+    assert np.max(np.abs(values)) <= np.float32(0.3) and values[0] == 0.0 and abs(values[-1]) < 1e-3
+
+
+def test_a_downward_chirp_and_its_early_finish_fade_out_at_the_frequency_reached():
+    ex = fw.Excitation()
+    assert ex.start(chirp(start=4.0, stop=1.0, sweep_s=10.0, fade=1), LOOP_HZ)
+    fade = math.ceil(LOOP_HZ / 1.0)
+    for _ in range(fade + 1000):                        # 5 s into the sweep
+        ex.next()
+    reached = ex.frequency_hz
+    assert reached == pytest.approx(4.0 * 0.25 ** 0.5, rel=1e-4)
+    assert ex.finish()
+    f, values = frequencies(ex)
+    assert f.size == fade and np.allclose(f, reached)
+    assert abs(values[-1]) < 1e-3 and not ex.active
+
+
+@pytest.mark.parametrize("change, ok", [
+    ({}, True),
+    ({"stop": 0.5}, False),                # no sweep: its ends are one frequency
+    ({"stop": 0.0}, False), ({"stop": math.nan}, False), ({"stop": 60.0}, False),
+    ({"sweep_s": 0.0}, False), ({"sweep_s": -1.0}, False), ({"sweep_s": math.inf}, False),
+    ({"cycles": 2}, False),                # one sweep
+])
+def test_an_impossible_chirp_does_not_start(change, ok):
+    c = chirp(**{k: v for k, v in change.items() if k != "cycles"})
+    if "cycles" in change:
+        c.cycles = change["cycles"]
+    ex = fw.Excitation()
+    assert ex.start(c, LOOP_HZ) is ok and ex.active is ok

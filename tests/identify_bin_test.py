@@ -35,9 +35,11 @@ GUARD_S = 300.0
 POINT_REL = 1e-12
 #: The recommended models' responses over the band: within these.
 MODEL_DB, MODEL_DEG = 0.5, 3.0
-#: The sweeps: a short dwell (3 frequencies, 4 cycles) and a multisine of 6 lines.
+#: The sweeps: a short dwell (3 frequencies, 4 cycles), a multisine of 6 lines and a 12 s
+#: chirp (its SIDD.F the frequency of each loop, as ArduPilot's).
 DWELL = ("--freqs-hz", 2, 4, 8, "--cycles", 4)
 MULTISINE = ("--signal", "multisine", "--lines", 6, "--freqs-hz", 1, 8, "--rig-time", 12)
+CHIRP = ("--signal", "chirp", "--freqs-hz", 1, 8, "--rig-time", 12)
 #: A card busy for 100 ms once a second: the ring (about 83 ms) overflows for about 17 ms,
 #: loops are missing from the log (HQGP), under the 5 % a record may lose wherever the busy
 #: spells fall (the 8 Hz dwell's 94 samples can hold one whole spell's losses: 120 ms, with
@@ -45,7 +47,8 @@ MULTISINE = ("--signal", "multisine", "--lines", 6, "--freqs-hz", 1, 8, "--rig-t
 BUSY = "busy_every_us=1000000,busy_for_us=100000"
 #: The manifest's keys of a measured frequency that the log gives back exactly.
 SAME_KEYS = ("freq_hz", "period_samples", "start_us", "end_us", "samples", "status",
-             "signal", "orders", "saturated", "collective_limited", "sensor_clipped")
+             "signal", "orders", "saturated", "collective_limited", "sensor_clipped",
+             "stop_hz", "sweep_s", "law", "sweep_samples")
 
 
 def heliquad(*args):
@@ -71,7 +74,7 @@ def flown(tmp, name, *args):
 def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("identify_bin")
     out = {}
-    for name, args in (("dwell", DWELL), ("multisine", MULTISINE),
+    for name, args in (("dwell", DWELL), ("multisine", MULTISINE), ("chirp", CHIRP),
                        ("busy", (*DWELL, "--sd-faults", BUSY))):
         sweep, board = flown(tmp, name, *args)
         heliquad("identify", sweep)
@@ -99,12 +102,12 @@ def assert_models_agree(a_dir, b_dir):
     return worst_db, worst_deg
 
 
-@pytest.mark.parametrize("name", ["dwell", "multisine"])
+@pytest.mark.parametrize("name", ["dwell", "multisine", "chirp"])
 def test_the_bin_gives_the_sweeps_points_and_model(runs, name):
     sweep, board, said = runs[name]
     assert f"in {board}" in said.stdout and not said.stderr
     a, b = read_points_csv(sweep / "points.csv"), read_points_csv(board / "points.csv")
-    assert len(a) == len(b) >= (3 if name == "dwell" else 6)
+    assert len(a) == len(b) >= {"dwell": 3, "multisine": 6, "chirp": 20}[name]
     for p, q in zip(a, b):
         assert q.omega_rad_s == p.omega_rad_s
         assert abs(q.gain - p.gain) <= POINT_REL * abs(p.gain)
@@ -116,10 +119,11 @@ def test_the_bin_gives_the_sweeps_points_and_model(runs, name):
     assert models.log["skipped_bytes"] == 0
 
 
-@pytest.mark.parametrize("name", ["dwell", "multisine"])
+@pytest.mark.parametrize("name", ["dwell", "multisine", "chirp"])
 def test_the_log_gives_back_the_manifests_experiment(runs, name):
     """Each measured frequency's window, period and lines (a multisine's, found from its
-    logged excitation) are the manifest's."""
+    logged excitation), or a chirp's ends, sweep and law (from SIDS and SIDD.F), are the
+    manifest's."""
     sweep, board, _ = runs[name]
     manifest = read_manifest(sweep / "manifest.json")
     found, samples, damage = bin_sweep(next(board.glob("*.BIN")))

@@ -738,3 +738,28 @@ def test_a_fifth_station_never_evicts_the_running_excitations_owner():
         assert b.sup.excitation_state != fw.ExcitationState.IDLE, loop
     assert b.sup.take_excitation_end() is None
     assert b.sup.excitation_owner == STATION_A
+
+
+# --- chirp ----------------------------------------------------------------------------------
+
+def chirp_config(start=0.5, stop=4.5, sweep_s=60.0, amp=0.25, fade=2, cycles=1):
+    c = config(freq=start, amp=amp, cycles=cycles, fade=fade)
+    c.signal, c.freq_stop_hz, c.sweep_s = fw.Signal.CHIRP, stop, sweep_s
+    return c
+
+
+@pytest.mark.parametrize("change, why", [
+    ({}, "NONE"),
+    ({"stop": 50.0}, "NONE"), ({"stop": 50.01}, "FREQUENCY"),   # both ends in the band
+    ({"start": 0.0499}, "FREQUENCY"), ({"stop": 0.0}, "FREQUENCY"),
+    ({"stop": 0.5}, "FREQUENCY"), ({"stop": math.nan}, "FREQUENCY"),
+    ({"amp": 1.01}, "AMPLITUDE"), ({"amp": math.inf}, "AMPLITUDE"),
+    ({"cycles": 2}, "CYCLES"), ({"fade": 0}, "FADE"),
+    ({"sweep_s": 0.0}, "DURATION"), ({"sweep_s": math.nan}, "DURATION"),
+    # 300 s with the fades: 292 s of sweep and two fades of 2 cycles at 0.5 Hz (8 s)
+    ({"sweep_s": 292.0}, "NONE"), ({"sweep_s": 292.1}, "DURATION"),
+])
+def test_a_chirp_is_held_to_every_bound_a_sine_is(change, why):
+    b = armed_bench()
+    got = b.sup.start_excitation(chirp_config(**change), b.t)
+    assert got == reason(why)

@@ -449,7 +449,9 @@ PYBIND11_MODULE(_firmware, m) {
     bind_allocation(m);
 
     py::enum_<Signal>(m, "Signal").value("SINE", Signal::Sine)
-        .value("MULTISINE", Signal::Multisine);
+        .value("MULTISINE", Signal::Multisine)
+        .value("CHIRP", Signal::Chirp)
+        .value("CHIRP_LINEAR", Signal::ChirpLinear);
     m.attr("MAX_HARMONICS") = kMaxHarmonics;
     m.attr("MAX_PROGRAM_STEPS") = kMaxProgramSteps;
     py::enum_<ExcitationState>(m, "ExcitationState").value("IDLE", ExcitationState::Idle)
@@ -463,6 +465,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_readwrite("cycles", &ExcitationConfig::cycles)
         .def_readwrite("fade_cycles", &ExcitationConfig::fade_cycles)
         .def_readwrite("signal", &ExcitationConfig::signal)
+        .def_readwrite("freq_stop_hz", &ExcitationConfig::freq_stop_hz)
+        .def_readwrite("sweep_s", &ExcitationConfig::sweep_s)
         .def_property("harmonics",
             [](const ExcitationConfig& c) {
                 py::list out;
@@ -500,6 +504,8 @@ PYBIND11_MODULE(_firmware, m) {
         .def_property_readonly("measuring", &Excitation::measuring)
         .def_property_readonly("period_samples", &Excitation::period_samples)
         .def_property_readonly("actual_freq_hz", &Excitation::actual_freq_hz)
+        .def_property_readonly("frequency_hz", &Excitation::frequency_hz)
+        .def_property_readonly("output_frequency_hz", &Excitation::output_frequency_hz)
         .def_property_readonly("total_samples", &Excitation::total_samples)
         .def_property_readonly("fade_samples", &Excitation::fade_samples)
         .def_property_readonly("peak_exceeded", &Excitation::peak_exceeded)

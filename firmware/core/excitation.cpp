@@ -24,13 +24,38 @@ uint16_t highest_order(const ExcitationConfig& c) {
     return c.signal == Signal::Multisine && c.harmonics > 0 ? c.harmonic[c.harmonics - 1].order : 1;
 }
 
+float lowest_freq_hz(const ExcitationConfig& c) {
+    if (is_chirp(c.signal)) return std::fmin(c.freq_hz, c.freq_stop_hz);
+    return c.freq_hz * static_cast<float>(lowest_order(c));
+}
+
+float highest_freq_hz(const ExcitationConfig& c) {
+    if (is_chirp(c.signal)) return std::fmax(c.freq_hz, c.freq_stop_hz);
+    return c.freq_hz * static_cast<float>(highest_order(c));
+}
+
+uint64_t sweep_samples_for(const ExcitationConfig& c, float loop_rate_hz) {
+    if (!is_chirp(c.signal)) return 0;
+    const double samples = static_cast<double>(c.sweep_s) * static_cast<double>(loop_rate_hz);
+    return samples >= 1.0 && samples <= static_cast<double>(Excitation::kMaxTotalSamples)
+               ? static_cast<uint64_t>(std::llround(samples))
+               : 0;
+}
+
+bool chirp_valid(const ExcitationConfig& c, float loop_rate_hz) {
+    if (!is_chirp(c.signal)) return true;
+    return std::isfinite(c.freq_stop_hz) && c.freq_stop_hz > 0.0f && c.freq_stop_hz != c.freq_hz &&
+           std::isfinite(c.sweep_s) && c.sweep_s > 0.0f && c.cycles == 1 &&
+           sweep_samples_for(c, loop_rate_hz) > 0;
+}
+
 uint64_t fade_samples_for(const ExcitationConfig& c, uint32_t period_samples) {
     const uint32_t lowest = lowest_order(c);
     return uint64_t{c.fade_cycles} * ((period_samples + lowest - 1u) / lowest);
 }
 
 bool harmonics_valid(const ExcitationConfig& c, uint32_t period_samples) {
-    if (c.signal == Signal::Sine) return true;
+    if (c.signal == Signal::Sine || is_chirp(c.signal)) return true;
     if (c.signal != Signal::Multisine || c.harmonics == 0 || c.harmonics > kMaxHarmonics) return false;
     float power = 0.0f;
     uint32_t previous = 0;
@@ -59,9 +84,21 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     const double samples = static_cast<double>(loop_rate_hz) / static_cast<double>(config.freq_hz);
     if (!(samples <= static_cast<double>(kMaxPeriodSamples))) return false;
     const uint32_t period = static_cast<uint32_t>(std::llround(samples));
-    if (!harmonics_valid(config, period)) return false;
-    const uint64_t fade = fade_samples_for(config, period);
-    const uint64_t total = uint64_t{period} * config.cycles + 2u * fade;
+    if (!harmonics_valid(config, period) || !chirp_valid(config, loop_rate_hz)) return false;
+    if (is_chirp(config.signal) && config.freq_stop_hz * kMinSamplesPerPeriod > loop_rate_hz) {
+        return false;
+    }
+    // A chirp fades over whole cycles of its lower end (so both fades hold at least
+    // fade_cycles cycles of the frequency they hold); its full-amplitude part is the sweep.
+    const uint32_t fade_period =
+        is_chirp(config.signal)
+            ? static_cast<uint32_t>(std::ceil(static_cast<double>(loop_rate_hz) /
+                                              static_cast<double>(lowest_freq_hz(config))))
+            : period;
+    const uint64_t fade = fade_samples_for(config, fade_period);
+    const uint64_t middle = is_chirp(config.signal) ? sweep_samples_for(config, loop_rate_hz)
+                                                    : uint64_t{period} * config.cycles;
+    const uint64_t total = middle + 2u * fade;
     if (total > kMaxTotalSamples) return false;
     config_ = config;
     if (config_.signal == Signal::Sine) {          // one harmonic: the fundamental
@@ -69,7 +106,12 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
         config_.harmonic[0] = Harmonic{1, config.amplitude, 0.0f};
     }
     period_ = period;
-    actual_freq_hz_ = loop_rate_hz / static_cast<float>(period_);
+    // A chirp's frequencies are as requested (it has no period to round to).
+    actual_freq_hz_ = is_chirp(config.signal) ? config.freq_hz
+                                              : loop_rate_hz / static_cast<float>(period_);
+    loop_rate_hz_ = loop_rate_hz;
+    hold_hz_ = config.freq_stop_hz;
+    phase_cycles_ = 0.0;
     total_ = static_cast<uint32_t>(total);
     fade_ = static_cast<uint32_t>(fade);
     k_ = 0;
@@ -82,6 +124,13 @@ void Excitation::stop() { active_ = false; }
 
 bool Excitation::finish() {
     if (!active_) return false;
+    if (is_chirp(config_.signal)) {       // fade out from here, at the frequency reached
+        if (k_ < total_ - fade_) {
+            hold_hz_ = frequency_hz();
+            total_ = (k_ < fade_ ? fade_ : k_) + fade_;
+        }
+        return true;
+    }
     // Whole full-amplitude periods once the one under way ends (k_ is the next sample).
     const uint32_t cycles = k_ <= fade_ ? 1u : (k_ - fade_ + period_ - 1u) / period_;
     const uint64_t total = uint64_t{period_} * cycles + 2u * uint64_t{fade_};
@@ -90,6 +139,29 @@ bool Excitation::finish() {
         config_.cycles = static_cast<uint16_t>(cycles);
     }
     return true;
+}
+
+float Excitation::frequency_hz() const {
+    if (!active_) return 0.0f;
+    if (!is_chirp(config_.signal)) return actual_freq_hz_;
+    if (k_ < fade_) return config_.freq_hz;
+    if (k_ >= total_ - fade_) return hold_hz_;
+    const float into = static_cast<float>(k_ - fade_) / loop_rate_hz_ / config_.sweep_s;
+    if (config_.signal == Signal::ChirpLinear) {
+        return config_.freq_hz + (config_.freq_stop_hz - config_.freq_hz) * into;
+    }
+    return config_.freq_hz * std::exp(std::log(config_.freq_stop_hz / config_.freq_hz) * into);
+}
+
+// The chirp's sample: the envelope times the sine of its phase, then the phase advanced by
+// this sample's frequency (phase continuous, in double so that no cycles are lost).
+float Excitation::chirp_value(float envelope) {
+    const float value = config_.amplitude * envelope *
+                        std::sin(kTwoPi * static_cast<float>(phase_cycles_));
+    output_hz_ = frequency_hz();
+    phase_cycles_ += static_cast<double>(output_hz_) / static_cast<double>(loop_rate_hz_);
+    phase_cycles_ -= std::floor(phase_cycles_);
+    return value;
 }
 
 bool Excitation::measuring() const {
@@ -111,7 +183,9 @@ float Excitation::next(float* per_group, int groups) {
     }
     const float n = static_cast<float>(period_);
     float value;
-    if (config_.signal == Signal::Sine) {
+    if (is_chirp(config_.signal)) {
+        value = chirp_value(envelope);
+    } else if (config_.signal == Signal::Sine) {
         value = config_.amplitude * envelope * std::sin(kTwoPi * static_cast<float>(index_[0]) / n);
     } else {
         float sum = 0.0f;

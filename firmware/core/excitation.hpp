@@ -14,6 +14,15 @@
 // amplitude; every sample is checked against it, and a sample beyond it (with a round-off
 // margin) is not output: the excitation stops at once and says so (peak_exceeded()).
 //
+// A chirp (as ArduPilot's SystemID mode flies one) sweeps from freq_hz to freq_stop_hz over
+// sweep_s seconds at full amplitude, logarithmically (the frequency a constant factor per
+// second: as many cycles at each octave's start as the record's windows need) or linearly.
+// It fades in over fade_cycles cycles held at its start frequency and out over as many
+// samples held at the frequency it reached, phase continuous throughout. It is not periodic:
+// the host identifies it from its record by the composite of windows. Its frequency is any,
+// not an integer period; its phase is kept in cycles in double precision (the frequency is
+// integrated sample by sample), so a long sweep stays exact.
+//
 // Injection points follow ArduPilot's SID_AXIS idea: the signal is added at the angle
 // setpoint, the rate setpoint, or the mixer's torque input of one axis.
 #pragma once
@@ -59,7 +68,10 @@ enum class ExcitationState : uint8_t {
 enum class Signal : uint8_t {
     Sine = HQ_SIGNAL_SINE,
     Multisine = HQ_SIGNAL_MULTISINE,
+    Chirp = HQ_SIGNAL_CHIRP,                // logarithmic sweep
+    ChirpLinear = HQ_SIGNAL_CHIRP_LINEAR,
 };
+inline bool is_chirp(Signal s) { return s == Signal::Chirp || s == Signal::ChirpLinear; }
 
 // The most harmonics a multisine has (HQ_EXCITATION's arrays).
 constexpr int kMaxHarmonics = 16;
@@ -83,6 +95,10 @@ struct ExcitationConfig {
     Signal signal = Signal::Sine;
     uint8_t harmonics = 0;         // multisine: how many of harmonic[] are used
     Harmonic harmonic[kMaxHarmonics] = {};
+    // Chirp: the frequency the sweep ends at (freq_hz is where it starts; either may be the
+    // higher) and the sweep's length at full amplitude, s. cycles must be 1 (one sweep).
+    float freq_stop_hz = 0.0f;
+    float sweep_s = 0.0f;
 };
 
 // The multisine's own checks (not the safety bounds): 1..kMaxHarmonics harmonics, strictly
@@ -93,9 +109,19 @@ bool harmonics_valid(const ExcitationConfig& config, uint32_t period_samples);
 // The length of each fade for a base period of period_samples: fade_cycles whole cycles of
 // the lowest harmonic, rounded up to a sample (whole periods for a sine).
 uint64_t fade_samples_for(const ExcitationConfig& config, uint32_t period_samples);
-// The lowest and highest harmonic order (1 and 1 for a sine).
+// The lowest and highest harmonic order (1 and 1 for a sine and a chirp).
 uint16_t lowest_order(const ExcitationConfig& config);
 uint16_t highest_order(const ExcitationConfig& config);
+// The lowest and highest frequency excited, Hz, as requested: a sine's, a multisine's lowest
+// and highest harmonic of freq_hz, a chirp's two ends.
+float lowest_freq_hz(const ExcitationConfig& config);
+float highest_freq_hz(const ExcitationConfig& config);
+// A chirp's own checks (true for the other signals): both ends finite and positive and not
+// equal, the sweep's length finite and positive, cycles 1, and its samples within
+// kMaxTotalSamples at loop_rate_hz.
+bool chirp_valid(const ExcitationConfig& config, float loop_rate_hz);
+// A chirp's full-amplitude samples at loop_rate_hz (0 for the other signals).
+uint64_t sweep_samples_for(const ExcitationConfig& config, float loop_rate_hz);
 
 class Excitation {
 public:
@@ -124,6 +150,12 @@ public:
     const ExcitationConfig& config() const { return config_; }
     uint32_t period_samples() const { return period_; }
     float actual_freq_hz() const { return actual_freq_hz_; }
+    // The frequency of the sample the next call to next() returns: a chirp's instantaneous
+    // one, the used frequency of the others; 0 when idle.
+    float frequency_hz() const;
+    // The frequency of the sample the last call to next() returned (ArduPilot's SIDD.F: a
+    // chirp's instantaneous one, the used frequency of the others).
+    float output_frequency_hz() const { return is_chirp(config_.signal) ? output_hz_ : actual_freq_hz_; }
     uint32_t sample() const { return k_; }
     uint32_t total_samples() const { return total_; }
     uint32_t fade_samples() const { return fade_; }
@@ -148,6 +180,11 @@ private:
     uint32_t period_ = 0, total_ = 0, k_ = 0, fade_ = 0;
     uint32_t index_[kMaxHarmonics] = {};     // (order * k) mod period, per harmonic
     float actual_freq_hz_ = 0.0f;
+    // A chirp: the loop rate, its phase in cycles (in [0, 1)), and the frequency its
+    // fade-out holds (the stop frequency, or the one reached when finished early).
+    float loop_rate_hz_ = 0.0f, hold_hz_ = 0.0f, output_hz_ = 0.0f;
+    double phase_cycles_ = 0.0;
+    float chirp_value(float envelope);
 };
 
 }  // namespace hq

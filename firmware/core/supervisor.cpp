@@ -363,19 +363,36 @@ Reason Supervisor::check_excitation_bounds(const ExcitationConfig& c) const {
         return Reason::Frequency;
     }
     if (!harmonics_valid(c, static_cast<uint32_t>(period))) return Reason::Harmonics;
-    // Every excited frequency (a sine's one; a multisine's lowest and highest harmonic) is
-    // inside the band.
-    if (!(c.freq_hz * static_cast<float>(lowest_order(c)) >= limits_.min_freq_hz &&
-          c.freq_hz * static_cast<float>(highest_order(c)) <=
-              limits_.max_freq_fraction * loop_rate_hz_)) {
+    if (is_chirp(c.signal) &&
+        !(std::isfinite(c.freq_stop_hz) && c.freq_stop_hz > 0.0f && c.freq_stop_hz != c.freq_hz)) {
         return Reason::Frequency;
     }
-    if (c.cycles == 0) return Reason::Cycles;
+    // Every excited frequency (a sine's one; a multisine's lowest and highest harmonic; a
+    // chirp's two ends) is inside the band.
+    if (!(lowest_freq_hz(c) >= limits_.min_freq_hz &&
+          highest_freq_hz(c) <= limits_.max_freq_fraction * loop_rate_hz_)) {
+        return Reason::Frequency;
+    }
+    if (c.cycles == 0 || (is_chirp(c.signal) && c.cycles != 1)) return Reason::Cycles;
     if (c.fade_cycles < limits_.min_fade_cycles) return Reason::Fade;
+    if (is_chirp(c.signal)) return check_chirp_duration(c);
     const float fade = static_cast<float>(fade_samples_for(c, static_cast<uint32_t>(period)));
     const float period_s = period / loop_rate_hz_;
     const float cycles = static_cast<float>(c.cycles) + 2.0f * fade / period;
     if (!(cycles * period_s <= limits_.max_duration_s)) return Reason::Duration;
+    return Reason::None;
+}
+
+// A chirp's length: its sweep (finite, positive, a whole number of samples at least) and
+// its two fades, of whole cycles of its lower end, within the duration cap.
+Reason Supervisor::check_chirp_duration(const ExcitationConfig& c) const {
+    const uint64_t sweep = sweep_samples_for(c, loop_rate_hz_);
+    if (!(std::isfinite(c.sweep_s) && c.sweep_s > 0.0f) || sweep == 0) return Reason::Duration;
+    const float fade_period = std::ceil(loop_rate_hz_ / lowest_freq_hz(c));
+    const float fade = static_cast<float>(c.fade_cycles) * fade_period;
+    if (!((static_cast<float>(sweep) + 2.0f * fade) / loop_rate_hz_ <= limits_.max_duration_s)) {
+        return Reason::Duration;
+    }
     return Reason::None;
 }
 

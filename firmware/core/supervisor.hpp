@@ -217,6 +217,8 @@ public:
     // The checks of a request's own numbers, whatever the state (armed, host, mode): axis and
     // injection, amplitude, band, harmonics, cycles, fade and duration within the limits.
     Reason check_excitation_bounds(const ExcitationConfig& config) const;
+    // A chirp's sweep and fades against the duration cap (check_excitation_bounds' last).
+    Reason check_chirp_duration(const ExcitationConfig& config) const;
     // Counts and announces a refused excitation request (for a refusal decided outside the
     // Supervisor's checks, such as an unknown HQ_EXCITATION action).
     void refuse_excitation(Reason why);

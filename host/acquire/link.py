@@ -181,14 +181,21 @@ class TelemetryLink:
                                names.MODES[mode])
 
     def start_excitation(self, axis: str, injection: str, freq_hz: float, amplitude: float,
-                         cycles: int, fade_cycles: int, harmonics=None) -> None:
+                         cycles: int, fade_cycles: int, harmonics=None, chirp=None) -> None:
         """Start a sine, or with ``harmonics`` (``[(order, amplitude, phase_rad), ...]``) a
-        multisine of base frequency ``freq_hz`` whose declared peak is ``amplitude``."""
+        multisine of base frequency ``freq_hz`` whose declared peak is ``amplitude``, or with
+        ``chirp`` (``(stop_hz, sweep_s, law)``, law ``log`` or ``linear``) a chirp from
+        ``freq_hz`` (``cycles`` 1)."""
         signal, orders, amps, phases = self._signal(harmonics)
+        stop_hz = sweep_s = 0.0
+        if chirp is not None:
+            stop_hz, sweep_s, law = chirp
+            signal = (self.mav_module.HQ_SIGNAL_CHIRP if law == "log"
+                      else self.mav_module.HQ_SIGNAL_CHIRP_LINEAR)
         self.mav.hq_excitation_send(TARGET_SYSTEM, self.target, self.mav_module.HQ_EXCITATION_START,
                                     names.AXES[axis], names.INJECTIONS[injection], float(freq_hz),
                                     float(amplitude), int(cycles), int(fade_cycles), signal,
-                                    orders, amps, phases)
+                                    orders, amps, phases, float(stop_hz), float(sweep_s))
 
     def _signal(self, harmonics):
         """HQ_EXCITATION's (and HQ_PROGRAM's) signal and harmonic arrays: a sine without

@@ -141,6 +141,9 @@ class ExcitationWatch:
                       **dict.fromkeys(self.flags, 0), "status": "ok"}
         if plan.multisine is not None:
             self.entry.update(signal="multisine", orders=list(plan.multisine.orders))
+        if plan.chirp is not None:
+            self.entry.update(signal="chirp", stop_hz=plan.chirp.stop_hz,
+                              sweep_s=plan.chirp.sweep_s, law=plan.chirp.law)
         self.u_name, self.y_name = input_output(plan.inject)
         self.keep_rows = keep_rows
         self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
@@ -195,8 +198,10 @@ class ExcitationWatch:
             return self._end(f"refused by the firmware: {reason_text(m.reason)}")
         if "freq_hz" not in self.entry or self.entry.pop("period_inferred", False):
             self.entry.update(freq_hz=float(m.freq_hz), period_samples=int(m.period_samples))
-            if self.plan.multisine is not None:
+            if self.plan.multisine is not None or self.plan.chirp is not None:
                 self.entry["fade_samples"] = int(m.fade_samples)
+            if self.plan.chirp is not None:          # its full-amplitude part: the sweep
+                self.entry["sweep_samples"] = int(m.total_samples) - 2 * int(m.fade_samples)
         if m.state == self.idle and m.reason not in self.normal_end:
             self._end(f"stopped by the firmware: {reason_text(m.reason)}")
 
@@ -213,6 +218,10 @@ class ExcitationWatch:
         if self.plan.multisine is not None:
             lowest = self.plan.multisine.orders[0]
             e["fade_samples"] = self.plan.fade_cycles * -(-period // lowest)
+        if self.plan.chirp is not None:            # as excitation.cpp rounds them
+            e["sweep_samples"] = int(round(self.plan.chirp.sweep_s * loop_hz))
+            e["fade_samples"] = self.plan.fade_cycles * math.ceil(
+                loop_hz / self.plan.chirp.band_hz[0])
 
     def _sample(self, m) -> None:
         e = self.entry
@@ -368,9 +377,11 @@ def measure(session, plan, f, amp, limits: Limits | None = None, progress=print,
 
 
 def _watch(session, plan, f, amp, watch) -> None:
+    chirp = plan.chirp
     session.tel.start_excitation(plan.axis, plan.inject, f, amp, plan.cycles_for(f),
                                  plan.fade_cycles,
-                                 plan.multisine.harmonics() if plan.multisine else None)
+                                 plan.multisine.harmonics() if plan.multisine else None,
+                                 (chirp.stop_hz, chirp.sweep_s, chirp.law) if chirp else None)
     finishing = False
     while not watch.done:
         session.advance(watch)
@@ -404,7 +415,8 @@ def _incomplete(entry, plan, finished: bool, edge_room=(0, 0)) -> str | None:
                     f"{_lost_text(entry)}, not whole cycles of {period} (at least {least})")
         expected = whole
     else:
-        expected = plan.cycles_for(entry["requested_hz"]) * period
+        expected = entry["sweep_samples"] if plan.chirp is not None else \
+            plan.cycles_for(entry["requested_hz"]) * period
         if not 0 <= expected - span <= room:
             return (f"incomplete: {entry['samples']} of {expected} measured samples were "
                     f"logged{_lost_text(entry)}")

@@ -37,12 +37,13 @@ from ..records.manifest import MANIFEST, UNSET, SweepManifest, write_manifest
 from .design import AmplitudeDesign, Dwell
 from .excitation import amplitude_bound, default_amplitude, default_peak
 from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
+from .chirp import design as chirp_design
 from .multisine import LINES, RIG_TIME_S, design
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .param_protocol import session_params
 
-__all__ = ["SweepPlan", "default_plan", "multisine_plan", "run_sweep", "sil_source", "SWEEP_TLOG",
+__all__ = ["SweepPlan", "default_plan", "multisine_plan", "chirp_plan", "run_sweep", "sil_source", "SWEEP_TLOG",
            "cut_text", "tuning_freqs_hz"]
 
 SWEEP_TLOG = "sweep.tlog"
@@ -88,6 +89,7 @@ class SweepPlan:
         self.cycles, self.fade_cycles = int(cycles), int(fade_cycles)
         self.dwell, self.design = dwell, design
         self.multisine = None
+        self.chirp = None
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
@@ -98,9 +100,17 @@ class SweepPlan:
         plan.multisine = multisine
         return plan
 
+    @classmethod
+    def of_chirp(cls, axis, inject, chirp) -> "SweepPlan":
+        """One excitation: the chirp (:mod:`.chirp`), from its start frequency, one sweep."""
+        plan = cls(axis, inject, [chirp.start_hz], [chirp.amplitude], 1, chirp.fade_cycles)
+        plan.chirp = chirp
+        return plan
+
     @property
     def signal(self) -> str:
-        return "dwell" if self.multisine is None else "multisine"
+        return "chirp" if self.chirp is not None else \
+            "dwell" if self.multisine is None else "multisine"
 
     def cycles_for(self, freq_hz: float) -> int:
         """The measured cycles (a multisine: base periods) an excitation is started with."""
@@ -110,6 +120,8 @@ class SweepPlan:
         """The design, for the manifest."""
         if self.multisine is not None:
             return self.multisine.record()
+        if self.chirp is not None:
+            return self.chirp.record()
         out = {"cycles": self.cycles} if self.dwell is None else {
             "dwell": "sequential", "min_cycles": self.dwell.min_cycles,
             "max_cycles": self.dwell.max_cycles, "max_dwell_s": self.dwell.max_dwell_s,
@@ -162,6 +174,14 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
                 rig_time_s or RIG_TIME_S, like=like)
     return SweepPlan.of_multisine(axis, inject, ms)
+
+
+def chirp_plan(axis, inject="mixer", amplitude=None, sweep_s=None, band_hz=None,
+               law="log") -> SweepPlan:
+    """A chirp over the axis's Table 1 band (or ``band_hz``), sweeping ``sweep_s`` seconds
+    (:func:`heliquad.host.acquire.chirp.design`; ``amplitude`` in firmware units)."""
+    chirp = chirp_design(band_hz or paper.BANDS_HZ[axis], inject, amplitude, sweep_s, law)
+    return SweepPlan.of_chirp(axis, inject, chirp)
 
 
 def _write_manifest(out_dir, manifest: SweepManifest) -> None:
@@ -241,8 +261,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             current = None
             _write_manifest(out_dir, manifest)
             bar = "#" * i + "." * (len(plan.freqs_hz) - i)
-            what = f"{entry.get('freq_hz', f):.4g} Hz" if plan.multisine is None else \
-                f"multisine, {len(plan.multisine.orders)} lines on {entry.get('freq_hz', f):.4g} Hz"
+            what = _excitation_text(plan, entry, f)
             progress(f"[{bar}] {i}/{len(plan.freqs_hz)}  {what}  "
                      f"{entry['samples']} samples{loss_text(entry)}{saturation_text(entry)}  "
                      f"{entry['status']}")
@@ -265,6 +284,17 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         raise
     _write_manifest(out_dir, manifest)
     return manifest.document()
+
+
+def _excitation_text(plan, entry, f) -> str:
+    """One excitation of the plan for the progress line."""
+    if plan.chirp is not None:
+        lo, hi = plan.chirp.band_hz
+        return f"chirp ({plan.chirp.law}), {lo:.4g}-{hi:.4g} Hz in {plan.chirp.sweep_s:g} s"
+    if plan.multisine is not None:
+        return (f"multisine, {len(plan.multisine.orders)} lines on "
+                f"{entry.get('freq_hz', f):.4g} Hz")
+    return f"{entry.get('freq_hz', f):.4g} Hz"
 
 
 def _measure_designed(session, plan, f, amp, last, limits, manifest, progress):

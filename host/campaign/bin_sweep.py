@@ -28,6 +28,7 @@ SIDS gives tell a multisine from a sine.
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 
 import numpy as np
@@ -52,6 +53,13 @@ class _Excitation:
     places: np.ndarray
     freq_hz: float
     setup: dict | None
+    freqs: np.ndarray = None            # each loop's SIDD.F (a chirp's moves)
+
+    @property
+    def chirp(self) -> bool:
+        """A chirp: its SIDD.F moves, and its SIDS names two ends."""
+        return self.setup is not None and self.setup["FSp"] != self.setup["FSt"] and \
+            np.unique(self.freqs).size > 1
 
 
 def bin_sweep(path) -> tuple:
@@ -80,8 +88,8 @@ def log_sweep(log, path) -> tuple:
     gains = gains_from_params(axis, log.params)
     manifest = {"axis": axis, "inject": inject, "tlog": os.path.basename(path),
                 "source": {"kind": "log", "file": os.path.basename(path)},
-                "signal": "multisine" if any(e.get("signal") == "multisine" for e in entries)
-                else "dwell", "frequencies": entries, "params": log.params or None,
+                "signal": next((e["signal"] for e in entries if e.get("signal")), "dwell"),
+                "frequencies": entries, "params": log.params or None,
                 "gains": None if gains is None else dataclasses.asdict(gains),
                 "complete": not unused,
                 "aborted": "; ".join(f"{e['freq_hz']:.4g} Hz {e['status']}" for e in unused)
@@ -114,7 +122,12 @@ def _excitations(log, active, loop_us) -> list:
     s = log.samples
     starts = s.time_us[active].astype(float) - log.exc_time_s[active] * 1e6
     freqs = log.exc_freq_hz[active]
-    cut = np.flatnonzero((np.abs(np.diff(starts)) > loop_us / 2) | (np.diff(freqs) != 0)) + 1
+    # a new start, or a new frequency unless the excitation is a chirp (its SIDD.F moves)
+    moved = np.diff(freqs) != 0
+    chirping = np.isin(np.round(starts[1:] / loop_us), [np.round(u["TimeUS"] / loop_us)
+                                                        for u in log.setups
+                                                        if u["FSp"] != u["FSt"]])
+    cut = np.flatnonzero((np.abs(np.diff(starts)) > loop_us / 2) | (moved & ~chirping)) + 1
     found, seq = [], s.seq.astype(np.int64)
     for rows in np.split(active, cut):
         first = rows[0]
@@ -123,7 +136,8 @@ def _excitations(log, active, loop_us) -> list:
         setup = next((u for u in log.setups if abs(u["TimeUS"] - start_us) < loop_us / 2),
                      None)
         found.append(_Excitation(rows, seq[rows] - (seq[first] - lead),
-                                 float(log.exc_freq_hz[first]), setup))
+                                 float(log.exc_freq_hz[first]), setup,
+                                 np.asarray(log.exc_freq_hz[rows], dtype=float)))
     return found
 
 
@@ -152,12 +166,28 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
                  samples=int(rows.size), lost=int(last - fade + 1 - rows.size),
                  **{k: int(np.count_nonzero(s.saturation[rows] & mask))
                     for k, mask in saturation_masks().items()})
+    if e.chirp:
+        return {**entry, **_chirp_entry(e, rows, fade, last, loop_us)}
     orders = _lines(s.excitation[rows].astype(float), places - fade, last - fade + 1, period)
     if orders is None:
         return {**entry, "status": "no whole period of its excitation in the log"}
     if orders != [1] or (e.setup and e.setup["FSp"] > e.setup["FSt"]):
         entry.update(signal="multisine", orders=orders, fade_samples=fade)
     return entry
+
+
+def _chirp_entry(e: _Excitation, rows, fade: int, last: int, loop_us: float) -> dict:
+    """A chirp's entry fields (as a sweep's manifest has them): its ends from SIDS (FSt,
+    FSp), its sweep's length (the window's loops), and its law read from SIDD's F, the
+    frequency at the sweep's middle: geometric (log) or arithmetic (linear) of its ends."""
+    start, stop = float(e.setup["FSt"]), float(e.setup["FSp"])
+    middle = float(np.interp((fade + last) / 2.0, e.places, e.freqs))
+    law = "log" if abs(middle - math.sqrt(start * stop)) < abs(middle - (start + stop) / 2) \
+        else "linear"
+    sweep = last - fade + 1
+    return {"signal": "chirp", "freq_hz": start, "requested_hz": start, "stop_hz": stop,
+            "sweep_s": sweep * loop_us * 1e-6, "law": law, "sweep_samples": sweep,
+            "fade_samples": fade}
 
 
 def _lines(r, places, length: int, period: int) -> list | None:

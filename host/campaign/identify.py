@@ -25,6 +25,7 @@ from ...sim.base.errors import InputError
 from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, input_output
 from ..acquire.measure import MAX_LOST_SHARE, saturation_text
 from ..acquire.sweep import cut_text
+from ..estimate.composite import MIN_COHERENCE, composite_response
 from ..estimate.fit import n_parameters
 from ..estimate.fsf import (DEFAULT_DISCARD_PERIODS, complete_excitation,
                             estimate_against_excitation, estimate_fsf, estimate_multisine,
@@ -42,7 +43,7 @@ from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .bin_sweep import bin_sweep
-from .record import read_record, record_points
+from .record import RECORD_POINTS, read_record, record_points
 
 __all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments", "estimate_points"]
 
@@ -97,8 +98,11 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 
 def sweep_segments(manifest, samples):
     """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
-    samples on their places in the sequence (:func:`_gridded`)."""
-    running = dialect().HQ_EXCITATION_STATE_RUNNING
+    samples on their places in the sequence (:func:`_gridded`). A chirp's record is its
+    whole excitation, fades included: they hold its two ends' frequencies, which the sweep
+    itself only passes through."""
+    mav = dialect()
+    running, idle = mav.HQ_EXCITATION_STATE_RUNNING, mav.HQ_EXCITATION_STATE_IDLE
     u_name, y_name = input_output(manifest["inject"])
     t = samples.time_us.astype(np.int64)
     state = samples.exc_state
@@ -108,7 +112,12 @@ def sweep_segments(manifest, samples):
     for entry in manifest["frequencies"]:
         if entry.get("status") != "ok" or "start_us" not in entry:
             continue
-        sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
+        if entry.get("signal") == "chirp":
+            fades = (entry.get("fade_samples", 0) + 1) * float(np.median(np.diff(t)))
+            sel = (t >= entry["start_us"] - fades) & (t <= entry["end_us"] + fades) & \
+                (state != idle)
+        else:
+            sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
         yield (entry, *_gridded(seq[sel], t[sel] * 1e-6, r[sel], u[sel], y[sel]))
 
 
@@ -200,7 +209,8 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         broken_loop=loop or None, sil_truth=truth or None,
         replay=None if replays is None else _replay_record(result.recommended, replays),
         axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path")))
-    _write_plots(plots, out_dir, manifest, points, result, replays)
+    _write_plots(plots, out_dir, manifest, points, result, replays,
+                 "a chirp: no periods to replay" if manifest.get("signal") == "chirp" else None)
     return {"out_dir": out_dir, "axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
             "records": segments, "record_points": firsts, "replays": replays}
@@ -221,7 +231,10 @@ def _identify_record(path, plots, orders, progress, delay, estimate, cost, optio
     """identify's work on a record read as one (:mod:`.record`): the composite's points, the
     fits, the broken loop and the simulator's truth where they apply; no replay (a record
     has no periods to replay)."""
-    manifest, samples, damage, out_dir = read_record(path)
+    if os.path.isdir(path):             # a sweep folder: its manifest names axis and injection
+        out_dir, manifest, samples, damage = load_sweep(path)
+    else:
+        manifest, (samples, damage, out_dir) = None, read_record(path)
     if damage:
         progress(f"warning: the log is damaged: {damage.summary()}; {damage.KEPT}")
     found = record_points(manifest, samples, estimate, progress, **options)
@@ -254,8 +267,9 @@ def _identify_record(path, plots, orders, progress, delay, estimate, cost, optio
 
 def _replays(result, points, segments):
     """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
-    record's first point), or None when no model is recommended."""
-    if result.recommended is None:
+    record's first point), or None when no model is recommended or a record is a chirp's
+    (no periods to replay)."""
+    if result.recommended is None or any(p.method == "composite" for p in points):
         return None
     return replay_points(result.models[result.recommended], points, segments,
                          DEFAULT_DISCARD_PERIODS)
@@ -351,7 +365,9 @@ def estimate_points(manifest, samples, estimate, progress) -> tuple:
             if lost > MAX_LOST_SHARE:
                 raise InputError(f"{100 * lost:.1f} % of its samples were lost on the link "
                                  f"(at most {100 * MAX_LOST_SHARE:g} % is used)")
-            found = _estimate_entry(entry, r, u, y, estimate, present)
+            found = _chirp_points(entry, t, r, u, y, estimate, present) \
+                if entry.get("signal") == "chirp" else \
+                _estimate_entry(entry, r, u, y, estimate, present)
         except InputError as exc:
             progress(f"  {what} skipped: {exc}")
             skipped.append(f"{what}: {exc}")
@@ -368,7 +384,28 @@ def estimate_points(manifest, samples, estimate, progress) -> tuple:
     return points, segments, firsts, skipped
 
 
+def _chirp_points(entry, t, r, u, y, estimate, present) -> list:
+    """A chirp's points (:mod:`..estimate.composite`): its sweep's record, holes lost on the
+    link filled by a straight line, at :data:`~.record.RECORD_POINTS` frequencies over its
+    band, against the excitation (or the input); those of coherence below
+    :data:`~..estimate.composite.MIN_COHERENCE` are left out."""
+    if present is not None:
+        k = np.arange(present.size)
+        r, u, y = (np.interp(k, k[present], x[present]) for x in (r, u, y))
+    fs = 1.0 / float(np.median(np.diff(t)))
+    lo, hi = sorted((entry["freq_hz"], entry["stop_hz"]))
+    found = composite_response(y, u, fs, np.geomspace(lo, hi, RECORD_POINTS),
+                               r=r if estimate == "excitation" else None)
+    points = [p for p in found if p.coherence >= MIN_COHERENCE]
+    if len(points) < 2:
+        raise InputError(f"{len(points)} of its points have coherence {MIN_COHERENCE:g} or "
+                         "more")
+    return points
+
+
 def _entry_name(entry) -> str:
+    if entry.get("signal") == "chirp":
+        return f"the chirp from {entry['freq_hz']:.4g} to {entry['stop_hz']:.4g} Hz"
     if entry.get("signal") == "multisine":
         return f"the multisine of base {entry['freq_hz']:.4g} Hz"
     return f"{entry['freq_hz']:.4g} Hz"

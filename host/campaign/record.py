@@ -42,23 +42,16 @@ MIN_RECORD_S = 4.0
 
 
 def read_record(path):
-    """``(manifest or None, samples, damage, folder for the outputs)`` of a sweep folder or a
-    .tlog (a ``heliquad log`` session)."""
+    """``(samples, damage, folder for the outputs)`` of a .tlog (a ``heliquad log`` session;
+    a sweep folder is read by identify's ``load_sweep``)."""
     damage = TlogDamage()
-    if os.path.isdir(path):
-        # a sweep folder: its manifest names the log, the axis and the injection (identify
-        # imports this module: the import waits until a folder is read)
-        from .identify import load_sweep
-
-        folder, manifest, samples, damage = load_sweep(path)
-        return manifest, samples, damage, folder
     if not path.endswith(".tlog"):
         raise InputError(f"{path}: not a folder or a .tlog")
     try:
         samples = read_tlog_table(path, dialect(), "HQ_SYSID_SAMPLE", damage=damage)
     except OSError as exc:
         raise InputError(f"{path}: {exc.strerror or exc}") from None
-    return None, samples, damage, os.path.dirname(path) or "."
+    return samples, damage, os.path.dirname(path) or "."
 
 
 def _armed_stretch(samples):

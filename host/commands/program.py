@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ...sim.base import dialect as names
 from ..acquire.link import INPUT_OUTPUT
-from .shared_options import add_board_actions, add_design_arguments, sweep_plan
+from .shared_options import add_board_actions
+from .sweep_options import add_design_arguments, sweep_plan
 
 __all__ = ["add_parser", "run"]
 

@@ -15,8 +15,9 @@ from ..acquire.excitation import firmware_amplitude
 from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
                              add_vehicle_arguments, vehicle_rig,
-                             add_param_store_argument, add_sd_card_arguments, check_excitation,
+                             add_param_store_argument, add_sd_card_arguments,
                              check_plant, faults, finite, int_in, number_in, sd_card)
+from .sweep_options import check_excitation
 
 __all__ = ["add_parser", "run"]
 

@@ -18,12 +18,11 @@ from ..acquire.multisine import MAX_LINES
 from ..acquire.rotor_multisine import ROTOR_PEAK
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .run_options import add_load_params_argument, add_rc_script_argument
-from .shared_options import (add_baud_argument, add_design_arguments, apply_tuning_band,
-                             add_fault_argument, add_firmware_argument, firmware_link,
-                             add_vehicle_arguments,
-                             add_param_store_argument, add_port_argument, add_sd_card_arguments,
-                             check_excitation, check_plant, faults, finite, int_in, number_in,
-                             sd_card, sweep_plan)
+from .shared_options import (add_baud_argument, add_fault_argument, add_firmware_argument,
+                             firmware_link, add_vehicle_arguments, add_param_store_argument,
+                             add_port_argument, add_sd_card_arguments, check_plant, faults,
+                             finite, int_in, number_in, sd_card)
+from .sweep_options import add_design_arguments, apply_tuning_band, check_excitation, sweep_plan
 
 __all__ = ["add_parser", "run"]
 
@@ -52,6 +51,14 @@ cycle of the lowest line, as many whole base periods as fit --rig-time (default 
 least 3 periods); --amplitude is its peak (default: {DEFAULT_SETPOINT['angle']:g} deg angle, {DEFAULT_SETPOINT['rate']:g} deg/s rate, the
 firmware's bound at the mixer). identify estimates every line from the one record.
 
+--signal chirp sweeps the band once instead, as ArduPilot's SystemID mode does: from its
+bottom to its top (or the lowest and highest of --freqs-hz) over --rig-time seconds at full
+amplitude (default 60), logarithmically (--chirp log, the default) or linearly, faded in over
+whole cycles held at the bottom (as many as fit 12 s, at most 6) and out as long at the top;
+--amplitude is its amplitude
+(default: 0.25 at the mixer, the dwell's setpoints for angle and rate). identify estimates it
+by the composite of overlapped windows of several lengths, with coherence per point.
+
 --inject motors is the per-rotor run of `heliquad effectiveness` (docs/effectiveness.md): one
 multisine in which every rotor has odd harmonics of its own (HQ_INJECTION_MOTORS: harmonic j
 to rotor j mod --rotors), added to each rotor's thrust after the allocation while the cascade
@@ -62,6 +69,7 @@ or the highest of --freqs-hz), the shortest base period that holds them, as many
 
 example: heliquad sweep --axis roll --sil --out roll_sweep && heliquad identify roll_sweep
          heliquad sweep --axis roll --sil --signal multisine --out roll_ms
+         heliquad sweep --axis roll --sil --signal chirp --out roll_chirp
          heliquad sweep --axis yaw --sil --inject motors --out yaw_rotors
 """
 
@@ -115,7 +123,9 @@ def run(args) -> int:
         # the command's work, imported when it runs: --help imports every command module
         from ...sim.rig.setup import SilConfig
 
-        if plan.multisine is not None:       # its lines in the band, its peak in bounds
+        if plan.chirp is not None:           # checked by its design (acquire/chirp.py)
+            pass
+        elif plan.multisine is not None:     # its lines in the band, its peak in bounds
             check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
                              plan.multisine.peak, args.inject)
         else:
@@ -241,6 +251,10 @@ def _ended(exc, out) -> int:
 
 
 def _what(plan) -> str:
+    if plan.chirp is not None:
+        c = plan.chirp
+        return (f"chirp ({c.law}) {c.start_hz:.3g}-{c.stop_hz:.3g} Hz in {c.sweep_s:g} s, "
+                f"{c.duration_s:.0f} s with its fades, amplitude {c.amplitude:.3g}")
     if plan.multisine is None:
         return (f"{len(plan.freqs_hz)} frequencies {plan.freqs_hz[0]:.3g}-"
                 f"{plan.freqs_hz[-1]:.3g} Hz")

@@ -30,7 +30,7 @@ __all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "PORT_FOUND", "UNSET", "Swe
 MANIFEST = "manifest.json"
 #: A sweep's signal (manifest.json and models.json ``signal``): the paper's dwell, one sine
 #: at a time, or one multisine for the whole band.
-SWEEP_SIGNALS = ("dwell", "multisine")
+SWEEP_SIGNALS = ("dwell", "multisine", "chirp")
 #: A manifest's loop rate (freq_hz x period_samples), Hz.
 LOOP_RANGE_HZ = (1.0, 1e4)
 #: Timestamps, us since 1970.

@@ -220,6 +220,10 @@ bool GcsLink::ask_excitation(const mavlink_message_t& msg, LoopRequest& r) {
         r.kind = RequestKind::ExcitationStart;
         inbox_.has_excitation = true;
         read_excitation(ex, inbox_.excitation);
+        // a chirp's fields are HQ_EXCITATION's alone (an on-board program has none: a chirp
+        // step is refused there by its missing stop frequency)
+        inbox_.excitation.freq_stop_hz = ex.freq_stop_hz;
+        inbox_.excitation.sweep_s = ex.sweep_s;
     } else {
         r.kind = RequestKind::ExcitationRefuse;
     }

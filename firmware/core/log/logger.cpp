@@ -131,7 +131,7 @@ void Logger::log_mode(const LoopStatus& st) {
 
 // SIDS at an excitation's start: ArduPilot's set-up fields (the fades and the full-amplitude
 // part in s, the band in Hz: one frequency for a sine, the lowest and highest harmonic of a
-// multisine). A start is a loop excited after one that was not, or after one that ended an
+// multisine, a chirp's start and stop). A start is a loop excited after one that was not, or after one that ended an
 // excitation (an on-board program starts its next step in the loop after the last ended,
 // with no idle loop between).
 void Logger::log_experiment(const LoopStatus& st, const Excitation& exc, float loop_rate_hz) {
@@ -150,7 +150,11 @@ void Logger::log_experiment(const LoopStatus& st, const Excitation& exc, float l
     uint8_t buf[kDfHeaderBytes + 8 + 1 + 7 * 4];
     DfRecord r(buf, sizeof buf, LogType::Sids);
     r.u64(st.time_us).u8(systemid_axis(c.injection, c.axis)).f32(c.amplitude);
-    r.f32(multi ? f0 * lowest_order(c) : f0).f32(multi ? f0 * highest_order(c) : f0);
+    if (is_chirp(c.signal)) {                 // the sweep's start and stop, as ArduPilot's
+        r.f32(c.freq_hz).f32(c.freq_stop_hz);
+    } else {
+        r.f32(multi ? f0 * lowest_order(c) : f0).f32(multi ? f0 * highest_order(c) : f0);
+    }
     r.f32(fade_s).f32(total_s - 2.0f * fade_s).f32(total_s).f32(fade_s);
     push(buf, r.size(), 1, st.time_us);
 }
@@ -163,7 +167,7 @@ void Logger::log_sample(const LoopStatus& st, const Excitation& exc) {
     DfRecord d(buf, sizeof buf, LogType::Sidd);
     const bool on = st.excitation_state != ExcitationState::Idle;
     d.u64(t).f32(on ? static_cast<float>(t - exc_start_us_) * 1e-6f : 0.0f).f32(x.excitation);
-    d.f32(on ? exc.actual_freq_hz() : 0.0f);
+    d.f32(on ? exc.output_frequency_hz() : 0.0f);
     d.f32(x.rate.x * kDegPerRad).f32(x.rate.y * kDegPerRad).f32(x.rate.z * kDegPerRad);
     d.f32(x.accel.x).f32(x.accel.y).f32(x.accel.z);
     const SysidSample s = sysid_sample(st);

@@ -1,0 +1,176 @@
+"""A sweep's design options and its plan, shared by ``heliquad sweep`` and ``heliquad program
+set``: the signal (dwell, multisine, chirp), its frequencies, amplitude and length, checked
+against the firmware's limits before anything flies."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...sim.base import firmware_facts as facts
+from ...sim.base.errors import InputError
+from ..acquire import design
+from ..acquire.chirp import LAWS as CHIRP_LAWS, SWEEP_S as CHIRP_SWEEP_S
+from ..acquire.excitation import amplitude_bound, bound_text, defaults_text, firmware_amplitude, units_text
+from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
+from .shared_options import MAX_CYCLES, int_in, number_in
+
+__all__ = ["check_excitation", "add_design_arguments", "apply_tuning_band", "sweep_plan"]
+
+
+def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):
+    """Refuse, before anything starts, an excitation the firmware would refuse: the limits
+    are the firmware's own defaults (:mod:`heliquad.sim.base.firmware_facts`, read from the
+    same C++ the firmware compiles)."""
+    f32 = lambda x: float(np.float32(x))       # noqa: E731 - the firmware compares in float
+    hi = f32(facts.MAX_FREQ_FRACTION * f32(loop_hz))
+    for f in freqs_hz:
+        if not facts.MIN_FREQ_HZ <= f32(f) <= hi:
+            raise InputError(f"{f:g} Hz is outside the firmware's excitation band "
+                             f"[{facts.MIN_FREQ_HZ:g}, {hi:g}] Hz at a {loop_hz:g} Hz loop")
+        duration = (cycles + 2 * fade_cycles) / f
+        if duration > facts.MAX_DURATION_S:
+            raise InputError(f"{cycles} cycles with {fade_cycles} of fade each way at {f:g} Hz "
+                             f"last {duration:.0f} s; the firmware allows "
+                             f"{facts.MAX_DURATION_S:g} s: fewer --cycles")
+    if fade_cycles < facts.MIN_FADE_CYCLES:
+        raise InputError(f"--fade-cycles must be at least {facts.MIN_FADE_CYCLES}")
+    if amplitude is not None and f32(amplitude) > amplitude_bound(inject):
+        raise InputError(f"--amplitude is above the firmware's bound for {inject} "
+                         f"injection ({bound_text(inject)})")
+
+
+def add_design_arguments(p, on_board: bool = False) -> None:
+    """A sweep's design options (``heliquad sweep``; ``heliquad program set`` with
+    ``on_board``: a program the board runs alone has no host to judge a dwell or design an
+    amplitude from what it measured, so it has a fixed dwell and fixed amplitudes)."""
+    p.add_argument("--freqs-hz", type=number_in(0, 1e6, lo_open=True), nargs="+", metavar="F",
+                   help="frequencies (default: 15 log-spaced over the paper's band for the axis)")
+    p.add_argument("--tuning-band", action="store_true",
+                   help="instead of the paper's band: 16 frequencies log-spaced from its "
+                        "bottom up to 45 Hz, so that the model holds where heliquad tune reads "
+                        "every margin (docs/tuning.md)")
+    mixer = ("a quarter of the firmware's bound (mixer, the design's first)" if on_board else
+             "designed per frequency (mixer)")
+    p.add_argument("--amplitude", type=number_in(0, 1e6, lo_open=True), metavar="A", help="one amplitude for all "
+                   f"frequencies: {units_text()}; default: "
+                   f"{mixer}, {defaults_text()}")
+    if not on_board:
+        p.add_argument("--swing-deg", type=number_in(0, 45, lo_open=True), metavar="D",
+                       help=f"mixer: the rig swing each designed amplitude aims at (default "
+                            f"{design.TARGET_SWING_DEG:g} deg)")
+    p.add_argument("--cycles", type=int_in(1, MAX_CYCLES), metavar="N",
+                   help="a fixed dwell: N measured cycles per frequency (the paper's: 8); "
+                        "default: " + ("8" if on_board else "the sequential dwell"))
+    if not on_board:
+        p.add_argument("--target-sigma", type=number_in(0, 1, lo_open=True), metavar="S",
+                       help=f"sequential dwell: end a frequency once its point's standard deviation "
+                            f"is S of its magnitude (default {design.TARGET_SIGMA:g})")
+        p.add_argument("--max-cycles", type=int_in(design.MIN_CYCLES, MAX_CYCLES), metavar="N",
+                       help=f"sequential dwell: the most measured cycles of a frequency (default "
+                            f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
+    p.add_argument("--signal", choices=("dwell", "multisine") + (() if on_board else ("chirp",)),
+                   default="dwell",
+                   help="dwell (default, the paper's): one sine per frequency; multisine: "
+                        "every line of the band at once, in one periodic record"
+                        + ("" if on_board else "; chirp: one frequency sweep over the band"))
+    if not on_board:
+        p.add_argument("--chirp", choices=CHIRP_LAWS, default="log",
+                       help="chirp: how its frequency moves, log (default: a constant factor "
+                            "per second) or linear")
+    p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
+                   help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
+                        "the nearest harmonic of the base period")
+    p.add_argument("--rig-time", type=number_in(10, facts.MAX_DURATION_S), metavar="S",
+                   help=f"multisine: the seconds it may last, fades included (default "
+                        f"{RIG_TIME_S:g}); as many whole base periods as fit"
+                        + ("" if on_board else f"; chirp: its sweep's seconds at full "
+                                               f"amplitude (default {CHIRP_SWEEP_S:g})"))
+
+
+def apply_tuning_band(args) -> None:
+    """--tuning-band: its frequencies as --freqs-hz (the two together refused)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import tuning_freqs_hz
+
+    if args.tuning_band:
+        if args.freqs_hz:
+            raise InputError("--tuning-band and --freqs-hz both give the frequencies: give one")
+        args.freqs_hz = tuning_freqs_hz(args.axis).tolist()
+
+
+def sweep_plan(args, on_board: bool = False):
+    """The sweep's plan from the options of :func:`add_design_arguments`: fixed or
+    sequential dwell, fixed or designed amplitudes (``on_board``: a fixed dwell, 8 cycles
+    unless --cycles, and fixed amplitudes, a mixer's the design's first)."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import MEASURED_CYCLES, default_plan
+
+    target_sigma, max_cycles, swing_deg = (getattr(args, name, None) for name in
+                                           ("target_sigma", "max_cycles", "swing_deg"))
+    apply_tuning_band(args)
+    if args.cycles is not None and (target_sigma or max_cycles):
+        raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
+                         "the sequential dwell: give one or the other")
+    if swing_deg is not None and (args.amplitude is not None or args.inject != "mixer"):
+        raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
+                         "--amplitude or angle or rate injection")
+    amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
+    if args.signal == "multisine":
+        return _multisine_plan(args, amp, (target_sigma, max_cycles, swing_deg))
+    if args.signal == "chirp":
+        return _chirp_plan(args, amp, (target_sigma, max_cycles, swing_deg))
+    if args.lines is not None or args.rig_time is not None:
+        raise InputError("--lines and --rig-time shape a multisine: add --signal multisine")
+    if on_board:
+        if amp is None and args.inject == "mixer":
+            amp = design.AmplitudeDesign(amplitude_bound("mixer")).first()
+        return default_plan(args.axis, args.inject, args.freqs_hz, amp,
+                            args.cycles or MEASURED_CYCLES)
+    dwell = None
+    if args.cycles is None:
+        dwell = design.Dwell()
+        dwell.target_sigma = target_sigma or dwell.target_sigma
+        dwell.max_cycles = max_cycles or dwell.max_cycles
+    return default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles, dwell,
+                        swing_deg)
+
+
+def _band_edges(args, signal: str):
+    """--freqs-hz as a band's two edges (its lowest and highest), or None without it."""
+    if args.freqs_hz is None:
+        return None
+    if len(args.freqs_hz) < 2 or min(args.freqs_hz) == max(args.freqs_hz):
+        raise InputError(f"--freqs-hz with --signal {signal}: the band's two edges "
+                         "(lowest and highest)")
+    return min(args.freqs_hz), max(args.freqs_hz)
+
+
+def _chirp_plan(args, amp, dwell_options):
+    """A chirp's plan: over the axis's band, or from the lowest to the highest of
+    --freqs-hz, sweeping --rig-time seconds; --amplitude is its amplitude."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import chirp_plan
+
+    given = [o for o, v in zip(("--cycles", "--target-sigma", "--max-cycles", "--swing-deg",
+                                "--lines"), (args.cycles, *dwell_options, args.lines))
+             if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} do not shape a chirp: its length is "
+                         "--rig-time, its band the axis's or --freqs-hz's edges")
+    return chirp_plan(args.axis, args.inject, amp, args.rig_time, _band_edges(args, "chirp"),
+                      args.chirp)
+
+
+def _multisine_plan(args, amp, dwell_options):
+    """A multisine's plan: over the axis's band, or from the lowest to the highest of
+    --freqs-hz; --amplitude is its peak."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import multisine_plan
+
+    given = [o for o, v in zip(("--cycles", "--target-sigma", "--max-cycles", "--swing-deg"),
+                               (args.cycles, *dwell_options)) if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} shape a dwell; a multisine's length is "
+                         "--rig-time")
+    return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time,
+                          _band_edges(args, "multisine"))
