@@ -37,6 +37,8 @@ def test_a_record_read_as_one_gives_the_plant_within_a_dB_and_5_degrees(multisin
     assert res.returncode == 0, res.stderr
     assert "record: 30.1 s of axis_cmd and rate at 200 Hz; windows 15, 11.1, 8.18, 6.03, " \
            "4.44 s; 20 of 20 points with coherence >= 0.6" in res.stdout
+    # each point says which estimate it came from
+    assert res.stdout.count("composite of windows against the excitation") == 20
     doc = json.loads((folder / "models.json").read_text())
     assert doc["estimate"] == "excitation" and doc["cost"] == "j"
     record = doc["record"]

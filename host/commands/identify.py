@@ -83,6 +83,16 @@ def add_parser(sub, fmt) -> None:
     p.set_defaults(func=run)
 
 
+#: Which estimator made a point (FrequencyPoint.method), in the table's words.
+ESTIMATORS = {"fsf": "FSF", "sinefit": "sine fit", "composite": "composite of windows"}
+
+
+def _estimate_text(point) -> str:
+    """Which estimate a point came from: the estimator, and against what."""
+    against = "the excitation" if point.estimate == "excitation" else "the input"
+    return f"{ESTIMATORS.get(point.method, point.method or 'file')} against {against}"
+
+
 def _record_options(args) -> dict | None:
     """--from-record's options for identify_dir, None without it; its options without it
     are refused."""
@@ -119,10 +129,12 @@ def run(args) -> int:
         r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
                          plots=plots, cost=args.cost, from_record=record)
     print(f"{r['axis']}: {len(r['points'])} points")
-    print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}")
+    print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}"
+          f"  estimate")
     for p in sorted(r["points"], key=lambda q: q.omega_rad_s):
         print(f"{p.freq_hz:8.4g} {p.omega_rad_s:8.4g} {p.magnitude:9.4g} "
-              f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} {p.coherence:7.4f}")
+              f"{math.degrees(p.phase_rad):9.2f} {p.gain.real:9.4g} {p.gain.imag:9.4g} "
+              f"{p.coherence:7.4f}  {_estimate_text(p)}")
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in "
           f"{r['out_dir']}")
