@@ -124,3 +124,41 @@ def test_the_teensy_image_flies_the_same_chirp(tmp_path):
     ratio = np.array([q.gain / p.gain for p, q in zip(a, b)])
     assert np.max(np.abs(20 * np.log10(np.abs(ratio)))) < 0.1
     assert np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
+
+
+@pytest.mark.parametrize("band, sweep_s", [((0.5, 4.5), 60.0), ((0.3, 4.0), 279.9),
+                                           ((0.16, 2.0), 120.0), ((1.0, 4.0), 33.3)])
+def test_the_hosts_chirp_lasts_the_firmwares_samples(band, sweep_s):
+    # the design's length is the generator's own count, so the host refuses exactly what
+    # the firmware's duration cap would
+    from heliquad import _firmware as fw
+    from heliquad.host.acquire.chirp import design
+
+    chirp = design(band, "mixer", sweep_s=sweep_s)
+    c = fw.ExcitationConfig()
+    c.freq_hz, c.freq_stop_hz, c.sweep_s = chirp.start_hz, chirp.stop_hz, chirp.sweep_s
+    c.amplitude, c.cycles, c.fade_cycles = chirp.amplitude, 1, chirp.fade_cycles
+    c.signal = fw.Signal.CHIRP
+    ex = fw.Excitation()
+    assert ex.start(c, 200.0)
+    assert (ex.total_samples, ex.fade_samples) == (round(chirp.duration_s * 200.0),
+                                                   chirp.fade_samples)
+
+
+def test_a_chirp_whose_fades_pass_the_cap_is_refused_by_the_host_as_by_the_firmware():
+    from heliquad.host.acquire.chirp import design
+    from heliquad.sim.base.errors import InputError
+
+    # 280 s of sweep and 3 fade cycles of 0.3 Hz (667 samples each: 300.01 s in all)
+    with pytest.raises(InputError, match="the chirp lasts 300 s with its fades"):
+        design((0.3, 4.0), "mixer", sweep_s=280.0)
+
+
+def test_a_chirp_read_as_one_record_keeps_its_band(runs, tmp_path):
+    import shutil
+
+    folder = tmp_path / "chirp"
+    shutil.copytree(runs["chirp"], folder)
+    res = heliquad("identify", folder, "--from-record")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((folder / "models.json").read_text())["record"]["band_hz"] == [0.5, 4.5]

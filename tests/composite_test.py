@@ -142,7 +142,7 @@ def test_a_record_too_short_for_its_lowest_window_is_one_line():
 @pytest.mark.parametrize("case, match", [
     ("nyquist", "100 Hz is not below the record's Nyquist frequency"),
     ("lengths", "must be equally long"),
-    ("nan", "not numbers"),
+    ("nan", "the record has samples that are not numbers"),
 ])
 def test_bad_records_are_refused_in_one_line(case, match):
     u = chirp()

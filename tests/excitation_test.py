@@ -300,9 +300,11 @@ def test_a_downward_chirp_and_its_early_finish_fade_out_at_the_frequency_reached
     ({"stop": 0.0}, False), ({"stop": math.nan}, False), ({"stop": 60.0}, False),
     ({"sweep_s": 0.0}, False), ({"sweep_s": -1.0}, False), ({"sweep_s": math.inf}, False),
     ({"cycles": 2}, False),                # one sweep
+    ({"fade": 0}, False),                  # a fade of at least a cycle (no 0/0 envelope)
 ])
 def test_an_impossible_chirp_does_not_start(change, ok):
     c = chirp(**{k: v for k, v in change.items() if k != "cycles"})
+    assert c.fade_cycles == change.get("fade", 2)
     if "cycles" in change:
         c.cycles = change["cycles"]
     ex = fw.Excitation()

@@ -92,6 +92,15 @@ def test_bad_record_options_are_one_line_exit_2(multisine, tmp_path, args, said)
         res.stderr
 
 
+def test_an_axis_the_records_samples_are_not_of_is_refused(multisine, tmp_path):
+    # HQ_SYSID_SAMPLE's fields are of the axis it names: --axis cannot relabel them
+    log = tmp_path / "flight.tlog"
+    shutil.copy(multisine / "sweep.tlog", log)
+    res = heliquad("identify", log, "--from-record", "--axis", "pitch")
+    assert res.returncode == 2 and "--axis pitch: the record's samples are roll's" in res.stderr
+    assert not (tmp_path / "models.json").exists()
+
+
 def test_record_options_without_from_record_are_refused(multisine, tmp_path):
     res = heliquad("identify", copy_of(multisine, tmp_path), "--axis", "roll")
     assert res.returncode == 2 and "--axis is an option of --from-record" in res.stderr

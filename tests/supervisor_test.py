@@ -758,6 +758,10 @@ def chirp_config(start=0.5, stop=4.5, sweep_s=60.0, amp=0.25, fade=2, cycles=1):
     ({"sweep_s": 0.0}, "DURATION"), ({"sweep_s": math.nan}, "DURATION"),
     # 300 s with the fades: 292 s of sweep and two fades of 2 cycles at 0.5 Hz (8 s)
     ({"sweep_s": 292.0}, "NONE"), ({"sweep_s": 292.1}, "DURATION"),
+    # whole samples, as the generator counts them: a fade cycle at 0.16 Hz (a float) is
+    # ceil(1250.00003) = 1251 samples, so 10 of them each way and 175 s of sweep are 300.1 s
+    ({"start": 0.16, "stop": 1.0, "fade": 10, "sweep_s": 174.9}, "NONE"),
+    ({"start": 0.16, "stop": 1.0, "fade": 10, "sweep_s": 175.0}, "DURATION"),
 ])
 def test_a_chirp_is_held_to_every_bound_a_sine_is(change, why):
     b = armed_bench()

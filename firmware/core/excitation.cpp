@@ -12,6 +12,7 @@ constexpr float kMinSamplesPerPeriod = 4.0f;
 constexpr uint32_t kMinSamplesPerCycle = 4;
 
 float raised_cosine(uint32_t i, uint32_t length) {
+    if (length == 0) return 0.0f;             // no fade: nothing to ramp (and no 0/0)
     return 0.5f * (1.0f - std::cos(kTwoPi * 0.5f * static_cast<float>(i) / static_cast<float>(length)));
 }
 }  // namespace
@@ -42,11 +43,20 @@ uint64_t sweep_samples_for(const ExcitationConfig& c, float loop_rate_hz) {
                : 0;
 }
 
+uint64_t chirp_fade_samples_for(const ExcitationConfig& c, float loop_rate_hz) {
+    if (!is_chirp(c.signal)) return 0;
+    // In double: the same samples for the Supervisor's cap and for the generator.
+    const double cycle = std::ceil(static_cast<double>(loop_rate_hz) /
+                                   static_cast<double>(lowest_freq_hz(c)));
+    if (!(cycle >= 1.0 && cycle <= static_cast<double>(Excitation::kMaxPeriodSamples))) return 0;
+    return uint64_t{c.fade_cycles} * static_cast<uint64_t>(cycle);
+}
+
 bool chirp_valid(const ExcitationConfig& c, float loop_rate_hz) {
     if (!is_chirp(c.signal)) return true;
     return std::isfinite(c.freq_stop_hz) && c.freq_stop_hz > 0.0f && c.freq_stop_hz != c.freq_hz &&
-           std::isfinite(c.sweep_s) && c.sweep_s > 0.0f && c.cycles == 1 &&
-           sweep_samples_for(c, loop_rate_hz) > 0;
+           std::isfinite(c.sweep_s) && c.sweep_s > 0.0f && c.cycles == 1 && c.fade_cycles > 0 &&
+           sweep_samples_for(c, loop_rate_hz) > 0 && chirp_fade_samples_for(c, loop_rate_hz) > 0;
 }
 
 uint64_t fade_samples_for(const ExcitationConfig& c, uint32_t period_samples) {
@@ -90,12 +100,8 @@ bool Excitation::start(const ExcitationConfig& config, float loop_rate_hz) {
     }
     // A chirp fades over whole cycles of its lower end (so both fades hold at least
     // fade_cycles cycles of the frequency they hold); its full-amplitude part is the sweep.
-    const uint32_t fade_period =
-        is_chirp(config.signal)
-            ? static_cast<uint32_t>(std::ceil(static_cast<double>(loop_rate_hz) /
-                                              static_cast<double>(lowest_freq_hz(config))))
-            : period;
-    const uint64_t fade = fade_samples_for(config, fade_period);
+    const uint64_t fade = is_chirp(config.signal) ? chirp_fade_samples_for(config, loop_rate_hz)
+                                                  : fade_samples_for(config, period);
     const uint64_t middle = is_chirp(config.signal) ? sweep_samples_for(config, loop_rate_hz)
                                                     : uint64_t{period} * config.cycles;
     const uint64_t total = middle + 2u * fade;

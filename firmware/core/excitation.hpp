@@ -117,11 +117,15 @@ uint16_t highest_order(const ExcitationConfig& config);
 float lowest_freq_hz(const ExcitationConfig& config);
 float highest_freq_hz(const ExcitationConfig& config);
 // A chirp's own checks (true for the other signals): both ends finite and positive and not
-// equal, the sweep's length finite and positive, cycles 1, and its samples within
-// kMaxTotalSamples at loop_rate_hz.
+// equal, the sweep's length finite and positive, cycles 1, a fade of at least one cycle, and
+// its sweep's and fades' samples within their counters at loop_rate_hz.
 bool chirp_valid(const ExcitationConfig& config, float loop_rate_hz);
 // A chirp's full-amplitude samples at loop_rate_hz (0 for the other signals).
 uint64_t sweep_samples_for(const ExcitationConfig& config, float loop_rate_hz);
+// Each of a chirp's fades in samples at loop_rate_hz: fade_cycles whole cycles of its lower
+// end, each rounded up to a sample (0 for the other signals, or a cycle beyond
+// Excitation::kMaxPeriodSamples). The generator and the Supervisor's cap use this one count.
+uint64_t chirp_fade_samples_for(const ExcitationConfig& config, float loop_rate_hz);
 
 class Excitation {
 public:

@@ -388,9 +388,10 @@ Reason Supervisor::check_excitation_bounds(const ExcitationConfig& c) const {
 Reason Supervisor::check_chirp_duration(const ExcitationConfig& c) const {
     const uint64_t sweep = sweep_samples_for(c, loop_rate_hz_);
     if (!(std::isfinite(c.sweep_s) && c.sweep_s > 0.0f) || sweep == 0) return Reason::Duration;
-    const float fade_period = std::ceil(loop_rate_hz_ / lowest_freq_hz(c));
-    const float fade = static_cast<float>(c.fade_cycles) * fade_period;
-    if (!((static_cast<float>(sweep) + 2.0f * fade) / loop_rate_hz_ <= limits_.max_duration_s)) {
+    // The generator's own sample counts (excitation.cpp), compared whole in double.
+    const uint64_t total = sweep + 2u * chirp_fade_samples_for(c, loop_rate_hz_);
+    if (!(static_cast<double>(total) <=
+          static_cast<double>(limits_.max_duration_s) * static_cast<double>(loop_rate_hz_))) {
         return Reason::Duration;
     }
     return Reason::None;

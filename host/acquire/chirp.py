@@ -24,11 +24,13 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
 from ...sim.base import firmware_facts
 from ...sim.base.errors import InputError
 from .excitation import amplitude_bound, default_amplitude
 
-__all__ = ["Chirp", "design", "fade_cycles_for", "SWEEP_S", "LAWS", "MIXER_AMPLITUDE",
+__all__ = ["Chirp", "design", "fade_cycles_for", "fade_samples", "SWEEP_S", "LAWS", "MIXER_AMPLITUDE",
            "FADE_S", "MAX_FADE_CYCLES"]
 
 #: The sweep's length at full amplitude by default, s (fades come on top).
@@ -57,27 +59,40 @@ class Chirp:
     law: str
     amplitude: float
     fade_cycles: int
+    fs_hz: float = firmware_facts.LOOP_RATE_HZ
 
     @property
     def band_hz(self) -> tuple:
         return min(self.start_hz, self.stop_hz), max(self.start_hz, self.stop_hz)
 
     @property
-    def fade_s(self) -> float:
-        """Each fade's length: whole cycles of the band's bottom (the firmware rounds them up
-        to a loop sample)."""
-        return self.fade_cycles / self.band_hz[0]
+    def sweep_samples(self) -> int:
+        """The sweep's loop samples, as the firmware rounds them."""
+        return int(round(self.sweep_s * self.fs_hz))
+
+    @property
+    def fade_samples(self) -> int:
+        """Each fade's loop samples: :func:`fade_samples`."""
+        return fade_samples(self.band_hz[0], self.fade_cycles, self.fs_hz)
 
     @property
     def duration_s(self) -> float:
-        """The excitation's length, fades included (the rig time it costs)."""
-        return self.sweep_s + 2.0 * self.fade_s
+        """The excitation's length, fades included (the rig time it costs), in the
+        firmware's whole samples."""
+        return (self.sweep_samples + 2 * self.fade_samples) / self.fs_hz
 
     def record(self) -> dict:
         """The design, for the manifest."""
         return {"signal": "chirp", "start_hz": self.start_hz, "stop_hz": self.stop_hz,
                 "sweep_s": self.sweep_s, "law": self.law, "amplitude": self.amplitude,
                 "fade_cycles": self.fade_cycles, "duration_s": self.duration_s}
+
+
+def fade_samples(lo_hz: float, fade_cycles: int, loop_hz: float) -> int:
+    """A chirp's fade in loop samples as the firmware counts it (excitation.cpp
+    ``chirp_fade_samples_for``): ``fade_cycles`` cycles of its lower end ``lo_hz``, each
+    rounded up to a sample, the lower end being the request's single-precision value."""
+    return fade_cycles * math.ceil(float(loop_hz) / float(np.float32(lo_hz)))
 
 
 def fade_cycles_for(lo_hz: float) -> int:
@@ -104,11 +119,11 @@ def design(band_hz, inject: str, amplitude=None, sweep_s=None, law: str = "log",
         raise InputError(f"the chirp's amplitude {amplitude:g} is outside the firmware's bound "
                          f"for {inject} injection (0, {amplitude_bound(inject):g}]")
     chirp = Chirp(lo, hi, float(sweep_s or SWEEP_S), law, float(amplitude),
-                  fade_cycles_for(lo))
+                  fade_cycles_for(lo), float(loop_hz))
+    if not math.isfinite(chirp.sweep_s) or chirp.sweep_s <= 0:
+        raise InputError("the chirp's sweep must last a positive time")
     if chirp.duration_s > firmware_facts.MAX_DURATION_S:
         raise InputError(f"the chirp lasts {chirp.duration_s:.0f} s with its fades; the "
                          f"firmware allows {firmware_facts.MAX_DURATION_S:g} s: a shorter "
                          "--rig-time")
-    if not math.isfinite(chirp.sweep_s) or chirp.sweep_s <= 0:
-        raise InputError("the chirp's sweep must last a positive time")
     return chirp

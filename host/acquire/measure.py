@@ -19,6 +19,7 @@ import numpy as np
 from ...sim.base import firmware_facts
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
+from .chirp import fade_samples
 from .design import response_per_unit
 from .link import input_output, reason_text
 
@@ -214,14 +215,16 @@ class ExcitationWatch:
             return
         loop_hz = 1e6 / self.dt_us
         period = max(int(round(loop_hz / e["requested_hz"])), 1)
-        e.update(freq_hz=loop_hz / period, period_samples=period, period_inferred=True)
+        # a chirp's frequency is used as given: it has no period to round to
+        used = e["requested_hz"] if self.plan.chirp is not None else loop_hz / period
+        e.update(freq_hz=used, period_samples=period, period_inferred=True)
         if self.plan.multisine is not None:
             lowest = self.plan.multisine.orders[0]
             e["fade_samples"] = self.plan.fade_cycles * -(-period // lowest)
-        if self.plan.chirp is not None:            # as excitation.cpp rounds them
+        if self.plan.chirp is not None:            # as excitation.cpp counts them
             e["sweep_samples"] = int(round(self.plan.chirp.sweep_s * loop_hz))
-            e["fade_samples"] = self.plan.fade_cycles * math.ceil(
-                loop_hz / self.plan.chirp.band_hz[0])
+            e["fade_samples"] = fade_samples(self.plan.chirp.band_hz[0], self.plan.fade_cycles,
+                                             loop_hz)
 
     def _sample(self, m) -> None:
         e = self.entry

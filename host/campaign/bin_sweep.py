@@ -4,7 +4,8 @@ excitations found in its logged loops, each as a sweep manifest's frequency entr
 measures a sweep folder's.
 
 An excitation is a run of loops whose SIDD gives one start (the loop's time less SIDD's time
-into the excitation) and one frequency; a loop missing from the log (an HQGP gap) leaves it
+into the excitation), and one frequency unless it is a chirp (SIDD's F moves, and the SIDS at
+its start names its two ends; one whose SIDS is missing is not measured); a loop missing from the log (an HQGP gap) leaves it
 whole, the loop a hole. Each loop's place in it is its loop number less the start's. Its set-up
 is the SIDS logged at that start: the fades (TFin) and the planned full-amplitude part (TC), in
 loops on the log's loop period; the period in loops is the loop rate over SIDD's F, the
@@ -121,13 +122,8 @@ def _excitations(log, active, loop_us) -> list:
     """The log's excitations (module docstring), in order."""
     s = log.samples
     starts = s.time_us[active].astype(float) - log.exc_time_s[active] * 1e6
-    freqs = log.exc_freq_hz[active]
-    # a new start, or a new frequency unless the excitation is a chirp (its SIDD.F moves)
-    moved = np.diff(freqs) != 0
-    chirping = np.isin(np.round(starts[1:] / loop_us), [np.round(u["TimeUS"] / loop_us)
-                                                        for u in log.setups
-                                                        if u["FSp"] != u["FSt"]])
-    cut = np.flatnonzero((np.abs(np.diff(starts)) > loop_us / 2) | (moved & ~chirping)) + 1
+    # a new start (a chirp's SIDD.F moves within one excitation)
+    cut = np.flatnonzero(np.abs(np.diff(starts)) > loop_us / 2) + 1
     found, seq = [], s.seq.astype(np.int64)
     for rows in np.split(active, cut):
         first = rows[0]
@@ -168,6 +164,9 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
                     for k, mask in saturation_masks().items()})
     if e.chirp:
         return {**entry, **_chirp_entry(e, rows, fade, last, loop_us)}
+    if np.unique(e.freqs).size > 1:
+        return {**entry, "status": "its frequency moves (a chirp) but the log has no SIDS "
+                                   "naming its two ends"}
     orders = _lines(s.excitation[rows].astype(float), places - fade, last - fade + 1, period)
     if orders is None:
         return {**entry, "status": "no whole period of its excitation in the log"}

@@ -23,7 +23,7 @@ import numpy as np
 from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
 from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, input_output
-from ..acquire.measure import MAX_LOST_SHARE, saturation_text
+from ..acquire.measure import MAX_LOST_RUN, MAX_LOST_SHARE, saturation_text
 from ..acquire.sweep import cut_text
 from ..estimate.composite import MIN_COHERENCE, composite_response
 from ..estimate.fit import n_parameters
@@ -210,7 +210,8 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         replay=None if replays is None else _replay_record(result.recommended, replays),
         axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path")))
     _write_plots(plots, out_dir, manifest, points, result, replays,
-                 "a chirp: no periods to replay" if manifest.get("signal") == "chirp" else None)
+                 "a chirp's record has no periods to replay"
+                 if any(p.method == "composite" for p in firsts) else None)
     return {"out_dir": out_dir, "axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
             "records": segments, "record_points": firsts, "replays": replays}
@@ -359,6 +360,8 @@ def estimate_points(manifest, samples, estimate, progress) -> tuple:
     for entry, t, r, u, y, present in sweep_segments(manifest, samples):
         what = _entry_name(entry)
         lost = _lost_share(entry, present)
+        if entry.get("signal") == "chirp" and present is not None:   # its fades count too
+            lost = max(lost, 1.0 - float(np.mean(present)))
         try:
             if not len(t):
                 raise InputError("the log holds none of its samples")
@@ -389,7 +392,13 @@ def _chirp_points(entry, t, r, u, y, estimate, present) -> list:
     link filled by a straight line, at :data:`~.record.RECORD_POINTS` frequencies over its
     band, against the excitation (or the input); those of coherence below
     :data:`~..estimate.composite.MIN_COHERENCE` are left out."""
+    if t.size < 2 or not float(np.median(np.diff(t))) > 0:
+        raise InputError("its record has fewer than two samples, or no time step")
     if present is not None:
+        run = _longest_hole(present)
+        if run > MAX_LOST_RUN:
+            raise InputError(f"{run} of its samples in a row were lost on the link (at most "
+                             f"{MAX_LOST_RUN} are bridged)")
         k = np.arange(present.size)
         r, u, y = (np.interp(k, k[present], x[present]) for x in (r, u, y))
     fs = 1.0 / float(np.median(np.diff(t)))
@@ -401,6 +410,13 @@ def _chirp_points(entry, t, r, u, y, estimate, present) -> list:
         raise InputError(f"{len(points)} of its points have coherence {MIN_COHERENCE:g} or "
                          "more")
     return points
+
+
+def _longest_hole(present) -> int:
+    """The longest run of samples not present."""
+    edges = np.diff(np.concatenate([[0], (~present).astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return int(np.max(ends - starts)) if starts.size else 0
 
 
 def _entry_name(entry) -> str:

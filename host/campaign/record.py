@@ -87,6 +87,8 @@ def _armed_record(samples, names) -> tuple:
         raise InputError("the record has no armed loops: nothing flew")
     seq = samples.seq[rows].astype(np.int64)
     t = samples.time_us[rows].astype(np.int64) * 1e-6
+    if not float(np.median(np.diff(t))) > 0:
+        raise InputError("the record's samples have no time step (their times do not increase)")
     place = seq - seq[0]
     grid = np.arange(int(place[-1]) + 1)
     if grid.size / (1.0 / float(np.median(np.diff(t)))) < MIN_RECORD_S:
@@ -102,6 +104,7 @@ def _band(manifest, axis, band_hz):
     if manifest is not None and manifest.get("frequencies"):
         used = [e["freq_hz"] * k for e in manifest["frequencies"] if e.get("freq_hz")
                 for k in (e.get("orders") or [1])]           # a multisine's lines
+        used += [e["stop_hz"] for e in manifest["frequencies"] if e.get("stop_hz")]  # a chirp's
         if len(set(used)) > 1:
             return min(used), max(used)
     return paper.BANDS_HZ[axis]
@@ -114,7 +117,11 @@ def record_points(manifest, samples, estimate: str, progress, axis=None, fields=
     ``segment`` the responses figure's record."""
     if not len(samples):
         raise InputError("the log holds no HQ_SYSID_SAMPLE: no record to identify")
-    axis = axis or (manifest or {}).get("axis") or _named_axis(samples)
+    named = _named_axis(samples)
+    if axis is not None and axis != named:
+        raise InputError(f"--axis {axis}: the record's samples are {named}'s (HQ_SYSID_SAMPLE "
+                         "names the axis its fields are of)")
+    axis = (manifest or {}).get("axis") or named
     inject = (manifest or {}).get("inject", "mixer")
     u_name, y_name = fields or input_output(inject)
     t, signals, lost = _armed_record(samples, (u_name, y_name, "excitation"))

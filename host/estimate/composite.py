@@ -181,7 +181,7 @@ def composite_response(y, u, fs_hz: float, freqs_hz, r=None, windows_s=None,
     if not freqs.size or not np.all(np.isfinite(freqs)) or freqs[0] <= 0:
         raise InputError("the frequencies must be positive")
     if not all(np.all(np.isfinite(x)) for x in (y, u) + ((r,) if r is not None else ())):
-        raise InputError("the record has samples that are not numbers (fill its holes first)")
+        raise InputError("the record has samples that are not numbers")
     if freqs[-1] >= fs_hz / 2:
         raise InputError(f"{freqs[-1]:.4g} Hz is not below the record's Nyquist frequency "
                          f"({fs_hz / 2:.4g} Hz)")
