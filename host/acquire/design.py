@@ -37,7 +37,8 @@ import numpy as np
 
 from ...sim.base.errors import InputError
 
-__all__ = ["Dwell", "AmplitudeDesign", "response_per_unit",
+__all__ = ["Dwell", "AmplitudeDesign", "SequentialMultisine", "response_per_unit",
+           "line_sdr", "SEQUENTIAL_RIG_TIME_S",
            "TARGET_SWING_DEG", "TARGET_SIGMA", "MIN_CYCLES", "MAX_CYCLES", "MAX_DWELL_S"]
 
 #: The rig's swing each designed amplitude aims at, deg.
@@ -51,6 +52,8 @@ MIN_CYCLES = 8
 #: The most measured cycles a frequency gets, and the most time at full amplitude.
 MAX_CYCLES = 48
 MAX_DWELL_S = 60.0
+#: A sequential multisine's rig time at most, fades included, s (the cap its periods fill).
+SEQUENTIAL_RIG_TIME_S = 180.0
 #: The first designed amplitude, as a fraction of the firmware's bound; the largest change
 #: from one frequency to the next.
 START_FRACTION = 0.25
@@ -83,6 +86,50 @@ class Dwell:
         except InputError:
             return math.inf
         return p.sigma / abs(p.gain) if abs(p.gain) > 0 else math.inf
+
+
+@dataclasses.dataclass
+class SequentialMultisine:
+    """The sequential multisine's rule: whole base periods, from ``min_periods`` on, until
+    every line's sigma over its magnitude is ``target_sigma`` or less (the dwell's target,
+    for each line at once), or the periods its rig time holds have run."""
+    target_sigma: float = TARGET_SIGMA
+    min_periods: int = 3
+
+    def relative_sigmas(self, r, u, y, fs_hz: float, period: int, orders,
+                        present=None) -> np.ndarray:
+        """Each line's sigma over its magnitude from the record so far (inf for a line not
+        estimated yet), in the order of ``orders``."""
+        # the estimator (estimate.fsf) when a multisine is judged: sil and --help need not wait
+        from ..estimate.fsf import estimate_multisine_against_excitation
+        try:
+            found = {p.order: p for p in estimate_multisine_against_excitation(
+                np.asarray(r), np.asarray(u), np.asarray(y), fs_hz, period, orders,
+                discard_periods=1, present=present)}
+        except InputError:
+            return np.full(len(orders), math.inf)
+        return np.array([found[h].sigma / abs(found[h].gain)
+                         if h in found and abs(found[h].gain) > 0 else math.inf
+                         for h in orders])
+
+
+def line_sdr(y, period: int, orders, present=None) -> list:
+    """Each line's signal-to-disturbance ratio in the output ``y``: over the whole periods
+    after the first (none with a lost sample), the magnitude of the line's mean over them
+    against the RMS of its scatter about that mean; None where fewer than two periods or no
+    scatter."""
+    y = np.asarray(y, dtype=float)
+    n = y.size // period
+    periods = y[:n * period].reshape(n, period)[1:]
+    if present is not None:
+        keep = np.asarray(present[:n * period], dtype=bool).reshape(n, period)[1:].all(axis=1)
+        periods = periods[keep]
+    if periods.shape[0] < 2:
+        return [None] * len(orders)
+    lines = np.fft.rfft(periods, axis=1)[:, list(orders)]
+    mean = lines.mean(axis=0)
+    scatter = np.sqrt(np.mean(np.abs(lines - mean) ** 2, axis=0))
+    return [float(abs(m) / s) if s > 0 else None for m, s in zip(mean, scatter)]
 
 
 def response_per_unit(r, y, fs_hz: float, freq_hz: float, present=None) -> float:

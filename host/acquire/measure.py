@@ -20,7 +20,7 @@ from ...sim.base import firmware_facts
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
 from .chirp import fade_samples
-from .design import response_per_unit
+from .design import line_sdr, response_per_unit
 from .link import input_output, reason_text
 
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
@@ -282,6 +282,17 @@ class ExcitationWatch:
             column.append(value)
         self.present.append(True)
         self._dwell()
+        self._sequential_multisine()
+
+    def _judging(self, least) -> int | None:
+        """The whole periods (a dwell's cycles) so far when a sequential rule whose least is
+        ``least`` (None: no rule) judges the record: halfway through each period from the
+        least's last on; None at any other sample, or once the excitation is finishing."""
+        period = self.entry.get("period_samples")
+        if least is None or self.finish or not period:
+            return None
+        periods, into = divmod(len(self.present), period)
+        return periods if into == period // 2 and periods >= least - 1 else None
 
     def _dwell(self) -> None:
         """The sequential dwell, halfway through each cycle from the least cycles' last on
@@ -290,12 +301,10 @@ class ExcitationWatch:
         or, at the first such moment, when the amplitude turns out less than half of what
         the swing target allows, finish to measure again."""
         dwell, e = self.plan.dwell, self.entry
-        period = e.get("period_samples")
-        if dwell is None or self.finish or not period:
+        cycles = self._judging(dwell and dwell.min_cycles)
+        if cycles is None:
             return
-        cycles, into = divmod(len(self.present), period)
-        if into != period // 2 or cycles < dwell.min_cycles - 1:
-            return
+        period = e["period_samples"]
         fs = e["freq_hz"] * period
         r, u, y, present = self.columns(cycles * period)
         relative = dwell.relative_sigma(r, u, y, fs, e["freq_hz"], present)
@@ -313,6 +322,23 @@ class ExcitationWatch:
         if used >= 1 and relative * math.sqrt(used / (used + 1)) <= dwell.target_sigma:
             self.finish = True
 
+    def _sequential_multisine(self) -> None:
+        """The sequential multisine, halfway through each base period from its least
+        periods' last on (so that a finish lands in that period, which the firmware
+        completes): finish once every line of the whole periods so far, with that period
+        added, is known well enough (the dwell's rule, line by line)."""
+        rule, e = self.plan.sequential, self.entry
+        periods = self._judging(rule and rule.min_periods)
+        if periods is None:
+            return
+        period = e["period_samples"]
+        r, u, y, present = self.columns(periods * period)
+        worst = float(np.max(rule.relative_sigmas(r, u, y, e["freq_hz"] * period, period,
+                                                  self.plan.multisine.orders, present)))
+        used = periods - 1                      # the first period fills the FSF's filter
+        if used >= 1 and worst * math.sqrt(used / (used + 1)) <= rule.target_sigma:
+            self.finish = True
+
     def rate_per_unit(self, require_end: bool = True, of: str = "rate") -> float:
         """The measured rate (``of="input"``: input) per unit of excitation at the
         fundamental (NaN if unknown: an excitation that did not end well, or an output
@@ -327,7 +353,10 @@ class ExcitationWatch:
 
     def conclude(self) -> None:
         """A sequential dwell's record in the entry: the cycles measured, why the dwell
-        ended, and the point's relative sigma then."""
+        ended, and the point's relative sigma then (a sequential multisine's:
+        :meth:`_conclude_multisine`)."""
+        if self.plan.sequential is not None:
+            return self._conclude_multisine()
         e, dwell = self.entry, self.plan.dwell
         if dwell is None or e["status"] != "ok" or not e.get("period_samples"):
             return
@@ -338,6 +367,22 @@ class ExcitationWatch:
         relative = dwell.relative_sigma(r, u, y, e["freq_hz"] * e["period_samples"],
                                         e["freq_hz"], present)
         e["relative_sigma"] = relative if math.isfinite(relative) else None
+
+    def _conclude_multisine(self) -> None:
+        """A sequential multisine's record in the entry: the base periods measured, why it
+        ended (``target``: every line known well enough; ``cap``: its rig time ran out), and
+        per line its sigma over its magnitude and its signal-to-disturbance ratio in the
+        output (:func:`.design.line_sdr`)."""
+        e, rule = self.entry, self.plan.sequential
+        if e["status"] != "ok" or not e.get("period_samples"):
+            return
+        period, orders = e["period_samples"], self.plan.multisine.orders
+        e["periods"] = (e["samples"] + e["lost"]) // period
+        e["multisine_end"] = "target" if self.finish else "cap"
+        r, u, y, present = self.columns()
+        sigmas = rule.relative_sigmas(r, u, y, e["freq_hz"] * period, period, orders, present)
+        e["line_sigma"] = [float(s) if math.isfinite(s) else None for s in sigmas]
+        e["line_sdr"] = line_sdr(y, period, orders, present)
 
     def check_time(self, now_us: int) -> None:
         """The timeouts, on the session's clock: no start, or samples that stopped."""
@@ -411,7 +456,8 @@ def _incomplete(entry, plan, finished: bool, edge_room=(0, 0)) -> str | None:
         return (f"incomplete: {entry['samples']} measured samples were logged and the "
                 "excitation's period is not known (its status and samples were lost)")
     if finished:
-        least = plan.dwell.min_cycles * period
+        least = (plan.dwell.min_cycles if plan.dwell is not None
+                 else plan.sequential.min_periods) * period
         whole = -(-span // period) * period
         if whole - span > room or whole < least:
             return (f"incomplete: {entry['samples']} measured samples were logged"

@@ -34,7 +34,7 @@ from ..process.signals import ABORTED_BY, stopped_by
 from ..records import paper
 from ..records.gains import gains_from_params, single
 from ..records.manifest import MANIFEST, UNSET, SweepManifest, write_manifest
-from .design import AmplitudeDesign, Dwell
+from .design import SEQUENTIAL_RIG_TIME_S, AmplitudeDesign, Dwell
 from .excitation import amplitude_bound, default_amplitude, default_peak
 from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
 from .chirp import design as chirp_design
@@ -90,6 +90,7 @@ class SweepPlan:
         self.dwell, self.design = dwell, design
         self.multisine = None
         self.chirp = None
+        self.sequential = None                  # a multisine's SequentialMultisine
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
@@ -119,7 +120,11 @@ class SweepPlan:
     def record(self) -> dict:
         """The design, for the manifest."""
         if self.multisine is not None:
-            return self.multisine.record()
+            out = self.multisine.record()
+            if self.sequential is not None:
+                out["sequential"] = {"target_sigma": self.sequential.target_sigma,
+                                     "min_periods": self.sequential.min_periods}
+            return out
         if self.chirp is not None:
             return self.chirp.record()
         out = {"cycles": self.cycles} if self.dwell is None else {
@@ -161,7 +166,7 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
 
 
 def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=None,
-                   band_hz=None, like=None) -> SweepPlan:
+                   band_hz=None, like=None, sequential=None) -> SweepPlan:
     """A multisine over the axis's Table 1 band (or ``band_hz``) in ``rig_time_s``
     (:func:`heliquad.host.acquire.multisine.design`). ``amplitude`` is its peak; without it, the
     dwell's amplitude for angle and rate injection (the same largest setpoint), and for
@@ -171,9 +176,13 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
     if amplitude is None:
         amplitude = default_peak(inject)
+    if sequential is not None and rig_time_s is None:
+        rig_time_s = SEQUENTIAL_RIG_TIME_S
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
                 rig_time_s or RIG_TIME_S, like=like)
-    return SweepPlan.of_multisine(axis, inject, ms)
+    plan = SweepPlan.of_multisine(axis, inject, ms)
+    plan.sequential = sequential
+    return plan
 
 
 def chirp_plan(axis, inject="mixer", amplitude=None, sweep_s=None, band_hz=None,

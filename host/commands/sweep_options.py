@@ -64,7 +64,10 @@ def add_design_arguments(p, on_board: bool = False) -> None:
     if not on_board:
         p.add_argument("--target-sigma", type=number_in(0, 1, lo_open=True), metavar="S",
                        help=f"sequential dwell: end a frequency once its point's standard deviation "
-                            f"is S of its magnitude (default {design.TARGET_SIGMA:g})")
+                            f"is S of its magnitude (default {design.TARGET_SIGMA:g}); with "
+                            "--signal multisine, a sequential multisine: whole base periods "
+                            "until every line's is, or --rig-time (default "
+                            f"{design.SEQUENTIAL_RIG_TIME_S:g} s)")
         p.add_argument("--max-cycles", type=int_in(design.MIN_CYCLES, MAX_CYCLES), metavar="N",
                        help=f"sequential dwell: the most measured cycles of a frequency (default "
                             f"{design.MAX_CYCLES}; at most {design.MAX_DWELL_S:g} s of them)")
@@ -108,9 +111,6 @@ def sweep_plan(args, on_board: bool = False):
     target_sigma, max_cycles, swing_deg = (getattr(args, name, None) for name in
                                            ("target_sigma", "max_cycles", "swing_deg"))
     apply_tuning_band(args)
-    if args.cycles is not None and (target_sigma or max_cycles):
-        raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
-                         "the sequential dwell: give one or the other")
     if swing_deg is not None and (args.amplitude is not None or args.inject != "mixer"):
         raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
                          "--amplitude or angle or rate injection")
@@ -121,6 +121,9 @@ def sweep_plan(args, on_board: bool = False):
         return _chirp_plan(args, amp, (target_sigma, max_cycles, swing_deg))
     if args.lines is not None or args.rig_time is not None:
         raise InputError("--lines and --rig-time shape a multisine: add --signal multisine")
+    if args.cycles is not None and (target_sigma or max_cycles):
+        raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
+                         "the sequential dwell: give one or the other")
     if on_board:
         if amp is None and args.inject == "mixer":
             amp = design.AmplitudeDesign(amplitude_bound("mixer")).first()
@@ -163,14 +166,17 @@ def _chirp_plan(args, amp, dwell_options):
 
 def _multisine_plan(args, amp, dwell_options):
     """A multisine's plan: over the axis's band, or from the lowest to the highest of
-    --freqs-hz; --amplitude is its peak."""
+    --freqs-hz; --amplitude is its peak; with --target-sigma it is sequential (whole base
+    periods until every line is known that well, or --rig-time, default 180 s)."""
     # the command's work, imported when it runs: --help imports every command module
     from ..acquire.sweep import multisine_plan
 
-    given = [o for o, v in zip(("--cycles", "--target-sigma", "--max-cycles", "--swing-deg"),
-                               (args.cycles, *dwell_options)) if v is not None]
+    target_sigma = dwell_options[0]
+    given = [o for o, v in zip(("--cycles", "--max-cycles", "--swing-deg"),
+                               (args.cycles, *dwell_options[1:])) if v is not None]
     if given:
         raise InputError(f"{' and '.join(given)} shape a dwell; a multisine's length is "
-                         "--rig-time")
+                         "--rig-time (and with --target-sigma, the periods its lines need)")
+    sequential = None if target_sigma is None else design.SequentialMultisine(target_sigma)
     return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time,
-                          _band_edges(args, "multisine"))
+                          _band_edges(args, "multisine"), sequential=sequential)
