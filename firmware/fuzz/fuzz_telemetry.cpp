@@ -132,7 +132,7 @@ size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
             const float amp = (injection & 0x80) ? in.f32() : (in.u8() % 100) * 0.01f;
             const uint8_t cycles = in.u8() % 8, fade = in.u8() % 3;
             // A sine, a multisine (lines in order or not, any float amplitude and phase, a
-            // gap before the last), or an unknown signal.
+            // gap before the last), a chirp of either law, or an unknown signal.
             const uint8_t signal = in.u8() % (HQ_SIGNAL_ENUM_END + 1);
             uint16_t orders[hq::kMaxHarmonics] = {};
             float amps[hq::kMaxHarmonics] = {}, phases[hq::kMaxHarmonics] = {};
@@ -144,12 +144,17 @@ size_t command_packet(Reader& in, uint8_t* out, mavlink_status_t& tx) {
                 amps[i] = (how & 0x40) ? in.f32() : (in.u8() % 50) * 0.01f;
                 phases[i] = (how & 0x20) ? in.f32() : (in.u8() % 64) * 0.1f;
             }
+            // A chirp's stop frequency and sweep: any float, or one in or near the band.
+            const bool chirp = signal == HQ_SIGNAL_CHIRP || signal == HQ_SIGNAL_CHIRP_LINEAR;
+            const float stop = !chirp ? 0.0f
+                               : (in.u8() & 1) ? in.f32() : 0.05f + (in.u8() % 64) * 0.8f;
+            const float sweep = !chirp ? 0.0f : (in.u8() & 1) ? in.f32() : 1.0f + in.u8() * 2.0f;
             // Every axis and injection point, and one unknown of each.
             mavlink_msg_hq_excitation_pack_status(
                 255, kGcs, &tx, &msg, 1, MAV_COMP_ID_AUTOPILOT1,
                 action % HQ_EXCITATION_ACTION_ENUM_END, axis % (HQ_AXIS_ENUM_END + 1),
                 injection % (HQ_INJECTION_ENUM_END + 1), freq, amp, cycles, fade, signal, orders,
-                amps, phases);
+                amps, phases, stop, sweep);
             break;
         }
     }
