@@ -30,7 +30,8 @@ from ...sim.base import firmware_facts
 from ...sim.base.errors import InputError
 from .excitation import amplitude_bound, default_amplitude
 
-__all__ = ["Chirp", "design", "fade_cycles_for", "fade_samples", "SWEEP_S", "LAWS", "MIXER_AMPLITUDE",
+__all__ = ["Chirp", "design", "fade_cycles_for", "fade_samples", "SWEEP_S", "LAWS",
+           "MIXER_AMPLITUDE",
            "FADE_S", "MAX_FADE_CYCLES"]
 
 #: The sweep's length at full amplitude by default, s (fades come on top).

@@ -5,18 +5,19 @@ measures a sweep folder's.
 
 An excitation is a run of loops whose SIDD gives one start (the loop's time less SIDD's time
 into the excitation), and one frequency unless it is a chirp (SIDD's F moves, and the SIDS at
-its start names its two ends; one whose SIDS is missing is not measured); a loop missing from the log (an HQGP gap) leaves it
-whole, the loop a hole. Each loop's place in it is its loop number less the start's. Its set-up
-is the SIDS logged at that start: the fades (TFin) and the planned full-amplitude part (TC), in
-loops on the log's loop period; the period in loops is the loop rate over SIDD's F, the
-frequency the firmware used. The full-amplitude window runs from the fade-in's end to the loop
-before the first fade-out loop; its loops the log misses are lost, as on a link. An excitation
-is measured when its fade-out is in the log (the firmware ended it in order, a finished dwell
-too) or its logged window reaches the planned end; one stopped at once (the abort limits, the
-host's heartbeat lost) or cut off by the log's end or damage is not measured, and the manifest
-says so as it says a sweep that was cut (``complete`` false, ``aborted`` naming each such
-excitation). An excitation of the same frequency later in the log supersedes an earlier one (a
-sweep measures a frequency again at another amplitude).
+its start names its two ends; one whose SIDS is missing is not measured); a loop missing
+from the log (an HQGP gap) leaves it whole, the loop a hole. Each loop's place in it is its
+loop number less the start's. Its set-up is the SIDS logged at that start: the fades (TFin)
+and the planned full-amplitude part (TC), in loops on the log's loop period; the period in
+loops is the loop rate over SIDD's F, the frequency the firmware used. The full-amplitude
+window runs from the fade-in's end to the loop before the first fade-out loop; its loops the
+log misses are lost, as on a link. An excitation is measured when its fade-out is in the log
+(the firmware ended it in order, a finished dwell too) or its logged window reaches the
+planned end; one stopped at once (the abort limits, the host's heartbeat lost) or cut off by
+the log's end or damage is not measured, and the manifest says so as it says a sweep that
+was cut (``complete`` false, ``aborted`` naming each such excitation). An excitation of the
+same frequency later in the log supersedes an earlier one (a sweep measures a frequency
+again at another amplitude).
 
 A multisine's lines are read from its logged excitation: the full-amplitude periods the log
 holds whole, averaged and transformed, give one line per harmonic whose amplitude is more
@@ -57,10 +58,14 @@ class _Excitation:
     freqs: np.ndarray = None            # each loop's SIDD.F (a chirp's moves)
 
     @property
+    def moves(self) -> bool:
+        """Its SIDD.F moves (a chirp's does)."""
+        return np.unique(self.freqs).size > 1
+
+    @property
     def chirp(self) -> bool:
         """A chirp: its SIDD.F moves, and its SIDS names two ends."""
-        return self.setup is not None and self.setup["FSp"] != self.setup["FSt"] and \
-            np.unique(self.freqs).size > 1
+        return self.moves and self.setup is not None and self.setup["FSp"] != self.setup["FSt"]
 
 
 def bin_sweep(path) -> tuple:
@@ -164,7 +169,7 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
                     for k, mask in saturation_masks().items()})
     if e.chirp:
         return {**entry, **_chirp_entry(e, rows, fade, last, loop_us)}
-    if np.unique(e.freqs).size > 1:
+    if e.moves:
         return {**entry, "status": "its frequency moves (a chirp) but the log has no SIDS "
                                    "naming its two ends"}
     orders = _lines(s.excitation[rows].astype(float), places - fade, last - fade + 1, period)

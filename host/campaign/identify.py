@@ -43,7 +43,7 @@ from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .bin_sweep import bin_sweep
-from .record import RECORD_POINTS, read_record, record_points
+from .record import RECORD_POINTS, coherent, longest_run, read_record, record_points
 
 __all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments", "estimate_points"]
 
@@ -157,10 +157,10 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     """``cost``: what the fits minimise (CIFER's J by default, or ``relative``,
     host/estimate/fit.py). ``from_record``: read the log as one record
     (:mod:`.record`; a dict of :func:`~.record.record_points`'s options, ``axis``,
-    ``fields``, ``band_hz``) instead of its designed excitations. ``plots``: what draws the plots (a :mod:`~heliquad.host.present.plot_process` object the
-    caller has started and will close); by default a
-    :class:`~heliquad.host.present.plot_process.PlotProcess` of its own, which draws them in a
-    process of its own while the models are fitted."""
+    ``fields``, ``band_hz``) instead of its designed excitations. ``plots``: what draws
+    the plots (a :mod:`~heliquad.host.present.plot_process` object the caller has started
+    and will close); by default a :class:`~heliquad.host.present.plot_process.PlotProcess`
+    of its own, which draws them in a process of its own while the models are fitted."""
     if plots is None:
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
@@ -228,6 +228,7 @@ def _points_and_fits(path, out_dir, axis, points, orders, delay, cost):
         raise InputError(f"{path}: {len(points)} points are too few for orders {wanted}")
     return fit_orders(points, orders, delay=delay, cost=cost)
 
+
 def _identify_record(path, plots, orders, progress, delay, estimate, cost, options) -> dict:
     """identify's work on a record read as one (:mod:`.record`): the composite's points, the
     fits, the broken loop and the simulator's truth where they apply; no replay (a record
@@ -265,6 +266,7 @@ def _identify_record(path, plots, orders, progress, delay, estimate, cost, optio
             "manifest": manifest, "damage": damage, "skipped": skipped, "saturated": [],
             "truth": truth, "records": [found["segment"]], "record_points": [],
             "replays": None, "record": found["record"]}
+
 
 def _replays(result, points, segments):
     """The recommended model's replay of each record (:mod:`.replay`; ``points``: each
@@ -380,8 +382,7 @@ def estimate_points(manifest, samples, estimate, progress) -> tuple:
             progress(f"  {what}: {100 * lost:.1f} % of its samples were lost on the link; "
                      "estimated from the rest")
         if present is not None:     # the plots and the replay: holes bridged by a line
-            k = np.arange(present.size)
-            u, y = (np.interp(k, k[present], x[present]) for x in (u, y))
+            u, y = _bridged(present, u, y)
         segments.append((entry["freq_hz"], t, u, y))
         firsts.append(found[0])
     return points, segments, firsts, skipped
@@ -395,28 +396,26 @@ def _chirp_points(entry, t, r, u, y, estimate, present) -> list:
     if t.size < 2 or not float(np.median(np.diff(t))) > 0:
         raise InputError("its record has fewer than two samples, or no time step")
     if present is not None:
-        run = _longest_hole(present)
-        if run > MAX_LOST_RUN:
-            raise InputError(f"{run} of its samples in a row were lost on the link (at most "
-                             f"{MAX_LOST_RUN} are bridged)")
-        k = np.arange(present.size)
-        r, u, y = (np.interp(k, k[present], x[present]) for x in (r, u, y))
+        start, end = longest_run(~present)
+        if end - start > MAX_LOST_RUN:
+            raise InputError(f"{end - start} of its samples in a row were lost on the link "
+                             f"(at most {MAX_LOST_RUN} are bridged)")
+        r, u, y = _bridged(present, r, u, y)
     fs = 1.0 / float(np.median(np.diff(t)))
     lo, hi = sorted((entry["freq_hz"], entry["stop_hz"]))
     found = composite_response(y, u, fs, np.geomspace(lo, hi, RECORD_POINTS),
                                r=r if estimate == "excitation" else None)
-    points = [p for p in found if p.coherence >= MIN_COHERENCE]
+    points, _ = coherent(found)
     if len(points) < 2:
         raise InputError(f"{len(points)} of its points have coherence {MIN_COHERENCE:g} or "
                          "more")
     return points
 
 
-def _longest_hole(present) -> int:
-    """The longest run of samples not present."""
-    edges = np.diff(np.concatenate([[0], (~present).astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    return int(np.max(ends - starts)) if starts.size else 0
+def _bridged(present, *signals) -> tuple:
+    """The signals with the samples not ``present`` bridged by a straight line."""
+    k = np.arange(present.size)
+    return tuple(np.interp(k, k[present], x[present]) for x in signals)
 
 
 def _entry_name(entry) -> str:

@@ -33,7 +33,7 @@ from ..estimate.composite import MIN_COHERENCE, composite_response, default_wind
 from ..records import paper
 from ..records.tlog import TlogDamage, read_tlog_table
 
-__all__ = ["record_points", "read_record", "RECORD_POINTS"]
+__all__ = ["record_points", "read_record", "longest_run", "coherent", "RECORD_POINTS"]
 
 #: Frequencies of a record's estimate, log-spaced over its band.
 RECORD_POINTS = 20
@@ -54,20 +54,30 @@ def read_record(path):
     return samples, damage, os.path.dirname(path) or "."
 
 
+def longest_run(mask) -> tuple:
+    """``(start, end)`` of the longest run of True in ``mask`` (the first of equal ones;
+    ``(0, 0)`` when there is none)."""
+    edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    if not starts.size:
+        return 0, 0
+    i = int(np.argmax(ends - starts))
+    return int(starts[i]), int(ends[i])
+
+
+def coherent(found) -> tuple:
+    """``(points, said)``: the points of coherence MIN_COHERENCE or more, and a line for
+    each one left out."""
+    return ([p for p in found if p.coherence >= MIN_COHERENCE],
+            [f"{p.freq_hz:.4g} Hz: coherence {p.coherence:.2f} below {MIN_COHERENCE:g}"
+             for p in found if p.coherence < MIN_COHERENCE])
+
+
 def _armed_stretch(samples):
     """The rows of the longest run of armed samples (in sequence order, once each)."""
-    seq, first = np.unique(samples.seq.astype(np.int64), return_index=True)
-    rows = first
-    armed = samples.armed[rows] != 0
-    best, start = (0, 0), None
-    for i, on in enumerate(np.append(armed, False)):
-        if on and start is None:
-            start = i
-        elif not on and start is not None:
-            if i - start > best[1] - best[0]:
-                best = (start, i)
-            start = None
-    return rows[best[0]:best[1]]
+    _, rows = np.unique(samples.seq.astype(np.int64), return_index=True)
+    start, end = longest_run(samples.armed[rows] != 0)
+    return rows[start:end]
 
 
 def _named_axis(samples) -> str:
@@ -80,23 +90,26 @@ def _named_axis(samples) -> str:
 
 
 def _armed_record(samples, names) -> tuple:
-    """The longest armed stretch's times (s, on the loop's grid), its fields ``names`` with
-    the samples lost on the link filled by a straight line, and the share lost."""
+    """The longest armed stretch's times (s, on the loop's grid), its sample rate, its fields
+    ``names`` with the samples lost on the link filled by a straight line, and the share
+    lost."""
     rows = _armed_stretch(samples)
     if rows.size < 2:
         raise InputError("the record has no armed loops: nothing flew")
     seq = samples.seq[rows].astype(np.int64)
     t = samples.time_us[rows].astype(np.int64) * 1e-6
-    if not float(np.median(np.diff(t))) > 0:
+    step = float(np.median(np.diff(t)))
+    if not step > 0:
         raise InputError("the record's samples have no time step (their times do not increase)")
     place = seq - seq[0]
     grid = np.arange(int(place[-1]) + 1)
-    if grid.size / (1.0 / float(np.median(np.diff(t)))) < MIN_RECORD_S:
+    if grid.size * step < MIN_RECORD_S:
         raise InputError(f"the record's armed stretch is {t[-1] - t[0]:.3g} s; at least "
                          f"{MIN_RECORD_S:g} s is needed")
     signals = {name: np.interp(grid, place, samples[name][rows].astype(float))
                for name in dict.fromkeys(names)}
-    return np.interp(grid, place, t), signals, 1.0 - rows.size / grid.size
+    return np.interp(grid, place, t), 1.0 / step, signals, 1.0 - rows.size / grid.size
+
 
 def _band(manifest, axis, band_hz):
     if band_hz is not None:
@@ -124,8 +137,7 @@ def record_points(manifest, samples, estimate: str, progress, axis=None, fields=
     axis = (manifest or {}).get("axis") or named
     inject = (manifest or {}).get("inject", "mixer")
     u_name, y_name = fields or input_output(inject)
-    t, signals, lost = _armed_record(samples, (u_name, y_name, "excitation"))
-    fs = 1.0 / float(np.median(np.diff(t)))
+    t, fs, signals, lost = _armed_record(samples, (u_name, y_name, "excitation"))
     duration = t.size / fs
     lo, hi = _band(manifest, axis, band_hz)
     if not 0 < lo < hi < fs / 2:
@@ -141,9 +153,7 @@ def record_points(manifest, samples, estimate: str, progress, axis=None, fields=
                  "output's noise")
     found = composite_response(signals[y_name], signals[u_name], fs, freqs,
                                r=r if conditioned else None, windows_s=windows)
-    points = [p for p in found if p.coherence >= MIN_COHERENCE]
-    skipped = [f"{p.freq_hz:.4g} Hz: coherence {p.coherence:.2f} below {MIN_COHERENCE:g}"
-               for p in found if p.coherence < MIN_COHERENCE]
+    points, skipped = coherent(found)
     resolved = {round(p.freq_hz, 9) for p in found}
     skipped += [f"{f:.4g} Hz: no window resolves it" for f in freqs
                 if round(f, 9) not in resolved]

@@ -498,7 +498,7 @@ def _refine(problem, x0, tau_max, evaluations):
     return x, float(r @ r), done
 
 
-def _least_squares(fun, jac, x0, lower, upper, max_nfev, tol=LSQ_TOL):
+def _least_squares(fun, jac, x0, lower, upper, max_nfev):
     """Minimise ``|fun(x)|^2`` for ``lower <= x <= upper`` from ``x0`` (clipped into the box),
     ``jac`` its Jacobian: ``(x, fun(x), done)``, ``done`` when it stopped by its tolerances
     (or where the residuals or the Jacobian are not finite) rather than after ``max_nfev``
@@ -523,14 +523,14 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev, tol=LSQ_TOL):
         g = J.T @ r
         free = ~(((x <= lower) & (g > 0)) | ((x >= upper) & (g < 0)))
         if cost == 0.0 or not free.any() or \
-                np.max(np.abs(g[free]) / scale[free]) <= tol * max(cost, 1e-300) ** 0.5:
+                np.max(np.abs(g[free]) / scale[free]) <= LSQ_TOL * max(cost, 1e-300) ** 0.5:
             return x, r, True
         step = _damped_step(J, r, g, x, lower, upper, scale, free, damping)
         if step is None:
             return x, r, True
         trial = np.clip(x + step, lower, upper)
         step = trial - x
-        if np.linalg.norm(step) <= tol * (tol + np.linalg.norm(x)):
+        if np.linalg.norm(step) <= LSQ_TOL * (LSQ_TOL + np.linalg.norm(x)):
             return x, r, True
         r_trial = fun(trial)
         nfev += 1
@@ -539,7 +539,7 @@ def _least_squares(fun, jac, x0, lower, upper, max_nfev, tol=LSQ_TOL):
         predicted = -(2.0 * (g @ step) + Js @ Js)         # the linear model's decrease
         ratio = (cost - cost_trial) / predicted if predicted > 0 else -1.0
         if ratio > 0 and np.isfinite(cost_trial):
-            converged = cost - cost_trial <= tol * cost
+            converged = cost - cost_trial <= LSQ_TOL * cost
             x, r, cost, J = trial, r_trial, cost_trial, jac(trial)
             if not np.all(np.isfinite(J)):
                 return x, r, True
@@ -706,9 +706,9 @@ class _JCost:
 
 
 def _j_stage(problem, refined, w_gamma, tau_max):
-    """Stage 4 from the J_STARTS lowest-cost ``(params, cost)`` of stage 3: ``(theta, J)``
-    of the lowest J reached (a start's own J when no refinement lowers it), and the
-    :class:`_JCost` that reads ``theta``."""
+    """Stage 4 from the J_STARTS lowest-cost ``(params, cost)`` of stage 3: ``theta`` of the
+    lowest J reached (a start's own when no refinement lowers it; None when no start is
+    finite), and the :class:`_JCost` that reads it."""
     cost = _JCost(problem, w_gamma)
     lower, upper = cost.bounds(tau_max)
     best_theta, best_j = None, np.inf
@@ -723,7 +723,7 @@ def _j_stage(problem, refined, w_gamma, tau_max):
             j = float(res @ res)
             if np.isfinite(j) and j < best_j:
                 best_theta, best_j = candidate, j
-    return best_theta, best_j, cost
+    return best_theta, cost
 
 
 def _minimised(problem, starts, tau_max, w_gamma):
@@ -740,7 +740,7 @@ def _minimised(problem, starts, tau_max, w_gamma):
                              "(degenerate points)")
         best = min(finite, key=lambda result: result[1])[0]
         if w_gamma is not None:
-            theta, _, j_cost = _j_stage(problem, finite, w_gamma, tau_max)
+            theta, j_cost = _j_stage(problem, finite, w_gamma, tau_max)
             if theta is not None:
                 return j_cost.params(theta), j_cost.num(theta)
     return best, problem.num(best)
