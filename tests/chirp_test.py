@@ -9,7 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from heliquad.host.campaign.identify import load_sweep, sweep_segments
+from heliquad.host.campaign.identify import load_sweep
+from heliquad.host.campaign.sweep_points import sweep_segments
 from heliquad.host.estimate.composite import composite_response
 from heliquad.host.estimate.fit import model_response
 from heliquad.host.records.points import read_points_csv

@@ -16,7 +16,8 @@ import pytest
 
 from heliquad.host.acquire.multisine import MAX_LINES, MIN_PERIODS
 from heliquad.host.acquire.rotor_multisine import ROTOR_PEAK, rotor_design
-from heliquad.host.campaign.identify import load_sweep, sweep_segments
+from heliquad.host.campaign.identify import load_sweep
+from heliquad.host.campaign.sweep_points import sweep_segments
 from heliquad.host.records import paper
 from heliquad.sim.base.dialect import dialect
 from heliquad.sim.base.errors import InputError

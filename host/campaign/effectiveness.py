@@ -41,7 +41,8 @@ from ..estimate.rotor_geometry import fit_rotor_geometry
 from ..records.models import read_models_json
 from ..records.output import write_json
 from ..records.params_file import write_params_file
-from .identify import load_sweep, sweep_segments
+from .identify import load_sweep
+from .sweep_points import sweep_segments
 
 __all__ = ["RotorRun", "read_rotor_run", "estimate_from_runs", "write_outputs",
            "geometry_params", "allocation_of", "hinge_rigs", "EFFECTIVENESS_JSON",

@@ -14,7 +14,6 @@ the output, :mod:`.replay`).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 
@@ -23,47 +22,38 @@ import numpy as np
 from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
 from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, input_output
-from ..acquire.measure import MAX_LOST_RUN, MAX_LOST_SHARE, saturation_text
+from ..acquire.measure import saturation_text
 from ..acquire.sweep import cut_text
-from ..estimate.composite import MIN_COHERENCE, composite_response
 from ..estimate.fit import n_parameters
-from ..estimate.fsf import (DEFAULT_DISCARD_PERIODS, complete_excitation,
-                            estimate_against_excitation, estimate_fsf, estimate_multisine,
-                            estimate_multisine_against_excitation, fill_lost)
+from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
 from ..estimate.models import default_orders, fit_orders
 from ..estimate.thresholds import LOW_COHERENCE
 from ..present.plot_process import PlotProcess
+from ..records.bin_log import is_ardupilot_log, is_bin_name, open_log
 from ..records.manifest import MANIFEST, read_manifest
 from ..records.models import fitted_models, write_models_json
 from ..records.points import write_points_csv, write_points_table
-from ..records.bin_log import is_bin_name
 from ..records.tlog import TlogDamage, imu_path_of, read_tlog_table
 from ..validate.closed_loop import margins_record
 from ..validate.loops import broken_loop, measured_loop_name
 from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
+from .ardupilot_sweep import ardupilot_sweeps, segment_note
 from .bin_sweep import bin_sweep
-from .record import RECORD_POINTS, coherent, longest_run, read_record, record_points
+from .record import read_record, record_points
+from .sweep_points import estimate_points
 
-__all__ = ["identify_dir", "INPUT_OUTPUT", "load_sweep", "sweep_segments", "estimate_points"]
+__all__ = ["identify_dir", "identify_path", "INPUT_OUTPUT", "load_sweep"]
 
 
 
 def load_sweep(dir_path):
     """``(the folder for the outputs, manifest, samples, damage)`` of a sweep folder, a .BIN
     or a folder holding one .BIN and no manifest."""
-    if not os.path.isdir(dir_path):
-        return (os.path.dirname(dir_path) or ".", *bin_sweep(dir_path))
+    log = _log_file(dir_path)
+    if log is not None:
+        return (os.path.dirname(log) or ".", *bin_sweep(log))
     path = os.path.join(dir_path, MANIFEST)
-    if not os.path.lexists(path):
-        logs = sorted(n for n in os.listdir(dir_path) if is_bin_name(n))
-        if len(logs) > 1:
-            raise InputError(f"{dir_path}: no {MANIFEST} and {len(logs)} .BIN logs "
-                             f"({', '.join(logs[:3])}{', ...' if len(logs) > 3 else ''}): "
-                             "give one of them")
-        if logs:
-            return (dir_path, *bin_sweep(os.path.join(dir_path, logs[0])))
-        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
     manifest = read_manifest(path)
     tlog = os.path.join(dir_path, manifest.get("tlog", "sweep.tlog"))
     if not os.path.exists(tlog):
@@ -77,6 +67,23 @@ def load_sweep(dir_path):
     # the IMU path the firmware flew, from its status in the same log (how its logged angle
     # follows its rate: host/validate/loops.py); kept with the manifest, not written to it
     return dir_path, {**manifest, "imu_path": imu_path_of(tlog, dialect())}, samples, damage
+
+
+def _log_file(dir_path) -> str | None:
+    """The log DIR is (a .BIN), or the one .BIN a folder without a manifest holds; None for a
+    sweep folder."""
+    if not os.path.isdir(dir_path):
+        return dir_path
+    if os.path.lexists(os.path.join(dir_path, MANIFEST)):
+        return None
+    logs = sorted(n for n in os.listdir(dir_path) if is_bin_name(n))
+    if len(logs) > 1:
+        raise InputError(f"{dir_path}: no {MANIFEST} and {len(logs)} .BIN logs "
+                         f"({', '.join(logs[:3])}{', ...' if len(logs) > 3 else ''}): "
+                         "give one of them")
+    if not logs:
+        raise InputError(f"{dir_path}: no {MANIFEST} (is it a sweep folder?)")
+    return os.path.join(dir_path, logs[0])
 
 
 def _check_log_matches(dir_path, manifest, samples) -> None:
@@ -94,61 +101,6 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
                          f"{names[1].get(injection, injection)} injection, the manifest "
                          f"says {manifest.get('axis')} with {manifest.get('inject')}: the "
                          "log and the manifest are not of one session")
-
-
-def sweep_segments(manifest, samples):
-    """Each measured frequency's full-amplitude record: (entry, t, r, u, y, present), the
-    samples on their places in the sequence (:func:`_gridded`). A chirp's record is its
-    whole excitation, fades included: they hold its two ends' frequencies, which the sweep
-    itself only passes through."""
-    mav = dialect()
-    running, idle = mav.HQ_EXCITATION_STATE_RUNNING, mav.HQ_EXCITATION_STATE_IDLE
-    u_name, y_name = input_output(manifest["inject"])
-    t = samples.time_us.astype(np.int64)
-    state = samples.exc_state
-    u, y = samples[u_name].astype(float), samples[y_name].astype(float)
-    r = samples.excitation.astype(float)
-    seq = samples.seq.astype(np.int64)
-    for entry in manifest["frequencies"]:
-        if entry.get("status") != "ok" or "start_us" not in entry:
-            continue
-        if entry.get("signal") == "chirp":
-            fades = (entry.get("fade_samples", 0) + 1) * float(np.median(np.diff(t)))
-            sel = (t >= entry["start_us"] - fades) & (t <= entry["end_us"] + fades) & \
-                (state != idle)
-        else:
-            sel = (t >= entry["start_us"]) & (t <= entry["end_us"]) & (state == running)
-        yield (entry, *_gridded(seq[sel], t[sel] * 1e-6, r[sel], u[sel], y[sel]))
-
-
-def _gridded(seq, t, r, u, y):
-    """A record on its samples' places: a sample lost on the link (a gap in the sequence
-    numbers) is a hole, NaN in ``r``, ``u`` and ``y`` (its time interpolated), and
-    ``present`` says which arrived (None when none was lost)."""
-    if not seq.size:
-        return t, r, u, y, None
-    seq, first = np.unique(seq, return_index=True)          # in order, each sample once
-    t, r, u, y = (x[first] for x in (t, r, u, y))
-    n = int(seq[-1] - seq[0]) + 1
-    if n == seq.size:
-        return t, r, u, y, None
-    idx = seq - seq[0]
-    present = np.zeros(n, dtype=bool)
-    present[idx] = True
-    holes = []
-    for x in (r, u, y):
-        full = np.full(n, np.nan)
-        full[idx] = x
-        holes.append(full)
-    return (np.interp(np.arange(n), idx, t), *holes, present)
-
-
-def _lost_share(entry, present) -> float:
-    """The share of a frequency's measured samples lost on the link: the sweep's count (it
-    knows the edges of the window too), else the holes in the log's record."""
-    if "lost" in entry and entry.get("samples", 0) + entry["lost"] > 0:
-        return entry["lost"] / (entry["samples"] + entry["lost"])
-    return 0.0 if present is None else 1.0 - float(np.mean(present))
 
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
@@ -175,6 +127,40 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
                          "effectiveness reads it")
     return _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress,
                      delay, estimate, cost)
+
+
+def identify_path(path, orders=None, progress=print, plots=None, **options) -> list:
+    """:func:`identify_dir`'s result for each sweep at ``path`` (its ``options`` too): one
+    for a sweep folder, a record or a .BIN of heliquad's, one per SystemID segment of an
+    ArduPilot log (:mod:`.ardupilot_sweep`), each written into a folder of its own beside the
+    log (``LOG-sidK-AXIS``); a segment that cannot be measured is said and skipped."""
+    log = None if options.get("from_record") is not None else _log_file(path)
+    opened = open_log(log) if log is not None else None
+    if opened is None or not is_ardupilot_log(opened[0]):
+        return [identify_dir(path, orders, progress, plots=plots, **options)]
+    if plots is None:
+        with PlotProcess() as plots:
+            return identify_path(path, orders, progress, plots, **options)
+    sweeps, skipped = ardupilot_sweeps(log, opened)
+    for line in skipped:
+        progress(f"warning: {line}: not identified")
+    stem = os.path.splitext(os.path.basename(log))[0]
+    results, failed = [], []
+    for name, manifest, samples in sweeps:
+        out_dir = os.path.join(os.path.dirname(log) or ".", f"{stem}-{name}")
+        progress(f"{name}: {segment_note(manifest)}; outputs in {out_dir}")
+        try:
+            os.makedirs(out_dir, exist_ok=True)
+            results.append(_identify(log, out_dir, manifest, samples, TlogDamage(), plots,
+                                     orders, progress, options.get("delay", True),
+                                     options.get("estimate", "excitation"),
+                                     options.get("cost", "j")))
+        except InputError as exc:
+            failed.append(f"{name}: {exc}")
+            progress(f"warning: {name} not identified: {exc}")
+    if not results:
+        raise InputError(f"{log}: no SystemID segment identified ({'; '.join(failed)})")
+    return results
 
 
 def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress, delay,
@@ -350,119 +336,6 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
     said += [f"no {why}" for why in record["unmeasured"]]
     progress(f"the {name} loop broken at the excitation, measured: {'; '.join(said)}")
     return record
-
-
-def estimate_points(manifest, samples, estimate, progress) -> tuple:
-    """(points, the records they came from, each record's first point, the frequencies
-    skipped and why): one point per measured frequency of a dwell, one per line of a
-    multisine, against the excitation or the input (``estimate``). A record that lost
-    samples on the link is estimated from those that arrived (each point's
-    ``lost_share``); one that lost more than the sweep allows is skipped."""
-    points, segments, firsts, skipped = [], [], [], []
-    for entry, t, r, u, y, present in sweep_segments(manifest, samples):
-        what = _entry_name(entry)
-        lost = _lost_share(entry, present)
-        if entry.get("signal") == "chirp" and present is not None:   # its fades count too
-            lost = max(lost, 1.0 - float(np.mean(present)))
-        try:
-            if not len(t):
-                raise InputError("the log holds none of its samples")
-            if lost > MAX_LOST_SHARE:
-                raise InputError(f"{100 * lost:.1f} % of its samples were lost on the link "
-                                 f"(at most {100 * MAX_LOST_SHARE:g} % is used)")
-            found = _chirp_points(entry, t, r, u, y, estimate, present) \
-                if entry.get("signal") == "chirp" else \
-                _estimate_entry(entry, r, u, y, estimate, present)
-        except InputError as exc:
-            progress(f"  {what} skipped: {exc}")
-            skipped.append(f"{what}: {exc}")
-            continue
-        points += [dataclasses.replace(p, lost_share=lost) for p in found]
-        if lost:
-            progress(f"  {what}: {100 * lost:.1f} % of its samples were lost on the link; "
-                     "estimated from the rest")
-        if present is not None:     # the plots and the replay: holes bridged by a line
-            u, y = _bridged(present, u, y)
-        segments.append((entry["freq_hz"], t, u, y))
-        firsts.append(found[0])
-    return points, segments, firsts, skipped
-
-
-def _chirp_points(entry, t, r, u, y, estimate, present) -> list:
-    """A chirp's points (:mod:`..estimate.composite`): its sweep's record, holes lost on the
-    link filled by a straight line, at :data:`~.record.RECORD_POINTS` frequencies over its
-    band, against the excitation (or the input); those of coherence below
-    :data:`~..estimate.composite.MIN_COHERENCE` are left out."""
-    if t.size < 2 or not float(np.median(np.diff(t))) > 0:
-        raise InputError("its record has fewer than two samples, or no time step")
-    if present is not None:
-        start, end = longest_run(~present)
-        if end - start > MAX_LOST_RUN:
-            raise InputError(f"{end - start} of its samples in a row were lost on the link "
-                             f"(at most {MAX_LOST_RUN} are bridged)")
-        r, u, y = _bridged(present, r, u, y)
-    fs = 1.0 / float(np.median(np.diff(t)))
-    lo, hi = sorted((entry["freq_hz"], entry["stop_hz"]))
-    found = composite_response(y, u, fs, np.geomspace(lo, hi, RECORD_POINTS),
-                               r=r if estimate == "excitation" else None)
-    points, _ = coherent(found)
-    if len(points) < 2:
-        raise InputError(f"{len(points)} of its points have coherence {MIN_COHERENCE:g} or "
-                         "more")
-    return points
-
-
-def _bridged(present, *signals) -> tuple:
-    """The signals with the samples not ``present`` bridged by a straight line."""
-    k = np.arange(present.size)
-    return tuple(np.interp(k, k[present], x[present]) for x in signals)
-
-
-def _entry_name(entry) -> str:
-    if entry.get("signal") == "chirp":
-        return f"the chirp from {entry['freq_hz']:.4g} to {entry['stop_hz']:.4g} Hz"
-    if entry.get("signal") == "multisine":
-        return f"the multisine of base {entry['freq_hz']:.4g} Hz"
-    return f"{entry['freq_hz']:.4g} Hz"
-
-
-def _estimate_entry(entry, r, u, y, estimate, present=None) -> list:
-    """The points of one excitation's full-amplitude record: a sine's one (the first period
-    discarded), or every line of a multisine (its first period fills the FSF's filter).
-    ``present``: which samples arrived (None: all)."""
-    fs = entry["freq_hz"] * entry["period_samples"]
-    if estimate != "excitation" and present is not None:
-        u, y = _complete_input(entry, r, u, y, present)
-    if entry.get("signal") == "multisine":
-        args = (fs, entry["period_samples"], entry["orders"])
-        found = estimate_multisine_against_excitation(r, u, y, *args, present=present) \
-            if estimate == "excitation" else estimate_multisine(u, y, *args, present=present)
-        if not found:
-            raise InputError("the input follows none of its lines")
-        return found
-    if estimate == "excitation":
-        return [estimate_against_excitation(r, u, y, fs, entry["freq_hz"], discard_periods=1,
-                                            present=present)]
-    return [estimate_fsf(u, y, fs, freq_hz=entry["freq_hz"], discard_periods=1,
-                         present=present)]
-
-
-def _complete_input(entry, r, u, y, present):
-    """For the estimate against the input, whose regressors need every sample of ``u``:
-    the lost samples of ``u`` from its fit against the (completed) excitation; ``y``'s
-    lost rows are left out of the fit."""
-    period = int(entry["period_samples"])
-    r = complete_excitation(r, present, period)
-    u0, y0 = np.where(present, u, 0.0), np.where(present, y, 0.0)
-    fs = entry["freq_hz"] * period
-    if entry.get("signal") == "multisine":
-        fits = estimate_multisine(r, u0, fs, period, entry["orders"], present=present)
-        gains = {p.order: p.gain for p in fits}
-        offset = fits[0].offset if fits else 0.0
-    else:
-        fit = estimate_fsf(r, u0, fs, entry["freq_hz"], discard_periods=1, present=present)
-        gains, offset = fit.harmonics, fit.offset
-    return fill_lost(u0, present, r, period, gains, offset), y0
 
 
 def _saturated(manifest) -> list:

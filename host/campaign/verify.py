@@ -41,7 +41,7 @@ from ..validate.verification import (CROSSOVERS, FLOOR, SWEEP_OF_LOOP, judge, ma
                                      measured_margins, sorted_points, sweep_band,
                                      truth_margins)
 from ..validate.truth import sil_truth_loops
-from .identify import estimate_points
+from .sweep_points import estimate_points
 
 __all__ = ["VerifyPlan", "verify_axis", "read_tune_dir", "prepare_verification",
            "run_verification", "sil_session", "PREVIOUS_PARAMS", "VERIFY_JSON",

@@ -30,6 +30,10 @@ DIR may also be a board's on-board log, a .BIN (heliquad logs download, or LOGS/
 card), or a folder holding one and no manifest: the sweep is read from the log itself (each
 excitation's set-up from SIDS, its samples from HQSD; a multisine's lines from its logged
 excitation), and the outputs go into the folder that holds the .BIN.
+DIR may also be an ArduPilot DataFlash log of ArduCopter's SystemID mode: each run of its
+chirp (SIDS, then SIDD, RATE and ATT every loop) is identified as a chirp of heliquad's,
+against its excitation (SID_AXIS 10-12: the mixer's input ROut/POut/YOut to the rate; 7-9
+and 1-3: the rate and angle targets), each into a folder beside the log, LOG-sidK-AXIS.
 --from-record reads the log (a sweep folder's, or a .tlog such as heliquad log writes) as one
 record without a designed periodic excitation: a chirp, a pilot's inputs, turbulence. Its
 longest armed stretch is cut into overlapped, tapered windows of five lengths, whose
@@ -46,8 +50,8 @@ turbulence: under a closed loop, turbulence alone gives the controller, not the 
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("identify", help="points, models and plots from a sweep folder or a .BIN",
                        description=HELP, formatter_class=fmt)
-    p.add_argument("dir", metavar="DIR", help="a sweep folder, a board's .BIN log, or a folder "
-                                              "holding one")
+    p.add_argument("dir", metavar="DIR", help="a sweep folder, a board's .BIN log (or an "
+                                              "ArduPilot SystemID log), or a folder holding one")
     p.add_argument("--order", action="append", metavar="M/N",
                    help="an order to fit, again for more (M/Ni: one pole at the origin); "
                         "default: the paper's per axis (0/2 0/3 2/4, yaw 0/1 2/2 2/3) and 0/2i 1/3i "
@@ -122,12 +126,23 @@ def run(args) -> int:
                                                          else ""))
     with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
         # the command's work, imported when it runs: --help imports every command module
-        from ..campaign.identify import identify_dir
+        from ..campaign.identify import identify_path
         from ..estimate.fit import parse_order
 
         orders = [parse_order(o) for o in args.order] if args.order else None
-        r = identify_dir(args.dir, orders, delay=args.delay, estimate=args.estimate,
-                         plots=plots, cost=args.cost, from_record=record)
+        results = identify_path(args.dir, orders, delay=args.delay, estimate=args.estimate,
+                                plots=plots, cost=args.cost, from_record=record)
+    for r in results:
+        _print_result(r, args.mat if len(results) == 1 else None)
+    if args.mat and len(results) > 1:
+        sys.stderr.write(f"heliquad identify: warning: {args.mat} not written: the log held "
+                         f"{len(results)} segments; each folder's models.json has its models\n")
+    return 0
+
+
+def _print_result(r, mat) -> None:
+    """One sweep's points and models, what was written, and its warnings (``mat``: the
+    MATLAB file to write its models into, or None)."""
     print(f"{r['axis']}: {len(r['points'])} points")
     print(f"{'f (Hz)':>8} {'omega':>8} {'|G|':>9} {'phase':>9} {'R':>9} {'I':>9} {'coh':>7}"
           f"  estimate")
@@ -138,12 +153,12 @@ def run(args) -> int:
     print_models(r["result"])
     print(f"wrote points.csv, points_table.csv, models.json, bode.png, responses.png in "
           f"{r['out_dir']}")
-    if args.mat:
+    if mat:
         # the command's work, imported when it runs: --help imports every command module
         from ..records.models import fitted_models, write_models_mat
 
-        write_models_mat(args.mat, fitted_models(r["result"]))
-        print(f"wrote {args.mat}")
+        write_models_mat(mat, fitted_models(r["result"]))
+        print(f"wrote {mat}")
     if r["skipped"] or r["damage"]:
         n = len(r["points"]) + len(r["skipped"])
         sys.stderr.write(f"heliquad identify: warning: {len(r['skipped'])} of {n} measured "
@@ -154,4 +169,3 @@ def run(args) -> int:
         sys.stderr.write(f"heliquad identify: warning: something saturated at "
                          f"{len(r['saturated'])} frequency(ies): {'; '.join(r['saturated'])} "
                          "(heliquad report flags it)\n")
-    return 0

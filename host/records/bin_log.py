@@ -32,7 +32,8 @@ from ...sim.base.errors import InputError
 from ...sim.base.userfiles import open_binary
 from .tlog import TlogDamage, message_dtype
 
-__all__ = ["BinLog", "BinDamage", "read_bin", "is_bin_name", "BIN_SUFFIX"]
+__all__ = ["BinLog", "BinDamage", "read_bin", "open_log", "is_ardupilot_log", "is_bin_name",
+           "BIN_SUFFIX"]
 
 #: The on-board logs' file names end so (LOGS/00000001.BIN; any case).
 BIN_SUFFIX = ".bin"
@@ -188,18 +189,37 @@ def _size(path) -> int:
     return size
 
 
-def read_bin(path) -> BinLog:
-    """The .BIN at ``path`` up to its first damage (:class:`BinLog`; module docstring).
-    InputError naming the file when it cannot be read or holds no DataFlash record."""
+def open_log(path) -> tuple:
+    """``(reader, size)``: the DataFlash log at ``path`` opened by DFReader (its formats
+    read, its records indexed). InputError naming the file when it cannot be."""
     size = _size(path)
-    collector, damage = _Collector(), BinDamage(size=size)
-    end = 0
     # DFReader prints what it skips and cannot parse; the damage is said once, by the caller.
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         try:
-            reader = _Reader(os.fspath(path))
+            return _Reader(os.fspath(path)), size
         except (ValueError, OSError, IndexError, KeyError) as exc:
             raise InputError(f"{path}: not a DataFlash log ({exc})") from None
+
+
+def is_ardupilot_log(reader) -> bool:
+    """The log a DFReader has opened is ArduPilot's, not heliquad's: it does not define
+    heliquad's sample (HQSD) and defines RATE or ATT, which ArduCopter logs in every flight
+    and heliquad's firmware never does."""
+    names = reader.name_to_id
+    return "HQSD" not in names and bool({"RATE", "ATT"} & set(names))
+
+
+def read_bin(path, opened=None) -> BinLog:
+    """The .BIN at ``path`` up to its first damage (:class:`BinLog`; module docstring);
+    ``opened``: :func:`open_log`'s answer when the caller has it. InputError naming the file
+    when it cannot be read, holds no DataFlash record or is another autopilot's log."""
+    reader, size = opened or open_log(path)
+    if is_ardupilot_log(reader):
+        raise InputError(f"{path}: not a log of heliquad's firmware (no HQSD record defined): "
+                         "an ArduPilot log's SystemID segments are read by heliquad identify")
+    collector, damage = _Collector(), BinDamage(size=size)
+    end = 0
+    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         while (m := reader.recv_msg()) is not None:
             if reader.offset - m.fmt.len != end:        # DFReader skipped bytes
                 damage.why = "bytes that are no record (damage, or garbage)"

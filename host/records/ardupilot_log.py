@@ -1,0 +1,149 @@
+"""An ArduPilot DataFlash log (.BIN) with ArduCopter's SystemID mode in it, read for analysis.
+
+ArduCopter's SystemID mode (the mode that injects a chirp, set up by its ``SID_*``
+parameters) logs, as documented in ArduPilot's log message reference:
+
+- **SIDS** once as the mode starts: ``Ax`` (``SID_AXIS``: what is excited), ``Mag`` (the
+  chirp's amplitude), ``FSt`` and ``FSp`` (its start and stop frequencies, Hz), ``TFin``,
+  ``TC``, ``TR``, ``TFout`` (fade-in, constant-frequency, record and fade-out times, s);
+- **SIDD** every loop while it runs: ``Time`` (s into the excitation), ``Targ`` (the
+  chirp's sample, added where ``Ax`` says), ``F`` (its frequency then, Hz), the IMU's rates
+  and accelerations;
+- **RATE** (``RDes``, ``R``, ``ROut`` and pitch's and yaw's: the rate controllers' targets
+  and measured rates in deg/s and their outputs into the mixer) and **ATT** (``DesRoll``,
+  ``Roll``, ...: desired and estimated attitude, deg) every loop too, which the mode logs at
+  the loop's rate.
+
+A **segment** is one run of the excitation: the SIDD records from one start (``Time`` back to
+its beginning, or a SIDS between) to the next, with the SIDS logged before it. Each SIDD is
+matched with the RATE and ATT records of its loop: the nearest in time, within half the
+loop's period (a loop whose record is missing has NaN there). pymavlink's DFReader parses the
+file; a byte it cannot parse is skipped, as every DataFlash tool does (an ArduPilot log has
+no checksum, and this reader cannot check what ArduPilot's logger promises as
+:mod:`.bin_log` checks heliquad's own).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import os
+
+import numpy as np
+
+from ...sim.base.errors import InputError
+from .bin_log import BinDamage, open_log
+
+__all__ = ["ArduPilotLog", "SidSegment", "read_ardupilot", "RATE_FIELDS", "ATT_FIELDS"]
+
+#: RATE's fields per axis: target rate, measured rate (deg/s), output into the mixer.
+RATE_FIELDS = {"roll": ("RDes", "R", "ROut"), "pitch": ("PDes", "P", "POut"),
+               "yaw": ("YDes", "Y", "YOut")}
+#: ATT's fields per axis: desired and estimated angle (deg).
+ATT_FIELDS = {"roll": ("DesRoll", "Roll"), "pitch": ("DesPitch", "Pitch"),
+              "yaw": ("DesYaw", "Yaw")}
+_SIDS = ("TimeUS", "Ax", "Mag", "FSt", "FSp", "TFin", "TC", "TR", "TFout")
+_SIDD = ("TimeUS", "Time", "Targ", "F")
+#: The records read; the rest of the log is not.
+_WANTED = ("SIDS", "SIDD", "RATE", "ATT", "PARM", "MSG")
+
+
+@dataclasses.dataclass
+class SidSegment:
+    """One run of the SystemID excitation: its set-up (SIDS's fields, None when the log holds
+    no SIDS before it) and per loop (SIDD's), SIDD's time (us), ``Time`` (s), ``Targ``, ``F``
+    (Hz), and the loop's RATE and ATT fields by name (NaN where the loop has none)."""
+    setup: dict | None
+    time_us: np.ndarray
+    wave_time_s: np.ndarray
+    target: np.ndarray
+    freq_hz: np.ndarray
+    fields: dict
+
+
+@dataclasses.dataclass
+class ArduPilotLog:
+    """An ArduPilot log's SystemID segments, its parameters and the firmware it names."""
+    segments: list
+    params: dict
+    version: str | None         # the first MSG naming the vehicle's firmware
+    damage: BinDamage
+
+
+def read_ardupilot(path, reader=None) -> ArduPilotLog:
+    """The SystemID segments of the ArduPilot log at ``path`` (module docstring); ``reader``:
+    the log already opened by :func:`~.bin_log.open_log`. InputError when it has no SystemID
+    record."""
+    if reader is None:
+        reader, _ = open_log(path)
+    defined = set(reader.name_to_id)
+    if not {"SIDS", "SIDD"} & defined:
+        raise InputError(f"{path}: an ArduPilot log without SystemID records (SIDS, SIDD): "
+                         "ArduCopter's SystemID mode never ran in it")
+    rows = {name: [] for name in _WANTED}
+    params, version, sids_before = {}, None, []
+    with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+        while (m := reader.recv_match(type=list(_WANTED))) is not None:
+            kind = m.get_type()
+            if kind == "PARM":
+                params[m.Name] = float(m.Value)
+            elif kind == "MSG":
+                version = version or _version(m.Message)
+            elif kind == "SIDS":
+                rows["SIDS"].append({k: getattr(m, k) for k in _SIDS})
+            elif kind == "SIDD":
+                rows["SIDD"].append(tuple(getattr(m, k) for k in _SIDD))
+                sids_before.append(len(rows["SIDS"]))
+            else:
+                rows[kind].append(m)
+    if not rows["SIDD"]:
+        raise InputError(f"{path}: the log defines SystemID's records but holds no SIDD "
+                         "sample: the mode never ran an excitation")
+    segments = [_segment(rows, sids_before, part) for part in _cut(rows["SIDD"], sids_before)]
+    return ArduPilotLog(segments, params, version, BinDamage(size=os.path.getsize(path)))
+
+
+def _version(text: str) -> str | None:
+    """A MSG naming the vehicle's firmware ("ArduCopter V4.5.7 (...)"), or None."""
+    text = text.strip()
+    return text if text.startswith("Ardu") else None
+
+
+def _cut(sidd, sids_before) -> list:
+    """Each segment's SIDD rows (index arrays): a new one where ``Time`` goes back or a SIDS
+    came between."""
+    wave = np.array([r[1] for r in sidd], dtype=float)
+    before = np.asarray(sids_before)
+    starts = np.flatnonzero((np.diff(wave) < 0) | (np.diff(before) != 0)) + 1
+    return np.split(np.arange(wave.size), starts)
+
+
+def _segment(rows, sids_before, part) -> SidSegment:
+    """The segment of SIDD rows ``part``: its set-up and its loops' matched records."""
+    sidd = np.array([rows["SIDD"][i] for i in part], dtype=float)
+    time_us = sidd[:, 0]
+    k = sids_before[part[0]]
+    setup = rows["SIDS"][k - 1] if k else None
+    loop_us = float(np.median(np.diff(time_us))) if time_us.size > 1 else 0.0
+    fields = {}
+    for kind, names in (("RATE", [n for t in RATE_FIELDS.values() for n in t]),
+                        ("ATT", [n for t in ATT_FIELDS.values() for n in t])):
+        fields.update(_matched(rows[kind], names, time_us, loop_us / 2))
+    return SidSegment(setup, time_us, sidd[:, 1], sidd[:, 2], sidd[:, 3], fields)
+
+
+def _matched(records, names, time_us, within_us) -> dict:
+    """``{name: values at time_us}`` from the records nearest in time to each, within
+    ``within_us`` (NaN where none is); ``{}`` for records without those fields."""
+    if not records or not all(hasattr(records[0], n) for n in names):
+        return {}
+    t = np.array([r.TimeUS for r in records], dtype=float)
+    values = np.array([[getattr(r, n) for n in names] for r in records], dtype=float)
+    after = np.clip(np.searchsorted(t, time_us), 1, max(t.size - 1, 1))
+    before = after - 1
+    nearest = np.where(np.abs(t[np.minimum(after, t.size - 1)] - time_us)
+                       < np.abs(t[before] - time_us), np.minimum(after, t.size - 1), before)
+    ok = np.abs(t[nearest] - time_us) <= within_us
+    picked = np.where(ok[:, None], values[nearest], np.nan)
+    return {n: picked[:, i] for i, n in enumerate(names)}
