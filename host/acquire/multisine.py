@@ -38,7 +38,7 @@ import numpy as np
 from ...sim.base import firmware_facts
 from ...sim.base.errors import InputError
 
-__all__ = ["Multisine", "design", "schroeder_phases", "low_crest_phases", "crest_factor",
+__all__ = ["Multisine", "design", "synthesise", "schroeder_phases", "low_crest_phases", "crest_factor",
            "LINES", "MAX_LINES", "RIG_TIME_S", "MIN_PERIODS", "FADE_CYCLES"]
 
 #: Lines of a multisine: the dwell's 15 frequencies; the most HQ_EXCITATION carries.
@@ -99,7 +99,7 @@ class Multisine:
 
     def period(self) -> np.ndarray:
         """One period of the signal, in double precision."""
-        return _synthesise(self.orders, self.amplitudes, self.phases, self.period_samples)
+        return synthesise(self.orders, self.amplitudes, self.phases, self.period_samples)
 
     def record(self) -> dict:
         """The design, for the manifest."""
@@ -112,7 +112,9 @@ class Multisine:
                 "duration_s": self.duration_s}
 
 
-def _synthesise(orders, amplitudes, phases, n) -> np.ndarray:
+def synthesise(orders, amplitudes, phases, n) -> np.ndarray:
+    """One period of ``n`` samples of the lines ``orders`` (their amplitudes and phases), in
+    double precision."""
     spectrum = np.zeros(n // 2 + 1, dtype=complex)
     # a sin(w k + phi) = Re(a e^{j(w k + phi - pi/2)}); irfft of X/2 per line, scaled by n.
     spectrum[list(orders)] = np.asarray(amplitudes) * np.exp(1j * (np.asarray(phases) - np.pi / 2)) * n / 2
@@ -141,9 +143,9 @@ def low_crest_phases(orders, amplitudes, n: int, iterations: int = CLIP_ITERATIO
     the best); deterministic."""
     orders = list(orders)
     phases = schroeder_phases(orders, amplitudes)
-    best, best_crest = phases, crest_factor(_synthesise(orders, amplitudes, phases, n))
+    best, best_crest = phases, crest_factor(synthesise(orders, amplitudes, phases, n))
     for _ in range(iterations):
-        x = _synthesise(orders, amplitudes, phases, n)
+        x = synthesise(orders, amplitudes, phases, n)
         crest = crest_factor(x)
         if crest < best_crest:
             best, best_crest = phases, crest
@@ -202,6 +204,6 @@ def design(band_hz, peak: float, lines: int = LINES, rig_time_s: float = RIG_TIM
     if w.shape != (len(orders),) or not np.all(np.isfinite(w) & (w > 0)):
         raise InputError(f"weights: {len(orders)} positive numbers wanted")
     phases = low_crest_phases(orders, w, n)
-    scale = peak / float(np.max(np.abs(_synthesise(orders, w, phases, n))))
+    scale = peak / float(np.max(np.abs(synthesise(orders, w, phases, n))))
     return Multisine(fs_hz, n, tuple(orders), tuple(float(a) for a in w * scale),
                      tuple(float(p) for p in phases), float(peak), periods, fade_cycles)

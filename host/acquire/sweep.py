@@ -38,12 +38,13 @@ from .design import SEQUENTIAL_RIG_TIME_S, AmplitudeDesign, Dwell
 from .excitation import amplitude_bound, default_amplitude, default_peak
 from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
 from .chirp import design as chirp_design
+from .linearity import LINES as LINEARITY_LINES, REALISATIONS, linearity_design
 from .multisine import LINES, RIG_TIME_S, design
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .param_protocol import session_params
 
-__all__ = ["SweepPlan", "default_plan", "multisine_plan", "chirp_plan", "run_sweep", "sil_source", "SWEEP_TLOG",
+__all__ = ["SweepPlan", "default_plan", "multisine_plan", "linearity_plan", "chirp_plan", "run_sweep", "sil_source", "SWEEP_TLOG",
            "cut_text", "tuning_freqs_hz"]
 
 SWEEP_TLOG = "sweep.tlog"
@@ -91,6 +92,8 @@ class SweepPlan:
         self.multisine = None
         self.chirp = None
         self.sequential = None                  # a multisine's SequentialMultisine
+        self.linearity = None                   # a linearity campaign's excitations
+        self.seed = None                        # and the seed of its phases
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
@@ -108,6 +111,25 @@ class SweepPlan:
         plan.chirp = chirp
         return plan
 
+    @classmethod
+    def of_linearity(cls, axis, inject, runs, seed) -> "SweepPlan":
+        """A linearity campaign (:mod:`.linearity`): ``runs`` its excitations in order,
+        ``(multisine, level, realisation)``; ``seed`` the one its phases were drawn from."""
+        first = runs[0][0]
+        plan = cls(axis, inject, [ms.base_hz for ms, _, _ in runs],
+                   [ms.peak for ms, _, _ in runs], first.periods, first.fade_cycles)
+        plan.multisine, plan.linearity, plan.seed = first, list(runs), seed
+        return plan
+
+    def select(self, i: int) -> dict:
+        """Before excitation ``i`` (from 0): a linearity campaign's multisine made the one
+        flown; the fields its manifest entry gets (none for another plan)."""
+        if not self.linearity:
+            return {}
+        ms, level, index = self.linearity[i]
+        self.multisine = ms
+        return {"realisation": index, "level": level, "phases_rad": list(ms.phases)}
+
     @property
     def signal(self) -> str:
         return "chirp" if self.chirp is not None else \
@@ -124,6 +146,12 @@ class SweepPlan:
             if self.sequential is not None:
                 out["sequential"] = {"target_sigma": self.sequential.target_sigma,
                                      "min_periods": self.sequential.min_periods}
+            if self.linearity:
+                del out["phases_rad"]                   # each realisation's, in its entry
+                out["linearity"] = {
+                    "realisations": len({i for _, _, i in self.linearity}),
+                    "peaks": sorted({ms.peak for ms, _, _ in self.linearity}, reverse=True),
+                    "seed": self.seed, "design": "odd, random phases"}
             return out
         if self.chirp is not None:
             return self.chirp.record()
@@ -183,6 +211,17 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     plan = SweepPlan.of_multisine(axis, inject, ms)
     plan.sequential = sequential
     return plan
+
+
+def linearity_plan(axis, inject="mixer", amplitude=None, seed=0, realisations=None,
+                   band_hz=None, lines=None) -> SweepPlan:
+    """A linearity campaign over the axis's Table 1 band (or ``band_hz``): odd random-phase
+    multisines on about ``lines`` lines, ``realisations`` of them at the peak ``amplitude``
+    (default: a multisine's) and at a quarter of it (:mod:`.linearity`)."""
+    runs = linearity_design(band_hz or paper.BANDS_HZ[axis],
+                            default_peak(inject) if amplitude is None else amplitude, seed,
+                            realisations or REALISATIONS, lines or LINEARITY_LINES)
+    return SweepPlan.of_linearity(axis, inject, runs, seed)
 
 
 def chirp_plan(axis, inject="mixer", amplitude=None, sweep_s=None, band_hz=None,
@@ -263,9 +302,10 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         _check_rotors(plan, manifest.params)
         last = None                              # (amplitude, rate per unit) just measured
         for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
-            current = f
+            current, chosen = f, plan.select(i - 1)
             entry, last = _measure_designed(session, plan, f, amp, last, limits, manifest,
                                             progress)
+            entry.update(chosen)
             manifest.frequencies.append(entry)
             current = None
             _write_manifest(out_dir, manifest)

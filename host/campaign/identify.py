@@ -40,6 +40,7 @@ from ..validate.replay import replay_points
 from ..validate.truth import sil_truth, truth_record
 from .ardupilot_sweep import ardupilot_sweeps, segment_note
 from .bin_sweep import bin_sweep
+from .linearity import is_linearity, linearity_points
 from .record import read_record, record_points
 from .sweep_points import estimate_points
 
@@ -173,6 +174,9 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
                  f"{damage.KEPT}")
     axis = manifest["axis"]
     points, segments, firsts, skipped = estimate_points(manifest, samples, estimate, progress)
+    linearity = None
+    if is_linearity(manifest):          # the best linear approximation is what is fitted
+        points, linearity = linearity_points(manifest, samples, estimate, progress)
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")
@@ -194,13 +198,20 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         gains=manifest.get("gains") or None,        # what the board flew, for validate
         broken_loop=loop or None, sil_truth=truth or None,
         replay=None if replays is None else _replay_record(result.recommended, replays),
-        axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path")))
+        axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path"),
+        linearity=linearity))
+    if linearity and linearity["flagged"]:
+        progress("warning: the models are fitted where the nonlinear distortion is above the "
+                 "noise and above "
+                 f"{linearity['distortion_limit_db']:g} dB of the response: a linear model "
+                 "does not hold at this amplitude (models.json linearity)")
     _write_plots(plots, out_dir, manifest, points, result, replays,
                  "a chirp's record has no periods to replay"
                  if any(p.method == "composite" for p in firsts) else None)
     return {"out_dir": out_dir, "axis": axis, "points": points, "result": result, "manifest": manifest,
             "damage": damage, "skipped": skipped, "saturated": saturated, "truth": truth,
-            "records": segments, "record_points": firsts, "replays": replays}
+            "records": segments, "record_points": firsts, "replays": replays,
+            "linearity": linearity}
 
 
 def _points_and_fits(path, out_dir, axis, points, orders, delay, cost):

@@ -12,7 +12,7 @@ from ...sim.base.firmware_facts import LOOP_RATE_HZ, MAX_LOOP_RATE_HZ, MAX_PTY_B
 from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_firmware_argument, firmware_link, add_param_store_argument,
                              add_sd_card_arguments, add_vehicle_arguments,
-                             check_plant, finite, sd_card, vehicle_rig,
+                             check_plant, finite, sd_card, vehicle_config, vehicle_rig,
                              int_in, number_in)
 
 __all__ = ["add_parser", "run"]
@@ -83,11 +83,12 @@ def run(args) -> int:
 
     check_plant(args)
     rig = vehicle_rig(args)
-    if args.plant != "vehicle" and (args.turbulence or args.params or args.ideal_sensor or args.rig):
-        raise InputError("--rig, --params, --turbulence and --ideal-sensor need --plant vehicle")
+    if args.plant != "vehicle" and (args.turbulence or args.params or args.ideal_sensor or
+                                    args.rig or args.hinge_friction is not None):
+        raise InputError("--rig, --params, --turbulence, --ideal-sensor and --hinge-friction "
+                         "need --plant vehicle")
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den), plant=args.plant,
-                    rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
-                    ideal_sensor=args.ideal_sensor, collective=args.collective,
+                    rig=rig, **vehicle_config(args), collective=args.collective,
                     loop_hz=args.loop_hz)
     if args.rc_script is not None and args.disarmed:
         raise InputError("--rc-script is the pilot (it arms or not): leave out --disarmed")

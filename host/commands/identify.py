@@ -88,7 +88,8 @@ def add_parser(sub, fmt) -> None:
 
 
 #: Which estimator made a point (FrequencyPoint.method), in the table's words.
-ESTIMATORS = {"fsf": "FSF", "sinefit": "sine fit", "composite": "composite of windows"}
+ESTIMATORS = {"fsf": "FSF", "sinefit": "sine fit", "composite": "composite of windows",
+              "bla": "BLA of random-phase realisations"}
 
 
 def _estimate_text(point) -> str:

@@ -16,7 +16,7 @@ from ..acquire.link import DEFAULT_BAUD
 __all__ = ["add_port_argument", "add_baud_argument", "add_board_actions", "require_port", "add_firmware_argument", "firmware_link", "add_param_store_argument",
            "add_sd_card_arguments", "sd_card",
            "add_fault_argument", "faults",
-           "check_plant", "check_model", "transfer_function",
+           "check_plant", "check_model", "vehicle_config", "transfer_function",
            "int_in", "number_in", "finite", "MAX_CYCLES", "MAX_SEED"]
 
 #: The widest an excitation's cycle counts can be: HQ_EXCITATION carries them as uint16.
@@ -168,6 +168,16 @@ def add_vehicle_arguments(p, rigs=None) -> None:
                    help="turbulence and sensor-noise seed (default 0)")
     p.add_argument("--ideal-sensor", action="store_true",
                    help="--plant vehicle: no IMU noise, bias or DMP latency")
+    p.add_argument("--hinge-friction", type=number_in(0, 1), metavar="N_M",
+                   help="--plant vehicle: the free hinge's Coulomb friction, N m (default: "
+                        "the parameter file's, 0 in the shipped one; the roll rig's full "
+                        "mixer command is about 0.18 N m), to study a rig that is not linear")
+
+
+def vehicle_config(args) -> dict:
+    """SilConfig's fields from :func:`add_vehicle_arguments`' options (the rig aside)."""
+    return {"params": args.params, "turbulence": args.turbulence, "seed": args.seed,
+            "ideal_sensor": args.ideal_sensor, "hinge_friction_n_m": args.hinge_friction}
 
 
 def vehicle_rig(args) -> str:

@@ -14,7 +14,7 @@ from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import firmware_amplitude
 from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (MAX_CYCLES, add_fault_argument, add_firmware_argument, firmware_link,
-                             add_vehicle_arguments, vehicle_rig,
+                             add_vehicle_arguments, vehicle_config, vehicle_rig,
                              add_param_store_argument, add_sd_card_arguments,
                              check_plant, faults, finite, int_in, number_in, sd_card)
 from .sweep_options import check_excitation
@@ -96,13 +96,13 @@ def run(args) -> int:
                     freq_hz=args.freq_hz, amplitude=amplitude, cycles=args.cycles,
                     fade_cycles=args.fade_cycles, loop_hz=args.loop_hz,
                     collective=args.collective, dmp_image=args.dmp_image, plant=args.plant,
-                    rig=rig, params=args.params, turbulence=args.turbulence, seed=args.seed,
+                    rig=rig, **vehicle_config(args),
                     param_store=args.param_store, load_params=args.load_params,
-                    ideal_sensor=args.ideal_sensor, faults=faults(args), firmware=args.firmware,
+                    faults=faults(args), firmware=args.firmware,
                     firmware_link=firmware_link(args), rc_script=args.rc_script,
                     **sd_card(args))
-    if args.turbulence and args.plant != "vehicle":
-        raise InputError("--turbulence needs --plant vehicle")
+    if (args.turbulence or args.hinge_friction is not None) and args.plant != "vehicle":
+        raise InputError("--turbulence and --hinge-friction need --plant vehicle")
     try:
         r = run_sil(cfg, args.out)
     except FirmwareError as exc:         # the board is gone (exit 1), not the user's input

@@ -21,7 +21,7 @@ from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_baud_argument, add_fault_argument, add_firmware_argument,
                              firmware_link, add_vehicle_arguments, add_param_store_argument,
                              add_port_argument, add_sd_card_arguments, check_plant, faults,
-                             finite, int_in, number_in, sd_card)
+                             finite, int_in, number_in, sd_card, vehicle_config)
 from .sweep_options import add_design_arguments, apply_tuning_band, check_excitation, sweep_plan
 
 __all__ = ["add_parser", "run"]
@@ -298,9 +298,8 @@ def _sweep_session(args, tlog):
     check_plant(args)
     cfg = SilConfig(axis=args.axis, num=tuple(args.num), den=tuple(args.den),
                     inject=args.inject, collective=args.collective, dmp_image=args.dmp_image,
-                    plant=args.plant, rig=args.axis, params=args.params,
-                    load_params=args.load_params, turbulence=args.turbulence, seed=args.seed, ideal_sensor=args.ideal_sensor,
-                    faults=faults(args), firmware=args.firmware, param_store=args.param_store,
+                    plant=args.plant, rig=args.axis, **vehicle_config(args),
+                    load_params=args.load_params, faults=faults(args), firmware=args.firmware, param_store=args.param_store,
                     firmware_link=firmware_link(args), rc_script=args.rc_script,
                     **sd_card(args))
     source = sil_source(cfg)

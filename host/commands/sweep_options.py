@@ -11,6 +11,7 @@ from ...sim.base.errors import InputError
 from ..acquire import design
 from ..acquire.chirp import LAWS as CHIRP_LAWS, SWEEP_S as CHIRP_SWEEP_S
 from ..acquire.excitation import amplitude_bound, bound_text, defaults_text, firmware_amplitude, units_text
+from ..acquire.linearity import PERIODS as LINEARITY_PERIODS, REALISATIONS, SMALL_SHARE
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from .shared_options import MAX_CYCLES, int_in, number_in
 
@@ -80,6 +81,14 @@ def add_design_arguments(p, on_board: bool = False) -> None:
         p.add_argument("--chirp", choices=CHIRP_LAWS, default="log",
                        help="chirp: how its frequency moves, log (default: a constant factor "
                             "per second) or linear")
+    if not on_board:
+        p.add_argument("--linearity", nargs="?", type=int_in(2, 50), const=REALISATIONS,
+                       metavar="M",
+                       help="with --signal multisine, a linearity campaign: odd multisines "
+                            f"with random phases, M realisations (default {REALISATIONS}) at "
+                            f"the peak and again at {SMALL_SHARE:g} of it; identify then "
+                            "separates each line's noise from the nonlinear distortion and "
+                            "fits the larger amplitude's best linear approximation")
     p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
                    help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
                         "the nearest harmonic of the base period")
@@ -115,6 +124,8 @@ def sweep_plan(args, on_board: bool = False):
         raise InputError("--swing-deg designs mixer amplitudes; it does not go with "
                          "--amplitude or angle or rate injection")
     amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
+    if getattr(args, "linearity", None) and args.signal != "multisine":
+        raise InputError("--linearity is a campaign of multisines: add --signal multisine")
     if args.signal == "multisine":
         return _multisine_plan(args, amp, (target_sigma, max_cycles, swing_deg))
     if args.signal == "chirp":
@@ -177,6 +188,23 @@ def _multisine_plan(args, amp, dwell_options):
     if given:
         raise InputError(f"{' and '.join(given)} shape a dwell; a multisine's length is "
                          "--rig-time (and with --target-sigma, the periods its lines need)")
+    if getattr(args, "linearity", None):
+        return _linearity_plan(args, amp, target_sigma)
     sequential = None if target_sigma is None else design.SequentialMultisine(target_sigma)
     return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time,
                           _band_edges(args, "multisine"), sequential=sequential)
+
+
+def _linearity_plan(args, amp, target_sigma):
+    """A linearity campaign's plan (--linearity M): its realisations' phases from --seed."""
+    # the command's work, imported when it runs: --help imports every command module
+    from ..acquire.sweep import linearity_plan
+
+    given = [o for o, v in (("--target-sigma", target_sigma), ("--rig-time", args.rig_time))
+             if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} with --linearity: its length is its "
+                         f"realisations' ({LINEARITY_PERIODS} base periods each, at two "
+                         "amplitudes)")
+    return linearity_plan(args.axis, args.inject, amp, getattr(args, "seed", 0) or 0,
+                          args.linearity, _band_edges(args, "multisine"), args.lines)

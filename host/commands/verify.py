@@ -9,7 +9,8 @@ import sys
 from ...sim.base import dialect as names
 from ...sim.base.errors import InputError
 from .shared_options import (add_baud_argument, add_param_store_argument, add_port_argument,
-                             add_vehicle_arguments, check_plant, int_in, number_in)
+                             add_vehicle_arguments, check_plant, int_in, number_in,
+                             vehicle_config)
 
 __all__ = ["add_parser", "run"]
 
@@ -109,8 +110,7 @@ def _opener(args):
 
     if args.sil:
         return lambda axis, tlog: sil_session(
-            axis, tlog, params=args.params, turbulence=args.turbulence, seed=args.seed,
-            ideal_sensor=args.ideal_sensor, collective=args.collective,
+            axis, tlog, **vehicle_config(args), collective=args.collective,
             param_store=args.param_store)
 
     def port_session(axis, tlog):

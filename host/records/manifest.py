@@ -48,7 +48,11 @@ FREQUENCY = S.Obj(
               "period_inferred": S.Bool(),
               "dwell_end": S.Str(("target", "cap", "amplitude")),
               "relative_sigma": S.Null(S.Num(0)), "signal": S.Str(tuple(names.SIGNALS)),
-              "orders": S.List(S.Int(1, 2**31), 1, 16), "fade_samples": S.Int(0, 2**31)})
+              "orders": S.List(S.Int(1, 2**31), 1, 16), "fade_samples": S.Int(0, 2**31),
+              # a linearity campaign's multisine: its random phases' realisation, and its
+              # amplitude's level (0 the peak asked for, 1 the smaller)
+              "realisation": S.Int(0, 2**31), "level": S.Int(0, 1),
+              "phases_rad": S.List(S.Num(), 1, 16)})
 
 #: What ``--port auto`` found (``port_found``, only when it chose the sweep's port): a USB
 #: device or a board ``heliquad board`` emulates (announced, with the firmware it runs).

@@ -64,7 +64,9 @@ def _models_schema():
                                       ("high", S.Num(0, 1e7, lo_open=True))),
                   "broken_loop": S.Obj(), "gains": recorded_gains_schema(),
                   "record": S.Obj(),
-                  "imu_path": S.Str(("raw", "dmp"))})
+                  "imu_path": S.Str(("raw", "dmp")),
+                  "linearity": S.Obj(required={"levels": S.List(S.Obj()),
+                                               "flagged": S.Bool()})})
 
 
 
@@ -156,6 +158,7 @@ class ModelsFile:
     cost: str | None = None
     record: dict | None = None
     imu_path: str | None = None
+    linearity: dict | None = None
 
     def document(self) -> dict:
         """The file's JSON document: the keys that have a value, in field order."""

@@ -55,6 +55,7 @@ class SilConfig:
     turbulence: str | None = None  # vehicle plant: light, moderate or severe Dryden turbulence
     seed: int = 0                  # turbulence and sensor-noise seed
     ideal_sensor: bool = False     # vehicle plant: no IMU noise, bias or DMP latency
+    hinge_friction_n_m: float | None = None  # vehicle plant: the hinge's, over the file's
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
     firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
@@ -106,6 +107,9 @@ def make_plant(cfg: SilConfig, dt_s: float) -> Plant:
     # A vehicle file given to the run has its geometry set on the board (the session does
     # it); without one the firmware flies its defaults.
     params = load_params(cfg.params)
+    if cfg.hinge_friction_n_m is not None:
+        params = dataclasses.replace(params, rig=dataclasses.replace(
+            params.rig, hinge_friction_n_m=float(cfg.hinge_friction_n_m)))
     return VehiclePlant(cfg.axis, cfg.rig, dt_s, params,
                         trim_collective=cfg.collective, turbulence=cfg.turbulence, seed=cfg.seed,
                         ideal_sensor=cfg.ideal_sensor,
