@@ -52,7 +52,7 @@ class DataFlashWriter:
         _, fmt, columns = self.messages[name]
         values = []
         for column, code in zip(columns.split(","), fmt):
-            v = fields.get(column, 0)
+            v = fields.get(column, "" if code in "nNZ" else 0)
             scale = CODES[code][1]
             if code in "nNZ":
                 v = v.encode() if isinstance(v, str) else v

@@ -45,6 +45,9 @@ ATT_FIELDS = {"roll": ("DesRoll", "Roll"), "pitch": ("DesPitch", "Pitch"),
               "yaw": ("DesYaw", "Yaw")}
 _SIDS = ("TimeUS", "Ax", "Mag", "FSt", "FSp", "TFin", "TC", "TR", "TFout")
 _SIDD = ("TimeUS", "Time", "Targ", "F")
+#: RATE's and ATT's fields read: the time and every axis's.
+_COLUMNS = {"RATE": ("TimeUS", *(n for names in RATE_FIELDS.values() for n in names)),
+            "ATT": ("TimeUS", *(n for names in ATT_FIELDS.values() for n in names))}
 #: The records read; the rest of the log is not.
 _WANTED = ("SIDS", "SIDD", "RATE", "ATT", "PARM", "MSG")
 
@@ -81,27 +84,50 @@ def read_ardupilot(path, reader=None) -> ArduPilotLog:
     if not {"SIDS", "SIDD"} & defined:
         raise InputError(f"{path}: an ArduPilot log without SystemID records (SIDS, SIDD): "
                          "ArduCopter's SystemID mode never ran in it")
-    rows = {name: [] for name in _WANTED}
-    params, version, sids_before = {}, None, []
+    found = _Found()
+    damage = BinDamage(size=os.path.getsize(path))
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         while (m := reader.recv_match(type=list(_WANTED))) is not None:
-            kind = m.get_type()
-            if kind == "PARM":
-                params[m.Name] = float(m.Value)
-            elif kind == "MSG":
-                version = version or _version(m.Message)
-            elif kind == "SIDS":
-                rows["SIDS"].append({k: getattr(m, k) for k in _SIDS})
-            elif kind == "SIDD":
-                rows["SIDD"].append(tuple(getattr(m, k) for k in _SIDD))
-                sids_before.append(len(rows["SIDS"]))
-            else:
-                rows[kind].append(m)
-    if not rows["SIDD"]:
+            try:
+                found.take(m)
+            except (AttributeError, TypeError, ValueError) as exc:
+                at = reader.offset - m.fmt.len
+                damage.why = (f"a {m.get_type()} record that does not read as its format "
+                              f"says ({exc}): the log is damaged there")
+                damage.regions.append((at, damage.size - at))
+                break
+    if not found.rows["SIDD"]:
         raise InputError(f"{path}: the log defines SystemID's records but holds no SIDD "
-                         "sample: the mode never ran an excitation")
-    segments = [_segment(rows, sids_before, part) for part in _cut(rows["SIDD"], sids_before)]
-    return ArduPilotLog(segments, params, version, BinDamage(size=os.path.getsize(path)))
+                         "sample: the mode never ran an excitation"
+                         + (f" ({damage.summary()})" if damage else ""))
+    segments = [_segment(found.rows, found.sids_before, part)
+                for part in _cut(found.rows["SIDD"], found.sids_before)]
+    return ArduPilotLog(segments, found.params, found.version, damage)
+
+
+class _Found:
+    """The records read, in file order: SIDS and SIDD's fields, the RATE and ATT records, the
+    parameters and the firmware named."""
+
+    def __init__(self):
+        self.rows = {name: [] for name in _WANTED}
+        self.params, self.version, self.sids_before = {}, None, []
+
+    def take(self, m) -> None:
+        """One record; AttributeError (a field its format lacks), TypeError or ValueError
+        (a value that is not a number) for one that does not read as expected."""
+        kind = m.get_type()
+        if kind == "PARM":
+            self.params[str(m.Name)] = float(m.Value)
+        elif kind == "MSG":
+            self.version = self.version or _version(str(m.Message))
+        elif kind == "SIDS":
+            self.rows["SIDS"].append({k: float(getattr(m, k)) for k in _SIDS})
+        elif kind == "SIDD":
+            self.rows["SIDD"].append(tuple(float(getattr(m, k)) for k in _SIDD))
+            self.sids_before.append(len(self.rows["SIDS"]))
+        else:
+            self.rows[kind].append(tuple(float(getattr(m, k)) for k in _COLUMNS[kind]))
 
 
 def _version(text: str) -> str | None:
@@ -127,23 +153,24 @@ def _segment(rows, sids_before, part) -> SidSegment:
     setup = rows["SIDS"][k - 1] if k else None
     loop_us = float(np.median(np.diff(time_us))) if time_us.size > 1 else 0.0
     fields = {}
-    for kind, names in (("RATE", [n for t in RATE_FIELDS.values() for n in t]),
-                        ("ATT", [n for t in ATT_FIELDS.values() for n in t])):
-        fields.update(_matched(rows[kind], names, time_us, loop_us / 2))
+    for kind in ("RATE", "ATT"):
+        fields.update(_matched(rows[kind], _COLUMNS[kind], time_us, loop_us / 2))
     return SidSegment(setup, time_us, sidd[:, 1], sidd[:, 2], sidd[:, 3], fields)
 
 
-def _matched(records, names, time_us, within_us) -> dict:
-    """``{name: values at time_us}`` from the records nearest in time to each, within
-    ``within_us`` (NaN where none is); ``{}`` for records without those fields."""
-    if not records or not all(hasattr(records[0], n) for n in names):
+def _matched(records, columns, time_us, within_us) -> dict:
+    """``{name: values at time_us}`` of ``columns`` (``TimeUS`` first) from the records
+    nearest in time to each, within ``within_us`` (NaN where none is); ``{}`` without
+    records."""
+    if not records:
         return {}
-    t = np.array([r.TimeUS for r in records], dtype=float)
-    values = np.array([[getattr(r, n) for n in names] for r in records], dtype=float)
-    after = np.clip(np.searchsorted(t, time_us), 1, max(t.size - 1, 1))
-    before = after - 1
-    nearest = np.where(np.abs(t[np.minimum(after, t.size - 1)] - time_us)
-                       < np.abs(t[before] - time_us), np.minimum(after, t.size - 1), before)
+    table = np.array(records, dtype=float)
+    table = table[np.argsort(table[:, 0], kind="stable")]    # a damaged log's times may not rise
+    t, values = table[:, 0], table[:, 1:]
+    last = t.size - 1
+    after = np.clip(np.searchsorted(t, time_us), 0, last)
+    before = np.clip(after - 1, 0, last)
+    nearest = np.where(np.abs(t[after] - time_us) < np.abs(t[before] - time_us), after, before)
     ok = np.abs(t[nearest] - time_us) <= within_us
     picked = np.where(ok[:, None], values[nearest], np.nan)
-    return {n: picked[:, i] for i, n in enumerate(names)}
+    return {n: picked[:, i] for i, n in enumerate(columns[1:])}

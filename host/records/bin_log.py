@@ -179,6 +179,15 @@ class _Collector:
                       self.params, self.gaps, damage)
 
 
+def _taken(collector, m) -> str | None:
+    """:meth:`_Collector.take`, a record whose format lacks a field it reads (a damaged FMT)
+    a damage like any other."""
+    try:
+        return collector.take(m)
+    except AttributeError as exc:
+        return f"a {m.get_type()} record without its field {exc} (its format is damaged)"
+
+
 def _size(path) -> int:
     """The file's size; InputError, naming it, for a missing, unreadable or empty file or a
     folder."""
@@ -197,7 +206,8 @@ def open_log(path) -> tuple:
     with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
         try:
             return _Reader(os.fspath(path)), size
-        except (ValueError, OSError, IndexError, KeyError) as exc:
+        # DFReader raises a bare Exception for a format it cannot take (a damaged FMT record)
+        except Exception as exc:                # noqa: BLE001 - said as the file's fault
             raise InputError(f"{path}: not a DataFlash log ({exc})") from None
 
 
@@ -224,7 +234,7 @@ def read_bin(path, opened=None) -> BinLog:
             if reader.offset - m.fmt.len != end:        # DFReader skipped bytes
                 damage.why = "bytes that are no record (damage, or garbage)"
                 break
-            if (why := collector.take(m)) is not None:
+            if (why := _taken(collector, m)) is not None:
                 damage.why, end = why, reader.offset - m.fmt.len
                 break
             end, damage.messages = reader.offset, damage.messages + 1

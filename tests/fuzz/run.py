@@ -1,7 +1,7 @@
 """Run heliquad's fuzz targets for a while each and print what every one of them did.
 
 Host targets are Python harnesses run under atheris (pip install atheris): tlog
-(host/records/tlog.py) and framer (sim/base/framing.py). Firmware targets are libFuzzer executables built
+(host/records/tlog.py), framer (sim/base/framing.py) and dataflash (identify's .BIN reading). Firmware targets are libFuzzer executables built
 with clang from firmware/ with HQ_FUZZ=ON: sim_link (fuzz_sim_link), telemetry
 (fuzz_telemetry) and usb_control (fuzz_usb_control, the Teensy 3.5 image's USB port). Every target runs as libFuzzer does, on its corpus folder with
 -max_total_time; the result line gives executions, executions per second, coverage (cov: and
@@ -58,6 +58,8 @@ TARGETS = (
     Target("tlog", HOST, "host/records/tlog.py read_tlog on .tlog files (tests/fuzz/tlog_fuzz.py)"),
     Target("framer", HOST, "sim/base/framing.py Framer and Codec on link byte streams "
                            "(tests/fuzz/framer_fuzz.py)"),
+    Target("dataflash", HOST, "identify's .BIN reading, heliquad's and ArduPilot SystemID logs "
+                              "(tests/fuzz/dataflash_fuzz.py)"),
     Target("sim_link", FIRMWARE, "firmware sim link, executable fuzz_sim_link"),
     Target("telemetry", FIRMWARE, "firmware telemetry link, executable fuzz_telemetry"),
     Target("usb_control", FIRMWARE, "Teensy 3.5 image's USB port (TinyUSB and its port layer), "
