@@ -133,3 +133,27 @@ def test_linearity_needs_a_multisine_and_its_own_length(tmp_path):
         res = heliquad("sweep", "--axis", "roll", "--sil", *extra, "--out", tmp_path / "x")
         assert res.returncode == 2
         assert says in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_the_report_shows_each_amplitudes_verdict(rigs, tmp_path):
+    _, _, folder = rigs["friction"]
+    res = heliquad("report", folder, "--out", tmp_path / "report.html")
+    assert res.returncode == 0, res.stderr
+    page = (tmp_path / "report.html").read_text()
+    section = page[page.index("Linearity (best linear approximation"):]
+    assert section.count("FLAGGED") == 1 and "Amplitude dependence: up to" in section
+    assert "significant" in section
+    # the models are the large amplitude's, which is not flagged: no quality flag for it
+    assert "a linear model does not hold at this amplitude" not in page
+
+
+def test_a_models_file_whose_linearity_is_incomplete_is_refused_by_the_report(rigs, tmp_path):
+    _, _, folder = rigs["free"]
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    doc = json.loads((folder / "models.json").read_text())
+    del doc["linearity"]["levels"][0]["count"]
+    (broken / "models.json").write_text(json.dumps(doc))
+    res = heliquad("report", broken, "--out", tmp_path / "r.html")
+    assert res.returncode == 2
+    assert res.stderr.strip().endswith("linearity.levels[0].count is missing")

@@ -42,9 +42,47 @@ def models_html(models, axis, flags):
     elif (models.quality or {}).get("level") == "poor":
         flags.append(f"{axis}: the recommended model fits its points poorly "
                      f"({models.quality.get('why')}); try other orders, or look at the points")
+    cost = {"j": "CIFER's J", "relative": "the weighted relative error"}.get(models.cost)
     return ("<h3>Models</h3>" + table_html(
         ["", "order", "J", "rms %", "AICc", "max dB", "max deg", "stable", "degenerate", "G(s)"],
-        rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.reason))}</p>")
+        rows, left=(9,)) + f"<p>Recommended: {html.escape(str(models.reason))}</p>"
+        + (f"<p>Minimised: {cost}.</p>" if cost else "") + _record_html(models.record)
+        + _linearity_html(models.linearity, axis, flags))
+
+
+def _record_html(record) -> str:
+    """What a record read as one (identify --from-record) was: its input, output, length
+    and windows."""
+    if not record:
+        return ""
+    return ("<p>From one record: " + html.escape(
+        f"{record['output']} over {record['input']}, {record['duration_s']:.1f} s at "
+        f"{record['rate_hz']:.4g} Hz, windows {', '.join(f'{w:.3g}' for w in record['windows_s'])}"
+        f" s, against {'the excitation' if record['estimate'] == 'excitation' else 'the input'}")
+        + ".</p>")
+
+
+def _linearity_html(linearity, axis, flags) -> str:
+    """A linearity campaign's verdicts per amplitude and its amplitude dependence; flags
+    models fitted where the distortion is above the noise."""
+    if not linearity:
+        return ""
+    rows = [(number_text(level["peak"], ".3g"), str(level["realisations"]),
+             number_text(level["distortion_db"], ".1f"), number_text(level["noise_db"], ".1f"),
+             f"{level['above_noise']} of {level['count']}",
+             "FLAGGED" if level["flagged"] else "no") for level in linearity["levels"]]
+    if linearity["flagged"]:
+        flags.append(f"{axis}: the models are fitted where the nonlinear distortion is above "
+                     f"the noise and above {linearity['distortion_limit_db']:g} dB of the "
+                     "response: a linear model does not hold at this amplitude")
+    dep = linearity.get("amplitude_dependence")
+    said = "" if not dep else (
+        f"<p>Amplitude dependence: up to {dep['max_db']:.2f} dB and {dep['max_deg']:.1f} deg "
+        f"between the two amplitudes, {'significant' if dep['significant'] else 'within the scatter'}"
+        ".</p>")
+    return ("<h4>Linearity (best linear approximation of random-phase realisations)</h4>"
+            + table_html(["peak", "realisations", "distortion dB", "noise dB",
+                          "lines above the noise", "flagged"], rows) + said)
 
 
 def order_text(model) -> str:

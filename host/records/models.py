@@ -65,9 +65,21 @@ def _models_schema():
                   "broken_loop": S.Obj(), "gains": recorded_gains_schema(),
                   "record": S.Obj(),
                   "imu_path": S.Str(("raw", "dmp")),
-                  "linearity": S.Obj(required={"levels": S.List(S.Obj()),
-                                               "flagged": S.Bool()})})
+                  "linearity": _linearity_schema()})
 
+
+
+def _linearity_schema():
+    """models.json's ``linearity`` (host/campaign/linearity.py): what the report reads of it."""
+    count = S.Int(0, 10_000)
+    level = S.Obj(required={"peak": S.Num(0), "realisations": count, "count": count,
+                            "above_noise": count, "distortion_db": S.Num(),
+                            "noise_db": S.Num(), "flagged": S.Bool()})
+    dependence = S.Obj(required={"max_db": S.Num(0), "max_deg": S.Num(0),
+                                 "significant": S.Bool()})
+    return S.Obj(required={"levels": S.List(level, 1, 2), "flagged": S.Bool(),
+                           "distortion_limit_db": S.Num()},
+                 optional={"amplitude_dependence": dependence})
 
 
 def _sil_truth_schema():
