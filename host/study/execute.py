@@ -26,7 +26,7 @@ __all__ = ["run_study", "plan", "EXIT_FAILED"]
 #: scheduler lost, a worker without heliquad): the records made so far kept.
 EXIT_FAILED = 1
 #: How long a scheduler may take to answer before the study says it does not.
-CONNECT_TIMEOUT_S = 10
+CONNECT_TIMEOUT_S = 5
 #: How often the progress line is redrawn while no run ends (seconds).
 TICK_S = 0.5
 
@@ -60,12 +60,15 @@ def run_study(spec, out: str, perform, workers=None, scheduler=None, retry_faile
         for run in spec.runs:
             print(f"{'over' if run.name in kept else 'to make':>8}  {run.name}")
         return 0
-    os.makedirs(os.path.join(out, RUNS), exist_ok=True)
+    client = _client(workers, scheduler) if todo else None   # before anything is written
     stopped = None
     try:
-        if todo:
-            stopped = _execute(todo, out, perform, workers, scheduler)
+        os.makedirs(os.path.join(out, RUNS), exist_ok=True)
+        if client is not None:
+            stopped = _execute(client, todo, out, perform)
     finally:                             # Ctrl-C too: every run over is in the table
+        if client is not None:
+            _close(client, scheduler)
         records = _write_results(spec, out)
     if stopped:
         sys.stderr.write(f"heliquad study: {stopped}; the {len(records)} runs over are kept: "
@@ -114,22 +117,18 @@ def _client(workers, scheduler):
     return distributed.Client(cluster, set_as_default=False)
 
 
-def _execute(todo, out, perform, workers, scheduler) -> str | None:
+def _execute(client, todo, out, perform) -> str | None:
     """Hand ``todo`` out, gather the records as runs end, show progress; None once every run
     is over, else why the study stopped."""
     # Dask, imported when runs are made: planning, a dry run and --help do without it
     import distributed
 
-    client = _client(workers, scheduler)
-    try:
-        why = _check_workers(client)
-        if why:
-            return why
-        futures = [client.submit(perform, run, out, key=f"heliquad-study-{run.name}-"
-                                 f"{os.getpid()}-{time.time_ns()}") for run in todo]
-        return _gather(client, futures, distributed.as_completed(futures, loop=client.loop))
-    finally:
-        _close(client, scheduler)
+    why = _check_workers(client)
+    if why:
+        return why
+    futures = [client.submit(perform, run, out, key=f"heliquad-study-{run.name}-"
+                             f"{os.getpid()}-{time.time_ns()}") for run in todo]
+    return _gather(client, futures, distributed.as_completed(futures, loop=client.loop))
 
 
 def _check_workers(client) -> str | None:

@@ -80,6 +80,8 @@ def load_spec(path: str, commands: dict) -> Spec:
             doc = tomllib.load(f)
     except OSError as exc:
         raise InputError(f"{path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: not UTF-8 text (a spec is a TOML file)") from None
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML: {exc}") from None
     return parse_spec(doc, commands, path)

@@ -35,9 +35,10 @@ AS_JSON = ("model_num", "model_den")
 
 
 def rows(records: list, factor_names) -> list:
-    """The table's rows (dicts, in the columns' order) of ``records``, sorted by run name."""
+    """The table's rows (dicts, in the columns' order) of ``records``, in their order (the
+    spec's)."""
     out = []
-    for rec in sorted(records, key=lambda r: r["run"]):
+    for rec in records:
         row = {"run": rec["run"], "status": rec.get("status"), "error": rec.get("error")}
         for name in factor_names:
             row[name] = _factor(rec.get("factors", {}).get(name))
