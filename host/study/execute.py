@@ -17,6 +17,7 @@ import sys
 import time
 
 from ...sim.base.errors import InputError
+from ..process.signals import TERMINAL_SIGNALS, ignoring
 from ..records.output import check_output_folder
 from .runs import FAILED, RECORD, RUNS, read_record, run_folder, worker_version
 
@@ -111,9 +112,12 @@ def _client(workers, scheduler):
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"--scheduler {scheduler}: no answer in {CONNECT_TIMEOUT_S} s "
                              f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    cluster = distributed.LocalCluster(n_workers=workers or os.cpu_count() or 1,
-                                       threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.ERROR)
+    # the workers start with a terminal's Ctrl-C and hang-up ignored: it reaches this
+    # process, which closes the cluster in order (the workers' runs left unfinished)
+    with ignoring(TERMINAL_SIGNALS):
+        cluster = distributed.LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                           threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=logging.ERROR)
     return distributed.Client(cluster, set_as_default=False)
 
 
