@@ -10,8 +10,8 @@ The spec (docs/studies.md)::
     seed = [1, 2, 3]           # or {first = 1, count = 100}
 
     [[grid]]                   # optional: products of their own, [factors] filling the rest
-    turbulence = ["none"]      # "none": the option left out (the command's default)
-    seed = [1]
+    turbulence = ["none"]      # "none": the option left out (the command's default), as
+    seed = [1]                 # a factor that neither the grid nor [factors] gives
 
     [sweep]                    # heliquad sweep's options, for every run
     lines = 8
@@ -108,7 +108,7 @@ def parse_spec(doc: dict, commands: dict, path: str = "spec") -> Spec:
         levels = {**{_key(k): v for k, v in factors.items()},
                   **{_key(k): v for k, v in grid.items()}}
         where = f"grid {i + 1}" if "grid" in doc else "[factors]"
-        values = [_levels(levels[n], n, path, where) for n in names]
+        values = [_levels(levels.get(n, LEFT_OUT), n, path, where) for n in names]
         for combo in itertools.product(*values):
             run = _run(dict(zip(names, combo)), shared, commands)
             if run.name not in seen:
@@ -156,11 +156,6 @@ def _factor_names(factors: dict, grids: list, commands: dict, path: str) -> list
                 _check_option(name, commands, path, "[factors]" if table is factors else
                               "[[grid]]")
                 names.append(name)
-    for grid in grids:
-        missing = [n for n in names if n not in {_key(k) for k in (*factors, *grid)}]
-        if missing:
-            raise InputError(f"{path}: a grid leaves factor {missing[0]!r} without values "
-                             "(give it in [factors] or in the grid)")
     return names
 
 
@@ -199,6 +194,7 @@ def _run(factors: dict, shared: dict, commands: dict) -> Run:
 def _text(value) -> str:
     if isinstance(value, bool):
         return "yes" if value else "no"
-    if isinstance(value, list):
-        return "+".join(_text(v) for v in value)
+    if isinstance(value, list):          # a few values, or the first..last and how many
+        words = [_text(v) for v in value]
+        return "+".join(words) if len(words) <= 3 else f"{words[0]}..{words[-1]}x{len(words)}"
     return f"{value:g}" if isinstance(value, float) else str(value)
