@@ -5,16 +5,18 @@ one is, a failed one is a row with its error); the table holds one row per run."
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
 import sys
+import threading
 import tomllib
 
 import pyarrow.parquet as pq
 import pytest
 
-from heliquad.host.commands.study import command_line, option_names
+from heliquad.host.commands.study import command_line, option_names, run_command
 from heliquad.host.study import runs
 from heliquad.host.study.execute import plan
 from heliquad.host.study.spec import parse_spec
@@ -91,6 +93,23 @@ def test_a_runs_command_lines_are_the_ones_a_user_types():
          "--sil", "--out", "F"]
     assert command_line("identify", {"delay": False, "order": ["0/2", "1/3"]}, "F") == \
         ["identify", "--no-delay", "--order", "0/2", "--order", "1/3", "F"]
+
+
+def test_threads_running_commands_at_once_each_write_their_own_log(tmp_path):
+    # a Dask worker with several threads: each run's output in its own run.log, none lost
+    logs = {i: io.StringIO() for i in (1, 2)}
+    threads = [threading.Thread(target=run_command, args=(
+        ["sweep", "--sil", "--axis", "roll", "--seed", str(i), "--signal", "multisine",
+         "--lines", "4", "--rig-time", "10", "--out", str(tmp_path / f"s{i}")], logs[i]))
+        for i in logs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for i, log in logs.items():
+        assert log.getvalue().count("next: heliquad identify") == 1
+        assert str(tmp_path / f"s{i}") in log.getvalue()
+        assert str(tmp_path / f"s{3 - i}") not in log.getvalue()
 
 
 # --- a run's folder, and resuming -----------------------------------------------------------

@@ -4,10 +4,11 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import functools
 import importlib
 import os
+import sys
+import threading
 
 from ...sim.base.errors import InputError
 from .shared_options import int_in
@@ -144,9 +145,49 @@ def _parse(words: list, what: str):
 
 
 def run_command(words: list, log) -> int:
-    """Run ``heliquad WORDS`` in this process, as the program does, its printed output
-    written to the file object ``log``; its exit code (an error raises, as in the program)."""
+    """Run ``heliquad WORDS`` in this process, as the program does, what it prints (stdout
+    and stderr) written to the file object ``log``; its exit code (an error raises, as in
+    the program). Threads may each run one at once: each one's output goes to its own log."""
     args = _parse(words, "run")
-    with contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
-        code = args.func(args)
-    return int(code or 0)
+    _ThreadStreams.install()
+    _ThreadStreams.local.log = log
+    try:
+        return int(args.func(args) or 0)
+    finally:
+        _ThreadStreams.local.log = None
+
+
+class _ThreadStreams:
+    """sys.stdout and sys.stderr in a process whose threads run commands (a Dask worker
+    with several threads): a write goes to the log of the command its thread is running,
+    else where it went before. (contextlib.redirect_stdout swaps the one sys.stdout of the
+    process, and two threads swapping it in turn would put it back wrong.)"""
+
+    local = threading.local()
+    _lock = threading.Lock()
+
+    def __init__(self, before):
+        self.before = before
+
+    @classmethod
+    def install(cls) -> None:
+        with cls._lock:
+            if not isinstance(sys.stdout, cls):
+                sys.stdout = cls(sys.stdout)
+            if not isinstance(sys.stderr, cls):
+                sys.stderr = cls(sys.stderr)
+
+    def _target(self):
+        return getattr(self.local, "log", None) or self.before
+
+    def write(self, text):
+        return self._target().write(text)
+
+    def flush(self):
+        return self._target().flush()
+
+    def isatty(self):
+        return self._target().isatty()
+
+    def __getattr__(self, name):
+        return getattr(self._target(), name)
