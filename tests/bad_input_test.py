@@ -568,6 +568,7 @@ FILES = {
     "study_lines.toml": '[factors]\naxis = ["roll"]\nlines = [1]\n[sweep]\nsignal = "multisine"\n',
     "study_out.toml": '[factors]\naxis = ["roll"]\nout = ["elsewhere"]\n',
     "study_table.toml": '[factors]\naxis = ["roll"]\n[wind]\nspeed = 3\n',
+    "study_plan.toml": '[factors]\naxis = ["yaw"]\n[sweep]\nsignal = "multisine"\nrig-time = 12\n',
     "study_seed.toml": '[factors]\naxis = ["roll"]\nseed = {first = 1}\n',
 }
 
@@ -1311,6 +1312,7 @@ CASES = [
     case("study study_lines.toml --out s", "--lines: 1 is outside 2..16"),
     case("study study_out.toml --out s", "out is set by the study itself"),
     case("study study_table.toml --out s", "unknown table 'wind'"),
+    case("study study_plan.toml --out s", "a multisine over 0.15-1.6 hz needs more than 12 s"),
     case("study study_seed.toml --out s", "{first = n, count = m}"),
     case("study study.toml --out s --workers 0", "--workers"),
     case("study study.toml --out s --workers 2 --scheduler tcp://127.0.0.1:1", "not allowed"),

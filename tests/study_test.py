@@ -172,12 +172,12 @@ def _raise():
 
 STUDY = """
 [study]
-description = "one run that works, one the sweep refuses"
+description = "one run that works, one that identify refuses"
 [factors]
 axis = "roll"
 turbulence = "light"
 seed = 3
-cycles = ["none", 4]
+band = ["none", [0.5, 5]]
 [sweep]
 signal = "multisine"
 lines = 5
@@ -203,7 +203,7 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     table = pq.read_table(tmp_path / "out" / "study.parquet").to_pylist()
     assert [r["status"] for r in table] == ["finished", "failed"]
     ok, failed = table
-    assert "--cycles" in failed["error"] and "multisine" in failed["error"]
+    assert failed["error"] == "--band is an option of --from-record"
     assert ok["seed"] == 3 and ok["axis"] == "roll" and ok["turbulence"] == "light"
     # the row's commands, typed by hand into another folder: the same numbers
     hand = tmp_path / "hand"

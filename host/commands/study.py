@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
+import json
 import os
 import sys
 import threading
@@ -69,13 +70,37 @@ def run(args) -> int:
     from ..study.spec import load_spec
 
     spec = load_spec(args.spec, option_names())
-    for r in spec.runs:                   # every run's command lines parse, before any starts
-        for step, options in r.options.items():
-            _parse(command_line(step, options), f"run {r.name}")
+    check_runs(spec.runs)
     perform = functools.partial(perform_run, command=run_command, line=command_line)
     return run_study(spec, os.path.abspath(args.out), perform, workers=args.workers,
                      scheduler=args.scheduler, retry_failed=args.retry_failed,
                      dry_run=args.dry_run)
+
+
+#: The sweep's options that its plan does not depend on: a plan checked once for all their
+#: values (a study's hundred seeds).
+PLAN_FREE = ("seed", "turbulence")
+
+
+def check_runs(runs) -> None:
+    """Every run's command lines parse, and its sweep's plan passes the checks the sweep
+    makes before it flies, before any run starts: an InputError names the first run that
+    would fail them."""
+    # the sweep command's checks, imported when a study runs: --help imports every module
+    from .sweep import checked_plan
+
+    planned = set()
+    for r in runs:
+        for step, options in r.options.items():
+            args = _parse(command_line(step, options), f"run {r.name}")
+            key = json.dumps({k: v for k, v in options.items() if k not in PLAN_FREE},
+                             sort_keys=True)
+            if step == "sweep" and key not in planned:
+                planned.add(key)
+                try:
+                    checked_plan(args)
+                except InputError as exc:
+                    raise InputError(f"run {r.name}: {exc}") from None
 
 
 class _Refused(Exception):

@@ -11,10 +11,12 @@ read back by identify, so the run's folder lives where the run does.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
 import time
+import warnings
 
 from ...sim.base.errors import InputError
 from ..process.signals import TERMINAL_SIGNALS, ignoring
@@ -63,17 +65,19 @@ def run_study(spec, out: str, perform, workers=None, scheduler=None, retry_faile
         return 0
     client = _client(workers, scheduler) if todo else None   # before anything is written
     stopped = None
-    try:
-        os.makedirs(os.path.join(out, RUNS), exist_ok=True)
-        if client is not None:
-            stopped = _execute(client, todo, out, perform)
-    finally:                             # Ctrl-C too: every run over is in the table
-        if client is not None:
-            _close(client, scheduler)
-        records = _write_results(spec, out)
+    with _dask_quiet():
+        try:
+            os.makedirs(os.path.join(out, RUNS), exist_ok=True)
+            if client is not None:
+                stopped = _execute(client, todo, out, perform)
+        finally:                             # Ctrl-C too: every run over is in the table
+            if client is not None:
+                _close(client, scheduler)
+            records = _write_results(spec, out)
     if stopped:
-        sys.stderr.write(f"heliquad study: {stopped}; the {len(records)} runs over are kept: "
-                         "run the same command again to make the rest\n")
+        kept = (f"; the {len(records)} runs over are kept: run the same command again to "
+                "make the rest") if records else ""
+        sys.stderr.write(f"heliquad study: {stopped}{kept}\n")
         return EXIT_FAILED
     failed = sum(r.get("status") == FAILED for r in records)
     if failed:
@@ -81,6 +85,22 @@ def run_study(spec, out: str, perform, workers=None, scheduler=None, retry_faile
                          f"errors are in the table's error column)\n")
         return EXIT_FAILED
     return 0
+
+
+@contextlib.contextmanager
+def _dask_quiet():
+    """Dask's own log lines kept off stderr while the study runs (a lost scheduler's
+    reconnection attempts, with their tracebacks): the study says in one line what
+    happened. Its handlers' levels are put back at the end."""
+    handlers = logging.getLogger("distributed").handlers
+    before = [h.level for h in handlers]
+    for h in handlers:
+        h.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for h, level in zip(handlers, before):
+            h.setLevel(level)
 
 
 def _write_results(spec, out: str) -> list:
@@ -107,8 +127,10 @@ def _client(workers, scheduler):
 
     if scheduler is not None:
         try:
-            return distributed.Client(scheduler, timeout=CONNECT_TIMEOUT_S,
-                                      set_as_default=False)
+            with warnings.catch_warnings():     # Dask's table of versions: ours is checked
+                warnings.simplefilter("ignore", distributed.versions.VersionMismatchWarning)
+                return distributed.Client(scheduler, timeout=CONNECT_TIMEOUT_S,
+                                          set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"--scheduler {scheduler}: no answer in {CONNECT_TIMEOUT_S} s "
                              f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
@@ -163,6 +185,8 @@ def _gather(client, futures, done) -> str | None:
                 progress.record(future.result())
             except Exception as exc:    # noqa: BLE001: not the run's failure: the cluster's
                 progress.close()
+                if client.status != "running" or "connection-lost" in str(exc):
+                    return "the connection to the scheduler was lost"
                 for f in futures:
                     f.cancel()
                 return f"run {_run_of(future)} could not be made: {type(exc).__name__}: " \
