@@ -8,6 +8,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -226,3 +227,45 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     assert {p: p.read_bytes() for p in records} == records
     assert pq.read_table(tmp_path / "out" / "study.parquet").num_rows == 2
     assert (tmp_path / "out" / "index.html").read_text().count("<tr>") == 3
+
+
+# --- vehicle parameters perturbed per run ---------------------------------------------------
+
+PERTURB = """
+[factors]
+axis = "roll"
+seed = [1, 2, 3, 4]
+[perturb]
+"body.mass_kg" = {normal = 0.1}
+"rig.hinge_damping_n_m_s_rad" = {uniform = 0.5}
+"""
+
+
+def test_perturbed_vehicle_numbers_are_drawn_per_run_and_written_as_a_vehicle_file(tmp_path):
+    from heliquad.host.study.perturb import base_text, perturbed_text
+    from heliquad.sim.plant.vehicle_params import load_params
+
+    s = spec(PERTURB)
+    assert s.columns == ("axis", "seed", "body.mass_kg", "rig.hinge_damping_n_m_s_rad")
+    masses = [r.perturb["body.mass_kg"] for r in s.runs]
+    assert [r.perturb for r in s.runs] == [r.perturb for r in spec(PERTURB).runs]
+    assert len(set(masses)) == len(masses)                     # each run its own draw
+    nominal = load_params().body
+    for r in s.runs:                                           # uniform: within its width
+        assert abs(r.perturb["rig.hinge_damping_n_m_s_rad"] /
+                   load_params().rig.hinge_damping_n_m_s_rad - 1) <= 0.5
+    path = tmp_path / "vehicle.toml"
+    path.write_text(perturbed_text(base_text(None), s.runs[0].perturb))
+    got = load_params(str(path))                               # a vehicle file the sim reads
+    assert got.body.mass_kg == masses[0]
+    assert got.body.inertia_kg_m2 == nominal.inertia_kg_m2     # the rest as it was
+
+
+@pytest.mark.parametrize("table, says", [
+    ('"body.mass_g" = {normal = 0.1}', "not a number of a section"),
+    ('"body.mass_kg" = {lognormal = 0.1}', "give {normal = S} or {uniform = W}"),
+    ('"body.mass_kg" = {normal = 2}', "a relative width from 0 to below 1"),
+])
+def test_a_bad_perturbation_says_what_is_wrong(table, says):
+    with pytest.raises(InputError, match=re.escape(says)):
+        spec(f'[factors]\naxis = "roll"\n[perturb]\n{table}\n')

@@ -112,7 +112,7 @@ def _write_results(spec, out: str) -> list:
     records = [r for r in (read_record(run_folder(out, run.name)) for run in spec.runs)
                if r is not None]
     if records:
-        paths = write_table(records, spec.factor_names, out)
+        paths = write_table(records, spec.columns, out)
         figures = write_page(records, spec, out)
         print(f"wrote {', '.join(os.path.basename(p) for p in (*paths, *figures))} in {out}",
               flush=True)

@@ -130,7 +130,7 @@ def _rig_time(done, factor_names, out) -> str:
 
 def _html(records, spec, figures) -> str:
     """The page: what the study is, its counts, the figures, the table."""
-    table = rows(records, spec.factor_names)
+    table = rows(records, spec.columns)
     failed = sum(r["status"] != FINISHED for r in table)
     head = "".join(f"<th>{html.escape(c)}</th>" for c in (table[0] if table else {}))
     body = "".join("<tr>" + "".join(f"<td>{html.escape(_cell(v))}</td>" for v in r.values())

@@ -19,7 +19,8 @@ import time
 
 from ...sim.base.errors import InputError
 from .. import __version__
-from ..records.output import write_json
+from ..records.output import atomic_write, write_json
+from .perturb import VEHICLE_FILE, base_text, perturbed_text
 
 __all__ = ["perform_run", "worker_version", "read_record", "run_folder", "outcome", "RECORD", "STARTED",
            "SWEEP", "LOG", "RUNS", "FINISHED", "FAILED"]
@@ -65,7 +66,8 @@ def perform_run(run, study_dir: str, command, line) -> dict:
         return done
     attempt = _start(folder)
     sweep_dir = os.path.join(folder, SWEEP)
-    words = {step: line(step, options, sweep_dir) for step, options in run.options.items()}
+    words = {step: line(step, options, sweep_dir)
+             for step, options in _vehicle(run, folder).items()}
     timing, started = {}, time.time()
     try:
         with open(os.path.join(folder, LOG), "w", encoding="utf-8") as log:
@@ -85,11 +87,23 @@ def perform_run(run, study_dir: str, command, line) -> dict:
               "seed": run.seed, "attempt": attempt, "worker": f"{socket.gethostname()}:"
                                                                f"{os.getpid()}",
               "started_at": started, "run_s": time.time() - started, **timing,
+              "perturbed": run.perturb,
               "commands": [" ".join(["heliquad", *w]).replace(sweep_dir, SWEEP)
-                           for w in words.values()],
+                           .replace(folder + os.sep, "") for w in words.values()],
               **result}
     write_json(os.path.join(folder, RECORD), record)
     return record
+
+
+def _vehicle(run, folder: str) -> dict:
+    """The run's options; with perturbed vehicle numbers, its own vehicle file written into
+    its folder and given to its sweep as --params."""
+    if not run.perturb:
+        return run.options
+    path = os.path.join(folder, VEHICLE_FILE)
+    with atomic_write(path) as fh:
+        fh.write(perturbed_text(base_text(run.options["sweep"].get("params")), run.perturb))
+    return {**run.options, "sweep": {**run.options["sweep"], "params": path}}
 
 
 def _start(folder: str) -> int:

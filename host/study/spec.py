@@ -25,6 +25,7 @@ so a factor means what the option means on the command line.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -33,6 +34,7 @@ import tomllib
 from dataclasses import dataclass, field
 
 from ...sim.base.errors import InputError
+from .perturb import base_text, check_perturb, draw, nominal
 
 __all__ = ["Run", "Spec", "load_spec", "parse_spec", "STEPS", "LEFT_OUT", "MAX_SEED"]
 
@@ -45,7 +47,7 @@ MAX_SEED = 2**31 - 1
 #: Options the study gives each run itself: never a factor or a shared option.
 OWN_OPTIONS = frozenset({"sil", "port", "baud", "out", "dir", "mat", "help"})
 #: The spec's top-level tables.
-TABLES = frozenset({"study", "factors", "grid", *STEPS})
+TABLES = frozenset({"study", "factors", "grid", "perturb", *STEPS})
 #: Characters kept in a run's name (the rest become "_").
 NAME_UNSAFE = re.compile(r"[^A-Za-z0-9.+]+")
 
@@ -57,6 +59,8 @@ class Run:
     name: str
     factors: dict
     options: dict = field(default_factory=dict)
+    #: The vehicle's numbers drawn for this run ({section.name: value}; [perturb]).
+    perturb: dict = field(default_factory=dict)
 
     @property
     def seed(self) -> int:
@@ -70,6 +74,13 @@ class Spec:
     description: str
     factor_names: tuple
     runs: list
+    #: The perturbed vehicle numbers ([perturb]'s keys), each a column of the table too.
+    perturbed: tuple = ()
+
+    @property
+    def columns(self) -> tuple:
+        """What varies between runs: the factors, then the perturbed numbers."""
+        return self.factor_names + self.perturbed
 
 
 def load_spec(path: str, commands: dict) -> Spec:
@@ -103,6 +114,7 @@ def parse_spec(doc: dict, commands: dict, path: str = "spec") -> Spec:
         for name in options:
             _check_option(name, commands, path, f"[{step}]", step)
     names = _factor_names(factors, grids, commands, path)
+    perturb = check_perturb(_table(doc, "perturb", path), path)
     runs, seen = [], set()
     for i, grid in enumerate(grids):
         levels = {**{_key(k): v for k, v in factors.items()},
@@ -110,14 +122,29 @@ def parse_spec(doc: dict, commands: dict, path: str = "spec") -> Spec:
         where = f"grid {i + 1}" if "grid" in doc else "[factors]"
         values = [_levels(levels.get(n, LEFT_OUT), n, path, where) for n in names]
         for combo in itertools.product(*values):
-            run = _run(dict(zip(names, combo)), shared, commands)
+            run = _run(dict(zip(names, combo)), shared, commands, perturb)
             if run.name not in seen:
                 seen.add(run.name)
                 runs.append(run)
     if not runs:
         raise InputError(f"{path}: the grid is empty: no run to make (a factor with no "
                          "values?)")
-    return Spec(path, str(study.get("description", "")), tuple(names), runs)
+    if perturb:
+        runs = _drawn(runs, perturb, path)
+    return Spec(path, str(study.get("description", "")), tuple(names), runs, tuple(perturb))
+
+
+def _drawn(runs: list, perturb: dict, path: str) -> list:
+    """The runs with their vehicle numbers drawn ([perturb]), around each run's vehicle
+    file (its sweep's ``params``, else the shipped one)."""
+    nominals = {}
+    out = []
+    for run in runs:
+        base = run.options["sweep"].get("params")
+        if base not in nominals:
+            nominals[base] = nominal(base_text(base), perturb, path)
+        out.append(dataclasses.replace(run, perturb=draw(run.name, perturb, nominals[base])))
+    return out
 
 
 def _table(doc: dict, name: str, path: str) -> dict:
@@ -176,7 +203,7 @@ def _levels(value, name: str, path: str, where: str) -> list:
     return values
 
 
-def _run(factors: dict, shared: dict, commands: dict) -> Run:
+def _run(factors: dict, shared: dict, commands: dict, perturb: dict) -> Run:
     """The run of one combination of the factors' values: each factor under its command,
     the shared options under theirs; the seed the factor's, else derived from the name."""
     options = {step: dict(shared[step]) for step in STEPS}
@@ -184,7 +211,8 @@ def _run(factors: dict, shared: dict, commands: dict) -> Run:
         options[_check_option(name, commands, "spec", "[factors]")][name] = value
     options = {step: {k: v for k, v in opts.items() if v != LEFT_OUT}
                for step, opts in options.items()}
-    digest = hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()
+    digest = hashlib.sha256(json.dumps({"options": options, "perturb": perturb} if perturb
+                                       else options, sort_keys=True).encode()).hexdigest()
     label = "-".join(NAME_UNSAFE.sub("_", _text(v)).strip("_") or "_" for v in factors.values())
     if "seed" not in options["sweep"]:
         options["sweep"]["seed"] = int(digest[:8], 16) % MAX_SEED

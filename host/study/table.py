@@ -40,8 +40,9 @@ def rows(records: list, factor_names) -> list:
     out = []
     for rec in records:
         row = {"run": rec["run"], "status": rec.get("status"), "error": rec.get("error")}
-        for name in factor_names:
-            row[name] = _factor(rec.get("factors", {}).get(name))
+        for name in factor_names:        # the factors, then the perturbed vehicle numbers
+            row[name] = _factor(rec.get("factors", {}).get(name,
+                                                          rec.get("perturbed", {}).get(name)))
         for name in COLUMNS:
             value = rec.get(name)
             if name in AS_JSON and value is not None:
