@@ -84,6 +84,7 @@ def main(argv=None) -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--runs", type=int, default=8, help="runs in the study (even)")
     args = parser.parse_args(argv)
+    print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     with tempfile.TemporaryDirectory(prefix="study_speed-") as tmp:
         spec_path = os.path.join(tmp, "spec.toml")
         with open(spec_path, "w") as f:
@@ -103,6 +104,7 @@ def main(argv=None) -> None:
         two, _ = study(spec_path, os.path.join(tmp, "w2"), 2)
         print(f"heliquad study --workers 2: {two:.1f} s ({two / base:.2f}x the one-by-one "
               f"time); speed-up over one worker {one / two:.2f}x", flush=True)
+    print(f"load average after: {os.getloadavg()[0]:.2f} (this benchmark's own included)")
 
 
 if __name__ == "__main__":
