@@ -19,7 +19,7 @@ import pytest
 
 from heliquad.host.commands.study import command_line, option_names, run_command
 from heliquad.host.study import runs
-from heliquad.host.study.execute import plan
+from heliquad.host.study.execute import forget, plan
 from heliquad.host.study.spec import parse_spec
 from heliquad.sim.base.errors import InputError
 
@@ -160,9 +160,13 @@ def test_an_unfinished_run_is_made_again_and_a_finished_one_never(tmp_path):
     again = runs.perform_run(finished, out, command, fake_line)
     assert again == runs.read_record(runs.run_folder(out, finished.name))
     assert calls == [["sweep", os.path.join(left, runs.SWEEP)]]
-    # --retry-failed: the failed runs are to make again
+    # --retry-failed: the failed runs are to make again (their records removed only when
+    # they are handed out: a dry run changes nothing)
     _, todo = plan(s, out, retry_failed=True)
     assert todo == s.runs
+    assert runs.read_record(runs.run_folder(out, finished.name))["status"] == runs.FAILED
+    forget(out, todo)
+    assert runs.read_record(runs.run_folder(out, finished.name)) is None
 
 
 def _raise():

@@ -36,19 +36,27 @@ TICK_S = 0.5
 
 def plan(spec, out: str, retry_failed: bool = False) -> tuple:
     """``(records of the runs already over, runs to make)``: a run whose folder holds its
-    record is over (a failed one is made again with ``retry_failed``: its record removed);
-    any other run is to make."""
+    record is over (a failed one is to make again with ``retry_failed``: :func:`forget`
+    removes its record before it is handed out); any other run is to make."""
     kept, todo = {}, []
     for run in spec.runs:
         record = read_record(run_folder(out, run.name))
         if record is not None and retry_failed and record.get("status") == FAILED:
-            os.unlink(os.path.join(run_folder(out, run.name), RECORD))
             record = None
         if record is None:
             todo.append(run)
         else:
             kept[run.name] = record
     return kept, todo
+
+
+def forget(out: str, runs) -> None:
+    """Remove the records of ``runs`` (failed runs to make again), so that their workers do
+    not take them for over."""
+    for run in runs:
+        path = os.path.join(run_folder(out, run.name), RECORD)
+        if os.path.exists(path):
+            os.unlink(path)
 
 
 def run_study(spec, out: str, perform, workers=None, scheduler=None, retry_failed=False,
@@ -64,6 +72,7 @@ def run_study(spec, out: str, perform, workers=None, scheduler=None, retry_faile
             print(f"{'over' if run.name in kept else 'to make':>8}  {run.name}")
         return 0
     client = _client(workers, scheduler) if todo else None   # before anything is written
+    forget(out, todo)
     stopped = None
     with _dask_quiet():
         try:
