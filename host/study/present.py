@@ -139,7 +139,7 @@ def _html(records, spec, figures) -> str:
                        for p in figures)
     return (f"<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>heliquad study: "
             f"{html.escape(os.path.basename(spec.path))}</title>\n<style>body{{font-family:"
-            "sans-serif}} table{border-collapse:collapse;font-size:12px} td,th{border:1px "
+            "sans-serif} table{border-collapse:collapse;font-size:12px} td,th{border:1px "
             "solid #ccc;padding:2px 4px}</style></head><body>\n"
             f"<h1>Study {html.escape(os.path.basename(spec.path))}</h1>\n"
             f"<p>{html.escape(spec.description)}</p>\n"
