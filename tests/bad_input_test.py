@@ -561,6 +561,15 @@ FILES = {
     "beyond.hex": hex_image(beyond=True),
     "checksum.hex": hex_image().replace(":00000001FF", ":00000001FE"),
     "text.hex": "hello, board\n",
+    # study specs: a good one (refused only for its options), and bad ones
+    "study.toml": '[factors]\naxis = ["roll"]\nseed = [1, 2]\n',
+    "study_unknown.toml": '[factors]\naxis = ["roll"]\nwind = [1, 2]\n',
+    "study_empty.toml": '[factors]\naxis = ["roll"]\nseed = []\n',
+    "study_lines.toml": '[factors]\naxis = ["roll"]\nlines = [1]\n[sweep]\nsignal = "multisine"\n',
+    "study_out.toml": '[factors]\naxis = ["roll"]\nout = ["elsewhere"]\n',
+    "study_table.toml": '[factors]\naxis = ["roll"]\n[wind]\nspeed = 3\n',
+    "study_plan.toml": '[factors]\naxis = ["yaw"]\n[sweep]\nsignal = "multisine"\nrig-time = 12\n',
+    "study_seed.toml": '[factors]\naxis = ["roll"]\nseed = {first = 1}\n',
 }
 
 
@@ -1294,6 +1303,21 @@ CASES = [
     case("sd-image nofolder/card.img", "nofolder"),
     case("sd-image", "required"),
     case("sd-image card.img --frobnicate", "unrecognized"),
+    # study: bad specs, a scheduler that does not answer (refused before any folder is made)
+    case("study missing.toml --out s", "no such file"),
+    case("study binary.dat --out s", "not utf-8"),
+    case("study points.csv --out s", "not valid toml"),
+    case("study study_unknown.toml --out s", "unknown factor 'wind'"),
+    case("study study_empty.toml --out s", "the grid is empty"),
+    case("study study_lines.toml --out s", "--lines: 1 is outside 2..16"),
+    case("study study_out.toml --out s", "out is set by the study itself"),
+    case("study study_table.toml --out s", "unknown table 'wind'"),
+    case("study study_plan.toml --out s", "a multisine over 0.15-1.6 hz needs more than 12 s"),
+    case("study study_seed.toml --out s", "{first = n, count = m}"),
+    case("study study.toml --out s --workers 0", "--workers"),
+    case("study study.toml --out s --workers 2 --scheduler tcp://127.0.0.1:1", "not allowed"),
+    case("study study.toml --out s --scheduler tcp://127.0.0.1:1", "no answer"),
+    case("study study.toml", "required"),
     # every subcommand: an unknown option, no subcommand
     case("fsf run.csv --out p.csv --frobnicate", "unrecognized"),
     case("fit points.csv --json m.json --frobnicate", "unrecognized"),

@@ -3,7 +3,7 @@ holds), and imports go down the floors only. Bottom up, the rooms are
 
     sim.base < sim.plant < sim.sensor < sim.rig < sim.chip        (heliquad.sim)
     < host.records < host.process < host.estimate < host.acquire
-    < host.validate < host.present < host.campaign < host.commands < host.cli   (heliquad.host)
+    < host.validate < host.present < host.campaign < host.study < host.commands < host.cli   (heliquad.host)
 
 A module may import modules of its own room and of the rooms below it, never above: so the
 simulator never imports the host tool, the shared base (sim.base) imports nothing else of
@@ -22,7 +22,7 @@ PACKAGES = {"host": "heliquad.host", "sim": "heliquad.sim"}
 #: The rooms, bottom up.
 ROOMS = ("sim.base", "sim.plant", "sim.sensor", "sim.rig", "sim.chip",
          "host.records", "host.process", "host.estimate", "host.acquire", "host.validate",
-         "host.present", "host.campaign", "host.commands", "host.cli")
+         "host.present", "host.campaign", "host.study", "host.commands", "host.cli")
 #: The two packages' own ``__init__`` (the version, a docstring): below every room of theirs.
 FLOORS = {"heliquad.sim": -2, "heliquad.host": -1}
 

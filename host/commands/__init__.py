@@ -16,7 +16,7 @@ __all__ = ["COMMANDS", "add_parsers", "module_of"]
 
 #: The subcommands, in the order ``heliquad --help`` lists them.
 COMMANDS = ("fsf", "fit", "sil", "board", "validate", "tune", "verify", "log", "tlog", "sweep", "identify",
-            "effectiveness", "report", "params", "logs", "program", "demo", "dmp-image", "flash",
+            "study", "effectiveness", "report", "params", "logs", "program", "demo", "dmp-image", "flash",
             "usb-descriptors", "mavlink-dialect", "sd-image")
 
 

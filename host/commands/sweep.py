@@ -24,7 +24,7 @@ from .shared_options import (add_baud_argument, add_fault_argument, add_firmware
                              finite, int_in, number_in, sd_card, vehicle_config)
 from .sweep_options import add_design_arguments, apply_tuning_band, check_excitation, sweep_plan
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "checked_plan"]
 
 HELP = f"""\
 Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
@@ -118,21 +118,7 @@ def run(args) -> int:
     # while the sweep runs: a Ctrl-C that lands inside an import leaves Python to end by
     # SIGINT after the tool has stopped in order.
     importlib.import_module("heliquad.host.estimate.fsf")
-    plan = rotor_plan(args) if args.inject in ROTOR_INPUT_OUTPUT else sweep_plan(args)
-    if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
-        # the command's work, imported when it runs: --help imports every command module
-        from ...sim.rig.setup import SilConfig
-
-        if plan.chirp is not None:           # checked by its design (acquire/chirp.py)
-            pass
-        elif plan.multisine is not None:     # its lines in the band, its peak in bounds
-            check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
-                             plan.multisine.peak, args.inject)
-        else:
-            for f, a in zip(plan.freqs_hz, plan.amplitudes):
-                check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz,
-                                 a, args.inject)
-    _check_rig_options(args)
+    plan = checked_plan(args)
     created = new_output_folder(args.out, "a sweep")
     try:
         session, source, found = _sweep_session(args, os.path.join(args.out, SWEEP_TLOG))
@@ -161,6 +147,28 @@ def run(args) -> int:
                      f"in {args.out})\n")
     # Stopped by a signal: its code (130, 143, 129), after the same orderly stop; else 1.
     return next((EXIT_CODES[s] for s, how in ABORTED_BY.items() if manifest["aborted"] == how), 1)
+
+
+def checked_plan(args):
+    """The sweep's plan from its options, refused (InputError) as the firmware would refuse
+    it, and the simulated rig's options checked: all before anything is made or flies (also
+    what ``heliquad study`` checks of every run before any starts)."""
+    plan = rotor_plan(args) if args.inject in ROTOR_INPUT_OUTPUT else sweep_plan(args)
+    if args.sil:       # a board applies the limits it was flashed with (and says why it refuses)
+        # the command's work, imported when it runs: --help imports every command module
+        from ...sim.rig.setup import SilConfig
+
+        if plan.chirp is not None:           # checked by its design (acquire/chirp.py)
+            pass
+        elif plan.multisine is not None:     # its lines in the band, its peak in bounds
+            check_excitation(plan.multisine.freqs_hz[[0, -1]], 1, 1, SilConfig.loop_hz,
+                             plan.multisine.peak, args.inject)
+        else:
+            for f, a in zip(plan.freqs_hz, plan.amplitudes):
+                check_excitation([f], plan.cycles_for(f), plan.fade_cycles, SilConfig.loop_hz,
+                                 a, args.inject)
+    _check_rig_options(args)
+    return plan
 
 
 def rotor_plan(args):

@@ -15,12 +15,13 @@
 Deliberately small (os and signal only): the program imports it before anything else.
 """
 
+import contextlib
 import os
 import signal
 import sys
 
 __all__ = ["EXIT_CODES", "ABORTED_BY", "Terminated", "HungUp", "take_at_start",
-           "take_while_running", "settle", "stopped_by"]
+           "take_while_running", "settle", "stopped_by", "ignoring", "TERMINAL_SIGNALS"]
 
 
 class Terminated(KeyboardInterrupt):
@@ -42,6 +43,11 @@ ABORTED_BY = {signal.SIGINT: "interrupted (Ctrl-C)", signal.SIGTERM: "terminated
               signal.SIGHUP: "hung up (SIGHUP)"}
 #: The signals a started-with-ignored disposition is kept for (POSIX background jobs, nohup).
 KEEP_IGNORED = (signal.SIGINT, signal.SIGHUP)
+#: What a terminal sends its foreground process group: Ctrl-C, and the hang-up when it
+#: closes. A child started while they are ignored keeps ignoring them (a Python one too: it
+#: takes SIGINT only when it starts with it at its default), so the terminal's signal
+#: reaches this process, which stops the child in order.
+TERMINAL_SIGNALS = (signal.SIGINT, signal.SIGHUP)
 
 _ignored_at_start: set = set()
 
@@ -104,3 +110,16 @@ def stopped_by(exc: BaseException) -> int:
     if isinstance(exc, HungUp):
         return signal.SIGHUP
     return signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+
+
+@contextlib.contextmanager
+def ignoring(signums=tuple(EXIT_CODES)):
+    """``signums`` (default SIGINT, SIGTERM and SIGHUP) ignored inside, their handlers put
+    back at the end: while children stop in order, or while children are started that must
+    not take them (:data:`TERMINAL_SIGNALS`). Main thread only."""
+    before = {s: signal.signal(s, signal.SIG_IGN) for s in signums}
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)

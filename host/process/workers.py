@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 
-from .signals import EXIT_CODES, stopped_by
+from .signals import ignoring, stopped_by
 
 __all__ = ["Child", "start_child", "run_children", "send_result", "RESULT_FD_VARIABLE"]
 
@@ -145,7 +145,7 @@ def run_children(commands, out=None, err=None) -> list:
         pump = _Pump(children, out or sys.stdout, err or sys.stderr)
         pump.run()
     except KeyboardInterrupt as exc:
-        with _ignoring_signals():
+        with ignoring():
             _signal_all(children, stopped_by(exc))
             pump = pump or _Pump(children, out or sys.stdout, err or sys.stderr)
             if not pump.run(time.monotonic() + STOP_GRACE_S):
@@ -171,14 +171,3 @@ def _wait_all(children) -> None:
         child.returncode = child.proc.wait()
         for stream in (child.proc.stdout, child.proc.stderr):
             stream.close()
-
-
-@contextlib.contextmanager
-def _ignoring_signals():
-    """SIGINT, SIGTERM and SIGHUP ignored inside (the children are stopping in order)."""
-    before = {s: signal.signal(s, signal.SIG_IGN) for s in EXIT_CODES}
-    try:
-        yield
-    finally:
-        for s, handler in before.items():
-            signal.signal(s, handler)

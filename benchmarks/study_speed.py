@@ -1,0 +1,111 @@
+"""Benchmark: a small study's wall time on one local Dask worker and on two, and what Dask's
+scheduler costs per run, against the same runs made one by one in this process.
+
+One spec of --runs short runs (a multisine of 5 lines, 10 s of rig time, on roll and pitch,
+light turbulence, seeds from 1); three measurements in one benchmark run:
+
+1. **one by one**: each run made in this process, no Dask (host/study/runs.py's
+   perform_run, as a worker makes it): the baseline, the sum of the runs' times;
+2. ``heliquad study SPEC --workers 1``: the command's wall time; the time between runs
+   (the first run's start to the last one's end, less the runs' own times, over the runs:
+   the scheduler's cost per run), and its start and finish (cluster, table, figures);
+3. ``heliquad study SPEC --workers 2``: its wall time; the speed-up over (2).
+
+Each figure is printed with its ratio to the baseline measured in the same benchmark run. On
+a machine whose two cores something else also uses, the speed-up is that machine's.
+
+    python benchmarks/study_speed.py [--runs 8]
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from heliquad.host.commands.study import command_line, option_names, run_command
+from heliquad.host.study.runs import RECORD, RUNS, perform_run
+from heliquad.host.study.spec import load_spec
+
+SPEC = """
+[study]
+description = "study_speed: short multisine runs"
+[factors]
+axis = ["roll", "pitch"]
+turbulence = "light"
+seed = {{first = 1, count = {seeds}}}
+[sweep]
+signal = "multisine"
+lines = 5
+rig-time = 10
+"""
+
+
+def one_by_one(spec_path: str, out: str) -> tuple:
+    """Every run made in this process, in order: (wall seconds, the runs' records)."""
+    spec = load_spec(spec_path, option_names())
+    perform = functools.partial(perform_run, command=run_command, line=command_line)
+    t0 = time.perf_counter()
+    records = [perform(run, out) for run in spec.runs]
+    return time.perf_counter() - t0, records
+
+
+def study(spec_path: str, out: str, workers: int) -> tuple:
+    """``heliquad study`` with ``workers`` local workers: (wall seconds, the records)."""
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", "study", spec_path,
+                          "--out", out, "--workers", str(workers)], capture_output=True,
+                         text=True)
+    wall = time.perf_counter() - t0
+    if res.returncode:
+        raise SystemExit(f"heliquad study --workers {workers}: {res.stderr.strip()}")
+    records = []
+    for name in sorted(os.listdir(os.path.join(out, RUNS))):
+        with open(os.path.join(out, RUNS, name, RECORD)) as f:
+            records.append(json.load(f))
+    return wall, records
+
+
+def between_runs(records: list) -> float:
+    """On one worker: the first run's start to the last one's end, less the runs' own
+    times, per run (what the scheduler adds to each)."""
+    span = max(r["started_at"] + r["run_s"] for r in records) - min(r["started_at"]
+                                                                   for r in records)
+    return (span - sum(r["run_s"] for r in records)) / len(records)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--runs", type=int, default=8, help="runs in the study (even)")
+    args = parser.parse_args(argv)
+    print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+    with tempfile.TemporaryDirectory(prefix="study_speed-") as tmp:
+        spec_path = os.path.join(tmp, "spec.toml")
+        with open(spec_path, "w") as f:
+            f.write(SPEC.format(seeds=max(1, args.runs // 2)))
+        base, base_records = one_by_one(spec_path, os.path.join(tmp, "seq"))
+        n = len(base_records)
+        mean_run = sum(r["run_s"] for r in base_records) / n
+        print(f"{n} runs one by one in this process: {base:.1f} s ({mean_run:.2f} s a run)",
+              flush=True)
+        one, one_records = study(spec_path, os.path.join(tmp, "w1"), 1)
+        gap = between_runs(one_records)
+        fixed = one - (max(r["started_at"] + r["run_s"] for r in one_records) -
+                       min(r["started_at"] for r in one_records))
+        print(f"heliquad study --workers 1: {one:.1f} s ({one / base:.2f}x the one-by-one "
+              f"time); between runs {gap * 1e3:.0f} ms a run ({gap / mean_run:.1%} of a run's "
+              f"time); start and finish (cluster, table, figures) {fixed:.1f} s", flush=True)
+        two, _ = study(spec_path, os.path.join(tmp, "w2"), 2)
+        print(f"heliquad study --workers 2: {two:.1f} s ({two / base:.2f}x the one-by-one "
+              f"time); speed-up over one worker {one / two:.2f}x", flush=True)
+    print(f"load average after: {os.getloadavg()[0]:.2f} (this benchmark's own included)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,175 @@
+"""One run of a study, as a worker makes it: the commands a user would type (``heliquad sweep
+--sil ... --out F`` then ``heliquad identify F``), in this process, into the run's folder;
+then the run's record, one flat set of figures read back from the files they wrote.
+
+A run's folder (``DIR/runs/NAME``, docs/studies.md): ``started.json`` (written when an
+attempt starts, counting the attempts), ``sweep/`` (the sweep folder, identify's files in
+it), ``run.log`` (what the commands printed) and ``record.json``, written last and
+atomically: the mark that the run is over (finished or failed), never made again.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import socket
+import time
+
+from ...sim.base.errors import InputError
+from .. import __version__
+from ..records.output import atomic_write, write_json
+from .perturb import VEHICLE_FILE, base_text, perturbed_text
+
+__all__ = ["perform_run", "worker_version", "read_record", "run_folder", "outcome", "RECORD", "STARTED",
+           "SWEEP", "LOG", "RUNS", "FINISHED", "FAILED"]
+
+#: The run folders' folder, in the study's.
+RUNS = "runs"
+#: A run folder's files.
+RECORD, STARTED, SWEEP, LOG = "record.json", "started.json", "sweep", "run.log"
+#: A record's status.
+FINISHED, FAILED = "finished", "failed"
+
+
+def worker_version() -> str:
+    """The heliquad a worker runs (the client checks every worker has its own)."""
+    return __version__
+
+
+def run_folder(study_dir: str, name: str) -> str:
+    return os.path.join(study_dir, RUNS, name)
+
+
+def read_record(folder: str) -> dict | None:
+    """The run's record, or None when it has none (never run, or stopped mid-run)."""
+    try:
+        with open(os.path.join(folder, RECORD), encoding="utf-8") as f:
+            return json.load(f)
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{folder}/{RECORD}: unreadable ({exc}); remove the run's folder "
+                         "to make it again") from None
+
+
+def perform_run(run, study_dir: str, command, line) -> dict:
+    """Make ``run`` (a :class:`~heliquad.host.study.spec.Run`) in its folder under
+    ``study_dir`` and return its record. ``line(step, options, folder)`` is a command's
+    words, ``command(words, log)`` runs them (host/commands/study.py). A run already over
+    (a retry of a task whose first attempt finished) is not made again: its record returns.
+    A run that raises is a failed record with the error, not an exception."""
+    folder = run_folder(study_dir, run.name)
+    done = read_record(folder)
+    if done is not None:
+        return done
+    attempt = _start(folder)
+    sweep_dir = os.path.join(folder, SWEEP)
+    words = {step: line(step, options, sweep_dir)
+             for step, options in _vehicle(run, folder).items()}
+    timing, started = {}, time.time()
+    try:
+        with open(os.path.join(folder, LOG), "w", encoding="utf-8") as log:
+            for step, argv in words.items():
+                t0 = time.perf_counter()
+                log.write(f"$ heliquad {' '.join(argv)}\n")
+                log.flush()
+                code = command(argv, log)
+                timing[f"{step}_s"] = time.perf_counter() - t0
+                if code:
+                    raise RuntimeError(f"heliquad {step} ended with exit code {code} "
+                                       f"(see {LOG})")
+        status, error, result = FINISHED, None, outcome(sweep_dir)
+    except Exception as exc:            # noqa: BLE001: a failed run is a row with its error
+        status, error, result = FAILED, _one_line(exc), {}
+    record = {"run": run.name, "status": status, "error": error, "factors": run.factors,
+              "seed": run.seed, "attempt": attempt, "worker": f"{socket.gethostname()}:"
+                                                               f"{os.getpid()}",
+              "started_at": started, "run_s": time.time() - started, **timing,
+              "perturbed": run.perturb,
+              "commands": [" ".join(["heliquad", *w]).replace(sweep_dir, SWEEP)
+                           .replace(folder + os.sep, "") for w in words.values()],
+              **result}
+    write_json(os.path.join(folder, RECORD), record)
+    return record
+
+
+def _vehicle(run, folder: str) -> dict:
+    """The run's options; with perturbed vehicle numbers, its own vehicle file written into
+    its folder and given to its sweep as --params."""
+    if not run.perturb:
+        return run.options
+    path = os.path.join(folder, VEHICLE_FILE)
+    with atomic_write(path) as fh:
+        fh.write(perturbed_text(base_text(run.options["sweep"].get("params")), run.perturb))
+    return {**run.options, "sweep": {**run.options["sweep"], "params": path}}
+
+
+def _start(folder: str) -> int:
+    """Mark an attempt's start (its number, from the earlier ones' mark) and clear what an
+    unfinished earlier attempt left; the attempt's number."""
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, STARTED)
+    try:
+        with open(path, encoding="utf-8") as f:
+            attempt = int(json.load(f).get("attempt", 0)) + 1
+    except (OSError, ValueError):
+        attempt = 1
+    shutil.rmtree(os.path.join(folder, SWEEP), ignore_errors=True)
+    write_json(path, {"attempt": attempt, "at": time.time(), "worker": socket.gethostname(),
+                      "pid": os.getpid()})
+    return attempt
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
+
+
+def outcome(sweep_dir: str) -> dict:
+    """The figures of a swept and identified folder: errors against the simulator's truth
+    (models.json's ``sil_truth``), the sigma's calibration, the recommended model, the
+    broken loop's margins, and the rig time (the log's span)."""
+    # the log's reader, imported when a run reads it: the client plans runs without it
+    from ..acquire.log_session import summarise_tlog
+    from ..estimate.fit import order_name
+
+    with open(os.path.join(sweep_dir, "models.json"), encoding="utf-8") as f:
+        doc = json.load(f)
+    with open(os.path.join(sweep_dir, "manifest.json"), encoding="utf-8") as f:
+        manifest = json.load(f)
+    truth = doc.get("sil_truth") or {}
+    points = truth.get("points", [])
+    out = {"complete": bool(manifest.get("complete")), "points": len(points),
+           "rig_s": summarise_tlog(os.path.join(sweep_dir, manifest.get("tlog", "sweep.tlog")))
+           ["span_s"], **_point_errors(truth, points)}
+    rec = doc.get("recommended")
+    model = doc["models"][rec] if rec is not None else None
+    out["recommended"] = None if model is None else order_name(
+        (*model["order"], int(bool(model.get("integrator")))), bool(model.get("delay_s")))
+    out["quality"] = (doc.get("quality") or {}).get("level")
+    out["model_num"] = None if model is None else model["num"]
+    out["model_den"] = None if model is None else model["den"]
+    out["model_delay_s"] = None if model is None else model.get("delay_s", 0.0)
+    loop = doc.get("broken_loop") or {}
+    out["gain_margin_db"] = loop.get("gain_margin_db")
+    out["phase_margin_deg"] = loop.get("phase_margin_deg")
+    return out
+
+
+def _point_errors(truth: dict, points: list) -> dict:
+    """The points' errors against the truth: worst and RMS (dB, deg), RMS of error/sigma,
+    and the share of points within one and two sigmas; the model's worst."""
+    z = [p["error_over_sigma"] for p in points if p.get("error_over_sigma") is not None]
+    rms = (lambda xs: math.sqrt(sum(x * x for x in xs) / len(xs)) if xs else None)
+    return {"points_worst_db": truth.get("points_worst_db"),
+            "points_worst_deg": truth.get("points_worst_deg"),
+            "points_rms_db": rms([p["error_db"] for p in points if p.get("error_db") is not None]),
+            "points_rms_deg": rms([p["error_deg"] for p in points
+                                   if p.get("error_deg") is not None]),
+            "points_rms_error_over_sigma": truth.get("points_rms_error_over_sigma"),
+            "within_1_sigma": sum(v <= 1 for v in z) / len(z) if z else None,
+            "within_2_sigma": sum(v <= 2 for v in z) / len(z) if z else None,
+            "model_worst_db": truth.get("model_worst_db"),
+            "model_worst_deg": truth.get("model_worst_deg")}

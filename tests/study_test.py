@@ -1,0 +1,275 @@
+"""heliquad study: a spec's runs are the combinations of its factors, each named and seeded
+from them; a run is what a user makes by hand with the same options (same numbers); a study
+resumes from its run folders' records (a finished run is never made again, an unfinished
+one is, a failed one is a row with its error); the table holds one row per run."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import subprocess
+import sys
+import threading
+import tomllib
+
+import pyarrow.parquet as pq
+import pytest
+
+from heliquad.host.commands.study import command_line, option_names, run_command
+from heliquad.host.study import runs
+from heliquad.host.study.execute import forget, plan
+from heliquad.host.study.spec import parse_spec
+from heliquad.sim.base.errors import InputError
+
+COMMANDS = option_names()
+
+
+def spec(text: str):
+    return parse_spec(tomllib.loads(text), COMMANDS, "s.toml")
+
+
+def heliquad(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "heliquad.host.cli.parser", *map(str, args)],
+                          capture_output=True, text=True, timeout=600, cwd=cwd)
+
+
+# --- the spec -------------------------------------------------------------------------------
+
+GRIDS = """
+[factors]
+axis = ["roll", "yaw"]
+[[grid]]
+turbulence = "none"
+seed = [1]
+[[grid]]
+turbulence = ["light", "severe"]
+seed = {first = 1, count = 2}
+[sweep]
+signal = "multisine"
+"""
+
+
+def test_the_runs_are_every_combination_of_each_grid():
+    s = spec(GRIDS)
+    got = [(r.factors["axis"], r.factors["turbulence"], r.seed) for r in s.runs]
+    assert got == [("roll", "none", 1), ("yaw", "none", 1)] + [
+        (a, t, n) for a in ("roll", "yaw") for t in ("light", "severe") for n in (1, 2)]
+    assert s.factor_names == ("axis", "turbulence", "seed")
+    still = s.runs[0]
+    assert "turbulence" not in still.options["sweep"]          # "none": the option left out
+    assert still.options["sweep"]["signal"] == "multisine"     # [sweep]: every run's
+    assert len({r.name for r in s.runs}) == len(s.runs)
+    assert [r.name for r in s.runs] == [r.name for r in spec(GRIDS).runs]   # deterministic
+
+
+def test_a_run_without_a_seed_has_one_derived_from_its_options():
+    a = spec('[factors]\naxis = ["roll", "pitch"]\n')
+    b = spec('[factors]\naxis = ["roll", "pitch"]\n')
+    assert [r.seed for r in a.runs] == [r.seed for r in b.runs]
+    assert a.runs[0].seed != a.runs[1].seed
+    # another shared option: other runs (other names and seeds), never the old records
+    c = spec('[factors]\naxis = ["roll", "pitch"]\n[sweep]\nlines = 6\nsignal = "multisine"\n')
+    assert not {r.name for r in a.runs} & {r.name for r in c.runs}
+
+
+@pytest.mark.parametrize("text, says", [
+    ('[factors]\naxis = ["roll"]\nwind = [1]\n', "unknown factor 'wind'"),
+    ('[factors]\naxis = []\n', "the grid is empty"),
+    ('[factors]\naxis = ["roll", "roll"]\n', "repeats a value"),
+    ('[factors]\naxis = ["roll"]\nlines = {count = 2}\n', "for seed only"),
+    ('[factors]\naxis = ["roll"]\nport = ["/dev/ttyACM0"]\n', "set by the study itself"),
+    ('[factors]\naxis = ["roll"]\n[identify]\nlines = 4\n', "unknown option of heliquad identify"),
+])
+def test_a_bad_spec_says_what_is_wrong(text, says):
+    with pytest.raises(InputError, match=says):
+        spec(text)
+
+
+def test_a_runs_command_lines_are_the_ones_a_user_types():
+    assert command_line("sweep", {"axis": "roll", "freqs-hz": [1, 2.5], "ideal-sensor": True,
+                                  "seed": 3}, "F") == \
+        ["sweep", "--axis", "roll", "--freqs-hz", "1", "2.5", "--ideal-sensor", "--seed", "3",
+         "--sil", "--out", "F"]
+    assert command_line("identify", {"delay": False, "order": ["0/2", "1/3"]}, "F") == \
+        ["identify", "--no-delay", "--order", "0/2", "--order", "1/3", "F"]
+
+
+def test_threads_running_commands_at_once_each_write_their_own_log(tmp_path):
+    # a Dask worker with several threads: each run's output in its own run.log, none lost
+    logs = {i: io.StringIO() for i in (1, 2)}
+    threads = [threading.Thread(target=run_command, args=(
+        ["sweep", "--sil", "--axis", "roll", "--seed", str(i), "--signal", "multisine",
+         "--lines", "4", "--rig-time", "10", "--out", str(tmp_path / f"s{i}")], logs[i]))
+        for i in logs]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for i, log in logs.items():
+        assert log.getvalue().count("next: heliquad identify") == 1
+        assert str(tmp_path / f"s{i}") in log.getvalue()
+        assert str(tmp_path / f"s{3 - i}") not in log.getvalue()
+
+
+# --- a run's folder, and resuming -----------------------------------------------------------
+
+ONE = '[factors]\naxis = ["roll"]\nseed = [1, 2, 3]\n'
+
+
+def fake_line(step, options, folder):
+    return [step, folder]
+
+
+def test_a_run_that_raises_is_a_failed_record_with_its_error(tmp_path):
+    def command(words, log):
+        raise InputError("the rig fell over")
+
+    run = spec(ONE).runs[0]
+    record = runs.perform_run(run, str(tmp_path), command, fake_line)
+    assert record["status"] == runs.FAILED and record["error"] == "the rig fell over"
+    assert runs.read_record(runs.run_folder(str(tmp_path), run.name)) == record
+
+
+def test_an_unfinished_run_is_made_again_and_a_finished_one_never(tmp_path):
+    s = spec(ONE)
+    finished, unfinished, never = s.runs
+    calls = []
+
+    def command(words, log):
+        calls.append(words[0])
+        raise RuntimeError("stop here")            # a failed record: the run is over
+
+    out = str(tmp_path)
+    runs.perform_run(finished, out, command, fake_line)
+    left = runs.run_folder(out, unfinished.name)        # started, stopped mid-sweep
+    os.makedirs(os.path.join(left, runs.SWEEP))
+    with open(os.path.join(left, runs.STARTED), "w") as f:
+        json.dump({"attempt": 1}, f)
+    with open(os.path.join(left, runs.SWEEP, "sweep.tlog"), "wb") as f:
+        f.write(b"half a log")
+    kept, todo = plan(s, out)
+    assert list(kept) == [finished.name] and todo == [unfinished, never]
+    calls.clear()
+    record = runs.perform_run(unfinished, out, lambda w, log: 0 if calls.append(w) else
+                              _raise(), fake_line)
+    assert record["attempt"] == 2
+    assert not os.path.exists(os.path.join(left, runs.SWEEP, "sweep.tlog"))   # cleared first
+    # a retried task whose run finished meanwhile returns its record, making nothing
+    again = runs.perform_run(finished, out, command, fake_line)
+    assert again == runs.read_record(runs.run_folder(out, finished.name))
+    assert calls == [["sweep", os.path.join(left, runs.SWEEP)]]
+    # --retry-failed: the failed runs are to make again (their records removed only when
+    # they are handed out: a dry run changes nothing)
+    _, todo = plan(s, out, retry_failed=True)
+    assert todo == s.runs
+    assert runs.read_record(runs.run_folder(out, finished.name))["status"] == runs.FAILED
+    forget(out, todo)
+    assert runs.read_record(runs.run_folder(out, finished.name)) is None
+
+
+def _raise():
+    raise RuntimeError("the sweep folder has no models.json here")
+
+
+# --- a study end to end, against the same run made by hand ----------------------------------
+
+STUDY = """
+[study]
+description = "one run that works, one that identify refuses"
+[factors]
+axis = "roll"
+turbulence = "light"
+seed = 3
+band = ["none", [0.5, 5]]
+[sweep]
+signal = "multisine"
+lines = 5
+rig-time = 10
+"""
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """A Dask scheduler with one worker thread in this process (the study's client is the
+    command, in its own)."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None, protocol="tcp://", host="127.0.0.1") as cluster:
+        yield cluster.scheduler_address
+
+
+def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path, scheduler):
+    (tmp_path / "s.toml").write_text(STUDY)
+    res = heliquad("study", "s.toml", "--out", "out", "--scheduler", scheduler, cwd=tmp_path)
+    assert res.returncode == 1, res.stderr              # one run failed: said, exit 1
+    assert "1 of 2 runs failed" in res.stderr.splitlines()[-1]
+    table = pq.read_table(tmp_path / "out" / "study.parquet").to_pylist()
+    assert [r["status"] for r in table] == ["finished", "failed"]
+    ok, failed = table
+    assert failed["error"] == "--band is an option of --from-record"
+    assert ok["seed"] == 3 and ok["axis"] == "roll" and ok["turbulence"] == "light"
+    # the row's commands, typed by hand into another folder: the same numbers
+    hand = tmp_path / "hand"
+    for command in ok["commands"].split(" && "):
+        words = command.split()[1:]
+        res = heliquad(*[str(hand) if w == "sweep" and i else w for i, w in enumerate(words)],
+                       cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    mine = json.loads((tmp_path / "out" / "runs" / ok["run"] / "sweep" / "models.json")
+                      .read_text())
+    theirs = json.loads((hand / "models.json").read_text())
+    assert mine["sil_truth"] == theirs["sil_truth"]
+    assert mine["models"] == theirs["models"]
+    assert json.loads(ok["model_num"]) == theirs["models"][theirs["recommended"]]["num"]
+    assert ok["points_worst_db"] == theirs["sil_truth"]["points_worst_db"]
+    # again: nothing left to make, the records untouched
+    records = {p: p.read_bytes() for p in (tmp_path / "out" / "runs").glob("*/record.json")}
+    res = heliquad("study", "s.toml", "--out", "out", "--scheduler", scheduler, cwd=tmp_path)
+    assert "2 runs, 2 already over, 0 to make" in res.stdout
+    assert {p: p.read_bytes() for p in records} == records
+    assert pq.read_table(tmp_path / "out" / "study.parquet").num_rows == 2
+    assert (tmp_path / "out" / "index.html").read_text().count("<tr>") == 3
+
+
+# --- vehicle parameters perturbed per run ---------------------------------------------------
+
+PERTURB = """
+[factors]
+axis = "roll"
+seed = [1, 2, 3, 4]
+[perturb]
+"body.mass_kg" = {normal = 0.1}
+"rig.hinge_damping_n_m_s_rad" = {uniform = 0.5}
+"""
+
+
+def test_perturbed_vehicle_numbers_are_drawn_per_run_and_written_as_a_vehicle_file(tmp_path):
+    from heliquad.host.study.perturb import base_text, perturbed_text
+    from heliquad.sim.plant.vehicle_params import load_params
+
+    s = spec(PERTURB)
+    assert s.columns == ("axis", "seed", "body.mass_kg", "rig.hinge_damping_n_m_s_rad")
+    masses = [r.perturb["body.mass_kg"] for r in s.runs]
+    assert [r.perturb for r in s.runs] == [r.perturb for r in spec(PERTURB).runs]
+    assert len(set(masses)) == len(masses)                     # each run its own draw
+    nominal = load_params().body
+    for r in s.runs:                                           # uniform: within its width
+        assert abs(r.perturb["rig.hinge_damping_n_m_s_rad"] /
+                   load_params().rig.hinge_damping_n_m_s_rad - 1) <= 0.5
+    path = tmp_path / "vehicle.toml"
+    path.write_text(perturbed_text(base_text(None), s.runs[0].perturb))
+    got = load_params(str(path))                               # a vehicle file the sim reads
+    assert got.body.mass_kg == masses[0]
+    assert got.body.inertia_kg_m2 == nominal.inertia_kg_m2     # the rest as it was
+
+
+@pytest.mark.parametrize("table, says", [
+    ('"body.mass_g" = {normal = 0.1}', "not a number of a section"),
+    ('"body.mass_kg" = {lognormal = 0.1}', "give {normal = S} or {uniform = W}"),
+    ('"body.mass_kg" = {normal = 2}', "a relative width from 0 to below 1"),
+])
+def test_a_bad_perturbation_says_what_is_wrong(table, says):
+    with pytest.raises(InputError, match=re.escape(says)):
+        spec(f'[factors]\naxis = "roll"\n[perturb]\n{table}\n')
