@@ -45,9 +45,10 @@ REACHED = 0.98
 
 
 def ardupilot_sweeps(path, opened=None) -> tuple:
-    """``(sweeps, skipped)`` of the ArduPilot log at ``path``: for each segment identify can
-    measure, ``(name, manifest, samples)`` (``name``: ``sidK-AXIS``, K its place in the log
-    from 1), and for each other a line saying why not. InputError when no segment can be."""
+    """``(sweeps, skipped, damage)`` of the ArduPilot log at ``path``: for each segment
+    identify can measure, ``(name, manifest, samples)`` (``name``: ``sidK-AXIS``, K its place
+    in the log from 1), for each other a line saying why not, and where the reading stopped
+    (:class:`~..records.bin_log.BinDamage`). InputError when no segment can be measured."""
     log = read_ardupilot(path, None if opened is None else opened[0])
     sweeps, skipped = [], []
     for k, seg in enumerate(log.segments, 1):
@@ -60,7 +61,7 @@ def ardupilot_sweeps(path, opened=None) -> tuple:
     if not sweeps:
         raise InputError(f"{path}: no SystemID segment identify can measure ("
                          + "; ".join(skipped) + ")")
-    return sweeps, skipped
+    return sweeps, skipped, log.damage
 
 
 def _sweep(seg, path, log) -> tuple:
@@ -108,20 +109,21 @@ def _signals(seg, axis, inject) -> dict:
                "rate": np.radians(seg.fields[rate])}
     desired, angle = ATT_FIELDS[axis]
     if angle in seg.fields:
-        unwrap = (lambda x: np.unwrap(x, period=360.0)) if axis == "yaw" else (lambda x: x)
-        signals.update(angle_sp=np.radians(_unwrapped(seg.fields[desired], unwrap)),
-                       angle=np.radians(_unwrapped(seg.fields[angle], unwrap)))
+        signals.update(angle_sp=_radians(seg.fields[desired], axis == "yaw"),
+                       angle=_radians(seg.fields[angle], axis == "yaw"))
     elif inject == "angle":
         raise InputError("the log has no ATT records, and its excitation is the angle target's")
     return signals
 
 
-def _unwrapped(x, unwrap):
-    """``unwrap`` applied to the finite values of ``x`` (its NaNs kept)."""
-    out = np.array(x, dtype=float)
-    ok = np.isfinite(out)
-    out[ok] = unwrap(out[ok])
-    return out
+def _radians(degrees, unwrap: bool):
+    """An angle in rad from deg, its finite values unwrapped when ``unwrap`` (ATT's yaw runs
+    0 to 360); NaN kept."""
+    out = np.array(degrees, dtype=float)
+    if unwrap:
+        ok = np.isfinite(out)
+        out[ok] = np.unwrap(out[ok], period=360.0)
+    return np.radians(out)
 
 
 def _entry_field(axis, inject) -> str:

@@ -142,7 +142,7 @@ def identify_path(path, orders=None, progress=print, plots=None, **options) -> l
     if plots is None:
         with PlotProcess() as plots:
             return identify_path(path, orders, progress, plots, **options)
-    sweeps, skipped = ardupilot_sweeps(log, opened)
+    sweeps, skipped, damage = ardupilot_sweeps(log, opened)   # its damage said by _identify
     for line in skipped:
         progress(f"warning: {line}: not identified")
     stem = os.path.splitext(os.path.basename(log))[0]
@@ -152,7 +152,7 @@ def identify_path(path, orders=None, progress=print, plots=None, **options) -> l
         progress(f"{name}: {segment_note(manifest)}; outputs in {out_dir}")
         try:
             os.makedirs(out_dir, exist_ok=True)
-            results.append(_identify(log, out_dir, manifest, samples, TlogDamage(), plots,
+            results.append(_identify(log, out_dir, manifest, samples, damage, plots,
                                      orders, progress, options.get("delay", True),
                                      options.get("estimate", "excitation"),
                                      options.get("cost", "j")))

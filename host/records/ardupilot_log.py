@@ -55,11 +55,10 @@ _WANTED = ("SIDS", "SIDD", "RATE", "ATT", "PARM", "MSG")
 @dataclasses.dataclass
 class SidSegment:
     """One run of the SystemID excitation: its set-up (SIDS's fields, None when the log holds
-    no SIDS before it) and per loop (SIDD's), SIDD's time (us), ``Time`` (s), ``Targ``, ``F``
-    (Hz), and the loop's RATE and ATT fields by name (NaN where the loop has none)."""
+    no SIDS before it) and per loop (SIDD's), SIDD's time (us), ``Targ``, ``F`` (Hz), and
+    the loop's RATE and ATT fields by name (NaN where the loop has none)."""
     setup: dict | None
     time_us: np.ndarray
-    wave_time_s: np.ndarray
     target: np.ndarray
     freq_hz: np.ndarray
     fields: dict
@@ -80,8 +79,7 @@ def read_ardupilot(path, reader=None) -> ArduPilotLog:
     record."""
     if reader is None:
         reader, _ = open_log(path)
-    defined = set(reader.name_to_id)
-    if not {"SIDS", "SIDD"} & defined:
+    if not {"SIDS", "SIDD"} & set(reader.name_to_id):
         raise InputError(f"{path}: an ArduPilot log without SystemID records (SIDS, SIDD): "
                          "ArduCopter's SystemID mode never ran in it")
     found = _Found()
@@ -100,8 +98,10 @@ def read_ardupilot(path, reader=None) -> ArduPilotLog:
         raise InputError(f"{path}: the log defines SystemID's records but holds no SIDD "
                          "sample: the mode never ran an excitation"
                          + (f" ({damage.summary()})" if damage else ""))
-    segments = [_segment(found.rows, found.sids_before, part)
-                for part in _cut(found.rows["SIDD"], found.sids_before)]
+    sidd = np.array(found.rows["SIDD"], dtype=float)
+    tables = {kind: _table(found.rows[kind]) for kind in _COLUMNS}
+    segments = [_segment(sidd[part], found.rows["SIDS"], found.sids_before[part[0]], tables)
+                for part in _cut(sidd[:, 1], found.sids_before)]
     return ArduPilotLog(segments, found.params, found.version, damage)
 
 
@@ -136,36 +136,41 @@ def _version(text: str) -> str | None:
     return text if text.startswith("Ardu") else None
 
 
-def _cut(sidd, sids_before) -> list:
+def _cut(wave_time_s, sids_before) -> list:
     """Each segment's SIDD rows (index arrays): a new one where ``Time`` goes back or a SIDS
     came between."""
-    wave = np.array([r[1] for r in sidd], dtype=float)
     before = np.asarray(sids_before)
-    starts = np.flatnonzero((np.diff(wave) < 0) | (np.diff(before) != 0)) + 1
-    return np.split(np.arange(wave.size), starts)
+    starts = np.flatnonzero((np.diff(wave_time_s) < 0) | (np.diff(before) != 0)) + 1
+    return np.split(np.arange(wave_time_s.size), starts)
 
 
-def _segment(rows, sids_before, part) -> SidSegment:
-    """The segment of SIDD rows ``part``: its set-up and its loops' matched records."""
-    sidd = np.array([rows["SIDD"][i] for i in part], dtype=float)
+def _table(records):
+    """RATE's or ATT's records as an array, its rows in time order (a damaged log's times may
+    not rise); None without records."""
+    if not records:
+        return None
+    table = np.array(records, dtype=float)
+    return table[np.argsort(table[:, 0], kind="stable")]
+
+
+def _segment(sidd, setups, sids_before: int, tables) -> SidSegment:
+    """The segment of SIDD rows ``sidd`` (TimeUS, Time, Targ, F): the SIDS logged before it
+    (the ``sids_before``-th of ``setups``) and its loops' matched RATE and ATT ``tables``."""
     time_us = sidd[:, 0]
-    k = sids_before[part[0]]
-    setup = rows["SIDS"][k - 1] if k else None
+    setup = setups[sids_before - 1] if sids_before else None
     loop_us = float(np.median(np.diff(time_us))) if time_us.size > 1 else 0.0
     fields = {}
-    for kind in ("RATE", "ATT"):
-        fields.update(_matched(rows[kind], _COLUMNS[kind], time_us, loop_us / 2))
-    return SidSegment(setup, time_us, sidd[:, 1], sidd[:, 2], sidd[:, 3], fields)
+    for kind, table in tables.items():
+        fields.update(_matched(table, _COLUMNS[kind], time_us, loop_us / 2))
+    return SidSegment(setup, time_us, sidd[:, 2], sidd[:, 3], fields)
 
 
-def _matched(records, columns, time_us, within_us) -> dict:
-    """``{name: values at time_us}`` of ``columns`` (``TimeUS`` first) from the records
-    nearest in time to each, within ``within_us`` (NaN where none is); ``{}`` without
-    records."""
-    if not records:
+def _matched(table, columns, time_us, within_us) -> dict:
+    """``{name: values at time_us}`` of ``columns`` (``TimeUS`` first) from the rows of
+    ``table`` (:func:`_table`) nearest in time to each, within ``within_us`` (NaN where none
+    is); ``{}`` without a table."""
+    if table is None:
         return {}
-    table = np.array(records, dtype=float)
-    table = table[np.argsort(table[:, 0], kind="stable")]    # a damaged log's times may not rise
     t, values = table[:, 0], table[:, 1:]
     last = t.size - 1
     after = np.clip(np.searchsorted(t, time_us), 0, last)

@@ -60,7 +60,7 @@ def read(content: bytes):
         fh.write(content)
     opened = bin_log.open_log(path)
     if bin_log.is_ardupilot_log(opened[0]):
-        sweeps, _ = ardupilot_sweep.ardupilot_sweeps(path, opened)
+        sweeps, _, _ = ardupilot_sweep.ardupilot_sweeps(path, opened)
         return sweeps
     return [bin_sweep.log_sweep(bin_log.read_bin(path, opened), path)]
 
