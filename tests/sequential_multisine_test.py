@@ -2,7 +2,9 @@
 periods until every line is known well enough, or the rig-time cap; each line's sigma and
 signal-to-disturbance ratio in the manifest."""
 
+import html
 import json
+import re
 import subprocess
 import sys
 
@@ -17,8 +19,8 @@ def heliquad(*args):
                           capture_output=True, text=True, timeout=600)
 
 
-def multisine(folder, *options):
-    res = heliquad("sweep", "--axis", "roll", "--sil", "--signal", "multisine",
+def multisine(folder, *options, axis="roll"):
+    res = heliquad("sweep", "--axis", axis, "--sil", "--signal", "multisine",
                    "--target-sigma", 0.02, *options, "--out", folder)
     assert res.returncode == 0, res.stderr
     manifest = json.loads((folder / "manifest.json").read_text())
@@ -34,6 +36,9 @@ def test_in_still_air_it_ends_once_every_line_is_known(tmp_path):
     assert len(entry["line_sigma"]) == len(entry["line_sdr"]) == len(entry["orders"])
     assert max(entry["line_sigma"]) <= 0.02
     assert min(entry["line_sdr"]) > 100                      # still air: the lines stand out
+    # a mixer sweep measures the plant: it has no other response to be told
+    res = heliquad("identify", tmp_path / "still", "--response", "loop")
+    assert res.returncode == 2 and "--response is for rate or angle injection" in res.stderr
 
 
 def test_under_severe_turbulence_it_runs_to_its_cap_and_the_model_holds(tmp_path):
@@ -48,6 +53,51 @@ def test_under_severe_turbulence_it_runs_to_its_cap_and_the_model_holds(tmp_path
     truth = json.loads((folder / "models.json").read_text())["sil_truth"]
     # measured: within 0.12 dB and 2.2 deg of the simulator's truth (roll, seed 5)
     assert truth["model_worst_db"] < 1.0 and truth["model_worst_deg"] < 5.0
+
+
+def test_yaw_under_severe_turbulence_the_plant_through_the_rate_loop_holds(tmp_path):
+    # At the mixer the loop cancels the injection at yaw's low frequencies and severe
+    # turbulence swamps what is left (seed 5: the model 3.5 dB and 12.8 deg off the truth
+    # at the cap). At the rate setpoint the loop follows the excitation; the plant is the
+    # mixer's input over the rate, both against it.
+    folder = tmp_path / "yaw"
+    manifest, entry = multisine(folder, "--turbulence", "severe", "--seed", 5, "--inject",
+                                "rate", "--response", "plant", "--amplitude", 40, axis="yaw")
+    assert manifest["response"] == "plant" and entry["multisine_end"] == "cap"
+    assert (entry["end_us"] - entry["start_us"]) / 1e6 <= 180.0
+    res = heliquad("identify", folder)
+    assert res.returncode == 0, res.stderr
+    models = json.loads((folder / "models.json").read_text())
+    assert models["response"] == "plant" and "broken_loop" not in models
+    truth = models["sil_truth"]                 # the mixer-to-rate truth
+    # measured: the model within 0.23 dB and 1.0 deg of it, the points 0.85 dB and 2.6 deg
+    assert truth["model_worst_db"] < 1.0 and truth["model_worst_deg"] < 5.0
+    # the report says what was measured and each line's sigma and signal-to-disturbance
+    assert heliquad("report", folder).returncode == 0
+    page = html.unescape(re.sub(r"<[^>]+>", " ", (folder / "report.html").read_text()))
+    assert "yaw, rate injection; measured: the plant, the mixer's input to the rate" in page
+    lines = page[page.index("Multisine lines"):].split("Frequency response")[0]
+    assert f"{entry['periods']} base periods; ended by the rig-time cap" in lines
+    for h, sdr in zip(entry["orders"], entry["line_sdr"]):
+        assert re.search(rf"\s{h}\s+[0-9.]+ %\s+{sdr:.3g}\s", lines)
+    # the same record, told to fit the loop: the rate setpoint to the rate, its own truth
+    res = heliquad("identify", folder, "--response", "loop")
+    assert res.returncode == 0, res.stderr
+    loop = json.loads((folder / "models.json").read_text())
+    assert loop["response"] == "loop"
+    assert loop["sil_truth"]["points_worst_db"] < 1.0
+    gain = lambda doc: doc["sil_truth"]["points"][0]["truth_db"]     # noqa: E731
+    assert gain(loop) < gain(models) - 6        # the plant's low-frequency gain is larger
+
+
+@pytest.mark.parametrize("options, said", [
+    (["--inject", "mixer", "--response", "plant"], "--response is for rate or angle injection"),
+    (["--inject", "motors", "--response", "loop"], "--response is for rate or angle injection"),
+])
+def test_a_response_is_refused_where_there_is_none_to_choose(tmp_path, options, said):
+    res = heliquad("sweep", "--axis", "yaw", "--sil", *options, "--out", tmp_path / "x")
+    assert res.returncode == 2 and said in res.stderr
+    assert not (tmp_path / "x").exists()
 
 
 def test_the_signal_to_disturbance_ratio_of_a_line():

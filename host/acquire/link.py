@@ -17,10 +17,12 @@ from ...sim.base import dialect as names
 from ...sim.base.dialect import dialect
 from ...sim.base.firmware_facts import MAX_ROTORS
 from ...sim.base.framing import Codec, Framer
+from ..records.choices import RESPONSES
 from .connection import open_connection
 
 # AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
-__all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
+__all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output", "RESPONSES",
+           "response_fields", "response_of", "chooses_response", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
            "reason_text"]
 
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point
@@ -59,6 +61,27 @@ def input_output(inject: str) -> tuple:
     """The logged fields (input, output) of an injection point a sweep runs (an axis's or the
     per-rotor run's)."""
     return {**INPUT_OUTPUT, **ROTOR_INPUT_OUTPUT}[inject]
+
+
+def response_fields(inject: str, response: str | None = None) -> tuple:
+    """The logged fields (input, output) a sweep at ``inject`` measures for ``response``
+    (:data:`~heliquad.host.records.manifest.RESPONSES`; None: the injection's own,
+    :func:`input_output`). A mixer sweep measures the plant whatever it is told."""
+    return INPUT_OUTPUT["mixer"] if response == "plant" else input_output(inject)
+
+
+def chooses_response(inject: str) -> bool:
+    """Whether a sweep at ``inject`` has a response to choose (a setpoint's: rate, angle);
+    a mixer sweep, or a rotor's, measures the plant."""
+    return inject in INPUT_OUTPUT and INPUT_OUTPUT[inject] != INPUT_OUTPUT["mixer"]
+
+
+def response_of(inject: str, fields: tuple) -> str | None:
+    """Which response the fields ``(input, output)`` are at ``inject``: ``plant`` for the
+    mixer's pair, ``loop`` for the injection's own, None for any other pair."""
+    if tuple(fields) == INPUT_OUTPUT["mixer"]:
+        return "plant"
+    return "loop" if tuple(fields) == input_output(inject) else None
 
 
 def reason_text(code: int) -> str:

@@ -21,7 +21,7 @@ from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
 from .chirp import fade_samples
 from .design import line_sdr, response_per_unit
-from .link import input_output, reason_text
+from .link import reason_text, response_fields
 
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
 #: millidegree: the firmware holds them in single precision).
@@ -145,7 +145,7 @@ class ExcitationWatch:
         if plan.chirp is not None:
             self.entry.update(signal="chirp", stop_hz=plan.chirp.stop_hz,
                               sweep_s=plan.chirp.sweep_s, law=plan.chirp.law)
-        self.u_name, self.y_name = input_output(plan.inject)
+        self.u_name, self.y_name = response_fields(plan.inject, plan.response)
         self.keep_rows = keep_rows
         self.record = ([], [], [], [])          # t, r, u, y of the full-amplitude samples
         self.present = []                       # False where a sample of it was lost

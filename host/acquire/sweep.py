@@ -94,6 +94,7 @@ class SweepPlan:
         self.sequential = None                  # a multisine's SequentialMultisine
         self.linearity = None                   # a linearity campaign's excitations
         self.seed = None                        # and the seed of its phases
+        self.response = None                    # a rate or angle sweep's (link.RESPONSES)
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
@@ -292,7 +293,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         tlog=SWEEP_TLOG, tlog_start_us=getattr(session, "start_us", None),
         cycles=plan.cycles, fade_cycles=plan.fade_cycles, design=plan.record(),
         limits={"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
-        signal=plan.signal, planned_hz=list(plan.freqs_hz))
+        signal=plan.signal, planned_hz=list(plan.freqs_hz), response=plan.response or UNSET)
     current = None
     try:
         _write_manifest(out_dir, manifest)

@@ -21,7 +21,8 @@ import numpy as np
 
 from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
-from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, input_output
+from ..acquire.link import (INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, chooses_response, input_output,
+                            response_fields, response_of)
 from ..acquire.measure import saturation_text
 from ..acquire.sweep import cut_text
 from ..estimate.fit import n_parameters
@@ -106,9 +107,11 @@ def _check_log_matches(dir_path, manifest, samples) -> None:
 
 def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
                  estimate: str = "excitation", plots=None, cost: str = "j",
-                 from_record: dict | None = None) -> dict:
+                 from_record: dict | None = None, response: str | None = None) -> dict:
     """``cost``: what the fits minimise (CIFER's J by default, or ``relative``,
-    host/estimate/fit.py). ``from_record``: read the log as one record
+    host/estimate/fit.py). ``response``: what a rate or angle sweep's points are
+    (``loop`` or ``plant``, :func:`~heliquad.host.acquire.link.response_fields`; None: the
+    sweep's own). ``from_record``: read the log as one record
     (:mod:`.record`; a dict of :func:`~.record.record_points`'s options, ``axis``,
     ``fields``, ``band_hz``) instead of its designed excitations. ``plots``: what draws
     the plots (a :mod:`~heliquad.host.present.plot_process` object the caller has started
@@ -118,7 +121,7 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
         # The plotting process starts first: its imports overlap reading the log.
         with PlotProcess() as plots:
             return identify_dir(dir_path, orders, progress, delay, estimate, plots, cost,
-                                from_record)
+                                from_record, response)
     if from_record is not None:
         return _identify_record(dir_path, plots, orders, progress, delay, estimate, cost,
                                 from_record)
@@ -126,8 +129,20 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     if manifest["inject"] in ROTOR_INPUT_OUTPUT:
         raise InputError(f"{dir_path}: a per-rotor run (motors injection): heliquad "
                          "effectiveness reads it")
+    manifest = _with_response(dir_path, manifest, response)
     return _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progress,
                      delay, estimate, cost)
+
+
+def _with_response(path, manifest, response):
+    """The manifest with ``response`` (identify --response) in place of its own: refused
+    where the injection has no other (a mixer sweep measures the plant)."""
+    if response is None or response == manifest.get("response"):
+        return manifest
+    if not chooses_response(manifest["inject"]):
+        raise InputError(f"{path}: --response is for rate or angle injection; this is a "
+                         f"{manifest['inject']} sweep (it measures the plant)")
+    return {**manifest, "response": response}
 
 
 def identify_path(path, orders=None, progress=print, plots=None, **options) -> list:
@@ -151,6 +166,7 @@ def identify_path(path, orders=None, progress=print, plots=None, **options) -> l
         out_dir = os.path.join(os.path.dirname(log) or ".", f"{stem}-{name}")
         progress(f"{name}: {segment_note(manifest)}; outputs in {out_dir}")
         try:
+            manifest = _with_response(name, manifest, options.get("response"))
             os.makedirs(out_dir, exist_ok=True)
             results.append(_identify(log, out_dir, manifest, samples, damage, plots,
                                      orders, progress, options.get("delay", True),
@@ -186,7 +202,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         aborted = f"; the sweep ended early: {manifest['aborted']}" if manifest.get("aborted") else ""
         raise InputError(f"{dir_path}: {len(points)} frequency(ies) with a usable excitation; "
                          f"a fit needs at least 2{why}{aborted}")
-    plots.records(segments, *INPUT_OUTPUT[manifest["inject"]])
+    plots.records(segments, *response_fields(manifest["inject"], manifest.get("response")))
     result = _points_and_fits(dir_path, out_dir, axis, points, orders, delay, cost)
     loop = _broken_loop(manifest, points, estimate, progress)
     truth = _truth(dir_path, manifest, points, result, progress)
@@ -199,7 +215,7 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         broken_loop=loop or None, sil_truth=truth or None,
         replay=None if replays is None else _replay_record(result.recommended, replays),
         axis=axis, points_file="points.csv", imu_path=manifest.get("imu_path"),
-        linearity=linearity))
+        linearity=linearity, response=manifest.get("response")))
     if linearity and linearity["flagged"]:
         progress("warning: the models are fitted where the nonlinear distortion is above the "
                  "noise and above "
@@ -250,7 +266,9 @@ def _identify_record(path, plots, orders, progress, delay, estimate, cost, optio
     said = {"axis": axis, "inject": inject}
     loop = _broken_loop(said, points, found["record"]["estimate"], progress) \
         if (u_name, y_name) == input_output(inject) else None
-    truth = _truth(out_dir, manifest, points, result, progress) if manifest else None
+    response = response_of(inject, (u_name, y_name))   # the truth there is, if any
+    truth = _truth(out_dir, {**manifest, "response": response}, points, result, progress) \
+        if manifest and response else None
     write_models_json(os.path.join(out_dir, "models.json"), fitted_models(
         result, log=damage.record(), skipped_frequencies=skipped,
         estimate=found["record"]["estimate"], record=found["record"],
@@ -325,6 +343,8 @@ def _broken_loop(manifest, points, estimate, progress) -> dict | None:
     returned for models.json (None when no loop closes there or the points were not
     estimated against the excitation)."""
     name = measured_loop_name(manifest["inject"], manifest["axis"])
+    if manifest.get("response") == "plant":
+        name = None     # the plant measured through a rate or angle loop: U is not R's sum
     pts = sorted(points, key=lambda p: p.omega_rad_s)
     t_u = np.array([p.input_gain for p in pts])
     if estimate != "excitation" or name is None or len(pts) < 2 or \

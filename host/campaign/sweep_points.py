@@ -13,7 +13,7 @@ import numpy as np
 
 from ...sim.base.dialect import dialect
 from ...sim.base.errors import InputError
-from ..acquire.link import input_output
+from ..acquire.link import response_fields
 from ..acquire.measure import MAX_LOST_RUN, MAX_LOST_SHARE
 from ..estimate.composite import MIN_COHERENCE, composite_response
 from ..estimate.fsf import (complete_excitation, estimate_against_excitation, estimate_fsf,
@@ -31,7 +31,7 @@ def sweep_segments(manifest, samples):
     itself only passes through."""
     mav = dialect()
     running, idle = mav.HQ_EXCITATION_STATE_RUNNING, mav.HQ_EXCITATION_STATE_IDLE
-    u_name, y_name = input_output(manifest["inject"])
+    u_name, y_name = response_fields(manifest["inject"], manifest.get("response"))
     t = samples.time_us.astype(np.int64)
     state = samples.exc_state
     u, y = samples[u_name].astype(float), samples[y_name].astype(float)

@@ -9,7 +9,7 @@ import sys
 
 from ...sim.base.dialect import AXES
 from ...sim.base.errors import InputError
-from ..records.choices import RECORD_FIELDS
+from ..records.choices import RECORD_FIELDS, RESPONSES
 from .fit import add_cost_option, print_models
 
 __all__ = ["add_parser", "run"]
@@ -70,6 +70,11 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--output", choices=RECORD_FIELDS, metavar="FIELD",
                    help="with --from-record: the record's output (default: the sweep's "
                         "injection's, else rate)")
+    p.add_argument("--response", choices=RESPONSES,
+                   help="a rate or angle sweep (or a .BIN's, or an ArduPilot log's rate or "
+                        "angle target segments): loop, the setpoint to the rate or angle; "
+                        "plant, the mixer's input to the rate, both against the excitation "
+                        "(default: what the sweep measured, its --response)")
     p.add_argument("--axis", choices=tuple(AXES),
                    help="with --from-record on a .tlog: the axis (default: the one its "
                         "samples name most)")
@@ -106,6 +111,9 @@ def _record_options(args) -> dict | None:
         if given:
             raise InputError(f"--{given[0]} is an option of --from-record")
         return None
+    if args.response:
+        raise InputError("--response is for designed excitations; with --from-record, "
+                         "--input and --output name the record's fields")
     if bool(args.input) != bool(args.output):
         raise InputError("--input and --output go together (or neither: the injection's)")
     if args.band and not 0 < args.band[0] < args.band[1]:
@@ -132,7 +140,8 @@ def run(args) -> int:
 
         orders = [parse_order(o) for o in args.order] if args.order else None
         results = identify_path(args.dir, orders, delay=args.delay, estimate=args.estimate,
-                                plots=plots, cost=args.cost, from_record=record)
+                                plots=plots, cost=args.cost, from_record=record,
+                                response=args.response)
     for r in results:
         _print_result(r, args.mat if len(results) == 1 else None)
     if args.mat and len(results) > 1:

@@ -16,13 +16,15 @@ from ...sim.rig.setup import PLANTS
 from ..acquire.excitation import DEFAULT_SETPOINT
 from ..acquire.multisine import MAX_LINES
 from ..acquire.rotor_multisine import ROTOR_PEAK
+from ..records.choices import RESPONSES
 from ..process.signals import ABORTED_BY, EXIT_CODES
 from .run_options import add_load_params_argument, add_rc_script_argument
 from .shared_options import (add_baud_argument, add_fault_argument, add_firmware_argument,
                              firmware_link, add_vehicle_arguments, add_param_store_argument,
                              add_port_argument, add_sd_card_arguments, check_plant, faults,
                              finite, int_in, number_in, sd_card, vehicle_config)
-from .sweep_options import add_design_arguments, apply_tuning_band, check_excitation, sweep_plan
+from .sweep_options import (add_design_arguments, apply_tuning_band, check_excitation,
+                            check_response, sweep_plan)
 
 __all__ = ["add_parser", "run", "checked_plan"]
 
@@ -82,6 +84,14 @@ def add_parser(sub, fmt) -> None:
     p.add_argument("--inject", choices=(*INPUT_OUTPUT, *ROTOR_INPUT_OUTPUT), default="mixer",
                    help="the axis's injection point (default mixer), or motors: the per-rotor "
                         "run, motorN: rotor N's alone (below)")
+    p.add_argument("--response", choices=RESPONSES,
+                   help="rate or angle injection: what the sweep measures and identify "
+                        "fits; loop (default): the setpoint to the rate or angle; plant: "
+                        "the mixer's input to the rate, against the excitation at the "
+                        "setpoint, as a mixer sweep measures it (under strong turbulence "
+                        "the better way to the plant at low frequencies, where the loop "
+                        "cancels a mixer injection but follows a setpoint's: "
+                        "docs/method.md)")
     p.add_argument("--rotors", type=int_in(MIN_ROTORS, MAX_ROTORS), metavar="N",
                    help="--inject motors or motorN: the rotors the board flies (its CA_ROTOR_COUNT; "
                         "default: the --params vehicle's with --sil, else the firmware's "
@@ -236,6 +246,7 @@ def _check_rig_options(args) -> None:
                          "socket; read its logs with heliquad logs)")
     if args.rotors is not None and args.inject not in ROTOR_INPUT_OUTPUT:
         raise InputError("--rotors is for --inject motors (the per-rotor run)")
+    check_response(args.inject, args.response)
     if args.sil:
         sd_card(args)
 

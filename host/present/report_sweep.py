@@ -42,6 +42,8 @@ def sweep_html(manifest, axis, flags):
     text += "<h3>Frequencies</h3>" + table_html(
         ["requested (Hz)", "used (Hz)", "period (samples)", "samples", "lost on the link",
          "garbage bytes", "status"], rows, left=(6,))
+    text += "".join(_lines_html(f, manifest)
+                    for f in manifest.get("frequencies", []) if f.get("line_sdr"))
     for f in manifest.get("frequencies", []):
         if f["status"].startswith("superseded"):
             continue             # the sequential design measured it again: nothing is wrong
@@ -52,6 +54,27 @@ def sweep_html(manifest, axis, flags):
     if manifest.get("aborted"):
         flags.append(f"{axis}: sweep stopped: {manifest['aborted']}")
     return text
+
+
+def _lines_html(entry, manifest) -> str:
+    """A sequential multisine's lines: each one's frequency, its point's sigma (share of its
+    magnitude) and its signal-to-disturbance ratio in the output, and how many lines the
+    rig-time cap left above the target (said, not flagged: the points' sigmas carry it to
+    the fit, and the model's checks say whether it matters)."""
+    target = ((manifest.get("design") or {}).get("sequential") or {}).get("target_sigma")
+    sigmas, sdrs = entry.get("line_sigma") or [], entry["line_sdr"]
+    rows = [(number_text(h * entry["freq_hz"]), h,
+             "-" if sigma is None else f"{100 * sigma:.2g} %",
+             "-" if sdr is None else f"{sdr:.3g}")
+            for h, sigma, sdr in zip(entry.get("orders", []), sigmas + [None] * len(sdrs), sdrs)]
+    above = [s for s in sigmas if s is not None and target is not None and s > target]
+    end = {"cap": "the rig-time cap", "target": "every line at its target"}.get(
+        entry.get("multisine_end"), entry.get("multisine_end") or "-")
+    said = (f"<p>{entry.get('periods', '-')} base periods; ended by {html.escape(end)}"
+            + (f"; {len(above)} of {len(sigmas)} lines above the target sigma "
+               f"({100 * target:g} %)" if above else "") + ".</p>")
+    return "<h3>Multisine lines</h3>" + said + table_html(
+        ["line (Hz)", "harmonic", "sigma / magnitude", "signal / disturbance (output)"], rows)
 
 
 #: A simulated sweep's source, in words: its keys (manifest.json ``source``) and how each
@@ -70,11 +93,18 @@ SIL_SOURCE = (("plant", "plant", lambda v: {"vehicle": "the simulated 6-DoF vehi
                if isinstance(v, dict) else v))
 
 
+#: What a rate or angle sweep measured (manifest.json ``response``), in words.
+RESPONSE_TEXT = {"plant": "; measured: the plant, the mixer's input to the rate, both "
+                          "against the excitation",
+                 "loop": "; measured: the loop, the setpoint to its response"}
+
+
 def _source_rows(manifest) -> list:
     """The sweep's settings as (what, value) rows: where it ran, the axis and injection, the
     signal, the gains the board flew, the tool, when, the log."""
     src = manifest.get("source") or {}
-    rows = [("axis, injection", f"{manifest.get('axis')}, {manifest.get('inject')} injection")]
+    rows = [("axis, injection", f"{manifest.get('axis')}, {manifest.get('inject')} injection"
+             + RESPONSE_TEXT.get(manifest.get("response"), ""))]
     if src.get("kind") == "port":
         rows.append(("source", f"a board on {src.get('port')} at {src.get('baud')} baud"))
     elif src.get("kind") == "sil":

@@ -19,6 +19,7 @@ import math
 
 from ...sim.base import dialect as names
 from . import schema as S
+from .choices import RESPONSES
 from .gains import recorded_gains_schema
 from .output import document, write_json
 from .reading import read_json
@@ -98,6 +99,7 @@ class SweepManifest:
     limits: dict = _key(S.Obj(values=S.Num()))
     signal: str = _key(S.Str(SWEEP_SIGNALS))
     planned_hz: list = _key(S.List(S.Num(0, 1e6, lo_open=True), 0, 10_000))
+    response: str = _key(S.Str(RESPONSES), default=UNSET)
     frequencies: list = _key(S.List(FREQUENCY, 0, 10_000), required=True,
                              default_factory=list)
     complete: bool = _key(S.Bool(), default=False)

@@ -22,8 +22,8 @@ import numpy as np
 
 from ...sim.base import dialect as names
 from . import schema as S
-from .choices import COSTS
 from .gains import recorded_gains_schema
+from .choices import COSTS, RESPONSES
 from .manifest import SWEEP_SIGNALS
 from .output import NULLABLE, atomic_write, document, write_json
 from .reading import read_json, record_of
@@ -65,7 +65,7 @@ def _models_schema():
                   "broken_loop": S.Obj(), "gains": recorded_gains_schema(),
                   "record": S.Obj(),
                   "imu_path": S.Str(("raw", "dmp")),
-                  "linearity": _linearity_schema()})
+                  "linearity": _linearity_schema(), "response": S.Str(RESPONSES)})
 
 
 
@@ -171,6 +171,7 @@ class ModelsFile:
     record: dict | None = None
     imu_path: str | None = None
     linearity: dict | None = None
+    response: str | None = None
 
     def document(self) -> dict:
         """The file's JSON document: the keys that have a value, in field order."""

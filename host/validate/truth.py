@@ -82,7 +82,8 @@ def sil_truth(manifest, dir_path: str):
     if plant is None:
         return None, why
     source = manifest["source"]
-    inject = manifest["inject"]
+    # a rate or angle sweep that measured the plant (link.response_fields): the mixer's truth
+    inject = "mixer" if manifest.get("response") == "plant" else manifest["inject"]
     if source["plant"] == "tf" and inject != "mixer":
         return None, "a transfer-function plant's truth is for mixer injection only"
     return (lambda omega: np.asarray(plant.truth(np.asarray(omega, float), inject))), None
