@@ -88,6 +88,12 @@ def test_yaw_under_severe_turbulence_the_plant_through_the_rate_loop_holds(tmp_p
     assert loop["sil_truth"]["points_worst_db"] < 1.0
     gain = lambda doc: doc["sil_truth"]["points"][0]["truth_db"]     # noqa: E731
     assert gain(loop) < gain(models) - 6        # the plant's low-frequency gain is larger
+    # a loop's response is not a plant: validate and tune refuse it, in one line
+    for command in (["validate", folder / "models.json"],
+                    ["tune", folder / "models.json", "--out", folder / "tuned"]):
+        res = heliquad(*command)
+        assert res.returncode == 2 and "--response plant" in res.stderr
+        assert len(res.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("options, said", [

@@ -17,7 +17,7 @@ from .. import __version__
 from ..acquire.param_protocol import Param
 from ..acquire.sweep import TUNING_TOP_HZ
 from ..records.gains import DERIVATIVE_FILTER_N, Gains, gains_params
-from ..records.models import read_models_json
+from ..records.models import check_plant_models, read_models_json
 from ..records.params_file import write_params_file
 from ..records.points import read_points_csv
 from ..records.tune import TuneFile, write_tune_json
@@ -86,6 +86,7 @@ def axis_input(path) -> AxisInput:
     """A MODELS.json checked for the design: its axis, a recommended model that is stable
     (by the poles identify recorded), its band; InputError otherwise."""
     doc = read_models_json(path)
+    check_plant_models(path, doc, "tune")
     if doc.axis is None:
         raise InputError(f"{path} does not say which axis its models are of (identify writes "
                          "\"axis\")")

@@ -50,10 +50,11 @@ def add_parser(sub, fmt) -> None:
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
     from ..records.gains import read_gains
-    from ..records.models import read_models_json
+    from ..records.models import check_plant_models, read_models_json
     from ..records.output import check_output_folder
 
     doc = read_models_json(args.models)
+    check_plant_models(args.models, doc, "validate")
     models = doc.models
     index = args.model if args.model is not None else doc.recommended
     if index is None or not 0 <= index < len(models):

@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from ...sim.base import dialect as names
+from ...sim.base.errors import InputError
 from . import schema as S
 from .gains import recorded_gains_schema
 from .choices import COSTS, RESPONSES
@@ -28,7 +29,7 @@ from .manifest import SWEEP_SIGNALS
 from .output import NULLABLE, atomic_write, document, write_json
 from .reading import read_json, record_of
 
-__all__ = ["StoredModel", "ModelsFile", "fitted_models", "read_models_json",
+__all__ = ["StoredModel", "ModelsFile", "fitted_models", "read_models_json", "check_plant_models",
            "write_models_json", "write_models_mat", "MAT_FIELDS"]
 
 #: A model's pure delay, s.
@@ -194,6 +195,15 @@ def fitted_models(result, **sections) -> ModelsFile:
                       recommended=result.recommended, reason=result.reason,
                       band_rad_s=[float(low), float(high)], quality=quality,
                       weights=result.weights, cost=result.cost, **sections)
+
+
+def check_plant_models(path, doc: ModelsFile, command: str) -> None:
+    """Refuse models of a loop's response (a rate or angle sweep fitted with ``response``
+    ``loop``: its setpoint to its output) where ``command`` needs the plant's."""
+    if doc.response == "loop":
+        raise InputError(f"{path}: its models are a loop's response (the setpoint to the rate "
+                         f"or angle), not the plant's; {command} needs the plant: identify "
+                         "the same sweep with --response plant")
 
 
 def read_models_json(path) -> ModelsFile:
