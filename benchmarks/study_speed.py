@@ -9,7 +9,11 @@ light turbulence, seeds from 1); three measurements in one benchmark run:
 2. ``heliquad study SPEC --workers 1``: the command's wall time; the time between runs
    (the first run's start to the last one's end, less the runs' own times, over the runs:
    the scheduler's cost per run), and its start and finish (cluster, table, figures);
-3. ``heliquad study SPEC --workers 2``: its wall time; the speed-up over (2).
+3. ``heliquad study SPEC --workers 2``: its wall time; the speed-up over (2);
+4. the machine's own ceiling, measured in the same run: a fixed CPU-bound loop in one
+   process, then in two at once (two copies' work over the wall time, against one's): what
+   two workers could reach at best on these cores as they are shared now (a virtual
+   machine's two cores can be one physical core's two threads, or shared with others).
 
 Each figure is printed with its ratio to the baseline measured in the same benchmark run. On
 a machine whose two cores something else also uses, the speed-up is that machine's.
@@ -71,6 +75,24 @@ def study(spec_path: str, out: str, workers: int) -> tuple:
     return wall, records
 
 
+#: The ceiling's work: a pure-Python loop of about a second on this machine.
+SPIN = "s = 0\nfor i in range(15_000_000):\n    s += i * i"
+
+
+def machine_ceiling() -> float:
+    """Two copies of :data:`SPIN` at once against one: how many times one's work two
+    processes do in the same wall time on this machine now (2.0: two free cores)."""
+    def wall(copies: int) -> float:
+        t0 = time.perf_counter()
+        procs = [subprocess.Popen([sys.executable, "-c", SPIN]) for _ in range(copies)]
+        for proc in procs:
+            proc.wait()
+        return time.perf_counter() - t0
+    one = min(wall(1) for _ in range(2))
+    two = min(wall(2) for _ in range(2))
+    return 2 * one / two
+
+
 def between_runs(records: list) -> float:
     """On one worker: the first run's start to the last one's end, less the runs' own
     times, per run (what the scheduler adds to each)."""
@@ -104,6 +126,9 @@ def main(argv=None) -> None:
         two, _ = study(spec_path, os.path.join(tmp, "w2"), 2)
         print(f"heliquad study --workers 2: {two:.1f} s ({two / base:.2f}x the one-by-one "
               f"time); speed-up over one worker {one / two:.2f}x", flush=True)
+    ceiling = machine_ceiling()
+    print(f"the machine's ceiling now: two processes of a CPU-bound loop do {ceiling:.2f}x "
+          f"one's work; the study's speed-up is {one / two / ceiling:.0%} of it", flush=True)
     print(f"load average after: {os.getloadavg()[0]:.2f} (this benchmark's own included)")
 
 

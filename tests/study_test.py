@@ -122,6 +122,23 @@ def fake_line(step, options, folder):
     return [step, folder]
 
 
+def test_a_studys_commands_draw_in_their_worker_and_others_in_a_process_of_their_own():
+    from heliquad.host.present.plot_process import (InlinePlots, PlotProcess, command_plots,
+                                                    drawing_here)
+
+    seen = {}
+    with drawing_here():
+        seen["here"] = type(command_plots())
+        other = threading.Thread(target=lambda: seen.update(other=command_plots()))
+        other.start()
+        other.join()
+    with seen["other"] as plots:                 # another thread: its own process, closed
+        assert isinstance(plots, PlotProcess)
+    assert seen["here"] is InlinePlots
+    with command_plots() as plots:
+        assert isinstance(plots, PlotProcess)
+
+
 def test_a_run_that_raises_is_a_failed_record_with_its_error(tmp_path):
     def command(words, log):
         raise InputError("the rig fell over")
@@ -222,6 +239,8 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     theirs = json.loads((hand / "models.json").read_text())
     assert mine["sil_truth"] == theirs["sil_truth"]
     assert mine["models"] == theirs["models"]
+    for picture in ("bode.png", "responses.png"):      # drawn in the worker, not a process
+        assert (tmp_path / "out" / "runs" / ok["run"] / "sweep" / picture).stat().st_size > 0
     assert json.loads(ok["model_num"]) == theirs["models"][theirs["recommended"]]["num"]
     assert ok["points_worst_db"] == theirs["sil_truth"]["points_worst_db"]
     # again: nothing left to make, the records untouched

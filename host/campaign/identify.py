@@ -29,7 +29,7 @@ from ..estimate.fit import n_parameters
 from ..estimate.fsf import DEFAULT_DISCARD_PERIODS
 from ..estimate.models import default_orders, fit_orders
 from ..estimate.thresholds import LOW_COHERENCE
-from ..present.plot_process import PlotProcess
+from ..present.plot_process import command_plots
 from ..records.bin_log import is_ardupilot_log, is_bin_name, open_log
 from ..records.manifest import MANIFEST, read_manifest
 from ..records.models import fitted_models, write_models_json
@@ -115,11 +115,12 @@ def identify_dir(dir_path: str, orders=None, progress=print, delay: bool = True,
     (:mod:`.record`; a dict of :func:`~.record.record_points`'s options, ``axis``,
     ``fields``, ``band_hz``) instead of its designed excitations. ``plots``: what draws
     the plots (a :mod:`~heliquad.host.present.plot_process` object the caller has started
-    and will close); by default a :class:`~heliquad.host.present.plot_process.PlotProcess`
-    of its own, which draws them in a process of its own while the models are fitted."""
+    and will close); by default :func:`~heliquad.host.present.plot_process.command_plots`'s:
+    a process of its own, which draws them while the models are fitted (in this process
+    within ``drawing_here``)."""
     if plots is None:
         # The plotting process starts first: its imports overlap reading the log.
-        with PlotProcess() as plots:
+        with command_plots() as plots:
             return identify_dir(dir_path, orders, progress, delay, estimate, plots, cost,
                                 from_record, response)
     if from_record is not None:
@@ -155,7 +156,7 @@ def identify_path(path, orders=None, progress=print, plots=None, **options) -> l
     if opened is None or not is_ardupilot_log(opened[0]):
         return [identify_dir(path, orders, progress, plots=plots, **options)]
     if plots is None:
-        with PlotProcess() as plots:
+        with command_plots() as plots:
             return identify_path(path, orders, progress, plots, **options)
     sweeps, skipped, damage = ardupilot_sweeps(log, opened)   # its damage said by _identify
     for line in skipped:

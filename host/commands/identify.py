@@ -125,7 +125,7 @@ def _record_options(args) -> dict | None:
 
 def run(args) -> int:
     # the command's work, imported when it runs: --help imports every command module
-    from ..present.plot_process import PlotProcess
+    from ..present.plot_process import command_plots
     from ..records.bin_log import is_bin_name
 
     record = _record_options(args)
@@ -133,7 +133,7 @@ def run(args) -> int:
             not (record is not None and args.dir.endswith(".tlog")):
         raise InputError(f"{args.dir}: not a folder" + (" or a .tlog" if record is not None
                                                          else ""))
-    with PlotProcess() as plots:        # first: its imports overlap all of ours (numpy's too)
+    with command_plots() as plots:        # first: its imports overlap all of ours (numpy's too)
         # the command's work, imported when it runs: --help imports every command module
         from ..campaign.identify import identify_path
         from ..estimate.fit import parse_order

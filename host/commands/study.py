@@ -173,11 +173,15 @@ def run_command(words: list, log) -> int:
     """Run ``heliquad WORDS`` in this process, as the program does, what it prints (stdout
     and stderr) written to the file object ``log``; its exit code (an error raises, as in
     the program). Threads may each run one at once: each one's output goes to its own log."""
+    # the plots' module, imported when a run is made: the client plans runs without it
+    from ..present.plot_process import drawing_here
+
     args = _parse(words, "run")
     _ThreadStreams.install()
     _ThreadStreams.local.log = log
     try:
-        return int(args.func(args) or 0)
+        with drawing_here():            # a worker per core: no plotting process per run
+            return int(args.func(args) or 0)
     finally:
         _ThreadStreams.local.log = None
 
