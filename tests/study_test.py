@@ -94,6 +94,65 @@ def test_a_runs_command_lines_are_the_ones_a_user_types():
          "--sil", "--out", "F"]
     assert command_line("identify", {"delay": False, "order": ["0/2", "1/3"]}, "F") == \
         ["identify", "--no-delay", "--order", "0/2", "--order", "1/3", "F"]
+    assert command_line("validate", {"turbulence": "severe"}, "F") == \
+        ["validate", "--turbulence", "severe", os.path.join("F", "models.json")]
+    assert command_line("tune", {"phase-margin": 50.0}, "F") == \
+        ["tune", "--phase-margin", "50.0", os.path.join("F", "models.json"), "--out",
+         os.path.join("F", "tuned")]
+
+
+def test_validate_and_tune_are_steps_only_where_the_spec_asks():
+    assert set(spec(ONE).runs[0].options) == {"sweep", "identify"}
+    asked = spec(ONE + "[validate]\nturbulence = 'severe'\n[tune]\n").runs[0].options
+    assert asked["validate"] == {"turbulence": "severe"} and asked["tune"] == {}
+    # a factor of validate's alone asks for it too
+    by_factor = spec('[factors]\naxis = "roll"\nmodel = [0, 1]\n').runs
+    assert [r.options["validate"] for r in by_factor] == [{"model": 0}, {"model": 1}]
+    assert "tune" not in by_factor[0].options
+    # a spec without them names its runs as before they could be asked for (a study's
+    # folder made then is resumed, not made again); one with them makes other runs
+    assert [r.name for r in spec(ONE).runs] == ["roll-1-dcc09b69", "roll-2-a0c6dcb7",
+                                                "roll-3-d0b9f380"]
+    assert spec(ONE + "[validate]\n").runs[0].name != "roll-1-dcc09b69"
+
+
+def test_a_run_that_validates_and_tunes_records_their_figures(tmp_path):
+    run = spec('[factors]\naxis = "roll"\nseed = 1\n[sweep]\nsignal = "multisine"\n'
+               'rig-time = 20\ntuning-band = true\n[validate]\n[tune]\n').runs[0]
+    record = runs.perform_run(run, str(tmp_path), run_command, command_line)
+    assert record["status"] == runs.FINISHED, record["error"]
+    assert record["commands"][2:] == ["heliquad validate sweep/models.json",
+                                      "heliquad tune sweep/models.json --out sweep/tuned"]
+    folder = tmp_path / "runs" / run.name / "sweep"
+    validation = json.loads((folder / "validation.json").read_text())
+    assert record["validated_stable"] is validation["stable"] is True
+    assert record["truth_phase_margin_deg"] == validation["truth_loops"]["input"][
+        "phase_margin_deg"]
+    tuned = json.loads((folder / "tuned" / "tune.json").read_text())["axes"]["roll"]
+    assert record["tuned_meets_spec"] is tuned["meets_spec"] is True
+    assert record["tuned_gains"] == tuned["tuned"]["gains"]
+    assert record["tuned_phase_margin_deg"] >= 45.0           # tune's default specification
+    assert record["verdicts"] is None
+
+
+def test_a_verdict_of_validate_or_tune_is_said_and_the_run_goes_on(tmp_path):
+    def command(words, log):
+        return {"validate": 1, "tune": 1}.get(words[0], 0)
+
+    run = spec(ONE + "[validate]\n[tune]\n").runs[0]
+    record = runs.perform_run(run, str(tmp_path), command, fake_line)
+    assert record["status"] == runs.FAILED          # no models.json: its figures cannot be read
+    assert record["verdicts"] == ("validate: the cascade is unstable with the model; tune: the "
+                                  "sweep's band forbids the specification (nothing written)")
+    assert record["validate_s"] >= 0 and record["tune_s"] >= 0   # both made
+
+    def failing(words, log):
+        return 1 if words[0] == "identify" else 0
+
+    run = spec(ONE + "[validate]\n").runs[1]
+    record = runs.perform_run(run, str(tmp_path), failing, fake_line)
+    assert record["error"] == "RuntimeError: heliquad identify ended with exit code 1 (see run.log)"
+    assert "validate_s" not in record                # nothing after a failed step
 
 
 def test_threads_running_commands_at_once_each_write_their_own_log(tmp_path):

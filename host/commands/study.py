@@ -18,13 +18,16 @@ __all__ = ["add_parser", "run", "run_command", "command_line", "option_names"]
 
 HELP = """\
 Make every run a study's spec (a TOML file, docs/studies.md) names: for each combination of
-its factors' values (axis, signal, turbulence, seed, firmware, any option of heliquad sweep or
-identify), `heliquad sweep --sil` on the simulated rig then `heliquad identify`, in-process,
-exactly as typed by hand with those options. Each run has a folder DIR/runs/NAME (its name
-and seed derived from its factors) holding the sweep folder, the commands' output and
-record.json, written last and atomically: a run whose folder holds one is finished and is
-never made again, so running the same command again does only what is missing (--retry-failed
-redoes the failed ones too). A run that fails is a row with its error.
+its factors' values (axis, signal, turbulence, seed, firmware, any option of heliquad sweep,
+identify, validate or tune), `heliquad sweep --sil` on the simulated rig then `heliquad
+identify`, and where the spec asks ([validate], [tune]) `heliquad validate` and `heliquad
+tune` on the models, in-process, exactly as typed by hand with those options. Each run has
+a folder DIR/runs/NAME (its name and seed derived from its factors) holding the sweep folder,
+the commands' output and record.json, written last and atomically: a run whose folder holds
+one is finished and is never made again, so running the same command again does only what is
+missing (--retry-failed redoes the failed ones too). A run that fails is a row with its error
+(and the figures of the steps before); validate's and tune's exit 1 are verdicts, said in the
+row's verdicts, and the run goes on.
 
 Runs execute on Dask distributed: a local cluster of one worker process per core (--workers N
 for another count), or an existing scheduler (--scheduler tcp://HOST:8786) whose workers have
@@ -41,7 +44,8 @@ example: heliquad study benchmarks/studies/closed_loop_id.toml --out cl_study
 """
 
 #: The commands a run makes (host/study/spec.py's STEPS), their modules here.
-STEP_MODULES = {"sweep": "sweep", "identify": "identify"}
+STEP_MODULES = {"sweep": "sweep", "identify": "identify", "validate": "validate", "tune": "tune"}
+
 
 
 def add_parser(sub, fmt) -> None:
@@ -154,8 +158,14 @@ def command_line(step: str, options: dict, folder: str | None = None) -> list:
             words += [f"--{name}", *map(_word, value)]
         else:
             words += [f"--{name}", _word(value)]
+    # the run folders' layout, imported when a line is made: --help imports every module
+    from ..study.runs import TUNED
+
     place = folder if folder is not None else "DIR"
-    return words + (["--sil", "--out", place] if step == "sweep" else [place])
+    models = os.path.join(place, "models.json")
+    return words + {"sweep": ["--sil", "--out", place], "identify": [place],
+                    "validate": [models],
+                    "tune": [models, "--out", os.path.join(place, TUNED)]}[step]
 
 
 def _word(value) -> str:

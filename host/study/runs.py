@@ -29,6 +29,12 @@ __all__ = ["perform_run", "worker_version", "read_record", "run_folder", "outcom
 RUNS = "runs"
 #: A run folder's files.
 RECORD, STARTED, SWEEP, LOG = "record.json", "started.json", "sweep", "run.log"
+#: tune's folder in the sweep folder (its outputs: tune.json, tuned.params, tune.png).
+TUNED = "tuned"
+#: A step's exit codes that are its verdict on the models, not a failure of the run: the
+#: run goes on, and its record says them (``verdicts``).
+VERDICTS = {("validate", 1): "the cascade is unstable with the model",
+            ("tune", 1): "the sweep's band forbids the specification (nothing written)"}
 #: A record's status.
 FINISHED, FAILED = "finished", "failed"
 
@@ -68,7 +74,7 @@ def perform_run(run, study_dir: str, command, line) -> dict:
     sweep_dir = os.path.join(folder, SWEEP)
     words = {step: line(step, options, sweep_dir)
              for step, options in _vehicle(run, folder).items()}
-    timing, started = {}, time.time()
+    timing, verdicts, started = {}, [], time.time()
     try:
         with open(os.path.join(folder, LOG), "w", encoding="utf-8") as log:
             for step, argv in words.items():
@@ -77,16 +83,19 @@ def perform_run(run, study_dir: str, command, line) -> dict:
                 log.flush()
                 code = command(argv, log)
                 timing[f"{step}_s"] = time.perf_counter() - t0
-                if code:
+                if (step, code) in VERDICTS:
+                    verdicts.append(f"{step}: {VERDICTS[step, code]}")
+                elif code:
                     raise RuntimeError(f"heliquad {step} ended with exit code {code} "
                                        f"(see {LOG})")
         status, error, result = FINISHED, None, outcome(sweep_dir)
     except Exception as exc:            # noqa: BLE001: a failed run is a row with its error
-        status, error, result = FAILED, _one_line(exc), {}
+        status, error, result = FAILED, _one_line(exc), _partial(sweep_dir)
     record = {"run": run.name, "status": status, "error": error, "factors": run.factors,
               "seed": run.seed, "attempt": attempt, "worker": f"{socket.gethostname()}:"
                                                                f"{os.getpid()}",
               "started_at": started, "run_s": time.time() - started, **timing,
+              "verdicts": "; ".join(verdicts) or None,
               "perturbed": run.perturb,
               "commands": [" ".join(["heliquad", *w]).replace(sweep_dir, SWEEP)
                            .replace(folder + os.sep, "") for w in words.values()],
@@ -127,6 +136,15 @@ def _one_line(exc: BaseException) -> str:
     return text if isinstance(exc, InputError) else f"{type(exc).__name__}: {text}"
 
 
+def _partial(sweep_dir: str) -> dict:
+    """A failed run's figures of the steps that finished before it failed (a tune that
+    could not meet its specification keeps the sweep's and identify's), else none."""
+    try:
+        return outcome(sweep_dir)
+    except Exception:                   # noqa: BLE001: what did not finish has no figures
+        return {}
+
+
 def outcome(sweep_dir: str) -> dict:
     """The figures of a swept and identified folder: errors against the simulator's truth
     (models.json's ``sil_truth``), the sigma's calibration, the recommended model, the
@@ -155,7 +173,49 @@ def outcome(sweep_dir: str) -> dict:
     loop = doc.get("broken_loop") or {}
     out["gain_margin_db"] = loop.get("gain_margin_db")
     out["phase_margin_deg"] = loop.get("phase_margin_deg")
-    return out
+    return {**out, **_validation(sweep_dir), **_tuning(sweep_dir, doc.get("axis"))}
+
+
+def _plant_loop(loops: dict) -> dict:
+    """The loop broken at the plant's input (roll and pitch: ``input``; yaw, whose cascade
+    is the rate loop alone: ``rate``), or {}."""
+    return (loops or {}).get("input") or (loops or {}).get("rate") or {}
+
+
+def _validation(sweep_dir: str) -> dict:
+    """validate's figures (validation.json beside models.json), {} without it: the margins
+    at the plant's input predicted from the model and the simulator's truth's, the closed
+    loop's stability, its step and its angle under turbulence."""
+    try:
+        with open(os.path.join(sweep_dir, "validation.json"), encoding="utf-8") as f:
+            doc = json.load(f)
+    except FileNotFoundError:
+        return {}
+    model, truth = _plant_loop(doc.get("loops")), _plant_loop(doc.get("truth_loops"))
+    return {"validated_stable": doc.get("stable"),
+            "validated_gain_margin_db": model.get("gain_margin_db"),
+            "validated_phase_margin_deg": model.get("phase_margin_deg"),
+            "truth_gain_margin_db": truth.get("gain_margin_db"),
+            "truth_phase_margin_deg": truth.get("phase_margin_deg"),
+            "step_overshoot_pct": (doc.get("step") or {}).get("overshoot_pct"),
+            "step_settling_s": (doc.get("step") or {}).get("settling_time_s"),
+            "turbulence_angle_rms_deg": (doc.get("turbulence") or {}).get("angle_rms_deg")}
+
+
+def _tuning(sweep_dir: str, axis) -> dict:
+    """tune's figures (TUNED/tune.json), {} without it: whether the tuned gains meet the
+    specification, the gains, and the predicted margins at the plant's input."""
+    try:
+        with open(os.path.join(sweep_dir, TUNED, "tune.json"), encoding="utf-8") as f:
+            doc = json.load(f)
+    except FileNotFoundError:
+        return {}
+    tuned = (doc.get("axes") or {}).get(axis) or {}
+    loop = _plant_loop((tuned.get("tuned") or {}).get("loops"))
+    return {"tuned_meets_spec": tuned.get("meets_spec"),
+            "tuned_gains": (tuned.get("tuned") or {}).get("gains"),
+            "tuned_gain_margin_db": loop.get("gain_margin_db"),
+            "tuned_phase_margin_deg": loop.get("phase_margin_deg")}
 
 
 def _point_errors(truth: dict, points: list) -> dict:

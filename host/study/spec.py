@@ -17,9 +17,12 @@ The spec (docs/studies.md)::
     lines = 8
     [identify]                 # heliquad identify's options, for every run
     delay = false
+    [validate]                 # optional: heliquad validate on identify's models
+    turbulence = "severe"
+    [tune]                     # optional: heliquad tune on them (empty: its defaults)
 
-A factor is an option of ``heliquad sweep`` (or, failing that, of ``heliquad identify``) by
-its long name; what the commands' options are comes from the caller (the commands' parsers),
+A factor is an option of ``heliquad sweep`` (or, failing that, of identify, validate or
+tune, in that order) by its long name; what the commands' options are comes from the caller (the commands' parsers),
 so a factor means what the option means on the command line.
 """
 
@@ -36,10 +39,14 @@ from dataclasses import dataclass, field
 from ...sim.base.errors import InputError
 from .perturb import base_text, check_perturb, draw, nominal
 
-__all__ = ["Run", "Spec", "load_spec", "parse_spec", "STEPS", "LEFT_OUT", "MAX_SEED"]
+__all__ = ["Run", "Spec", "load_spec", "parse_spec", "STEPS", "OPTIONAL_STEPS", "LEFT_OUT",
+           "MAX_SEED"]
 
 #: The commands a run makes, in order, and the tables of the spec that give their options.
-STEPS = ("sweep", "identify")
+STEPS = ("sweep", "identify", "validate", "tune")
+#: The steps a run makes only when the spec asks for them: its table (empty for the
+#: command's defaults), or a factor of theirs.
+OPTIONAL_STEPS = ("validate", "tune")
 #: A factor's value that leaves its option out (the command's default: no turbulence).
 LEFT_OUT = "none"
 #: The seed derived for a run whose spec gives none: below the sweep's bound.
@@ -114,6 +121,9 @@ def parse_spec(doc: dict, commands: dict, path: str = "spec") -> Spec:
         for name in options:
             _check_option(name, commands, path, f"[{step}]", step)
     names = _factor_names(factors, grids, commands, path)
+    made = set(STEPS) - set(OPTIONAL_STEPS) | {step for step in OPTIONAL_STEPS if step in doc} | \
+        {_check_option(n, commands, path, "[factors]") for n in names}
+    shared = {step: options for step, options in shared.items() if step in made}
     perturb = check_perturb(_table(doc, "perturb", path), path)
     runs, seen = [], set()
     for i, grid in enumerate(grids):
@@ -206,7 +216,7 @@ def _levels(value, name: str, path: str, where: str) -> list:
 def _run(factors: dict, shared: dict, commands: dict, perturb: dict) -> Run:
     """The run of one combination of the factors' values: each factor under its command,
     the shared options under theirs; the seed the factor's, else derived from the name."""
-    options = {step: dict(shared[step]) for step in STEPS}
+    options = {step: dict(opts) for step, opts in shared.items()}
     for name, value in factors.items():
         options[_check_option(name, commands, "spec", "[factors]")][name] = value
     options = {step: {k: v for k, v in opts.items() if v != LEFT_OUT}

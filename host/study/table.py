@@ -27,11 +27,18 @@ COLUMNS = {
     "model_worst_deg": pa.float64(), "recommended": pa.string(), "quality": pa.string(),
     "model_num": pa.string(), "model_den": pa.string(), "model_delay_s": pa.float64(),
     "gain_margin_db": pa.float64(), "phase_margin_deg": pa.float64(), "rig_s": pa.float64(),
-    "sweep_s": pa.float64(), "identify_s": pa.float64(), "run_s": pa.float64(),
+    "validated_stable": pa.bool_(), "validated_gain_margin_db": pa.float64(),
+    "validated_phase_margin_deg": pa.float64(), "truth_gain_margin_db": pa.float64(),
+    "truth_phase_margin_deg": pa.float64(), "step_overshoot_pct": pa.float64(),
+    "step_settling_s": pa.float64(), "turbulence_angle_rms_deg": pa.float64(),
+    "tuned_meets_spec": pa.bool_(), "tuned_gains": pa.string(),
+    "tuned_gain_margin_db": pa.float64(), "tuned_phase_margin_deg": pa.float64(),
+    "sweep_s": pa.float64(), "identify_s": pa.float64(), "validate_s": pa.float64(),
+    "tune_s": pa.float64(), "run_s": pa.float64(), "verdicts": pa.string(),
     "started_at": pa.float64(), "attempt": pa.int64(), "worker": pa.string(),
     "commands": pa.string()}
 #: Columns held as JSON text in the table (lists in the record).
-AS_JSON = ("model_num", "model_den")
+AS_JSON = ("model_num", "model_den", "tuned_gains")
 
 
 def rows(records: list, factor_names) -> list:
