@@ -190,10 +190,12 @@ def _identify(dir_path, out_dir, manifest, samples, damage, plots, orders, progr
         progress(f"warning: {manifest.get('tlog', 'sweep.tlog')} is damaged: {damage.summary()}; "
                  f"{damage.KEPT}")
     axis = manifest["axis"]
-    points, segments, firsts, skipped = estimate_points(manifest, samples, estimate, progress)
+    by_entry = []
+    points, segments, firsts, skipped = estimate_points(manifest, samples, estimate, progress,
+                                                        by_entry)
     linearity = None
     if is_linearity(manifest):          # the best linear approximation is what is fitted
-        points, linearity = linearity_points(manifest, samples, estimate, progress)
+        points, linearity = linearity_points(manifest, by_entry, progress)
     saturated = _saturated(manifest)
     for text in saturated:
         progress(f"  warning: {text}: the record is not the linear response")

@@ -27,7 +27,6 @@ import numpy as np
 
 from ...sim.base.errors import InputError
 from ..estimate.linearity import best_linear_approximation, level_verdict
-from .sweep_points import estimate_points
 
 __all__ = ["is_linearity", "linearity_points", "DISTORTION_LIMIT_DB"]
 
@@ -42,18 +41,15 @@ def is_linearity(manifest) -> bool:
     return bool((manifest.get("design") or {}).get("linearity"))
 
 
-def linearity_points(manifest, samples, estimate, progress) -> tuple:
+def linearity_points(manifest, by_entry, progress) -> tuple:
     """``(points, record)``: the BLA at the larger amplitude as the points to fit, and
     models.json's ``linearity`` (each level's lines and verdict, the amplitude dependence,
-    ``flagged``); each level said."""
+    ``flagged``); each level said. ``by_entry``: each realisation's entry with its points,
+    as :func:`~.sweep_points.estimate_points` estimated them."""
     peaks = manifest["design"]["linearity"]["peaks"]
     levels = {}
-    for entry in manifest["frequencies"]:
-        if entry.get("status") != "ok" or "level" not in entry:
-            continue
-        found, *_ = estimate_points({**manifest, "frequencies": [entry]}, samples, estimate,
-                                    lambda *_a, **_k: None)
-        if found:
+    for entry, found in by_entry:
+        if found and "level" in entry:
             levels.setdefault(entry["level"], []).append(found)
     if 0 not in levels:
         raise InputError("no realisation at the larger amplitude was measured")

@@ -79,12 +79,14 @@ def _lost_share(entry, present) -> float:
     return 0.0 if present is None else 1.0 - float(np.mean(present))
 
 
-def estimate_points(manifest, samples, estimate, progress) -> tuple:
+def estimate_points(manifest, samples, estimate, progress, by_entry=None) -> tuple:
     """(points, the records they came from, each record's first point, the frequencies
     skipped and why): one point per measured frequency of a dwell, one per line of a
     multisine, against the excitation or the input (``estimate``). A record that lost
     samples on the link is estimated from those that arrived (each point's
-    ``lost_share``); one that lost more than the sweep allows is skipped."""
+    ``lost_share``); one that lost more than the sweep allows is skipped. ``by_entry``: a
+    list that gets ``(entry, its points)`` for each record estimated (a linearity campaign
+    groups them by realisation)."""
     points, segments, firsts, skipped = [], [], [], []
     for entry, t, r, u, y, present in sweep_segments(manifest, samples):
         what = _entry_name(entry)
@@ -104,7 +106,10 @@ def estimate_points(manifest, samples, estimate, progress) -> tuple:
             progress(f"  {what} skipped: {exc}")
             skipped.append(f"{what}: {exc}")
             continue
-        points += [dataclasses.replace(p, lost_share=lost) for p in found]
+        found = [dataclasses.replace(p, lost_share=lost) for p in found]
+        points += found
+        if by_entry is not None:
+            by_entry.append((entry, found))
         if lost:
             progress(f"  {what}: {100 * lost:.1f} % of its samples were lost on the link; "
                      "estimated from the rest")
