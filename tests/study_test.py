@@ -5,8 +5,10 @@ one is, a failed one is a row with its error); the table holds one row per run."
 
 from __future__ import annotations
 
+import cmath
 import io
 import json
+import math
 import os
 import re
 import subprocess
@@ -18,6 +20,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from heliquad.host.commands.study import command_line, option_names, run_command
+from heliquad.host.records.points import read_points_csv
 from heliquad.host.study import runs
 from heliquad.host.study.execute import forget, plan
 from heliquad.host.study.spec import parse_spec
@@ -133,6 +136,25 @@ def test_a_run_that_validates_and_tunes_records_their_figures(tmp_path):
     assert record["tuned_gains"] == tuned["tuned"]["gains"]
     assert record["tuned_phase_margin_deg"] >= 45.0           # tune's default specification
     assert record["verdicts"] is None
+
+
+@pytest.mark.pil
+def test_a_firmware_factor_flies_the_teensy_image_in_its_runs(tmp_path):
+    # the exact image in the emulated chip, as `sweep --firmware teensy35` flies it: the
+    # same run's points within a gyro step of the host build's (measured 0.01 dB)
+    made = {}
+    for run in spec('[factors]\naxis = "roll"\nseed = 1\nfirmware = ["host", "teensy35"]\n'
+                    '[sweep]\nsignal = "multisine"\nrig-time = 10\nlines = 5\n').runs:
+        record = runs.perform_run(run, str(tmp_path), run_command, command_line)
+        assert record["status"] == runs.FINISHED, record["error"]
+        made[run.factors["firmware"]] = record
+    assert "--firmware teensy35" in made["teensy35"]["commands"][0]
+    host, image = (read_points_csv(tmp_path / "runs" / made[f]["run"] / "sweep" / "points.csv")
+                   for f in ("host", "teensy35"))
+    assert len(host) == len(image) == 5
+    for p, q in zip(host, image):
+        assert abs(20 * math.log10(abs(q.gain / p.gain))) < 0.1
+        assert abs(math.degrees(cmath.phase(q.gain / p.gain))) < 0.5
 
 
 def test_a_verdict_of_validate_or_tune_is_said_and_the_run_goes_on(tmp_path):
