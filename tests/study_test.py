@@ -365,8 +365,45 @@ def test_perturbed_vehicle_numbers_are_drawn_per_run_and_written_as_a_vehicle_fi
     assert got.body.inertia_kg_m2 == nominal.inertia_kg_m2     # the rest as it was
 
 
+def test_an_arrays_elements_and_the_rotors_numbers_are_drawn_each_its_own(tmp_path):
+    from heliquad.host.study.perturb import base_text, perturbed_text
+    from heliquad.sim.plant.vehicle_params import load_params
+
+    s = spec('[factors]\naxis = "roll"\nseed = [1, 2]\n[perturb]\n'
+             '"body.inertia_kg_m2" = {normal = 0.1}\n'
+             '"rotors.max_thrust_n" = {uniform = 0.2}\n'
+             '"rotors.1.time_constant_s" = {normal = 0.3}\n'
+             '"rotors.2.position_m[0]" = {normal = 0.05}\n')
+    assert s.columns == ("axis", "seed", "body.inertia_kg_m2[0]", "body.inertia_kg_m2[1]",
+                         "body.inertia_kg_m2[2]", *(f"rotors.{n}.max_thrust_n"
+                                                    for n in range(1, 6)),
+                         "rotors.1.time_constant_s", "rotors.2.position_m[0]")
+    nominal = load_params()
+    for run in s.runs:
+        drawn = run.perturb
+        assert len({drawn[f"body.inertia_kg_m2[{i}]"] for i in range(3)}) == 3  # own draws
+        path = tmp_path / f"{run.name}.toml"
+        path.write_text(perturbed_text(base_text(None), drawn))
+        got = load_params(str(path))                           # a vehicle file the sim reads
+        assert list(got.body.inertia_kg_m2) == [drawn[f"body.inertia_kg_m2[{i}]"]
+                                                for i in range(3)]
+        for n, rotor in enumerate(got.rotors, 1):
+            assert rotor.max_thrust_n == drawn[f"rotors.{n}.max_thrust_n"]
+            assert abs(rotor.max_thrust_n / nominal.rotors[n - 1].max_thrust_n - 1) <= 0.2
+            want = drawn["rotors.1.time_constant_s"] if n == 1 else \
+                nominal.rotors[n - 1].time_constant_s
+            assert rotor.time_constant_s == want               # the others as they were
+        assert got.rotors[1].position_m[0] == drawn["rotors.2.position_m[0]"]
+        assert list(got.rotors[1].position_m[1:]) == list(nominal.rotors[1].position_m[1:])
+        assert got.body.mass_kg == nominal.body.mass_kg
+
+
 @pytest.mark.parametrize("table, says", [
-    ('"body.mass_g" = {normal = 0.1}', "not a number of a section"),
+    ('"body.mass_g" = {normal = 0.1}', "not a number of the vehicle file"),
+    ('"body.inertia_kg_m2[3]" = {normal = 0.1}', "not a number of the vehicle file"),
+    ('"rotors.6.max_thrust_n" = {normal = 0.1}', "not a number of the vehicle file"),
+    ('"rotors.spin" = {normal = 0.1}', "a rotor's spin is its direction"),
+    ('"rig.hinge.x" = {normal = 0.1}', "not a number of the vehicle file"),
     ('"body.mass_kg" = {lognormal = 0.1}', "give {normal = S} or {uniform = W}"),
     ('"body.mass_kg" = {normal = 2}', "a relative width from 0 to below 1"),
 ])

@@ -66,7 +66,8 @@ class Run:
     name: str
     factors: dict
     options: dict = field(default_factory=dict)
-    #: The vehicle's numbers drawn for this run ({section.name: value}; [perturb]).
+    #: The vehicle's numbers drawn for this run ({section.name: value}, an array's elements
+    #: and the rotors' numbers each its own; [perturb], host/study/perturb.py).
     perturb: dict = field(default_factory=dict)
 
     @property
@@ -81,7 +82,8 @@ class Spec:
     description: str
     factor_names: tuple
     runs: list
-    #: The perturbed vehicle numbers ([perturb]'s keys), each a column of the table too.
+    #: The perturbed vehicle numbers (every number [perturb]'s keys name), each a column of
+    #: the table too.
     perturbed: tuple = ()
 
     @property
@@ -141,7 +143,8 @@ def parse_spec(doc: dict, commands: dict, path: str = "spec") -> Spec:
                          "values?)")
     if perturb:
         runs = _drawn(runs, perturb, path)
-    return Spec(path, str(study.get("description", "")), tuple(names), runs, tuple(perturb))
+    perturbed = tuple(dict.fromkeys(n for run in runs for n in run.perturb))
+    return Spec(path, str(study.get("description", "")), tuple(names), runs, perturbed)
 
 
 def _drawn(runs: list, perturb: dict, path: str) -> list:
@@ -153,7 +156,7 @@ def _drawn(runs: list, perturb: dict, path: str) -> list:
         base = run.options["sweep"].get("params")
         if base not in nominals:
             nominals[base] = nominal(base_text(base), perturb, path)
-        out.append(dataclasses.replace(run, perturb=draw(run.name, perturb, nominals[base])))
+        out.append(dataclasses.replace(run, perturb=draw(run.name, nominals[base])))
     return out
 
 
