@@ -155,3 +155,35 @@ def test_a_segment_cut_short_is_measured_up_to_where_it_got(run, tmp_path):
     assert f"the chirp stopped at {top:.4g} Hz of its 4.5" in res.stdout
     points = read_points_csv(tmp_path / "cut-sid1-roll" / "points.csv")
     assert max(p.freq_hz for p in points) <= top * 1.0001
+
+
+def test_a_rate_target_segment_gives_the_plant_with_response_plant(tmp_path):
+    # SID_AXIS 7 (the roll rate target) of a SIL rate-injection chirp: by default its loop
+    # (the target to the rate); --response plant, the mixer's input (ROut) to the rate, both
+    # against the chirp, as the same run's telemetry log gives it
+    folder = tmp_path / "sweep"
+    res = heliquad("sweep", "--axis", "roll", "--sil", "--signal", "chirp", "--inject", "rate",
+                   "--rig-time", 30, "--out", folder)
+    assert res.returncode == 0, res.stderr
+    _, manifest, samples, _ = load_sweep(str(folder))
+    w = DataFlashWriter()
+    header(w, 7)
+    write_sid_segment(w, manifest, samples, 7)
+    log = w.save(tmp_path / "rate.BIN")
+    got = {}
+    for what, path, out, options in (
+            ("bin loop", log, tmp_path / "rate-sid1-roll", ()),
+            ("bin plant", log, tmp_path / "rate-sid1-roll", ("--response", "plant")),
+            ("tlog plant", folder, folder, ("--response", "plant"))):
+        res = heliquad("identify", path, *options)
+        assert res.returncode == 0, res.stderr
+        said = json.loads((out / "models.json").read_text()).get("response")
+        assert said == (options[1] if options else None)
+        got[what] = read_points_csv(out / "points.csv")
+    a, b = got["tlog plant"], got["bin plant"]
+    assert len(a) == len(b) > 10
+    ratio = np.array([q.gain / p.gain for p, q in zip(a, b)])
+    assert np.max(np.abs(20 * np.log10(np.abs(ratio)))) < 0.05
+    assert np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
+    loop, plant = got["bin loop"][0].gain, got["bin plant"][0].gain
+    assert abs(loop) < 2.0 < abs(plant)      # the loop follows its target; the plant is larger
