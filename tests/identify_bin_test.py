@@ -40,6 +40,8 @@ MODEL_DB, MODEL_DEG = 0.5, 3.0
 DWELL = ("--freqs-hz", 2, 4, 8, "--cycles", 4)
 MULTISINE = ("--signal", "multisine", "--lines", 6, "--freqs-hz", 1, 8, "--rig-time", 12)
 CHIRP = ("--signal", "chirp", "--freqs-hz", 1, 8, "--rig-time", 12)
+#: A linearity campaign of two realisations at each of its two peaks.
+LINEARITY = ("--signal", "multisine", "--linearity", 2)
 #: A card busy for 100 ms once a second: the ring (about 83 ms) overflows for about 17 ms,
 #: loops are missing from the log (HQGP), under the 5 % a record may lose wherever the busy
 #: spells fall (the 8 Hz dwell's 94 samples can hold one whole spell's losses: 120 ms, with
@@ -75,7 +77,7 @@ def runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("identify_bin")
     out = {}
     for name, args in (("dwell", DWELL), ("multisine", MULTISINE), ("chirp", CHIRP),
-                       ("busy", (*DWELL, "--sd-faults", BUSY))):
+                       ("busy", (*DWELL, "--sd-faults", BUSY)), ("linearity", LINEARITY)):
         sweep, board = flown(tmp, name, *args)
         heliquad("identify", sweep)
         target = board / "00000001.BIN" if name != "multisine" else board   # a file, a folder
@@ -134,6 +136,43 @@ def test_the_log_gives_back_the_manifests_experiment(runs, name):
     for want, got in zip(measured, found["frequencies"]):
         assert {k: got.get(k) for k in SAME_KEYS} == {k: want.get(k) for k in SAME_KEYS}
         assert got["lost"] == want["lost"] == 0
+
+
+def test_a_linearity_campaigns_log_is_read_as_the_campaign(runs):
+    # its realisations told apart by their phases (read from the logged excitation) and
+    # their peaks, none superseded: the verdicts are the telemetry log's, number for number
+    sweep, board, said = runs["linearity"]
+    want = read_models_json(sweep / "models.json").linearity
+    got = read_models_json(board / "models.json").linearity
+    assert got is not None and "linearity at peak 0.25" in said.stdout
+    assert [level["peak"] for level in got["levels"]] == [1.0, 0.25]
+    for a, b in zip(want["levels"], got["levels"]):
+        assert b["realisations"] == a["realisations"] == 2
+        assert b["distortion_db"] == pytest.approx(a["distortion_db"], rel=POINT_REL)
+        assert b["noise_db"] == pytest.approx(a["noise_db"], rel=POINT_REL)
+        assert b["flagged"] == a["flagged"]
+    manifest = read_manifest(sweep / "manifest.json")
+    found, _, _ = bin_sweep(next(board.glob("*.BIN")))
+    for e, f in zip(manifest["frequencies"], found["frequencies"]):
+        assert (f["level"], f["realisation"]) == (e["level"], e["realisation"])
+        assert np.allclose(np.exp(1j * np.array(f["phases_rad"])),
+                           np.exp(1j * np.array(e["phases_rad"])), atol=1e-4)
+
+
+def test_the_same_multisine_flown_again_is_not_a_linearity_campaign():
+    from heliquad.host.campaign.bin_sweep import _linearity
+
+    def entry(amplitude, phases):
+        return {"status": "ok", "signal": "multisine", "freq_hz": 0.1, "orders": [1, 3],
+                "amplitude": amplitude, "phases_rad": phases}
+
+    again = [entry(a, [0.3, 1.2]) for a in (1.0, 0.25, 1.0, 0.25)]
+    assert _linearity(again) is None                   # each peak's two are one multisine
+    campaign = [entry(1.0, [0.3, 1.2]), entry(0.25, [2.0, 0.1]), entry(1.0, [1.9, 2.5]),
+                entry(0.25, [0.7, 3.0])]
+    assert _linearity(campaign)["linearity"]["peaks"] == [1.0, 0.25]
+    assert [(e["level"], e["realisation"]) for e in campaign] == [(0, 0), (1, 0), (0, 1), (1, 1)]
+    assert _linearity(campaign[:3]) is None            # one realisation at the small peak
 
 
 def test_loops_missing_from_the_log_are_lost_samples(runs):

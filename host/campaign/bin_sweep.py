@@ -24,7 +24,9 @@ holds whole, averaged and transformed, give one line per harmonic whose amplitud
 than :data:`LINE_FLOOR` of the largest (the firmware computes the signal in float, so the
 harmonics it does not excite stay below 1e-6 of it). SIDS names only the band's edges (FSt,
 FSp), and reading the lines from the signal needs no field the log does not have; the edges
-SIDS gives tell a multisine from a sine.
+SIDS gives tell a multisine from a sine. Each line's phase is read with it; multisines on the
+same lines at two peaks, whose phases differ between those of one peak, are a linearity
+campaign's realisations (:func:`_linearity`), each used, none superseded.
 """
 
 from __future__ import annotations
@@ -88,7 +90,9 @@ def log_sweep(log, path) -> tuple:
     axis, inject = _axis_injection(path, s[active])
     loop_us = _loop_period_us(s)
     entries = [_entry(e, s, loop_us, mav) for e in _excitations(log, active, loop_us)]
-    _supersede(entries)
+    design = _linearity(entries)
+    if design is None:          # a campaign's realisations are each used, not superseded
+        _supersede(entries)
     unused = [e for e in entries if e["status"] != "ok" and
               not e["status"].startswith("superseded")]
     gains = gains_from_params(axis, log.params)
@@ -96,6 +100,7 @@ def log_sweep(log, path) -> tuple:
                 "source": {"kind": "log", "file": os.path.basename(path)},
                 "signal": next((e["signal"] for e in entries if e.get("signal")), "dwell"),
                 "frequencies": entries, "params": log.params or None,
+                **({"design": design} if design else {}),
                 "gains": None if gains is None else dataclasses.asdict(gains),
                 "complete": not unused,
                 "aborted": "; ".join(f"{e['freq_hz']:.4g} Hz {e['status']}" for e in unused)
@@ -172,11 +177,13 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
     if e.moves:
         return {**entry, "status": "its frequency moves (a chirp) but the log has no SIDS "
                                    "naming its two ends"}
-    orders = _lines(s.excitation[rows].astype(float), places - fade, last - fade + 1, period)
-    if orders is None:
+    lines = _lines(s.excitation[rows].astype(float), places - fade, last - fade + 1, period,
+                   fade)
+    if lines is None:
         return {**entry, "status": "no whole period of its excitation in the log"}
+    orders, phases = lines
     if orders != [1] or (e.setup and e.setup["FSp"] > e.setup["FSt"]):
-        entry.update(signal="multisine", orders=orders, fade_samples=fade)
+        entry.update(signal="multisine", orders=orders, fade_samples=fade, phases_rad=phases)
     return entry
 
 
@@ -194,18 +201,56 @@ def _chirp_entry(e: _Excitation, rows, fade: int, last: int, loop_us: float) -> 
             "fade_samples": fade}
 
 
-def _lines(r, places, length: int, period: int) -> list | None:
-    """The harmonics of ``period`` the excitation ``r`` (at ``places`` of a window
-    ``length`` long) has, from its periods the log holds whole; None without one."""
+def _lines(r, places, length: int, period: int, fade: int) -> tuple | None:
+    """``(harmonics, their phases)``: the harmonics of ``period`` the excitation ``r`` (at
+    ``places`` of a window ``length`` long, which starts ``fade`` samples into the
+    excitation) has, from its periods the log holds whole, and each one's phase (rad, of
+    its sine, at the excitation's start as the design gives it); None without one."""
     grid = np.full(length // period * period, np.nan)
     inside = places < grid.size
     grid[places[inside]] = r[inside]
     periods = grid.reshape(-1, period)
     whole = periods[~np.isnan(periods).any(axis=1)]
-    amplitude = np.abs(np.fft.rfft(whole.mean(axis=0)))[1:] if whole.size else np.zeros(1)
+    spectrum = np.fft.rfft(whole.mean(axis=0))[1:] if whole.size else np.zeros(1)
+    amplitude = np.abs(spectrum)
     if not amplitude.max() > 0:
         return None
-    return (np.flatnonzero(amplitude > LINE_FLOOR * amplitude.max()) + 1).tolist()
+    lines = np.flatnonzero(amplitude > LINE_FLOOR * amplitude.max())
+    # a sine's phase p: its DFT bin is proportional to exp(j (p - pi / 2)); the window's
+    # start is the fade's length after the excitation's, where the design's phase is
+    shift = 2 * np.pi * (lines + 1) * fade / period
+    return (lines + 1).tolist(), [float(np.angle(spectrum[k] * np.exp(-1j * d)) + np.pi / 2)
+                                  for k, d in zip(lines, shift)]
+
+
+#: Two realisations of a linearity campaign differ in some line's phase by more than this.
+PHASES_DIFFER_RAD = 0.1
+
+
+def _linearity(entries) -> dict | None:
+    """A linearity campaign's design read from its log (sweep --linearity), or None: every
+    measured multisine on the same lines of the same period, at two peaks, and at each peak
+    at least two whose phases differ (random-phase realisations; the same multisine flown
+    again is not one). Its entries get their level (0 the larger peak) and realisation."""
+    ok = [e for e in entries if e["status"] == "ok" and e.get("signal") == "multisine"]
+    if len(ok) < 4 or len({(e["freq_hz"], tuple(e["orders"])) for e in ok}) != 1 or \
+            any(e["status"] == "ok" and e.get("signal") != "multisine" for e in entries):
+        return None
+    peaks = sorted({e["amplitude"] for e in ok}, reverse=True)
+    if len(peaks) != 2:
+        return None
+    levels = [[e for e in ok if e["amplitude"] == peak] for peak in peaks]
+    for level in levels:
+        phases = np.array([e["phases_rad"] for e in level])
+        step = np.abs(np.angle(np.exp(1j * (phases[:, None, :] - phases[None, :, :]))))
+        distinct = step.max(axis=2) > PHASES_DIFFER_RAD
+        if len(level) < 2 or not distinct[~np.eye(len(level), dtype=bool)].all():
+            return None
+    for index, level in enumerate(levels):
+        for realisation, e in enumerate(level):
+            e.update(level=index, realisation=realisation)
+    return {"linearity": {"realisations": max(len(level) for level in levels), "peaks": peaks,
+                          "design": "read from the log"}}
 
 
 def _supersede(entries) -> None:
