@@ -398,6 +398,19 @@ def test_an_arrays_elements_and_the_rotors_numbers_are_drawn_each_its_own(tmp_pa
         assert got.body.mass_kg == nominal.body.mass_kg
 
 
+def test_a_number_whose_line_cannot_be_rewritten_is_refused_before_any_run(tmp_path):
+    from heliquad.host.study.perturb import base_text
+
+    text = base_text(None).replace("inertia_kg_m2 = [0.0118, 0.0118, 0.0226]",
+                                   "inertia_kg_m2 = [\n  0.0118,\n  0.0118,\n  0.0226,\n]")
+    assert "inertia_kg_m2 = [\n" in text
+    (tmp_path / "v.toml").write_text(text)
+    with pytest.raises(InputError, match=r"body.inertia_kg_m2\[0\]: its line in the vehicle "
+                                         "file could not be rewritten"):
+        spec(f'[factors]\naxis = "roll"\n[sweep]\nparams = "{tmp_path / "v.toml"}"\n'
+             '[perturb]\n"body.inertia_kg_m2" = {normal = 0.1}\n')
+
+
 @pytest.mark.parametrize("table, says", [
     ('"body.mass_g" = {normal = 0.1}', "not a number of the vehicle file"),
     ('"body.inertia_kg_m2[3]" = {normal = 0.1}', "not a number of the vehicle file"),

@@ -148,8 +148,17 @@ def perturbed_text(text: str, values: dict) -> str:
             lines[i] = f"{m.group(1)}{m.group(2)}{m.group(3)}{values[name]!r}  # perturbed " \
                        f"from {m.group(4)}\n"
         elif any(k.startswith(name + "[") for k in values):
-            old = tomllib.loads(f"v = {m.group(4)}")["v"]
+            try:
+                old = tomllib.loads(f"v = {m.group(4)}")["v"]
+            except tomllib.TOMLDecodeError:     # not on one line: said below
+                continue
             new = [values.get(f"{name}[{j}]", v) for j, v in enumerate(old)]
             lines[i] = f"{m.group(1)}{m.group(2)}{m.group(3)}{new!r}  # perturbed from " \
                        f"{m.group(4)}\n"
-    return "".join(lines)
+    out = "".join(lines)
+    doc = tomllib.loads(out)
+    for name, value in values.items():         # each number written where the sim reads it
+        if numbers(doc, name, "the run's vehicle file") != [(name, value)]:
+            raise InputError(f"[perturb] {name}: its line in the vehicle file could not be "
+                             "rewritten (a value over several lines?): give it on one line")
+    return out

@@ -37,7 +37,7 @@ import tomllib
 from dataclasses import dataclass, field
 
 from ...sim.base.errors import InputError
-from .perturb import base_text, check_perturb, draw, nominal
+from .perturb import base_text, check_perturb, draw, nominal, perturbed_text
 
 __all__ = ["Run", "Spec", "load_spec", "parse_spec", "STEPS", "OPTIONAL_STEPS", "LEFT_OUT",
            "MAX_SEED"]
@@ -157,6 +157,11 @@ def _drawn(runs: list, perturb: dict, path: str) -> list:
         if base not in nominals:
             nominals[base] = nominal(base_text(base), perturb, path)
         out.append(dataclasses.replace(run, perturb=draw(run.name, nominals[base])))
+        if len(out) == 1 or out[-2].options["sweep"].get("params") != base:
+            try:                                    # each file written as drawn, or refused
+                perturbed_text(base_text(base), out[-1].perturb)
+            except InputError as exc:
+                raise InputError(f"{path}: {exc}") from None
     return out
 
 
