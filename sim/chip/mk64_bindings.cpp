@@ -281,7 +281,10 @@ void bind_mk64(py::module_& m) {
             const int n = c.pending_exception();
             return n < 0 ? py::object(py::none()) : py::object(py::int_(n));
         })
-        .def("preempts", &Core::preempts, py::arg("number"), py::arg("ignore_primask") = false)
+        .def("preempts", [](Core& c, int number, bool ignore_primask) {
+            c.forget_masks();                    // Python may have written them
+            return c.preempts(number, ignore_primask);
+        }, py::arg("number"), py::arg("ignore_primask") = false)
         .def("execution_priority", [](Core& c, bool ignore_primask) {
             c.forget_masks();                    // Python may have written them
             return c.execution_priority(ignore_primask);
