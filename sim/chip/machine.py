@@ -781,7 +781,6 @@ class _Native:
         regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in
                 ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "EPSR", "CONTROL", "FPSCR",
                  "PRIMASK", "BASEPRI", "FAULTMASK")}
-        regs.update({f"S{i}": getattr(A, f"UC_ARM_REG_S{i}") for i in range(16)})
         regs.update({f"D{i}": getattr(A, f"UC_ARM_REG_D{i}") for i in range(8)})
         self.core = Mk64Core(functions, regs, {k: address(v) for k, v in callbacks.items()},
                              [exception_name(n) for n in range(N_EXCEPTIONS)])

@@ -164,7 +164,6 @@ void bind_mk64(py::module_& m) {
                  r.fpscr = regs["FPSCR"].cast<int>(); r.primask = regs["PRIMASK"].cast<int>();
                  r.basepri = regs["BASEPRI"].cast<int>();
                  r.faultmask = regs["FAULTMASK"].cast<int>();
-                 for (int i = 0; i < 16; ++i) r.s[i] = regs[("S" + std::to_string(i)).c_str()].cast<int>();
                  for (int i = 0; i < 8; ++i) r.d[i] = regs[("D" + std::to_string(i)).c_str()].cast<int>();
                  PyCallbacks p;
                  p.decode = function<decltype(p.decode)>(callbacks, "decode");

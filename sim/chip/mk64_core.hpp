@@ -58,7 +58,6 @@ struct Uc {
 // unicorn's register numbers for the registers the core reads and writes (from arm_const).
 struct Regs {
     int r0, r1, r2, r3, r12, lr, pc, sp, xpsr, epsr, control, fpscr, primask, basepri, faultmask;
-    int s[16];
     int d[8];      // D0-D7: S0-S15 in pairs (S2n the low word), read and written whole
 };
 
