@@ -999,6 +999,27 @@ def test_image_runs_are_deterministic_and_the_native_paths_agree_with_the_refere
     assert counts["inline_boundaries"] == 0 and counts["native_accesses"] == 0
 
 
+def test_a_native_stop_stops_where_a_breakpoint_does_and_the_run_goes_on_alike():
+    # Machine.stop_at (the lockstep's loop end, no call into Python) against a breakpoint
+    # with no callback at the same instruction: each stop at the same PC, instruction count
+    # and cycle, and each run after it goes on through the stop alike.
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    runs = []
+    for native in (False, True):
+        board = Teensy35(IMAGE, track_loops=False)
+        m = board.machine
+        (m.stop_at if native else m.break_at)("hq::teensy::LoopTimer::wait")
+        stops = []
+        for _ in range(6):
+            stop = m.run(instructions=BOOT_BUDGET)
+            assert stop.reason == ("stop-at" if native else "breakpoint")
+            stops.append((stop.pc, m.pc, m.instructions, m.cycles, m.sleep_cycles))
+        runs.append((stops, list(board.chip.uart0.sent), list(m.exception_log)))
+    assert runs[0] == runs[1]
+    assert len({pc for pc, *_ in runs[0][0]}) == 1
+
+
 def test_take_telemetry_hands_over_each_byte_once():
     require_image()
     pytest.importorskip("heliquad._firmware")

@@ -121,6 +121,10 @@ class Ftm(NativeRegisters):
         runs waits for the period's end, so this is what the pin carries from then on."""
         return self.machine.core.ftm_commanded_value(self.device, ch)
 
+    def commanded_values(self) -> list:
+        """commanded_value of every channel, 0 to 7, in one call."""
+        return self.machine.core.ftm_commanded_values(self.device)
+
     def high_true(self, ch) -> bool:
         sc = self.v[f"C{ch}SC"]
         return bool(sc & self.bit("C0SC", "ELSB")) and not sc & self.bit("C0SC", "ELSA")

@@ -54,7 +54,7 @@ N_EXCEPTIONS = 16 + 86
 _INTR_UNDEF = 1
 # Why Mk64Core.run() returned (sim/chip/mk64_core.hpp, enum Run).
 (_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
- _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET) = range(1, 12)
+ _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET, _RUN_STOP_AT) = range(1, 13)
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
  GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE) = range(11)
@@ -89,7 +89,7 @@ class ChipReset(EmulationError):
 @dataclass
 class Stop:
     """Why a run returned."""
-    reason: str                 # budget | time | breakpoint | bkpt | sleep-forever | <name>
+    reason: str         # budget | time | breakpoint | stop-at | bkpt | sleep-forever | <name>
     pc: int
     detail: dict = field(default_factory=dict)
 
@@ -348,6 +348,16 @@ class Machine:
             self.uc.ctl_remove_cache(address, address + 4)      # retranslate with the hook
         return address
 
+    def stop_at(self, where) -> int:
+        """Stop every run that reaches the instruction at ``where`` (address or symbol)
+        before it executes, with reason ``stop-at``; the next run goes on through it. As a
+        breakpoint with no callback, but native: no call into Python at the stop, for the
+        stops a lockstep driver makes every loop."""
+        address = self.image.symbol(where).address if isinstance(where, str) else where & ~1
+        self.core.add_stop_at(address)
+        self.uc.ctl_remove_cache(address, address + 4)      # retranslate with the hook
+        return address
+
     def _on_breakpoint(self, uc, address, size, _):
         if address == self._bp_resume:
             self._bp_resume = None
@@ -570,6 +580,8 @@ class Machine:
                 if code == _RUN_STOP:
                     self._bp_resume = self._stop.pc
                     return self._stop
+                if code == _RUN_STOP_AT:
+                    return Stop("stop-at", core.stop_at_pc)
                 if code == _RUN_BKPT:
                     pc = core.bkpt_pc
                     return Stop("bkpt", pc, {"imm": self.uc.mem_read(pc, 2)[0]})
@@ -763,12 +775,13 @@ class _Native:
         address = self.address
         functions = {name: address(getattr(lib, name)) for name in
                      ("uc_emu_start", "uc_emu_stop", "uc_reg_read", "uc_reg_write", "uc_reg_write2",
+                      "uc_reg_read_batch", "uc_reg_write_batch",
                       "uc_mem_read", "uc_mem_write", "uc_hook_add", "uc_mmio_map")}
         functions["handle"] = handle.value
         regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in
                 ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "EPSR", "CONTROL", "FPSCR",
                  "PRIMASK", "BASEPRI", "FAULTMASK")}
-        regs.update({f"S{i}": getattr(A, f"UC_ARM_REG_S{i}") for i in range(16)})
+        regs.update({f"D{i}": getattr(A, f"UC_ARM_REG_D{i}") for i in range(8)})
         self.core = Mk64Core(functions, regs, {k: address(v) for k, v in callbacks.items()},
                              [exception_name(n) for n in range(N_EXCEPTIONS)])
 

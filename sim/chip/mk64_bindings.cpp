@@ -148,6 +148,9 @@ void bind_mk64(py::module_& m) {
                  u.reg_read = function<decltype(u.reg_read)>(uc, "uc_reg_read");
                  u.reg_write = function<decltype(u.reg_write)>(uc, "uc_reg_write");
                  u.reg_write2 = function<decltype(u.reg_write2)>(uc, "uc_reg_write2");
+                 u.reg_read_batch = function<decltype(u.reg_read_batch)>(uc, "uc_reg_read_batch");
+                 u.reg_write_batch =
+                     function<decltype(u.reg_write_batch)>(uc, "uc_reg_write_batch");
                  u.mem_read = function<decltype(u.mem_read)>(uc, "uc_mem_read");
                  u.mem_write = function<decltype(u.mem_write)>(uc, "uc_mem_write");
                  u.hook_add = function<decltype(u.hook_add)>(uc, "uc_hook_add");
@@ -161,7 +164,7 @@ void bind_mk64(py::module_& m) {
                  r.fpscr = regs["FPSCR"].cast<int>(); r.primask = regs["PRIMASK"].cast<int>();
                  r.basepri = regs["BASEPRI"].cast<int>();
                  r.faultmask = regs["FAULTMASK"].cast<int>();
-                 for (int i = 0; i < 16; ++i) r.s[i] = regs[("S" + std::to_string(i)).c_str()].cast<int>();
+                 for (int i = 0; i < 8; ++i) r.d[i] = regs[("D" + std::to_string(i)).c_str()].cast<int>();
                  PyCallbacks p;
                  p.decode = function<decltype(p.decode)>(callbacks, "decode");
                  p.fpu_check = function<decltype(p.fpu_check)>(callbacks, "fpu_check");
@@ -236,6 +239,8 @@ void bind_mk64(py::module_& m) {
         .def_readonly("intr_number", &Core::intr_number_)
         .def_readonly("intr_pc", &Core::intr_pc_)
         .def_readonly("bkpt_pc", &Core::bkpt_pc_)
+        .def("add_stop_at", &Core::add_stop_at)
+        .def_property_readonly("stop_at_pc", &Core::stop_at_pc)
         .def_readwrite("sleeping", &Core::sleeping_)
         .def_readwrite("fpu_watch", &Core::fpu_watch_)
         .def_readwrite("log_all", &Core::log_all)
@@ -275,8 +280,14 @@ void bind_mk64(py::module_& m) {
             const int n = c.pending_exception();
             return n < 0 ? py::object(py::none()) : py::object(py::int_(n));
         })
-        .def("preempts", &Core::preempts, py::arg("number"), py::arg("ignore_primask") = false)
-        .def("execution_priority", &Core::execution_priority, py::arg("ignore_primask") = false)
+        .def("preempts", [](Core& c, int number, bool ignore_primask) {
+            c.forget_masks();                    // Python may have written them
+            return c.preempts(number, ignore_primask);
+        }, py::arg("number"), py::arg("ignore_primask") = false)
+        .def("execution_priority", [](Core& c, bool ignore_primask) {
+            c.forget_masks();                    // Python may have written them
+            return c.execution_priority(ignore_primask);
+        }, py::arg("ignore_primask") = false)
         .def("exception_log", [](const Core& c) {
             py::list out;
             for (const auto& e : c.exception_log_) {
@@ -439,6 +450,16 @@ void bind_mk64(py::module_& m) {
             uint32_t value = 0;
             return ftm_of(c, dev).commanded_value(c, channel(ch), value) ? py::object(py::int_(value))
                                                                    : py::object(py::none());
+        })
+        .def("ftm_commanded_values", [](Core& c, int dev) {
+            Ftm& f = ftm_of(c, dev);
+            py::list out;
+            for (int ch = 0; ch < Ftm::kChannels; ++ch) {
+                uint32_t value = 0;
+                out.append(f.commanded_value(c, ch, value) ? py::object(py::int_(value))
+                                                           : py::object(py::none()));
+            }
+            return out;
         })
         .def("ftm_edge", [](Core& c, int dev, int ch, bool rising) {
             ftm_of(c, dev).edge(c, channel(ch), rising);

@@ -14,6 +14,7 @@ namespace hqsim::mk64 {
 
 namespace {
 constexpr int UC_HOOK_INTR = 1 << 0;
+constexpr int UC_HOOK_CODE = 1 << 2;
 constexpr int UC_HOOK_BLOCK = 1 << 3;
 constexpr int UC_HOOK_MEM_READ_PROT = 1 << 7, UC_HOOK_MEM_WRITE_PROT = 1 << 8;
 constexpr int UC_HOOK_TLB_FILL = 1 << 17;
@@ -89,6 +90,23 @@ void Core::install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base
                  uint64_t{ppb_base} + ppb_size - 1);
 }
 
+void Core::add_stop_at(uint32_t address) {
+    size_t h = 0;
+    uc_.hook_add(uc_.handle, &h, UC_HOOK_CODE, reinterpret_cast<void*>(&Core::on_stop_at_cb),
+                 this, uint64_t{address}, uint64_t{address});
+}
+
+void Core::on_stop_at_cb(void*, uint64_t address, uint32_t, void* user) {
+    Core* c = static_cast<Core*>(user);
+    if (static_cast<int64_t>(address) == c->stop_at_resume_) {     // the run resumes here
+        c->stop_at_resume_ = -1;
+        return;
+    }
+    c->stop_at_hit_ = true;
+    c->stop_at_pc_ = static_cast<uint32_t>(address);
+    c->stop_now();
+}
+
 void Core::reset(double core_hz) {
     cycles_ = instructions_ = sleep_cycles_ = 0;
     epoch_cycles_ = 0;
@@ -100,6 +118,8 @@ void Core::reset(double core_hz) {
     deadline_ = 0;
     instr_limit_ = 0;
     stop_ = py_error_ = budget_hit_ = watch_mask_ = false;
+    stop_at_hit_ = false;
+    stop_at_resume_ = -1;
     reset_pending_ = false;
     reset_source_.clear();
     reset_message_.clear();
@@ -136,8 +156,17 @@ void Core::reset(double core_hz) {
 
 void Core::add_block(Block b) {
     const uint32_t start = b.start;
-    recent_[(start >> 1) & (kRecent - 1)] = Recent{};   // looked up afresh next time
-    blocks_[start] = std::move(b);
+    Block& kept = blocks_[start] = std::move(b);     // a block decoded again keeps its node
+    Slot& slot = slot_for(start);
+    if (slot.block) slot = slot_of(kept);
+}
+
+void Core::grow_slots() {
+    std::vector<Slot> old(2 * slots_.size());
+    old.swap(slots_);
+    for (const Slot& s : old) {
+        if (s.block) slot_for(s.start) = s;
+    }
 }
 
 void Core::install_tlb(uint32_t sram_base, uint32_t sram_size) {
@@ -378,13 +407,41 @@ int Core::pending_exception() const {
 int Core::execution_priority(bool ignore_primask) const {
     int prio = kThreadPriority;
     for (int n : active_) prio = std::min(prio, group(priority_[n]));
+    const Masks& m = masks();
     if (!ignore_primask) {
-        if (reg(r_.faultmask) & 1) prio = std::min(prio, -1);
-        if (reg(r_.primask) & 1) prio = std::min(prio, 0);
+        if (m.faultmask & 1) prio = std::min(prio, -1);
+        if (m.primask & 1) prio = std::min(prio, 0);
     }
-    const int basepri = static_cast<int>(reg(r_.basepri) & 0xF0);
+    const int basepri = static_cast<int>(m.basepri & 0xF0);
     if (basepri) prio = std::min(prio, group(basepri));
     return prio;
+}
+
+const Core::Masks& Core::masks() const {
+    if (!masks_valid_) {
+        const int ids[3] = {r_.primask, r_.faultmask, r_.basepri};
+        uint64_t v[3];
+        read_regs(ids, v, 3);
+        masks_ = {static_cast<uint32_t>(v[0]), static_cast<uint32_t>(v[1]),
+                  static_cast<uint32_t>(v[2])};
+        masks_valid_ = true;
+    }
+    return masks_;
+}
+
+void Core::read_regs(const int* ids, uint64_t* out, int n) const {
+    void* ptrs[32];
+    for (int i = 0; i < n; ++i) {
+        out[i] = 0;                 // a 32-bit register fills the low word only
+        ptrs[i] = &out[i];
+    }
+    uc_.reg_read_batch(uc_.handle, ids, ptrs, n);
+}
+
+void Core::write_regs(const int* ids, const uint64_t* values, int n) {
+    void* ptrs[32];
+    for (int i = 0; i < n; ++i) ptrs[i] = const_cast<uint64_t*>(&values[i]);
+    uc_.reg_write_batch(uc_.handle, ids, ptrs, n);
 }
 
 bool Core::masked_pending() const {
@@ -407,17 +464,35 @@ void Core::log_exception(bool enter, int number) {
     exception_log_.push_back({cycles_, enter, number});
 }
 
+// S0-S15 and FPSCR, as a frame's words 8-24 (S0-S15 read as D0-D7, in one call).
+void Core::read_fp_frame(uint32_t* words) const {
+    int ids[9];
+    for (int i = 0; i < 8; ++i) ids[i] = r_.d[i];
+    ids[8] = r_.fpscr;
+    uint64_t v[9];
+    read_regs(ids, v, 9);
+    for (int i = 0; i < 8; ++i) {
+        words[2 * i] = static_cast<uint32_t>(v[i]);
+        words[2 * i + 1] = static_cast<uint32_t>(v[i] >> 32);
+    }
+    words[16] = static_cast<uint32_t>(v[8]);
+}
+
 bool Core::take_exception(int number, uint32_t return_pc) {
     ++counts.exceptions;
-    const uint32_t control = reg(r_.control);
+    // CONTROL, SP, xPSR and the basic frame's registers in one call
+    const int ids[9] = {r_.control, r_.sp, r_.xpsr, r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
+    uint64_t got[9];
+    read_regs(ids, got, 9);
+    const uint32_t control = static_cast<uint32_t>(got[0]);
     if ((control & kControlSpsel) && active_.empty()) {
         fault("UsageFault", "thread mode on the process stack (CONTROL.SPSEL) is not modelled",
               return_pc);
         return false;
     }
     const bool fp = (control & kControlFpca) && (fpccr_ & (1u << 31));
-    const uint32_t sp = reg(r_.sp);
-    uint32_t xpsr = reg(r_.xpsr);
+    const uint32_t sp = static_cast<uint32_t>(got[1]);
+    uint32_t xpsr = static_cast<uint32_t>(got[2]);
     uint32_t new_sp = sp - (fp ? 0x68 : 0x20);
     if ((ccr_ & 0x200) || fp) {
         if (new_sp & 4) {
@@ -428,16 +503,14 @@ bool Core::take_exception(int number, uint32_t return_pc) {
         }
     }
     uint32_t words[26];
-    const int base_regs[6] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
-    for (int i = 0; i < 6; ++i) words[i] = reg(base_regs[i]);
+    for (int i = 0; i < 6; ++i) words[i] = static_cast<uint32_t>(got[3 + i]);
     words[6] = return_pc;
     words[7] = xpsr;
     int n = 8;
     if (fp) {
         // Lazy stacking reserves this space and fills it when the handler first uses the FPU;
         // it is filled at once here, which the program cannot tell apart.
-        for (int i = 0; i < 16; ++i) words[8 + i] = reg(r_.s[i]);
-        words[24] = reg(r_.fpscr);
+        read_fp_frame(words + 8);
         words[25] = 0;
         n = 26;
     }
@@ -459,10 +532,10 @@ bool Core::take_exception(int number, uint32_t return_pc) {
     pending_ &= ~bit(number);
     uint32_t handler = 0;
     read32(vtor_ + 4u * static_cast<uint32_t>(number), handler);
-    set_reg(r_.sp, new_sp);
-    set_reg(r_.lr, exc_return);
-    set_reg(r_.control, control & ~kControlFpca);
-    set_reg(r_.xpsr, (1u << 24) | static_cast<uint32_t>(number));
+    const int set_ids[4] = {r_.sp, r_.lr, r_.control, r_.xpsr};
+    const uint64_t set[4] = {new_sp, exc_return, control & ~kControlFpca,
+                             (1u << 24) | static_cast<uint32_t>(number)};
+    write_regs(set_ids, set, 4);
     set_pc(handler);
     cycles_ += kEntryCycles;
     log_exception(true, number);
@@ -507,20 +580,32 @@ bool Core::return_from_exception(uint32_t exc_return) {
               exc_return, true, sp);
         return false;
     }
-    const int base_regs[6] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
-    for (int i = 0; i < 6; ++i) set_reg(base_regs[i], words[i]);
     const uint32_t xpsr = words[7];
-    if (fp) {
-        for (int i = 0; i < 16; ++i) set_reg(r_.s[i], words[8 + i]);
-        set_reg(r_.fpscr, words[24]);
-    }
     const uint32_t new_sp = sp + 4u * n + ((xpsr & kXpsrAlign) ? 4u : 0u);
     active_.pop_back();
     frames_.pop_back();
-    set_reg(r_.sp, new_sp);
     const uint32_t control = reg(r_.control);
-    set_reg(r_.control, fp ? (control | kControlFpca) : (control & ~kControlFpca));
-    set_reg(r_.xpsr, xpsr & ~kXpsrAlign);
+    // The registers in the order they were written one at a time: the basic frame's, the FP
+    // frame's, SP, CONTROL, xPSR; in one call.
+    int ids[6 + 9 + 3] = {r_.r0, r_.r1, r_.r2, r_.r3, r_.r12, r_.lr};
+    uint64_t values[6 + 9 + 3];
+    for (int i = 0; i < 6; ++i) values[i] = words[i];
+    int k = 6;
+    if (fp) {
+        for (int i = 0; i < 8; ++i) {
+            ids[k] = r_.d[i];
+            values[k++] = uint64_t{words[8 + 2 * i]} | uint64_t{words[9 + 2 * i]} << 32;
+        }
+        ids[k] = r_.fpscr;
+        values[k++] = words[24];
+    }
+    ids[k] = r_.sp;
+    values[k++] = new_sp;
+    ids[k] = r_.control;
+    values[k++] = fp ? (control | kControlFpca) : (control & ~kControlFpca);
+    ids[k] = r_.xpsr;
+    values[k++] = xpsr & ~kXpsrAlign;
+    write_regs(ids, values, k);
     set_pc(words[6]);
     cycles_ += kReturnCycles;
     log_exception(false, number);
@@ -545,6 +630,7 @@ void Core::chip_reset(const char* source, std::string message) {
 
 int Core::run(uint64_t instr_limit) {
     instr_limit_ = instr_limit;
+    masks_valid_ = false;                // Python may have written them since
     for (;;) {
         if (reset_pending_) return kReset;
         const int s = service();
@@ -651,6 +737,7 @@ int Core::execute() {
     const uint32_t start = pc();
     cur_ = nullptr;
     xn_fetched_ = false;
+    stop_at_hit_ = false;
     ++counts.emu_starts;
     in_emu_ = true;
     const int err = uc_.emu_start(uc_.handle, start | 1u, 0xFFFFFFFFu, 0, 0);
@@ -683,6 +770,10 @@ int Core::execute() {
         return kBkpt;
     } else if (stop_) {
         return kStop;
+    } else if (stop_at_hit_) {
+        stop_at_hit_ = false;
+        stop_at_resume_ = stop_at_pc_;
+        return kStopAt;
     } else if (last_ && (last_->flags & Block::kWfi) && pc() == last_->start + last_->size) {
         sleeping_ = true;
     }
@@ -693,6 +784,7 @@ int Core::execute() {
 void Core::commit() {
     last_ = cur_;
     if (!cur_) return;
+    if (cur_flags_ & Block::kMaskOp) masks_valid_ = false;
     const uint32_t p = pc();
     const uint32_t done = cur_->index_of(p);
     instructions_ += done;
@@ -708,13 +800,43 @@ void Core::commit() {
 // holds inside a block hook may be stale (chained blocks do not store it), so the block's
 // address is the return address of an exception taken here. A block in program flash while the
 // flash module runs a command is a read collision: the run stops with a fault before it.
+// The common boundary, inline in the hook: the previous block retires with no mask operation
+// in it, and the next is in the table, within the budget and before the deadline, with no
+// flash command running and the FPU watch over. Anything else takes on_block's whole
+// sequence (the same checks in the same order).
+void Core::on_block_cb(void*, uint64_t address, uint32_t size, void* user) {
+    Core* c = static_cast<Core*>(user);
+    const uint32_t a = static_cast<uint32_t>(address);
+    if (!(c->cur_flags_ & Block::kMaskOp) && !c->ftfe.busy && !c->fpu_watch_) {
+        const Slot& s = c->slot_for(a);
+        const uint64_t instructions = c->instructions_ + (c->cur_ ? c->cur_n_ : 0);
+        const uint64_t cycles = c->cycles_ + (c->cur_ ? c->cur_cycles_ : 0);
+        if (s.block && s.size == size && !(s.flags & Block::kMaskOp) &&
+            instructions + s.n <= c->instr_limit_ && cycles < c->deadline_) {
+            ++c->counts.blocks;
+            c->instructions_ = instructions;
+            c->cycles_ = cycles;
+            c->cur_ = s.block;
+            c->cur_n_ = s.n;
+            c->cur_flags_ = s.flags;
+            c->cur_cycles_ = s.cycles;
+            return;
+        }
+    }
+    c->in_block_hook_ = true;
+    c->on_block(address, size);
+    c->in_block_hook_ = false;
+}
+
 void Core::on_block(uint64_t address, uint32_t size) {
     ++counts.blocks;
     const uint32_t a = static_cast<uint32_t>(address);
     if (cur_) {
-        instructions_ += cur_->n;
-        cycles_ += cur_->cycles;
-        const bool unmasked = (cur_->flags & Block::kMaskOp) && watch_mask_;
+        instructions_ += cur_n_;
+        cycles_ += cur_cycles_;
+        const bool mask_op = cur_flags_ & Block::kMaskOp;
+        if (mask_op) masks_valid_ = false;
+        const bool unmasked = mask_op && watch_mask_;
         cur_ = nullptr;
         if (unmasked) {
             pending_pc_ = a;
@@ -725,8 +847,11 @@ void Core::on_block(uint64_t address, uint32_t size) {
             if (inline_taken_) return;
         }
     }
-    const Block* b = find_block(a, size);
-    if (!b) {
+    const Slot* found = find_block(a, size);
+    Slot b;
+    if (found) {
+        b = *found;             // copied: the pointer is good until the next lookup
+    } else {
         ++counts.decodes;
         if (py_.decode(address, size) != 0) {       // Python has flagged the error and stopped
             return;
@@ -737,9 +862,9 @@ void Core::on_block(uint64_t address, uint32_t size) {
             stop_now();
             return;
         }
-        b = &it->second;
+        b = slot_of(it->second);
     }
-    if (instructions_ + b->n > instr_limit_) {
+    if (instructions_ + b.n > instr_limit_) {
         budget_hit_ = true;
         stop_now();
         return;
@@ -760,14 +885,18 @@ void Core::on_block(uint64_t address, uint32_t size) {
         stop_now();
         return;
     }
-    if (fpu_watch_ && (b->flags & (Block::kVfp | Block::kIsb))) {
+    if (fpu_watch_ && (b.flags & (Block::kVfp | Block::kIsb))) {
         ++counts.fpu_checks;
         if (py_.fpu_check(address) == 0) {        // the chip would take a NOCP UsageFault
             stop_now();
             return;
         }
     }
-    cur_ = b;
+    if (b.flags & Block::kMaskOp) masks_valid_ = false;
+    cur_ = b.block;
+    cur_n_ = b.n;
+    cur_flags_ = b.flags;
+    cur_cycles_ = b.cycles;
 }
 
 void Core::on_intr(uint32_t intno) {
@@ -895,13 +1024,6 @@ void Core::mmio_write(uint32_t address, unsigned size, uint64_t value) {
     }
     ++counts.python_accesses;
     py_.write(address, size, value);
-}
-
-void Core::on_block_cb(void*, uint64_t address, uint32_t size, void* user) {
-    Core* c = static_cast<Core*>(user);
-    c->in_block_hook_ = true;
-    c->on_block(address, size);
-    c->in_block_hook_ = false;
 }
 
 void Core::on_intr_cb(void*, uint32_t intno, void* user) {

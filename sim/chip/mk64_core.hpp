@@ -47,6 +47,8 @@ struct Uc {
     int (*reg_read)(void*, int, void*) = nullptr;
     int (*reg_write)(void*, int, const void*) = nullptr;
     int (*reg_write2)(void*, int, const void*, size_t*) = nullptr;
+    int (*reg_read_batch)(void*, const int*, void**, int) = nullptr;
+    int (*reg_write_batch)(void*, const int*, void* const*, int) = nullptr;
     int (*mem_read)(void*, uint64_t, void*, uint64_t) = nullptr;
     int (*mem_write)(void*, uint64_t, const void*, uint64_t) = nullptr;
     int (*hook_add)(void*, size_t*, int, void*, void*, uint64_t, uint64_t, ...) = nullptr;
@@ -56,7 +58,7 @@ struct Uc {
 // unicorn's register numbers for the registers the core reads and writes (from arm_const).
 struct Regs {
     int r0, r1, r2, r3, r12, lr, pc, sp, xpsr, epsr, control, fpscr, primask, basepri, faultmask;
-    int s[16];
+    int d[8];      // D0-D7: S0-S15 in pairs (S2n the low word), read and written whole
 };
 
 // Callbacks into Python (ctypes function pointers; they take the GIL themselves).
@@ -95,7 +97,7 @@ enum class Ev : uint8_t {
 // Why run() returned.
 enum Run : int {
     kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
-    kIntrFault, kReset
+    kIntrFault, kReset, kStopAt
 };
 
 // A fault found natively (exception entry/return); Python raises it.
@@ -538,7 +540,8 @@ public:
     void add_block(Block b);
     void clear_blocks() {
         blocks_.clear();
-        recent_.assign(kRecent, Recent{});
+        slots_.assign(kMinSlots, Slot{});
+        used_slots_ = 0;
         cur_ = last_ = nullptr;
     }
     const Block* cur() const { return cur_; }
@@ -581,6 +584,7 @@ public:
     void unpend(int number) { pending_ &= ~bit(number); }
     int pending_exception() const;
     int execution_priority(bool ignore_primask) const;
+    void forget_masks() { masks_valid_ = false; }
     bool preempts(int number, bool ignore_primask = false) const {
         return group(priority_[number]) < execution_priority(ignore_primask);
     }
@@ -595,6 +599,12 @@ public:
         reset_pending_ = false;
         return {std::move(reset_source_), std::move(reset_message_)};
     }
+    // A stop address (Machine.stop_at): the run returns kStopAt before the instruction there
+    // executes, with no call into Python; the next run goes on through it. A native code hook
+    // at that one address (unicorn syncs the PC there, so the stop is exact to the
+    // instruction, as a breakpoint's).
+    void add_stop_at(uint32_t address);
+    uint32_t stop_at_pc() const { return stop_at_pc_; }
     void request_stop() { stop_ = true; }
     void clear_stop() { stop_ = false; }
     void request_error() { py_error_ = true; }
@@ -672,6 +682,7 @@ public:
     // unicorn callbacks (C functions; user data is the Core)
     static void on_block_cb(void* uc, uint64_t address, uint32_t size, void* user);
     static void on_intr_cb(void* uc, uint32_t intno, void* user);
+    static void on_stop_at_cb(void* uc, uint64_t address, uint32_t size, void* user);
     static bool grant_cb(void* uc, int type, uint64_t address, int size, int64_t value,
                          void* user);
     struct TlbEntry { uint64_t paddr; int perms; };
@@ -712,6 +723,17 @@ private:
     };
 
     int group(int prio) const { return prio < 0 ? prio : prio >> (prigroup_ + 1); }
+    // PRIMASK, FAULTMASK and BASEPRI as last read. Only an instruction of a block with a
+    // mask operation (CPS, MSR) changes them while the core runs: the copy is dropped when
+    // such a block is entered and when it retires, and at every run() (Python may have
+    // written them between runs).
+    struct Masks { uint32_t primask, faultmask, basepri; };
+    mutable Masks masks_{};
+    mutable bool masks_valid_ = false;
+    const Masks& masks() const;
+    // Registers read and written in one call each (an exception's frame).
+    void read_regs(const int* ids, uint64_t* out, int n) const;
+    void write_regs(const int* ids, const uint64_t* values, int n);
     void on_block(uint64_t address, uint32_t size);
     void on_intr(uint32_t intno);
     uint64_t mmio_read(uint32_t address, unsigned size);
@@ -726,6 +748,7 @@ private:
     void commit();
     void dispatch(const HeapEntry& e);
     bool masked_pending() const;
+    void read_fp_frame(uint32_t* words) const;
     bool take_exception(int number, uint32_t return_pc);
     bool continue_inline();
     bool return_from_exception(uint32_t exc_return);
@@ -739,21 +762,48 @@ private:
     PyCallbacks py_;
     std::vector<std::string> names_;
     std::unordered_map<uint32_t, Block> blocks_;
-    // The blocks by start address, direct-mapped with the key beside the pointer (a block is
-    // found at every boundary without hashing or touching the Block); a miss falls back to
-    // blocks_. Node pointers stay valid as blocks_ grows.
-    struct Recent { uint32_t start = 0, size = 0; const Block* block = nullptr; };
-    static constexpr size_t kRecent = size_t{1} << 12;
-    std::vector<Recent> recent_ = std::vector<Recent>(kRecent);
-    const Block* find_block(uint32_t start, uint32_t size) {
-        Recent& slot = recent_[(start >> 1) & (kRecent - 1)];
-        if (slot.block && slot.start == start && slot.size == size) return slot.block;
+    // The blocks by start address, open-addressed (linear probing, at most half full), each
+    // slot with the key and the costs a boundary needs beside the pointer: a block is found
+    // and counted at every boundary from one cache line, without hashing into blocks_ or
+    // touching the Block (the memory latency of those two dominated the block hook), and hot
+    // blocks never evict each other. Node pointers stay valid as blocks_ grows; a block
+    // decoded again at the same start keeps its node and its slot is brought up to date.
+    struct Slot {
+        uint32_t start = 0, size = 0, n = 0, flags = 0;
+        uint64_t cycles = 0;
+        const Block* block = nullptr;
+    };
+    static constexpr size_t kMinSlots = size_t{1} << 13;
+    std::vector<Slot> slots_ = std::vector<Slot>(kMinSlots);
+    size_t used_slots_ = 0;
+    // by address (code runs in order: neighbours share cache lines), linear probing past a
+    // slot taken
+    static size_t slot_hash(uint32_t start) { return start >> 1; }
+    Slot& slot_for(uint32_t start) {
+        const size_t mask = slots_.size() - 1;
+        for (size_t i = slot_hash(start) & mask;; i = (i + 1) & mask) {
+            Slot& s = slots_[i];
+            if (!s.block || s.start == start) return s;
+        }
+    }
+    static Slot slot_of(const Block& b) { return {b.start, b.size, b.n, b.flags, b.cycles, &b}; }
+    void grow_slots();
+    // The slot of the block at `start` of `size` bytes, or nullptr (not decoded, or decoded
+    // with another size). The pointer is good until the next lookup.
+    const Slot* find_block(uint32_t start, uint32_t size) {
+        Slot& slot = slot_for(start);
+        if (slot.block) return slot.size == size ? &slot : nullptr;
         auto it = blocks_.find(start);
         if (it == blocks_.end() || it->second.size != size) return nullptr;
-        slot = {start, size, &it->second};
-        return slot.block;
+        slot = slot_of(it->second);
+        if (2 * ++used_slots_ <= slots_.size()) return &slot;
+        grow_slots();
+        return &slot_for(start);
     }
+    // The block running now and its costs (copied from its slot: no Block touched).
     const Block* cur_ = nullptr;
+    uint32_t cur_n_ = 0, cur_flags_ = 0;
+    uint64_t cur_cycles_ = 0;
     const Block* last_ = nullptr;
     std::vector<Route> routes_;
     std::vector<HeapEntry> heap_;
@@ -769,6 +819,9 @@ private:
     bool in_emu_ = false;           // inside emu_start
     bool reset_pending_ = false;
     std::string reset_source_, reset_message_;
+    bool stop_at_hit_ = false;
+    uint32_t stop_at_pc_ = 0;
+    int64_t stop_at_resume_ = -1;   // the stop address the next run goes on through, or -1
     uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
 
 public:

@@ -82,57 +82,48 @@ class PilBoard:
         self.stored = [kept for kept in (self.params, self.program) if kept]
         self.report_address = image.symbol(REPORT_SYMBOL).address
         self.waits = 0
-        self._wait_target = None
-        self.machine.break_at(WAIT_SYMBOL, self._on_wait)
+        # Where a loop ends: native stops (Machine.stop_at), no call into Python there.
+        self.machine.stop_at(WAIT_SYMBOL)
         self.in_card_wait = False          # the last loop ended with a step due in the card's wait
-        if image.has(CARD_WAIT_STEP_SYMBOL):
-            self.machine.break_at(CARD_WAIT_STEP_SYMBOL, self._on_card_wait_step)
+        self._card_wait_step = (self.machine.stop_at(CARD_WAIT_STEP_SYMBOL)
+                                if image.has(CARD_WAIT_STEP_SYMBOL) else None)
         self.resets = 0
         self._rc_last, self._rc_age = None, 0
         self._fault = None
         self.step_cycles = []
         self.telemetry_out = bytearray()
 
-    def _on_card_wait_step(self, machine):
-        stop = self._on_wait(machine)
-        self.in_card_wait = True
-        return stop
-
-    def _on_wait(self, machine):
-        self.in_card_wait = False
+    def _waited(self, stop) -> bool:
+        """A run stopped where a loop ends (the wait, or the card wait's step): count it."""
+        if stop.reason != "stop-at":
+            return False
+        self.in_card_wait = stop.pc == self._card_wait_step
         self.waits += 1
-        if self._wait_target is not None and self.waits >= self._wait_target:
-            return "loop-done"
-        return None
+        return True
 
     def _run_to_wait(self, limit_s: float, what: str):
         """Run until the main loop next reaches its sleep; a watchdog reset reboots."""
-        self._wait_target = self.waits + 1
-        try:
-            while True:
-                try:
-                    stop = self.machine.run(seconds=limit_s)
-                except ChipReset as e:
-                    self.resets += 1
-                    print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
-                          file=sys.stderr, flush=True)
-                    self.board.reset()
-                    self._rc_last = None            # the image lost its captures
-                    self._fault = None
-                    self.waits = 0
-                    self._wait_target = 1
-                    continue
-                except EmulationError as e:
-                    raise ImageFault(f"{what}: {e}") from None
-                if stop.reason == "loop-done":
-                    return
-                if stop.reason == "fatal":
-                    raise ImageFault(f"{what}: the image stopped in hq_fatal "
-                                     f"(code {stop.detail.get('code')})")
-                raise ImageFault(f"{what}: the main loop did not come round within "
-                                 f"{limit_s:g} s of emulated time ({stop})")
-        finally:
-            self._wait_target = None
+        while True:
+            try:
+                stop = self.machine.run(seconds=limit_s)
+            except ChipReset as e:
+                self.resets += 1
+                print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
+                      file=sys.stderr, flush=True)
+                self.board.reset()
+                self._rc_last = None            # the image lost its captures
+                self._fault = None
+                self.waits = 0
+                continue
+            except EmulationError as e:
+                raise ImageFault(f"{what}: {e}") from None
+            if self._waited(stop):
+                return
+            if stop.reason == "fatal":
+                raise ImageFault(f"{what}: the image stopped in hq_fatal "
+                                 f"(code {stop.detail.get('code')})")
+            raise ImageFault(f"{what}: the main loop did not come round within "
+                             f"{limit_s:g} s of emulated time ({stop})")
 
     def boot(self) -> None:
         """Reset to the main loop's first sleep, before the first tick (the stack painted
@@ -261,19 +252,15 @@ class PilBoard:
             uart = self.board.chip.uart0
             done, step = uart.tx_idle, (lambda: uart.frame_cycles() * 4)
         while m.now() < deadline and not done():
-            m.run(seconds=min(step(), deadline - m.now()) / m.core_hz)
+            self._waited(m.run(seconds=min(step(), deadline - m.now()) / m.core_hz))
 
     def thrust(self) -> list:
         """The thrust fractions all eight ESCs (FTM0 channels 0-7) get from the next PWM
         period on."""
-        ftm0 = self.board.chip.ftm0
         lo, hi = ESC_MIN_US * FTM0_COUNTS_PER_US, ESC_MAX_US * FTM0_COUNTS_PER_US
-        out = []
-        for ch in range(len(ESC_PINS)):
-            counts = ftm0.commanded_value(ch)
-            out.append(min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None
-                       else 0.0)
-        return out
+        commanded = self.board.chip.ftm0.commanded_values()[:len(ESC_PINS)]
+        return [min(1.0, max(0.0, (counts - lo) / (hi - lo))) if counts is not None else 0.0
+                for counts in commanded]
 
     def _collect_telemetry(self) -> None:
         chip = self.board.chip
