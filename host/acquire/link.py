@@ -15,14 +15,14 @@ import time
 
 from ...sim.base import dialect as names
 from ...sim.base.dialect import dialect
+from ...sim.base.errors import InputError
 from ...sim.base.firmware_facts import MAX_ROTORS
 from ...sim.base.framing import Codec, Framer
-from ..records.choices import RESPONSES
 from .connection import open_connection
 
 # AXES, INJECTIONS and MODES are made on first use (__getattr__), so not listed here.
-__all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output", "RESPONSES",
-           "response_fields", "response_of", "chooses_response", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
+__all__ = ["TelemetryLink", "INPUT_OUTPUT", "ROTOR_INPUT_OUTPUT", "input_output",
+           "response_fields", "response_of", "check_response", "SESSION_MESSAGES", "HEARTBEAT_PERIOD_S",
            "reason_text"]
 
 #: Which logged HQ_SYSID_SAMPLE field is the input and which the output, per injection point
@@ -65,15 +65,19 @@ def input_output(inject: str) -> tuple:
 
 def response_fields(inject: str, response: str | None = None) -> tuple:
     """The logged fields (input, output) a sweep at ``inject`` measures for ``response``
-    (:data:`~heliquad.host.records.manifest.RESPONSES`; None: the injection's own,
+    (:data:`~heliquad.host.records.choices.RESPONSES`; None: the injection's own,
     :func:`input_output`). A mixer sweep measures the plant whatever it is told."""
     return INPUT_OUTPUT["mixer"] if response == "plant" else input_output(inject)
 
 
-def chooses_response(inject: str) -> bool:
-    """Whether a sweep at ``inject`` has a response to choose (a setpoint's: rate, angle);
-    a mixer sweep, or a rotor's, measures the plant."""
-    return inject in INPUT_OUTPUT and INPUT_OUTPUT[inject] != INPUT_OUTPUT["mixer"]
+def check_response(inject: str, response: str | None) -> None:
+    """Refuse a ``response`` (sweep --response, identify --response) where the injection has
+    none to choose: only a setpoint's (rate, angle) has; a mixer sweep, or a rotor's,
+    measures the plant."""
+    if response is not None and not (inject in INPUT_OUTPUT and
+                                     INPUT_OUTPUT[inject] != INPUT_OUTPUT["mixer"]):
+        raise InputError("--response is for rate or angle injection (a mixer sweep measures "
+                         "the plant)")
 
 
 def response_of(inject: str, fields: tuple) -> str | None:

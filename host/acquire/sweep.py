@@ -94,7 +94,7 @@ class SweepPlan:
         self.sequential = None                  # a multisine's SequentialMultisine
         self.linearity = None                   # a linearity campaign's excitations
         self.seed = None                        # and the seed of its phases
-        self.response = None                    # a rate or angle sweep's (link.RESPONSES)
+        self.response = None                    # a rate or angle sweep's (choices.RESPONSES)
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":

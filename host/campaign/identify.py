@@ -21,7 +21,7 @@ import numpy as np
 
 from ...sim.base.dialect import AXES, INJECTIONS, dialect
 from ...sim.base.errors import InputError
-from ..acquire.link import (INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, chooses_response, input_output,
+from ..acquire.link import (INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, check_response, input_output,
                             response_fields, response_of)
 from ..acquire.measure import saturation_text
 from ..acquire.sweep import cut_text
@@ -140,9 +140,10 @@ def _with_response(path, manifest, response):
     where the injection has no other (a mixer sweep measures the plant)."""
     if response is None or response == manifest.get("response"):
         return manifest
-    if not chooses_response(manifest["inject"]):
-        raise InputError(f"{path}: --response is for rate or angle injection; this is a "
-                         f"{manifest['inject']} sweep (it measures the plant)")
+    try:
+        check_response(manifest["inject"], response)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}; this is a {manifest['inject']} sweep") from None
     return {**manifest, "response": response}
 
 

@@ -47,7 +47,6 @@ example: heliquad study benchmarks/studies/closed_loop_id.toml --out cl_study
 STEP_MODULES = {"sweep": "sweep", "identify": "identify", "validate": "validate", "tune": "tune"}
 
 
-
 def add_parser(sub, fmt) -> None:
     p = sub.add_parser("study", help="many simulated sweeps and identifications from a spec, "
                                      "locally or on a Dask cluster",

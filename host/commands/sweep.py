@@ -9,7 +9,7 @@ import os
 import sys
 
 from ...sim.base import dialect as names
-from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT
+from ..acquire.link import INPUT_OUTPUT, ROTOR_INPUT_OUTPUT, check_response
 from ...sim.base.errors import DiskFull, InputError, LinkLost
 from ...sim.base.firmware_facts import ABORT_ANGLE_RAD, ABORT_RATE_RAD_S, MAX_ROTORS, MIN_ROTORS
 from ...sim.rig.setup import PLANTS
@@ -23,8 +23,7 @@ from .shared_options import (add_baud_argument, add_fault_argument, add_firmware
                              firmware_link, add_vehicle_arguments, add_param_store_argument,
                              add_port_argument, add_sd_card_arguments, check_plant, faults,
                              finite, int_in, number_in, sd_card, vehicle_config)
-from .sweep_options import (add_design_arguments, apply_tuning_band, check_excitation,
-                            check_response, sweep_plan)
+from .sweep_options import add_design_arguments, apply_tuning_band, check_excitation, sweep_plan
 
 __all__ = ["add_parser", "run", "checked_plan"]
 

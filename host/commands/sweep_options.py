@@ -15,8 +15,7 @@ from ..acquire.linearity import PERIODS as LINEARITY_PERIODS, REALISATIONS, SMAL
 from ..acquire.multisine import LINES, MAX_LINES, RIG_TIME_S
 from .shared_options import MAX_CYCLES, int_in, number_in
 
-__all__ = ["check_excitation", "add_design_arguments", "apply_tuning_band", "sweep_plan",
-           "check_response"]
+__all__ = ["check_excitation", "add_design_arguments", "apply_tuning_band", "sweep_plan"]
 
 
 def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inject=None):
@@ -115,23 +114,10 @@ def sweep_plan(args, on_board: bool = False):
     """The sweep's plan from the options of :func:`add_design_arguments`: fixed or
     sequential dwell, fixed or designed amplitudes (``on_board``: a fixed dwell, 8 cycles
     unless --cycles, and fixed amplitudes, a mixer's the design's first), and what a rate
-    or angle sweep measures (--response)."""
-    response = getattr(args, "response", None)
-    check_response(args.inject, response)
+    or angle sweep measures (--response, checked with the rig's options)."""
     plan = _plan(args, on_board)
-    plan.response = response
+    plan.response = getattr(args, "response", None)
     return plan
-
-
-def check_response(inject, response) -> None:
-    """--response: for rate or angle injection only (a mixer sweep, or a rotor's, measures
-    the plant)."""
-    # the command's work, imported when it runs: --help imports every command module
-    from ..acquire.link import chooses_response
-
-    if response is not None and not chooses_response(inject):
-        raise InputError("--response is for rate or angle injection (a mixer sweep measures "
-                         "the plant)")
 
 
 def _plan(args, on_board: bool):

@@ -23,8 +23,8 @@ import numpy as np
 from ...sim.base import dialect as names
 from ...sim.base.errors import InputError
 from . import schema as S
-from .gains import recorded_gains_schema
 from .choices import COSTS, RESPONSES
+from .gains import recorded_gains_schema
 from .manifest import SWEEP_SIGNALS
 from .output import NULLABLE, atomic_write, document, write_json
 from .reading import read_json, record_of

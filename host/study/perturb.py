@@ -135,10 +135,13 @@ def perturbed_text(text: str, values: dict) -> str:
     section, rotor = None, 0
     for i, line in enumerate(lines):
         head = re.match(r"\s*\[(\[?)\s*([\w-]+)\s*\]?\]", line)
-        if head:
-            rotor += head.group(1) == "[" and head.group(2) == "rotors"
-            section = f"rotors.{rotor}" if head.group(1) == "[" and head.group(2) == "rotors" \
-                else None if head.group(1) else head.group(2)
+        if head:                    # [section], or [[rotors]] (rotor N), or another array table
+            array, name = head.group(1) == "[", head.group(2)
+            if array and name == "rotors":
+                rotor += 1
+                section = f"rotors.{rotor}"
+            else:
+                section = None if array else name
             continue
         m = re.match(r"(\s*)([\w-]+)(\s*=\s*)([^#\n]*?)(\s*(#.*)?)$", line.rstrip("\n"))
         if not (section and m):

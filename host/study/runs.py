@@ -182,14 +182,21 @@ def _plant_loop(loops: dict) -> dict:
     return (loops or {}).get("input") or (loops or {}).get("rate") or {}
 
 
+def _written(path: str) -> dict | None:
+    """The JSON document a step wrote at ``path``, None when it wrote none."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            return json.load(f)
+    except FileNotFoundError:
+        return None
+
+
 def _validation(sweep_dir: str) -> dict:
     """validate's figures (validation.json beside models.json), {} without it: the margins
     at the plant's input predicted from the model and the simulator's truth's, the closed
     loop's stability, its step and its angle under turbulence."""
-    try:
-        with open(os.path.join(sweep_dir, "validation.json"), encoding="utf-8") as f:
-            doc = json.load(f)
-    except FileNotFoundError:
+    doc = _written(os.path.join(sweep_dir, "validation.json"))
+    if doc is None:
         return {}
     model, truth = _plant_loop(doc.get("loops")), _plant_loop(doc.get("truth_loops"))
     return {"validated_stable": doc.get("stable"),
@@ -205,10 +212,8 @@ def _validation(sweep_dir: str) -> dict:
 def _tuning(sweep_dir: str, axis) -> dict:
     """tune's figures (TUNED/tune.json), {} without it: whether the tuned gains meet the
     specification, the gains, and the predicted margins at the plant's input."""
-    try:
-        with open(os.path.join(sweep_dir, TUNED, "tune.json"), encoding="utf-8") as f:
-            doc = json.load(f)
-    except FileNotFoundError:
+    doc = _written(os.path.join(sweep_dir, TUNED, "tune.json"))
+    if doc is None:
         return {}
     tuned = (doc.get("axes") or {}).get(axis) or {}
     loop = _plant_loop((tuned.get("tuned") or {}).get("loops"))

@@ -22,8 +22,8 @@ The spec (docs/studies.md)::
     [tune]                     # optional: heliquad tune on them (empty: its defaults)
 
 A factor is an option of ``heliquad sweep`` (or, failing that, of identify, validate or
-tune, in that order) by its long name; what the commands' options are comes from the caller (the commands' parsers),
-so a factor means what the option means on the command line.
+tune, in that order) by its long name; what the commands' options are comes from the caller
+(the commands' parsers), so a factor means what the option means on the command line.
 """
 
 from __future__ import annotations
