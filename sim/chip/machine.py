@@ -340,7 +340,7 @@ class Machine:
         """Call ``callback(machine)`` when the instruction at ``where`` (address or symbol)
         is about to execute. A callback returning a truthy value (or no callback) stops the
         run there with reason ``breakpoint`` (or the value, if it is a string)."""
-        address = self.image.symbol(where).address if isinstance(where, str) else where & ~1
+        address = self._code_address(where)
         self._breakpoints.setdefault(address, []).append(callback)
         if address not in self._bp_hooks:
             self._bp_hooks[address] = self.uc.hook_add(UC_HOOK_CODE, self._on_breakpoint, None,
@@ -353,10 +353,14 @@ class Machine:
         before it executes, with reason ``stop-at``; the next run goes on through it. As a
         breakpoint with no callback, but native: no call into Python at the stop, for the
         stops a lockstep driver makes every loop."""
-        address = self.image.symbol(where).address if isinstance(where, str) else where & ~1
+        address = self._code_address(where)
         self.core.add_stop_at(address)
         self.uc.ctl_remove_cache(address, address + 4)      # retranslate with the hook
         return address
+
+    def _code_address(self, where) -> int:
+        """An instruction's address: a symbol's, or an address with its Thumb bit cleared."""
+        return self.image.symbol(where).address if isinstance(where, str) else where & ~1
 
     def _on_breakpoint(self, uc, address, size, _):
         if address == self._bp_resume:
