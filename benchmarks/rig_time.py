@@ -1,23 +1,28 @@
 """Benchmark: rig time per axis, the paper's dwell against one multisine, at equal accuracy.
 
-On each axis's rig (the 6-DoF vehicle, firmware in the loop, mixer injection):
+Runs the study ``benchmarks/studies/rig_time.toml`` (``heliquad study``: every run a
+``heliquad sweep --sil`` and ``heliquad identify`` on the axis's rig, the 6-DoF vehicle,
+mixer injection, firmware in the loop) and prints its figures from the runs' records:
 
-1. **Still air, ideal sensor** (the method alone): a multisine over the axis's band in its
-   default rig time (at most 60 s), and the paper's dwell (8 measured cycles per frequency,
-   designed amplitudes) at the multisine's own line frequencies. Prints the rig time of
-   each and the largest difference between their points (the dwell's interpolated to the
-   multisine's exact frequencies, which differ by the rounding of each sine's period).
-2. **Moderate turbulence, the IMU's noise**: the shortest dwell identify can use (1 fade
-   cycle each way, 3 measured cycles: one discarded, one fills the FSF's filter, one of
-   regression rows) at the default multisine's lines, and that multisine (same lines and
-   period) with as many whole periods as fit the dwell's rig time;
-   over several seeds, each point's error against the
-   simulator's truth. Prints the rig time and the RMS and worst errors of both.
+1. **Still air, ideal sensor** (the method alone): the default multisine (at most 60 s)
+   and the paper's dwell (8 measured cycles per frequency, designed amplitudes) at the
+   multisine's line frequencies: the rig time of each, each one's worst error against the
+   simulator's truth, and the largest difference between their points (the dwell's
+   interpolated to the multisine's exact frequencies, which differ by the rounding of each
+   sine's period to whole loop samples).
+2. **Moderate turbulence, the IMU's noise**, seeds 1-3: the shortest dwell identify can
+   use (1 fade cycle each way, 3 measured cycles: one discarded, one fills the FSF's
+   filter, one of regression rows) at the default multisine's lines, and that multisine
+   (same lines and base period) with as many whole periods as fit the dwell's rig time:
+   the mean rig time, and the RMS and worst error against the truth over all the points of
+   the three seeds.
 
-Rig time counts each excitation from the start of its fade-in to the end of its fade-out
-(what the rig flies excited). Prints figures; there is no target ratio.
+Rig time is the table's ``excited_s``: each excitation from the start of its fade-in to the
+end of its fade-out (what the rig flies excited). Prints figures; there is no target ratio.
+With --out the study's folder is kept (the table, figures and page) and the same command
+again makes only the runs that are missing.
 
-    python benchmarks/rig_time.py [--axes roll pitch yaw] [--seeds 3]
+    python benchmarks/rig_time.py [--out DIR] [--workers N]
 """
 
 from __future__ import annotations
@@ -25,46 +30,28 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import subprocess
+import sys
 import tempfile
 
 import numpy as np
 
-from heliquad.host.acquire.session import SilSession
-from heliquad.host.acquire.sweep import (SWEEP_TLOG, default_plan, multisine_plan, run_sweep,
-                                         sil_source)
-from heliquad.host.campaign.identify import identify_dir
+from heliquad.host.records.points import read_points_csv
+from heliquad.host.study.runs import RUNS, SWEEP, read_record
 from heliquad.sim.base.dialect import AXES
-from heliquad.sim.rig.setup import SilConfig
+
+SPEC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "studies", "rig_time.toml")
 
 
-def quiet(*_args, **_kwargs):
-    pass
-
-
-def rig_seconds(manifest) -> float:
-    """Excited time: each measured excitation's full-amplitude window plus its two fades."""
-    total = 0.0
-    for e in manifest["frequencies"]:
-        if "period_samples" not in e:
-            continue
-        fs = e["freq_hz"] * e["period_samples"]
-        fade = e.get("fade_samples", manifest["fade_cycles"] * e["period_samples"])
-        total += (e["samples"] + 2 * fade) / fs
-    return total
-
-
-def run(axis, plan, folder, turbulence=None, seed=0, ideal=False):
-    """Sweep ``plan`` on the axis's rig; (points by frequency, truth errors, rig seconds)."""
-    os.makedirs(folder)
-    cfg = SilConfig(axis=axis, inject="mixer", plant="vehicle", rig=axis, seed=seed,
-                    turbulence=turbulence, ideal_sensor=ideal)
-    with SilSession(cfg, os.path.join(folder, SWEEP_TLOG)) as session:
-        manifest = run_sweep(session, plan, folder,
-                             {**sil_source(cfg), "firmware": session.fw.record()}, progress=quiet)
-    got = identify_dir(folder, orders=[(0, 2)], progress=quiet, delay=False)
-    points = sorted(got["points"], key=lambda p: p.omega_rad_s)
-    errors = got["truth"]["points"]
-    return points, errors, rig_seconds(manifest)
+def study(out: str, workers: int | None) -> list:
+    """``heliquad study`` of :data:`SPEC` into ``out``: every run's record."""
+    command = [sys.executable, "-m", "heliquad.host.cli.parser", "study", SPEC, "--out", out]
+    if workers:
+        command += ["--workers", str(workers)]
+    if subprocess.run(command).returncode:
+        raise SystemExit(f"heliquad study {SPEC} --out {out} did not finish every run")
+    folders = sorted(os.listdir(os.path.join(out, RUNS)))
+    return [dict(read_record(os.path.join(out, RUNS, name)), folder=name) for name in folders]
 
 
 def _interpolated(points, freqs_hz):
@@ -76,61 +63,60 @@ def _interpolated(points, freqs_hz):
     return np.exp(mag + 1j * phase)
 
 
-def still_air(axis, tmp) -> None:
-    ms_plan = multisine_plan(axis)
-    ms, _, ms_s = run(axis, ms_plan, f"{tmp}/{axis}-ms", ideal=True)
-    freqs = ms_plan.multisine.freqs_hz
-    dwell, _, dwell_s = run(axis, default_plan(axis, freqs_hz=freqs, cycles=8),
-                            f"{tmp}/{axis}-dwell", ideal=True)
-    want = _interpolated(dwell, np.array([p.freq_hz for p in ms]))
-    ratio = np.array([p.gain for p in ms]) / want
-    print(f"{axis:>6} still air: multisine {len(ms)} points in {ms_s:.1f} s, dwell "
-          f"{len(dwell)} in {dwell_s:.1f} s ({dwell_s / ms_s:.1f}x); largest difference "
+def _points(out: str, record: dict) -> list:
+    return read_points_csv(os.path.join(out, RUNS, record["folder"], SWEEP, "points.csv"))
+
+
+def _pick(records, axis, signal, turbulence) -> list:
+    return [r for r in records if r["factors"]["axis"] == axis and
+            r["factors"]["signal"] == signal and r["factors"]["turbulence"] == turbulence]
+
+
+def still_air(out: str, records: list, axis: str) -> None:
+    (ms,), (dwell,) = (_pick(records, axis, s, "none") for s in ("multisine", "dwell"))
+    got = _points(out, ms)
+    want = _interpolated(_points(out, dwell), np.array([p.freq_hz for p in got]))
+    ratio = np.array([p.gain for p in got]) / want
+    print(f"{axis:>6} still air: multisine {ms['points']} points in {ms['excited_s']:.1f} s, "
+          f"dwell {dwell['points']} in {dwell['excited_s']:.1f} s "
+          f"({dwell['excited_s'] / ms['excited_s']:.1f}x); largest difference "
           f"{np.max(np.abs(20 * np.log10(np.abs(ratio)))):.3f} dB, "
-          f"{np.max(np.abs(np.degrees(np.angle(ratio)))):.2f} deg", flush=True)
+          f"{np.max(np.abs(np.degrees(np.angle(ratio)))):.2f} deg; against the truth, worst: "
+          f"multisine {ms['points_worst_db']:.3f} dB {ms['points_worst_deg']:.2f} deg, dwell "
+          f"{dwell['points_worst_db']:.3f} dB {dwell['points_worst_deg']:.2f} deg", flush=True)
 
 
-def _error_summary(errors) -> tuple:
-    db = np.array([e["error_db"] for e in errors])
-    deg = np.array([e["error_deg"] for e in errors])
-    return (math.sqrt(np.mean(db ** 2)), math.sqrt(np.mean(deg ** 2)),
-            float(np.max(np.abs(db))), float(np.max(np.abs(deg))))
+def _pooled(runs: list, name: str) -> float:
+    """The RMS over every point of ``runs`` from each run's RMS and count."""
+    return math.sqrt(sum(r["points"] * r[name] ** 2 for r in runs) /
+                     sum(r["points"] for r in runs))
 
 
-def turbulent(axis, tmp, seeds) -> None:
-    default = multisine_plan(axis).multisine
-    freqs = default.freqs_hz
-    dwell_plan = default_plan(axis, freqs_hz=freqs, cycles=3)
-    dwell_plan.fade_cycles = 1
-    rows = {"dwell": [], "multisine": []}
-    rig = {"dwell": [], "multisine": []}
-    for seed in range(1, seeds + 1):
-        _, errors, seconds = run(axis, dwell_plan, f"{tmp}/{axis}-td{seed}", "moderate", seed)
-        rows["dwell"] += errors
-        rig["dwell"].append(seconds)
-        ms_plan = multisine_plan(axis, rig_time_s=seconds, like=default)
-        _, errors, seconds = run(axis, ms_plan, f"{tmp}/{axis}-tm{seed}", "moderate", seed)
-        rows["multisine"] += errors
-        rig["multisine"].append(seconds)
-    for kind, errors in rows.items():
-        rms_db, rms_deg, worst_db, worst_deg = _error_summary(errors)
-        print(f"{axis:>6} moderate turbulence, {kind:>9}: {np.mean(rig[kind]):.1f} s; error "
-              f"against truth RMS {rms_db:.2f} dB {rms_deg:.1f} deg, worst {worst_db:.2f} dB "
-              f"{worst_deg:.1f} deg ({len(errors)} points, {seeds} seeds)", flush=True)
+def turbulent(records: list, axis: str) -> None:
+    for signal in ("dwell", "multisine"):
+        runs = _pick(records, axis, signal, "moderate")
+        print(f"{axis:>6} moderate turbulence, {signal:>9}: "
+              f"{np.mean([r['excited_s'] for r in runs]):.1f} s; error against truth RMS "
+              f"{_pooled(runs, 'points_rms_db'):.2f} dB {_pooled(runs, 'points_rms_deg'):.1f} "
+              f"deg, worst {max(r['points_worst_db'] for r in runs):.2f} dB "
+              f"{max(r['points_worst_deg'] for r in runs):.1f} deg "
+              f"({sum(r['points'] for r in runs)} points, {len(runs)} seeds)", flush=True)
 
 
 def main(argv=None):
-    """Both experiments on the axes asked for."""
+    """The study, then its figures, axis by axis."""
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--axes", nargs="+", default=list(AXES), choices=tuple(AXES))
-    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--out", help="the study's folder, kept (default: a temporary one)")
+    parser.add_argument("--workers", type=int, help="local workers (default: one per core)")
     args = parser.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
-        for axis in args.axes:
-            still_air(axis, tmp)
-        for axis in args.axes:
-            turbulent(axis, tmp, args.seeds)
+    with tempfile.TemporaryDirectory(prefix="rig_time-") as tmp:
+        out = args.out or tmp
+        records = study(out, args.workers)
+        for axis in AXES:
+            still_air(out, records, axis)
+        for axis in AXES:
+            turbulent(records, axis)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ import tempfile
 import numpy as np
 
 from heliquad.host.estimate.fit import model_response
+from heliquad.host.records.manifest import excited_seconds
 from heliquad.host.records.points import read_points_csv
 from heliquad.sim.base.dialect import AXES
 
@@ -38,7 +39,7 @@ def heliquad(*args):
 
 
 def run(folder, axis, args, turbulence, seed):
-    """Sweep and identify one campaign: (models.json, the manifest's one entry)."""
+    """Sweep and identify one campaign: (models.json, manifest.json)."""
     sweep = ["sweep", "--sil", "--axis", axis, "--signal", "multisine", "--target-sigma",
              0.02, "--rig-time", args.rig_time, "--inject", args.inject, "--seed", seed,
              "--out", folder]
@@ -53,8 +54,7 @@ def run(folder, axis, args, turbulence, seed):
     with open(os.path.join(folder, "models.json")) as fh:
         models = json.load(fh)
     with open(os.path.join(folder, "manifest.json")) as fh:
-        (entry,) = json.load(fh)["frequencies"]
-    return models, entry
+        return models, json.load(fh)
 
 
 def reference_points(folder):
@@ -100,11 +100,11 @@ def main():
         still, _ = run(still_dir, axis, args, None, 0)
         reference = reference_points(still_dir)
         for seed in range(1, args.seeds + 1):
-            models, entry = run(os.path.join(base, f"{axis}-severe-{seed}"), axis, args,
-                                "severe", seed)
+            models, manifest = run(os.path.join(base, f"{axis}-severe-{seed}"), axis, args,
+                                   "severe", seed)
             truth = models["sil_truth"]
-            rig_s = (entry["end_us"] - entry["start_us"]) / 1e6 + \
-                2 * entry["fade_samples"] / (entry["freq_hz"] * entry["period_samples"])
+            (entry,) = manifest["frequencies"]
+            rig_s = excited_seconds(manifest)
             err = against(models, reference)
             rec = models.get("recommended")
             order = "none recommended" if rec is None else \

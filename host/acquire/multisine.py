@@ -155,13 +155,18 @@ def low_crest_phases(orders, amplitudes, n: int, iterations: int = CLIP_ITERATIO
     return best
 
 
-def _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles):
+def _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles, base_period_s=None):
     """(period N, orders, whole periods) of the grid that fits the rig time with the most
-    distinct lines, and of those the most periods (the coarsest grid that keeps them)."""
+    distinct lines, and of those the most periods (the coarsest grid that keeps them); with
+    ``base_period_s``, the grid of that base period."""
     lo, hi = band_hz
+    if base_period_s is not None and base_period_s * lo < 1.0 - 1e-9:
+        raise InputError(f"a base period of {base_period_s:g} s puts the first harmonic above "
+                         f"the band's lowest frequency, {lo:g} Hz: at least {1 / lo:.6g} s")
+    sizes = ([int(round(fs_hz * base_period_s))] if base_period_s is not None else
+             [int(round(fs_hz * lowest / lo)) for lowest in range(1, MAX_LOWEST_ORDER + 1)])
     best = None
-    for lowest in range(1, MAX_LOWEST_ORDER + 1):
-        n = int(round(fs_hz * lowest / lo))
+    for n in sizes:
         base = fs_hz / n
         orders = sorted({max(1, int(round(f / base))) for f in
                          np.logspace(math.log10(lo), math.log10(hi), lines)})
@@ -171,21 +176,24 @@ def _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles):
                 best is None or (len(orders), periods) > (len(best[1]), best[2])):
             best = (n, orders, periods)
     if best is None:
+        grid = ("a base frequency below its lowest line" if base_period_s is None else
+                f"its base period of {base_period_s:g} s")
         raise InputError(f"a multisine over {lo:g}-{hi:g} Hz needs more than {rig_time_s:g} s: "
-                         f"{min_periods} whole periods of a base frequency below its lowest line, "
-                         "and the fades, do not fit (a longer rig time, or a higher lowest "
-                         "frequency)")
+                         f"{min_periods} whole periods of {grid}, and the fades, do not fit "
+                         "(a longer rig time, or a higher lowest frequency)")
     return best
 
 
 def design(band_hz, peak: float, lines: int = LINES, rig_time_s: float = RIG_TIME_S,
            min_periods: int = MIN_PERIODS, fade_cycles: int = FADE_CYCLES,
-           fs_hz: float | None = None, weights=None, like: Multisine | None = None) -> Multisine:
+           fs_hz: float | None = None, weights=None, like: Multisine | None = None,
+           base_period_s: float | None = None) -> Multisine:
     """A multisine over ``band_hz`` (lo, hi) with declared peak ``peak`` (injection units)
     that fits ``rig_time_s``; ``weights`` (one per line after rounding, default equal) are
     the lines' relative amplitudes. ``like``: keep that multisine's period and lines, and
     fill ``rig_time_s`` with as many whole periods as fit (a longer or shorter record of the
-    same points)."""
+    same points). ``base_period_s``: the base period (rounded to whole loop samples) instead
+    of the one chosen for the rig time: the lines of a design made for another length."""
     fs_hz = float(fs_hz or firmware_facts.LOOP_RATE_HZ)
     if not 0 < band_hz[0] < band_hz[1] <= fs_hz / 4:
         raise InputError(f"band {band_hz[0]:g}-{band_hz[1]:g} Hz: the lowest must be above 0 "
@@ -193,7 +201,8 @@ def design(band_hz, peak: float, lines: int = LINES, rig_time_s: float = RIG_TIM
     if not 2 <= lines <= MAX_LINES:
         raise InputError(f"lines must be from 2 to {MAX_LINES}, got {lines}")
     if like is None:
-        n, orders, periods = _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles)
+        n, orders, periods = _grid(band_hz, fs_hz, lines, rig_time_s, min_periods, fade_cycles,
+                                   base_period_s)
     else:
         n, orders = like.period_samples, list(like.orders)
         periods = int((rig_time_s * fs_hz - 2 * like.fade_samples) // n)

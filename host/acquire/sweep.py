@@ -39,7 +39,7 @@ from .excitation import amplitude_bound, default_amplitude, default_peak
 from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, saturation_text
 from .chirp import design as chirp_design
 from .linearity import LINES as LINEARITY_LINES, REALISATIONS, linearity_design
-from .multisine import LINES, RIG_TIME_S, design
+from .multisine import FADE_CYCLES as MULTISINE_FADE_CYCLES, LINES, RIG_TIME_S, design
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .param_protocol import session_params
@@ -167,14 +167,15 @@ class SweepPlan:
 
 
 def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=None,
-                 dwell=None, swing_deg=None):
+                 dwell=None, swing_deg=None, fade_cycles=None):
     """The paper's Table 1 (docs/paper.md): 15 log-spaced frequencies over the axis's band.
 
     ``cycles``: a fixed dwell of that many measured cycles (the published one: 8); without
     it the dwell is sequential (``dwell``, default :class:`~heliquad.host.acquire.design.Dwell`).
     ``amplitude``: one for every frequency; without it a mixer sweep's amplitudes are
     designed for a swing of ``swing_deg`` (:class:`~heliquad.host.acquire.design.AmplitudeDesign`)
-    and angle and rate sweeps use :func:`.excitation.default_amplitude`."""
+    and angle and rate sweeps use :func:`.excitation.default_amplitude`. ``fade_cycles``:
+    the cycles each frequency is faded in and out over (default :data:`FADE_CYCLES`)."""
     if freqs_hz is None:
         lo, hi = paper.BANDS_HZ[axis]
         freqs_hz = np.logspace(math.log10(lo), math.log10(hi), N_FREQUENCIES)
@@ -188,27 +189,32 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
         amps = [None] * len(freqs_hz)
     else:
         amps = [default_amplitude(inject)] * len(freqs_hz)
+    fade = fade_cycles or FADE_CYCLES
     if cycles is not None:
-        return SweepPlan(axis, inject, freqs_hz, amps, cycles, design=design)
-    return SweepPlan(axis, inject, freqs_hz, amps, MEASURED_CYCLES, dwell=dwell or Dwell(),
+        return SweepPlan(axis, inject, freqs_hz, amps, cycles, fade, design=design)
+    return SweepPlan(axis, inject, freqs_hz, amps, MEASURED_CYCLES, fade, dwell=dwell or Dwell(),
                      design=design)
 
 
 def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=None,
-                   band_hz=None, like=None, sequential=None) -> SweepPlan:
+                   band_hz=None, like=None, sequential=None, base_period_s=None,
+                   fade_cycles=None) -> SweepPlan:
     """A multisine over the axis's Table 1 band (or ``band_hz``) in ``rig_time_s``
     (:func:`heliquad.host.acquire.multisine.design`). ``amplitude`` is its peak; without it, the
     dwell's amplitude for angle and rate injection (the same largest setpoint), and for
     mixer injection the firmware's bound: the designed dwell reaches it on a rig in
     turbulence, and a multisine shares its power among its lines (on the vehicle's rigs in
     still air the roll rig then swings about 5 deg). ``like``: the same lines as that
-    :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``."""
+    :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``;
+    ``base_period_s``: the base period instead of the one chosen for ``rig_time_s``;
+    ``fade_cycles``: cycles of the lowest line in each fade (default one)."""
     if amplitude is None:
         amplitude = default_peak(inject)
     if sequential is not None and rig_time_s is None:
         rig_time_s = SEQUENTIAL_RIG_TIME_S
     ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
-                rig_time_s or RIG_TIME_S, like=like)
+                rig_time_s or RIG_TIME_S, fade_cycles=fade_cycles or MULTISINE_FADE_CYCLES,
+                like=like, base_period_s=base_period_s)
     plan = SweepPlan.of_multisine(axis, inject, ms)
     plan.sequential = sequential
     return plan

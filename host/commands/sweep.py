@@ -29,7 +29,7 @@ __all__ = ["add_parser", "run", "checked_plan"]
 
 HELP = f"""\
 Run the paper's sine sweep for one axis: the band of its Table 1, 15 log-spaced frequencies
-(or --freqs-hz), each faded in over 2 cycles (the settling), measured, faded out.
+(or --freqs-hz), each faded in over 2 cycles (--fade-cycles; the settling), measured, out.
 The dwell is sequential by default: at least 8 measured cycles (the paper's dwell), then
 until the point's standard deviation is --target-sigma of its magnitude (estimated against
 the excitation after every cycle) or --max-cycles (and at most 60 s) have run, when the
@@ -47,9 +47,9 @@ Input and output for `heliquad identify`: mixer -> the axis's torque command and
 angle -> angle setpoint and angle.
 
 --signal multisine excites the whole band at once instead: --lines log-spaced lines (default
-15) on harmonics of one base period, phases for a low crest factor, faded in and out over a
-cycle of the lowest line, as many whole base periods as fit --rig-time (default 60 s, at
-least 3 periods); --amplitude is its peak (default: {DEFAULT_SETPOINT['angle']:g} deg angle, {DEFAULT_SETPOINT['rate']:g} deg/s rate, the
+15) on harmonics of one base period (chosen for the rig time, or --base-period), phases for a
+low crest factor, faded in and out over a cycle of the lowest line (--fade-cycles), as many
+whole base periods as fit --rig-time (default 60 s, at least 3 periods); --amplitude is its peak (default: {DEFAULT_SETPOINT['angle']:g} deg angle, {DEFAULT_SETPOINT['rate']:g} deg/s rate, the
 firmware's bound at the mixer). identify estimates every line from the one record.
 
 --signal chirp sweeps the band once instead, as ArduPilot's SystemID mode does: from its

@@ -89,6 +89,11 @@ def add_design_arguments(p, on_board: bool = False) -> None:
                             f"the peak and again at {SMALL_SHARE:g} of it; identify then "
                             "separates each line's noise from the nonlinear distortion and "
                             "fits the larger amplitude's best linear approximation")
+    _add_shape_arguments(p, on_board)
+
+
+def _add_shape_arguments(p, on_board: bool) -> None:
+    """A multisine's lines, length and grid, and the fades of a dwell or a multisine."""
     p.add_argument("--lines", type=int_in(2, MAX_LINES), metavar="N",
                    help=f"multisine: log-spaced lines over the band (default {LINES}), each on "
                         "the nearest harmonic of the base period")
@@ -97,6 +102,16 @@ def add_design_arguments(p, on_board: bool = False) -> None:
                         f"{RIG_TIME_S:g}); as many whole base periods as fit"
                         + ("" if on_board else f"; chirp: its sweep's seconds at full "
                                                f"amplitude (default {CHIRP_SWEEP_S:g})"))
+    p.add_argument("--base-period", type=number_in(0.1, facts.MAX_DURATION_S), metavar="S",
+                   help="multisine: its base period, s, its lines on harmonics of 1/S Hz "
+                        "(default: chosen for --rig-time, the most distinct lines, then the "
+                        "most periods); the same S with another --rig-time flies the same "
+                        "lines for longer or shorter")
+    p.add_argument("--fade-cycles", type=int_in(facts.MIN_FADE_CYCLES, MAX_CYCLES),
+                   metavar="N",
+                   help="dwell: each frequency faded in and out over N cycles (default 2; "
+                        "the fade-in is the settling before the measured cycles); multisine: "
+                        "over N cycles of its lowest line (default 1)")
 
 
 def apply_tuning_band(args) -> None:
@@ -137,8 +152,9 @@ def _plan(args, on_board: bool):
         return _multisine_plan(args, amp, (target_sigma, max_cycles, swing_deg))
     if args.signal == "chirp":
         return _chirp_plan(args, amp, (target_sigma, max_cycles, swing_deg))
-    if args.lines is not None or args.rig_time is not None:
-        raise InputError("--lines and --rig-time shape a multisine: add --signal multisine")
+    if args.lines is not None or args.rig_time is not None or args.base_period is not None:
+        raise InputError("--lines, --rig-time and --base-period shape a multisine: add "
+                         "--signal multisine")
     if args.cycles is not None and (target_sigma or max_cycles):
         raise InputError("--cycles fixes the dwell; --target-sigma and --max-cycles are for "
                          "the sequential dwell: give one or the other")
@@ -146,14 +162,14 @@ def _plan(args, on_board: bool):
         if amp is None and args.inject == "mixer":
             amp = design.AmplitudeDesign(amplitude_bound("mixer")).first()
         return default_plan(args.axis, args.inject, args.freqs_hz, amp,
-                            args.cycles or MEASURED_CYCLES)
+                            args.cycles or MEASURED_CYCLES, fade_cycles=args.fade_cycles)
     dwell = None
     if args.cycles is None:
         dwell = design.Dwell()
         dwell.target_sigma = target_sigma or dwell.target_sigma
         dwell.max_cycles = max_cycles or dwell.max_cycles
     return default_plan(args.axis, args.inject, args.freqs_hz, amp, args.cycles, dwell,
-                        swing_deg)
+                        swing_deg, args.fade_cycles)
 
 
 def _band_edges(args, signal: str):
@@ -173,11 +189,14 @@ def _chirp_plan(args, amp, dwell_options):
     from ..acquire.sweep import chirp_plan
 
     given = [o for o, v in zip(("--cycles", "--target-sigma", "--max-cycles", "--swing-deg",
-                                "--lines"), (args.cycles, *dwell_options, args.lines))
+                                "--lines", "--base-period", "--fade-cycles"),
+                               (args.cycles, *dwell_options, args.lines, args.base_period,
+                                args.fade_cycles))
              if v is not None]
     if given:
         raise InputError(f"{' and '.join(given)} do not shape a chirp: its length is "
-                         "--rig-time, its band the axis's or --freqs-hz's edges")
+                         "--rig-time, its band the axis's or --freqs-hz's edges, its fades "
+                         "whole cycles at its ends")
     return chirp_plan(args.axis, args.inject, amp, args.rig_time, _band_edges(args, "chirp"),
                       args.chirp)
 
@@ -199,7 +218,8 @@ def _multisine_plan(args, amp, dwell_options):
         return _linearity_plan(args, amp, target_sigma)
     sequential = None if target_sigma is None else design.SequentialMultisine(target_sigma)
     return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time,
-                          _band_edges(args, "multisine"), sequential=sequential)
+                          _band_edges(args, "multisine"), sequential=sequential,
+                          base_period_s=args.base_period, fade_cycles=args.fade_cycles)
 
 
 def _linearity_plan(args, amp, target_sigma):
@@ -207,8 +227,9 @@ def _linearity_plan(args, amp, target_sigma):
     # the command's work, imported when it runs: --help imports every command module
     from ..acquire.sweep import linearity_plan
 
-    given = [o for o, v in (("--target-sigma", target_sigma), ("--rig-time", args.rig_time))
-             if v is not None]
+    given = [o for o, v in (("--target-sigma", target_sigma), ("--rig-time", args.rig_time),
+                            ("--base-period", args.base_period),
+                            ("--fade-cycles", args.fade_cycles)) if v is not None]
     if given:
         raise InputError(f"{' and '.join(given)} with --linearity: its length is its "
                          f"realisations' ({LINEARITY_PERIODS} base periods each, at two "

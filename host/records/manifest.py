@@ -25,7 +25,7 @@ from .output import document, write_json
 from .reading import read_json
 
 __all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "PORT_FOUND", "UNSET", "SweepManifest",
-           "write_manifest", "read_manifest"]
+           "write_manifest", "read_manifest", "excited_seconds"]
 
 #: The manifest's name in a sweep folder.
 MANIFEST = "manifest.json"
@@ -159,3 +159,17 @@ def read_manifest(path) -> dict:
                 S.fail(path, key, f"freq_hz x period_samples, the loop rate, is {loop_hz:g} Hz; "
                        f"it must be in [{LOOP_RANGE_HZ[0]:g}, {LOOP_RANGE_HZ[1]:g}] Hz")
     return doc
+
+
+def excited_seconds(manifest: dict) -> float:
+    """The seconds the rig flew excited: each measured excitation's full-amplitude samples and
+    its two fades (a dwell's ``fade_cycles`` cycles of its frequency, a multisine's or chirp's
+    ``fade_samples``), at the loop rate the entry gives (``freq_hz`` x ``period_samples``).
+    The time between excitations, which a log's span also counts, is left out."""
+    total = 0.0
+    for e in manifest["frequencies"]:
+        if "period_samples" not in e or "samples" not in e:
+            continue
+        fade = e.get("fade_samples", manifest["fade_cycles"] * e["period_samples"])
+        total += (e["samples"] + 2 * fade) / (e["freq_hz"] * e["period_samples"])
+    return total

@@ -19,6 +19,7 @@ import time
 
 from ...sim.base.errors import InputError
 from .. import __version__
+from ..records.manifest import excited_seconds
 from ..records.output import atomic_write, write_json
 from .perturb import VEHICLE_FILE, base_text, perturbed_text
 
@@ -148,7 +149,7 @@ def _partial(sweep_dir: str) -> dict:
 def outcome(sweep_dir: str) -> dict:
     """The figures of a swept and identified folder: errors against the simulator's truth
     (models.json's ``sil_truth``), the sigma's calibration, the recommended model, the
-    broken loop's margins, and the rig time (the log's span)."""
+    broken loop's margins, and the rig time (the log's span, and the excitations' own)."""
     # the log's reader, imported when a run reads it: the client plans runs without it
     from ..acquire.log_session import summarise_tlog
     from ..estimate.fit import order_name
@@ -161,7 +162,7 @@ def outcome(sweep_dir: str) -> dict:
     points = truth.get("points", [])
     out = {"complete": bool(manifest.get("complete")), "points": len(points),
            "rig_s": summarise_tlog(os.path.join(sweep_dir, manifest.get("tlog", "sweep.tlog")))
-           ["span_s"], **_point_errors(truth, points)}
+           ["span_s"], "excited_s": excited_seconds(manifest), **_point_errors(truth, points)}
     rec = doc.get("recommended")
     model = doc["models"][rec] if rec is not None else None
     out["recommended"] = None if model is None else order_name(

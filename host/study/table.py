@@ -27,6 +27,7 @@ COLUMNS = {
     "model_worst_deg": pa.float64(), "recommended": pa.string(), "quality": pa.string(),
     "model_num": pa.string(), "model_den": pa.string(), "model_delay_s": pa.float64(),
     "gain_margin_db": pa.float64(), "phase_margin_deg": pa.float64(), "rig_s": pa.float64(),
+    "excited_s": pa.float64(),
     "validated_stable": pa.bool_(), "validated_gain_margin_db": pa.float64(),
     "validated_phase_margin_deg": pa.float64(), "truth_gain_margin_db": pa.float64(),
     "truth_phase_margin_deg": pa.float64(), "step_overshoot_pct": pa.float64(),
