@@ -6,13 +6,15 @@ Dryden turbulence with the IMU's noise, each `heliquad sweep --sil --signal mult
 --target-sigma 0.02 --rig-time CAP` and `heliquad identify`. By default the excitation
 enters at the rate setpoint and the sweep measures the plant (`--inject rate --response
 plant`: the mixer's input to the rate, both against the excitation); `--inject mixer`
-runs the mixer injection instead, for comparison. Per run: the rig time (the excitation's
-span, fades included), the points' and the recommended model's worst errors against the
+runs the mixer injection instead, for comparison; `--redesign` flies each run in two passes,
+the second's lines redesigned from the first's disturbance. Per run: the rig time (the
+excitations' spans, fades included), how the last pass ended, the worst line's sigma over
+magnitude (the passes combined), the points' and the recommended model's worst errors against the
 simulator's truth, and the model's worst error against the still-air run's points (at
 their frequencies): the figure the acceptance of a severe-turbulence campaign reads.
 
     python benchmarks/severe_turbulence.py [--axes roll pitch yaw] [--seeds 5]
-        [--inject rate|mixer] [--amplitude A] [--rig-time 180] [--keep DIR]
+        [--inject rate|mixer] [--amplitude A] [--rig-time 180] [--redesign] [--keep DIR]
 """
 
 import argparse
@@ -24,6 +26,7 @@ import tempfile
 
 import numpy as np
 
+from heliquad.host.acquire.redesign import passes_sigmas
 from heliquad.host.estimate.fit import model_response
 from heliquad.host.records.manifest import excited_seconds
 from heliquad.host.records.points import read_points_csv
@@ -49,12 +52,20 @@ def run(folder, axis, args, turbulence, seed):
         sweep += ["--amplitude", args.amplitude]
     if turbulence:
         sweep += ["--turbulence", turbulence]
+    if args.redesign:
+        sweep += ["--redesign"]
     heliquad(*sweep)
     heliquad("identify", folder)
     with open(os.path.join(folder, "models.json")) as fh:
         models = json.load(fh)
     with open(os.path.join(folder, "manifest.json")) as fh:
         return models, json.load(fh)
+
+
+def worst_sigma(manifest) -> float:
+    """The worst line's sigma over magnitude, each line's passes combined as identify
+    combines them."""
+    return max(s for s in passes_sigmas(manifest["frequencies"]) if s is not None)
 
 
 def reference_points(folder):
@@ -84,6 +95,8 @@ def main():
                         help="the multisine's peak (rate: deg/s, default 40; mixer: the "
                              "firmware's bound)")
     parser.add_argument("--rig-time", type=float, default=180.0)
+    parser.add_argument("--redesign", action="store_true",
+                        help="two passes, the second's lines redesigned from the first")
     parser.add_argument("--keep", metavar="DIR", help="keep the sweep folders here")
     args = parser.parse_args()
     if args.inject == "rate" and args.amplitude is None:
@@ -92,7 +105,7 @@ def main():
     print(f"injection {args.inject}"
           + (f", the plant against the excitation, peak {args.amplitude:g} deg/s"
              if args.inject == "rate" else "") + f"; cap {args.rig_time:g} s; folders in {base}")
-    print(f"{'axis':>5} {'seed':>5} {'rig s':>6} {'end':>6} | {'points dB':>9} {'deg':>5} | "
+    print(f"{'axis':>5} {'seed':>5} {'rig s':>6} {'end':>6} {'sigma':>6} | {'points dB':>9} {'deg':>5} | "
           f"{'model dB':>8} {'deg':>5} | {'vs still dB':>11} {'deg':>5} | order", flush=True)
     worst = {}
     for axis in args.axes:
@@ -103,7 +116,7 @@ def main():
             models, manifest = run(os.path.join(base, f"{axis}-severe-{seed}"), axis, args,
                                    "severe", seed)
             truth = models["sil_truth"]
-            (entry,) = manifest["frequencies"]
+            entry = manifest["frequencies"][-1]
             rig_s = excited_seconds(manifest)
             err = against(models, reference)
             rec = models.get("recommended")
@@ -111,7 +124,8 @@ def main():
                 "/".join(map(str, models["models"][rec]["order"])) + \
                 ("+d" if models["models"][rec].get("delay_s") else "")
             fmt = (lambda v, spec: "-" if v is None else format(v, spec))
-            print(f"{axis:>5} {seed:>5} {rig_s:6.1f} {entry.get('multisine_end', '-'):>6} | "
+            print(f"{axis:>5} {seed:>5} {rig_s:6.1f} {entry.get('multisine_end', '-'):>6} "
+                  f"{worst_sigma(manifest):6.3f} | "
                   f"{truth['points_worst_db']:9.2f} {truth['points_worst_deg']:5.1f} | "
                   f"{fmt(truth.get('model_worst_db'), '8.2f'):>8} "
                   f"{fmt(truth.get('model_worst_deg'), '5.1f'):>5} | "

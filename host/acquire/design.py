@@ -36,6 +36,7 @@ import math
 import numpy as np
 
 from ...sim.base.errors import InputError
+from .redesign import combined_sigmas
 
 __all__ = ["Dwell", "AmplitudeDesign", "SequentialMultisine", "response_per_unit",
            "line_sdr", "SEQUENTIAL_RIG_TIME_S",
@@ -92,9 +93,27 @@ class Dwell:
 class SequentialMultisine:
     """The sequential multisine's rule: whole base periods, from ``min_periods`` on, until
     every line's sigma over its magnitude is ``target_sigma`` or less (the dwell's target,
-    for each line at once), or the periods its rig time holds have run."""
+    for each line at once), or the periods its rig time holds have run. ``prior``: per line,
+    the sigma over magnitude of an earlier pass on the same lines (:mod:`.redesign`), which
+    each line's estimate is judged combined with."""
     target_sigma: float = TARGET_SIGMA
     min_periods: int = 3
+    prior: tuple | None = None
+
+    def met(self, sigmas, used: int) -> bool:
+        """Whether every line is known well enough: ``sigmas`` this pass's over ``used``
+        whole periods, with the period under way added (the dwell's rule, ``sqrt(used /
+        (used + 1))``), combined with :attr:`prior`, ``(sigmas, used periods, amplitudes
+        then, amplitudes now)``, as identify combines the passes
+        (:func:`.redesign.combined_sigmas`)."""
+        if used < 1:
+            return False
+        now = np.asarray(sigmas, dtype=float) * math.sqrt(used / (used + 1))
+        if self.prior is not None:
+            before, periods, then, amps = self.prior
+            s = np.column_stack([[np.nan if v is None else v for v in before], now])
+            now = combined_sigmas(s, np.column_stack([then, amps]), [periods, used + 1])
+        return bool(np.all(np.isfinite(now))) and float(np.max(now)) <= self.target_sigma
 
     def relative_sigmas(self, r, u, y, fs_hz: float, period: int, orders,
                         present=None) -> np.ndarray:

@@ -21,6 +21,7 @@ from ...sim.base.dialect import dialect
 from ...sim.base.errors import LinkLost
 from .chirp import fade_samples
 from .design import line_sdr, response_per_unit
+from .redesign import disturbance_sigmas
 from .link import reason_text, response_fields
 
 #: The firmware's abort limits (SafetyLimits), checked again on the host (rounded to the
@@ -333,10 +334,9 @@ class ExcitationWatch:
             return
         period = e["period_samples"]
         r, u, y, present = self.columns(periods * period)
-        worst = float(np.max(rule.relative_sigmas(r, u, y, e["freq_hz"] * period, period,
-                                                  self.plan.multisine.orders, present)))
-        used = periods - 1                      # the first period fills the FSF's filter
-        if used >= 1 and worst * math.sqrt(used / (used + 1)) <= rule.target_sigma:
+        sigmas = rule.relative_sigmas(r, u, y, e["freq_hz"] * period, period,
+                                      self.plan.multisine.orders, present)
+        if rule.met(sigmas, periods - 1):       # the first period fills the FSF's filter
             self.finish = True
 
     def rate_per_unit(self, require_end: bool = True, of: str = "rate") -> float:
@@ -383,6 +383,7 @@ class ExcitationWatch:
         sigmas = rule.relative_sigmas(r, u, y, e["freq_hz"] * period, period, orders, present)
         e["line_sigma"] = [float(s) if math.isfinite(s) else None for s in sigmas]
         e["line_sdr"] = line_sdr(y, period, orders, present)
+        e["line_disturbance"] = disturbance_sigmas(u, y, period, orders, present)
 
     def check_time(self, now_us: int) -> None:
         """The timeouts, on the session's clock: no start, or samples that stopped."""

@@ -40,6 +40,7 @@ from .measure import MAX_ANGLE_DEG, MAX_RATE_DEG_S, Limits, loss_text, measure, 
 from .chirp import design as chirp_design
 from .linearity import LINES as LINEARITY_LINES, REALISATIONS, linearity_design
 from .multisine import FADE_CYCLES as MULTISINE_FADE_CYCLES, LINES, RIG_TIME_S, design
+from .redesign import SPREAD, Redesign
 # Imported here, not when the sweep reads the board: a Ctrl-C that lands in the middle of an
 # import leaves Python to end by SIGINT even after the tool has stopped in order.
 from .param_protocol import session_params
@@ -95,6 +96,7 @@ class SweepPlan:
         self.linearity = None                   # a linearity campaign's excitations
         self.seed = None                        # and the seed of its phases
         self.response = None                    # a rate or angle sweep's (choices.RESPONSES)
+        self.redesign = None                    # a two-pass sequential multisine's Redesign
 
     @classmethod
     def of_multisine(cls, axis, inject, multisine) -> "SweepPlan":
@@ -123,13 +125,42 @@ class SweepPlan:
         return plan
 
     def select(self, i: int) -> dict:
-        """Before excitation ``i`` (from 0): a linearity campaign's multisine made the one
-        flown; the fields its manifest entry gets (none for another plan)."""
+        """Before excitation ``i`` (from 0): a linearity campaign's multisine, or a redesigned
+        multisine's pass, made the one flown; the fields its manifest entry gets (none for
+        another plan)."""
+        if self.redesign is not None:
+            return self._select_pass(i)
         if not self.linearity:
             return {}
         ms, level, index = self.linearity[i]
         self.multisine = ms
         return {"realisation": index, "level": level, "phases_rad": list(ms.phases)}
+
+    def _select_pass(self, i: int) -> dict:
+        rd = self.redesign
+        if i == 0:
+            self.multisine = rd.first
+            return {"line_amplitudes": list(rd.first.amplitudes)}
+        self.multisine = rd.second
+        self.sequential = dataclasses.replace(self.sequential, prior=rd.prior)
+        return {"redesign_of": rd.first_index, "weights": list(rd.weights),
+                "line_amplitudes": list(rd.second.amplitudes)}
+
+    def after(self, entry: dict, index: int) -> str | None:
+        """After excitation ``entry`` (``index`` in the manifest's frequencies): a redesigned
+        multisine's second pass added to the plan when the first calls for one; what to say
+        of it (None for another plan)."""
+        rd = self.redesign
+        if rd is None or rd.second is not None or rd.why_not is not None:
+            return None
+        second = rd.second_pass(entry, index, self.sequential.min_periods)
+        if second is None:
+            return f"no second pass: {rd.why_not}"
+        self.freqs_hz.append(second.base_hz)
+        self.amplitudes.append(second.peak)
+        amps = np.asarray(second.amplitudes)
+        return (f"second pass, lines redesigned from the first: amplitudes "
+                f"{amps.min() / amps.max():.2g} to 1 of the largest, {second.periods} periods")
 
     @property
     def signal(self) -> str:
@@ -138,6 +169,8 @@ class SweepPlan:
 
     def cycles_for(self, freq_hz: float) -> int:
         """The measured cycles (a multisine: base periods) an excitation is started with."""
+        if self.multisine is not None and self.redesign is not None:
+            return self.multisine.periods               # the pass under way's
         return self.dwell.cycles(freq_hz) if self.dwell else self.cycles
 
     def record(self) -> dict:
@@ -147,6 +180,8 @@ class SweepPlan:
             if self.sequential is not None:
                 out["sequential"] = {"target_sigma": self.sequential.target_sigma,
                                      "min_periods": self.sequential.min_periods}
+            if self.redesign is not None:
+                out["redesign"] = {"rig_time_s": self.redesign.rig_time_s, "spread": SPREAD}
             if self.linearity:
                 del out["phases_rad"]                   # each realisation's, in its entry
                 out["linearity"] = {
@@ -198,7 +233,7 @@ def default_plan(axis, inject="mixer", freqs_hz=None, amplitude=None, cycles=Non
 
 def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=None,
                    band_hz=None, like=None, sequential=None, base_period_s=None,
-                   fade_cycles=None) -> SweepPlan:
+                   fade_cycles=None, redesign=False) -> SweepPlan:
     """A multisine over the axis's Table 1 band (or ``band_hz``) in ``rig_time_s``
     (:func:`heliquad.host.acquire.multisine.design`). ``amplitude`` is its peak; without it, the
     dwell's amplitude for angle and rate injection (the same largest setpoint), and for
@@ -207,16 +242,25 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
     still air the roll rig then swings about 5 deg). ``like``: the same lines as that
     :class:`~heliquad.host.acquire.multisine.Multisine`, as many periods as fit ``rig_time_s``;
     ``base_period_s``: the base period instead of the one chosen for ``rig_time_s``;
-    ``fade_cycles``: cycles of the lowest line in each fade (default one)."""
+    ``fade_cycles``: cycles of the lowest line in each fade (default one). ``redesign``
+    (with ``sequential``): two passes (:mod:`.redesign`), on the grid designed for half the
+    rig time, so that each pass holds its least periods."""
     if amplitude is None:
         amplitude = default_peak(inject)
     if sequential is not None and rig_time_s is None:
         rig_time_s = SEQUENTIAL_RIG_TIME_S
-    ms = design(band_hz or paper.BANDS_HZ[axis], amplitude, lines or LINES,
-                rig_time_s or RIG_TIME_S, fade_cycles=fade_cycles or MULTISINE_FADE_CYCLES,
-                like=like, base_period_s=base_period_s)
-    plan = SweepPlan.of_multisine(axis, inject, ms)
-    plan.sequential = sequential
+    band = band_hz or paper.BANDS_HZ[axis]
+    rig = rig_time_s or RIG_TIME_S
+    ms = design(band, amplitude, lines or LINES, rig / 2 if redesign else rig,
+                fade_cycles=fade_cycles or MULTISINE_FADE_CYCLES, like=like,
+                base_period_s=base_period_s)
+    if not redesign:
+        plan = SweepPlan.of_multisine(axis, inject, ms)
+        plan.sequential = sequential
+        return plan
+    rd = Redesign.of(band, ms, rig, sequential.min_periods)
+    plan = SweepPlan.of_multisine(axis, inject, rd.first)
+    plan.sequential, plan.redesign = sequential, rd
     return plan
 
 
@@ -291,15 +335,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
     excitation, records the error in the manifest's ``aborted`` and the frequency that was
     running in ``in_progress_hz``, and is raised again."""
     limits = Limits(max_angle_deg, max_rate_deg_s)
-    manifest = SweepManifest(
-        axis=plan.axis, inject=plan.inject, source=source,
-        port_found=UNSET if port_found is None else port_found,
-        firmware=f"heliquad {__version__}",
-        started=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        tlog=SWEEP_TLOG, tlog_start_us=getattr(session, "start_us", None),
-        cycles=plan.cycles, fade_cycles=plan.fade_cycles, design=plan.record(),
-        limits={"max_angle_deg": max_angle_deg, "max_rate_deg_s": max_rate_deg_s},
-        signal=plan.signal, planned_hz=list(plan.freqs_hz), response=plan.response or UNSET)
+    manifest = _new_manifest(session, plan, source, port_found, limits)
     current = None
     try:
         _write_manifest(out_dir, manifest)
@@ -308,7 +344,10 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         _write_manifest(out_dir, manifest)
         _check_rotors(plan, manifest.params)
         last = None                              # (amplitude, rate per unit) just measured
-        for i, (f, amp) in enumerate(zip(plan.freqs_hz, plan.amplitudes), 1):
+        i = 0
+        while i < len(plan.freqs_hz):            # a redesign adds its second pass on the way
+            f, amp = plan.freqs_hz[i], plan.amplitudes[i]
+            i += 1
             current, chosen = f, plan.select(i - 1)
             entry, last = _measure_designed(session, plan, f, amp, last, limits, manifest,
                                             progress)
@@ -324,6 +363,9 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
             if entry["status"] != "ok":
                 manifest.aborted = entry["status"]
                 break
+            said = plan.after(entry, len(manifest.frequencies) - 1)
+            if said:
+                progress(f"  {said}")
         else:
             manifest.complete = True
     except BaseException as exc:
@@ -340,6 +382,19 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
         raise
     _write_manifest(out_dir, manifest)
     return manifest.document()
+
+
+def _new_manifest(session, plan, source, port_found, limits) -> SweepManifest:
+    """The manifest of a sweep about to start: what it flies, where, with which tool."""
+    return SweepManifest(
+        axis=plan.axis, inject=plan.inject, source=source,
+        port_found=UNSET if port_found is None else port_found,
+        firmware=f"heliquad {__version__}",
+        started=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        tlog=SWEEP_TLOG, tlog_start_us=getattr(session, "start_us", None),
+        cycles=plan.cycles, fade_cycles=plan.fade_cycles, design=plan.record(),
+        limits={"max_angle_deg": limits.max_angle_deg, "max_rate_deg_s": limits.max_rate_deg_s},
+        signal=plan.signal, planned_hz=list(plan.freqs_hz), response=plan.response or UNSET)
 
 
 def _excitation_text(plan, entry, f) -> str:

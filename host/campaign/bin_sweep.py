@@ -26,7 +26,10 @@ harmonics it does not excite stay below 1e-6 of it). SIDS names only the band's 
 FSp), and reading the lines from the signal needs no field the log does not have; the edges
 SIDS gives tell a multisine from a sine. Each line's phase is read with it; multisines on the
 same lines at two peaks, whose phases differ between those of one peak, are a linearity
-campaign's realisations (:func:`_linearity`), each used, none superseded.
+campaign's realisations (:func:`_linearity`), each used, none superseded. A multisine
+followed by one on the same lines at the same declared peak whose lines' relative
+amplitudes differ is a redesigned multisine's two passes (:func:`_redesigns`): both used,
+identify combines them.
 """
 
 from __future__ import annotations
@@ -92,6 +95,7 @@ def log_sweep(log, path) -> tuple:
     entries = [_entry(e, s, loop_us, mav) for e in _excitations(log, active, loop_us)]
     design = _linearity(entries)
     if design is None:          # a campaign's realisations are each used, not superseded
+        _redesigns(entries)
         _supersede(entries)
     unused = [e for e in entries if e["status"] != "ok" and
               not e["status"].startswith("superseded")]
@@ -181,9 +185,10 @@ def _entry(e: _Excitation, s, loop_us: float, mav) -> dict:
                    fade)
     if lines is None:
         return {**entry, "status": "no whole period of its excitation in the log"}
-    orders, phases = lines
+    orders, phases, amplitudes = lines
     if orders != [1] or (e.setup and e.setup["FSp"] > e.setup["FSt"]):
-        entry.update(signal="multisine", orders=orders, fade_samples=fade, phases_rad=phases)
+        entry.update(signal="multisine", orders=orders, fade_samples=fade, phases_rad=phases,
+                     line_amplitudes=amplitudes)
     return entry
 
 
@@ -202,10 +207,11 @@ def _chirp_entry(e: _Excitation, rows, fade: int, last: int, loop_us: float) -> 
 
 
 def _lines(r, places, length: int, period: int, fade: int) -> tuple | None:
-    """``(harmonics, their phases)``: the harmonics of ``period`` the excitation ``r`` (at
-    ``places`` of a window ``length`` long, which starts ``fade`` samples into the
-    excitation) has, from its periods the log holds whole, and each one's phase (rad, of
-    its sine, at the excitation's start as the design gives it); None without one."""
+    """``(harmonics, their phases, their amplitudes)``: the harmonics of ``period`` the
+    excitation ``r`` (at ``places`` of a window ``length`` long, which starts ``fade``
+    samples into the excitation) has, from its periods the log holds whole, each one's
+    phase (rad, of its sine, at the excitation's start as the design gives it) and
+    amplitude; None without one."""
     grid = np.full(length // period * period, np.nan)
     inside = places < grid.size
     grid[places[inside]] = r[inside]
@@ -219,8 +225,10 @@ def _lines(r, places, length: int, period: int, fade: int) -> tuple | None:
     # a sine's phase p: its DFT bin is proportional to exp(j (p - pi / 2)); the window's
     # start is the fade's length after the excitation's, where the design's phase is
     shift = 2 * np.pi * (lines + 1) * fade / period
-    return (lines + 1).tolist(), [float(np.angle(spectrum[k] * np.exp(-1j * d)) + np.pi / 2)
-                                  for k, d in zip(lines, shift)]
+    return ((lines + 1).tolist(),
+            [float(np.angle(spectrum[k] * np.exp(-1j * d)) + np.pi / 2)
+             for k, d in zip(lines, shift)],
+            [float(2 * amplitude[k] / period) for k in lines])
 
 
 #: Two realisations of a linearity campaign differ in some line's phase by more than this.
@@ -253,13 +261,37 @@ def _linearity(entries) -> dict | None:
                           "design": "read from the log"}}
 
 
+def _redesigns(entries) -> None:
+    """A redesigned multisine's two passes (sweep --redesign): a measured multisine and the
+    next measured excitation, a multisine on the same lines of the same period at the same
+    declared peak whose lines' amplitudes relative to their median differ from the first's
+    by more than :data:`AMPLITUDES_DIFFER` on some line. The second gets ``redesign_of``
+    (the first's index) and ``weights`` (those relative amplitudes), as the sweep's
+    manifest has them."""
+    ok = [i for i, e in enumerate(entries) if e["status"] == "ok"]
+    for i, j in zip(ok, ok[1:]):
+        a, b = entries[i], entries[j]
+        if a.get("signal") != "multisine" or b.get("signal") != "multisine" or \
+                "redesign_of" in a or (a["freq_hz"], a["orders"], a["amplitude"]) != \
+                (b["freq_hz"], b["orders"], b["amplitude"]):
+            continue
+        wa, wb = (np.asarray(e["line_amplitudes"]) / np.median(e["line_amplitudes"])
+                  for e in (a, b))
+        if np.max(np.abs(np.log(wb / wa))) > math.log(1 + AMPLITUDES_DIFFER):
+            b.update(redesign_of=i, weights=[float(w) for w in wb])
+
+
+#: Two multisines' lines differ in relative amplitude when one line's differs by this share.
+AMPLITUDES_DIFFER = 0.1
+
+
 def _supersede(entries) -> None:
     """An excitation measured again later in the log (the same signal at the same frequency)
-    is superseded by the later one."""
+    is superseded by the later one, unless the later one is its redesigned pass."""
     for i, e in enumerate(entries):
         again = next((f for f in entries[i + 1:] if f["status"] == "ok" and
-                      f["freq_hz"] == e["freq_hz"] and f.get("orders") == e.get("orders")),
-                     None)
+                      f["freq_hz"] == e["freq_hz"] and f.get("orders") == e.get("orders") and
+                      f.get("redesign_of") != i), None)
         if e["status"] == "ok" and again is not None:
             e["status"] = (f"superseded: measured again later in the log (amplitude "
                            f"{again['amplitude']:.4g})")

@@ -15,6 +15,7 @@ from ...sim.base.dialect import dialect
 from ...sim.base.errors import InputError
 from ..acquire.link import response_fields
 from ..acquire.measure import MAX_LOST_RUN, MAX_LOST_SHARE
+from ..acquire.redesign import combined_points
 from ..estimate.composite import MIN_COHERENCE, composite_response
 from ..estimate.fsf import (complete_excitation, estimate_against_excitation, estimate_fsf,
                             estimate_multisine, estimate_multisine_against_excitation,
@@ -88,6 +89,8 @@ def estimate_points(manifest, samples, estimate, progress, by_entry=None) -> tup
     list that gets ``(entry, its points)`` for each record estimated (a linearity campaign
     groups them by realisation)."""
     points, segments, firsts, skipped = [], [], [], []
+    kept = {}                                   # a first pass's points, by its index
+    index = {id(e): k for k, e in enumerate(manifest["frequencies"])}
     for entry, t, r, u, y, present in sweep_segments(manifest, samples):
         what = _entry_name(entry)
         lost = _lost_share(entry, present)
@@ -107,7 +110,8 @@ def estimate_points(manifest, samples, estimate, progress, by_entry=None) -> tup
             skipped.append(f"{what}: {exc}")
             continue
         found = [dataclasses.replace(p, lost_share=lost) for p in found]
-        points += found
+        kept[index[id(entry)]] = found
+        points = _with_pass(manifest, entry, points, found, kept, progress)
         if by_entry is not None:
             by_entry.append((entry, found))
         if lost:
@@ -118,6 +122,28 @@ def estimate_points(manifest, samples, estimate, progress, by_entry=None) -> tup
         segments.append((entry["freq_hz"], t, u, y))
         firsts.append(found[0])
     return points, segments, firsts, skipped
+
+
+def _with_pass(manifest, entry, points, found, kept, progress) -> list:
+    """``points`` with ``found`` added: a redesigned multisine's second pass combined line
+    by line with its first pass's points (:func:`..acquire.redesign.combined_points`, by
+    each line's amplitude in each pass), which it replaces; a first pass not estimated, on
+    other lines or without its lines' amplitudes leaves the second alone."""
+    first = entry.get("redesign_of")
+    if first is None or first not in kept:
+        return points + found
+    before = manifest["frequencies"][first]
+    if (before.get("period_samples"), before.get("orders")) != (entry.get("period_samples"),
+                                                              entry.get("orders")) or \
+            not before.get("line_amplitudes") or not entry.get("line_amplitudes"):
+        progress(f"  {_entry_name(entry)}: its first pass has other lines, or no line "
+                 "amplitudes; used alone")
+        return points + found
+    amplitudes = {h: pair for h, pair in zip(entry["orders"], zip(before["line_amplitudes"],
+                                                                   entry["line_amplitudes"]))}
+    ids = {id(p) for p in kept[first]}
+    return [p for p in points if id(p) not in ids] + combined_points(kept[first], found,
+                                                                     amplitudes)
 
 
 def _chirp_points(entry, t, r, u, y, estimate, present) -> list:

@@ -82,6 +82,12 @@ def add_design_arguments(p, on_board: bool = False) -> None:
                        help="chirp: how its frequency moves, log (default: a constant factor "
                             "per second) or linear")
     if not on_board:
+        p.add_argument("--redesign", action="store_true",
+                       help="with --signal multisine --target-sigma, two passes: the first for "
+                            "its least periods, then the same lines with each one's amplitude "
+                            "from the disturbance the first measured there (more where the "
+                            "response is buried), within the same peak, sequential to the rest "
+                            "of --rig-time; identify combines the passes line by line")
         p.add_argument("--linearity", nargs="?", type=int_in(2, 50), const=REALISATIONS,
                        metavar="M",
                        help="with --signal multisine, a linearity campaign: odd multisines "
@@ -148,6 +154,8 @@ def _plan(args, on_board: bool):
     amp = None if args.amplitude is None else firmware_amplitude(args.inject, args.amplitude)
     if getattr(args, "linearity", None) and args.signal != "multisine":
         raise InputError("--linearity is a campaign of multisines: add --signal multisine")
+    if getattr(args, "redesign", False) and args.signal != "multisine":
+        raise InputError("--redesign redesigns a multisine's lines: add --signal multisine")
     if args.signal == "multisine":
         return _multisine_plan(args, amp, (target_sigma, max_cycles, swing_deg))
     if args.signal == "chirp":
@@ -217,9 +225,13 @@ def _multisine_plan(args, amp, dwell_options):
     if getattr(args, "linearity", None):
         return _linearity_plan(args, amp, target_sigma)
     sequential = None if target_sigma is None else design.SequentialMultisine(target_sigma)
+    redesign = bool(getattr(args, "redesign", False))
+    if redesign and sequential is None:
+        raise InputError("--redesign judges a first pass against the target: add --target-sigma")
     return multisine_plan(args.axis, args.inject, amp, args.lines, args.rig_time,
                           _band_edges(args, "multisine"), sequential=sequential,
-                          base_period_s=args.base_period, fade_cycles=args.fade_cycles)
+                          base_period_s=args.base_period, fade_cycles=args.fade_cycles,
+                          redesign=redesign)
 
 
 def _linearity_plan(args, amp, target_sigma):
@@ -229,7 +241,8 @@ def _linearity_plan(args, amp, target_sigma):
 
     given = [o for o, v in (("--target-sigma", target_sigma), ("--rig-time", args.rig_time),
                             ("--base-period", args.base_period),
-                            ("--fade-cycles", args.fade_cycles)) if v is not None]
+                            ("--fade-cycles", args.fade_cycles),
+                            ("--redesign", args.redesign or None)) if v is not None]
     if given:
         raise InputError(f"{' and '.join(given)} with --linearity: its length is its "
                          f"realisations' ({LINEARITY_PERIODS} base periods each, at two "

@@ -8,6 +8,7 @@ import html
 import math
 
 from ..acquire.measure import saturation_text
+from ..acquire.redesign import passes_sigmas
 from ..acquire.sweep import cut_text
 from .report_html import number_text, table_html
 
@@ -60,21 +61,33 @@ def _lines_html(entry, manifest) -> str:
     """A sequential multisine's lines: each one's frequency, its point's sigma (share of its
     magnitude) and its signal-to-disturbance ratio in the output, and how many lines the
     rig-time cap left above the target (said, not flagged: the points' sigmas carry it to
-    the fit, and the model's checks say whether it matters)."""
+    the fit, and the model's checks say whether it matters). A redesigned second pass also
+    gives each line's relative amplitude and its sigma with the first pass's combined."""
     target = ((manifest.get("design") or {}).get("sequential") or {}).get("target_sigma")
-    sigmas, sdrs = entry.get("line_sigma") or [], entry["line_sdr"]
-    rows = [(number_text(h * entry["freq_hz"]), h,
-             "-" if sigma is None else f"{100 * sigma:.2g} %",
-             "-" if sdr is None else f"{sdr:.3g}")
-            for h, sigma, sdr in zip(entry.get("orders", []), sigmas + [None] * len(sdrs), sdrs)]
-    above = [s for s in sigmas if s is not None and target is not None and s > target]
+    sigmas, sdrs = entry.get("line_sigma") or [None] * len(entry["line_sdr"]), entry["line_sdr"]
+    first = entry.get("redesign_of")
+    judged = sigmas if first is None else passes_sigmas([manifest["frequencies"][first], entry])
+    pct = lambda v: "-" if v is None else f"{100 * v:.2g} %"        # noqa: E731
+    rows = [(number_text(h * entry["freq_hz"]), h, pct(sigma), "-" if sdr is None else f"{sdr:.3g}")
+            for h, sigma, sdr in zip(entry.get("orders", []), sigmas, sdrs)]
+    head = ["line (Hz)", "harmonic", "sigma / magnitude", "signal / disturbance (output)"]
+    if first is not None:
+        rows = [(*row, f"{w:.2g}", pct(c)) for row, w, c in zip(rows, entry["weights"], judged)]
+        head += ["amplitude (of the median)", "sigma, both passes"]
+    above = [s for s in judged if s is not None and target is not None and s > target]
     end = {"cap": "the rig-time cap", "target": "every line at its target"}.get(
         entry.get("multisine_end"), entry.get("multisine_end") or "-")
     said = (f"<p>{entry.get('periods', '-')} base periods; ended by {html.escape(end)}"
-            + (f"; {len(above)} of {len(sigmas)} lines above the target sigma "
+            + (f"; {len(above)} of {len(judged)} lines above the target sigma "
                f"({100 * target:g} %)" if above else "") + ".</p>")
-    return "<h3>Multisine lines</h3>" + said + table_html(
-        ["line (Hz)", "harmonic", "sigma / magnitude", "signal / disturbance (output)"], rows)
+    title = "Multisine lines" + ("" if not _redesigned(manifest) else
+                                 " (second pass, redesigned)" if first is not None else
+                                 " (first pass)")
+    return f"<h3>{title}</h3>" + said + table_html(head, rows)
+
+
+def _redesigned(manifest) -> bool:
+    return bool(((manifest.get("design") or {}).get("redesign")))
 
 
 #: A simulated sweep's source, in words: its keys (manifest.json ``source``) and how each

@@ -53,7 +53,11 @@ FREQUENCY = S.Obj(
               # a linearity campaign's multisine: its random phases' realisation, and its
               # amplitude's level (0 the peak asked for, 1 the smaller)
               "realisation": S.Int(0, 2**31), "level": S.Int(0, 1),
-              "phases_rad": S.List(S.Num(), 1, 16)})
+              "phases_rad": S.List(S.Num(), 1, 16),
+              # a redesigned sequential multisine's second pass: the first pass's entry
+              # (its index in frequencies) and the lines' relative amplitudes
+              "redesign_of": S.Int(0, 2**31), "weights": S.List(S.Num(0), 1, 16),
+              "line_amplitudes": S.List(S.Num(0), 1, 16)})
 
 #: What ``--port auto`` found (``port_found``, only when it chose the sweep's port): a USB
 #: device or a board ``heliquad board`` emulates (announced, with the firmware it runs).
