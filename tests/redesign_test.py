@@ -107,6 +107,8 @@ def test_under_severe_turbulence_the_redesign_knows_its_lines_better(yaw):
     first, second = got["frequencies"]
     assert first["multisine_end"] == "cap" and second["redesign_of"] == 0
     assert first["orders"] == second["orders"] and len(second["weights"]) == len(first["orders"])
+    assert len(second["phases_rad"]) == len(first["orders"])     # what the second pass flew
+    assert len(got["planned_hz"]) == 2
     # the lowest lines, where the turbulence is, get the most; the upper ones the least
     assert second["weights"][0] > 1 > second["weights"][-1]
     # measured (seed 5): the worst line 0.056 against 0.065 with equal lines over the same
@@ -156,7 +158,51 @@ def test_the_on_board_log_is_read_as_the_two_passes(tmp_path):
     assert np.allclose([p.gain for p in a], [p.gain for p in b], rtol=1e-6)
 
 
+def test_a_second_pass_must_name_an_earlier_first(yaw, tmp_path):
+    from heliquad.host.records.manifest import read_manifest
+    from heliquad.sim.base.errors import InputError
+
+    manifest = json.loads((yaw / "redesigned" / "manifest.json").read_text())
+    manifest["frequencies"][1]["redesign_of"] = 1
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match=r"frequencies\[1\]\.redesign_of.*must name an earlier"):
+        read_manifest(tmp_path / "manifest.json")
+
+
+def test_a_first_pass_at_the_target_ends_the_sweep(tmp_path):
+    # still air on yaw: the first pass's 3 periods know every line to better than 2 %
+    out = tmp_path / "still"
+    res = heliquad("sweep", *YAW[:-8], "--target-sigma", 0.02, "--redesign", "--out", out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert "no second pass: the first pass met the target" in res.stdout
+    (entry,) = manifest["frequencies"]
+    assert manifest["complete"] and max(entry["line_sigma"]) <= 0.02
+
+
+def test_without_a_disturbance_the_second_pass_has_equal_lines():
+    # samples lost on the link in the first pass's periods: no line's disturbance, its own
+    # sigmas for two lines only; the rest of the rig time is still flown, equal lines
+    from heliquad.host.acquire.sweep import multisine_plan
+    from heliquad.host.acquire.design import SequentialMultisine
+
+    plan = multisine_plan("yaw", "rate", 0.7, rig_time_s=180,
+                          sequential=SequentialMultisine(0.02), redesign=True)
+    n = plan.redesign.first.period_samples
+    entry = {"status": "ok", "multisine_end": "cap", "periods": 3, "samples": 3 * n - 5,
+             "lost": 5, "fade_samples": 1000, "line_sigma": [0.1, 0.2] + [None] * 12,
+             "line_disturbance": [None] * 14}
+    said = plan.after(entry, 0)
+    assert "equal lines: the first pass estimated fewer than three lines" in said
+    assert plan.redesign.weights == (1.0,) * 14 and len(plan.freqs_hz) == 2
+    # the rule never passes a pass that knows no line yet, whatever the first knew
+    rule = SequentialMultisine(0.02, prior=((0.001,) * 3, 2, (1.0,) * 3, (1.0,) * 3))
+    assert not rule.met([np.inf] * 3, 1) and rule.met([0.01] * 3, 1)
+
+
 @pytest.mark.parametrize("options, said", [
+    (["--inject", "motors", "--redesign"], "--redesign do not shape the per-rotor run"),
+    (["--signal", "multisine", "--target-sigma", 0.02, "--redesign", "--lines", 2],
+     "--redesign redesigns from at least 3 lines; the grid has 2"),
     (["--signal", "multisine", "--redesign"], "--redesign judges a first pass against the "
                                               "target: add --target-sigma"),
     (["--redesign", "--target-sigma", 0.02], "--redesign redesigns a multisine's lines: add "

@@ -84,6 +84,16 @@ def test_a_multisine_faded_over_two_cycles_of_its_lowest_line(tmp_path):
     assert abs(run - (entry["samples"] + 2 * entry["fade_samples"])) <= 2
 
 
+def test_the_excited_time_counts_samples_lost_on_the_link():
+    # the window is samples + lost (what the rig flew); the pauses between excitations not
+    manifest = {"fade_cycles": 2, "frequencies": [
+        {"freq_hz": 1.0, "period_samples": 200, "samples": 590, "lost": 10, "status": "ok"},
+        {"freq_hz": 0.1, "period_samples": 2000, "samples": 6000, "fade_samples": 2000,
+         "status": "ok"},
+        {"requested_hz": 3.0, "samples": 0, "status": "refused by the firmware"}]}
+    assert excited_seconds(manifest) == pytest.approx((600 + 800) / 200 + 10000 / 200)
+
+
 @pytest.mark.parametrize("options, said", [
     (["--base-period", 10], "--lines, --rig-time and --base-period shape a multisine"),
     (["--signal", "chirp", "--fade-cycles", 2], "--fade-cycles do not shape a chirp"),

@@ -106,9 +106,9 @@ class SequentialMultisine:
         (used + 1))``), combined with :attr:`prior`, ``(sigmas, used periods, amplitudes
         then, amplitudes now)``, as identify combines the passes
         (:func:`.redesign.combined_sigmas`)."""
-        if used < 1:
+        now = np.asarray(sigmas, dtype=float) * math.sqrt(max(used, 0) / (used + 1))
+        if used < 1 or not np.all(np.isfinite(now)):     # this pass must know every line
             return False
-        now = np.asarray(sigmas, dtype=float) * math.sqrt(used / (used + 1))
         if self.prior is not None:
             before, periods, then, amps = self.prior
             s = np.column_stack([[np.nan if v is None else v for v in before], now])

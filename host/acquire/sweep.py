@@ -144,7 +144,8 @@ class SweepPlan:
         self.multisine = rd.second
         self.sequential = dataclasses.replace(self.sequential, prior=rd.prior)
         return {"redesign_of": rd.first_index, "weights": list(rd.weights),
-                "line_amplitudes": list(rd.second.amplitudes)}
+                "line_amplitudes": list(rd.second.amplitudes),
+                "phases_rad": list(rd.second.phases)}
 
     def after(self, entry: dict, index: int) -> str | None:
         """After excitation ``entry`` (``index`` in the manifest's frequencies): a redesigned
@@ -153,12 +154,15 @@ class SweepPlan:
         rd = self.redesign
         if rd is None or rd.second is not None or rd.why_not is not None:
             return None
-        second = rd.second_pass(entry, index, self.sequential.min_periods)
+        second = rd.second_pass(entry, index, self.sequential.min_periods,
+                                self.sequential.target_sigma)
         if second is None:
             return f"no second pass: {rd.why_not}"
         self.freqs_hz.append(second.base_hz)
         self.amplitudes.append(second.peak)
         amps = np.asarray(second.amplitudes)
+        if rd.equal_why:
+            return f"second pass, {second.periods} periods, equal lines: {rd.equal_why}"
         return (f"second pass, lines redesigned from the first: amplitudes "
                 f"{amps.min() / amps.max():.2g} to 1 of the largest, {second.periods} periods")
 
@@ -251,9 +255,18 @@ def multisine_plan(axis, inject="mixer", amplitude=None, lines=None, rig_time_s=
         rig_time_s = SEQUENTIAL_RIG_TIME_S
     band = band_hz or paper.BANDS_HZ[axis]
     rig = rig_time_s or RIG_TIME_S
-    ms = design(band, amplitude, lines or LINES, rig / 2 if redesign else rig,
-                fade_cycles=fade_cycles or MULTISINE_FADE_CYCLES, like=like,
-                base_period_s=base_period_s)
+    try:
+        ms = design(band, amplitude, lines or LINES, rig / 2 if redesign else rig,
+                    fade_cycles=fade_cycles or MULTISINE_FADE_CYCLES, like=like,
+                    base_period_s=base_period_s)
+    except InputError as exc:
+        if redesign:
+            raise InputError(f"{exc} (--redesign designs the grid for half of the rig time, "
+                             f"{rig:g} s, so that each pass holds its periods)") from None
+        raise
+    if redesign and len(ms.orders) < 3:
+        raise InputError(f"--redesign redesigns from at least 3 lines; the grid has "
+                         f"{len(ms.orders)} (more --lines)")
     if not redesign:
         plan = SweepPlan.of_multisine(axis, inject, ms)
         plan.sequential = sequential
@@ -365,6 +378,7 @@ def run_sweep(session, plan: SweepPlan, out_dir: str, source: dict, progress=pri
                 break
             said = plan.after(entry, len(manifest.frequencies) - 1)
             if said:
+                manifest.planned_hz = list(plan.freqs_hz)       # a second pass, if added
                 progress(f"  {said}")
         else:
             manifest.complete = True

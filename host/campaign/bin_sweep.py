@@ -28,8 +28,8 @@ SIDS gives tell a multisine from a sine. Each line's phase is read with it; mult
 same lines at two peaks, whose phases differ between those of one peak, are a linearity
 campaign's realisations (:func:`_linearity`), each used, none superseded. A multisine
 followed by one on the same lines at the same declared peak whose lines' relative
-amplitudes differ is a redesigned multisine's two passes (:func:`_redesigns`): both used,
-identify combines them.
+amplitudes or phases differ is a redesigned multisine's two passes (:func:`_redesigns`):
+both used, identify combines them.
 """
 
 from __future__ import annotations
@@ -265,7 +265,10 @@ def _redesigns(entries) -> None:
     """A redesigned multisine's two passes (sweep --redesign): a measured multisine and the
     next measured excitation, a multisine on the same lines of the same period at the same
     declared peak whose lines' amplitudes relative to their median differ from the first's
-    by more than :data:`AMPLITUDES_DIFFER` on some line. The second gets ``redesign_of``
+    by more than :data:`AMPLITUDES_DIFFER`, or whose phases by more than
+    :data:`PHASES_DIFFER_RAD`, on some line (the same multisine flown again has the same
+    of both; a second pass of equal lines, the first's phases too: read as flown again, its
+    first pass superseded). The second gets ``redesign_of``
     (the first's index) and ``weights`` (those relative amplitudes), as the sweep's
     manifest has them."""
     ok = [i for i, e in enumerate(entries) if e["status"] == "ok"]
@@ -277,7 +280,10 @@ def _redesigns(entries) -> None:
             continue
         wa, wb = (np.asarray(e["line_amplitudes"]) / np.median(e["line_amplitudes"])
                   for e in (a, b))
-        if np.max(np.abs(np.log(wb / wa))) > math.log(1 + AMPLITUDES_DIFFER):
+        step = np.abs(np.angle(np.exp(1j * (np.asarray(b["phases_rad"]) -
+                                            np.asarray(a["phases_rad"])))))
+        if np.max(np.abs(np.log(wb / wa))) > math.log(1 + AMPLITUDES_DIFFER) or \
+                np.max(step) > PHASES_DIFFER_RAD:
             b.update(redesign_of=i, weights=[float(w) for w in wb])
 
 

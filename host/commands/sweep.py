@@ -195,6 +195,12 @@ def rotor_plan(args):
     if given:
         raise InputError(f"{' and '.join(given)} shape a dwell; the per-rotor run is one "
                          "multisine, its length --rig-time")
+    given = [o for o, v in (("--fade-cycles", args.fade_cycles),
+                            ("--base-period", args.base_period),
+                            ("--redesign", args.redesign or None)) if v is not None]
+    if given:
+        raise InputError(f"{' and '.join(given)} do not shape the per-rotor run: its lines, "
+                         "base period and fades are its own design's, its length --rig-time")
     peak = ROTOR_PEAK if args.amplitude is None else args.amplitude
     if peak > amplitude_bound("motors"):
         raise InputError(f"--amplitude {peak:g} is above the firmware's bound for a rotor's "

@@ -32,7 +32,7 @@ def check_excitation(freqs_hz, cycles, fade_cycles, loop_hz, amplitude=None, inj
         if duration > facts.MAX_DURATION_S:
             raise InputError(f"{cycles} cycles with {fade_cycles} of fade each way at {f:g} Hz "
                              f"last {duration:.0f} s; the firmware allows "
-                             f"{facts.MAX_DURATION_S:g} s: fewer --cycles")
+                             f"{facts.MAX_DURATION_S:g} s: fewer --cycles or --fade-cycles")
     if fade_cycles < facts.MIN_FADE_CYCLES:
         raise InputError(f"--fade-cycles must be at least {facts.MIN_FADE_CYCLES}")
     if amplitude is not None and f32(amplitude) > amplitude_bound(inject):

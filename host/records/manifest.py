@@ -155,6 +155,9 @@ def read_manifest(path) -> dict:
                     S.fail(path, f"{key}.{name}", "is missing (the frequency's status is ok)")
         if entry["status"] == "ok" and entry.get("signal") == "multisine":
             _check_orders(path, key, entry)
+        if entry.get("redesign_of", -1) >= i:
+            S.fail(path, f"{key}.redesign_of", "must name an earlier entry (its first pass)",
+                   entry["redesign_of"])
         if "start_us" in entry and entry["start_us"] > entry.get("end_us", math.inf):
             S.fail(path, f"{key}.end_us", "is before start_us", entry["end_us"])
         if "freq_hz" in entry and "period_samples" in entry:
@@ -166,8 +169,8 @@ def read_manifest(path) -> dict:
 
 
 def excited_seconds(manifest: dict) -> float:
-    """The seconds the rig flew excited: each measured excitation's full-amplitude samples and
-    its two fades (a dwell's ``fade_cycles`` cycles of its frequency, a multisine's or chirp's
+    """The seconds the rig flew excited: each measured excitation's full-amplitude window (its
+    samples and those lost on the link) and its two fades (a dwell's ``fade_cycles`` cycles of its frequency, a multisine's or chirp's
     ``fade_samples``), at the loop rate the entry gives (``freq_hz`` x ``period_samples``).
     The time between excitations, which a log's span also counts, is left out."""
     total = 0.0
@@ -175,5 +178,6 @@ def excited_seconds(manifest: dict) -> float:
         if "period_samples" not in e or "samples" not in e:
             continue
         fade = e.get("fade_samples", manifest["fade_cycles"] * e["period_samples"])
-        total += (e["samples"] + 2 * fade) / (e["freq_hz"] * e["period_samples"])
+        total += (e["samples"] + e.get("lost", 0) + 2 * fade) / (e["freq_hz"] *
+                                                               e["period_samples"])
     return total
