@@ -333,6 +333,24 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     assert (tmp_path / "out" / "index.html").read_text().count("<tr>") == 3
 
 
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")   # another cluster's
+def test_the_local_clusters_workers_wake_their_event_loop_seldom():
+    # Dask's periodic work in a worker's event loop takes the GIL from the run beside it
+    pytest.importorskip("distributed")
+    from heliquad.host.study.execute import _client, _close   # the cluster the study starts
+
+    client = _client(1, None)
+    try:
+        callbacks = client.run(lambda dask_worker: {
+            name: pc.callback_time for name, pc in dask_worker.periodic_callbacks.items()})
+    finally:
+        _close(client, None)
+    (worker,) = callbacks.values()
+    assert "profile" not in worker and worker["tick"] == 1000
+    assert worker["memory_monitor"] == 1000 and worker["monitor"] == 5000
+    assert worker["heartbeat"]                                  # the rest as Dask has it
+
+
 # --- vehicle parameters perturbed per run ---------------------------------------------------
 
 PERTURB = """
