@@ -189,6 +189,7 @@ def test_without_a_disturbance_the_second_pass_has_equal_lines():
                           sequential=SequentialMultisine(0.02), redesign=True)
     n = plan.redesign.first.period_samples
     entry = {"status": "ok", "multisine_end": "cap", "periods": 3, "samples": 3 * n - 5,
+             "freq_hz": 200.0 / n, "period_samples": n,
              "lost": 5, "fade_samples": 1000, "line_sigma": [0.1, 0.2] + [None] * 12,
              "line_disturbance": [None] * 14}
     said = plan.after(entry, 0)

@@ -106,14 +106,16 @@ class SequentialMultisine:
         (used + 1))``), combined with :attr:`prior`, ``(sigmas, used periods, amplitudes
         then, amplitudes now)``, as identify combines the passes
         (:func:`.redesign.combined_sigmas`)."""
-        now = np.asarray(sigmas, dtype=float) * math.sqrt(max(used, 0) / (used + 1))
-        if used < 1 or not np.all(np.isfinite(now)):     # this pass must know every line
+        if used < 1:
+            return False
+        now = np.asarray(sigmas, dtype=float) * math.sqrt(used / (used + 1))
+        if not np.all(np.isfinite(now)):                 # this pass must know every line
             return False
         if self.prior is not None:
             before, periods, then, amps = self.prior
             s = np.column_stack([[np.nan if v is None else v for v in before], now])
             now = combined_sigmas(s, np.column_stack([then, amps]), [periods, used + 1])
-        return bool(np.all(np.isfinite(now))) and float(np.max(now)) <= self.target_sigma
+        return float(np.max(now)) <= self.target_sigma
 
     def relative_sigmas(self, r, u, y, fs_hz: float, period: int, orders,
                         present=None) -> np.ndarray:

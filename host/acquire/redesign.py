@@ -33,6 +33,7 @@ import math
 import numpy as np
 
 from ...sim.base.errors import InputError
+from ..records.manifest import entry_seconds
 from .multisine import Multisine, design
 
 __all__ = ["Redesign", "disturbance_sigmas", "line_weights", "pass_weights", "combined_sigmas",
@@ -128,12 +129,11 @@ class Redesign:
         if weights is None:
             weights = np.ones(len(self.first.orders))
             self.equal_why = "the first pass estimated fewer than three lines"
-        fs = self.first.fs_hz
-        spent = (entry["samples"] + entry["lost"] + 2 * entry["fade_samples"]) / fs
+        spent = entry_seconds(entry, self.first.fade_cycles)
         try:
             self.second = design(self.band_hz, self.first.peak, len(self.first.orders),
                                  self.rig_time_s - spent, min_periods, self.first.fade_cycles,
-                                 fs, weights=weights, like=self.first)
+                                 self.first.fs_hz, weights=weights, like=self.first)
         except InputError:
             self.why_not = (f"the rest of the rig time, {self.rig_time_s - spent:.0f} s, holds "
                             f"fewer than {min_periods} periods")

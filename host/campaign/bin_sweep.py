@@ -231,6 +231,11 @@ def _lines(r, places, length: int, period: int, fade: int) -> tuple | None:
             [float(2 * amplitude[k] / period) for k in lines])
 
 
+def _phase_step(a, b):
+    """How far apart phases ``a`` and ``b`` are (rad, 0 to pi, elementwise)."""
+    return np.abs(np.angle(np.exp(1j * (a - b))))
+
+
 #: Two realisations of a linearity campaign differ in some line's phase by more than this.
 PHASES_DIFFER_RAD = 0.1
 
@@ -250,7 +255,7 @@ def _linearity(entries) -> dict | None:
     levels = [[e for e in ok if e["amplitude"] == peak] for peak in peaks]
     for level in levels:
         phases = np.array([e["phases_rad"] for e in level])
-        step = np.abs(np.angle(np.exp(1j * (phases[:, None, :] - phases[None, :, :]))))
+        step = _phase_step(phases[:, None, :], phases[None, :, :])
         distinct = step.max(axis=2) > PHASES_DIFFER_RAD
         if len(level) < 2 or not distinct[~np.eye(len(level), dtype=bool)].all():
             return None
@@ -280,8 +285,7 @@ def _redesigns(entries) -> None:
             continue
         wa, wb = (np.asarray(e["line_amplitudes"]) / np.median(e["line_amplitudes"])
                   for e in (a, b))
-        step = np.abs(np.angle(np.exp(1j * (np.asarray(b["phases_rad"]) -
-                                            np.asarray(a["phases_rad"])))))
+        step = _phase_step(np.asarray(b["phases_rad"]), np.asarray(a["phases_rad"]))
         if np.max(np.abs(np.log(wb / wa))) > math.log(1 + AMPLITUDES_DIFFER) or \
                 np.max(step) > PHASES_DIFFER_RAD:
             b.update(redesign_of=i, weights=[float(w) for w in wb])

@@ -25,7 +25,7 @@ from .output import document, write_json
 from .reading import read_json
 
 __all__ = ["MANIFEST", "SWEEP_SIGNALS", "FREQUENCY", "PORT_FOUND", "UNSET", "SweepManifest",
-           "write_manifest", "read_manifest", "excited_seconds"]
+           "write_manifest", "read_manifest", "excited_seconds", "entry_seconds"]
 
 #: The manifest's name in a sweep folder.
 MANIFEST = "manifest.json"
@@ -169,15 +169,17 @@ def read_manifest(path) -> dict:
 
 
 def excited_seconds(manifest: dict) -> float:
-    """The seconds the rig flew excited: each measured excitation's full-amplitude window (its
-    samples and those lost on the link) and its two fades (a dwell's ``fade_cycles`` cycles of its frequency, a multisine's or chirp's
-    ``fade_samples``), at the loop rate the entry gives (``freq_hz`` x ``period_samples``).
+    """The seconds the rig flew excited: each measured excitation's (:func:`entry_seconds`).
     The time between excitations, which a log's span also counts, is left out."""
-    total = 0.0
-    for e in manifest["frequencies"]:
-        if "period_samples" not in e or "samples" not in e:
-            continue
-        fade = e.get("fade_samples", manifest["fade_cycles"] * e["period_samples"])
-        total += (e["samples"] + e.get("lost", 0) + 2 * fade) / (e["freq_hz"] *
-                                                               e["period_samples"])
-    return total
+    return sum(entry_seconds(e, manifest["fade_cycles"]) for e in manifest["frequencies"]
+               if "period_samples" in e and "samples" in e)
+
+
+def entry_seconds(entry: dict, fade_cycles: int) -> float:
+    """One measured excitation's seconds excited: its full-amplitude window (its samples and
+    those lost on the link) and its two fades (a dwell's ``fade_cycles`` cycles of its
+    frequency, a multisine's or chirp's ``fade_samples``), at the loop rate the entry gives
+    (``freq_hz`` x ``period_samples``)."""
+    fade = entry.get("fade_samples", fade_cycles * entry["period_samples"])
+    return (entry["samples"] + entry.get("lost", 0) + 2 * fade) / (entry["freq_hz"] *
+                                                                   entry["period_samples"])
