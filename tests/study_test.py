@@ -25,6 +25,7 @@ from heliquad.host.study import runs
 from heliquad.host.study.execute import forget, plan
 from heliquad.host.study.spec import parse_spec
 from heliquad.sim.base.errors import InputError
+from tool_runs import HANG_GUARD_S
 
 COMMANDS = option_names()
 
@@ -333,19 +334,29 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     assert (tmp_path / "out" / "index.html").read_text().count("<tr>") == 3
 
 
-@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")   # another cluster's
+#: The local cluster the study starts, in a process of its own: a cluster started in the
+#: test's process would leave multiprocessing's resource tracker running under it.
+WORKER_CALLBACKS = """
+import json, warnings
+warnings.simplefilter("ignore")                       # Dask's port-in-use notices
+from heliquad.host.study.execute import _client, _close
+client = _client(1, None)
+try:
+    callbacks = client.run(lambda dask_worker: {
+        name: pc.callback_time for name, pc in dask_worker.periodic_callbacks.items()})
+finally:
+    _close(client, None)
+print(json.dumps(list(callbacks.values())))
+"""
+
+
 def test_the_local_clusters_workers_wake_their_event_loop_seldom():
     # Dask's periodic work in a worker's event loop takes the GIL from the run beside it
     pytest.importorskip("distributed")
-    from heliquad.host.study.execute import _client, _close   # the cluster the study starts
-
-    client = _client(1, None)
-    try:
-        callbacks = client.run(lambda dask_worker: {
-            name: pc.callback_time for name, pc in dask_worker.periodic_callbacks.items()})
-    finally:
-        _close(client, None)
-    (worker,) = callbacks.values()
+    done = subprocess.run([sys.executable, "-c", WORKER_CALLBACKS], capture_output=True,
+                          text=True, timeout=HANG_GUARD_S)
+    assert done.returncode == 0, done.stderr
+    (worker,) = json.loads(done.stdout.strip().splitlines()[-1])
     assert "profile" not in worker and worker["tick"] == 1000
     assert worker["memory_monitor"] == 1000 and worker["monitor"] == 5000
     assert worker["heartbeat"]                                  # the rest as Dask has it

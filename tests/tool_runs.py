@@ -109,7 +109,8 @@ def private_tmpdir(base):
 
 def assert_nothing_left(tmp) -> None:
     """No process left running by the tools the test ran, nothing in their TMPDIR."""
-    assert orphans() == []
+    left = orphans()
+    assert left == [], f"left running: {left}"
     assert list(tmp.iterdir()) == []
 
 

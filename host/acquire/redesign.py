@@ -163,8 +163,12 @@ def combined_sigmas(sigmas, amplitudes, periods) -> np.ndarray:
     w = pass_weights(amplitudes, periods)
     n = np.broadcast_to(np.asarray(periods, dtype=float), s.shape)
     known = np.isfinite(s) & (w > 0)
-    pooled = np.where(known, s ** 2 * w * n, 0).sum(axis=1) / np.where(known, n, 0).sum(axis=1)
-    return np.sqrt(pooled / np.where(known, w, 0).sum(axis=1))
+    estimated = known.any(axis=1)               # a line no pass estimated stays NaN
+    out = np.full(s.shape[0], np.nan)
+    k, n, w, s = known[estimated], n[estimated], w[estimated], s[estimated]
+    pooled = np.where(k, s ** 2 * w * n, 0).sum(axis=1) / np.where(k, n, 0).sum(axis=1)
+    out[estimated] = np.sqrt(pooled / np.where(k, w, 0).sum(axis=1))
+    return out
 
 
 def passes_sigmas(entries) -> list:
