@@ -6,10 +6,13 @@ light turbulence, seeds from 1); three measurements in one benchmark run:
 
 1. **one by one**: each run made in this process, no Dask (host/study/runs.py's
    perform_run, as a worker makes it): the baseline, the sum of the runs' times;
-2. ``heliquad study SPEC --workers 1``: the command's wall time; the time between runs
-   (the first run's start to the last one's end, less the runs' own times, over the runs:
-   the scheduler's cost per run), and its start and finish (cluster, table, figures);
-3. ``heliquad study SPEC --workers 2``: its wall time; the speed-up over (2);
+2. ``heliquad study SPEC --workers 1``: the command's wall time; a run's mean time on the
+   worker (made in its runner) against in this process; the time between runs (the first
+   run's start to the last one's end, less the runs' own times, over the runs: the
+   scheduler's cost per run), and its start and finish (cluster, table, figures);
+3. ``heliquad study SPEC --workers 2``: its wall time; the speed-up over (2), whole and of
+   the runs alone (first start to last end: the rate a long study makes runs at, its
+   start and finish left out);
 4. the machine's own ceiling, measured in the same run: a fixed CPU-bound loop in one
    process, then in two at once (two copies' work over the wall time, against one's): what
    two workers could reach at best on these cores as they are shared now (a virtual
@@ -93,12 +96,16 @@ def machine_ceiling() -> float:
     return 2 * one / two
 
 
+def span(records: list) -> float:
+    """The first run's start to the last one's end."""
+    return (max(r["started_at"] + r["run_s"] for r in records) -
+            min(r["started_at"] for r in records))
+
+
 def between_runs(records: list) -> float:
     """On one worker: the first run's start to the last one's end, less the runs' own
     times, per run (what the scheduler adds to each)."""
-    span = max(r["started_at"] + r["run_s"] for r in records) - min(r["started_at"]
-                                                                   for r in records)
-    return (span - sum(r["run_s"] for r in records)) / len(records)
+    return (span(records) - sum(r["run_s"] for r in records)) / len(records)
 
 
 def main(argv=None) -> None:
@@ -118,14 +125,18 @@ def main(argv=None) -> None:
               flush=True)
         one, one_records = study(spec_path, os.path.join(tmp, "w1"), 1)
         gap = between_runs(one_records)
-        fixed = one - (max(r["started_at"] + r["run_s"] for r in one_records) -
-                       min(r["started_at"] for r in one_records))
+        fixed = one - span(one_records)
+        worker_run = sum(r["run_s"] for r in one_records) / n
         print(f"heliquad study --workers 1: {one:.1f} s ({one / base:.2f}x the one-by-one "
-              f"time); between runs {gap * 1e3:.0f} ms a run ({gap / mean_run:.1%} of a run's "
-              f"time); start and finish (cluster, table, figures) {fixed:.1f} s", flush=True)
-        two, _ = study(spec_path, os.path.join(tmp, "w2"), 2)
+              f"time); a run {worker_run:.2f} s on the worker ({worker_run / mean_run - 1:+.1%}"
+              f" against in this process); between runs {gap * 1e3:.0f} ms a run "
+              f"({gap / mean_run:.1%} of a run's time); start and finish (cluster, table, "
+              f"figures) {fixed:.1f} s", flush=True)
+        two, two_records = study(spec_path, os.path.join(tmp, "w2"), 2)
         print(f"heliquad study --workers 2: {two:.1f} s ({two / base:.2f}x the one-by-one "
-              f"time); speed-up over one worker {one / two:.2f}x", flush=True)
+              f"time); speed-up over one worker {one / two:.2f}x; the runs alone (first "
+              f"start to last end) {span(one_records) / span(two_records):.2f}x, start and "
+              f"finish {two - span(two_records):.1f} s", flush=True)
     ceiling = machine_ceiling()
     print(f"the machine's ceiling now: two processes of a CPU-bound loop do {ceiling:.2f}x "
           f"one's work; the study's speed-up is {one / two / ceiling:.0%} of it", flush=True)

@@ -4,9 +4,10 @@ a progress line on stderr, then the table, figures and page of every run that is
 
 Dask's scheduler hands each run to a worker; a worker that dies mid-run has its runs given
 to another (the run's folder then holds a start mark and no record: the new attempt clears
-it and makes the run again). The folders are written by the workers, at the same path the
-client gives (a shared file system on a cluster): the sweep's log is written as it flies and
-read back by identify, so the run's folder lives where the run does.
+it and makes the run again). Each worker makes its runs in a runner, a process of its own
+that ends with the worker (:mod:`.runner`). The folders are written by the workers, at the
+same path the client gives (a shared file system on a cluster): the sweep's log is written
+as it flies and read back by identify, so the run's folder lives where the run does.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import warnings
 from ...sim.base.errors import InputError
 from ..process.signals import TERMINAL_SIGNALS, ignoring
 from ..records.output import check_output_folder
+from .runner import in_runner, runner_plugin
 from .runs import FAILED, RECORD, RUNS, read_record, run_folder, worker_version
 
 __all__ = ["run_study", "plan", "EXIT_FAILED"]
@@ -37,10 +39,9 @@ TICK_S = 0.5
 #: for a dashboard the local cluster has none of), the loop-latency tick every second, not
 #: every 20 ms (it feeds only a warning the study silences), the worker's memory checked
 #: every second, not 100 ms (its nanny still stops it at 95 % every 100 ms), its system
-#: figures every 5 s, not 0.5 s. Each of those wake-ups of the worker's event loop takes
-#: the GIL from the run beside it, and a hand-over costs the run's thread a futex wake-up of
-#: the other thread: measured on a 2-core VM, a run on a worker took 19 % more wall time
-#: than in-process (its thread 0.2 s more system CPU in 2.4 s), 5 % with these.
+#: figures every 5 s, not 0.5 s. The runs are made in runners of their own
+#: (host/study/runner.py), so these wake-ups no longer take the GIL from a run; they still
+#: take CPU on the cores the runs use, for nothing a study reads.
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "1s",
                  "distributed.worker.memory.monitor-interval": "1s",
@@ -175,7 +176,8 @@ def _execute(client, todo, out, perform) -> str | None:
     why = _check_workers(client)
     if why:
         return why
-    futures = [client.submit(perform, run, out, key=f"heliquad-study-{run.name}-"
+    client.register_plugin(runner_plugin())   # a worker's runners end with it
+    futures = [client.submit(in_runner, perform, run, out, key=f"heliquad-study-{run.name}-"
                              f"{os.getpid()}-{time.time_ns()}") for run in todo]
     return _gather(client, futures, distributed.as_completed(futures, loop=client.loop))
 

@@ -23,7 +23,7 @@ from ..records.manifest import excited_seconds
 from ..records.output import atomic_write, write_json
 from .perturb import VEHICLE_FILE, base_text, perturbed_text
 
-__all__ = ["perform_run", "worker_version", "read_record", "run_folder", "outcome", "RECORD", "STARTED",
+__all__ = ["perform_run", "died_record", "worker_version", "read_record", "run_folder", "outcome", "RECORD", "STARTED",
            "SWEEP", "LOG", "RUNS", "FINISHED", "FAILED"]
 
 #: The run folders' folder, in the study's.
@@ -101,6 +101,27 @@ def perform_run(run, study_dir: str, command, line) -> dict:
               "commands": [" ".join(["heliquad", *w]).replace(sweep_dir, SWEEP)
                            .replace(folder + os.sep, "") for w in words.values()],
               **result}
+    write_json(os.path.join(folder, RECORD), record)
+    return record
+
+
+def died_record(run, study_dir: str, why: str) -> dict:
+    """The failed record of ``run`` whose process died mid-run (host/study/runner.py), written
+    as :func:`perform_run` writes its own: the run is over, said with why, and the figures
+    of the steps that finished."""
+    folder = run_folder(study_dir, run.name)
+    try:
+        with open(os.path.join(folder, STARTED), encoding="utf-8") as f:
+            started = json.load(f)
+    except (OSError, ValueError):
+        started = {}
+    at = started.get("at", time.time())
+    record = {"run": run.name, "status": FAILED, "error": why, "factors": run.factors,
+              "seed": run.seed, "attempt": started.get("attempt", 1),
+              "worker": f"{socket.gethostname()}:{started.get('pid', os.getpid())}",
+              "started_at": at, "run_s": time.time() - at, "verdicts": None,
+              "perturbed": run.perturb, **_partial(os.path.join(folder, SWEEP))}
+    os.makedirs(folder, exist_ok=True)
     write_json(os.path.join(folder, RECORD), record)
     return record
 

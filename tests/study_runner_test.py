@@ -1,0 +1,128 @@
+"""A study's runs are made in a runner, a process of the worker's own (host/study/runner.py):
+what the run returns or raises comes back; a runner that dies mid-run costs that run only
+(a failed record saying so, the next run in a new runner); a runner never outlives its
+worker, killed or closed."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import tomllib
+
+import pytest
+
+cloudpickle = pytest.importorskip("cloudpickle")
+
+from heliquad.host.commands.study import option_names       # noqa: E402
+from heliquad.host.study import runner, runs                # noqa: E402
+from heliquad.host.study.spec import parse_spec             # noqa: E402
+from tool_runs import (HANG_GUARD_S, adopting_orphans, assert_nothing_left,  # noqa: E402
+                       private_tmpdir, wait_for)
+
+# The performs below are this module's: the runner receives them by value.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+SPEC = """
+[study]
+description = "runner"
+[factors]
+axis = "roll"
+seed = [1, 2]
+[sweep]
+signal = "multisine"
+"""
+
+
+def _runs():
+    return parse_spec(tomllib.loads(SPEC), option_names(), "s.toml").runs
+
+
+def _where(run, out):
+    return {"run": run.name, "pid": os.getpid(), "out": out}
+
+
+def _raises(run, out):
+    raise ValueError(f"{run.name} refused")
+
+
+def _dies(run, out):
+    os.makedirs(runs.run_folder(out, run.name), exist_ok=True)
+    with open(os.path.join(runs.run_folder(out, run.name), runs.STARTED), "w") as f:
+        json.dump({"attempt": 2, "at": 1.0, "pid": os.getpid()}, f)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_a_run_is_made_in_a_process_of_its_own_kept_for_the_next(tmp_path):
+    first, second = _runs()
+    with private_tmpdir(tmp_path) as tmp:
+        try:
+            a = runner.in_runner(_where, first, str(tmp_path))
+            b = runner.in_runner(_where, second, str(tmp_path))
+            assert a["run"] == first.name and b["run"] == second.name
+            assert a["pid"] != os.getpid() and a["pid"] == b["pid"]     # one runner, kept
+            with pytest.raises(ValueError, match=f"{first.name} refused"):
+                runner.in_runner(_raises, first, str(tmp_path))
+            assert runner.in_runner(_where, first, str(tmp_path))["pid"] == a["pid"]
+        finally:
+            runner.close_runners()
+        assert_nothing_left(tmp)
+
+
+def test_a_runner_that_dies_mid_run_fails_that_run_only(tmp_path):
+    first, second = _runs()
+    out = str(tmp_path / "study")
+    with private_tmpdir(tmp_path) as tmp:
+        try:
+            record = runner.in_runner(_dies, first, out)
+            assert record["status"] == runs.FAILED and record["attempt"] == 2
+            assert record["error"] == "the run's process died of SIGKILL"
+            assert runs.read_record(runs.run_folder(out, first.name)) == record
+            assert runner.in_runner(_where, second, out)["run"] == second.name
+        finally:
+            runner.close_runners()
+        assert_nothing_left(tmp)
+
+
+#: A worker that starts a runner, hands it a run that waits forever, and says the runner's
+#: pid once the run has started.
+WORKER = textwrap.dedent("""
+    import os, sys, time
+    from heliquad.host.study import runner
+    started = sys.argv[1]
+
+    def wait_forever(run, out):
+        open(started, "w").close()
+        while True:
+            time.sleep(3600)
+
+    r = runner.Runner()
+    print(r.proc.pid, flush=True)
+    r.call(wait_forever, None, None)
+""")
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
+def test_a_runner_ends_when_its_worker_is_gone(tmp_path, how):
+    started = tmp_path / "started"
+    with private_tmpdir(tmp_path) as tmp, adopting_orphans():
+        worker = subprocess.Popen([sys.executable, "-c", WORKER, str(started)],
+                                  stdout=subprocess.PIPE, text=True)
+        pid = int(worker.stdout.readline())
+        wait_for(started.exists, "the run started", worker)
+        worker.send_signal(getattr(signal, how))
+        worker.wait(HANG_GUARD_S)
+        worker.stdout.close()
+        status = []                              # the runner, ours now: its exit status
+
+        def ended():
+            got, code = os.waitpid(pid, os.WNOHANG)
+            if got:
+                status.append(os.waitstatus_to_exitcode(code))
+            return bool(status)
+        wait_for(ended, "the runner's end")
+        assert status == [runner.ORPHANED]
+        assert_nothing_left(tmp)
