@@ -21,7 +21,7 @@ light turbulence, seeds from 1); three measurements in one benchmark run:
 Each figure is printed with its ratio to the baseline measured in the same benchmark run. On
 a machine whose two cores something else also uses, the speed-up is that machine's.
 
-    python benchmarks/study_speed.py [--runs 8]
+    python benchmarks/study_speed.py [--runs 16]
 """
 
 from __future__ import annotations
@@ -111,7 +111,9 @@ def between_runs(records: list) -> float:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--runs", type=int, default=8, help="runs in the study (even)")
+    parser.add_argument("--runs", type=int, default=16,
+                        help="runs in the study (even; default 16: with fewer, the study's "
+                             "start and finish, some 4-5 s once, weigh more than its runs)")
     args = parser.parse_args(argv)
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     with tempfile.TemporaryDirectory(prefix="study_speed-") as tmp:
