@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import tomllib
 
 import pytest
@@ -20,8 +21,8 @@ cloudpickle = pytest.importorskip("cloudpickle")
 from heliquad.host.commands.study import option_names       # noqa: E402
 from heliquad.host.study import runner, runs                # noqa: E402
 from heliquad.host.study.spec import parse_spec             # noqa: E402
-from tool_runs import (HANG_GUARD_S, adopting_orphans, assert_nothing_left,  # noqa: E402
-                       private_tmpdir, wait_for)
+from tool_runs import (HANG_GUARD_S, assert_nothing_left, private_tmpdir,  # noqa: E402
+                       wait_for)
 
 # The performs below are this module's: the runner receives them by value.
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -72,6 +73,77 @@ def test_a_run_is_made_in_a_process_of_its_own_kept_for_the_next(tmp_path):
         assert_nothing_left(tmp)
 
 
+class _Awkward(Exception):
+    def __init__(self, a, b):
+        super().__init__(f"{a} and {b}")
+
+
+def _awkward(run, out):
+    raise _Awkward("one", "two")
+
+
+def _wait_forever(run, out):
+    open(out, "w").close()
+    while True:
+        signal.pause()
+
+
+def test_what_the_run_raises_comes_back_even_when_it_cannot_be_rebuilt(tmp_path):
+    first, _ = _runs()
+    with private_tmpdir(tmp_path) as tmp:
+        try:
+            with pytest.raises(RuntimeError, match="_Awkward: one and two.*not sendable"):
+                runner.in_runner(_awkward, first, str(tmp_path))
+            # a perform the runner cannot import: its error, not a dead runner
+            (tmp_path / "only_here.py").write_text("def perform(run, out):\n    return 1\n")
+            sys.path.insert(0, str(tmp_path))
+            try:
+                import only_here
+                with pytest.raises(ModuleNotFoundError, match="only_here"):
+                    runner.in_runner(only_here.perform, first, str(tmp_path))
+            finally:
+                sys.path.remove(str(tmp_path))
+                sys.modules.pop("only_here", None)
+            assert runner.in_runner(_where, first, str(tmp_path))["run"] == first.name
+        finally:
+            runner.close_runners()
+        assert_nothing_left(tmp)
+
+
+def test_closing_a_workers_runners_ends_a_run_in_flight_at_once(tmp_path):
+    # A worker closing (its plugin's teardown) must not wait for the run: the run is not
+    # over (no record), the runner ends, the waiting thread is told.
+    first, _ = _runs()
+    started = tmp_path / "started"
+    with private_tmpdir(tmp_path) as tmp:
+        raised = []
+
+        def make():
+            try:
+                runner.in_runner(_wait_forever, first, str(started))
+            except BaseException as exc:   # noqa: BLE001 - what the worker's thread sees
+                raised.append(exc)
+        thread = threading.Thread(target=make)
+        thread.start()
+        wait_for(started.exists, "the run started")
+        runner.close_runners()
+        thread.join(HANG_GUARD_S)
+        assert not thread.is_alive()
+        assert [type(e) for e in raised] == [runner.RunnerGone]
+        assert runs.read_record(runs.run_folder(str(tmp_path), first.name)) is None
+        assert_nothing_left(tmp)
+
+
+def test_a_run_over_before_its_process_died_keeps_its_record(tmp_path):
+    first, _ = _runs()
+    out = str(tmp_path)
+    os.makedirs(runs.run_folder(out, first.name))
+    kept = {"run": first.name, "status": runs.FINISHED}
+    with open(os.path.join(runs.run_folder(out, first.name), runs.RECORD), "w") as f:
+        json.dump(kept, f)
+    assert runs.died_record(first, out, "the run's process died of SIGKILL") == kept
+
+
 def test_a_runner_that_dies_mid_run_fails_that_run_only(tmp_path):
     first, second = _runs()
     out = str(tmp_path / "study")
@@ -108,7 +180,7 @@ WORKER = textwrap.dedent("""
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
 def test_a_runner_ends_when_its_worker_is_gone(tmp_path, how):
     started = tmp_path / "started"
-    with private_tmpdir(tmp_path) as tmp, adopting_orphans():
+    with private_tmpdir(tmp_path) as tmp:
         worker = subprocess.Popen([sys.executable, "-c", WORKER, str(started)],
                                   stdout=subprocess.PIPE, text=True)
         pid = int(worker.stdout.readline())

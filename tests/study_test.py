@@ -25,7 +25,7 @@ from heliquad.host.study import runs
 from heliquad.host.study.execute import forget, plan
 from heliquad.host.study.spec import parse_spec
 from heliquad.sim.base.errors import InputError
-from tool_runs import HANG_GUARD_S
+from tool_runs import HANG_GUARD_S, children, cmdline
 
 COMMANDS = option_names()
 
@@ -308,6 +308,10 @@ def test_a_study_row_is_the_run_made_by_hand_and_a_rerun_makes_nothing(tmp_path,
     assert [r["status"] for r in table] == ["finished", "failed"]
     ok, failed = table
     assert failed["error"] == "--band is an option of --from-record"
+    # the runs were made in the worker's runners (in this process: the scheduler's worker is
+    # a thread here), ended with the study: the cluster's workers keep nothing of it
+    assert all(r["worker"].split(":")[1] != str(os.getpid()) for r in table)
+    assert [p for p in children(os.getpid()) if "study.runner" in cmdline(p)] == []
     assert ok["seed"] == 3 and ok["axis"] == "roll" and ok["turbulence"] == "light"
     # the row's commands, typed by hand into another folder: the same numbers
     hand = tmp_path / "hand"

@@ -38,10 +38,11 @@ TICK_S = 0.5
 #: started again has them too): no sampling profiler (the running task's stack every 10 ms,
 #: for a dashboard the local cluster has none of), the loop-latency tick every second, not
 #: every 20 ms (it feeds only a warning the study silences), the worker's memory checked
-#: every second, not 100 ms (its nanny still stops it at 95 % every 100 ms), its system
-#: figures every 5 s, not 0.5 s. The runs are made in runners of their own
-#: (host/study/runner.py), so these wake-ups no longer take the GIL from a run; they still
-#: take CPU on the cores the runs use, for nothing a study reads.
+#: every second, not 100 ms (its nanny still stops it at 95 % every 100 ms: the worker's
+#: own memory, not its runners'), its system figures every 5 s, not 0.5 s. The runs are
+#: made in runners of their own (host/study/runner.py), so these wake-ups no longer take
+#: the GIL from a run; they still take CPU on the cores the runs use, for nothing a study
+#: reads.
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.tick.interval": "1s",
                  "distributed.worker.memory.monitor-interval": "1s",
@@ -176,7 +177,12 @@ def _execute(client, todo, out, perform) -> str | None:
     why = _check_workers(client)
     if why:
         return why
-    client.register_plugin(runner_plugin())   # a worker's runners end with it
+    plugin = runner_plugin()                  # a worker's runners, ended with it
+    try:
+        client.register_plugin(plugin)
+    except Exception as exc:            # noqa: BLE001: the worker's own error, said in a line
+        return (f"a worker cannot start the runs' processes ({type(exc).__name__}: "
+                f"{' '.join(str(exc).split())})")
     futures = [client.submit(in_runner, perform, run, out, key=f"heliquad-study-{run.name}-"
                              f"{os.getpid()}-{time.time_ns()}") for run in todo]
     return _gather(client, futures, distributed.as_completed(futures, loop=client.loop))
@@ -231,6 +237,10 @@ def _close(client, scheduler) -> None:
     """Close the client (and the local cluster this study started); a scheduler given is left
     running, the study's tasks on it cancelled."""
     cluster = client.cluster if scheduler is None else None
+    if scheduler is not None:
+        # the study's runners ended on the cluster's workers: they keep nothing of it
+        with contextlib.suppress(Exception):
+            client.unregister_worker_plugin(runner_plugin().name)
     try:
         client.close(timeout=CONNECT_TIMEOUT_S)
     finally:

@@ -3,20 +3,22 @@
 A Dask worker runs a task in a thread beside its event loop, and the loop wakes several
 times a second (heartbeats, its timers). Each wake-up has to take the GIL from the run, and
 while it waits, every release of the GIL by the run (a socket read, a NumPy call) costs a
-futex wake-up of the waiting thread: measured on a two-core machine, a run took about 12 %
+futex wake-up of the waiting thread: measured on a two-core machine, a run took 12-19 %
 longer on a worker than in a process of its own, the worker's loop thread waiting some
 10 ms at each wake-up and making thousands of futex calls a second. The runner is a
-Python process of its own for each worker thread, started at its first run and kept for the
-next: the run has its interpreter to itself, as when a user types the commands, and the
-worker's thread waits on a pipe, without the GIL.
+Python process of its own for each worker thread, kept for the thread's next runs (the
+study's plugin starts one per thread as the worker joins the study, so that its imports
+are made before the first run arrives): the run has its interpreter to itself, as when a
+user types the commands, and the worker's thread waits on a pipe, without the GIL.
 
 The runner is in a session of its own (a terminal's Ctrl-C reaches the study's client,
-which closes the cluster in order) and ends when its worker does: it watches a pipe only
-its worker holds open, and exits at once when that closes (the worker closed, killed or
-crashed), so that a run never goes on writing after its worker is gone and its run is
-handed to another. A runner that dies mid-run (a crash in the simulator's C++) costs its
-run only: the run is a failed record with the signal that ended it, and the next run
-starts a new runner.
+which closes the cluster in order). It holds the read end of a pipe, the lifeline, whose
+write end only its worker holds and never writes: when the worker closes, is killed or
+crashes, the pipe closes and the runner exits at once (:data:`ORPHANED`), mid-run too, so
+that a run never goes on writing after its worker is gone and Dask has handed the run to
+another. A runner that dies mid-run on its own (a crash in the simulator's C++) costs its
+run only: the run is a failed record saying what ended it (``runs.died_record``), and the
+thread's next run starts a new runner.
 """
 
 from __future__ import annotations
@@ -28,72 +30,92 @@ import struct
 import subprocess
 import sys
 import threading
+import traceback
 
-__all__ = ["in_runner", "start_spares", "close_runners", "runner_plugin", "serve"]
+__all__ = ["in_runner", "start_spares", "close_runners", "runner_plugin", "serve",
+           "ORPHANED", "RunnerGone"]
 
-#: What the runner process runs.
+#: What the runner process runs (``-P``: the worker's working directory is not put on its
+#: import path).
 SERVE = "from heliquad.host.study.runner import serve; serve()"
 #: A message's length prefix on the pipes.
 _HEADER = struct.Struct("<Q")
 #: The exit code of a runner whose worker went away.
 ORPHANED = 70
-
 #: What a runner imports as it starts, before its first run arrives: what a study's run uses
-#: (the commands, the simulator, identification, the plots; about 1.5 s), so that a worker's
-#: first run does not wait for it.
+#: (the commands, the simulator, identification, the figures; about 1.5 s), so that a
+#: worker's first run does not wait for it. Only a head start: one that fails to import
+#: fails later, in the run that needs it, with its own error.
 WARM = ("heliquad.host.commands.study", "heliquad.host.study.runs",
         "heliquad.host.commands.sweep", "heliquad.host.acquire.sweep",
         "heliquad.host.acquire.session", "heliquad.host.commands.identify",
-        "heliquad.host.campaign.identify", "matplotlib.pyplot")
+        "heliquad.host.campaign.identify", "matplotlib.figure", "matplotlib.backends.backend_agg")
 
 _LOCAL = threading.local()
-_ALL: list = []                 # every runner started in this process (closed with it)
-_SPARE: list = []               # started when the worker did, for its threads' first runs
-_ALL_LOCK = threading.Lock()
+_LOCK = threading.Lock()
+#: The runners started in this process, by the worker they serve (None outside a worker),
+#: and the spares not yet taken by a thread.
+_ALL: dict = {}
+_SPARE: dict = {}
 
 
 class RunnerDied(RuntimeError):
-    """The runner ended before it answered."""
+    """The runner ended on its own before it answered."""
+
+
+class RunnerGone(RuntimeError):
+    """The runner was ended (its worker closing) before it answered: the run is not over."""
 
 
 class Runner:
     """One runner process and the pipes to it."""
 
     def __init__(self):
-        request_r, request_w = os.pipe()
-        reply_r, reply_w = os.pipe()
-        life_r, life_w = os.pipe()
-        theirs = (request_r, reply_w, life_r)
+        self._lock = threading.Lock()
+        self.closing = False
+        pipes = []
         try:
+            for _ in range(3):                     # requests, replies, lifeline
+                pipes.append(os.pipe())
+            (request_r, request_w), (reply_r, reply_w), (life_r, life_w) = pipes
+            theirs = (request_r, reply_w, life_r)
             self.proc = subprocess.Popen(
-                [sys.executable, "-c", SERVE, *map(str, theirs)], pass_fds=theirs,
+                [sys.executable, "-P", "-c", SERVE, *map(str, theirs)], pass_fds=theirs,
                 stdin=subprocess.DEVNULL, start_new_session=True)
         except BaseException:
-            for fd in (request_w, reply_r, life_w):
+            for fd in (fd for pair in pipes for fd in pair):
                 os.close(fd)
             raise
-        finally:
-            for fd in theirs:
-                os.close(fd)
+        for fd in theirs:
+            os.close(fd)
         self.requests = os.fdopen(request_w, "wb")
         self.replies = os.fdopen(reply_r, "rb")
-        self.lifeline = life_w              # never written: its closing ends the runner
+        self.lifeline = life_w               # never written: its closing ends the runner
 
     def alive(self) -> bool:
-        return self.proc.poll() is None
+        return not self.closing and self.proc.poll() is None
 
     def call(self, perform, run, out):
         """``perform(run, out)`` made in the runner: its return value, or what it raised
-        raised here; RunnerDied when the runner ended first."""
+        raised here; RunnerDied when the runner ended on its own first, RunnerGone when it
+        was ended (:meth:`close`). Anything else that stops the call (Ctrl-C in a caller's
+        main thread) ends the runner: its answer would otherwise be read as the next run's."""
         # Dask's serialiser, there wherever a worker is: it pickles a test's or a
         # closure's function by value, as Dask itself sends the task here
         import cloudpickle
 
+        request = cloudpickle.dumps((perform, run, out))
         try:
-            _send(self.requests, cloudpickle.dumps((perform, run, out)))
-            status, value = cloudpickle.loads(_receive(self.replies))
-        except (OSError, EOFError):
+            _send(self.requests, request)
+            reply = _receive(self.replies)
+        except (OSError, EOFError, ValueError):      # ValueError: read from a closed pipe
+            if self.closing:
+                raise RunnerGone("the run's process was ended with its worker") from None
             raise RunnerDied(self._death()) from None
+        except BaseException:
+            self.close()
+            raise
+        status, value = cloudpickle.loads(reply)
         if status == "raised":
             raise value
         return value
@@ -101,7 +123,7 @@ class Runner:
     def _death(self) -> str:
         try:
             code = self.proc.wait(5)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired:      # its end of the pipe closed, not yet ended
             self.close()
             code = self.proc.returncode
         if code is not None and code < 0:
@@ -109,86 +131,131 @@ class Runner:
         return f"the run's process ended (exit code {code}) before its run did"
 
     def close(self) -> None:
-        """End the runner (at once, mid-run too) and wait for it."""
-        for stream in (self.requests, self.replies):
+        """End the runner, mid-run too (the lifeline first: the runner exits at once), wait
+        for it, then close the pipes. Safe to call again and from another thread."""
+        with self._lock:
+            self.closing = True
+            if self.lifeline is not None:
+                os.close(self.lifeline)
+                self.lifeline = None
             try:
-                stream.close()
-            except OSError:
-                pass
-        if self.lifeline is not None:
-            os.close(self.lifeline)
-            self.lifeline = None
-        try:
-            self.proc.wait(5)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+            for stream in (self.requests, self.replies):
+                try:
+                    stream.close()
+                except (OSError, ValueError):
+                    pass
 
 
 def in_runner(perform, run, out):
-    """What a worker runs for each run: ``perform(run, out)`` in this thread's runner (one
-    started on first use, and again after one died). A runner that dies mid-run makes the
-    run a failed record (``died(run, out, why)``, from ``perform``'s module) and is
-    replaced at the next run."""
+    """What a worker runs for each run: ``perform(run, out)`` in this thread's runner (a
+    spare started with the worker, or a new one; again after one died). A runner that dies
+    mid-run on its own makes the run a failed record (``runs.died_record``, which keeps a
+    record the run had already written) and is replaced at the next run; one ended with its
+    worker raises RunnerGone (the worker is closing: Dask hands the run to another)."""
     runner = getattr(_LOCAL, "runner", None)
     if runner is None or not runner.alive():
+        if runner is not None:
+            _forget(runner)
         runner = _LOCAL.runner = _started()
     try:
         return runner.call(perform, run, out)
     except RunnerDied as exc:
         _LOCAL.runner = None
-        runner.close()
+        _forget(runner)
         # the record's maker, imported where a run has failed this way
         from .runs import died_record
 
         return died_record(run, out, str(exc))
+    except BaseException:
+        if not runner.alive():
+            _LOCAL.runner = None
+            _forget(runner)
+        raise
+
+
+def _worker_key():
+    """The worker this thread serves (its runners are ended with it), or None."""
+    try:
+        # Dask, there when a worker runs this: outside one (a test), the key is None
+        from distributed import get_worker
+
+        return id(get_worker())
+    except (ImportError, ValueError):
+        return None
 
 
 def _started() -> Runner:
-    """A spare runner (started with the worker) if one is alive, else a new one."""
-    with _ALL_LOCK:
-        while _SPARE:
-            runner = _SPARE.pop()
+    """A spare runner of this thread's worker if one is alive, else a new one."""
+    key = _worker_key()
+    with _LOCK:
+        spares = _SPARE.get(key, [])
+        while spares:
+            runner = spares.pop()
             if runner.alive():
                 return runner
+            _ALL[key].remove(runner)
+            runner.close()
         runner = Runner()
-        _ALL.append(runner)
+        _ALL.setdefault(key, []).append(runner)
     return runner
 
 
-def start_spares(count: int) -> None:
-    """Start ``count`` runners now (a worker starting: one per thread), so that their
-    imports overlap the study's start."""
-    with _ALL_LOCK:
-        for _ in range(count):
-            runner = Runner()
-            _ALL.append(runner)
-            _SPARE.append(runner)
+def _forget(runner: Runner) -> None:
+    """A runner that ended: closed (its pipes) and dropped from the lists."""
+    runner.close()
+    with _LOCK:
+        for runners in (*_ALL.values(), *_SPARE.values()):
+            if runner in runners:
+                runners.remove(runner)
 
 
-def close_runners() -> None:
-    """End every runner this process started (a worker closing)."""
-    with _ALL_LOCK:
-        runners, _ALL[:], _SPARE[:] = list(_ALL), [], []
+def start_spares(worker) -> None:
+    """Start one runner for each of ``worker``'s threads now, so that their imports overlap
+    the study's start. A failure here is only a lost head start: said nowhere, the runs
+    start their own runners (and say what stops them)."""
+    key = id(worker)
+    try:
+        with _LOCK:
+            for _ in range(worker.state.nthreads):
+                runner = Runner()
+                _ALL.setdefault(key, []).append(runner)
+                _SPARE.setdefault(key, []).append(runner)
+    except Exception:                     # noqa: BLE001 - a head start only
+        pass
+
+
+def close_runners(worker=None) -> None:
+    """End the runners of ``worker`` (default: of no worker, as a test starts them)."""
+    key = None if worker is None else id(worker)
+    with _LOCK:
+        runners = _ALL.pop(key, [])
+        _SPARE.pop(key, None)
     for runner in runners:
         runner.close()
 
 
 def runner_plugin():
-    """A Dask worker plugin that ends the worker's runners when the worker closes (a worker
-    in the client's own process, as tests start, would otherwise leave them running)."""
+    """The Dask worker plugin of a study: one spare runner a thread when a worker joins,
+    its runners ended when the worker closes or the study ends (the client unregisters it,
+    so that a cluster's workers keep nothing of the study's once it is over)."""
     # Dask, imported where a study hands its runs out: the runner itself does without it
     from distributed.diagnostics.plugin import WorkerPlugin
 
+    from .. import __version__
+
     class RunnerPlugin(WorkerPlugin):
-        name = "heliquad-runners"
+        name = f"heliquad-runners-{__version__}"
         idempotent = True
 
         def setup(self, worker):
-            start_spares(worker.state.nthreads)
+            start_spares(worker)
 
         def teardown(self, worker):
-            close_runners()
+            close_runners(worker)
 
     return RunnerPlugin()
 
@@ -222,29 +289,44 @@ def _watch(lifeline: int) -> None:
     os._exit(ORPHANED)
 
 
+def _reply(cloudpickle, status: str, value) -> bytes:
+    """The reply, made sure to arrive whole: what cannot be sent or rebuilt on the other
+    side (an exception whose constructor takes other arguments) goes as a RuntimeError
+    with its text and traceback."""
+    try:
+        data = cloudpickle.dumps((status, value))
+        cloudpickle.loads(data)
+        return data
+    except Exception as exc:             # noqa: BLE001 - said in the error instead
+        what = "".join(traceback.format_exception(value)) if status == "raised" else repr(value)
+        return cloudpickle.dumps(("raised", RuntimeError(
+            f"{what.strip()} (not sendable from the run's process: {exc})")))
+
+
 def serve() -> None:
     """The runner: make each run its worker sends, and send back what it returned or
     raised, until the requests end or the worker goes away."""
     import cloudpickle      # Dask's serialiser (see Runner.call)
 
     requests_fd, replies_fd, lifeline = map(int, sys.argv[1:4])
+    for fd in (requests_fd, replies_fd, lifeline):
+        os.set_inheritable(fd, False)      # not the firmware's and plotters' it starts
     threading.Thread(target=_watch, args=(lifeline,), daemon=True,
                      name="heliquad-lifeline").start()
     for module in WARM:
-        importlib.import_module(module)
+        try:
+            importlib.import_module(module)
+        except Exception:                 # noqa: BLE001 - a head start only (see WARM)
+            pass
     with os.fdopen(requests_fd, "rb") as requests, os.fdopen(replies_fd, "wb") as replies:
         while True:
             try:
-                perform, run, out = cloudpickle.loads(_receive(requests))
+                request = _receive(requests)
             except EOFError:
                 return
             try:
-                reply = ("returned", perform(run, out))
-            except Exception as exc:      # noqa: BLE001 - raised again in the worker
-                reply = ("raised", exc)
-            try:
-                data = cloudpickle.dumps(reply)
-            except Exception as exc:      # noqa: BLE001 - what cannot be sent, said
-                data = cloudpickle.dumps(("raised", RuntimeError(
-                    f"{type(reply[1]).__name__}: {reply[1]} (not sendable: {exc})")))
-            _send(replies, data)
+                perform, run, out = cloudpickle.loads(request)
+                reply = _reply(cloudpickle, "returned", perform(run, out))
+            except BaseException as exc:  # noqa: BLE001 - raised again in the worker
+                reply = _reply(cloudpickle, "raised", exc)
+            _send(replies, reply)

@@ -108,8 +108,12 @@ def perform_run(run, study_dir: str, command, line) -> dict:
 def died_record(run, study_dir: str, why: str) -> dict:
     """The failed record of ``run`` whose process died mid-run (host/study/runner.py), written
     as :func:`perform_run` writes its own: the run is over, said with why, and the figures
-    of the steps that finished."""
+    of the steps that finished. A run whose record was written before the process died
+    keeps it."""
     folder = run_folder(study_dir, run.name)
+    done = read_record(folder)
+    if done is not None:              # it died after the run was over: the run stands
+        return done
     try:
         with open(os.path.join(folder, STARTED), encoding="utf-8") as f:
             started = json.load(f)
