@@ -22,7 +22,7 @@ import warnings
 from ...sim.base.errors import InputError
 from ..process.signals import TERMINAL_SIGNALS, ignoring
 from ..records.output import check_output_folder
-from .runner import in_runner, runner_plugin
+from .runner import PLUGIN_NAME, in_runner, runner_plugin
 from .runs import FAILED, RECORD, RUNS, read_record, run_folder, worker_version
 
 __all__ = ["run_study", "plan", "EXIT_FAILED"]
@@ -240,7 +240,7 @@ def _close(client, scheduler) -> None:
     if scheduler is not None:
         # the study's runners ended on the cluster's workers: they keep nothing of it
         with contextlib.suppress(Exception):
-            client.unregister_worker_plugin(runner_plugin().name)
+            client.unregister_worker_plugin(PLUGIN_NAME)
     try:
         client.close(timeout=CONNECT_TIMEOUT_S)
     finally:

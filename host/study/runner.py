@@ -32,14 +32,19 @@ import sys
 import threading
 import traceback
 
+from .. import __version__
+
 __all__ = ["in_runner", "start_spares", "close_runners", "runner_plugin", "serve",
-           "ORPHANED", "RunnerGone"]
+           "ORPHANED", "PLUGIN_NAME", "RunnerGone"]
 
 #: What the runner process runs (``-P``: the worker's working directory is not put on its
 #: import path).
 SERVE = "from heliquad.host.study.runner import serve; serve()"
 #: A message's length prefix on the pipes.
 _HEADER = struct.Struct("<Q")
+#: The study's worker plugin (:func:`runner_plugin`), by heliquad's version: a newer
+#: heliquad's replaces an older one's on a scheduler.
+PLUGIN_NAME = f"heliquad-runners-{__version__}"
 #: The exit code of a runner whose worker went away.
 ORPHANED = 70
 #: What a runner imports as it starts, before its first run arrives: what a study's run uses
@@ -245,10 +250,8 @@ def runner_plugin():
     # Dask, imported where a study hands its runs out: the runner itself does without it
     from distributed.diagnostics.plugin import WorkerPlugin
 
-    from .. import __version__
-
     class RunnerPlugin(WorkerPlugin):
-        name = f"heliquad-runners-{__version__}"
+        name = PLUGIN_NAME
         idempotent = True
 
         def setup(self, worker):

@@ -92,10 +92,7 @@ def perform_run(run, study_dir: str, command, line) -> dict:
         status, error, result = FINISHED, None, outcome(sweep_dir)
     except Exception as exc:            # noqa: BLE001: a failed run is a row with its error
         status, error, result = FAILED, _one_line(exc), _partial(sweep_dir)
-    record = {"run": run.name, "status": status, "error": error, "factors": run.factors,
-              "seed": run.seed, "attempt": attempt, "worker": f"{socket.gethostname()}:"
-                                                               f"{os.getpid()}",
-              "started_at": started, "run_s": time.time() - started, **timing,
+    record = {**_head(run, status, error, attempt, os.getpid(), started), **timing,
               "verdicts": "; ".join(verdicts) or None,
               "perturbed": run.perturb,
               "commands": [" ".join(["heliquad", *w]).replace(sweep_dir, SWEEP)
@@ -114,20 +111,31 @@ def died_record(run, study_dir: str, why: str) -> dict:
     done = read_record(folder)
     if done is not None:              # it died after the run was over: the run stands
         return done
-    try:
-        with open(os.path.join(folder, STARTED), encoding="utf-8") as f:
-            started = json.load(f)
-    except (OSError, ValueError):
-        started = {}
-    at = started.get("at", time.time())
-    record = {"run": run.name, "status": FAILED, "error": why, "factors": run.factors,
-              "seed": run.seed, "attempt": started.get("attempt", 1),
-              "worker": f"{socket.gethostname()}:{started.get('pid', os.getpid())}",
-              "started_at": at, "run_s": time.time() - at, "verdicts": None,
-              "perturbed": run.perturb, **_partial(os.path.join(folder, SWEEP))}
+    started = _start_mark(folder)
+    record = {**_head(run, FAILED, why, started.get("attempt", 1),
+                      started.get("pid", os.getpid()), started.get("at", time.time())),
+              "verdicts": None, "perturbed": run.perturb,
+              **_partial(os.path.join(folder, SWEEP))}
     os.makedirs(folder, exist_ok=True)
     write_json(os.path.join(folder, RECORD), record)
     return record
+
+
+def _head(run, status: str, error, attempt: int, pid: int, started_at: float) -> dict:
+    """A record's first fields, the same for a run made and one whose process died: the
+    run, how it ended, its attempt, who made it (host:pid), when and for how long."""
+    return {"run": run.name, "status": status, "error": error, "factors": run.factors,
+            "seed": run.seed, "attempt": attempt, "worker": f"{socket.gethostname()}:{pid}",
+            "started_at": started_at, "run_s": time.time() - started_at}
+
+
+def _start_mark(folder: str) -> dict:
+    """The run's start mark (:data:`STARTED`), or {} when it has none or it is unreadable."""
+    try:
+        with open(os.path.join(folder, STARTED), encoding="utf-8") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {}
 
 
 def _vehicle(run, folder: str) -> dict:
@@ -145,15 +153,14 @@ def _start(folder: str) -> int:
     """Mark an attempt's start (its number, from the earlier ones' mark) and clear what an
     unfinished earlier attempt left; the attempt's number."""
     os.makedirs(folder, exist_ok=True)
-    path = os.path.join(folder, STARTED)
     try:
-        with open(path, encoding="utf-8") as f:
-            attempt = int(json.load(f).get("attempt", 0)) + 1
-    except (OSError, ValueError):
+        attempt = int(_start_mark(folder).get("attempt", 0)) + 1
+    except ValueError:
         attempt = 1
     shutil.rmtree(os.path.join(folder, SWEEP), ignore_errors=True)
-    write_json(path, {"attempt": attempt, "at": time.time(), "worker": socket.gethostname(),
-                      "pid": os.getpid()})
+    write_json(os.path.join(folder, STARTED), {"attempt": attempt, "at": time.time(),
+                                               "worker": socket.gethostname(),
+                                               "pid": os.getpid()})
     return attempt
 
 
