@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 import threading
 import tomllib
@@ -21,8 +22,8 @@ cloudpickle = pytest.importorskip("cloudpickle")
 from heliquad.host.commands.study import option_names       # noqa: E402
 from heliquad.host.study import runner, runs                # noqa: E402
 from heliquad.host.study.spec import parse_spec             # noqa: E402
-from tool_runs import (HANG_GUARD_S, assert_nothing_left, private_tmpdir,  # noqa: E402
-                       wait_for)
+from tool_runs import (HANG_GUARD_S, assert_nothing_left, children,  # noqa: E402
+                       private_tmpdir, wait_for)
 
 # The performs below are this module's: the runner receives them by value.
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -83,7 +84,16 @@ def _awkward(run, out):
 
 
 def _wait_forever(run, out):
-    open(out, "w").close()
+    """A run that starts what a SIL run starts (a process in a session of its own, as the
+    firmware is; a temporary folder), says where its TMPDIR is, and waits forever; should its
+    process die while the run lives, the run writes a file (as a run would its record)."""
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(3600)"],
+                             start_new_session=True)
+    tempfile.mkdtemp(prefix="heliquad-sil-")
+    with open(out, "w") as f:
+        f.write(tempfile.gettempdir())
+    child.wait()
+    open(out + ".after", "w").close()
     while True:
         signal.pause()
 
@@ -112,7 +122,9 @@ def test_what_the_run_raises_comes_back_even_when_it_cannot_be_rebuilt(tmp_path)
 
 def test_closing_a_workers_runners_ends_a_run_in_flight_at_once(tmp_path):
     # A worker closing (its plugin's teardown) must not wait for the run: the run is not
-    # over (no record), the runner ends, the waiting thread is told.
+    # over (no record), the runner ends, the waiting thread is told; what the run started
+    # (a process in a session of its own, its temporary folder) is gone when the close
+    # returns, and the run wrote nothing after its process was killed.
     first, _ = _runs()
     started = tmp_path / "started"
     with private_tmpdir(tmp_path) as tmp:
@@ -131,6 +143,10 @@ def test_closing_a_workers_runners_ends_a_run_in_flight_at_once(tmp_path):
         assert not thread.is_alive()
         assert [type(e) for e in raised] == [runner.RunnerGone]
         assert runs.read_record(runs.run_folder(str(tmp_path), first.name)) is None
+        scratch = started.read_text()
+        assert os.path.basename(scratch).startswith("heliquad-runner-")
+        assert not os.path.exists(scratch)
+        assert not (tmp_path / "started.after").exists()
         assert_nothing_left(tmp)
 
 
@@ -160,14 +176,22 @@ def test_a_runner_that_dies_mid_run_fails_that_run_only(tmp_path):
 
 
 #: A worker that starts a runner, hands it a run that waits forever, and says the runner's
-#: pid once the run has started.
+#: pid once the run has started. The run starts what a SIL run starts: a process in a
+#: session of its own (as the firmware is) and a temporary folder; should that process die
+#: while the run's process lives, the run writes a file (as a run would its failed record).
 WORKER = textwrap.dedent("""
-    import os, sys, time
+    import os, subprocess, sys, tempfile, time
     from heliquad.host.study import runner
-    started = sys.argv[1]
+    started, wrote = sys.argv[1:3]
 
     def wait_forever(run, out):
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(3600)"],
+                                 start_new_session=True)
+        with open(os.path.join(tempfile.mkdtemp(prefix="heliquad-sil-"), "log"), "w") as f:
+            f.write("kept until the runner ends")
         open(started, "w").close()
+        child.wait()
+        open(wrote, "w").close()
         while True:
             time.sleep(3600)
 
@@ -179,9 +203,12 @@ WORKER = textwrap.dedent("""
 
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM"])
 def test_a_runner_ends_when_its_worker_is_gone(tmp_path, how):
-    started = tmp_path / "started"
+    # ...at once, writing nothing more, and what its run started goes with it once it is
+    # gone: the firmware-like process (in a session of its own, it would serve on until its
+    # idle timeout) and the temporary folders
+    started, wrote = tmp_path / "started", tmp_path / "wrote"
     with private_tmpdir(tmp_path) as tmp:
-        worker = subprocess.Popen([sys.executable, "-c", WORKER, str(started)],
+        worker = subprocess.Popen([sys.executable, "-c", WORKER, str(started), str(wrote)],
                                   stdout=subprocess.PIPE, text=True)
         pid = int(worker.stdout.readline())
         wait_for(started.exists, "the run started", worker)
@@ -197,4 +224,7 @@ def test_a_runner_ends_when_its_worker_is_gone(tmp_path, how):
             return bool(status)
         wait_for(ended, "the runner's end")
         assert status == [runner.ORPHANED]
+        wait_for(lambda: not children(os.getpid()) and not any(tmp.iterdir()),
+                 "the run's process and folders gone")
+        assert not wrote.exists()
         assert_nothing_left(tmp)

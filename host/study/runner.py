@@ -13,33 +13,43 @@ user types the commands, and the worker's thread waits on a pipe, without the GI
 
 The runner is in a session of its own (a terminal's Ctrl-C reaches the study's client,
 which closes the cluster in order). It holds the read end of a pipe, the lifeline, whose
-write end only its worker holds and never writes: when the worker closes, is killed or
-crashes, the pipe closes and the runner exits at once (:data:`ORPHANED`), mid-run too, so
-that a run never goes on writing after its worker is gone and Dask has handed the run to
-another. A runner that dies mid-run on its own (a crash in the simulator's C++) costs its
-run only: the run is a failed record saying what ended it (``runs.died_record``), and the
-thread's next run starts a new runner.
+write end only its worker holds: when the worker closes, is killed or crashes, the pipe
+closes and the runner exits at once (:data:`ORPHANED`), mid-run too, so that a run never
+goes on writing after its worker is gone and Dask has handed the run to another. What its
+run started goes too: a firmware the run started is in a session of its own and would serve
+its ptys until its idle timeout. A worker that ends a runner mid-run (closing) kills them
+itself once the runner has exited; a runner whose worker went away without a word leaves a
+cleaner behind that does it once the runner is gone. Each runner has a temporary folder of
+its own (TMPDIR for its runs and what they start), removed with it. A runner that dies
+mid-run on its own (a crash in the simulator's C++) costs its run only: the run is a failed
+record saying what ended it (``runs.died_record``), and the thread's next run starts a new
+runner.
 """
 
 from __future__ import annotations
 
 import importlib
 import os
+import shutil
 import signal
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
+import time
 import traceback
 
 from .. import __version__
 
-__all__ = ["in_runner", "start_spares", "close_runners", "runner_plugin", "serve",
+__all__ = ["in_runner", "start_spares", "close_runners", "runner_plugin", "serve", "clean",
            "ORPHANED", "PLUGIN_NAME", "RunnerGone"]
 
 #: What the runner process runs (``-P``: the worker's working directory is not put on its
 #: import path).
 SERVE = "from heliquad.host.study.runner import serve; serve()"
+#: What an orphaned runner's cleaner runs (:func:`clean`).
+CLEAN = "from heliquad.host.study.runner import clean; clean()"
 #: A message's length prefix on the pipes.
 _HEADER = struct.Struct("<Q")
 #: The study's worker plugin (:func:`runner_plugin`), by heliquad's version: a newer
@@ -47,6 +57,8 @@ _HEADER = struct.Struct("<Q")
 PLUGIN_NAME = f"heliquad-runners-{__version__}"
 #: The exit code of a runner whose worker went away.
 ORPHANED = 70
+#: Written on the lifeline before it is closed: the worker ends what the run started itself.
+QUIT = b"q"
 #: What a runner imports as it starts, before its first run arrives: what a study's run uses
 #: (the commands, the simulator, identification, the figures; about 1.5 s), so that a
 #: worker's first run does not wait for it. Only a head start: one that fails to import
@@ -78,6 +90,9 @@ class Runner:
     def __init__(self):
         self._lock = threading.Lock()
         self.closing = False
+        self.busy = False                    # a run sent and not answered
+        # the runner's temporary folder (TMPDIR for its runs and what they start)
+        self.scratch = tempfile.mkdtemp(prefix="heliquad-runner-")
         pipes = []
         try:
             for _ in range(3):                     # requests, replies, lifeline
@@ -85,17 +100,20 @@ class Runner:
             (request_r, request_w), (reply_r, reply_w), (life_r, life_w) = pipes
             theirs = (request_r, reply_w, life_r)
             self.proc = subprocess.Popen(
-                [sys.executable, "-P", "-c", SERVE, *map(str, theirs)], pass_fds=theirs,
-                stdin=subprocess.DEVNULL, start_new_session=True)
+                [sys.executable, "-P", "-c", SERVE, *map(str, theirs), self.scratch],
+                pass_fds=theirs, stdin=subprocess.DEVNULL, start_new_session=True)
         except BaseException:
             for fd in (fd for pair in pipes for fd in pair):
                 os.close(fd)
+            shutil.rmtree(self.scratch, ignore_errors=True)
             raise
         for fd in theirs:
             os.close(fd)
         self.requests = os.fdopen(request_w, "wb")
         self.replies = os.fdopen(reply_r, "rb")
-        self.lifeline = life_w               # never written: its closing ends the runner
+        # its closing ends the runner (and its cleaner ends what the run started); QUIT
+        # written first ends it without a cleaner: this side cleans
+        self.lifeline = life_w
 
     def alive(self) -> bool:
         return not self.closing and self.proc.poll() is None
@@ -110,9 +128,11 @@ class Runner:
         import cloudpickle
 
         request = cloudpickle.dumps((perform, run, out))
+        self.busy = True
         try:
             _send(self.requests, request)
             reply = _receive(self.replies)
+            self.busy = False
         except (OSError, EOFError, ValueError):      # ValueError: read from a closed pipe
             if self.closing:
                 raise RunnerGone("the run's process was ended with its worker") from None
@@ -136,11 +156,26 @@ class Runner:
         return f"the run's process ended (exit code {code}) before its run did"
 
     def close(self) -> None:
-        """End the runner, mid-run too (the lifeline first: the runner exits at once), wait
-        for it, then close the pipes. Safe to call again and from another thread."""
+        """End the runner and wait for it, then close the pipes and remove its temporary
+        folder. Between runs by closing its requests (it ends as a finished process does);
+        mid-run by the lifeline (it exits at once) and then the processes its run started
+        killed. Safe to call again and from another thread."""
         with self._lock:
             self.closing = True
+            below = []
+            if not self.busy:
+                _quietly_close(self.requests)
+                try:
+                    self.proc.wait(5)
+                except subprocess.TimeoutExpired:
+                    pass
+            elif self.proc.poll() is None:
+                below = _descendants(self.proc.pid)
             if self.lifeline is not None:
+                try:
+                    os.write(self.lifeline, QUIT)
+                except OSError:            # the runner is gone already
+                    pass
                 os.close(self.lifeline)
                 self.lifeline = None
             try:
@@ -148,11 +183,18 @@ class Runner:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+            _kill(below)
             for stream in (self.requests, self.replies):
-                try:
-                    stream.close()
-                except (OSError, ValueError):
-                    pass
+                _quietly_close(stream)
+            shutil.rmtree(self.scratch, ignore_errors=True)
+
+
+def _quietly_close(stream) -> None:
+    """A pipe closed whatever state it is in (a broken or already closed one too)."""
+    try:
+        stream.close()
+    except (OSError, ValueError):
+        pass
 
 
 def in_runner(perform, run, out):
@@ -279,17 +321,105 @@ def _receive(stream) -> bytes:
     return data
 
 
-def _watch(lifeline: int) -> None:
-    """In the runner: exit at once when the worker's end of the lifeline closes."""
+def _watch(lifeline: int, scratch: str) -> None:
+    """In the runner: when the worker's end of the lifeline closes, exit at once; unless the
+    worker said QUIT first (it cleans up itself), leave a cleaner behind to end what the run
+    started once this process is gone."""
     while True:
         try:
-            if not os.read(lifeline, 1):
-                break
+            said = os.read(lifeline, 1)
         except InterruptedError:
             continue
         except OSError:
+            said = b""
+        if said == QUIT:
+            os._exit(ORPHANED)
+        if not said:
             break
-    os._exit(ORPHANED)
+    try:
+        _start_cleaner(scratch)
+    finally:
+        os._exit(ORPHANED)
+
+
+def _start_cleaner(scratch: str) -> None:
+    """A process of its own that waits for this runner's end, then kills the processes below
+    it as they are now (a run's firmware, in a session of its own, would serve on until its
+    idle timeout) and removes its temporary folder. Not done here: a run that saw its
+    firmware killed would write a failed record before this process exits, and the run is
+    Dask's to make again."""
+    below = [f"{pid}:{created!r}" for pid, created in _descendants(os.getpid())]
+    subprocess.Popen([sys.executable, "-P", "-c", CLEAN, str(os.getpid()), scratch, *below],
+                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                     stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+def clean() -> None:
+    """The cleaner (:func:`_start_cleaner`): ``RUNNER_PID SCRATCH PID:CREATE_TIME...``."""
+    runner_pid, scratch, *below = sys.argv[1:]
+    _wait_gone([(int(runner_pid), None)])
+    _kill([(int(pid), float(created)) for pid, created in
+           (item.split(":", 1) for item in below)])
+    shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _descendants(pid: int) -> list:
+    """The processes below ``pid``, whatever session they are in: (pid, start time)."""
+    # psutil, there with Dask (distributed needs it): only a runner ended mid-run lists
+    # what is below it, so a runner's start does without it
+    import psutil
+
+    below = []
+    try:
+        for proc in psutil.Process(pid).children(recursive=True):
+            try:
+                below.append((proc.pid, proc.create_time()))
+            except psutil.Error:
+                pass
+    except psutil.Error:
+        pass
+    return below
+
+
+def _kill(procs: list) -> None:
+    """Kill each (pid, start time) that is still that process (not a new one on a reused
+    pid), and wait until they have ended."""
+    import psutil      # see _descendants
+
+    for pid, created in procs:
+        try:
+            proc = psutil.Process(pid)
+            if proc.create_time() == created:
+                proc.kill()
+        except psutil.Error:
+            pass
+    _wait_gone(procs)
+
+
+def _wait_gone(procs: list, limit_s: float = 5.0) -> None:
+    """Until each (pid, start time) has ended (a zombie waiting to be reaped counts as
+    ended), at most ``limit_s``."""
+    import psutil      # see _descendants
+
+    deadline = time.monotonic() + limit_s
+    for pid, created in procs:
+        while time.monotonic() < deadline:
+            try:
+                proc = psutil.Process(pid)
+                if created is not None and proc.create_time() != created:
+                    break
+                if proc.status() == psutil.STATUS_ZOMBIE:
+                    break
+            except psutil.NoSuchProcess:
+                break
+            time.sleep(0.01)
+
+
+def _use_scratch(path: str) -> None:
+    """The runner's temporary folder (its worker made it) as TMPDIR for its runs and what
+    they start (a firmware's ptys and logs)."""
+    tempfile.tempdir = path
+    os.environ["TMPDIR"] = path
 
 
 def _reply(cloudpickle, status: str, value) -> bytes:
@@ -312,10 +442,20 @@ def serve() -> None:
     import cloudpickle      # Dask's serialiser (see Runner.call)
 
     requests_fd, replies_fd, lifeline = map(int, sys.argv[1:4])
+    scratch = sys.argv[4]
     for fd in (requests_fd, replies_fd, lifeline):
         os.set_inheritable(fd, False)      # not the firmware's and plotters' it starts
-    threading.Thread(target=_watch, args=(lifeline,), daemon=True,
-                     name="heliquad-lifeline").start()
+    _use_scratch(scratch)
+    try:
+        threading.Thread(target=_watch, args=(lifeline, scratch), daemon=True,
+                         name="heliquad-lifeline").start()
+        _serve(cloudpickle, requests_fd, replies_fd)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _serve(cloudpickle, requests_fd: int, replies_fd: int) -> None:
+    """The runner's loop: each request's run made, its reply sent, until the requests end."""
     for module in WARM:
         try:
             importlib.import_module(module)
