@@ -5,7 +5,9 @@ One spec of --runs short runs (a multisine of 5 lines, 10 s of rig time, on roll
 light turbulence, seeds from 1); three measurements in one benchmark run:
 
 1. **one by one**: each run made in this process, no Dask (host/study/runs.py's
-   perform_run, as a worker makes it): the baseline, the sum of the runs' times;
+   perform_run, as a worker makes it), after importing what a run needs as a worker's
+   runner does before its first run (so that neither side's run time carries the imports):
+   the baseline, the sum of the runs' times;
 2. ``heliquad study SPEC --workers 1``: the command's wall time; a run's mean time on the
    worker (made in its runner) against in this process; the time between runs (the first
    run's start to the last one's end, less the runs' own times, over the runs: the
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import importlib
 import json
 import os
 import subprocess
@@ -36,6 +39,7 @@ import tempfile
 import time
 
 from heliquad.host.commands.study import command_line, option_names, run_command
+from heliquad.host.study.runner import WARM
 from heliquad.host.study.runs import RECORD, RUNS, perform_run
 from heliquad.host.study.spec import load_spec
 
@@ -54,7 +58,10 @@ rig-time = 10
 
 
 def one_by_one(spec_path: str, out: str) -> tuple:
-    """Every run made in this process, in order: (wall seconds, the runs' records)."""
+    """Every run made in this process, in order, after the imports a runner makes before
+    its first run: (wall seconds, the runs' records)."""
+    for module in WARM:
+        importlib.import_module(module)
     spec = load_spec(spec_path, option_names())
     perform = functools.partial(perform_run, command=run_command, line=command_line)
     t0 = time.perf_counter()

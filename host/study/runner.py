@@ -69,7 +69,7 @@ WARM = ("heliquad.host.commands.study", "heliquad.host.study.runs",
         "heliquad.host.campaign.identify", "matplotlib.figure", "matplotlib.backends.backend_agg")
 
 _LOCAL = threading.local()
-_LOCK = threading.Lock()
+_LOCK = threading.RLock()            # _started forgets a dead spare while holding it
 #: The runners started in this process, by the worker they serve (None outside a worker),
 #: and the spares not yet taken by a thread.
 _ALL: dict = {}
@@ -244,8 +244,7 @@ def _started() -> Runner:
             runner = spares.pop()
             if runner.alive():
                 return runner
-            _ALL[key].remove(runner)
-            runner.close()
+            _forget(runner)
         runner = Runner()
         _ALL.setdefault(key, []).append(runner)
     return runner
