@@ -188,9 +188,9 @@ def test_the_teensy_image_gets_a_fresh_card_in_its_socket(tmp_path):
         assert firmware.startup_lines[-1] == "ready"
     assert card.stat().st_size == fw.DEFAULT_CARD_IMAGE_BYTES
     Fat32Image(card)                                 # a FAT32 volume at byte 0
-    board = PilBoard(str(teensy35_image("elf")), sd_image=str(card))
+    board = PilBoard(str(teensy35_image("elf")), sd_image=str(card), link="uart")
     assert board.board.sd_card.path == str(card)
-    assert PilBoard(str(teensy35_image("elf"))).board.sd_card is None
+    assert PilBoard(str(teensy35_image("elf")), link="uart").board.sd_card is None
 
 
 @pytest.mark.parametrize("faults", ["no_card", "write_protected", "writable_blocks=1"])

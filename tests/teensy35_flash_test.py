@@ -490,7 +490,7 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
 
     path = tmp_path / "params.bin"
     path.write_bytes(_slot(3, b"kept") + b"\xff" * SECTOR_BYTES)
-    pil = PilBoard(str(boot.IMAGE), params_file=str(path))
+    pil = PilBoard(str(boot.IMAGE), params_file=str(path), link="uart")
     pil.boot()
     storage = Storage(pil.board)
     assert storage.load() == (OK, b"kept")
@@ -501,7 +501,7 @@ def test_the_pil_board_keeps_its_parameter_flash_in_a_file(tmp_path):
     assert path.read_bytes() == _slot(3, b"kept") + _slot(4, b"changed")
     assert not (tmp_path / "params.bin.tmp").exists()
 
-    new_board = PilBoard(str(boot.IMAGE), params_file=str(tmp_path / "none.bin"))
+    new_board = PilBoard(str(boot.IMAGE), params_file=str(tmp_path / "none.bin"), link="uart")
     new_board.boot()
     assert new_board.board.read_param_flash() == b"\xff" * 2 * SECTOR_BYTES
     assert not (tmp_path / "none.bin").exists(), "created only when the image writes"
@@ -517,7 +517,8 @@ def test_the_program_has_its_own_two_sectors_and_its_own_file(tmp_path):
 
     params, program = tmp_path / "p.bin", tmp_path / "p.bin.program"
     params.write_bytes(_slot(2, b"parameters") + b"\xff" * SECTOR_BYTES)
-    pil = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program))
+    pil = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program),
+                   link="uart")
     pil.boot()
     board_params, board_program = Storage(pil.board), Storage(pil.board, PROGRAM_STORAGE_OBJECT)
     assert pil.board.stored_range("program") == (0x7C000, 0x7E000)
@@ -535,7 +536,8 @@ def test_the_program_has_its_own_two_sectors_and_its_own_file(tmp_path):
     pil.board.write_stored(_slot(9, b"parameters") + b"\xff" * SECTOR_BYTES, "program")
     assert board_program.load() == (CORRUPT, None)
 
-    again = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program))
+    again = PilBoard(str(boot.IMAGE), params_file=str(params), program_file=str(program),
+                     link="uart")
     again.boot()
     assert Storage(again.board, PROGRAM_STORAGE_OBJECT).load() == (OK, b"steps")
 

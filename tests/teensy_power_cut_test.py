@@ -86,7 +86,7 @@ class Flight:
 
     def __init__(self, card: pathlib.Path, cuts=(), on_cut=None):
         self.card = card
-        self.board = PilBoard(str(boot.IMAGE), sd_image=str(card))
+        self.board = PilBoard(str(boot.IMAGE), sd_image=str(card), link="uart")
         self.board.boot()
         m = self.machine = self.board.machine
         # The firmware's clock counts core cycles from the cycle counter's start (TeensyClock).

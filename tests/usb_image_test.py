@@ -156,7 +156,7 @@ class Flying:
         boot.require_image()
         pytest.importorskip("heliquad._firmware")
         self.mav = dialect()
-        self.pil = PilBoard(str(boot.IMAGE))
+        self.pil = PilBoard(str(boot.IMAGE), link="uart")     # its USB port: this test's own host
         self.host = UsbHost(self.pil.board.chip)
         self.pil.boot()
         self.sample = raw_packet([0.0, 0.0, 0.0], [0.0, 0.0, -9.80665])

@@ -144,7 +144,7 @@ def test_a_failing_axis_of_the_demo_is_said_and_the_others_are_summarised(
 
     monkeypatch.setattr(demo, "AXIS_COMMAND", FAKE_AXIS)
     args = argparse.Namespace(out=str(tmp_path / "demo"), axes=["roll", "pitch", "yaw"],
-                              ideal_sensor=False, seed=1, firmware="host", link="uart",
+                              ideal_sensor=False, seed=1, firmware="host", link=None,
                               turbulence=None, load_params=None)
     assert demo.run_demo(args) == demo.EXIT_STOPPED
     out, err = capsys.readouterr()

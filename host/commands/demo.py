@@ -208,7 +208,7 @@ def axis_main() -> None:
     send_result(result)
 
 
-def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link="uart",
+def _run_axis(axis, out, ideal_sensor, seed, firmware, turbulence, link,
               load_params=None) -> dict:
     """One axis of the demo in ``out/AXIS``: ``{"summary": _compare's row, "sim_s": ...}``."""
     # Everything a sweep uses is imported before it starts: a Ctrl-C that lands inside an

@@ -10,6 +10,7 @@ import numpy as np
 
 from ...sim.base import firmware_facts as facts
 from ...sim.base.errors import InputError
+from ...sim.rig.setup import BOARD_LINKS, DEFAULT_BOARD_LINK
 from ..acquire.connection import CONNECTION_HELP
 from ..acquire.link import DEFAULT_BAUD
 
@@ -231,18 +232,20 @@ def add_firmware_argument(p) -> None:
                         "image itself, run instruction by instruction in the emulated "
                         "MK64FX512 (processor in the loop: slower; the install builds the "
                         "image when the ARM toolchain is present)")
-    p.add_argument("--link", choices=("uart", "usb"), default="uart",
-                   help="--firmware teensy35: the board's link the tools talk over: uart "
-                        "(UART0, pins 0 and 1; the default) or usb (its own USB port, which "
-                        "an emulated USB host enumerates and holds open; slower to emulate: "
-                        "docs/processor-in-the-loop.md)")
+    p.add_argument("--link", choices=BOARD_LINKS, default=None,
+                   help="--firmware teensy35: the board's link the tools talk over: usb (its "
+                        "own USB port, which an emulated USB host enumerates and holds open; "
+                        "the default) or uart (UART0, pins 0 and 1, where a telemetry radio "
+                        "goes): docs/processor-in-the-loop.md")
 
 
 def firmware_link(args) -> str:
-    """--link, refused with the host build (whose one link is a pty)."""
-    if args.link != "uart" and args.firmware != "teensy35":
-        raise InputError("--link usb needs --firmware teensy35 (the host build's link is a pty)")
-    return args.link
+    """--link (default: the board's USB port), refused with the host build (whose one link
+    is a pty)."""
+    if args.link is not None and args.firmware != "teensy35":
+        raise InputError(f"--link {args.link} needs --firmware teensy35 (the host build's "
+                         "link is a pty)")
+    return args.link or DEFAULT_BOARD_LINK
 
 
 def add_fault_argument(p, prefix="") -> None:

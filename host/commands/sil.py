@@ -111,7 +111,8 @@ def run(args) -> int:
         raise exc.also("the run is stopped; the log up to here is kept")
     print(f"{r.frames} frames ({r.frames / args.loop_hz:.2f} s simulated) in {r.wall_s:.2f} s "
           f"wall ({r.frames / args.loop_hz / r.wall_s:.2g}x real time); firmware "
-          f"{args.firmware}; imu path {r.imu_mode}")
+          f"{args.firmware}{' over ' + cfg.firmware_link if args.firmware == 'teensy35' else ''}"
+          f"; imu path {r.imu_mode}")
     print(f"excitation at {r.actual_freq_hz:.6g} Hz; {r.samples} full-amplitude samples; "
           f"{r.seq_gaps} telemetry gaps")
     # the command's work, imported when it runs: --help imports every command module

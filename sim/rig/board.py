@@ -26,7 +26,7 @@ import numpy as np
 from ..base.firmware_facts import LOOP_RATE_HZ, MAX_PTY_BACKLOG_BYTES
 from .announce import announced
 from .driver import Rig
-from .setup import rc_block, rc_disarmed
+from .setup import DEFAULT_BOARD_LINK, rc_block, rc_disarmed
 
 __all__ = ["run_board"]
 
@@ -52,7 +52,7 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
               dmp_image: str | None = None, ready=None, firmware: str = "host",
               params_file: str | None = None, armed: bool = True,
               backlog_bytes: int = TELEMETRY_BACKLOG_BYTES,
-              usb_serial: str | None = None, link: str = "uart", rc_script=None,
+              usb_serial: str | None = None, link: str = DEFAULT_BOARD_LINK, rc_script=None,
               sd_image: str | None = None, sd_faults: str | None = None,
               configure=None) -> dict:
     """Fly ``plant`` (given the loop period, s, it returns the rig's plant: setup.make_plant)
@@ -67,7 +67,7 @@ def run_board(plant, telemetry_path: str, loop_hz: float = LOOP_RATE_HZ,
     reader, the oldest dropped past it (0: all of it waits, as a bare pty keeps it).
     ``usb_serial``: announce the pty, with this USB serial number, from before ``ready`` until
     the board has landed (default: not announced). ``link``: the Teensy image's link the
-    pty carries (``uart`` or ``usb``; teensy35 only). ``rc_script``: the pilot, an
+    pty carries (``usb``, the default, or ``uart``; teensy35 only). ``rc_script``: the pilot, an
     :class:`~.rc_script.RcScript` (its times from the first frame; ``armed`` then unused).
     ``sd_image``, ``sd_faults``: the board's SD card, a card-image file, and the host build's
     faults of it (:class:`~.lockstep.HostFirmware`; default no card). ``configure``: called

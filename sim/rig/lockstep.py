@@ -33,6 +33,7 @@ from ..base.dialect import dialect
 from ..base.errors import FirmwareError, InputError
 from ..base.firmware_facts import LOOP_RATE_HZ
 from ..base.firmware_image import teensy35_image
+from .setup import DEFAULT_BOARD_LINK
 
 __all__ = ["FirmwareError", "HostFirmware", "PilFirmware", "SimLink", "Actuators", "actuators",
            "find_firmware", "start_firmware", "FIRMWARES"]
@@ -254,7 +255,8 @@ class PilFirmware(HostFirmware):
     start_timeout_s = 120.0
     reply_timeout_s = 60.0
 
-    def __init__(self, *args, image: str | None = None, link: str = "uart", **kwargs):
+    def __init__(self, *args, image: str | None = None, link: str = DEFAULT_BOARD_LINK,
+                 **kwargs):
         self.image = image
         self.link = link
         super().__init__(*args, **kwargs)

@@ -21,6 +21,12 @@ from typing import Protocol
 import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ
+
+#: The Teensy image's links a tool can talk over when the image flies the rig: its own USB
+#: port (the cable every Teensy user plugs in; the default) and UART0 (pins 0 and 1, where a
+#: telemetry radio goes). The image serves MAVLink on both.
+BOARD_LINKS = ("usb", "uart")
+DEFAULT_BOARD_LINK = "usb"
 from ..plant.tf_plant import TfPlant
 from ..plant.vehicle_params import load_params
 
@@ -59,7 +65,7 @@ class SilConfig:
     faults: tuple = ()             # sim.faults.Fault: what goes wrong, and when
     firmware: str = "host"         # "host" (the host build) or "teensy35" (the image, emulated)
     firmware_image: str | None = None  # teensy35: the .elf (default: the installed image)
-    firmware_link: str = "uart"    # teensy35: its link the tools talk over, "uart" or "usb"
+    firmware_link: str = DEFAULT_BOARD_LINK  # teensy35: its link the tools talk over (BOARD_LINKS)
     param_store: str | None = None  # where the firmware keeps its parameters (default: nowhere)
     # how long the firmware waits for its next frame before it takes its simulator for gone,
     # s of wall time (its own default; longer for a tool that computes between frames)

@@ -10,6 +10,7 @@ import sys
 
 from ...base.dialect import dialect
 from ...base.firmware_facts import LOOP_RATE_HZ
+from ...rig.setup import BOARD_LINKS
 from ..machine import ChipReset, EmulationError
 from ..teensy35 import ESC_PINS, RC_PINS, Teensy35
 from ..usb_host import UsbHost
@@ -45,7 +46,7 @@ DRAIN_LIMIT_S = 0.004
 USB_DRAIN_STEP_S = 0.00025
 SYSTICK_EXCEPTION = 15
 #: The telemetry links a board has: its USB port (CDC-ACM) and UART0 (pins 0 and 1).
-LINKS = ("usb", "uart")
+LINKS = BOARD_LINKS
 #: The emulated hub reports the board attached at once: a host's 100 ms debounce
 #: (usb_host.DEBOUNCE_S) would outlast the image's start-up, and the port must be open
 #: before the first loop so that its telemetry is read from the first loop on, as UART0's.
@@ -60,9 +61,11 @@ class PilBoard:
     """The Teensy 3.5 on the simulated rig, one lockstep frame at a time. ``params_file``:
     keep the parameter flash in that file, ``program_file`` the on-board program's
     (:class:`ParamFile`). ``sd_image``: the card-image file in its microSD socket (default:
-    the socket empty)."""
+    the socket empty). ``link``: the link whose telemetry the board collects, ``usb`` (a USB
+    host model enumerates the port and holds it open) or ``uart`` (UART0; nothing is plugged
+    into the USB port: a caller may plug in a host of its own)."""
 
-    def __init__(self, elf: str, params_file: str | None = None, link: str = "uart",
+    def __init__(self, elf: str, params_file: str | None = None, *, link: str,
                  sd_image: str | None = None, program_file: str | None = None):
         if link not in LINKS:
             raise ValueError(f"link {link!r}: one of {', '.join(LINKS)}")

@@ -12,6 +12,7 @@ from heliquad import _firmware
 
 from ...base.dialect import dialect
 from ...base.firmware_image import ImageNotFound, teensy35_image
+from ...rig.setup import DEFAULT_BOARD_LINK
 from .board import IMAGE_LOOP_HZ, LINKS, ImageFault, PilBoard
 from .drop_in import EXIT_IMAGE, EXIT_USAGE, DropIn, Stop
 from .param_file import ParamFileError
@@ -31,10 +32,10 @@ def parse(argv):
     p.add_argument("--sim-link", required=True, help="path for the sim link's pty symlink")
     p.add_argument("--telemetry", required=True, help="path for the telemetry pty symlink")
     p.add_argument("--image", help="the .elf (default: the image the install built)")
-    p.add_argument("--link", choices=LINKS, default="uart",
-                   help="the board's telemetry link the ptys carry: uart (UART0, pins 0/1; "
-                        "the default) or usb (its USB port, which an emulated USB host "
-                        "enumerates and holds open; slower to emulate)")
+    p.add_argument("--link", choices=LINKS, default=DEFAULT_BOARD_LINK,
+                   help="the board's telemetry link the ptys carry: usb (its USB port, which "
+                        "an emulated USB host enumerates and holds open; the default) or uart "
+                        "(UART0, pins 0/1, where a telemetry radio goes)")
     p.add_argument("--loop-hz", type=float, default=IMAGE_LOOP_HZ,
                    help=f"must be the image's loop rate, {IMAGE_LOOP_HZ:g}")
     p.add_argument("--idle-timeout-s", type=int, default=10,
