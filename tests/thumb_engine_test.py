@@ -14,19 +14,32 @@ Deterministic (a fixed seed); no timing asserts (benchmarks/thumb_speed.py measu
 
 import functools
 import random
+import struct
 
-import pytest
 from unicorn.arm_const import UC_ARM_REG_XPSR
 
 import thumb_cases
 from heliquad.sim.base.firmware_image import teensy35_image
 from heliquad.sim.chip.image import Image
-from heliquad.sim.chip.thumb_twin import SRAM_BASE, SRAM_SIZE, Twin
+from heliquad.sim.chip.thumb_twin import RETURN_ADDRESS, SRAM_BASE, SRAM_SIZE, Twin
 from heliquad.sim.chip.timing import instruction_cycles
 
 STATES = 3
 SEED = 20261129
-CODE = 0x2000_0000          # where hand-written code goes (SRAM)
+DATA = 0x2001_E000          # a called function's pointer arguments point here
+CALLS = 24                  # inputs per function
+#: Functions of the image called in both: name -> (pointer arguments, float arguments,
+#: an integer argument after the pointers or None).
+FUNCTIONS = {
+    "sinf": (0, 1, None), "cosf": (0, 1, None), "atan2f": (0, 2, None), "expf": (0, 1, None),
+    "logf": (0, 1, None), "acosf": (0, 1, None), "asinf": (0, 1, None), "atanf": (0, 1, None),
+    "__ieee754_sqrtf": (0, 1, None),
+    "_ZN2hq3Pid6updateEfff": (1, 3, None),
+    "_ZN2hq19ComplementaryFilter6updateERKNS_4Vec3ES3_fb": (3, 1, 1),
+    "_ZN2hq8multiplyERKNS_4QuatES2_": (2, 0, None),
+    "_ZN2hq9normaliseERKNS_4QuatE": (1, 0, None),
+    "_ZN2hq8to_eulerERKNS_4QuatE": (1, 0, None),
+}
 
 
 @functools.lru_cache(maxsize=1)
@@ -96,6 +109,48 @@ def _resync(twin):
     its handler mode)."""
     fresh = Twin(image().segments, twin.engine.read(SRAM_BASE, SRAM_SIZE))
     return fresh
+
+
+def _float_input(rng):
+    pick = rng.random()
+    if pick < 0.15:
+        return rng.choice((0x0000_0000, 0x8000_0000, 0x7F80_0000, 0xFF80_0000, 0x7FC0_0000,
+                           0x7F80_0001, 0x0000_0001, 0x3F80_0000, 0x4F00_0000))
+    scale = rng.choice((1.0, 10.0, 1e-3, 1e4, 1e30))
+    return struct.unpack("<I", struct.pack("<f", rng.uniform(-scale, scale)))[0]
+
+
+def _call_args(rng, pointers, floats, integer):
+    ints = [DATA + 64 * i for i in range(pointers)]
+    if integer is not None:
+        ints.append(rng.getrandbits(1))
+    return ints, [_float_input(rng) for _ in range(floats)]
+
+
+def test_whole_functions_give_unicorns_results_state_and_instruction_count():
+    rng = random.Random(SEED)
+    twin = Twin(image().segments, bytes(SRAM_SIZE), step_hook=False)
+    twin.count_blocks()
+    calls = 0
+    for name, (pointers, floats, integer) in FUNCTIONS.items():
+        address = image().symbol(name).address
+        for _ in range(CALLS):
+            data = b"".join(struct.pack("<I", _float_input(rng)) for _ in range(64))
+            twin.write(DATA, data)
+            ints, fargs = _call_args(rng, pointers, floats, integer)
+            twin.set_call(address, ints, fargs)
+            twin.engine.instructions = twin.engine.cycles = 0
+            twin.block_instructions = twin.block_cycles = 0
+            stop = twin.call_engine()
+            err = twin.call_unicorn(address)
+            what = f"{name}{tuple(hex(a) for a in ints + fargs)}"
+            assert stop == "stop_address" and twin.engine.pc == RETURN_ADDRESS, (what, stop)
+            assert err is None, (what, err)
+            assert twin.differences() == {}, what
+            assert twin.engine.instructions == twin.block_instructions, what
+            assert twin.engine.cycles == twin.block_cycles, what
+            calls += 1
+    print(f"\n{calls} calls of {len(FUNCTIONS)} functions compared")
 
 
 def test_every_instruction_costs_what_the_timing_model_charges():

@@ -15,16 +15,20 @@ from __future__ import annotations
 
 import random
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
+from unicorn import (UC_ARCH_ARM, UC_HOOK_BLOCK, UC_HOOK_CODE, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
                      UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
 from unicorn import arm_const as A
 
 from heliquad._simcore import ThumbEngine
 
+from .timing import BlockDecoder
+
 FLASH_BASE, FLASH_SIZE = 0x0000_0000, 512 * 1024
 SRAM_BASE, SRAM_SIZE = 0x1FFF_0000, 192 * 1024
 FPSCR_COMPARED = 0xF7C0_0000        # N Z C V, AHP, DN, FZ, RMode
 CONTROL_COMPARED = 0x7
+RETURN_ADDRESS = 0x2001_FF00        # a called function returns here (LR): the run stops
+CALL_STACK = 0x2001_F000
 
 _R = [getattr(A, f"UC_ARM_REG_R{i}") for i in range(13)] + [A.UC_ARM_REG_SP, A.UC_ARM_REG_LR,
                                                              A.UC_ARM_REG_PC]
@@ -90,7 +94,7 @@ def random_state(rng: random.Random) -> dict:
 class Twin:
     """The engine and unicorn with the same flash, SRAM and state."""
 
-    def __init__(self, segments=(), sram: bytes | None = None):
+    def __init__(self, segments=(), sram: bytes | None = None, step_hook: bool = True):
         self.engine = ThumbEngine()
         self.engine.set_bus(lambda address, size: None, lambda address, size, value: False)
         self.uc = new_unicorn()
@@ -101,7 +105,13 @@ class Twin:
             self.write(SRAM_BASE, sram)
         self._stop_range = (0, 0)
         self._seen = []
-        self.uc.hook_add(UC_HOOK_CODE, self._on_code)
+        self._stepping = False
+        if step_hook:
+            self.uc.hook_add(UC_HOOK_CODE, self._on_code)
+        self.engine.add_stop_address(RETURN_ADDRESS)
+        self._blocks = {}
+        self._decoder = BlockDecoder()
+        self.block_instructions = self.block_cycles = 0
 
     def write(self, address: int, data: bytes):
         self.engine.write(address, bytes(data))
@@ -155,6 +165,8 @@ class Twin:
 
     # --- running -------------------------------------------------------------------------
     def _on_code(self, uc, address, size, _):
+        if not self._stepping:
+            return
         lo, hi = self._stop_range
         if not lo <= address < hi or (self._seen and address <= self._seen[-1]):
             uc.emu_stop()
@@ -166,6 +178,7 @@ class Twin:
         instruction, or an IT instruction and its block up to end. None, or the UcError."""
         self._stop_range = (start, end)
         self._seen = []
+        self._stepping = True
         try:
             self.uc.emu_start(start | 1, end, count=64)
         except UcError as err:
@@ -182,3 +195,40 @@ class Twin:
         if not self.sram_equal():
             out["sram"] = ("differs", "")
         return out
+
+    # --- calling functions ---------------------------------------------------------------
+    def set_call(self, function: int, args=(), fargs=()):
+        """Both at the entry of ``function`` with integer arguments in R0-R3 and float ones
+        (bits) in S0-S15 (AAPCS-VFP), LR the return address, an FP context open, FPSCR 0."""
+        r = [0] * 16
+        r[:len(args)] = list(args)
+        r[13], r[14], r[15] = CALL_STACK, RETURN_ADDRESS | 1, function & ~1
+        s = [0] * 32
+        s[:len(fargs)] = list(fargs)
+        self.set_state({"r": r, "apsr": 0, "it": 0, "s": s, "fpscr": 0, "control": 4,
+                        "primask": 0, "basepri": 0, "faultmask": 0})
+
+    def call_engine(self, limit: int = 1_000_000) -> str:
+        return self.engine.run(1 << 62, limit)
+
+    def call_unicorn(self, start: int):
+        """Unicorn from ``start`` to the return address; None or the UcError."""
+        self._stepping = False
+        try:
+            self.uc.emu_start(start | 1, RETURN_ADDRESS)
+        except UcError as err:
+            return err
+        return None
+
+    def count_blocks(self):
+        """Count unicorn's instructions and cycles as heliquad's machine does: a block hook
+        and timing.py's model of each translated block (block_instructions, block_cycles)."""
+        self.uc.hook_add(UC_HOOK_BLOCK, self._on_block)
+
+    def _on_block(self, uc, address, size, _):
+        block = self._blocks.get((address, size))
+        if block is None:
+            block = self._decoder.decode(bytes(uc.mem_read(address, size)), address)
+            self._blocks[(address, size)] = block
+        self.block_instructions += block.n
+        self.block_cycles += block.cycles
