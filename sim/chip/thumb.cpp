@@ -160,7 +160,7 @@ void Thumb::clear_stop_addresses() {
     stops_.clear();
 }
 
-void Thumb::decode(uint32_t pc, Op& op) {
+__attribute__((noinline)) void Thumb::decode(uint32_t pc, Op& op) {
     uint8_t bytes[4] = {0xFF, 0xFF, 0xFF, 0xFF};
     read_memory(pc, bytes, 2);
     read_memory(pc + 2, bytes + 2, 2);
@@ -176,12 +176,12 @@ void Thumb::decode(uint32_t pc, Op& op) {
     }
 }
 
-Op* Thumb::lookup(uint32_t pc) {
+inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
     Op* op;
     if (pc < kFlashSize) op = &fcache_[pc >> 1];
     else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
     else return nullptr;
-    if (!op->fn) decode(pc, *op);
+    if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
     return op;
 }
 
@@ -224,56 +224,73 @@ bool condition_passed(const Thumb& t, unsigned cond) {
 
 Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     const uint64_t limit = icount_ + max_instructions;
-    bool first = true;
     pending_ = 0;
+    in_it_ = false;
+    Op* op = nullptr;
+    bool first = true;
     for (;;) {
         if (cycles_ >= deadline_cycles) return Stop::Deadline;
         if (icount_ >= limit) return Stop::Limit;
         const uint32_t pc = r_[15];
-        Op* op = lookup(pc);
-        if (!op) {
+        op = lookup(pc);
+        if (__builtin_expect(!op, 0)) {
             fault_address_ = pc;
             detail_ = "instruction fetch from nothing";
             return Stop::BusFault;
         }
-        if ((op->flags & kStopAt) && !first) return Stop::StopAddress;
-        first = false;
         npc_ = pc + op->size;
-        in_it_ = it_ != 0;
-        next_it_ = 0;
-        bool pass = true;
-        if (in_it_) {
-            pass = condition_passed(*this, it_ >> 4);
-            next_it_ = (it_ & 7) ? ((it_ & 0xE0) | ((it_ << 1) & 0x1F)) : 0;
-        }
-        if (pass) {
-            if (op->flags & kFp) {          // ExecuteFPCheck: only when the condition passes
+        if (__builtin_expect(op->flags & (kStopAt | kFp), 0)) {
+            if ((op->flags & kStopAt) && !first) return Stop::StopAddress;
+            if ((op->flags & kFp) && !it_) {        // ExecuteFPCheck (in IT: below)
                 if (!fpu_enabled) return Stop::NoFpu;
                 if (!(control_ & 4)) {
                     control_ |= 4;
                     if (aspen) fpscr_ = fpdscr & 0x07C00000u;
                 }
             }
-            op->fn(*this, *op);
-            if (pending_) {
-                if (pending_ & kPendBefore) {
-                    pending_ = 0;
-                    return pending_stop_;
+        }
+        first = false;
+        if (__builtin_expect(it_ == 0, 1)) {
+            op->fn(*this, *op);                     // the IT instruction sets it_ itself
+            if (__builtin_expect(pending_ != 0, 0)) return finish(*op, 0);
+            r_[15] = npc_;
+            cycles_ += op->cyc;
+            ++icount_;
+            continue;
+        }
+        // inside an IT block: the condition, ExecuteFPCheck only when it passes, the cost
+        // the model charges inside a block, the IT state advanced
+        const uint32_t next_it = (it_ & 7) ? ((it_ & 0xE0) | ((it_ << 1) & 0x1F)) : 0;
+        if (condition_passed(*this, it_ >> 4)) {
+            if (op->flags & kFp) {
+                if (!fpu_enabled) return Stop::NoFpu;
+                if (!(control_ & 4)) {
+                    control_ |= 4;
+                    if (aspen) fpscr_ = fpdscr & 0x07C00000u;
                 }
-                const Stop s = (pending_ & kPendAfter) ? pending_stop_ : Stop::Requested;
-                pending_ = 0;
-                r_[15] = npc_;
-                cycles_ += in_it_ ? op->cyc_it : op->cyc;
-                ++icount_;
-                it_ = next_it_;
-                return s;
             }
+            in_it_ = true;
+            op->fn(*this, *op);
+            in_it_ = false;
+            if (__builtin_expect(pending_ != 0, 0)) return finish(*op, next_it | 0x100);
         }
         r_[15] = npc_;
-        cycles_ += in_it_ ? op->cyc_it : op->cyc;
+        cycles_ += op->cyc_it;
         ++icount_;
-        it_ = next_it_;
+        it_ = next_it;
     }
+}
+
+// A handler asked to stop: before the instruction (nothing retires) or after it.
+Stop Thumb::finish(const Op& op, uint32_t next_it) {
+    const uint8_t p = pending_;
+    pending_ = 0;
+    if (p & kPendBefore) return pending_stop_;
+    r_[15] = npc_;
+    cycles_ += (next_it & 0x100) ? op.cyc_it : op.cyc;
+    ++icount_;
+    if (next_it & 0x100) it_ = next_it & 0xFF;
+    return (p & kPendAfter) ? pending_stop_ : Stop::Requested;
 }
 
 }  // namespace hqsim::thumb

@@ -156,7 +156,7 @@ public:
     enum : uint8_t { kPendBefore = 1, kPendAfter = 2, kPendRequested = 4 };
     uint32_t r_[16] = {};
     uint32_t n_ = 0, z_ = 0, c_ = 0, v_ = 0, q_ = 0;
-    uint32_t it_ = 0, next_it_ = 0;
+    uint32_t it_ = 0;
     uint32_t npc_ = 0;
     bool in_it_ = false;
     uint32_t s_[32] = {};
@@ -181,6 +181,7 @@ public:
 
 private:
     Op* lookup(uint32_t pc);
+    Stop finish(const Op& op, uint32_t next_it);
     void decode(uint32_t pc, Op& op);
     void drop_page(uint32_t page);
     void sram_code_written(uint32_t off, unsigned n);

@@ -41,9 +41,32 @@ struct Engine {
     std::unique_ptr<PyBus> bus;
 };
 
+// The least a unicorn block hook costs (benchmarks/thumb_speed.py): a native callback that
+// counts the blocks unicorn runs, installed through the library's uc_hook_add (its address
+// and the engine handle taken from the unicorn binding, as sim/chip/machine.py does).
+struct BlockCounter {
+    uint64_t blocks = 0;
+};
+void count_block(void*, uint64_t, uint32_t, void* user) {
+    ++static_cast<BlockCounter*>(user)->blocks;
+}
+using HookAdd = int (*)(void*, size_t*, int, void*, void*, uint64_t, uint64_t, ...);
+constexpr int kUcHookBlock = 1 << 3;
+
 }  // namespace
 
 void bind_thumb(py::module_& m) {
+    py::class_<BlockCounter>(m, "UnicornBlockCounter",
+                             "Counts unicorn's blocks from a native block hook")
+        .def(py::init<>())
+        .def_readwrite("blocks", &BlockCounter::blocks)
+        .def("install", [](BlockCounter& c, uintptr_t uc_hook_add, uintptr_t handle) {
+            size_t hook = 0;
+            const int err = reinterpret_cast<HookAdd>(uc_hook_add)(
+                reinterpret_cast<void*>(handle), &hook, kUcHookBlock,
+                reinterpret_cast<void*>(&count_block), &c, uint64_t{1}, uint64_t{0});
+            if (err) throw std::runtime_error("uc_hook_add failed: " + std::to_string(err));
+        });
     py::class_<Engine>(m, "ThumbEngine",
                        "The engine's Cortex-M4F CPU (sim/chip/thumb.hpp): flash and SRAM it "
                        "owns, a bus of Python callables for everything else")

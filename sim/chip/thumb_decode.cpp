@@ -83,7 +83,9 @@ void multiple(Op& op, bool load, unsigned rn, uint32_t list, bool wback, bool db
     op.imm = list;
     op.x = wback;
     op.y = db;
-    const unsigned n = static_cast<unsigned>(__builtin_popcount(list));
+    unsigned n = 0;
+    for (uint32_t l = list; l; l &= l - 1) ++n;
+    op.sn = u8(n);
     op.cyc = u8(1 + n + ((list & 0x8000) ? 2 : 0));
     if (!list || (!load && (list & 0xA000)) || (list & 0x2000) ||
         (load && (list & 0xC000) == 0xC000)) {

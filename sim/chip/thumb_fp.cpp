@@ -65,7 +65,25 @@ inline uint32_t result(const Mode& m, float host, double exact) {
 
 enum Arith : uint8_t { ADD, SUB, MUL, DIV };
 
+inline bool normal(uint32_t b) { return ((b >> 23) & 0xFF) - 1u < 0xFEu; }
+
+// Normal operands in round-to-nearest: no NaN can come out, and a result that is normal and
+// not the smallest normal (which may have been tiny before rounding) needs no rule of FZ.
+inline bool fast(const Mode& m, Arith op, uint32_t a, uint32_t b, uint32_t& r) {
+    if (m.rmode || !normal(a) || !normal(b)) return false;
+    const float x = F(a), y = F(b);
+    switch (op) {
+        case ADD: r = B(x + y); break;
+        case SUB: r = B(x - y); break;
+        case MUL: r = B(x * y); break;
+        default: r = B(x / y); break;
+    }
+    return normal(r) && (r & ~kSign) != 0x00800000u;
+}
+
 uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+    uint32_t fr;
+    if (fast(m, op, a, b, fr)) return fr;
     a = m.in(a);
     b = m.in(b);
     uint32_t r;
@@ -219,11 +237,10 @@ void v_mrs(Thumb& t, const Op& o) {
 void v_msr(Thumb& t, const Op& o) { t.fpscr_ = t.r_[o.rd] & Thumb::kFpscrKept; }
 
 // VLDR/VSTR: o.rd the first S register, o.x 2 registers (a D register), o.imm the offset.
-template <bool LOAD>
+template <bool LOAD, unsigned n>
 void v_ldst(Thumb& t, const Op& o) {
     const uint32_t base = o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn];
     const uint32_t a = base + o.imm;
-    const unsigned n = o.x ? 2 : 1;
     if constexpr (LOAD) {
         uint32_t v[2];
         for (unsigned i = 0; i < n; ++i) {
@@ -339,7 +356,8 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
     if (p && !w) {                                          // VLDR VSTR
         op.imm = u ? imm8 * 4 : 0u - imm8 * 4;
         op.x = dbl;
-        op.fn = l ? v_ldst<true> : v_ldst<false>;
+        op.fn = l ? (dbl ? v_ldst<true, 2> : v_ldst<true, 1>)
+                  : (dbl ? v_ldst<false, 2> : v_ldst<false, 1>);
         op.cyc = 2;
         return op.rd + (dbl ? 2 : 1) <= 32 && (l || op.rn != 15);
     }

@@ -170,7 +170,7 @@ void ldst_dual(Thumb& t, const Op& o) {
 template <bool LOAD>
 void ldst_multiple(Thumb& t, const Op& o) {
     const uint32_t list = o.imm;
-    const uint32_t n = static_cast<uint32_t>(__builtin_popcount(list));
+    const uint32_t n = o.sn;                    // registers in the list
     const uint32_t base = t.r_[o.rn];
     const uint32_t start = o.y ? base - 4 * n : base;
     const uint32_t end = o.y ? base - 4 * n : base + 4 * n;
@@ -227,7 +227,7 @@ void tb(Thumb& t, const Op& o) {
 
 // --- everything else ----------------------------------------------------------------------
 inline void nop(Thumb&, const Op&) {}
-inline void it(Thumb& t, const Op& o) { t.next_it_ = o.imm; }
+inline void it(Thumb& t, const Op& o) { t.it_ = o.imm; }
 inline void wfi(Thumb& t, const Op&) { t.stop_after(Stop::Wfi); }
 inline void bkpt(Thumb& t, const Op&) { t.stop_before(Stop::Bkpt); }
 inline void svc(Thumb& t, const Op& o) {
