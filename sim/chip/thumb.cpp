@@ -176,15 +176,6 @@ __attribute__((noinline)) void Thumb::decode(uint32_t pc, Op& op) {
     }
 }
 
-inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
-    Op* op;
-    if (pc < kFlashSize) op = &fcache_[pc >> 1];
-    else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
-    else return nullptr;
-    if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
-    return op;
-}
-
 const Op* Thumb::decoded(uint32_t address) { return lookup(address & ~1u); }
 
 // --- the run loop -------------------------------------------------------------------------
@@ -224,6 +215,8 @@ bool condition_passed(const Thumb& t, unsigned cond) {
 
 Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     const uint64_t limit = icount_ + max_instructions;
+    deadline_ = deadline_cycles;
+    limit_ = limit;
     pending_ = 0;
     in_it_ = false;
     Op* op = nullptr;
@@ -250,6 +243,13 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
             }
         }
         first = false;
+        if (__builtin_expect(it_ == 0, 1) && op->next) {
+            cur_ = op;
+            chain_ = 256;
+            op->next(*this, *op);                   // retires it and maybe more (threaded)
+            if (__builtin_expect(pending_ != 0, 0)) return finish(*cur_, 0);
+            continue;
+        }
         if (__builtin_expect(it_ == 0, 1)) {
             op->fn(*this, *op);                     // the IT instruction sets it_ itself
             if (__builtin_expect(pending_ != 0, 0)) return finish(*op, 0);

@@ -69,6 +69,7 @@ using Handler = void (*)(Thumb&, const Op&);
 // One decoded instruction.
 struct Op {
     Handler fn = nullptr;       // nullptr: not decoded yet
+    Handler next = nullptr;     // fn, then on to the next instruction (threaded<fn>), or none
     uint32_t imm = 0;
     uint8_t rd = 0, rn = 0, rm = 0, ra = 0;     // operands (FP: register numbers)
     uint8_t size = 0;           // 2 or 4 bytes
@@ -140,6 +141,12 @@ public:
     // --- memory --------------------------------------------------------------------------
     uint8_t* flash() { return flash_.data(); }
     uint8_t* sram() { return sram_.data(); }
+    bool sram_has_code(uint32_t off, uint32_t n) const {
+        for (uint32_t p = off >> kPageShift; p <= (off + n - 1) >> kPageShift; ++p) {
+            if (code_pages_[p]) return true;
+        }
+        return false;
+    }
     // Owner writes (flash programming, loading code): bytes copied, decoded code dropped.
     void write_memory(uint32_t address, const uint8_t* data, size_t n);
     bool read_memory(uint32_t address, uint8_t* out, size_t n) const;
@@ -163,6 +170,9 @@ public:
     uint32_t fpscr_ = 0;
     uint32_t control_ = 0, ipsr_ = 0, sp_other_ = 0;
     uint8_t pending_ = 0;
+    const Op* cur_ = nullptr;           // the instruction a chain of handlers is at
+    uint32_t chain_ = 0;                // instructions a chain may still run
+    uint64_t deadline_ = 0, limit_ = 0;
     Stop pending_stop_ = Stop::Deadline;
     uint32_t fault_address_ = 0, exc_return_ = 0, svc_number_ = 0;
     std::string detail_;
@@ -179,8 +189,10 @@ public:
     template <unsigned N> bool load(uint32_t a, uint32_t& v, bool must_align = false);
     template <unsigned N> bool store(uint32_t a, uint32_t v, bool must_align = false);
 
-private:
     Op* lookup(uint32_t pc);
+    uint64_t cycles_ = 0, icount_ = 0;
+
+private:
     Stop finish(const Op& op, uint32_t next_it);
     void decode(uint32_t pc, Op& op);
     void drop_page(uint32_t page);
@@ -194,11 +206,41 @@ private:
     std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
     std::unordered_set<uint32_t> stops_;
     Bus* bus_ = nullptr;
-    uint64_t cycles_ = 0, icount_ = 0;
 };
 
 // Decoding (thumb_decode.cpp): fills op for the instruction at pc (hw1, hw2 its halfwords).
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2);
+Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP handler
+
+inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
+    Op* op;
+    if (pc < kFlashSize) op = &fcache_[pc >> 1];
+    else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
+    else return nullptr;
+    if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
+    return op;
+}
+
+// Threaded dispatch: H, then (outside IT blocks, nothing to stop for) the instruction
+// retired and the next one's handler called from here, a jump from each handler's own
+// site (its branch predicted per handler, not from the run loop's one call). Back to the
+// run loop for anything else, and after at most chain_ instructions (a bound on the stack
+// should the compiler not turn the call into a jump).
+template <Handler H>
+void threaded(Thumb& t, const Op& o) {
+    H(t, o);
+    if (__builtin_expect(t.pending_ != 0, 0)) return;
+    t.r_[15] = t.npc_;
+    t.cycles_ += o.cyc;
+    ++t.icount_;
+    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.icount_ >= t.limit_ || t.it_) return;
+    Op* n = t.lookup(t.r_[15]);
+    if (!n || !n->next || (n->flags & kStopAt)) return;
+    if ((n->flags & kFp) && (!t.fpu_enabled || !(t.control_ & 4))) return;
+    t.npc_ = t.r_[15] + n->size;
+    t.cur_ = n;
+    n->next(t, *n);
+}
 
 template <unsigned N>
 inline bool Thumb::load(uint32_t a, uint32_t& v, bool must_align) {

@@ -4,6 +4,9 @@
 // as Undefined.
 #include "chip/thumb_int.hpp"
 
+#include <unordered_map>
+#include <utility>
+
 namespace hqsim::thumb {
 
 bool decode_fp(Op& op, uint16_t hw1, uint16_t hw2);     // thumb_fp.cpp
@@ -561,6 +564,43 @@ void decode32(Op& op, uint16_t h1, uint16_t h2) {
     }
 }
 
+// --- threaded<fn> of each integer handler --------------------------------------------------
+
+using Map = std::unordered_map<Handler, Handler>;
+
+template <Handler... H>
+void add(Map& m) {
+    (m.emplace(H, threaded<H>), ...);
+}
+template <Src S, size_t... I>
+void add_dp(Map& m, std::index_sequence<I...>) {
+    add<dp<static_cast<Dp>(I), S>...>(m);
+}
+template <Mode M, size_t... I>
+void add_ldst(Map& m, std::index_sequence<I...>) {
+    add<ldst<static_cast<Kind>(I), M>...>(m);
+}
+
+const Map& threaded_int() {
+    static const Map m = [] {
+        Map r;
+        add_dp<IMM>(r, std::make_index_sequence<16>());
+        add_dp<REG>(r, std::make_index_sequence<16>());
+        add_dp<REGREG>(r, std::make_index_sequence<16>());
+        add_ldst<OFF>(r, std::make_index_sequence<8>());
+        add_ldst<PRE>(r, std::make_index_sequence<8>());
+        add_ldst<POST>(r, std::make_index_sequence<8>());
+        add_ldst<REGOFF>(r, std::make_index_sequence<8>());
+        add_ldst<LIT>(r, std::make_index_sequence<8>());
+        add<ldst_dual<true>, ldst_dual<false>, ldst_multiple<true>, ldst_multiple<false>,
+            b_cond, b, bl, bx, blx, cbz, tb<true>, tb<false>, nop, mrs, movw, movt, adr, addw,
+            mul, mla, mls, mull, div<true>, div<false>, ubfx, sbfx, bfi, extend, rev, rev16,
+            revsh, clz, rbit>(r);
+        return r;
+    }();
+    return m;
+}
+
 }  // namespace
 
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
@@ -568,6 +608,8 @@ void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
     else decode16(op, pc, hw1);
     if (!op.fn) op.fn = unknown;
     if (!op.cyc_it) op.cyc_it = op.cyc;
+    const auto it = threaded_int().find(op.fn);
+    op.next = it != threaded_int().end() ? it->second : threaded_fp(op.fn);
 }
 
 }  // namespace hqsim::thumb

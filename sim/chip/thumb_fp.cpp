@@ -7,6 +7,7 @@
 #include <cfenv>
 #include <cmath>
 #include <cstring>
+#include <unordered_map>
 
 #include "chip/thumb.hpp"
 
@@ -81,9 +82,7 @@ inline bool fast(const Mode& m, Arith op, uint32_t a, uint32_t b, uint32_t& r) {
     return normal(r) && (r & ~kSign) != 0x00800000u;
 }
 
-uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
-    uint32_t fr;
-    if (fast(m, op, a, b, fr)) return fr;
+uint32_t arith_slow(const Mode& m, Arith op, uint32_t a, uint32_t b) {
     a = m.in(a);
     b = m.in(b);
     uint32_t r;
@@ -96,6 +95,11 @@ uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
         case MUL: return result(m, rounded(m.rmode, [&] { return x * y; }), dx * dy);
         default: return result(m, rounded(m.rmode, [&] { return x / y; }), dx / dy);
     }
+}
+
+inline uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+    uint32_t r;
+    return fast(m, op, a, b, r) ? r : arith_slow(m, op, a, b);
 }
 
 inline uint32_t neg(uint32_t a) { return a ^ kSign; }
@@ -372,6 +376,21 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
 }
 
 }  // namespace
+
+Handler threaded_fp(Handler fn) {
+    static const std::unordered_map<Handler, Handler> m = {
+#define HQ_T(h) {h, threaded<h>}
+        HQ_T(v_arith), HQ_T(v_mac), HQ_T(v_fma), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg),
+        HQ_T(v_imm), HQ_T(v_sqrt), HQ_T(v_cmp), HQ_T(v_to_int), HQ_T(v_from_int),
+        HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
+        HQ_T(v_msr), HQ_T((v_ldst<true, 1>)), HQ_T((v_ldst<true, 2>)),
+        HQ_T((v_ldst<false, 1>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+        HQ_T(v_multiple<false>),
+#undef HQ_T
+    };
+    const auto it = m.find(fn);
+    return it == m.end() ? nullptr : it->second;
+}
 
 bool decode_fp(Op& op, uint16_t h1, uint16_t h2) {
     if ((h1 >> 12) != 0xE || bits(h2, 11, 9) != 5) return false;

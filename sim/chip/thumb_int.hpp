@@ -175,6 +175,34 @@ void ldst_multiple(Thumb& t, const Op& o) {
     const uint32_t start = o.y ? base - 4 * n : base;
     const uint32_t end = o.y ? base - 4 * n : base + 4 * n;
     uint32_t a = start;
+    const uint32_t so = start - kSramBase;
+    // all in SRAM (a store not over decoded code): straight to the array
+    if (!(start & 3) && so < kSramSize && so + 4 * n <= kSramSize &&
+        (LOAD || !t.sram_has_code(so, 4 * n))) {
+        uint8_t* p = t.sram() + so;
+        if constexpr (LOAD) {
+            if (o.x) t.r_[o.rn] = end;
+            for (unsigned i = 0; i < 15; ++i) {
+                if (!(list >> i & 1)) continue;
+                __builtin_memcpy(&t.r_[i], p, 4);
+                p += 4;
+            }
+            if (list & 0x8000) {
+                uint32_t pc;
+                __builtin_memcpy(&pc, p, 4);
+                t.bx_write_pc(pc);
+            }
+            return;
+        } else {
+            for (unsigned i = 0; i < 15; ++i) {
+                if (!(list >> i & 1)) continue;
+                __builtin_memcpy(p, &t.r_[i], 4);
+                p += 4;
+            }
+            if (o.x) t.r_[o.rn] = end;
+            return;
+        }
+    }
     if constexpr (LOAD) {
         uint32_t vals[16];
         for (unsigned i = 0; i < 16; ++i) {
