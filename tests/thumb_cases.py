@@ -153,6 +153,8 @@ def state_for(case: Case, rng: random.Random) -> tuple:
         # at its first FP instruction even when that one fails its IT condition; the engine,
         # as the architecture, at every FP instruction that passes its condition
         st["control"] = 4
+    if any("control" in i.op_str for i in case.insns):
+        st["control"] = 0       # with an FP context unicorn's CONTROL has bit 3 (not an M4's)
     st["r"][15] = case.start
     return st, patches
 

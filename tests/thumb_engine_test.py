@@ -13,9 +13,13 @@ Deterministic (a fixed seed); no timing asserts (benchmarks/thumb_speed.py measu
 """
 
 import functools
+import pathlib
 import random
+import shutil
 import struct
+import subprocess
 
+import pytest
 from unicorn.arm_const import UC_ARM_REG_XPSR
 
 import thumb_cases
@@ -25,6 +29,8 @@ from heliquad.sim.chip.thumb_twin import RETURN_ADDRESS, SRAM_BASE, SRAM_SIZE, T
 from heliquad.sim.chip.timing import instruction_cycles
 
 STATES = 3
+EXTRA_STATES = 12
+ENCODINGS = pathlib.Path(__file__).parent / "data" / "thumb_encodings.s"
 SEED = 20261129
 DATA = 0x2001_E000          # a called function's pointer arguments point here
 CALLS = 24                  # inputs per function
@@ -79,29 +85,59 @@ def _run_case(twin, case, rng):
     return "compared" if not diff else repr(diff)
 
 
-def test_every_instruction_of_the_image_runs_as_in_unicorn():
-    all_insns = instructions()
-    case_list, _ = thumb_cases.cases(all_insns)
+def _compare(twin, case_list, states, code=None):
+    """Runs every case from `states` random states: ({outcome: runs}, [mismatch lines]).
+    code: (address, bytes) written again before each run (code in SRAM)."""
     rng = random.Random(SEED)
-    twin = _twin()
     counts = {"compared": 0, "faulted": 0, "skipped": 0}
     bad = []
     for case in case_list:
-        for _ in range(STATES):
+        for _ in range(states):
+            if code:
+                twin.write(*code)
             got = _run_case(twin, case, rng)
             if got in counts:
                 counts[got] += 1
             else:
                 insn = case.insns[-1]
                 bad.append(f"0x{insn.address:x} {insn.mnemonic} {insn.op_str}: {got}")
-                twin.uc.mem_write(SRAM_BASE, twin.engine.read(SRAM_BASE, SRAM_SIZE))
-            if got == "faulted" or got not in counts:
+            if got != "compared":
                 twin = _resync(twin)
+    return counts, bad
+
+
+def test_every_instruction_of_the_image_runs_as_in_unicorn():
+    all_insns = instructions()
+    case_list, _ = thumb_cases.cases(all_insns)
+    counts, bad = _compare(_twin(), case_list, STATES)
     names = {i.insn_name() for i, _, _ in all_insns}
     print(f"\n{len(all_insns)} instructions in .text, {len(case_list)} distinct encodings "
           f"(IT blocks as run), {len(names)} capstone names; runs: {counts}")
     assert not bad, f"{len(bad)} mismatches:\n" + "\n".join(bad[:40])
     assert counts["compared"] >= STATES * len(case_list) * 0.95
+
+
+def test_encodings_the_image_lacks_run_as_in_unicorn(tmp_path):
+    """tests/data/thumb_encodings.s, assembled and linked into SRAM: the FP conversions with
+    FPSCR rounding and fixed point, the negated multiply-adds, long multiplies, extends with
+    rotation, shifts by register, the addressing modes and system registers the image does
+    not use, IT blocks of four."""
+    if not (shutil.which("arm-none-eabi-as") and shutil.which("arm-none-eabi-ld")):
+        pytest.skip("no ARM toolchain")
+    obj, elf = tmp_path / "x.o", tmp_path / "x.elf"
+    subprocess.run(["arm-none-eabi-as", "-mcpu=cortex-m4", "-mfpu=fpv4-sp-d16", "-mthumb",
+                    str(ENCODINGS), "-o", str(obj)], check=True)
+    subprocess.run(["arm-none-eabi-ld", "-Ttext=0x20000000", str(obj), "-o", str(elf)],
+                   check=True)
+    base, data, _ = thumb_cases.code_ranges(elf)
+    all_insns = thumb_cases.text_instructions(elf)
+    case_list, _ = thumb_cases.cases(all_insns)
+    twin = _twin()
+    twin.write(base, data)
+    counts, bad = _compare(twin, case_list, EXTRA_STATES, (base, data))
+    print(f"\n{len(all_insns)} instructions, {len(case_list)} cases; runs: {counts}")
+    assert not bad, f"{len(bad)} mismatches:\n" + "\n".join(bad[:40])
+    assert len(all_insns) > 100 and counts["compared"] >= EXTRA_STATES * len(case_list) * 0.9
 
 
 def _resync(twin):
