@@ -245,7 +245,7 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         first = false;
         if (__builtin_expect(it_ == 0, 1) && op->next) {
             cur_ = op;
-            chain_ = 256;
+            chain_ = static_cast<uint32_t>(std::min<uint64_t>(256, limit - icount_));
             op->next(*this, *op);                   // retires it and maybe more (threaded)
             if (__builtin_expect(pending_ != 0, 0)) return finish(*cur_, 0);
             continue;

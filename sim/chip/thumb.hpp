@@ -233,7 +233,7 @@ void threaded(Thumb& t, const Op& o) {
     t.r_[15] = t.npc_;
     t.cycles_ += o.cyc;
     ++t.icount_;
-    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.icount_ >= t.limit_ || t.it_) return;
+    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.it_) return;   // chain_: the limit too
     Op* n = t.lookup(t.r_[15]);
     if (!n || !n->next || (n->flags & kStopAt)) return;
     if ((n->flags & kFp) && (!t.fpu_enabled || !(t.control_ & 4))) return;
