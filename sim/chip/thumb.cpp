@@ -108,8 +108,8 @@ void Thumb::drop_page(uint32_t page) {
     code_pages_[page] = 0;
     const uint32_t first = (page << kPageShift) / 2;
     const uint32_t end = std::min<uint32_t>(first + (1u << kPageShift) / 2, kSramSize / 2);
-    for (uint32_t i = first; i < end; ++i) scache_[i].fn = nullptr;
-    if (first) scache_[first - 1].fn = nullptr;         // a 32-bit instruction across the edge
+    for (uint32_t i = first; i < end; ++i) scache_[i].fn = scache_[i].next = nullptr;
+    if (first) scache_[first - 1].fn = scache_[first - 1].next = nullptr;   // across the edge
 }
 
 void Thumb::sram_code_written(uint32_t off, unsigned n) {
@@ -123,8 +123,8 @@ void Thumb::invalidate(uint32_t address, uint32_t length) {
     const uint64_t end = uint64_t{address} + length;
     for (uint64_t a = address & ~1u; a < end; a += 2) {
         if (a < kFlashSize) {
-            fcache_[a / 2].fn = nullptr;
-            if (a >= 2) fcache_[a / 2 - 1].fn = nullptr;
+            fcache_[a / 2].fn = fcache_[a / 2].next = nullptr;
+            if (a >= 2) fcache_[a / 2 - 1].fn = fcache_[a / 2 - 1].next = nullptr;
         } else if (a - kSramBase < kSramSize) {
             sram_code_written(static_cast<uint32_t>(a - kSramBase), 2);
         }

@@ -156,7 +156,6 @@ public:
 
     // The decoded record at an address (decoding it): for tests of the cost model.
     const Op* decoded(uint32_t address);
-    std::string handler_name(uint32_t address);
 
     // --- for the handlers (public so the decode/execute files reach them) -----------------
     static constexpr uint32_t kFpscrKept = 0xF7C00000;  // NZCV AHP DN FZ RMode

@@ -312,9 +312,8 @@ inline void msr(Thumb& t, const Op& o) {
             if ((v & 0xFF) && ((v & 0xFF) < t.basepri || t.basepri == 0)) t.basepri = v & 0xFF;
             break;
         case 19: if (t.ipsr_ != 2) t.faultmask = v & 1; break;
-        case 20:
-            if (t.ipsr_ == 0) t.set_control((t.control_ & 4) | (v & 3));
-            else t.set_control((t.control_ & 6) | (v & 1));
+        case 20:                        // nPRIV, FPCA; SPSEL in thread mode only
+            t.set_control(t.ipsr_ == 0 ? (v & 7) : ((t.control_ & 2) | (v & 5)));
             return;
         default: return;
     }
