@@ -23,6 +23,7 @@ namespace py = pybind11;
 using namespace hqsim;
 
 void bind_mk64(py::module_& m);     // mk64_bindings.cpp
+void bind_thumb(py::module_& m);    // chip/thumb_bindings.cpp
 
 namespace {
 
@@ -102,6 +103,7 @@ void check_rotor_commands(const VehicleModel& v, const std::vector<double>& u) {
 
 PYBIND11_MODULE(_simcore, m) {
     bind_mk64(m);
+    bind_thumb(m);
     m.doc() = "heliquad simulator core: plants, MPU6050 FIFO packets, sim link, lockstep engine";
     // The chip's scales and packet sizes (the firmware driver's) and the sensor frame's FIFO
     // capacity and RC channels (the dialect's), for Python.

@@ -1,0 +1,275 @@
+// The engine's CPU: an ARMv7-M (Cortex-M4F) Thumb-2 interpreter with a pre-decoded
+// instruction cache, written from the ARMv7-M Architecture Reference Manual's semantics.
+// Not yet the PIL's CPU (unicorn still is): tests/thumb_engine_test.py proves it equal to
+// unicorn instruction by instruction, benchmarks/thumb_speed.py measures it.
+//
+// Memory: flash (512 KiB at 0) and SRAM (192 KiB at 0x1FFF0000) are byte arrays the engine
+// owns; every other address goes to the owner's Bus. Each halfword address of flash and SRAM
+// has one decoded record (Op), filled the first time the PC reaches it; a store into SRAM
+// holding decoded code drops that page's records (a bit per 256-byte page), and the owner
+// calls invalidate() when it programs the flash.
+//
+// Time: every instruction costs the cycles of sim/chip/timing.py's model (condition-blind:
+// an instruction failing its IT condition costs the same), counted before it runs, so a bus
+// access sees cycles() = the cycles before the accessing instruction and pc() = its address.
+//
+// Not modelled: the FPSCR cumulative exception flags (IOC DZC OFC UFC IDC IXC; the image
+// reads FPSCR only through VMRS APSR_nzcv), the DSP extension's GE flags and SIMD
+// instructions, exclusives, and anything the image does not contain (an unknown encoding
+// stops the run as Undefined).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <unordered_set>
+#include <vector>
+
+namespace hqsim::thumb {
+
+constexpr uint32_t kFlashBase = 0x00000000, kFlashSize = 512 * 1024;
+constexpr uint32_t kSramBase = 0x1FFF0000, kSramSize = 192 * 1024;
+constexpr unsigned kPageShift = 8;                  // invalidation granule of decoded SRAM code
+
+// Why run() returned.
+enum class Stop : uint8_t {
+    Deadline,       // cycles reached the deadline (at an instruction boundary)
+    Limit,          // the instruction limit was reached
+    Wfi,            // after a WFI
+    Bkpt,           // before a BKPT (PC at it)
+    Svc,            // after an SVC (svc_number())
+    Undefined,      // before an encoding the engine does not know or that is UNPREDICTABLE
+    BusFault,       // before an access to nothing (fault_address())
+    Unaligned,      // before an unaligned access the architecture or CCR.UNALIGN_TRP forbids
+    DivByZero,      // before an SDIV/UDIV by zero with CCR.DIV_0_TRP
+    InvState,       // after an interworking branch to an even address (EPSR.T would be 0)
+    ExcReturn,      // an EXC_RETURN value reached the PC (exc_return()); the branch retired,
+                    // the PC left at the branch
+    NoFpu,          // before an FP instruction while fpu_enabled is off (the owner: NOCP)
+    MaskChanged,    // after a CPS or MSR that wrote PRIMASK, FAULTMASK or BASEPRI
+    StopAddress,    // before the instruction at a stop address
+    Requested,      // after the instruction whose bus access called request_stop()
+};
+
+const char* stop_name(Stop s);
+
+// The owner's view of everything outside flash and SRAM. Returning false: nothing there
+// (the run stops with BusFault). Inside a call the owner may read pc()/cycles() and call
+// request_stop().
+class Bus {
+public:
+    virtual ~Bus() = default;
+    virtual bool read(uint32_t address, unsigned size, uint32_t& value) = 0;
+    virtual bool write(uint32_t address, unsigned size, uint32_t value) = 0;
+};
+
+class Thumb;
+struct Op;
+using Handler = void (*)(Thumb&, const Op&);
+
+// One decoded instruction.
+struct Op {
+    Handler fn = nullptr;       // nullptr: not decoded yet
+    Handler next = nullptr;     // fn, then on to the next instruction (threaded<fn>), or none
+    uint32_t imm = 0;
+    uint8_t rd = 0, rn = 0, rm = 0, ra = 0;     // operands (FP: register numbers)
+    uint8_t size = 0;           // 2 or 4 bytes
+    uint8_t cyc = 0;            // cycles charged
+    uint8_t cyc_it = 0;         // cycles charged inside an IT block (the model's conditional branch)
+    uint8_t flags = 0;          // kFp | kStopAt | kSetFlags...
+    uint8_t st = 0, sn = 0;     // shift type and amount / misc
+    uint8_t x = 0, y = 0;       // misc
+};
+
+enum OpFlags : uint8_t {
+    kFp = 1,                // an FP instruction (needs fpu_enabled; sets CONTROL.FPCA)
+    kStopAt = 2,            // a stop address
+    kSetFlags = 4,          // sets APSR flags
+    kSetFlagsOutsideIt = 8, // a 16-bit encoding that sets flags only outside an IT block
+};
+
+class Thumb {
+public:
+    Thumb();
+    void set_bus(Bus* bus) { bus_ = bus; }
+
+    Stop run(uint64_t deadline_cycles, uint64_t max_instructions);
+    void request_stop() { pending_ |= kPendRequested; }
+
+    // --- state ---------------------------------------------------------------------------
+    uint32_t reg(unsigned n) const { return r_[n]; }
+    void set_reg(unsigned n, uint32_t v);
+    uint32_t pc() const { return r_[15]; }
+    uint32_t apsr() const;              // N Z C V Q in bits 31..27
+    void set_apsr(uint32_t v);
+    uint32_t itstate() const { return it_; }
+    void set_itstate(uint32_t v) { it_ = v & 0xFF; }
+    uint32_t xpsr() const;              // APSR | IT/ICI | T | IPSR
+    void set_xpsr(uint32_t v);
+    uint32_t msp() const { return psp_active() ? sp_other_ : r_[13]; }
+    uint32_t psp() const { return psp_active() ? r_[13] : sp_other_; }
+    void set_msp(uint32_t v);
+    void set_psp(uint32_t v);
+    uint32_t control() const { return control_; }
+    void set_control(uint32_t v);
+    uint32_t ipsr() const { return ipsr_; }
+    void set_ipsr(uint32_t v);          // handler mode is ipsr != 0 (SP is MSP there)
+    bool handler_mode() const { return ipsr_ != 0; }
+    uint32_t primask = 0, faultmask = 0, basepri = 0;
+    uint32_t sreg(unsigned n) const { return s_[n]; }
+    void set_sreg(unsigned n, uint32_t v) { s_[n] = v; }
+    uint32_t fpscr() const { return fpscr_; }
+    void set_fpscr(uint32_t v) { fpscr_ = v & kFpscrKept; }
+
+    bool fpu_enabled = true;    // CPACR grants CP10/CP11
+    // FPCCR.ASPEN and FPDSCR: the first FP instruction with CONTROL.FPCA clear (a new FP
+    // context, e.g. in a handler) sets FPCA and FPSCR = FPDSCR (its mode bits; N Z C V
+    // cleared, as unicorn does).
+    bool aspen = true;
+    uint32_t fpdscr = 0;
+    bool div0_trap = false;     // CCR.DIV_0_TRP
+    bool unalign_trap = false;  // CCR.UNALIGN_TRP
+
+    uint64_t cycles() const { return cycles_; }
+    void set_cycles(uint64_t c) { cycles_ = c; }
+    uint64_t instructions() const { return icount_; }
+    void set_instructions(uint64_t n) { icount_ = n; }
+    uint32_t fault_address() const { return fault_address_; }
+    uint32_t exc_return() const { return exc_return_; }
+    uint32_t svc_number() const { return svc_number_; }
+    const std::string& stop_detail() const { return detail_; }
+
+    // --- memory --------------------------------------------------------------------------
+    uint8_t* flash() { return flash_.data(); }
+    uint8_t* sram() { return sram_.data(); }
+    bool sram_has_code(uint32_t off, uint32_t n) const {
+        for (uint32_t p = off >> kPageShift; p <= (off + n - 1) >> kPageShift; ++p) {
+            if (code_pages_[p]) return true;
+        }
+        return false;
+    }
+    // Owner writes (flash programming, loading code): bytes copied, decoded code dropped.
+    void write_memory(uint32_t address, const uint8_t* data, size_t n);
+    bool read_memory(uint32_t address, uint8_t* out, size_t n) const;
+    void invalidate(uint32_t address, uint32_t length);
+    void add_stop_address(uint32_t address);
+    void clear_stop_addresses();
+
+    // The decoded record at an address (decoding it): for tests of the cost model.
+    const Op* decoded(uint32_t address);
+
+    // --- for the handlers (public so the decode/execute files reach them) -----------------
+    static constexpr uint32_t kFpscrKept = 0xF7C00000;  // NZCV AHP DN FZ RMode
+    enum : uint8_t { kPendBefore = 1, kPendAfter = 2, kPendRequested = 4 };
+    uint32_t r_[16] = {};
+    uint32_t n_ = 0, z_ = 0, c_ = 0, v_ = 0, q_ = 0;
+    uint32_t it_ = 0;
+    uint32_t npc_ = 0;
+    bool in_it_ = false;
+    uint32_t s_[32] = {};
+    uint32_t fpscr_ = 0;
+    uint32_t control_ = 0, ipsr_ = 0, sp_other_ = 0;
+    uint8_t pending_ = 0;
+    const Op* cur_ = nullptr;           // the instruction a chain of handlers is at
+    uint32_t chain_ = 0;                // instructions a chain may still run
+    uint64_t deadline_ = 0, limit_ = 0;
+    Stop pending_stop_ = Stop::Deadline;
+    uint32_t fault_address_ = 0, exc_return_ = 0, svc_number_ = 0;
+    std::string detail_;
+
+    bool psp_active() const { return ipsr_ == 0 && (control_ & 2); }
+    bool privileged() const { return ipsr_ != 0 || !(control_ & 1); }
+    void stop_before(Stop s) { pending_ |= kPendBefore; pending_stop_ = s; }
+    void stop_after(Stop s) { pending_ |= kPendAfter; pending_stop_ = s; }
+    void undefined(const char* why);
+    void bx_write_pc(uint32_t v);       // BX/BLX/LDR PC/POP PC/LDM PC
+    void branch_to(uint32_t v) { npc_ = v & ~1u; }
+
+    // Memory access from instructions: false after setting a stop (the handler returns).
+    template <unsigned N> bool load(uint32_t a, uint32_t& v, bool must_align = false);
+    template <unsigned N> bool store(uint32_t a, uint32_t v, bool must_align = false);
+
+    Op* lookup(uint32_t pc);
+    uint64_t cycles_ = 0, icount_ = 0;
+
+private:
+    Stop finish(const Op& op, uint32_t next_it);
+    void decode(uint32_t pc, Op& op);
+    void drop_page(uint32_t page);
+    void sram_code_written(uint32_t off, unsigned n);
+    bool bus_read(uint32_t a, unsigned n, uint32_t& v);
+    bool bus_write(uint32_t a, unsigned n, uint32_t v);
+    bool align_fault(uint32_t a, unsigned n, bool must_align);
+
+    std::vector<uint8_t> flash_, sram_;
+    std::vector<Op> fcache_, scache_;
+    std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
+    std::unordered_set<uint32_t> stops_;
+    Bus* bus_ = nullptr;
+};
+
+// Decoding (thumb_decode.cpp): fills op for the instruction at pc (hw1, hw2 its halfwords).
+void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2);
+Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP handler
+
+inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
+    Op* op;
+    if (pc < kFlashSize) op = &fcache_[pc >> 1];
+    else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
+    else return nullptr;
+    if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
+    return op;
+}
+
+// Threaded dispatch: H, then (outside IT blocks, nothing to stop for) the instruction
+// retired and the next one's handler called from here, a jump from each handler's own
+// site (its branch predicted per handler, not from the run loop's one call). Back to the
+// run loop for anything else, and after at most chain_ instructions (a bound on the stack
+// should the compiler not turn the call into a jump).
+template <Handler H>
+void threaded(Thumb& t, const Op& o) {
+    H(t, o);
+    if (__builtin_expect(t.pending_ != 0, 0)) return;
+    t.r_[15] = t.npc_;
+    t.cycles_ += o.cyc;
+    ++t.icount_;
+    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.it_) return;   // chain_: the limit too
+    Op* n = t.lookup(t.r_[15]);
+    if (!n || !n->next || (n->flags & kStopAt)) return;
+    if ((n->flags & kFp) && (!t.fpu_enabled || !(t.control_ & 4))) return;
+    t.npc_ = t.r_[15] + n->size;
+    t.cur_ = n;
+    n->next(t, *n);
+}
+
+template <unsigned N>
+inline bool Thumb::load(uint32_t a, uint32_t& v, bool must_align) {
+    if ((a & (N - 1)) && align_fault(a, N, must_align)) return false;
+    const uint32_t so = a - kSramBase;
+    if (so <= kSramSize - N) {
+        v = 0;
+        __builtin_memcpy(&v, sram_.data() + so, N);
+        return true;
+    }
+    if (a <= kFlashSize - N) {
+        v = 0;
+        __builtin_memcpy(&v, flash_.data() + a, N);
+        return true;
+    }
+    return bus_read(a, N, v);
+}
+
+template <unsigned N>
+inline bool Thumb::store(uint32_t a, uint32_t v, bool must_align) {
+    if ((a & (N - 1)) && align_fault(a, N, must_align)) return false;
+    const uint32_t so = a - kSramBase;
+    if (so <= kSramSize - N) {
+        __builtin_memcpy(sram_.data() + so, &v, N);
+        if (code_pages_[so >> kPageShift] | code_pages_[(so + N - 1) >> kPageShift]) {
+            sram_code_written(so, N);
+        }
+        return true;
+    }
+    return bus_write(a, N, v);
+}
+
+}  // namespace hqsim::thumb

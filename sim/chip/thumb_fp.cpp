@@ -1,0 +1,430 @@
+// The engine's FPv4-SP instructions (thumb.hpp): decoding and execution. Arithmetic runs on
+// the host's IEEE single precision in FPSCR's rounding mode (this file is compiled with
+// -frounding-math), wrapped in the architecture's rules the host does not share: NaN
+// operand priority and quieting, the default NaN (0x7FC00000; DN), flush-to-zero of
+// denormal inputs and of results tiny before rounding (FZ), FPNeg applied to NaNs too.
+// The cumulative exception flags are not kept (thumb.hpp).
+#include <cfenv>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+#include "chip/thumb.hpp"
+
+namespace hqsim::thumb {
+
+namespace {
+
+constexpr uint32_t kSign = 0x80000000u, kDefaultNaN = 0x7FC00000u, kQuiet = 0x00400000u;
+
+inline float F(uint32_t b) { float x; std::memcpy(&x, &b, 4); return x; }
+inline uint32_t B(float x) { uint32_t b; std::memcpy(&b, &x, 4); return b; }
+inline bool is_nan(uint32_t b) { return (b & ~kSign) > 0x7F800000u; }
+inline bool is_snan(uint32_t b) { return is_nan(b) && !(b & kQuiet); }
+inline bool is_denormal(uint32_t b) { return !(b & 0x7F800000u) && (b & 0x007FFFFFu); }
+
+struct Mode {
+    bool fz, dn;
+    unsigned rmode;
+    explicit Mode(uint32_t fpscr)
+        : fz(fpscr >> 24 & 1), dn(fpscr >> 25 & 1), rmode(fpscr >> 22 & 3) {}
+    uint32_t in(uint32_t b) const { return fz && is_denormal(b) ? (b & kSign) : b; }
+    uint32_t nan(uint32_t b) const { return dn ? kDefaultNaN : (b | kQuiet); }
+};
+
+const int kHostRounding[4] = {FE_TONEAREST, FE_UPWARD, FE_DOWNWARD, FE_TOWARDZERO};
+
+// The host computes f() in FPSCR's rounding mode.
+template <typename Fn>
+inline auto rounded(unsigned rmode, Fn f) -> decltype(f()) {
+    if (rmode == 0) return f();
+    const int old = std::fegetround();
+    std::fesetround(kHostRounding[rmode]);
+    const auto r = f();
+    std::fesetround(old);
+    return r;
+}
+
+// The NaN rules of two operands: a signalling NaN first (a, then b), then a quiet one.
+inline bool nans2(const Mode& m, uint32_t a, uint32_t b, uint32_t& r) {
+    if (!is_nan(a) && !is_nan(b)) return false;
+    if (is_snan(a)) r = m.nan(a);
+    else if (is_snan(b)) r = m.nan(b);
+    else if (is_nan(a)) r = m.nan(a);
+    else r = m.nan(b);
+    return true;
+}
+
+// A host result to the architecture's: an invalid operation's NaN is the default NaN; a
+// result whose exact value `exact` is tiny (below 2^-126) is zero under FZ.
+inline uint32_t result(const Mode& m, float host, double exact) {
+    const uint32_t r = B(host);
+    if (is_nan(r)) return kDefaultNaN;
+    if (m.fz && exact != 0.0 && std::fabs(exact) < 0x1p-126) return exact < 0 ? kSign : 0;
+    return r;
+}
+
+enum Arith : uint8_t { ADD, SUB, MUL, DIV };
+
+inline bool normal(uint32_t b) { return ((b >> 23) & 0xFF) - 1u < 0xFEu; }
+
+// Normal operands in round-to-nearest: no NaN can come out, and a result that is normal and
+// not the smallest normal (which may have been tiny before rounding) needs no rule of FZ.
+inline bool fast(const Mode& m, Arith op, uint32_t a, uint32_t b, uint32_t& r) {
+    if (m.rmode || !normal(a) || !normal(b)) return false;
+    const float x = F(a), y = F(b);
+    switch (op) {
+        case ADD: r = B(x + y); break;
+        case SUB: r = B(x - y); break;
+        case MUL: r = B(x * y); break;
+        default: r = B(x / y); break;
+    }
+    return normal(r) && (r & ~kSign) != 0x00800000u;
+}
+
+uint32_t arith_slow(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+    a = m.in(a);
+    b = m.in(b);
+    uint32_t r;
+    if (nans2(m, a, b, r)) return r;
+    const float x = F(a), y = F(b);
+    const double dx = x, dy = y;
+    switch (op) {
+        case ADD: return result(m, rounded(m.rmode, [&] { return x + y; }), dx + dy);
+        case SUB: return result(m, rounded(m.rmode, [&] { return x - y; }), dx - dy);
+        case MUL: return result(m, rounded(m.rmode, [&] { return x * y; }), dx * dy);
+        default: return result(m, rounded(m.rmode, [&] { return x / y; }), dx / dy);
+    }
+}
+
+inline uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+    uint32_t r;
+    return fast(m, op, a, b, r) ? r : arith_slow(m, op, a, b);
+}
+
+inline uint32_t neg(uint32_t a) { return a ^ kSign; }
+
+// FPMulAdd(addend, op1, op2): one rounding.
+uint32_t muladd(const Mode& m, uint32_t addend, uint32_t a, uint32_t b) {
+    addend = m.in(addend);
+    a = m.in(a);
+    b = m.in(b);
+    const bool inf_zero = ((a & ~kSign) == 0x7F800000u && !(b & ~kSign)) ||
+                          (!(a & ~kSign) && (b & ~kSign) == 0x7F800000u);
+    if (is_nan(addend) || is_nan(a) || is_nan(b)) {
+        if (is_nan(addend) && !is_snan(addend) && inf_zero) return kDefaultNaN;
+        if (is_snan(addend)) return m.nan(addend);
+        if (is_snan(a)) return m.nan(a);
+        if (is_snan(b)) return m.nan(b);
+        if (is_nan(addend)) return m.nan(addend);
+        if (is_nan(a)) return m.nan(a);
+        return m.nan(b);
+    }
+    const float x = F(a), y = F(b), z = F(addend);
+    const float host = rounded(m.rmode, [&] { return std::fmaf(x, y, z); });
+    return result(m, host, std::fma(double{x}, double{y}, double{z}));
+}
+
+// --- handlers ---------------------------------------------------------------------------
+// o.rd, o.rn, o.rm: S register numbers; o.x: the variant.
+
+void v_arith(Thumb& t, const Op& o) {       // x: ADD SUB MUL DIV; y: 1 VNMUL
+    const Mode m(t.fpscr_);
+    const uint32_t r = arith(m, static_cast<Arith>(o.x), t.s_[o.rn], t.s_[o.rm]);
+    t.s_[o.rd] = o.y ? neg(r) : r;
+}
+
+// VMLA VMLS VNMLA VNMLS: x bit0 negate the product, bit1 negate the accumulator.
+void v_mac(Thumb& t, const Op& o) {
+    const Mode m(t.fpscr_);
+    uint32_t p = arith(m, MUL, t.s_[o.rn], t.s_[o.rm]);
+    if (o.x & 1) p = neg(p);
+    const uint32_t d = (o.x & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    t.s_[o.rd] = arith(m, ADD, d, p);
+}
+
+// VFMA VFMS VFNMA VFNMS: x bit0 negate op1 (Sn), bit1 negate the addend (Sd).
+void v_fma(Thumb& t, const Op& o) {
+    const Mode m(t.fpscr_);
+    const uint32_t a = (o.x & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
+    const uint32_t d = (o.x & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    t.s_[o.rd] = muladd(m, d, a, t.s_[o.rm]);
+}
+
+void v_mov(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm]; }
+void v_abs(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] & ~kSign; }
+void v_neg(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] ^ kSign; }
+void v_imm(Thumb& t, const Op& o) { t.s_[o.rd] = o.imm; }
+
+void v_sqrt(Thumb& t, const Op& o) {
+    const Mode m(t.fpscr_);
+    const uint32_t a = m.in(t.s_[o.rm]);
+    if (is_nan(a)) { t.s_[o.rd] = m.nan(a); return; }
+    if (!(a & ~kSign)) { t.s_[o.rd] = a; return; }
+    if (a & kSign) { t.s_[o.rd] = kDefaultNaN; return; }
+    const float x = F(a);
+    t.s_[o.rd] = B(rounded(m.rmode, [&] { return std::sqrt(x); }));
+}
+
+void v_cmp(Thumb& t, const Op& o) {         // x: 1 compare with zero
+    const Mode m(t.fpscr_);
+    const uint32_t a = m.in(t.s_[o.rd]), b = o.x ? 0 : m.in(t.s_[o.rm]);
+    uint32_t nzcv;
+    if (is_nan(a) || is_nan(b)) nzcv = 0x3;
+    else if (F(a) == F(b)) nzcv = 0x6;
+    else if (F(a) < F(b)) nzcv = 0x8;
+    else nzcv = 0x2;
+    t.fpscr_ = (t.fpscr_ & 0x0FFFFFFFu) | (nzcv << 28);
+}
+
+// Float to integer: x bit0 signed, bit1 round toward zero (else FPSCR's mode); o.y fraction
+// bits, o.sn the integer's size (16 or 32).
+uint32_t to_fixed(const Mode& m, uint32_t a, bool is_signed, bool toward_zero, unsigned fbits,
+                  unsigned size) {
+    a = m.in(a);
+    if (is_nan(a)) return 0;
+    const double v = std::ldexp(static_cast<double>(F(a)), static_cast<int>(fbits));
+    double r;
+    switch (toward_zero ? 3 : m.rmode) {
+        case 0: r = std::nearbyint(v); break;
+        case 1: r = std::ceil(v); break;
+        case 2: r = std::floor(v); break;
+        default: r = std::trunc(v); break;
+    }
+    const double lo = is_signed ? -std::ldexp(1.0, static_cast<int>(size - 1)) : 0.0;
+    const double hi = is_signed ? std::ldexp(1.0, static_cast<int>(size - 1)) - 1
+                                : std::ldexp(1.0, static_cast<int>(size)) - 1;
+    if (r < lo) r = lo;
+    if (r > hi) r = hi;
+    const int64_t i = static_cast<int64_t>(r);
+    if (size == 16) {
+        return is_signed ? static_cast<uint32_t>(static_cast<int32_t>(static_cast<int16_t>(i)))
+                         : static_cast<uint32_t>(i & 0xFFFF);
+    }
+    return static_cast<uint32_t>(i);
+}
+
+void v_to_int(Thumb& t, const Op& o) {
+    const Mode m(t.fpscr_);
+    t.s_[o.rd] = to_fixed(m, t.s_[o.rm], o.x & 1, o.x & 2, o.y, o.sn);
+}
+
+// Integer (o.y fraction bits, o.sn size) to float, rounded in FPSCR's mode; x: 1 signed.
+void v_from_int(Thumb& t, const Op& o) {
+    const Mode m(t.fpscr_);
+    const uint32_t v = t.s_[o.rm];
+    double x;
+    if (o.sn == 16) x = o.x ? double(static_cast<int16_t>(v)) : double(v & 0xFFFF);
+    else x = o.x ? double(static_cast<int32_t>(v)) : double(v);
+    x = std::ldexp(x, -static_cast<int>(o.y));
+    t.s_[o.rd] = B(rounded(m.rmode, [&] { return static_cast<float>(x); }));
+}
+
+void v_to_core(Thumb& t, const Op& o) { t.r_[o.rd] = t.s_[o.rn]; }
+void v_from_core(Thumb& t, const Op& o) { t.s_[o.rn] = t.r_[o.rd]; }
+void v_to_core2(Thumb& t, const Op& o) {
+    t.r_[o.rd] = t.s_[o.rm];
+    t.r_[o.ra] = t.s_[o.rm + 1];
+}
+void v_from_core2(Thumb& t, const Op& o) {
+    t.s_[o.rm] = t.r_[o.rd];
+    t.s_[o.rm + 1] = t.r_[o.ra];
+}
+void v_mrs(Thumb& t, const Op& o) {
+    if (o.rd == 15) {
+        const uint32_t f = t.fpscr_ >> 28;
+        t.n_ = f >> 3; t.z_ = (f >> 2) & 1; t.c_ = (f >> 1) & 1; t.v_ = f & 1;
+    } else {
+        t.r_[o.rd] = t.fpscr_;
+    }
+}
+void v_msr(Thumb& t, const Op& o) { t.fpscr_ = t.r_[o.rd] & Thumb::kFpscrKept; }
+
+// VLDR/VSTR: o.rd the first S register, o.x 2 registers (a D register), o.imm the offset.
+template <bool LOAD, unsigned n>
+void v_ldst(Thumb& t, const Op& o) {
+    const uint32_t base = o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn];
+    const uint32_t a = base + o.imm;
+    if constexpr (LOAD) {
+        uint32_t v[2];
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.load<4>(a + 4 * i, v[i], true)) return;
+        }
+        for (unsigned i = 0; i < n; ++i) t.s_[o.rd + i] = v[i];
+    } else {
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.store<4>(a + 4 * i, t.s_[o.rd + i], true)) return;
+        }
+    }
+}
+
+// VLDM/VSTM: o.imm words from S[o.rd]; o.x writeback; o.y decrement before.
+template <bool LOAD>
+void v_multiple(Thumb& t, const Op& o) {
+    const uint32_t base = t.r_[o.rn], n = o.imm;
+    const uint32_t start = o.y ? base - 4 * n : base;
+    if constexpr (LOAD) {
+        uint32_t v[32];
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.load<4>(start + 4 * i, v[i], true)) return;
+        }
+        for (unsigned i = 0; i < n; ++i) t.s_[o.rd + i] = v[i];
+    } else {
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.store<4>(start + 4 * i, t.s_[o.rd + i], true)) return;
+        }
+    }
+    if (o.x) t.r_[o.rn] = o.y ? start : base + 4 * n;
+}
+
+inline uint32_t bits(uint32_t v, unsigned hi, unsigned lo) {
+    return (v >> lo) & ((1u << (hi - lo + 1)) - 1);
+}
+inline uint8_t u8(uint32_t v) { return static_cast<uint8_t>(v); }
+
+uint32_t expand_imm(uint32_t imm8) {
+    const uint32_t b6 = (imm8 >> 6) & 1;
+    const uint32_t exp = ((b6 ^ 1) << 7) | (b6 ? 0x7Cu : 0) | ((imm8 >> 4) & 3);
+    return ((imm8 >> 7) << 31) | (exp << 23) | ((imm8 & 0xF) << 19);
+}
+
+bool decode_other(Op& op, uint16_t h1, uint16_t h2) {   // opc1 = 1x11: the rest
+    const unsigned opc2 = bits(h1, 3, 0), opc3 = bits(h2, 7, 6);
+    if (!(opc3 & 1)) {
+        op.imm = expand_imm((opc2 << 4) | bits(h2, 3, 0));
+        op.fn = v_imm;
+        return true;
+    }
+    switch (opc2) {
+        case 0: op.fn = opc3 == 1 ? v_mov : v_abs; return true;
+        case 1: op.fn = opc3 == 1 ? v_neg : v_sqrt; op.cyc = opc3 == 1 ? 1 : 14; return true;
+        case 4: case 5:
+            op.fn = v_cmp;
+            op.x = u8(opc2 == 5);
+            return !(opc2 == 5 && bits(h2, 5, 5)) && !(opc2 == 5 && bits(h2, 3, 0));
+        case 8:
+            op.fn = v_from_int;
+            op.x = u8(bits(h2, 7, 7));
+            op.sn = 32;
+            return true;
+        case 12: case 13:
+            op.fn = v_to_int;
+            op.x = u8((opc2 & 1) | (bits(h2, 7, 7) << 1));
+            op.sn = 32;
+            return true;
+        case 10: case 11: case 14: case 15: {       // fixed point, in place in Sd
+            const unsigned size = bits(h2, 7, 7) ? 32 : 16;
+            const unsigned imm = (bits(h2, 3, 0) << 1) | bits(h2, 5, 5);
+            if (imm > size) return false;
+            op.y = u8(size - imm);
+            op.sn = u8(size);
+            op.rm = op.rd;
+            const bool is_unsigned = bits(h1, 0, 0);
+            if (opc2 >= 14) {
+                op.fn = v_to_int;
+                op.x = u8((is_unsigned ? 0 : 1) | 2);
+            } else {
+                op.fn = v_from_int;
+                op.x = u8(!is_unsigned);
+            }
+            return true;
+        }
+        default: return false;
+    }
+}
+
+bool decode_data(Op& op, uint16_t h1, uint16_t h2) {
+    op.rd = u8((bits(h2, 15, 12) << 1) | bits(h1, 6, 6));
+    op.rn = u8((bits(h1, 3, 0) << 1) | bits(h2, 7, 7));
+    op.rm = u8((bits(h2, 3, 0) << 1) | bits(h2, 5, 5));
+    const unsigned opc1 = (bits(h1, 7, 7) << 2) | bits(h1, 5, 4), o = bits(h2, 6, 6);
+    op.cyc = 1;
+    switch (opc1) {
+        case 0: op.fn = v_mac; op.x = u8(o); op.cyc = 3; return true;          // VMLA VMLS
+        case 1: op.fn = v_mac; op.x = u8(o ? 3 : 2); op.cyc = 3; return true;  // VNMLS VNMLA
+        case 2: op.fn = v_arith; op.x = MUL; op.y = u8(o); return true;        // VMUL VNMUL
+        case 3: op.fn = v_arith; op.x = u8(o ? SUB : ADD); return true;
+        case 4: op.fn = v_arith; op.x = DIV; op.cyc = 14; return !o;
+        case 5: op.fn = v_fma; op.x = u8(o ? 3 : 2); op.cyc = 3; return true;  // VFNMS VFNMA
+        case 6: op.fn = v_fma; op.x = u8(o); op.cyc = 3; return true;          // VFMA VFMS
+        default: return decode_other(op, h1, h2);
+    }
+}
+
+bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
+    const bool p = bits(h1, 8, 8), u = bits(h1, 7, 7), w = bits(h1, 5, 5), l = bits(h1, 4, 4);
+    const bool dbl = bits(h2, 8, 8);
+    const unsigned vd = bits(h2, 15, 12), d = bits(h1, 6, 6), imm8 = bits(h2, 7, 0);
+    op.rn = u8(bits(h1, 3, 0));
+    op.rd = u8(dbl ? ((d << 4) | vd) * 2 : (vd << 1) | d);
+    if (p && !w) {                                          // VLDR VSTR
+        op.imm = u ? imm8 * 4 : 0u - imm8 * 4;
+        op.x = dbl;
+        op.fn = l ? (dbl ? v_ldst<true, 2> : v_ldst<true, 1>)
+                  : (dbl ? v_ldst<false, 2> : v_ldst<false, 1>);
+        op.cyc = 2;
+        return op.rd + (dbl ? 2 : 1) <= 32 && (l || op.rn != 15);
+    }
+    if (p == u || op.rn == 15) return false;
+    op.imm = dbl ? imm8 : imm8;
+    if (dbl && (imm8 & 1)) return false;                   // FLDMX/FSTMX
+    op.x = w;
+    op.y = p;
+    op.fn = l ? v_multiple<true> : v_multiple<false>;
+    op.cyc = u8(1 + (dbl ? imm8 / 2 : imm8));
+    return imm8 && op.rd + imm8 <= 32;
+}
+
+}  // namespace
+
+Handler threaded_fp(Handler fn) {
+    static const std::unordered_map<Handler, Handler> m = {
+#define HQ_T(h) {h, threaded<h>}
+        HQ_T(v_arith), HQ_T(v_mac), HQ_T(v_fma), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg),
+        HQ_T(v_imm), HQ_T(v_sqrt), HQ_T(v_cmp), HQ_T(v_to_int), HQ_T(v_from_int),
+        HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
+        HQ_T(v_msr), HQ_T((v_ldst<true, 1>)), HQ_T((v_ldst<true, 2>)),
+        HQ_T((v_ldst<false, 1>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+        HQ_T(v_multiple<false>),
+#undef HQ_T
+    };
+    const auto it = m.find(fn);
+    return it == m.end() ? nullptr : it->second;
+}
+
+bool decode_fp(Op& op, uint16_t h1, uint16_t h2) {
+    if ((h1 >> 12) != 0xE || bits(h2, 11, 9) != 5) return false;
+    op.flags |= kFp;
+    op.cyc = 1;
+    const unsigned top = bits(h1, 11, 8);
+    if (top == 0xE && !bits(h2, 4, 4)) return !bits(h2, 8, 8) && decode_data(op, h1, h2);
+    if (top == 0xE) {                                       // 32-bit transfers
+        if (bits(h2, 8, 8) || bits(h2, 6, 5) || bits(h2, 3, 0)) return false;
+        const unsigned a = bits(h1, 7, 5);
+        op.rd = u8(bits(h2, 15, 12));
+        if (a == 0) {
+            op.rn = u8((bits(h1, 3, 0) << 1) | bits(h2, 7, 7));
+            op.fn = bits(h1, 4, 4) ? v_to_core : v_from_core;
+            return op.rd < 13;
+        }
+        if (a == 7 && bits(h1, 3, 0) == 1) {
+            op.fn = bits(h1, 4, 4) ? v_mrs : v_msr;
+            return op.rd != 13 && (op.rd != 15 || bits(h1, 4, 4));
+        }
+        return false;
+    }
+    if ((h1 & 0xFFE0) == 0xEC40) {                          // two core registers
+        op.rd = u8(bits(h2, 15, 12));
+        op.ra = u8(bits(h1, 3, 0));
+        const unsigned m = bits(h2, 5, 5), vm = bits(h2, 3, 0);
+        op.rm = u8(bits(h2, 8, 8) ? ((m << 4) | vm) * 2 : (vm << 1) | m);
+        const bool to_core = bits(h1, 4, 4);
+        op.fn = to_core ? v_to_core2 : v_from_core2;
+        return bits(h2, 7, 6) == 0 && bits(h2, 4, 4) && op.rm + 2 <= 32 && op.rd < 13 &&
+               op.ra < 13 && !(to_core && op.rd == op.ra);
+    }
+    if ((top & 0xE) == 0xC && (h1 & 0xFFA0) != 0xEC00) return decode_load_store(op, h1, h2);
+    return false;
+}
+
+}  // namespace hqsim::thumb

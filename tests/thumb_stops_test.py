@@ -1,0 +1,143 @@
+"""The engine's run() (sim/chip/thumb.hpp): each stop reason, where the PC is left, what a
+bus call sees (the accessing instruction's PC and the cycles before it), the decoded-code
+cache dropped by stores into SRAM code and by the owner's writes, an encoding the engine
+does not know. Hand-assembled code in SRAM."""
+
+import struct
+
+import pytest
+
+from heliquad._simcore import ThumbEngine
+
+CODE = 0x2000_0000
+PERIPHERAL = 0x4000_0000
+
+
+def _engine(*halfwords, regs=None):
+    e = ThumbEngine()
+    e.write(CODE, b"".join(struct.pack("<H", h) for h in halfwords))
+    e.set_reg(13, 0x2001_0000)
+    for n, v in (regs or {}).items():
+        e.set_reg(n, v)
+    e.set_reg(15, CODE)
+    return e
+
+
+@pytest.mark.parametrize("code, stop, pc_after", [
+    ((0xBF30,), "wfi", CODE + 2),                   # WFI: after it
+    ((0xBE00,), "bkpt", CODE),                      # BKPT: before it
+    ((0xDF05,), "svc", CODE + 2),                   # SVC #5: after it
+    ((0xDE00,), "undefined", CODE),                 # UDF
+    ((0xE851, 0x0F00), "undefined", CODE),          # LDREX: not known to the engine
+    ((0xB672,), "mask_changed", CODE + 2),          # CPSID i
+])
+def test_stop_reasons_of_single_instructions(code, stop, pc_after):
+    e = _engine(*code)
+    assert e.run(1000, 10) == stop
+    assert e.pc == pc_after
+    if stop == "svc":
+        assert e.svc_number == 5
+    if stop == "mask_changed":
+        assert e.primask == 1
+    if stop == "undefined":
+        assert e.stop_detail and e.instructions == 0
+
+
+def test_a_bus_call_sees_the_accessing_instruction_and_the_cycles_before_it():
+    e = _engine(0x2101, 0x6810, 0x6810, regs={2: PERIPHERAL})   # movs r1,#1; ldr r0,[r2] x2
+    e.cycles = 100
+    seen = []
+
+    def read(address, size):
+        seen.append((address, size, e.pc, e.cycles))
+        if len(seen) == 2:
+            e.request_stop()
+        return 0x1234
+
+    e.set_bus(read, lambda a, s, v: True)
+    assert e.run(10_000, 100) == "requested"
+    assert seen == [(PERIPHERAL, 4, CODE + 2, 101), (PERIPHERAL, 4, CODE + 4, 103)]
+    assert e.pc == CODE + 6 and e.reg(0) == 0x1234 and e.cycles == 105
+
+
+def test_nothing_at_an_address_is_a_bus_fault_before_the_instruction():
+    e = _engine(0x6810, regs={2: PERIPHERAL + 8})
+    e.set_bus(lambda a, s: None, lambda a, s, v: False)
+    assert e.run(1000, 10) == "bus_fault"
+    assert e.fault_address == PERIPHERAL + 8 and e.pc == CODE and e.instructions == 0
+
+
+def test_unaligned_accesses_the_m4_refuses_and_ccr_unalign_trp():
+    e = _engine(0xE9D2, 0x0100, regs={2: CODE + 0x102})          # ldrd r0, r1, [r2]
+    assert e.run(1000, 10) == "unaligned" and e.fault_address == CODE + 0x102
+    e = _engine(0x6810, 0xBE00, regs={2: CODE + 0x101})          # ldr r0, [r2]
+    assert e.run(1000, 10) == "bkpt"
+    e = _engine(0x6810, 0xBE00, regs={2: CODE + 0x101})
+    e.unalign_trap = True
+    assert e.run(1000, 10) == "unaligned" and e.pc == CODE
+
+
+def test_division_by_zero_gives_zero_or_stops_with_ccr_div_0_trp():
+    e = _engine(0xFBB1, 0xF0F2, 0xBE00, regs={0: 7, 1: 5, 2: 0})  # udiv r0, r1, r2
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 0
+    e = _engine(0xFBB1, 0xF0F2, 0xBE00, regs={0: 7, 1: 5, 2: 0})
+    e.div0_trap = True
+    assert e.run(1000, 10) == "div_by_zero" and e.pc == CODE and e.reg(0) == 7
+
+
+def test_exc_return_to_the_pc_stops_with_its_value_the_pc_not_taken():
+    e = _engine(0x4770, regs={14: 0xFFFF_FFF9})                  # bx lr
+    e.ipsr = 15
+    assert e.run(1000, 10) == "exc_return"
+    assert e.exc_return == 0xFFFF_FFF9 and e.pc == CODE and e.instructions == 1
+    e = _engine(0xBD01, regs={13: 0x2001_0000})                   # pop {r0, pc}
+    e.write(0x2001_0000, struct.pack("<II", 42, 0xFFFF_FFE9))
+    assert e.run(1000, 10) == "exc_return" and e.exc_return == 0xFFFF_FFE9
+    assert e.reg(0) == 42 and e.reg(13) == 0x2001_0008
+
+
+def test_an_interworking_branch_to_an_even_address_stops():
+    e = _engine(0x4700, regs={0: 0x1000})                         # bx r0
+    assert e.run(1000, 10) == "inv_state" and e.pc == 0x1000
+
+
+def test_an_fp_instruction_without_the_fpu_stops_before_it():
+    e = _engine(0xEE30, 0x0A81)                                   # vadd.f32 s0, s1, s2
+    e.fpu_enabled = False
+    assert e.run(1000, 10) == "no_fpu" and e.pc == CODE and e.control & 4 == 0
+    e.fpu_enabled = True
+    e.fpdscr = 0x0300_0000                                        # DN, FZ for new contexts
+    assert e.run(1000, 1) == "limit" and e.control & 4 and e.fpscr == 0x0300_0000
+
+
+def test_a_stop_address_stops_before_it_and_the_next_run_goes_through():
+    e = _engine(0xBF00, 0xBF00, 0xBF00, 0xBE00)
+    e.add_stop_address(CODE + 4)
+    assert e.run(1000, 10) == "stop_address" and e.pc == CODE + 4
+    assert e.run(1000, 10) == "bkpt" and e.pc == CODE + 6
+
+
+def test_deadline_and_limit_stop_at_instruction_boundaries():
+    e = _engine(*([0xBF00] * 8 + [0xE7F7]))                       # nops; b back
+    assert e.run(5, 100) == "deadline" and e.cycles == 5 and e.pc == CODE + 10
+    e.cycles = 0
+    assert e.run(1 << 40, 3) == "limit" and e.instructions == 8
+
+
+def test_a_store_into_decoded_sram_code_and_an_owner_write_drop_the_decoded_code():
+    # str r1, [r2]; movs r0, #1; bkpt  -- then the store rewrites "movs r0, #1; bkpt"
+    e = _engine(0x6011, 0x2001, 0xBE00, regs={1: 0xBE00_2001, 2: CODE + 2})
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 1
+    e.set_reg(1, 0xBE00_2007)                                     # movs r0, #7; bkpt
+    e.set_reg(15, CODE)
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 7
+    e.write(CODE + 2, struct.pack("<H", 0x2009))                  # the owner: movs r0, #9
+    e.set_reg(1, 0xBE00_2009)
+    e.set_reg(15, CODE)
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 9
+    e.write(0x1000, struct.pack("<HH", 0x2003, 0xBE00))           # flash programmed
+    e.set_reg(15, 0x1000)
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 3
+    e.write(0x1000, struct.pack("<H", 0x2004))
+    e.set_reg(15, 0x1000)
+    assert e.run(1000, 10) == "bkpt" and e.reg(0) == 4
