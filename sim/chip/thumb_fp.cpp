@@ -240,22 +240,29 @@ void v_mrs(Thumb& t, const Op& o) {
 }
 void v_msr(Thumb& t, const Op& o) { t.fpscr_ = t.r_[o.rd] & Thumb::kFpscrKept; }
 
+// n words between memory at a and S[first]: a load takes effect only once every word was
+// read (a fault part-way leaves the S registers as they were), a store stops at the fault.
+template <bool LOAD>
+bool v_transfer(Thumb& t, uint32_t a, unsigned first, unsigned n) {
+    if constexpr (LOAD) {
+        uint32_t v[32];
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.load<4>(a + 4 * i, v[i], true)) return false;
+        }
+        for (unsigned i = 0; i < n; ++i) t.s_[first + i] = v[i];
+    } else {
+        for (unsigned i = 0; i < n; ++i) {
+            if (!t.store<4>(a + 4 * i, t.s_[first + i], true)) return false;
+        }
+    }
+    return true;
+}
+
 // VLDR/VSTR: o.rd the first S register, o.x 2 registers (a D register), o.imm the offset.
 template <bool LOAD, unsigned n>
 void v_ldst(Thumb& t, const Op& o) {
     const uint32_t base = o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn];
-    const uint32_t a = base + o.imm;
-    if constexpr (LOAD) {
-        uint32_t v[2];
-        for (unsigned i = 0; i < n; ++i) {
-            if (!t.load<4>(a + 4 * i, v[i], true)) return;
-        }
-        for (unsigned i = 0; i < n; ++i) t.s_[o.rd + i] = v[i];
-    } else {
-        for (unsigned i = 0; i < n; ++i) {
-            if (!t.store<4>(a + 4 * i, t.s_[o.rd + i], true)) return;
-        }
-    }
+    v_transfer<LOAD>(t, base + o.imm, o.rd, n);
 }
 
 // VLDM/VSTM: o.imm words from S[o.rd]; o.x writeback; o.y decrement before.
@@ -263,17 +270,7 @@ template <bool LOAD>
 void v_multiple(Thumb& t, const Op& o) {
     const uint32_t base = t.r_[o.rn], n = o.imm;
     const uint32_t start = o.y ? base - 4 * n : base;
-    if constexpr (LOAD) {
-        uint32_t v[32];
-        for (unsigned i = 0; i < n; ++i) {
-            if (!t.load<4>(start + 4 * i, v[i], true)) return;
-        }
-        for (unsigned i = 0; i < n; ++i) t.s_[o.rd + i] = v[i];
-    } else {
-        for (unsigned i = 0; i < n; ++i) {
-            if (!t.store<4>(start + 4 * i, t.s_[o.rd + i], true)) return;
-        }
-    }
+    if (!v_transfer<LOAD>(t, start, o.rd, n)) return;
     if (o.x) t.r_[o.rn] = o.y ? start : base + 4 * n;
 }
 

@@ -15,16 +15,15 @@ from __future__ import annotations
 
 import random
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_BLOCK, UC_HOOK_CODE, UC_MODE_MCLASS, UC_MODE_THUMB, UC_PROT_ALL,
-                     UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
+from unicorn import (UC_ARCH_ARM, UC_HOOK_BLOCK, UC_HOOK_CODE, UC_MODE_MCLASS, UC_MODE_THUMB,
+                     UC_PROT_ALL, UC_PROT_EXEC, UC_PROT_READ, Uc, UcError)
 from unicorn import arm_const as A
 
 from heliquad._simcore import ThumbEngine
 
+from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE
 from .timing import BlockDecoder
 
-FLASH_BASE, FLASH_SIZE = 0x0000_0000, 512 * 1024
-SRAM_BASE, SRAM_SIZE = 0x1FFF_0000, 192 * 1024
 FPSCR_COMPARED = 0xF7C0_0000        # N Z C V, AHP, DN, FZ, RMode
 CONTROL_COMPARED = 0x7
 RETURN_ADDRESS = 0x2001_FF00        # a called function returns here (LR): the run stops

@@ -21,14 +21,14 @@ from typing import Protocol
 import numpy as np
 
 from ..base.firmware_facts import LOOP_RATE_HZ
+from ..plant.tf_plant import TfPlant
+from ..plant.vehicle_params import load_params
 
 #: The Teensy image's links a tool can talk over when the image flies the rig: its own USB
 #: port (the cable every Teensy user plugs in; the default) and UART0 (pins 0 and 1, where a
 #: telemetry radio goes). The image serves MAVLink on both.
 BOARD_LINKS = ("usb", "uart")
 DEFAULT_BOARD_LINK = "usb"
-from ..plant.tf_plant import TfPlant
-from ..plant.vehicle_params import load_params
 
 __all__ = ["SilConfig", "Plant", "PLANTS", "make_plant", "rc_block", "RC_CENTER_US",
            "rc_disarmed", "BOOT_FRAMES", "ARM_FRAMES"]
