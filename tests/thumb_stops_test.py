@@ -141,3 +141,29 @@ def test_a_store_into_decoded_sram_code_and_an_owner_write_drop_the_decoded_code
     e.write(0x1000, struct.pack("<H", 0x2004))
     e.set_reg(15, 0x1000)
     assert e.run(1000, 10) == "bkpt" and e.reg(0) == 4
+
+
+def test_an_isb_stops_after_it_only_while_the_owner_watches_for_one():
+    e = _engine(0xF3BF, 0x8F6F, 0xF3BF, 0x8F6F, 0xBE00)           # isb; isb; bkpt
+    e.stop_on_isb = True
+    assert e.run(1000, 10) == "isb" and e.pc == CODE + 4 and e.instructions == 1
+    e.stop_on_isb = False
+    assert e.run(1000, 10) == "bkpt" and e.instructions == 2
+
+
+def test_a_deadline_brought_forward_by_a_bus_call_stops_at_the_next_boundary():
+    # ldr r0,[r2]; nop x6 -- the read brings the deadline forward to "now"
+    e = _engine(0x6810, *([0xBF00] * 6), regs={2: PERIPHERAL})
+    e.set_bus(lambda a, s: e.lower_deadline(e.cycles) or 7, lambda a, s, v: True)
+    assert e.run(1000, 100) == "deadline"
+    assert e.pc == CODE + 2 and e.reg(0) == 7 and e.instructions == 1
+
+
+def test_fetching_from_flash_past_its_fetch_limit_is_a_fetch_from_nothing():
+    e = ThumbEngine()
+    e.write(0x1000, struct.pack("<HH", 0xBF00, 0xBE00))           # nop; bkpt in flash
+    e.set_reg(15, 0x1000)
+    e.flash_fetch_limit = 0                                       # being programmed
+    assert e.run(1000, 10) == "bus_fault" and e.fault_address == 0x1000
+    e.flash_fetch_limit = 512 * 1024
+    assert e.run(1000, 10) == "bkpt" and e.pc == 0x1002

@@ -9,7 +9,7 @@ const char* stop_name(Stop s) {
     static const char* const names[] = {
         "deadline", "limit", "wfi", "bkpt", "svc", "undefined", "bus_fault", "unaligned",
         "div_by_zero", "inv_state", "exc_return", "no_fpu", "mask_changed", "stop_address",
-        "requested"};
+        "requested", "isb"};
     return names[static_cast<unsigned>(s)];
 }
 
@@ -222,7 +222,7 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     Op* op = nullptr;
     bool first = true;
     for (;;) {
-        if (cycles_ >= deadline_cycles) return Stop::Deadline;
+        if (cycles_ >= deadline_) return Stop::Deadline;
         if (icount_ >= limit) return Stop::Limit;
         const uint32_t pc = r_[15];
         op = lookup(pc);

@@ -48,6 +48,7 @@ enum class Stop : uint8_t {
     MaskChanged,    // after a CPS or MSR that wrote PRIMASK, FAULTMASK or BASEPRI
     StopAddress,    // before the instruction at a stop address
     Requested,      // after the instruction whose bus access called request_stop()
+    Isb,            // after an ISB, while stop_on_isb
 };
 
 const char* stop_name(Stop s);
@@ -92,7 +93,10 @@ public:
     Thumb();
     void set_bus(Bus* bus) { bus_ = bus; }
 
+    // Runs until a stop. The deadline may be brought forward during the run (from a bus
+    // call: lower_deadline()); the run then stops at the next instruction boundary past it.
     Stop run(uint64_t deadline_cycles, uint64_t max_instructions);
+    void lower_deadline(uint64_t cycles) { if (cycles < deadline_) deadline_ = cycles; }
     void request_stop() { pending_ |= kPendRequested; }
 
     // --- state ---------------------------------------------------------------------------
@@ -126,6 +130,12 @@ public:
     // cleared, as unicorn does).
     bool aspen = true;
     uint32_t fpdscr = 0;
+    bool stop_on_isb = false;   // stop after each ISB (Stop::Isb)
+    // Instructions are fetched from flash below this address: the owner sets it to 0 while
+    // the flash is being programmed, and a fetch from flash then stops the run as a fetch
+    // from nothing (BusFault with fault_address() = the PC), which the owner reports as the
+    // read collision it is.
+    uint32_t flash_fetch_limit = kFlashSize;
     bool div0_trap = false;     // CCR.DIV_0_TRP
     bool unalign_trap = false;  // CCR.UNALIGN_TRP
 
@@ -213,7 +223,7 @@ Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP h
 
 inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
     Op* op;
-    if (pc < kFlashSize) op = &fcache_[pc >> 1];
+    if (pc < flash_fetch_limit) op = &fcache_[pc >> 1];
     else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
     else return nullptr;
     if (__builtin_expect(!op->fn, 0)) decode(pc, *op);

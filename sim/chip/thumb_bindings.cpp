@@ -79,6 +79,7 @@ void bind_thumb(py::module_& m) {
             return std::string(stop_name(e.cpu.run(deadline, max_instructions)));
         }, py::arg("deadline_cycles"), py::arg("max_instructions"))
         .def("request_stop", [](Engine& e) { e.cpu.request_stop(); })
+        .def("lower_deadline", [](Engine& e, uint64_t c) { e.cpu.lower_deadline(c); })
         .def("reg", [](Engine& e, unsigned n) { return e.cpu.reg(n & 15); })
         .def("set_reg", [](Engine& e, unsigned n, uint32_t v) { e.cpu.set_reg(n & 15, v); })
         .def("sreg", [](Engine& e, unsigned n) { return e.cpu.sreg(n & 31); })
@@ -94,6 +95,7 @@ void bind_thumb(py::module_& m) {
                       [](Engine& e, decltype(Thumb::name) v) { e.cpu.name = v; })
         HQ_FIELD(primask) HQ_FIELD(faultmask) HQ_FIELD(basepri) HQ_FIELD(fpu_enabled)
         HQ_FIELD(div0_trap) HQ_FIELD(unalign_trap) HQ_FIELD(aspen) HQ_FIELD(fpdscr)
+        HQ_FIELD(stop_on_isb) HQ_FIELD(flash_fetch_limit)
 #undef HQ_FIELD
         .def_property("cycles", [](Engine& e) { return e.cpu.cycles(); },
                       [](Engine& e, uint64_t v) { e.cpu.set_cycles(v); })

@@ -353,7 +353,7 @@ void decode_branch_misc(Op& op, uint16_t h1, uint16_t h2) {
         else set(op, hint == 3 ? wfi : hint <= 4 ? nop : unknown);
     } else if (o == 0x3B) {                                   // DSB DMB ISB
         const unsigned k = bits(h2, 7, 4);
-        set(op, nop, k == 6 ? 3 : 1);
+        set(op, k == 6 ? isb : nop, k == 6 ? 3 : 1);
         if (k < 4 || k > 6) op.fn = unknown;
     } else if (o == 0x7F && op1 == 2) {
         set(op, udf);

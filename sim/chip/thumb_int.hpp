@@ -257,6 +257,10 @@ void tb(Thumb& t, const Op& o) {
 inline void nop(Thumb&, const Op&) {}
 inline void it(Thumb& t, const Op& o) { t.it_ = o.imm; }
 inline void wfi(Thumb& t, const Op&) { t.stop_after(Stop::Wfi); }
+// ISB: a stop after it only while the owner watches for one (the FPU-enable check).
+inline void isb(Thumb& t, const Op&) {
+    if (t.stop_on_isb) t.stop_after(Stop::Isb);
+}
 inline void bkpt(Thumb& t, const Op&) { t.stop_before(Stop::Bkpt); }
 inline void svc(Thumb& t, const Op& o) {
     t.svc_number_ = o.imm;
