@@ -2,16 +2,18 @@
 
 Runs the same sine experiment (`heliquad sil`: the roll transfer function, mixer injection,
 1 Hz, 0.05) on the host build and on the Teensy 3.5 image in the emulated MK64FX512 over each
-of its links (`--link uart`, `--link usb`), and prints for each the frames per second of the
-lockstep loop (wall time of the loop alone, start-up excluded) as a multiple of real time at
-200 Hz; then each PIL run's rate as a ratio to the host build's measured in the same run (the
-baseline) and USB's to UART0's, and where the PIL's time goes: the emulated board driven
-alone for as many loops as the drop-in drives it (its share of a frame; the rest is the
-lockstep around it), over each link, with the board's own counts per loop; last, the boards
-over both links driven in turns with a sync every loop, so that the two links' rates are
-compared under the same load.
+of its links (`--link uart`, `--link usb`) with each of the emulated chip's CPUs (unicorn and
+the engine, sim/chip/cpu.py; `--cpus` chooses), and prints for each the frames per second of
+the lockstep loop (wall time of the loop alone, start-up excluded) as a multiple of real time
+at 200 Hz; then each PIL run's rate as a ratio to the host build's measured in the same run
+(the baseline), USB's to UART0's and the engine's to unicorn's, and where the PIL's time goes:
+the emulated board driven alone for as many loops as the drop-in drives it (its share of a
+frame; the rest is the lockstep around it), for each CPU and link, with the board's own counts
+per loop; last, those boards driven in turns with a sync every loop, so that they are compared
+under the same load.
 
     python benchmarks/pil_speed.py [--cycles 30] [--elf PATH] [--board-loops 1000]
+                                   [--cpus unicorn,engine]
 
 Figures are wall-clock ratios on a shared machine: they move with the load. Never a test.
 """
@@ -19,6 +21,7 @@ Figures are wall-clock ratios on a shared machine: they move with the load. Neve
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import sys
 import tempfile
@@ -27,8 +30,14 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 LOOP_HZ = 200.0
 LINKS = ("uart", "usb")
-RUNS = [("host", "uart")] + [("teensy35", link) for link in LINKS]
+CPUS = ("unicorn", "engine")
+CPU_VARIABLE = "HQ_CHIP_CPU"    # the emulated chip's CPU, for this process and the drop-in's
 TURNS = 4                   # turns of the boards driven in turns (boards_in_turns)
+
+
+def use_cpu(cpu: str):
+    """The CPU every emulated chip made from now on runs (the drop-in inherits it)."""
+    os.environ[CPU_VARIABLE] = cpu
 
 
 def run(firmware: str, link: str, cycles: int, elf: str | None, out: str):
@@ -53,13 +62,14 @@ def _board_inputs():
             [1500, 1500, 1000, 1500, 2000, 1000, 0, 0])
 
 
-def board_alone(elf: str, link: str, loops: int):
+def board_alone(elf: str, cpu: str, link: str, loops: int):
     """The emulated board driven loop by loop as the drop-in drives it (inputs in, one loop,
     outputs out), without the ptys, the codec or the simulator: wall time, and the board's
     own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
     accesses and events)."""
     from heliquad.sim.chip.pil.board import PilBoard
 
+    use_cpu(cpu)
     board = PilBoard(elf, link=link)
     board.boot()
     sample, rc = _board_inputs()
@@ -74,33 +84,37 @@ def board_alone(elf: str, link: str, loops: int):
     return wall, {k: (after[k] - before[k]) / loops for k in after}
 
 
-def boards_in_turns(elf: str, loops: int, turns: int = TURNS) -> dict:
-    """The board over each link, booted once each and driven in turns (``turns`` turns of
-    ``loops`` loops, a sync every loop as the lockstep asks for its telemetry): each link's
+def boards_in_turns(elf: str, cpus, loops: int, turns: int = TURNS) -> dict:
+    """The board for each CPU and link, booted once each and driven in turns (``turns`` turns
+    of ``loops`` loops, a sync every loop as the lockstep asks for its telemetry): each one's
     wall time a loop. Turns taken in the same minutes see the same load on a shared
     machine, which the runs one after the other above do not."""
     from heliquad.sim.chip.pil.board import PilBoard
 
     sample, rc = _board_inputs()
-    boards = {link: PilBoard(elf, link=link) for link in LINKS}
-    wall = dict.fromkeys(LINKS, 0.0)
+    boards = {}
+    for cpu in cpus:
+        use_cpu(cpu)
+        for link in LINKS:
+            boards[cpu, link] = PilBoard(elf, link=link)
+    wall = dict.fromkeys(boards, 0.0)
     for board in boards.values():
         board.boot()
     for _ in range(turns):
-        for link, board in boards.items():
+        for key, board in boards.items():
             t0 = time.perf_counter()
             for _ in range(loops):
                 board.frame(sample, False, rc, 0, sync=True)
                 board.telemetry_out.clear()
-            wall[link] += time.perf_counter() - t0
-    return {link: wall[link] / (turns * loops) for link in LINKS}
+            wall[key] += time.perf_counter() - t0
+    return {key: wall[key] / (turns * loops) for key in boards}
 
 
-def board_report(elf: str, link: str, n: int, pil_rate: float):
-    wall, per = board_alone(elf, link, n)
+def board_report(elf: str, cpu: str, link: str, n: int, pil_rate: float):
+    wall, per = board_alone(elf, cpu, link, n)
     board_rate = n / wall
     pil_frame_us = 1e6 / pil_rate
-    print(f"\nthe emulated board alone over {link}, {n} loops driven as the drop-in drives "
+    print(f"\nthe emulated board alone ({cpu}) over {link}, {n} loops driven as the drop-in drives "
           f"them: {board_rate:.0f} loops/s = {board_rate / LOOP_HZ:.2f}x real time, "
           f"{1e6 / board_rate:.0f} us a loop")
     print(f"  so of the PIL's {pil_frame_us:.0f} us a frame, the board takes "
@@ -112,6 +126,34 @@ def board_report(elf: str, link: str, n: int, pil_rate: float):
           f"{per['python_events']:.2f} Python events, {per['exceptions']:.1f} exceptions")
 
 
+def _cpus(text: str):
+    cpus = tuple(c for c in text.split(",") if c)
+    bad = [c for c in cpus if c not in CPUS]
+    if bad or not cpus:
+        raise argparse.ArgumentTypeError(f"CPUs are {', '.join(CPUS)}, comma-separated")
+    return cpus
+
+
+def pil_runs(elf: str, cpus, cycles: int) -> dict:
+    """The experiment on the host build, then on the image for each CPU and link: each
+    run's lockstep rate (frames a second of wall time), printed as it comes."""
+    rates = {}
+    runs = [("host", "host", "uart")] + [(f"{cpu} {link}", cpu, link)
+                                         for cpu in cpus for link in LINKS]
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, cpu, link in runs:
+            if cpu != "host":
+                use_cpu(cpu)
+            fw = "host" if cpu == "host" else "teensy35"
+            r, total = run(fw, link, cycles, elf, str(pathlib.Path(tmp) / name.replace(" ", "-")))
+            rate = r.frames / r.loop_s
+            rates[name] = rate
+            print(f"{name:14s}: {r.frames} frames ({r.frames / LOOP_HZ:.2f} s simulated); "
+                  f"lockstep {r.loop_s:.2f} s wall = {rate:.0f} frames/s = "
+                  f"{rate / LOOP_HZ:.2f}x real time; start-up and shutdown {total - r.loop_s:.2f} s")
+    return rates
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cycles", type=int, default=30,
@@ -121,31 +163,32 @@ def main() -> int:
     p.add_argument("--elf", help="the Teensy image (default: the installed or in-tree one)")
     p.add_argument("--board-loops", type=int, default=1000,
                    help="loops of the board driven alone (default 1000)")
+    p.add_argument("--cpus", type=_cpus, default=CPUS,
+                   help="the emulated chip's CPUs to measure, comma-separated (default "
+                        "unicorn,engine)")
     args = p.parse_args()
     from heliquad.sim.base.firmware_image import teensy35_image
 
     elf = args.elf or str(teensy35_image("elf"))
     print(f"image: {elf}")
-    rates = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        for fw, link in RUNS:
-            name = fw if fw == "host" else f"{fw} {link}"
-            r, total = run(fw, link, args.cycles, elf, str(pathlib.Path(tmp) / f"{fw}-{link}"))
-            rate = r.frames / r.loop_s
-            rates[name] = rate
-            print(f"{name:14s}: {r.frames} frames ({r.frames / LOOP_HZ:.2f} s simulated); "
-                  f"lockstep {r.loop_s:.2f} s wall = {rate:.0f} frames/s = "
-                  f"{rate / LOOP_HZ:.2f}x real time; start-up and shutdown {total - r.loop_s:.2f} s")
-    for link in LINKS:
-        print(f"PIL over {link} / host lockstep rate: {rates[f'teensy35 {link}'] / rates['host']:.4f}")
-    print(f"PIL over usb / over uart: {rates['teensy35 usb'] / rates['teensy35 uart']:.4f}")
-    for link in LINKS:
-        board_report(elf, link, args.board_loops, rates[f"teensy35 {link}"])
-    per_loop = boards_in_turns(elf, max(1, args.board_loops // TURNS))
-    print(f"\nthe boards over both links driven in turns ({TURNS} turns of "
-          f"{max(1, args.board_loops // TURNS)} loops each, a sync every loop): "
-          + ", ".join(f"{link} {1e6 * per_loop[link]:.0f} us a loop" for link in LINKS)
-          + f"; usb / uart rate {per_loop['uart'] / per_loop['usb']:.4f}")
+    rates = pil_runs(elf, args.cpus, args.cycles)
+    for cpu in args.cpus:
+        for link in LINKS:
+            print(f"PIL ({cpu}) over {link} / host lockstep rate: "
+                  f"{rates[f'{cpu} {link}'] / rates['host']:.4f}")
+        print(f"PIL ({cpu}) over usb / over uart: {rates[f'{cpu} usb'] / rates[f'{cpu} uart']:.4f}")
+    if set(CPUS) <= set(args.cpus):
+        for link in LINKS:
+            print(f"PIL over {link}, engine / unicorn: "
+                  f"{rates[f'engine {link}'] / rates[f'unicorn {link}']:.4f}")
+    for cpu in args.cpus:
+        for link in LINKS:
+            board_report(elf, cpu, link, args.board_loops, rates[f"{cpu} {link}"])
+    loops = max(1, args.board_loops // TURNS)
+    per_loop = boards_in_turns(elf, args.cpus, loops)
+    print(f"\nthe boards driven in turns ({TURNS} turns of {loops} loops each, a sync every "
+          "loop): " + ", ".join(f"{cpu} {link} {1e6 * t:.0f} us a loop"
+                               for (cpu, link), t in per_loop.items()))
     print("  (benchmarks/teensy35_pil_speed.py --profile breaks the board's own time down)")
     return 0
 

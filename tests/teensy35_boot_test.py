@@ -1227,13 +1227,11 @@ def call_in_image(machine, ret: int, address: int, args, budget: int):
     """Calls the image's function at ``address`` with ``args`` in r0-r3 as a debug probe
     would, returning to a BKPT written at ``ret`` (scratch RAM): the run's Stop, reason
     "bkpt" at ``ret`` once it returned (r0 holds the result)."""
-    from unicorn import arm_const as A   # core registers by name: only these calls set them
-
     machine.write(ret, b"\x00\xbe\x00\xbe")                      # bkpt #0
     for i, value in enumerate(args):
-        machine.uc.reg_write(getattr(A, f"UC_ARM_REG_R{i}"), value)
-    machine.uc.reg_write(A.UC_ARM_REG_LR, ret | 1)
-    machine.uc.reg_write(A.UC_ARM_REG_PC, address)
+        machine.set_reg(f"r{i}", value)
+    machine.set_reg("lr", ret | 1)
+    machine.set_reg("pc", address)
     return machine.run(instructions=budget)
 
 

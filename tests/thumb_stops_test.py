@@ -167,3 +167,11 @@ def test_fetching_from_flash_past_its_fetch_limit_is_a_fetch_from_nothing():
     assert e.run(1000, 10) == "bus_fault" and e.fault_address == 0x1000
     e.flash_fetch_limit = 512 * 1024
     assert e.run(1000, 10) == "bkpt" and e.pc == 0x1002
+
+
+def test_a_run_stopped_just_before_a_stop_address_for_another_reason_stops_there_next():
+    e = _engine(0xBF00, 0xBF00, 0xBE00)                           # nop; nop; bkpt
+    e.add_stop_address(CODE + 2)
+    assert e.run(1, 10) == "deadline" and e.pc == CODE + 2        # at it, not yet reported
+    assert e.run(1000, 10) == "stop_address" and e.pc == CODE + 2
+    assert e.run(1000, 10) == "bkpt"

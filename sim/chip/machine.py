@@ -35,26 +35,25 @@ faults and their messages, and the logs of the first accesses.
 from __future__ import annotations
 
 import collections
-import ctypes
 import struct
 from dataclasses import dataclass, field
 
-from unicorn import (UC_ARCH_ARM, UC_HOOK_CODE, UC_HOOK_MEM_UNMAPPED, UC_MODE_MCLASS,
-                     UC_MODE_THUMB, UC_PROT_ALL, UC_PROT_EXEC, UC_PROT_NONE, UC_PROT_READ,
-                     UC_TLB_VIRTUAL, Uc, UcError)
-from unicorn import arm_const as A
+from unicorn import UcError
 
-from .image import FLASH_BASE, FLASH_SIZE, SRAM_BASE, SRAM_SIZE, Image, exception_name
+from .cpu import (N_EXCEPTIONS, PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_SIZE,
+                  make_cpu)
+from .errors import ChipReset, EmulationError, Fault
+from .image import FLASH_BASE, FLASH_SIZE, Image
 from .timing import BlockDecoder
 
-PERIPHERAL_BASE, PERIPHERAL_SIZE = 0x4000_0000, 0x0010_0000    # AIPS0/1 bridges and GPIO
-PPB_BASE, PPB_SIZE = 0xE000_0000, 0x0010_0000                  # private peripheral bus
+__all__ = ["ChipReset", "EmulationError", "Fault", "Machine", "Stop", "Access", "Event",
+           "Device", "PERIPHERAL_BASE", "PERIPHERAL_SIZE", "PPB_BASE", "PPB_SIZE", "N_EXCEPTIONS"]
 
-N_EXCEPTIONS = 16 + 86
 _INTR_UNDEF = 1
 # Why Mk64Core.run() returned (sim/chip/mk64_core.hpp, enum Run).
 (_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
- _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET, _RUN_STOP_AT) = range(1, 13)
+ _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET, _RUN_STOP_AT,
+ _RUN_CPU_STOP) = range(1, 14)
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
  GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE) = range(11)
@@ -63,27 +62,6 @@ _INTR_UNDEF = 1
 PY_CALL_USB_PUMP, PY_CALL_USB_WRITE_BACK = 1, 2
 # Block flags in the native table (Block::kMaskOp ...).
 _MASK_OP, _ISB, _VFP, _WFI = 1, 2, 4, 8
-
-
-class EmulationError(RuntimeError):
-    """Something the emulated chip cannot continue from."""
-
-
-class Fault(EmulationError):
-    """A fault the chip would raise (BusFault, UsageFault, MemManage, ...). The harness stops
-    instead of entering the fault handler, so a test sees the cause and the instruction."""
-
-    def __init__(self, kind: str, message: str, pc: int | None = None, address: int | None = None):
-        self.kind, self.pc, self.address = kind, pc, address
-        super().__init__(f"{kind}: {message}")
-
-
-class ChipReset(EmulationError):
-    """A reset the chip would perform (watchdog, SYSRESETREQ)."""
-
-    def __init__(self, source: str, message: str):
-        self.source = source
-        super().__init__(f"reset by {source}: {message}")
 
 
 @dataclass
@@ -161,40 +139,20 @@ class Machine:
     TRACE_LENGTH = 256          # recent peripheral accesses kept for error messages
     FIRST_ACCESSES = 64         # the first accesses after reset, kept for boot-order checks
 
-    def __init__(self, image: Image | None = None, *, core_hz: float = 20_971_520.0):
+    def __init__(self, image: Image | None = None, *, core_hz: float = 20_971_520.0,
+                 cpu: str | None = None):
         self.image = image
-        uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
-        uc.ctl_set_cpu_model(A.UC_CPU_ARM_CORTEX_M4)        # before anything else
-        uc.mem_map(FLASH_BASE, FLASH_SIZE, UC_PROT_READ | UC_PROT_EXEC)
-        uc.mem_write(FLASH_BASE, b"\xff" * FLASH_SIZE)            # an erased chip
-        uc.mem_map(SRAM_BASE, SRAM_SIZE, UC_PROT_ALL)
-        self.uc = uc
-        self._native = _Native(uc, self)
-        self.core = self._native.core
-        self.core.install(PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_SIZE)
-        # The core fills unicorn's TLB itself (mk64_core.hpp, install_tlb): the default
-        # memory map's permissions, and RAM stores on unicorn's fast path.
-        uc.ctl_set_tlb_mode(UC_TLB_VIRTUAL)
-        self.core.install_tlb(SRAM_BASE, SRAM_SIZE)
-        for base, size in ((PERIPHERAL_BASE, PERIPHERAL_SIZE), (PPB_BASE, PPB_SIZE)):
-            # No access rights: every access there calls the core's protection hook, with the
-            # PC brought up to date first, and then goes to the MMIO callbacks (install()).
-            uc.mem_protect(base, size, UC_PROT_NONE)
-        # The unmapped-access hook covers only the holes of the map: unicorn never lets a
-        # page that any memory hook covers take the fast store path, so a hook over all of
-        # the address space would send every RAM store through its slow path.
-        mapped = sorted((lo, hi) for lo, hi, _ in uc.mem_regions())
-        edge = 0
-        for lo, hi in mapped + [(1 << 32, 1 << 32)]:
-            if lo > edge:
-                uc.hook_add(UC_HOOK_MEM_UNMAPPED, self._on_unmapped, begin=edge, end=lo - 1)
-            edge = max(edge, hi + 1)
+        self.cpu = make_cpu(self, cpu)      # unicorn or the engine (cpu.py)
+        self.uc = self.cpu.uc               # unicorn's, when it is the CPU (None otherwise)
+        self.core = self.cpu.core
+        self._engine = self.cpu.name == "engine"
         self._decoder = BlockDecoder()
         self._blocks = {}                               # start -> timing.Block (decoded once)
         self._pages = collections.defaultdict(list)     # 4 KiB page -> [(lo, hi, device)]
         self.devices = []
         self._breakpoints = {}                         # address -> [callback]
-        self._bp_hooks = {}
+        self._bp_hooks = set()
+        self._stop_ats = set()
         self._py_events = {}                           # native event number -> Event
         self.native_calls = {}                         # Core::PyCall -> its Python part
         self._reset_core_hz = core_hz
@@ -325,10 +283,7 @@ class Machine:
         if self._error is None:
             self._error = error
         self.core.request_error()
-        try:
-            self.uc.emu_stop()
-        except UcError:
-            pass
+        self.cpu.stop()
 
     def _on_unmapped(self, uc, access, address, size, value, _):
         kinds = {19: "read", 20: "write", 21: "fetch"}     # UC_MEM_*_UNMAPPED
@@ -343,9 +298,8 @@ class Machine:
         address = self._code_address(where)
         self._breakpoints.setdefault(address, []).append(callback)
         if address not in self._bp_hooks:
-            self._bp_hooks[address] = self.uc.hook_add(UC_HOOK_CODE, self._on_breakpoint, None,
-                                                       address, address)
-            self.uc.ctl_remove_cache(address, address + 4)      # retranslate with the hook
+            self._bp_hooks.add(address)
+            self.cpu.add_breakpoint(address, self._on_breakpoint)
         return address
 
     def stop_at(self, where) -> int:
@@ -354,46 +308,54 @@ class Machine:
         breakpoint with no callback, but native: no call into Python at the stop, for the
         stops a lockstep driver makes every loop."""
         address = self._code_address(where)
+        self._stop_ats.add(address)
         self.core.add_stop_at(address)
-        self.uc.ctl_remove_cache(address, address + 4)      # retranslate with the hook
+        self.cpu.code_changed(address)      # unicorn: retranslate with the hook
         return address
 
     def _code_address(self, where) -> int:
         """An instruction's address: a symbol's, or an address with its Thumb bit cleared."""
         return self.image.symbol(where).address if isinstance(where, str) else where & ~1
 
+    def _breakpoint_stop(self, address: int):
+        """The breakpoint callbacks at ``address`` called; the Stop they ask for, or None."""
+        stop = None
+        for cb in self._breakpoints.get(address, ()):
+            result = True if cb is None else cb(self)
+            if result and stop is None:
+                stop = result
+        if not stop:
+            return None
+        return stop if isinstance(stop, Stop) else \
+            Stop(stop if isinstance(stop, str) else "breakpoint", address)
+
     def _on_breakpoint(self, uc, address, size, _):
+        """Unicorn's code hook at a breakpoint (the engine stops there instead: run())."""
         if address == self._bp_resume:
             self._bp_resume = None
             return
-        stop = None
         try:
-            for cb in self._breakpoints.get(address, ()):
-                result = True if cb is None else cb(self)
-                if result and stop is None:
-                    stop = result
+            stop = self._breakpoint_stop(address)
         except BaseException as e:           # noqa: BLE001 - re-raised by run()
             self._defer(e)
             return
         if stop:
-            self._stop = stop if isinstance(stop, Stop) else \
-                Stop(stop if isinstance(stop, str) else "breakpoint", address)
+            self._stop = stop
             self.core.request_stop()
             uc.emu_stop()
 
     # ------------------------------------------------------------------ reset ---------
     def load(self, image: Image):
         self.image = image
-        self.uc.mem_write(FLASH_BASE, b"\xff" * FLASH_SIZE)
+        self.write(FLASH_BASE, b"\xff" * FLASH_SIZE)
         for address, data in image.segments:
-            self.uc.mem_write(address, data)
+            self.write(address, data)
         self._blocks.clear()
         self.core.clear_blocks()
         self.reset()
 
     def reset(self):
         """Power-on reset: core registers, NVIC, time, every attached device."""
-        uc = self.uc
         self.core.reset(self._reset_core_hz)    # time, events, NVIC, the native devices
         self._py_events.clear()
         self._stop = None
@@ -411,17 +373,11 @@ class Machine:
         self.access_listeners = []
         self._trace_enabled = False
         self._update_log_all()
-        for reg in (A.UC_ARM_REG_R0, A.UC_ARM_REG_R1, A.UC_ARM_REG_R2, A.UC_ARM_REG_R3,
-                    A.UC_ARM_REG_R4, A.UC_ARM_REG_R5, A.UC_ARM_REG_R6, A.UC_ARM_REG_R7,
-                    A.UC_ARM_REG_R8, A.UC_ARM_REG_R9, A.UC_ARM_REG_R10, A.UC_ARM_REG_R11,
-                    A.UC_ARM_REG_R12):
-            uc.reg_write(reg, 0)
-        uc.reg_write(A.UC_ARM_REG_LR, 0xFFFF_FFFF)
-        uc.reg_write(A.UC_ARM_REG_CONTROL, 0)
-        uc.reg_write(A.UC_ARM_REG_PRIMASK, 0)
-        uc.reg_write(A.UC_ARM_REG_BASEPRI, 0)
-        uc.reg_write(A.UC_ARM_REG_FAULTMASK, 0)
-        uc.reg_write(A.UC_ARM_REG_XPSR, 1 << 24)
+        for n in range(13):
+            self.set_reg(f"r{n}", 0)
+        for name, value in (("lr", 0xFFFF_FFFF), ("control", 0), ("primask", 0), ("basepri", 0),
+                            ("faultmask", 0), ("xpsr", 1 << 24)):
+            self.set_reg(name, value)
         for listener in self.pre_reset_listeners:
             listener()
         for dev in self.devices:
@@ -429,9 +385,9 @@ class Machine:
         for listener in self.reset_listeners:
             listener()
         if self.image is not None:
-            uc.reg_write(A.UC_ARM_REG_MSP, self._read32(0))
-            uc.reg_write(A.UC_ARM_REG_SP, self._read32(0))
-            uc.reg_write(A.UC_ARM_REG_PC, self._read32(4) & ~1)
+            self.set_reg("msp", self._read32(0))
+            self.set_reg("sp", self._read32(0))
+            self.set_reg("pc", self._read32(4) & ~1)
 
     # ------------------------------------------------------------------ time ----------
     @property
@@ -516,25 +472,56 @@ class Machine:
     def _check_fpu(self, block) -> bool:
         """The first FPU instruction is about to run. Not granted: a NOCP UsageFault on the
         chip (False: the run stops with that fault). Granted but no ISB since: recorded."""
-        at = (self.instructions + block.vfp_at, block.addrs[block.vfp_at])
+        error = self._first_fpu((self.instructions + block.vfp_at, block.addrs[block.vfp_at]))
+        if error is not None:
+            self._error = error
+            self.core.request_error()
+            return False
+        return True
+
+    def _first_fpu(self, at):
+        """The first FPU instruction, ``at`` = (instruction count, pc), is about to run: the
+        NOCP fault the chip would take if CPACR does not grant CP10/CP11 (else None, and
+        recorded when no ISB has come since the grant)."""
         self.first_fpu = at
         if (self.cpacr >> 20) & 0xF != 0xF:
             self.fpu_violation = at
-            self._error = Fault("UsageFault", f"NOCP: FPU instruction at {self.describe(at[1])} "
-                                f"(instruction {at[0]}) before CPACR granted CP10 and CP11 "
-                                f"(CPACR = 0x{self.cpacr:08X}; a grant in the same block has "
-                                "no ISB before it either)", at[1])
-            self.core.request_error()
-            return False
+            return Fault("UsageFault", f"NOCP: FPU instruction at {self.describe(at[1])} "
+                         f"(instruction {at[0]}) before CPACR granted CP10 and CP11 "
+                         f"(CPACR = 0x{self.cpacr:08X}; a grant in the same block has "
+                         "no ISB before it either)", at[1])
         if self.fpu_synced_at is None:
             self.fpu_violation = at
-        return True
+        return None
+
+    def _cpu_stop(self):
+        """The engine stopped for Python's judgement: the ISB after a CPACR grant (noted),
+        the first FP instruction (judged: the engine then runs FP instructions), or a fault
+        of the program (returned, for run() to raise)."""
+        reason, pc, address, detail = self.core.cpu_stop()
+        if reason == "isb":
+            if self.fpu_granted_at is not None and self.fpu_synced_at is None:
+                self.fpu_synced_at = self.core.instructions
+            self.core.engine_watch_isb = False
+            return None
+        if reason == "no_fpu":
+            error = self._first_fpu((self.core.instructions, pc))
+            if error is None:
+                self._fpu_watch = False
+                self.core.fpu_watch = False
+                self.core.engine_fpu = True
+                self.core.engine_watch_isb = False
+            return error
+        return _engine_fault(reason, pc, address, detail, self.describe(pc))
 
     def grant_fpu(self, cpacr: int):
         """SCB_CPACR written (from the SCS model)."""
         self.cpacr = cpacr
         if (cpacr >> 20) & 0xF == 0xF and self.fpu_granted_at is None:
             self.fpu_granted_at = self.instructions_now()
+            if self._engine:                # the engine stops after the next ISB
+                self.core.engine_watch_isb = self._fpu_watch
+                return
             cur = self.core.cur_start()
             if cur >= 0 and self._blocks[cur].isb:
                 # ISB ends a block, so it follows this write in the same block
@@ -585,10 +572,22 @@ class Machine:
                     self._bp_resume = self._stop.pc
                     return self._stop
                 if code == _RUN_STOP_AT:
-                    return Stop("stop-at", core.stop_at_pc)
+                    pc = core.stop_at_pc
+                    if self._engine and pc in self._bp_hooks:    # the engine's breakpoints
+                        stop = self._breakpoint_stop(pc)
+                        if stop:
+                            return stop
+                        if pc not in self._stop_ats:
+                            continue
+                    return Stop("stop-at", pc)
+                if code == _RUN_CPU_STOP:
+                    error = self._cpu_stop()
+                    if error is None:
+                        continue
+                    raise error
                 if code == _RUN_BKPT:
                     pc = core.bkpt_pc
-                    return Stop("bkpt", pc, {"imm": self.uc.mem_read(pc, 2)[0]})
+                    return Stop("bkpt", pc, {"imm": self.read(pc, 2)[0]})
                 if code == _RUN_BUDGET:
                     return Stop("budget", self.pc, {"instructions": self.instructions})
                 if code == _RUN_TIME:
@@ -661,24 +660,31 @@ class Machine:
 
     # ------------------------------------------------------------------ helpers -------
     def _read32(self, address: int) -> int:
-        return struct.unpack("<I", bytes(self.uc.mem_read(address, 4)))[0]
+        return struct.unpack("<I", self.read(address, 4))[0]
 
     def read(self, address: int, n: int) -> bytes:
-        return bytes(self.uc.mem_read(address, n))
+        """Bytes of flash or SRAM (as a debugger reads them: no peripheral, no time)."""
+        return self.cpu.read(address, n)
 
     def write(self, address: int, data: bytes):
-        self.uc.mem_write(address, bytes(data))
+        """Flash or SRAM written from outside (loading, a test's set-up)."""
+        self.cpu.write(address, data)
 
     def describe(self, pc: int) -> str:
         return self.image.describe(pc) if self.image is not None else f"0x{pc:08X}"
 
     def reg(self, name: str) -> int:
-        return self.uc.reg_read(getattr(A, f"UC_ARM_REG_{name.upper()}"))
+        """A core register by name (r0-r12, sp, lr, pc, msp, psp, xpsr, control, primask,
+        basepri, faultmask, fpscr, s0-s31)."""
+        return self.cpu.reg(name)
+
+    def set_reg(self, name: str, value: int):
+        self.cpu.set_reg(name, value)
 
     def paint(self, lo: int, hi: int, word: int = 0xDEADBEEF):
         """Fill [lo, hi) with a 32-bit pattern (stack painting)."""
         lo, hi = (lo + 3) & ~3, hi & ~3
-        self.uc.mem_write(lo, struct.pack("<I", word) * ((hi - lo) // 4))
+        self.write(lo, struct.pack("<I", word) * ((hi - lo) // 4))
 
     def painted_high_water(self, lo: int, hi: int, word: int = 0xDEADBEEF) -> int:
         """Lowest address in [lo, hi) whose painted word was overwritten (hi if none)."""
@@ -689,6 +695,25 @@ class Machine:
             if data[off:off + 4] != pattern:
                 return lo + off
         return hi
+
+
+def _engine_fault(reason: str, pc: int, address: int, detail: str, where: str) -> Fault:
+    """The fault the chip would take for what stopped the engine (Core::engine_stopped)."""
+    if reason == "bus_fault":
+        if address == pc:
+            return Fault("MemManage", f"instruction fetch from 0x{address:08X}, outside flash "
+                         f"and SRAM, at {where}", pc, address)
+        kind = "write" if "write" in detail else "read"
+        if kind == "write" and address < FLASH_BASE + FLASH_SIZE:
+            return Fault("BusFault", f"write to flash at {where}", pc, address)
+        return Fault("BusFault", f"{kind} of unmapped 0x{address:08X} at {where}", pc, address)
+    if reason == "unaligned":
+        return Fault("UsageFault", f"UNALIGNED: {detail} 0x{address:08X} at {where}", pc, address)
+    if reason == "div_by_zero":
+        return Fault("UsageFault", f"DIVBYZERO: a division by zero at {where}", pc)
+    if reason == "inv_state":
+        return Fault("UsageFault", f"INVSTATE: {detail} at {where}", pc, address)
+    return Fault("Fault", f"the engine stopped ({reason} {detail}) at {where}", pc)
 
 
 class _Priorities:
@@ -724,71 +749,3 @@ class _ExceptionLog:
 
     def __getitem__(self, i):
         return self._core.exception_log()[i]
-
-
-class _Native:
-    """The native core and what it needs from the unicorn binding: the engine handle and the
-    library's entry points (taken from the library the binding loaded; nothing is linked),
-    and the ctypes callbacks it calls back into Python with."""
-
-    def __init__(self, uc, machine):
-        try:
-            # a missing binding or native core says so in one line (EmulationError)
-            from unicorn.unicorn_py3 import unicorn as binding
-            lib, handle = binding.uclib, uc._uch
-            code_t = binding.HOOK_CODE_CFUNC
-        except (ImportError, AttributeError) as e:
-            raise EmulationError(
-                "the emulator needs the unicorn Python binding's internals (unicorn_py3.unicorn."
-                f"uclib, Uc._uch; unicorn>=2.1.4,<3 is pinned): {e}") from None
-        try:
-            # a missing binding or native core says so in one line (EmulationError)
-            from heliquad._simcore import Mk64Core
-        except ImportError as e:
-            raise EmulationError(f"the emulator's native core (heliquad._simcore.Mk64Core) is "
-                                 f"not built: {e}") from None
-        self.uc, self.lib, self.handle, self._code_t = uc, lib, handle, code_t
-        self._keep = []
-        m = machine
-
-        def guarded(fn, failed):
-            def call(*args):
-                try:
-                    return fn(*args)
-                except BaseException as e:       # noqa: BLE001 - re-raised by run()
-                    m._defer(e)
-                    return failed
-            return call
-
-        decode_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint64, ctypes.c_uint32)
-        fpu_t = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_uint64)
-        read_t = ctypes.CFUNCTYPE(ctypes.c_uint64, ctypes.c_uint64, ctypes.c_uint32)
-        write_t = ctypes.CFUNCTYPE(None, ctypes.c_uint64, ctypes.c_uint32, ctypes.c_uint64)
-
-        def decode(address, size):
-            m._decode(address, size)
-            return 0
-
-        callbacks = {
-            "decode": decode_t(guarded(decode, 1)),
-            "fpu_check": fpu_t(guarded(lambda a: 1 if m._fpu_block(a) else 0, 0)),
-            "read": read_t(guarded(m._mmio_read, 0)),
-            "write": write_t(guarded(m._mmio_write, None)),
-        }
-        self._keep += callbacks.values()
-        address = self.address
-        functions = {name: address(getattr(lib, name)) for name in
-                     ("uc_emu_start", "uc_emu_stop", "uc_reg_read", "uc_reg_write", "uc_reg_write2",
-                      "uc_reg_read_batch", "uc_reg_write_batch",
-                      "uc_mem_read", "uc_mem_write", "uc_hook_add", "uc_mmio_map")}
-        functions["handle"] = handle.value
-        regs = {name: getattr(A, f"UC_ARM_REG_{name}") for name in
-                ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "EPSR", "CONTROL", "FPSCR",
-                 "PRIMASK", "BASEPRI", "FAULTMASK")}
-        regs.update({f"D{i}": getattr(A, f"UC_ARM_REG_D{i}") for i in range(8)})
-        self.core = Mk64Core(functions, regs, {k: address(v) for k, v in callbacks.items()},
-                             [exception_name(n) for n in range(N_EXCEPTIONS)])
-
-    @staticmethod
-    def address(fn) -> int:
-        return ctypes.cast(fn, ctypes.c_void_p).value

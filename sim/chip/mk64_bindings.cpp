@@ -173,6 +173,51 @@ void bind_mk64(py::module_& m) {
                  return new Core(u, r, p, std::move(names));
              }),
              py::arg("uc"), py::arg("regs"), py::arg("callbacks"), py::arg("exception_names"))
+        .def_static("with_engine", [](const py::dict& callbacks, std::vector<std::string> names) {
+            PyCallbacks p;
+            p.read = function<decltype(p.read)>(callbacks, "read");
+            p.write = function<decltype(p.write)>(callbacks, "write");
+            return std::make_unique<Core>(p, std::move(names));
+        }, py::arg("callbacks"), py::arg("exception_names"),
+           "The core with its own CPU (the engine, sim/chip/thumb.hpp) in place of unicorn")
+        .def_property_readonly("has_engine", &Core::has_engine)
+        .def_static("engine_registers", []() {
+            py::dict d;
+            const char* special[] = {"XPSR", "EPSR", "CONTROL", "FPSCR", "PRIMASK", "BASEPRI",
+                                     "FAULTMASK", "MSP", "PSP", "APSR", "IPSR"};
+            for (int i = 0; i < 13; ++i) d[py::str("R" + std::to_string(i))] = i;
+            d["SP"] = static_cast<int>(kEngSp); d["LR"] = static_cast<int>(kEngLr);
+            d["PC"] = static_cast<int>(kEngPc);
+            for (int i = 0; i < 11; ++i) d[special[i]] = static_cast<int>(kEngXpsr) + i;
+            for (int i = 0; i < 16; ++i) d[py::str("D" + std::to_string(i))] = kEngD0 + i;
+            for (int i = 0; i < 32; ++i) d[py::str("S" + std::to_string(i))] = kEngS0 + i;
+            return d;
+        }, "register name -> number for reg()/set_reg() when the engine is the CPU")
+        .def("reg", [](const Core& c, int id) { return c.reg(id); })
+        .def("set_reg", [](Core& c, int id, uint32_t v) { c.set_reg(id, v); })
+        .def("mem_read", [](const Core& c, uint32_t address, size_t n) {
+            std::string s(n, '\0');
+            if (!c.mem_read(address, s.data(), n)) throw py::index_error("not flash or SRAM");
+            return py::bytes(s);
+        })
+        .def("mem_write", [](Core& c, uint32_t address, const py::bytes& data) {
+            const std::string s = data;
+            if (!c.mem_write(address, s.data(), s.size())) throw py::index_error("not flash or SRAM");
+        })
+        .def_property("engine_fpu", [](const Core& c) { return c.engine_fpu_; },
+                      [](Core& c, bool on) {
+                          c.engine_fpu_ = on;
+                          if (c.has_engine()) c.engine()->fpu_enabled = on;
+                      }, "the engine runs FP instructions (False until the first is judged)")
+        .def_property("engine_watch_isb", [](const Core& c) { return c.engine_watch_isb_; },
+                      [](Core& c, bool on) {
+                          c.engine_watch_isb_ = on;
+                          if (c.has_engine()) c.engine()->stop_on_isb = on;
+                      }, "the engine stops after each ISB (kCpuStop 'isb')")
+        .def("cpu_stop", [](const Core& c) {
+            const CpuStop& s = c.cpu_stop_;
+            return py::make_tuple(s.reason, s.pc, s.address, s.detail);
+        }, "(reason, pc, address, detail) of the engine's last kCpuStop")
         .def("install", &Core::install)
         .def("install_tlb", &Core::install_tlb)
         .def_readonly("xn_fetched", &Core::xn_fetched_)

@@ -64,13 +64,16 @@ const std::string& Core::exception_name(int n) const {
 
 void Core::install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base,
                    uint32_t ppb_size) {
+    spaces_[0].base = periph_base;
+    spaces_[1].base = ppb_base;
+    space_sizes_[0] = periph_size;
+    space_sizes_[1] = ppb_size;
+    if (eng_) return;                // the engine's bus is engine_access (mk64_engine.cpp)
     size_t h = 0;
     uc_.hook_add(uc_.handle, &h, UC_HOOK_BLOCK, reinterpret_cast<void*>(&Core::on_block_cb),
                  this, uint64_t{1}, uint64_t{0});
     uc_.hook_add(uc_.handle, &h, UC_HOOK_INTR, reinterpret_cast<void*>(&Core::on_intr_cb), this,
                  uint64_t{1}, uint64_t{0});
-    spaces_[0].base = periph_base;
-    spaces_[1].base = ppb_base;
     uc_.mmio_map(uc_.handle, periph_base, periph_size,
                  reinterpret_cast<void*>(&Core::mmio_read_cb), &spaces_[0],
                  reinterpret_cast<void*>(&Core::mmio_write_cb), &spaces_[0]);
@@ -91,6 +94,10 @@ void Core::install(uint32_t periph_base, uint32_t periph_size, uint32_t ppb_base
 }
 
 void Core::add_stop_at(uint32_t address) {
+    if (eng_) {
+        eng_->add_stop_address(address);
+        return;
+    }
     size_t h = 0;
     uc_.hook_add(uc_.handle, &h, UC_HOOK_CODE, reinterpret_cast<void*>(&Core::on_stop_at_cb),
                  this, uint64_t{address}, uint64_t{address});
@@ -152,6 +159,13 @@ void Core::reset(double core_hz) {
     if (ftfe.ready) ftfe.reset(*this);
     if (usb0.ready) usb0.reset(*this);
     py_call_ = kNoCall;
+    if (eng_) {
+        engine_fpu_ = engine_watch_isb_ = false;
+        eng_->primask = eng_->faultmask = eng_->basepri = 0;
+        eng_->set_control(0);
+        eng_->set_xpsr(1u << 24);
+        eng_->set_fpscr(0);
+    }
 }
 
 void Core::add_block(Block b) {
@@ -172,6 +186,7 @@ void Core::grow_slots() {
 void Core::install_tlb(uint32_t sram_base, uint32_t sram_size) {
     sram_base_ = sram_base;
     sram_size_ = sram_size;
+    if (eng_) return;
     size_t h = 0;
     uc_.hook_add(uc_.handle, &h, UC_HOOK_TLB_FILL, reinterpret_cast<void*>(&Core::tlb_fill_cb),
                  this, uint64_t{1}, uint64_t{0});
@@ -187,6 +202,7 @@ void Core::install_tlb(uint32_t sram_base, uint32_t sram_size) {
 // STATUSTEXTs went out empty). These hooks put the copy back to zero, the Thumb bit kept;
 // a fault that follows restores it again itself. tests/teensy35_boot_test.py has the case.
 void Core::clear_restored_it_bits() {
+    if (eng_) return;
     const uint64_t thumb_only = uint64_t{1} << 24;     // EPSR: T set, ICI/IT clear
     uc_.reg_write(uc_.handle, r_.epsr, &thumb_only);
 }
@@ -219,12 +235,17 @@ bool Core::tlb_fill_cb(void*, uint64_t vaddr, int type, TlbEntry* e, void* user)
 
 // -- registers and memory --------------------------------------------------------------------
 uint32_t Core::reg(int id) const {
+    if (eng_) return static_cast<uint32_t>(engine_reg(id));
     uint64_t v = 0;
     uc_.reg_read(uc_.handle, id, &v);
     return static_cast<uint32_t>(v);
 }
 
 void Core::set_reg(int id, uint32_t value) {
+    if (eng_) {
+        set_engine_reg(id, value);
+        return;
+    }
     uint64_t v = value;
     size_t size = sizeof v;
     uc_.reg_write2(uc_.handle, id, &v, &size);
@@ -239,6 +260,10 @@ uint32_t Core::pc() const { return reg(r_.pc); }
 // and turn off the PC sync at peripheral accesses until the next uc_emu_start, so
 // uc_reg_write2, which leaves it alone, is used there. Bit 0 keeps unicorn in Thumb state.
 void Core::set_pc(uint32_t value) {
+    if (eng_) {
+        eng_->set_reg(15, value & ~1u);
+        return;
+    }
     uint64_t v = value | 1u;
     if (in_block_hook_) {
         uc_.reg_write(uc_.handle, r_.pc, &v);
@@ -250,7 +275,7 @@ void Core::set_pc(uint32_t value) {
 
 bool Core::read32(uint32_t address, uint32_t& out) const {
     uint8_t b[4];
-    if (uc_.mem_read(uc_.handle, address, b, 4) != 0) return false;
+    if (!mem_read(address, b, 4)) return false;
     out = uint32_t{b[0]} | uint32_t{b[1]} << 8 | uint32_t{b[2]} << 16 | uint32_t{b[3]} << 24;
     return true;
 }
@@ -286,6 +311,7 @@ uint64_t Core::at(uint64_t cycle, Ev kind, bool scaled) {
     std::push_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
     live_.insert(e.seq);
     if (e.due < deadline_) deadline_ = e.due;
+    if (eng_ && in_emu_) eng_->lower_deadline(e.due);     // due before the run's deadline
     return e.seq;
 }
 
@@ -430,6 +456,10 @@ const Core::Masks& Core::masks() const {
 }
 
 void Core::read_regs(const int* ids, uint64_t* out, int n) const {
+    if (eng_) {
+        for (int i = 0; i < n; ++i) out[i] = engine_reg(ids[i]);
+        return;
+    }
     void* ptrs[32];
     for (int i = 0; i < n; ++i) {
         out[i] = 0;                 // a 32-bit register fills the low word only
@@ -439,6 +469,10 @@ void Core::read_regs(const int* ids, uint64_t* out, int n) const {
 }
 
 void Core::write_regs(const int* ids, const uint64_t* values, int n) {
+    if (eng_) {
+        for (int i = 0; i < n; ++i) set_engine_reg(ids[i], values[i]);
+        return;
+    }
     void* ptrs[32];
     for (int i = 0; i < n; ++i) ptrs[i] = const_cast<uint64_t*>(&values[i]);
     uc_.reg_write_batch(uc_.handle, ids, ptrs, n);
@@ -514,7 +548,7 @@ bool Core::take_exception(int number, uint32_t return_pc) {
         words[25] = 0;
         n = 26;
     }
-    if (uc_.mem_write(uc_.handle, new_sp, words, 4u * n) != 0) {
+    if (!mem_write(new_sp, words, 4u * n)) {
         fault("BusFault", "stacking a " + exception_name(number) + " frame at " + hex8(new_sp) +
                               " failed (stack overflow?)",
               return_pc, true, new_sp);
@@ -574,7 +608,7 @@ bool Core::return_from_exception(uint32_t exc_return) {
     const uint32_t sp = reg(r_.sp);
     const int n = fp ? 26 : 8;
     uint32_t words[26];
-    if (uc_.mem_read(uc_.handle, sp, words, 4u * n) != 0) {
+    if (!mem_read(sp, words, 4u * n)) {
         fault("BusFault", "unstacking a " + exception_name(number) + " frame at " + hex8(sp) +
                               " failed",
               exc_return, true, sp);
@@ -731,6 +765,7 @@ bool Core::sleep() {
 
 // One emu_start: until a block boundary that needs attention.
 int Core::execute() {
+    if (eng_) return execute_engine();
     update_deadline();
     budget_hit_ = false;
     watch_mask_ = masked_pending();

@@ -31,6 +31,8 @@
 #include <utility>
 #include <vector>
 
+#include "chip/thumb.hpp"
+
 namespace hq {
 class Mpu6050Emulator;
 }
@@ -53,6 +55,15 @@ struct Uc {
     int (*mem_write)(void*, uint64_t, const void*, uint64_t) = nullptr;
     int (*hook_add)(void*, size_t*, int, void*, void*, uint64_t, uint64_t, ...) = nullptr;
     int (*mmio_map)(void*, uint64_t, uint64_t, void*, void*, void*, void*) = nullptr;
+};
+
+// The register numbers of the core's own CPU (the engine, sim/chip/thumb.hpp), used in place
+// of unicorn's when the engine runs the instructions: R0-R15, the special registers, D0-D15
+// and S0-S31.
+enum EngineReg : int {
+    kEngSp = 13, kEngLr = 14, kEngPc = 15, kEngXpsr = 16, kEngEpsr, kEngControl, kEngFpscr,
+    kEngPrimask, kEngBasepri, kEngFaultmask, kEngMsp, kEngPsp, kEngApsr, kEngIpsr,
+    kEngD0 = 32, kEngS0 = 64, kEngEnd = 96
 };
 
 // unicorn's register numbers for the registers the core reads and writes (from arm_const).
@@ -97,7 +108,17 @@ enum class Ev : uint8_t {
 // Why run() returned.
 enum Run : int {
     kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
-    kIntrFault, kReset, kStopAt
+    kIntrFault, kReset, kStopAt,
+    kCpuStop        // the engine stopped for its owner's judgement (Core::cpu_stop_)
+};
+
+// What the engine stopped for when the run returns kCpuStop: a fault of the program (a bus
+// fault, an unaligned access, a division by zero trapped, an interworking branch to ARM
+// state), the first FP instruction (no_fpu: Python judges the CPACR grant), an ISB while
+// watched (isb).
+struct CpuStop {
+    std::string reason, detail;
+    uint32_t pc = 0, address = 0;
 };
 
 // A fault found natively (exception entry/return); Python raises it.
@@ -108,6 +129,18 @@ struct FaultInfo {
 };
 
 class Core;
+
+// The engine's bus when it is the CPU: every access outside flash and SRAM goes to the core
+// (Core::engine_access, mk64_engine.cpp).
+class EngineBus : public thumb::Bus {
+public:
+    explicit EngineBus(Core& core) : core_(core) {}
+    bool read(uint32_t address, unsigned size, uint32_t& value) override;
+    bool write(uint32_t address, unsigned size, uint32_t value) override;
+
+private:
+    Core& core_;
+};
 
 // Python's float floor division (a // b), step for step as CPython does it: the models' timing
 // rules were written with it, and a cycle computed differently would move an event.
@@ -521,6 +554,10 @@ public:
 
     Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
          std::vector<std::string> exception_names);
+    // The core with its own CPU, the engine (sim/chip/thumb.hpp), in place of unicorn: only
+    // the read and write callbacks are used (the engine decodes itself and reports the first
+    // FP instruction as a stop).
+    Core(const PyCallbacks& py, std::vector<std::string> exception_names);
     Core(const Core&) = delete;
     Core& operator=(const Core&) = delete;
 
@@ -569,7 +606,10 @@ public:
     void cancel(uint64_t seq) { live_.erase(seq); }
     bool live(uint64_t seq) const { return live_.count(seq) != 0; }
     bool event_due(uint64_t seq, uint64_t& due) const;
-    void attention() { deadline_ = 0; }
+    void attention() {
+        deadline_ = 0;
+        if (eng_ && in_emu_) eng_->lower_deadline(0);
+    }
     uint64_t next_event_due() const;
     // Time passes to `target` with no code running: native events due by then run in order;
     // a Python event due returns its number (0 when the target is reached).
@@ -605,18 +645,39 @@ public:
     // instruction, as a breakpoint's).
     void add_stop_at(uint32_t address);
     uint32_t stop_at_pc() const { return stop_at_pc_; }
-    void request_stop() { stop_ = true; }
+    void request_stop() {
+        stop_ = true;
+        if (eng_ && in_emu_) eng_->request_stop();
+    }
     void clear_stop() { stop_ = false; }
     void request_error() { py_error_ = true; }
     void clear_error() { py_error_ = false; }
-    void stop_now() { uc_.emu_stop(uc_.handle); }
+    void stop_now() {
+        if (eng_) {
+            if (in_emu_) eng_->request_stop();
+        } else {
+            uc_.emu_stop(uc_.handle);
+        }
+    }
 
     // -- memory ---------------------------------------------------------------------------
     bool read32(uint32_t address, uint32_t& out) const;
     bool mem_read(uint32_t address, void* out, size_t n) const {
+        if (eng_) return eng_->read_memory(address, static_cast<uint8_t*>(out), n);
         return uc_.mem_read(uc_.handle, address, out, n) == 0;
     }
+    // Flash and SRAM only (the engine's memory; unicorn's maps only those two): an owner's
+    // write (DMA, flash programming, loading), which drops the engine's decoded code there.
     bool mem_write(uint32_t address, const void* data, size_t n) {
+        if (eng_) {
+            uint8_t probe = 0;
+            if (n && (!eng_->read_memory(address, &probe, 1) ||
+                      !eng_->read_memory(address + static_cast<uint32_t>(n - 1), &probe, 1))) {
+                return false;
+            }
+            eng_->write_memory(address, static_cast<const uint8_t*>(data), n);
+            return true;
+        }
         return uc_.mem_write(uc_.handle, address, data, n) == 0;
     }
     uint32_t reg(int id) const;
@@ -694,6 +755,14 @@ public:
 
     const std::string& exception_name(int n) const;
 
+    // -- the engine as the CPU (mk64_engine.cpp) -------------------------------------------
+    bool has_engine() const { return eng_ != nullptr; }
+    thumb::Thumb* engine() { return eng_.get(); }
+    // The FPU as the engine sees it: off until Python has judged the first FP instruction
+    // (the kCpuStop "no_fpu"); the ISB watch while Python waits for the ISB after a grant.
+    bool engine_fpu_ = false, engine_watch_isb_ = false;
+    CpuStop cpu_stop_;
+
 private:
     struct HeapEntry {
         uint64_t due, seq;
@@ -755,6 +824,14 @@ private:
     void log_exception(bool enter, int number);
     void fault(const char* kind, std::string message, uint32_t pc, bool has_address = false,
                uint32_t address = 0);
+    // engine mode (mk64_engine.cpp)
+    friend class EngineBus;
+    int execute_engine();
+    int engine_stopped(thumb::Stop s);
+    int cpu_stop(const char* reason, std::string detail, uint32_t address);
+    bool engine_access(bool write, uint32_t address, unsigned size, uint32_t& value);
+    uint64_t engine_reg(int id) const;
+    void set_engine_reg(int id, uint64_t value);
 
     Uc uc_;
     Regs r_;
@@ -824,9 +901,13 @@ private:
     int64_t stop_at_resume_ = -1;   // the stop address the next run goes on through, or -1
     uint32_t pending_pc_ = 0;       // the return address of an exception taken inline
 
+    std::unique_ptr<thumb::Thumb> eng_;         // the CPU when it is not unicorn
+    std::unique_ptr<EngineBus> eng_bus_;
+
 public:
     struct Space { Core* core; uint32_t base; };
     Space spaces_[2] = {{nullptr, 0}, {nullptr, 0}};   // the MMIO callbacks' user data
+    uint32_t space_sizes_[2] = {0, 0};
 };
 
 }  // namespace hqsim::mk64

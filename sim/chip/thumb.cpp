@@ -132,6 +132,14 @@ void Thumb::invalidate(uint32_t address, uint32_t length) {
 }
 
 void Thumb::write_memory(uint32_t address, const uint8_t* data, size_t n) {
+    const uint32_t so = address - kSramBase;
+    if (n && so < kSramSize && n <= kSramSize - so) {       // SRAM (a DMA, an exception frame)
+        std::memcpy(sram_.data() + so, data, n);
+        if (sram_has_code(so, static_cast<uint32_t>(n))) {
+            sram_code_written(so, static_cast<unsigned>(n));
+        }
+        return;
+    }
     for (size_t i = 0; i < n; ++i) {
         const uint32_t a = address + static_cast<uint32_t>(i);
         if (a < kFlashSize) flash_[a] = data[i];
@@ -141,6 +149,15 @@ void Thumb::write_memory(uint32_t address, const uint8_t* data, size_t n) {
 }
 
 bool Thumb::read_memory(uint32_t address, uint8_t* out, size_t n) const {
+    const uint32_t so = address - kSramBase;
+    if (so < kSramSize && n <= kSramSize - so) {
+        std::memcpy(out, sram_.data() + so, n);
+        return true;
+    }
+    if (address < kFlashSize && n <= kFlashSize - address) {
+        std::memcpy(out, flash_.data() + address, n);
+        return true;
+    }
     for (size_t i = 0; i < n; ++i) {
         const uint32_t a = address + static_cast<uint32_t>(i);
         if (a < kFlashSize) out[i] = flash_[a];
@@ -220,7 +237,6 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     pending_ = 0;
     in_it_ = false;
     Op* op = nullptr;
-    bool first = true;
     for (;;) {
         if (cycles_ >= deadline_) return Stop::Deadline;
         if (icount_ >= limit) return Stop::Limit;
@@ -233,7 +249,13 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         }
         npc_ = pc + op->size;
         if (__builtin_expect(op->flags & (kStopAt | kFp), 0)) {
-            if ((op->flags & kStopAt) && !first) return Stop::StopAddress;
+            if (op->flags & kStopAt) {
+                if (pc != resume_at_) {
+                    resume_at_ = pc;
+                    return Stop::StopAddress;
+                }
+                resume_at_ = kNoResume;             // reported: this run goes through it
+            }
             if ((op->flags & kFp) && !it_) {        // ExecuteFPCheck (in IT: below)
                 if (!fpu_enabled) return Stop::NoFpu;
                 if (!(control_ & 4)) {
@@ -242,7 +264,6 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
                 }
             }
         }
-        first = false;
         if (__builtin_expect(it_ == 0, 1) && op->next) {
             cur_ = op;
             chain_ = static_cast<uint32_t>(std::min<uint64_t>(256, limit - icount_));

@@ -1,7 +1,8 @@
 // The engine's CPU: an ARMv7-M (Cortex-M4F) Thumb-2 interpreter with a pre-decoded
 // instruction cache, written from the ARMv7-M Architecture Reference Manual's semantics.
-// Not yet the PIL's CPU (unicorn still is): tests/thumb_engine_test.py proves it equal to
-// unicorn instruction by instruction, benchmarks/thumb_speed.py measures it.
+// One of the emulated chip's two CPUs (sim/chip/cpu.py; the native core runs on it in
+// mk64_engine.cpp): tests/thumb_engine_test.py proves it equal to unicorn instruction by
+// instruction, benchmarks/thumb_speed.py measures it.
 //
 // Memory: flash (512 KiB at 0) and SRAM (192 KiB at 0x1FFF0000) are byte arrays the engine
 // owns; every other address goes to the owner's Bus. Each halfword address of flash and SRAM
@@ -46,7 +47,8 @@ enum class Stop : uint8_t {
                     // the PC left at the branch
     NoFpu,          // before an FP instruction while fpu_enabled is off (the owner: NOCP)
     MaskChanged,    // after a CPS or MSR that wrote PRIMASK, FAULTMASK or BASEPRI
-    StopAddress,    // before the instruction at a stop address
+    StopAddress,    // before the instruction at a stop address (once: the next run that
+                    // reaches it without having left it goes through)
     Requested,      // after the instruction whose bus access called request_stop()
     Isb,            // after an ISB, while stop_on_isb
 };
@@ -214,6 +216,11 @@ private:
     std::vector<Op> fcache_, scache_;
     std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
     std::unordered_set<uint32_t> stops_;
+    // The stop address the run last stopped at, until its instruction runs: a run that
+    // starts there goes through it (after a handler too), one that stopped for another
+    // reason just before it stops there.
+    static constexpr uint32_t kNoResume = 1;        // odd: never an instruction's address
+    uint32_t resume_at_ = kNoResume;
     Bus* bus_ = nullptr;
 };
 
