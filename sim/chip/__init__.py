@@ -1,5 +1,6 @@
 """An emulated NXP MK64FX512 (the Teensy 3.5's Cortex-M4F) for running the firmware image
-without a board: unicorn executes the instructions; this package supplies the memory map,
+without a board: a CPU executes the instructions (the engine's own interpreter, or unicorn:
+cpu.py); this package supplies the memory map,
 a deterministic time base, the exception model and register-level models of the
 peripherals the image's boot and main loop use. See docs/teensy35-emulator.md.
 

@@ -1,6 +1,9 @@
-"""The Cortex-M4 core of the emulated chip: unicorn for the instructions, this module and its
-native half (``heliquad._simcore.Mk64Core``, sim/chip/mk64_core.cpp) for everything
-unicorn leaves out on an M-profile core.
+"""The Cortex-M4 core of the emulated chip: a CPU for the instructions (``cpu.py``: the
+engine's own interpreter by default, or unicorn), this module and its native half
+(``heliquad._simcore.Mk64Core``, sim/chip/mk64_core.cpp and, on the engine,
+mk64_engine.cpp) for everything a CPU alone leaves out on an M-profile core. What follows
+describes the unicorn path where the two differ; docs/teensy35-emulator.md ("The engine's
+own CPU") says how the engine's differs (events and interrupts at instruction boundaries).
 
 * Memory map: flash (read/execute), SRAM, and the peripheral spaces as MMIO dispatched to
   device models by address (:meth:`Machine.attach`). An access to a peripheral whose clock is
