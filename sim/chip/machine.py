@@ -56,7 +56,9 @@ _INTR_UNDEF = 1
 # Why Mk64Core.run() returned (sim/chip/mk64_core.hpp, enum Run).
 (_RUN_PY_EVENT, _RUN_STOP, _RUN_BUDGET, _RUN_TIME, _RUN_SLEEP_FOREVER, _RUN_PY_ERROR,
  _RUN_UC_ERROR, _RUN_FAULT, _RUN_BKPT, _RUN_INTR_FAULT, _RUN_RESET, _RUN_STOP_AT,
- _RUN_CPU_STOP) = range(1, 14)
+ _RUN_CPU_STOP, _RUN_DRAINED) = range(1, 15)
+#: What a run may wait to leave the board (Machine.run's ``drain``; Core::Drain).
+_DRAINS = {"usb": 1, "uart": 2}
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
  GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE) = range(11)
@@ -550,13 +552,20 @@ class Machine:
         return self.core.pending_exception()
 
     # ------------------------------------------------------------------ run ------------
-    def run(self, instructions: int | None = None, seconds: float | None = None) -> Stop:
+    def run(self, instructions: int | None = None, seconds: float | None = None, *,
+            drain: tuple | None = None) -> Stop:
         """Run until a breakpoint or BKPT stops it, ``instructions`` more instructions have
         retired (at a block boundary, never more) or ``seconds`` more of simulated time have
-        passed. Faults and resets raise. One of the two limits is required."""
+        passed. Faults and resets raise. One of the two limits is required. ``drain``:
+        ``("usb", cycle)`` also ends the run (reason ``drained``) at the first boundary after
+        the USB host's bulk IN poll found the board's IN endpoint empty after ``cycle``;
+        ``("uart", None)`` once UART0 has nothing left to send and its transmit interrupt
+        is off."""
         if instructions is None and seconds is None:
             raise ValueError("give an instruction budget or a simulated time")
         core = self.core
+        if drain is not None:
+            core.set_drain(_DRAINS[drain[0]], drain[1] or 0)
         instr_limit = core.instructions + instructions if instructions is not None else 1 << 62
         # The time limit is an event in seconds: it keeps its time if the clock changes.
         limit = core.time_limit(self.cycles_after(seconds, core.cycles)) \
@@ -595,6 +604,8 @@ class Machine:
                     return Stop("budget", self.pc, {"instructions": self.instructions})
                 if code == _RUN_TIME:
                     return Stop("time", self.pc, {"seconds": self.seconds()})
+                if code == _RUN_DRAINED:
+                    return Stop("drained", self.pc)
                 if code == _RUN_SLEEP_FOREVER:
                     return Stop("sleep-forever", self.pc, {
                         "detail": "WFI with no enabled interrupt and no event to come"})
@@ -603,6 +614,8 @@ class Machine:
             if limit is not None:
                 core.cancel(limit)
             core.time_up = False
+            if drain is not None:
+                core.set_drain(0, 0)
 
     def _python_event(self, seq: int):
         """A Python event is due (its callback runs), or a native event needs its Python

@@ -252,6 +252,14 @@ void bind_mk64(py::module_& m) {
         .def("at", [](Core& c, uint64_t cycle, bool scaled) { return c.at(cycle, Ev::Python, scaled); })
         .def("time_limit", [](Core& c, uint64_t cycle) { return c.at(cycle, Ev::TimeLimit, true); })
         .def_readwrite("time_up", &Core::time_up_)
+        .def("set_drain", [](Core& c, int mode, uint64_t after) {
+            if (mode < Core::kNoDrain || mode > Core::kDrainUart) {
+                throw std::invalid_argument("drain: 0 none, 1 USB, 2 UART0");
+            }
+            c.drain_ = mode;
+            c.drain_after_ = after;
+        }, "end runs once the board's USB IN queue (1: a bulk IN poll NAKed after `after`) or "
+           "UART0 (2) has drained; 0: never")
         .def("cancel", &Core::cancel)
         .def("live", &Core::live)
         .def("event_due", [](const Core& c, uint64_t seq) -> py::object {

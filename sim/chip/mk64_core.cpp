@@ -669,6 +669,7 @@ int Core::run(uint64_t instr_limit) {
         if (reset_pending_) return kReset;
         const int s = service();
         if (s) return s;
+        if (drain_ != kNoDrain && drained()) return kDrained;
         if (stop_) return kStop;
         if (instructions_ >= instr_limit) return kBudget;
         if (time_up_) return kTime;
@@ -739,10 +740,19 @@ bool Core::continue_inline() {
         inline_taken_ = true;
     }
     if (stop_ || instructions_ >= instr_limit_ || time_up_) return false;
+    if (drain_ != kNoDrain && drained()) return false;
     update_deadline();
     budget_hit_ = false;
     watch_mask_ = masked_pending();
     return true;
+}
+
+bool Core::drained() const {
+    if (drain_ == kDrainUsb) {
+        return usb0.host.in_nak_cycle >= 0 &&
+               static_cast<uint64_t>(usb0.host.in_nak_cycle) > drain_after_;
+    }
+    return uart0.ready && uart0.tc() && !(uart0.v[uart0.oC2] & uart0.TIE);
 }
 
 // WFI: wake on an exception that would preempt were PRIMASK clear; else time passes to the

@@ -109,7 +109,8 @@ enum class Ev : uint8_t {
 enum Run : int {
     kPyEvent = 1, kStop, kBudget, kTime, kSleepForever, kPyError, kUcError, kFault, kBkpt,
     kIntrFault, kReset, kStopAt,
-    kCpuStop        // the engine stopped for its owner's judgement (Core::cpu_stop_)
+    kCpuStop,       // the engine stopped for its owner's judgement (Core::cpu_stop_)
+    kDrained        // what the run waited to leave the board has left (Core::drain_)
 };
 
 // What the engine stopped for when the run returns kCpuStop: a fault of the program (a bus
@@ -726,6 +727,14 @@ public:
     std::deque<LogEntry> exception_log_;
     std::vector<uint64_t> exception_counts_;
     bool sleeping_ = false, fpu_watch_ = true, time_up_ = false;
+    // A run may end early, at the first boundary at which what a lockstep frame waits to
+    // leave the board has left: the USB host's bulk IN poll NAKed after cycle drain_after_
+    // (the board's IN queue is empty), or UART0 idle (nothing in its FIFO or shifter, and
+    // its transmit interrupt off: the driver's own queue is empty too). kNoDrain: never.
+    enum Drain : int { kNoDrain = 0, kDrainUsb = 1, kDrainUart = 2 };
+    int drain_ = kNoDrain;
+    uint64_t drain_after_ = 0;
+    bool drained() const;
     uint64_t py_event_ = 0;
     int py_call_ = kNoCall;     // a native event needs Python (a Python event with no callback)
     int uc_error_ = 0;

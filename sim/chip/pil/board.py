@@ -42,8 +42,6 @@ RC_FRAME_LOOPS = 4
 BOOT_LIMIT_S = 5.0
 LOOP_LIMIT_S = 2.0
 DRAIN_LIMIT_S = 0.004
-#: How often a USB drain looks whether the host's poll found the endpoint empty.
-USB_DRAIN_STEP_S = 0.00025
 SYSTICK_EXCEPTION = 15
 #: The telemetry links a board has: its USB port (CDC-ACM) and UART0 (pins 0 and 1).
 LINKS = BOARD_LINKS
@@ -248,14 +246,9 @@ class PilBoard:
         start = m.now()
         deadline = min(start + int(DRAIN_LIMIT_S * m.core_hz),
                        systick.zero_at - int(20e-6 * m.core_hz))
-        if self.usb_host is not None:
-            host, usb_step = self.usb_host, int(USB_DRAIN_STEP_S * m.core_hz)
-            done, step = (lambda: host.in_nak_cycle > start), (lambda: usb_step)
-        else:
-            uart = self.board.chip.uart0
-            done, step = uart.tx_idle, (lambda: uart.frame_cycles() * 4)
-        while m.now() < deadline and not done():
-            self._waited(m.run(seconds=min(step(), deadline - m.now()) / m.core_hz))
+        if deadline > start:        # one run, ended natively the moment the link has drained
+            drain = ("usb", start) if self.usb_host is not None else ("uart", None)
+            self._waited(m.run(seconds=(deadline - start) / m.core_hz, drain=drain))
 
     def thrust(self) -> list:
         """The thrust fractions all eight ESCs (FTM0 channels 0-7) get from the next PWM
