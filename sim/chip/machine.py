@@ -47,7 +47,6 @@ from .cpu import (N_EXCEPTIONS, PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_
                   make_cpu)
 from .errors import ChipReset, EmulationError, Fault
 from .image import FLASH_BASE, FLASH_SIZE, Image
-from .timing import BlockDecoder
 
 __all__ = ["ChipReset", "EmulationError", "Fault", "Machine", "Stop", "Access", "Event",
            "Device", "PERIPHERAL_BASE", "PERIPHERAL_SIZE", "PPB_BASE", "PPB_SIZE", "N_EXCEPTIONS"]
@@ -151,7 +150,7 @@ class Machine:
         self.uc = self.cpu.uc               # unicorn's, when it is the CPU (None otherwise)
         self.core = self.cpu.core
         self._engine = self.cpu.name == "engine"
-        self._decoder = BlockDecoder()
+        self._decoder = None                # unicorn's block decoder, made at its first block
         self._blocks = {}                               # start -> timing.Block (decoded once)
         self._pages = collections.defaultdict(list)     # 4 KiB page -> [(lo, hi, device)]
         self.devices = []
@@ -456,6 +455,12 @@ class Machine:
     def _decode(self, address: int, size: int):
         """A block unicorn is about to run for the first time: decode it once (capstone)
         and give the native table its costs."""
+        if self._decoder is None:
+            # capstone only where unicorn runs: the engine decodes itself, and capstone's
+            # library cannot be loaded under the sanitizers (RTLD_DEEPBIND), which the
+            # engine's chip then runs under (.ci/sanitize)
+            from .timing import BlockDecoder
+            self._decoder = BlockDecoder()
         block = self._decoder.decode(bytes(self.uc.mem_read(address, size)), address)
         self._blocks[address] = block
         flags = (_MASK_OP if block.mask_op else 0) | (_ISB if block.isb else 0) | \
