@@ -581,46 +581,52 @@ class Machine:
         self._update_log_all()
         try:
             while True:
-                code = core.run(instr_limit)
-                if code == _RUN_PY_EVENT:
-                    self._python_event(core.py_event)
-                    continue
-                if code == _RUN_STOP:
-                    self._bp_resume = self._stop.pc
-                    return self._stop
-                if code == _RUN_STOP_AT:
-                    pc = core.stop_at_pc
-                    if self._engine and pc in self._bp_hooks:    # the engine's breakpoints
-                        stop = self._breakpoint_stop(pc)
-                        if stop:
-                            return stop
-                        if pc not in self._stop_ats:
-                            continue
-                    return Stop("stop-at", pc)
-                if code == _RUN_CPU_STOP:
-                    error = self._cpu_stop()
-                    if error is None:
-                        continue
-                    raise error
-                if code == _RUN_BKPT:
-                    pc = core.bkpt_pc
-                    return Stop("bkpt", pc, {"imm": self.read(pc, 2)[0]})
-                if code == _RUN_BUDGET:
-                    return Stop("budget", self.pc, {"instructions": self.instructions})
-                if code == _RUN_TIME:
-                    return Stop("time", self.pc, {"seconds": self.seconds()})
-                if code == _RUN_DRAINED:
-                    return Stop("drained", self.pc)
-                if code == _RUN_SLEEP_FOREVER:
-                    return Stop("sleep-forever", self.pc, {
-                        "detail": "WFI with no enabled interrupt and no event to come"})
-                raise self._run_error(code)
+                stop = self._after_run(core.run(instr_limit))
+                if stop is not None:
+                    return stop
         finally:
             if limit is not None:
                 core.cancel(limit)
             core.time_up = False
             if drain is not None:
                 core.set_drain(0, 0)
+
+    def _after_run(self, code: int):
+        """What a native run's return ``code`` means: the Stop to return, None to run on
+        (a Python event run, a breakpoint that did not stop, the engine's FPU judgement);
+        faults and resets raise."""
+        core = self.core
+        if code == _RUN_PY_EVENT:
+            self._python_event(core.py_event)
+            return None
+        if code == _RUN_STOP:
+            self._bp_resume = self._stop.pc
+            return self._stop
+        if code == _RUN_STOP_AT:
+            pc = core.stop_at_pc
+            if self._engine and pc in self._bp_hooks:    # the engine's breakpoints
+                stop = self._breakpoint_stop(pc)
+                if stop or pc not in self._stop_ats:
+                    return stop
+            return Stop("stop-at", pc)
+        if code == _RUN_CPU_STOP:
+            error = self._cpu_stop()
+            if error is not None:
+                raise error
+            return None
+        if code == _RUN_BKPT:
+            pc = core.bkpt_pc
+            return Stop("bkpt", pc, {"imm": self.read(pc, 2)[0]})
+        if code == _RUN_BUDGET:
+            return Stop("budget", self.pc, {"instructions": self.instructions})
+        if code == _RUN_TIME:
+            return Stop("time", self.pc, {"seconds": self.seconds()})
+        if code == _RUN_DRAINED:
+            return Stop("drained", self.pc)
+        if code == _RUN_SLEEP_FOREVER:
+            return Stop("sleep-forever", self.pc, {
+                "detail": "WFI with no enabled interrupt and no event to come"})
+        raise self._run_error(code)
 
     def _python_event(self, seq: int):
         """A Python event is due (its callback runs), or a native event needs its Python
