@@ -65,7 +65,7 @@ def _board_inputs():
 def board_alone(elf: str, cpu: str, link: str, loops: int):
     """The emulated board driven loop by loop as the drop-in drives it (inputs in, one loop,
     outputs out), without the ptys, the codec or the simulator: wall time, and the board's
-    own counts per loop (Machine.counts(): blocks, emu_start calls, native and Python
+    own counts per loop (Machine.counts(): blocks, runs of the CPU, native and Python
     accesses and events)."""
     from heliquad.sim.chip.pil.board import PilBoard
 
@@ -120,8 +120,8 @@ def board_report(elf: str, cpu: str, link: str, n: int, pil_rate: float):
     print(f"  so of the PIL's {pil_frame_us:.0f} us a frame, the board takes "
           f"{1e6 / board_rate:.0f} us and the lockstep around it (ptys, codec, the simulator's "
           f"plant and telemetry tap) {pil_frame_us - 1e6 / board_rate:.0f} us")
-    print(f"  per loop: {per['blocks']:.0f} blocks entered, {per['emu_starts']:.1f} emu_start "
-          f"calls, {per['native_accesses']:.0f} native and {per['python_accesses']:.1f} Python "
+    print(f"  per loop: {per['blocks']:.0f} blocks entered (unicorn's), {per['emu_starts']:.1f} "
+          f"runs of the CPU, {per['native_accesses']:.0f} native and {per['python_accesses']:.1f} Python "
           f"peripheral accesses, {per['native_events']:.1f} native and "
           f"{per['python_events']:.2f} Python events, {per['exceptions']:.1f} exceptions")
 

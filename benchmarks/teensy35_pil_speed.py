@@ -10,11 +10,13 @@ Reports:
 * loops per second of wall time and the real-time factor at 200 Hz (loops/s over 200);
 * per loop: instructions, busy cycles (the stated CPI model; sleep excluded), interrupts,
   telemetry bytes;
-* where the wall time goes, per loop: translated blocks entered, emu_start calls, peripheral
-  accesses handled natively and in Python, events run natively and in Python, exceptions;
+* where the wall time goes, per loop: translated blocks entered (unicorn's), runs of the CPU
+  (uc_emu_start calls, or the engine's runs), peripheral accesses handled natively and in
+  Python, events run natively and in Python, exceptions;
 * with --profile, the Python functions that took the most time (cProfile, self time).
 
-Wall-clock figures are this machine's; the counts are deterministic.
+Wall-clock figures are this machine's; the counts are deterministic. The chip runs on its
+default CPU, the engine; HQ_CHIP_CPU=unicorn measures unicorn.
 
     python benchmarks/teensy35_pil_speed.py [--loops 2000] [--profile] [--elf PATH]
 """
@@ -104,8 +106,8 @@ def main():
           f"{rate / LOOP_HZ:.2f} (emulated time over wall time: {simulated / wall:.2f})")
     print(f"per loop: {per['instructions']:.0f} instructions, {per['busy']:.0f} busy cycles, "
           f"{per['interrupts']:.1f} interrupts, {per['telemetry']:.1f} telemetry bytes")
-    print(f"per loop, where the time goes: {per['blocks']:.0f} blocks entered, "
-          f"{per['emu_starts']:.1f} emu_start calls, {per['native_accesses']:.0f} native and "
+    print(f"per loop, where the time goes: {per['blocks']:.0f} blocks entered (unicorn's), "
+          f"{per['emu_starts']:.1f} runs of the CPU, {per['native_accesses']:.0f} native and "
           f"{per['python_accesses']:.1f} Python peripheral accesses, {per['native_events']:.1f} "
           f"native and {per['python_events']:.2f} Python events, {per['exceptions']:.1f} "
           f"exceptions taken, {per['decodes']:.2f} blocks decoded, {per['fpu_checks']:.2f} "
