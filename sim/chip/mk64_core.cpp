@@ -119,8 +119,8 @@ void Core::reset(double core_hz) {
     epoch_cycles_ = 0;
     epoch_seconds_ = 0.0;
     core_hz_ = core_hz;
-    heap_.clear();
-    live_.clear();
+    events_.clear();
+    earliest_valid_ = false;
     cur_ = last_ = nullptr;
     deadline_ = 0;
     instr_limit_ = 0;
@@ -290,13 +290,13 @@ void Core::set_clocks(double core_hz, double bus_hz) {
     const double ratio = core_hz / core_hz_;
     core_hz_ = core_hz;
     // Events in seconds keep their time: their cycle counts move with the clock.
-    for (HeapEntry& e : heap_) {
-        if (e.scaled && live_.count(e.seq) && e.due > t) {
+    for (HeapEntry& e : events_) {
+        if (e.scaled && e.due > t) {
             const double moved = std::nearbyint(static_cast<double>(e.due - t) * ratio);
             e.due = t + std::max<uint64_t>(1, static_cast<uint64_t>(moved));
         }
     }
-    std::make_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
+    earliest_valid_ = false;
     update_deadline();
 }
 
@@ -307,39 +307,45 @@ uint64_t Core::cycles_after(double seconds, uint64_t start) const {
 
 uint64_t Core::at(uint64_t cycle, Ev kind, bool scaled) {
     const HeapEntry e{std::max(cycle, now()), ++seq_, kind, scaled};
-    heap_.push_back(e);
-    std::push_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
-    live_.insert(e.seq);
+    events_.push_back(e);
+    if (earliest_valid_ && e.before(events_[earliest_])) earliest_ = events_.size() - 1;
     if (e.due < deadline_) deadline_ = e.due;
     if (eng_ && in_emu_) eng_->lower_deadline(e.due);     // due before the run's deadline
     return e.seq;
 }
 
+void Core::cancel(uint64_t seq) {
+    const ptrdiff_t i = find_event(seq);
+    if (i >= 0) remove_event(static_cast<size_t>(i));
+}
+
 bool Core::event_due(uint64_t seq, uint64_t& due) const {
-    for (const HeapEntry& e : heap_) {
-        if (e.seq == seq) {
-            due = e.due;
-            return true;
-        }
-    }
-    return false;
+    const ptrdiff_t i = find_event(seq);
+    if (i < 0) return false;
+    due = events_[static_cast<size_t>(i)].due;
+    return true;
 }
 
+// The earliest event (by cycle, then by the order scheduled), or nullptr: good until the
+// list next changes.
 const Core::HeapEntry* Core::head() {
-    while (!heap_.empty() && !live_.count(heap_.front().seq)) pop();
-    return heap_.empty() ? nullptr : &heap_.front();
+    if (events_.empty()) return nullptr;
+    if (!earliest_valid_) {
+        earliest_ = 0;
+        for (size_t i = 1; i < events_.size(); ++i) {
+            if (events_[i].before(events_[earliest_])) earliest_ = i;
+        }
+        earliest_valid_ = true;
+    }
+    return &events_[earliest_];
 }
 
-void Core::pop() {
-    std::pop_heap(heap_.begin(), heap_.end(), std::greater<HeapEntry>());
-    heap_.pop_back();
-}
+// Removes the earliest event (head() first).
+void Core::pop() { remove_event(earliest_); }
 
 uint64_t Core::next_event_due() const {
     uint64_t best = kFar;
-    for (const HeapEntry& e : heap_) {
-        if (live_.count(e.seq)) best = std::min(best, e.due);
-    }
+    for (const HeapEntry& e : events_) best = std::min(best, e.due);
     return best;
 }
 
@@ -352,7 +358,6 @@ uint64_t Core::advance(uint64_t target) {
         }
         const HeapEntry e = *h;
         pop();
-        live_.erase(e.seq);
         cycles_ = std::max(cycles_, e.due);
         if (e.kind == Ev::Python) return e.seq;
         dispatch(e);
@@ -694,7 +699,6 @@ int Core::service() {
         if (!h || h->due > cycles_) break;
         const HeapEntry e = *h;
         pop();
-        live_.erase(e.seq);
         if (e.kind == Ev::Python) {
             ++counts.python_events;
             py_event_ = e.seq;
@@ -726,7 +730,6 @@ bool Core::continue_inline() {
         if (h->kind == Ev::Python) return false;
         const HeapEntry e = *h;
         pop();
-        live_.erase(e.seq);
         dispatch(e);
         if (reset_pending_ || py_call_) return false;
     }

@@ -604,8 +604,8 @@ public:
 
     // -- events ---------------------------------------------------------------------------
     uint64_t at(uint64_t cycle, Ev kind, bool scaled = true);
-    void cancel(uint64_t seq) { live_.erase(seq); }
-    bool live(uint64_t seq) const { return live_.count(seq) != 0; }
+    void cancel(uint64_t seq);
+    bool live(uint64_t seq) const { return find_event(seq) >= 0; }
     bool event_due(uint64_t seq, uint64_t& due) const;
     void attention() {
         deadline_ = 0;
@@ -777,28 +777,26 @@ private:
         uint64_t due, seq;
         Ev kind;
         bool scaled;
-        bool operator>(const HeapEntry& o) const {
-            return due != o.due ? due > o.due : seq > o.seq;
+        bool before(const HeapEntry& o) const {
+            return due != o.due ? due < o.due : seq < o.seq;
         }
     };
     struct Route { uint32_t lo, hi; int dev; };
-    // The scheduled events not yet run or cancelled, by sequence number: a handful at any time
-    // (one or two per device), so a flat list searched in place costs less at every boundary
-    // than a hash set's hashing and node allocation.
-    struct LiveSet {
-        std::vector<uint64_t> seqs;
-        size_t count(uint64_t seq) const {
-            return std::find(seqs.begin(), seqs.end(), seq) != seqs.end() ? 1 : 0;
+    // The scheduled events not yet run or cancelled: a handful at any time (one or two per
+    // device), so an unordered flat list with the earliest's index kept (found again by a
+    // scan only after the list changed) costs less at every boundary than a heap, whose
+    // cancelled entries had to be skipped against a live set at its head.
+    ptrdiff_t find_event(uint64_t seq) const {
+        for (size_t i = 0; i < events_.size(); ++i) {
+            if (events_[i].seq == seq) return static_cast<ptrdiff_t>(i);
         }
-        void insert(uint64_t seq) { seqs.push_back(seq); }
-        void erase(uint64_t seq) {
-            auto it = std::find(seqs.begin(), seqs.end(), seq);
-            if (it == seqs.end()) return;
-            *it = seqs.back();
-            seqs.pop_back();
-        }
-        void clear() { seqs.clear(); }
-    };
+        return -1;
+    }
+    void remove_event(size_t i) {
+        events_[i] = events_.back();
+        events_.pop_back();
+        earliest_valid_ = false;
+    }
 
     int group(int prio) const { return prio < 0 ? prio : prio >> (prigroup_ + 1); }
     // PRIMASK, FAULTMASK and BASEPRI as last read. Only an instruction of a block with a
@@ -892,8 +890,9 @@ private:
     uint64_t cur_cycles_ = 0;
     const Block* last_ = nullptr;
     std::vector<Route> routes_;
-    std::vector<HeapEntry> heap_;
-    LiveSet live_;
+    std::vector<HeapEntry> events_;
+    size_t earliest_ = 0;               // index of the earliest event, while earliest_valid_
+    bool earliest_valid_ = false;
     uint64_t seq_ = 0;
     uint64_t deadline_ = 0, instr_limit_ = 0;
     uint64_t epoch_cycles_ = 0;
