@@ -175,3 +175,14 @@ def test_a_run_stopped_just_before_a_stop_address_for_another_reason_stops_there
     assert e.run(1, 10) == "deadline" and e.pc == CODE + 2        # at it, not yet reported
     assert e.run(1000, 10) == "stop_address" and e.pc == CODE + 2
     assert e.run(1000, 10) == "bkpt"
+
+
+def test_an_owners_pc_write_makes_a_stop_address_stop_again_but_a_handler_does_not():
+    e = _engine(0xBF00, 0xBF00, 0xBE00)                           # nop; nop; bkpt
+    e.add_stop_address(CODE + 2)
+    assert e.run(1000, 10) == "stop_address" and e.pc == CODE + 2
+    e.set_reg(15, CODE)                                           # the owner starts again
+    assert e.run(1000, 10) == "stop_address" and e.pc == CODE + 2
+    e.jump(CODE + 0x10)                                           # a handler runs elsewhere
+    e.jump(CODE + 2)                                              # and returns to it
+    assert e.run(1000, 10) == "bkpt"

@@ -261,7 +261,7 @@ uint32_t Core::pc() const { return reg(r_.pc); }
 // uc_reg_write2, which leaves it alone, is used there. Bit 0 keeps unicorn in Thumb state.
 void Core::set_pc(uint32_t value) {
     if (eng_) {
-        eng_->set_reg(15, value & ~1u);
+        eng_->jump(value);              // exception entry and return, BKPT: not the owner's
         return;
     }
     uint64_t v = value | 1u;

@@ -19,6 +19,7 @@ Thumb::Thumb()
 
 void Thumb::set_reg(unsigned n, uint32_t v) {
     r_[n & 15] = (n == 15 || n == 13) ? (v & ~(n == 15 ? 1u : 3u)) : v;
+    if ((n & 15) == 15) resume_at_ = kNoResume;
 }
 
 uint32_t Thumb::apsr() const {

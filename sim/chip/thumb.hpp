@@ -103,7 +103,11 @@ public:
 
     // --- state ---------------------------------------------------------------------------
     uint32_t reg(unsigned n) const { return r_[n]; }
+    // An owner's write of the PC (set_reg(15, ...)) starts afresh: a stop address there stops
+    // the next run. jump() moves the PC as exception entry and return do, keeping the stop
+    // address last reported (a run that comes back to it after a handler goes through it).
     void set_reg(unsigned n, uint32_t v);
+    void jump(uint32_t pc) { r_[15] = pc & ~1u; }
     uint32_t pc() const { return r_[15]; }
     uint32_t apsr() const;              // N Z C V Q in bits 31..27
     void set_apsr(uint32_t v);
@@ -216,9 +220,9 @@ private:
     std::vector<Op> fcache_, scache_;
     std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
     std::unordered_set<uint32_t> stops_;
-    // The stop address the run last stopped at, until its instruction runs: a run that
-    // starts there goes through it (after a handler too), one that stopped for another
-    // reason just before it stops there.
+    // The stop address the run last stopped at, until its instruction runs or the owner
+    // writes the PC: a run that reaches it first goes through it (after a handler too), one
+    // that stopped for another reason just before it stops there.
     static constexpr uint32_t kNoResume = 1;        // odd: never an instruction's address
     uint32_t resume_at_ = kNoResume;
     Bus* bus_ = nullptr;

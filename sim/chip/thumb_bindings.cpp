@@ -80,6 +80,8 @@ void bind_thumb(py::module_& m) {
         }, py::arg("deadline_cycles"), py::arg("max_instructions"))
         .def("request_stop", [](Engine& e) { e.cpu.request_stop(); })
         .def("lower_deadline", [](Engine& e, uint64_t c) { e.cpu.lower_deadline(c); })
+        .def("jump", [](Engine& e, uint32_t pc) { e.cpu.jump(pc); },
+             "move the PC as exception entry and return do (keeps the stop address reported)")
         .def("reg", [](Engine& e, unsigned n) { return e.cpu.reg(n & 15); })
         .def("set_reg", [](Engine& e, unsigned n, uint32_t v) { e.cpu.set_reg(n & 15, v); })
         .def("sreg", [](Engine& e, unsigned n) { return e.cpu.sreg(n & 31); })
