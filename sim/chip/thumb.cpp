@@ -14,8 +14,8 @@ const char* stop_name(Stop s) {
 }
 
 Thumb::Thumb()
-    : flash_(kFlashSize, 0xFF), sram_(kSramSize, 0), fcache_(kFlashSize / 2),
-      scache_(kSramSize / 2), code_pages_((kSramSize >> kPageShift) + 1, 0) {}
+    : fcache_(kFlashSize / 2 + 1), scache_(kSramSize / 2 + 1), flash_(kFlashSize, 0xFF),
+      sram_(kSramSize, 0), code_pages_((kSramSize >> kPageShift) + 1, 0) {}
 
 void Thumb::set_reg(unsigned n, uint32_t v) {
     r_[n & 15] = (n == 15 || n == 13) ? (v & ~(n == 15 ? 1u : 3u)) : v;
@@ -86,6 +86,7 @@ bool Thumb::align_fault(uint32_t a, unsigned n, bool must_align) {
 }
 
 bool Thumb::bus_read(uint32_t a, unsigned n, uint32_t& v) {
+    break_chain();
     v = 0;
     if (bus_ && bus_->read(a, n, v)) return true;
     fault_address_ = a;
@@ -95,6 +96,7 @@ bool Thumb::bus_read(uint32_t a, unsigned n, uint32_t& v) {
 }
 
 bool Thumb::bus_write(uint32_t a, unsigned n, uint32_t v) {
+    break_chain();
     if (bus_ && bus_->write(a, n, v)) return true;
     fault_address_ = a;
     detail_ = "write to nothing";
@@ -245,7 +247,13 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         first = false;
         if (__builtin_expect(it_ == 0, 1) && op->next) {
             cur_ = op;
-            chain_ = static_cast<uint32_t>(std::min<uint64_t>(256, limit - icount_));
+            // the chain's ends (thumb.hpp): at most 256 instructions, and none past the limit
+            chain_end_ = std::min(deadline_, cycles_ + std::min<uint64_t>(256, limit - icount_));
+            chain_mask_ = kStopAt | (fpu_enabled && (control_ & 4) ? 0 : kFp);
+            fetch_limit_ = std::min(flash_fetch_limit, kFlashSize);
+            // a limit inside the flash: each instruction from here (a straight run of a chain
+            // would not see it)
+            if (fetch_limit_ != 0 && fetch_limit_ != kFlashSize) break_chain();
             op->next(*this, *op);                   // retires it and maybe more (threaded)
             if (__builtin_expect(pending_ != 0, 0)) return finish(*cur_, 0);
             continue;

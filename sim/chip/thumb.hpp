@@ -96,7 +96,10 @@ public:
     // Runs until a stop. The deadline may be brought forward during the run (from a bus
     // call: lower_deadline()); the run then stops at the next instruction boundary past it.
     Stop run(uint64_t deadline_cycles, uint64_t max_instructions);
-    void lower_deadline(uint64_t cycles) { if (cycles < deadline_) deadline_ = cycles; }
+    void lower_deadline(uint64_t cycles) {
+        if (cycles < deadline_) deadline_ = cycles;
+        if (cycles < chain_end_) chain_end_ = cycles;
+    }
     void request_stop() { pending_ |= kPendRequested; }
 
     // --- state ---------------------------------------------------------------------------
@@ -180,7 +183,16 @@ public:
     uint32_t control_ = 0, ipsr_ = 0, sp_other_ = 0;
     uint8_t pending_ = 0;
     const Op* cur_ = nullptr;           // the instruction a chain of handlers is at
-    uint32_t chain_ = 0;                // instructions a chain may still run
+    // A chain of handlers runs while cycles_ < chain_end_ (the deadline; the instruction
+    // limit and a bound on the chain's length, as every chained instruction costs a cycle
+    // at least), past no Op whose flags meet chain_mask_ (kStopAt; kFp while an FP
+    // instruction needs the run loop's ExecuteFPCheck), fetching below fetch_limit_. What
+    // changes those ends the chain (break_chain()): a bus call (the owner may change anything
+    // there), IT, MSR CONTROL.
+    uint64_t chain_end_ = 0;
+    uint8_t chain_mask_ = 0;
+    uint32_t fetch_limit_ = 0;
+    void break_chain() { chain_end_ = 0; }
     uint64_t deadline_ = 0, limit_ = 0;
     Stop pending_stop_ = Stop::Deadline;
     uint32_t fault_address_ = 0, exc_return_ = 0, svc_number_ = 0;
@@ -200,6 +212,9 @@ public:
 
     Op* lookup(uint32_t pc);
     uint64_t cycles_ = 0, icount_ = 0;
+    // decoded records, one per halfword of flash and SRAM, each array with one more at its
+    // end (never decoded: a chain running straight past the end stops there)
+    std::vector<Op> fcache_, scache_;
 
 private:
     Stop finish(const Op& op, uint32_t next_it);
@@ -211,7 +226,6 @@ private:
     bool align_fault(uint32_t a, unsigned n, bool must_align);
 
     std::vector<uint8_t> flash_, sram_;
-    std::vector<Op> fcache_, scache_;
     std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
     std::unordered_set<uint32_t> stops_;
     Bus* bus_ = nullptr;
@@ -223,32 +237,49 @@ Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP h
 
 inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
     Op* op;
-    if (pc < flash_fetch_limit) op = &fcache_[pc >> 1];
+    if (pc < flash_fetch_limit && pc < kFlashSize) op = &fcache_[pc >> 1];
     else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
     else return nullptr;
     if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
     return op;
 }
 
-// Threaded dispatch: H, then (outside IT blocks, nothing to stop for) the instruction
-// retired and the next one's handler called from here, a jump from each handler's own
-// site (its branch predicted per handler, not from the run loop's one call). Back to the
-// run loop for anything else, and after at most chain_ instructions (a bound on the stack
-// should the compiler not turn the call into a jump).
-template <Handler H>
+// Threaded dispatch: H, then (nothing to stop for, the chain's ends not reached) the
+// instruction retired and the next one's handler called from here, a jump from each
+// handler's own site (its branch predicted per handler, not from the run loop's one call).
+// Back to the run loop for anything else. STRAIGHT: H never writes the PC (decided per Op at
+// decode time), so the next PC is this one's plus its size and the next Op the one after
+// this in the same array (each array ends with an Op never decoded, which ends a chain).
+// Otherwise H sees npc_ = the next instruction's address and may change it (a branch).
+template <Handler H, bool STRAIGHT>
 void threaded(Thumb& t, const Op& o) {
+    const uint32_t pc0 = t.r_[15];
+    if (!STRAIGHT) t.npc_ = pc0 + o.size;
     H(t, o);
-    if (__builtin_expect(t.pending_ != 0, 0)) return;
-    t.r_[15] = t.npc_;
-    t.cycles_ += o.cyc;
+    if (__builtin_expect(t.pending_ != 0, 0)) {
+        if (STRAIGHT) t.npc_ = pc0 + o.size;
+        return;
+    }
+    const uint32_t pc = STRAIGHT ? pc0 + o.size : t.npc_;
+    t.r_[15] = pc;
+    const uint64_t c = t.cycles_ + o.cyc;
+    t.cycles_ = c;
     ++t.icount_;
-    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.it_) return;   // chain_: the limit too
-    Op* n = t.lookup(t.r_[15]);
-    if (!n || !n->next || (n->flags & kStopAt)) return;
-    if ((n->flags & kFp) && (!t.fpu_enabled || !(t.control_ & 4))) return;
-    t.npc_ = t.r_[15] + n->size;
+    if (__builtin_expect(c >= t.chain_end_, 0)) return;
+    const Op* n;
+    if (STRAIGHT) {
+        n = &o + (o.size >> 1);
+    } else if (pc < t.fetch_limit_) {
+        n = &t.fcache_[pc >> 1];
+    } else if (pc - kSramBase < kSramSize) {
+        n = &t.scache_[(pc - kSramBase) >> 1];
+    } else {
+        return;
+    }
+    const Handler f = n->next;
+    if (__builtin_expect(!f || (n->flags & t.chain_mask_), 0)) return;
     t.cur_ = n;
-    n->next(t, *n);
+    f(t, *n);
 }
 
 template <unsigned N>

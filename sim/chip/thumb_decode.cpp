@@ -566,11 +566,12 @@ void decode32(Op& op, uint16_t h1, uint16_t h2) {
 
 // --- threaded<fn> of each integer handler --------------------------------------------------
 
-using Map = std::unordered_map<Handler, Handler>;
+// fn -> threaded<fn, true> (the Op never writes the PC), threaded<fn, false>
+using Map = std::unordered_map<Handler, std::pair<Handler, Handler>>;
 
 template <Handler... H>
 void add(Map& m) {
-    (m.emplace(H, threaded<H>), ...);
+    (m.emplace(H, std::make_pair(threaded<H, true>, threaded<H, false>)), ...);
 }
 template <Src S, size_t... I>
 void add_dp(Map& m, std::index_sequence<I...>) {
@@ -601,6 +602,17 @@ const Map& threaded_int() {
     return m;
 }
 
+// Whether the integer instruction in op may write the PC: the branches, a destination of
+// R15 (data processing, LDR; for the rest an UNPREDICTABLE form: the PC is what the old
+// dispatch left, the next instruction's), a POP or LDM of the PC.
+bool may_write_pc(const Op& op) {
+    static const Handler kBranches[] = {b_cond, b, bl, bx, blx, cbz, tb<true>, tb<false>};
+    for (Handler h : kBranches) {
+        if (op.fn == h) return true;
+    }
+    return op.rd == 15 || (op.fn == ldst_multiple<true> && (op.imm & 0x8000));
+}
+
 }  // namespace
 
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
@@ -609,7 +621,12 @@ void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
     if (!op.fn) op.fn = unknown;
     if (!op.cyc_it) op.cyc_it = op.cyc;
     const auto it = threaded_int().find(op.fn);
-    op.next = it != threaded_int().end() ? it->second : threaded_fp(op.fn);
+    if (it != threaded_int().end()) {
+        op.next = may_write_pc(op) ? it->second.second : it->second.first;
+    } else {
+        op.next = threaded_fp(op.fn);
+    }
+    if (!op.cyc) op.next = nullptr;         // a chain's length is bounded by its cycles
 }
 
 }  // namespace hqsim::thumb

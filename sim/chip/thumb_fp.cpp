@@ -376,7 +376,7 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
 
 Handler threaded_fp(Handler fn) {
     static const std::unordered_map<Handler, Handler> m = {
-#define HQ_T(h) {h, threaded<h>}
+#define HQ_T(h) {h, threaded<h, true>}
         HQ_T(v_arith), HQ_T(v_mac), HQ_T(v_fma), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg),
         HQ_T(v_imm), HQ_T(v_sqrt), HQ_T(v_cmp), HQ_T(v_to_int), HQ_T(v_from_int),
         HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),

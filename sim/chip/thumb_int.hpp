@@ -255,7 +255,10 @@ void tb(Thumb& t, const Op& o) {
 
 // --- everything else ----------------------------------------------------------------------
 inline void nop(Thumb&, const Op&) {}
-inline void it(Thumb& t, const Op& o) { t.it_ = o.imm; }
+inline void it(Thumb& t, const Op& o) {       // the block's instructions: in the run loop
+    t.it_ = o.imm;
+    t.break_chain();
+}
 inline void wfi(Thumb& t, const Op&) { t.stop_after(Stop::Wfi); }
 // ISB: a stop after it only while the owner watches for one (the FPU-enable check).
 inline void isb(Thumb& t, const Op&) {
@@ -318,6 +321,7 @@ inline void msr(Thumb& t, const Op& o) {
         case 19: if (t.ipsr_ != 2) t.faultmask = v & 1; break;
         case 20:                        // nPRIV, FPCA; SPSEL in thread mode only
             t.set_control(t.ipsr_ == 0 ? (v & 7) : ((t.control_ & 2) | (v & 5)));
+            t.break_chain();            // FPCA: the chain's kFp mask
             return;
         default: return;
     }
