@@ -24,6 +24,9 @@
 #include <unordered_set>
 #include <vector>
 
+// A handler that each threaded<> wrapper holds in its own body (the compiler would call some).
+#define HQ_INLINE inline __attribute__((always_inline))
+
 namespace hqsim::thumb {
 
 constexpr uint32_t kFlashBase = 0x00000000, kFlashSize = 512 * 1024;
@@ -160,6 +163,14 @@ public:
         }
         return false;
     }
+    // [a, a + n) in SRAM, a word-aligned, and for a store no decoded code there: its bytes,
+    // for a block transfer straight to or from them (LDM/STM, VLDM/VSTM); else nullptr.
+    uint8_t* sram_block(uint32_t a, uint32_t n, bool store) {
+        const uint32_t so = a - kSramBase;
+        if ((a & 3) || so >= kSramSize || n > kSramSize - so) return nullptr;
+        if (store && sram_has_code(so, n)) return nullptr;
+        return sram_.data() + so;
+    }
     // Owner writes (flash programming, loading code): bytes copied, decoded code dropped.
     void write_memory(uint32_t address, const uint8_t* data, size_t n);
     bool read_memory(uint32_t address, uint8_t* out, size_t n) const;
@@ -182,7 +193,7 @@ public:
     uint32_t fpscr_ = 0;
     uint32_t control_ = 0, ipsr_ = 0, sp_other_ = 0;
     uint8_t pending_ = 0;
-    const Op* cur_ = nullptr;           // the instruction a chain of handlers is at
+    const Op* cur_ = nullptr;           // the instruction a chain of handlers stopped at
     // A chain of handlers runs while cycles_ < chain_end_ (the deadline; the instruction
     // limit and a bound on the chain's length, as every chained instruction costs a cycle
     // at least), past no Op whose flags meet chain_mask_ (kStopAt; kFp while an FP
@@ -258,6 +269,7 @@ void threaded(Thumb& t, const Op& o) {
     H(t, o);
     if (__builtin_expect(t.pending_ != 0, 0)) {
         if (STRAIGHT) t.npc_ = pc0 + o.size;
+        t.cur_ = &o;
         return;
     }
     const uint32_t pc = STRAIGHT ? pc0 + o.size : t.npc_;
@@ -278,7 +290,6 @@ void threaded(Thumb& t, const Op& o) {
     }
     const Handler f = n->next;
     if (__builtin_expect(!f || (n->flags & t.chain_mask_), 0)) return;
-    t.cur_ = n;
     f(t, *n);
 }
 

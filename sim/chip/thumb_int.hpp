@@ -67,24 +67,31 @@ inline uint32_t add_with_carry(Thumb& t, uint32_t x, uint32_t y, uint32_t cin, b
 
 enum Dp : uint8_t { AND, EOR, ORR, ORN, BIC, MOV, MVN, ADD, ADC, SUB, SBC, RSB, TST, TEQ, CMP,
                     CMN };
-enum Src : uint8_t { IMM, REG, REGREG };   // modified immediate, shifted register, shift by reg
+// modified immediate, shifted register, shift by register, register unshifted (LSL #0)
+enum Src : uint8_t { IMM, REG, REGREG, REG0 };
+// Flags set per the Op at run time (any operand may be the PC, any Rd), or known at decode
+// time for an Op in a chain (outside IT blocks; no operand and no Rd the PC): NOFLAGS, FLAGS.
+enum FlagMode : uint8_t { RUNTIME, NOFLAGS, FLAGS };
 
 // Data processing: Rd = Rn op operand2. Src IMM: o.imm (o.x: the immediate's carry out is its
 // bit 31); REG: R[rm] shifted by (st, sn); REGREG: R[rn] shifted (st) by R[rm]<7:0> (MOV).
-template <Dp OP, Src SRC>
-void dp(Thumb& t, const Op& o) {
+template <Dp OP, Src SRC, FlagMode FM = RUNTIME>
+HQ_INLINE void dp(Thumb& t, const Op& o) {
+    const auto reg = [&t](unsigned n) { return FM == RUNTIME ? R(t, n) : t.r_[n]; };
     uint32_t carry = t.c_;
     uint32_t b;
     if constexpr (SRC == IMM) {
         b = o.imm;
         if (o.x) carry = b >> 31;
     } else if constexpr (SRC == REG) {
-        b = shift_c(R(t, o.rm), o.st, o.sn, carry);
+        b = shift_c(reg(o.rm), o.st, o.sn, carry);
+    } else if constexpr (SRC == REG0) {
+        b = reg(o.rm);
     } else {
         b = shift_c(t.r_[o.rn], o.st, t.r_[o.rm] & 0xFF, carry);
     }
-    const bool sf = setflags(t, o);
-    const uint32_t a = (OP == MOV || OP == MVN) ? 0 : R(t, o.rn);
+    const bool sf = FM == RUNTIME ? setflags(t, o) : FM == FLAGS;
+    const uint32_t a = (OP == MOV || OP == MVN) ? 0 : reg(o.rn);
     uint32_t r = 0;
     bool logical = true;
     switch (OP) {
@@ -106,7 +113,7 @@ void dp(Thumb& t, const Op& o) {
         t.c_ = carry;
     }
     if constexpr (OP == TST || OP == TEQ || OP == CMP || OP == CMN) return;
-    if (o.rd == 15) t.branch_to(r);
+    if (FM == RUNTIME && o.rd == 15) t.branch_to(r);
     else t.r_[o.rd] = r;
 }
 
@@ -175,16 +182,12 @@ void ldst_multiple(Thumb& t, const Op& o) {
     const uint32_t start = o.y ? base - 4 * n : base;
     const uint32_t end = o.y ? base - 4 * n : base + 4 * n;
     uint32_t a = start;
-    const uint32_t so = start - kSramBase;
     // all in SRAM (a store not over decoded code): straight to the array
-    if (!(start & 3) && so < kSramSize && so + 4 * n <= kSramSize &&
-        (LOAD || !t.sram_has_code(so, 4 * n))) {
-        uint8_t* p = t.sram() + so;
+    if (uint8_t* p = t.sram_block(start, 4 * n, !LOAD)) {
         if constexpr (LOAD) {
             if (o.x) t.r_[o.rn] = end;
-            for (unsigned i = 0; i < 15; ++i) {
-                if (!(list >> i & 1)) continue;
-                __builtin_memcpy(&t.r_[i], p, 4);
+            for (uint32_t l = list & 0x7FFF; l; l &= l - 1) {
+                __builtin_memcpy(&t.r_[__builtin_ctz(l)], p, 4);
                 p += 4;
             }
             if (list & 0x8000) {
@@ -192,16 +195,14 @@ void ldst_multiple(Thumb& t, const Op& o) {
                 __builtin_memcpy(&pc, p, 4);
                 t.bx_write_pc(pc);
             }
-            return;
         } else {
-            for (unsigned i = 0; i < 15; ++i) {
-                if (!(list >> i & 1)) continue;
-                __builtin_memcpy(p, &t.r_[i], 4);
+            for (uint32_t l = list & 0x7FFF; l; l &= l - 1) {
+                __builtin_memcpy(p, &t.r_[__builtin_ctz(l)], 4);
                 p += 4;
             }
             if (o.x) t.r_[o.rn] = end;
-            return;
         }
+        return;
     }
     if constexpr (LOAD) {
         uint32_t vals[16];
@@ -228,6 +229,26 @@ void ldst_multiple(Thumb& t, const Op& o) {
 // --- branches -----------------------------------------------------------------------------
 inline void b_cond(Thumb& t, const Op& o) {
     if (condition_passed(t, o.x)) t.branch_to(t.r_[15] + 4 + o.imm);
+}
+// The same with its condition (o.x) known at decode time.
+template <unsigned COND>
+HQ_INLINE bool passed(const Thumb& t) {
+    bool r;
+    switch (COND >> 1) {
+        case 0: r = t.z_; break;
+        case 1: r = t.c_; break;
+        case 2: r = t.n_; break;
+        case 3: r = t.v_; break;
+        case 4: r = t.c_ && !t.z_; break;
+        case 5: r = t.n_ == t.v_; break;
+        case 6: r = !t.z_ && t.n_ == t.v_; break;
+        default: r = true; break;
+    }
+    return (COND & 1) && COND != 15 ? !r : r;
+}
+template <unsigned COND>
+HQ_INLINE void b_if(Thumb& t, const Op& o) {
+    if (passed<COND>(t)) t.branch_to(t.r_[15] + 4 + o.imm);
 }
 inline void b(Thumb& t, const Op& o) { t.branch_to(t.r_[15] + 4 + o.imm); }
 inline void bl(Thumb& t, const Op& o) {
