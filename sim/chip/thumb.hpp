@@ -220,6 +220,10 @@ public:
     // Memory access from instructions: false after setting a stop (the handler returns).
     template <unsigned N> bool load(uint32_t a, uint32_t& v, bool must_align = false);
     template <unsigned N> bool store(uint32_t a, uint32_t v, bool must_align = false);
+    // The same for an aligned access to SRAM or flash only (a store not over decoded code):
+    // false, nothing done, for any other.
+    template <unsigned N> bool load_fast(uint32_t a, uint32_t& v);
+    template <unsigned N> bool store_fast(uint32_t a, uint32_t v);
 
     Op* lookup(uint32_t pc);
     uint64_t cycles_ = 0, icount_ = 0;
@@ -262,12 +266,28 @@ inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
 // decode time), so the next PC is this one's plus its size and the next Op the one after
 // this in the same array (each array ends with an Op never decoded, which ends a chain).
 // Otherwise H sees npc_ = the next instruction's address and may change it (a branch).
+//
+// TRY, when given: H's fast form, which does the instruction only if nothing can stop it (no
+// bus call: an access to SRAM or flash) and else changes nothing and returns false; then
+// threaded<H> runs it, out of line (the fast path then needs no registers kept over a call).
+using Try = bool (*)(Thumb&, const Op&);
+template <Handler H, bool STRAIGHT, Try TRY = nullptr>
+void threaded(Thumb& t, const Op& o);
 template <Handler H, bool STRAIGHT>
+__attribute__((noinline)) void threaded_slow(Thumb& t, const Op& o) {
+    threaded<H, STRAIGHT>(t, o);
+}
+
+template <Handler H, bool STRAIGHT, Try TRY>
 void threaded(Thumb& t, const Op& o) {
     const uint32_t pc0 = t.r_[15];
     if (!STRAIGHT) t.npc_ = pc0 + o.size;
-    H(t, o);
-    if (__builtin_expect(t.pending_ != 0, 0)) {
+    if constexpr (TRY != nullptr) {
+        if (__builtin_expect(!TRY(t, o), 0)) return threaded_slow<H, STRAIGHT>(t, o);
+    } else {
+        H(t, o);
+    }
+    if (TRY == nullptr && __builtin_expect(t.pending_ != 0, 0)) {
         if (STRAIGHT) t.npc_ = pc0 + o.size;
         t.cur_ = &o;
         return;
@@ -308,6 +328,27 @@ inline bool Thumb::load(uint32_t a, uint32_t& v, bool must_align) {
         return true;
     }
     return bus_read(a, N, v);
+}
+
+template <unsigned N>
+HQ_INLINE bool Thumb::load_fast(uint32_t a, uint32_t& v) {
+    if (a & (N - 1)) return false;
+    const uint32_t so = a - kSramBase;
+    const uint8_t* p;
+    if (so <= kSramSize - N) p = sram_.data() + so;
+    else if (a <= kFlashSize - N) p = flash_.data() + a;
+    else return false;
+    v = 0;
+    __builtin_memcpy(&v, p, N);
+    return true;
+}
+
+template <unsigned N>
+HQ_INLINE bool Thumb::store_fast(uint32_t a, uint32_t v) {
+    const uint32_t so = a - kSramBase;
+    if ((a & (N - 1)) || so > kSramSize - N || code_pages_[so >> kPageShift]) return false;
+    __builtin_memcpy(sram_.data() + so, &v, N);
+    return true;
 }
 
 template <unsigned N>

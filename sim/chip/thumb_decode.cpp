@@ -595,9 +595,14 @@ template <Src S, size_t... I>
 void add_dp(Map& m, std::index_sequence<I...>) {
     (add_dp_one<static_cast<Dp>(I), S>(m), ...);
 }
+template <Kind K, Mode M>
+void add_ldst_one(Map& m) {         // a straight one: its fast form first (threaded's TRY)
+    m.emplace(ldst<K, M>, Chained{threaded<ldst<K, M>, true, ldst_try<K, M>>,
+                                  threaded<ldst<K, M>, false>});
+}
 template <Mode M, size_t... I>
 void add_ldst(Map& m, std::index_sequence<I...>) {
-    add<ldst<static_cast<Kind>(I), M>...>(m);
+    (add_ldst_one<static_cast<Kind>(I), M>(m), ...);
 }
 
 const Map& threaded_int() {

@@ -294,10 +294,12 @@ bool v_transfer(Thumb& t, uint32_t a, unsigned first, unsigned n) {
 }
 
 // VLDR/VSTR: o.rd the first S register, o.x 2 registers (a D register), o.imm the offset.
+HQ_INLINE uint32_t v_address(const Thumb& t, const Op& o) {
+    return (o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn]) + o.imm;
+}
 template <bool LOAD, unsigned n>
 HQ_INLINE void v_ldst(Thumb& t, const Op& o) {
-    const uint32_t base = o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn];
-    const uint32_t a = base + o.imm;
+    const uint32_t a = v_address(t, o);
     if constexpr (n == 1 && LOAD) {
         uint32_t v;
         if (t.load<4>(a, v, true)) t.s_[o.rd] = v;
@@ -306,6 +308,16 @@ HQ_INLINE void v_ldst(Thumb& t, const Op& o) {
     } else {
         v_transfer<LOAD>(t, a, o.rd, n);
     }
+}
+// One word in SRAM or flash only (threaded's TRY).
+template <bool LOAD>
+HQ_INLINE bool v_ldst_try(Thumb& t, const Op& o) {
+    const uint32_t a = v_address(t, o);
+    if constexpr (!LOAD) return t.store_fast<4>(a, t.s_[o.rd]);
+    uint32_t v;
+    if (!t.load_fast<4>(a, v)) return false;
+    t.s_[o.rd] = v;
+    return true;
 }
 
 // VLDM/VSTM: o.imm words from S[o.rd]; o.x writeback; o.y decrement before.
@@ -426,8 +438,9 @@ Handler threaded_fp(Handler fn) {
         HQ_T(v_fma<2>), HQ_T(v_fma<3>), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg), HQ_T(v_imm),
         HQ_T(v_sqrt), HQ_T(v_cmp<false>), HQ_T(v_cmp<true>), HQ_T(v_to_int), HQ_T(v_from_int),
         HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
-        HQ_T(v_msr), HQ_T((v_ldst<true, 1>)), HQ_T((v_ldst<true, 2>)),
-        HQ_T((v_ldst<false, 1>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+        HQ_T(v_msr), HQ_T((v_ldst<true, 2>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+        {v_ldst<true, 1>, threaded<v_ldst<true, 1>, true, v_ldst_try<true>>},
+        {v_ldst<false, 1>, threaded<v_ldst<false, 1>, true, v_ldst_try<false>>},
         HQ_T(v_multiple<false>),
 #undef HQ_T
     };

@@ -122,39 +122,42 @@ enum Mode : uint8_t { OFF, PRE, POST, REGOFF, LIT };
 enum Kind : uint8_t { LDR, LDRB, LDRH, LDRSB, LDRSH, STR, STRB, STRH };
 
 // Address modes: OFF R[rn]+imm; PRE the same with writeback; POST R[rn], then R[rn]+imm;
-// REGOFF R[rn] + (R[rm] << sn); LIT Align(PC,4)+imm. imm is signed (two's complement).
-template <Kind K, Mode M>
-void ldst(Thumb& t, const Op& o) {
+// REGOFF R[rn] + (R[rm] << sn); LIT Align(PC,4)+imm. imm is signed (two's complement). Rn is
+// never the PC but in LIT, nor a stored Rt (the decoder's UNDEFINED forms).
+// TRY (an Op that does not write the PC): only an aligned access to SRAM or flash (no SRAM
+// holding decoded code for a store); false, nothing changed, for any other (threaded's slow
+// path then runs ldst).
+template <Kind K, Mode M, bool TRY = false>
+HQ_INLINE bool ldst_access(Thumb& t, const Op& o) {
+    constexpr unsigned N = (K == LDR || K == STR) ? 4 : (K == LDRH || K == LDRSH || K == STRH) ? 2 : 1;
     uint32_t a;
     if constexpr (M == LIT) a = ((t.r_[15] + 4) & ~3u) + o.imm;
-    else if constexpr (M == REGOFF) a = R(t, o.rn) + (t.r_[o.rm] << o.sn);
+    else if constexpr (M == REGOFF) a = t.r_[o.rn] + (t.r_[o.rm] << o.sn);
     else if constexpr (M == POST) a = t.r_[o.rn];
-    else a = R(t, o.rn) + o.imm;
+    else a = t.r_[o.rn] + o.imm;
     if constexpr (K >= STR) {
-        const uint32_t v = R(t, o.rd);
-        bool ok;
-        if constexpr (K == STR) ok = t.store<4>(a, v);
-        else if constexpr (K == STRH) ok = t.store<2>(a, v);
-        else ok = t.store<1>(a, v);
-        if (!ok) return;
+        const uint32_t v = t.r_[o.rd];
+        if (!(TRY ? t.store_fast<N>(a, v) : t.store<N>(a, v))) return false;
     } else {
         uint32_t v;
-        bool ok;
-        if constexpr (K == LDR) ok = t.load<4>(a, v, o.rd == 15);   // LDR PC: aligned
-        else if constexpr (K == LDRH || K == LDRSH) ok = t.load<2>(a, v);
-        else ok = t.load<1>(a, v);
-        if (!ok) return;
+        // LDR PC: aligned
+        if (!(TRY ? t.load_fast<N>(a, v) : t.load<N>(a, v, K == LDR && o.rd == 15))) return false;
         if constexpr (K == LDRSB) v = static_cast<uint32_t>(static_cast<int8_t>(v));
         if constexpr (K == LDRSH) v = static_cast<uint32_t>(static_cast<int16_t>(v));
         if constexpr (M == PRE) t.r_[o.rn] = a;
         if constexpr (M == POST) t.r_[o.rn] = a + o.imm;
-        if (K == LDR && o.rd == 15) t.bx_write_pc(v);
+        if (!TRY && K == LDR && o.rd == 15) t.bx_write_pc(v);     // TRY: never Rt = PC
         else t.r_[o.rd] = v;
-        return;
+        return true;
     }
     if constexpr (M == PRE) t.r_[o.rn] = a;
     if constexpr (M == POST) t.r_[o.rn] = a + o.imm;
+    return true;
 }
+template <Kind K, Mode M>
+HQ_INLINE void ldst(Thumb& t, const Op& o) { ldst_access<K, M>(t, o); }
+template <Kind K, Mode M>
+HQ_INLINE bool ldst_try(Thumb& t, const Op& o) { return ldst_access<K, M, true>(t, o); }
 
 // LDRD/STRD: rd, ra the pair; o.x: 0 offset, 1 pre-indexed, 2 post-indexed, 3 literal.
 template <bool LOAD>
