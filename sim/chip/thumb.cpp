@@ -215,6 +215,59 @@ bool condition_passed(const Thumb& t, unsigned cond) {
     return (kCondPass[cond & 15] >> f) & 1;
 }
 
+// --- IT blocks in a chain ----------------------------------------------------------------
+// The IT instruction hands on to its block's instructions, each run as the run loop runs one
+// inside a block (its condition, its handler fn with in_it_, the cost inside a block, the IT
+// state advanced), then on to the next: in the block, or past it (its chain handler). What
+// the run loop must see (a stop address, an FP instruction while the FP context needs its
+// ExecuteFPCheck) ends the chain before that instruction, as in threaded<>.
+namespace {
+inline uint32_t it_advance(uint32_t it) {
+    return (it & 7) ? ((it & 0xE0) | ((it << 1) & 0x1F)) : 0;
+}
+
+void it_block(Thumb& t, const Op& o) {
+    t.npc_ = t.r_[15] + o.size;
+    const uint32_t next_it = it_advance(t.it_);
+    if (condition_passed(t, t.it_ >> 4)) {
+        t.in_it_ = true;
+        o.fn(t, o);
+        t.in_it_ = false;
+        if (__builtin_expect(t.pending_ != 0, 0)) {
+            t.cur_ = &o;
+            t.it_stop_ = next_it | 0x100;
+            return;
+        }
+    }
+    const uint32_t pc = t.npc_;
+    t.r_[15] = pc;
+    const uint64_t c = t.cycles_ + o.cyc_it;
+    t.cycles_ = c;
+    ++t.icount_;
+    t.it_ = next_it;
+    if (c >= t.chain_end_) return;
+    const Op* n;
+    if (pc < t.fetch_limit_) n = &t.fcache_[pc >> 1];
+    else if (pc - kSramBase < kSramSize) n = &t.scache_[(pc - kSramBase) >> 1];
+    else return;
+    if (!n->next || (n->flags & t.chain_mask_)) return;
+    if (next_it) it_block(t, *n);
+    else n->next(t, *n);
+}
+}  // namespace
+
+void it_start(Thumb& t, const Op& o) {
+    t.it_ = o.imm;
+    t.r_[15] += o.size;
+    const uint64_t c = t.cycles_ + o.cyc;
+    t.cycles_ = c;
+    ++t.icount_;
+    if (c >= t.chain_end_) return;
+    const Op* n = &o + (o.size >> 1);
+    if (!n->next || (n->flags & t.chain_mask_)) return;
+    it_block(t, *n);
+}
+
 Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     const uint64_t limit = icount_ + max_instructions;
     deadline_ = deadline_cycles;
@@ -255,7 +308,11 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
             // would not see it)
             if (fetch_limit_ != 0 && fetch_limit_ != kFlashSize) break_chain();
             op->next(*this, *op);                   // retires it and maybe more (threaded)
-            if (__builtin_expect(pending_ != 0, 0)) return finish(*cur_, 0);
+            if (__builtin_expect(pending_ != 0, 0)) {
+                const uint32_t in_it = it_stop_;
+                it_stop_ = 0;
+                return finish(*cur_, in_it);
+            }
             continue;
         }
         if (__builtin_expect(it_ == 0, 1)) {
@@ -268,7 +325,7 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         }
         // inside an IT block: the condition, ExecuteFPCheck only when it passes, the cost
         // the model charges inside a block, the IT state advanced
-        const uint32_t next_it = (it_ & 7) ? ((it_ & 0xE0) | ((it_ << 1) & 0x1F)) : 0;
+        const uint32_t next_it = it_advance(it_);
         if (condition_passed(*this, it_ >> 4)) {
             if (op->flags & kFp) {
                 if (!fpu_enabled) return Stop::NoFpu;

@@ -203,6 +203,7 @@ public:
     uint64_t chain_end_ = 0;
     uint8_t chain_mask_ = 0;
     uint32_t fetch_limit_ = 0;
+    uint32_t it_stop_ = 0;              // a chain stopped in an IT block: its next IT | 0x100
     void break_chain() { chain_end_ = 0; }
     uint64_t deadline_ = 0, limit_ = 0;
     Stop pending_stop_ = Stop::Deadline;
@@ -249,6 +250,7 @@ private:
 // Decoding (thumb_decode.cpp): fills op for the instruction at pc (hw1, hw2 its halfwords).
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2);
 Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP handler
+void it_start(Thumb& t, const Op& o);   // thumb.cpp: an IT instruction's chain handler
 
 inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
     Op* op;

@@ -662,7 +662,9 @@ void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
     if (!op.fn) op.fn = unknown;
     if (!op.cyc_it) op.cyc_it = op.cyc;
     const auto it = threaded_int().find(op.fn);
-    if (it != threaded_int().end()) {
+    if (op.fn == ops::it) {
+        op.next = it_start;
+    } else if (it != threaded_int().end()) {
         op.next = chained(op, it->second, may_write_pc(op));
     } else {
         op.next = threaded_fp(op.fn);

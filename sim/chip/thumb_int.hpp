@@ -279,7 +279,7 @@ void tb(Thumb& t, const Op& o) {
 
 // --- everything else ----------------------------------------------------------------------
 inline void nop(Thumb&, const Op&) {}
-inline void it(Thumb& t, const Op& o) {       // the block's instructions: in the run loop
+inline void it(Thumb& t, const Op& o) {       // in a chain: it_start (thumb.cpp)
     t.it_ = o.imm;
     t.break_chain();
 }
