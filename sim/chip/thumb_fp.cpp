@@ -7,6 +7,7 @@
 #include <cfenv>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <unordered_map>
 
 #include "chip/thumb.hpp"
@@ -101,10 +102,10 @@ __attribute__((noinline)) uint32_t arith_slow(const Mode& m, Arith op, uint32_t 
     }
 }
 
+// The host's a OP b where it is the architecture's (fast()): r, else false.
 template <Arith OP>
-HQ_INLINE uint32_t arith(uint32_t fpscr, uint32_t a, uint32_t b) {
+HQ_INLINE bool arith_fast(uint32_t fpscr, uint32_t a, uint32_t b, uint32_t& r) {
     const float x = F(a), y = F(b);
-    uint32_t r;
     const auto host = [x, y] {
         switch (OP) {
             case ADD: return x + y;
@@ -113,7 +114,13 @@ HQ_INLINE uint32_t arith(uint32_t fpscr, uint32_t a, uint32_t b) {
             default: return x / y;
         }
     };
-    return fast(fpscr, r, host, a, b) ? r : arith_slow(Mode(fpscr), OP, a, b);
+    return fast(fpscr, r, host, a, b);
+}
+
+template <Arith OP>
+HQ_INLINE uint32_t arith(uint32_t fpscr, uint32_t a, uint32_t b) {
+    uint32_t r;
+    return arith_fast<OP>(fpscr, a, b, r) ? r : arith_slow(Mode(fpscr), OP, a, b);
 }
 
 inline uint32_t neg(uint32_t a) { return a ^ kSign; }
@@ -140,25 +147,63 @@ __attribute__((noinline)) uint32_t muladd_slow(const Mode& m, uint32_t addend, u
     return result(m, host, std::fma(double{x}, double{y}, double{z}));
 }
 
-HQ_INLINE uint32_t muladd(uint32_t fpscr, uint32_t addend, uint32_t a, uint32_t b) {
+// x * y + z rounded once to nearest, for finite operands, without the host's fmaf (a call):
+// the product is exact in double (24 + 24 bits), the sum rounded to odd at double's 53 bits
+// (the sum rounded to nearest, then moved to its odd neighbour toward the exact value when
+// it was inexact and even), which rounded to float is the sum rounded once. A NaN when the
+// sum is not finite (an infinite operand: the slow path's).
+HQ_INLINE float fma_host(float x, float y, float z) {
+    const double p = double{x} * double{y}, c = z;
+    const double sum = p + c;
+    if (!std::isfinite(sum)) return std::numeric_limits<float>::quiet_NaN();
+    const double pp = sum - c;                  // TwoSum: sum + err == p + c exactly
+    const double err = (p - pp) + (c - (sum - pp));
+    uint64_t bits;
+    std::memcpy(&bits, &sum, 8);
+    if (err != 0 && !(bits & 1)) bits += ((err < 0) == (sum < 0)) ? 1 : ~uint64_t{0};
+    double odd;
+    std::memcpy(&odd, &bits, 8);
+    return static_cast<float>(odd);
+}
+
+HQ_INLINE bool muladd_fast(uint32_t fpscr, uint32_t addend, uint32_t a, uint32_t b,
+                           uint32_t& r) {
     const float x = F(a), y = F(b), z = F(addend);
-    uint32_t r;
-    const auto host = [x, y, z] { return std::fmaf(x, y, z); };
-    return fast(fpscr, r, host, addend, a, b) ? r : muladd_slow(Mode(fpscr), addend, a, b);
+    return fast(fpscr, r, [x, y, z] { return fma_host(x, y, z); }, addend, a, b);
 }
 
 // --- handlers ---------------------------------------------------------------------------
 // o.rd, o.rn, o.rm: S register numbers; o.x: the variant.
 
+// Each handler and its fast form (threaded's TRY): the host's results where they are the
+// architecture's (fast()), else false with nothing changed, the handler then run out of line.
 template <Arith OP, bool NEG>          // VNMUL: NEG
-HQ_INLINE void v_arith(Thumb& t, const Op& o) {
+HQ_INLINE bool v_arith_try(Thumb& t, const Op& o) {
+    uint32_t r;
+    if (!arith_fast<OP>(t.fpscr_, t.s_[o.rn], t.s_[o.rm], r)) return false;
+    t.s_[o.rd] = NEG ? neg(r) : r;
+    return true;
+}
+template <Arith OP, bool NEG>
+void v_arith(Thumb& t, const Op& o) {
     const uint32_t r = arith<OP>(t.fpscr_, t.s_[o.rn], t.s_[o.rm]);
     t.s_[o.rd] = NEG ? neg(r) : r;
 }
 
 // VMLA VMLS VNMLA VNMLS: X bit0 negate the product, bit1 negate the accumulator.
 template <unsigned X>
-HQ_INLINE void v_mac(Thumb& t, const Op& o) {
+HQ_INLINE bool v_mac_try(Thumb& t, const Op& o) {
+    const uint32_t fpscr = t.fpscr_;
+    uint32_t p, r;
+    if (!arith_fast<MUL>(fpscr, t.s_[o.rn], t.s_[o.rm], p)) return false;
+    if (X & 1) p = neg(p);
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    if (!arith_fast<ADD>(fpscr, d, p, r)) return false;
+    t.s_[o.rd] = r;
+    return true;
+}
+template <unsigned X>
+void v_mac(Thumb& t, const Op& o) {
     const uint32_t fpscr = t.fpscr_;
     uint32_t p = arith<MUL>(fpscr, t.s_[o.rn], t.s_[o.rm]);
     if (X & 1) p = neg(p);
@@ -168,10 +213,22 @@ HQ_INLINE void v_mac(Thumb& t, const Op& o) {
 
 // VFMA VFMS VFNMA VFNMS: X bit0 negate op1 (Sn), bit1 negate the addend (Sd).
 template <unsigned X>
-HQ_INLINE void v_fma(Thumb& t, const Op& o) {
+HQ_INLINE bool v_fma_try(Thumb& t, const Op& o) {
     const uint32_t a = (X & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
     const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
-    t.s_[o.rd] = muladd(t.fpscr_, d, a, t.s_[o.rm]);
+    uint32_t r;
+    if (!muladd_fast(t.fpscr_, d, a, t.s_[o.rm], r)) return false;
+    t.s_[o.rd] = r;
+    return true;
+}
+template <unsigned X>
+void v_fma(Thumb& t, const Op& o) {
+    const uint32_t a = (X & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    const uint32_t b = t.s_[o.rm];
+    uint32_t r;
+    if (!muladd_fast(t.fpscr_, d, a, b, r)) r = muladd_slow(Mode(t.fpscr_), d, a, b);
+    t.s_[o.rd] = r;
 }
 
 HQ_INLINE void v_mov(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm]; }
@@ -432,17 +489,24 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
 Handler threaded_fp(Handler fn) {
     static const std::unordered_map<Handler, Handler> m = {
 #define HQ_T(h) {h, threaded<h, true>}
-        HQ_T((v_arith<ADD, false>)), HQ_T((v_arith<SUB, false>)), HQ_T((v_arith<MUL, false>)),
-        HQ_T((v_arith<MUL, true>)), HQ_T((v_arith<DIV, false>)), HQ_T(v_mac<0>),
-        HQ_T(v_mac<1>), HQ_T(v_mac<2>), HQ_T(v_mac<3>), HQ_T(v_fma<0>), HQ_T(v_fma<1>),
-        HQ_T(v_fma<2>), HQ_T(v_fma<3>), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg), HQ_T(v_imm),
+#define HQ_TRY(h, fast) {h, threaded<h, true, fast>}
+        HQ_TRY((v_arith<ADD, false>), (v_arith_try<ADD, false>)),
+        HQ_TRY((v_arith<SUB, false>), (v_arith_try<SUB, false>)),
+        HQ_TRY((v_arith<MUL, false>), (v_arith_try<MUL, false>)),
+        HQ_TRY((v_arith<MUL, true>), (v_arith_try<MUL, true>)),
+        HQ_TRY((v_arith<DIV, false>), (v_arith_try<DIV, false>)),
+        HQ_TRY(v_mac<0>, v_mac_try<0>), HQ_TRY(v_mac<1>, v_mac_try<1>),
+        HQ_TRY(v_mac<2>, v_mac_try<2>), HQ_TRY(v_mac<3>, v_mac_try<3>),
+        HQ_TRY(v_fma<0>, v_fma_try<0>), HQ_TRY(v_fma<1>, v_fma_try<1>),
+        HQ_TRY(v_fma<2>, v_fma_try<2>), HQ_TRY(v_fma<3>, v_fma_try<3>), HQ_T(v_mov),
+        HQ_T(v_abs), HQ_T(v_neg), HQ_T(v_imm),
         HQ_T(v_sqrt), HQ_T(v_cmp<false>), HQ_T(v_cmp<true>), HQ_T(v_to_int), HQ_T(v_from_int),
         HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
         HQ_T(v_msr), HQ_T((v_ldst<true, 2>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
-        {v_ldst<true, 1>, threaded<v_ldst<true, 1>, true, v_ldst_try<true>>},
-        {v_ldst<false, 1>, threaded<v_ldst<false, 1>, true, v_ldst_try<false>>},
+        HQ_TRY((v_ldst<true, 1>), v_ldst_try<true>), HQ_TRY((v_ldst<false, 1>), v_ldst_try<false>),
         HQ_T(v_multiple<false>),
 #undef HQ_T
+#undef HQ_TRY
     };
     const auto it = m.find(fn);
     return it == m.end() ? nullptr : it->second;

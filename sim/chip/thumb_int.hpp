@@ -129,7 +129,9 @@ enum Kind : uint8_t { LDR, LDRB, LDRH, LDRSB, LDRSH, STR, STRB, STRH };
 // path then runs ldst).
 template <Kind K, Mode M, bool TRY = false>
 HQ_INLINE bool ldst_access(Thumb& t, const Op& o) {
-    constexpr unsigned N = (K == LDR || K == STR) ? 4 : (K == LDRH || K == LDRSH || K == STRH) ? 2 : 1;
+    constexpr unsigned N = (K == LDR || K == STR)                    ? 4
+                           : (K == LDRH || K == LDRSH || K == STRH) ? 2
+                                                                    : 1;
     uint32_t a;
     if constexpr (M == LIT) a = ((t.r_[15] + 4) & ~3u) + o.imm;
     else if constexpr (M == REGOFF) a = t.r_[o.rn] + (t.r_[o.rm] << o.sn);
