@@ -206,6 +206,7 @@ public:
     uint32_t it_stop_ = 0;              // a chain stopped in an IT block: its next IT | 0x100
     void break_chain() { chain_end_ = 0; }
     uint64_t deadline_ = 0, limit_ = 0;
+    uint64_t icount_ = 0;               // apart from cycles_: two scalar adds, not one vector
     Stop pending_stop_ = Stop::Deadline;
     uint32_t fault_address_ = 0, exc_return_ = 0, svc_number_ = 0;
     std::string detail_;
@@ -227,7 +228,7 @@ public:
     template <unsigned N> bool store_fast(uint32_t a, uint32_t v);
 
     Op* lookup(uint32_t pc);
-    uint64_t cycles_ = 0, icount_ = 0;
+    uint64_t cycles_ = 0;
     // decoded records, one per halfword of flash and SRAM, each array with one more at its
     // end (never decoded: a chain running straight past the end stops there)
     std::vector<Op> fcache_, scache_;
@@ -269,31 +270,17 @@ inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
 // this in the same array (each array ends with an Op never decoded, which ends a chain).
 // Otherwise H sees npc_ = the next instruction's address and may change it (a branch).
 //
-// TRY, when given: H's fast form, which does the instruction only if nothing can stop it (no
-// bus call: an access to SRAM or flash) and else changes nothing and returns false; then
-// threaded<H> runs it, out of line (the fast path then needs no registers kept over a call).
-using Try = bool (*)(Thumb&, const Op&);
-template <Handler H, bool STRAIGHT, Try TRY = nullptr>
-void threaded(Thumb& t, const Op& o);
-template <Handler H, bool STRAIGHT>
-__attribute__((noinline)) void threaded_slow(Thumb& t, const Op& o) {
-    threaded<H, STRAIGHT>(t, o);
-}
+// STOPS false: H never stops the run (no bus call, no fault, no stop_*: data processing,
+// FP arithmetic and moves), so nothing to check for after it.
+//
+// threaded_try<H, TRY> (a straight Op): TRY is H's fast form, which does the instruction
+// only if nothing can stop it (no bus call: an access to SRAM or flash; no FP rule beyond
+// the host's) and else changes nothing and returns false; then threaded<H> runs it, out of
+// line (the fast path then needs no registers kept over a call).
 
-template <Handler H, bool STRAIGHT, Try TRY>
-void threaded(Thumb& t, const Op& o) {
-    const uint32_t pc0 = t.r_[15];
-    if (!STRAIGHT) t.npc_ = pc0 + o.size;
-    if constexpr (TRY != nullptr) {
-        if (__builtin_expect(!TRY(t, o), 0)) return threaded_slow<H, STRAIGHT>(t, o);
-    } else {
-        H(t, o);
-    }
-    if (TRY == nullptr && __builtin_expect(t.pending_ != 0, 0)) {
-        if (STRAIGHT) t.npc_ = pc0 + o.size;
-        t.cur_ = &o;
-        return;
-    }
+// The instruction retired (PC, cycles, count) and the next one's chain handler called.
+template <bool STRAIGHT>
+HQ_INLINE void retire_and_next(Thumb& t, const Op& o, uint32_t pc0) {
     const uint32_t pc = STRAIGHT ? pc0 + o.size : t.npc_;
     t.r_[15] = pc;
     const uint64_t c = t.cycles_ + o.cyc;
@@ -313,6 +300,32 @@ void threaded(Thumb& t, const Op& o) {
     const Handler f = n->next;
     if (__builtin_expect(!f || (n->flags & t.chain_mask_), 0)) return;
     f(t, *n);
+}
+
+template <Handler H, bool STRAIGHT, bool STOPS = true>
+void threaded(Thumb& t, const Op& o) {
+    const uint32_t pc0 = t.r_[15];
+    if (!STRAIGHT) t.npc_ = pc0 + o.size;
+    H(t, o);
+    if (STOPS && __builtin_expect(t.pending_ != 0, 0)) {
+        if (STRAIGHT) t.npc_ = pc0 + o.size;
+        t.cur_ = &o;
+        return;
+    }
+    retire_and_next<STRAIGHT>(t, o, pc0);
+}
+
+template <Handler H>
+__attribute__((noinline)) void threaded_slow(Thumb& t, const Op& o) {
+    threaded<H, true>(t, o);
+}
+
+using Try = bool (*)(Thumb&, const Op&);
+template <Handler H, Try TRY>
+void threaded_try(Thumb& t, const Op& o) {
+    const uint32_t pc0 = t.r_[15];
+    if (__builtin_expect(!TRY(t, o), 0)) return threaded_slow<H>(t, o);
+    retire_and_next<true>(t, o, pc0);
 }
 
 template <unsigned N>

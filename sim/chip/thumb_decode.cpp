@@ -585,8 +585,10 @@ template <Dp OP, Src S>
 void add_dp_one(Map& m) {
     constexpr Src S0 = S == REG ? REG0 : S;
     Chained c{threaded<dp<OP, S>, true>, threaded<dp<OP, S>, false>,
-              {{threaded<dp<OP, S, NOFLAGS>, true>, threaded<dp<OP, S, FLAGS>, true>},
-               {threaded<dp<OP, S0, NOFLAGS>, true>, threaded<dp<OP, S0, FLAGS>, true>}}};
+              {{threaded<dp<OP, S, NOFLAGS>, true, false>,
+                threaded<dp<OP, S, FLAGS>, true, false>},
+               {threaded<dp<OP, S0, NOFLAGS>, true, false>,
+                threaded<dp<OP, S0, FLAGS>, true, false>}}};
     c.rn_operand = S != REGREG && OP != MOV && OP != MVN;
     c.rm_operand = S == REG;
     m.emplace(dp<OP, S>, c);
@@ -596,8 +598,8 @@ void add_dp(Map& m, std::index_sequence<I...>) {
     (add_dp_one<static_cast<Dp>(I), S>(m), ...);
 }
 template <Kind K, Mode M>
-void add_ldst_one(Map& m) {         // a straight one: its fast form first (threaded's TRY)
-    m.emplace(ldst<K, M>, Chained{threaded<ldst<K, M>, true, ldst_try<K, M>>,
+void add_ldst_one(Map& m) {         // a straight one: its fast form first (threaded_try)
+    m.emplace(ldst<K, M>, Chained{threaded_try<ldst<K, M>, ldst_try<K, M>>,
                                   threaded<ldst<K, M>, false>});
 }
 template <Mode M, size_t... I>

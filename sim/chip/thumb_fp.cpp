@@ -175,7 +175,7 @@ HQ_INLINE bool muladd_fast(uint32_t fpscr, uint32_t addend, uint32_t a, uint32_t
 // --- handlers ---------------------------------------------------------------------------
 // o.rd, o.rn, o.rm: S register numbers; o.x: the variant.
 
-// Each handler and its fast form (threaded's TRY): the host's results where they are the
+// Each handler and its fast form (threaded_try): the host's results where they are the
 // architecture's (fast()), else false with nothing changed, the handler then run out of line.
 template <Arith OP, bool NEG>          // VNMUL: NEG
 HQ_INLINE bool v_arith_try(Thumb& t, const Op& o) {
@@ -366,7 +366,7 @@ HQ_INLINE void v_ldst(Thumb& t, const Op& o) {
         v_transfer<LOAD>(t, a, o.rd, n);
     }
 }
-// One word in SRAM or flash only (threaded's TRY).
+// One word in SRAM or flash only (threaded_try).
 template <bool LOAD>
 HQ_INLINE bool v_ldst_try(Thumb& t, const Op& o) {
     const uint32_t a = v_address(t, o);
@@ -489,7 +489,8 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
 Handler threaded_fp(Handler fn) {
     static const std::unordered_map<Handler, Handler> m = {
 #define HQ_T(h) {h, threaded<h, true>}
-#define HQ_TRY(h, fast) {h, threaded<h, true, fast>}
+#define HQ_TRY(h, fast) {h, threaded_try<h, fast>}
+#define HQ_N(h) {h, threaded<h, true, false>}     // never stops
         HQ_TRY((v_arith<ADD, false>), (v_arith_try<ADD, false>)),
         HQ_TRY((v_arith<SUB, false>), (v_arith_try<SUB, false>)),
         HQ_TRY((v_arith<MUL, false>), (v_arith_try<MUL, false>)),
@@ -498,15 +499,17 @@ Handler threaded_fp(Handler fn) {
         HQ_TRY(v_mac<0>, v_mac_try<0>), HQ_TRY(v_mac<1>, v_mac_try<1>),
         HQ_TRY(v_mac<2>, v_mac_try<2>), HQ_TRY(v_mac<3>, v_mac_try<3>),
         HQ_TRY(v_fma<0>, v_fma_try<0>), HQ_TRY(v_fma<1>, v_fma_try<1>),
-        HQ_TRY(v_fma<2>, v_fma_try<2>), HQ_TRY(v_fma<3>, v_fma_try<3>), HQ_T(v_mov),
-        HQ_T(v_abs), HQ_T(v_neg), HQ_T(v_imm),
-        HQ_T(v_sqrt), HQ_T(v_cmp<false>), HQ_T(v_cmp<true>), HQ_T(v_to_int), HQ_T(v_from_int),
-        HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
+        HQ_TRY(v_fma<2>, v_fma_try<2>), HQ_TRY(v_fma<3>, v_fma_try<3>), HQ_N(v_mov),
+        HQ_N(v_abs), HQ_N(v_neg), HQ_N(v_imm), HQ_N(v_sqrt), HQ_N(v_cmp<false>),
+        HQ_N(v_cmp<true>), HQ_N(v_to_int), HQ_N(v_from_int), HQ_N(v_to_core), HQ_N(v_from_core),
+        HQ_N(v_to_core2), HQ_N(v_from_core2), HQ_N(v_mrs),
         HQ_T(v_msr), HQ_T((v_ldst<true, 2>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
-        HQ_TRY((v_ldst<true, 1>), v_ldst_try<true>), HQ_TRY((v_ldst<false, 1>), v_ldst_try<false>),
+        HQ_TRY((v_ldst<true, 1>), v_ldst_try<true>),
+        HQ_TRY((v_ldst<false, 1>), v_ldst_try<false>),
         HQ_T(v_multiple<false>),
 #undef HQ_T
 #undef HQ_TRY
+#undef HQ_N
     };
     const auto it = m.find(fn);
     return it == m.end() ? nullptr : it->second;

@@ -125,7 +125,7 @@ enum Kind : uint8_t { LDR, LDRB, LDRH, LDRSB, LDRSH, STR, STRB, STRH };
 // REGOFF R[rn] + (R[rm] << sn); LIT Align(PC,4)+imm. imm is signed (two's complement). Rn is
 // never the PC but in LIT, nor a stored Rt (the decoder's UNDEFINED forms).
 // TRY (an Op that does not write the PC): only an aligned access to SRAM or flash (no SRAM
-// holding decoded code for a store); false, nothing changed, for any other (threaded's slow
+// holding decoded code for a store); false, nothing changed, for any other (threaded_try's slow
 // path then runs ldst).
 template <Kind K, Mode M, bool TRY = false>
 HQ_INLINE bool ldst_access(Thumb& t, const Op& o) {
