@@ -7,7 +7,6 @@
 #include <cfenv>
 #include <cmath>
 #include <cstring>
-#include <limits>
 #include <unordered_map>
 
 #include "chip/thumb.hpp"
@@ -147,29 +146,10 @@ __attribute__((noinline)) uint32_t muladd_slow(const Mode& m, uint32_t addend, u
     return result(m, host, std::fma(double{x}, double{y}, double{z}));
 }
 
-// x * y + z rounded once to nearest, for finite operands, without the host's fmaf (a call):
-// the product is exact in double (24 + 24 bits), the sum rounded to odd at double's 53 bits
-// (the sum rounded to nearest, then moved to its odd neighbour toward the exact value when
-// it was inexact and even), which rounded to float is the sum rounded once. A NaN when the
-// sum is not finite (an infinite operand: the slow path's).
-HQ_INLINE float fma_host(float x, float y, float z) {
-    const double p = double{x} * double{y}, c = z;
-    const double sum = p + c;
-    if (!std::isfinite(sum)) return std::numeric_limits<float>::quiet_NaN();
-    const double pp = sum - c;                  // TwoSum: sum + err == p + c exactly
-    const double err = (p - pp) + (c - (sum - pp));
-    uint64_t bits;
-    std::memcpy(&bits, &sum, 8);
-    if (err != 0 && !(bits & 1)) bits += ((err < 0) == (sum < 0)) ? 1 : ~uint64_t{0};
-    double odd;
-    std::memcpy(&odd, &bits, 8);
-    return static_cast<float>(odd);
-}
-
 HQ_INLINE bool muladd_fast(uint32_t fpscr, uint32_t addend, uint32_t a, uint32_t b,
                            uint32_t& r) {
     const float x = F(a), y = F(b), z = F(addend);
-    return fast(fpscr, r, [x, y, z] { return fma_host(x, y, z); }, addend, a, b);
+    return fast(fpscr, r, [x, y, z] { return std::fmaf(x, y, z); }, addend, a, b);
 }
 
 // --- handlers ---------------------------------------------------------------------------
