@@ -186,3 +186,47 @@ def test_an_owners_pc_write_makes_a_stop_address_stop_again_but_a_handler_does_n
     e.jump(CODE + 0x10)                                           # a handler runs elsewhere
     e.jump(CODE + 2)                                              # and returns to it
     assert e.run(1000, 10) == "bkpt"
+
+
+def test_a_request_from_a_bus_call_inside_an_it_block_stops_after_it_the_block_going_on():
+    # cmp r0,r0; itt eq; ldreq r1,[r2]; moveq r3,#1; bkpt -- once decoded, then again
+    e = _engine(0x4280, 0xBF04, 0x6811, 0x2301, 0xBE00, regs={2: PERIPHERAL})
+    e.set_bus(lambda a, s: 0, lambda a, s, v: True)
+    assert e.run(1000, 100) == "bkpt"
+    seen = []
+
+    def read(address, size):
+        seen.append((e.pc, e.cycles))
+        e.request_stop()
+        return 0x55
+
+    e.set_bus(read, lambda a, s, v: True)
+    e.set_reg(15, CODE)
+    e.set_reg(3, 0)
+    e.cycles = 0
+    assert e.run(1000, 100) == "requested"
+    assert seen == [(CODE + 4, 2)]
+    assert e.pc == CODE + 6 and e.reg(1) == 0x55 and e.cycles == 4 and e.itstate != 0
+    assert e.run(1000, 100) == "bkpt" and e.reg(3) == 1 and e.itstate == 0
+
+
+def test_what_a_bus_call_changes_holds_from_the_next_instruction():
+    # in flash: ldr r0,[r2]; nop; bkpt -- run once (decoded), then again with a read that
+    # starts programming the flash (fetch limit 0)
+    e = ThumbEngine()
+    e.write(0x1000, struct.pack("<HHH", 0x6810, 0xBF00, 0xBE00))
+    e.set_reg(2, PERIPHERAL)
+    e.set_bus(lambda a, s: 1, lambda a, s, v: True)
+    e.set_reg(15, 0x1000)
+    assert e.run(1000, 10) == "bkpt"
+    e.set_bus(lambda a, s: setattr(e, "flash_fetch_limit", 0) or 1, lambda a, s, v: True)
+    e.set_reg(15, 0x1000)
+    assert e.run(1000, 10) == "bus_fault" and e.fault_address == 0x1002 and e.reg(0) == 1
+    # ldr r0,[r2]; vmov.f32 s0,s1; bkpt -- then with a read that takes the FPU away (CPACR)
+    e = _engine(0x6810, 0xEEB0, 0x0A60, 0xBE00, regs={2: PERIPHERAL})
+    e.control = 4
+    e.set_bus(lambda a, s: 1, lambda a, s, v: True)
+    assert e.run(1000, 10) == "bkpt"
+    e.set_bus(lambda a, s: setattr(e, "fpu_enabled", False) or 1, lambda a, s, v: True)
+    e.set_reg(15, CODE)
+    assert e.run(1000, 10) == "no_fpu" and e.pc == CODE + 2

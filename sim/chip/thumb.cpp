@@ -14,8 +14,8 @@ const char* stop_name(Stop s) {
 }
 
 Thumb::Thumb()
-    : flash_(kFlashSize, 0xFF), sram_(kSramSize, 0), fcache_(kFlashSize / 2),
-      scache_(kSramSize / 2), code_pages_((kSramSize >> kPageShift) + 1, 0) {}
+    : fcache_(kFlashSize / 2 + 1), scache_(kSramSize / 2 + 1), flash_(kFlashSize, 0xFF),
+      sram_(kSramSize, 0), code_pages_((kSramSize >> kPageShift) + 1, 0) {}
 
 void Thumb::set_reg(unsigned n, uint32_t v) {
     r_[n & 15] = (n == 15 || n == 13) ? (v & ~(n == 15 ? 1u : 3u)) : v;
@@ -87,6 +87,7 @@ bool Thumb::align_fault(uint32_t a, unsigned n, bool must_align) {
 }
 
 bool Thumb::bus_read(uint32_t a, unsigned n, uint32_t& v) {
+    break_chain();
     v = 0;
     if (bus_ && bus_->read(a, n, v)) return true;
     fault_address_ = a;
@@ -96,6 +97,7 @@ bool Thumb::bus_read(uint32_t a, unsigned n, uint32_t& v) {
 }
 
 bool Thumb::bus_write(uint32_t a, unsigned n, uint32_t v) {
+    break_chain();
     if (bus_ && bus_->write(a, n, v)) return true;
     fault_address_ = a;
     detail_ = "write to nothing";
@@ -231,6 +233,59 @@ bool condition_passed(const Thumb& t, unsigned cond) {
     return (kCondPass[cond & 15] >> f) & 1;
 }
 
+// --- IT blocks in a chain ----------------------------------------------------------------
+// The IT instruction hands on to its block's instructions, each run as the run loop runs one
+// inside a block (its condition, its handler fn with in_it_, the cost inside a block, the IT
+// state advanced), then on to the next: in the block, or past it (its chain handler). What
+// the run loop must see (a stop address, an FP instruction while the FP context needs its
+// ExecuteFPCheck) ends the chain before that instruction, as in threaded<>.
+namespace {
+inline uint32_t it_advance(uint32_t it) {
+    return (it & 7) ? ((it & 0xE0) | ((it << 1) & 0x1F)) : 0;
+}
+
+void it_block(Thumb& t, const Op& o) {
+    t.npc_ = t.r_[15] + o.size;
+    const uint32_t next_it = it_advance(t.it_);
+    if (condition_passed(t, t.it_ >> 4)) {
+        t.in_it_ = true;
+        o.fn(t, o);
+        t.in_it_ = false;
+        if (__builtin_expect(t.pending_ != 0, 0)) {
+            t.cur_ = &o;
+            t.it_stop_ = next_it | 0x100;
+            return;
+        }
+    }
+    const uint32_t pc = t.npc_;
+    t.r_[15] = pc;
+    const uint64_t c = t.cycles_ + o.cyc_it;
+    t.cycles_ = c;
+    ++t.icount_;
+    t.it_ = next_it;
+    if (c >= t.chain_end_) return;
+    const Op* n;
+    if (pc < t.fetch_limit_) n = &t.fcache_[pc >> 1];
+    else if (pc - kSramBase < kSramSize) n = &t.scache_[(pc - kSramBase) >> 1];
+    else return;
+    if (!n->next || (n->flags & t.chain_mask_)) return;
+    if (next_it) it_block(t, *n);
+    else n->next(t, *n);
+}
+}  // namespace
+
+void it_start(Thumb& t, const Op& o) {
+    t.it_ = o.imm;
+    t.r_[15] += o.size;
+    const uint64_t c = t.cycles_ + o.cyc;
+    t.cycles_ = c;
+    ++t.icount_;
+    if (c >= t.chain_end_) return;
+    const Op* n = &o + (o.size >> 1);
+    if (!n->next || (n->flags & t.chain_mask_)) return;
+    it_block(t, *n);
+}
+
 Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
     const uint64_t limit = icount_ + max_instructions;
     deadline_ = deadline_cycles;
@@ -267,9 +322,19 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         }
         if (__builtin_expect(it_ == 0, 1) && op->next) {
             cur_ = op;
-            chain_ = static_cast<uint32_t>(std::min<uint64_t>(256, limit - icount_));
+            // the chain's ends (thumb.hpp): at most 256 instructions, and none past the limit
+            chain_end_ = std::min(deadline_, cycles_ + std::min<uint64_t>(256, limit - icount_));
+            chain_mask_ = kStopAt | (fpu_enabled && (control_ & 4) ? 0 : kFp);
+            fetch_limit_ = std::min(flash_fetch_limit, kFlashSize);
+            // a limit inside the flash: each instruction from here (a straight run of a chain
+            // would not see it)
+            if (fetch_limit_ != 0 && fetch_limit_ != kFlashSize) break_chain();
             op->next(*this, *op);                   // retires it and maybe more (threaded)
-            if (__builtin_expect(pending_ != 0, 0)) return finish(*cur_, 0);
+            if (__builtin_expect(pending_ != 0, 0)) {
+                const uint32_t in_it = it_stop_;
+                it_stop_ = 0;
+                return finish(*cur_, in_it);
+            }
             continue;
         }
         if (__builtin_expect(it_ == 0, 1)) {
@@ -282,7 +347,7 @@ Stop Thumb::run(uint64_t deadline_cycles, uint64_t max_instructions) {
         }
         // inside an IT block: the condition, ExecuteFPCheck only when it passes, the cost
         // the model charges inside a block, the IT state advanced
-        const uint32_t next_it = (it_ & 7) ? ((it_ & 0xE0) | ((it_ << 1) & 0x1F)) : 0;
+        const uint32_t next_it = it_advance(it_);
         if (condition_passed(*this, it_ >> 4)) {
             if (op->flags & kFp) {
                 if (!fpu_enabled) return Stop::NoFpu;

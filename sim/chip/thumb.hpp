@@ -25,6 +25,9 @@
 #include <unordered_set>
 #include <vector>
 
+// A handler that each threaded<> wrapper holds in its own body (the compiler would call some).
+#define HQ_INLINE inline __attribute__((always_inline))
+
 namespace hqsim::thumb {
 
 constexpr uint32_t kFlashBase = 0x00000000, kFlashSize = 512 * 1024;
@@ -98,7 +101,10 @@ public:
     // Runs until a stop. The deadline may be brought forward during the run (from a bus
     // call: lower_deadline()); the run then stops at the next instruction boundary past it.
     Stop run(uint64_t deadline_cycles, uint64_t max_instructions);
-    void lower_deadline(uint64_t cycles) { if (cycles < deadline_) deadline_ = cycles; }
+    void lower_deadline(uint64_t cycles) {
+        if (cycles < deadline_) deadline_ = cycles;
+        if (cycles < chain_end_) chain_end_ = cycles;
+    }
     void request_stop() { pending_ |= kPendRequested; }
 
     // --- state ---------------------------------------------------------------------------
@@ -163,6 +169,14 @@ public:
         }
         return false;
     }
+    // [a, a + n) in SRAM, a word-aligned, and for a store no decoded code there: its bytes,
+    // for a block transfer straight to or from them (LDM/STM, VLDM/VSTM); else nullptr.
+    uint8_t* sram_block(uint32_t a, uint32_t n, bool store) {
+        const uint32_t so = a - kSramBase;
+        if ((a & 3) || so >= kSramSize || n > kSramSize - so) return nullptr;
+        if (store && sram_has_code(so, n)) return nullptr;
+        return sram_.data() + so;
+    }
     // Owner writes (flash programming, loading code): bytes copied, decoded code dropped.
     void write_memory(uint32_t address, const uint8_t* data, size_t n);
     bool read_memory(uint32_t address, uint8_t* out, size_t n) const;
@@ -185,9 +199,20 @@ public:
     uint32_t fpscr_ = 0;
     uint32_t control_ = 0, ipsr_ = 0, sp_other_ = 0;
     uint8_t pending_ = 0;
-    const Op* cur_ = nullptr;           // the instruction a chain of handlers is at
-    uint32_t chain_ = 0;                // instructions a chain may still run
+    const Op* cur_ = nullptr;           // the instruction a chain of handlers stopped at
+    // A chain of handlers runs while cycles_ < chain_end_ (the deadline; the instruction
+    // limit and a bound on the chain's length, as every chained instruction costs a cycle
+    // at least), past no Op whose flags meet chain_mask_ (kStopAt; kFp while an FP
+    // instruction needs the run loop's ExecuteFPCheck), fetching below fetch_limit_. What
+    // changes those ends the chain (break_chain()): a bus call (the owner may change anything
+    // there), IT, MSR CONTROL.
+    uint64_t chain_end_ = 0;
+    uint8_t chain_mask_ = 0;
+    uint32_t fetch_limit_ = 0;
+    uint32_t it_stop_ = 0;              // a chain stopped in an IT block: its next IT | 0x100
+    void break_chain() { chain_end_ = 0; }
     uint64_t deadline_ = 0, limit_ = 0;
+    uint64_t icount_ = 0;               // apart from cycles_: two scalar adds, not one vector
     Stop pending_stop_ = Stop::Deadline;
     uint32_t fault_address_ = 0, exc_return_ = 0, svc_number_ = 0;
     std::string detail_;
@@ -203,9 +228,16 @@ public:
     // Memory access from instructions: false after setting a stop (the handler returns).
     template <unsigned N> bool load(uint32_t a, uint32_t& v, bool must_align = false);
     template <unsigned N> bool store(uint32_t a, uint32_t v, bool must_align = false);
+    // The same for an aligned access to SRAM or flash only (a store not over decoded code):
+    // false, nothing done, for any other.
+    template <unsigned N> bool load_fast(uint32_t a, uint32_t& v);
+    template <unsigned N> bool store_fast(uint32_t a, uint32_t v);
 
     Op* lookup(uint32_t pc);
-    uint64_t cycles_ = 0, icount_ = 0;
+    uint64_t cycles_ = 0;
+    // decoded records, one per halfword of flash and SRAM, each array with one more at its
+    // end (never decoded: a chain running straight past the end stops there)
+    std::vector<Op> fcache_, scache_;
 
 private:
     Stop finish(const Op& op, uint32_t next_it);
@@ -217,7 +249,6 @@ private:
     bool align_fault(uint32_t a, unsigned n, bool must_align);
 
     std::vector<uint8_t> flash_, sram_;
-    std::vector<Op> fcache_, scache_;
     std::vector<uint8_t> code_pages_;       // SRAM pages holding decoded code
     std::unordered_set<uint32_t> stops_;
     // The stop address the run last stopped at, until its instruction runs or the owner
@@ -231,35 +262,81 @@ private:
 // Decoding (thumb_decode.cpp): fills op for the instruction at pc (hw1, hw2 its halfwords).
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2);
 Handler threaded_fp(Handler fn);        // thumb_fp.cpp: threaded<fn> of an FP handler
+void it_start(Thumb& t, const Op& o);   // thumb.cpp: an IT instruction's chain handler
 
 inline __attribute__((always_inline)) Op* Thumb::lookup(uint32_t pc) {
     Op* op;
-    if (pc < flash_fetch_limit) op = &fcache_[pc >> 1];
+    if (pc < flash_fetch_limit && pc < kFlashSize) op = &fcache_[pc >> 1];
     else if (pc - kSramBase < kSramSize) op = &scache_[(pc - kSramBase) >> 1];
     else return nullptr;
     if (__builtin_expect(!op->fn, 0)) decode(pc, *op);
     return op;
 }
 
-// Threaded dispatch: H, then (outside IT blocks, nothing to stop for) the instruction
-// retired and the next one's handler called from here, a jump from each handler's own
-// site (its branch predicted per handler, not from the run loop's one call). Back to the
-// run loop for anything else, and after at most chain_ instructions (a bound on the stack
-// should the compiler not turn the call into a jump).
-template <Handler H>
-void threaded(Thumb& t, const Op& o) {
-    H(t, o);
-    if (__builtin_expect(t.pending_ != 0, 0)) return;
-    t.r_[15] = t.npc_;
-    t.cycles_ += o.cyc;
+// Threaded dispatch: H, then (nothing to stop for, the chain's ends not reached) the
+// instruction retired and the next one's handler called from here, a jump from each
+// handler's own site (its branch predicted per handler, not from the run loop's one call).
+// Back to the run loop for anything else. STRAIGHT: H never writes the PC (decided per Op at
+// decode time), so the next PC is this one's plus its size and the next Op the one after
+// this in the same array (each array ends with an Op never decoded, which ends a chain).
+// Otherwise H sees npc_ = the next instruction's address and may change it (a branch).
+//
+// STOPS false: H never stops the run (no bus call, no fault, no stop_*: data processing,
+// FP arithmetic and moves), so nothing to check for after it.
+//
+// threaded_try<H, TRY> (a straight Op): TRY is H's fast form, which does the instruction
+// only if nothing can stop it (no bus call: an access to SRAM or flash; no FP rule beyond
+// the host's) and else changes nothing and returns false; then threaded<H> runs it, out of
+// line (the fast path then needs no registers kept over a call).
+
+// The instruction retired (PC, cycles, count) and the next one's chain handler called.
+template <bool STRAIGHT>
+HQ_INLINE void retire_and_next(Thumb& t, const Op& o, uint32_t pc0) {
+    const uint32_t pc = STRAIGHT ? pc0 + o.size : t.npc_;
+    t.r_[15] = pc;
+    const uint64_t c = t.cycles_ + o.cyc;
+    t.cycles_ = c;
     ++t.icount_;
-    if (--t.chain_ == 0 || t.cycles_ >= t.deadline_ || t.it_) return;   // chain_: the limit too
-    Op* n = t.lookup(t.r_[15]);
-    if (!n || !n->next || (n->flags & kStopAt)) return;
-    if ((n->flags & kFp) && (!t.fpu_enabled || !(t.control_ & 4))) return;
-    t.npc_ = t.r_[15] + n->size;
-    t.cur_ = n;
-    n->next(t, *n);
+    if (__builtin_expect(c >= t.chain_end_, 0)) return;
+    const Op* n;
+    if (STRAIGHT) {
+        n = &o + (o.size >> 1);
+    } else if (pc < t.fetch_limit_) {
+        n = &t.fcache_[pc >> 1];
+    } else if (pc - kSramBase < kSramSize) {
+        n = &t.scache_[(pc - kSramBase) >> 1];
+    } else {
+        return;
+    }
+    const Handler f = n->next;
+    if (__builtin_expect(!f || (n->flags & t.chain_mask_), 0)) return;
+    f(t, *n);
+}
+
+template <Handler H, bool STRAIGHT, bool STOPS = true>
+void threaded(Thumb& t, const Op& o) {
+    const uint32_t pc0 = t.r_[15];
+    if (!STRAIGHT) t.npc_ = pc0 + o.size;
+    H(t, o);
+    if (STOPS && __builtin_expect(t.pending_ != 0, 0)) {
+        if (STRAIGHT) t.npc_ = pc0 + o.size;
+        t.cur_ = &o;
+        return;
+    }
+    retire_and_next<STRAIGHT>(t, o, pc0);
+}
+
+template <Handler H>
+__attribute__((noinline)) void threaded_slow(Thumb& t, const Op& o) {
+    threaded<H, true>(t, o);
+}
+
+using Try = bool (*)(Thumb&, const Op&);
+template <Handler H, Try TRY>
+void threaded_try(Thumb& t, const Op& o) {
+    const uint32_t pc0 = t.r_[15];
+    if (__builtin_expect(!TRY(t, o), 0)) return threaded_slow<H>(t, o);
+    retire_and_next<true>(t, o, pc0);
 }
 
 template <unsigned N>
@@ -277,6 +354,27 @@ inline bool Thumb::load(uint32_t a, uint32_t& v, bool must_align) {
         return true;
     }
     return bus_read(a, N, v);
+}
+
+template <unsigned N>
+HQ_INLINE bool Thumb::load_fast(uint32_t a, uint32_t& v) {
+    if (a & (N - 1)) return false;
+    const uint32_t so = a - kSramBase;
+    const uint8_t* p;
+    if (so <= kSramSize - N) p = sram_.data() + so;
+    else if (a <= kFlashSize - N) p = flash_.data() + a;
+    else return false;
+    v = 0;
+    __builtin_memcpy(&v, p, N);
+    return true;
+}
+
+template <unsigned N>
+HQ_INLINE bool Thumb::store_fast(uint32_t a, uint32_t v) {
+    const uint32_t so = a - kSramBase;
+    if ((a & (N - 1)) || so > kSramSize - N || code_pages_[so >> kPageShift]) return false;
+    __builtin_memcpy(sram_.data() + so, &v, N);
+    return true;
 }
 
 template <unsigned N>

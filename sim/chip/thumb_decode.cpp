@@ -4,6 +4,7 @@
 // as Undefined.
 #include "chip/thumb_int.hpp"
 
+#include <array>
 #include <unordered_map>
 #include <utility>
 
@@ -566,19 +567,44 @@ void decode32(Op& op, uint16_t h1, uint16_t h2) {
 
 // --- threaded<fn> of each integer handler --------------------------------------------------
 
-using Map = std::unordered_map<Handler, Handler>;
+// The chain handlers of a handler fn: threaded<fn, true> (the Op never writes the PC),
+// threaded<fn, false>; for data processing the forms specialised for an Op in a chain
+// (FlagMode), [operand unshifted][sets flags], and which operands may not be the PC there.
+struct Chained {
+    Handler straight = nullptr, branchy = nullptr;
+    Handler fast[2][2] = {};
+    bool rn_operand = false, rm_operand = false;
+};
+using Map = std::unordered_map<Handler, Chained>;
 
 template <Handler... H>
 void add(Map& m) {
-    (m.emplace(H, threaded<H>), ...);
+    (m.emplace(H, Chained{threaded<H, true>, threaded<H, false>}), ...);
+}
+template <Dp OP, Src S>
+void add_dp_one(Map& m) {
+    constexpr Src S0 = S == REG ? REG0 : S;
+    Chained c{threaded<dp<OP, S>, true>, threaded<dp<OP, S>, false>,
+              {{threaded<dp<OP, S, NOFLAGS>, true, false>,
+                threaded<dp<OP, S, FLAGS>, true, false>},
+               {threaded<dp<OP, S0, NOFLAGS>, true, false>,
+                threaded<dp<OP, S0, FLAGS>, true, false>}}};
+    c.rn_operand = S != REGREG && OP != MOV && OP != MVN;
+    c.rm_operand = S == REG;
+    m.emplace(dp<OP, S>, c);
 }
 template <Src S, size_t... I>
 void add_dp(Map& m, std::index_sequence<I...>) {
-    add<dp<static_cast<Dp>(I), S>...>(m);
+    (add_dp_one<static_cast<Dp>(I), S>(m), ...);
+}
+template <Kind K, Mode M>
+void add_ldst_one(Map& m) {         // a straight one: its fast form first (threaded_try)
+    m.emplace(ldst<K, M>, Chained{threaded_try<ldst<K, M>, ldst_try<K, M>>,
+                                  threaded<ldst<K, M>, false>});
 }
 template <Mode M, size_t... I>
 void add_ldst(Map& m, std::index_sequence<I...>) {
-    add<ldst<static_cast<Kind>(I), M>...>(m);
+    (add_ldst_one<static_cast<Kind>(I), M>(m), ...);
 }
 
 const Map& threaded_int() {
@@ -601,6 +627,35 @@ const Map& threaded_int() {
     return m;
 }
 
+// B<cond> with its condition known: threaded<b_if<cond>> by condition.
+template <size_t... C>
+constexpr std::array<Handler, 16> conditional_branches(std::index_sequence<C...>) {
+    return {threaded<b_if<C>, false>...};
+}
+constexpr auto kBranchIf = conditional_branches(std::make_index_sequence<16>());
+
+// The chain handler of an integer Op (it, fn's handlers).
+Handler chained(const Op& op, const Chained& c, bool writes_pc) {
+    if (op.fn == b_cond) return kBranchIf[op.x & 15];
+    if (writes_pc) return c.branchy;
+    if (c.fast[0][0] && !(c.rn_operand && op.rn == 15) && !(c.rm_operand && op.rm == 15)) {
+        const bool unshifted = op.st == LSL && op.sn == 0;
+        return c.fast[unshifted][(op.flags & (kSetFlags | kSetFlagsOutsideIt)) != 0];
+    }
+    return c.straight;
+}
+
+// Whether the integer instruction in op may write the PC: the branches, a destination of
+// R15 (data processing, LDR; for the rest an UNPREDICTABLE form: the PC is what the old
+// dispatch left, the next instruction's), a POP or LDM of the PC.
+bool may_write_pc(const Op& op) {
+    static const Handler kBranches[] = {b_cond, b, bl, bx, blx, cbz, tb<true>, tb<false>};
+    for (Handler h : kBranches) {
+        if (op.fn == h) return true;
+    }
+    return op.rd == 15 || (op.fn == ldst_multiple<true> && (op.imm & 0x8000));
+}
+
 }  // namespace
 
 void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
@@ -609,7 +664,14 @@ void decode_instruction(Op& op, uint32_t pc, uint16_t hw1, uint16_t hw2) {
     if (!op.fn) op.fn = unknown;
     if (!op.cyc_it) op.cyc_it = op.cyc;
     const auto it = threaded_int().find(op.fn);
-    op.next = it != threaded_int().end() ? it->second : threaded_fp(op.fn);
+    if (op.fn == ops::it) {
+        op.next = it_start;
+    } else if (it != threaded_int().end()) {
+        op.next = chained(op, it->second, may_write_pc(op));
+    } else {
+        op.next = threaded_fp(op.fn);
+    }
+    if (!op.cyc) op.next = nullptr;         // a chain's length is bounded by its cycles
 }
 
 }  // namespace hqsim::thumb

@@ -68,21 +68,25 @@ enum Arith : uint8_t { ADD, SUB, MUL, DIV };
 
 inline bool normal(uint32_t b) { return ((b >> 23) & 0xFF) - 1u < 0xFEu; }
 
-// Normal operands in round-to-nearest: no NaN can come out, and a result that is normal and
-// not the smallest normal (which may have been tiny before rounding) needs no rule of FZ.
-inline bool fast(const Mode& m, Arith op, uint32_t a, uint32_t b, uint32_t& r) {
-    if (m.rmode || !normal(a) || !normal(b)) return false;
-    const float x = F(a), y = F(b);
-    switch (op) {
-        case ADD: r = B(x + y); break;
-        case SUB: r = B(x - y); break;
-        case MUL: r = B(x * y); break;
-        default: r = B(x / y); break;
+constexpr uint32_t kFz = 1u << 24, kModeBits = kFz | (3u << 22);    // FZ, RMode
+
+// The host's result f() where it is the architecture's, in round-to-nearest: without FZ, any
+// result but a NaN (a NaN operand gives a NaN, which takes the NaN rules; denormals the host
+// takes as the architecture does); with FZ, normal operands and a result that is normal and
+// not the smallest normal (which may have been tiny before rounding).
+template <typename Fn, typename... U>
+HQ_INLINE bool fast(uint32_t fpscr, uint32_t& r, Fn f, U... operands) {
+    const uint32_t mode = fpscr & kModeBits;
+    if (__builtin_expect(mode == 0, 1)) {
+        r = B(f());
+        return !is_nan(r);
     }
+    if (mode != kFz || !(normal(operands) && ...)) return false;
+    r = B(f());
     return normal(r) && (r & ~kSign) != 0x00800000u;
 }
 
-uint32_t arith_slow(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+__attribute__((noinline)) uint32_t arith_slow(const Mode& m, Arith op, uint32_t a, uint32_t b) {
     a = m.in(a);
     b = m.in(b);
     uint32_t r;
@@ -97,15 +101,32 @@ uint32_t arith_slow(const Mode& m, Arith op, uint32_t a, uint32_t b) {
     }
 }
 
-inline uint32_t arith(const Mode& m, Arith op, uint32_t a, uint32_t b) {
+// The host's a OP b where it is the architecture's (fast()): r, else false.
+template <Arith OP>
+HQ_INLINE bool arith_fast(uint32_t fpscr, uint32_t a, uint32_t b, uint32_t& r) {
+    const float x = F(a), y = F(b);
+    const auto host = [x, y] {
+        switch (OP) {
+            case ADD: return x + y;
+            case SUB: return x - y;
+            case MUL: return x * y;
+            default: return x / y;
+        }
+    };
+    return fast(fpscr, r, host, a, b);
+}
+
+template <Arith OP>
+HQ_INLINE uint32_t arith(uint32_t fpscr, uint32_t a, uint32_t b) {
     uint32_t r;
-    return fast(m, op, a, b, r) ? r : arith_slow(m, op, a, b);
+    return arith_fast<OP>(fpscr, a, b, r) ? r : arith_slow(Mode(fpscr), OP, a, b);
 }
 
 inline uint32_t neg(uint32_t a) { return a ^ kSign; }
 
 // FPMulAdd(addend, op1, op2): one rounding.
-uint32_t muladd(const Mode& m, uint32_t addend, uint32_t a, uint32_t b) {
+__attribute__((noinline)) uint32_t muladd_slow(const Mode& m, uint32_t addend, uint32_t a,
+                                               uint32_t b) {
     addend = m.in(addend);
     a = m.in(a);
     b = m.in(b);
@@ -125,36 +146,75 @@ uint32_t muladd(const Mode& m, uint32_t addend, uint32_t a, uint32_t b) {
     return result(m, host, std::fma(double{x}, double{y}, double{z}));
 }
 
+HQ_INLINE bool muladd_fast(uint32_t fpscr, uint32_t addend, uint32_t a, uint32_t b,
+                           uint32_t& r) {
+    const float x = F(a), y = F(b), z = F(addend);
+    return fast(fpscr, r, [x, y, z] { return std::fmaf(x, y, z); }, addend, a, b);
+}
+
 // --- handlers ---------------------------------------------------------------------------
 // o.rd, o.rn, o.rm: S register numbers; o.x: the variant.
 
-void v_arith(Thumb& t, const Op& o) {       // x: ADD SUB MUL DIV; y: 1 VNMUL
-    const Mode m(t.fpscr_);
-    const uint32_t r = arith(m, static_cast<Arith>(o.x), t.s_[o.rn], t.s_[o.rm]);
-    t.s_[o.rd] = o.y ? neg(r) : r;
+// Each handler and its fast form (threaded_try): the host's results where they are the
+// architecture's (fast()), else false with nothing changed, the handler then run out of line.
+template <Arith OP, bool NEG>          // VNMUL: NEG
+HQ_INLINE bool v_arith_try(Thumb& t, const Op& o) {
+    uint32_t r;
+    if (!arith_fast<OP>(t.fpscr_, t.s_[o.rn], t.s_[o.rm], r)) return false;
+    t.s_[o.rd] = NEG ? neg(r) : r;
+    return true;
+}
+template <Arith OP, bool NEG>
+void v_arith(Thumb& t, const Op& o) {
+    const uint32_t r = arith<OP>(t.fpscr_, t.s_[o.rn], t.s_[o.rm]);
+    t.s_[o.rd] = NEG ? neg(r) : r;
 }
 
-// VMLA VMLS VNMLA VNMLS: x bit0 negate the product, bit1 negate the accumulator.
+// VMLA VMLS VNMLA VNMLS: X bit0 negate the product, bit1 negate the accumulator.
+template <unsigned X>
+HQ_INLINE bool v_mac_try(Thumb& t, const Op& o) {
+    const uint32_t fpscr = t.fpscr_;
+    uint32_t p, r;
+    if (!arith_fast<MUL>(fpscr, t.s_[o.rn], t.s_[o.rm], p)) return false;
+    if (X & 1) p = neg(p);
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    if (!arith_fast<ADD>(fpscr, d, p, r)) return false;
+    t.s_[o.rd] = r;
+    return true;
+}
+template <unsigned X>
 void v_mac(Thumb& t, const Op& o) {
-    const Mode m(t.fpscr_);
-    uint32_t p = arith(m, MUL, t.s_[o.rn], t.s_[o.rm]);
-    if (o.x & 1) p = neg(p);
-    const uint32_t d = (o.x & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
-    t.s_[o.rd] = arith(m, ADD, d, p);
+    const uint32_t fpscr = t.fpscr_;
+    uint32_t p = arith<MUL>(fpscr, t.s_[o.rn], t.s_[o.rm]);
+    if (X & 1) p = neg(p);
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    t.s_[o.rd] = arith<ADD>(fpscr, d, p);
 }
 
-// VFMA VFMS VFNMA VFNMS: x bit0 negate op1 (Sn), bit1 negate the addend (Sd).
+// VFMA VFMS VFNMA VFNMS: X bit0 negate op1 (Sn), bit1 negate the addend (Sd).
+template <unsigned X>
+HQ_INLINE bool v_fma_try(Thumb& t, const Op& o) {
+    const uint32_t a = (X & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    uint32_t r;
+    if (!muladd_fast(t.fpscr_, d, a, t.s_[o.rm], r)) return false;
+    t.s_[o.rd] = r;
+    return true;
+}
+template <unsigned X>
 void v_fma(Thumb& t, const Op& o) {
-    const Mode m(t.fpscr_);
-    const uint32_t a = (o.x & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
-    const uint32_t d = (o.x & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
-    t.s_[o.rd] = muladd(m, d, a, t.s_[o.rm]);
+    const uint32_t a = (X & 1) ? neg(t.s_[o.rn]) : t.s_[o.rn];
+    const uint32_t d = (X & 2) ? neg(t.s_[o.rd]) : t.s_[o.rd];
+    const uint32_t b = t.s_[o.rm];
+    uint32_t r;
+    if (!muladd_fast(t.fpscr_, d, a, b, r)) r = muladd_slow(Mode(t.fpscr_), d, a, b);
+    t.s_[o.rd] = r;
 }
 
-void v_mov(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm]; }
-void v_abs(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] & ~kSign; }
-void v_neg(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] ^ kSign; }
-void v_imm(Thumb& t, const Op& o) { t.s_[o.rd] = o.imm; }
+HQ_INLINE void v_mov(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm]; }
+HQ_INLINE void v_abs(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] & ~kSign; }
+HQ_INLINE void v_neg(Thumb& t, const Op& o) { t.s_[o.rd] = t.s_[o.rm] ^ kSign; }
+HQ_INLINE void v_imm(Thumb& t, const Op& o) { t.s_[o.rd] = o.imm; }
 
 void v_sqrt(Thumb& t, const Op& o) {
     const Mode m(t.fpscr_);
@@ -166,9 +226,14 @@ void v_sqrt(Thumb& t, const Op& o) {
     t.s_[o.rd] = B(rounded(m.rmode, [&] { return std::sqrt(x); }));
 }
 
-void v_cmp(Thumb& t, const Op& o) {         // x: 1 compare with zero
-    const Mode m(t.fpscr_);
-    const uint32_t a = m.in(t.s_[o.rd]), b = o.x ? 0 : m.in(t.s_[o.rm]);
+template <bool ZERO>                        // compare with zero
+HQ_INLINE void v_cmp(Thumb& t, const Op& o) {
+    uint32_t a = t.s_[o.rd], b = ZERO ? 0 : t.s_[o.rm];
+    if (__builtin_expect(t.fpscr_ & kFz, 0)) {
+        const Mode m(t.fpscr_);
+        a = m.in(a);
+        b = m.in(b);
+    }
     uint32_t nzcv;
     if (is_nan(a) || is_nan(b)) nzcv = 0x3;
     else if (F(a) == F(b)) nzcv = 0x6;
@@ -220,17 +285,17 @@ void v_from_int(Thumb& t, const Op& o) {
     t.s_[o.rd] = B(rounded(m.rmode, [&] { return static_cast<float>(x); }));
 }
 
-void v_to_core(Thumb& t, const Op& o) { t.r_[o.rd] = t.s_[o.rn]; }
-void v_from_core(Thumb& t, const Op& o) { t.s_[o.rn] = t.r_[o.rd]; }
-void v_to_core2(Thumb& t, const Op& o) {
+HQ_INLINE void v_to_core(Thumb& t, const Op& o) { t.r_[o.rd] = t.s_[o.rn]; }
+HQ_INLINE void v_from_core(Thumb& t, const Op& o) { t.s_[o.rn] = t.r_[o.rd]; }
+HQ_INLINE void v_to_core2(Thumb& t, const Op& o) {
     t.r_[o.rd] = t.s_[o.rm];
     t.r_[o.ra] = t.s_[o.rm + 1];
 }
-void v_from_core2(Thumb& t, const Op& o) {
+HQ_INLINE void v_from_core2(Thumb& t, const Op& o) {
     t.s_[o.rm] = t.r_[o.rd];
     t.s_[o.rm + 1] = t.r_[o.ra];
 }
-void v_mrs(Thumb& t, const Op& o) {
+HQ_INLINE void v_mrs(Thumb& t, const Op& o) {
     if (o.rd == 15) {
         const uint32_t f = t.fpscr_ >> 28;
         t.n_ = f >> 3; t.z_ = (f >> 2) & 1; t.c_ = (f >> 1) & 1; t.v_ = f & 1;
@@ -244,6 +309,13 @@ void v_msr(Thumb& t, const Op& o) { t.fpscr_ = t.r_[o.rd] & Thumb::kFpscrKept; }
 // read (a fault part-way leaves the S registers as they were), a store stops at the fault.
 template <bool LOAD>
 bool v_transfer(Thumb& t, uint32_t a, unsigned first, unsigned n) {
+    if (uint8_t* p = t.sram_block(a, 4 * n, !LOAD)) {        // all in SRAM: straight
+        for (unsigned i = 0; i < n; ++i, p += 4) {
+            if constexpr (LOAD) __builtin_memcpy(&t.s_[first + i], p, 4);
+            else __builtin_memcpy(p, &t.s_[first + i], 4);
+        }
+        return true;
+    }
     if constexpr (LOAD) {
         uint32_t v[32];
         for (unsigned i = 0; i < n; ++i) {
@@ -259,10 +331,30 @@ bool v_transfer(Thumb& t, uint32_t a, unsigned first, unsigned n) {
 }
 
 // VLDR/VSTR: o.rd the first S register, o.x 2 registers (a D register), o.imm the offset.
+HQ_INLINE uint32_t v_address(const Thumb& t, const Op& o) {
+    return (o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn]) + o.imm;
+}
 template <bool LOAD, unsigned n>
-void v_ldst(Thumb& t, const Op& o) {
-    const uint32_t base = o.rn == 15 ? ((t.r_[15] + 4) & ~3u) : t.r_[o.rn];
-    v_transfer<LOAD>(t, base + o.imm, o.rd, n);
+HQ_INLINE void v_ldst(Thumb& t, const Op& o) {
+    const uint32_t a = v_address(t, o);
+    if constexpr (n == 1 && LOAD) {
+        uint32_t v;
+        if (t.load<4>(a, v, true)) t.s_[o.rd] = v;
+    } else if constexpr (n == 1) {
+        t.store<4>(a, t.s_[o.rd], true);
+    } else {
+        v_transfer<LOAD>(t, a, o.rd, n);
+    }
+}
+// One word in SRAM or flash only (threaded_try).
+template <bool LOAD>
+HQ_INLINE bool v_ldst_try(Thumb& t, const Op& o) {
+    const uint32_t a = v_address(t, o);
+    if constexpr (!LOAD) return t.store_fast<4>(a, t.s_[o.rd]);
+    uint32_t v;
+    if (!t.load_fast<4>(a, v)) return false;
+    t.s_[o.rd] = v;
+    return true;
 }
 
 // VLDM/VSTM: o.imm words from S[o.rd]; o.x writeback; o.y decrement before.
@@ -296,7 +388,7 @@ bool decode_other(Op& op, uint16_t h1, uint16_t h2) {   // opc1 = 1x11: the rest
         case 0: op.fn = opc3 == 1 ? v_mov : v_abs; return true;
         case 1: op.fn = opc3 == 1 ? v_neg : v_sqrt; op.cyc = opc3 == 1 ? 1 : 14; return true;
         case 4: case 5:
-            op.fn = v_cmp;
+            op.fn = opc2 == 5 ? v_cmp<true> : v_cmp<false>;
             op.x = u8(opc2 == 5);
             return !(opc2 == 5 && bits(h2, 5, 5)) && !(opc2 == 5 && bits(h2, 3, 0));
         case 8:
@@ -337,13 +429,13 @@ bool decode_data(Op& op, uint16_t h1, uint16_t h2) {
     const unsigned opc1 = (bits(h1, 7, 7) << 2) | bits(h1, 5, 4), o = bits(h2, 6, 6);
     op.cyc = 1;
     switch (opc1) {
-        case 0: op.fn = v_mac; op.x = u8(o); op.cyc = 3; return true;          // VMLA VMLS
-        case 1: op.fn = v_mac; op.x = u8(o ? 3 : 2); op.cyc = 3; return true;  // VNMLS VNMLA
-        case 2: op.fn = v_arith; op.x = MUL; op.y = u8(o); return true;        // VMUL VNMUL
-        case 3: op.fn = v_arith; op.x = u8(o ? SUB : ADD); return true;
-        case 4: op.fn = v_arith; op.x = DIV; op.cyc = 14; return !o;
-        case 5: op.fn = v_fma; op.x = u8(o ? 3 : 2); op.cyc = 3; return true;  // VFNMS VFNMA
-        case 6: op.fn = v_fma; op.x = u8(o); op.cyc = 3; return true;          // VFMA VFMS
+        case 0: op.fn = o ? v_mac<1> : v_mac<0>; op.cyc = 3; return true;      // VMLA VMLS
+        case 1: op.fn = o ? v_mac<3> : v_mac<2>; op.cyc = 3; return true;      // VNMLS VNMLA
+        case 2: op.fn = o ? v_arith<MUL, true> : v_arith<MUL, false>; return true; // VNMUL
+        case 3: op.fn = o ? v_arith<SUB, false> : v_arith<ADD, false>; return true;
+        case 4: op.fn = v_arith<DIV, false>; op.cyc = 14; return !o;
+        case 5: op.fn = o ? v_fma<3> : v_fma<2>; op.cyc = 3; return true;      // VFNMS VFNMA
+        case 6: op.fn = o ? v_fma<1> : v_fma<0>; op.cyc = 3; return true;      // VFMA VFMS
         default: return decode_other(op, h1, h2);
     }
 }
@@ -376,14 +468,28 @@ bool decode_load_store(Op& op, uint16_t h1, uint16_t h2) {
 
 Handler threaded_fp(Handler fn) {
     static const std::unordered_map<Handler, Handler> m = {
-#define HQ_T(h) {h, threaded<h>}
-        HQ_T(v_arith), HQ_T(v_mac), HQ_T(v_fma), HQ_T(v_mov), HQ_T(v_abs), HQ_T(v_neg),
-        HQ_T(v_imm), HQ_T(v_sqrt), HQ_T(v_cmp), HQ_T(v_to_int), HQ_T(v_from_int),
-        HQ_T(v_to_core), HQ_T(v_from_core), HQ_T(v_to_core2), HQ_T(v_from_core2), HQ_T(v_mrs),
-        HQ_T(v_msr), HQ_T((v_ldst<true, 1>)), HQ_T((v_ldst<true, 2>)),
-        HQ_T((v_ldst<false, 1>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+#define HQ_T(h) {h, threaded<h, true>}
+#define HQ_TRY(h, fast) {h, threaded_try<h, fast>}
+#define HQ_N(h) {h, threaded<h, true, false>}     // never stops
+        HQ_TRY((v_arith<ADD, false>), (v_arith_try<ADD, false>)),
+        HQ_TRY((v_arith<SUB, false>), (v_arith_try<SUB, false>)),
+        HQ_TRY((v_arith<MUL, false>), (v_arith_try<MUL, false>)),
+        HQ_TRY((v_arith<MUL, true>), (v_arith_try<MUL, true>)),
+        HQ_TRY((v_arith<DIV, false>), (v_arith_try<DIV, false>)),
+        HQ_TRY(v_mac<0>, v_mac_try<0>), HQ_TRY(v_mac<1>, v_mac_try<1>),
+        HQ_TRY(v_mac<2>, v_mac_try<2>), HQ_TRY(v_mac<3>, v_mac_try<3>),
+        HQ_TRY(v_fma<0>, v_fma_try<0>), HQ_TRY(v_fma<1>, v_fma_try<1>),
+        HQ_TRY(v_fma<2>, v_fma_try<2>), HQ_TRY(v_fma<3>, v_fma_try<3>), HQ_N(v_mov),
+        HQ_N(v_abs), HQ_N(v_neg), HQ_N(v_imm), HQ_N(v_sqrt), HQ_N(v_cmp<false>),
+        HQ_N(v_cmp<true>), HQ_N(v_to_int), HQ_N(v_from_int), HQ_N(v_to_core), HQ_N(v_from_core),
+        HQ_N(v_to_core2), HQ_N(v_from_core2), HQ_N(v_mrs),
+        HQ_T(v_msr), HQ_T((v_ldst<true, 2>)), HQ_T((v_ldst<false, 2>)), HQ_T(v_multiple<true>),
+        HQ_TRY((v_ldst<true, 1>), v_ldst_try<true>),
+        HQ_TRY((v_ldst<false, 1>), v_ldst_try<false>),
         HQ_T(v_multiple<false>),
 #undef HQ_T
+#undef HQ_TRY
+#undef HQ_N
     };
     const auto it = m.find(fn);
     return it == m.end() ? nullptr : it->second;

@@ -67,24 +67,31 @@ inline uint32_t add_with_carry(Thumb& t, uint32_t x, uint32_t y, uint32_t cin, b
 
 enum Dp : uint8_t { AND, EOR, ORR, ORN, BIC, MOV, MVN, ADD, ADC, SUB, SBC, RSB, TST, TEQ, CMP,
                     CMN };
-enum Src : uint8_t { IMM, REG, REGREG };   // modified immediate, shifted register, shift by reg
+// modified immediate, shifted register, shift by register, register unshifted (LSL #0)
+enum Src : uint8_t { IMM, REG, REGREG, REG0 };
+// Flags set per the Op at run time (any operand may be the PC, any Rd), or known at decode
+// time for an Op in a chain (outside IT blocks; no operand and no Rd the PC): NOFLAGS, FLAGS.
+enum FlagMode : uint8_t { RUNTIME, NOFLAGS, FLAGS };
 
 // Data processing: Rd = Rn op operand2. Src IMM: o.imm (o.x: the immediate's carry out is its
 // bit 31); REG: R[rm] shifted by (st, sn); REGREG: R[rn] shifted (st) by R[rm]<7:0> (MOV).
-template <Dp OP, Src SRC>
-void dp(Thumb& t, const Op& o) {
+template <Dp OP, Src SRC, FlagMode FM = RUNTIME>
+HQ_INLINE void dp(Thumb& t, const Op& o) {
+    const auto reg = [&t](unsigned n) { return FM == RUNTIME ? R(t, n) : t.r_[n]; };
     uint32_t carry = t.c_;
     uint32_t b;
     if constexpr (SRC == IMM) {
         b = o.imm;
         if (o.x) carry = b >> 31;
     } else if constexpr (SRC == REG) {
-        b = shift_c(R(t, o.rm), o.st, o.sn, carry);
+        b = shift_c(reg(o.rm), o.st, o.sn, carry);
+    } else if constexpr (SRC == REG0) {
+        b = reg(o.rm);
     } else {
         b = shift_c(t.r_[o.rn], o.st, t.r_[o.rm] & 0xFF, carry);
     }
-    const bool sf = setflags(t, o);
-    const uint32_t a = (OP == MOV || OP == MVN) ? 0 : R(t, o.rn);
+    const bool sf = FM == RUNTIME ? setflags(t, o) : FM == FLAGS;
+    const uint32_t a = (OP == MOV || OP == MVN) ? 0 : reg(o.rn);
     uint32_t r = 0;
     bool logical = true;
     switch (OP) {
@@ -106,7 +113,7 @@ void dp(Thumb& t, const Op& o) {
         t.c_ = carry;
     }
     if constexpr (OP == TST || OP == TEQ || OP == CMP || OP == CMN) return;
-    if (o.rd == 15) t.branch_to(r);
+    if (FM == RUNTIME && o.rd == 15) t.branch_to(r);
     else t.r_[o.rd] = r;
 }
 
@@ -115,39 +122,44 @@ enum Mode : uint8_t { OFF, PRE, POST, REGOFF, LIT };
 enum Kind : uint8_t { LDR, LDRB, LDRH, LDRSB, LDRSH, STR, STRB, STRH };
 
 // Address modes: OFF R[rn]+imm; PRE the same with writeback; POST R[rn], then R[rn]+imm;
-// REGOFF R[rn] + (R[rm] << sn); LIT Align(PC,4)+imm. imm is signed (two's complement).
-template <Kind K, Mode M>
-void ldst(Thumb& t, const Op& o) {
+// REGOFF R[rn] + (R[rm] << sn); LIT Align(PC,4)+imm. imm is signed (two's complement). Rn is
+// never the PC but in LIT, nor a stored Rt (the decoder's UNDEFINED forms).
+// TRY (an Op that does not write the PC): only an aligned access to SRAM or flash (no SRAM
+// holding decoded code for a store); false, nothing changed, for any other (threaded_try's slow
+// path then runs ldst).
+template <Kind K, Mode M, bool TRY = false>
+HQ_INLINE bool ldst_access(Thumb& t, const Op& o) {
+    constexpr unsigned N = (K == LDR || K == STR)                    ? 4
+                           : (K == LDRH || K == LDRSH || K == STRH) ? 2
+                                                                    : 1;
     uint32_t a;
     if constexpr (M == LIT) a = ((t.r_[15] + 4) & ~3u) + o.imm;
-    else if constexpr (M == REGOFF) a = R(t, o.rn) + (t.r_[o.rm] << o.sn);
+    else if constexpr (M == REGOFF) a = t.r_[o.rn] + (t.r_[o.rm] << o.sn);
     else if constexpr (M == POST) a = t.r_[o.rn];
-    else a = R(t, o.rn) + o.imm;
+    else a = t.r_[o.rn] + o.imm;
     if constexpr (K >= STR) {
-        const uint32_t v = R(t, o.rd);
-        bool ok;
-        if constexpr (K == STR) ok = t.store<4>(a, v);
-        else if constexpr (K == STRH) ok = t.store<2>(a, v);
-        else ok = t.store<1>(a, v);
-        if (!ok) return;
+        const uint32_t v = t.r_[o.rd];
+        if (!(TRY ? t.store_fast<N>(a, v) : t.store<N>(a, v))) return false;
     } else {
         uint32_t v;
-        bool ok;
-        if constexpr (K == LDR) ok = t.load<4>(a, v, o.rd == 15);   // LDR PC: aligned
-        else if constexpr (K == LDRH || K == LDRSH) ok = t.load<2>(a, v);
-        else ok = t.load<1>(a, v);
-        if (!ok) return;
+        // LDR PC: aligned
+        if (!(TRY ? t.load_fast<N>(a, v) : t.load<N>(a, v, K == LDR && o.rd == 15))) return false;
         if constexpr (K == LDRSB) v = static_cast<uint32_t>(static_cast<int8_t>(v));
         if constexpr (K == LDRSH) v = static_cast<uint32_t>(static_cast<int16_t>(v));
         if constexpr (M == PRE) t.r_[o.rn] = a;
         if constexpr (M == POST) t.r_[o.rn] = a + o.imm;
-        if (K == LDR && o.rd == 15) t.bx_write_pc(v);
+        if (!TRY && K == LDR && o.rd == 15) t.bx_write_pc(v);     // TRY: never Rt = PC
         else t.r_[o.rd] = v;
-        return;
+        return true;
     }
     if constexpr (M == PRE) t.r_[o.rn] = a;
     if constexpr (M == POST) t.r_[o.rn] = a + o.imm;
+    return true;
 }
+template <Kind K, Mode M>
+HQ_INLINE void ldst(Thumb& t, const Op& o) { ldst_access<K, M>(t, o); }
+template <Kind K, Mode M>
+HQ_INLINE bool ldst_try(Thumb& t, const Op& o) { return ldst_access<K, M, true>(t, o); }
 
 // LDRD/STRD: rd, ra the pair; o.x: 0 offset, 1 pre-indexed, 2 post-indexed, 3 literal.
 template <bool LOAD>
@@ -175,16 +187,12 @@ void ldst_multiple(Thumb& t, const Op& o) {
     const uint32_t start = o.y ? base - 4 * n : base;
     const uint32_t end = o.y ? base - 4 * n : base + 4 * n;
     uint32_t a = start;
-    const uint32_t so = start - kSramBase;
     // all in SRAM (a store not over decoded code): straight to the array
-    if (!(start & 3) && so < kSramSize && so + 4 * n <= kSramSize &&
-        (LOAD || !t.sram_has_code(so, 4 * n))) {
-        uint8_t* p = t.sram() + so;
+    if (uint8_t* p = t.sram_block(start, 4 * n, !LOAD)) {
         if constexpr (LOAD) {
             if (o.x) t.r_[o.rn] = end;
-            for (unsigned i = 0; i < 15; ++i) {
-                if (!(list >> i & 1)) continue;
-                __builtin_memcpy(&t.r_[i], p, 4);
+            for (uint32_t l = list & 0x7FFF; l; l &= l - 1) {
+                __builtin_memcpy(&t.r_[__builtin_ctz(l)], p, 4);
                 p += 4;
             }
             if (list & 0x8000) {
@@ -192,16 +200,14 @@ void ldst_multiple(Thumb& t, const Op& o) {
                 __builtin_memcpy(&pc, p, 4);
                 t.bx_write_pc(pc);
             }
-            return;
         } else {
-            for (unsigned i = 0; i < 15; ++i) {
-                if (!(list >> i & 1)) continue;
-                __builtin_memcpy(p, &t.r_[i], 4);
+            for (uint32_t l = list & 0x7FFF; l; l &= l - 1) {
+                __builtin_memcpy(p, &t.r_[__builtin_ctz(l)], 4);
                 p += 4;
             }
             if (o.x) t.r_[o.rn] = end;
-            return;
         }
+        return;
     }
     if constexpr (LOAD) {
         uint32_t vals[16];
@@ -229,6 +235,26 @@ void ldst_multiple(Thumb& t, const Op& o) {
 inline void b_cond(Thumb& t, const Op& o) {
     if (condition_passed(t, o.x)) t.branch_to(t.r_[15] + 4 + o.imm);
 }
+// The same with its condition (o.x) known at decode time.
+template <unsigned COND>
+HQ_INLINE bool passed(const Thumb& t) {
+    bool r;
+    switch (COND >> 1) {
+        case 0: r = t.z_; break;
+        case 1: r = t.c_; break;
+        case 2: r = t.n_; break;
+        case 3: r = t.v_; break;
+        case 4: r = t.c_ && !t.z_; break;
+        case 5: r = t.n_ == t.v_; break;
+        case 6: r = !t.z_ && t.n_ == t.v_; break;
+        default: r = true; break;
+    }
+    return (COND & 1) && COND != 15 ? !r : r;
+}
+template <unsigned COND>
+HQ_INLINE void b_if(Thumb& t, const Op& o) {
+    if (passed<COND>(t)) t.branch_to(t.r_[15] + 4 + o.imm);
+}
 inline void b(Thumb& t, const Op& o) { t.branch_to(t.r_[15] + 4 + o.imm); }
 inline void bl(Thumb& t, const Op& o) {
     t.r_[14] = t.npc_ | 1;
@@ -255,7 +281,10 @@ void tb(Thumb& t, const Op& o) {
 
 // --- everything else ----------------------------------------------------------------------
 inline void nop(Thumb&, const Op&) {}
-inline void it(Thumb& t, const Op& o) { t.it_ = o.imm; }
+inline void it(Thumb& t, const Op& o) {       // in a chain: it_start (thumb.cpp)
+    t.it_ = o.imm;
+    t.break_chain();
+}
 inline void wfi(Thumb& t, const Op&) { t.stop_after(Stop::Wfi); }
 // ISB: a stop after it only while the owner watches for one (the FPU-enable check).
 inline void isb(Thumb& t, const Op&) {
@@ -318,6 +347,7 @@ inline void msr(Thumb& t, const Op& o) {
         case 19: if (t.ipsr_ != 2) t.faultmask = v & 1; break;
         case 20:                        // nPRIV, FPCA; SPSEL in thread mode only
             t.set_control(t.ipsr_ == 0 ? (v & 7) : ((t.control_ & 2) | (v & 5)));
+            t.break_chain();            // FPCA: the chain's kFp mask
             return;
         default: return;
     }
