@@ -76,12 +76,12 @@ constexpr uint32_t kFz = 1u << 24, kModeBits = kFz | (3u << 22);    // FZ, RMode
 // not the smallest normal (which may have been tiny before rounding).
 template <typename Fn, typename... U>
 HQ_INLINE bool fast(uint32_t fpscr, uint32_t& r, Fn f, U... operands) {
-    const uint32_t mode = fpscr & kModeBits;
-    if (__builtin_expect(mode == 0, 1)) {
+    const uint32_t fz_rmode = fpscr & kModeBits;
+    if (__builtin_expect(fz_rmode == 0, 1)) {
         r = B(f());
         return !is_nan(r);
     }
-    if (mode != kFz || !(normal(operands) && ...)) return false;
+    if (fz_rmode != kFz || !(normal(operands) && ...)) return false;
     r = B(f());
     return normal(r) && (r & ~kSign) != 0x00800000u;
 }
