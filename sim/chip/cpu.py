@@ -65,6 +65,10 @@ def _native_core():
     return Mk64Core
 
 
+def _exception_names() -> list:
+    return [exception_name(n) for n in range(N_EXCEPTIONS)]
+
+
 def _address(fn) -> int:
     return ctypes.cast(fn, ctypes.c_void_p).value
 
@@ -157,8 +161,7 @@ class UnicornCpu:
                 ("R0", "R1", "R2", "R3", "R12", "LR", "PC", "SP", "XPSR", "EPSR", "CONTROL", "FPSCR",
                  "PRIMASK", "BASEPRI", "FAULTMASK")}
         regs.update({f"D{i}": getattr(A, f"UC_ARM_REG_D{i}") for i in range(8)})
-        return _native_core()(functions, regs, self._callbacks.addresses(),
-                              [exception_name(n) for n in range(N_EXCEPTIONS)])
+        return _native_core()(functions, regs, self._callbacks.addresses(), _exception_names())
 
     def read(self, address: int, n: int) -> bytes:
         return bytes(self.uc.mem_read(address, n))
@@ -197,8 +200,7 @@ class EngineCpu:
     def __init__(self, machine):
         self._callbacks = _Callbacks(machine, with_blocks=False)
         core_type = _native_core()
-        self.core = core_type.with_engine(self._callbacks.addresses(),
-                                          [exception_name(n) for n in range(N_EXCEPTIONS)])
+        self.core = core_type.with_engine(self._callbacks.addresses(), _exception_names())
         self._regs = core_type.engine_registers()
         self.core.install(PERIPHERAL_BASE, PERIPHERAL_SIZE, PPB_BASE, PPB_SIZE)
         self.core.install_tlb(SRAM_BASE, SRAM_SIZE)

@@ -21,21 +21,20 @@ constexpr int UC_HOOK_TLB_FILL = 1 << 17;
 constexpr int UC_MEM_FETCH = 18;
 constexpr int UC_PROT_READ = 1, UC_PROT_WRITE = 2, UC_PROT_EXEC = 4;
 constexpr uint32_t kExcReturnTrap = 8;     // QEMU's EXCP_EXCEPTION_EXIT
-constexpr uint32_t kIntrUndef = 1, kIntrSvc = 2, kIntrBkpt = 7;
+constexpr uint32_t kIntrSvc = 2, kIntrBkpt = 7;
 constexpr uint32_t kControlSpsel = 1u << 1, kControlFpca = 1u << 2;
 constexpr uint32_t kXpsrAlign = 1u << 9;
 constexpr int kThreadPriority = 1 << 16;
-constexpr int kExceptions = 16 + 86;
 constexpr uint64_t kEntryCycles = 12, kReturnCycles = 12;   // timing.py's figures
 constexpr size_t kExceptionLog = 4096;
 constexpr uint64_t kFar = uint64_t{1} << 62;
+}  // namespace
 
 std::string hex8(uint32_t v) {
     char buf[16];
     std::snprintf(buf, sizeof buf, "0x%08X", v);
     return buf;
 }
-}  // namespace
 
 Core::Core(const Uc& uc, const Regs& regs, const PyCallbacks& py,
            std::vector<std::string> exception_names)

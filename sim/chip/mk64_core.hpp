@@ -131,6 +131,10 @@ struct FaultInfo {
 
 class Core;
 
+constexpr int kExceptions = 16 + 86;        // the MK64F12's: 16 system, 86 IRQs
+constexpr uint32_t kIntrUndef = 1;          // QEMU's EXCP_UDEF: an undefined instruction
+std::string hex8(uint32_t v);               // "0x%08X"
+
 // The engine's bus when it is the CPU: every access outside flash and SRAM goes to the core
 // (Core::engine_access, mk64_engine.cpp).
 class EngineBus : public thumb::Bus {

@@ -18,14 +18,15 @@
 namespace hqsim::mk64 {
 
 namespace {
-constexpr uint32_t kControlFpca = 1u << 2;
 constexpr uint32_t kEpsrBits = 0x0600FC00u | (1u << 24);    // ICI/IT and T
-constexpr uint32_t kIntrUndef = 1;
 constexpr uint32_t kCcrUnalignTrp = 1u << 3, kCcrDiv0Trp = 1u << 4;
-std::string hex8(uint32_t v) {
-    char b[11];
-    std::snprintf(b, sizeof b, "0x%08X", v);
-    return b;
+
+// The core's register numbers when the engine is the CPU (in place of unicorn's).
+Regs engine_regs() {
+    Regs r{0, 1, 2, 3, 12, kEngLr, kEngPc, kEngSp, kEngXpsr, kEngEpsr, kEngControl,
+           kEngFpscr, kEngPrimask, kEngBasepri, kEngFaultmask, {}};
+    for (int i = 0; i < 8; ++i) r.d[i] = kEngD0 + i;
+    return r;
 }
 }  // namespace
 
@@ -38,13 +39,7 @@ bool EngineBus::write(uint32_t address, unsigned size, uint32_t value) {
 }
 
 Core::Core(const PyCallbacks& py, std::vector<std::string> exception_names)
-    : py_(py), names_(std::move(exception_names)) {
-    priority_.assign(16 + 86, 0);
-    exception_counts_.assign(16 + 86, 0);
-    spaces_[0].core = spaces_[1].core = this;
-    r_ = Regs{0, 1, 2, 3, 12, kEngLr, kEngPc, kEngSp, kEngXpsr, kEngEpsr, kEngControl,
-              kEngFpscr, kEngPrimask, kEngBasepri, kEngFaultmask, {}};
-    for (int i = 0; i < 8; ++i) r_.d[i] = kEngD0 + i;
+    : Core(Uc{}, engine_regs(), py, std::move(exception_names)) {
     eng_ = std::make_unique<thumb::Thumb>();
     eng_bus_ = std::make_unique<EngineBus>(*this);
     eng_->set_bus(eng_bus_.get());
