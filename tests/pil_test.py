@@ -145,3 +145,32 @@ def test_a_loop_longer_than_its_period_shows_as_overruns(tmp_path_factory):
         else:
             assert status.loop_overruns == 0
             assert 0 < status.loop_cycles_max < budget / 4
+
+
+def test_a_frame_is_answered_at_its_steps_outputs_and_the_rest_of_the_loop_changes_none():
+    # The drop-in answers a frame where the step's outputs are final (hq_step_outputs) and
+    # runs the loop's telemetry and USB work after the reply, while the simulator
+    # integrates. That is only right if nothing after that point moves an output: through
+    # arming, a hover with the gyro moving the rate loop, and disarming, the motors, armed,
+    # mode and sensor kind read at that point must be those at the loop's end, every frame.
+    import teensy_image
+    from heliquad.sim.chip.pil.board import STEP_OUTPUTS_SYMBOL, PilBoard
+    from heliquad.sim.sensor.mpu6050_packets import raw_packet
+
+    board = PilBoard(str(teensy_image.image().elf), link="usb")
+    board.boot()
+    early_at = board.machine.image.symbol(STEP_OUTPUTS_SYMBOL).address
+    rc = [1500, 1500, 1000, 1500, 1000, 1000, 0, 0]
+    armed_frames, early = 0, 0
+    for k in range(160):
+        rc[4] = 2000 if 10 <= k < 130 else 1000          # arm, then disarm
+        rc[2] = 1400 if 20 <= k < 120 else 1000
+        rate = 0.3 * math.sin(k / 7.0)                    # rad/s: the rate loop works
+        fifo = raw_packet([rate, -0.5 * rate, 0.1 * rate], [0.0, 0.0, -9.80665])
+        answer = board.begin_frame(fifo, False, rc, MAV.HQ_IMU_FAULT_NONE)
+        early += board.machine.pc & ~1 == early_at & ~1
+        board.end_frame(sync=(k % 50 == 49))
+        assert board.outputs() == answer, f"frame {k}"
+        armed_frames += answer[1]
+    assert early == 160                      # every frame was answered at the step's outputs
+    assert 100 <= armed_frames <= 120        # and the outputs moved: armed, then disarmed

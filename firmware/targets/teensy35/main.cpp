@@ -17,8 +17,9 @@
 // the overruns), update the LED; then the spare time's work on the card (the on-board log's
 // ring drained into its file, the log protocol's answers: core/log/spare_tasks.hpp), during
 // which a tick that comes while the card is busy runs its step at once (StepWhenDue); then
-// sleep until the next tick (servicing the USB stack whenever an interrupt wakes the core). After each step the loop's state goes to hq_loop_report (below). A host that
-// sets 134 baud on the USB port asks for the bootloader: the loop refuses it while armed and
+// sleep until the next tick (servicing the USB stack whenever an interrupt wakes the core).
+// After each step the loop's state goes to hq_loop_report (below). A host that sets 134
+// baud on the USB port asks for the bootloader: the loop refuses it while armed and
 // otherwise, once its messages are out, stops the motors and enters the bootloader
 // (bootloader.hpp).
 #include <cstdint>
@@ -99,7 +100,9 @@ void ask_bootloader(hq::LoopInbox& inbox) {
 
 // The last loop's state, at a fixed symbol in RAM, for a debug probe to watch without
 // stopping the loop; the emulated board (heliquad's processor-in-the-loop target) reads it to
-// answer each lockstep frame as the host build does. Written once a loop, after the step.
+// answer each lockstep frame as the host build does. Written once a loop: the flight state as
+// soon as the step's outputs are final (then hq_step_outputs is called), the cycles and
+// overruns when the loop's work is done.
 struct LoopReport {
     uint32_t loops;         // FlightController steps since boot
     uint32_t step_cycles;   // core cycles of the last step
@@ -131,6 +134,13 @@ volatile SdProbe hq_sd_probe;
 // `loop` is the Loop. Its own symbol, never inlined: the emulated board ends a lockstep frame
 // here as at LoopTimer::wait, so that this step too gets its frame's sensor data.
 __attribute__((noinline)) void hq_card_wait_step(void* loop);
+
+// Called once a step, as soon as the step's outputs are final: the motors written and
+// hq_loop_report's flight state (loops, armed, mode, sensor kind, excitation state, rotor
+// count) set. Its own symbol, never inlined or dropped: the emulated board answers its
+// lockstep frame here, then runs the rest of the step (the telemetry, the USB stack) while
+// the simulator integrates the plant. A few cycles a loop on the board.
+__attribute__((noipa)) void hq_step_outputs();
 }
 
 namespace {
@@ -161,6 +171,13 @@ void Loop::step() {
     usb_link.receive();
     uart_link.receive();
     fc.step(rc.read(), inbox);
+    hq_loop_report.loops = fc.loops();
+    hq_loop_report.armed = fc.armed() ? 1 : 0;
+    hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
+    hq_loop_report.sensor_kind = fc.sensor_kind();
+    hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
+    hq_loop_report.rotor_count = fc.status().state.rotor_count;
+    hq_step_outputs();
     usb_link.transmit(fc.status());
     uart_link.transmit(fc.status());
     // The USB stack's work after the step, not before it: the step's time is its tick's,
@@ -173,14 +190,8 @@ void Loop::step() {
     const uint32_t step_cycles = cycles32() - c0;
     usb_link.record_loop(step_cycles, timer.overruns());
     uart_link.record_loop(step_cycles, timer.overruns());
-    hq_loop_report.loops = fc.loops();
     hq_loop_report.step_cycles = step_cycles;
     hq_loop_report.overruns = timer.overruns();
-    hq_loop_report.armed = fc.armed() ? 1 : 0;
-    hq_loop_report.mode = static_cast<uint8_t>(fc.mode());
-    hq_loop_report.sensor_kind = fc.sensor_kind();
-    hq_loop_report.exc_state = static_cast<uint8_t>(fc.supervisor().excitation_state());
-    hq_loop_report.rotor_count = fc.status().state.rotor_count;
     led_update(clock.micros(), led_pattern(fc, init));
     if (fc.status().bootloader) enter_bootloader(motors, usb);
 }
@@ -203,6 +214,8 @@ private:
 }  // namespace
 
 void hq_card_wait_step(void* loop) { static_cast<Loop*>(loop)->step(); }
+
+void hq_step_outputs() { __asm__ volatile("" ::: "memory"); }
 
 extern "C" [[noreturn]] void hq_teensy_main() {
     using namespace hq::teensy;

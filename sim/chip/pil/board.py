@@ -23,6 +23,9 @@ WAIT_SYMBOL = "hq::teensy::LoopTimer::wait"
 #: Where a loop ends too: a tick came while the card is busy, and its step is about to run
 #: inside the card's wait (main.cpp's StepWhenDue). Its frame's inputs go in there.
 CARD_WAIT_STEP_SYMBOL = "hq_card_wait_step"
+#: Where a loop's step has its outputs final (the motors written, hq_loop_report's flight
+#: state set): the frame's reply can go while the rest of the loop runs (begin_frame).
+STEP_OUTPUTS_SYMBOL = "hq_step_outputs"
 REPORT_SYMBOL = "hq_loop_report"
 #: hq_loop_report: loops, step cycles, overruns (uint32); armed, mode, sensor kind,
 #: excitation state, rotor count (uint8).
@@ -88,6 +91,11 @@ class PilBoard:
         self.in_card_wait = False          # the last loop ended with a step due in the card's wait
         self._card_wait_step = (self.machine.stop_at(CARD_WAIT_STEP_SYMBOL)
                                 if image.has(CARD_WAIT_STEP_SYMBOL) else None)
+        # Where the step's outputs are final (None: an image older than that symbol, whose
+        # frames are answered at the loop's end); True while a frame stopped there.
+        self._outputs_at = (self.machine.stop_at(STEP_OUTPUTS_SYMBOL)
+                            if image.has(STEP_OUTPUTS_SYMBOL) else None)
+        self._mid_loop = False
         self.resets = 0
         self._rc_last, self._rc_age = None, 0
         self._fault = None
@@ -102,8 +110,10 @@ class PilBoard:
         self.waits += 1
         return True
 
-    def _run_to_wait(self, limit_s: float, what: str):
-        """Run until the main loop next reaches its sleep; a watchdog reset reboots."""
+    def _run_to_wait(self, limit_s: float, what: str, outputs: bool = False) -> bool:
+        """Run until the main loop next reaches its sleep, or with ``outputs`` until its
+        step's outputs are final if that comes first (then True); a watchdog reset
+        reboots."""
         while True:
             try:
                 stop = self.machine.run(seconds=limit_s)
@@ -118,8 +128,12 @@ class PilBoard:
                 continue
             except EmulationError as e:
                 raise ImageFault(f"{what}: {e}") from None
+            if stop.reason == "stop-at" and stop.pc == self._outputs_at:
+                if outputs:
+                    return True
+                continue
             if self._waited(stop):
-                return
+                return False
             if stop.reason == "fatal":
                 raise ImageFault(f"{what}: the image stopped in hq_fatal "
                                  f"(code {stop.detail.get('code')})")
@@ -200,18 +214,41 @@ class PilBoard:
     def frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int, sync: bool):
         """Inputs in, one loop, outputs out: (motors, armed, mode, sensor kind); the motors
         are the thrust fractions of the rotors the loop flies (its rotor count's channels)."""
+        outputs = self.begin_frame(fifo, dmp, rc_us, imu_fault)
+        self.end_frame(sync)
+        return outputs
+
+    def begin_frame(self, fifo: bytes, dmp: bool, rc_us, imu_fault: int):
+        """Inputs in, and the loop run until its step's outputs are final: (motors, armed,
+        mode, sensor kind) as :meth:`frame` returns them. The rest of the loop (its
+        telemetry, the USB stack's work) is :meth:`end_frame`'s, which the caller runs
+        next, after answering with these if it likes: nothing the rest of the loop does
+        changes them. An image without hq_step_outputs runs its whole loop here."""
         self.apply_imu_fault(imu_fault)
         if fifo:
             self.board.mpu.emu.push_fifo(bytes(fifo), dmp)
         self.rc_pulses(rc_us)
-        self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
+        self._mid_loop = self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}",
+                                           outputs=self._outputs_at is not None)
+        return self.outputs()
+
+    def end_frame(self, sync: bool) -> None:
+        """The rest of the loop begun by :meth:`begin_frame`, to where the loop ends; the
+        stored records kept; with ``sync``, the telemetry drained (:meth:`_drain`); the
+        telemetry that left collected."""
+        if self._mid_loop:
+            self._mid_loop = False
+            self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
         for kept in self.stored:
             kept.keep()
         if sync and not self.in_card_wait:     # a step is due now: no time to drain
             self._drain()
         self._collect_telemetry()
-        loops, cycles, _, armed, mode, kind, _, rotors = self.report()
-        self.step_cycles.append(cycles)
+        self.step_cycles.append(self.report()[1])
+
+    def outputs(self):
+        """The last step's outputs: (motors, armed, mode, sensor kind)."""
+        _, _, _, armed, mode, kind, _, rotors = self.report()
         return self.thrust()[:rotors], bool(armed), mode, kind
 
     def report(self) -> tuple:

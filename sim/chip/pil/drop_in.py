@@ -97,19 +97,27 @@ class DropIn:
             if msgid != self.frame_id:
                 continue
             msg = self.codec.decode(msgid, payload)
-            if self.last_frame is not None and msg.frame == self.last_frame:
-                self.repeated += 1                 # the simulator resent it: same reply
-            else:
+            new = self.last_frame is None or msg.frame != self.last_frame
+            if new:
                 self._step(msg)
-            if msg.sync:
+            else:
+                self.repeated += 1                 # the simulator resent it: same reply
+            if msg.sync:                           # its telemetry first, then the reply
+                if new:
+                    self.board.end_frame(True)
                 self.flush_telemetry()
             if not self.sim.write_all(self.reply, 5.0):
                 print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
                 return EXIT_LINK
+            if new and not msg.sync:
+                # The rest of the loop (its telemetry, the USB stack) while the simulator
+                # integrates the plant with the reply: the two processes overlap.
+                self.board.end_frame(False)
         return 0
 
     def _step(self, msg) -> None:
-        """One new sensor frame: the board's loop, and the reply to send."""
+        """One new sensor frame: the board's loop to its step's outputs (the caller runs the
+        rest, board.end_frame), and the reply to send."""
         if self.last_frame is not None and msg.frame > self.last_frame + 1:
             gap = msg.frame - self.last_frame - 1
             self.lost += gap
@@ -120,8 +128,8 @@ class DropIn:
         self.board.feed_telemetry(self.uplink)
         self.uplink = b""
         fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
-        motors, armed, mode, kind = self.board.frame(
-            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault, bool(msg.sync))
+        motors, armed, mode, kind = self.board.begin_frame(
+            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault)
         self.reply = self.codec.encode(self.reply_id, {
             "time_us": msg.time_us, "frame": msg.frame,
             "motor": motors + [0.0] * (len(ESC_PINS) - len(motors)), "motor_count": len(motors),
