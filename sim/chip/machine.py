@@ -60,7 +60,7 @@ _INTR_UNDEF = 1
 _DRAINS = {"usb": 1, "uart": 2}
 # Native device numbers (Core::Device).
 (DWT_DEVICE, SYSTICK_DEVICE, UART0_DEVICE, I2C0_DEVICE, FTM0_DEVICE, FTM3_DEVICE, WDOG_DEVICE,
- GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE) = range(11)
+ GPIO_IN_DEVICE, FTFE_DEVICE, NVIC_DEVICE, USB0_DEVICE, GPIO_OUT_DEVICE) = range(12)
 # What a native event asks Python to do (Core::PyCall): the USB host's pump; the check of a
 # bulk IN BD's write-back after the MPU changed.
 PY_CALL_USB_PUMP, PY_CALL_USB_WRITE_BACK = 1, 2

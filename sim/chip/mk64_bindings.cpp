@@ -7,6 +7,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "chip/mk64_core.hpp"
@@ -354,6 +355,25 @@ void bind_mk64(py::module_& m) {
         .def("set_clocked", [](Core& c, int dev, bool on) { c.clocked[dev] = on; })
         .def("set_gpio_input", [](Core& c, uint32_t address, uint32_t value) {
             c.gpio_in.set(address, value);
+        })
+        .def("set_gpio_output", [](Core& c, uint32_t base, uint32_t pdor) {
+            c.gpio_out.set(base, pdor);
+        })
+        // An edge driven onto input pins at `cycle` (unscaled): pins as (PDIR address, bit
+        // number, FTM3 channel or -1).
+        .def("pin_edge", [](Core& c, uint64_t cycle, bool level,
+                            const std::vector<std::tuple<uint32_t, int, int>>& pins) {
+            std::vector<PinEdges::Pin> list;
+            for (const auto& [pdir, n, ch] : pins) {
+                if (n < 0 || n > 31 || ch < -1 || ch >= Ftm::kChannels) {
+                    throw py::value_error("pin_edge: a pin's bit is 0..31, its channel -1..7");
+                }
+                list.push_back({pdir, uint32_t{1} << n, ch});
+            }
+            c.pin_edges.add(c, cycle, level, std::move(list));
+        })
+        .def_property_readonly("pin_edges_pending", [](const Core& c) {
+            return c.pin_edges.edges.size();
         })
         .def("dev_read", [](Core& c, int dev, uint32_t address, unsigned size) -> py::object {
             uint64_t v = 0;

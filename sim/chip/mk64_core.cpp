@@ -157,6 +157,7 @@ void Core::reset(double core_hz) {
     if (wdog.ready) wdog.reset();
     if (ftfe.ready) ftfe.reset(*this);
     if (usb0.ready) usb0.reset(*this);
+    pin_edges.reset(*this);
     py_call_ = kNoCall;
     if (eng_) {
         engine_fpu_ = engine_watch_isb_ = false;
@@ -397,6 +398,7 @@ void Core::dispatch(const HeapEntry& e) {
             usb0.sleep_event = 0;
             usb0.flag(*this, usb0.SLEEP);
             break;
+        case Ev::PinEdge: pin_edges.fire(*this); break;
         case Ev::Python: break;
     }
 }
@@ -1038,6 +1040,7 @@ bool Core::dev_write(int dev, uint32_t address, unsigned size, uint64_t value) {
         case kFtfe: return ftfe.write(*this, address, size, value);
         case kUsb0: return usb0.write(*this, address, size, value);
         case kNvic: return nvic_write(address, size, value);
+        case kGpioOut: return gpio_out.write(address, size, value);
         default: return false;
     }
 }

@@ -102,7 +102,7 @@ struct Block {
 
 enum class Ev : uint8_t {
     Python, TimeLimit, SysTick, UartTx, UartRx, UartIdle, I2cByte, I2cFree, Ftm0Tof, Ftm3Tof,
-    WdogTimeout, WdogWindow, FtfeDone, UsbFrame, UsbPump, UsbFinish, UsbSleep
+    WdogTimeout, WdogWindow, FtfeDone, UsbFrame, UsbPump, UsbFinish, UsbSleep, PinEdge
 };
 
 // Why run() returned.
@@ -460,10 +460,44 @@ struct Ftfe {
 // handler that reads a pin's level (the RC capture handler does at every edge) then costs no
 // call into Python.
 struct GpioInputs {
-    struct Port { uint32_t address; uint32_t value; };
-    std::vector<Port> ports;             // PDIR's address and value per port
+    // PDIR's address and value per port; the bits of `held` are the pins PinEdges drives
+    // (their levels in `held_value`, over what Python publishes).
+    struct Port { uint32_t address; uint32_t value; uint32_t held = 0, held_value = 0, published = 0; };
+    std::vector<Port> ports;
     bool read(uint32_t address, unsigned size, uint64_t& out) const;
     void set(uint32_t address, uint32_t value);
+    Port* port(uint32_t address);
+    void hold(Port& p, uint32_t bit, bool level);
+    void release(Port& p, uint32_t bit);
+    void release_all();
+};
+
+// The GPIO ports' output registers (PDOR, PSOR, PCOR, PTOR): a 32-bit write that leaves the
+// port's PDOR as it was (the image sets the LED to its level again every loop) is taken
+// here, with nothing to do; one that changes it, or any other access, goes to the Python pin
+// model (sim/chip/port.py), which owns the pins and keeps this copy of each port's PDOR.
+struct GpioOutputs {
+    struct Port { uint32_t base; uint32_t pdor; };
+    std::vector<Port> ports;
+    bool write(uint32_t address, unsigned size, uint64_t value) const;
+    void set(uint32_t base, uint32_t pdor);
+};
+
+// Levels driven onto input pins from outside at given cycles, natively: an RC receiver's
+// servo pulses on FTM3's capture pins (Teensy35.rc_capture_pulses). At an edge's cycle its
+// pins' bits in their port's PDIR take its level and each pin on an FTM3 channel whose level
+// changed gives that channel its edge, pin by pin, as the Python pin model does it. A pin's
+// level is held here from its first scheduled edge to its last (over the input word Python
+// publishes, which has the level the pin keeps after its last edge).
+struct PinEdges {
+    struct Pin { uint32_t pdir; uint32_t bit; int ftm3_channel; };    // -1: on no channel
+    struct Edge { uint64_t cycle; bool level; std::vector<Pin> pins; };
+    std::vector<Edge> edges;             // in cycle order (equal cycles: in scheduling order)
+    uint64_t event = 0;                  // the event at edges.front()'s cycle (0: none)
+    void add(Core& c, uint64_t cycle, bool level, std::vector<Pin> pins);
+    void fire(Core& c);
+    void reset(Core& c);
+    void schedule(Core& c);
 };
 
 // USB0's registers, the SIE's answer to a bulk IN token, and the host's frames and bulk IN
@@ -551,7 +585,7 @@ class Core {
 public:
     enum Device : int {
         kNone = -1, kDwt = 0, kSysTick, kUart0, kI2c0, kFtm0, kFtm3, kWdog, kGpioIn, kFtfe,
-        kNvic, kUsb0, kDevices
+        kNvic, kUsb0, kGpioOut, kDevices
     };
     // What a native event asks of Python: the USB host's pump; the check of a bulk IN BD's
     // write-back when the MPU changed while its packet was on the bus (then end_data).
@@ -707,8 +741,10 @@ public:
     Ftm* ftm(int dev) { return dev == kFtm0 ? &ftm0 : dev == kFtm3 ? &ftm3 : nullptr; }
     std::vector<std::unique_ptr<MpuSlave>> owned_slaves;
     GpioInputs gpio_in;
+    GpioOutputs gpio_out;
+    PinEdges pin_edges;
     bool clocked[kDevices] = {true, true, false, false, false, false, true, true, true, true,
-                              false};
+                              false, true};
     bool log_all = true;         // every peripheral access through Python (boot logs, traces)
     // Keep the I2C transfer records, the MPU6050's register log, the FTM captures and the
     // watchdog's write log until taken (for tests and inspection); a long lockstep run turns

@@ -91,13 +91,107 @@ bool GpioInputs::read(uint32_t address, unsigned size, uint64_t& out) const {
 }
 
 void GpioInputs::set(uint32_t address, uint32_t value) {
+    Port* p = port(address);
+    if (!p) {
+        ports.push_back({address, value});
+        p = &ports.back();
+    }
+    p->published = value;
+    p->value = (value & ~p->held) | (p->held_value & p->held);
+}
+
+GpioInputs::Port* GpioInputs::port(uint32_t address) {
     for (Port& p : ports) {
-        if (p.address == address) {
-            p.value = value;
+        if (p.address == address) return &p;
+    }
+    return nullptr;
+}
+
+void GpioInputs::hold(Port& p, uint32_t bit, bool level) {
+    p.held |= bit;
+    p.held_value = level ? (p.held_value | bit) : (p.held_value & ~bit);
+    p.value = level ? (p.value | bit) : (p.value & ~bit);
+}
+
+void GpioInputs::release(Port& p, uint32_t bit) {
+    p.held &= ~bit;
+    p.value = (p.value & ~bit) | (p.published & bit);
+}
+
+void GpioInputs::release_all() {
+    for (Port& p : ports) {
+        p.held = p.held_value = 0;
+        p.value = p.published;
+    }
+}
+
+// -- GPIO outputs ------------------------------------------------------------------------------
+bool GpioOutputs::write(uint32_t address, unsigned size, uint64_t value) const {
+    if (size != 4) return false;
+    const uint32_t v = static_cast<uint32_t>(value);
+    for (const Port& p : ports) {
+        if (address < p.base || address >= p.base + 0x10) continue;
+        uint32_t pdor = p.pdor;
+        switch (address - p.base) {
+            case 0x0: pdor = v; break;              // PDOR
+            case 0x4: pdor |= v; break;             // PSOR
+            case 0x8: pdor &= ~v; break;            // PCOR
+            case 0xC: pdor ^= v; break;             // PTOR
+            default: return false;
+        }
+        return pdor == p.pdor;
+    }
+    return false;
+}
+
+void GpioOutputs::set(uint32_t base, uint32_t pdor) {
+    for (Port& p : ports) {
+        if (p.base == base) {
+            p.pdor = pdor;
             return;
         }
     }
-    ports.push_back({address, value});
+    ports.push_back({base, pdor});
+}
+
+// -- pin edges driven from outside --------------------------------------------------------------
+void PinEdges::add(Core& c, uint64_t cycle, bool level, std::vector<Pin> pins) {
+    size_t i = edges.size();
+    while (i > 0 && edges[i - 1].cycle > cycle) --i;
+    edges.insert(edges.begin() + static_cast<ptrdiff_t>(i), Edge{cycle, level, std::move(pins)});
+    if (i == 0) schedule(c);
+}
+
+void PinEdges::schedule(Core& c) {
+    if (event) c.cancel(event);
+    event = edges.empty() ? 0 : c.at(edges.front().cycle, Ev::PinEdge, false);
+}
+
+void PinEdges::fire(Core& c) {
+    event = 0;
+    const Edge edge = std::move(edges.front());
+    edges.erase(edges.begin());
+    for (const Pin& pin : edge.pins) {
+        GpioInputs::Port* port = c.gpio_in.port(pin.pdir);
+        if (!port) continue;
+        const bool was = (port->value & pin.bit) != 0;
+        c.gpio_in.hold(*port, pin.bit, edge.level);
+        bool later = false;                  // another edge on this pin is still to come
+        for (const Edge& e : edges) {
+            for (const Pin& q : e.pins) later = later || (q.pdir == pin.pdir && q.bit == pin.bit);
+        }
+        if (!later) c.gpio_in.release(*port, pin.bit);
+        if (was != edge.level && pin.ftm3_channel >= 0 && c.ftm3.ready) {
+            c.ftm3.edge(c, pin.ftm3_channel, edge.level);
+        }
+    }
+    schedule(c);
+}
+
+void PinEdges::reset(Core& c) {
+    edges.clear();
+    event = 0;                           // the core's reset dropped the events
+    c.gpio_in.release_all();
 }
 
 // -- SysTick ----------------------------------------------------------------------------------

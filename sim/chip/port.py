@@ -19,7 +19,7 @@ into Python.
 
 from __future__ import annotations
 
-from .machine import GPIO_IN_DEVICE
+from .machine import GPIO_IN_DEVICE, GPIO_OUT_DEVICE
 from .peripheral import RegisterDevice
 
 PORT_NAMES = "ABCDE"
@@ -110,8 +110,22 @@ class Gpio(RegisterDevice):
         super().__init__(machine, f"GPIO{letter}", span=0x18)
         self.pdir_address = self.base + self.map["PDIR"].offset
         machine.core.add_route(GPIO_IN_DEVICE, self.pdir_address, self.pdir_address + 4)
+        # A write to PDOR, PSOR, PCOR or PTOR that leaves PDOR as it is: taken natively
+        # (nothing to do), from the copy of PDOR kept there (_output, reset).
+        machine.core.add_route(GPIO_OUT_DEVICE, self.base, self.base + 0x10)
+
+    def reset(self):
+        super().reset()
+        self.machine.core.set_gpio_output(self.base, self.v["PDOR"])
 
     def r_PDIR(self):
+        """PDIR as the program reads it: the native core's word (which has the levels of
+        pins it drives itself, Teensy35.rc_capture_pulses), once the pins are published."""
+        native = self.machine.core.dev_read(GPIO_IN_DEVICE, self.pdir_address, 4)
+        return self.pins_word() if native is None else native
+
+    def pins_word(self):
+        """The input word from the pin model's levels."""
         ports, letter = self.ports, self.letter
         return sum(ports.level(letter, n) << n for n in ports.port[letter].digital_pins())
 
@@ -134,6 +148,7 @@ class Gpio(RegisterDevice):
         pdor &= 0xFFFF_FFFF
         before = self._levels(self.v["PDOR"] ^ pdor)
         self.v["PDOR"] = pdor
+        self.machine.core.set_gpio_output(self.base, pdor)
         self.ports.outputs_changed(self.letter, before)
         self.ports.publish(self.letter, before)
 
@@ -186,7 +201,7 @@ class Ports:
         levels can have changed."""
         gpio = self.gpio[letter]
         if pins is None or letter not in self._published:
-            word = gpio.r_PDIR()
+            word = gpio.pins_word()
         else:
             word = self._published[letter]
             digital = self.port[letter].digital_pins()

@@ -241,7 +241,10 @@ class Teensy35:
         """Pulses as :meth:`rc_capture_pulse` makes them, on several channels at once
         ({channel: us}), as a receiver's frame sends them: all rise on the same count, and
         the pins whose pulses end on the same count fall together (one event per edge time,
-        not per pin)."""
+        not per pin). The native core drives them (no call into Python at the edges) when
+        every pin is low and on its FTM3 channel and nothing else listens to the pins'
+        edges; the pin model's own view of those pins then stays low through the pulses
+        (PDIR, read by the program, has them)."""
         ftm, ports, m = self.chip.ftm3, self.chip.ports, self.machine
         rise = ftm.next_tick(m.now())
         if rise is None or not widths:
@@ -251,7 +254,14 @@ class Teensy35:
         falls = {}
         for ch, us in widths.items():
             counts = -(-us * hz // 1_000_000)
-            falls.setdefault(ftm.next_tick(rise + int(counts * per_tick)), []).append(pins[ch])
+            falls.setdefault(ftm.next_tick(rise + int(counts * per_tick)), []).append(ch)
+        native = self._native_pins(pins)
+        if native is not None:
+            m.core.pin_edge(rise, True, list(native.values()))
+            for fall, group in falls.items():
+                m.core.pin_edge(fall, False, [native[ch] for ch in group])
+            return
+        falls = {fall: [pins[ch] for ch in group] for fall, group in falls.items()}
 
         def drive(group, level):
             for letter, bit in group:
@@ -260,6 +270,23 @@ class Teensy35:
         m.at(rise, lambda: drive(pins.values(), 1), scaled=False)
         for fall, group in falls.items():
             m.at(fall, lambda group=group: drive(group, 0), scaled=False)
+
+    def _native_pins(self, pins: dict):
+        """{channel: (PDIR address, bit, FTM3 channel)} for Mk64Core.pin_edge when the core
+        can drive these pins' pulses (each low and muxed to an FTM3 channel, no listener to
+        their edges but the capture's), else None."""
+        ports = self.chip.ports
+        if ports.edge_listeners != [self._pin_edge]:
+            return None
+        out = {}
+        for ch, (letter, bit) in pins.items():
+            sig = signal(letter, bit, ports.mux(letter, bit))
+            if not sig or not sig.startswith("FTM3_CH") or ports.level(letter, bit):
+                return None
+            out[ch] = (ports.gpio[letter].pdir_address, bit, int(sig[-1]))
+        for letter, bit in pins.values():
+            ports.external[(letter, bit)] = 0          # its level after the pulse: no change
+        return out
 
     def telemetry(self) -> bytes:
         """What has left UART0's TX pin since reset (or since the last take_telemetry())."""
