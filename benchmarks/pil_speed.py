@@ -13,7 +13,11 @@ per loop; last, those boards driven in turns with a sync every loop, so that the
 under the same load.
 
     python benchmarks/pil_speed.py [--cycles 30] [--elf PATH] [--board-loops 1000]
-                                   [--cpus unicorn,engine]
+                                   [--cpus unicorn,engine] [--python-frames]
+
+``--python-frames`` also flies each PIL run with every frame in the drop-in's Python path
+(HQ_PIL_FRAMES=python; by default its plain frames run natively) and prints the native
+path's rate as a ratio to it.
 
 Figures are wall-clock ratios on a shared machine: they move with the load. Never a test.
 """
@@ -32,6 +36,7 @@ LOOP_HZ = 200.0
 LINKS = ("uart", "usb")
 CPUS = ("unicorn", "engine")
 CPU_VARIABLE = "HQ_CHIP_CPU"    # the emulated chip's CPU, for this process and the drop-in's
+FRAMES_VARIABLE = "HQ_PIL_FRAMES"   # the drop-in's frames: native (plain ones) or python
 TURNS = 4                   # turns of the boards driven in turns (boards_in_turns)
 
 
@@ -134,21 +139,24 @@ def _cpus(text: str):
     return cpus
 
 
-def pil_runs(elf: str, cpus, cycles: int) -> dict:
-    """The experiment on the host build, then on the image for each CPU and link: each
-    run's lockstep rate (frames a second of wall time), printed as it comes."""
+def pil_runs(elf: str, cpus, cycles: int, frame_paths=("native",)) -> dict:
+    """The experiment on the host build, then on the image for each CPU, link and frame
+    path (the Python path's runs named "... python-frames"): each run's lockstep rate
+    (frames a second of wall time), printed as it comes."""
     rates = {}
-    runs = [("host", "host", "uart")] + [(f"{cpu} {link}", cpu, link)
-                                         for cpu in cpus for link in LINKS]
+    runs = [("host", "host", "uart", "native")] + [
+        (f"{cpu} {link}" + ("" if path == "native" else " python-frames"), cpu, link, path)
+        for cpu in cpus for link in LINKS for path in frame_paths]
     with tempfile.TemporaryDirectory() as tmp:
-        for name, cpu, link in runs:
+        for name, cpu, link, path in runs:
+            os.environ[FRAMES_VARIABLE] = path
             if cpu != "host":
                 use_cpu(cpu)
             fw = "host" if cpu == "host" else "teensy35"
             r, total = run(fw, link, cycles, elf, str(pathlib.Path(tmp) / name.replace(" ", "-")))
             rate = r.frames / r.loop_s
             rates[name] = rate
-            print(f"{name:14s}: {r.frames} frames ({r.frames / LOOP_HZ:.2f} s simulated); "
+            print(f"{name:28s}: {r.frames} frames ({r.frames / LOOP_HZ:.2f} s simulated); "
                   f"lockstep {r.loop_s:.2f} s wall = {rate:.0f} frames/s = "
                   f"{rate / LOOP_HZ:.2f}x real time; start-up and shutdown {total - r.loop_s:.2f} s")
     return rates
@@ -166,13 +174,21 @@ def main() -> int:
     p.add_argument("--cpus", type=_cpus, default=CPUS,
                    help="the emulated chip's CPUs to measure, comma-separated (default "
                         "unicorn,engine)")
+    p.add_argument("--python-frames", action="store_true",
+                   help="also fly each PIL run with every frame in the drop-in's Python path "
+                        "(its plain frames run natively otherwise), and compare")
     args = p.parse_args()
     from heliquad.sim.base.firmware_image import teensy35_image
 
     elf = args.elf or str(teensy35_image("elf"))
     print(f"image: {elf}")
-    rates = pil_runs(elf, args.cpus, args.cycles)
+    rates = pil_runs(elf, args.cpus, args.cycles,
+                     ("native", "python") if args.python_frames else ("native",))
     for cpu in args.cpus:
+        for link in LINKS:
+            if args.python_frames:
+                print(f"PIL ({cpu}) over {link}, native frames / Python frames: "
+                      f"{rates[f'{cpu} {link}'] / rates[f'{cpu} {link} python-frames']:.4f}")
         for link in LINKS:
             print(f"PIL ({cpu}) over {link} / host lockstep rate: "
                   f"{rates[f'{cpu} {link}'] / rates['host']:.4f}")

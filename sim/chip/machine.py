@@ -591,6 +591,12 @@ class Machine:
             if drain is not None:
                 core.set_drain(0, 0)
 
+    def after_run(self, code: int):
+        """What ``code``, returned by a run of the native core that its caller made itself
+        (sim/chip/pil_frames.hpp), means: the Stop, or None to run on; faults and resets
+        raise, as from :meth:`run`."""
+        return self._after_run(code)
+
     def _after_run(self, code: int):
         """What a native run's return ``code`` means: the Stop to return, None to run on
         (a Python event run, a breakpoint that did not stop, the engine's FPU judgement);

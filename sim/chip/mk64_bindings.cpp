@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "chip/mk64_core.hpp"
+#include "chip/pil_frames.hpp"
 #include "sensor/mpu6050_emulator.hpp"
 
 namespace py = pybind11;
@@ -85,6 +86,72 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 
 }  // namespace
 
+// The drop-in's plain frames (pil_frames.hpp; sim/chip/pil/drop_in.py drives them).
+static void bind_pil_frames(py::module_& m) {
+    using P = PilFrames;
+    py::class_<P>(m, "PilFrames", "The processor-in-the-loop drop-in's plain frames, natively.")
+        .def(py::init([](Core& c) {
+                 auto p = std::make_unique<P>(c);
+                 p->before_wait = [] { return static_cast<void*>(PyEval_SaveThread()); };
+                 p->after_wait = [](void* s) { PyEval_RestoreThread(static_cast<PyThreadState*>(s)); };
+                 return p;
+             }),
+             py::keep_alive<1, 2>())
+        .def("configure", [](P& p, const py::dict& d) {
+            P::Config c;
+            c.sim_fd = d["sim_fd"].cast<int>();
+            c.tel_fd = d["tel_fd"].cast<int>();
+            c.outputs_at = d["outputs_at"].cast<uint32_t>();
+            c.wait_at = d["wait_at"].cast<uint32_t>();
+            c.card_wait_at = d["card_wait_at"].cast<uint32_t>();
+            c.report_address = d["report_address"].cast<uint32_t>();
+            c.mpu = d["mpu"].cast<size_t>();
+            c.usb = d["usb"].cast<bool>();
+            c.esc_lo = d["esc_lo"].cast<uint32_t>();
+            c.esc_hi = d["esc_hi"].cast<uint32_t>();
+            c.loop_limit_s = d["loop_limit_s"].cast<double>();
+            c.system_id = d["system_id"].cast<uint8_t>();
+            c.component_id = d["component_id"].cast<uint8_t>();
+            c.telemetry_chunk = d["telemetry_chunk"].cast<size_t>();
+            c.quiet_ms = d["quiet_ms"].cast<int>();
+            const py::object pins = d["rc_pins"];
+            c.rc_native = !pins.is_none();
+            if (c.rc_native) {
+                for (const auto& [pdir, n, ch] : pins.cast<std::vector<std::tuple<uint32_t, int, int>>>()) {
+                    if (n < 0 || n > 31 || ch < 0 || ch >= Ftm::kChannels) {
+                        throw py::value_error("rc_pins: a pin's bit is 0..31, its channel 0..7");
+                    }
+                    c.rc_pins.push_back({pdir, uint32_t{1} << n, ch});
+                }
+                if (c.rc_pins.size() != 7) throw py::value_error("rc_pins: one per RC channel, 7");
+            }
+            p.config = std::move(c);
+        })
+        .def("serve", &P::serve, py::arg("wait_ms"), py::arg("max_frames"))
+        .def_readwrite("last_frame", &P::last_frame)
+        .def_readwrite("frames", &P::frames)
+        .def_readwrite("seq", &P::seq)
+        .def_readwrite("rc_last", &P::rc_last)
+        .def_readwrite("rc_age", &P::rc_age)
+        .def_readwrite("ftfe_changes", &P::ftfe_changes)
+        .def_readwrite("waits", &P::waits)
+        .def_readwrite("in_card_wait", &P::in_card_wait)
+        .def_readonly("phase", &P::phase)
+        .def_readonly("code", &P::code)
+        .def_readonly("frame_time_us", &P::frame_time_us)
+        .def_property("input", [](const P& p) { return py::bytes(p.input); },
+                      [](P& p, const py::bytes& b) { p.input = b; })
+        .def_property("telemetry", [](const P& p) { return py::bytes(p.telemetry); },
+                      [](P& p, const py::bytes& b) { p.telemetry = b; })
+        .def_property("reply", [](const P& p) { return py::bytes(p.reply); },
+                      [](P& p, const py::bytes& b) { p.reply = b; })
+        .def("take_step_cycles", [](P& p) {
+            std::vector<uint32_t> out;
+            out.swap(p.step_cycles);
+            return out;
+        });
+}
+
 void bind_mk64(py::module_& m) {
     py::class_<Usb::Host>(m, "Mk64UsbHost",
                           "The USB host's state its native bulk IN polls share with usb_host.py.")
@@ -121,6 +188,7 @@ void bind_mk64(py::module_& m) {
             h.nak_frame = -1;
         })
         .def("drop_job", [](Usb::Host& h) { h.job = false; });
+    bind_pil_frames(m);
     py::class_<Usb>(m, "Mk64Usb", "USB0's registers and SIE state the native path keeps.")
         .def_readwrite("native", &Usb::native)
         .def_readwrite("frame", &Usb::frame)

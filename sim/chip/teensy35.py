@@ -255,7 +255,7 @@ class Teensy35:
         for ch, us in widths.items():
             counts = -(-us * hz // 1_000_000)
             falls.setdefault(ftm.next_tick(rise + int(counts * per_tick)), []).append(ch)
-        native = self._native_pins(pins)
+        native = self.native_pins(pins)
         if native is not None:
             m.core.pin_edge(rise, True, list(native.values()))
             for fall, group in falls.items():
@@ -271,7 +271,7 @@ class Teensy35:
         for fall, group in falls.items():
             m.at(fall, lambda group=group: drive(group, 0), scaled=False)
 
-    def _native_pins(self, pins: dict):
+    def native_pins(self, pins: dict):
         """{channel: (PDIR address, bit, FTM3 channel)} for Mk64Core.pin_edge when the core
         can drive these pins' pulses (each low and muxed to an FTM3 channel, no listener to
         their edges but the capture's), else None."""

@@ -12,7 +12,7 @@ from ...base.dialect import dialect
 from ...base.firmware_facts import LOOP_RATE_HZ
 from ...rig.setup import BOARD_LINKS
 from ..machine import ChipReset, EmulationError
-from ..teensy35 import ESC_PINS, RC_PINS, Teensy35
+from ..teensy35 import ESC_PINS, PINS, RC_PINS, Teensy35
 from ..usb_host import UsbHost
 from .param_file import ParamFile
 
@@ -87,7 +87,7 @@ class PilBoard:
         self.report_address = image.symbol(REPORT_SYMBOL).address
         self.waits = 0
         # Where a loop ends: native stops (Machine.stop_at), no call into Python there.
-        self.machine.stop_at(WAIT_SYMBOL)
+        self._wait_at = self.machine.stop_at(WAIT_SYMBOL)
         self.in_card_wait = False          # the last loop ended with a step due in the card's wait
         self._card_wait_step = (self.machine.stop_at(CARD_WAIT_STEP_SYMBOL)
                                 if image.has(CARD_WAIT_STEP_SYMBOL) else None)
@@ -110,13 +110,20 @@ class PilBoard:
         self.waits += 1
         return True
 
-    def _run_to_wait(self, limit_s: float, what: str, outputs: bool = False) -> bool:
+    def _run_to_wait(self, limit_s: float, what: str, outputs: bool = False,
+                     code: int | None = None) -> bool:
         """Run until the main loop next reaches its sleep, or with ``outputs`` until its
         step's outputs are final if that comes first (then True); a watchdog reset
-        reboots."""
+        reboots. ``code``: a native run the caller made returned it (PilFrames): that run's
+        stop first."""
         while True:
             try:
-                stop = self.machine.run(seconds=limit_s)
+                if code is not None:
+                    stop, code = self.machine.after_run(code), None
+                    if stop is None:
+                        continue
+                else:
+                    stop = self.machine.run(seconds=limit_s)
             except ChipReset as e:
                 self.resets += 1
                 print(f"heliquad-fw-pil: {e} during {what}; the board reboots",
@@ -202,6 +209,14 @@ class PilBoard:
         self._rc_last, self._rc_age = rc, 0
         self.board.rc_capture_pulses({ch: us for ch, us in enumerate(rc) if us > 0})
 
+    def rc_schedule(self) -> tuple:
+        """(the RC values last sent as pulses or None, frames since): what rc_pulses decides
+        the next pulses by (PilFrames shares it)."""
+        return self._rc_last, self._rc_age
+
+    def set_rc_schedule(self, last, age: int) -> None:
+        self._rc_last, self._rc_age = last, age
+
     def feed_telemetry(self, data: bytes) -> None:
         if not data:
             return
@@ -232,19 +247,52 @@ class PilBoard:
                                            outputs=self._outputs_at is not None)
         return self.outputs()
 
-    def end_frame(self, sync: bool) -> None:
+    def end_frame(self, sync: bool, code: int | None = None) -> None:
         """The rest of the loop begun by :meth:`begin_frame`, to where the loop ends; the
         stored records kept; with ``sync``, the telemetry drained (:meth:`_drain`); the
-        telemetry that left collected."""
-        if self._mid_loop:
+        telemetry that left collected. ``code``: the rest began with a native run that
+        returned it (a frame PilFrames handed over after its reply)."""
+        if self._mid_loop or code is not None:
             self._mid_loop = False
-            self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}")
+            self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}", code=code)
         for kept in self.stored:
             kept.keep()
         if sync and not self.in_card_wait:     # a step is due now: no time to drain
             self._drain()
         self._collect_telemetry()
         self.step_cycles.append(self.report()[1])
+
+    def resume_begin(self, code: int):
+        """:meth:`begin_frame` from a native run of its loop that returned ``code`` (a frame
+        PilFrames handed over before its reply): the outputs."""
+        self._mid_loop = self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}",
+                                           outputs=True, code=code)
+        return self.outputs()
+
+    def native_config(self, sim_fd: int, tel_fd: int, system_id: int, component_id: int,
+                      chunk: int, quiet_s: float):
+        """The set-up of PilFrames (sim/chip/pil_frames.hpp), which runs this board's plain
+        frames natively; None when it cannot (an image without hq_step_outputs). The RC
+        pins' table only when the core can drive their pulses now (Teensy35.native_pins);
+        without it, frames with pulses are Python's."""
+        if self._outputs_at is None:
+            return None
+        pins = self.board.native_pins({ch: PINS[RC_PINS[ch]] for ch in range(RC_CHANNELS)})
+        return {"sim_fd": sim_fd, "tel_fd": tel_fd, "outputs_at": self._outputs_at,
+                "wait_at": self._wait_at,
+                "card_wait_at": self._card_wait_step or 0,
+                "report_address": self.report_address, "mpu": self.board.mpu.native,
+                "usb": self.usb_host is not None,
+                "rc_pins": None if pins is None else [pins[ch] for ch in range(RC_CHANNELS)],
+                "esc_lo": ESC_MIN_US * FTM0_COUNTS_PER_US,
+                "esc_hi": ESC_MAX_US * FTM0_COUNTS_PER_US, "loop_limit_s": LOOP_LIMIT_S,
+                "system_id": system_id, "component_id": component_id,
+                "telemetry_chunk": chunk, "quiet_ms": max(1, round(quiet_s * 1000))}
+
+    def native_ready(self) -> bool:
+        """Between frames, in the state PilFrames takes over: no IMU fault held, no loop
+        begun and not finished."""
+        return self._fault == dialect().HQ_IMU_FAULT_NONE and not self._mid_loop
 
     def outputs(self):
         """The last step's outputs: (motors, armed, mode, sensor kind)."""

@@ -12,6 +12,7 @@ from ...base.firmware_facts import MAX_PTY_BACKLOG_BYTES
 from ...base.framing import Codec, Framer
 from ..teensy35 import ESC_PINS
 from .board import IMAGE_LOOP_HZ
+from .native_frames import IDLE, KEEP, LINK_FAILED, MID_FRAME, PYTHON, UPLINK, NativeFrames
 
 #: Telemetry is written out in chunks as a USB CDC device ships it (the link contract): after
 #: a sync frame's reply, once this many bytes wait, or when the sim link is quiet this long.
@@ -32,7 +33,8 @@ class DropIn:
     """The board behind the two ptys: sensor frames in, replies and telemetry out, as
     heliquad-fw-host does (docs/link-contract.md)."""
 
-    def __init__(self, board, sim, tel, idle_timeout_s: float, backlog_bytes: int = 0):
+    def __init__(self, board, sim, tel, idle_timeout_s: float, backlog_bytes: int = 0, *,
+                 native: bool = True):
         # At most what the pty's line discipline holds in sight, as heliquad-fw-host's bound.
         self.backlog_bytes = min(backlog_bytes, MAX_PTY_BACKLOG_BYTES)
         self.board, self.sim, self.tel, self.idle_timeout_s = board, sim, tel, idle_timeout_s
@@ -46,6 +48,9 @@ class DropIn:
         self.lost = self.repeated = self.frames = self.dropped = 0
         self.last_input = time.monotonic()
         self.uplink = b""
+        self.telemetry_chunk, self.quiet_s = TELEMETRY_CHUNK, QUIET_S
+        # The plain frames natively (native_frames.py); without it, every frame here.
+        self.native = NativeFrames(self) if native else None
 
     def flush_telemetry(self) -> None:
         """Put the queued telemetry on the link; before the first frame, nothing: what the
@@ -66,6 +71,12 @@ class DropIn:
             # otherwise once TELEMETRY_CHUNK bytes wait or the sim link is quiet QUIET_S.
             if len(board.telemetry_out) >= TELEMETRY_CHUNK:
                 self.flush_telemetry()
+            if self.native is not None and self.native.ready():
+                code, python_next = self._native_turn()
+                if code is not None:
+                    return code
+                if not python_next:
+                    continue
             ready, _, _ = select.select([sim.master, tel.master], [], [],
                                         QUIET_S if board.telemetry_out else 0.1)
             if tel.master in ready:
@@ -78,6 +89,25 @@ class DropIn:
             elif self._idle(ready):
                 return EXIT_IDLE
         return 0
+
+    def _native_turn(self) -> tuple:
+        """The native path's frames, then what its hand-back asks: (an exit code or None,
+        whether the Python path's select takes the next turn: uplink bytes wait). A frame
+        that is not plain is fed here from the bytes the native path read; its wait finding
+        no input is the idle turn the select would make."""
+        native, board = self.native, self.board
+        reason = native.turn(QUIET_S if board.telemetry_out else 0.1)
+        if reason == LINK_FAILED or (reason == MID_FRAME and not native.finish()):
+            print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
+            return EXIT_LINK, False
+        if reason == KEEP:
+            for kept in board.stored:
+                kept.keep()
+        if reason == IDLE and self._idle([]):
+            return EXIT_IDLE, False
+        if reason == PYTHON:
+            return self._feed(b"") or None, False
+        return None, reason == UPLINK
 
     def _idle(self, ready) -> bool:
         """Nothing on the sim link: flush, drop what nobody reads, and say when to give up."""
@@ -128,16 +158,23 @@ class DropIn:
         self.board.feed_telemetry(self.uplink)
         self.uplink = b""
         fifo = bytes(msg.fifo[:min(msg.fifo_len, len(msg.fifo))])
-        motors, armed, mode, kind = self.board.begin_frame(
-            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault)
-        self.reply = self.codec.encode(self.reply_id, {
-            "time_us": msg.time_us, "frame": msg.frame,
+        self.reply = self.encode_reply(msg.time_us, msg.frame, self.board.begin_frame(
+            fifo, msg.fifo_kind == self.mav.HQ_SENSOR_DMP, msg.rc_us, msg.imu_fault))
+
+    def encode_reply(self, time_us: int, frame: int, outputs) -> bytes:
+        """HQ_ACTUATOR_FRAME for the frame of ``time_us`` and ``frame`` with the board's
+        ``outputs`` (PilBoard.begin_frame's)."""
+        motors, armed, mode, kind = outputs
+        return self.codec.encode(self.reply_id, {
+            "time_us": time_us, "frame": frame,
             "motor": motors + [0.0] * (len(ESC_PINS) - len(motors)), "motor_count": len(motors),
             "armed": int(armed), "mode": mode, "sensor_kind": kind})
 
     def summary(self) -> str:
         f = self.board.figures()
-        return (f"heliquad-fw-pil: {f['loops']} loops, {self.lost} frames lost, {self.repeated} "
+        native = self.native.frames.frames if self.native is not None else 0
+        return (f"heliquad-fw-pil: {f['loops']} loops ({native} frames run natively), "
+                f"{self.lost} frames lost, {self.repeated} "
                 f"repeated, {self.dropped} telemetry bytes dropped, {f['watchdog_resets']} "
                 f"watchdog resets, {f['emulated_s']:.3f} s emulated; step cycles median "
                 f"{f['step_cycles_median']} max {f['step_cycles_max']} of "

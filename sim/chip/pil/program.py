@@ -19,6 +19,21 @@ from .param_file import ParamFileError
 from .pty import Pty
 
 
+#: ``python`` runs every frame in the Python path, as the reference the native path's frames
+#: are compared with (tests/pil_frames_test.py); ``native`` (the default) runs the plain
+#: frames natively (native_frames.py).
+FRAMES_VARIABLE = "HQ_PIL_FRAMES"
+
+
+def native_frames() -> bool:
+    """Whether the drop-in runs its plain frames natively (``HQ_PIL_FRAMES``); an unknown
+    value is a usage error."""
+    value = os.environ.get(FRAMES_VARIABLE, "native")
+    if value not in ("native", "python"):
+        _usage(f"{FRAMES_VARIABLE}={value}: native or python")
+    return value == "native"
+
+
 def _usage(message: str) -> None:
     print(f"heliquad-fw-pil: {message}", file=sys.stderr)
     sys.exit(EXIT_USAGE)
@@ -115,7 +130,8 @@ def main(argv=None) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     board, sim, tel = _open(args)
-    drop_in = DropIn(board, sim, tel, args.idle_timeout_s, args.telemetry_backlog_bytes)
+    drop_in = DropIn(board, sim, tel, args.idle_timeout_s, args.telemetry_backlog_bytes,
+                     native=native_frames())
     exit_code = 0
     try:
         exit_code = drop_in.serve()

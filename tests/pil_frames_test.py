@@ -1,0 +1,177 @@
+"""The drop-in's plain frames run natively (sim/chip/pil_frames.hpp, native_frames.py) are the
+Python path's frames, byte for byte: the same replies (sequence numbers included), the same
+telemetry, the same logged experiment. The Python path (HQ_PIL_FRAMES=python) is the
+reference: it runs every frame through PilBoard and DropIn as before the native path
+existed."""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import threading
+import tty
+
+import pytest
+
+from firmwares import image_for
+from heliquad.host.acquire.experiment import run_sil
+from heliquad.host.records.tlog import read_tlog
+from heliquad.sim.base.dialect import dialect
+from heliquad.sim.base.framing import Codec, Framer
+from heliquad.sim.chip.pil.board import PilBoard
+from heliquad.sim.chip.pil.drop_in import DropIn, Stop
+from heliquad.sim.chip.pil.program import FRAMES_VARIABLE
+from heliquad.sim.chip.pil.pty import Pty
+from heliquad.sim.plant.tf_plant import TfPlant
+from heliquad.sim.rig.setup import SilConfig
+
+pytestmark = pytest.mark.pil
+MAV = dialect()
+ROLL = ((28.19,), (1.0, 5.13, 22.93))
+#: A bound on a hang (a reply that never comes), never a measure: a reply takes milliseconds.
+REPLY_WAIT_S = 30.0
+#: A loop's period in core cycles (5 ms at 120 MHz).
+PERIOD_CYCLES = 600_000
+
+
+def _fly(path: str, link: str, out, monkeypatch):
+    monkeypatch.setenv(FRAMES_VARIABLE, path)         # the drop-in inherits it
+    cfg = SilConfig(axis="roll", num=ROLL[0], den=ROLL[1], inject="mixer", freq_hz=2.0,
+                    amplitude=0.05, cycles=6, fade_cycles=1, firmware_link=link,
+                    **image_for("teensy35"))
+    return run_sil(cfg, str(out / f"{path}-{link}"), progress=lambda *_: None)
+
+
+def _loops_and_native(summary: str) -> tuple:
+    words = summary.replace(",", "").replace("(", "").split()
+    return int(words[words.index("loops") - 1]), int(words[words.index("frames") - 1])
+
+
+@pytest.mark.parametrize("link", ["usb", "uart"])
+def test_an_experiment_logs_the_same_bytes_through_either_path(link, tmp_path, monkeypatch):
+    runs = {path: _fly(path, link, tmp_path, monkeypatch) for path in ("python", "native")}
+    py, nat = runs["python"], runs["native"]
+    with open(py.csv_path, "rb") as a, open(nat.csv_path, "rb") as b:
+        assert a.read() == b.read()
+    messages = {path: [(m.get_type(), repr(m)) for _, m in read_tlog(r.tlog_path, MAV)]
+                for path, r in runs.items()}
+    assert len(messages["python"]) > 1000
+    assert messages["python"] == messages["native"]
+    loops, native = _loops_and_native(nat.firmware_summary)
+    assert native > 0.8 * loops                      # most frames were the native path's
+    assert _loops_and_native(py.firmware_summary) == (loops, 0)
+    assert py.firmware_summary.split(";")[1] == nat.firmware_summary.split(";")[1]
+
+
+class _Bench:
+    """A drop-in served in a thread behind its two ptys, stepped frame by frame from here as
+    the simulator steps it, keeping every reply's and the telemetry's raw bytes."""
+
+    def __init__(self, tmp_path, native: bool):
+        import teensy_image
+
+        board = PilBoard(str(teensy_image.image().elf), link="usb")
+        board.boot()
+        # Python events in the middle of frames the native path would run: each hands its
+        # frame over to Python there, before the reply or after it (one per frame, 0.1 ms
+        # further into the loop each time, past the step's outputs).
+        m, self.events = board.machine, []
+        start = m.now() + 150 * PERIOD_CYCLES
+        for k in range(50):
+            m.at(start + k * (PERIOD_CYCLES + PERIOD_CYCLES // 50),
+                 lambda k=k: self.events.append((k, m.now())), scaled=False)
+        self.sim, self.tel = Pty(str(tmp_path / "sim")), Pty(str(tmp_path / "tel"))
+        self.drop_in = DropIn(board, self.sim, self.tel, idle_timeout_s=60, native=native)
+        self.exit = []
+        self.thread = threading.Thread(target=lambda: self.exit.append(self.drop_in.serve()))
+        self.sim_fd = os.open(self.sim.slave_path, os.O_RDWR | os.O_NOCTTY)
+        self.tel_fd = os.open(self.tel.slave_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        for fd in (self.sim_fd, self.tel_fd):
+            tty.setraw(fd)
+        self.codec = Codec(MAV, system_id=1, component_id=MAV.MAV_COMP_ID_IMU)
+        self.framer = Framer(Codec(MAV, system_id=1))
+        self.replies, self.telemetry = [], bytearray()
+        self.thread.start()
+
+    def frame(self, n: int, fifo: bytes, kind: int, rc, sync=False, fault=0):
+        self.codec.seq = n                     # a resent frame is the same bytes
+        os.write(self.sim_fd, self.codec.encode(MAV.MAVLINK_MSG_ID_HQ_SENSOR_FRAME, {
+            "time_us": n * 5000, "frame": n, "fifo_kind": kind, "fifo_len": len(fifo),
+            "sync": int(sync), "rc_us": list(rc), "imu_fault": fault,
+            "fifo": list(fifo) + [0] * (168 - len(fifo))}))
+        while True:
+            ready, _, _ = select.select([self.sim_fd], [], [], REPLY_WAIT_S)
+            assert ready, f"no reply to frame {n}"
+            for msgid, packet, payload in self.framer.feed(os.read(self.sim_fd, 4096)):
+                if msgid == MAV.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME:
+                    self.replies.append(packet)
+                    self.take_telemetry()
+                    return self.framer.codec.decode(msgid, payload)
+
+    def take_telemetry(self):
+        try:
+            while True:
+                self.telemetry += os.read(self.tel_fd, 65536)
+        except BlockingIOError:
+            pass
+
+    def uplink(self, data: bytes):
+        os.write(self.tel_fd, data)
+
+    def close(self):
+        Stop.requested = True
+        try:
+            self.thread.join(REPLY_WAIT_S)
+        finally:
+            Stop.requested = False
+        assert not self.thread.is_alive() and self.exit == [0]
+        self.take_telemetry()
+        for fd in (self.sim_fd, self.tel_fd):
+            os.close(fd)
+        self.sim.close()
+        self.tel.close()
+
+
+def _session(bench: _Bench) -> None:
+    """Arming, a hover on the roll plant, a stick change, sync frames, a resent frame, an IMU
+    overflow, and a ground station's heartbeats and a parameter request on the uplink."""
+    plant = TfPlant("roll", *ROLL, 0.005)
+    mav = MAV.MAVLink(None, srcSystem=255, srcComponent=190)
+    rc = [1500, 1500, 1000, 1500, 1000, 1000, 0, 0]
+    kind = MAV.HQ_SENSOR_NONE
+    for n in range(1, 241):
+        rc[4] = 2000 if n >= 10 else 1000
+        rc[2] = 1400 if n >= 20 else 1000
+        rc[0] = 1500 + int(60 * math.sin(n / 15.0)) if 120 <= n < 160 else 1500
+        if n in (30, 90, 180):
+            bench.uplink(mav.heartbeat_encode(MAV.MAV_TYPE_GCS, MAV.MAV_AUTOPILOT_INVALID,
+                                              0, 0, 0).pack(mav))
+        if n == 100:
+            bench.uplink(mav.param_request_list_encode(1, 1).pack(mav))
+        fault = MAV.HQ_IMU_FAULT_OVERFLOW if n == 70 else MAV.HQ_IMU_FAULT_NONE
+        reply = bench.frame(n, plant.fifo(kind), kind, rc, sync=n % 40 == 0, fault=fault)
+        if n == 45:
+            assert bench.frame(n, plant.fifo(kind), kind, rc).frame == n     # resent
+        kind = reply.sensor_kind
+        plant.step_motors(reply.motor[:reply.motor_count])
+
+
+def test_replies_and_telemetry_are_the_python_paths_to_the_byte(tmp_path):
+    out = {}
+    for native in (False, True):
+        (tmp_path / str(native)).mkdir()
+        bench = _Bench(tmp_path / str(native), native)
+        try:
+            _session(bench)
+        finally:
+            bench.close()
+        out[native] = (bench.replies, bytes(bench.telemetry), bench.drop_in, bench.events)
+    assert len(out[True][0]) == 241 and len(out[True][1]) > 20_000
+    assert out[True][0] == out[False][0]
+    assert out[True][1] == out[False][1]
+    assert len(out[True][3]) == 50 and out[True][3] == out[False][3]
+    drop_in = out[True][2]
+    assert 150 < drop_in.native.frames.frames < 240      # the plain frames, not the others
+    assert drop_in.native.finished >= 40                 # those the events handed over
+    assert drop_in.repeated == out[False][2].repeated == 1
