@@ -136,7 +136,8 @@ void PilFrames::write_telemetry() {
 // count, each ceil(us x counts per us) counts long.
 void PilFrames::rc_pulses(const uint16_t* rc) {
     ++rc_age;
-    const bool same = rc_last.size() == kRcChannels && std::equal(rc_last.begin(), rc_last.end(), rc);
+    const bool same =
+        rc_last.size() == kRcChannels && std::equal(rc_last.begin(), rc_last.end(), rc);
     if (same && rc_age < kRcFrameLoops) return;
     rc_last.assign(rc, rc + kRcChannels);
     rc_age = 0;
@@ -155,8 +156,10 @@ void PilFrames::rc_pulses(const uint16_t* rc) {
         rising.push_back(config.rc_pins[ch]);
         const int64_t counts = (static_cast<int64_t>(rc[ch]) * hz + 999'999) / 1'000'000;
         uint64_t fall = 0;
-        c.ftm3.next_tick(c, rise + static_cast<uint64_t>(static_cast<double>(counts) * per_tick), fall);
-        auto it = std::find_if(falls.begin(), falls.end(), [&](const auto& g) { return g.first == fall; });
+        const auto width = static_cast<uint64_t>(static_cast<double>(counts) * per_tick);
+        c.ftm3.next_tick(c, rise + width, fall);
+        auto it = std::find_if(falls.begin(), falls.end(),
+                               [&](const auto& g) { return g.first == fall; });
         if (it == falls.end()) {
             falls.push_back({fall, {}});
             it = falls.end() - 1;
@@ -274,7 +277,10 @@ int PilFrames::serve(int wait_ms, uint64_t max_frames) {
         ++done;
         // begin_frame: the inputs, then the board to the step's outputs
         const size_t fifo_len = std::min<size_t>(f.m.fifo_len, sizeof f.m.fifo);
-        if (fifo_len) c.owned_slaves[mpu]->emu->push_fifo(f.m.fifo, fifo_len, f.m.fifo_kind == HQ_SENSOR_DMP);
+        if (fifo_len) {
+            c.owned_slaves[mpu]->emu->push_fifo(f.m.fifo, fifo_len,
+                                                f.m.fifo_kind == HQ_SENSOR_DMP);
+        }
         rc_pulses(f.m.rc_us);
         const Reached outputs = run_to(kToOutputs);
         if (outputs == Reached::kHandOver) return kMidFrame;
