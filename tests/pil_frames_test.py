@@ -21,6 +21,7 @@ from heliquad.sim.base.dialect import dialect
 from heliquad.sim.base.framing import Codec, Framer
 from heliquad.sim.chip.pil.board import PilBoard
 from heliquad.sim.chip.pil.drop_in import DropIn, Stop
+from heliquad.sim.chip.pil.native_frames import DRAIN, TO_LOOP_END, TO_OUTPUTS
 from heliquad.sim.chip.pil.program import FRAMES_VARIABLE
 from heliquad.sim.chip.pil.pty import Pty
 from heliquad.sim.plant.tf_plant import TfPlant
@@ -91,7 +92,7 @@ class _Bench:
             tty.setraw(fd)
         self.codec = Codec(MAV, system_id=1, component_id=MAV.MAV_COMP_ID_IMU)
         self.framer = Framer(Codec(MAV, system_id=1))
-        self.replies, self.telemetry = [], bytearray()
+        self.replies, self.telemetry, self.sync_ends = [], bytearray(), []
         self.thread.start()
 
     def frame(self, n: int, fifo: bytes, kind: int, rc, sync=False, fault=0):
@@ -107,7 +108,20 @@ class _Bench:
                 if msgid == MAV.MAVLINK_MSG_ID_HQ_ACTUATOR_FRAME:
                     self.replies.append(packet)
                     self.take_telemetry()
+                    if sync:     # where its drain ended (the drop-in waits for a frame now)
+                        self.sync_ends.append((n, self.drop_in.board.machine.now()))
                     return self.framer.codec.decode(msgid, payload)
+
+    def events_after_tick(self, frame: int, first: int):
+        """Python events every 0.1 ms for 2 ms from ``first`` tenths of a millisecond after
+        the board's next SysTick: after the step of the frame sent next (a sync frame: in
+        its drain). Made while the drop-in waits for that frame (its thread holds no GIL and
+        runs no board)."""
+        m = self.drop_in.board.machine
+        tick = self.drop_in.board.board.chip.scs.systick.zero_at
+        for j in range(20):
+            m.at(tick + (first + j) * PERIOD_CYCLES // 50,
+                 lambda k=(frame, j): self.events.append((k, m.now())), scaled=False)
 
     def take_telemetry(self):
         try:
@@ -150,6 +164,8 @@ def _session(bench: _Bench) -> None:
         if n == 100:
             bench.uplink(mav.param_request_list_encode(1, 1).pack(mav))
         fault = MAV.HQ_IMU_FAULT_OVERFLOW if n == 70 else MAV.HQ_IMU_FAULT_NONE
+        if n in (200, 240):
+            bench.events_after_tick(n, 13 if n == 200 else 9)
         reply = bench.frame(n, plant.fifo(kind), kind, rc, sync=n % 40 == 0, fault=fault)
         if n == 45:
             assert bench.frame(n, plant.fifo(kind), kind, rc).frame == n     # resent
@@ -166,12 +182,15 @@ def test_replies_and_telemetry_are_the_python_paths_to_the_byte(tmp_path):
             _session(bench)
         finally:
             bench.close()
-        out[native] = (bench.replies, bytes(bench.telemetry), bench.drop_in, bench.events)
+        out[native] = (bench.replies, bytes(bench.telemetry), bench.drop_in, bench.events,
+                       bench.sync_ends)
     assert len(out[True][0]) == 241 and len(out[True][1]) > 20_000
     assert out[True][0] == out[False][0]
     assert out[True][1] == out[False][1]
-    assert len(out[True][3]) == 50 and out[True][3] == out[False][3]
+    assert len(out[True][3]) >= 70 and out[True][3] == out[False][3]
+    assert len(out[True][4]) == 6 and out[True][4] == out[False][4]
     drop_in = out[True][2]
-    assert 150 < drop_in.native.frames.frames < 240      # the plain frames, not the others
-    assert drop_in.native.finished >= 40                 # those the events handed over
+    assert 180 < drop_in.native.frames.frames < 240      # the plain frames, not the others
+    finished = drop_in.native.finished                   # those the events handed over
+    assert finished[TO_OUTPUTS] >= 30 and finished[TO_LOOP_END] >= 1 and finished[DRAIN] >= 1
     assert drop_in.repeated == out[False][2].repeated == 1

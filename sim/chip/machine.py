@@ -558,23 +558,25 @@ class Machine:
 
     # ------------------------------------------------------------------ run ------------
     def run(self, instructions: int | None = None, seconds: float | None = None, *,
-            drain: tuple | None = None) -> Stop:
+            drain: tuple | None = None, until: int | None = None) -> Stop:
         """Run until a breakpoint or BKPT stops it, ``instructions`` more instructions have
         retired (at a block boundary, never more) or ``seconds`` more of simulated time have
-        passed. Faults and resets raise. One of the two limits is required. ``drain``:
+        passed (or the core cycle ``until``, instead of ``seconds``). Faults and resets
+        raise. One of the limits is required. ``drain``:
         ``("usb", cycle)`` also ends the run (reason ``drained``) at the first boundary after
         the USB host's bulk IN poll found the board's IN endpoint empty after ``cycle``;
         ``("uart", None)`` once UART0 has nothing left to send and its transmit interrupt
         is off."""
-        if instructions is None and seconds is None:
+        if instructions is None and seconds is None and until is None:
             raise ValueError("give an instruction budget or a simulated time")
         core = self.core
         if drain is not None:
             core.set_drain(_DRAINS[drain[0]], drain[1] or 0)
         instr_limit = core.instructions + instructions if instructions is not None else 1 << 62
         # The time limit is an event in seconds: it keeps its time if the clock changes.
-        limit = core.time_limit(self.cycles_after(seconds, core.cycles)) \
-            if seconds is not None else None
+        limit = core.time_limit(until if until is not None else
+                                self.cycles_after(seconds, core.cycles)) \
+            if seconds is not None or until is not None else None
         core.time_up = False
         self._stop = None
         core.clear_stop()

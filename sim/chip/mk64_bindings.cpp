@@ -110,6 +110,8 @@ static void bind_pil_frames(py::module_& m) {
             c.esc_lo = d["esc_lo"].cast<uint32_t>();
             c.esc_hi = d["esc_hi"].cast<uint32_t>();
             c.loop_limit_s = d["loop_limit_s"].cast<double>();
+            c.drain_limit_s = d["drain_limit_s"].cast<double>();
+            c.drain_margin_s = d["drain_margin_s"].cast<double>();
             c.system_id = d["system_id"].cast<uint8_t>();
             c.component_id = d["component_id"].cast<uint8_t>();
             c.telemetry_chunk = d["telemetry_chunk"].cast<size_t>();
@@ -139,6 +141,9 @@ static void bind_pil_frames(py::module_& m) {
         .def_readonly("phase", &P::phase)
         .def_readonly("code", &P::code)
         .def_readonly("frame_time_us", &P::frame_time_us)
+        .def_readonly("frame_sync", &P::frame_sync)
+        .def_readonly("drain_until", &P::drain_until)
+        .def_readonly("drain_after", &P::drain_after)
         .def_property("input", [](const P& p) { return py::bytes(p.input); },
                       [](P& p, const py::bytes& b) { p.input = b; })
         .def_property("telemetry", [](const P& p) { return py::bytes(p.telemetry); },

@@ -229,6 +229,17 @@ struct Uart {
     double baud(const Core& c) const;
     int frame_bits() const;
     uint64_t frame_cycles(const Core& c) const;
+    // What frame_cycles last computed, and from what (BDH, BDL, C4, C1, the core clock).
+    struct FrameKey {
+        uint8_t bdh = 0, bdl = 0, c4 = 0, c1 = 0;
+        double core_hz = -1.0;
+        bool operator==(const FrameKey& o) const {
+            return bdh == o.bdh && bdl == o.bdl && c4 == o.c4 && c1 == o.c1 &&
+                   core_hz == o.core_hz;
+        }
+    };
+    mutable FrameKey frame_key_;
+    mutable uint64_t frame_cycles_ = 0;
     size_t tx_depth() const { return (v[oPFIFO] & TXFE) ? depth : 1; }
     size_t rx_depth() const { return (v[oPFIFO] & RXFE) ? depth : 1; }
     size_t rx_water() const;

@@ -339,10 +339,19 @@ int Uart::frame_bits() const {
 }
 
 uint64_t Uart::frame_cycles(const Core& c) const {
+    // Kept for the registers and clock it was computed from (a byte's time is asked for
+    // every byte; they change at set-up).
+    const FrameKey key{v[oBDH], v[oBDL], v[oC4], v[oC1], c.core_hz()};
+    if (key == frame_key_) return frame_cycles_;
     const double b = baud(c);
-    if (b == 0.0) return kNever;
-    const double cycles = std::nearbyint(frame_bits() * c.core_hz() / b);   // half to even
-    return std::max<uint64_t>(1, static_cast<uint64_t>(cycles));
+    uint64_t cycles = kNever;
+    if (b != 0.0) {
+        const double n = std::nearbyint(frame_bits() * c.core_hz() / b);   // half to even
+        cycles = std::max<uint64_t>(1, static_cast<uint64_t>(n));
+    }
+    frame_key_ = key;
+    frame_cycles_ = cycles;
+    return cycles;
 }
 
 size_t Uart::rx_water() const {

@@ -63,7 +63,7 @@ bool PilFrames::plain(const uint8_t* payload, size_t len, SensorFrame& f) const 
     msg.len = static_cast<uint8_t>(len);
     std::memcpy(_MAV_PAYLOAD_NON_CONST(&msg), payload, len);
     mavlink_msg_hq_sensor_frame_decode(&msg, &f.m);
-    if (f.m.frame != last_frame + 1 || f.m.sync || f.m.imu_fault != HQ_IMU_FAULT_NONE) return false;
+    if (f.m.frame != last_frame + 1 || f.m.imu_fault != HQ_IMU_FAULT_NONE) return false;
     if (config.rc_native) {
         for (const PinEdges::Pin& pin : config.rc_pins) {      // a pulse still on: Python's
             GpioInputs::Port* port = core_.gpio_in.port(pin.pdir);
@@ -237,6 +237,45 @@ void PilFrames::encode_reply(const SensorFrame& f) {
     reply.assign(reinterpret_cast<const char*>(out), n);
 }
 
+// As PilBoard._drain: the board runs on (it sleeps) until what it queued for its link has
+// left, at most drain_limit_s and never closer than drain_margin_s to the next SysTick (none
+// at all with that tick pending: the loop overran).
+bool PilFrames::drain() {
+    Core& c = core_;
+    constexpr int kSysTick = 15;
+    if ((c.pending_ >> kSysTick) & 1 || c.systick.zero_at < 0) return true;
+    const double hz = c.core_hz();
+    const uint64_t start = c.now();
+    const auto margin = static_cast<int64_t>(config.drain_margin_s * hz);
+    const int64_t deadline = std::min(static_cast<int64_t>(start) +
+                                          static_cast<int64_t>(config.drain_limit_s * hz),
+                                      c.systick.zero_at - margin);
+    if (deadline <= static_cast<int64_t>(start)) return true;
+    const double seconds = static_cast<double>(deadline - static_cast<int64_t>(start)) / hz;
+    const uint64_t until = c.cycles_after(seconds, c.cycles_);
+    const uint64_t limit = c.at(until, Ev::TimeLimit, true);
+    c.drain_ = config.usb ? Core::kDrainUsb : Core::kDrainUart;
+    c.drain_after_ = config.usb ? start : 0;
+    c.time_up_ = false;
+    c.clear_stop();
+    const int r = c.run(uint64_t{1} << 62);
+    c.cancel(limit);
+    c.time_up_ = false;
+    c.drain_ = Core::kNoDrain;
+    c.drain_after_ = 0;
+    if (r == kStopAt) {                  // as PilBoard._waited
+        ++waits;
+        in_card_wait = config.card_wait_at && c.stop_at_pc() == config.card_wait_at;
+        return true;
+    }
+    if (r == kDrained || r == kTime) return true;
+    phase = kDrain;
+    code = r;
+    drain_until = until;
+    drain_after = config.usb ? start : 0;
+    return false;
+}
+
 // As PilBoard._collect_telemetry and end_frame's record of the step's cycles.
 void PilFrames::collect() {
     Core& c = core_;
@@ -273,6 +312,7 @@ int PilFrames::serve(int wait_ms, uint64_t max_frames) {
         input.erase(0, total);
         last_frame = f.m.frame;
         frame_time_us = f.m.time_us;
+        frame_sync = f.m.sync != 0;
         ++frames;
         ++done;
         // begin_frame: the inputs, then the board to the step's outputs
@@ -285,13 +325,20 @@ int PilFrames::serve(int wait_ms, uint64_t max_frames) {
         const Reached outputs = run_to(kToOutputs);
         if (outputs == Reached::kHandOver) return kMidFrame;
         encode_reply(f);
-        if (!write_all(reply)) return kLinkFailed;
-        // end_frame: the rest of the loop while the simulator integrates
+        // end_frame: the rest of the loop while the simulator integrates, except after a
+        // sync frame, whose telemetry goes first
+        if (!frame_sync && !write_all(reply)) return kLinkFailed;
         if (outputs == Reached::kOutputs && run_to(kToLoopEnd) == Reached::kHandOver) {
             return kMidFrame;
         }
+        if (frame_sync && !in_card_wait && !drain()) return kMidFrame;
         collect();
-        if (telemetry.size() >= config.telemetry_chunk) write_telemetry();
+        if (frame_sync) {
+            write_telemetry();
+            if (!write_all(reply)) return kLinkFailed;
+        } else if (telemetry.size() >= config.telemetry_chunk) {
+            write_telemetry();
+        }
         if (c.ftfe.changes != ftfe_changes) return kKeep;
     }
     return kFrames;

@@ -1,9 +1,10 @@
 // The processor-in-the-loop drop-in's plain frames, natively (sim/chip/pil/drop_in.py serves
 // the rest and says which frames are plain). A plain frame is the next HQ_SENSOR_FRAME in
-// order, not a sync frame, with no IMU fault, no uplink waiting and nothing unusual on the
-// board: its FIFO bytes into the MPU6050, its RC pulses as PilBoard.rc_pulses makes them, the
-// board run to its step's outputs, the reply written, the rest of the loop run to its end,
-// the telemetry collected and written in chunks, exactly as the Python path does each step.
+// order, with no IMU fault, no uplink waiting and nothing unusual on the board: its FIFO
+// bytes into the MPU6050, its RC pulses as PilBoard.rc_pulses makes them, the board run to
+// its step's outputs, the reply written, the rest of the loop run to its end, the telemetry
+// collected and written in chunks; a sync frame's reply after the loop's end, the link's
+// drain (PilBoard._drain) and its telemetry: exactly as the Python path does each step.
 // Anything else hands over to Python at once: a frame that is not plain before it is
 // consumed, a run that stopped for anything but the loop's own stops in the middle of its
 // frame (Python finishes that frame from there: PilBoard's phase and the run's code).
@@ -36,7 +37,7 @@ public:
         kKeep = 7,        // the flash's stored records changed in the frame just done
         kFrames = 8,      // max_frames frames done
     };
-    enum Phase : int { kToOutputs = 1, kToLoopEnd = 2 };
+    enum Phase : int { kToOutputs = 1, kToLoopEnd = 2, kDrain = 3 };
 
     struct Config {
         int sim_fd = -1, tel_fd = -1;
@@ -48,6 +49,8 @@ public:
         std::vector<PinEdges::Pin> rc_pins;   // per RC channel
         uint32_t esc_lo = 0, esc_hi = 0;      // FTM0 counts of zero and full thrust
         double loop_limit_s = 2.0;            // emulated time a loop may take
+        double drain_limit_s = 0.004;         // a sync frame's drain, at most
+        double drain_margin_s = 20e-6;        // ... ending this long before the next SysTick
         uint8_t system_id = 1, component_id = 1;
         size_t telemetry_chunk = 1024;
         int quiet_ms = 1;                     // telemetry waits no longer for a quiet link
@@ -77,6 +80,8 @@ public:
     // frame's time and counter (for the reply, when it was still to come).
     int phase = 0, code = 0;
     uint64_t frame_time_us = 0;
+    bool frame_sync = false;
+    uint64_t drain_until = 0, drain_after = 0;    // a drain handed over: its end, its start
 
     // Plain frames until Python is needed (or max_frames are done): the Reason. `wait_ms`:
     // how long to wait for sim-link input before kIdle.
@@ -95,6 +100,8 @@ private:
     Reached run_to(Phase to);
     void encode_reply(const SensorFrame& f);
     void collect();
+    // PilBoard._drain: false when handed over (kDrain, code).
+    bool drain();
 
     Core& core_;
 };

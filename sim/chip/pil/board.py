@@ -45,6 +45,8 @@ RC_FRAME_LOOPS = 4
 BOOT_LIMIT_S = 5.0
 LOOP_LIMIT_S = 2.0
 DRAIN_LIMIT_S = 0.004
+#: A drain ends at least this long before the next SysTick.
+DRAIN_MARGIN_S = 20e-6
 SYSTICK_EXCEPTION = 15
 #: The telemetry links a board has: its USB port (CDC-ACM) and UART0 (pins 0 and 1).
 LINKS = BOARD_LINKS
@@ -269,6 +271,20 @@ class PilBoard:
                                            outputs=True, code=code)
         return self.outputs()
 
+    def resume_drain(self, code: int, until: int, after: int) -> None:
+        """:meth:`end_frame`'s drain from a native run of it that returned ``code`` (a sync
+        frame PilFrames handed over there), on to where that run would have ended (the core
+        cycle ``until``; ``after``: the cycle it started at), then the rest of end_frame."""
+        for kept in self.stored:
+            kept.keep()
+        stop = self.machine.after_run(code)
+        if stop is None:
+            drain = ("usb", after) if self.usb_host is not None else ("uart", None)
+            stop = self.machine.run(until=until, drain=drain)
+        self._waited(stop)
+        self._collect_telemetry()
+        self.step_cycles.append(self.report()[1])
+
     def native_config(self, sim_fd: int, tel_fd: int, system_id: int, component_id: int,
                       chunk: int, quiet_s: float):
         """The set-up of PilFrames (sim/chip/pil_frames.hpp), which runs this board's plain
@@ -286,6 +302,7 @@ class PilBoard:
                 "rc_pins": None if pins is None else [pins[ch] for ch in range(RC_CHANNELS)],
                 "esc_lo": ESC_MIN_US * FTM0_COUNTS_PER_US,
                 "esc_hi": ESC_MAX_US * FTM0_COUNTS_PER_US, "loop_limit_s": LOOP_LIMIT_S,
+                "drain_limit_s": DRAIN_LIMIT_S, "drain_margin_s": DRAIN_MARGIN_S,
                 "system_id": system_id, "component_id": component_id,
                 "telemetry_chunk": chunk, "quiet_ms": max(1, round(quiet_s * 1000))}
 
@@ -330,7 +347,7 @@ class PilBoard:
             return
         start = m.now()
         deadline = min(start + int(DRAIN_LIMIT_S * m.core_hz),
-                       systick.zero_at - int(20e-6 * m.core_hz))
+                       systick.zero_at - int(DRAIN_MARGIN_S * m.core_hz))
         if deadline > start:        # one run, ended natively the moment the link has drained
             drain = ("usb", start) if self.usb_host is not None else ("uart", None)
             self._waited(m.run(seconds=(deadline - start) / m.core_hz, drain=drain))

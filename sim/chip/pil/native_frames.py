@@ -9,6 +9,7 @@ stopped there for something only Python does (a Python event, a reset, a fault).
 
 from __future__ import annotations
 
+import collections
 import time
 
 from heliquad._simcore import PilFrames
@@ -16,7 +17,7 @@ from heliquad._simcore import PilFrames
 # PilFrames::Reason.
 (PYTHON, IDLE, UPLINK, SIGNAL, LINK_FAILED, MID_FRAME, KEEP, FRAMES) = range(1, 9)
 # PilFrames::Phase: where a frame handed over in the middle stopped.
-TO_OUTPUTS = 1
+TO_OUTPUTS, TO_LOOP_END, DRAIN = 1, 2, 3
 #: Frames a turn runs at most before Python looks at its signals and state again.
 TURN_FRAMES = 2000
 
@@ -27,7 +28,8 @@ class NativeFrames:
     def __init__(self, drop_in):
         self.drop_in = drop_in
         self.frames = PilFrames(drop_in.board.machine.core)
-        self.finished = 0           # frames handed over in their middle (finish())
+        # Frames handed over in their middle (finish()), by the phase they stopped in.
+        self.finished = collections.Counter()
 
     def ready(self) -> bool:
         """Whether the next frames may be native: the first frame answered (the telemetry
@@ -80,15 +82,25 @@ class NativeFrames:
 
     def finish(self) -> bool:
         """The frame the native path handed over in its middle, finished as the Python path
-        does it (from the run's stop); False when its reply could not be written."""
+        does it (from the run's stop; a sync frame's reply after its telemetry); False when
+        its reply could not be written."""
         d, board, nat = self.drop_in, self.drop_in.board, self.frames
-        self.finished += 1
+        self.finished[nat.phase] += 1
+        sync = nat.frame_sync
         if nat.phase == TO_OUTPUTS:
             d.reply = d.encode_reply(nat.frame_time_us, nat.last_frame,
                                      board.resume_begin(nat.code))
-            if not d.sim.write_all(d.reply, 5.0):
-                return False
-            board.end_frame(False)
+            if not sync:
+                if not d.sim.write_all(d.reply, 5.0):
+                    return False
+                board.end_frame(False)
+                return True
+            board.end_frame(True)
+        elif nat.phase == TO_LOOP_END:
+            board.end_frame(sync, code=nat.code)
+            if not sync:
+                return True
         else:
-            board.end_frame(False, code=nat.code)
-        return True
+            board.resume_drain(nat.code, nat.drain_until, nat.drain_after)
+        d.flush_telemetry()
+        return d.sim.write_all(d.reply, 5.0)

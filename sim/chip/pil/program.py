@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import signal
 import sys
@@ -111,6 +112,11 @@ def _open(args):
         board.boot()
     except (ImageFault, ParamFileError, OSError, ValueError) as e:
         _usage(str(e))
+    # What the start-up made lives as long as the process (the image, the register maps,
+    # most of the heap): kept out of the collector's passes, which the frames' short-lived
+    # objects would otherwise trigger over all of it.
+    gc.collect()
+    gc.freeze()
     try:
         sim, tel = Pty(args.sim_link), Pty(args.telemetry)
     except OSError as e:
