@@ -32,6 +32,8 @@ MAV = dialect()
 ROLL = ((28.19,), (1.0, 5.13, 22.93))
 #: A bound on a hang (a reply that never comes), never a measure: a reply takes milliseconds.
 REPLY_WAIT_S = 30.0
+#: The roll rig's rotors (the paper's vehicle).
+ROTORS = 5
 #: A loop's period in core cycles (5 ms at 120 MHz).
 PERIOD_CYCLES = 600_000
 
@@ -115,8 +117,8 @@ class _Bench:
     def events_after_tick(self, frame: int, first: int):
         """Python events every 0.1 ms for 2 ms from ``first`` tenths of a millisecond after
         the board's next SysTick: after the step of the frame sent next (a sync frame: in
-        its drain). Made while the drop-in waits for that frame (its thread holds no GIL and
-        runs no board)."""
+        its drain). Made right after a sync frame's reply, when the drop-in's thread, on
+        either path, has finished that frame and runs no board until the next one."""
         m = self.drop_in.board.machine
         tick = self.drop_in.board.board.chip.scs.systick.zero_at
         for j in range(20):
@@ -166,7 +168,8 @@ def _session(bench: _Bench) -> None:
         fault = MAV.HQ_IMU_FAULT_OVERFLOW if n == 70 else MAV.HQ_IMU_FAULT_NONE
         if n in (200, 240):
             bench.events_after_tick(n, 13 if n == 200 else 9)
-        reply = bench.frame(n, plant.fifo(kind), kind, rc, sync=n % 40 == 0, fault=fault)
+        sync = n % 40 == 0 or n in (199, 239)     # before 200 and 240: see events_after_tick
+        reply = bench.frame(n, plant.fifo(kind), kind, rc, sync=sync, fault=fault)
         if n == 45:
             assert bench.frame(n, plant.fifo(kind), kind, rc).frame == n     # resent
         kind = reply.sensor_kind
@@ -188,9 +191,78 @@ def test_replies_and_telemetry_are_the_python_paths_to_the_byte(tmp_path):
     assert out[True][0] == out[False][0]
     assert out[True][1] == out[False][1]
     assert len(out[True][3]) >= 70 and out[True][3] == out[False][3]
-    assert len(out[True][4]) == 6 and out[True][4] == out[False][4]
+    assert len(out[True][4]) == 8 and out[True][4] == out[False][4]
     drop_in = out[True][2]
     assert 180 < drop_in.native.frames.frames < 240      # the plain frames, not the others
     finished = drop_in.native.finished                   # those the events handed over
     assert finished[TO_OUTPUTS] >= 30 and finished[TO_LOOP_END] >= 1 and finished[DRAIN] >= 1
     assert drop_in.repeated == out[False][2].repeated == 1
+
+
+def _hover(bench: _Bench, frames: int, first: int = 1, after_sync=None) -> list:
+    """Arming and a hover; ``after_sync(n)`` is called after each sync frame's reply (the
+    drop-in then runs no board until the next frame, on either path)."""
+    plant = TfPlant("roll", *ROLL, 0.005)
+    rc = [1500, 1500, 1000, 1500, 1000, 1000, 0, 0]
+    kind, replies = MAV.HQ_SENSOR_NONE, []
+    for n in range(first, first + frames):
+        rc[4] = 2000 if n >= 10 else 1000
+        rc[2] = 1400 if n >= 20 else 1000
+        reply = bench.frame(n, plant.fifo(kind), kind, rc, sync=n % 40 == 0)
+        if n % 40 == 0 and after_sync is not None:
+            after_sync(n)
+        kind = reply.sensor_kind
+        plant.step_motors(reply.motor[:ROTORS])      # none while a rebooted board starts
+        replies.append(reply)
+    return replies
+
+
+def test_a_board_the_native_path_cannot_run_is_served_by_the_python_path(tmp_path):
+    # Every access logged (a trace): the native path stands aside, and every frame is still
+    # answered, none of them natively (it must not take turns that do nothing instead).
+    bench = _Bench(tmp_path, native=True)
+    bench.drop_in.board.machine.trace_enabled = True
+    try:
+        assert len(_hover(bench, 30)) == 30
+    finally:
+        bench.close()
+    assert bench.drop_in.native.frames.frames == 0 and bench.drop_in.frames == 30
+
+
+def _spin_at(board) -> int:
+    """A branch to itself in the image (enter_bootloader's wait for the reset): the board's
+    loop hangs there and the watchdog resets the chip."""
+    image = board.machine.image
+    sym = image.symbol("_ZN2hq6teensy16enter_bootloaderERNS0_10Ftm0MotorsERNS0_12UsbCdcSerialE")
+    code = board.machine.read(sym.address, sym.size)
+    at = next(i for i in range(0, len(code) - 1, 2) if code[i:i + 2] == b"\xfe\xe7")
+    return sym.address + at
+
+
+def test_a_watchdog_reset_inside_a_native_frame_reboots_the_board_as_in_python(tmp_path):
+    # The board's core sent into a branch to itself between frames 40 and 41: the next
+    # frame's run spins until the watchdog resets the chip, in the native run (which hands
+    # the frame over with the reset) or in Python's; the board reboots and flies on, and
+    # the replies are the same. Then a Python event does it in the middle of frame 131:
+    # handed over at the event, reset in Python's run of the rest.
+    out = {}
+    for native in (False, True):
+        (tmp_path / str(native)).mkdir()
+        bench = _Bench(tmp_path / str(native), native)
+        board = bench.drop_in.board
+        m, spin = board.machine, _spin_at(board)
+
+        def hang(n):
+            if n == 40:
+                m.set_reg("pc", spin | 1)
+            if n == 120:                   # after the reboot (a reset drops every event)
+                m.at(m.now() + 10 * PERIOD_CYCLES + PERIOD_CYCLES // 2,
+                     lambda: m.set_reg("pc", spin | 1), scaled=False)
+        try:
+            _hover(bench, 200, after_sync=hang)
+        finally:
+            bench.close()
+        out[native] = (bench.replies, board.resets, bench.drop_in.native)
+    assert out[True][1] == out[False][1] == 2
+    assert out[True][0] == out[False][0]
+    assert out[True][2].finished[TO_OUTPUTS] >= 2

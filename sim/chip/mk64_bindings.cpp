@@ -119,9 +119,16 @@ static void bind_pil_frames(py::module_& m) {
             const py::object pins = d["rc_pins"];
             c.rc_native = !pins.is_none();
             if (c.rc_native) {
-                for (const auto& [pdir, n, ch] : pins.cast<std::vector<std::tuple<uint32_t, int, int>>>()) {
-                    if (n < 0 || n > 31 || ch < 0 || ch >= Ftm::kChannels) {
-                        throw py::value_error("rc_pins: a pin's bit is 0..31, its channel 0..7");
+                // One per RC channel: (PDIR address, bit, FTM3 channel), or None for a pin
+                // the pin model drives (PDIR address 0 here).
+                for (const py::handle pin : pins.cast<py::list>()) {
+                    if (pin.is_none()) {
+                        c.rc_pins.push_back({0, 0, -1});
+                        continue;
+                    }
+                    const auto [pdir, n, ch] = pin.cast<std::tuple<uint32_t, int, int>>();
+                    if (pdir == 0 || n < 0 || n > 31 || ch < 0 || ch >= Ftm::kChannels) {
+                        throw py::value_error("rc_pins: a PDIR address, a bit 0..31, a channel 0..7");
                     }
                     c.rc_pins.push_back({pdir, uint32_t{1} << n, ch});
                 }
@@ -132,6 +139,7 @@ static void bind_pil_frames(py::module_& m) {
         .def("serve", &P::serve, py::arg("wait_ms"), py::arg("max_frames"))
         .def_readwrite("last_frame", &P::last_frame)
         .def_readwrite("frames", &P::frames)
+        .def_readonly("bytes_read", &P::bytes_read)
         .def_readwrite("seq", &P::seq)
         .def_readwrite("rc_last", &P::rc_last)
         .def_readwrite("rc_age", &P::rc_age)

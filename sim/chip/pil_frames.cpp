@@ -64,16 +64,18 @@ bool PilFrames::plain(const uint8_t* payload, size_t len, SensorFrame& f) const 
     std::memcpy(_MAV_PAYLOAD_NON_CONST(&msg), payload, len);
     mavlink_msg_hq_sensor_frame_decode(&msg, &f.m);
     if (f.m.frame != last_frame + 1 || f.m.imu_fault != HQ_IMU_FAULT_NONE) return false;
-    if (config.rc_native) {
-        for (const PinEdges::Pin& pin : config.rc_pins) {      // a pulse still on: Python's
-            GpioInputs::Port* port = core_.gpio_in.port(pin.pdir);
-            if (!port || (port->value & pin.bit)) return false;
-        }
-        return true;
-    }
     const bool same = rc_last.size() == kRcChannels &&
                       std::equal(rc_last.begin(), rc_last.end(), f.m.rc_us);
-    return same && rc_age + 1 < kRcFrameLoops;              // no pulses this frame
+    if (same && rc_age + 1 < kRcFrameLoops) return true;    // no pulses this frame
+    if (!config.rc_native) return false;
+    for (size_t ch = 0; ch < kRcChannels; ++ch) {
+        if (f.m.rc_us[ch] == 0) continue;
+        const PinEdges::Pin& pin = config.rc_pins[ch];
+        if (!pin.pdir) return false;                        // a pin the pin model drives
+        GpioInputs::Port* port = core_.gpio_in.port(pin.pdir);
+        if (!port || (port->value & pin.bit)) return false;   // a pulse still on
+    }
+    return true;
 }
 
 int PilFrames::poll_unlocked(pollfd* fds, int n, int timeout_ms) {
@@ -97,6 +99,7 @@ int PilFrames::wait_input(int wait_ms) {
         const ssize_t got = ::read(config.sim_fd, buf, sizeof buf);
         if (got > 0) {
             input.append(buf, static_cast<size_t>(got));
+            bytes_read += static_cast<uint64_t>(got);
             return 0;
         }
         if (got < 0 && errno == EINTR) return kSignal;

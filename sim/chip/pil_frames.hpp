@@ -73,6 +73,7 @@ public:
     uint32_t waits = 0;
     bool in_card_wait = false;
     std::string input;                        // sim-link bytes not consumed yet
+    uint64_t bytes_read = 0;                  // read from the sim link, ever
     std::string telemetry;                    // collected, not yet written
     std::string reply;                        // the last reply's bytes
     std::vector<uint32_t> step_cycles;        // each frame's, until taken

@@ -271,21 +271,28 @@ class Teensy35:
         for fall, group in falls.items():
             m.at(fall, lambda group=group: drive(group, 0), scaled=False)
 
-    def native_pins(self, pins: dict):
+    def native_pins(self, pins: dict, *, driven_only: bool = False):
         """{channel: (PDIR address, bit, FTM3 channel)} for Mk64Core.pin_edge when the core
         can drive these pins' pulses (each low and muxed to an FTM3 channel, no listener to
-        their edges but the capture's), else None."""
+        their edges but the capture's), else None; each pin is then held low from outside
+        (its level after the pulse about to be made: no change). ``driven_only``: a table
+        for pulses to come (PilFrames), of only the pins an outside driver already holds
+        low (a pulse has ended there), the others left out and nothing changed."""
         ports = self.chip.ports
         if ports.edge_listeners != [self._pin_edge]:
             return None
         out = {}
         for ch, (letter, bit) in pins.items():
             sig = signal(letter, bit, ports.mux(letter, bit))
-            if not sig or not sig.startswith("FTM3_CH") or ports.level(letter, bit):
+            usable = bool(sig) and sig.startswith("FTM3_CH") and not ports.level(letter, bit)
+            if driven_only and (not usable or ports.external.get((letter, bit)) != 0):
+                continue
+            if not usable:
                 return None
             out[ch] = (ports.gpio[letter].pdir_address, bit, int(sig[-1]))
-        for letter, bit in pins.values():
-            ports.external[(letter, bit)] = 0          # its level after the pulse: no change
+        if not driven_only:
+            for letter, bit in pins.values():
+                ports.external[(letter, bit)] = 0
         return out
 
     def telemetry(self) -> bytes:

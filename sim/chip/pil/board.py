@@ -121,7 +121,8 @@ class PilBoard:
         while True:
             try:
                 if code is not None:
-                    stop, code = self.machine.after_run(code), None
+                    first, code = code, None        # once: a reset it raises is taken
+                    stop = self.machine.after_run(first)
                     if stop is None:
                         continue
                 else:
@@ -290,21 +291,28 @@ class PilBoard:
         """The set-up of PilFrames (sim/chip/pil_frames.hpp), which runs this board's plain
         frames natively; None when it cannot (an image without hq_step_outputs). The RC
         pins' table only when the core can drive their pulses now (Teensy35.native_pins);
-        without it, frames with pulses are Python's."""
+        without it, frames with pulses are Python's, and so are frames with a pulse on a pin
+        the table leaves out."""
         if self._outputs_at is None:
             return None
-        pins = self.board.native_pins({ch: PINS[RC_PINS[ch]] for ch in range(RC_CHANNELS)})
+        pins = self.board.native_pins({ch: PINS[RC_PINS[ch]] for ch in range(RC_CHANNELS)},
+                                      driven_only=True)
         return {"sim_fd": sim_fd, "tel_fd": tel_fd, "outputs_at": self._outputs_at,
                 "wait_at": self._wait_at,
                 "card_wait_at": self._card_wait_step or 0,
                 "report_address": self.report_address, "mpu": self.board.mpu.native,
                 "usb": self.usb_host is not None,
-                "rc_pins": None if pins is None else [pins[ch] for ch in range(RC_CHANNELS)],
+                "rc_pins": None if pins is None else [pins.get(ch) for ch in range(RC_CHANNELS)],
                 "esc_lo": ESC_MIN_US * FTM0_COUNTS_PER_US,
                 "esc_hi": ESC_MAX_US * FTM0_COUNTS_PER_US, "loop_limit_s": LOOP_LIMIT_S,
                 "drain_limit_s": DRAIN_LIMIT_S, "drain_margin_s": DRAIN_MARGIN_S,
                 "system_id": system_id, "component_id": component_id,
                 "telemetry_chunk": chunk, "quiet_ms": max(1, round(quiet_s * 1000))}
+
+    def native_capable(self) -> bool:
+        """Whether PilFrames can run this board's frames at all: an image with
+        hq_step_outputs, and no log of every peripheral access (which is Python's)."""
+        return self._outputs_at is not None and not self.machine.core.log_all
 
     def native_ready(self) -> bool:
         """Between frames, in the state PilFrames takes over: no IMU fault held, no loop

@@ -106,7 +106,10 @@ class DropIn:
         if reason == IDLE and self._idle([]):
             return EXIT_IDLE, False
         if reason == PYTHON:
-            return self._feed(b"") or None, False
+            # The frame the native path left, if it read one; else the select's turn.
+            seen = self.frames + self.repeated
+            code = self._feed(b"")
+            return code or None, seen == self.frames + self.repeated
         return None, reason == UPLINK
 
     def _idle(self, ready) -> bool:

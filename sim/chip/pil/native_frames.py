@@ -18,8 +18,9 @@ from heliquad._simcore import PilFrames
 (PYTHON, IDLE, UPLINK, SIGNAL, LINK_FAILED, MID_FRAME, KEEP, FRAMES) = range(1, 9)
 # PilFrames::Phase: where a frame handed over in the middle stopped.
 TO_OUTPUTS, TO_LOOP_END, DRAIN = 1, 2, 3
-#: Frames a turn runs at most before Python looks at its signals and state again.
-TURN_FRAMES = 2000
+#: Frames a turn runs at most before Python looks at its signals and state again (a signal
+#: that lands while the board runs, not while the turn waits for input, waits for this).
+TURN_FRAMES = 200
 
 
 class NativeFrames:
@@ -37,7 +38,8 @@ class NativeFrames:
         dropping is Python's), the board between frames with no IMU fault held."""
         d = self.drop_in
         return (d.last_frame is not None and d.frames > 0 and not d.uplink
-                and not d.backlog_bytes and d.board.native_ready())
+                and not d.backlog_bytes and d.board.native_ready()
+                and d.board.native_capable())
 
     def turn(self, wait_s: float) -> int:
         """Plain frames until Python is needed: the reason (PilFrames::Reason). ``wait_s``:
@@ -49,11 +51,13 @@ class NativeFrames:
             return PYTHON
         nat.configure(config)
         self._hand_over(nat, d, board)
-        before = nat.frames
+        before, read = nat.frames, nat.bytes_read
         try:
             reason = nat.serve(max(0, int(wait_s * 1000)), TURN_FRAMES)
         finally:
             self._take_back(nat, d, board, nat.frames - before)
+            if nat.bytes_read != read:              # input from the simulator: not idle
+                d.last_input = time.monotonic()
         return reason
 
     @staticmethod
@@ -74,7 +78,6 @@ class NativeFrames:
         if handled:
             d.frames += handled
             d.last_frame, d.reply, d.codec.seq = nat.last_frame, nat.reply, nat.seq
-            d.last_input = time.monotonic()
         board.set_rc_schedule(tuple(nat.rc_last) or None, nat.rc_age)
         board.waits, board.in_card_wait = nat.waits, nat.in_card_wait
         board.step_cycles += nat.take_step_cycles()
