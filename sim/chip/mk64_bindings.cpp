@@ -86,6 +86,16 @@ py::tuple transfer_tuple(const I2c::Transfer& t) {
 
 }  // namespace
 
+// A pin for Mk64Core.pin_edge and PilFrames: (PDIR address, bit number, FTM3 channel or -1).
+static PinEdges::Pin edge_pin(const py::handle& pin) {
+    const auto [pdir, n, ch] = pin.cast<std::tuple<uint32_t, int, int>>();
+    if (pdir == 0 || n < 0 || n > 31 || ch < -1 || ch >= Ftm::kChannels) {
+        throw py::value_error("a pin is (its PDIR address, its bit 0..31, its FTM3 channel "
+                              "0..7 or -1)");
+    }
+    return {pdir, uint32_t{1} << n, ch};
+}
+
 // The drop-in's plain frames (pil_frames.hpp; sim/chip/pil/drop_in.py drives them).
 static void bind_pil_frames(py::module_& m) {
     using P = PilFrames;
@@ -122,15 +132,10 @@ static void bind_pil_frames(py::module_& m) {
                 // One per RC channel: (PDIR address, bit, FTM3 channel), or None for a pin
                 // the pin model drives (PDIR address 0 here).
                 for (const py::handle pin : pins.cast<py::list>()) {
-                    if (pin.is_none()) {
-                        c.rc_pins.push_back({0, 0, -1});
-                        continue;
+                    c.rc_pins.push_back(pin.is_none() ? PinEdges::Pin{0, 0, -1} : edge_pin(pin));
+                    if (!pin.is_none() && c.rc_pins.back().ftm3_channel < 0) {
+                        throw py::value_error("rc_pins: an RC pin is on an FTM3 channel");
                     }
-                    const auto [pdir, n, ch] = pin.cast<std::tuple<uint32_t, int, int>>();
-                    if (pdir == 0 || n < 0 || n > 31 || ch < 0 || ch >= Ftm::kChannels) {
-                        throw py::value_error("rc_pins: a PDIR address, a bit 0..31, a channel 0..7");
-                    }
-                    c.rc_pins.push_back({pdir, uint32_t{1} << n, ch});
                 }
                 if (c.rc_pins.size() != 7) throw py::value_error("rc_pins: one per RC channel, 7");
             }
@@ -442,15 +447,9 @@ void bind_mk64(py::module_& m) {
         })
         // An edge driven onto input pins at `cycle` (unscaled): pins as (PDIR address, bit
         // number, FTM3 channel or -1).
-        .def("pin_edge", [](Core& c, uint64_t cycle, bool level,
-                            const std::vector<std::tuple<uint32_t, int, int>>& pins) {
+        .def("pin_edge", [](Core& c, uint64_t cycle, bool level, const py::list& pins) {
             std::vector<PinEdges::Pin> list;
-            for (const auto& [pdir, n, ch] : pins) {
-                if (n < 0 || n > 31 || ch < -1 || ch >= Ftm::kChannels) {
-                    throw py::value_error("pin_edge: a pin's bit is 0..31, its channel -1..7");
-                }
-                list.push_back({pdir, uint32_t{1} << n, ch});
-            }
+            for (const py::handle pin : pins) list.push_back(edge_pin(pin));
             c.pin_edges.add(c, cycle, level, std::move(list));
         })
         .def_property_readonly("pin_edges_pending", [](const Core& c) {
@@ -516,13 +515,7 @@ void bind_mk64(py::module_& m) {
             out.swap(c.uart0.sent);
             return out;
         })
-        .def("uart_take_sent_bytes", [](Core& c) {
-            std::string out;
-            out.reserve(c.uart0.sent.size());
-            for (const auto& s : c.uart0.sent) out.push_back(static_cast<char>(s.second));
-            c.uart0.sent.clear();
-            return py::bytes(out);
-        })
+        .def("uart_take_sent_bytes", [](Core& c) { return py::bytes(c.uart0.take_sent_bytes()); })
         .def("uart_receive", [](Core& c, const py::bytes& data) {
             const std::string s = data;
             c.uart0.receive(c, reinterpret_cast<const uint8_t*>(s.data()), s.size());

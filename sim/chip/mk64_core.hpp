@@ -250,6 +250,8 @@ struct Uart {
     void update_irq(Core& c);
     void kick(Core& c);
     void shifted(Core& c);
+    // The bytes in `sent`, forgotten there.
+    std::string take_sent_bytes();
     void receive(Core& c, const uint8_t* data, size_t n);
     void arrived(Core& c);
     void idle(Core& c);

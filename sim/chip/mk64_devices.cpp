@@ -387,6 +387,14 @@ void Uart::kick(Core& c) {
     tx_event = c.at(c.now() + frame_cycles(c), Ev::UartTx);
 }
 
+std::string Uart::take_sent_bytes() {
+    std::string out;
+    out.reserve(sent.size());
+    for (const auto& s : sent) out.push_back(static_cast<char>(s.second));
+    sent.clear();
+    return out;
+}
+
 void Uart::shifted(Core& c) {
     const int byte = shifting;
     shifting = -1;

@@ -177,9 +177,7 @@ void PilFrames::rc_pulses(const uint16_t* rc) {
 // end: kOutputs or kLoopEnd, or kHandOver with `phase` and `code` set for Python.
 PilFrames::Reached PilFrames::run_to(Phase to) {
     Core& c = core_;
-    const uint64_t limit = c.at(c.cycles_after(config.loop_limit_s, c.now()), Ev::TimeLimit, true);
-    c.time_up_ = false;
-    c.clear_stop();
+    const uint64_t limit = start_limit(c.cycles_after(config.loop_limit_s, c.now()));
     Reached reached = Reached::kHandOver;
     int r = 0;
     for (;;) {
@@ -200,8 +198,7 @@ PilFrames::Reached PilFrames::run_to(Phase to) {
         }
         break;                           // the loop's end, or another stop (Python's)
     }
-    c.cancel(limit);
-    c.time_up_ = false;
+    end_limit(limit);
     if (reached == Reached::kHandOver) {
         phase = to;
         code = r;
@@ -256,14 +253,11 @@ bool PilFrames::drain() {
     if (deadline <= static_cast<int64_t>(start)) return true;
     const double seconds = static_cast<double>(deadline - static_cast<int64_t>(start)) / hz;
     const uint64_t until = c.cycles_after(seconds, c.cycles_);
-    const uint64_t limit = c.at(until, Ev::TimeLimit, true);
+    const uint64_t limit = start_limit(until);
     c.drain_ = config.usb ? Core::kDrainUsb : Core::kDrainUart;
     c.drain_after_ = config.usb ? start : 0;
-    c.time_up_ = false;
-    c.clear_stop();
     const int r = c.run(uint64_t{1} << 62);
-    c.cancel(limit);
-    c.time_up_ = false;
+    end_limit(limit);
     c.drain_ = Core::kNoDrain;
     c.drain_after_ = 0;
     if (r == kStopAt) {                  // as PilBoard._waited
@@ -279,17 +273,30 @@ bool PilFrames::drain() {
     return false;
 }
 
+// The runs that follow end at core cycle `until` at the latest (as Machine.run's time limit):
+// the limit's event, and the run's stop and time-up flags cleared.
+uint64_t PilFrames::start_limit(uint64_t until) {
+    Core& c = core_;
+    const uint64_t limit = c.at(until, Ev::TimeLimit, true);
+    c.time_up_ = false;
+    c.clear_stop();
+    return limit;
+}
+
+void PilFrames::end_limit(uint64_t limit) {
+    core_.cancel(limit);
+    core_.time_up_ = false;
+}
+
 // As PilBoard._collect_telemetry and end_frame's record of the step's cycles.
 void PilFrames::collect() {
     Core& c = core_;
-    std::string uart;
-    for (const auto& s : c.uart0.sent) uart.push_back(static_cast<char>(s.second));
-    c.uart0.sent.clear();
     if (config.usb) {                    // UART0's bytes leave on pins nothing listens to
+        c.uart0.sent.clear();
         telemetry += c.usb0.host.received;
         c.usb0.host.received.clear();
     } else {
-        telemetry += uart;
+        telemetry += c.uart0.take_sent_bytes();
     }
     uint8_t report[kReportSize];
     c.mem_read(config.report_address, report, sizeof report);

@@ -99,6 +99,8 @@ private:
     void rc_pulses(const uint16_t* rc);
     enum class Reached { kOutputs, kLoopEnd, kHandOver };
     Reached run_to(Phase to);
+    uint64_t start_limit(uint64_t until);
+    void end_limit(uint64_t limit);
     void encode_reply(const SensorFrame& f);
     void collect();
     // PilBoard._drain: false when handed over (kDrain, code).

@@ -160,8 +160,7 @@ class PilBoard:
         self._run_to_wait(BOOT_LIMIT_S, "start-up")
         if self.usb_host is not None:
             self._check_usb_open()
-        for kept in self.stored:
-            kept.keep()
+        self.keep_stored()
         self.machine.core.keep_records = False
         self.board.mpu.log.clear()
         self.board.chip.i2c0.transfers.clear()
@@ -258,10 +257,18 @@ class PilBoard:
         if self._mid_loop or code is not None:
             self._mid_loop = False
             self._run_to_wait(LOOP_LIMIT_S, f"loop {self.waits}", code=code)
-        for kept in self.stored:
-            kept.keep()
+        self.keep_stored()
         if sync and not self.in_card_wait:     # a step is due now: no time to drain
             self._drain()
+        self._loop_done()
+
+    def keep_stored(self) -> None:
+        """The stored records' files written back where the image changed their flash."""
+        for kept in self.stored:
+            kept.keep()
+
+    def _loop_done(self) -> None:
+        """A frame's end: the telemetry that left collected, the step's cycles recorded."""
         self._collect_telemetry()
         self.step_cycles.append(self.report()[1])
 
@@ -276,15 +283,13 @@ class PilBoard:
         """:meth:`end_frame`'s drain from a native run of it that returned ``code`` (a sync
         frame PilFrames handed over there), on to where that run would have ended (the core
         cycle ``until``; ``after``: the cycle it started at), then the rest of end_frame."""
-        for kept in self.stored:
-            kept.keep()
+        self.keep_stored()
         stop = self.machine.after_run(code)
         if stop is None:
             drain = ("usb", after) if self.usb_host is not None else ("uart", None)
             stop = self.machine.run(until=until, drain=drain)
         self._waited(stop)
-        self._collect_telemetry()
-        self.step_cycles.append(self.report()[1])
+        self._loop_done()
 
     def native_config(self, sim_fd: int, tel_fd: int, system_id: int, component_id: int,
                       chunk: int, quiet_s: float):

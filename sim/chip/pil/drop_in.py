@@ -101,8 +101,7 @@ class DropIn:
             print("heliquad-fw-pil: sim link write failed; exiting", file=sys.stderr)
             return EXIT_LINK, False
         if reason == KEEP:
-            for kept in board.stored:
-                kept.keep()
+            board.keep_stored()
         if reason == IDLE and self._idle([]):
             return EXIT_IDLE, False
         if reason == PYTHON:

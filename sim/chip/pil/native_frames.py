@@ -1,6 +1,6 @@
 """The drop-in's plain frames in the native core (``heliquad._simcore.PilFrames``,
 sim/chip/pil_frames.hpp): between two frames the Python path needs, the next frames in order
-that are not sync frames, carry no IMU fault and find no uplink waiting are read, run,
+that carry no IMU fault and find no uplink waiting (sync frames among them) are read, run,
 answered and their telemetry written without a call into Python. Each hand-back carries the
 state both paths share (the frame counter, the reply and its sequence number, the RC pulses'
 schedule, the bytes not yet consumed or written, the loop's stops and cycles), so the Python
