@@ -12,6 +12,7 @@ artifacts and sanitizer or libFuzzer error reports in the output.
 from __future__ import annotations
 
 import argparse
+import base64
 import importlib
 import importlib.util
 import os
@@ -38,6 +39,10 @@ POLL_S = 0.5
 ARTIFACT_KINDS = {"crash": "crashes", "timeout": "timeouts", "oom": "OOMs", "leak": "leaks"}
 REPORT_MARKERS = ("ERROR: AddressSanitizer", "ERROR: LeakSanitizer", "runtime error:",
                   "ERROR: libFuzzer")
+FINDING_MARKERS = ("=== Uncaught Python exception", "Traceback (most recent call last)") \
+    + REPORT_MARKERS
+FINDING_LINES = 40                        # of a failed target's log, printed with the results
+ARTIFACT_SHOWN_BYTES = 4096               # a finding's input this small is printed (base64)
 STATUS = re.compile(r"^#(\d+)\s+\w+\s+cov: (\d+) ft: (\d+) corp: ", re.M)
 STAT = re.compile(r"^stat::(\w+):\s+(\d+)", re.M)
 DONE = re.compile(r"^Done (\d+) runs in (\d+) second", re.M)
@@ -81,6 +86,7 @@ class Result:
     corpus: int = 0
     artifacts: dict = field(default_factory=dict)
     reports: int = 0
+    new_artifacts: list = field(default_factory=list)     # their names, in the artifacts folder
 
     @property
     def found(self) -> int:
@@ -267,6 +273,7 @@ class Run:
             r.cov, r.ft = int(status[-1][1]), int(status[-1][2])
         folder = self.work.artifacts(r.target.name)
         new = set(os.listdir(folder)) - self.before
+        r.new_artifacts = sorted(new)
         r.artifacts = {kind: sum(n.startswith(kind + "-") for n in new) for kind in ARTIFACT_KINDS}
         r.reports = sum(text.count(marker) for marker in REPORT_MARKERS)
         r.corpus = len(os.listdir(self.work.corpus(r.target.name)))
@@ -276,6 +283,26 @@ class Run:
         if r.runs is None:
             r.runs = 0
         return r
+
+
+def finding(result: Result, work: Work) -> list:
+    """What a failed target's log says about its finding (from the first report or traceback,
+    at most FINDING_LINES lines) and its new artifacts, the small ones in base64: the work
+    folder of a CI machine is gone once its output is read."""
+    if result.ok or result.log is None or not result.log.is_file():
+        return []
+    lines = result.log.read_text(errors="replace").splitlines()
+    start = next((i for i, line in enumerate(lines)
+                  if any(marker in line for marker in FINDING_MARKERS)), None)
+    shown = lines[start:start + FINDING_LINES] if start is not None else lines[-FINDING_LINES:]
+    out = [f"-- {result.target.name}: its log from the finding on --"] + shown
+    folder = work.artifacts(result.target.name)
+    for name in result.new_artifacts:
+        data = (folder / name).read_bytes()
+        out.append(f"-- artifact {folder / name}: {len(data)} bytes"
+                   + (f", base64 {base64.b64encode(data).decode()}"
+                      if len(data) <= ARTIFACT_SHOWN_BYTES else ""))
+    return out
 
 
 def _tail(path: Path, size: int = 8192) -> str:
@@ -375,6 +402,9 @@ def main(argv: list | None = None) -> int:
     results = [ran.get(t.name) or Result(t, error=failed[t.name]) for t in targets]
     for r in results:
         print(r.line())
+    for r in results:
+        for line in finding(r, work):
+            print(line)
     return 0 if all(r.ok for r in results) else 1
 
 
