@@ -187,3 +187,22 @@ def test_a_rate_target_segment_gives_the_plant_with_response_plant(tmp_path):
     assert np.max(np.abs(np.degrees(np.angle(ratio)))) < 0.5
     loop, plant = got["bin loop"][0].gain, got["bin plant"][0].gain
     assert abs(loop) < 2.0 < abs(plant)      # the loop follows its target; the plant is larger
+
+
+def test_a_segment_whose_loops_share_one_time_is_refused_without_a_warning(tmp_path):
+    """A damaged or hand-made log whose SIDD times never advance: one line, exit 2, and no
+    division by a zero loop period on the way (numpy's warnings would reach the user)."""
+    w = DataFlashWriter()
+    header(w, 10)
+    w.write("SIDS", TimeUS=2000, Ax=10, Mag=0.2, FSt=0.5, FSp=4.0, TFin=0.0, TC=0.0, TR=10.0,
+            TFout=0.0)
+    for k in range(400):
+        f = 0.5 * 8.0 ** (k / 400)
+        w.write("SIDD", TimeUS=5000, Time=k * 0.0025, Targ=0.2 * math.sin(k / 3.0) + 0.01, F=f)
+        w.write("RATE", TimeUS=5040, R=float(k % 7), ROut=0.2 * math.sin(k / 3.0))
+        w.write("ATT", TimeUS=5070, Roll=1.0, Yaw=180.0)
+    res = heliquad("identify", w.save(tmp_path / "still.BIN"))
+    assert res.returncode == 2, res.stdout
+    assert res.stderr.strip().splitlines() == [
+        f"heliquad identify: error: {tmp_path / 'still.BIN'}: no SystemID segment identify can "
+        "measure (SystemID segment 1: its loops' times do not rise (their median step is 0 us))"]

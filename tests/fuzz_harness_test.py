@@ -232,6 +232,23 @@ def _fmt(w, mtype, name, fmt, columns, length):
     w._raw("FMT", [mtype, length, name.encode(), fmt.encode(), columns.encode()])
 
 
+@pytest.mark.parametrize("start10, stop, loops, amp", [(1, 1, 0, 1.4e-45), (5, 1, 100, 1.4e-45),
+                                                      (5, 1, 0, 1e-44)])
+def test_a_chirp_too_small_for_float32_is_refused_and_the_harness_expects_it(start10, stop,
+                                                                            loops, amp):
+    """Found by fuzzing (CI, stop 48): a chirp of a subnormal amplitude logs as zero at most
+    loops; identify refuses it in one line, and the harness no longer calls that log whole."""
+    recipe = dataflash_fuzz._RECIPE.pack(10, start10, stop, loops, 0, amp, 0)
+    content, whole, _ = dataflash_fuzz.structured_log(recipe)
+    assert not whole
+    with pytest.raises(InputError, match="zero throughout|not a sweep"):
+        dataflash_fuzz.read(content)
+    assert dataflash_fuzz.check(bytes((dataflash_fuzz.STRUCTURED,)) + recipe) == 0
+    small = dataflash_fuzz._RECIPE.pack(10, start10, stop, loops, 0,
+                                        dataflash_fuzz.MIN_WHOLE_AMP, 0)
+    assert dataflash_fuzz.check(bytes((dataflash_fuzz.STRUCTURED,)) + small) == 1
+
+
 @pytest.mark.parametrize("family", ["ardupilot", "heliquad"])
 def test_a_format_dataflash_cannot_take_is_refused_in_one_line(family):
     # found by fuzzing: DFReader raised a bare Exception for an unknown format character

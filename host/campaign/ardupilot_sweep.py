@@ -82,6 +82,8 @@ def _sweep(seg, path, log) -> tuple:
     rows = np.arange(active[0], active[-1] + 1)
     lo, hi, said = _band(seg, rows)
     loop_us = float(np.median(np.diff(seg.time_us[rows])))
+    if not loop_us > 0:
+        raise InputError(f"its loops' times do not rise (their median step is {loop_us:g} us)")
     samples, lost = _samples(seg, rows, signals, axis, inject, loop_us)
     start, end = int(samples.time_us[0]), int(samples.time_us[-1])
     entry = {"signal": "chirp", "requested_hz": lo, "freq_hz": lo, "stop_hz": hi,

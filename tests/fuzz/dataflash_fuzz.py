@@ -14,8 +14,8 @@ Contract checked per input (the file is written to one temporary file per proces
 - reading it as identify does (the log opened, then its SystemID segments as sweeps for an
   ArduPilot log, or heliquad's own log read up to its damage and taken as its sweep) returns
   or raises InputError, never anything else;
-- a structured log left whole, of SID_AXIS 10 with a rising time and a chirp that sweeps,
-  gives one sweep of the roll axis at the mixer with every loop in it.
+- a structured log left whole, of SID_AXIS 10 with a rising time and a chirp that sweeps
+  (with an amplitude of at least MIN_WHOLE_AMP), gives one sweep of the roll axis at the mixer with every loop in it.
 """
 
 from __future__ import annotations
@@ -40,6 +40,10 @@ STRUCTURED = 0x01
 SCRATCH_DIR = "/dev/shm" if os.access("/dev/shm", os.W_OK) else None
 _scratch = None
 _RECIPE = struct.Struct("<BBBHhfB")      # axis, f_start*10, f_stop, loops, step, amp, damage
+#: The least amplitude a whole log's chirp has. Below it the logged excitation (float32) is
+#: subnormal or zero at many loops, so its non-zero part may not span the band: identify's
+#: refusal ("zero throughout", "not a sweep") is then right, not a defect.
+MIN_WHOLE_AMP = 1e-6
 
 
 def _scratch_file() -> str:
@@ -95,7 +99,7 @@ def structured_log(recipe: bytes) -> tuple:
         else:
             data[at:at + len(rest)] = rest
     whole = not (damage & 1 and rest) and step >= 0 and axis % 16 == 10 and \
-        stop >= 2 * start and amp != 0.0
+        stop >= 2 * start and abs(amp) >= MIN_WHOLE_AMP
     return bytes(data), whole, loops
 
 
