@@ -6,7 +6,7 @@
 // (firmware/mavlink/heliquad.xml): one definition, no copies.
 #pragma once
 
-#include <heliquad/mavlink.h>
+#include <hq_mavlink.hpp>
 
 #include <cstdint>
 

@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <cstring>
 
-#include <heliquad/mavlink.h>
+#include <hq_mavlink.hpp>
 
 #include "../core/flight_controller.hpp"
 #include "../core/link/gcs_link.hpp"

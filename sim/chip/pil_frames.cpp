@@ -8,7 +8,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "heliquad/mavlink.h"
+#include <hq_mavlink.hpp>
 #include "sensor/mpu6050_emulator.hpp"
 
 namespace hqsim::mk64 {

@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "heliquad/mavlink.h"
+#include <hq_mavlink.hpp>
 #include "plant/rig_plant.hpp"
 
 namespace hqsim {

@@ -14,7 +14,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "heliquad/mavlink.h"
+#include <hq_mavlink.hpp>
 
 namespace hqsim {
 

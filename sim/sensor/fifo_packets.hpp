@@ -9,7 +9,7 @@
 #include <cstdint>
 
 #include "core/mpu6050.hpp"
-#include "heliquad/mavlink.h"
+#include <hq_mavlink.hpp>
 #include "plant/rig_plant.hpp"
 
 namespace hqsim {

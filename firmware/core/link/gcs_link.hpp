@@ -37,7 +37,7 @@
 #include "link_util.hpp"
 #include "log_transfer.hpp"
 
-#include <heliquad/mavlink.h>
+#include <hq_mavlink.hpp>
 
 namespace hq {
 

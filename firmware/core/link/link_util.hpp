@@ -7,7 +7,7 @@
 
 #include "../params.hpp"
 
-#include <heliquad/mavlink.h>
+#include <hq_mavlink.hpp>
 
 namespace hq {
 
@@ -43,6 +43,14 @@ constexpr uint32_t kNotWhole = UINT32_MAX;
 inline uint32_t whole(float v) {
     if (!(v >= 0.0f && v <= 16777216.0f) || v != std::floor(v)) return kNotWhole;
     return static_cast<uint32_t>(v);
+}
+
+// MAVLink's time_boot_ms (wraps after 49.7 days) from the loop's time in microseconds. The
+// first 71 minutes divide in 32 bits (one instruction on the Cortex-M4; a 64-bit division
+// is a library call of some fifty).
+inline uint32_t boot_ms(uint64_t now_us) {
+    return now_us <= UINT32_MAX ? static_cast<uint32_t>(now_us) / 1000u
+                                : static_cast<uint32_t>(now_us / 1000u);
 }
 
 // The largest encoded length of a message (header, payload, checksum; no signature).

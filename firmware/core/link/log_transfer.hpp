@@ -27,7 +27,7 @@
 
 #include "../log/log_store.hpp"
 
-#include <heliquad/mavlink.h>
+#include <hq_mavlink.hpp>
 
 namespace hq {
 

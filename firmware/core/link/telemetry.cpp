@@ -220,7 +220,7 @@ void GcsLink::send_rc_channels(const LoopStatus& st, uint64_t now_us) {
     const uint16_t u = kUnusedChannel;
     mavlink_message_t msg;
     mavlink_msg_rc_channels_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                        static_cast<uint32_t>(now_us / 1000), count, ch[0], ch[1],
+                                        boot_ms(now_us), count, ch[0], ch[1],
                                         ch[2], ch[3], ch[4], ch[5], ch[6], ch[7], u, u, u, u, u,
                                         u, u, u, u, u, UINT8_MAX);
     send(msg);
@@ -233,7 +233,7 @@ void GcsLink::send_scaled_imu(const LoopStatus& st, uint64_t now_us) {
     const Vec3& g = st.state.rate;
     mavlink_message_t msg;
     mavlink_msg_scaled_imu_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                       static_cast<uint32_t>(now_us / 1000), saturate16(a.x * kMilliG),
+                                       boot_ms(now_us), saturate16(a.x * kMilliG),
                                        saturate16(a.y * kMilliG), saturate16(a.z * kMilliG),
                                        saturate16(g.x * 1000.0f), saturate16(g.y * 1000.0f),
                                        saturate16(g.z * 1000.0f), 0, 0, 0, 0);
@@ -259,7 +259,7 @@ void GcsLink::send_attitude(const LoopStatus& st, uint64_t now_us) {
     const LoopState& x = st.state;
     mavlink_message_t msg;
     mavlink_msg_attitude_pack_status(config_.system_id, config_.component_id, &tx_status_, &msg,
-                                     static_cast<uint32_t>(now_us / 1000), x.attitude.roll,
+                                     boot_ms(now_us), x.attitude.roll,
                                      x.attitude.pitch, x.attitude.yaw, x.rate.x, x.rate.y, x.rate.z);
     send(msg);
 }

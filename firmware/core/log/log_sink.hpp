@@ -18,7 +18,7 @@
 
 #include <cstdint>
 
-#include <heliquad/mavlink.h>      // HQ_CARD_STATE: the numbers HQ_FW_STATUS reports
+#include <hq_mavlink.hpp>      // HQ_CARD_STATE: the numbers HQ_FW_STATUS reports
 
 namespace hq {
 

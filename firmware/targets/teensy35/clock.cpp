@@ -40,8 +40,6 @@ void start_cycle_counter() {
     g_wraps = 0;
 }
 
-uint32_t cycles32() { return DWT::CYCCNT::read(); }
-
 uint64_t cycles64() {
     IrqGuard guard;
     const uint32_t now = DWT::CYCCNT::read();

@@ -14,6 +14,7 @@
 #include <cstdint>
 
 #include "../../hal/clock.hpp"
+#include "mk64f12.hpp"
 
 namespace hq::teensy {
 
@@ -45,8 +46,8 @@ uint32_t core_hz();
 
 // 64-bit cycle count since start_cycle_counter(); safe from interrupts and main.
 uint64_t cycles64();
-// 32-bit cycle count (wraps): for short intervals.
-uint32_t cycles32();
+// 32-bit cycle count (wraps): for short intervals. Inline: the I2C and loop waits poll it.
+inline uint32_t cycles32() { return mk64::DWT::CYCCNT::read(); }
 
 class TeensyClock final : public Clock {
 public:

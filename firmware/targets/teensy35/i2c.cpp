@@ -13,9 +13,8 @@ namespace {
 constexpr uint32_t kSda = 3, kScl = 2;    // PTB3, PTB2
 constexpr uint32_t kSdaBit = 1u << kSda, kSclBit = 1u << kScl;
 
-bool expired(uint32_t start, uint32_t timeout_us) {
-    return cycles32() - start > timeout_us * (core_hz() / 1000000u);
-}
+// A wait's timeout in cycles of the clock now running, taken once before the wait polls.
+uint32_t timeout_cycles(uint32_t timeout_us) { return timeout_us * (core_hz() / 1000000u); }
 }  // namespace
 
 // The byte-done wake-up. wait_byte() sleeps with IICIE set; the level (IICIF and IICIE)
@@ -48,12 +47,12 @@ void I2c0Bus::begin() {
 // Both waits test the flag once more after the time is up: an interrupt that held the CPU
 // past the timeout must not turn a finished byte into a bus recovery mid-transfer.
 bool I2c0Bus::wait_byte() {
-    const uint32_t t0 = cycles32();
+    const uint32_t t0 = cycles32(), budget = timeout_cycles(kByteTimeoutUs);
     // Sleep only once the loop tick runs: SysTick is then the wake-up that comes even when
     // the bus never answers. Before it (the IMU start-up) the wait polls.
     const bool sleep = LoopTimer::ticking();
     while (!(I2C0::S::read() & I2C0::S::IICIF)) {
-        if (expired(t0, kByteTimeoutUs)) {
+        if (cycles32() - t0 > budget) {
             if (!(I2C0::S::read() & I2C0::S::IICIF)) return false;
             break;
         }
@@ -77,9 +76,9 @@ bool I2c0Bus::wait_byte() {
 // A STOP takes one SCL period (2.7 us): this wait polls. Sleeping on it would need the
 // stop-detect interrupt (FLT[SSIE]), which shares IICIF with the byte flag.
 bool I2c0Bus::wait_idle() {
-    const uint32_t t0 = cycles32();
+    const uint32_t t0 = cycles32(), budget = timeout_cycles(kByteTimeoutUs);
     while (I2C0::S::read() & I2C0::S::BUSY) {
-        if (expired(t0, kByteTimeoutUs)) return !(I2C0::S::read() & I2C0::S::BUSY);
+        if (cycles32() - t0 > budget) return !(I2C0::S::read() & I2C0::S::BUSY);
     }
     return true;
 }

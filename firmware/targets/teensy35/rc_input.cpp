@@ -71,22 +71,26 @@ RcInput Ftm3RcInput::read() const {
         c = g_cap;
         now_cycles = cycles64();    // taken with the snapshot: no capture can be newer than now
     }
+    // Ages in cycles, one division at the end (a 64-bit division is a library call of some
+    // fifty instructions, and this runs every loop).
     RcInput in;
-    const uint64_t per_us = core_hz() / 1000000u;
-    const uint64_t now_us = now_cycles / per_us;
-    uint64_t oldest_stick_us = 0;
+    const uint32_t per_us = core_hz() / 1000000u;
+    const uint64_t timeout_cycles = static_cast<uint64_t>(kChannelTimeoutUs) * per_us;
+    uint64_t oldest_stick = 0;
     bool sticks_live = true;
     for (int i = 0; i < kN; ++i) {
-        const uint64_t t_us = c.when_cycles[i] / per_us;
-        const bool fresh = c.valid[i] && (t_us >= now_us || now_us - t_us <= kChannelTimeoutUs);
+        const uint64_t when = c.when_cycles[i];
+        const bool fresh = c.valid[i] && (when >= now_cycles || now_cycles - when <= timeout_cycles);
         in.channel_us[i] = fresh ? c.pulse_us[i] : 0;
         if (i < 4) {
             if (!c.valid[i]) sticks_live = false;
-            else if (i == 0 || t_us < oldest_stick_us) oldest_stick_us = t_us;
+            else if (i == 0 || when < oldest_stick) oldest_stick = when;
         }
     }
     if (sticks_live) {
-        const uint64_t age = now_us > oldest_stick_us ? now_us - oldest_stick_us : 0;
+        const uint64_t cycles = now_cycles > oldest_stick ? now_cycles - oldest_stick : 0;
+        const uint64_t age = cycles <= 0xFFFFFFFFu ? static_cast<uint32_t>(cycles) / per_us
+                                                   : cycles / per_us;
         in.age_us = age > 0xFFFFFFFEu ? 0xFFFFFFFEu : static_cast<uint32_t>(age);
     }
     return in;
