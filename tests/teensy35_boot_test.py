@@ -895,6 +895,19 @@ def test_uart0_baud_and_line_rate(running):
     assert running.machine.exception_counts[16 + registers.irq("UART0_RX_TX")] > 0
 
 
+def test_uart0_telemetry_leaves_back_to_back_within_a_loops_burst(running):
+    """The shifter takes the FIFO's next byte the cycle the last one left, and the interrupt
+    refills the FIFO at its watermark before it runs dry: within a loop's telemetry every
+    byte leaves exactly one frame after the one before (what the transmitter is worked out
+    to when looked at, not stepped byte by byte); the only longer gaps are between loops."""
+    uart = running.chip.uart0
+    sent, frame = uart.sent, uart.frame_cycles()
+    gaps = [b[0] - a[0] for a, b in zip(sent, sent[1:])]
+    assert len(gaps) > 100
+    assert {g for g in gaps if g < 100 * frame} == {frame}
+    assert sum(g == frame for g in gaps) / len(gaps) > 0.95
+
+
 def test_ftm0_esc_outputs_at_the_stop_pulse_from_their_first_edge(booted):
     for pin, sig, period, pulse in booted.esc_outputs():
         assert period == pytest.approx(2.5e-3, abs=1e-9), pin

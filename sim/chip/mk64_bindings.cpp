@@ -496,8 +496,9 @@ void bind_mk64(py::module_& m) {
             u.reset(c);
         })
         .def("uart_reg", [](const Core& c, uint32_t offset) { return c.uart0.v.at(offset); })
-        .def("uart_state", [](const Core& c) {
-            const Uart& u = c.uart0;
+        .def("uart_state", [](Core& c) {
+            Uart& u = c.uart0;
+            u.catch_up(c, c.now());
             py::dict d;
             d["tx"] = std::vector<uint8_t>(u.tx.begin(), u.tx.end());
             d["rx"] = std::vector<uint8_t>(u.rx.begin(), u.rx.end());
@@ -512,10 +513,14 @@ void bind_mk64(py::module_& m) {
         })
         .def("uart_take_sent", [](Core& c) {
             std::vector<std::pair<uint64_t, uint8_t>> out;
+            c.uart0.catch_up(c, c.now());
             out.swap(c.uart0.sent);
             return out;
         })
-        .def("uart_take_sent_bytes", [](Core& c) { return py::bytes(c.uart0.take_sent_bytes()); })
+        .def("uart_take_sent_bytes", [](Core& c) {
+            c.uart0.catch_up(c, c.now());
+            return py::bytes(c.uart0.take_sent_bytes());
+        })
         .def("uart_receive", [](Core& c, const py::bytes& data) {
             const std::string s = data;
             c.uart0.receive(c, reinterpret_cast<const uint8_t*>(s.data()), s.size());

@@ -751,12 +751,14 @@ bool Core::continue_inline() {
     return true;
 }
 
-bool Core::drained() const {
+bool Core::drained() {
     if (drain_ == kDrainUsb) {
         return usb0.host.in_nak_cycle >= 0 &&
                static_cast<uint64_t>(usb0.host.in_nak_cycle) > drain_after_;
     }
-    return uart0.ready && uart0.tc() && !(uart0.v[uart0.oC2] & uart0.TIE);
+    if (!uart0.ready) return false;
+    uart0.catch_up(*this, cycles_);
+    return uart0.tc() && !(uart0.v[uart0.oC2] & uart0.TIE);
 }
 
 // WFI: wake on an exception that would preempt were PRIMASK clear; else time passes to the

@@ -217,6 +217,9 @@ struct Uart {
     std::vector<std::pair<uint64_t, uint8_t>> sent;   // (cycle, byte), until taken
     int shifting = -1;                                // byte, kPreamble, or -1 (idle)
     static constexpr int kPreamble = 0x100;
+    // The shifting frame's start and length: it leaves the pin at shift_start + shift_frame,
+    // the FIFO's next byte starts then (catch_up applies that when the state is looked at).
+    uint64_t shift_start = 0, shift_frame = 0;
     uint64_t tx_event = 0, rx_event = 0, idle_event = 0;
     uint8_t bdh_buffer = 0, s1_seen = 0;
     bool rdrf = false, line_rxtx = false, line_err = false;
@@ -250,6 +253,18 @@ struct Uart {
     void update_irq(Core& c);
     void kick(Core& c);
     void shifted(Core& c);
+    // The transmitter brought to cycle `now`: every frame that has left the pin by then
+    // recorded in `sent` at its own cycle, the next byte of the FIFO started at that cycle.
+    // Done wherever the transmitter's state is looked at (a register access, the interrupt
+    // line, a drain, Python), so its progress needs no event a byte.
+    void catch_up(Core& c, uint64_t now);
+    // When the transmitter's state next matters to anyone who does not look at it: TDRE
+    // setting while TIE is on, or the last frame leaving (TC, a drain); 0 when idle.
+    uint64_t next_tx_change(const Core& c) const;
+    // An event at next_tx_change() when none is pending. A pending one may be early (bytes
+    // written since only move the change later); it then schedules the next.
+    void ensure_tx_event(Core& c);
+    void reschedule_tx(Core& c);       // the pending event moved: TIE, the FIFO or its mark changed
     // The bytes in `sent`, forgotten there.
     std::string take_sent_bytes();
     void receive(Core& c, const uint8_t* data, size_t n);
@@ -787,7 +802,7 @@ public:
     enum Drain : int { kNoDrain = 0, kDrainUsb = 1, kDrainUart = 2 };
     int drain_ = kNoDrain;
     uint64_t drain_after_ = 0;
-    bool drained() const;
+    bool drained();
     uint64_t py_event_ = 0;
     int py_call_ = kNoCall;     // a native event needs Python (a Python event with no callback)
     int uc_error_ = 0;

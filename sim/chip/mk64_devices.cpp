@@ -316,6 +316,7 @@ void Uart::reset(Core&) {
     sent.clear();
     notes.clear();
     shifting = -1;
+    shift_start = shift_frame = 0;
     tx_event = rx_event = idle_event = 0;
     bdh_buffer = v[oBDH];
     s1_seen = 0;
@@ -368,6 +369,7 @@ uint8_t Uart::s1() const {
 }
 
 void Uart::update_irq(Core& c) {
+    catch_up(c, c.now());
     const uint8_t c2 = v[oC2], s = s1();
     const bool rxtx = ((c2 & TIE) && (s & TDRE)) || ((c2 & TCIE) && (s & TC)) ||
                       ((c2 & RIE) && (s & RDRF)) || ((c2 & ILIE) && (s & IDLE));
@@ -384,7 +386,47 @@ void Uart::kick(Core& c) {
     if (shifting >= 0 || !(v[oC2] & TE) || tx.empty()) return;
     shifting = tx.front();
     tx.pop_front();
-    tx_event = c.at(c.now() + frame_cycles(c), Ev::UartTx);
+    shift_start = c.now();
+    shift_frame = frame_cycles(c);
+    ensure_tx_event(c);
+}
+
+void Uart::catch_up(Core& c, uint64_t now) {
+    while (shifting >= 0 && shift_start + shift_frame <= now) {
+        const uint64_t left = shift_start + shift_frame;
+        if (shifting != kPreamble) sent.emplace_back(left, static_cast<uint8_t>(shifting));
+        shifting = -1;
+        if ((v[oC2] & TE) && !tx.empty()) {          // back to back, from the cycle it left
+            shifting = tx.front();
+            tx.pop_front();
+            shift_start = left;
+            shift_frame = frame_cycles(c);
+        }
+    }
+}
+
+uint64_t Uart::next_tx_change(const Core& c) const {
+    if (shifting < 0) return 0;
+    const uint64_t first = shift_start + shift_frame;
+    if (!(v[oC2] & TE)) return first;                 // the shifter stops after this frame
+    const size_t water = (v[oPFIFO] & TXFE) ? v[oTWFIFO] : 0;
+    const uint64_t frame = frame_cycles(c);
+    if ((v[oC2] & TIE) && tx.size() > water) {       // each frame leaving takes one byte
+        return first + (tx.size() - water - 1) * frame;
+    }
+    return first + tx.size() * frame;
+}
+
+void Uart::ensure_tx_event(Core& c) {
+    if (tx_event) return;
+    const uint64_t due = next_tx_change(c);
+    if (due) tx_event = c.at(due, Ev::UartTx);
+}
+
+void Uart::reschedule_tx(Core& c) {
+    if (tx_event) c.cancel(tx_event);
+    tx_event = 0;
+    ensure_tx_event(c);
 }
 
 std::string Uart::take_sent_bytes() {
@@ -396,12 +438,10 @@ std::string Uart::take_sent_bytes() {
 }
 
 void Uart::shifted(Core& c) {
-    const int byte = shifting;
-    shifting = -1;
     tx_event = 0;
-    if (byte != kPreamble) sent.emplace_back(c.cycles_, static_cast<uint8_t>(byte));
-    kick(c);
+    catch_up(c, c.now());
     update_irq(c);
+    ensure_tx_event(c);
 }
 
 void Uart::receive(Core& c, const uint8_t* data, size_t n) {
@@ -435,6 +475,7 @@ void Uart::idle(Core& c) {
 }
 
 uint8_t Uart::read_reg(Core& c, uint32_t o) {
+    catch_up(c, c.now());
     if (o == oS1) {
         const uint8_t s = s1();
         s1_seen = static_cast<uint8_t>(s & (S1_CLEARED_BY_D | RDRF));
@@ -470,6 +511,7 @@ uint8_t Uart::read_reg(Core& c, uint32_t o) {
 
 void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
     if (o == oS1 || o == oED || o == oTCFIFO || o == oRCFIFO) return;    // read-only
+    catch_up(c, c.now());
     if (o == oBDH) {
         bdh_buffer = value;                      // buffered until BDL
     } else if (o == oBDL) {
@@ -489,9 +531,11 @@ void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
         v[oC2] = value;
         if ((value & TE) && !(old & TE) && shifting < 0) {     // a preamble (idle frame) first
             shifting = kPreamble;
-            tx_event = c.at(c.now() + frame_cycles(c), Ev::UartTx);
+            shift_start = c.now();
+            shift_frame = frame_cycles(c);
         }
         kick(c);
+        reschedule_tx(c);
         update_irq(c);
     } else if (o == oC3) {
         v[oC3] = value;
@@ -503,16 +547,19 @@ void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
                                "the FIFO enables only with both clear)");
         }
         v[oPFIFO] = static_cast<uint8_t>(value & (TXFE | RXFE));
+        reschedule_tx(c);
         update_irq(c);
     } else if (o == oCFIFO) {
         if (value & TXFLUSH) tx.clear();
         if (value & RXFLUSH) rx.clear();
         v[oCFIFO] = static_cast<uint8_t>(value & CFIFO_ENABLES);
+        reschedule_tx(c);
         update_irq(c);
     } else if (o == oSFIFO) {
         v[oSFIFO] &= static_cast<uint8_t>(~(value & SFIFO_W1C));
     } else if (o == oTWFIFO) {
         v[oTWFIFO] = value;
+        reschedule_tx(c);
         update_irq(c);
     } else if (o == oRWFIFO) {
         v[oRWFIFO] = value;

@@ -291,6 +291,7 @@ void PilFrames::end_limit(uint64_t limit) {
 // As PilBoard._collect_telemetry and end_frame's record of the step's cycles.
 void PilFrames::collect() {
     Core& c = core_;
+    c.uart0.catch_up(c, c.now());
     if (config.usb) {                    // UART0's bytes leave on pins nothing listens to
         c.uart0.sent.clear();
         telemetry += c.usb0.host.received;

@@ -26,6 +26,9 @@ writes, and a long run need not keep every byte.
 
 The model is native (``heliquad._simcore.Mk64Core``, sim/chip/mk64_devices.cpp): the
 telemetry handler touches S1, TCFIFO and D hundreds of times a loop. This class is its view.
+The transmitter is worked out when looked at (each byte leaves one frame after the one
+before, from the cycle that one left), with an event only where TDRE (under TIE) or the
+end of transmission can change unseen, not one a byte.
 """
 
 from __future__ import annotations
