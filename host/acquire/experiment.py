@@ -41,7 +41,7 @@ class SilResult:
     saturation: dict               # measured samples that saturated, by kind (sweep.SATURATION)
     imu_mode: str
     wall_s: float                  # the whole run, firmware start-up included
-    loop_s: float                  # the lockstep loop alone, hover included
+    loop_s: float                  # the lockstep loop alone (hover included, start-up not)
     truth: complex                 # sampled-data truth at the actual frequency (nan if unknown)
     stopped: str | None = None     # why the excitation ended early, if it did
     firmware_summary: str = ""     # the firmware's own last word: counters, loop figures
@@ -66,11 +66,14 @@ def run_sil(cfg: SilConfig, out_base: str, progress=print, start_us: int | None 
                      cfg.fade_cycles)
     t0 = time.monotonic()
     with SilSession(cfg, tlog_path, start_us) as session:
+        # The loop's time starts once the firmware is up (the drop-in's boot, some 0.7 s of
+        # the Teensy image's, is start-up, as wall_s - loop_s says).
+        t_loop = time.monotonic()
         session.hover()
         watch = measure(session, plan, cfg.freq_hz, cfg.amplitude, progress=progress,
                         keep_rows=True)
         session.advance(frames=TAIL_FRAMES)
-        loop_s = time.monotonic() - t0
+        loop_s = time.monotonic() - t_loop
         plant, imu_mode, frames = session.plant, session.fw.imu_mode, session.frame
         start_us = session.start_us
     write_run_csv(csv_path, watch.rows)
