@@ -4,8 +4,9 @@ Runs the same sine experiment (`heliquad sil`: the roll transfer function, mixer
 1 Hz, 0.05) on the host build and on the Teensy 3.5 image in the emulated MK64FX512 over each
 of its links (`--link uart`, `--link usb`) with each of the emulated chip's CPUs (unicorn and
 the engine, sim/chip/cpu.py; `--cpus` chooses), and prints for each the frames per second of
-the lockstep loop (wall time of the loop alone, start-up excluded) as a multiple of real time
-at 200 Hz; then each PIL run's rate as a ratio to the host build's measured in the same run
+the lockstep loop (wall time of the loop alone: from the firmware being up, after the
+drop-in's Python start and the image's boot, to the run's end) as a multiple of real time at
+200 Hz, and the whole run's with that start-up; then each PIL run's rate as a ratio to the host build's measured in the same run
 (the baseline), USB's to UART0's and the engine's to unicorn's, and where the PIL's time goes:
 the emulated board driven alone for as many loops as the drop-in drives it (its share of a
 frame; the rest is the lockstep around it), for each CPU and link, with the board's own counts
@@ -158,7 +159,8 @@ def pil_runs(elf: str, cpus, cycles: int, frame_paths=("native",)) -> dict:
             rates[name] = rate
             print(f"{name:28s}: {r.frames} frames ({r.frames / LOOP_HZ:.2f} s simulated); "
                   f"lockstep {r.loop_s:.2f} s wall = {rate:.0f} frames/s = "
-                  f"{rate / LOOP_HZ:.2f}x real time; start-up and shutdown {total - r.loop_s:.2f} s")
+                  f"{rate / LOOP_HZ:.2f}x real time; start-up and shutdown {total - r.loop_s:.2f} s "
+                  f"(with them {r.frames / LOOP_HZ / total:.2f}x)")
     return rates
 
 
