@@ -1033,6 +1033,34 @@ def test_a_native_stop_stops_where_a_breakpoint_does_and_the_run_goes_on_alike()
     assert len({pc for pc, *_ in runs[0][0]}) == 1
 
 
+def test_an_interrupt_taken_at_a_stop_with_a_watch_on_its_handler_stops_there_once():
+    # The loop's run stops at the wait (a native stop). An interrupt pending when the next run
+    # starts is taken before the wait's first instruction; a breakpoint that does not stop
+    # (a watch) at its handler's first instruction stops the CPU there too. After the handler
+    # the run must go through the wait it already stopped at, on to the next loop's, as it
+    # does with no watch (on the engine it once stopped at the same wait again: a loop
+    # counted twice, 329 cycles long).
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    ends = []
+    for with_watch in (False, True):
+        board = Teensy35(IMAGE, track_loops=False)
+        m = board.machine
+        m.stop_at("hq::teensy::LoopTimer::wait")
+        for _ in range(4):
+            assert m.run(instructions=BOOT_BUDGET).reason == "stop-at"
+        stopped_at = m.cycles
+        seen = []
+        if with_watch:
+            m.break_at("FTM3_IRQHandler", lambda machine: seen.append(machine.cycles))
+        m.pend(16 + registers.irq("FTM3"))
+        stop = m.run(instructions=BOOT_BUDGET)
+        assert stop.reason == "stop-at" and len(seen) == int(with_watch)
+        assert m.cycles - stopped_at > 500_000, "the next loop's wait, not the same one again"
+        ends.append((stop.pc, m.instructions, m.cycles, list(m.exception_log)))
+    assert ends[0] == ends[1]
+
+
 def test_take_telemetry_hands_over_each_byte_once():
     require_image()
     pytest.importorskip("heliquad._firmware")

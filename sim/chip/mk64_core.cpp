@@ -576,7 +576,8 @@ bool Core::take_exception(int number, uint32_t return_pc) {
     const uint64_t set[4] = {new_sp, exc_return, control & ~kControlFpca,
                              (1u << 24) | static_cast<uint32_t>(number)};
     write_regs(set_ids, set, 4);
-    set_pc(handler);
+    if (eng_) eng_->enter_exception(handler);
+    else set_pc(handler);
     cycles_ += kEntryCycles;
     log_exception(true, number);
     ++exception_counts_[number];
@@ -646,7 +647,8 @@ bool Core::return_from_exception(uint32_t exc_return) {
     ids[k] = r_.xpsr;
     values[k++] = xpsr & ~kXpsrAlign;
     write_regs(ids, values, k);
-    set_pc(words[6]);
+    if (eng_) eng_->return_from_exception(words[6]);
+    else set_pc(words[6]);
     cycles_ += kReturnCycles;
     log_exception(false, number);
     if (active_.empty() && handler_since_valid_) {

@@ -19,7 +19,25 @@ Thumb::Thumb()
 
 void Thumb::set_reg(unsigned n, uint32_t v) {
     r_[n & 15] = (n == 15 || n == 13) ? (v & ~(n == 15 ? 1u : 3u)) : v;
-    if ((n & 15) == 15) resume_at_ = kNoResume;
+    if ((n & 15) == 15) {
+        resume_at_ = kNoResume;
+        resume_depth_ = 0;
+    }
+}
+
+void Thumb::enter_exception(uint32_t handler) {
+    if (resume_depth_ == kResumeLevels) {           // forget the oldest level
+        for (unsigned i = 1; i < kResumeLevels; ++i) saved_resume_[i - 1] = saved_resume_[i];
+        --resume_depth_;
+    }
+    saved_resume_[resume_depth_++] = resume_at_;
+    resume_at_ = kNoResume;
+    jump(handler);
+}
+
+void Thumb::return_from_exception(uint32_t pc) {
+    resume_at_ = resume_depth_ ? saved_resume_[--resume_depth_] : kNoResume;
+    jump(pc);
 }
 
 uint32_t Thumb::apsr() const {

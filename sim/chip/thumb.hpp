@@ -114,6 +114,11 @@ public:
     // address last reported (a run that comes back to it after a handler goes through it).
     void set_reg(unsigned n, uint32_t v);
     void jump(uint32_t pc) { r_[15] = pc & ~1u; }
+    // Exception entry and return: as jump(), and the stop address the interrupted code was
+    // to go through is kept for its return (a stop inside the handler, at its first
+    // instruction for one, must not make the interrupted code stop a second time there).
+    void enter_exception(uint32_t handler);
+    void return_from_exception(uint32_t pc);
     uint32_t pc() const { return r_[15]; }
     uint32_t apsr() const;              // N Z C V Q in bits 31..27
     void set_apsr(uint32_t v);
@@ -256,6 +261,11 @@ private:
     // that stopped for another reason just before it stops there.
     static constexpr uint32_t kNoResume = 1;        // odd: never an instruction's address
     uint32_t resume_at_ = kNoResume;
+    // resume_at_ of each interrupted level, innermost last (the NVIC nests at most as many
+    // levels as it has priorities; past kResumeLevels the oldest are forgotten).
+    static constexpr unsigned kResumeLevels = 32;
+    uint32_t saved_resume_[kResumeLevels] = {};
+    unsigned resume_depth_ = 0;
     Bus* bus_ = nullptr;
 };
 
