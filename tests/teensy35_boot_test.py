@@ -1012,17 +1012,24 @@ def test_image_runs_are_deterministic_and_the_native_paths_agree_with_the_refere
     assert counts["inline_boundaries"] == 0 and counts["native_accesses"] == 0
 
 
+def _stopping_at_the_wait(native: bool):
+    """``(board, machine)``: the image reset, its runs stopping at the loop's wait, by a
+    native stop (``native``) or a breakpoint with no callback."""
+    require_image()
+    pytest.importorskip("heliquad._firmware")
+    board = Teensy35(IMAGE, track_loops=False)
+    m = board.machine
+    (m.stop_at if native else m.break_at)("hq::teensy::LoopTimer::wait")
+    return board, m
+
+
 def test_a_native_stop_stops_where_a_breakpoint_does_and_the_run_goes_on_alike():
     # Machine.stop_at (the lockstep's loop end, no call into Python) against a breakpoint
     # with no callback at the same instruction: each stop at the same PC, instruction count
     # and cycle, and each run after it goes on through the stop alike.
-    require_image()
-    pytest.importorskip("heliquad._firmware")
     runs = []
     for native in (False, True):
-        board = Teensy35(IMAGE, track_loops=False)
-        m = board.machine
-        (m.stop_at if native else m.break_at)("hq::teensy::LoopTimer::wait")
+        board, m = _stopping_at_the_wait(native)
         stops = []
         for _ in range(6):
             stop = m.run(instructions=BOOT_BUDGET)
@@ -1040,13 +1047,9 @@ def test_an_interrupt_taken_at_a_stop_with_a_watch_on_its_handler_stops_there_on
     # the run must go through the wait it already stopped at, on to the next loop's, as it
     # does with no watch (on the engine it once stopped at the same wait again: a loop
     # counted twice, 329 cycles long).
-    require_image()
-    pytest.importorskip("heliquad._firmware")
     ends = []
     for with_watch in (False, True):
-        board = Teensy35(IMAGE, track_loops=False)
-        m = board.machine
-        m.stop_at("hq::teensy::LoopTimer::wait")
+        _, m = _stopping_at_the_wait(True)
         for _ in range(4):
             assert m.run(instructions=BOOT_BUDGET).reason == "stop-at"
         stopped_at = m.cycles
