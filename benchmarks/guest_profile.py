@@ -32,9 +32,9 @@ import pathlib
 import sys
 import tempfile
 
-LINKS = ("uart", "usb")
-CPU_VARIABLE = "HQ_CHIP_CPU"            # the emulated chip's CPU, inherited by the drop-in
-FRAMES_VARIABLE = "HQ_PIL_FRAMES"       # every frame in the drop-in's Python path
+import pil_speed           # this script's folder: the experiment profiled, its CPU and links
+from pil_speed import CPU_VARIABLE, FRAMES_VARIABLE, LINKS
+
 OUT_VARIABLE = "HQ_GUEST_PROFILE_OUT"   # where the drop-in writes its counts
 #: The flight controller's step, entered once a loop (hq_step_outputs, where the drop-in
 #: stops, is entered twice: the stop ends unicorn's block).
@@ -101,9 +101,6 @@ def experiment_blocks(elf: str, link: str, cycles: int) -> tuple:
     """``(blocks, exceptions)``: how often each ``(address, size)`` block ran in the drop-in
     through benchmarks/pil_speed.py's experiment over ``link``, and the exceptions taken, by
     name, from the board's boot to its exit."""
-    from heliquad.host.acquire.experiment import run_sil      # the experiment's modules
-    from heliquad.sim.rig.setup import SilConfig
-
     with tempfile.TemporaryDirectory() as tmp:
         out = pathlib.Path(tmp) / "blocks.json"
         (pathlib.Path(tmp) / "sitecustomize.py").write_text(DROP_IN_HOOK % OUT_VARIABLE)
@@ -112,10 +109,7 @@ def experiment_blocks(elf: str, link: str, cycles: int) -> tuple:
         saved = {k: os.environ.get(k) for k in env}
         os.environ.update(env)
         try:
-            cfg = SilConfig(axis="roll", inject="mixer", freq_hz=1.0, amplitude=0.05,
-                            cycles=cycles, fade_cycles=1, firmware="teensy35",
-                            firmware_image=elf, firmware_link=link)
-            run_sil(cfg, str(pathlib.Path(tmp) / "run"), progress=lambda *_: None)
+            pil_speed.run("teensy35", link, cycles, elf, str(pathlib.Path(tmp) / "run"))
         finally:
             for k, v in saved.items():
                 os.environ.pop(k) if v is None else os.environ.__setitem__(k, v)

@@ -8,6 +8,13 @@
 
 namespace hq {
 
+// A 64-bit count of time divided by a 32-bit unit (cycles a microsecond, microseconds a
+// millisecond): in 32 bits while the count fits, one instruction on the Cortex-M4, where a
+// 64-bit division is a library call of some fifty. The same quotient either way.
+inline uint64_t divide_time(uint64_t count, uint32_t unit) {
+    return count <= UINT32_MAX ? static_cast<uint32_t>(count) / unit : count / unit;
+}
+
 class Clock {
 public:
     virtual uint64_t micros() const = 0;

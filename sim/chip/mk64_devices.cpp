@@ -534,8 +534,8 @@ void Uart::write_reg(Core& c, uint32_t o, uint8_t value) {
             shift_start = c.now();
             shift_frame = frame_cycles(c);
         }
-        kick(c);
-        reschedule_tx(c);
+        reschedule_tx(c);                        // TIE may move the change: first, then a
+        kick(c);                                 // byte started now schedules its own
         update_irq(c);
     } else if (o == oC3) {
         v[oC3] = value;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "../../hal/clock.hpp"
 #include "../params.hpp"
 
 #include <hq_mavlink.hpp>
@@ -45,13 +46,8 @@ inline uint32_t whole(float v) {
     return static_cast<uint32_t>(v);
 }
 
-// MAVLink's time_boot_ms (wraps after 49.7 days) from the loop's time in microseconds. The
-// first 71 minutes divide in 32 bits (one instruction on the Cortex-M4; a 64-bit division
-// is a library call of some fifty).
-inline uint32_t boot_ms(uint64_t now_us) {
-    return now_us <= UINT32_MAX ? static_cast<uint32_t>(now_us) / 1000u
-                                : static_cast<uint32_t>(now_us / 1000u);
-}
+// MAVLink's time_boot_ms (wraps after 49.7 days) from the loop's time in microseconds.
+inline uint32_t boot_ms(uint64_t now_us) { return static_cast<uint32_t>(divide_time(now_us, 1000u)); }
 
 // The largest encoded length of a message (header, payload, checksum; no signature).
 inline uint32_t packet_bytes(uint32_t msgid) {

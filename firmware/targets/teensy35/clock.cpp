@@ -83,7 +83,7 @@ ClockFault start_clocks() {
     return ClockFault::None;
 }
 
-uint64_t TeensyClock::micros() const { return cycles64() / (g_core_hz / 1000000u); }
+uint64_t TeensyClock::micros() const { return divide_time(cycles64(), g_core_hz / 1000000u); }
 
 void TeensyClock::delay_us(uint32_t us) {
     // Start-up waits (the IMU's reset, 100 ms) outlast nothing but keep the watchdog fed and

@@ -71,8 +71,7 @@ RcInput Ftm3RcInput::read() const {
         c = g_cap;
         now_cycles = cycles64();    // taken with the snapshot: no capture can be newer than now
     }
-    // Ages in cycles, one division at the end (a 64-bit division is a library call of some
-    // fifty instructions, and this runs every loop).
+    // Ages in cycles, one division at the end (this runs every loop).
     RcInput in;
     const uint32_t per_us = core_hz() / 1000000u;
     const uint64_t timeout_cycles = static_cast<uint64_t>(kChannelTimeoutUs) * per_us;
@@ -89,8 +88,7 @@ RcInput Ftm3RcInput::read() const {
     }
     if (sticks_live) {
         const uint64_t cycles = now_cycles > oldest_stick ? now_cycles - oldest_stick : 0;
-        const uint64_t age = cycles <= 0xFFFFFFFFu ? static_cast<uint32_t>(cycles) / per_us
-                                                   : cycles / per_us;
+        const uint64_t age = divide_time(cycles, per_us);
         in.age_us = age > 0xFFFFFFFEu ? 0xFFFFFFFEu : static_cast<uint32_t>(age);
     }
     return in;
